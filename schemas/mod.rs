@@ -1,0 +1,7 @@
+//! Schemas: the periodic units of behaviour. Each is compiled in only under the
+//! cargo feature of its own name.
+
+#[cfg(feature = "myschema")]
+pub mod myschema;
+#[cfg(feature = "pingpong")]
+pub mod pingpong;

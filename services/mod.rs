@@ -1,0 +1,2 @@
+//! Services: cross-cutting facilities (network serving, the GUI host). Each is
+//! compiled in only under the cargo feature of its own name.

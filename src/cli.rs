@@ -1,0 +1,169 @@
+//! The command line: `jderobot [CONF]`, `jderobot list`, `jderobot check CONF`.
+//!
+//! [`main`] is the whole program; `src/main.rs` only calls it, and a user's own
+//! crate that adds schemas calls it too.
+
+use std::{path::PathBuf, process::ExitCode, time::Duration};
+
+use clap::{Parser, Subcommand};
+
+use crate::{conf::Conf, registry, runtime, shell};
+
+/// jderobot: program a robot as concurrent periodic schemas.
+///
+/// Runs the conf file CONF (default ./jde.conf): loads its drivers, services and
+/// schemas, runs and shows what it says, then reads shell commands from standard
+/// input (type `help`). Without a display, or with --headless, no GUI starts.
+#[derive(Parser, Debug)]
+#[command(name = "jderobot", version, args_conflicts_with_subcommands = true)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Option<Command>,
+    /// The conf file to run.
+    #[arg(value_name = "CONF", default_value = "jde.conf")]
+    pub conf: PathBuf,
+    /// Run with no GUI (automatic when there is no display).
+    #[arg(long)]
+    pub headless: bool,
+    /// Do not read shell commands; run until interrupted (Ctrl+C) or --for ends.
+    #[arg(long)]
+    pub no_shell: bool,
+    /// Stop after this many seconds (for scripts and benchmarks).
+    #[arg(long = "for", value_name = "SECONDS")]
+    pub run_for: Option<f64>,
+}
+
+#[derive(Subcommand, Debug)]
+pub enum Command {
+    /// List every component compiled into this binary.
+    List,
+    /// Parse and validate CONF without running it; exit 1 on problems.
+    Check {
+        /// The conf file to check.
+        conf: PathBuf,
+    },
+}
+
+/// Runs the program; returns its exit code.
+pub fn main() -> ExitCode {
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn")),
+        )
+        .with_writer(std::io::stderr)
+        .init();
+    let cli = Cli::parse();
+    match cli.command {
+        Some(Command::List) => {
+            list();
+            ExitCode::SUCCESS
+        }
+        Some(Command::Check { conf }) => check(&conf),
+        None => run(&cli),
+    }
+}
+
+fn list() {
+    let comps = registry::components();
+    if comps.is_empty() {
+        println!("no components compiled in; build with `--features full`");
+    }
+    for c in comps {
+        println!("{:<8} {:<16} {}", c.kind.to_string(), c.name, c.summary);
+    }
+    let compiled: Vec<&str> = registry::components().iter().map(|c| c.feature).collect();
+    let missing: Vec<&&str> = registry::ALL_COMPONENT_FEATURES
+        .iter()
+        .filter(|f| !compiled.contains(f))
+        .collect();
+    if !missing.is_empty() {
+        let names: Vec<&str> = missing.iter().map(|s| **s).collect();
+        println!(
+            "\nnot compiled in (add with `--features NAME`): {}",
+            names.join(", ")
+        );
+    }
+}
+
+fn check(file: &std::path::Path) -> ExitCode {
+    let conf = match Conf::load(file) {
+        Ok(c) => c,
+        Err(e) => {
+            eprintln!("{e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    let problems = runtime::check(&conf);
+    if problems.is_empty() {
+        println!(
+            "{}: ok ({} sections, {} directives)",
+            file.display(),
+            conf.sections.len(),
+            conf.directives.len()
+        );
+        ExitCode::SUCCESS
+    } else {
+        for p in problems {
+            eprintln!("{p}");
+        }
+        ExitCode::FAILURE
+    }
+}
+
+fn run(cli: &Cli) -> ExitCode {
+    let conf = match Conf::load(&cli.conf) {
+        Ok(c) => c,
+        Err(e) => {
+            eprintln!("{e}");
+            if !cli.conf.exists() {
+                eprintln!(
+                    "usage: jderobot [CONF] (default ./jde.conf); try `jderobot examples/myschema.conf`, or `jderobot --help`"
+                );
+            }
+            return ExitCode::from(2);
+        }
+    };
+    let problems = runtime::check(&conf);
+    if !problems.is_empty() {
+        for p in problems {
+            eprintln!("{p}");
+        }
+        return ExitCode::from(2);
+    }
+    eprintln!("Configuration from {}", cli.conf.display());
+    let rt = match runtime::Runtime::start(&conf) {
+        Ok(rt) => rt,
+        Err(e) => {
+            eprintln!("{e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    let headless = cli.headless || !crate::runtime::display_available();
+    if !headless {
+        tracing::warn!("this binary has no GUI compiled in; running headless");
+    }
+    {
+        let rt = rt.clone();
+        let _ = ctrlc::set_handler(move || {
+            rt.shutdown();
+            std::process::exit(130);
+        });
+    }
+    if let Some(secs) = cli.run_for {
+        let rt = rt.clone();
+        std::thread::spawn(move || {
+            std::thread::sleep(Duration::from_secs_f64(secs.max(0.0)));
+            rt.shutdown();
+            std::process::exit(0);
+        });
+    }
+    if cli.no_shell {
+        loop {
+            std::thread::park();
+        }
+    }
+    shell::run(rt.clone(), conf);
+    rt.shutdown();
+    ExitCode::SUCCESS
+}

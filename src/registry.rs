@@ -1,0 +1,147 @@
+//! The compile-time component registry.
+//!
+//! Every driver, service and schema submits a [`Component`] through `inventory`
+//! (with [`register_schema!`](crate::register_schema) or
+//! [`register_driver!`](crate::register_driver)), from a module compiled only under
+//! the cargo feature of its own name. The conf loader instantiates only what a conf
+//! loads. Asking for a component that is not compiled in names the feature that
+//! would add it.
+
+use std::fmt;
+
+use crate::{
+    conf::ComponentConf,
+    runtime::{Driver, Runtime, Schema},
+};
+
+include!(concat!(env!("OUT_DIR"), "/features.rs"));
+
+/// What a component is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Kind {
+    Driver,
+    Service,
+    Schema,
+}
+
+impl Kind {
+    /// Drivers and services are the same kind of object (as in 4.3): a service may
+    /// read a `driver NAME` section and the reverse.
+    pub fn same_family(self, other: Kind) -> bool {
+        self == other || (self != Kind::Schema && other != Kind::Schema)
+    }
+}
+
+impl fmt::Display for Kind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Kind::Driver => "driver",
+            Kind::Service => "service",
+            Kind::Schema => "schema",
+        })
+    }
+}
+
+/// Builds a schema from its conf lines.
+pub type SchemaFactory = fn(&ComponentConf, &Runtime) -> anyhow::Result<Box<dyn Schema>>;
+/// Builds a driver or service from its conf lines; it provides its interfaces on `Runtime`.
+pub type DriverFactory = fn(&ComponentConf, &Runtime) -> anyhow::Result<Box<dyn Driver>>;
+
+/// How to build a component.
+#[derive(Clone, Copy)]
+pub enum Factory {
+    Schema(SchemaFactory),
+    Driver(DriverFactory),
+}
+
+/// A registered component.
+pub struct Component {
+    pub kind: Kind,
+    pub name: &'static str,
+    /// One line for `jderobot list` and help texts.
+    pub summary: &'static str,
+    /// The cargo feature that compiles it in (empty for a user's own crate).
+    pub feature: &'static str,
+    pub factory: Factory,
+}
+
+inventory::collect!(Component);
+
+/// Every compiled-in component, sorted by kind then name.
+pub fn components() -> Vec<&'static Component> {
+    let mut v: Vec<&'static Component> = inventory::iter::<Component>.into_iter().collect();
+    v.sort_by_key(|c| (c.kind as u8, c.name));
+    v
+}
+
+/// The compiled-in component called `name`.
+pub fn find(name: &str) -> Option<&'static Component> {
+    inventory::iter::<Component>
+        .into_iter()
+        .find(|c| c.name == name)
+}
+
+/// Looks a component up for a load line, with an error that says what to do.
+pub fn lookup(kind: Option<Kind>, name: &str) -> Result<&'static Component, String> {
+    if let Some(c) = find(name) {
+        return match kind {
+            Some(k) if !k.same_family(c.kind) => Err(format!(
+                "`{name}` is a {}, not a {k}; load it with `load_{} {name}`",
+                c.kind, c.kind
+            )),
+            _ => Ok(c),
+        };
+    }
+    let what = kind.map(|k| k.to_string()).unwrap_or("component".into());
+    if ALL_COMPONENT_FEATURES.contains(&name) {
+        return Err(format!(
+            "{what} `{name}` is not compiled into this binary; rebuild with \
+             `cargo build --release --features {name}` (or `--features full`)"
+        ));
+    }
+    let compiled: Vec<&str> = components().iter().map(|c| c.name).collect();
+    Err(format!(
+        "no {what} called `{name}`; compiled in: {}; cargo features that add components: {}",
+        compiled.join(", "),
+        ALL_COMPONENT_FEATURES.join(", ")
+    ))
+}
+
+/// Registers a schema: `register_schema!("name", "summary", factory_fn)`.
+///
+/// `factory_fn: fn(&ComponentConf, &Runtime) -> anyhow::Result<Box<dyn Schema>>`.
+/// The feature is taken to be the name; a user's crate may pass a fourth argument.
+#[macro_export]
+macro_rules! register_schema {
+    ($name:literal, $summary:literal, $factory:expr) => {
+        $crate::register_schema!($name, $summary, $factory, $name);
+    };
+    ($name:literal, $summary:literal, $factory:expr, $feature:literal) => {
+        $crate::inventory::submit! {
+            $crate::registry::Component {
+                kind: $crate::registry::Kind::Schema,
+                name: $name,
+                summary: $summary,
+                feature: $feature,
+                factory: $crate::registry::Factory::Schema($factory),
+            }
+        }
+    };
+}
+
+/// Registers a driver or service:
+/// `register_driver!(Driver|Service, "name", "summary", factory_fn)`.
+#[macro_export]
+macro_rules! register_driver {
+    ($kind:ident, $name:literal, $summary:literal, $factory:expr) => {
+        $crate::inventory::submit! {
+            $crate::registry::Component {
+                kind: $crate::registry::Kind::$kind,
+                name: $name,
+                summary: $summary,
+                feature: $name,
+                factory: $crate::registry::Factory::Driver($factory),
+            }
+        }
+    };
+}
