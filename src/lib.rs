@@ -11,13 +11,19 @@
 //! [`register_schema!`] and call [`cli::main`]; see `examples/own_schema.rs`.
 
 pub mod cli;
+pub mod colorspaces;
 pub mod conf;
+pub mod fuzzy;
+#[cfg(feature = "gui")]
+pub mod gui;
 pub mod interfaces;
 pub mod namespace;
 pub mod output;
+pub mod progeo;
 pub mod registry;
 pub mod runtime;
 pub mod shell;
+pub mod vision;
 
 #[path = "../drivers/mod.rs"]
 pub mod drivers;

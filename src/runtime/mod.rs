@@ -110,6 +110,11 @@ pub trait Schema: Send {
     fn on_stop(&mut self, _ctx: &Context) {}
     /// Called once before the schema is unloaded.
     fn terminate(&mut self) {}
+    /// The schema's GUI panel, taken once when the schema is loaded.
+    #[cfg(feature = "gui")]
+    fn panel(&mut self) -> Option<Box<dyn crate::gui::Panel>> {
+        None
+    }
 }
 
 /// A driver or service: the factory provides its interfaces and starts its work;
@@ -215,6 +220,9 @@ pub struct SchemaSlot {
     stats: Mutex<Cronos>,
     shown: AtomicBool,
     thread: Mutex<Option<JoinHandle<()>>>,
+    /// The schema's panel; only the GUI thread locks it.
+    #[cfg(feature = "gui")]
+    pub panel: Mutex<Option<Box<dyn crate::gui::Panel>>>,
 }
 
 /// What `ps`, `ls` and the GUI show of a schema.
@@ -428,7 +436,10 @@ impl Runtime {
     }
 
     /// Adds a schema object under `name` and starts its (sleeping) thread.
-    pub fn add_schema(&self, name: &str, summary: &'static str, schema: Box<dyn Schema>) {
+    #[allow(unused_mut)]
+    pub fn add_schema(&self, name: &str, summary: &'static str, mut schema: Box<dyn Schema>) {
+        #[cfg(feature = "gui")]
+        let panel = schema.panel();
         let mut all = self.schemas.write();
         let cycle = schema.cycle().as_nanos().max(1) as u64;
         let slot = Arc::new(SchemaSlot {
@@ -452,6 +463,8 @@ impl Runtime {
             stats: Mutex::new(Cronos::default()),
             shown: AtomicBool::new(false),
             thread: Mutex::new(None),
+            #[cfg(feature = "gui")]
+            panel: Mutex::new(panel),
         });
         tracing::info!("{name} schema loaded (id {})", slot.id);
         let rt = self.arc();

@@ -1,0 +1,1 @@
+//! colorspaces (in progress).

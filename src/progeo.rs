@@ -1,0 +1,1 @@
+//! progeo (in progress).
