@@ -3,29 +3,19 @@
 //! walls with their heights, boxes, balls and the other robots), depth-tested
 //! with an inverse-depth buffer.
 //!
-//! Conventions (the seed's progeo): the camera is given by `position`, `foa`
-//! (focus of attention), `roll`, `fx`, `fy`, `u0`, `v0`. Optical coordinates are
+//! The camera is a [`PinholeCamera`] from [`crate::progeo`] (`position`, `foa`,
+//! `roll`, `fdistx`, `fdisty`, `u0`, `v0`), with its pixel conventions: optical
 //! x = row counted from the bottom, y = column from the left; graphic column =
-//! optical y, graphic row = rows − 1 − optical x.
+//! optical y, graphic row = rows − 1 − optical x. Optical pixel (x, y) covers
+//! [x, x+1) x [y, y+1), so a point that progeo projects to (x, y) lands in graphic
+//! pixel (column ⌊y⌋, row rows − 1 − ⌊x⌋).
 
-use crate::interfaces::Image;
+use crate::{
+    interfaces::Image,
+    progeo::{HPoint3D, PinholeCamera, focal_from_fov},
+};
 
 use super::{physics::Sim, world::Rgb};
-
-/// A pinhole camera in progeo's terms (mm, radians, pixels).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct CameraModel {
-    pub position: [f64; 3],
-    pub foa: [f64; 3],
-    pub roll: f64,
-    pub fx: f64,
-    pub fy: f64,
-    /// Principal point: u0 on the optical x (rows), v0 on the optical y (columns).
-    pub u0: f64,
-    pub v0: f64,
-    pub columns: u32,
-    pub rows: u32,
-}
 
 fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
     [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
@@ -34,67 +24,12 @@ fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
-impl CameraModel {
-    /// The rotation's rows (progeo's update_camera_matrix, "second method", then roll).
-    pub fn rotation(&self) -> [[f64; 3]; 3] {
-        let d = sub(self.foa, self.position);
-        let n = dot(d, d).sqrt().max(1e-12);
-        let w = [d[0] / n, d[1] / n, d[2] / n];
-        let t = (-w[0]).atan2(w[1]);
-        let mut v = [t.cos(), t.sin(), 0.0];
-        let mut u = [
-            v[1] * w[2] - w[1] * v[2],
-            -v[0] * w[2] + w[0] * v[2],
-            v[0] * w[1] - w[0] * v[1],
-        ];
-        if u[2] < 0.0 {
-            u = u.map(|x| -x);
-            v = v.map(|x| -x);
-        }
-        let (s, c) = self.roll.sin_cos();
-        let r0 = [
-            c * u[0] + s * v[0],
-            c * u[1] + s * v[1],
-            c * u[2] + s * v[2],
-        ];
-        let r1 = [
-            -s * u[0] + c * v[0],
-            -s * u[1] + c * v[1],
-            -s * u[2] + c * v[2],
-        ];
-        [r0, r1, w]
-    }
-
-    /// A world point in camera coordinates (progeo's a = RT·X).
-    pub fn to_camera(&self, p: [f64; 3]) -> [f64; 3] {
-        let r = self.rotation();
-        let q = sub(p, self.position);
-        [dot(r[0], q), dot(r[1], q), dot(r[2], q)]
-    }
-
-    /// Optical coordinates (x = row from the bottom, y = column) of a world point,
-    /// or `None` if it is behind the camera.
-    pub fn project(&self, p: [f64; 3]) -> Option<(f64, f64)> {
-        let a = self.to_camera(p);
-        (a[2] > 0.0).then(|| {
-            (
-                self.fx * a[0] / a[2] + self.u0,
-                self.fy * a[1] / a[2] + self.v0,
-            )
-        })
-    }
-
-    /// Graphic pixel (column, row) of a world point, if it is in front of the camera.
-    pub fn pixel(&self, p: [f64; 3]) -> Option<(f64, f64)> {
-        self.project(p)
-            .map(|(x, y)| (y, self.rows as f64 - 1.0 - x))
-    }
-}
-
 impl Sim {
-    /// Robot `i`'s camera for an image of `columns` x `rows`: on its pan-tilt unit,
-    /// looking along heading + pan, tilted up by tilt; no roll.
-    pub fn camera(&self, i: usize, columns: u32, rows: u32) -> CameraModel {
+    /// Robot `i`'s camera for an image of `columns` x `rows`, as a progeo pinhole
+    /// camera: on its pan-tilt unit, looking along heading + pan, tilted up by
+    /// tilt; no roll, no skew, `fx = fy` from the field of view, `u0 = rows/2`,
+    /// `v0 = columns/2`.
+    pub fn camera(&self, i: usize, columns: u32, rows: u32) -> PinholeCamera {
         let (pose, m, pan, tilt) = match self.robots.get(i) {
             Some(r) => (r.pose, r.model.clone(), r.pan, r.tilt),
             None => Default::default(),
@@ -109,18 +44,13 @@ impl Sim {
             position[2] + 1000.0 * el.sin(),
         ];
         let fov = m.camera_fov.clamp(1.0, 170.0).to_radians();
-        let f = columns as f64 / 2.0 / (fov / 2.0).tan();
-        CameraModel {
-            position,
-            foa,
-            roll: 0.0,
-            fx: f,
-            fy: f,
-            u0: rows as f64 / 2.0,
-            v0: columns as f64 / 2.0,
+        PinholeCamera::new(
+            HPoint3D::point(position[0], position[1], position[2]),
+            HPoint3D::point(foa[0], foa[1], foa[2]),
+            focal_from_fov(columns as f64, fov),
             columns,
             rows,
-        }
+        )
     }
 }
 
@@ -174,9 +104,9 @@ impl Renderer {
         ]
     }
 
-    /// Renders robot `me`'s view with camera `cam` into `img` (resized to the
-    /// camera's size if needed).
-    pub fn render(&mut self, sim: &Sim, me: usize, cam: &CameraModel, img: &mut Image) {
+    /// Renders robot `me`'s view with progeo camera `cam` (its skew is ignored)
+    /// into `img` (resized to the camera's size if needed).
+    pub fn render(&mut self, sim: &Sim, me: usize, cam: &PinholeCamera, img: &mut Image) {
         let (w, h) = (cam.columns as usize, cam.rows as usize);
         if img.width as usize != w || img.height as usize != h || img.data.len() != w * h * 3 {
             *img = Image::new(w as u32, h as u32);
@@ -185,9 +115,19 @@ impl Renderer {
         self.h = h;
         self.inv_z.clear();
         self.inv_z.resize(w * h, 0.0);
-        self.rot = cam.rotation();
-        self.pos = cam.position;
-        (self.fx, self.fy, self.u0, self.v0) = (cam.fx, cam.fy, cam.u0, cam.v0);
+        let r = cam.rotation();
+        self.rot = [0, 1, 2].map(|i| [r[(i, 0)], r[(i, 1)], r[(i, 2)]]);
+        let hp = if cam.position.h != 0.0 {
+            cam.position.h
+        } else {
+            1.0
+        };
+        self.pos = [
+            cam.position.x / hp,
+            cam.position.y / hp,
+            cam.position.z / hp,
+        ];
+        (self.fx, self.fy, self.u0, self.v0) = (cam.fdistx, cam.fdisty, cam.u0, cam.v0);
         if w == 0 || h == 0 {
             return;
         }

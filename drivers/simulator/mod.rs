@@ -98,7 +98,7 @@ use crate::{
     runtime::{Driver, Runtime},
 };
 
-pub use camera::{CameraModel, Renderer};
+pub use camera::Renderer;
 pub use physics::{Noise, Pose, Rng, Robot, RobotModel, Sim};
 pub use world::{BallSpec, BoxObj, World, WorldError};
 
@@ -187,6 +187,21 @@ fn positive(l: &ConfLine, i: usize, what: &str) -> anyhow::Result<f64> {
     Ok(v)
 }
 
+fn finite(l: &ConfLine, i: usize, what: &str) -> anyhow::Result<f64> {
+    let v: f64 = l.arg(i, what)?;
+    if !v.is_finite() {
+        return Err(err(
+            l,
+            format!(
+                "`{}`: argument {} must be {what}, got {v}",
+                l.keyword(),
+                i + 1
+            ),
+        ));
+    }
+    Ok(v)
+}
+
 fn non_negative(l: &ConfLine, i: usize, what: &str) -> anyhow::Result<f64> {
     let v: f64 = l.arg(i, what)?;
     if !(v >= 0.0 && v.is_finite()) {
@@ -236,9 +251,9 @@ impl SimConf {
                     }
                     let pose = if l.args().len() == 4 {
                         Some(Pose::new(
-                            l.arg(1, "X in mm")?,
-                            l.arg(2, "Y in mm")?,
-                            l.arg(3, "THETA in degrees")?,
+                            finite(l, 1, "X in mm")?,
+                            finite(l, 2, "Y in mm")?,
+                            finite(l, 3, "THETA in degrees")?,
                         ))
                     } else {
                         None
@@ -248,9 +263,9 @@ impl SimConf {
                 "initial_position" => {
                     l.expect_args(3, 3, "initial_position X_MM Y_MM THETA_DEG")?;
                     initial = Some(Pose::new(
-                        l.arg(0, "X in mm")?,
-                        l.arg(1, "Y in mm")?,
-                        l.arg(2, "THETA in degrees")?,
+                        finite(l, 0, "X in mm")?,
+                        finite(l, 1, "Y in mm")?,
+                        finite(l, 2, "THETA in degrees")?,
                     ));
                 }
                 "provides" | "motors_timeout" => {}
