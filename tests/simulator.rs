@@ -569,10 +569,13 @@ fn a_stale_motors_command_stops_the_robot() {
     );
     let enc: Arc<Interface<Encoders>> = rt.interfaces.get("encoders").unwrap();
     let motors: Arc<Interface<Motors>> = rt.interfaces.get("motors").unwrap();
-    // One command, never repeated: the robot moves, then stops by itself, well
-    // before the wall 4.7 m away.
-    motors.publish(Motors { v: 300.0, w: 0.0 }).unwrap();
-    eventually("the robot moves", || enc.read().x > 1000.5);
+    // Commands until it moves (the driver may not get the CPU at once), then
+    // none: the robot stops by itself, well before the wall 4.7 m away.
+    eventually("the robot moves", || {
+        motors.publish(Motors { v: 300.0, w: 0.0 }).unwrap();
+        std::thread::sleep(Duration::from_millis(5));
+        enc.read().x > 1000.5
+    });
     let mut last = (enc.read().x, enc.clock());
     eventually("the robot stops", || {
         let (x, c) = (enc.read().x, enc.clock());

@@ -780,7 +780,8 @@ fn run(mut sc: SimConf, mut robots: Vec<RobotIfaces>, stop: &AtomicBool) {
         Clock::Stepped(per) => {
             let steps = ((per / dt).round() as u64).max(1);
             let trigger = robots.iter().find_map(|r| r.motors.clone());
-            let mut seen = trigger.as_ref().map_or(0, |m| m.clock());
+            // The interface was created with clock 0: any later value is a command.
+            let mut seen = 0;
             while !stop.load(Ordering::Acquire) {
                 let Some(m) = &trigger else {
                     std::thread::sleep(Duration::from_millis(20));
