@@ -1,0 +1,166 @@
+//! Runs jderobot's vision, colour and fuzzy operations on inputs written by
+//! `scripts/compare_opencv.py`, writes the outputs next to them and prints the median
+//! time of each op (milliseconds, one thread) as JSON.
+//!
+//! ```text
+//! cargo run --release --example vision_compare -- DIR WIDTH HEIGHT REPEATS
+//! ```
+//! Inputs in DIR: `a.bgr`, `b.bgr` (raw BGR frames), `points.txt` (`x y` per line),
+//! `homography.txt` (`sx sy dx dy` per line), `hsv.txt` (`hmin hmax smin smax vmin
+//! vmax`, H in degrees), `fuzzy.txt` (`var1 var2` per line, for
+//! `assets/fuzzy/example.fzz`). Outputs: `rs_*.raw` (u8 or little-endian i16),
+//! `rs_*.txt`.
+
+use std::{fs, path::Path, time::Instant};
+
+use jderobot::{
+    colorspaces::{HsvRange, Lookup, hsv_mask},
+    fuzzy::{Controller, Inference},
+    interfaces::Image,
+    vision::{self, Kernel, LkParams},
+};
+
+fn median_ms<T>(repeats: usize, mut f: impl FnMut() -> T) -> (f64, T) {
+    let mut out = f(); // warm-up
+    let mut times = Vec::with_capacity(repeats);
+    for _ in 0..repeats {
+        let t = Instant::now();
+        out = std::hint::black_box(f());
+        times.push(t.elapsed().as_secs_f64() * 1e3);
+    }
+    times.sort_by(f64::total_cmp);
+    (times[times.len() / 2], out)
+}
+
+fn numbers(path: &Path) -> anyhow::Result<Vec<Vec<f64>>> {
+    let text = fs::read_to_string(path)?;
+    text.lines()
+        .filter(|l| !l.trim().is_empty())
+        .map(|l| {
+            l.split_whitespace()
+                .map(|w| w.parse::<f64>().map_err(|e| anyhow::anyhow!("{}: {e}", path.display())))
+                .collect()
+        })
+        .collect()
+}
+
+fn main() -> anyhow::Result<()> {
+    let args: Vec<String> = std::env::args().collect();
+    if args.len() != 5 {
+        anyhow::bail!("usage: vision_compare DIR WIDTH HEIGHT REPEATS");
+    }
+    let dir = Path::new(&args[1]);
+    let (w, h): (u32, u32) = (args[2].parse()?, args[3].parse()?);
+    let repeats: usize = args[4].parse()?;
+    let load = |name: &str| -> anyhow::Result<Image> {
+        let data = fs::read(dir.join(name))?;
+        anyhow::ensure!(data.len() == (w * h * 3) as usize, "{name}: wrong size");
+        Ok(Image {
+            width: w,
+            height: h,
+            data,
+        })
+    };
+    let a = load("a.bgr")?;
+    let b = load("b.bgr")?;
+    let mut times: Vec<(String, f64)> = Vec::new();
+    let write_u8 = |name: &str, d: &[u8]| fs::write(dir.join(name), d);
+    let write_i16 = |name: &str, d: &[i16]| {
+        fs::write(dir.join(name), d.iter().flat_map(|v| v.to_le_bytes()).collect::<Vec<u8>>())
+    };
+
+    let (t, g) = median_ms(repeats, || vision::grayscale(&a));
+    times.push(("gray".into(), t));
+    write_u8("rs_gray.raw", &g.data)?;
+
+    let hv = &numbers(&dir.join("hsv.txt"))?[0];
+    let range = HsvRange {
+        hmin: hv[0] as f32,
+        hmax: hv[1] as f32,
+        smin: hv[2] as f32,
+        smax: hv[3] as f32,
+        vmin: hv[4] as f32,
+        vmax: hv[5] as f32,
+    };
+    let (t, m) = median_ms(repeats, || hsv_mask(&a, &range, Lookup::Exact));
+    times.push(("hsv_filter".into(), t));
+    write_u8("rs_hsv.raw", &m.data)?;
+
+    let (t, (dx, dy)) = median_ms(repeats, || vision::sobel(&g));
+    times.push(("sobel_dx_dy".into(), t));
+    write_i16("rs_sobel_dx.raw", &dx.data)?;
+    write_i16("rs_sobel_dy.raw", &dy.data)?;
+
+    let (t, e) = median_ms(repeats, || vision::canny(&g, 50.0, 150.0, false));
+    times.push(("canny".into(), t));
+    write_u8("rs_canny.raw", &e.data)?;
+
+    let (t, p) = median_ms(repeats, || vision::pyr_down(&a));
+    times.push(("pyrdown".into(), t));
+    write_u8("rs_pyrdown.raw", &p.data)?;
+
+    for name in ["sharpen", "gaussian5", "edge"] {
+        let k = Kernel::load(format!("assets/kernels/{name}.kernel"))?;
+        let (t, c) = median_ms(repeats, || vision::convolve(&a, &k));
+        times.push((format!("filter2d_{name}"), t));
+        write_u8(&format!("rs_conv_{name}.raw"), &c.data)?;
+    }
+
+    let pts: Vec<(f32, f32)> = numbers(&dir.join("points.txt"))?
+        .iter()
+        .map(|p| (p[0] as f32, p[1] as f32))
+        .collect();
+    let gb = vision::grayscale(&b);
+    let (t, tracked) = median_ms(repeats, || {
+        vision::optical_flow_pyr_lk(&g, &gb, &pts, &LkParams::default())
+    });
+    times.push(("optical_flow_lk".into(), t));
+    let mut s = String::new();
+    for p in &tracked {
+        s += &format!("{} {} {} {}\n", p.x, p.y, p.found as u8, p.error);
+    }
+    fs::write(dir.join("rs_lk.txt"), s)?;
+
+    let hp = numbers(&dir.join("homography.txt"))?;
+    let src: Vec<(f64, f64)> = hp.iter().map(|r| (r[0], r[1])).collect();
+    let dst: Vec<(f64, f64)> = hp.iter().map(|r| (r[2], r[3])).collect();
+    let (t, hm) = median_ms(repeats, || vision::find_homography(&src, &dst));
+    times.push(("find_homography".into(), t));
+    let hm = hm.ok_or_else(|| anyhow::anyhow!("homography failed"))?;
+    fs::write(
+        dir.join("rs_homography.txt"),
+        hm.transpose().iter().map(|v| format!("{v:e}")).collect::<Vec<_>>().join(" "),
+    )?;
+    let (t, wp) = median_ms(repeats, || vision::warp_perspective(&a, &hm, w, h));
+    times.push(("warp_perspective".into(), t));
+    write_u8("rs_warp.raw", &wp.data)?;
+
+    let mut fz = Controller::from_file("assets/fuzzy/example.fzz")?;
+    let inputs = numbers(&dir.join("fuzzy.txt"))?;
+    for (mode, name) in [(Inference::Jde, "jde"), (Inference::Mamdani, "mamdani")] {
+        fz.set_inference(mode);
+        let (t, outs) = median_ms(repeats, || {
+            inputs
+                .iter()
+                .map(|v| {
+                    fz.set_input("fuzzyvar1", v[0] as f32);
+                    fz.set_input("fuzzyvar2", v[1] as f32);
+                    fz.output("fuzzyvar3")
+                })
+                .collect::<Vec<_>>()
+        });
+        times.push((format!("fuzzy_{name}"), t));
+        let s: String = outs
+            .iter()
+            .map(|o| match o {
+                Some((v, n)) => format!("{v} {n}\n"),
+                None => "nan 0\n".into(),
+            })
+            .collect();
+        fs::write(dir.join(format!("rs_fuzzy_{name}.txt")), s)?;
+    }
+
+    let json: Vec<String> = times.iter().map(|(k, v)| format!("\"{k}\": {v:.4}")).collect();
+    println!("{{{}}}", json.join(", "));
+    Ok(())
+}

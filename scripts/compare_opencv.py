@@ -1,0 +1,331 @@
+#!/usr/bin/env python3
+"""Compare jderobot's vision/colour/fuzzy libraries with OpenCV and scikit-fuzzy.
+
+Creates a venv under target/compare-venv (pip: opencv-python-headless, numpy,
+scikit-fuzzy), writes a synthetic 640x480 scene and a shifted second frame, runs
+`examples/vision_compare.rs` (release build) and the same operations through
+OpenCV (cv2.setNumThreads(1)) / scikit-fuzzy, and prints a Markdown table: per op
+the agreement (max abs difference) and the median times over REPEATS runs.
+
+    python3 scripts/compare_opencv.py [--repeats 50] [--markdown-out FILE]
+"""
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+VENV = os.path.join(ROOT, "target", "compare-venv")
+W, H = 640, 480
+
+
+def ensure_venv():
+    """Re-run this script inside the venv (creating it when needed)."""
+    py = os.path.join(VENV, "bin", "python")
+    if os.path.abspath(sys.prefix) == os.path.abspath(VENV):
+        return
+    if not os.path.exists(py):
+        subprocess.check_call([sys.executable, "-m", "venv", VENV])
+    subprocess.check_call(
+        [py, "-m", "pip", "install", "-q", "opencv-python-headless", "numpy", "scikit-fuzzy", "scipy", "networkx", "packaging"]
+    )
+    os.execv(py, [py] + sys.argv)
+
+
+def median_ms(fn, repeats):
+    out = fn()
+    ts = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        out = fn()
+        ts.append((time.perf_counter() - t) * 1e3)
+    ts.sort()
+    return ts[len(ts) // 2], out
+
+
+def scene(np, cv2):
+    """A textured scene: gradients, shapes, text and noise (deterministic)."""
+    rng = np.random.default_rng(43)
+    y, x = np.mgrid[0:H, 0:W].astype(np.float32)
+    img = np.zeros((H, W, 3), np.float32)
+    img[..., 0] = 128 + 100 * np.sin(x / 37.0) * np.cos(y / 53.0)
+    img[..., 1] = 255 * x / W
+    img[..., 2] = 255 * y / H
+    img = img.astype(np.uint8)
+    for _ in range(60):
+        c = tuple(int(v) for v in rng.integers(0, 256, 3))
+        p = (int(rng.integers(0, W)), int(rng.integers(0, H)))
+        if rng.random() < 0.5:
+            cv2.circle(img, p, int(rng.integers(5, 60)), c, -1)
+        else:
+            q = (p[0] + int(rng.integers(-80, 80)), p[1] + int(rng.integers(-80, 80)))
+            cv2.rectangle(img, p, q, c, -1)
+    cv2.putText(img, "JDE 4.3", (120, 260), cv2.FONT_HERSHEY_SIMPLEX, 3, (20, 220, 240), 6)
+    noise = rng.normal(0, 6, img.shape)
+    return np.clip(img.astype(np.float64) + noise, 0, 255).astype(np.uint8)
+
+
+def load_kernel(path, np):
+    size, modulo, offset, rows = 3, 1, 0, {}
+    for line in open(path):
+        line = line.split("#")[0].split()
+        if not line:
+            continue
+        if line[0] == "size":
+            size = int(line[1])
+        elif line[0] == "modulo":
+            modulo = int(line[1])
+        elif line[0] == "offset":
+            offset = int(line[1])
+        elif line[0] == "row":
+            rows[int(line[1])] = [float(v) for v in line[2:]]
+    k = np.array([rows[i + 1] for i in range(size)], np.float32)
+    if modulo > 1:
+        k = k / np.float32(modulo)
+    return k, offset
+
+
+def fuzzy_jde_reference(v1, v2, labels, rules):
+    """4.3.0's fuzzylib inference (product AND, per-rule clipped centroid, weighted mean)."""
+
+    def mu(t, x):
+        p0, p1, p2, p3 = t
+        if p0 < x < p1:
+            return (x - p0) / (p1 - p0)
+        if p2 < x < p3:
+            return (p3 - x) / (p3 - p2)
+        if p1 <= x <= p2:
+            return 1.0
+        return 0.0
+
+    def centroid(t, a):
+        p0, p1, p2, p3 = t
+        m1, c1 = (p1 - p0) * a * a / 2, p0 + 2 * (p1 - p0) * a / 3
+        wd = (p3 - p0) - a * (p3 - p2) - a * (p1 - p0)
+        m2, c2 = a * wd, p0 + a * (p1 - p0) + wd / 2
+        m3, c3 = (p3 - p2) * a * a / 2, p3 - 2 * a * (p3 - p2) / 3
+        m = m1 + m2 + m3
+        return (m1 * c1 + m2 * c2 + m3 * c3) / m if m > 0 else (p0 + p3) / 2
+
+    vals = {"fuzzyvar1": v1, "fuzzyvar2": v2}
+    num = den = 0.0
+    n = 0
+    for ante, cons in rules:
+        a = 1.0
+        for var, lab in ante:
+            a *= mu(labels[(var, lab)], vals[var])
+        if a > 0:
+            num += a * centroid(labels[("fuzzyvar3", cons)], a)
+            den += a
+            n += 1
+    return (num / den, n) if n else (float("nan"), 0)
+
+
+def main():
+    ensure_venv()
+    import cv2
+    import numpy as np
+    import skfuzzy as fuzz
+    from skfuzzy import control as ctrl
+
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--repeats", type=int, default=50)
+    ap.add_argument("--markdown-out")
+    args = ap.parse_args()
+    R = args.repeats
+    cv2.setNumThreads(1)
+
+    d = tempfile.mkdtemp(prefix="jderobot-compare-")
+    a = scene(np, cv2)
+    # Second frame: the scene moved by a sub-pixel shift and slightly re-noised.
+    m = np.float32([[1, 0, 2.3], [0, 1, -1.7]])
+    b = cv2.warpAffine(a, m, (W, H), borderMode=cv2.BORDER_REFLECT_101)
+    a.tofile(os.path.join(d, "a.bgr"))
+    b.tofile(os.path.join(d, "b.bgr"))
+    g = cv2.cvtColor(a, cv2.COLOR_BGR2GRAY)
+    gb = cv2.cvtColor(b, cv2.COLOR_BGR2GRAY)
+    pts = cv2.goodFeaturesToTrack(g, 200, 0.01, 10).reshape(-1, 2)
+    np.savetxt(os.path.join(d, "points.txt"), pts, fmt="%.6f")
+    # Homography: imgrectifier's 4 clicked corners -> a rectangle, plus 4 more exact pairs.
+    src = np.float64([[100, 80], [560, 40], [600, 450], [60, 400]])
+    dst = np.float64([[0, 0], [639, 0], [639, 479], [0, 479]])
+    htrue = cv2.getPerspectiveTransform(src.astype(np.float32), dst.astype(np.float32))
+    extra = np.float64([[300, 200], [200, 300], [450, 120], [500, 350]])
+    ex = cv2.perspectiveTransform(extra.reshape(-1, 1, 2), htrue).reshape(-1, 2)
+    src8, dst8 = np.vstack([src, extra]), np.vstack([dst, ex])
+    np.savetxt(os.path.join(d, "homography.txt"), np.hstack([src8, dst8]), fmt="%.17g")
+    hsv = [200.5, 265.3, 0.2137, 0.9, 40.5, 250.5]  # H degrees, S 0..1, V 0..255
+    np.savetxt(os.path.join(d, "hsv.txt"), [hsv], fmt="%.6f")
+    rng = np.random.default_rng(7)
+    fin = np.column_stack([rng.uniform(7000, 20000, 40), rng.uniform(150, 800, 40)])
+    fin = np.vstack([[12000, 500], fin])
+    np.savetxt(os.path.join(d, "fuzzy.txt"), fin, fmt="%.3f")
+
+    subprocess.check_call(
+        ["cargo", "build", "--release", "--example", "vision_compare"], cwd=ROOT
+    )
+    exe = os.path.join(ROOT, "target", "release", "examples", "vision_compare")
+    rs = json.loads(
+        subprocess.check_output([exe, d, str(W), str(H), str(R)], cwd=ROOT).decode()
+    )
+
+    def raw(name, dtype, shape):
+        return np.fromfile(os.path.join(d, name), dtype).reshape(shape)
+
+    rows = []  # (op, agreement, rust ms, opencv ms, note)
+
+    def add(op, rs_key, diff, cv_ms, note=""):
+        rows.append((op, diff, rs[rs_key], cv_ms, note))
+
+    t, cg = median_ms(lambda: cv2.cvtColor(a, cv2.COLOR_BGR2GRAY), R)
+    diff = int(np.abs(cg.astype(int) - raw("rs_gray.raw", np.uint8, (H, W))).max())
+    add("grayscale (BGR2GRAY)", "gray", str(diff), t)
+
+    lo = np.array([hsv[0], hsv[2], hsv[4]], np.float32)
+    hi = np.array([hsv[1], hsv[3], hsv[5]], np.float32)
+    t, cm = median_ms(
+        lambda: cv2.inRange(cv2.cvtColor(a.astype(np.float32), cv2.COLOR_BGR2HSV), lo, hi), R
+    )
+    rm = raw("rs_hsv.raw", np.uint8, (H, W))
+    nd = int((cm != rm).sum())
+    add("HSV colour filter (float HSV + inRange)", "hsv_filter",
+        f"{int(np.abs(cm.astype(int) - rm).max())} ({nd} px differ)", t,
+        f"{int((rm > 0).sum())} px pass")
+
+    def sob():
+        return (cv2.Sobel(g, cv2.CV_16S, 1, 0, ksize=3), cv2.Sobel(g, cv2.CV_16S, 0, 1, ksize=3))
+
+    t, (cx, cy) = median_ms(sob, R)
+    dxd = np.abs(cx.astype(int) - raw("rs_sobel_dx.raw", "<i2", (H, W))).max()
+    dyd = np.abs(cy.astype(int) - raw("rs_sobel_dy.raw", "<i2", (H, W))).max()
+    add("Sobel 3x3 dx + dy (CV_16S)", "sobel_dx_dy", str(int(max(dxd, dyd))), t)
+
+    t, ce = median_ms(lambda: cv2.Canny(g, 50, 150), R)
+    re_ = raw("rs_canny.raw", np.uint8, (H, W))
+    nd = int((ce != re_).sum())
+    add("Canny 50/150 (L1)", "canny", f"{int(np.abs(ce.astype(int) - re_).max())} ({nd} px differ)", t,
+        f"{int((ce > 0).sum())} edge px")
+
+    t, cp = median_ms(lambda: cv2.pyrDown(a), R)
+    diff = int(np.abs(cp.astype(int) - raw("rs_pyrdown.raw", np.uint8, cp.shape)).max())
+    add("pyrDown (BGR)", "pyrdown", str(diff), t)
+
+    for name in ["sharpen", "gaussian5", "edge"]:
+        k, off = load_kernel(os.path.join(ROOT, "assets", "kernels", name + ".kernel"), np)
+        t, cc = median_ms(
+            lambda: cv2.filter2D(a, -1, k, delta=off, borderType=cv2.BORDER_REFLECT_101), R
+        )
+        rc = raw(f"rs_conv_{name}.raw", np.uint8, (H, W, 3))
+        diff = int(np.abs(cc.astype(int) - rc).max())
+        add(f"filter2D {name} {k.shape[0]}x{k.shape[0]} (BGR)", f"filter2d_{name}",
+            f"{diff} ({int((cc != rc).sum())} values differ)", t)
+
+    crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 30, 0.01)
+    p0 = pts.reshape(-1, 1, 2).astype(np.float32)
+
+    def lk():
+        return cv2.calcOpticalFlowPyrLK(g, gb, p0, None, winSize=(21, 21), maxLevel=3, criteria=crit)
+
+    t, (cp1, cst, _) = median_ms(lk, R)
+    rl = np.loadtxt(os.path.join(d, "rs_lk.txt"))
+    both = (cst.reshape(-1) == 1) & (rl[:, 2] == 1)
+    diff = np.abs(cp1.reshape(-1, 2)[both] - rl[both, :2]).max()
+    stat = int((cst.reshape(-1) != rl[:, 2]).sum())
+    truth = np.abs(rl[both, :2] - (pts[both] + [2.3, -1.7])).max()
+    add(f"optical flow LK ({len(pts)} points, 21x21, 3 levels)", "optical_flow_lk",
+        f"{diff:.4f} px ({stat} status differ)", t, f"max error vs true shift {truth:.3f} px")
+
+    t, (ch, _) = median_ms(lambda: cv2.findHomography(src8, dst8, 0), R)
+    rh = np.loadtxt(os.path.join(d, "rs_homography.txt")).reshape(3, 3)
+    add("findHomography (8 pairs, least squares)", "find_homography",
+        f"{np.abs(ch / ch[2, 2] - rh).max():.2e}", t)
+
+    t, cw = median_ms(lambda: cv2.warpPerspective(a, rh, (W, H)), R)
+    rw = raw("rs_warp.raw", np.uint8, (H, W, 3))
+    add("warpPerspective (bilinear, BGR)", "warp_perspective",
+        f"{int(np.abs(cw.astype(int) - rw).max())} ({int((cw != rw).sum())} values differ)", t)
+
+    # Fuzzy: 4.3's inference against a Python transcription; Mamdani against scikit-fuzzy.
+    labels = {
+        ("fuzzyvar1", "valuename1"): (8000, 12000, 16000, 20000),
+        ("fuzzyvar1", "valuename2"): (1000, 2000, 4000, 8000),
+        ("fuzzyvar1", "valuename3"): (300, 500, 800, 1000),
+        ("fuzzyvar2", "valuename4"): (300, 500, 600, 800),
+        ("fuzzyvar2", "valuename5"): (200, 225, 275, 300),
+        ("fuzzyvar2", "valuename6"): (100, 175, 187, 200),
+        ("fuzzyvar3", "valuename7"): (-40, -35, -30, -25),
+        ("fuzzyvar3", "valuename8"): (-25, -20, -15, -10),
+        ("fuzzyvar3", "valuename9"): (0, 0, 0, 0),
+    }
+    rules = [
+        ([("fuzzyvar1", "valuename1"), ("fuzzyvar2", "valuename4")], "valuename7"),
+        ([("fuzzyvar1", "valuename3"), ("fuzzyvar2", "valuename6")], "valuename7"),
+        ([("fuzzyvar2", "valuename5"), ("fuzzyvar1", "valuename1")], "valuename9"),
+        ([("fuzzyvar1", "valuename1")], "valuename8"),
+        ([("fuzzyvar2", "valuename6")], "valuename9"),
+    ]
+    rj = np.loadtxt(os.path.join(d, "rs_fuzzy_jde.txt"))
+    t, ref = median_ms(lambda: [fuzzy_jde_reference(v1, v2, labels, rules) for v1, v2 in fin], R)
+    ok = [i for i, r in enumerate(ref) if r[1] > 0]
+    diff = max(abs(rj[i, 0] - ref[i][0]) for i in ok)
+    nd = sum(int(rj[i, 1]) != ref[i][1] for i in ok)
+    add(f"fuzzy 4.3 inference ({len(fin)} inputs; example = {rj[0, 0]:g}, {int(rj[0, 1])} rules)",
+        "fuzzy_jde", f"{diff:.1e} ({nd} rule counts differ)", t, "vs Python transcription of 4.3")
+
+    u1 = np.arange(0, 20001, 1.0)
+    u2 = np.arange(0, 1001, 1.0)
+    u3 = np.round(np.arange(-45, 5.0001, 0.01), 2)
+    v1, v2 = ctrl.Antecedent(u1, "fuzzyvar1"), ctrl.Antecedent(u2, "fuzzyvar2")
+    v3 = ctrl.Consequent(u3, "fuzzyvar3")
+    for (var, lab), p in labels.items():
+        obj = {"fuzzyvar1": v1, "fuzzyvar2": v2, "fuzzyvar3": v3}[var]
+        obj[lab] = fuzz.trapmf(obj.universe, list(p))
+    sk_rules = []
+    for ante, cons in rules:
+        term = None
+        for var, lab in ante:
+            t_ = {"fuzzyvar1": v1, "fuzzyvar2": v2}[var][lab]
+            term = t_ if term is None else term & t_
+        sk_rules.append(ctrl.Rule(term, v3[cons]))
+    sim = ctrl.ControlSystemSimulation(ctrl.ControlSystem(sk_rules))
+
+    def skrun():
+        out = []
+        for x1, x2 in fin:
+            sim.input["fuzzyvar1"] = x1
+            sim.input["fuzzyvar2"] = x2
+            try:
+                sim.compute()
+                out.append(sim.output["fuzzyvar3"])
+            except Exception:  # only singletons fired: no area
+                out.append(float("nan"))
+        return out
+
+    t, sk = median_ms(skrun, max(3, R // 10))
+    rmd = np.loadtxt(os.path.join(d, "rs_fuzzy_mamdani.txt"))
+    ok = [i for i, v in enumerate(sk) if np.isfinite(v) and np.isfinite(rmd[i, 0])]
+    diff = max(abs(rmd[i, 0] - sk[i]) for i in ok)
+    add(f"fuzzy Mamdani ({len(ok)}/{len(fin)} inputs comparable)", "fuzzy_mamdani", f"{diff:.1e}", t,
+        "vs scikit-fuzzy ControlSystem (universe step 0.01)")
+
+    lines = [
+        "| op (640x480, 1 thread) | max abs diff | jderobot ms | reference ms | ratio | note |",
+        "|---|---|---|---|---|---|",
+    ]
+    for op, diff, r_ms, c_ms, note in rows:
+        lines.append(f"| {op} | {diff} | {r_ms:.3f} | {c_ms:.3f} | {r_ms / c_ms:.2f}x | {note} |")
+    table = "\n".join(lines)
+    print(f"OpenCV {cv2.__version__}, numpy {np.__version__}, scikit-fuzzy {fuzz.__version__}; "
+          f"medians of {R} runs; inputs in {d}")
+    print(table)
+    if args.markdown_out:
+        with open(args.markdown_out, "w") as f:
+            f.write(table + "\n")
+
+
+if __name__ == "__main__":
+    main()
