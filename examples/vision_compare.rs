@@ -38,7 +38,10 @@ fn numbers(path: &Path) -> anyhow::Result<Vec<Vec<f64>>> {
         .filter(|l| !l.trim().is_empty())
         .map(|l| {
             l.split_whitespace()
-                .map(|w| w.parse::<f64>().map_err(|e| anyhow::anyhow!("{}: {e}", path.display())))
+                .map(|w| {
+                    w.parse::<f64>()
+                        .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
+                })
                 .collect()
         })
         .collect()
@@ -66,7 +69,10 @@ fn main() -> anyhow::Result<()> {
     let mut times: Vec<(String, f64)> = Vec::new();
     let write_u8 = |name: &str, d: &[u8]| fs::write(dir.join(name), d);
     let write_i16 = |name: &str, d: &[i16]| {
-        fs::write(dir.join(name), d.iter().flat_map(|v| v.to_le_bytes()).collect::<Vec<u8>>())
+        fs::write(
+            dir.join(name),
+            d.iter().flat_map(|v| v.to_le_bytes()).collect::<Vec<u8>>(),
+        )
     };
 
     let (t, g) = median_ms(repeats, || vision::grayscale(&a));
@@ -129,7 +135,11 @@ fn main() -> anyhow::Result<()> {
     let hm = hm.ok_or_else(|| anyhow::anyhow!("homography failed"))?;
     fs::write(
         dir.join("rs_homography.txt"),
-        hm.transpose().iter().map(|v| format!("{v:e}")).collect::<Vec<_>>().join(" "),
+        hm.transpose()
+            .iter()
+            .map(|v| format!("{v:e}"))
+            .collect::<Vec<_>>()
+            .join(" "),
     )?;
     let (t, wp) = median_ms(repeats, || vision::warp_perspective(&a, &hm, w, h));
     times.push(("warp_perspective".into(), t));
@@ -160,7 +170,10 @@ fn main() -> anyhow::Result<()> {
         fs::write(dir.join(format!("rs_fuzzy_{name}.txt")), s)?;
     }
 
-    let json: Vec<String> = times.iter().map(|(k, v)| format!("\"{k}\": {v:.4}")).collect();
+    let json: Vec<String> = times
+        .iter()
+        .map(|(k, v)| format!("\"{k}\": {v:.4}"))
+        .collect();
     println!("{{{}}}", json.join(", "));
     Ok(())
 }

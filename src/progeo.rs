@@ -367,8 +367,8 @@ impl PinholeCamera {
         (n > 0.0).then(|| d / n)
     }
 
-    /// Clips the image of a 3D segment whose ends were projected to `p1`, `p2` (with
-    /// [`project`](Self::project)'s `h` sign) to the image `[0, rows−1] x [0,
+    /// Clips the image of a 3D segment whose ends were projected to `p1`, `p2` by
+    /// [`project`](Self::project) (x, y in pixels; `h` = +1 in front, −1 behind) to the image `[0, rows−1] x [0,
     /// columns−1]` (optical). Returns the visible part, or `None` when nothing is
     /// visible. Unlike 4.3.0, a segment crossing the camera plane is drawn: its
     /// visible part is the ray from the point in front away from the other's image.
@@ -378,7 +378,8 @@ impl PinholeCamera {
         }
         let xmax = self.rows as f64 - 1.0;
         let ymax = self.columns as f64 - 1.0;
-        let (a, b) = (p1.normalized(), p2.normalized());
+        // As in 4.3, x and y are already divided; h only says in front (+) or behind (−).
+        let (a, b) = (p1, p2);
         let (front1, front2) = (p1.h > 0.0, p2.h > 0.0);
         let (origin, dir, tmax) = match (front1, front2) {
             (false, false) => return None,
@@ -387,13 +388,7 @@ impl PinholeCamera {
             (false, true) => ((b.x, b.y), (b.x - a.x, b.y - a.y), f64::INFINITY),
         };
         let (t0, t1) = clip_liang_barsky(origin, dir, tmax, xmax, ymax)?;
-        let at = |t: f64| {
-            if t == 0.0 {
-                HPoint2D::new(origin.0, origin.1, 1.0)
-            } else {
-                HPoint2D::new(origin.0 + t * dir.0, origin.1 + t * dir.1, 1.0)
-            }
-        };
+        let at = |t: f64| HPoint2D::new(origin.0 + t * dir.0, origin.1 + t * dir.1, 1.0);
         if !t1.is_finite() {
             return None;
         }
@@ -406,9 +401,9 @@ impl PinholeCamera {
         HPoint2D::new(x, y, 1.0)
     }
 
-    /// Graphic (column, row) of an optical point of this camera's image.
+    /// Graphic (column, row) of an optical point of this camera's image (`x`, `y` as
+    /// [`project`](Self::project) leaves them; `h` is not used).
     pub fn optical_to_graphic(&self, p: HPoint2D) -> (f64, f64) {
-        let p = p.normalized();
         optical_to_graphic(p.x, p.y, self.rows)
     }
 
@@ -476,7 +471,7 @@ impl PinholeCamera {
                 )));
             }
             let count = |v: f64| -> Result<u32, ProgeoError> {
-                if v >= 1.0 && v <= 100_000.0 && v.fract() == 0.0 {
+                if (1.0..=100_000.0).contains(&v) && v.fract() == 0.0 {
                     Ok(v as u32)
                 } else {
                     Err(err(format!(

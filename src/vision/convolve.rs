@@ -54,7 +54,7 @@ impl Kernel {
     /// A kernel from rows of coefficients (divided by `modulo` when > 1).
     pub fn from_rows(rows: &[&[f32]], modulo: i32, offset: i32) -> Option<Self> {
         let size = rows.len();
-        if size % 2 == 0 || rows.iter().any(|r| r.len() != size) {
+        if size.is_multiple_of(2) || rows.iter().any(|r| r.len() != size) {
             return None;
         }
         let div = if modulo > 1 { modulo as f32 } else { 1.0 };
@@ -203,44 +203,23 @@ multiversion! {
     }
 }
 
-/// Accumulates `offset + Σ v·row[i + o]` over the taps (in kernel row-major order,
-/// with fused multiply-adds like OpenCV's SIMD path) and saturates.
-#[inline(always)]
-fn conv_block<const B: usize>(
-    rows: &[&[f32]],
-    taps: &[(usize, usize, f32)],
-    offset: f32,
-    x: usize,
-    dst: &mut [u8],
-) -> bool {
-    let mut acc = [offset; B];
-    for &(r, o, v) in taps {
-        let Some(s) = rows[r].get(x + o..).and_then(|s| s.first_chunk::<B>()) else {
-            return false;
-        };
-        for j in 0..B {
-            acc[j] = v.mul_add(s[j], acc[j]);
+multiversion! {
+    /// `acc[i] += v · src[i]` with a fused multiply-add (as OpenCV's SIMD path).
+    fn mul_add_row(acc: &mut [f32], src: &[f32], v: f32) {
+        let n = acc.len();
+        let src = &src[..n];
+        for i in 0..n {
+            acc[i] = v.mul_add(src[i], acc[i]);
         }
     }
-    let Some(d) = dst.get_mut(x..).and_then(|d| d.first_chunk_mut::<B>()) else {
-        return false;
-    };
-    for j in 0..B {
-        d[j] = acc[j].round_ties_even().clamp(0.0, 255.0) as u8;
-    }
-    true
 }
 
 multiversion! {
-    fn conv_row(rows: &[&[f32]], taps: &[(usize, usize, f32)], offset: f32, dst: &mut [u8]) {
-        const B: usize = 32;
-        let n = dst.len();
-        let mut x = 0;
-        while x + B <= n && conv_block::<B>(rows, taps, offset, x, dst) {
-            x += B;
-        }
-        while x < n && conv_block::<1>(rows, taps, offset, x, dst) {
-            x += 1;
+    fn saturate_row(acc: &[f32], dst: &mut [u8]) {
+        for (d, &a) in dst.iter_mut().zip(acc) {
+            // Adding 1.5·2²³ rounds half to even into the low mantissa bits (exact for
+            // 0..=255); this form vectorises, `as u8` on a float does not.
+            *d = (a.clamp(0.0, 255.0) + 12_582_912.0).to_bits() as u8;
         }
     }
 }
@@ -250,7 +229,10 @@ multiversion! {
 /// to even — OpenCV's `filter2D(src, -1, kernel, delta = offset)` (a correlation, as
 /// OpenCV's; opencvdemo's kernels are symmetric or meant that way).
 pub fn convolve(img: &Image, kernel: &Kernel) -> Image {
-    if !is_valid(img) || kernel.values.len() != kernel.size * kernel.size || kernel.size % 2 == 0 {
+    if !is_valid(img)
+        || kernel.values.len() != kernel.size * kernel.size
+        || kernel.size.is_multiple_of(2)
+    {
         return Image::default();
     }
     let (w, h) = (img.width as usize, img.height as usize);
@@ -267,6 +249,7 @@ pub fn convolve(img: &Image, kernel: &Kernel) -> Image {
         .map(|i| (i / k, (i % k) * cn, kernel.values[i]))
         .collect();
     let mut out = Image::new(img.width, img.height);
+    let mut acc = vec![0f32; w * cn];
     for y in 0..h {
         let mut slots = vec![0usize; k];
         for (ky, slot) in slots.iter_mut().enumerate().take(k) {
@@ -290,15 +273,13 @@ pub fn convolve(img: &Image, kernel: &Kernel) -> Image {
             }
             *slot = s;
         }
-        let rows: Vec<&[f32]> = (0..k)
-            .map(|ky| &ring[slots[ky] * pw..(slots[ky] + 1) * pw])
-            .collect();
-        conv_row(
-            &rows,
-            &taps,
-            kernel.offset as f32,
-            &mut out.data[y * w * cn..(y + 1) * w * cn],
-        );
+        // Taps in kernel row-major order, each added over the whole row.
+        acc.fill(kernel.offset as f32);
+        for &(ky, o, v) in &taps {
+            let s = slots[ky] * pw + o;
+            mul_add_row(&mut acc, &ring[s..s + w * cn], v);
+        }
+        saturate_row(&acc, &mut out.data[y * w * cn..(y + 1) * w * cn]);
     }
     out
 }

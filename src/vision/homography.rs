@@ -97,7 +97,8 @@ multiversion! {
 }
 
 multiversion! {
-    fn warp_row(src: &[u8], sw: i32, sh: i32, ix: &[i32], iy: &[i32], fx: &[f32], fy: &[f32], dst: &mut [u8]) {
+    fn warp_row(src: &[u8], size: (i32, i32), pos: (&[i32], &[i32], &[f32], &[f32]), dst: &mut [u8]) {
+        let ((sw, sh), (ix, iy, fx, fy)) = (size, pos);
         const CN: usize = 3;
         let stride = sw as usize * CN;
         for (i, d) in dst.chunks_exact_mut(CN).enumerate() {
@@ -156,7 +157,7 @@ pub fn warp_perspective(img: &Image, h: &Matrix3<f64>, width: u32, height: u32) 
     for y in 0..height as usize {
         map_row(&m, y as f64, &mut ix, &mut iy, &mut fx, &mut fy);
         let dst = &mut out.data[y * ow * 3..(y + 1) * ow * 3];
-        warp_row(&img.data, sw, sh, &ix, &iy, &fx, &fy, dst);
+        warp_row(&img.data, (sw, sh), (&ix, &iy, &fx, &fy), dst);
     }
     out
 }

@@ -43,8 +43,9 @@ pub fn sobel_with_border(img: &GrayImage, border: Border) -> (Gray16, Gray16) {
     if !valid_len(img.width, img.height, 1, img.data.len()) || w == 0 || h == 0 {
         return (Gray16::default(), Gray16::default());
     }
-    let mut dx = Gray16::new(img.width, img.height);
-    let mut dy = Gray16::new(img.width, img.height);
+    // Outputs are filled row by row without zero-initialising them first.
+    let (mut ox, mut oy) = (Vec::with_capacity(w * h), Vec::with_capacity(w * h));
+    let (mut rx, mut ry) = (vec![0i16; w], vec![0i16; w]);
     let mut sm = vec![0i16; w + 2];
     let mut df = vec![0i16; w + 2];
     let row = |y: isize| {
@@ -54,15 +55,27 @@ pub fn sobel_with_border(img: &GrayImage, border: Border) -> (Gray16, Gray16) {
     let (l, r) = (border.index(-1, w), border.index(w as isize, w));
     for y in 0..h {
         let yy = y as isize;
-        let out_x = &mut dx.data[y * w..(y + 1) * w];
-        let out_y = &mut dy.data[y * w..(y + 1) * w];
         sobel_rows(row(yy - 1), row(yy), row(yy + 1), &mut sm, &mut df);
         sm[0] = sm[l + 1];
         df[0] = df[l + 1];
         sm[w + 1] = sm[r + 1];
         df[w + 1] = df[r + 1];
-        sobel_h(&sm, &df, out_x, out_y);
+        sobel_h(&sm, &df, &mut rx, &mut ry);
+        ox.extend_from_slice(&rx);
+        oy.extend_from_slice(&ry);
     }
+    let (dx, dy) = (
+        Gray16 {
+            width: img.width,
+            height: img.height,
+            data: ox,
+        },
+        Gray16 {
+            width: img.width,
+            height: img.height,
+            data: oy,
+        },
+    );
     (dx, dy)
 }
 
