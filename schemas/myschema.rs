@@ -47,4 +47,8 @@ fn create(conf: &ComponentConf, _rt: &Runtime) -> anyhow::Result<Box<dyn Schema>
     }))
 }
 
-crate::register_schema!("myschema", "the seed's hello world: prints -->Hello world! each cycle", create);
+crate::register_schema!(
+    "myschema",
+    "the seed's hello world: prints -->Hello world! each cycle",
+    create
+);

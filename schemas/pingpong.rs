@@ -44,7 +44,11 @@ impl Schema for PingPong {
         let turn = self.turn.clone();
         // The arbitration: among the ready brothers, pick the one whose turn it is.
         let arbitration = Arc::new(move |ready: &[&str]| {
-            let wanted = if turn.load(Ordering::Acquire) { "ping" } else { "pong" };
+            let wanted = if turn.load(Ordering::Acquire) {
+                "ping"
+            } else {
+                "pong"
+            };
             ready.iter().position(|n| *n == wanted).unwrap_or(0)
         });
         ctx.run_children(&["ping", "pong"], Some(arbitration))?;
@@ -52,7 +56,7 @@ impl Schema for PingPong {
     }
     fn iteration(&mut self, _ctx: &Context) -> anyhow::Result<()> {
         self.count += 1;
-        if self.count % self.every == 0 {
+        if self.count.is_multiple_of(self.every) {
             self.turn.fetch_xor(true, Ordering::AcqRel);
         }
         Ok(())
@@ -94,11 +98,17 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
 }
 
 fn create_ping(_: &ComponentConf, _: &Runtime) -> anyhow::Result<Box<dyn Schema>> {
-    Ok(Box::new(Player { name: "ping", wins: 0 }))
+    Ok(Box::new(Player {
+        name: "ping",
+        wins: 0,
+    }))
 }
 
 fn create_pong(_: &ComponentConf, _: &Runtime) -> anyhow::Result<Box<dyn Schema>> {
-    Ok(Box::new(Player { name: "pong", wins: 0 }))
+    Ok(Box::new(Player {
+        name: "pong",
+        wins: 0,
+    }))
 }
 
 crate::register_schema!(
@@ -106,5 +116,15 @@ crate::register_schema!(
     "example parent: runs ping and pong as brothers and arbitrates between them",
     create
 );
-crate::register_schema!("ping", "child of pingpong: prints ping N when it wins", create_ping, "pingpong");
-crate::register_schema!("pong", "child of pingpong: prints pong N when it wins", create_pong, "pingpong");
+crate::register_schema!(
+    "ping",
+    "child of pingpong: prints ping N when it wins",
+    create_ping,
+    "pingpong"
+);
+crate::register_schema!(
+    "pong",
+    "child of pingpong: prints pong N when it wins",
+    create_pong,
+    "pingpong"
+);

@@ -358,9 +358,8 @@ impl Conf {
                          (line {}); expected `end_{}`",
                         s.kind, s.name, s.at.line, s.kind
                     ))),
-                    (None, false) => errors.push(line.error(format!(
-                        "`{kw}` without an open `{kind} NAME` section"
-                    ))),
+                    (None, false) => errors
+                        .push(line.error(format!("`{kw}` without an open `{kind} NAME` section"))),
                 }
                 continue;
             }
@@ -371,7 +370,12 @@ impl Conf {
             match Conf::directive(file, &line) {
                 Ok(Some(d)) => conf.directives.push(d),
                 Ok(None) => {
-                    conf.path = line.args().iter().flat_map(|a| a.split(':')).map(PathBuf::from).collect();
+                    conf.path = line
+                        .args()
+                        .iter()
+                        .flat_map(|a| a.split(':'))
+                        .map(PathBuf::from)
+                        .collect();
                 }
                 Err(e) => errors.push(e),
             }
@@ -524,7 +528,10 @@ mod tests {
         .unwrap();
         assert_eq!(c.path, vec![PathBuf::from("/a"), PathBuf::from("/b")]);
         assert_eq!(c.sections.len(), 1);
-        assert_eq!(c.sections[0].lines[0].words, ["provides", "laser", "180", "1"]);
+        assert_eq!(
+            c.sections[0].lines[0].words,
+            ["provides", "laser", "180", "1"]
+        );
         assert_eq!(c.directives.len(), 4);
         assert_eq!(c.directives[3].action, Action::Show("myschema".into()));
     }
@@ -533,7 +540,13 @@ mod tests {
     fn errors_name_file_and_line() {
         let e = parse("load_driver a\nfrobnicate x\ndriver b\n").unwrap_err();
         let text = e.to_string();
-        assert!(text.contains("t.conf:2: unknown keyword `frobnicate`"), "{text}");
-        assert!(text.contains("t.conf:3: `driver b` section is never closed"), "{text}");
+        assert!(
+            text.contains("t.conf:2: unknown keyword `frobnicate`"),
+            "{text}"
+        );
+        assert!(
+            text.contains("t.conf:3: `driver b` section is never closed"),
+            "{text}"
+        );
     }
 }

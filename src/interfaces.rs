@@ -129,7 +129,12 @@ impl Image {
 impl InterfaceValue for Image {
     const KIND: &'static str = "image";
     fn describe(&self) -> String {
-        format!("{}x{} BGR ({} bytes)", self.width, self.height, self.data.len())
+        format!(
+            "{}x{} BGR ({} bytes)",
+            self.width,
+            self.height,
+            self.data.len()
+        )
     }
     fn validate(&self, name: &str) -> Result<(), String> {
         if self.data.len() != self.width as usize * self.height as usize * 3 {
@@ -141,8 +146,7 @@ impl InterfaceValue for Image {
                 self.width as usize * self.height as usize * 3
             ));
         }
-        if name.starts_with("color") && (self.width, self.height) != (COLOR_WIDTH, COLOR_HEIGHT)
-        {
+        if name.starts_with("color") && (self.width, self.height) != (COLOR_WIDTH, COLOR_HEIGHT) {
             return Err(format!(
                 "{name}: colorA..D images are {COLOR_WIDTH}x{COLOR_HEIGHT}, got {}x{}; use a varcolor interface for other sizes",
                 self.width, self.height
@@ -264,7 +268,9 @@ impl InterfaceValue for Motors {
         match field {
             "v" => set_f32(field, value, &mut self.v),
             "w" => set_f32(field, value, &mut self.w),
-            _ => Err(format!("motors has no field `{field}`; fields: v (mm/s), w (deg/s)")),
+            _ => Err(format!(
+                "motors has no field `{field}`; fields: v (mm/s), w (deg/s)"
+            )),
         }
     }
 }
@@ -501,7 +507,11 @@ impl<T> Writer<T> {
             .iter()
             .filter(|t| now.duration_since(**t) <= RATE_WINDOW)
             .count();
-        if window < 0.05 { 0.0 } else { n as f64 / window }
+        if window < 0.05 {
+            0.0
+        } else {
+            n as f64 / window
+        }
     }
 }
 
@@ -624,7 +634,9 @@ impl<T: InterfaceValue> Interface<T> {
     /// Someone stops using it (4.3's `stop`); never goes below zero.
     pub fn suspend(&self) -> usize {
         self.users
-            .fetch_update(Ordering::AcqRel, Ordering::Acquire, |n| Some(n.saturating_sub(1)))
+            .fetch_update(Ordering::AcqRel, Ordering::Acquire, |n| {
+                Some(n.saturating_sub(1))
+            })
             .map(|n| n.saturating_sub(1))
             .unwrap_or(0)
     }
@@ -739,10 +751,13 @@ pub enum InterfaceError {
     Duplicate { name: String, provider: String },
 }
 
+/// An interface and the order it was provided in.
+type Entry = (usize, Arc<dyn AnyInterface>);
+
 /// The table of every provided interface, by name, in the order they were provided.
 #[derive(Default)]
 pub struct Interfaces {
-    table: RwLock<BTreeMap<String, (usize, Arc<dyn AnyInterface>)>>,
+    table: RwLock<BTreeMap<String, Entry>>,
 }
 
 impl Interfaces {
@@ -844,8 +859,14 @@ mod tests {
     #[test]
     fn color_must_be_320x240() {
         let t = Interfaces::default();
-        let c = t.provide_value("colorA", "t", Image::new(320, 240)).unwrap();
-        assert!(c.publish(Image::new(640, 480)).unwrap_err().contains("320x240"));
+        let c = t
+            .provide_value("colorA", "t", Image::new(320, 240))
+            .unwrap();
+        assert!(
+            c.publish(Image::new(640, 480))
+                .unwrap_err()
+                .contains("320x240")
+        );
         let v = t.provide::<Image>("varcolorA", "t").unwrap();
         v.publish(Image::new(640, 480)).unwrap();
     }

@@ -130,16 +130,20 @@ macro_rules! register_schema {
 }
 
 /// Registers a driver or service:
-/// `register_driver!(Driver|Service, "name", "summary", factory_fn)`.
+/// `register_driver!(Driver|Service, "name", "summary", factory_fn)`; a fifth
+/// argument names the feature when it is not the name (aliases such as `graphics_gtk`).
 #[macro_export]
 macro_rules! register_driver {
     ($kind:ident, $name:literal, $summary:literal, $factory:expr) => {
+        $crate::register_driver!($kind, $name, $summary, $factory, $name);
+    };
+    ($kind:ident, $name:literal, $summary:literal, $factory:expr, $feature:literal) => {
         $crate::inventory::submit! {
             $crate::registry::Component {
                 kind: $crate::registry::Kind::$kind,
                 name: $name,
                 summary: $summary,
-                feature: $name,
+                feature: $feature,
                 factory: $crate::registry::Factory::Driver($factory),
             }
         }

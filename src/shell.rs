@@ -43,22 +43,50 @@ const MAIN_COMMANDS: &[(&str, &str, &str)] = &[
     ("help", "[COMMAND]", "Display this help text"),
     ("?", "[COMMAND]", "Synonym for `help'"),
     ("cd", "DIR", "Change working directory to DIR"),
-    ("dir", "[DIR]", "List files in the working directory (or DIR)"),
+    (
+        "dir",
+        "[DIR]",
+        "List files in the working directory (or DIR)",
+    ),
     ("pwd", "", "Print the current working directory"),
     ("view", "FILE", "View the contents of FILE"),
-    ("ls", "", "List loaded schemas, drivers, services and interfaces"),
+    (
+        "ls",
+        "",
+        "List loaded schemas, drivers, services and interfaces",
+    ),
     ("load_driver", "NAME [CONF]", "Load driver NAME"),
     ("load_service", "NAME [CONF]", "Load service NAME"),
     ("load_schema", "NAME [CONF]", "Load schema NAME"),
-    ("load", "NAME [CONF]", "Load component NAME, whatever its kind"),
-    ("ps", "", "Print schemas' states, ips and jitter, and interfaces' clocks and rates"),
+    (
+        "load",
+        "NAME [CONF]",
+        "Load component NAME, whatever its kind",
+    ),
+    (
+        "ps",
+        "",
+        "Print schemas' states, ips and jitter, and interfaces' clocks and rates",
+    ),
     ("run", "NAME", "Run schema NAME (or resume interface NAME)"),
-    ("stop", "NAME", "Stop schema NAME (or suspend interface NAME)"),
+    (
+        "stop",
+        "NAME",
+        "Stop schema NAME (or suspend interface NAME)",
+    ),
     ("show", "NAME", "Show the GUI panel of schema NAME"),
     ("hide", "NAME", "Hide the GUI panel of schema NAME"),
     ("zoom", "NAME", "Change to schema state of NAME"),
-    ("echo", "NAME [N]", "Print interface NAME's value, or its next N values"),
-    ("set", "NAME FIELD=VALUE...", "Write fields of actuator interface NAME"),
+    (
+        "echo",
+        "NAME [N]",
+        "Print interface NAME's value, or its next N values",
+    ),
+    (
+        "set",
+        "NAME FIELD=VALUE...",
+        "Write fields of actuator interface NAME",
+    ),
     ("show_license", "", "Show the license"),
     ("exit", "", "Quit using jderobot"),
     ("quit", "", "Quit using jderobot"),
@@ -68,14 +96,22 @@ const SCHEMA_COMMANDS: &[(&str, &str, &str)] = &[
     ("help", "[COMMAND]", "Display this help text"),
     ("?", "[COMMAND]", "Synonym for `help'"),
     ("cd", "DIR", "Change working directory to DIR"),
-    ("dir", "[DIR]", "List files in the working directory (or DIR)"),
+    (
+        "dir",
+        "[DIR]",
+        "List files in the working directory (or DIR)",
+    ),
     ("pwd", "", "Print the current working directory"),
     ("view", "FILE", "View the contents of FILE"),
     ("run", "", "Run the schema"),
     ("stop", "", "Stop the schema"),
     ("show", "", "Show the schema's GUI panel"),
     ("hide", "", "Hide the schema's GUI panel"),
-    ("init", "[CONF]", "Init the schema again from CONF (default: the main conf file)"),
+    (
+        "init",
+        "[CONF]",
+        "Init the schema again from CONF (default: the main conf file)",
+    ),
     ("terminate", "", "Terminate the schema"),
     ("exit", "", "Exit schema state"),
 ];
@@ -174,13 +210,16 @@ impl Shell {
             "cd" | "dir" | "pwd" | "view" => files(cmd, args, out),
             "ls" => {
                 for s in rt.schema_names() {
-                    w(out, format!("{s}"));
+                    w(out, s);
                 }
                 for (d, k) in rt.drivers() {
                     w(out, format!("{d} ({k})"));
                 }
                 for i in rt.interfaces.all() {
-                    w(out, format!("{} ({} interface of {})", i.name(), i.kind(), i.provider()));
+                    w(
+                        out,
+                        format!("{} ({} interface of {})", i.name(), i.kind(), i.provider()),
+                    );
                 }
                 Ok(Flow::Continue)
             }
@@ -209,10 +248,22 @@ impl Shell {
                 ps(&rt, out);
                 Ok(Flow::Continue)
             }
-            "run" => rt.run(one("NAME")?).map(|_| Flow::Continue).map_err(|e| format!("run: {e}")),
-            "stop" => rt.stop(one("NAME")?).map(|_| Flow::Continue).map_err(|e| format!("stop: {e}")),
-            "show" => rt.show(one("NAME")?).map(|_| Flow::Continue).map_err(|e| format!("show: {e}")),
-            "hide" => rt.hide(one("NAME")?).map(|_| Flow::Continue).map_err(|e| format!("hide: {e}")),
+            "run" => rt
+                .run(one("NAME")?)
+                .map(|_| Flow::Continue)
+                .map_err(|e| format!("run: {e}")),
+            "stop" => rt
+                .stop(one("NAME")?)
+                .map(|_| Flow::Continue)
+                .map_err(|e| format!("stop: {e}")),
+            "show" => rt
+                .show(one("NAME")?)
+                .map(|_| Flow::Continue)
+                .map_err(|e| format!("show: {e}")),
+            "hide" => rt
+                .hide(one("NAME")?)
+                .map(|_| Flow::Continue)
+                .map_err(|e| format!("hide: {e}")),
             "zoom" => {
                 let name = one("NAME")?;
                 if rt.schema(name).is_none() {
@@ -229,13 +280,17 @@ impl Shell {
                     [n] => (*n, None),
                     [n, c] => (
                         *n,
-                        Some(c.parse::<u64>().map_err(|_| {
-                            format!("echo: count `{c}` is not a whole number")
-                        })?),
+                        Some(
+                            c.parse::<u64>()
+                                .map_err(|_| format!("echo: count `{c}` is not a whole number"))?,
+                        ),
                     ),
                     _ => return Err("echo: Usage: echo NAME [N]".into()),
                 };
-                let iface = rt.interfaces.get_any(name).map_err(|e| format!("echo: {e}"))?;
+                let iface = rt
+                    .interfaces
+                    .get_any(name)
+                    .map_err(|e| format!("echo: {e}"))?;
                 echo(&*iface, n, out)
             }
             "set" => {
@@ -245,7 +300,10 @@ impl Shell {
                 if fields.is_empty() {
                     return Err(format!("set: no FIELD=VALUE given for `{name}`"));
                 }
-                let iface = rt.interfaces.get_any(name).map_err(|e| format!("set: {e}"))?;
+                let iface = rt
+                    .interfaces
+                    .get_any(name)
+                    .map_err(|e| format!("set: {e}"))?;
                 if !iface.is_actuator() {
                     return Err(format!(
                         "set: `{name}` is a {} sensor interface; only actuators (motors, \
@@ -261,7 +319,15 @@ impl Shell {
                     })
                     .collect::<Result<_, _>>()?;
                 iface.set_fields(&pairs).map_err(|e| format!("set: {e}"))?;
-                w(out, format!("{} clock={} {}", iface.name(), iface.clock(), iface.describe()));
+                w(
+                    out,
+                    format!(
+                        "{} clock={} {}",
+                        iface.name(),
+                        iface.clock(),
+                        iface.describe()
+                    ),
+                );
                 Ok(Flow::Continue)
             }
             "show_license" => {
@@ -314,7 +380,8 @@ impl Shell {
                 ));
             }
         };
-        res.map(|_| Flow::Continue).map_err(|e| format!("{cmd}: {e}"))
+        res.map(|_| Flow::Continue)
+            .map_err(|e| format!("{cmd}: {e}"))
     }
 
     /// Every word TAB may complete after `before` (the words typed so far).
@@ -327,7 +394,11 @@ impl Shell {
 fn candidates(rt: &Runtime, zoomed: bool, before: &[&str]) -> Vec<String> {
     {
         if before.is_empty() {
-            let table = if zoomed { SCHEMA_COMMANDS } else { MAIN_COMMANDS };
+            let table = if zoomed {
+                SCHEMA_COMMANDS
+            } else {
+                MAIN_COMMANDS
+            };
             let mut v: Vec<String> = table.iter().map(|c| c.0.to_string()).collect();
             if !zoomed {
                 v.extend(rt.schema_names());

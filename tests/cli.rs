@@ -48,14 +48,24 @@ fn myschema_hello_world_headless_with_ps() {
         Duration::from_secs(1),
     );
     let stdout = text(&out.stdout);
-    assert!(out.status.success(), "exit {:?}\n{stdout}\n{}", out.status, text(&out.stderr));
+    assert!(
+        out.status.success(),
+        "exit {:?}\n{stdout}\n{}",
+        out.status,
+        text(&out.stderr)
+    );
     assert!(stdout.contains("myschema: on\n"), "{stdout}");
     assert!(stdout.matches("-->Hello world!\n").count() >= 3, "{stdout}");
     let ps = stdout
         .lines()
         .find(|l| l.starts_with("myschema: ") && l.contains(" ips, winner ()"))
         .unwrap_or_else(|| panic!("no ps line in {stdout}"));
-    let ips: f64 = ps["myschema: ".len()..].split(' ').next().unwrap().parse().unwrap();
+    let ips: f64 = ps["myschema: ".len()..]
+        .split(' ')
+        .next()
+        .unwrap()
+        .parse()
+        .unwrap();
     assert!(ips > 0.0, "{ps}");
     assert!(stdout.contains("myschema: off"), "{stdout}");
 }
@@ -69,8 +79,14 @@ fn pingpong_example_runs_children_under_arbitration() {
     );
     let stdout = text(&out.stdout);
     assert!(out.status.success(), "{stdout}{}", text(&out.stderr));
-    assert!(stdout.contains("ping 1\n") && stdout.contains("pong 1\n"), "{stdout}");
-    assert!(stdout.contains("pingpong: ") && stdout.contains("winner (ping pong)"), "{stdout}");
+    assert!(
+        stdout.contains("ping 1\n") && stdout.contains("pong 1\n"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("pingpong: ") && stdout.contains("winner (ping pong)"),
+        "{stdout}"
+    );
     // Exactly one of the two is winner, the other ready, in the first ps.
     let first_ps: Vec<&str> = stdout
         .lines()
@@ -82,8 +98,15 @@ fn pingpong_example_runs_children_under_arbitration() {
         1,
         "{first_ps:?}"
     );
-    assert_eq!(first_ps.iter().filter(|l| l.contains("ready")).count(), 1, "{first_ps:?}");
-    assert!(stdout.contains("ping: off") && stdout.contains("pong: off"), "{stdout}");
+    assert_eq!(
+        first_ps.iter().filter(|l| l.contains("ready")).count(),
+        1,
+        "{first_ps:?}"
+    );
+    assert!(
+        stdout.contains("ping: off") && stdout.contains("pong: off"),
+        "{stdout}"
+    );
 }
 
 #[test]
@@ -91,21 +114,39 @@ fn check_reports_file_and_line_and_exits_nonzero() {
     let dir = tempfile::tempdir().unwrap();
     let bad = dir.path().join("bad.conf");
     std::fs::write(&bad, "load_schema myschema\nrun myschema\nfrobnicate\n").unwrap();
-    let out = Command::new(BIN).args(["check", bad.to_str().unwrap()]).output().unwrap();
+    let out = Command::new(BIN)
+        .args(["check", bad.to_str().unwrap()])
+        .output()
+        .unwrap();
     assert!(!out.status.success());
     let err = text(&out.stderr);
-    assert!(err.contains(&format!("{}:3: unknown keyword `frobnicate`", bad.display())), "{err}");
+    assert!(
+        err.contains(&format!(
+            "{}:3: unknown keyword `frobnicate`",
+            bad.display()
+        )),
+        "{err}"
+    );
 
     let nosuch = dir.path().join("nosuch.conf");
     std::fs::write(&nosuch, "load_driver nosuch\n").unwrap();
-    let out = Command::new(BIN).args(["check", nosuch.to_str().unwrap()]).output().unwrap();
+    let out = Command::new(BIN)
+        .args(["check", nosuch.to_str().unwrap()])
+        .output()
+        .unwrap();
     assert!(!out.status.success());
     let err = text(&out.stderr);
     assert!(err.contains(":1: no driver called `nosuch`"), "{err}");
-    assert!(err.contains("cargo features that add components: "), "{err}");
+    assert!(
+        err.contains("cargo features that add components: "),
+        "{err}"
+    );
     assert!(err.contains("myschema"), "{err}");
 
-    let out = Command::new(BIN).args(["check", "examples/myschema.conf"]).output().unwrap();
+    let out = Command::new(BIN)
+        .args(["check", "examples/myschema.conf"])
+        .output()
+        .unwrap();
     assert!(out.status.success(), "{}", text(&out.stderr));
 }
 
@@ -127,10 +168,17 @@ fn list_help_version() {
     let out = Command::new(BIN).arg("list").output().unwrap();
     let s = text(&out.stdout);
     assert!(out.status.success());
-    assert!(s.lines().any(|l| l.starts_with("schema") && l.contains("myschema")), "{s}");
+    assert!(
+        s.lines()
+            .any(|l| l.starts_with("schema") && l.contains("myschema")),
+        "{s}"
+    );
     let out = Command::new(BIN).arg("--help").output().unwrap();
     let s = text(&out.stdout);
-    assert!(s.contains("check") && s.contains("list") && s.contains("--headless"), "{s}");
+    assert!(
+        s.contains("check") && s.contains("list") && s.contains("--headless"),
+        "{s}"
+    );
     let out = Command::new(BIN).arg("--version").output().unwrap();
     assert!(text(&out.stdout).starts_with("jderobot "));
 }
@@ -156,14 +204,21 @@ fn every_shell_command_piped() {
         d = dir.path().display(),
         own = own.display()
     );
-    let out = run_with_input(&["--headless", conf.to_str().unwrap()], &script, Duration::ZERO);
+    let out = run_with_input(
+        &["--headless", conf.to_str().unwrap()],
+        &script,
+        Duration::ZERO,
+    );
     let stdout = text(&out.stdout);
     let stderr = text(&out.stderr);
     assert!(out.status.success(), "{stdout}\n{stderr}");
     for expected in [
         "help [COMMAND]",
         "ps                          Print schemas",
-        &format!("Current directory is {}", dir.path().canonicalize().unwrap().display()),
+        &format!(
+            "Current directory is {}",
+            dir.path().canonicalize().unwrap().display()
+        ),
         "jde.conf  (",
         "cycle 20",
         "ping loaded",
@@ -176,9 +231,15 @@ fn every_shell_command_piped() {
         "myschema terminated",
         "GNU General Public License",
     ] {
-        assert!(stdout.contains(expected), "missing {expected:?} in\n{stdout}\n--\n{stderr}");
+        assert!(
+            stdout.contains(expected),
+            "missing {expected:?} in\n{stdout}\n--\n{stderr}"
+        );
     }
-    assert!(stderr.is_empty() || !stderr.contains("No such command"), "{stderr}");
+    assert!(
+        stderr.is_empty() || !stderr.contains("No such command"),
+        "{stderr}"
+    );
 }
 
 /// Every mistake gets a one-line explanation and the program carries on.
@@ -189,7 +250,11 @@ fn shell_errors_explain_and_never_kill() {
                   load_schema ping /nonexistent.conf\nload_schema a b c\nzoom nosuch\n\
                   view /nonexistent\ncd /nonexistent\necho nosuch\necho motors\nset motors v=1\n\
                   zoom myschema\nfrobnicate\nexit\nhelp nosuch\nps\nquit\n";
-    let out = run_with_input(&["--headless", "examples/myschema.conf"], script, Duration::ZERO);
+    let out = run_with_input(
+        &["--headless", "examples/myschema.conf"],
+        script,
+        Duration::ZERO,
+    );
     let stderr = text(&out.stderr);
     assert!(out.status.success(), "{stderr}");
     let errors: Vec<&str> = stderr
@@ -223,13 +288,22 @@ fn shell_errors_explain_and_never_kill() {
     }
     // One line per mistake.
     assert!(errors.len() <= expected.len() + 2, "{stderr}");
-    assert!(text(&out.stdout).contains("myschema: "), "ps still works at the end");
+    assert!(
+        text(&out.stdout).contains("myschema: "),
+        "ps still works at the end"
+    );
 }
 
 #[test]
 fn run_for_ends_a_headless_run() {
     let out = Command::new(BIN)
-        .args(["--headless", "--no-shell", "--for", "0.5", "examples/myschema.conf"])
+        .args([
+            "--headless",
+            "--no-shell",
+            "--for",
+            "0.5",
+            "examples/myschema.conf",
+        ])
         .output()
         .unwrap();
     assert!(out.status.success());

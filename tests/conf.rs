@@ -34,7 +34,10 @@ fn the_seed_manuals_sections_parse() {
         "simulated3D",
         "gazebo",
     ] {
-        assert!(names.contains(&expected), "{expected} missing from {names:?}");
+        assert!(
+            names.contains(&expected),
+            "{expected} missing from {names:?}"
+        );
     }
     let player = conf.section(Kind::Driver, "player").unwrap();
     let provides: Vec<String> = player
@@ -84,7 +87,10 @@ fn every_keyword_and_synonym() {
 
 #[test]
 fn comments_blank_lines_and_indentation() {
-    let c = parse("\n# top\n   # indented comment\n\t\n  driver x  \n\t provides laser # why\n  end_driver\n").unwrap();
+    let c = parse(
+        "\n# top\n   # indented comment\n\t\n  driver x  \n\t provides laser # why\n  end_driver\n",
+    )
+    .unwrap();
     assert_eq!(c.sections[0].lines.len(), 1);
     assert_eq!(c.sections[0].lines[0].words, ["provides", "laser"]);
     assert_eq!(c.sections[0].lines[0].at.line, 6);
@@ -102,23 +108,44 @@ fn unknown_keyword() {
 #[test]
 fn unclosed_nested_and_stray_sections() {
     let e = parse("driver a\nprovides x\n").unwrap_err();
-    assert!(e.contains("jde.conf:1: `driver a` section is never closed; expected `end_driver`"), "{e}");
+    assert!(
+        e.contains("jde.conf:1: `driver a` section is never closed; expected `end_driver`"),
+        "{e}"
+    );
     let e = parse("driver a\nschema b\nend_driver\n").unwrap_err();
-    assert!(e.contains("jde.conf:2: `schema` section inside the `driver a` section"), "{e}");
+    assert!(
+        e.contains("jde.conf:2: `schema` section inside the `driver a` section"),
+        "{e}"
+    );
     let e = parse("end_schema\n").unwrap_err();
-    assert!(e.contains("jde.conf:1: `end_schema` without an open `schema NAME` section"), "{e}");
+    assert!(
+        e.contains("jde.conf:1: `end_schema` without an open `schema NAME` section"),
+        "{e}"
+    );
     let e = parse("driver a\nend_schema\nend_driver\n").unwrap_err();
-    assert!(e.contains("jde.conf:2: `end_schema` closes a schema section"), "{e}");
+    assert!(
+        e.contains("jde.conf:2: `end_schema` closes a schema section"),
+        "{e}"
+    );
     let e = parse("driver\nend_driver\n").unwrap_err();
-    assert!(e.contains("jde.conf:1: `driver` must be followed by exactly one name"), "{e}");
+    assert!(
+        e.contains("jde.conf:1: `driver` must be followed by exactly one name"),
+        "{e}"
+    );
 }
 
 #[test]
 fn wrong_argument_counts() {
     let e = parse("run\n").unwrap_err();
-    assert!(e.contains("jde.conf:1: `run` takes 1 argument(s), got 0; usage: run NAME"), "{e}");
+    assert!(
+        e.contains("jde.conf:1: `run` takes 1 argument(s), got 0; usage: run NAME"),
+        "{e}"
+    );
     let e = parse("load_schema a b c\n").unwrap_err();
-    assert!(e.contains("`load_schema` takes 1 to 2 arguments, got 3"), "{e}");
+    assert!(
+        e.contains("`load_schema` takes 1 to 2 arguments, got 3"),
+        "{e}"
+    );
 }
 
 #[test]
@@ -134,7 +161,9 @@ fn run_or_show_of_something_not_loaded() {
     let errs = check("run myschema\n");
     assert_eq!(errs.len(), 1);
     assert!(
-        errs[0].starts_with("jde.conf:1: `run myschema`: no schema `myschema` is loaded before this line"),
+        errs[0].starts_with(
+            "jde.conf:1: `run myschema`: no schema `myschema` is loaded before this line"
+        ),
         "{errs:?}"
     );
     let errs = check("load_schema myschema\nshow nosuch\n");
@@ -146,7 +175,9 @@ fn run_or_show_of_something_not_loaded() {
 fn missing_own_conf_file() {
     let errs = check("load_schema myschema /nonexistent/own.conf\n");
     assert!(
-        errs[0].contains("jde.conf:1: conf file `/nonexistent/own.conf` of schema `myschema` does not exist"),
+        errs[0].contains(
+            "jde.conf:1: conf file `/nonexistent/own.conf` of schema `myschema` does not exist"
+        ),
         "{errs:?}"
     );
 }
@@ -154,8 +185,14 @@ fn missing_own_conf_file() {
 #[test]
 fn component_not_compiled_in_names_the_features() {
     let errs = check("load_driver nosuch\n");
-    assert!(errs[0].starts_with("jde.conf:1: no driver called `nosuch`"), "{errs:?}");
-    assert!(errs[0].contains("cargo features that add components:"), "{errs:?}");
+    assert!(
+        errs[0].starts_with("jde.conf:1: no driver called `nosuch`"),
+        "{errs:?}"
+    );
+    assert!(
+        errs[0].contains("cargo features that add components:"),
+        "{errs:?}"
+    );
     for f in registry::ALL_COMPONENT_FEATURES {
         assert!(errs[0].contains(f), "feature {f} not named in {errs:?}");
     }
@@ -165,11 +202,15 @@ fn component_not_compiled_in_names_the_features() {
 fn wrong_kind_and_double_load() {
     let errs = check("load_driver myschema\n");
     assert!(
-        errs[0].contains("`myschema` is a schema, not a driver; load it with `load_schema myschema`"),
+        errs[0]
+            .contains("`myschema` is a schema, not a driver; load it with `load_schema myschema`"),
         "{errs:?}"
     );
     let errs = check("load_schema myschema\nload myschema\n");
-    assert!(errs[0].contains("jde.conf:2: `myschema` is loaded twice"), "{errs:?}");
+    assert!(
+        errs[0].contains("jde.conf:2: `myschema` is loaded twice"),
+        "{errs:?}"
+    );
 }
 
 #[test]
@@ -183,12 +224,20 @@ fn component_reads_its_section_or_its_own_file() {
     let conf = Conf::load(&main).unwrap();
     let from_section = conf.component_conf(Kind::Schema, "myschema", None).unwrap();
     assert_eq!(from_section.line("cycle").unwrap().args(), ["50"]);
-    let from_file = conf.component_conf(Kind::Schema, "myschema", Some(&own)).unwrap();
+    let from_file = conf
+        .component_conf(Kind::Schema, "myschema", Some(&own))
+        .unwrap();
     assert_eq!(from_file.line("cycle").unwrap().args(), ["20"]);
     assert_eq!(from_file.line("cycle").unwrap().at.line, 2);
     // An own file may hold the component's section too.
-    std::fs::write(&own, "schema other\ncycle 1\nend_schema\nschema myschema\ncycle 7\nend_schema\n").unwrap();
-    let from_file = conf.component_conf(Kind::Schema, "myschema", Some(&own)).unwrap();
+    std::fs::write(
+        &own,
+        "schema other\ncycle 1\nend_schema\nschema myschema\ncycle 7\nend_schema\n",
+    )
+    .unwrap();
+    let from_file = conf
+        .component_conf(Kind::Schema, "myschema", Some(&own))
+        .unwrap();
     assert_eq!(from_file.line("cycle").unwrap().args(), ["7"]);
 }
 
@@ -196,14 +245,23 @@ fn component_reads_its_section_or_its_own_file() {
 fn typed_argument_errors_name_the_line() {
     let conf = parse("schema myschema\ncycle fast\nend_schema\n").unwrap();
     let cc = conf.component_conf(Kind::Schema, "myschema", None).unwrap();
-    let e = cc.value_or("cycle", "milliseconds", 100u64).unwrap_err().to_string();
-    assert_eq!(e, "jde.conf:2: `cycle`: argument 1 is `fast`, expected milliseconds");
+    let e = cc
+        .value_or("cycle", "milliseconds", 100u64)
+        .unwrap_err()
+        .to_string();
+    assert_eq!(
+        e,
+        "jde.conf:2: `cycle`: argument 1 is `fast`, expected milliseconds"
+    );
 }
 
 #[test]
 fn registry_lists_compiled_components_with_features() {
     let all = registry::components();
-    let my = all.iter().find(|c| c.name == "myschema").expect("myschema compiled in");
+    let my = all
+        .iter()
+        .find(|c| c.name == "myschema")
+        .expect("myschema compiled in");
     assert_eq!(my.kind, Kind::Schema);
     assert_eq!(my.feature, "myschema");
     assert!(!my.summary.is_empty());
@@ -217,6 +275,9 @@ fn registry_lists_compiled_components_with_features() {
     }
     // Every component feature compiled in has at least one component.
     for f in registry::ALL_COMPONENT_FEATURES {
-        assert!(all.iter().any(|c| c.feature == *f), "feature {f} registers no component");
+        assert!(
+            all.iter().any(|c| c.feature == *f),
+            "feature {f} registers no component"
+        );
     }
 }

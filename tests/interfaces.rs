@@ -86,7 +86,10 @@ fn concurrent_writers_keep_clock_unique_and_increasing() {
             })
         })
         .collect();
-    let mut all: Vec<u64> = writers.into_iter().flat_map(|w| w.join().unwrap()).collect();
+    let mut all: Vec<u64> = writers
+        .into_iter()
+        .flat_map(|w| w.join().unwrap())
+        .collect();
     all.sort_unstable();
     all.dedup();
     assert_eq!(all.len(), 2000, "every publish gets its own clock");
@@ -149,9 +152,16 @@ fn resume_suspend_reference_counting() {
 #[test]
 fn motor_safety_zeroes_stale_commands() {
     let m: Interface<Motors> = Interface::new("motors", "t");
-    assert_eq!(m.command(Duration::from_secs(1)), Motors::default(), "never commanded");
+    assert_eq!(
+        m.command(Duration::from_secs(1)),
+        Motors::default(),
+        "never commanded"
+    );
     m.publish(Motors { v: 200.0, w: 10.0 }).unwrap();
-    assert_eq!(m.command(Duration::from_secs(60)), Motors { v: 200.0, w: 10.0 });
+    assert_eq!(
+        m.command(Duration::from_secs(60)),
+        Motors { v: 200.0, w: 10.0 }
+    );
     thread::sleep(Duration::from_millis(30));
     assert_eq!(m.command(Duration::from_millis(10)), Motors::default());
 }
@@ -161,7 +171,10 @@ fn table_lookup_errors_are_clear() {
     let t = Interfaces::default();
     t.provide::<Motors>("motors", "simulator").unwrap();
     let e = t.get::<PtMotors>("motors").err().unwrap().to_string();
-    assert_eq!(e, "interface `motors` is a motors interface, not pantiltmotors");
+    assert_eq!(
+        e,
+        "interface `motors` is a motors interface, not pantiltmotors"
+    );
     let e = t.get::<Motors>("laser").err().unwrap();
     assert_eq!(
         e,
@@ -170,7 +183,11 @@ fn table_lookup_errors_are_clear() {
             available: "motors".into()
         }
     );
-    let e = t.provide::<Motors>("motors", "player").err().unwrap().to_string();
+    let e = t
+        .provide::<Motors>("motors", "player")
+        .err()
+        .unwrap()
+        .to_string();
     assert_eq!(e, "interface `motors` is already provided by simulator");
 }
 
@@ -182,8 +199,16 @@ fn actuators_are_set_by_field_and_sensors_refuse() {
     let m = t.get_any("motors").unwrap();
     m.set_fields(&[("v", "200"), ("w", "-10.5")]).unwrap();
     assert_eq!(m.describe(), "v=200.0 mm/s w=-10.50 deg/s");
-    assert!(m.set_fields(&[("speed", "1")]).unwrap_err().contains("no field `speed`"));
-    assert!(m.set_fields(&[("v", "fast")]).unwrap_err().contains("expected a number"));
+    assert!(
+        m.set_fields(&[("speed", "1")])
+            .unwrap_err()
+            .contains("no field `speed`")
+    );
+    assert!(
+        m.set_fields(&[("v", "fast")])
+            .unwrap_err()
+            .contains("expected a number")
+    );
     let e = t.get_any("encoders").unwrap();
     assert!(e.set_fields(&[("x", "1")]).unwrap_err().contains("sensor"));
 }

@@ -55,7 +55,10 @@ fn counter(rt: &Runtime, name: &str) -> (Arc<AtomicU64>, Arc<AtomicBool>) {
 fn eventually(what: &str, mut f: impl FnMut() -> bool) {
     let t0 = Instant::now();
     while !f() {
-        assert!(t0.elapsed() < Duration::from_secs(10), "timed out waiting for: {what}");
+        assert!(
+            t0.elapsed() < Duration::from_secs(10),
+            "timed out waiting for: {what}"
+        );
         std::thread::sleep(Duration::from_millis(2));
     }
 }
@@ -82,7 +85,11 @@ fn run_iterates_and_stop_sleeps() {
     std::thread::sleep(Duration::from_millis(20));
     let n = count.load(Ordering::Acquire);
     std::thread::sleep(Duration::from_millis(30));
-    assert_eq!(count.load(Ordering::Acquire), n, "a stopped schema must not iterate");
+    assert_eq!(
+        count.load(Ordering::Acquire),
+        n,
+        "a stopped schema must not iterate"
+    );
     assert_eq!(rt.stop("a"), Err(RuntimeError::NotRunning("a".into())));
     rt.shutdown();
 }
@@ -128,7 +135,11 @@ impl Schema for Parent {
         ctx.run_children(
             &self.children,
             Some(Arc::new(move |ready: &[&str]| {
-                let want = if prefer.load(Ordering::Acquire) { names[1] } else { names[0] };
+                let want = if prefer.load(Ordering::Acquire) {
+                    names[1]
+                } else {
+                    names[0]
+                };
                 ready.iter().position(|n| *n == want).unwrap_or(0)
             })),
         )?;
@@ -165,7 +176,11 @@ fn parent_runs_children_and_only_the_winner_iterates() {
     );
     let before = c2.load(Ordering::Acquire);
     eventually("left iterates", || c1.load(Ordering::Acquire) >= 5);
-    assert_eq!(c2.load(Ordering::Acquire), before, "the loser must not iterate");
+    assert_eq!(
+        c2.load(Ordering::Acquire),
+        before,
+        "the loser must not iterate"
+    );
 
     // The arbitration changes its mind.
     prefer_second.store(true, Ordering::Release);
@@ -286,9 +301,16 @@ fn cronos_measures_ips() {
     eventually("iterations", || count.load(Ordering::Acquire) >= 50);
     let s = rt.schema_status("tenms").unwrap();
     // 100 ips nominal; only a sanity range here (timing belongs in benches).
-    assert!(s.timing.ips > 20.0 && s.timing.ips < 150.0, "{}", s.timing.ips);
+    assert!(
+        s.timing.ips > 20.0 && s.timing.ips < 150.0,
+        "{}",
+        s.timing.ips
+    );
     let line = s.ps_line();
-    assert!(line.starts_with("tenms: ") && line.contains(" ips, winner ()"), "{line}");
+    assert!(
+        line.starts_with("tenms: ") && line.contains(" ips, winner ()"),
+        "{line}"
+    );
     rt.shutdown();
 }
 
@@ -311,7 +333,9 @@ fn interfaces_run_as_children_are_resumed_and_suspended() {
     let motors = rt.interfaces.provide::<Motors>("motors", "test").unwrap();
     rt.add_schema("user", "", Box::new(UsesLaser));
     rt.run("user").unwrap();
-    eventually("laser resumed", || laser.users() == 1 && motors.users() == 1);
+    eventually("laser resumed", || {
+        laser.users() == 1 && motors.users() == 1
+    });
     rt.stop("user").unwrap();
     assert_eq!(laser.users(), 0);
     assert_eq!(motors.users(), 0);

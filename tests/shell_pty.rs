@@ -21,7 +21,11 @@ fn spawn(conf: &str, data_home: &std::path::Path) -> PtySession {
 
 fn quiet_conf(dir: &std::path::Path) -> String {
     let conf = dir.join("jde.conf");
-    std::fs::write(&conf, "load_schema myschema\nload_schema ping\nload_schema pong\n").unwrap();
+    std::fs::write(
+        &conf,
+        "load_schema myschema\nload_schema ping\nload_schema pong\n",
+    )
+    .unwrap();
     conf.to_str().unwrap().to_string()
 }
 
@@ -66,10 +70,15 @@ fn tab_completion_zoom_exit_and_ctrl_d() {
 fn file_name_completion() {
     let dir = tempfile::tempdir().unwrap();
     let conf = quiet_conf(dir.path());
-    std::fs::write(dir.path().join("uniquely_named_file.txt"), "hello from the file\n").unwrap();
+    std::fs::write(
+        dir.path().join("uniquely_named_file.txt"),
+        "hello from the file\n",
+    )
+    .unwrap();
     let mut p = spawn(&conf, dir.path());
     p.exp_string("jdeC $> ").unwrap();
-    p.send_line(&format!("cd {}", dir.path().display())).unwrap();
+    p.send_line(&format!("cd {}", dir.path().display()))
+        .unwrap();
     p.exp_string("jdeC $> ").unwrap();
     p.send("view uniq\t").unwrap();
     p.flush().unwrap();

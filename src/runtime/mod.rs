@@ -414,7 +414,10 @@ impl Runtime {
         cconf: &ComponentConf,
     ) -> Result<(), RuntimeError> {
         let fail = |e: anyhow::Error| {
-            RuntimeError::Load(format!("{} `{}` failed to start: {e:#}", comp.kind, comp.name))
+            RuntimeError::Load(format!(
+                "{} `{}` failed to start: {e:#}",
+                comp.kind, comp.name
+            ))
         };
         match comp.factory {
             Factory::Schema(make) => {
@@ -424,7 +427,13 @@ impl Runtime {
             Factory::Driver(make) => {
                 let driver = make(cconf, self).map_err(fail)?;
                 let mut d = self.drivers.lock();
-                tracing::info!("{} {} loaded ({} {})", comp.name, comp.kind, comp.kind, d.len());
+                tracing::info!(
+                    "{} {} loaded ({} {})",
+                    comp.name,
+                    comp.kind,
+                    comp.kind,
+                    d.len()
+                );
                 d.push(LoadedDriver {
                     name: comp.name.to_string(),
                     kind: comp.kind,
@@ -792,14 +801,13 @@ fn schema_thread(rt: Arc<Runtime>, slot: Arc<SchemaSlot>, mut schema: Box<dyn Sc
             schema.on_stop(&ctx);
         }
         let generation = slot.generation.load(Ordering::Acquire);
-        if on_run {
-            if let Err(e) = catch_unwind(AssertUnwindSafe(|| schema.on_run(&ctx)))
+        if on_run
+            && let Err(e) = catch_unwind(AssertUnwindSafe(|| schema.on_run(&ctx)))
                 .map_err(|p| panic_message(&*p))
                 .and_then(|r| r.map_err(|e| format!("{e:#}")))
-            {
-                let _ = rt.stop_with(&slot.name, Some(e));
-                continue;
-            }
+        {
+            let _ = rt.stop_with(&slot.name, Some(e));
+            continue;
         }
         if generation != seen_generation {
             seen_generation = generation;
@@ -860,36 +868,36 @@ pub fn check(conf: &Conf) -> Vec<ConfError> {
     };
     for d in &conf.directives {
         match &d.action {
-            Action::Load { kind, name, file } => {
-                match registry::lookup(*kind, name) {
-                    Ok(c) => {
-                        if loaded.iter().any(|(n, _)| n == name) {
-                            errors.push(err(&d.at, format!("`{name}` is loaded twice")));
-                        }
-                        loaded.push((name.clone(), c.kind));
-                        if let Some(f) = file
-                            && !f.exists()
-                        {
-                            errors.push(err(
-                                &d.at,
-                                format!("conf file `{}` of {} `{name}` does not exist", f.display(), c.kind),
-                            ));
-                        }
-                        if let Ok(cc) = conf.component_conf(c.kind, name, file.as_deref()) {
-                            for l in cc.provides() {
-                                if let Some(i) = l.args().first() {
-                                    provided.push(interfaces::canonical(i));
-                                }
+            Action::Load { kind, name, file } => match registry::lookup(*kind, name) {
+                Ok(c) => {
+                    if loaded.iter().any(|(n, _)| n == name) {
+                        errors.push(err(&d.at, format!("`{name}` is loaded twice")));
+                    }
+                    loaded.push((name.clone(), c.kind));
+                    if let Some(f) = file
+                        && !f.exists()
+                    {
+                        errors.push(err(
+                            &d.at,
+                            format!(
+                                "conf file `{}` of {} `{name}` does not exist",
+                                f.display(),
+                                c.kind
+                            ),
+                        ));
+                    }
+                    if let Ok(cc) = conf.component_conf(c.kind, name, file.as_deref()) {
+                        for l in cc.provides() {
+                            if let Some(i) = l.args().first() {
+                                provided.push(interfaces::canonical(i));
                             }
                         }
                     }
-                    Err(m) => errors.push(err(&d.at, m)),
                 }
-            }
+                Err(m) => errors.push(err(&d.at, m)),
+            },
             Action::Run(name) | Action::Show(name) => {
-                let is_schema = loaded
-                    .iter()
-                    .any(|(n, k)| n == name && *k == Kind::Schema);
+                let is_schema = loaded.iter().any(|(n, k)| n == name && *k == Kind::Schema);
                 let base = interfaces::canonical(name.split('.').next().unwrap_or(name));
                 let is_iface = provided.contains(&base)
                     || (interfaces::family(name).is_some()

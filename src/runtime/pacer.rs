@@ -51,6 +51,9 @@ pub fn precise_timers_for_this_thread() {
 /// Longest single sleep, so a stop or terminate is noticed promptly even with long cycles.
 const SLICE_NS: u64 = 50_000_000;
 
+/// How many cycles behind a loop may fall and still catch up.
+pub const CATCH_UP_CYCLES: u64 = 10;
+
 /// Keeps a periodic loop on absolute deadlines.
 #[derive(Debug)]
 pub struct Pacer {
@@ -85,17 +88,21 @@ impl Pacer {
         self.overruns
     }
 
-    /// Sleeps until the next deadline. If an iteration overran it, the missed
-    /// deadlines are skipped (no burst of catch-up iterations) and the schedule keeps
-    /// its phase. `interrupted` is polled between slices of long sleeps; if it
-    /// returns true the wait ends early and `false` is returned.
+    /// Sleeps until the next deadline. A loop that fell behind by a few cycles
+    /// (a slow iteration, a busy machine) catches up by starting at once, so the mean
+    /// rate stays exact; one that fell more than [`CATCH_UP_CYCLES`] behind skips the
+    /// missed deadlines instead of bursting, keeping its phase. `interrupted` is
+    /// polled between slices of long sleeps; if it returns true the wait ends early
+    /// and `false` is returned.
     pub fn wait(&mut self, interrupted: &dyn Fn() -> bool) -> bool {
         self.next_ns += self.cycle_ns;
         let now = now_ns();
         if now > self.next_ns {
-            let missed = (now - self.next_ns) / self.cycle_ns + 1;
-            self.next_ns += missed * self.cycle_ns;
             self.overruns += 1;
+            if now > self.next_ns + CATCH_UP_CYCLES * self.cycle_ns {
+                let missed = (now - self.next_ns) / self.cycle_ns + 1;
+                self.next_ns += missed * self.cycle_ns;
+            }
         }
         loop {
             let now = now_ns();
