@@ -314,7 +314,8 @@ fn run_for_ends_a_headless_run() {
 fn every_example_conf_passes_check() {
     for entry in std::fs::read_dir("examples").unwrap() {
         let p = entry.unwrap().path();
-        if p.extension().is_some_and(|e| e == "conf") {
+        // own_schema.conf loads a schema that only the own_schema example binary has.
+        if p.extension().is_some_and(|e| e == "conf") && !p.ends_with("own_schema.conf") {
             let out = Command::new(BIN).arg("check").arg(&p).output().unwrap();
             assert!(
                 out.status.success(),
