@@ -1,2 +1,5 @@
 //! Services: cross-cutting facilities (network serving, the GUI host). Each is
 //! compiled in only under the cargo feature of its own name.
+
+#[cfg(feature = "gui")]
+pub mod gui;

@@ -49,7 +49,7 @@ pub fn main() -> ExitCode {
     tracing_subscriber::fmt()
         .with_env_filter(
             tracing_subscriber::EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn")),
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn,winit=error")),
         )
         .with_writer(std::io::stderr)
         .init();
@@ -140,6 +140,7 @@ fn run(cli: &Cli) -> ExitCode {
         }
     };
     let headless = cli.headless || !crate::runtime::display_available();
+    #[cfg(not(feature = "gui"))]
     if !headless {
         tracing::warn!("this binary has no GUI compiled in; running headless");
     }
@@ -158,6 +159,14 @@ fn run(cli: &Cli) -> ExitCode {
             std::process::exit(0);
         });
     }
+    // With a display, the shell runs on its own thread and the window (once a GUI
+    // service is loaded) on this one.
+    #[cfg(feature = "gui")]
+    if !headless {
+        return crate::gui::launch(rt, conf, cli.no_shell);
+    }
+    #[cfg(feature = "gui")]
+    crate::gui::headless_notice(&rt);
     if cli.no_shell {
         loop {
             std::thread::park();

@@ -1,6 +1,36 @@
-//! The GUI host: one eframe window with mastergui and the shown schema panels.
+//! The GUI host: one eframe window with mastergui and the shown schema panels, in
+//! place of 4.3's graphics_gtk / graphics_xforms / graphics_glut services.
+//!
+//! - The window opens when a GUI service is loaded (`load_service gui`, or 4.3's
+//!   `graphics_gtk`, `graphics_xforms`, `graphics_glut`), from the conf or later
+//!   from the shell, provided there is a display and `--headless` was not given.
+//! - A schema offers a [`Panel`] from [`Schema::panel`](crate::runtime::Schema::panel).
+//!   Shown panels (`show NAME` in the conf or the shell, or mastergui's show toggle:
+//!   one state, [`Runtime::show`]) appear in the window: docked ones (mastergui) in a
+//!   left side panel, the others as movable windows. Closing a panel's window hides it.
+//! - The host never locks a schema: it reads [`Runtime::status`] (short locks) and
+//!   calls panels, which share data with their schemas through interfaces or
+//!   atomics. It repaints at about 30 frames per second.
+//! - Quitting the shell closes the window; closing the window shuts the runtime
+//!   down and the program exits with status 0.
 
-use crate::runtime::Runtime;
+pub mod widgets;
+
+use std::{
+    collections::VecDeque,
+    panic::{AssertUnwindSafe, catch_unwind},
+    process::ExitCode,
+    sync::{
+        Arc,
+        atomic::{AtomicBool, Ordering},
+        mpsc,
+    },
+    time::{Duration, Instant},
+};
+
+use parking_lot::Mutex;
+
+use crate::{conf::Conf, runtime::Runtime};
 
 /// A schema's GUI panel. It is taken from the schema once, when the schema is
 /// loaded, and lives on the GUI thread: it shares state with its schema through
@@ -9,4 +39,360 @@ use crate::runtime::Runtime;
 pub trait Panel: Send {
     /// Draws the panel.
     fn ui(&mut self, ui: &mut egui::Ui, rt: &Runtime);
+    /// The panel's title (default: the schema's name).
+    fn title(&self) -> Option<String> {
+        None
+    }
+    /// Whether the panel is docked in the window's left side panel (mastergui)
+    /// rather than shown as a movable window.
+    fn docked(&self) -> bool {
+        false
+    }
+}
+
+/// The services that open the window: `gui` and 4.3's names for it.
+pub const GUI_SERVICES: [&str; 4] = ["gui", "graphics_gtk", "graphics_xforms", "graphics_glut"];
+
+/// Whether a GUI service is loaded.
+pub fn gui_loaded(rt: &Runtime) -> bool {
+    rt.drivers()
+        .iter()
+        .any(|(n, _)| GUI_SERVICES.contains(&n.as_str()))
+}
+
+/// The frame period the host asks for (about 30 frames per second).
+pub const FRAME_PERIOD: Duration = Duration::from_millis(33);
+
+/// Closes a running window from another thread (the shell's).
+#[derive(Clone, Default)]
+pub struct CloseHandle {
+    inner: Arc<CloseInner>,
+}
+
+#[derive(Default)]
+struct CloseInner {
+    close: AtomicBool,
+    ctx: Mutex<Option<egui::Context>>,
+}
+
+impl CloseHandle {
+    /// Asks the window to close (at its next frame, woken at once).
+    pub fn close(&self) {
+        self.inner.close.store(true, Ordering::Release);
+        if let Some(ctx) = self.inner.ctx.lock().as_ref() {
+            ctx.request_repaint();
+        }
+    }
+    /// Whether closing was asked for.
+    pub fn requested(&self) -> bool {
+        self.inner.close.load(Ordering::Acquire)
+    }
+}
+
+/// A panel that panicked is replaced by this note, so the window goes on.
+struct Broken(String);
+
+impl Panel for Broken {
+    fn ui(&mut self, ui: &mut egui::Ui, _rt: &Runtime) {
+        ui.colored_label(egui::Color32::RED, format!("this panel failed: {}", self.0));
+    }
+}
+
+fn panic_text(p: &(dyn std::any::Any + Send)) -> String {
+    p.downcast_ref::<&str>()
+        .map(|s| s.to_string())
+        .or_else(|| p.downcast_ref::<String>().cloned())
+        .unwrap_or_else(|| "panicked".into())
+}
+
+/// The window's contents: a top bar, the docked panels (mastergui) on the left, and
+/// the other shown panels as windows. Usable without eframe (tests, benchmarks):
+/// call [`GuiHost::ui`] from any egui pass.
+pub struct GuiHost {
+    rt: Arc<Runtime>,
+    handle: CloseHandle,
+    frames: VecDeque<Instant>,
+    quit_clicked: bool,
+}
+
+impl GuiHost {
+    pub fn new(rt: Arc<Runtime>) -> Self {
+        GuiHost {
+            rt,
+            handle: CloseHandle::default(),
+            frames: VecDeque::new(),
+            quit_clicked: false,
+        }
+    }
+
+    /// A handle that closes the window from another thread.
+    pub fn close_handle(&self) -> CloseHandle {
+        self.handle.clone()
+    }
+
+    /// Frames drawn per second over the last second.
+    pub fn fps(&self) -> f64 {
+        match (self.frames.front(), self.frames.back()) {
+            (Some(a), Some(b)) if self.frames.len() > 1 => {
+                let span = b.duration_since(*a).as_secs_f64();
+                if span > 0.0 {
+                    (self.frames.len() - 1) as f64 / span
+                } else {
+                    0.0
+                }
+            }
+            _ => 0.0,
+        }
+    }
+
+    /// Whether the user asked to quit (the Quit button) or the shell did.
+    pub fn should_close(&self) -> bool {
+        self.quit_clicked || self.handle.requested()
+    }
+
+    /// Draws one frame into `ui` (the whole window's area).
+    pub fn ui(&mut self, ui: &mut egui::Ui) {
+        let now = Instant::now();
+        self.frames.push_back(now);
+        while self
+            .frames
+            .front()
+            .is_some_and(|t| now.duration_since(*t) > Duration::from_secs(1))
+        {
+            self.frames.pop_front();
+        }
+        {
+            let mut c = self.handle.inner.ctx.lock();
+            if c.is_none() {
+                *c = Some(ui.ctx().clone());
+            }
+        }
+        if ui.input(|i| i.modifiers.command && i.key_pressed(egui::Key::Q)) {
+            self.quit_clicked = true;
+        }
+        let rt = self.rt.clone();
+        let status = rt.status();
+        // Which shown schemas have panels, docked or not.
+        let mut docked = Vec::new();
+        let mut windows = Vec::new();
+        for s in status.iter().filter(|s| s.shown) {
+            let Some(slot) = rt.schema(&s.name) else {
+                continue;
+            };
+            let (has, dock, title) = match slot.panel.lock().as_ref() {
+                Some(p) => (true, p.docked(), p.title()),
+                None => (false, false, None),
+            };
+            let title = title.unwrap_or_else(|| s.name.clone());
+            if has && dock {
+                docked.push((s.name.clone(), slot));
+            } else {
+                windows.push((s.name.clone(), title, slot, has));
+            }
+        }
+
+        egui::Panel::top("jde_top").show(ui, |ui| {
+            ui.horizontal(|ui| {
+                ui.strong("jderobot");
+                ui.menu_button("Panels", |ui| {
+                    for s in &status {
+                        let mut shown = s.shown;
+                        if ui.checkbox(&mut shown, &s.name).changed() {
+                            let _ = if shown {
+                                rt.show(&s.name)
+                            } else {
+                                rt.hide(&s.name)
+                            };
+                        }
+                    }
+                    if status.is_empty() {
+                        ui.label("no schema loaded");
+                    }
+                });
+                if ui.button("Quit").on_hover_text("Ctrl+Q").clicked() {
+                    self.quit_clicked = true;
+                }
+                let running = status.iter().filter(|s| s.state.iterates()).count();
+                ui.label(format!(
+                    "{} schemas ({running} iterating), {} drivers/services, {:.0} fps",
+                    status.len(),
+                    rt.drivers().len(),
+                    self.fps()
+                ));
+            });
+        });
+
+        if !docked.is_empty() {
+            egui::Panel::left("jde_docked")
+                .default_size(380.0)
+                .show(ui, |ui| {
+                    egui::ScrollArea::vertical().show(ui, |ui| {
+                        for (name, slot) in &docked {
+                            draw_panel(ui, &rt, name, &slot.panel);
+                            ui.separator();
+                        }
+                    });
+                });
+        }
+
+        egui::CentralPanel::default_margins().show(ui, |ui| {
+            if windows.is_empty() {
+                ui.centered_and_justified(|ui| {
+                    ui.weak(
+                        "Schema panels appear here. Show one with `show NAME` in the shell, \
+                         the Panels menu, or mastergui's show toggle.",
+                    );
+                });
+            }
+        });
+
+        let ctx = ui.ctx().clone();
+        for (i, (name, title, slot, has)) in windows.iter().enumerate() {
+            let mut open = true;
+            egui::Window::new(title.as_str())
+                .id(egui::Id::unique(("jde_panel", name.as_str())))
+                .open(&mut open)
+                .default_pos([400.0 + 30.0 * i as f32, 60.0 + 30.0 * i as f32])
+                .vscroll(true)
+                .show(&ctx, |ui| {
+                    if *has {
+                        draw_panel(ui, &rt, name, &slot.panel);
+                    } else {
+                        ui.label(format!("schema `{name}` has no panel"));
+                    }
+                });
+            if !open {
+                let _ = rt.hide(name);
+            }
+        }
+        ctx.request_repaint_after(FRAME_PERIOD);
+    }
+}
+
+/// Calls a panel; a panel that panics is replaced by a note.
+fn draw_panel(ui: &mut egui::Ui, rt: &Runtime, name: &str, panel: &Mutex<Option<Box<dyn Panel>>>) {
+    let mut p = panel.lock();
+    let Some(inner) = p.as_mut() else { return };
+    let r = catch_unwind(AssertUnwindSafe(|| {
+        ui.push_id(("jde_panel_body", name), |ui| inner.ui(ui, rt));
+    }));
+    if let Err(e) = r {
+        let msg = panic_text(&*e);
+        tracing::error!("{name}: panel failed: {msg}");
+        *p = Some(Box::new(Broken(msg)));
+    }
+}
+
+impl eframe::App for GuiHost {
+    fn ui(&mut self, ui: &mut egui::Ui, _frame: &mut eframe::Frame) {
+        if self.should_close() {
+            ui.ctx().send_viewport_cmd(egui::ViewportCommand::Close);
+        }
+        GuiHost::ui(self, ui);
+    }
+}
+
+/// Opens the window on this (the main) thread and returns when it closes.
+pub fn run_window(host: GuiHost) -> Result<(), String> {
+    let options = eframe::NativeOptions {
+        viewport: egui::ViewportBuilder::default()
+            .with_title("jderobot")
+            .with_app_id("jderobot")
+            .with_inner_size([1180.0, 760.0]),
+        ..Default::default()
+    };
+    eframe::run_native("jderobot", options, Box::new(move |_cc| Ok(Box::new(host))))
+        .map_err(|e| e.to_string())
+}
+
+/// Says why no window opens when a GUI service is loaded but the run is headless.
+pub fn headless_notice(rt: &Runtime) {
+    if gui_loaded(rt) {
+        eprintln!("gui: no display or --headless: running without the window");
+    }
+}
+
+/// Runs the shell on its own thread and, once a GUI service is loaded (now or later
+/// from the shell), the window on this thread. Returns when the shell ends or the
+/// window is closed; the runtime is shut down either way.
+pub fn launch(rt: Arc<Runtime>, conf: Conf, no_shell: bool) -> ExitCode {
+    let host = GuiHost::new(rt.clone());
+    let handle = host.close_handle();
+    let term = terminal::Saved::now();
+    let (tx, rx) = mpsc::channel::<()>();
+    let mut _keep = None;
+    if no_shell {
+        _keep = Some(tx);
+    } else {
+        let (rt2, h) = (rt.clone(), handle.clone());
+        let spawned = std::thread::Builder::new()
+            .name("shell".into())
+            .spawn(move || {
+                crate::shell::run(rt2, conf);
+                h.close();
+                let _ = tx.send(());
+            });
+        if let Err(e) = spawned {
+            eprintln!("cannot start the shell thread: {e}");
+            rt.shutdown();
+            return ExitCode::FAILURE;
+        }
+    }
+    // Wait for a GUI service, or for the shell to end.
+    loop {
+        match rx.recv_timeout(Duration::from_millis(50)) {
+            Err(mpsc::RecvTimeoutError::Timeout) => {}
+            _ => {
+                rt.shutdown();
+                return ExitCode::SUCCESS;
+            }
+        }
+        if gui_loaded(&rt) {
+            break;
+        }
+    }
+    match run_window(host) {
+        Ok(()) => {}
+        Err(e) => {
+            eprintln!("gui: cannot open the window ({e}); running without it");
+            // Wait for the shell (or forever with --no-shell: Ctrl+C ends the run).
+            let _ = rx.recv();
+        }
+    }
+    term.restore();
+    rt.shutdown();
+    ExitCode::SUCCESS
+}
+
+mod terminal {
+    //! Restores the terminal's settings when the window ends the program while
+    //! the line editor (on the shell's thread) has it in raw mode.
+
+    pub struct Saved(Option<libc::termios>);
+
+    impl Saved {
+        pub fn now() -> Self {
+            // SAFETY: tcgetattr only writes into the zeroed struct we own.
+            unsafe {
+                if libc::isatty(0) != 1 {
+                    return Saved(None);
+                }
+                let mut t: libc::termios = std::mem::zeroed();
+                if libc::tcgetattr(0, &mut t) == 0 {
+                    Saved(Some(t))
+                } else {
+                    Saved(None)
+                }
+            }
+        }
+
+        pub fn restore(&self) {
+            if let Some(t) = &self.0 {
+                // SAFETY: restores settings read by tcgetattr on the same fd.
+                unsafe {
+                    libc::tcsetattr(0, libc::TCSANOW, t);
+                }
+            }
+        }
+    }
 }

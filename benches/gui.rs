@@ -1,0 +1,251 @@
+//! The GUI never waits for a schema and a schema never waits for the GUI.
+//!
+//! 1. Frame rate with a slow schema: the window's contents ([`GuiHost::ui`], with
+//!    mastergui docked and a camera panel showing a 320x240 image that the schema
+//!    publishes) are drawn and tessellated headlessly with `egui::Context::run_ui`
+//!    as fast as possible, while a schema whose iteration takes 200 ms runs (once
+//!    sleeping, once spinning a core). A frame must stay well under 33 ms (30 fps).
+//! 2. Schema ips with a busy GUI: a 10 ms schema's iterations per second, alone and
+//!    while a GUI loop draws unpaced and another thread hammers `Runtime::status()`.
+//!
+//! Run: `cargo bench --features full --bench gui`. Prints medians and ratios.
+
+use std::{
+    path::Path,
+    sync::{
+        Arc,
+        atomic::{AtomicBool, AtomicU64, Ordering},
+    },
+    time::{Duration, Instant},
+};
+
+use jderobot::{
+    ComponentConf, Context, Kind, Runtime, Schema,
+    gui::{GuiHost, Panel, widgets::ImageView},
+    interfaces::{Image, Interface},
+    registry,
+};
+
+/// A schema whose iteration takes `work` (sleeping or spinning) and publishes an image.
+struct Slow {
+    work: Duration,
+    spin: bool,
+    image: Arc<Interface<Image>>,
+    count: Arc<AtomicU64>,
+}
+
+impl Schema for Slow {
+    fn cycle(&self) -> Duration {
+        self.work.max(Duration::from_millis(10))
+    }
+    fn iteration(&mut self, _: &Context) -> anyhow::Result<()> {
+        let t = Instant::now();
+        if self.spin {
+            while t.elapsed() < self.work {
+                std::hint::spin_loop();
+            }
+        } else if !self.work.is_zero() {
+            std::thread::sleep(self.work);
+        }
+        let n = self.count.fetch_add(1, Ordering::Relaxed) as u8;
+        let _ = self.image.write(|img| {
+            for (i, b) in img.data.iter_mut().enumerate() {
+                *b = (i as u8).wrapping_add(n);
+            }
+        });
+        Ok(())
+    }
+    fn panel(&mut self) -> Option<Box<dyn Panel>> {
+        Some(Box::new(CameraPanel {
+            image: self.image.clone(),
+            view: ImageView::new("camera"),
+        }))
+    }
+}
+
+struct CameraPanel {
+    image: Arc<Interface<Image>>,
+    view: ImageView,
+}
+
+impl Panel for CameraPanel {
+    fn ui(&mut self, ui: &mut egui::Ui, _: &Runtime) {
+        let s = self.image.read();
+        self.view.show_sample(ui, &s);
+    }
+}
+
+fn runtime(work: Duration, spin: bool, name: &str) -> (Arc<Runtime>, Arc<AtomicU64>) {
+    let path = Path::new("jde.conf");
+    let rt = Runtime::new(path);
+    if let Some(c) = registry::find("mastergui") {
+        let _ = rt.load_component(c, &ComponentConf::empty(Kind::Schema, "mastergui", path));
+        let _ = rt.run("mastergui");
+        let _ = rt.show("mastergui");
+    }
+    let image = rt
+        .interfaces
+        .provide_value(&format!("varcolor{name}"), name, Image::new(320, 240))
+        .expect("provide image");
+    let count = Arc::new(AtomicU64::new(0));
+    rt.add_schema(
+        name,
+        "benchmark schema",
+        Box::new(Slow {
+            work,
+            spin,
+            image,
+            count: count.clone(),
+        }),
+    );
+    let _ = rt.show(name);
+    (rt, count)
+}
+
+fn raw_input(t: f64) -> egui::RawInput {
+    egui::RawInput {
+        screen_rect: Some(egui::Rect::from_min_size(
+            egui::Pos2::ZERO,
+            egui::vec2(1280.0, 800.0),
+        )),
+        time: Some(t),
+        ..Default::default()
+    }
+}
+
+/// Draws frames back to back for `dur`; returns frame times in ms.
+fn frames(host: &mut GuiHost, dur: Duration) -> Vec<f64> {
+    let ctx = egui::Context::default();
+    let start = Instant::now();
+    let mut times = Vec::new();
+    while start.elapsed() < dur {
+        let t0 = Instant::now();
+        let out = ctx.run_ui(raw_input(start.elapsed().as_secs_f64()), |ui| host.ui(ui));
+        let prims = ctx.tessellate(out.shapes, out.pixels_per_point);
+        std::hint::black_box(prims);
+        times.push(t0.elapsed().as_secs_f64() * 1e3);
+    }
+    times
+}
+
+fn pct(v: &[f64], p: f64) -> f64 {
+    let mut s = v.to_vec();
+    s.sort_by(|a, b| a.total_cmp(b));
+    if s.is_empty() {
+        return 0.0;
+    }
+    s[((s.len() - 1) as f64 * p).round() as usize]
+}
+
+fn frame_rate_case(label: &str, work: Duration, spin: bool) -> f64 {
+    let (rt, count) = runtime(work, spin, "slow");
+    rt.run("slow").expect("run");
+    // Wait for the first iteration to be under way.
+    std::thread::sleep(Duration::from_millis(50));
+    let mut host = GuiHost::new(rt.clone());
+    let _ = frames(&mut host, Duration::from_millis(500)); // warm-up
+    let t = frames(&mut host, Duration::from_secs(3));
+    let iters = count.load(Ordering::Relaxed);
+    rt.shutdown();
+    let (p50, p99, max) = (pct(&t, 0.5), pct(&t, 0.99), pct(&t, 1.0));
+    println!(
+        "frames, {label:<28} {:>5} frames in 3 s: median {p50:6.2} ms ({:5.0} fps possible), p99 {p99:6.2} ms, max {max:6.2} ms ({:4.0} fps worst); schema iterations {iters}",
+        t.len(),
+        1000.0 / p50,
+        1000.0 / max
+    );
+    p99
+}
+
+fn ips_case(label: &str, gui: bool) -> f64 {
+    let (rt, count) = runtime(Duration::ZERO, false, "fast");
+    rt.run("fast").expect("run");
+    std::thread::sleep(Duration::from_millis(300));
+    let stop = Arc::new(AtomicBool::new(false));
+    let mut helpers = Vec::new();
+    if gui {
+        let (rt2, stop2) = (rt.clone(), stop.clone());
+        helpers.push(std::thread::spawn(move || {
+            let mut n = 0u64;
+            while !stop2.load(Ordering::Relaxed) {
+                std::hint::black_box(rt2.status());
+                n += 1;
+            }
+            n
+        }));
+        let (rt3, stop3) = (rt.clone(), stop.clone());
+        helpers.push(std::thread::spawn(move || {
+            let mut host = GuiHost::new(rt3);
+            let mut n = 0u64;
+            while !stop3.load(Ordering::Relaxed) {
+                n += frames(&mut host, Duration::from_millis(100)).len() as u64;
+            }
+            n
+        }));
+    }
+    let c0 = count.load(Ordering::Relaxed);
+    let t0 = Instant::now();
+    std::thread::sleep(Duration::from_secs(3));
+    let ips = (count.load(Ordering::Relaxed) - c0) as f64 / t0.elapsed().as_secs_f64();
+    let cronos = rt
+        .schema_status("fast")
+        .map(|s| s.timing.ips)
+        .unwrap_or(0.0);
+    stop.store(true, Ordering::Relaxed);
+    let done: Vec<u64> = helpers.into_iter().map(|h| h.join().unwrap_or(0)).collect();
+    rt.shutdown();
+    let extra = if gui {
+        format!(
+            " (meanwhile {} status() calls and {} GUI frames)",
+            done.first().copied().unwrap_or(0),
+            done.get(1).copied().unwrap_or(0)
+        )
+    } else {
+        String::new()
+    };
+    println!(
+        "ips, 10 ms schema, {label:<22} {ips:6.2} ips counted, {cronos:6.2} ips by cronos{extra}"
+    );
+    ips
+}
+
+fn main() {
+    // `cargo bench` passes --bench; `cargo test --benches` runs this too: keep it short then.
+    let quick = !std::env::args().any(|a| a == "--bench");
+    if quick {
+        println!("gui bench: run with `cargo bench --features full --bench gui` for figures");
+        return;
+    }
+    println!("== 1. frame time while a schema's iteration takes 200 ms (30 fps = 33.3 ms)");
+    let base = frame_rate_case("no slow work (0 ms)", Duration::ZERO, false);
+    let sleeping = frame_rate_case(
+        "200 ms iteration, sleeping",
+        Duration::from_millis(200),
+        false,
+    );
+    let spinning = frame_rate_case(
+        "200 ms iteration, spinning",
+        Duration::from_millis(200),
+        true,
+    );
+    println!(
+        "p99 frame time ratio slow/baseline: sleeping {:.2}, spinning {:.2}; worst p99 {:.2} ms = {:.0} fps ({})",
+        sleeping / base,
+        spinning / base,
+        sleeping.max(spinning),
+        1000.0 / sleeping.max(spinning),
+        if sleeping.max(spinning) < 33.3 {
+            "above 30 fps"
+        } else {
+            "BELOW 30 fps"
+        }
+    );
+    println!("== 2. a 10 ms schema's ips, alone and with a busy GUI");
+    let alone = ips_case("alone", false);
+    let busy = ips_case("with a busy GUI", true);
+    println!(
+        "ips ratio busy/alone: {:.3} ({:+.1} %)",
+        busy / alone,
+        (busy / alone - 1.0) * 100.0
+    );
+}

@@ -1,0 +1,86 @@
+//! Service `gui`: the egui window (one eframe window with mastergui and the shown
+//! schema panels; see [`crate::gui`]).
+//!
+//! Loading it asks for the window: it opens when there is a display and
+//! `--headless` was not given. 4.3's GUI services `graphics_gtk`, `graphics_xforms`
+//! and `graphics_glut` are accepted as aliases: they load the same window and say so
+//! in one line, so 4.3 confs run unchanged.
+//!
+//! Conf:
+//! ```text
+//! load_service gui
+//! load_schema mastergui
+//! run mastergui
+//! show mastergui
+//! ```
+//! Interfaces: none.
+
+use crate::{
+    conf::ComponentConf,
+    runtime::{Driver, Runtime},
+};
+
+/// The GUI service (the window itself runs on the main thread, see [`crate::gui::launch`]).
+pub struct GuiService;
+
+impl Driver for GuiService {}
+
+fn check_lines(conf: &ComponentConf) -> anyhow::Result<()> {
+    if let Some(l) = conf.lines.first() {
+        return Err(conf
+            .unknown(l, "nothing (the gui service takes no lines)")
+            .into());
+    }
+    Ok(())
+}
+
+fn create(conf: &ComponentConf, _rt: &Runtime) -> anyhow::Result<Box<dyn Driver>> {
+    check_lines(conf)?;
+    Ok(Box::new(GuiService))
+}
+
+fn alias(_conf: &ComponentConf, name: &str) -> anyhow::Result<Box<dyn Driver>> {
+    // 4.3's GUI services had no settings that mean anything here: their lines are ignored.
+    eprintln!("{name}: replaced by the egui window (service gui)");
+    Ok(Box::new(GuiService))
+}
+
+fn create_gtk(conf: &ComponentConf, _rt: &Runtime) -> anyhow::Result<Box<dyn Driver>> {
+    alias(conf, "graphics_gtk")
+}
+
+fn create_xforms(conf: &ComponentConf, _rt: &Runtime) -> anyhow::Result<Box<dyn Driver>> {
+    alias(conf, "graphics_xforms")
+}
+
+fn create_glut(conf: &ComponentConf, _rt: &Runtime) -> anyhow::Result<Box<dyn Driver>> {
+    alias(conf, "graphics_glut")
+}
+
+crate::register_driver!(
+    Service,
+    "gui",
+    "the egui window: mastergui and the shown schema panels",
+    create
+);
+crate::register_driver!(
+    Service,
+    "graphics_gtk",
+    "4.3's GTK GUI service: loads the egui window (service gui)",
+    create_gtk,
+    "gui"
+);
+crate::register_driver!(
+    Service,
+    "graphics_xforms",
+    "4.3's XForms GUI service: loads the egui window (service gui)",
+    create_xforms,
+    "gui"
+);
+crate::register_driver!(
+    Service,
+    "graphics_glut",
+    "4.3's GLUT GUI service: loads the egui window (service gui)",
+    create_glut,
+    "gui"
+);
