@@ -36,3 +36,43 @@ pub fn set_sink(sink: Option<Sink>) {
 macro_rules! jde_println {
     ($($arg:tt)*) => { $crate::output::println(format!($($arg)*)) };
 }
+
+/// The log writer (`tracing`): while the interactive shell is editing a line, log
+/// lines go through its printer like components' output; otherwise to standard error.
+#[derive(Clone, Copy, Default)]
+pub struct LogWriter;
+
+/// One log event's text, sent when dropped.
+pub struct LogLine(Vec<u8>);
+
+impl<'a> tracing_subscriber::fmt::MakeWriter<'a> for LogWriter {
+    type Writer = LogLine;
+    fn make_writer(&'a self) -> LogLine {
+        LogLine(Vec::new())
+    }
+}
+
+impl Write for LogLine {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        self.0.extend_from_slice(buf);
+        Ok(buf.len())
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        Ok(())
+    }
+}
+
+impl Drop for LogLine {
+    fn drop(&mut self) {
+        if self.0.is_empty() {
+            return;
+        }
+        let mut sink = SINK.lock();
+        match sink.as_mut() {
+            Some(f) => f(String::from_utf8_lossy(&self.0).trim_end().to_string()),
+            None => {
+                let _ = std::io::stderr().lock().write_all(&self.0);
+            }
+        }
+    }
+}
