@@ -43,10 +43,8 @@
 //! cycle); `fc_output` → [`Controller::output`], which returns the value and the
 //! number of rules applied, or `None` where 4.3 returned −1.
 
-use std::{
-    fmt::Write as _,
-    path::{Path, PathBuf},
-};
+pub use crate::files::FileError as FuzzyError;
+use std::{fmt::Write as _, path::Path};
 
 /// How rules are combined; see the module doc.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -109,25 +107,6 @@ type Term = (usize, usize);
 struct Rule {
     antecedents: Vec<Term>,
     consequents: Vec<Term>,
-}
-
-/// A problem in a `.fzz` file.
-#[derive(Debug, thiserror::Error)]
-pub enum FuzzyError {
-    #[error("{file}: cannot read: {source}")]
-    Io {
-        file: PathBuf,
-        #[source]
-        source: std::io::Error,
-    },
-    #[error("{file}:{line}: {message}")]
-    Syntax {
-        file: PathBuf,
-        line: usize,
-        message: String,
-    },
-    #[error("{file}: {message}")]
-    Empty { file: PathBuf, message: String },
 }
 
 /// A bad line skipped by [`Controller::parse_lenient`].
@@ -216,7 +195,7 @@ impl Controller {
 
     fn finish(mut self, file: &Path) -> Result<Self, FuzzyError> {
         if self.variables.is_empty() || self.rules.is_empty() {
-            return Err(FuzzyError::Empty {
+            return Err(FuzzyError::Invalid {
                 file: file.to_path_buf(),
                 message: format!(
                     "a controller needs labels (`etiqueta ...`) and rules (`IF ... THEN ...`); found {} variables and {} rules",

@@ -13,6 +13,7 @@
 pub mod cli;
 pub mod colorspaces;
 pub mod conf;
+pub mod files;
 pub mod fuzzy;
 #[cfg(feature = "gui")]
 pub mod gui;

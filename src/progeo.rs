@@ -52,6 +52,7 @@
 //!
 //! Every error names `file:line` and what was expected ([`ProgeoError`]).
 
+pub use crate::files::FileError as ProgeoError;
 use std::{
     fmt,
     path::{Path, PathBuf},
@@ -148,25 +149,6 @@ pub fn graphic_to_optical(column: f64, row: f64, rows: u32) -> (f64, f64) {
 /// width for Webots).
 pub fn focal_from_fov(size_px: f64, fov_rad: f64) -> f64 {
     size_px / (2.0 * (fov_rad / 2.0).tan())
-}
-
-/// A problem in a camera or world file.
-#[derive(Debug, thiserror::Error)]
-pub enum ProgeoError {
-    #[error("{file}: cannot read: {source}")]
-    Io {
-        file: PathBuf,
-        #[source]
-        source: std::io::Error,
-    },
-    #[error("{file}:{line}: {message}")]
-    Syntax {
-        file: PathBuf,
-        line: usize,
-        message: String,
-    },
-    #[error("{file}: {message}")]
-    Invalid { file: PathBuf, message: String },
 }
 
 /// The pinhole camera (4.3's `TPinHoleCamera`). Change the public parameters, then

@@ -122,7 +122,7 @@ fn parse_errors_have_file_and_line() {
         assert!(e.starts_with(want), "{text:?}: got {e}");
     }
     let e = Controller::parse("# only a comment\n", p).unwrap_err();
-    assert!(matches!(e, FuzzyError::Empty { .. }), "{e}");
+    assert!(matches!(e, FuzzyError::Invalid { .. }), "{e}");
     assert!(matches!(
         Controller::from_file("/no/such.fzz"),
         Err(FuzzyError::Io { .. })

@@ -1,7 +1,8 @@
 //! Convolution with opencvdemo's kernels (see the module doc of [`super`] for the
 //! file format).
 
-use std::path::{Path, PathBuf};
+pub use crate::files::FileError as KernelError;
+use std::path::Path;
 
 use super::{is_valid, multiversion, reflect101};
 use crate::interfaces::Image;
@@ -29,25 +30,6 @@ impl Default for Kernel {
             offset: 0,
         }
     }
-}
-
-/// A problem in a kernel file.
-#[derive(Debug, thiserror::Error)]
-pub enum KernelError {
-    #[error("{file}: cannot read: {source}")]
-    Io {
-        file: PathBuf,
-        #[source]
-        source: std::io::Error,
-    },
-    #[error("{file}:{line}: {message}")]
-    Syntax {
-        file: PathBuf,
-        line: usize,
-        message: String,
-    },
-    #[error("{file}: {message}")]
-    Incomplete { file: PathBuf, message: String },
 }
 
 impl Kernel {
@@ -137,7 +119,7 @@ impl Kernel {
         if size.is_none() && rows.is_empty() {
             return Ok(Kernel::default());
         }
-        let incomplete = |message: String| KernelError::Incomplete {
+        let incomplete = |message: String| KernelError::Invalid {
             file: file.to_path_buf(),
             message,
         };
