@@ -489,10 +489,7 @@ impl Controller {
 }
 
 fn read(path: &Path) -> Result<String, FuzzyError> {
-    std::fs::read_to_string(path).map_err(|source| FuzzyError::Io {
-        file: path.to_path_buf(),
-        source,
-    })
+    FuzzyError::read(path)
 }
 
 /// The clipped trapezoid `min(a, t(x))` as linear on [x0, x1] between breakpoints.

@@ -392,10 +392,7 @@ impl PinholeCamera {
     /// Reads a camera file (see the module doc) and updates the matrices.
     pub fn load(path: impl AsRef<Path>) -> Result<Self, ProgeoError> {
         let path = path.as_ref();
-        let text = std::fs::read_to_string(path).map_err(|source| ProgeoError::Io {
-            file: path.to_path_buf(),
-            source,
-        })?;
+        let text = ProgeoError::read(path)?;
         Self::parse(&text, path)
     }
 
@@ -693,10 +690,7 @@ const BOUND_KEYS: [&str; 6] = ["maxX", "minX", "maxY", "minY", "maxZ", "minZ"];
 impl World {
     pub fn load(path: impl AsRef<Path>) -> Result<Self, ProgeoError> {
         let path = path.as_ref();
-        let text = std::fs::read_to_string(path).map_err(|source| ProgeoError::Io {
-            file: path.to_path_buf(),
-            source,
-        })?;
+        let text = ProgeoError::read(path)?;
         Self::parse(&text, path)
     }
 

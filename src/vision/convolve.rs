@@ -54,10 +54,7 @@ impl Kernel {
     /// Reads a kernel file (or an opencvdemo conf).
     pub fn load(path: impl AsRef<Path>) -> Result<Self, KernelError> {
         let path = path.as_ref();
-        let text = std::fs::read_to_string(path).map_err(|source| KernelError::Io {
-            file: path.to_path_buf(),
-            source,
-        })?;
+        let text = KernelError::read(path)?;
         Self::parse(&text, path)
     }
 
