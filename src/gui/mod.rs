@@ -338,6 +338,12 @@ pub fn launch(rt: Arc<Runtime>, conf: Conf, no_shell: bool) -> ExitCode {
             return ExitCode::FAILURE;
         }
     }
+    if !gui_loaded(&rt) && rt.status().iter().any(|s| s.shown) {
+        eprintln!(
+            "gui: panels are shown but no GUI service is loaded; `load_service gui` \
+             (in the conf or the shell) opens the window"
+        );
+    }
     // Wait for a GUI service, or for the shell to end.
     loop {
         match rx.recv_timeout(Duration::from_millis(50)) {
