@@ -1,6 +1,8 @@
 //! Schemas: the periodic units of behaviour. Each is compiled in only under the
 //! cargo feature of its own name.
 
+#[cfg(feature = "introrob")]
+pub mod introrob;
 #[cfg(feature = "mastergui")]
 pub mod mastergui;
 #[cfg(feature = "myschema")]

@@ -1,0 +1,202 @@
+//! introrob's panel: behaviour choice, teleoperation joystick and stop, the robot
+//! in its world (walls, laser points, path, forces, your drawings; a click sets
+//! the target), laser and sonar views and the camera image.
+
+use std::sync::Arc;
+
+use egui::{Color32, vec2};
+
+use crate::{
+    gui::{
+        Panel,
+        widgets::{
+            ImageView, Joystick, PolarStyle, WorldScene, WorldView, laser_points, polar_view,
+            relative_to_world, sonar_points,
+        },
+    },
+    interfaces::{Encoders, Image, Interface, Laser, Sonars},
+    runtime::Runtime,
+};
+
+use super::{Behaviour, Shared};
+
+/// The panel; it shares [`Shared`] with the schema and reads the interfaces.
+pub struct IntrorobPanel {
+    shared: Arc<Shared>,
+    encoders: Arc<Interface<Encoders>>,
+    laser: Arc<Interface<Laser>>,
+    sonars: Option<Arc<Interface<Sonars>>>,
+    camera: Option<Arc<Interface<Image>>>,
+    walls: Vec<[f32; 4]>,
+    world: WorldView,
+    joystick: Joystick,
+    image: ImageView,
+    placed: bool,
+}
+
+impl IntrorobPanel {
+    pub fn new(
+        shared: Arc<Shared>,
+        encoders: Arc<Interface<Encoders>>,
+        laser: Arc<Interface<Laser>>,
+        sonars: Option<Arc<Interface<Sonars>>>,
+        camera: Option<Arc<Interface<Image>>>,
+    ) -> IntrorobPanel {
+        let walls = shared
+            .world
+            .as_ref()
+            .map(|w| {
+                w.segments
+                    .iter()
+                    .map(|s| [s.a[0] as f32, s.a[1] as f32, s.b[0] as f32, s.b[1] as f32])
+                    .collect()
+            })
+            .unwrap_or_default();
+        let mut world = WorldView::new("introrob world");
+        if let Some((lo, hi)) = shared.world.as_ref().and_then(|w| w.bounds()) {
+            world.center = [
+                ((lo[0] + hi[0]) / 2.0) as f32,
+                ((lo[1] + hi[1]) / 2.0) as f32,
+            ];
+            world.width_mm =
+                ((hi[0] - lo[0]).max((hi[1] - lo[1]) * 1.4) as f32 + 1000.0).clamp(500.0, 20000.0);
+        }
+        let joystick = Joystick::new("introrob joystick", shared.max_v, shared.max_w);
+        IntrorobPanel {
+            shared,
+            encoders,
+            laser,
+            sonars,
+            camera,
+            walls,
+            world,
+            joystick,
+            image: ImageView::new("introrob camera"),
+            placed: false,
+        }
+    }
+
+    fn controls(&mut self, ui: &mut egui::Ui) {
+        ui.horizontal(|ui| {
+            ui.label("behaviour:");
+            let mut b = *self.shared.behaviour.lock();
+            let before = b;
+            for x in Behaviour::ALL {
+                ui.selectable_value(&mut b, x, x.as_str());
+            }
+            if b != before {
+                self.shared.set_behaviour(b);
+            }
+            if ui.button("STOP").clicked() {
+                self.shared.set_teleop(0.0, 0.0);
+                self.shared.set_behaviour(Behaviour::Stop);
+            }
+        });
+        let view = self.shared.view.lock().clone();
+        ui.label(format!(
+            "{}   |   v {:.0} mm/s  w {:.1} deg/s",
+            view.status, view.command.v, view.command.w
+        ));
+    }
+}
+
+impl Panel for IntrorobPanel {
+    fn title(&self) -> Option<String> {
+        Some("introrob".into())
+    }
+
+    fn ui(&mut self, ui: &mut egui::Ui, _rt: &Runtime) {
+        self.controls(ui);
+        let pose = self.encoders.read().value;
+        let laser = self.laser.snapshot();
+        if !self.placed && self.walls.is_empty() {
+            self.world.center = [pose.x, pose.y];
+        }
+        self.placed = true;
+        // The shared target shows as the view's cross (set by conf, shell or click).
+        self.world.target = *self.shared.target.lock();
+        let view = self.shared.view.lock().clone();
+        let mut segs: Vec<([f32; 4], Color32)> = Vec::new();
+        let path_c = Color32::from_rgb(230, 140, 0);
+        for w in view.path.windows(2) {
+            segs.push(([w[0][0], w[0][1], w[1][0], w[1][1]], path_c));
+        }
+        if let Some(c) = view.carrot {
+            let k = 80.0;
+            segs.push(([c[0] - k, c[1], c[0] + k, c[1]], path_c));
+            segs.push(([c[0], c[1] - k, c[0], c[1] + k], path_c));
+        }
+        if let Some(f) = view.forces {
+            let arrow = |v: [f32; 2]| {
+                let a = relative_to_world(&pose, [0.0, 0.0]);
+                let b = relative_to_world(&pose, [v[0] * 800.0, v[1] * 800.0]);
+                [a[0], a[1], b[0], b[1]]
+            };
+            segs.push((arrow(f.attractive), Color32::from_rgb(0, 160, 0)));
+            segs.push((arrow(f.repulsive), Color32::from_rgb(220, 0, 0)));
+            segs.push((arrow(f.resultant), Color32::from_rgb(0, 60, 220)));
+        }
+        for d in &view.drawings {
+            let [r, g, b] = d.color;
+            segs.push(([d.a[0], d.a[1], d.b[0], d.b[1]], Color32::from_rgb(r, g, b)));
+        }
+        ui.horizontal_top(|ui| {
+            ui.vertical(|ui| {
+                let scene = WorldScene {
+                    robot: Some(pose),
+                    walls: &self.walls,
+                    laser: Some(&laser.value),
+                    segments: &segs,
+                    robot_radius: Some(250.0),
+                };
+                let r = self.world.show(ui, vec2(480.0, 360.0), &scene);
+                if let Some(t) = r.clicked {
+                    self.shared.set_target(Some(t));
+                }
+                ui.label(
+                    "click: target · drag: pan · wheel: zoom · right click: centre on the robot",
+                );
+            });
+            ui.vertical(|ui| {
+                ui.label("teleoperation");
+                let r = self.joystick.show(ui, 150.0);
+                if r.changed() {
+                    self.shared.set_teleop(self.joystick.v, self.joystick.w);
+                    if self.joystick.v != 0.0 || self.joystick.w != 0.0 {
+                        self.shared.set_behaviour(Behaviour::Teleop);
+                    }
+                }
+                ui.label("laser");
+                polar_view(
+                    ui,
+                    "introrob laser",
+                    vec2(150.0, 150.0),
+                    &laser_points(&laser.value),
+                    8000.0,
+                    PolarStyle::Laser,
+                );
+                if let Some(s) = &self.sonars {
+                    ui.label("sonars");
+                    let s = s.snapshot();
+                    polar_view(
+                        ui,
+                        "introrob sonars",
+                        vec2(150.0, 150.0),
+                        &sonar_points(&s.value),
+                        5000.0,
+                        PolarStyle::Sonar,
+                    );
+                }
+            });
+        });
+        if let Some(c) = &self.camera {
+            let s = c.snapshot();
+            if s.clock > 0 {
+                ui.label("camera");
+                ui.allocate_ui(vec2(320.0, 240.0), |ui| {
+                    self.image.show_sample(ui, &s);
+                });
+            }
+        }
+    }
+}
