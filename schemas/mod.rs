@@ -9,3 +9,5 @@ pub mod mastergui;
 pub mod myschema;
 #[cfg(feature = "pingpong")]
 pub mod pingpong;
+#[cfg(feature = "teleoperator")]
+pub mod teleoperator;

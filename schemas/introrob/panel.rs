@@ -149,17 +149,15 @@ impl Panel for IntrorobPanel {
                     segments: &segs,
                     robot_radius: Some(250.0),
                 };
-                let r = self.world.show(ui, vec2(480.0, 360.0), &scene);
+                let r = self.world.show(ui, vec2(440.0, 330.0), &scene);
                 if let Some(t) = r.clicked {
                     self.shared.set_target(Some(t));
                 }
-                ui.label(
-                    "click: target · drag: pan · wheel: zoom · right click: centre on the robot",
-                );
+                ui.small("click: target · drag: pan · wheel: zoom · right click: the robot");
             });
             ui.vertical(|ui| {
                 ui.label("teleoperation");
-                let r = self.joystick.show(ui, 150.0);
+                let r = self.joystick.show(ui, 140.0);
                 if r.changed() {
                     self.shared.set_teleop(self.joystick.v, self.joystick.w);
                     if self.joystick.v != 0.0 || self.joystick.w != 0.0 {
@@ -170,18 +168,31 @@ impl Panel for IntrorobPanel {
                 polar_view(
                     ui,
                     "introrob laser",
-                    vec2(150.0, 150.0),
+                    vec2(140.0, 140.0),
                     &laser_points(&laser.value),
                     8000.0,
                     PolarStyle::Laser,
                 );
+            });
+            ui.vertical(|ui| {
+                if let Some(c) = &self.camera {
+                    let s = c.snapshot();
+                    ui.label("camera");
+                    ui.allocate_ui(vec2(240.0, 180.0), |ui| {
+                        if s.clock > 0 {
+                            self.image.show_sample(ui, &s);
+                        } else {
+                            ui.small("(no image yet)");
+                        }
+                    });
+                }
                 if let Some(s) = &self.sonars {
                     ui.label("sonars");
                     let s = s.snapshot();
                     polar_view(
                         ui,
                         "introrob sonars",
-                        vec2(150.0, 150.0),
+                        vec2(140.0, 140.0),
                         &sonar_points(&s.value),
                         5000.0,
                         PolarStyle::Sonar,
@@ -189,14 +200,5 @@ impl Panel for IntrorobPanel {
                 }
             });
         });
-        if let Some(c) = &self.camera {
-            let s = c.snapshot();
-            if s.clock > 0 {
-                ui.label("camera");
-                ui.allocate_ui(vec2(320.0, 240.0), |ui| {
-                    self.image.show_sample(ui, &s);
-                });
-            }
-        }
     }
 }

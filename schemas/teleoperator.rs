@@ -1,0 +1,514 @@
+//! teleoperator: drive a robot's base (v/w) and its pan-tilt unit, and watch it in
+//! a 3D canvas (world walls, robot, laser points) from an orbitable virtual camera,
+//! with its camera image.
+//!
+//! Headless it holds the commanded values (from the conf or the name space) and
+//! writes them every iteration: the base command to `motors` (so it never goes
+//! stale) and the pan-tilt command to `pantiltmotors` when it changes.
+//!
+//! Conf (every line optional):
+//! ```text
+//! schema teleoperator
+//! base 0 0                 # V W: initial base command, mm/s and deg/s
+//! pantilt 0 0              # LONGITUDE LATITUDE: initial pan-tilt command, deg
+//! max_v 500                # joystick maxima, mm/s and deg/s (4.3's 500 and 30)
+//! max_w 30
+//! world ../assets/worlds/simple.world   # walls for the 3D canvas; default: the
+//!                          #   simulator's world in the same conf; `none`: none
+//! cycle 100                # ms
+//! motors motors            # interface names (defaults shown); all but motors may
+//! encoders encoders        #   be `none`, and are skipped when nothing provides them
+//! laser laser
+//! pantiltmotors pantiltmotors
+//! pantiltencoders pantiltencoders
+//! camera colorA
+//! end_schema
+//! ```
+//! Name space, component `teleoperator`: `base` ([`parking_lot::Mutex`]`<`[`Motors`]`>`)
+//! and `pantilt` (`Mutex<[f32; 2]>`, longitude and latitude in degrees).
+
+use std::{
+    path::{Path, PathBuf},
+    sync::Arc,
+    time::Duration,
+};
+
+use parking_lot::Mutex;
+
+use crate::{
+    conf::{Action, ComponentConf, Conf, ConfError, ConfLine},
+    drivers::simulator::World,
+    interfaces::{Encoders, Image, Interface, Laser, Motors, PtEncoders, PtMotors},
+    registry::Kind,
+    runtime::{Context, Runtime, Schema},
+};
+
+/// Commands shared by the schema, its panel and the name space.
+pub struct Commands {
+    pub base: Arc<Mutex<Motors>>,
+    pub pantilt: Arc<Mutex<[f32; 2]>>,
+    pub max_v: f32,
+    pub max_w: f32,
+}
+
+impl Commands {
+    /// Sets the base command, clamped to the maxima.
+    pub fn set_base(&self, v: f32, w: f32) {
+        let fin = |x: f32| if x.is_finite() { x } else { 0.0 };
+        *self.base.lock() = Motors {
+            v: fin(v).clamp(-self.max_v, self.max_v),
+            w: fin(w).clamp(-self.max_w, self.max_w),
+        };
+    }
+    /// Sets the pan-tilt command (the unit clamps it to its limits).
+    pub fn set_pantilt(&self, longitude: f32, latitude: f32) {
+        let fin = |x: f32| if x.is_finite() { x } else { 0.0 };
+        *self.pantilt.lock() = [fin(longitude), fin(latitude)];
+    }
+}
+
+/// The interfaces the teleoperator uses (all but motors optional).
+#[derive(Clone)]
+pub struct Devices {
+    pub motors: Arc<Interface<Motors>>,
+    pub encoders: Option<Arc<Interface<Encoders>>>,
+    pub laser: Option<Arc<Interface<Laser>>>,
+    pub ptmotors: Option<Arc<Interface<PtMotors>>>,
+    pub ptencoders: Option<Arc<Interface<PtEncoders>>>,
+    pub camera: Option<Arc<Interface<Image>>>,
+}
+
+/// The schema.
+pub struct Teleoperator {
+    pub commands: Arc<Commands>,
+    dev: Devices,
+    children: Vec<String>,
+    cycle: Duration,
+    last_pantilt: Option<[f32; 2]>,
+    #[cfg(feature = "gui")]
+    panel: Option<Box<dyn crate::gui::Panel>>,
+}
+
+impl Schema for Teleoperator {
+    fn cycle(&self) -> Duration {
+        self.cycle
+    }
+    fn on_run(&mut self, ctx: &Context) -> anyhow::Result<()> {
+        let names: Vec<&str> = self.children.iter().map(String::as_str).collect();
+        ctx.run_children(&names, None)?;
+        self.last_pantilt = None;
+        Ok(())
+    }
+    fn iteration(&mut self, _ctx: &Context) -> anyhow::Result<()> {
+        let base = *self.commands.base.lock();
+        self.dev.motors.publish(base).map_err(anyhow::Error::msg)?;
+        let pt = *self.commands.pantilt.lock();
+        if let Some(ptm) = &self.dev.ptmotors
+            && self.last_pantilt != Some(pt)
+        {
+            ptm.write(|m| {
+                m.longitude = pt[0].clamp(m.min_longitude, m.max_longitude);
+                m.latitude = pt[1].clamp(m.min_latitude, m.max_latitude);
+            })
+            .map_err(anyhow::Error::msg)?;
+            self.last_pantilt = Some(pt);
+        }
+        Ok(())
+    }
+    fn on_stop(&mut self, _ctx: &Context) {
+        let _ = self.dev.motors.publish(Motors::default());
+    }
+    #[cfg(feature = "gui")]
+    fn panel(&mut self) -> Option<Box<dyn crate::gui::Panel>> {
+        self.panel.take()
+    }
+}
+
+/// The simulator's world file in the main conf, if it loads a simulator with one.
+fn simulator_world(conf_file: &Path) -> Option<PathBuf> {
+    let conf = Conf::load(conf_file).ok()?;
+    let own = conf.directives.iter().find_map(|d| match &d.action {
+        Action::Load { name, file, .. } if name == "simulator" => Some(file.clone()),
+        _ => None,
+    })?;
+    let cc = conf
+        .component_conf(Kind::Driver, "simulator", own.as_deref())
+        .ok()?;
+    let l = cc.line("world")?;
+    Some(cc.resolve(l.args().first()?))
+}
+
+fn pair(l: &ConfLine, a: &str, b: &str) -> Result<[f32; 2], ConfError> {
+    l.expect_args(2, 2, &format!("{} {a} {b}", l.keyword()))?;
+    let (x, y): (f32, f32) = (l.arg(0, a)?, l.arg(1, b)?);
+    if !(x.is_finite() && y.is_finite()) {
+        return Err(l.error(format!("`{}` needs finite numbers", l.keyword())));
+    }
+    Ok([x, y])
+}
+
+fn positive(l: &ConfLine, what: &str) -> Result<f32, ConfError> {
+    l.expect_args(1, 1, &format!("{} <{what}>", l.keyword()))?;
+    let x: f32 = l.arg(0, what)?;
+    if !(x.is_finite() && x > 0.0) {
+        return Err(l.error(format!(
+            "`{}` must be a positive {what}, got {x}",
+            l.keyword()
+        )));
+    }
+    Ok(x)
+}
+
+fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>> {
+    let mut base = [0.0f32, 0.0];
+    let mut pantilt = [0.0f32, 0.0];
+    let (mut max_v, mut max_w) = (500.0f32, 30.0f32);
+    let mut cycle = Duration::from_millis(100);
+    let mut world: Option<Option<(PathBuf, ConfLine)>> = None;
+    let mut names: Vec<(&str, Option<String>)> = [
+        ("motors", "motors"),
+        ("encoders", "encoders"),
+        ("laser", "laser"),
+        ("pantiltmotors", "pantiltmotors"),
+        ("pantiltencoders", "pantiltencoders"),
+        ("camera", "colorA"),
+    ]
+    .into_iter()
+    .map(|(k, v)| (k, Some(v.to_string())))
+    .collect();
+    for l in &conf.lines {
+        match l.keyword() {
+            "base" => base = pair(l, "V(mm/s)", "W(deg/s)")?,
+            "pantilt" => pantilt = pair(l, "LONGITUDE(deg)", "LATITUDE(deg)")?,
+            "max_v" => max_v = positive(l, "speed in mm/s")?.min(1000.0),
+            "max_w" => max_w = positive(l, "speed in deg/s")?.min(180.0),
+            "cycle" => {
+                let ms = positive(l, "period in ms")?;
+                cycle = Duration::from_secs_f32(ms.clamp(1.0, 10_000.0) / 1000.0);
+            }
+            "world" => {
+                l.expect_args(1, 1, "world FILE|none")?;
+                let w = &l.args()[0];
+                world = Some((w != "none").then(|| (conf.resolve(w), l.clone())));
+            }
+            k if names.iter().any(|(n, _)| *n == k) => {
+                l.expect_args(1, 1, &format!("{k} INTERFACE|none"))?;
+                let v = &l.args()[0];
+                if k == "motors" && v == "none" {
+                    return Err(l.error("teleoperator needs a motors interface").into());
+                }
+                if let Some(e) = names.iter_mut().find(|(n, _)| *n == k) {
+                    e.1 = (v != "none").then(|| v.clone());
+                }
+            }
+            _ => {
+                return Err(conf
+                    .unknown(
+                        l,
+                        "base, pantilt, max_v, max_w, cycle, world, motors, encoders, laser, \
+                         pantiltmotors, pantiltencoders or camera",
+                    )
+                    .into());
+            }
+        }
+    }
+    let world = match world {
+        Some(Some((file, l))) => Some(Arc::new(
+            World::load(&file).map_err(|e| l.error(format!("world: {e}")))?,
+        )),
+        Some(None) => None,
+        None => simulator_world(rt.conf_file())
+            .and_then(|f| World::load(&f).ok())
+            .map(Arc::new),
+    };
+    let name = |k: &str| {
+        names
+            .iter()
+            .find(|(n, _)| *n == k)
+            .and_then(|(_, v)| v.clone())
+            .filter(|n| rt.interfaces.contains(n))
+    };
+    let Some(motors_name) = name("motors") else {
+        anyhow::bail!(
+            "{}: teleoperator needs a motors interface; load a driver that provides it (e.g. \
+             the simulator with `provides motors`) before teleoperator",
+            conf.file.display()
+        );
+    };
+    let ifs = &rt.interfaces;
+    let dev = Devices {
+        motors: ifs.get(&motors_name)?,
+        encoders: name("encoders").map(|n| ifs.get(&n)).transpose()?,
+        laser: name("laser").map(|n| ifs.get(&n)).transpose()?,
+        ptmotors: name("pantiltmotors").map(|n| ifs.get(&n)).transpose()?,
+        ptencoders: name("pantiltencoders").map(|n| ifs.get(&n)).transpose()?,
+        camera: name("camera").map(|n| ifs.get(&n)).transpose()?,
+    };
+    let children: Vec<String> = [
+        "motors",
+        "encoders",
+        "laser",
+        "pantiltmotors",
+        "pantiltencoders",
+        "camera",
+    ]
+    .iter()
+    .filter_map(|k| name(k))
+    .collect();
+    let c = conf.name.as_str();
+    let shared = |n: &str, init| -> Arc<Mutex<[f32; 2]>> {
+        if let Ok(a) = rt.names.import::<Mutex<[f32; 2]>>(c, n) {
+            *a.lock() = init;
+            return a;
+        }
+        let a = Arc::new(Mutex::new(init));
+        let _ = rt.names.export_arc(c, n, a.clone());
+        a
+    };
+    let base_cmd = match rt.names.import::<Mutex<Motors>>(c, "base") {
+        Ok(a) => a,
+        Err(_) => {
+            let a = Arc::new(Mutex::new(Motors::default()));
+            let _ = rt.names.export_arc(c, "base", a.clone());
+            a
+        }
+    };
+    let commands = Arc::new(Commands {
+        base: base_cmd,
+        pantilt: shared("pantilt", [0.0, 0.0]),
+        max_v,
+        max_w,
+    });
+    commands.set_base(base[0], base[1]);
+    commands.set_pantilt(pantilt[0], pantilt[1]);
+    #[cfg(feature = "gui")]
+    let panel: Option<Box<dyn crate::gui::Panel>> = Some(Box::new(panel::TeleoperatorPanel::new(
+        commands.clone(),
+        dev.clone(),
+        world,
+    )));
+    #[cfg(not(feature = "gui"))]
+    let _ = world;
+    Ok(Box::new(Teleoperator {
+        commands,
+        dev,
+        children,
+        cycle,
+        last_pantilt: None,
+        #[cfg(feature = "gui")]
+        panel,
+    }))
+}
+
+crate::register_schema!(
+    "teleoperator",
+    "drive the base and the pan-tilt; 3D view of the world, robot and laser; camera image",
+    create
+);
+
+#[cfg(feature = "gui")]
+pub mod panel {
+    //! The teleoperator's panel: the 3D canvas, the base joystick and stop, the
+    //! pan-tilt positioner and the camera image.
+
+    use std::sync::Arc;
+
+    use egui::{Color32, vec2};
+
+    use crate::{
+        drivers::simulator::World,
+        gui::{
+            Panel,
+            widgets::{
+                ImageView, Joystick, OrbitCamera, PanTiltLimits, PanTiltPad, Segment3D,
+                Wireframe3D, laser_to_world, relative_to_world,
+            },
+        },
+        interfaces::{Encoders, Laser},
+        runtime::Runtime,
+    };
+
+    use super::{Commands, Devices};
+
+    /// Robot radius and body height in the 3D view, mm.
+    const RADIUS: f64 = 250.0;
+    const HEIGHT: f64 = 400.0;
+    /// Laser and camera heights, mm.
+    const LASER_Z: f64 = 300.0;
+    const CAMERA_Z: f64 = 500.0;
+
+    /// The world's walls and boxes as 3D wireframe edges (bottom, top and ends).
+    pub fn world_segments(world: &World) -> Vec<Segment3D> {
+        let mut out = Vec::new();
+        for s in &world.segments {
+            let [r, g, b] = s.color;
+            let c = Color32::from_rgb(r, g, b);
+            let (a, e, h) = (s.a, s.b, s.height);
+            out.push(([a[0], a[1], 0.0], [e[0], e[1], 0.0], c));
+            out.push(([a[0], a[1], h], [e[0], e[1], h], c));
+            out.push(([a[0], a[1], 0.0], [a[0], a[1], h], c));
+            out.push(([e[0], e[1], 0.0], [e[0], e[1], h], c));
+        }
+        out
+    }
+
+    /// The robot (a cylinder with a nose), its laser points and its camera's
+    /// viewing direction (pan, tilt in degrees).
+    pub fn robot_segments(
+        pose: &Encoders,
+        laser: Option<&Laser>,
+        pantilt: Option<(f32, f32)>,
+    ) -> Vec<Segment3D> {
+        let mut out = Vec::new();
+        let body = Color32::from_rgb(220, 60, 50);
+        let (x, y, th) = (pose.x as f64, pose.y as f64, pose.theta as f64);
+        let ring = |k: usize| {
+            let a = k as f64 * std::f64::consts::TAU / 16.0;
+            [x + RADIUS * a.cos(), y + RADIUS * a.sin()]
+        };
+        for k in 0..16 {
+            let (p, q) = (ring(k), ring(k + 1));
+            out.push(([p[0], p[1], 0.0], [q[0], q[1], 0.0], body));
+            out.push(([p[0], p[1], HEIGHT], [q[0], q[1], HEIGHT], body));
+            if k % 4 == 0 {
+                out.push(([p[0], p[1], 0.0], [p[0], p[1], HEIGHT], body));
+            }
+        }
+        let nose = [x + 1.4 * RADIUS * th.cos(), y + 1.4 * RADIUS * th.sin()];
+        out.push(([x, y, HEIGHT], [nose[0], nose[1], HEIGHT], body));
+        if let Some(l) = laser {
+            let c = Color32::from_rgb(80, 160, 255);
+            for p in laser_to_world(pose, l) {
+                let (px, py) = (p[0] as f64, p[1] as f64);
+                out.push(([px - 30.0, py, LASER_Z], [px + 30.0, py, LASER_Z], c));
+                out.push(([px, py - 30.0, LASER_Z], [px, py + 30.0, LASER_Z], c));
+            }
+        }
+        if let Some((pan, tilt)) = pantilt {
+            let cam = relative_to_world(pose, [190.0, 0.0]);
+            let (a, t) = (th + (pan as f64).to_radians(), (tilt as f64).to_radians());
+            let l = 1000.0;
+            let (cx, cy) = (cam[0] as f64, cam[1] as f64);
+            out.push((
+                [cx, cy, CAMERA_Z],
+                [
+                    cx + l * t.cos() * a.cos(),
+                    cy + l * t.cos() * a.sin(),
+                    CAMERA_Z + l * t.sin(),
+                ],
+                Color32::from_rgb(240, 200, 40),
+            ));
+        }
+        out
+    }
+
+    /// The panel.
+    pub struct TeleoperatorPanel {
+        commands: Arc<Commands>,
+        dev: Devices,
+        walls: Vec<Segment3D>,
+        canvas: Wireframe3D,
+        joystick: Joystick,
+        pad: Option<PanTiltPad>,
+        image: ImageView,
+        follow: bool,
+        show_laser: bool,
+    }
+
+    impl TeleoperatorPanel {
+        pub fn new(commands: Arc<Commands>, dev: Devices, world: Option<Arc<World>>) -> Self {
+            let walls = world.as_deref().map(world_segments).unwrap_or_default();
+            let orbit = OrbitCamera {
+                distance: 9000.0,
+                elevation_deg: 40.0,
+                ..OrbitCamera::default()
+            };
+            let pad = dev.ptmotors.as_ref().map(|m| {
+                let limits = PanTiltLimits::from(&m.read().value);
+                let mut p = PanTiltPad::new("teleoperator pantilt", limits);
+                let c = *commands.pantilt.lock();
+                (p.longitude, p.latitude) = (c[0], c[1]);
+                p
+            });
+            let joystick = Joystick::new("teleoperator joystick", commands.max_v, commands.max_w);
+            TeleoperatorPanel {
+                commands,
+                dev,
+                walls,
+                canvas: Wireframe3D::new("teleoperator 3d", orbit),
+                joystick,
+                pad,
+                image: ImageView::new("teleoperator camera"),
+                follow: true,
+                show_laser: true,
+            }
+        }
+    }
+
+    impl Panel for TeleoperatorPanel {
+        fn title(&self) -> Option<String> {
+            Some("teleoperator".into())
+        }
+
+        fn ui(&mut self, ui: &mut egui::Ui, _rt: &Runtime) {
+            let pose = self.dev.encoders.as_ref().map(|e| e.read().value);
+            let laser = self.dev.laser.as_ref().map(|l| l.snapshot());
+            let pt = self
+                .dev
+                .ptencoders
+                .as_ref()
+                .map(|p| p.read().value)
+                .map(|p| (p.pan_angle, p.tilt_angle));
+            let mut segs = self.walls.clone();
+            if let Some(p) = &pose {
+                if self.follow {
+                    self.canvas.orbit.target = [p.x as f64, p.y as f64, 0.0];
+                }
+                let l = laser.as_ref().filter(|_| self.show_laser).map(|s| &s.value);
+                segs.extend(robot_segments(p, l, pt));
+            }
+            ui.horizontal(|ui| {
+                ui.checkbox(&mut self.follow, "follow the robot");
+                ui.checkbox(&mut self.show_laser, "laser");
+                let m = self.dev.motors.read().value;
+                ui.label(format!("v {:.0} mm/s  w {:.1} deg/s", m.v, m.w));
+                if ui.button("STOP").clicked() {
+                    self.commands.set_base(0.0, 0.0);
+                }
+            });
+            ui.horizontal_top(|ui| {
+                ui.vertical(|ui| {
+                    self.canvas.show(ui, vec2(480.0, 340.0), &segs);
+                    ui.small("drag: orbit · wheel: zoom");
+                });
+                ui.vertical(|ui| {
+                    ui.label("base");
+                    let r = self.joystick.show(ui, 140.0);
+                    if r.changed() {
+                        self.commands.set_base(self.joystick.v, self.joystick.w);
+                    }
+                    if let Some(pad) = &mut self.pad {
+                        ui.label("pan-tilt");
+                        let r = pad.show(ui, vec2(140.0, 90.0), pt);
+                        if r.changed() {
+                            self.commands.set_pantilt(pad.longitude, pad.latitude);
+                        }
+                    }
+                });
+                if let Some(c) = &self.dev.camera {
+                    ui.vertical(|ui| {
+                        ui.label("camera");
+                        let s = c.snapshot();
+                        ui.allocate_ui(vec2(240.0, 180.0), |ui| {
+                            if s.clock > 0 {
+                                self.image.show_sample(ui, &s);
+                            } else {
+                                ui.small("(no image yet)");
+                            }
+                        });
+                    });
+                }
+            });
+        }
+    }
+}
