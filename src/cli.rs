@@ -51,7 +51,7 @@ pub fn main() -> ExitCode {
             tracing_subscriber::EnvFilter::try_from_default_env()
                 .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn,winit=error")),
         )
-        .with_writer(std::io::stderr)
+        .with_writer(crate::output::LogWriter)
         .init();
     let cli = Cli::parse();
     match cli.command {

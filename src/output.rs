@@ -17,13 +17,14 @@ static SINK: Mutex<Option<Sink>> = Mutex::new(None);
 pub fn println(line: impl Into<String>) {
     let line = line.into();
     let mut sink = SINK.lock();
-    match sink.as_mut() {
-        Some(f) => f(line),
-        None => {
-            let mut out = std::io::stdout().lock();
-            let _ = writeln!(out, "{line}");
-        }
+    if let Some(f) = sink.as_mut() {
+        f(line);
+        return;
     }
+    // Never hold SINK while waiting for stdout: the shell holds stdout while a
+    // command runs, and a command (`stop x`) prints through here.
+    drop(sink);
+    let _ = writeln!(std::io::stdout().lock(), "{line}");
 }
 
 /// Routes component output to `sink` (the shell's printer); `None` restores stdout.
@@ -68,11 +69,11 @@ impl Drop for LogLine {
             return;
         }
         let mut sink = SINK.lock();
-        match sink.as_mut() {
-            Some(f) => f(String::from_utf8_lossy(&self.0).trim_end().to_string()),
-            None => {
-                let _ = std::io::stderr().lock().write_all(&self.0);
-            }
+        if let Some(f) = sink.as_mut() {
+            f(String::from_utf8_lossy(&self.0).trim_end().to_string());
+            return;
         }
+        drop(sink);
+        let _ = std::io::stderr().lock().write_all(&self.0);
     }
 }

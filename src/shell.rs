@@ -584,8 +584,8 @@ pub fn run(rt: Arc<Runtime>, conf: Conf) {
             Ok(0) | Err(_) => break,
             Ok(_) => {}
         }
-        let mut out = std::io::stdout().lock();
-        let mut err = std::io::stderr().lock();
+        let mut out = std::io::stdout();
+        let mut err = std::io::stderr();
         if shell.execute(line.trim(), &mut out, &mut err) == Flow::Quit {
             break;
         }
@@ -680,8 +680,8 @@ fn interactive(shell: &mut Shell) -> rustyline::Result<()> {
         zoomed.store(shell.zoomed.is_some(), std::sync::atomic::Ordering::Relaxed);
         match rl.readline(&shell.prompt()) {
             Ok(line) => {
-                let mut out = std::io::stdout().lock();
-                let mut err = std::io::stderr().lock();
+                let mut out = std::io::stdout();
+                let mut err = std::io::stderr();
                 if shell.execute(line.trim(), &mut out, &mut err) == Flow::Quit {
                     break;
                 }
