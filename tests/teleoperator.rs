@@ -74,7 +74,11 @@ fn conf_commands_drive_the_base_and_aim_the_pantilt() {
     let reaimed = wait_until(20, || (pte.read().value.pan_angle + 45.0).abs() < 0.5);
     rt.shutdown();
     assert!(moved, "the robot did not drive ahead: x = {}", e.x);
-    assert!((e.y - 2000.0).abs() < 20.0, "it drove straight: y = {}", e.y);
+    assert!(
+        (e.y - 2000.0).abs() < 20.0,
+        "it drove straight: y = {}",
+        e.y
+    );
     assert!(aimed, "the pan-tilt did not reach (30, -10)");
     assert!(stopped, "the robot did not stop");
     assert!(reaimed, "the pan-tilt did not follow the name space");

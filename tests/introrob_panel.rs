@@ -1,0 +1,100 @@
+//! introrob's and teleoperator's panels through egui_kittest, headless (no
+//! display, no GPU): the behaviour buttons, the world view's click target, STOP,
+//! and the teleoperator's pan-tilt pad reach the schemas' shared state.
+#![cfg(all(feature = "gui", feature = "introrob", feature = "teleoperator"))]
+
+use std::{path::Path, sync::Arc};
+
+use egui::vec2;
+use egui_kittest::{Harness, kittest::Queryable};
+use jderobot::{
+    conf::Conf,
+    gui::Panel,
+    runtime::Runtime,
+    schemas::introrob::{Behaviour, Shared},
+};
+
+fn start(schema: &str, body: &str) -> (tempfile::TempDir, Arc<Runtime>) {
+    let dir = tempfile::tempdir().unwrap();
+    let world = Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/worlds/simple.world");
+    let file = dir.path().join("p.conf");
+    std::fs::write(
+        &file,
+        format!(
+            "driver simulator\nworld {}\nrobot robot1 1000 1000 90\nprovides encoders\n\
+             provides motors\nprovides laser\nprovides sonars\nprovides pantiltencoders\n\
+             provides pantiltmotors\nend_driver\nschema {schema}\n{body}end_schema\n\
+             load_driver simulator\nload_schema {schema}\n",
+            world.display()
+        ),
+    )
+    .unwrap();
+    let rt = Runtime::start(&Conf::load(&file).unwrap()).expect("starts");
+    (dir, rt)
+}
+
+fn take_panel(rt: &Runtime, name: &str) -> Box<dyn Panel> {
+    rt.schema(name)
+        .expect("loaded")
+        .panel
+        .lock()
+        .take()
+        .expect("has a panel")
+}
+
+#[test]
+fn introrob_panel_sets_behaviour_target_and_stop() {
+    let (_dir, rt) = start("introrob", "behaviour teleop\n");
+    let shared = rt.names.import::<Shared>("introrob", "state").unwrap();
+    let mut panel = take_panel(&rt, "introrob");
+    let rt2 = rt.clone();
+    let mut h = Harness::builder()
+        .with_size(vec2(1000.0, 700.0))
+        .build_ui(move |ui| panel.ui(ui, &rt2));
+    h.run();
+    h.get_by_label("vff").click();
+    h.run();
+    assert_eq!(*shared.behaviour.lock(), Behaviour::Vff);
+    h.get_by_label("gpp").click();
+    h.run();
+    assert_eq!(*shared.behaviour.lock(), Behaviour::Gpp);
+    // A click in the world view sets the target: the view is centred on the
+    // room (6 m x 4 m), so its centre is (3000, 2000).
+    assert_eq!(*shared.target.lock(), None);
+    h.get_by_label("introrob world").click();
+    h.run();
+    let t = shared.target.lock().expect("a target was set");
+    assert!(
+        (t[0] - 3000.0).abs() < 50.0 && (t[1] - 2000.0).abs() < 50.0,
+        "{t:?}"
+    );
+    h.get_by_label("STOP").click();
+    h.run();
+    assert_eq!(*shared.behaviour.lock(), Behaviour::Stop);
+    // The laser and sonar views are there.
+    h.get_by_label("introrob laser");
+    h.get_by_label("introrob sonars");
+    rt.shutdown();
+}
+
+#[test]
+fn teleoperator_panel_draws_and_stops() {
+    let (_dir, rt) = start("teleoperator", "base 200 10\n");
+    let mut panel = take_panel(&rt, "teleoperator");
+    let rt2 = rt.clone();
+    let mut h = Harness::builder()
+        .with_size(vec2(1000.0, 700.0))
+        .build_ui(move |ui| panel.ui(ui, &rt2));
+    h.run();
+    h.get_by_label("teleoperator 3d");
+    h.get_by_label("teleoperator pantilt");
+    let base = rt
+        .names
+        .import::<parking_lot::Mutex<jderobot::interfaces::Motors>>("teleoperator", "base")
+        .unwrap();
+    assert_eq!(base.lock().v, 200.0);
+    h.get_by_label("STOP").click();
+    h.run();
+    assert_eq!(base.lock().v, 0.0);
+    rt.shutdown();
+}

@@ -1,0 +1,185 @@
+//! introrob's panel in the real window: starts the binary with
+//! examples/introrob.conf on the X display, takes screenshots of the root window
+//! with imagemagick's `import`, and checks that the world view shows the robot (its
+//! red outline) and the laser points (blue dots), and that the robot moves between
+//! two screenshots. The last screenshot is kept in
+//! target/tmp/introrob_screenshot.png.
+//!
+//! Needs a display (CI runs it under `xvfb-run -a`) and imagemagick; without them
+//! it says why and passes without checking anything.
+#![cfg(all(feature = "gui", feature = "mastergui", feature = "introrob"))]
+
+use std::{
+    io::Write,
+    path::{Path, PathBuf},
+    process::{Child, Command, Stdio},
+    time::{Duration, Instant},
+};
+
+fn have(cmd: &str) -> bool {
+    Command::new("sh")
+        .args(["-c", &format!("command -v {cmd}")])
+        .stdout(Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success())
+}
+
+/// RGB pixels of a PNG (None if unreadable).
+fn rgb(png_file: &Path) -> Option<(usize, usize, Vec<[u8; 3]>)> {
+    let bytes = std::fs::read(png_file).ok()?;
+    let mut dec = png::Decoder::new(std::io::Cursor::new(bytes));
+    dec.set_transformations(png::Transformations::EXPAND | png::Transformations::STRIP_16);
+    let mut r = dec.read_info().ok()?;
+    let mut buf = vec![0u8; r.output_buffer_size()?];
+    let info = r.next_frame(&mut buf).ok()?;
+    let (w, h, ch) = (
+        info.width as usize,
+        info.height as usize,
+        info.color_type.samples(),
+    );
+    if ch < 3 {
+        return None;
+    }
+    let mut px = Vec::with_capacity(w * h);
+    for y in 0..h {
+        let row = &buf[y * info.line_size..];
+        for x in 0..w {
+            let p = &row[x * ch..x * ch + 3];
+            px.push([p[0], p[1], p[2]]);
+        }
+    }
+    Some((w, h, px))
+}
+
+/// Pixels within `tol` of `c`: their count and centroid.
+fn find(img: &(usize, usize, Vec<[u8; 3]>), c: [u8; 3], tol: i32) -> (usize, [f32; 2]) {
+    let (w, _, px) = img;
+    let (mut n, mut sx, mut sy) = (0usize, 0f32, 0f32);
+    for (k, p) in px.iter().enumerate() {
+        if (0..3).all(|i| (p[i] as i32 - c[i] as i32).abs() <= tol) {
+            n += 1;
+            sx += (k % w) as f32;
+            sy += (k / w) as f32;
+        }
+    }
+    let c = if n > 0 {
+        [sx / n as f32, sy / n as f32]
+    } else {
+        [0.0; 2]
+    };
+    (n, c)
+}
+
+/// The robot outline and laser colours of the world view (src/gui/widgets.rs).
+const ROBOT: [u8; 3] = [200, 40, 40];
+const LASER: [u8; 3] = [30, 90, 220];
+
+fn shoot(png: &Path) -> Option<(usize, usize, Vec<[u8; 3]>)> {
+    let ok = Command::new("import")
+        .args(["-window", "root"])
+        .arg(png)
+        .status()
+        .is_ok_and(|s| s.success());
+    if ok { rgb(png) } else { None }
+}
+
+fn quit(mut child: Child) -> Option<std::process::ExitStatus> {
+    if let Some(stdin) = child.stdin.as_mut() {
+        let _ = stdin.write_all(b"exit\n");
+    }
+    let t = Instant::now();
+    loop {
+        if let Ok(Some(s)) = child.try_wait() {
+            return Some(s);
+        }
+        if t.elapsed() > Duration::from_secs(20) {
+            let _ = child.kill();
+            let _ = child.wait();
+            return None;
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+#[test]
+fn introrob_panel_shows_the_robot_and_its_laser_moving() {
+    if std::env::var_os("DISPLAY").is_none_or(|d| d.is_empty()) {
+        eprintln!(
+            "skipped: DISPLAY is not set (run under `xvfb-run -a cargo test --test introrob_screenshot`)"
+        );
+        return;
+    }
+    if !have("import") {
+        eprintln!("skipped: imagemagick's `import` is not installed");
+        return;
+    }
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let tmp = PathBuf::from(env!("CARGO_TARGET_TMPDIR"));
+    let png = tmp.join("introrob_screenshot.png");
+    let first = tmp.join("introrob_screenshot_first.png");
+    let log = tmp.join("introrob_screenshot.log");
+    let child = Command::new(env!("CARGO_BIN_EXE_jderobot"))
+        .arg("examples/introrob.conf")
+        .current_dir(&root)
+        .env("LIBGL_ALWAYS_SOFTWARE", "1")
+        .stdin(Stdio::piped())
+        .stdout(Stdio::null())
+        .stderr(std::fs::File::create(&log).expect("log file"))
+        .spawn()
+        .expect("start jderobot");
+
+    // Wait (software GL is slow to start) until the robot and laser show.
+    let start = Instant::now();
+    let mut seen = None;
+    let mut counts = (0, 0);
+    while start.elapsed() < Duration::from_secs(60) {
+        std::thread::sleep(Duration::from_millis(1000));
+        if let Some(img) = shoot(&first) {
+            let (r, c) = find(&img, ROBOT, 10);
+            let (l, _) = find(&img, LASER, 10);
+            counts = (r, l);
+            if r >= 20 && l >= 20 {
+                seen = Some(c);
+                break;
+            }
+        }
+    }
+    // Two seconds later the robot has moved (it drives toward its VFF target).
+    let mut moved = None;
+    if let Some(c0) = seen {
+        std::thread::sleep(Duration::from_secs(2));
+        if let Some(img) = shoot(&png) {
+            let (r, c1) = find(&img, ROBOT, 10);
+            let (l, _) = find(&img, LASER, 10);
+            counts = (r, l);
+            moved = Some(((c1[0] - c0[0]).powi(2) + (c1[1] - c0[1]).powi(2)).sqrt());
+        }
+    }
+    let status = quit(child);
+    let text = std::fs::read_to_string(&log).unwrap_or_default();
+    eprintln!(
+        "screenshot: {} (robot {} px, laser {} px, robot moved {:?} px)",
+        png.display(),
+        counts.0,
+        counts.1,
+        moved
+    );
+    let c0 = seen.unwrap_or_else(|| {
+        panic!(
+            "no robot/laser in the screenshot (robot {} px, laser {} px); log:\n{text}",
+            counts.0, counts.1
+        )
+    });
+    let _ = c0;
+    assert!(
+        counts.0 >= 20 && counts.1 >= 20,
+        "robot/laser gone: {counts:?}"
+    );
+    let moved = moved.expect("second screenshot");
+    assert!(
+        moved > 3.0,
+        "the robot did not move in the view ({moved} px)"
+    );
+    let status = status.unwrap_or_else(|| panic!("did not exit after `exit`; log:\n{text}"));
+    assert!(status.success(), "exit status {status}; log:\n{text}");
+}
