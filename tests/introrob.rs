@@ -444,3 +444,42 @@ fn conf_errors_name_file_and_line() {
         .to_string();
     assert!(e.contains("laser"), "{e}");
 }
+
+#[test]
+fn shell_init_with_another_conf_changes_behaviour_and_target() {
+    // The shell's `zoom introrob` + `init FILE` re-creates introrob from FILE's
+    // section; the panel's and the name space's state carry the new values.
+    let dir = tempfile::tempdir().unwrap();
+    let world = assets().join("simple.world");
+    let main = write_conf(
+        dir.path(),
+        "main.conf",
+        &format!(
+            "driver simulator\nworld {}\nrobot robot1 1000 1000 90\nprovides encoders\n\
+             provides motors\nprovides laser\nend_driver\n\
+             load_driver simulator\nload_schema introrob\nrun introrob\n",
+            world.display()
+        ),
+    );
+    let rt = Runtime::start(&Conf::load(&main).unwrap()).expect("starts");
+    let shared = rt.names.import::<Shared>("introrob", "state").unwrap();
+    assert_eq!(*shared.behaviour.lock(), Behaviour::Teleop);
+    let go = write_conf(
+        dir.path(),
+        "go.conf",
+        "schema introrob\nbehaviour gpp\ntarget 5000 3000\nend_schema\n",
+    );
+    rt.reinit("introrob", Some(&go)).expect("init");
+    let ok = (0..100).any(|_| {
+        std::thread::sleep(Duration::from_millis(50));
+        shared.view.lock().status.starts_with("gpp:")
+    });
+    let status = shared.view.lock().status.clone();
+    rt.shutdown();
+    assert_eq!(*shared.behaviour.lock(), Behaviour::Gpp);
+    assert_eq!(*shared.target.lock(), Some([5000.0, 3000.0]));
+    assert!(
+        ok,
+        "the re-created schema did not report into the shared state: {status:?}"
+    );
+}

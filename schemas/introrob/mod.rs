@@ -636,17 +636,30 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
         v: s.teleop.v.clamp(-s.max_v, s.max_v),
         w: s.teleop.w.clamp(-s.max_w, s.max_w),
     };
-    let shared = Arc::new(Shared {
-        behaviour: shared_value(rt, c, "behaviour", s.behaviour),
-        target: shared_value(rt, c, "target", s.target),
-        teleop: shared_value(rt, c, "teleop", teleop),
-        view: Mutex::new(View::default()),
-        world,
-        max_v: s.max_v,
-        max_w: s.max_w,
-    });
-    // `state` is replaced on re-init: drop the old one first.
-    let _ = rt.names.export_arc(c, "state", shared.clone());
+    let shared = match rt.names.import::<Shared>(c, "state") {
+        // A re-init (the shell's `init`): the panel and importers keep the state
+        // exported at load; the conf's behaviour, target and teleop apply now (the
+        // world and the maxima stay those of the first load).
+        Ok(old) => {
+            old.set_behaviour(s.behaviour);
+            old.set_target(s.target);
+            *old.teleop.lock() = teleop;
+            old
+        }
+        Err(_) => {
+            let shared = Arc::new(Shared {
+                behaviour: shared_value(rt, c, "behaviour", s.behaviour),
+                target: shared_value(rt, c, "target", s.target),
+                teleop: shared_value(rt, c, "teleop", teleop),
+                view: Mutex::new(View::default()),
+                world,
+                max_v: s.max_v,
+                max_w: s.max_w,
+            });
+            let _ = rt.names.export_arc(c, "state", shared.clone());
+            shared
+        }
+    };
     let mut brain = Brain::new(shared.clone());
     brain.cell = s.cell;
     #[cfg(feature = "gui")]
