@@ -56,8 +56,8 @@ impl Commands {
     pub fn set_base(&self, v: f32, w: f32) {
         let fin = |x: f32| if x.is_finite() { x } else { 0.0 };
         *self.base.lock() = Motors {
-            v: fin(v).clamp(-self.max_v, self.max_v),
-            w: fin(w).clamp(-self.max_w, self.max_w),
+            v: limit(fin(v), -self.max_v, self.max_v),
+            w: limit(fin(w), -self.max_w, self.max_w),
         };
     }
     /// Sets the pan-tilt command (the unit clamps it to its limits).
@@ -107,8 +107,8 @@ impl Schema for Teleoperator {
             && self.last_pantilt != Some(pt)
         {
             ptm.write(|m| {
-                m.longitude = pt[0].clamp(m.min_longitude, m.max_longitude);
-                m.latitude = pt[1].clamp(m.min_latitude, m.max_latitude);
+                m.longitude = limit(pt[0], m.min_longitude, m.max_longitude);
+                m.latitude = limit(pt[1], m.min_latitude, m.max_latitude);
             })
             .map_err(anyhow::Error::msg)?;
             self.last_pantilt = Some(pt);
@@ -298,6 +298,15 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
         #[cfg(feature = "gui")]
         panel,
     }))
+}
+
+/// `x` limited to [lo, hi]; unlike `f32::clamp` it never panics (bad bounds or NaN).
+fn limit(x: f32, lo: f32, hi: f32) -> f32 {
+    if x.is_nan() {
+        0.0f32.max(lo).min(hi)
+    } else {
+        x.max(lo).min(hi)
+    }
 }
 
 crate::register_schema!(

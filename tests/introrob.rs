@@ -483,3 +483,56 @@ fn shell_init_with_another_conf_changes_behaviour_and_target() {
         "the re-created schema did not report into the shared state: {status:?}"
     );
 }
+
+#[test]
+fn garbage_inputs_do_not_panic() {
+    // NaN and infinite poses, empty or odd scans, absurd maxima and targets: the
+    // brain answers with finite commands.
+    let w = world("simple.world");
+    for (max_v, max_w) in [(400.0, 40.0), (-1.0, f32::NAN), (f32::INFINITY, 0.0)] {
+        let shared = Shared::new(Some(Arc::new(w.clone())), max_v, max_w);
+        let mut brain = Brain::new(shared.clone());
+        let scans = [
+            Laser::default(),
+            Laser {
+                readings: vec![-5, 0, i32::MAX, 100],
+                resolution: 0.0,
+            },
+            Laser {
+                readings: vec![10; 720],
+                resolution: 4.0,
+            },
+        ];
+        let poses = [
+            Encoders::from_pose(f32::NAN, 0.0, 0.0),
+            Encoders::from_pose(1e30, -1e30, f32::INFINITY),
+            Encoders::from_pose(1000.0, 1000.0, 1.0),
+        ];
+        let targets = [
+            None,
+            Some([f32::NAN, 0.0]),
+            Some([1e30, 5.0]),
+            Some([3000.0, 2000.0]),
+        ];
+        for b in Behaviour::ALL {
+            shared.set_behaviour(b);
+            shared.set_teleop(f32::NAN, 1e9);
+            for t in targets {
+                shared.set_target(t);
+                for laser in &scans {
+                    for pose in poses {
+                        let m = brain.step(&Inputs {
+                            pose,
+                            laser,
+                            sonars: None,
+                            bumpers: None,
+                            image: None,
+                            time: 0.0,
+                        });
+                        assert!(m.v.is_finite() && m.w.is_finite(), "{b} {t:?} {m:?}");
+                    }
+                }
+            }
+        }
+    }
+}

@@ -102,8 +102,8 @@ impl GridMap {
         }
         let margin = 1000.0;
         let origin = [lo[0] - margin, lo[1] - margin];
-        // Bound the grid (a world of 2 km at 50 mm is 1.6 G cells: refuse that).
-        let cells = |span: f32| ((span + 2.0 * margin) / cell).ceil().clamp(1.0, 4000.0) as usize;
+        // Bound the grid to 2000 x 2000 cells (100 m at 50 mm); farther goals are "outside".
+        let cells = |span: f32| ((span + 2.0 * margin) / cell).ceil().clamp(1.0, 2000.0) as usize;
         let (width, height) = (cells(hi[0] - lo[0]), cells(hi[1] - lo[1]));
         let mut map = GridMap {
             origin,

@@ -176,8 +176,8 @@ impl Shared {
     pub fn set_teleop(&self, v: f32, w: f32) {
         let fin = |x: f32| if x.is_finite() { x } else { 0.0 };
         *self.teleop.lock() = Motors {
-            v: fin(v).clamp(-self.max_v, self.max_v),
-            w: fin(w).clamp(-self.max_w, self.max_w),
+            v: limit(fin(v), -self.max_v, self.max_v),
+            w: limit(fin(w), -self.max_w, self.max_w),
         };
     }
 }
@@ -304,8 +304,8 @@ impl Brain {
         };
         let fin = |x: f32| if x.is_finite() { x } else { 0.0 };
         let m = Motors {
-            v: fin(m.v).clamp(-self.shared.max_v, self.shared.max_v),
-            w: fin(m.w).clamp(-self.shared.max_w, self.shared.max_w),
+            v: limit(fin(m.v), -self.shared.max_v, self.shared.max_v),
+            w: limit(fin(m.w), -self.shared.max_w, self.shared.max_w),
         };
         self.robot.v = m.v;
         self.robot.w = m.w;
@@ -633,8 +633,8 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
 
     let c = conf.name.as_str();
     let teleop = Motors {
-        v: s.teleop.v.clamp(-s.max_v, s.max_v),
-        w: s.teleop.w.clamp(-s.max_w, s.max_w),
+        v: limit(s.teleop.v, -s.max_v, s.max_v),
+        w: limit(s.teleop.w, -s.max_w, s.max_w),
     };
     let shared = match rt.names.import::<Shared>(c, "state") {
         // A re-init (the shell's `init`): the panel and importers keep the state
@@ -689,6 +689,15 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
 /// Builds introrob from conf text against a runtime (for tests and user code).
 pub fn create_from(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>> {
     create(conf, rt)
+}
+
+/// `x` limited to [lo, hi]; unlike `f32::clamp` it never panics (bad bounds or NaN).
+fn limit(x: f32, lo: f32, hi: f32) -> f32 {
+    if x.is_nan() {
+        0.0f32.max(lo).min(hi)
+    } else {
+        x.max(lo).min(hi)
+    }
 }
 
 crate::register_schema!(

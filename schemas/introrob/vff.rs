@@ -143,7 +143,7 @@ pub fn forces(pose: &Encoders, laser: &Laser, target: [f32; 2], p: &VffParams) -
 pub fn steer(dir: [f32; 2], dist: f32, laser: &Laser, p: &VffParams) -> Motors {
     let err = dir[1].atan2(dir[0]).to_degrees();
     let err = if err.is_finite() { err } else { 0.0 };
-    let w = (p.k_w * err).clamp(-p.max_w, p.max_w);
+    let w = limit(p.k_w * err, -p.max_w, p.max_w);
     let mut v = 0.0;
     let mut w = w;
     if err.abs() < p.turn_in_place {
@@ -196,5 +196,14 @@ pub fn command(pose: &Encoders, laser: &Laser, target: [f32; 2], p: &VffParams) 
         motors: steer(f.resultant, dist, laser, p),
         forces: f,
         arrived: false,
+    }
+}
+
+/// `x` limited to [lo, hi]; unlike `f32::clamp` it never panics (bad bounds or NaN).
+fn limit(x: f32, lo: f32, hi: f32) -> f32 {
+    if x.is_nan() {
+        0.0f32.max(lo).min(hi)
+    } else {
+        x.max(lo).min(hi)
     }
 }
