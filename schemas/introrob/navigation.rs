@@ -132,7 +132,7 @@ impl Robot {
 pub const LASER_X: f32 = 19.0;
 
 /// 4.3's formula: x' = x·c + y·s − X·c − Y·s; y' = y·c − x·s + X·s − Y·c, with
-/// (X, Y, c, s) = robot[0], robot[1], robot[3], robot[4].
+/// (X, Y, c, s) = `robot[0]`, `robot[1]`, `robot[3]`, `robot[4]`.
 pub fn absolute_to_relative(robot: &[f32; 5], p: [f32; 2]) -> [f32; 2] {
     let (x0, y0, c, s) = (robot[0], robot[1], robot[3], robot[4]);
     [
