@@ -686,11 +686,6 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
     }))
 }
 
-/// Builds introrob from conf text against a runtime (for tests and user code).
-pub fn create_from(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>> {
-    create(conf, rt)
-}
-
 /// `x` limited to [lo, hi]; unlike `f32::clamp` it never panics (bad bounds or NaN).
 fn limit(x: f32, lo: f32, hi: f32) -> f32 {
     if x.is_nan() {
