@@ -62,7 +62,7 @@ fn sobel_on_a_ramp_and_a_step() {
     let s = gray_from(5, 6, |_, y| if y < 3 { 0 } else { 100 });
     let (_, dy) = sobel(&s);
     assert_eq!(
-        (dy.data[5 * 2 + 2], dy.data[5 * 3 + 2], dy.data[5 * 1 + 2]),
+        (dy.data[5 * 2 + 2], dy.data[5 * 3 + 2], dy.data[5 + 2]),
         (400, 400, 0)
     );
     assert_eq!(dy.to_abs_u8().data[5 * 2 + 2], 255);

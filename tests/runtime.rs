@@ -236,7 +236,7 @@ impl Schema for Panicker {
     }
     fn iteration(&mut self, _: &Context) -> anyhow::Result<()> {
         self.n += 1;
-        if self.n % self.after == 0 {
+        if self.n.is_multiple_of(self.after) {
             panic!("boom at iteration {}", self.n);
         }
         Ok(())

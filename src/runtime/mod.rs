@@ -164,7 +164,11 @@ impl BrotherGroup {
 
     /// The current winner's name.
     pub fn winner(&self) -> Option<String> {
-        self.state.lock().1.map(|i| self.names[i].clone())
+        self.winner_index().map(|i| self.names[i].clone())
+    }
+
+    fn winner_index(&self) -> Option<usize> {
+        self.state.lock().1
     }
 }
 
@@ -729,14 +733,26 @@ impl Runtime {
 impl SchemaSlot {
     fn status(&self) -> SchemaStatus {
         let c = self.ctl.lock();
+        // Between two of its cycles a brother's own state may lag the group's latest
+        // decision; report the group's winner so at most one brother shows `winner`.
+        let state = match (&c.group, c.state) {
+            (Some((g, i)), State::Winner | State::Ready) => {
+                if g.winner_index() == Some(*i) {
+                    State::Winner
+                } else {
+                    State::Ready
+                }
+            }
+            (_, s) => s,
+        };
         SchemaStatus {
             name: self.name.clone(),
             id: self.id,
-            state: c.state,
+            state,
             shown: self.shown.load(Ordering::Acquire),
             father: c.father.clone(),
             children: c.children.clone(),
-            timing: self.stats.lock().timing(c.state.iterates()),
+            timing: self.stats.lock().timing(state.iterates() || c.state.iterates()),
             cycle: Duration::from_nanos(self.cycle_ns.load(Ordering::Relaxed)),
             last_error: c.last_error.clone(),
         }
