@@ -752,7 +752,10 @@ impl SchemaSlot {
             shown: self.shown.load(Ordering::Acquire),
             father: c.father.clone(),
             children: c.children.clone(),
-            timing: self.stats.lock().timing(state.iterates() || c.state.iterates()),
+            timing: self
+                .stats
+                .lock()
+                .timing(state.iterates() || c.state.iterates()),
             cycle: Duration::from_nanos(self.cycle_ns.load(Ordering::Relaxed)),
             last_error: c.last_error.clone(),
         }
