@@ -48,6 +48,13 @@ pub fn precise_timers_for_this_thread() {
     }
 }
 
+/// The pacer stops sleeping a little before a deadline and spins the rest: twice
+/// the machine's average wake-up lateness (learnt as it runs), at most
+/// [`MAX_SPIN_NS`] (1 % of a core per schema at 10 ms). Cycles shorter than
+/// [`SPIN_FROM_CYCLE_NS`] do not spin: their spinning would add up.
+const MAX_SPIN_NS: u64 = 100_000;
+const SPIN_FROM_CYCLE_NS: u64 = 5_000_000;
+
 /// Longest single sleep, so a stop or terminate is noticed promptly even with long cycles.
 const SLICE_NS: u64 = 50_000_000;
 
@@ -60,6 +67,8 @@ pub struct Pacer {
     cycle_ns: u64,
     next_ns: u64,
     overruns: u64,
+    /// Average lateness of wake-ups from sleep, ns.
+    wake_late_ns: u64,
 }
 
 impl Pacer {
@@ -69,6 +78,7 @@ impl Pacer {
             cycle_ns: cycle_ns.max(1),
             next_ns: now_ns(),
             overruns: 0,
+            wake_late_ns: 0,
         }
     }
 
@@ -104,6 +114,14 @@ impl Pacer {
                 self.next_ns += missed * self.cycle_ns;
             }
         }
+        // Sleep until just before the deadline, then spin the last few microseconds:
+        // waking from a long sleep costs the kernel tens of microseconds more than a
+        // short one, and that delay would be the jitter.
+        let spin = if self.cycle_ns >= SPIN_FROM_CYCLE_NS {
+            (2 * self.wake_late_ns + 5_000).min(MAX_SPIN_NS)
+        } else {
+            0
+        };
         loop {
             let now = now_ns();
             if now >= self.next_ns {
@@ -112,7 +130,17 @@ impl Pacer {
             if interrupted() {
                 return false;
             }
-            sleep_until_ns(self.next_ns.min(now + SLICE_NS));
+            if now + spin >= self.next_ns {
+                while now_ns() < self.next_ns {
+                    std::hint::spin_loop();
+                }
+                return true;
+            }
+            let target = (self.next_ns - spin).min(now + SLICE_NS);
+            sleep_until_ns(target);
+            // Learn how late this machine wakes (moving average, 1/8 weight).
+            let late = now_ns().saturating_sub(target).min(MAX_SPIN_NS);
+            self.wake_late_ns = (7 * self.wake_late_ns + late) / 8;
         }
     }
 }
