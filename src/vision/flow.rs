@@ -195,6 +195,36 @@ fn mismatch_row(
     (s1, s2, s3)
 }
 
+/// (Σ diff·ix, Σ diff·iy, Σ |diff|) over the window at `p` (top-left, unpadded) of `lj`.
+#[inline(always)]
+fn mismatch_window(
+    lj: &Level,
+    p: (i32, i32),
+    wt: [i32; 4],
+    win: usize,
+    pad: usize,
+    tmpl: (&[i32], &[i32], &[i32]),
+) -> (i64, i64, i64) {
+    let (iv, ix, iy) = tmpl;
+    let (mut b1, mut b2, mut e) = (0i64, 0i64, 0i64);
+    for y in 0..win {
+        let o = (p.1 + pad as i32 + y as i32) as usize * lj.stride + (p.0 + pad as i32) as usize;
+        let r = y * win..(y + 1) * win;
+        let (s1, s2, s3) = mismatch_row(
+            &lj.img[o..],
+            &lj.img[o + lj.stride..],
+            wt,
+            &iv[r.clone()],
+            &ix[r.clone()],
+            &iy[r],
+        );
+        b1 += s1 as i64;
+        b2 += s2 as i64;
+        e += s3 as i64;
+    }
+    (b1, b2, e)
+}
+
 /// Tracks `points` (x = column, y = row, pixels) from `prev` to `next` (same size)
 /// with pyramidal Lucas-Kanade, OpenCV's `calcOpticalFlowPyrLK` without initial
 /// flow. Returns one [`TrackedPoint`] per input point; mismatched images give every
@@ -313,25 +343,6 @@ multiversion! {
             let d = 1.0 / d;
             next_pt = (next_pt.0 - half, next_pt.1 - half);
             let mut prev_delta = (0f32, 0f32);
-            let mismatch = |p: (i32, i32), wt: [i32; 4]| {
-                let (mut b1, mut b2, mut e) = (0i64, 0i64, 0i64);
-                for y in 0..win {
-                    let o = (p.1 + pad as i32 + y as i32) as usize * lj.stride + (p.0 + pad as i32) as usize;
-                    let r = y * win..(y + 1) * win;
-                    let (s1, s2, s3) = mismatch_row(
-                        &lj.img[o..],
-                        &lj.img[o + lj.stride..],
-                        wt,
-                        &iv[r.clone()],
-                        &ix[r.clone()],
-                        &iy[r],
-                    );
-                    b1 += s1 as i64;
-                    b2 += s2 as i64;
-                    e += s3 as i64;
-                }
-                (b1, b2, e)
-            };
             let mut result = next_pt;
             for j in 0..params.max_iter.min(100) {
                 let inp = (next_pt.0.floor() as i32, next_pt.1.floor() as i32);
@@ -342,7 +353,9 @@ multiversion! {
                     break;
                 }
                 let wt = weights(next_pt.0 - inp.0 as f32, next_pt.1 - inp.1 as f32);
-                let (b1, b2, _) = mismatch(inp, wt);
+                // A plain fn, not a closure: closures do not inherit the AVX2 target
+                // feature of `track`, and this is the hot loop.
+                let (b1, b2, _) = mismatch_window(lj, inp, wt, win, pad, (&iv, &ix, &iy));
                 let (b1, b2) = (b1 as f32 * FLT_SCALE, b2 as f32 * FLT_SCALE);
                 let delta = ((a12 * b2 - a22 * b1) * d, (a12 * b1 - a11 * b2) * d);
                 next_pt = (next_pt.0 + delta.0, next_pt.1 + delta.1);
@@ -366,7 +379,7 @@ multiversion! {
                     res.found = false;
                 } else {
                     let wt = weights(result.0 - p.0 as f32, result.1 - p.1 as f32);
-                    let (_, _, e) = mismatch(p, wt);
+                    let (_, _, e) = mismatch_window(lj, p, wt, win, pad, (&iv, &ix, &iy));
                     res.error = e as f32 / (32 * area) as f32;
                 }
             }

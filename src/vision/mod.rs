@@ -34,7 +34,9 @@
 //! for kernels with negative responses (edge, emboss); we add it before.
 //!
 //! Hot loops are written over slices so they auto-vectorise, and compiled twice
-//! (AVX2+FMA and baseline) with a runtime switch; no `unsafe` beyond that switch.
+//! (AVX2+FMA and baseline) with a runtime switch. The one hand-written SIMD loop is
+//! `warp_perspective`'s (AVX2 gathers, same f32 arithmetic as the portable path,
+//! checked against it by a unit test); its `unsafe` is the gathers and stores.
 
 mod convolve;
 mod flow;
