@@ -195,6 +195,242 @@ fn mismatch_row(
     (s1, s2, s3)
 }
 
+/// Template rows are stored `padded(win)` wide (a multiple of 8) with zero
+/// derivatives past the window, so the iteration loop runs on whole 8-lane vectors.
+fn padded(win: usize) -> usize {
+    win.div_ceil(8) * 8
+}
+
+/// (Σ diff·ix, Σ diff·iy) of one padded template row: as [`mismatch_row`] over
+/// `ix.len()` (a multiple of 8) lanes, whose lanes past the window add 0.
+#[inline(always)]
+fn gradient_row(
+    r0: &[u8],
+    r1: &[u8],
+    wt: [i32; 4],
+    iv: &[i32],
+    ix: &[i32],
+    iy: &[i32],
+) -> (i32, i32) {
+    let n = ix.len();
+    let (a, b) = (&r0[..n + 1], &r1[..n + 1]);
+    let (mut s1, mut s2) = ([0i32; 8], [0i32; 8]);
+    for c in 0..n / 8 {
+        let k = c * 8;
+        let (a0, a1): (&[u8; 8], &[u8; 8]) = (
+            a[k..k + 8].try_into().unwrap(),
+            a[k + 1..k + 9].try_into().unwrap(),
+        );
+        let (b0, b1): (&[u8; 8], &[u8; 8]) = (
+            b[k..k + 8].try_into().unwrap(),
+            b[k + 1..k + 9].try_into().unwrap(),
+        );
+        let (tv, tx, ty): (&[i32; 8], &[i32; 8], &[i32; 8]) = (
+            iv[k..k + 8].try_into().unwrap(),
+            ix[k..k + 8].try_into().unwrap(),
+            iy[k..k + 8].try_into().unwrap(),
+        );
+        for l in 0..8 {
+            let v = a0[l] as i32 * wt[0]
+                + a1[l] as i32 * wt[1]
+                + b0[l] as i32 * wt[2]
+                + b1[l] as i32 * wt[3];
+            let d = ((v + (1 << 8)) >> 9) - tv[l];
+            s1[l] += d * tx[l];
+            s2[l] += d * ty[l];
+        }
+    }
+    (s1.iter().sum(), s2.iter().sum())
+}
+
+/// [`gradient_row`] with 16-bit multiply-adds (as OpenCV): the bilinear sample
+/// as (a[x], a[x+1])·(w00, w01) + (b[x], b[x+1])·(w10, w11), then diff·ix with
+/// ix's high half masked off (diff and ix fit in i16: |diff| <= 8160, |ix| <= 4080).
+/// Exact integer arithmetic, so the same sums.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn gradient_row_avx2(
+    r0: &[u8],
+    r1: &[u8],
+    wt: [i32; 4],
+    iv: &[i32],
+    ix: &[i32],
+    iy: &[i32],
+) -> (i32, i32) {
+    use std::arch::x86_64::*;
+    let n = ix.len();
+    assert!(n.is_multiple_of(8) && r0.len() > n && r1.len() > n && iv.len() >= n && iy.len() >= n);
+    let wa = _mm256_set1_epi32(wt[0] | (wt[1] << 16));
+    let wb = _mm256_set1_epi32(wt[2] | (wt[3] << 16));
+    let (round, lo) = (_mm256_set1_epi32(1 << 8), _mm256_set1_epi32(0xffff));
+    let (mut s1, mut s2) = (_mm256_setzero_si256(), _mm256_setzero_si256());
+    for k in (0..n).step_by(8) {
+        // SAFETY: k + 9 <= n + 1 <= r0.len(), r1.len(), and k + 8 <= n for the
+        // template rows (asserted above); all loads are unaligned.
+        let (pa, pb, tv, tx, ty) = unsafe {
+            let p = |r: &[u8]| {
+                let x0 = _mm_loadl_epi64(r.as_ptr().add(k) as *const __m128i);
+                let x1 = _mm_loadl_epi64(r.as_ptr().add(k + 1) as *const __m128i);
+                _mm256_cvtepu8_epi16(_mm_unpacklo_epi8(x0, x1))
+            };
+            let l = |t: &[i32]| _mm256_loadu_si256(t.as_ptr().add(k) as *const __m256i);
+            (p(r0), p(r1), l(iv), l(ix), l(iy))
+        };
+        let v = _mm256_add_epi32(_mm256_madd_epi16(pa, wa), _mm256_madd_epi16(pb, wb));
+        let d = _mm256_sub_epi32(_mm256_srai_epi32::<9>(_mm256_add_epi32(v, round)), tv);
+        s1 = _mm256_add_epi32(s1, _mm256_madd_epi16(d, _mm256_and_si256(tx, lo)));
+        s2 = _mm256_add_epi32(s2, _mm256_madd_epi16(d, _mm256_and_si256(ty, lo)));
+    }
+    let mut out = [[0i32; 8]; 2];
+    // SAFETY: each array has 8 lanes.
+    unsafe {
+        _mm256_storeu_si256(out[0].as_mut_ptr() as *mut __m256i, s1);
+        _mm256_storeu_si256(out[1].as_mut_ptr() as *mut __m256i, s2);
+    }
+    (out[0].iter().sum(), out[1].iter().sum())
+}
+
+type DerivRows<'a> = (&'a [i16], &'a [i16], &'a [i16], &'a [i16]);
+
+/// One template row: samples `iv` (1/32 levels) and derivatives `ix`, `iy` of the
+/// first `win` lanes (the padding lanes are left 0), and that row's
+/// (Σ ix², Σ ix·iy, Σ iy²).
+#[inline(always)]
+fn template_row(
+    i0: &[u8],
+    i1: &[u8],
+    d: DerivRows,
+    wt: [i32; 4],
+    win: usize,
+    (iv, ix, iy): (&mut [i32], &mut [i32], &mut [i32]),
+) -> (i64, i64, i64) {
+    sample_row(i0, i1, wt, &mut iv[..win]);
+    deriv_row(d.0, d.1, wt, &mut ix[..win]);
+    deriv_row(d.2, d.3, wt, &mut iy[..win]);
+    let (rx, ry) = (&ix[..win], &iy[..win]);
+    (
+        rx.iter().map(|v| (v * v) as i64).sum::<i64>(),
+        rx.iter().zip(ry).map(|(a, b)| (a * b) as i64).sum::<i64>(),
+        ry.iter().map(|v| (v * v) as i64).sum::<i64>(),
+    )
+}
+
+/// [`template_row`] with 16-bit multiply-adds on (p[x], p[x+1]) pairs, over whole
+/// 8-lane blocks with the lanes past `win` masked to 0. Exact integer arithmetic
+/// (|derivative| <= 4080 fits in i16; 4080·2¹⁴ fits in i32), so the same values.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn template_row_avx2(
+    i0: &[u8],
+    i1: &[u8],
+    d: DerivRows,
+    wt: [i32; 4],
+    win: usize,
+    (iv, ix, iy): (&mut [i32], &mut [i32], &mut [i32]),
+) -> (i64, i64, i64) {
+    use std::arch::x86_64::*;
+    let n = ix.len();
+    assert!(n.is_multiple_of(8) && win <= n && iv.len() >= n && iy.len() >= n);
+    assert!(i0.len() > n && i1.len() > n && d.0.len() > n && d.1.len() > n);
+    assert!(d.2.len() > n && d.3.len() > n);
+    let wa = _mm256_set1_epi32(wt[0] | (wt[1] << 16));
+    let wb = _mm256_set1_epi32(wt[2] | (wt[3] << 16));
+    let lo = _mm256_set1_epi32(0xffff);
+    let lanes = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+    let (mut sxx, mut sxy, mut syy) = (
+        _mm256_setzero_si256(),
+        _mm256_setzero_si256(),
+        _mm256_setzero_si256(),
+    );
+    for k in (0..n).step_by(8) {
+        let keep = _mm256_cmpgt_epi32(_mm256_set1_epi32((win - k) as i32), lanes);
+        // SAFETY: reads end at k + 9 <= n + 1 <= each row's length, writes at
+        // k + 8 <= n (asserted above); all accesses are unaligned.
+        unsafe {
+            let bytes = |r: &[u8]| {
+                let x0 = _mm_loadl_epi64(r.as_ptr().add(k) as *const __m128i);
+                let x1 = _mm_loadl_epi64(r.as_ptr().add(k + 1) as *const __m128i);
+                _mm256_cvtepu8_epi16(_mm_unpacklo_epi8(x0, x1))
+            };
+            let words = |r: &[i16]| {
+                let x0 = _mm_loadu_si128(r.as_ptr().add(k) as *const __m128i);
+                let x1 = _mm_loadu_si128(r.as_ptr().add(k + 1) as *const __m128i);
+                _mm256_set_m128i(_mm_unpackhi_epi16(x0, x1), _mm_unpacklo_epi16(x0, x1))
+            };
+            let v = _mm256_add_epi32(
+                _mm256_madd_epi16(bytes(i0), wa),
+                _mm256_madd_epi16(bytes(i1), wb),
+            );
+            let v = _mm256_srai_epi32::<9>(_mm256_add_epi32(v, _mm256_set1_epi32(1 << 8)));
+            let deriv = |a: &[i16], b: &[i16]| {
+                let v = _mm256_add_epi32(
+                    _mm256_madd_epi16(words(a), wa),
+                    _mm256_madd_epi16(words(b), wb),
+                );
+                let v = _mm256_srai_epi32::<14>(_mm256_add_epi32(v, _mm256_set1_epi32(1 << 13)));
+                _mm256_and_si256(v, keep)
+            };
+            let (gx, gy) = (deriv(d.0, d.1), deriv(d.2, d.3));
+            _mm256_storeu_si256(
+                iv.as_mut_ptr().add(k) as *mut __m256i,
+                _mm256_and_si256(v, keep),
+            );
+            _mm256_storeu_si256(ix.as_mut_ptr().add(k) as *mut __m256i, gx);
+            _mm256_storeu_si256(iy.as_mut_ptr().add(k) as *mut __m256i, gy);
+            let (gx, gy) = (_mm256_and_si256(gx, lo), _mm256_and_si256(gy, lo));
+            sxx = _mm256_add_epi32(sxx, _mm256_madd_epi16(gx, gx));
+            sxy = _mm256_add_epi32(sxy, _mm256_madd_epi16(gx, gy));
+            syy = _mm256_add_epi32(syy, _mm256_madd_epi16(gy, gy));
+        }
+    }
+    let mut out = [[0i32; 8]; 3];
+    // SAFETY: each array has 8 lanes.
+    unsafe {
+        _mm256_storeu_si256(out[0].as_mut_ptr() as *mut __m256i, sxx);
+        _mm256_storeu_si256(out[1].as_mut_ptr() as *mut __m256i, sxy);
+        _mm256_storeu_si256(out[2].as_mut_ptr() as *mut __m256i, syy);
+    }
+    let sum = |a: &[i32; 8]| a.iter().map(|&v| v as i64).sum::<i64>();
+    (sum(&out[0]), sum(&out[1]), sum(&out[2]))
+}
+
+/// (Σ diff·ix, Σ diff·iy) over the window at `p` (the iteration's right-hand side).
+#[inline(always)]
+fn gradient_window(
+    lj: &Level,
+    p: (i32, i32),
+    wt: [i32; 4],
+    win: usize,
+    pad: usize,
+    tmpl: (&[i32], &[i32], &[i32]),
+    avx2: bool,
+) -> (i64, i64) {
+    let (iv, ix, iy) = tmpl;
+    let wp = padded(win);
+    let (mut b1, mut b2) = (0i64, 0i64);
+    for y in 0..win {
+        let o = (p.1 + pad as i32 + y as i32) as usize * lj.stride + (p.0 + pad as i32) as usize;
+        let r = y * wp..(y + 1) * wp;
+        let (r0, r1) = (&lj.img[o..], &lj.img[o + lj.stride..]);
+        let (iv, ix, iy) = (&iv[r.clone()], &ix[r.clone()], &iy[r]);
+        #[cfg(target_arch = "x86_64")]
+        let (s1, s2) = if avx2 {
+            // SAFETY: the caller checked that the CPU has AVX2.
+            unsafe { gradient_row_avx2(r0, r1, wt, iv, ix, iy) }
+        } else {
+            gradient_row(r0, r1, wt, iv, ix, iy)
+        };
+        #[cfg(not(target_arch = "x86_64"))]
+        let (s1, s2) = {
+            let _ = avx2;
+            gradient_row(r0, r1, wt, iv, ix, iy)
+        };
+        b1 += s1 as i64;
+        b2 += s2 as i64;
+    }
+    (b1, b2)
+}
+
 /// (Σ diff·ix, Σ diff·iy, Σ |diff|) over the window at `p` (top-left, unpadded) of `lj`.
 #[inline(always)]
 fn mismatch_window(
@@ -206,10 +442,11 @@ fn mismatch_window(
     tmpl: (&[i32], &[i32], &[i32]),
 ) -> (i64, i64, i64) {
     let (iv, ix, iy) = tmpl;
+    let wp = padded(win);
     let (mut b1, mut b2, mut e) = (0i64, 0i64, 0i64);
     for y in 0..win {
         let o = (p.1 + pad as i32 + y as i32) as usize * lj.stride + (p.0 + pad as i32) as usize;
-        let r = y * win..(y + 1) * win;
+        let r = y * wp..y * wp + win;
         let (s1, s2, s3) = mismatch_row(
             &lj.img[o..],
             &lj.img[o + lj.stride..],
@@ -252,7 +489,8 @@ pub fn optical_flow_pyr_lk(
         return points.iter().map(lost).collect();
     }
     // Pyramids; stop before a level gets smaller than the window (as OpenCV).
-    let pad = win + 1;
+    // The padding also covers the reads of whole 8-lane template rows (`padded`).
+    let pad = padded(win) + 1;
     let mut pi = vec![prev.clone()];
     let mut pj = vec![next.clone()];
     while pi.len() <= params.max_level {
@@ -274,11 +512,16 @@ pub fn optical_flow_pyr_lk(
 multiversion! {
     fn track(li: &[Level], lj: &[Level], points: &[(f32, f32)], params: &LkParams, win: usize, pad: usize) -> Vec<TrackedPoint> {
     let max_level = li.len() - 1;
+    #[cfg(target_arch = "x86_64")]
+    let avx2 = std::arch::is_x86_feature_detected!("avx2");
+    #[cfg(not(target_arch = "x86_64"))]
+    let avx2 = false;
     let half = (win as f32 - 1.0) * 0.5;
     let eps2 = params.epsilon.clamp(0.0, 10.0).powi(2);
     const FLT_SCALE: f32 = 1.0 / (1 << 20) as f32;
     let area = win * win;
-    let (mut iv, mut ix, mut iy) = (vec![0i32; area], vec![0i32; area], vec![0i32; area]);
+    let tlen = win * padded(win);
+    let (mut iv, mut ix, mut iy) = (vec![0i32; tlen], vec![0i32; tlen], vec![0i32; tlen]);
     let inside = |p: (i32, i32), l: &Level| {
         p.0 >= -(win as i32) && p.0 < l.w as i32 && p.1 >= -(win as i32) && p.1 < l.h as i32
     };
@@ -317,14 +560,22 @@ multiversion! {
             let (mut a11, mut a12, mut a22) = (0i64, 0i64, 0i64);
             for y in 0..win {
                 let o = (ip.1 + pad as i32 + y as i32) as usize * li.stride + (ip.0 + pad as i32) as usize;
-                let r = y * win..(y + 1) * win;
-                sample_row(&li.img[o..], &li.img[o + li.stride..], wt, &mut iv[r.clone()]);
-                deriv_row(&li.dx[o..], &li.dx[o + li.stride..], wt, &mut ix[r.clone()]);
-                deriv_row(&li.dy[o..], &li.dy[o + li.stride..], wt, &mut iy[r.clone()]);
-                let (rx, ry) = (&ix[r.clone()], &iy[r]);
-                a11 += rx.iter().map(|v| (v * v) as i64).sum::<i64>();
-                a12 += rx.iter().zip(ry).map(|(a, b)| (a * b) as i64).sum::<i64>();
-                a22 += ry.iter().map(|v| (v * v) as i64).sum::<i64>();
+                let r = y * padded(win)..(y + 1) * padded(win);
+                let (i0, i1) = (&li.img[o..], &li.img[o + li.stride..]);
+                let d = (&li.dx[o..], &li.dx[o + li.stride..], &li.dy[o..], &li.dy[o + li.stride..]);
+                let t = (&mut iv[r.clone()], &mut ix[r.clone()], &mut iy[r]);
+                #[cfg(target_arch = "x86_64")]
+                let sums = if avx2 {
+                    // SAFETY: the CPU has AVX2 (checked above).
+                    unsafe { template_row_avx2(i0, i1, d, wt, win, t) }
+                } else {
+                    template_row(i0, i1, d, wt, win, t)
+                };
+                #[cfg(not(target_arch = "x86_64"))]
+                let sums = template_row(i0, i1, d, wt, win, t);
+                a11 += sums.0;
+                a12 += sums.1;
+                a22 += sums.2;
             }
             let (a11, a12, a22) = (
                 a11 as f32 * FLT_SCALE,
@@ -355,7 +606,7 @@ multiversion! {
                 let wt = weights(next_pt.0 - inp.0 as f32, next_pt.1 - inp.1 as f32);
                 // A plain fn, not a closure: closures do not inherit the AVX2 target
                 // feature of `track`, and this is the hot loop.
-                let (b1, b2, _) = mismatch_window(lj, inp, wt, win, pad, (&iv, &ix, &iy));
+                let (b1, b2) = gradient_window(lj, inp, wt, win, pad, (&iv, &ix, &iy), avx2);
                 let (b1, b2) = (b1 as f32 * FLT_SCALE, b2 as f32 * FLT_SCALE);
                 let delta = ((a12 * b2 - a22 * b1) * d, (a12 * b1 - a11 * b2) * d);
                 next_pt = (next_pt.0 + delta.0, next_pt.1 + delta.1);
@@ -389,5 +640,57 @@ multiversion! {
         out.push(res);
     }
     out
+    }
+}
+
+#[cfg(all(test, target_arch = "x86_64"))]
+mod tests {
+    use super::*;
+
+    /// The AVX2 row kernels give the portable kernels' integers, on random rows with
+    /// derivatives at Scharr's extremes and random bilinear weights.
+    #[test]
+    fn avx2_rows_match_portable_rows() {
+        if !std::arch::is_x86_feature_detected!("avx2") {
+            return;
+        }
+        let mut seed = 12345u32;
+        let mut rnd = move || {
+            seed = seed.wrapping_mul(1664525).wrapping_add(1013904223);
+            seed >> 8
+        };
+        for win in [3usize, 5, 8, 21, 31] {
+            let n = padded(win);
+            for _ in 0..50 {
+                let img: Vec<Vec<u8>> = (0..2)
+                    .map(|_| (0..=n).map(|_| rnd() as u8).collect())
+                    .collect();
+                let der: Vec<Vec<i16>> = (0..4)
+                    .map(|_| (0..=n).map(|_| (rnd() % 8161) as i16 - 4080).collect())
+                    .collect();
+                let (a, b) = (
+                    (rnd() % 1000) as f32 / 1000.0,
+                    (rnd() % 1000) as f32 / 1000.0,
+                );
+                let wt = weights(a, b);
+                let d = (&der[0][..], &der[1][..], &der[2][..], &der[3][..]);
+                let mut t1 = [vec![0i32; n], vec![0i32; n], vec![0i32; n]];
+                let mut t2 = t1.clone();
+                let [v1, x1, y1] = &mut t1;
+                let s1 = template_row(&img[0], &img[1], d, wt, win, (v1, x1, y1));
+                let [v2, x2, y2] = &mut t2;
+                // SAFETY: AVX2 checked above.
+                let s2 = unsafe { template_row_avx2(&img[0], &img[1], d, wt, win, (v2, x2, y2)) };
+                assert_eq!((s1, &t1), (s2, &t2), "win {win}");
+                let next: Vec<Vec<u8>> = (0..2)
+                    .map(|_| (0..=n).map(|_| rnd() as u8).collect())
+                    .collect();
+                let g1 = gradient_row(&next[0], &next[1], wt, &t1[0], &t1[1], &t1[2]);
+                // SAFETY: AVX2 checked above.
+                let g2 =
+                    unsafe { gradient_row_avx2(&next[0], &next[1], wt, &t1[0], &t1[1], &t1[2]) };
+                assert_eq!(g1, g2, "win {win}");
+            }
+        }
     }
 }

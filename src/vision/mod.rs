@@ -34,9 +34,10 @@
 //! for kernels with negative responses (edge, emboss); we add it before.
 //!
 //! Hot loops are written over slices so they auto-vectorise, and compiled twice
-//! (AVX2+FMA and baseline) with a runtime switch. The one hand-written SIMD loop is
-//! `warp_perspective`'s (AVX2 gathers, same f32 arithmetic as the portable path,
-//! checked against it by a unit test); its `unsafe` is the gathers and stores.
+//! (AVX2+FMA and baseline) with a runtime switch. Hand-written AVX2 loops, each
+//! checked against its portable twin by a unit test, are `warp_perspective`'s
+//! (gathers, same f32 arithmetic) and LK's window rows (16-bit multiply-adds, exact
+//! integers); their `unsafe` is the loads and stores.
 
 mod convolve;
 mod flow;
