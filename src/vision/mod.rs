@@ -36,8 +36,8 @@
 //! Hot loops are written over slices so they auto-vectorise, and compiled twice
 //! (AVX2+FMA and baseline) with a runtime switch. Hand-written AVX2 loops, each
 //! checked against its portable twin by a unit test, are `warp_perspective`'s
-//! (gathers, same f32 arithmetic) and LK's window rows (16-bit multiply-adds, exact
-//! integers); their `unsafe` is the loads and stores.
+//! (gathers, same f32 arithmetic), LK's window rows and `grayscale` (16-bit
+//! multiply-adds, exact integers); their `unsafe` is the loads and stores.
 
 mod convolve;
 mod flow;
@@ -208,6 +208,56 @@ multiversion! {
     }
 }
 
+/// [`gray_row`] 32 pixels at a time, as OpenCV: 16-bit multiply-adds of (B, G)
+/// pairs by (3735, 19235) and (R, 0) by (9798, 0), then `+ 2¹⁴ >> 15` (exact
+/// integers, the same bytes). Returns how many pixels it wrote (the rest are the
+/// caller's).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn gray_avx2(src: &[u8], dst: &mut [std::mem::MaybeUninit<u8>]) -> usize {
+    use std::arch::x86_64::*;
+    let n = dst.len().min(src.len() / 3);
+    // Each 16-byte load starts on a pixel and uses 4 pixels (12 bytes) of it.
+    let bg = _mm256_setr_epi8(
+        0, -1, 1, -1, 3, -1, 4, -1, 6, -1, 7, -1, 9, -1, 10, -1, //
+        0, -1, 1, -1, 3, -1, 4, -1, 6, -1, 7, -1, 9, -1, 10, -1,
+    );
+    let r = _mm256_setr_epi8(
+        2, -1, -1, -1, 5, -1, -1, -1, 8, -1, -1, -1, 11, -1, -1, -1, //
+        2, -1, -1, -1, 5, -1, -1, -1, 8, -1, -1, -1, 11, -1, -1, -1,
+    );
+    let wbg = _mm256_set1_epi32(3735 | (19235 << 16));
+    let (wr, half) = (_mm256_set1_epi32(9798), _mm256_set1_epi32(1 << 14));
+    let order = _mm256_setr_epi32(0, 4, 1, 5, 2, 6, 3, 7);
+    let mut i = 0;
+    // The last load of a block reads 4 bytes past its 32 pixels.
+    while i + 32 <= n && 3 * i + 100 <= src.len() {
+        let p = src[3 * i..3 * i + 100].as_ptr();
+        // SAFETY: loads at p + 12k, k < 8, end at p + 100 (in the slice above).
+        let eight = |k: usize| unsafe {
+            let v = _mm256_loadu2_m128i(
+                p.add(24 * k + 12) as *const __m128i,
+                p.add(24 * k) as *const __m128i,
+            );
+            let s = _mm256_add_epi32(
+                _mm256_madd_epi16(_mm256_shuffle_epi8(v, bg), wbg),
+                _mm256_madd_epi16(_mm256_shuffle_epi8(v, r), wr),
+            );
+            _mm256_srli_epi32::<15>(_mm256_add_epi32(s, half))
+        };
+        let (a, b) = (
+            _mm256_packus_epi32(eight(0), eight(1)),
+            _mm256_packus_epi32(eight(2), eight(3)),
+        );
+        let v = _mm256_permutevar8x32_epi32(_mm256_packus_epi16(a, b), order);
+        let d = &mut dst[i..i + 32];
+        // SAFETY: d has 32 bytes.
+        unsafe { _mm256_storeu_si256(d.as_mut_ptr() as *mut __m256i, v) };
+        i += 32;
+    }
+    i
+}
+
 /// Grey levels of a BGR image, exactly OpenCV's `cvtColor(BGR2GRAY)` (0.114 B +
 /// 0.587 G + 0.299 R in 15-bit fixed point): `(3735·B + 19235·G + 9798·R + 2¹⁴) >> 15`. An image whose data does not match
 /// its size gives an empty image.
@@ -219,7 +269,17 @@ pub fn grayscale(img: &Image) -> GrayImage {
     // as a tenth of the conversion (which is bound by memory bandwidth).
     let n = img.width as usize * img.height as usize;
     let mut data = Vec::with_capacity(n);
-    gray_row(&img.data, &mut data.spare_capacity_mut()[..n]);
+    let dst = &mut data.spare_capacity_mut()[..n];
+    #[cfg(target_arch = "x86_64")]
+    let done = if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU has AVX2 (checked just above).
+        unsafe { gray_avx2(&img.data, dst) }
+    } else {
+        0
+    };
+    #[cfg(not(target_arch = "x86_64"))]
+    let done = 0;
+    gray_row(&img.data[3 * done..], &mut dst[done..]);
     // SAFETY: gray_row wrote all n values (src has exactly 3·n bytes).
     unsafe { data.set_len(n) };
     GrayImage {
@@ -377,6 +437,26 @@ mod tests {
                 assert_eq!((dw, dh), (w.div_ceil(2), h.div_ceil(2)));
                 assert_eq!(got, pyr_down_reference(&src, w, h, cn), "{w}x{h}x{cn}");
             }
+        }
+    }
+
+    #[test]
+    fn grayscale_vector_blocks_and_tails_match_the_formula() {
+        for (w, h) in [(1, 1), (31, 1), (32, 1), (33, 2), (40, 3), (97, 5)] {
+            let data: Vec<u8> = (0..w * h * 3).map(|i| (i * 7919 % 256) as u8).collect();
+            let want: Vec<u8> = data
+                .chunks_exact(3)
+                .map(|p| {
+                    let v = p[0] as u32 * 3735 + p[1] as u32 * 19235 + p[2] as u32 * 9798;
+                    ((v + (1 << 14)) >> 15) as u8
+                })
+                .collect();
+            let img = Image {
+                width: w,
+                height: h,
+                data,
+            };
+            assert_eq!(grayscale(&img).data, want, "{w}x{h}");
         }
     }
 
