@@ -14,7 +14,7 @@
 //! max_v 500                # joystick maxima, mm/s and deg/s (4.3's 500 and 30)
 //! max_w 30
 //! world ../assets/worlds/simple.world   # walls for the 3D canvas; default: the
-//!                          #   simulator's world in the same conf; `none`: none
+//!                          #   loaded simulator's world; `none`: none
 //! cycle 100                # ms
 //! motors motors            # interface names (defaults shown); all but motors may
 //! encoders encoders        #   be `none`, and are skipped when nothing provides them
@@ -27,19 +27,14 @@
 //! Name space, component `teleoperator`: `base` ([`parking_lot::Mutex`]`<`[`Motors`]`>`)
 //! and `pantilt` (`Mutex<[f32; 2]>`, longitude and latitude in degrees).
 
-use std::{
-    path::{Path, PathBuf},
-    sync::Arc,
-    time::Duration,
-};
+use std::{path::PathBuf, sync::Arc, time::Duration};
 
 use parking_lot::Mutex;
 
 use crate::{
-    conf::{Action, ComponentConf, Conf, ConfError, ConfLine},
+    conf::{ComponentConf, ConfError, ConfLine},
     drivers::simulator::World,
-    interfaces::{Encoders, Image, Interface, Laser, Motors, PtEncoders, PtMotors},
-    registry::Kind,
+    interfaces::{Encoders, Image, Interface, Laser, Motors, PtEncoders, PtMotors, limit},
     runtime::{Context, Runtime, Schema},
 };
 
@@ -54,11 +49,7 @@ pub struct Commands {
 impl Commands {
     /// Sets the base command, clamped to the maxima.
     pub fn set_base(&self, v: f32, w: f32) {
-        let fin = |x: f32| if x.is_finite() { x } else { 0.0 };
-        *self.base.lock() = Motors {
-            v: limit(fin(v), -self.max_v, self.max_v),
-            w: limit(fin(w), -self.max_w, self.max_w),
-        };
+        *self.base.lock() = Motors::limited(v, w, self.max_v, self.max_w);
     }
     /// Sets the pan-tilt command (the unit clamps it to its limits).
     pub fn set_pantilt(&self, longitude: f32, latitude: f32) {
@@ -122,20 +113,6 @@ impl Schema for Teleoperator {
     fn panel(&mut self) -> Option<Box<dyn crate::gui::Panel>> {
         self.panel.take()
     }
-}
-
-/// The simulator's world file in the main conf, if it loads a simulator with one.
-fn simulator_world(conf_file: &Path) -> Option<PathBuf> {
-    let conf = Conf::load(conf_file).ok()?;
-    let own = conf.directives.iter().find_map(|d| match &d.action {
-        Action::Load { name, file, .. } if name == "simulator" => Some(file.clone()),
-        _ => None,
-    })?;
-    let cc = conf
-        .component_conf(Kind::Driver, "simulator", own.as_deref())
-        .ok()?;
-    let l = cc.line("world")?;
-    Some(cc.resolve(l.args().first()?))
 }
 
 fn pair(l: &ConfLine, a: &str, b: &str) -> Result<[f32; 2], ConfError> {
@@ -217,9 +194,7 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
             World::load(&file).map_err(|e| l.error(format!("world: {e}")))?,
         )),
         Some(None) => None,
-        None => simulator_world(rt.conf_file())
-            .and_then(|f| World::load(&f).ok())
-            .map(Arc::new),
+        None => crate::drivers::simulator::loaded_world(rt),
     };
     let name = |k: &str| {
         names
@@ -298,15 +273,6 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
         #[cfg(feature = "gui")]
         panel,
     }))
-}
-
-/// `x` limited to [lo, hi]; unlike `f32::clamp` it never panics (bad bounds or NaN).
-fn limit(x: f32, lo: f32, hi: f32) -> f32 {
-    if x.is_nan() {
-        0.0f32.max(lo).min(hi)
-    } else {
-        x.max(lo).min(hi)
-    }
 }
 
 crate::register_schema!(

@@ -258,6 +258,28 @@ pub struct Motors {
     pub w: f32,
 }
 
+impl Motors {
+    /// The command (v, w) made safe to send: a non-finite speed counts as 0, and each
+    /// is limited to ±its maximum. What every schema and panel that drives a base uses.
+    pub fn limited(v: f32, w: f32, max_v: f32, max_w: f32) -> Motors {
+        let finite = |x: f32| if x.is_finite() { x } else { 0.0 };
+        Motors {
+            v: limit(finite(v), -max_v, max_v),
+            w: limit(finite(w), -max_w, max_w),
+        }
+    }
+}
+
+/// `x` limited to [lo, hi]; unlike `f32::clamp` it never panics (bad bounds or NaN:
+/// a NaN counts as 0).
+pub fn limit(x: f32, lo: f32, hi: f32) -> f32 {
+    if x.is_nan() {
+        0.0f32.max(lo).min(hi)
+    } else {
+        x.max(lo).min(hi)
+    }
+}
+
 impl InterfaceValue for Motors {
     const KIND: &'static str = "motors";
     const ACTUATOR: bool = true;

@@ -39,7 +39,11 @@ pub enum Flow {
     Quit,
 }
 
-const MAIN_COMMANDS: &[(&str, &str, &str)] = &[
+/// A command's name, usage and one-line help.
+type CommandDoc = (&'static str, &'static str, &'static str);
+
+/// The commands of both states.
+const SHARED_COMMANDS: &[CommandDoc] = &[
     ("help", "[COMMAND]", "Display this help text"),
     ("?", "[COMMAND]", "Synonym for `help'"),
     ("cd", "DIR", "Change working directory to DIR"),
@@ -50,6 +54,10 @@ const MAIN_COMMANDS: &[(&str, &str, &str)] = &[
     ),
     ("pwd", "", "Print the current working directory"),
     ("view", "FILE", "View the contents of FILE"),
+];
+
+/// The main state's own commands.
+const MAIN_COMMANDS: &[CommandDoc] = &[
     (
         "ls",
         "",
@@ -92,17 +100,8 @@ const MAIN_COMMANDS: &[(&str, &str, &str)] = &[
     ("quit", "", "Quit using jderobot"),
 ];
 
-const SCHEMA_COMMANDS: &[(&str, &str, &str)] = &[
-    ("help", "[COMMAND]", "Display this help text"),
-    ("?", "[COMMAND]", "Synonym for `help'"),
-    ("cd", "DIR", "Change working directory to DIR"),
-    (
-        "dir",
-        "[DIR]",
-        "List files in the working directory (or DIR)",
-    ),
-    ("pwd", "", "Print the current working directory"),
-    ("view", "FILE", "View the contents of FILE"),
+/// The schema state's own commands.
+const SCHEMA_COMMANDS: &[CommandDoc] = &[
     ("run", "", "Run the schema"),
     ("stop", "", "Stop the schema"),
     ("show", "", "Show the schema's GUI panel"),
@@ -115,6 +114,16 @@ const SCHEMA_COMMANDS: &[(&str, &str, &str)] = &[
     ("terminate", "", "Terminate the schema"),
     ("exit", "", "Exit schema state"),
 ];
+
+/// Every command of the main state (`zoomed` false) or the schema state.
+fn commands(zoomed: bool) -> impl Iterator<Item = &'static CommandDoc> {
+    let own = if zoomed {
+        SCHEMA_COMMANDS
+    } else {
+        MAIN_COMMANDS
+    };
+    SHARED_COMMANDS.iter().chain(own)
+}
 
 /// Aliases of schema-state commands (4.3's older names).
 fn schema_alias(cmd: &str) -> &str {
@@ -206,7 +215,7 @@ impl Shell {
         };
         let rt = self.rt.clone();
         match cmd {
-            "help" | "?" => help(MAIN_COMMANDS, args, out),
+            "help" | "?" => help(false, args, out),
             "cd" | "dir" | "pwd" | "view" => files(cmd, args, out),
             "ls" => {
                 for s in rt.schema_names() {
@@ -354,7 +363,7 @@ impl Shell {
     ) -> Result<Flow, String> {
         let rt = self.rt.clone();
         let res = match cmd {
-            "help" | "?" => return help(SCHEMA_COMMANDS, args, out),
+            "help" | "?" => return help(true, args, out),
             "cd" | "dir" | "pwd" | "view" => return files(cmd, args, out),
             "run" => rt.run(schema),
             "stop" => rt.stop(schema),
@@ -394,12 +403,7 @@ impl Shell {
 fn candidates(rt: &Runtime, zoomed: bool, before: &[&str]) -> Vec<String> {
     {
         if before.is_empty() {
-            let table = if zoomed {
-                SCHEMA_COMMANDS
-            } else {
-                MAIN_COMMANDS
-            };
-            let mut v: Vec<String> = table.iter().map(|c| c.0.to_string()).collect();
+            let mut v: Vec<String> = commands(zoomed).map(|c| c.0.to_string()).collect();
             if !zoomed {
                 v.extend(rt.schema_names());
             }
@@ -437,13 +441,12 @@ fn w(out: &mut dyn Write, line: String) {
     let _ = writeln!(out, "{line}");
 }
 
-fn help(table: &[(&str, &str, &str)], args: &[&str], out: &mut dyn Write) -> Result<Flow, String> {
-    let matching: Vec<_> = table
-        .iter()
+fn help(zoomed: bool, args: &[&str], out: &mut dyn Write) -> Result<Flow, String> {
+    let matching: Vec<_> = commands(zoomed)
         .filter(|c| args.is_empty() || args.contains(&c.0))
         .collect();
     if matching.is_empty() {
-        let names: Vec<&str> = table.iter().map(|c| c.0).collect();
+        let names: Vec<&str> = commands(zoomed).map(|c| c.0).collect();
         return Err(format!(
             "No commands match `{}'.  Possibilities are: {}",
             args.join(" "),

@@ -2,14 +2,17 @@
 //! change the runtime's state, and each widget's interaction gives the right values.
 #![cfg(all(feature = "gui", feature = "mastergui", feature = "myschema"))]
 
-use std::{path::Path, sync::Arc, time::Duration};
+mod common;
+
+use common::{eventually, state, take_panel};
+use std::{path::Path, sync::Arc};
 
 use egui::{Pos2, Rect, pos2, vec2};
 use egui_kittest::{Harness, kittest::Queryable};
 use jderobot::{
     ComponentConf, Kind, Runtime, State,
     gui::{
-        GuiHost, Panel,
+        GuiHost,
         widgets::{
             ImageView, Joystick, OrbitCamera, PanTiltLimits, PanTiltPad, PixelPick, Wireframe3D,
             WorldScene, WorldView,
@@ -28,30 +31,6 @@ fn runtime_with(names: &[(&str, Kind)]) -> Arc<Runtime> {
             .unwrap_or_else(|e| panic!("load {name}: {e}"));
     }
     rt
-}
-
-fn state(rt: &Runtime, name: &str) -> State {
-    rt.schema_status(name).expect("loaded").state
-}
-
-fn wait_for(what: &str, mut cond: impl FnMut() -> bool) {
-    let t = std::time::Instant::now();
-    while !cond() {
-        assert!(
-            t.elapsed() < Duration::from_secs(10),
-            "timed out waiting for {what}"
-        );
-        std::thread::sleep(Duration::from_millis(5));
-    }
-}
-
-fn take_panel(rt: &Runtime, name: &str) -> Box<dyn Panel> {
-    rt.schema(name)
-        .expect("loaded")
-        .panel
-        .lock()
-        .take()
-        .expect("has a panel")
 }
 
 /// Presses and releases the primary button at `pos`, running frames in between.
@@ -82,7 +61,7 @@ fn mastergui_run_stop_toggles_schema_state() {
         State::Slept,
         "run toggle runs the schema"
     );
-    wait_for("myschema to iterate", || {
+    eventually("myschema to iterate", || {
         state(&rt, "myschema") == State::Winner
     });
 

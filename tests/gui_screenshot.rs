@@ -7,20 +7,15 @@
 //! it says why and passes without checking anything.
 #![cfg(all(feature = "gui", feature = "mastergui"))]
 
+mod common;
+
 use std::{
-    io::Write,
     path::PathBuf,
-    process::{Command, Stdio},
+    process::Command,
     time::{Duration, Instant},
 };
 
-fn have(cmd: &str) -> bool {
-    Command::new("sh")
-        .args(["-c", &format!("command -v {cmd}")])
-        .stdout(Stdio::null())
-        .status()
-        .is_ok_and(|s| s.success())
-}
+use common::{can_screenshot, quit, spawn_window};
 
 /// Number of distinct colours in a PNG (imagemagick's `%k`).
 fn colours(png: &PathBuf) -> Option<u64> {
@@ -34,29 +29,13 @@ fn colours(png: &PathBuf) -> Option<u64> {
 
 #[test]
 fn window_renders_under_x_and_quits_with_the_shell() {
-    if std::env::var_os("DISPLAY").is_none_or(|d| d.is_empty()) {
-        eprintln!(
-            "skipped: DISPLAY is not set (run under `xvfb-run -a cargo test --test gui_screenshot`)"
-        );
+    if !can_screenshot("gui_screenshot", &["import", "identify"]) {
         return;
     }
-    if !have("import") || !have("identify") {
-        eprintln!("skipped: imagemagick's `import`/`identify` are not installed");
-        return;
-    }
-    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
     let png = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("gui_screenshot.png");
     let _ = std::fs::remove_file(&png);
     let log = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("gui_screenshot.log");
-    let mut child = Command::new(env!("CARGO_BIN_EXE_jderobot"))
-        .arg("examples/gui.conf")
-        .current_dir(&root)
-        .env("LIBGL_ALWAYS_SOFTWARE", "1")
-        .stdin(Stdio::piped())
-        .stdout(Stdio::null())
-        .stderr(std::fs::File::create(&log).expect("log file"))
-        .spawn()
-        .expect("start jderobot");
+    let mut child = spawn_window("examples/gui.conf", &log);
 
     // The window takes a moment (software GL): retry until the screen has content.
     let start = Instant::now();
@@ -83,20 +62,7 @@ fn window_renders_under_x_and_quits_with_the_shell() {
     eprintln!("screenshot: {} ({best} distinct colours)", png.display());
 
     // Quitting the shell closes the window and the program exits 0.
-    if let Some(stdin) = child.stdin.as_mut() {
-        let _ = stdin.write_all(b"ps\nexit\n");
-    }
-    let t = Instant::now();
-    let status = loop {
-        if let Ok(Some(s)) = child.try_wait() {
-            break Some(s);
-        }
-        if t.elapsed() > Duration::from_secs(20) {
-            let _ = child.kill();
-            break None;
-        }
-        std::thread::sleep(Duration::from_millis(50));
-    };
+    let status = quit(child, "ps\nexit\n");
     let text = std::fs::read_to_string(&log).unwrap_or_default();
     assert!(
         best >= 16,

@@ -3,48 +3,31 @@
 //! and the teleoperator's pan-tilt pad reach the schemas' shared state.
 #![cfg(all(feature = "gui", feature = "introrob", feature = "teleoperator"))]
 
-use std::{path::Path, sync::Arc};
+mod common;
+
+use common::{start_conf, take_panel, world_path};
+use std::sync::Arc;
 
 use egui::vec2;
 use egui_kittest::{Harness, kittest::Queryable};
 use jderobot::{
-    conf::Conf,
-    gui::Panel,
     runtime::Runtime,
     schemas::introrob::{Behaviour, Shared},
 };
 
-fn start(schema: &str, body: &str) -> (tempfile::TempDir, Arc<Runtime>) {
-    let dir = tempfile::tempdir().unwrap();
-    let world = Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/worlds/simple.world");
-    let file = dir.path().join("p.conf");
-    std::fs::write(
-        &file,
-        format!(
-            "driver simulator\nworld {}\nrobot robot1 1000 1000 90\nprovides encoders\n\
-             provides motors\nprovides laser\nprovides sonars\nprovides pantiltencoders\n\
-             provides pantiltmotors\nend_driver\nschema {schema}\n{body}end_schema\n\
-             load_driver simulator\nload_schema {schema}\n",
-            world.display()
-        ),
-    )
-    .unwrap();
-    let rt = Runtime::start(&Conf::load(&file).unwrap()).expect("starts");
-    (dir, rt)
-}
-
-fn take_panel(rt: &Runtime, name: &str) -> Box<dyn Panel> {
-    rt.schema(name)
-        .expect("loaded")
-        .panel
-        .lock()
-        .take()
-        .expect("has a panel")
+fn start(schema: &str, body: &str) -> Arc<Runtime> {
+    start_conf(&format!(
+        "driver simulator\nworld {}\nrobot robot1 1000 1000 90\nprovides encoders\n\
+         provides motors\nprovides laser\nprovides sonars\nprovides pantiltencoders\n\
+         provides pantiltmotors\nend_driver\nschema {schema}\n{body}end_schema\n\
+         load_driver simulator\nload_schema {schema}\n",
+        world_path("simple.world")
+    ))
 }
 
 #[test]
 fn introrob_panel_sets_behaviour_target_and_stop() {
-    let (_dir, rt) = start("introrob", "behaviour teleop\n");
+    let rt = start("introrob", "behaviour teleop\n");
     let shared = rt.names.import::<Shared>("introrob", "state").unwrap();
     let mut panel = take_panel(&rt, "introrob");
     let rt2 = rt.clone();
@@ -79,7 +62,7 @@ fn introrob_panel_sets_behaviour_target_and_stop() {
 
 #[test]
 fn teleoperator_panel_draws_and_stops() {
-    let (_dir, rt) = start("teleoperator", "base 200 10\n");
+    let rt = start("teleoperator", "base 200 10\n");
     let mut panel = take_panel(&rt, "teleoperator");
     let rt2 = rt.clone();
     let mut h = Harness::builder()

@@ -9,20 +9,15 @@
 //! it says why and passes without checking anything.
 #![cfg(all(feature = "gui", feature = "mastergui", feature = "introrob"))]
 
+mod common;
+
 use std::{
-    io::Write,
     path::{Path, PathBuf},
-    process::{Child, Command, Stdio},
+    process::Command,
     time::{Duration, Instant},
 };
 
-fn have(cmd: &str) -> bool {
-    Command::new("sh")
-        .args(["-c", &format!("command -v {cmd}")])
-        .stdout(Stdio::null())
-        .status()
-        .is_ok_and(|s| s.success())
-}
+use common::{can_screenshot, quit, spawn_window};
 
 /// RGB pixels of a PNG (None if unreadable).
 fn rgb(png_file: &Path) -> Option<(usize, usize, Vec<[u8; 3]>)> {
@@ -83,50 +78,16 @@ fn shoot(png: &Path) -> Option<(usize, usize, Vec<[u8; 3]>)> {
     if ok { rgb(png) } else { None }
 }
 
-fn quit(mut child: Child) -> Option<std::process::ExitStatus> {
-    if let Some(stdin) = child.stdin.as_mut() {
-        let _ = stdin.write_all(b"exit\n");
-    }
-    let t = Instant::now();
-    loop {
-        if let Ok(Some(s)) = child.try_wait() {
-            return Some(s);
-        }
-        if t.elapsed() > Duration::from_secs(20) {
-            let _ = child.kill();
-            let _ = child.wait();
-            return None;
-        }
-        std::thread::sleep(Duration::from_millis(50));
-    }
-}
-
 #[test]
 fn introrob_panel_shows_the_robot_and_its_laser_moving() {
-    if std::env::var_os("DISPLAY").is_none_or(|d| d.is_empty()) {
-        eprintln!(
-            "skipped: DISPLAY is not set (run under `xvfb-run -a cargo test --test introrob_screenshot`)"
-        );
+    if !can_screenshot("introrob_screenshot", &["import"]) {
         return;
     }
-    if !have("import") {
-        eprintln!("skipped: imagemagick's `import` is not installed");
-        return;
-    }
-    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
     let tmp = PathBuf::from(env!("CARGO_TARGET_TMPDIR"));
     let png = tmp.join("introrob_screenshot.png");
     let first = tmp.join("introrob_screenshot_first.png");
     let log = tmp.join("introrob_screenshot.log");
-    let child = Command::new(env!("CARGO_BIN_EXE_jderobot"))
-        .arg("examples/introrob.conf")
-        .current_dir(&root)
-        .env("LIBGL_ALWAYS_SOFTWARE", "1")
-        .stdin(Stdio::piped())
-        .stdout(Stdio::null())
-        .stderr(std::fs::File::create(&log).expect("log file"))
-        .spawn()
-        .expect("start jderobot");
+    let child = spawn_window("examples/introrob.conf", &log);
 
     // Wait (software GL is slow to start) until the robot and laser show.
     let start = Instant::now();
@@ -155,7 +116,7 @@ fn introrob_panel_shows_the_robot_and_its_laser_moving() {
             moved = Some(((c1[0] - c0[0]).powi(2) + (c1[1] - c0[1]).powi(2)).sqrt());
         }
     }
-    let status = quit(child);
+    let status = quit(child, "exit\n");
     let text = std::fs::read_to_string(&log).unwrap_or_default();
     eprintln!(
         "screenshot: {} (robot {} px, laser {} px, robot moved {:?} px)",

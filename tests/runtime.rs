@@ -1,13 +1,16 @@
 //! The schema runtime through its public API: states, hierarchy, arbitration,
 //! panic isolation, cronos. Waits are bounded polls on state, never timing asserts.
 
+mod common;
+
+use common::{eventually, state};
 use std::{
     path::Path,
     sync::{
         Arc,
         atomic::{AtomicBool, AtomicU64, Ordering},
     },
-    time::{Duration, Instant},
+    time::Duration,
 };
 
 use jderobot::{
@@ -49,22 +52,6 @@ fn counter(rt: &Runtime, name: &str) -> (Arc<AtomicU64>, Arc<AtomicBool>) {
         }),
     );
     (count, ready)
-}
-
-/// Polls `f` until it holds or 10 s pass.
-fn eventually(what: &str, mut f: impl FnMut() -> bool) {
-    let t0 = Instant::now();
-    while !f() {
-        assert!(
-            t0.elapsed() < Duration::from_secs(10),
-            "timed out waiting for: {what}"
-        );
-        std::thread::sleep(Duration::from_millis(2));
-    }
-}
-
-fn state(rt: &Runtime, name: &str) -> State {
-    rt.schema_status(name).unwrap().state
 }
 
 fn runtime() -> Arc<Runtime> {

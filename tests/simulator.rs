@@ -3,11 +3,10 @@
 //! timing: driver tests poll for a state with a generous bound.
 #![cfg(feature = "simulator")]
 
-use std::{
-    path::{Path, PathBuf},
-    sync::Arc,
-    time::{Duration, Instant},
-};
+mod common;
+
+use common::{eventually, root, start_conf, world_path};
+use std::{path::Path, sync::Arc, time::Duration};
 
 use jderobot::{
     ComponentConf, Conf, Runtime,
@@ -18,10 +17,6 @@ use jderobot::{
 };
 
 const DT: f64 = 0.01;
-
-fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
 
 /// A 4 m x 4 m room, walls 1 m high.
 fn room() -> World {
@@ -502,26 +497,11 @@ fn conf_lines_are_checked() {
     );
 }
 
-/// Polls `f` until it holds or 20 s pass.
-fn eventually(what: &str, mut f: impl FnMut() -> bool) {
-    let t0 = Instant::now();
-    while !f() {
-        assert!(
-            t0.elapsed() < Duration::from_secs(20),
-            "timed out waiting for: {what}"
-        );
-        std::thread::sleep(Duration::from_millis(5));
-    }
-}
-
 fn start(body: &str) -> Arc<Runtime> {
-    let world = root().join("assets/worlds/simple.world");
-    let text = format!(
+    start_conf(&format!(
         "driver simulator\nworld {}\n{body}\nend_driver\nload_driver simulator\n",
-        world.display()
-    );
-    let conf = Conf::parse(Path::new("test.conf"), &text).unwrap_or_else(|e| panic!("{e}"));
-    Runtime::start(&conf).unwrap_or_else(|e| panic!("{e}"))
+        world_path("simple.world")
+    ))
 }
 
 #[test]
@@ -533,6 +513,9 @@ fn the_driver_loads_from_a_conf_and_publishes() {
     let enc: Arc<Interface<Encoders>> = rt.interfaces.get("encoders").unwrap();
     let laser: Arc<Interface<Laser>> = rt.interfaces.get("laser").unwrap();
     assert!(rt.interfaces.get::<Laser>("laser.robot2").is_ok());
+    // The static world is in the name space for schemas that draw or plan over it.
+    let world = jderobot::drivers::simulator::loaded_world(&rt).expect("simulator.world");
+    assert!(world.segments.len() >= 5, "the room and its partition");
     assert!(rt.interfaces.get::<Encoders>("encoders.robot2").is_ok());
     eventually("encoders published a few times", || enc.clock() > 3);
     let e = enc.read();

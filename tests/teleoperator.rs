@@ -2,10 +2,10 @@
 //! move the simulated robot and its camera; the name space changes them.
 #![cfg(feature = "teleoperator")]
 
-use std::{
-    path::Path,
-    time::{Duration, Instant},
-};
+mod common;
+
+use common::{poll_until, start_conf, world_path};
+use std::{sync::Arc, time::Duration};
 
 use jderobot::{
     conf::Conf,
@@ -14,43 +14,23 @@ use jderobot::{
 };
 use parking_lot::Mutex;
 
-fn wait_until(secs: u64, mut f: impl FnMut() -> bool) -> bool {
-    let t = Instant::now();
-    while t.elapsed() < Duration::from_secs(secs) {
-        if f() {
-            return true;
-        }
-        std::thread::sleep(Duration::from_millis(50));
-    }
-    false
-}
-
-fn start(body: &str) -> (tempfile::TempDir, std::sync::Arc<Runtime>) {
-    let dir = tempfile::tempdir().unwrap();
-    let world = Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/worlds/simple.world");
-    let file = dir.path().join("teleoperator.conf");
-    std::fs::write(
-        &file,
-        format!(
-            "driver simulator\nworld {}\nrobot robot1 1000 2000 0\nprovides encoders\n\
-             provides motors\nprovides laser\nprovides pantiltencoders\nprovides pantiltmotors\n\
-             speed 4\nend_driver\nschema teleoperator\n{body}end_schema\n\
-             load_driver simulator\nload_schema teleoperator\nrun teleoperator\n",
-            world.display()
-        ),
-    )
-    .unwrap();
-    let rt = Runtime::start(&Conf::load(&file).unwrap()).expect("starts");
-    (dir, rt)
+fn start(body: &str) -> Arc<Runtime> {
+    start_conf(&format!(
+        "driver simulator\nworld {}\nrobot robot1 1000 2000 0\nprovides encoders\n\
+         provides motors\nprovides laser\nprovides pantiltencoders\nprovides pantiltmotors\n\
+         speed 4\nend_driver\nschema teleoperator\n{body}end_schema\n\
+         load_driver simulator\nload_schema teleoperator\nrun teleoperator\n",
+        world_path("simple.world")
+    ))
 }
 
 #[test]
 fn conf_commands_drive_the_base_and_aim_the_pantilt() {
-    let (_dir, rt) = start("base 300 0\npantilt 30 -10\n");
+    let rt = start("base 300 0\npantilt 30 -10\n");
     let enc = rt.interfaces.get::<Encoders>("encoders").unwrap();
     let pte = rt.interfaces.get::<PtEncoders>("pantiltencoders").unwrap();
-    let moved = wait_until(20, || enc.read().value.x > 1500.0);
-    let aimed = wait_until(20, || {
+    let moved = poll_until(20, || enc.read().value.x > 1500.0);
+    let aimed = poll_until(20, || {
         let p = pte.read().value;
         (p.pan_angle - 30.0).abs() < 0.5 && (p.tilt_angle + 10.0).abs() < 0.5
     });
@@ -61,7 +41,7 @@ fn conf_commands_drive_the_base_and_aim_the_pantilt() {
         .import::<Mutex<Motors>>("teleoperator", "base")
         .expect("exports base");
     *base.lock() = Motors::default();
-    let stopped = wait_until(20, || {
+    let stopped = poll_until(20, || {
         let a = enc.read().value.x;
         std::thread::sleep(Duration::from_millis(300));
         (enc.read().value.x - a).abs() < 1.0
@@ -71,7 +51,7 @@ fn conf_commands_drive_the_base_and_aim_the_pantilt() {
         .import::<Mutex<[f32; 2]>>("teleoperator", "pantilt")
         .expect("exports pantilt");
     *pt.lock() = [-45.0, 20.0];
-    let reaimed = wait_until(20, || (pte.read().value.pan_angle + 45.0).abs() < 0.5);
+    let reaimed = poll_until(20, || (pte.read().value.pan_angle + 45.0).abs() < 0.5);
     rt.shutdown();
     assert!(moved, "the robot did not drive ahead: x = {}", e.x);
     assert!(

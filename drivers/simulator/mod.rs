@@ -55,6 +55,10 @@
 //! The laser, sonars and cameras are computed only while someone uses them
 //! (resume/suspend), unless `publish_always on`.
 //!
+//! # Name space
+//! `simulator.world`: the static [`World`] (walls, boxes, where balls start), for
+//! schemas that draw or plan over the map ([`loaded_world`]).
+//!
 //! # World file
 //! Line based, `#` comments, lengths in mm, angles in degrees; errors name
 //! `file:line`. Colours are names (`red`, `green`, `blue`, `yellow`, `orange`,
@@ -837,7 +841,18 @@ fn run(mut sc: SimConf, mut robots: Vec<RobotIfaces>, stop: &AtomicBool) {
 
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>> {
     let sc = SimConf::parse(conf)?;
+    rt.names
+        .export(&conf.name, WORLD_EXPORT, sc.sim.world.clone())?;
     Ok(Box::new(SimDriver::start(sc, &rt.interfaces, &conf.name)?))
+}
+
+/// The name under which the driver exports its (static) [`World`].
+pub const WORLD_EXPORT: &str = "world";
+
+/// The world of a loaded simulator driver, for schemas that draw or plan over the
+/// map (introrob, teleoperator); None if no simulator is loaded.
+pub fn loaded_world(rt: &Runtime) -> Option<Arc<World>> {
+    rt.names.import::<World>("simulator", WORLD_EXPORT).ok()
 }
 
 crate::register_driver!(

@@ -23,7 +23,7 @@
 //! max_w 40                 # deg/s (default 30)
 //! teleop 0 0               # V W: the initial teleoperation command
 //! world ../assets/worlds/simple.world   # the map for gpp and the world view;
-//!                          #   default: the simulator's world in the same conf; `none`: no map
+//!                          #   default: the loaded simulator's world; `none`: no map
 //! cell 50                  # gpp grid cell, mm (default 50)
 //! cycle 100                # ms (default 100)
 //! laser laser              # interface names (defaults shown); sonars, bumpers
@@ -48,7 +48,7 @@ pub mod vff;
 
 use std::{
     fmt,
-    path::{Path, PathBuf},
+    path::PathBuf,
     str::FromStr,
     sync::Arc,
     time::{Duration, Instant},
@@ -57,10 +57,9 @@ use std::{
 use parking_lot::Mutex;
 
 use crate::{
-    conf::{ComponentConf, Conf, ConfError},
+    conf::{ComponentConf, ConfError},
     drivers::simulator::World,
     interfaces::{Bumpers, Encoders, Image, Interface, Laser, Motors, Sonars},
-    registry::Kind,
     runtime::{Context, Runtime, Schema},
 };
 
@@ -174,11 +173,7 @@ impl Shared {
     }
     /// Sets the teleoperation command (clamped to the maxima).
     pub fn set_teleop(&self, v: f32, w: f32) {
-        let fin = |x: f32| if x.is_finite() { x } else { 0.0 };
-        *self.teleop.lock() = Motors {
-            v: limit(fin(v), -self.max_v, self.max_v),
-            w: limit(fin(w), -self.max_w, self.max_w),
-        };
+        *self.teleop.lock() = Motors::limited(v, w, self.max_v, self.max_w);
     }
 }
 
@@ -302,11 +297,7 @@ impl Brain {
                 m
             }
         };
-        let fin = |x: f32| if x.is_finite() { x } else { 0.0 };
-        let m = Motors {
-            v: limit(fin(m.v), -self.shared.max_v, self.shared.max_v),
-            w: limit(fin(m.w), -self.shared.max_w, self.shared.max_w),
-        };
+        let m = Motors::limited(m.v, m.w, self.shared.max_v, self.shared.max_w);
         self.robot.v = m.v;
         self.robot.w = m.w;
         view.command = m;
@@ -452,20 +443,6 @@ fn shared_value<T: Send + 'static>(
     a
 }
 
-/// The simulator's world file in the main conf, if it loads a simulator with one.
-fn simulator_world(conf_file: &Path) -> Option<PathBuf> {
-    let conf = Conf::load(conf_file).ok()?;
-    let own = conf.directives.iter().find_map(|d| match &d.action {
-        crate::conf::Action::Load { name, file, .. } if name == "simulator" => Some(file.clone()),
-        _ => None,
-    })?;
-    let cc = conf
-        .component_conf(Kind::Driver, "simulator", own.as_deref())
-        .ok()?;
-    let l = cc.line("world")?;
-    Some(cc.resolve(l.args().first()?))
-}
-
 /// Parsed conf.
 struct Settings {
     behaviour: Behaviour,
@@ -587,9 +564,7 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
             Some(Arc::new(w))
         }
         None if s.world_none => None,
-        None => simulator_world(rt.conf_file())
-            .and_then(|f| World::load(&f).ok())
-            .map(Arc::new),
+        None => crate::drivers::simulator::loaded_world(rt),
     };
     let need = |name: &str, what: &str| -> anyhow::Result<()> {
         if rt.interfaces.contains(name) {
@@ -632,10 +607,7 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
     children.extend([sonars_n, bumpers_n, camera_n].into_iter().flatten());
 
     let c = conf.name.as_str();
-    let teleop = Motors {
-        v: limit(s.teleop.v, -s.max_v, s.max_v),
-        w: limit(s.teleop.w, -s.max_w, s.max_w),
-    };
+    let teleop = Motors::limited(s.teleop.v, s.teleop.w, s.max_v, s.max_w);
     let shared = match rt.names.import::<Shared>(c, "state") {
         // A re-init (the shell's `init`): the panel and importers keep the state
         // exported at load; the conf's behaviour, target and teleop apply now (the
@@ -684,15 +656,6 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
         #[cfg(feature = "gui")]
         panel,
     }))
-}
-
-/// `x` limited to [lo, hi]; unlike `f32::clamp` it never panics (bad bounds or NaN).
-fn limit(x: f32, lo: f32, hi: f32) -> f32 {
-    if x.is_nan() {
-        0.0f32.max(lo).min(hi)
-    } else {
-        x.max(lo).min(hi)
-    }
 }
 
 crate::register_schema!(

@@ -11,7 +11,7 @@
 //! `turn_in_place` degrees of the heading, slower near the target and when the
 //! way ahead is short.
 
-use crate::interfaces::{Encoders, Laser, Motors};
+use crate::interfaces::{Encoders, Laser, Motors, limit};
 
 use super::navigation::{LASER_X, absolute_to_relative};
 
@@ -196,14 +196,5 @@ pub fn command(pose: &Encoders, laser: &Laser, target: [f32; 2], p: &VffParams) 
         motors: steer(f.resultant, dist, laser, p),
         forces: f,
         arrived: false,
-    }
-}
-
-/// `x` limited to [lo, hi]; unlike `f32::clamp` it never panics (bad bounds or NaN).
-fn limit(x: f32, lo: f32, hi: f32) -> f32 {
-    if x.is_nan() {
-        0.0f32.max(lo).min(hi)
-    } else {
-        x.max(lo).min(hi)
     }
 }

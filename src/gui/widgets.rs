@@ -706,20 +706,24 @@ impl TimePlot {
 // ---------------------------------------------------------------------------
 // Joystick
 
+/// `norm` with each coordinate limited to [-1, 1]; a non-finite one (a degenerate
+/// pad size) counts as 0, so a bad frame never sends a wild command.
+fn clamp_unit(norm: Vec2) -> Vec2 {
+    let c = |t: f32| {
+        if t.is_finite() {
+            t.clamp(-1.0, 1.0)
+        } else {
+            0.0
+        }
+    };
+    Vec2::new(c(norm.x), c(norm.y))
+}
+
 /// Maps a joystick offset to (v mm/s, w deg/s): `norm` is the offset from the pad's
 /// centre in units of its half size (x right, y down), clamped to [-1, 1]. Up is
 /// forward (+v), left is a counter-clockwise turn (+w).
 pub fn joystick_to_vw(norm: Vec2, max_v: f32, max_w: f32) -> (f32, f32) {
-    let x = if norm.x.is_finite() {
-        norm.x.clamp(-1.0, 1.0)
-    } else {
-        0.0
-    };
-    let y = if norm.y.is_finite() {
-        norm.y.clamp(-1.0, 1.0)
-    } else {
-        0.0
-    };
+    let Vec2 { x, y } = clamp_unit(norm);
     (-y * max_v, -x * max_w)
 }
 
@@ -829,16 +833,7 @@ impl From<&PtMotors> for PanTiltLimits {
 /// Maps a pad position (`norm` in [-1, 1], x right, y down) to (longitude, latitude)
 /// in degrees: left edge = max longitude (pan left is positive), top = max latitude.
 pub fn pad_to_pantilt(norm: Vec2, l: &PanTiltLimits) -> (f32, f32) {
-    let x = if norm.x.is_finite() {
-        norm.x.clamp(-1.0, 1.0)
-    } else {
-        0.0
-    };
-    let y = if norm.y.is_finite() {
-        norm.y.clamp(-1.0, 1.0)
-    } else {
-        0.0
-    };
+    let Vec2 { x, y } = clamp_unit(norm);
     let lerp = |lo: f32, hi: f32, t: f32| lo + (hi - lo) * t;
     (
         lerp(l.max_longitude, l.min_longitude, (x + 1.0) / 2.0),

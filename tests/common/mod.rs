@@ -1,0 +1,120 @@
+//! Helpers the integration tests share; each test crate `mod common;` and uses
+//! what it needs.
+#![allow(dead_code)]
+
+use std::{
+    path::{Path, PathBuf},
+    process::{Command, Stdio},
+    sync::Arc,
+    time::{Duration, Instant},
+};
+
+use jderobot::{Conf, Runtime, State};
+
+/// The crate's root, where `assets/` and `examples/` are.
+pub fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// Polls `f` every few ms until it holds (true) or `secs` pass (false).
+pub fn poll_until(secs: u64, mut f: impl FnMut() -> bool) -> bool {
+    let t0 = Instant::now();
+    while !f() {
+        if t0.elapsed() > Duration::from_secs(secs) {
+            return false;
+        }
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    true
+}
+
+/// Polls `f` until it holds; fails the test after 20 s.
+pub fn eventually(what: &str, f: impl FnMut() -> bool) {
+    assert!(poll_until(20, f), "timed out waiting for: {what}");
+}
+
+/// A loaded schema's state.
+pub fn state(rt: &Runtime, name: &str) -> State {
+    rt.schema_status(name).expect("loaded").state
+}
+
+/// Starts a runtime from conf text (as if read from `test.conf`).
+pub fn start_conf(text: &str) -> Arc<Runtime> {
+    let conf = Conf::parse(Path::new("test.conf"), text).unwrap_or_else(|e| panic!("{e}"));
+    Runtime::start(&conf).unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// The path of a world under `assets/worlds/`, for conf text.
+pub fn world_path(name: &str) -> String {
+    root()
+        .join("assets/worlds")
+        .join(name)
+        .display()
+        .to_string()
+}
+
+/// Takes a loaded schema's panel out of the runtime, to drive it in a harness.
+#[cfg(feature = "gui")]
+pub fn take_panel(rt: &Runtime, name: &str) -> Box<dyn jderobot::gui::Panel> {
+    rt.schema(name)
+        .expect("loaded")
+        .panel
+        .lock()
+        .take()
+        .expect("has a panel")
+}
+
+/// Whether `cmd` is on the PATH.
+pub fn have(cmd: &str) -> bool {
+    Command::new("sh")
+        .args(["-c", &format!("command -v {cmd}")])
+        .stdout(Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success())
+}
+
+/// Whether a screenshot test can run here: an X display and imagemagick's
+/// `tools`. If not, says why (naming `test`) so the test can pass without checking.
+pub fn can_screenshot(test: &str, tools: &[&str]) -> bool {
+    if std::env::var_os("DISPLAY").is_none_or(|d| d.is_empty()) {
+        eprintln!("skipped: DISPLAY is not set (run under `xvfb-run -a cargo test --test {test}`)");
+        return false;
+    }
+    if let Some(t) = tools.iter().find(|t| !have(t)) {
+        eprintln!("skipped: imagemagick's `{t}` is not installed");
+        return false;
+    }
+    true
+}
+
+/// Starts the real binary on the X display with `conf` (relative to the crate's
+/// root), standard error to `log`, standard input a pipe for shell commands.
+pub fn spawn_window(conf: &str, log: &Path) -> std::process::Child {
+    Command::new(env!("CARGO_BIN_EXE_jderobot"))
+        .arg(conf)
+        .current_dir(root())
+        .env("LIBGL_ALWAYS_SOFTWARE", "1")
+        .stdin(Stdio::piped())
+        .stdout(Stdio::null())
+        .stderr(std::fs::File::create(log).expect("log file"))
+        .spawn()
+        .expect("start jderobot")
+}
+
+/// Types `commands` into the child's shell and waits up to 20 s for it to exit;
+/// kills it and gives None if it does not.
+pub fn quit(mut child: std::process::Child, commands: &str) -> Option<std::process::ExitStatus> {
+    use std::io::Write;
+    if let Some(stdin) = child.stdin.as_mut() {
+        let _ = stdin.write_all(commands.as_bytes());
+    }
+    let mut status = None;
+    if !poll_until(20, || {
+        status = child.try_wait().ok().flatten();
+        status.is_some()
+    }) {
+        let _ = child.kill();
+        let _ = child.wait();
+    }
+    status
+}
