@@ -380,8 +380,7 @@ impl Schema for Introrob {
         self.cycle
     }
     fn on_run(&mut self, ctx: &Context) -> anyhow::Result<()> {
-        let names: Vec<&str> = self.children.iter().map(String::as_str).collect();
-        ctx.run_children(&names, None)?;
+        ctx.run_children(&self.children, None)?;
         self.started = Instant::now();
         Ok(())
     }

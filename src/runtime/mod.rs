@@ -298,9 +298,10 @@ impl Context {
     /// optional arbitration among them. They are stopped when this schema stops.
     pub fn run_children(
         &self,
-        names: &[&str],
+        names: &[impl AsRef<str>],
         arbitration: Option<Arbitration>,
     ) -> Result<(), RuntimeError> {
+        let names: Vec<&str> = names.iter().map(AsRef::as_ref).collect();
         let schema_names: Vec<String> = names
             .iter()
             .filter(|n| self.runtime.schema(n).is_some())
