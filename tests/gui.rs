@@ -4,7 +4,7 @@
 
 mod common;
 
-use common::{eventually, state, take_panel};
+use common::{eventually, panel_harness, state};
 use std::{path::Path, sync::Arc};
 
 use egui::{Pos2, Rect, pos2, vec2};
@@ -46,11 +46,7 @@ fn click_at<S>(h: &mut Harness<'_, S>, pos: Pos2) {
 #[test]
 fn mastergui_run_stop_toggles_schema_state() {
     let rt = runtime_with(&[("mastergui", Kind::Schema), ("myschema", Kind::Schema)]);
-    let mut panel = take_panel(&rt, "mastergui");
-    let rt2 = rt.clone();
-    let mut h = Harness::builder()
-        .with_size(vec2(700.0, 700.0))
-        .build_ui(move |ui| panel.ui(ui, &rt2));
+    let mut h = panel_harness(&rt, "mastergui", vec2(700.0, 700.0));
     h.run();
     assert_eq!(state(&rt, "myschema"), State::Slept);
 
@@ -79,11 +75,7 @@ fn mastergui_run_stop_toggles_schema_state() {
 #[test]
 fn mastergui_show_hide_toggles_the_shared_shown_state() {
     let rt = runtime_with(&[("mastergui", Kind::Schema), ("myschema", Kind::Schema)]);
-    let mut panel = take_panel(&rt, "mastergui");
-    let rt2 = rt.clone();
-    let mut h = Harness::builder()
-        .with_size(vec2(700.0, 700.0))
-        .build_ui(move |ui| panel.ui(ui, &rt2));
+    let mut h = panel_harness(&rt, "mastergui", vec2(700.0, 700.0));
     h.run();
     let shown = |rt: &Runtime| rt.schema("myschema").expect("loaded").shown();
     assert!(!shown(&rt));
@@ -118,11 +110,7 @@ fn mastergui_lists_drivers_services_and_their_interfaces() {
         })
         .expect("publish");
     laser.resume();
-    let mut panel = take_panel(&rt, "mastergui");
-    let rt2 = rt.clone();
-    let mut h = Harness::builder()
-        .with_size(vec2(700.0, 700.0))
-        .build_ui(move |ui| panel.ui(ui, &rt2));
+    let mut h = panel_harness(&rt, "mastergui", vec2(700.0, 700.0));
     h.run();
     h.get_by_label("gui (service)");
     assert!(h.query_all_by_label("laser").count() >= 1);

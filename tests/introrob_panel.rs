@@ -5,11 +5,11 @@
 
 mod common;
 
-use common::{start_conf, take_panel, world_path};
+use common::{panel_harness, start_conf, world_path};
 use std::sync::Arc;
 
 use egui::vec2;
-use egui_kittest::{Harness, kittest::Queryable};
+use egui_kittest::kittest::Queryable;
 use jderobot::{
     runtime::Runtime,
     schemas::introrob::{Behaviour, Shared},
@@ -29,11 +29,7 @@ fn start(schema: &str, body: &str) -> Arc<Runtime> {
 fn introrob_panel_sets_behaviour_target_and_stop() {
     let rt = start("introrob", "behaviour teleop\n");
     let shared = rt.names.import::<Shared>("introrob", "state").unwrap();
-    let mut panel = take_panel(&rt, "introrob");
-    let rt2 = rt.clone();
-    let mut h = Harness::builder()
-        .with_size(vec2(1000.0, 700.0))
-        .build_ui(move |ui| panel.ui(ui, &rt2));
+    let mut h = panel_harness(&rt, "introrob", vec2(1000.0, 700.0));
     h.run();
     h.get_by_label("vff").click();
     h.run();
@@ -63,11 +59,7 @@ fn introrob_panel_sets_behaviour_target_and_stop() {
 #[test]
 fn teleoperator_panel_draws_and_stops() {
     let rt = start("teleoperator", "base 200 10\n");
-    let mut panel = take_panel(&rt, "teleoperator");
-    let rt2 = rt.clone();
-    let mut h = Harness::builder()
-        .with_size(vec2(1000.0, 700.0))
-        .build_ui(move |ui| panel.ui(ui, &rt2));
+    let mut h = panel_harness(&rt, "teleoperator", vec2(1000.0, 700.0));
     h.run();
     h.get_by_label("teleoperator 3d");
     h.get_by_label("teleoperator pantilt");

@@ -53,15 +53,25 @@ pub fn world_path(name: &str) -> String {
         .to_string()
 }
 
-/// Takes a loaded schema's panel out of the runtime, to drive it in a harness.
+/// A loaded schema's panel, taken out of the runtime and drawn alone in an
+/// egui_kittest harness of `size` points (headless: no display, no GPU).
 #[cfg(feature = "gui")]
-pub fn take_panel(rt: &Runtime, name: &str) -> Box<dyn jderobot::gui::Panel> {
-    rt.schema(name)
+pub fn panel_harness(
+    rt: &Arc<Runtime>,
+    name: &str,
+    size: egui::Vec2,
+) -> egui_kittest::Harness<'static> {
+    let mut panel = rt
+        .schema(name)
         .expect("loaded")
         .panel
         .lock()
         .take()
-        .expect("has a panel")
+        .expect("has a panel");
+    let rt = rt.clone();
+    egui_kittest::Harness::builder()
+        .with_size(size)
+        .build_ui(move |ui| panel.ui(ui, &rt))
 }
 
 /// Whether `cmd` is on the PATH.
