@@ -475,16 +475,9 @@ impl Sim {
             let (rp, rr) = ([rb.pose.x, rb.pose.y], rb.model.radius);
             let rv = [rb.v * rb.pose.theta.cos(), rb.v * rb.pose.theta.sin()];
             for b in &mut self.balls {
-                let d = [b.pos[0] - rp[0], b.pos[1] - rp[1]];
-                let dist = (d[0] * d[0] + d[1] * d[1]).sqrt();
                 let min = rr + b.radius;
-                if dist >= min {
+                let Some((nrm, _)) = overlap(rp, b.pos, min) else {
                     continue;
-                }
-                let nrm = if dist > 1e-9 {
-                    [d[0] / dist, d[1] / dist]
-                } else {
-                    [1.0, 0.0]
                 };
                 let rel = (rv[0] - b.vel[0]) * nrm[0] + (rv[1] - b.vel[1]) * nrm[1];
                 if rel > 0.0 {
@@ -499,16 +492,9 @@ impl Sim {
             for c in a + 1..n {
                 let (l, r) = self.balls.split_at_mut(c);
                 let (p, q) = (&mut l[a], &mut r[0]);
-                let d = [q.pos[0] - p.pos[0], q.pos[1] - p.pos[1]];
-                let dist = (d[0] * d[0] + d[1] * d[1]).sqrt();
                 let min = p.radius + q.radius;
-                if dist >= min {
+                let Some((nrm, dist)) = overlap(p.pos, q.pos, min) else {
                     continue;
-                }
-                let nrm = if dist > 1e-9 {
-                    [d[0] / dist, d[1] / dist]
-                } else {
-                    [1.0, 0.0]
                 };
                 let rel = (p.vel[0] - q.vel[0]) * nrm[0] + (p.vel[1] - q.vel[1]) * nrm[1];
                 if rel > 0.0 {
@@ -591,4 +577,20 @@ impl Sim {
             }
         }
     }
+}
+
+/// When circle centres `a` and `b` are closer than `min` (the sum of the radii):
+/// the unit normal from `a` to `b` ((1, 0) if they coincide) and their distance.
+fn overlap(a: [f64; 2], b: [f64; 2], min: f64) -> Option<([f64; 2], f64)> {
+    let d = [b[0] - a[0], b[1] - a[1]];
+    let dist = (d[0] * d[0] + d[1] * d[1]).sqrt();
+    if dist >= min {
+        return None;
+    }
+    let normal = if dist > 1e-9 {
+        [d[0] / dist, d[1] / dist]
+    } else {
+        [1.0, 0.0]
+    };
+    Some((normal, dist))
 }
