@@ -104,7 +104,8 @@ fn runtime(
             image,
             count: count.clone(),
         }),
-    );
+    )
+    .expect("add schema");
     let _ = rt.show(name);
     (rt, count)
 }

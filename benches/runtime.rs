@@ -71,7 +71,8 @@ fn ours(n: usize, cycle: Duration, span: Duration) -> Figures {
             (span.as_nanos() / cycle.as_nanos()) as usize + 16,
         )));
         logs.push(starts.clone());
-        rt.add_schema(&format!("probe{i}"), "", Box::new(Probe { cycle, starts }));
+        rt.add_schema(&format!("probe{i}"), "", Box::new(Probe { cycle, starts }))
+            .expect("add schema");
     }
     jderobot::output::set_sink(Some(Box::new(|_| {})));
     for i in 0..n {

@@ -50,7 +50,8 @@ fn counter(rt: &Runtime, name: &str) -> (Arc<AtomicU64>, Arc<AtomicBool>) {
             ready: ready.clone(),
             cycle_ms: 2,
         }),
-    );
+    )
+    .expect("add schema");
     (count, ready)
 }
 
@@ -150,7 +151,8 @@ fn parent_runs_children_and_only_the_winner_iterates() {
             prefer_second: prefer_second.clone(),
             children: ["left", "right"],
         }),
-    );
+    )
+    .expect("add schema");
     rt.run("parent").unwrap();
     eventually("left wins", || {
         state(&rt, "left") == State::Winner && state(&rt, "right") == State::Ready
@@ -204,7 +206,9 @@ fn without_arbitration_function_first_ready_brother_wins() {
     let rt = runtime();
     counter(&rt, "x");
     counter(&rt, "y");
-    rt.add_schema("p", "", Box::new(P));
+    rt.add_schema("p", "", Box::new(P)).expect("add schema");
+    let again = rt.add_schema("x", "", Box::new(P)).unwrap_err();
+    assert_eq!(again.to_string(), "`x` is already loaded");
     rt.run("p").unwrap();
     eventually("x winner, y ready", || {
         state(&rt, "x") == State::Winner && state(&rt, "y") == State::Ready
@@ -245,8 +249,10 @@ impl Schema for Failer {
 fn a_panicking_or_failing_schema_is_stopped_and_the_others_run_on() {
     let rt = runtime();
     let (count, _) = counter(&rt, "healthy");
-    rt.add_schema("bad", "", Box::new(Panicker { after: 3, n: 0 }));
-    rt.add_schema("failing", "", Box::new(Failer));
+    rt.add_schema("bad", "", Box::new(Panicker { after: 3, n: 0 }))
+        .expect("add schema");
+    rt.add_schema("failing", "", Box::new(Failer))
+        .expect("add schema");
     rt.run("healthy").unwrap();
     rt.run("bad").unwrap();
     rt.run("failing").unwrap();
@@ -283,7 +289,8 @@ fn cronos_measures_ips() {
             ready: Arc::new(AtomicBool::new(true)),
             cycle_ms: 10,
         }),
-    );
+    )
+    .expect("add schema");
     rt.run("tenms").unwrap();
     eventually("iterations", || count.load(Ordering::Acquire) >= 50);
     let s = rt.schema_status("tenms").unwrap();
@@ -318,7 +325,8 @@ fn interfaces_run_as_children_are_resumed_and_suspended() {
     let rt = runtime();
     let laser = rt.interfaces.provide::<Laser>("laser", "test").unwrap();
     let motors = rt.interfaces.provide::<Motors>("motors", "test").unwrap();
-    rt.add_schema("user", "", Box::new(UsesLaser));
+    rt.add_schema("user", "", Box::new(UsesLaser))
+        .expect("add schema");
     rt.run("user").unwrap();
     eventually("laser resumed", || {
         laser.users() == 1 && motors.users() == 1

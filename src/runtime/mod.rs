@@ -427,7 +427,7 @@ impl Runtime {
         match comp.factory {
             Factory::Schema(make) => {
                 let schema = make(cconf, self).map_err(fail)?;
-                self.add_schema(comp.name, comp.summary, schema);
+                self.add_schema(comp.name, comp.summary, schema)?;
             }
             Factory::Driver(make) => {
                 let driver = make(cconf, self).map_err(fail)?;
@@ -451,7 +451,15 @@ impl Runtime {
 
     /// Adds a schema object under `name` and starts its (sleeping) thread.
     #[allow(unused_mut)]
-    pub fn add_schema(&self, name: &str, summary: &'static str, mut schema: Box<dyn Schema>) {
+    pub fn add_schema(
+        &self,
+        name: &str,
+        summary: &'static str,
+        mut schema: Box<dyn Schema>,
+    ) -> Result<(), RuntimeError> {
+        if self.is_loaded(name) {
+            return Err(RuntimeError::AlreadyLoaded(name.into()));
+        }
         #[cfg(feature = "gui")]
         let panel = schema.panel();
         let mut all = self.schemas.write();
@@ -486,9 +494,10 @@ impl Runtime {
         let handle = std::thread::Builder::new()
             .name(name.to_string())
             .spawn(move || schema_thread(rt, s, schema))
-            .expect("spawn schema thread");
+            .map_err(|e| RuntimeError::Load(format!("{name}: cannot start its thread: {e}")))?;
         *slot.thread.lock() = Some(handle);
         all.push(slot);
+        Ok(())
     }
 
     /// Whether a schema, driver or service of this name is loaded.
