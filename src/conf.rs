@@ -313,11 +313,11 @@ impl Conf {
                 message: format!("cannot read conf file: {e}"),
             }])
         })?;
-        Conf::parse(file, &text)
+        Conf::parse(&text, file)
     }
 
     /// Parses conf text; `file` names it in errors and anchors relative paths.
-    pub fn parse(file: &Path, text: &str) -> Result<Conf, ConfErrors> {
+    pub fn parse(text: &str, file: &Path) -> Result<Conf, ConfErrors> {
         let fname: Arc<Path> = Arc::from(file);
         let mut conf = Conf {
             file: file.to_path_buf(),
@@ -470,7 +470,7 @@ impl Conf {
                     }])
                 })?;
                 // The component's own file may hold its section, or be all its lines.
-                let own = match Conf::parse(path, &text) {
+                let own = match Conf::parse(&text, path) {
                     Ok(c) => c,
                     Err(_) => Conf {
                         file: path.to_path_buf(),
@@ -517,7 +517,7 @@ mod tests {
     use super::*;
 
     fn parse(text: &str) -> Result<Conf, ConfErrors> {
-        Conf::parse(Path::new("t.conf"), text)
+        Conf::parse(text, Path::new("t.conf"))
     }
 
     #[test]

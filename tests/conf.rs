@@ -9,7 +9,7 @@ use jderobot::{
 };
 
 fn parse(text: &str) -> Result<Conf, String> {
-    Conf::parse(Path::new("jde.conf"), text).map_err(|e| e.to_string())
+    Conf::parse(text, Path::new("jde.conf")).map_err(|e| e.to_string())
 }
 
 fn check(text: &str) -> Vec<String> {

@@ -440,10 +440,10 @@ fn the_asset_worlds_load() {
 
 #[test]
 fn world_file_errors_name_file_and_line() {
-    let e = World::parse(Path::new("my.world"), "room 0 0 10 10\nbox 1 2 3\n").unwrap_err();
+    let e = World::parse("room 0 0 10 10\nbox 1 2 3\n", Path::new("my.world")).unwrap_err();
     assert_eq!(e.to_string().split(": ").next(), Some("my.world:2"));
     assert!(e.message.contains("usage: box"), "{e}");
-    let e = World::parse(Path::new("my.world"), "floorplan missing.png 50\n").unwrap_err();
+    let e = World::parse("floorplan missing.png 50\n", Path::new("my.world")).unwrap_err();
     assert!(
         e.to_string().starts_with("my.world:1: floorplan") && e.message.contains("cannot read"),
         "{e}"

@@ -358,11 +358,11 @@ impl World {
             line: 0,
             message: format!("cannot read world file: {e}"),
         })?;
-        World::parse(file, &text)
+        World::parse(&text, file)
     }
 
     /// Parses world file text; `file` names it in errors and anchors relative paths.
-    pub fn parse(file: &Path, text: &str) -> Result<World, WorldError> {
+    pub fn parse(text: &str, file: &Path) -> Result<World, WorldError> {
         let mut w = World::new();
         let mut wall_height = 1000.0;
         let mut wall_color: Rgb = [225, 215, 185];
@@ -940,12 +940,12 @@ mod tests {
 
     #[test]
     fn parse_errors_name_the_line() {
-        let e = World::parse(Path::new("x.world"), "# c\nwall 0 0 1000\n").unwrap_err();
+        let e = World::parse("# c\nwall 0 0 1000\n", Path::new("x.world")).unwrap_err();
         assert_eq!(e.line, 2);
         assert!(e.to_string().starts_with("x.world:2:"), "{e}");
-        let e = World::parse(Path::new("x.world"), "ball 0 0 100 mauve\n").unwrap_err();
+        let e = World::parse("ball 0 0 100 mauve\n", Path::new("x.world")).unwrap_err();
         assert!(e.message.contains("not a colour"), "{e}");
-        let e = World::parse(Path::new("x.world"), "tree 1 2\n").unwrap_err();
+        let e = World::parse("tree 1 2\n", Path::new("x.world")).unwrap_err();
         assert!(e.message.contains("unknown keyword"), "{e}");
     }
 }

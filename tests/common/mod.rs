@@ -40,7 +40,7 @@ pub fn state(rt: &Runtime, name: &str) -> State {
 
 /// Starts a runtime from conf text (as if read from `test.conf`).
 pub fn start_conf(text: &str) -> Arc<Runtime> {
-    let conf = Conf::parse(Path::new("test.conf"), text).unwrap_or_else(|e| panic!("{e}"));
+    let conf = Conf::parse(text, Path::new("test.conf")).unwrap_or_else(|e| panic!("{e}"));
     Runtime::start(&conf).unwrap_or_else(|e| panic!("{e}"))
 }
 
