@@ -580,15 +580,27 @@ pub fn run(rt: Arc<Runtime>, conf: Conf) {
         }
     }
     let stdin = std::io::stdin();
-    let mut line = String::new();
-    loop {
-        line.clear();
-        match stdin.lock().read_line(&mut line) {
-            Ok(0) | Err(_) => break,
+    let mut bytes = Vec::new();
+    for n in 1.. {
+        bytes.clear();
+        match stdin.lock().read_until(b'\n', &mut bytes) {
+            Ok(0) => break,
             Ok(_) => {}
+            Err(e) => {
+                eprintln!("shell: standard input: {e}");
+                break;
+            }
         }
         let mut out = std::io::stdout();
         let mut err = std::io::stderr();
+        // A line that is not text is refused on its own; the lines after it still run.
+        let Ok(line) = std::str::from_utf8(&bytes) else {
+            w(
+                &mut err,
+                format!("line {n} of standard input is not UTF-8 text; ignored"),
+            );
+            continue;
+        };
         if shell.execute(line.trim(), &mut out, &mut err) == Flow::Quit {
             break;
         }

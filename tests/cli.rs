@@ -12,7 +12,7 @@ use std::{
 const BIN: &str = env!("CARGO_BIN_EXE_jderobot");
 
 /// Runs the binary with `args`, feeding `input` on stdin after `delay`.
-fn run_with_input(args: &[&str], input: &str, delay: Duration) -> Output {
+fn run_with_input(args: &[&str], input: impl AsRef<[u8]>, delay: Duration) -> Output {
     let mut child = Command::new(BIN)
         .args(args)
         .env("RUST_LOG", "warn")
@@ -24,10 +24,10 @@ fn run_with_input(args: &[&str], input: &str, delay: Duration) -> Output {
         .spawn()
         .expect("spawn jderobot");
     let mut stdin = child.stdin.take().unwrap();
-    let input = input.to_string();
+    let input = input.as_ref().to_vec();
     let feeder = thread::spawn(move || {
         thread::sleep(delay);
-        let _ = stdin.write_all(input.as_bytes());
+        let _ = stdin.write_all(&input);
     });
     let out = child.wait_with_output().expect("wait");
     feeder.join().unwrap();
@@ -292,6 +292,24 @@ fn shell_errors_explain_and_never_kill() {
         text(&out.stdout).contains("myschema: "),
         "ps still works at the end"
     );
+}
+
+/// Binary garbage on standard input is refused a line at a time; the commands
+/// after it still run (nothing typed is lost).
+#[test]
+fn a_line_that_is_not_text_is_refused_and_the_rest_runs() {
+    let out = run_with_input(
+        &["--headless", "examples/myschema.conf"],
+        b"\xff\xfe\x00garbage\nps\nquit\n",
+        Duration::ZERO,
+    );
+    let stderr = text(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("line 1 of standard input is not UTF-8 text; ignored"),
+        "{stderr}"
+    );
+    assert!(text(&out.stdout).contains("myschema: "), "ps ran after it");
 }
 
 #[test]
