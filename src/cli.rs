@@ -37,7 +37,8 @@ pub struct Cli {
 pub enum Command {
     /// List every component compiled into this binary.
     List,
-    /// Parse and validate CONF without running it; exit 1 on problems.
+    /// Parse and validate CONF: its grammar, then every component built from its
+    /// lines as a run would, without running any schema; exit 1 on problems.
     Check {
         /// The conf file to check.
         conf: PathBuf,
@@ -94,7 +95,12 @@ fn check(file: &std::path::Path) -> ExitCode {
             return ExitCode::FAILURE;
         }
     };
-    let problems = runtime::check(&conf);
+    let mut problems = runtime::check(&conf);
+    if problems.is_empty()
+        && let Err(e) = runtime::check_loads(&conf)
+    {
+        problems.push(e);
+    }
     if problems.is_empty() {
         println!(
             "{}: ok ({} sections, {} directives)",

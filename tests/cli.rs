@@ -143,6 +143,31 @@ fn check_reports_file_and_line_and_exits_nonzero() {
     );
     assert!(err.contains("myschema"), "{err}");
 
+    // A component's own lines are checked too, by building it as a run would.
+    let cycle = dir.path().join("cycle.conf");
+    std::fs::write(
+        &cycle,
+        "schema myschema\ncycle abc\nend_schema\nload_schema myschema\nrun myschema\n",
+    )
+    .unwrap();
+    let out = Command::new(BIN)
+        .args(["check", cycle.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = text(&out.stderr);
+    assert!(
+        err.contains(&format!(
+            "{}:2: `cycle`: argument 1 is `abc`",
+            cycle.display()
+        )),
+        "{err}"
+    );
+    assert!(
+        !text(&out.stdout).contains("Hello world"),
+        "check runs nothing"
+    );
+
     let out = Command::new(BIN)
         .args(["check", "examples/myschema.conf"])
         .output()

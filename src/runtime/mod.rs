@@ -359,6 +359,13 @@ impl Runtime {
     /// file order. Stops at the first failure with an error naming its line.
     pub fn start(conf: &Conf) -> Result<Arc<Runtime>, ConfError> {
         let rt = Runtime::new(&conf.file);
+        rt.apply(conf, true)?;
+        Ok(rt)
+    }
+
+    /// Carries out a conf's directives in file order: its loads, and its `run` and
+    /// `show` lines if `run_and_show`.
+    fn apply(&self, conf: &Conf, run_and_show: bool) -> Result<(), ConfError> {
         for d in &conf.directives {
             let at = |e: RuntimeError| ConfError {
                 at: d.at.clone(),
@@ -366,13 +373,14 @@ impl Runtime {
             };
             match &d.action {
                 Action::Load { kind, name, file } => {
-                    rt.load(conf, *kind, name, file.as_deref()).map_err(at)?
+                    self.load(conf, *kind, name, file.as_deref()).map_err(at)?
                 }
-                Action::Run(name) => rt.run(name).map_err(at)?,
-                Action::Show(name) => rt.show(name).map_err(at)?,
+                Action::Run(name) if run_and_show => self.run(name).map_err(at)?,
+                Action::Show(name) if run_and_show => self.show(name).map_err(at)?,
+                Action::Run(_) | Action::Show(_) => {}
             }
         }
-        Ok(rt)
+        Ok(())
     }
 
     /// The main conf file.
@@ -946,6 +954,17 @@ pub fn check(conf: &Conf) -> Vec<ConfError> {
         }
     }
     errors
+}
+
+/// Builds every component of a conf as a run would (each reads its lines and
+/// files, and a driver opens its device), without running or showing anything,
+/// then shuts them down: what `jderobot check` does once [`check`] finds nothing.
+/// Returns the first component that fails, with its line.
+pub fn check_loads(conf: &Conf) -> Result<(), ConfError> {
+    let rt = Runtime::new(&conf.file);
+    let result = rt.apply(conf, false);
+    rt.shutdown();
+    result
 }
 
 /// Whether a graphical display is reachable (X11 or Wayland).
