@@ -376,6 +376,31 @@ pub mod panel {
         out
     }
 
+    /// Balls as wireframe spheres: the equator and two meridians, 16 edges each.
+    pub fn ball_segments(balls: &[crate::drivers::simulator::Ball]) -> Vec<Segment3D> {
+        let mut out = Vec::new();
+        for b in balls {
+            let [r, g, bl] = b.color;
+            let c = Color32::from_rgb(r, g, bl);
+            let (x, y, rad) = (b.pos[0], b.pos[1], b.radius);
+            let circle = |k: usize, plane: usize| {
+                let a = k as f64 * std::f64::consts::TAU / 16.0;
+                let (u, v) = (rad * a.cos(), rad * a.sin());
+                match plane {
+                    0 => [x + u, y + v, rad],
+                    1 => [x + u, y, rad + v],
+                    _ => [x, y + u, rad + v],
+                }
+            };
+            for plane in 0..3 {
+                for k in 0..16 {
+                    out.push((circle(k, plane), circle(k + 1, plane), c));
+                }
+            }
+        }
+        out
+    }
+
     /// The panel.
     pub struct TeleoperatorPanel {
         commands: Arc<Commands>,
@@ -424,7 +449,7 @@ pub mod panel {
             Some("teleoperator".into())
         }
 
-        fn ui(&mut self, ui: &mut egui::Ui, _rt: &Runtime) {
+        fn ui(&mut self, ui: &mut egui::Ui, rt: &Runtime) {
             let pose = self.dev.encoders.as_ref().map(|e| e.read().value);
             let laser = self.dev.laser.as_ref().map(|l| l.snapshot());
             let pt = self
@@ -434,6 +459,7 @@ pub mod panel {
                 .map(|p| p.read().value)
                 .map(|p| (p.pan_angle, p.tilt_angle));
             let mut segs = self.walls.clone();
+            segs.extend(ball_segments(&crate::drivers::simulator::live_balls(rt)));
             if let Some(p) = &pose {
                 if self.follow {
                     self.canvas.orbit.target = [p.x as f64, p.y as f64, 0.0];

@@ -73,3 +73,27 @@ fn teleoperator_panel_draws_and_stops() {
     assert_eq!(base.lock().v, 0.0);
     rt.shutdown();
 }
+
+/// teleoperator's 3D canvas draws a ball as a wireframe sphere resting on the floor.
+#[test]
+fn balls_are_wireframe_spheres_on_the_floor() {
+    use jderobot::{drivers::simulator::Ball, schemas::teleoperator::panel::ball_segments};
+    let ball = Ball {
+        pos: [4500.0, 1200.0],
+        vel: [0.0, 0.0],
+        radius: 110.0,
+        color: [220, 20, 20],
+        friction: 300.0,
+    };
+    let segs = ball_segments(&[ball]);
+    assert_eq!(segs.len(), 48, "three circles of 16 edges");
+    for (a, b, c) in &segs {
+        assert_eq!(*c, egui::Color32::from_rgb(220, 20, 20));
+        for p in [a, b] {
+            let d =
+                ((p[0] - 4500.0).powi(2) + (p[1] - 1200.0).powi(2) + (p[2] - 110.0).powi(2)).sqrt();
+            assert!((d - 110.0).abs() < 1e-9, "{p:?} is on the sphere");
+            assert!(p[2] >= -1e-9, "above the floor");
+        }
+    }
+}

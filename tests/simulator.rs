@@ -10,7 +10,9 @@ use std::{path::Path, sync::Arc, time::Duration};
 
 use jderobot::{
     ComponentConf, Conf, Runtime,
-    drivers::simulator::{BallSpec, Renderer, RobotModel, Sim, SimConf, World},
+    drivers::simulator::{
+        BallSpec, Renderer, RobotModel, Sim, SimConf, World, live_balls, loaded_world,
+    },
     interfaces::{Encoders, Image, Interface, Laser, Motors, PtMotors},
     progeo::{self, HPoint3D},
     registry::Kind,
@@ -504,6 +506,23 @@ fn start(body: &str) -> Arc<Runtime> {
     ))
 }
 
+/// The balls as they roll are in the name space (`simulator.balls`): a robot
+/// driving into simple.world's red ball pushes it east.
+#[test]
+fn the_driver_publishes_the_balls_as_they_roll() {
+    let rt = start("robot robot1 3900 1200 0\nprovides encoders\nprovides motors\nspeed 4\n");
+    let balls = live_balls(&rt);
+    assert_eq!(balls.len(), 1, "simple.world has one ball");
+    assert_eq!((balls[0].pos, balls[0].radius), ([4500.0, 1200.0], 110.0));
+    assert_eq!(balls[0].color, [220, 20, 20]);
+    let motors: Arc<Interface<Motors>> = rt.interfaces.get("motors").unwrap();
+    eventually("the ball to roll east", || {
+        let _ = motors.publish(Motors { v: 400.0, w: 0.0 });
+        live_balls(&rt)[0].pos[0] > 4700.0
+    });
+    rt.shutdown();
+}
+
 #[test]
 fn the_driver_loads_from_a_conf_and_publishes() {
     let rt = start(
@@ -514,7 +533,7 @@ fn the_driver_loads_from_a_conf_and_publishes() {
     let laser: Arc<Interface<Laser>> = rt.interfaces.get("laser").unwrap();
     assert!(rt.interfaces.get::<Laser>("laser.robot2").is_ok());
     // The static world is in the name space for schemas that draw or plan over it.
-    let world = jderobot::drivers::simulator::loaded_world(&rt).expect("simulator.world");
+    let world = loaded_world(&rt).expect("simulator.world");
     assert!(world.segments.len() >= 5, "the room and its partition");
     assert!(rt.interfaces.get::<Encoders>("encoders.robot2").is_ok());
     eventually("encoders published a few times", || enc.clock() > 3);

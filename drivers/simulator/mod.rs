@@ -57,7 +57,9 @@
 //!
 //! # Name space
 //! `simulator.world`: the static [`World`] (walls, boxes, where balls start), for
-//! schemas that draw or plan over the map ([`loaded_world`]).
+//! schemas that draw or plan over the map ([`loaded_world`]); `simulator.balls`:
+//! the balls as they roll ([`LiveBalls`], refreshed at the encoders' period;
+//! [`live_balls`]).
 //!
 //! # World file
 //! Line based, `#` comments, lengths in mm, angles in degrees; errors name
@@ -92,6 +94,7 @@ use std::{
 };
 
 use anyhow::Context as _;
+use arc_swap::ArcSwap;
 
 use crate::{
     conf::{ComponentConf, ConfLine},
@@ -103,7 +106,7 @@ use crate::{
 };
 
 pub use camera::Renderer;
-pub use physics::{Noise, Pose, Rng, Robot, RobotModel, Sim};
+pub use physics::{Ball, Noise, Pose, Rng, Robot, RobotModel, Sim};
 pub use world::{BallSpec, BoxObj, World, WorldError};
 
 /// How simulated time advances.
@@ -581,6 +584,12 @@ struct RobotIfaces {
     cameras: Vec<(Arc<Interface<Image>>, u32, u32, Renderer)>,
 }
 
+/// What the simulator thread publishes to: each robot's interfaces and the balls.
+struct Outputs {
+    robots: Vec<RobotIfaces>,
+    balls: Arc<LiveBalls>,
+}
+
 /// The running driver: a thread that steps the simulation and publishes.
 pub struct SimDriver {
     stop: Arc<AtomicBool>,
@@ -589,8 +598,14 @@ pub struct SimDriver {
 }
 
 impl SimDriver {
-    /// Provides the interfaces of `sc` on `ifaces` and starts the thread.
-    pub fn start(sc: SimConf, ifaces: &Interfaces, provider: &str) -> anyhow::Result<SimDriver> {
+    /// Provides the interfaces of `sc` on `ifaces` and starts the thread, which also
+    /// keeps `balls` up to date.
+    pub fn start(
+        sc: SimConf,
+        ifaces: &Interfaces,
+        provider: &str,
+        balls: Arc<LiveBalls>,
+    ) -> anyhow::Result<SimDriver> {
         let mut robots = Vec::new();
         for (k, p) in sc.provides.iter().enumerate() {
             let pt_limits = sc.sim.robots[k].model.pantilt;
@@ -647,7 +662,7 @@ impl SimDriver {
         let stop2 = stop.clone();
         let thread = std::thread::Builder::new()
             .name("simulator".into())
-            .spawn(move || run(sc, robots, &stop2))
+            .spawn(move || run(sc, Outputs { robots, balls }, &stop2))
             .context("cannot start the simulator thread")?;
         Ok(SimDriver {
             stop,
@@ -700,7 +715,7 @@ fn used<T: crate::interfaces::InterfaceValue>(i: &Interface<T>, always: bool) ->
 }
 
 /// Publishes what is due after a step.
-fn publish(sc: &mut SimConf, robots: &mut [RobotIfaces], next: &mut Due) {
+fn publish(sc: &mut SimConf, out: &mut Outputs, next: &mut Due) {
     let t = sc.sim.time;
     let p = sc.periods;
     let always = sc.publish_always;
@@ -713,7 +728,10 @@ fn publish(sc: &mut SimConf, robots: &mut [RobotIfaces], next: &mut Due) {
         due(&mut next.pte, t, p.pantiltencoders),
     );
     let sim = &mut sc.sim;
-    for (k, r) in robots.iter_mut().enumerate() {
+    if enc && !sim.balls.is_empty() {
+        out.balls.store(Arc::new(sim.balls.clone()));
+    }
+    for (k, r) in out.robots.iter_mut().enumerate() {
         if enc && let Some(i) = &r.encoders {
             let _ = i.publish(sim.encoders(k));
         }
@@ -775,15 +793,15 @@ fn commands(sc: &mut SimConf, robots: &[RobotIfaces], stepped: bool) {
 }
 
 /// The driver thread.
-fn run(mut sc: SimConf, mut robots: Vec<RobotIfaces>, stop: &AtomicBool) {
+fn run(mut sc: SimConf, mut out: Outputs, stop: &AtomicBool) {
     let dt = sc.step;
     let mut next = Due::default();
-    commands(&mut sc, &robots, false);
-    publish(&mut sc, &mut robots, &mut next);
+    commands(&mut sc, &out.robots, false);
+    publish(&mut sc, &mut out, &mut next);
     match sc.clock {
         Clock::Stepped(per) => {
             let steps = ((per / dt).round() as u64).max(1);
-            let trigger = robots.iter().find_map(|r| r.motors.clone());
+            let trigger = out.robots.iter().find_map(|r| r.motors.clone());
             // The interface was created with clock 0: any later value is a command.
             let mut seen = 0;
             while !stop.load(Ordering::Acquire) {
@@ -797,10 +815,10 @@ fn run(mut sc: SimConf, mut robots: Vec<RobotIfaces>, stop: &AtomicBool) {
                     continue;
                 }
                 seen = c;
-                commands(&mut sc, &robots, true);
+                commands(&mut sc, &out.robots, true);
                 for _ in 0..steps {
                     sc.sim.step(dt);
-                    publish(&mut sc, &mut robots, &mut next);
+                    publish(&mut sc, &mut out, &mut next);
                 }
             }
         }
@@ -829,9 +847,9 @@ fn run(mut sc: SimConf, mut robots: Vec<RobotIfaces>, stop: &AtomicBool) {
                     done = target - cap;
                 }
                 while done < target && !stop.load(Ordering::Acquire) {
-                    commands(&mut sc, &robots, false);
+                    commands(&mut sc, &out.robots, false);
                     sc.sim.step(dt);
-                    publish(&mut sc, &mut robots, &mut next);
+                    publish(&mut sc, &mut out, &mut next);
                     done += 1;
                 }
             }
@@ -843,16 +861,39 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
     let sc = SimConf::parse(conf)?;
     rt.names
         .export(&conf.name, WORLD_EXPORT, sc.sim.world.clone())?;
-    Ok(Box::new(SimDriver::start(sc, &rt.interfaces, &conf.name)?))
+    let balls = rt.names.export(
+        &conf.name,
+        BALLS_EXPORT,
+        LiveBalls::from_pointee(sc.sim.balls.clone()),
+    )?;
+    Ok(Box::new(SimDriver::start(
+        sc,
+        &rt.interfaces,
+        &conf.name,
+        balls,
+    )?))
 }
 
 /// The name under which the driver exports its (static) [`World`].
 pub const WORLD_EXPORT: &str = "world";
+/// The name under which the driver exports its [`LiveBalls`].
+pub const BALLS_EXPORT: &str = "balls";
+
+/// The balls as they are now, refreshed at the encoders' period; readers never wait.
+pub type LiveBalls = ArcSwap<Vec<Ball>>;
 
 /// The world of a loaded simulator driver, for schemas that draw or plan over the
 /// map (introrob, teleoperator); None if no simulator is loaded.
 pub fn loaded_world(rt: &Runtime) -> Option<Arc<World>> {
     rt.names.import::<World>("simulator", WORLD_EXPORT).ok()
+}
+
+/// The balls of a loaded simulator as they are now (empty if none is loaded).
+pub fn live_balls(rt: &Runtime) -> Arc<Vec<Ball>> {
+    rt.names
+        .import::<LiveBalls>("simulator", BALLS_EXPORT)
+        .map(|b| b.load_full())
+        .unwrap_or_default()
 }
 
 crate::register_driver!(

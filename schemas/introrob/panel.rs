@@ -105,7 +105,7 @@ impl Panel for IntrorobPanel {
         Some("introrob".into())
     }
 
-    fn ui(&mut self, ui: &mut egui::Ui, _rt: &Runtime) {
+    fn ui(&mut self, ui: &mut egui::Ui, rt: &Runtime) {
         self.controls(ui);
         let pose = self.encoders.read().value;
         let laser = self.laser.snapshot();
@@ -140,6 +140,14 @@ impl Panel for IntrorobPanel {
             let [r, g, b] = d.color;
             segs.push(([d.a[0], d.a[1], d.b[0], d.b[1]], Color32::from_rgb(r, g, b)));
         }
+        let balls: Vec<_> = crate::drivers::simulator::live_balls(rt)
+            .iter()
+            .map(|b| {
+                let [r, g, bl] = b.color;
+                let centre = [b.pos[0] as f32, b.pos[1] as f32];
+                (centre, b.radius as f32, Color32::from_rgb(r, g, bl))
+            })
+            .collect();
         ui.horizontal_top(|ui| {
             ui.vertical(|ui| {
                 let scene = WorldScene {
@@ -148,6 +156,7 @@ impl Panel for IntrorobPanel {
                     laser: Some(&laser.value),
                     segments: &segs,
                     robot_radius: Some(250.0),
+                    balls: &balls,
                 };
                 let r = self.world.show(ui, vec2(440.0, 330.0), &scene);
                 if let Some(t) = r.clicked {

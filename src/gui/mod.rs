@@ -253,6 +253,9 @@ impl GuiHost {
                 .id(egui::Id::unique(("jde_panel", name.as_str())))
                 .open(&mut open)
                 .default_pos([400.0 + 30.0 * i as f32, 60.0 + 30.0 * i as f32])
+                // Tall enough for introrob's and teleoperator's panels; it scrolls
+                // (and resizes) when a panel is taller or the screen smaller.
+                .default_height(520.0)
                 .vscroll(true)
                 .show(&ctx, |ui| {
                     if *has {

@@ -438,6 +438,8 @@ pub struct WorldScene<'a> {
     pub segments: &'a [([f32; 4], Color32)],
     /// Robot radius in mm (default 225, a Pioneer).
     pub robot_radius: Option<f32>,
+    /// Balls: centre (mm), radius (mm) and colour, drawn as filled discs.
+    pub balls: &'a [([f32; 2], f32, Color32)],
 }
 
 /// A 2D world view: drag pans, scroll zooms, click sets the target.
@@ -589,6 +591,12 @@ impl WorldView {
                 [t.to_screen([s[0], s[1]]), t.to_screen([s[2], s[3]])],
                 Stroke::new(1.5, *c),
             );
+        }
+        for (c, r, colour) in scene.balls {
+            let p = t.to_screen(*c);
+            let radius = (r / t.mm_per_px).max(2.0);
+            painter.circle_filled(p, radius, *colour);
+            painter.circle_stroke(p, radius, Stroke::new(1.0, Color32::from_gray(60)));
         }
         if let Some(pose) = scene.robot {
             if let Some(laser) = scene.laser {
