@@ -172,7 +172,7 @@ fn run(cli: &Cli) -> ExitCode {
         return crate::gui::launch(rt, conf, cli.no_shell);
     }
     #[cfg(feature = "gui")]
-    crate::gui::headless_notice(&rt);
+    crate::gui::headless_notice(&rt, !cli.no_shell);
     if cli.no_shell {
         loop {
             std::thread::park();

@@ -308,10 +308,14 @@ pub fn run_window(host: GuiHost) -> Result<(), String> {
         .map_err(|e| e.to_string())
 }
 
-/// Says why no window opens when a GUI service is loaded but the run is headless.
-pub fn headless_notice(rt: &Runtime) {
+/// Says why no window opens when a GUI service is loaded but the run is headless,
+/// and, with a shell, how to watch the run from it.
+pub fn headless_notice(rt: &Runtime, shell: bool) {
     if gui_loaded(rt) {
         eprintln!("gui: no display or --headless: running without the window");
+        if shell {
+            eprintln!("gui: watch from the shell instead: `ps`, `echo encoders 5`, `help`");
+        }
     }
 }
 
