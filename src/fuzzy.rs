@@ -61,16 +61,7 @@ pub struct Trapezoid(pub [f32; 4]);
 impl Trapezoid {
     /// 4.3's membership: ramps open at the ends, 1 on [p1, p2], else 0.
     pub fn membership(&self, x: f32) -> f32 {
-        let [p0, p1, p2, p3] = self.0;
-        if p0 < x && x < p1 {
-            (x - p0) / (p1 - p0)
-        } else if p2 < x && x < p3 {
-            (p3 - x) / (p3 - p2)
-        } else if p1 <= x && x <= p2 {
-            1.0
-        } else {
-            0.0
-        }
+        trapezoid(self.0, x)
     }
 
     /// Centroid of the trapezoid clipped at height `a` (4.3's three-piece formula);
@@ -498,17 +489,27 @@ fn clipped(a: f32, t: &Trapezoid, x: f64) -> f64 {
 }
 
 impl Trapezoid {
+    /// [`Trapezoid::membership`] in f64, for the exact Mamdani centroid.
     fn membership_f64(&self, x: f64) -> f64 {
-        let [p0, p1, p2, p3] = self.0.map(f64::from);
-        if p0 < x && x < p1 {
-            (x - p0) / (p1 - p0)
-        } else if p2 < x && x < p3 {
-            (p3 - x) / (p3 - p2)
-        } else if p1 <= x && x <= p2 {
-            1.0
-        } else {
-            0.0
-        }
+        trapezoid(self.0.map(f64::from), x)
+    }
+}
+
+/// The trapezoid `p`'s membership at `x`, in the precision of `T` (f32 as 4.3
+/// computed it, f64 for Mamdani).
+fn trapezoid<T>(p: [T; 4], x: T) -> T
+where
+    T: Copy + PartialOrd + From<u8> + std::ops::Sub<Output = T> + std::ops::Div<Output = T>,
+{
+    let [p0, p1, p2, p3] = p;
+    if p0 < x && x < p1 {
+        (x - p0) / (p1 - p0)
+    } else if p2 < x && x < p3 {
+        (p3 - x) / (p3 - p2)
+    } else if p1 <= x && x <= p2 {
+        T::from(1)
+    } else {
+        T::from(0)
     }
 }
 
