@@ -1,6 +1,6 @@
 //! Where components' messages go.
 //!
-//! Schemas and drivers print through [`println`] (or the [`jde_println!`] macro)
+//! Schemas and drivers print through [`println()`] (or the [`jde_println!`](crate::jde_println) macro)
 //! rather than `std::println!`, so that when the interactive shell is editing a
 //! line the message is printed above the prompt instead of garbling it. Without a
 //! shell, messages go to standard output, one line each.
@@ -32,7 +32,7 @@ pub fn set_sink(sink: Option<Sink>) {
     *SINK.lock() = sink;
 }
 
-/// `println!` for components: formats and prints one line through [`println`].
+/// `println!` for components: formats and prints one line through [`println()`].
 #[macro_export]
 macro_rules! jde_println {
     ($($arg:tt)*) => { $crate::output::println(format!($($arg)*)) };
