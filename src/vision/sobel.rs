@@ -46,37 +46,58 @@ pub fn sobel_with_border(img: &GrayImage, border: Border) -> (Gray16, Gray16) {
     // Outputs are filled row by row without zero-initialising them first.
     let (mut ox, mut oy) = (Vec::with_capacity(w * h), Vec::with_capacity(w * h));
     let (mut rx, mut ry) = (vec![0i16; w], vec![0i16; w]);
-    let mut sm = vec![0i16; w + 2];
-    let mut df = vec![0i16; w + 2];
-    let row = |y: isize| {
-        let y = border.index(y, h);
-        &img.data[y * w..(y + 1) * w]
-    };
-    let (l, r) = (border.index(-1, w), border.index(w as isize, w));
+    let mut rows = SobelRows::new(img, border);
     for y in 0..h {
-        let yy = y as isize;
-        sobel_rows(row(yy - 1), row(yy), row(yy + 1), &mut sm, &mut df);
-        sm[0] = sm[l + 1];
-        df[0] = df[l + 1];
-        sm[w + 1] = sm[r + 1];
-        df[w + 1] = df[r + 1];
-        sobel_h(&sm, &df, &mut rx, &mut ry);
+        rows.row(y, &mut rx, &mut ry);
         ox.extend_from_slice(&rx);
         oy.extend_from_slice(&ry);
     }
-    let (dx, dy) = (
-        Gray16 {
-            width: img.width,
-            height: img.height,
-            data: ox,
-        },
-        Gray16 {
-            width: img.width,
-            height: img.height,
-            data: oy,
-        },
-    );
-    (dx, dy)
+    let image = |data| Gray16 {
+        width: img.width,
+        height: img.height,
+        data,
+    };
+    (image(ox), image(oy))
+}
+
+/// The Sobel derivatives one row at a time, for whole images ([`sobel`]) and for
+/// Canny's rolling three-row window. `img` must be valid and non-empty.
+struct SobelRows<'a> {
+    img: &'a GrayImage,
+    border: Border,
+    /// Vertical smoothing and difference of the current row, with one element of
+    /// border on each side.
+    sm: Vec<i16>,
+    df: Vec<i16>,
+}
+
+impl<'a> SobelRows<'a> {
+    fn new(img: &'a GrayImage, border: Border) -> Self {
+        let w = img.width as usize;
+        SobelRows {
+            img,
+            border,
+            sm: vec![0; w + 2],
+            df: vec![0; w + 2],
+        }
+    }
+
+    /// Row `y` of dx (columns) and dy (rows).
+    fn row(&mut self, y: usize, dx: &mut [i16], dy: &mut [i16]) {
+        let (w, h) = (self.img.width as usize, self.img.height as usize);
+        let row = |y: isize| {
+            let y = self.border.index(y, h);
+            &self.img.data[y * w..(y + 1) * w]
+        };
+        let y = y as isize;
+        sobel_rows(row(y - 1), row(y), row(y + 1), &mut self.sm, &mut self.df);
+        let (l, r) = (self.border.index(-1, w), self.border.index(w as isize, w));
+        self.sm[0] = self.sm[l + 1];
+        self.df[0] = self.df[l + 1];
+        self.sm[w + 1] = self.sm[r + 1];
+        self.df[w + 1] = self.df[r + 1];
+        sobel_h(&self.sm, &self.df, dx, dy);
+    }
 }
 
 const CANNY_SHIFT: i32 = 15;
@@ -95,6 +116,28 @@ multiversion! {
             for i in 0..n {
                 mag[i] = (dx[i] as i32).abs() + (dy[i] as i32).abs();
             }
+        }
+    }
+}
+
+multiversion! {
+    fn above_mask(row: &[i32], low: i32, mask: &mut [u32]) {
+        // 32 comparisons a word; the compiler turns them into vector compares.
+        let mut chunks = row.chunks_exact(32);
+        for (m, c) in mask.iter_mut().zip(&mut chunks) {
+            let mut bits = 0u32;
+            for (k, &v) in c.iter().enumerate() {
+                bits |= ((v > low) as u32) << k;
+            }
+            *m = bits;
+        }
+        let rest = chunks.remainder();
+        if !rest.is_empty() {
+            let mut bits = 0u32;
+            for (k, &v) in rest.iter().enumerate() {
+                bits |= ((v > low) as u32) << k;
+            }
+            mask[row.len() / 32] = bits;
         }
     }
 }
@@ -119,54 +162,83 @@ pub fn canny(img: &GrayImage, low: f64, high: f64, l2: bool) -> GrayImage {
         high *= high;
     }
     let (low, high) = (low.floor() as i32, high.floor() as i32);
-    let (dx, dy) = sobel_with_border(img, Border::Replicate);
-    // Magnitudes with a zero border of one pixel all around.
+    // A rolling window of three rows: the Sobel derivatives and magnitudes of rows
+    // y - 1, y, y + 1 (slot r % 3 holds row r), so nothing image-sized but the map
+    // is written. Magnitude rows have a zero element at each end, and the rows
+    // above the first and below the last are zeros, as OpenCV's.
     let mw = w + 2;
-    let mut mag = vec![0i32; mw * (h + 2)];
-    for y in 0..h {
-        let o = (y + 1) * mw + 1;
-        magnitude(
-            &dx.data[y * w..(y + 1) * w],
-            &dy.data[y * w..(y + 1) * w],
-            &mut mag[o..o + w],
-            l2,
-        );
-    }
+    let mut sobel = SobelRows::new(img, Border::Replicate);
+    let mut dxs = [vec![0i16; w], vec![0i16; w], vec![0i16; w]];
+    let mut dys = [vec![0i16; w], vec![0i16; w], vec![0i16; w]];
+    let mut mags = [vec![0i32; mw], vec![0i32; mw], vec![0i32; mw]];
+    let zeros = vec![0i32; mw];
+    let mut compute =
+        |y: usize, dxs: &mut [Vec<i16>; 3], dys: &mut [Vec<i16>; 3], mags: &mut [Vec<i32>; 3]| {
+            let k = y % 3;
+            sobel.row(y, &mut dxs[k], &mut dys[k]);
+            magnitude(&dxs[k], &dys[k], &mut mags[k][1..=w], l2);
+        };
+    compute(0, &mut dxs, &mut dys, &mut mags);
     // Map: 0 = candidate (weak local maximum), 1 = not an edge, 2 = edge. One-pixel
     // border of 1s.
     let mut map = vec![1u8; mw * (h + 2)];
     let mut stack: Vec<usize> = Vec::with_capacity(w * h / 8);
+    // Bit k of above[c]: pixel 32c + k of the row is above `low`. Most pixels are
+    // not, so the suppression below visits only those.
+    let mut above = vec![0u32; w.div_ceil(32)];
     for y in 0..h {
+        if y + 1 < h {
+            compute(y + 1, &mut dxs, &mut dys, &mut mags);
+        }
+        let prev = if y > 0 { &mags[(y - 1) % 3] } else { &zeros };
+        let next = if y + 1 < h {
+            &mags[(y + 1) % 3]
+        } else {
+            &zeros
+        };
+        let (cur, dxr, dyr) = (&mags[y % 3], &dxs[y % 3], &dys[y % 3]);
         let base = (y + 1) * mw + 1;
-        let (dxr, dyr) = (&dx.data[y * w..(y + 1) * w], &dy.data[y * w..(y + 1) * w]);
-        for x in 0..w {
-            let j = base + x;
-            let m = mag[j];
-            if m <= low {
-                continue;
-            }
-            let (xs, ys) = (dxr[x] as i32, dyr[x] as i32);
-            let ax = xs.abs();
-            let ay = ys.abs() << CANNY_SHIFT;
-            let tg22x = ax * TG22;
-            let is_max = if ay < tg22x {
-                m > mag[j - 1] && m >= mag[j + 1]
-            } else {
+        above_mask(&cur[1..=w], low, &mut above);
+        for (c, &bits) in above.iter().enumerate() {
+            let mut bits = bits;
+            while bits != 0 {
+                let x = c * 32 + bits.trailing_zeros() as usize;
+                bits &= bits - 1;
+                let i = x + 1; // x in the bordered magnitude rows
+                let m = cur[i];
+                // The gradient's direction picks the two neighbours across the edge:
+                // horizontal, vertical or one of the diagonals (selected without
+                // branches: the directions are unpredictable).
+                let (xs, ys) = (dxr[x] as i32, dyr[x] as i32);
+                let ax = xs.abs();
+                let ay = ys.abs() << CANNY_SHIFT;
+                let tg22x = ax * TG22;
                 let tg67x = tg22x + (ax << (CANNY_SHIFT + 1));
-                if ay > tg67x {
-                    m > mag[j - mw] && m >= mag[j + mw]
+                let (horizontal, vertical) = (ay < tg22x, ay > tg67x);
+                let diagonal = !horizontal & !vertical;
+                // Across rows: straight up and down, or along the diagonal whose
+                // column step is -1 when dx and dy have opposite signs.
+                let step = if vertical { 0 } else { ((xs ^ ys) >> 31) | 1 } as isize;
+                let (up, down) = (
+                    prev[i.wrapping_add_signed(-step)],
+                    next[i.wrapping_add_signed(step)],
+                );
+                let (before, after) = if horizontal {
+                    (cur[i - 1], cur[i + 1])
                 } else {
-                    let s: isize = if (xs ^ ys) < 0 { -1 } else { 1 };
-                    m > mag[(j - mw).wrapping_add_signed(-s)]
-                        && m > mag[(j + mw).wrapping_add_signed(s)]
-                }
-            };
-            if is_max {
-                if m > high {
-                    map[j] = 2;
-                    stack.push(j);
-                } else {
-                    map[j] = 0;
+                    (up, down)
+                };
+                // OpenCV's ties: strict on the first neighbour, and on the second too
+                // along a diagonal.
+                let is_max = (m > before) & ((m > after) | ((m == after) & !diagonal));
+                if is_max {
+                    let j = base + x;
+                    if m > high {
+                        map[j] = 2;
+                        stack.push(j);
+                    } else {
+                        map[j] = 0;
+                    }
                 }
             }
         }
@@ -197,4 +269,143 @@ pub fn canny(img: &GrayImage, low: f64, high: f64, l2: bool) -> GrayImage {
         }
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Canny as it reads in OpenCV's scalar code: whole-image Sobel and magnitudes,
+    /// then suppression with branches, then hysteresis.
+    fn canny_reference(img: &GrayImage, low: i32, high: i32, l2: bool) -> Vec<u8> {
+        let (w, h) = (img.width as usize, img.height as usize);
+        let (dx, dy) = sobel_with_border(img, Border::Replicate);
+        let mw = w + 2;
+        let mut mag = vec![0i32; mw * (h + 2)];
+        for y in 0..h {
+            for x in 0..w {
+                let (a, b) = (dx.data[y * w + x] as i32, dy.data[y * w + x] as i32);
+                mag[(y + 1) * mw + x + 1] = if l2 { a * a + b * b } else { a.abs() + b.abs() };
+            }
+        }
+        let mut map = vec![1u8; mw * (h + 2)];
+        let mut stack = Vec::new();
+        for y in 0..h {
+            for x in 0..w {
+                let j = (y + 1) * mw + x + 1;
+                let m = mag[j];
+                if m <= low {
+                    continue;
+                }
+                let (xs, ys) = (dx.data[y * w + x] as i32, dy.data[y * w + x] as i32);
+                let ax = xs.abs();
+                let ay = ys.abs() << CANNY_SHIFT;
+                let tg22x = ax * TG22;
+                let tg67x = tg22x + (ax << (CANNY_SHIFT + 1));
+                let is_max = if ay < tg22x {
+                    m > mag[j - 1] && m >= mag[j + 1]
+                } else if ay > tg67x {
+                    m > mag[j - mw] && m >= mag[j + mw]
+                } else {
+                    let s: isize = if (xs ^ ys) < 0 { -1 } else { 1 };
+                    m > mag[(j - mw).wrapping_add_signed(-s)]
+                        && m > mag[(j + mw).wrapping_add_signed(s)]
+                };
+                if is_max {
+                    if m > high {
+                        map[j] = 2;
+                        stack.push(j);
+                    } else {
+                        map[j] = 0;
+                    }
+                }
+            }
+        }
+        while let Some(j) = stack.pop() {
+            for k in [
+                j - mw - 1,
+                j - mw,
+                j - mw + 1,
+                j - 1,
+                j + 1,
+                j + mw - 1,
+                j + mw,
+                j + mw + 1,
+            ] {
+                if map[k] == 0 {
+                    map[k] = 2;
+                    stack.push(k);
+                }
+            }
+        }
+        (0..h)
+            .flat_map(|y| (0..w).map(move |x| (y, x)))
+            .map(|(y, x)| {
+                if map[(y + 1) * mw + x + 1] == 2 {
+                    255
+                } else {
+                    0
+                }
+            })
+            .collect()
+    }
+
+    /// A smooth pattern with noise and sharp steps: edges in every direction.
+    fn scene(w: usize, h: usize, seed: u32) -> GrayImage {
+        let mut s = seed;
+        let data = (0..w * h)
+            .map(|i| {
+                s = s.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                let (x, y) = ((i % w) as f32, (i / w) as f32);
+                let wave = 100.0 * ((x * 0.21).sin() * (y * 0.13).cos());
+                let step = if (x - 0.7 * y).rem_euclid(23.0) < 11.0 {
+                    60.0
+                } else {
+                    0.0
+                };
+                (120.0 + wave + step + (s >> 28) as f32).clamp(0.0, 255.0) as u8
+            })
+            .collect();
+        GrayImage {
+            width: w as u32,
+            height: h as u32,
+            data,
+        }
+    }
+
+    #[test]
+    fn canny_matches_the_plain_algorithm() {
+        for (w, h) in [
+            (1, 1),
+            (1, 9),
+            (9, 1),
+            (2, 2),
+            (31, 7),
+            (33, 17),
+            (64, 48),
+            (97, 61),
+        ] {
+            for (k, (low, high, l2)) in [
+                (50.0, 150.0, false),
+                (10.0, 40.0, false),
+                (20.0, 60.0, true),
+            ]
+            .into_iter()
+            .enumerate()
+            {
+                let img = scene(w, h, (w * 31 + h + k) as u32);
+                let (lo, hi) = if l2 {
+                    ((low * low) as i32, (high * high) as i32)
+                } else {
+                    (low as i32, high as i32)
+                };
+                let got = canny(&img, low, high, l2);
+                let want = canny_reference(&img, lo, hi, l2);
+                assert_eq!(got.data, want, "{w}x{h} low {low} high {high} l2 {l2}");
+                if w * h > 1000 {
+                    assert!(want.contains(&255), "{w}x{h}: the scene has edges");
+                }
+            }
+        }
+    }
 }
