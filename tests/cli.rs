@@ -34,6 +34,15 @@ fn run_with_input(args: &[&str], input: impl AsRef<[u8]>, delay: Duration) -> Ou
     out
 }
 
+/// `jderobot check CONF`.
+fn check(conf: impl AsRef<std::ffi::OsStr>) -> Output {
+    Command::new(BIN)
+        .arg("check")
+        .arg(conf)
+        .output()
+        .expect("run jderobot check")
+}
+
 fn text(b: &[u8]) -> String {
     String::from_utf8_lossy(b).into_owned()
 }
@@ -114,10 +123,7 @@ fn check_reports_file_and_line_and_exits_nonzero() {
     let dir = tempfile::tempdir().unwrap();
     let bad = dir.path().join("bad.conf");
     std::fs::write(&bad, "load_schema myschema\nrun myschema\nfrobnicate\n").unwrap();
-    let out = Command::new(BIN)
-        .args(["check", bad.to_str().unwrap()])
-        .output()
-        .unwrap();
+    let out = check(&bad);
     assert!(!out.status.success());
     let err = text(&out.stderr);
     assert!(
@@ -130,10 +136,7 @@ fn check_reports_file_and_line_and_exits_nonzero() {
 
     let nosuch = dir.path().join("nosuch.conf");
     std::fs::write(&nosuch, "load_driver nosuch\n").unwrap();
-    let out = Command::new(BIN)
-        .args(["check", nosuch.to_str().unwrap()])
-        .output()
-        .unwrap();
+    let out = check(&nosuch);
     assert!(!out.status.success());
     let err = text(&out.stderr);
     assert!(err.contains(":1: no driver called `nosuch`"), "{err}");
@@ -150,10 +153,7 @@ fn check_reports_file_and_line_and_exits_nonzero() {
         "schema myschema\ncycle abc\nend_schema\nload_schema myschema\nrun myschema\n",
     )
     .unwrap();
-    let out = Command::new(BIN)
-        .args(["check", cycle.to_str().unwrap()])
-        .output()
-        .unwrap();
+    let out = check(&cycle);
     assert!(!out.status.success());
     let err = text(&out.stderr);
     assert!(
@@ -168,10 +168,7 @@ fn check_reports_file_and_line_and_exits_nonzero() {
         "check runs nothing"
     );
 
-    let out = Command::new(BIN)
-        .args(["check", "examples/myschema.conf"])
-        .output()
-        .unwrap();
+    let out = check("examples/myschema.conf");
     assert!(out.status.success(), "{}", text(&out.stderr));
 }
 
@@ -359,7 +356,7 @@ fn every_example_conf_passes_check() {
         let p = entry.unwrap().path();
         // own_schema.conf loads a schema that only the own_schema example binary has.
         if p.extension().is_some_and(|e| e == "conf") && !p.ends_with("own_schema.conf") {
-            let out = Command::new(BIN).arg("check").arg(&p).output().unwrap();
+            let out = check(&p);
             assert!(
                 out.status.success(),
                 "{}: {}",

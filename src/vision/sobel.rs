@@ -243,7 +243,14 @@ pub fn canny(img: &GrayImage, low: f64, high: f64, l2: bool) -> GrayImage {
             }
         }
     }
-    // Hysteresis: grow edges into 8-connected candidates.
+    hysteresis(&mut map, stack, w, h)
+}
+
+/// Canny's last step: grows the edges on `stack` into 8-connected candidates of
+/// `map` (0 = candidate, 1 = not an edge, 2 = edge; one-pixel border of 1s around a
+/// `w` x `h` image) and returns the edges as 255s.
+fn hysteresis(map: &mut [u8], mut stack: Vec<usize>, w: usize, h: usize) -> GrayImage {
+    let mw = w + 2;
     while let Some(j) = stack.pop() {
         for k in [
             j - mw - 1,
@@ -261,7 +268,7 @@ pub fn canny(img: &GrayImage, low: f64, high: f64, l2: bool) -> GrayImage {
             }
         }
     }
-    let mut out = GrayImage::new(img.width, img.height);
+    let mut out = GrayImage::new(w as u32, h as u32);
     for y in 0..h {
         let src = &map[(y + 1) * mw + 1..(y + 1) * mw + 1 + w];
         for (d, &s) in out.data[y * w..(y + 1) * w].iter_mut().zip(src) {
@@ -321,33 +328,7 @@ mod tests {
                 }
             }
         }
-        while let Some(j) = stack.pop() {
-            for k in [
-                j - mw - 1,
-                j - mw,
-                j - mw + 1,
-                j - 1,
-                j + 1,
-                j + mw - 1,
-                j + mw,
-                j + mw + 1,
-            ] {
-                if map[k] == 0 {
-                    map[k] = 2;
-                    stack.push(k);
-                }
-            }
-        }
-        (0..h)
-            .flat_map(|y| (0..w).map(move |x| (y, x)))
-            .map(|(y, x)| {
-                if map[(y + 1) * mw + x + 1] == 2 {
-                    255
-                } else {
-                    0
-                }
-            })
-            .collect()
+        hysteresis(&mut map, stack, w, h).data
     }
 
     /// A smooth pattern with noise and sharp steps: edges in every direction.
