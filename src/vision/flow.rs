@@ -141,30 +141,24 @@ fn weights(a: f32, b: f32) -> [i32; 4] {
     [w00, w01, w10, (1 << 14) - w00 - w01 - w10]
 }
 
-/// Bilinear samples of one window row in 1/32 grey levels.
+/// Bilinear interpolation of one window row with the 14-bit weights `wt`, rounded
+/// and shifted right by `SHIFT` (OpenCV's `DESCALE`): grey levels (`u8`, SHIFT 9)
+/// give 1/32 levels, derivatives (`i16`, SHIFT 14) their own units.
 #[inline(always)]
-fn sample_row(r0: &[u8], r1: &[u8], wt: [i32; 4], out: &mut [i32]) {
+fn bilinear_row<T: Copy + Into<i32>, const SHIFT: u32>(
+    r0: &[T],
+    r1: &[T],
+    wt: [i32; 4],
+    out: &mut [i32],
+) {
     let n = out.len();
     let (a, b) = (&r0[..n + 1], &r1[..n + 1]);
     for x in 0..n {
-        let v = a[x] as i32 * wt[0]
-            + a[x + 1] as i32 * wt[1]
-            + b[x] as i32 * wt[2]
-            + b[x + 1] as i32 * wt[3];
-        out[x] = (v + (1 << 8)) >> 9;
-    }
-}
-
-#[inline(always)]
-fn deriv_row(r0: &[i16], r1: &[i16], wt: [i32; 4], out: &mut [i32]) {
-    let n = out.len();
-    let (a, b) = (&r0[..n + 1], &r1[..n + 1]);
-    for x in 0..n {
-        let v = a[x] as i32 * wt[0]
-            + a[x + 1] as i32 * wt[1]
-            + b[x] as i32 * wt[2]
-            + b[x + 1] as i32 * wt[3];
-        out[x] = (v + (1 << 13)) >> 14;
+        let v = a[x].into() * wt[0]
+            + a[x + 1].into() * wt[1]
+            + b[x].into() * wt[2]
+            + b[x + 1].into() * wt[3];
+        out[x] = (v + (1 << (SHIFT - 1))) >> SHIFT;
     }
 }
 
@@ -304,9 +298,9 @@ fn template_row(
     win: usize,
     (iv, ix, iy): (&mut [i32], &mut [i32], &mut [i32]),
 ) -> (i64, i64, i64) {
-    sample_row(i0, i1, wt, &mut iv[..win]);
-    deriv_row(d.0, d.1, wt, &mut ix[..win]);
-    deriv_row(d.2, d.3, wt, &mut iy[..win]);
+    bilinear_row::<_, 9>(i0, i1, wt, &mut iv[..win]);
+    bilinear_row::<_, 14>(d.0, d.1, wt, &mut ix[..win]);
+    bilinear_row::<_, 14>(d.2, d.3, wt, &mut iy[..win]);
     let (rx, ry) = (&ix[..win], &iy[..win]);
     (
         rx.iter().map(|v| (v * v) as i64).sum::<i64>(),
