@@ -71,18 +71,25 @@ impl Cronos {
 
     /// The summary now; `running` is false for a schema that is not iterating.
     pub fn timing(&self, running: bool) -> Timing {
-        let now = now_ns();
+        self.timing_at(now_ns(), running)
+    }
+
+    fn timing_at(&self, now: u64, running: bool) -> Timing {
         let ips = if running && self.since_ns > 0 {
-            let window = (now - self.since_ns).min(IPS_WINDOW_NS);
+            let window = now.saturating_sub(self.since_ns).min(IPS_WINDOW_NS);
             let n = self
                 .starts
                 .iter()
                 .filter(|&&s| now.saturating_sub(s) <= window)
                 .count();
+            // Each iteration stands for a cycle: just after a run the window holds the
+            // first iteration and a fraction of a cycle, and n / window would read
+            // high (2 iterations 120 ms into a 100 ms schema: 17 ips, not 10).
+            let span = window.max(n as u64 * self.cycle_ns);
             if window < 1_000_000 {
                 0.0
             } else {
-                n as f64 * 1e9 / window as f64
+                n as f64 * 1e9 / span as f64
             }
         } else {
             0.0
@@ -103,5 +110,56 @@ impl Cronos {
             iterations: self.iterations,
             overruns: self.overruns,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const MS: u64 = 1_000_000;
+
+    fn cronos_run_at(t0: u64, cycle: u64) -> Cronos {
+        let mut c = Cronos::default();
+        c.activate(cycle);
+        c.since_ns = t0;
+        c
+    }
+
+    #[test]
+    fn ips_is_right_from_the_first_cycles_on() {
+        let t0 = 1_000 * MS;
+        let mut c = cronos_run_at(t0, 100 * MS);
+        c.record(t0, t0);
+        assert_eq!(c.timing_at(t0 + 50 * MS, true).ips, 10.0);
+        c.record(t0 + 100 * MS, t0 + 100 * MS);
+        assert_eq!(c.timing_at(t0 + 120 * MS, true).ips, 10.0);
+        for k in 2..=40 {
+            c.record(t0 + k * 100 * MS, t0 + k * 100 * MS);
+        }
+        let ips = c.timing_at(t0 + 4_050 * MS, true).ips;
+        assert!((ips - 10.0).abs() < 0.01, "{ips}");
+        // A schema stuck in one long iteration: the rate falls.
+        let stuck = c.timing_at(t0 + 5_500 * MS, true).ips;
+        assert!(stuck <= 3.0, "{stuck}");
+        assert_eq!(c.timing_at(t0 + 4_050 * MS, false).ips, 0.0);
+    }
+
+    #[test]
+    fn jitter_percentiles_and_overruns() {
+        let t0 = 1_000 * MS;
+        let mut c = cronos_run_at(t0, 10 * MS);
+        for k in 0..100u64 {
+            let late = if k == 99 { 25 * MS } else { k * 1_000 };
+            c.record(t0 + k * 10 * MS + late, t0 + k * 10 * MS);
+        }
+        let t = c.timing_at(t0 + 1_000 * MS, true);
+        assert_eq!(t.iterations, 100);
+        assert_eq!(
+            t.overruns, 1,
+            "one iteration started more than a cycle late"
+        );
+        assert!((t.jitter_p50 - 50e-6).abs() < 1.5e-6, "{}", t.jitter_p50);
+        assert!(t.jitter_p99 >= 98e-6, "{}", t.jitter_p99);
     }
 }
