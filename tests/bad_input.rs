@@ -3,7 +3,9 @@
 //! mutations of its own example files — tokens replaced by numbers out of range,
 //! NaN, infinities, junk words, lines dropped, doubled and cut short. Each parse
 //! must return `Ok` or a clear `file:line` error, and whatever it accepts must
-//! then be usable (projected, convolved, inferred, simulated) without a panic.
+//! then be usable (projected, convolved, inferred, simulated) without a panic. The
+//! shell gets the same treatment: mutated command lines against a live runtime are
+//! answered, and only `quit`/`exit` end it.
 //!
 //! Deterministic (a fixed xorshift seed), so a failure names a reproducible case.
 #![cfg(feature = "simulator")]
@@ -275,4 +277,48 @@ fn fuzzy_controllers_then_inferred() {
             }
         },
     );
+}
+
+/// Whatever is typed, the shell explains and carries on: mutations of a script that
+/// uses every command, run against a live simulator and schemas.
+#[test]
+fn shell_command_lines() {
+    use jderobot::shell::{Flow, Shell};
+    let script = "help\nhelp run\nls\nps\nrun myschema\nstop myschema\nshow myschema\n\
+                  hide myschema\necho encoders\necho encoders 1\nset motors v=100 w=5\n\
+                  set pantiltmotors longitude=10\nzoom myschema\nrun\nstop\ninit\nterminate\n\
+                  exit\npwd\ndir\nview examples/myschema.conf\nload_schema ping\n\
+                  load_driver simulator\nshow_license\ncd .\n";
+    let text = format!(
+        "driver simulator\nworld {}\nprovides encoders\nprovides motors\nprovides laser\n\
+         speed 20\nend_driver\nschema myschema\ncycle 20\nend_schema\nload_driver simulator\n\
+         load_schema myschema\n",
+        common::world_path("simple.world")
+    );
+    // The schemas' `on`/`off` lines would flood the test log.
+    jderobot::output::set_sink(Some(Box::new(|_| {})));
+    let rt = common::start_conf(&text);
+    let conf = Conf::parse(&text, Path::new("test.conf")).unwrap();
+    let mut shell = Shell::new(rt.clone(), conf);
+    let cwd = std::env::current_dir().unwrap();
+    let mut rng = Rng(7);
+    let (mut out, mut err) = (Vec::new(), Vec::new());
+    for n in 0..300 {
+        let m = mutate(script, &mut rng);
+        for line in m.lines() {
+            // Only `quit`/`exit` may end the shell; everything else must be answered.
+            let flow = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                shell.execute(line, &mut out, &mut err)
+            }))
+            .unwrap_or_else(|_| panic!("mutation {n}: `{line}` panicked"));
+            let first = line.split_whitespace().next().unwrap_or("");
+            assert!(
+                flow == Flow::Continue || ["quit", "exit"].contains(&first),
+                "`{line}` ended the shell"
+            );
+        }
+        std::env::set_current_dir(&cwd).unwrap();
+    }
+    rt.shutdown();
+    assert!(!err.is_empty() && !out.is_empty());
 }
