@@ -153,6 +153,10 @@ fn run(cli: &Cli) -> ExitCode {
     {
         let rt = rt.clone();
         let _ = ctrlc::set_handler(move || {
+            // Ctrl+C stops a shell command that is waiting (echo N), else the program.
+            if shell::interrupt_foreground() {
+                return;
+            }
             rt.shutdown();
             std::process::exit(130);
         });

@@ -14,13 +14,17 @@
 //! component names and file names, and history persists in
 //! `$XDG_DATA_HOME/jderobot/history` (or `~/.local/share/jderobot/history`).
 //! With piped standard input it reads one command a line and ends at end of input,
-//! so runs can be scripted. Nothing typed can kill the program: every mistake gets
+//! so runs can be scripted. Ctrl+C stops a waiting `echo NAME N` (at the prompt it
+//! clears the line). Nothing typed can kill the program: every mistake gets
 //! a one-line explanation on standard error.
 
 use std::{
     io::{BufRead, Write},
     path::{Path, PathBuf},
-    sync::Arc,
+    sync::{
+        Arc,
+        atomic::{AtomicBool, Ordering},
+    },
     time::{Duration, Instant},
 };
 
@@ -535,17 +539,56 @@ fn echo_line(i: &dyn AnyInterface) -> String {
     )
 }
 
-/// Prints an interface's value once, or its next `n` new values.
+/// Set while a command that waits (`echo NAME N`) runs, so that Ctrl+C stops that
+/// command instead of the program.
+static FOREGROUND: AtomicBool = AtomicBool::new(false);
+static INTERRUPTED: AtomicBool = AtomicBool::new(false);
+
+/// Called on Ctrl+C: interrupts the command that is waiting, if one is, and says so
+/// (true); false when nothing is, and Ctrl+C should end the program.
+pub fn interrupt_foreground() -> bool {
+    let waiting = FOREGROUND.load(Ordering::Acquire);
+    if waiting {
+        INTERRUPTED.store(true, Ordering::Release);
+    }
+    waiting
+}
+
+/// Marks a waiting command for [`interrupt_foreground`] while it lives.
+struct Foreground;
+
+impl Foreground {
+    fn start() -> Foreground {
+        INTERRUPTED.store(false, Ordering::Release);
+        FOREGROUND.store(true, Ordering::Release);
+        Foreground
+    }
+    fn interrupted(&self) -> bool {
+        INTERRUPTED.load(Ordering::Acquire)
+    }
+}
+
+impl Drop for Foreground {
+    fn drop(&mut self) {
+        FOREGROUND.store(false, Ordering::Release);
+    }
+}
+
+/// Prints an interface's value once, or its next `n` new values (Ctrl+C stops).
 fn echo(i: &dyn AnyInterface, n: Option<u64>, out: &mut dyn Write) -> Result<Flow, String> {
     let Some(n) = n else {
         w(out, echo_line(i));
         return Ok(Flow::Continue);
     };
+    let fg = Foreground::start();
     let mut last = i.clock();
     let patience = Duration::from_secs(5);
     for _ in 0..n {
         let t0 = Instant::now();
-        while i.clock() == last {
+        while i.clock() == last || fg.interrupted() {
+            if fg.interrupted() {
+                return Err("echo: interrupted".into());
+            }
             if t0.elapsed() > patience {
                 return Err(format!(
                     "echo: no new value of `{}` in {} s (is it running? `run {}`)",

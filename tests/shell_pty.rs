@@ -136,3 +136,28 @@ fn schema_output_does_not_garble_the_line_being_typed() {
     p.send_line("quit").unwrap();
     p.exp_eof().unwrap();
 }
+
+#[test]
+fn ctrl_c_stops_a_waiting_echo_not_the_program() {
+    let dir = tempfile::tempdir().unwrap();
+    let conf = dir.path().join("jde.conf");
+    std::fs::write(
+        &conf,
+        "driver simulator\nprovides encoders\nend_driver\nload_driver simulator\n",
+    )
+    .unwrap();
+    let mut p = spawn(conf.to_str().unwrap(), dir.path());
+    p.exp_string("jdeC $> ").unwrap();
+    p.send_line("echo encoders 100000").unwrap();
+    p.exp_string("encoders clock=").unwrap();
+    p.send_control('c').unwrap();
+    p.exp_string("echo: interrupted").unwrap();
+    p.exp_string("jdeC $> ").unwrap();
+    // The program is alive: it answers, and a Ctrl+C at the prompt does not end it.
+    p.send_control('c').unwrap();
+    p.exp_string("jdeC $> ").unwrap();
+    p.send_line("echo encoders").unwrap();
+    p.exp_string("encoders clock=").unwrap();
+    p.send_line("quit").unwrap();
+    p.exp_eof().unwrap();
+}
