@@ -145,6 +145,47 @@ fn host_docks_mastergui_and_its_toggles_drive_the_runtime() {
     rt.shutdown();
 }
 
+/// A panel that panics is replaced by a note; the window and the schemas go on.
+#[test]
+fn a_panel_that_panics_is_replaced_by_a_note() {
+    struct Faulty;
+    impl jderobot::Schema for Faulty {
+        fn cycle(&self) -> std::time::Duration {
+            std::time::Duration::from_millis(20)
+        }
+        fn iteration(&mut self, _: &jderobot::Context) -> anyhow::Result<()> {
+            Ok(())
+        }
+        fn panel(&mut self) -> Option<Box<dyn jderobot::gui::Panel>> {
+            struct Boom;
+            impl jderobot::gui::Panel for Boom {
+                fn ui(&mut self, _: &mut egui::Ui, _: &Runtime) {
+                    panic!("boom in the panel");
+                }
+            }
+            Some(Box::new(Boom))
+        }
+    }
+    let rt = runtime_with(&[("gui", Kind::Service), ("mastergui", Kind::Schema)]);
+    rt.add_schema("faulty", "a schema whose panel panics", Box::new(Faulty))
+        .expect("add");
+    rt.run("faulty").expect("run");
+    rt.show("mastergui").expect("show");
+    rt.show("faulty").expect("show");
+    let mut host = GuiHost::new(rt.clone());
+    let mut h = Harness::builder()
+        .with_size(vec2(1100.0, 700.0))
+        .build_ui(move |ui| host.ui(ui));
+    h.run();
+    h.run();
+    h.get_by_label("this panel failed: boom in the panel");
+    // mastergui still draws and still drives the runtime.
+    h.get_by_label("run faulty").click();
+    h.run();
+    assert_eq!(state(&rt, "faulty"), State::Slept);
+    rt.shutdown();
+}
+
 fn test_image() -> Image {
     // 4x2: row 0 = red, green, blue, white; row 1 = black, grey, (1,2,3), yellow.
     let px: [[u8; 3]; 8] = [
