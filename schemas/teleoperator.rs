@@ -260,6 +260,7 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
         commands.clone(),
         dev.clone(),
         world,
+        crate::drivers::simulator::live_balls(rt),
     )));
     #[cfg(not(feature = "gui"))]
     let _ = world;
@@ -290,7 +291,7 @@ pub mod panel {
     use egui::{Color32, vec2};
 
     use crate::{
-        drivers::simulator::World,
+        drivers::simulator::{LiveBalls, World},
         gui::{
             Panel,
             widgets::{
@@ -406,6 +407,8 @@ pub mod panel {
         commands: Arc<Commands>,
         dev: Devices,
         walls: Vec<Segment3D>,
+        /// The simulator's balls, drawn as spheres.
+        balls: Option<Arc<LiveBalls>>,
         canvas: Wireframe3D,
         joystick: Joystick,
         pad: Option<PanTiltPad>,
@@ -415,7 +418,12 @@ pub mod panel {
     }
 
     impl TeleoperatorPanel {
-        pub fn new(commands: Arc<Commands>, dev: Devices, world: Option<Arc<World>>) -> Self {
+        pub fn new(
+            commands: Arc<Commands>,
+            dev: Devices,
+            world: Option<Arc<World>>,
+            balls: Option<Arc<LiveBalls>>,
+        ) -> Self {
             let walls = world.as_deref().map(world_segments).unwrap_or_default();
             let orbit = OrbitCamera {
                 distance: 9000.0,
@@ -434,6 +442,7 @@ pub mod panel {
                 commands,
                 dev,
                 walls,
+                balls,
                 canvas: Wireframe3D::new("teleoperator 3d", orbit),
                 joystick,
                 pad,
@@ -449,7 +458,7 @@ pub mod panel {
             Some("teleoperator".into())
         }
 
-        fn ui(&mut self, ui: &mut egui::Ui, rt: &Runtime) {
+        fn ui(&mut self, ui: &mut egui::Ui, _rt: &Runtime) {
             let pose = self.dev.encoders.as_ref().map(|e| e.read().value);
             let laser = self.dev.laser.as_ref().map(|l| l.snapshot());
             let pt = self
@@ -459,7 +468,9 @@ pub mod panel {
                 .map(|p| p.read().value)
                 .map(|p| (p.pan_angle, p.tilt_angle));
             let mut segs = self.walls.clone();
-            segs.extend(ball_segments(&crate::drivers::simulator::live_balls(rt)));
+            if let Some(balls) = &self.balls {
+                segs.extend(ball_segments(&balls.load()));
+            }
             if let Some(p) = &pose {
                 if self.follow {
                     self.canvas.orbit.target = [p.x as f64, p.y as f64, 0.0];

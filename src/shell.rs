@@ -585,9 +585,12 @@ fn echo(i: &dyn AnyInterface, n: Option<u64>, out: &mut dyn Write) -> Result<Flo
     let patience = Duration::from_secs(5);
     for _ in 0..n {
         let t0 = Instant::now();
-        while i.clock() == last || fg.interrupted() {
+        loop {
             if fg.interrupted() {
                 return Err("echo: interrupted".into());
+            }
+            if i.clock() != last {
+                break;
             }
             if t0.elapsed() > patience {
                 return Err(format!(

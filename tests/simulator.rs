@@ -511,14 +511,15 @@ fn start(body: &str) -> Arc<Runtime> {
 #[test]
 fn the_driver_publishes_the_balls_as_they_roll() {
     let rt = start("robot robot1 3900 1200 0\nprovides encoders\nprovides motors\nspeed 4\n");
-    let balls = live_balls(&rt);
+    let live = live_balls(&rt).expect("simulator.balls");
+    let balls = live.load();
     assert_eq!(balls.len(), 1, "simple.world has one ball");
     assert_eq!((balls[0].pos, balls[0].radius), ([4500.0, 1200.0], 110.0));
     assert_eq!(balls[0].color, [220, 20, 20]);
     let motors: Arc<Interface<Motors>> = rt.interfaces.get("motors").unwrap();
     eventually("the ball to roll east", || {
         let _ = motors.publish(Motors { v: 400.0, w: 0.0 });
-        live_balls(&rt)[0].pos[0] > 4700.0
+        live.load()[0].pos[0] > 4700.0
     });
     rt.shutdown();
 }

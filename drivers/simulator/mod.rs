@@ -888,12 +888,10 @@ pub fn loaded_world(rt: &Runtime) -> Option<Arc<World>> {
     rt.names.import::<World>("simulator", WORLD_EXPORT).ok()
 }
 
-/// The balls of a loaded simulator as they are now (empty if none is loaded).
-pub fn live_balls(rt: &Runtime) -> Arc<Vec<Ball>> {
-    rt.names
-        .import::<LiveBalls>("simulator", BALLS_EXPORT)
-        .map(|b| b.load_full())
-        .unwrap_or_default()
+/// The live balls of a loaded simulator, to import once and `load()` whenever they
+/// are drawn; None if no simulator is loaded.
+pub fn live_balls(rt: &Runtime) -> Option<Arc<LiveBalls>> {
+    rt.names.import::<LiveBalls>("simulator", BALLS_EXPORT).ok()
 }
 
 crate::register_driver!(

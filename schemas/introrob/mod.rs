@@ -640,6 +640,7 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
         laser.clone(),
         sonars.clone(),
         camera.clone(),
+        crate::drivers::simulator::live_balls(rt),
     )));
     Ok(Box::new(Introrob {
         brain,

@@ -7,6 +7,7 @@ use std::sync::Arc;
 use egui::{Color32, vec2};
 
 use crate::{
+    drivers::simulator::LiveBalls,
     gui::{
         Panel,
         widgets::{
@@ -28,6 +29,8 @@ pub struct IntrorobPanel {
     sonars: Option<Arc<Interface<Sonars>>>,
     camera: Option<Arc<Interface<Image>>>,
     walls: Vec<[f32; 4]>,
+    /// The simulator's balls, drawn in the world view.
+    balls: Option<Arc<LiveBalls>>,
     world: WorldView,
     joystick: Joystick,
     image: ImageView,
@@ -41,6 +44,7 @@ impl IntrorobPanel {
         laser: Arc<Interface<Laser>>,
         sonars: Option<Arc<Interface<Sonars>>>,
         camera: Option<Arc<Interface<Image>>>,
+        balls: Option<Arc<LiveBalls>>,
     ) -> IntrorobPanel {
         let walls = shared
             .world
@@ -69,6 +73,7 @@ impl IntrorobPanel {
             sonars,
             camera,
             walls,
+            balls,
             world,
             joystick,
             image: ImageView::new("introrob camera"),
@@ -105,7 +110,7 @@ impl Panel for IntrorobPanel {
         Some("introrob".into())
     }
 
-    fn ui(&mut self, ui: &mut egui::Ui, rt: &Runtime) {
+    fn ui(&mut self, ui: &mut egui::Ui, _rt: &Runtime) {
         self.controls(ui);
         let pose = self.encoders.read().value;
         let laser = self.laser.snapshot();
@@ -140,7 +145,11 @@ impl Panel for IntrorobPanel {
             let [r, g, b] = d.color;
             segs.push(([d.a[0], d.a[1], d.b[0], d.b[1]], Color32::from_rgb(r, g, b)));
         }
-        let balls: Vec<_> = crate::drivers::simulator::live_balls(rt)
+        let balls: Vec<_> = self
+            .balls
+            .as_ref()
+            .map(|b| b.load_full())
+            .unwrap_or_default()
             .iter()
             .map(|b| {
                 let [r, g, bl] = b.color;

@@ -121,24 +121,41 @@ multiversion! {
 }
 
 multiversion! {
+    /// Bit k of `mask[c]`: `row[32c + k] > low` (32 comparisons a word, which the
+    /// compiler turns into vector compares).
     fn above_mask(row: &[i32], low: i32, mask: &mut [u32]) {
-        // 32 comparisons a word; the compiler turns them into vector compares.
-        let mut chunks = row.chunks_exact(32);
-        for (m, c) in mask.iter_mut().zip(&mut chunks) {
-            let mut bits = 0u32;
-            for (k, &v) in c.iter().enumerate() {
-                bits |= ((v > low) as u32) << k;
-            }
-            *m = bits;
+        for (m, c) in mask.iter_mut().zip(row.chunks(32)) {
+            *m = c
+                .iter()
+                .enumerate()
+                .fold(0, |bits, (k, &v)| bits | (((v > low) as u32) << k));
         }
-        let rest = chunks.remainder();
-        if !rest.is_empty() {
-            let mut bits = 0u32;
-            for (k, &v) in rest.iter().enumerate() {
-                bits |= ((v > low) as u32) << k;
-            }
-            mask[row.len() / 32] = bits;
+    }
+}
+
+/// Canny's rolling window: slot `r % 3` holds row r's derivatives and magnitudes
+/// (with a zero element at each end).
+struct Window {
+    dx: [Vec<i16>; 3],
+    dy: [Vec<i16>; 3],
+    mag: [Vec<i32>; 3],
+}
+
+impl Window {
+    fn new(w: usize) -> Self {
+        Window {
+            dx: std::array::from_fn(|_| vec![0; w]),
+            dy: std::array::from_fn(|_| vec![0; w]),
+            mag: std::array::from_fn(|_| vec![0; w + 2]),
         }
+    }
+
+    /// Computes row `y` into its slot.
+    fn fill(&mut self, y: usize, sobel: &mut SobelRows, l2: bool) {
+        let k = y % 3;
+        let w = self.dx[k].len();
+        sobel.row(y, &mut self.dx[k], &mut self.dy[k]);
+        magnitude(&self.dx[k], &self.dy[k], &mut self.mag[k][1..=w], l2);
     }
 }
 
@@ -162,23 +179,14 @@ pub fn canny(img: &GrayImage, low: f64, high: f64, l2: bool) -> GrayImage {
         high *= high;
     }
     let (low, high) = (low.floor() as i32, high.floor() as i32);
-    // A rolling window of three rows: the Sobel derivatives and magnitudes of rows
-    // y - 1, y, y + 1 (slot r % 3 holds row r), so nothing image-sized but the map
-    // is written. Magnitude rows have a zero element at each end, and the rows
-    // above the first and below the last are zeros, as OpenCV's.
+    // A rolling window of three rows (y - 1, y, y + 1), so nothing image-sized but
+    // the map is written. The rows above the first and below the last are zeros, as
+    // OpenCV's.
     let mw = w + 2;
     let mut sobel = SobelRows::new(img, Border::Replicate);
-    let mut dxs = [vec![0i16; w], vec![0i16; w], vec![0i16; w]];
-    let mut dys = [vec![0i16; w], vec![0i16; w], vec![0i16; w]];
-    let mut mags = [vec![0i32; mw], vec![0i32; mw], vec![0i32; mw]];
+    let mut win = Window::new(w);
     let zeros = vec![0i32; mw];
-    let mut compute =
-        |y: usize, dxs: &mut [Vec<i16>; 3], dys: &mut [Vec<i16>; 3], mags: &mut [Vec<i32>; 3]| {
-            let k = y % 3;
-            sobel.row(y, &mut dxs[k], &mut dys[k]);
-            magnitude(&dxs[k], &dys[k], &mut mags[k][1..=w], l2);
-        };
-    compute(0, &mut dxs, &mut dys, &mut mags);
+    win.fill(0, &mut sobel, l2);
     // Map: 0 = candidate (weak local maximum), 1 = not an edge, 2 = edge. One-pixel
     // border of 1s.
     let mut map = vec![1u8; mw * (h + 2)];
@@ -188,15 +196,15 @@ pub fn canny(img: &GrayImage, low: f64, high: f64, l2: bool) -> GrayImage {
     let mut above = vec![0u32; w.div_ceil(32)];
     for y in 0..h {
         if y + 1 < h {
-            compute(y + 1, &mut dxs, &mut dys, &mut mags);
+            win.fill(y + 1, &mut sobel, l2);
         }
-        let prev = if y > 0 { &mags[(y - 1) % 3] } else { &zeros };
+        let prev = if y > 0 { &win.mag[(y - 1) % 3] } else { &zeros };
         let next = if y + 1 < h {
-            &mags[(y + 1) % 3]
+            &win.mag[(y + 1) % 3]
         } else {
             &zeros
         };
-        let (cur, dxr, dyr) = (&mags[y % 3], &dxs[y % 3], &dys[y % 3]);
+        let (cur, dxr, dyr) = (&win.mag[y % 3], &win.dx[y % 3], &win.dy[y % 3]);
         let base = (y + 1) * mw + 1;
         above_mask(&cur[1..=w], low, &mut above);
         for (c, &bits) in above.iter().enumerate() {
