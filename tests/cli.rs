@@ -43,6 +43,14 @@ fn check(conf: impl AsRef<std::ffi::OsStr>) -> Output {
         .expect("run jderobot check")
 }
 
+/// Writes `text` as `dir/name` and runs `jderobot check` on it.
+fn check_text(dir: &Path, name: &str, text: &str) -> (std::path::PathBuf, Output) {
+    let file = dir.join(name);
+    std::fs::write(&file, text).unwrap();
+    let out = check(&file);
+    (file, out)
+}
+
 fn text(b: &[u8]) -> String {
     String::from_utf8_lossy(b).into_owned()
 }
@@ -121,9 +129,11 @@ fn pingpong_example_runs_children_under_arbitration() {
 #[test]
 fn check_reports_file_and_line_and_exits_nonzero() {
     let dir = tempfile::tempdir().unwrap();
-    let bad = dir.path().join("bad.conf");
-    std::fs::write(&bad, "load_schema myschema\nrun myschema\nfrobnicate\n").unwrap();
-    let out = check(&bad);
+    let (bad, out) = check_text(
+        dir.path(),
+        "bad.conf",
+        "load_schema myschema\nrun myschema\nfrobnicate\n",
+    );
     assert!(!out.status.success());
     let err = text(&out.stderr);
     assert!(
@@ -134,9 +144,7 @@ fn check_reports_file_and_line_and_exits_nonzero() {
         "{err}"
     );
 
-    let nosuch = dir.path().join("nosuch.conf");
-    std::fs::write(&nosuch, "load_driver nosuch\n").unwrap();
-    let out = check(&nosuch);
+    let (_, out) = check_text(dir.path(), "nosuch.conf", "load_driver nosuch\n");
     assert!(!out.status.success());
     let err = text(&out.stderr);
     assert!(err.contains(":1: no driver called `nosuch`"), "{err}");
@@ -147,13 +155,11 @@ fn check_reports_file_and_line_and_exits_nonzero() {
     assert!(err.contains("myschema"), "{err}");
 
     // A component's own lines are checked too, by building it as a run would.
-    let cycle = dir.path().join("cycle.conf");
-    std::fs::write(
-        &cycle,
+    let (cycle, out) = check_text(
+        dir.path(),
+        "cycle.conf",
         "schema myschema\ncycle abc\nend_schema\nload_schema myschema\nrun myschema\n",
-    )
-    .unwrap();
-    let out = check(&cycle);
+    );
     assert!(!out.status.success());
     let err = text(&out.stderr);
     assert!(

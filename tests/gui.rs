@@ -120,6 +120,14 @@ fn mastergui_lists_drivers_services_and_their_interfaces() {
     rt.shutdown();
 }
 
+/// The whole window's contents (the GUI host) in a harness.
+fn host_harness(rt: &Arc<Runtime>) -> Harness<'static> {
+    let mut host = GuiHost::new(rt.clone());
+    Harness::builder()
+        .with_size(vec2(1100.0, 700.0))
+        .build_ui(move |ui| host.ui(ui))
+}
+
 #[test]
 fn host_docks_mastergui_and_its_toggles_drive_the_runtime() {
     let rt = runtime_with(&[
@@ -128,10 +136,7 @@ fn host_docks_mastergui_and_its_toggles_drive_the_runtime() {
         ("myschema", Kind::Schema),
     ]);
     rt.show("mastergui").expect("show");
-    let mut host = GuiHost::new(rt.clone());
-    let mut h = Harness::builder()
-        .with_size(vec2(1100.0, 700.0))
-        .build_ui(move |ui| host.ui(ui));
+    let mut h = host_harness(&rt);
     h.run();
     h.get_by_label("run myschema").click();
     h.run();
@@ -172,10 +177,7 @@ fn a_panel_that_panics_is_replaced_by_a_note() {
     rt.run("faulty").expect("run");
     rt.show("mastergui").expect("show");
     rt.show("faulty").expect("show");
-    let mut host = GuiHost::new(rt.clone());
-    let mut h = Harness::builder()
-        .with_size(vec2(1100.0, 700.0))
-        .build_ui(move |ui| host.ui(ui));
+    let mut h = host_harness(&rt);
     h.run();
     h.run();
     h.get_by_label("this panel failed: boom in the panel");

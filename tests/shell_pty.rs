@@ -19,14 +19,18 @@ fn spawn(conf: &str, data_home: &std::path::Path) -> PtySession {
     spawn_command(cmd, Some(20_000)).expect("spawn in a pty")
 }
 
-fn quiet_conf(dir: &std::path::Path) -> String {
+/// Writes `text` as `dir/jde.conf`; returns its path.
+fn write_conf(dir: &std::path::Path, text: &str) -> String {
     let conf = dir.join("jde.conf");
-    std::fs::write(
-        &conf,
+    std::fs::write(&conf, text).unwrap();
+    conf.to_str().unwrap().to_string()
+}
+
+fn quiet_conf(dir: &std::path::Path) -> String {
+    write_conf(
+        dir,
         "load_schema myschema\nload_schema ping\nload_schema pong\n",
     )
-    .unwrap();
-    conf.to_str().unwrap().to_string()
 }
 
 #[test]
@@ -117,13 +121,11 @@ fn history_persists_across_runs() {
 #[test]
 fn schema_output_does_not_garble_the_line_being_typed() {
     let dir = tempfile::tempdir().unwrap();
-    let conf = dir.path().join("jde.conf");
-    std::fs::write(
-        &conf,
+    let conf = write_conf(
+        dir.path(),
         "schema myschema\ncycle 50\nend_schema\nload_schema myschema\nrun myschema\n",
-    )
-    .unwrap();
-    let mut p = spawn(conf.to_str().unwrap(), dir.path());
+    );
+    let mut p = spawn(&conf, dir.path());
     p.exp_string("jdeC $> ").unwrap();
     p.send("sho").unwrap();
     p.flush().unwrap();
@@ -140,13 +142,11 @@ fn schema_output_does_not_garble_the_line_being_typed() {
 #[test]
 fn ctrl_c_stops_a_waiting_echo_not_the_program() {
     let dir = tempfile::tempdir().unwrap();
-    let conf = dir.path().join("jde.conf");
-    std::fs::write(
-        &conf,
+    let conf = write_conf(
+        dir.path(),
         "driver simulator\nprovides encoders\nend_driver\nload_driver simulator\n",
-    )
-    .unwrap();
-    let mut p = spawn(conf.to_str().unwrap(), dir.path());
+    );
+    let mut p = spawn(&conf, dir.path());
     p.exp_string("jdeC $> ").unwrap();
     p.send_line("echo encoders 100000").unwrap();
     p.exp_string("encoders clock=").unwrap();
