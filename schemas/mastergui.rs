@@ -199,7 +199,19 @@ impl MasterPanel {
                     ui.label("users");
                     ui.end_row();
                     for i in &mine {
-                        ui.label(i.name()).on_hover_text(i.describe());
+                        match i.stale() {
+                            Some(why) => ui
+                                .label(
+                                    RichText::new(format!(
+                                        "{} (stale {:.0} s)",
+                                        i.name(),
+                                        i.age().as_secs_f64()
+                                    ))
+                                    .color(egui::Color32::from_rgb(220, 60, 40)),
+                                )
+                                .on_hover_text(why),
+                            None => ui.label(i.name()).on_hover_text(i.describe()),
+                        };
                         ui.label(i.kind());
                         ui.label(i.clock().to_string());
                         ui.label(format!("{:.1}", i.rate()));

@@ -548,6 +548,8 @@ pub struct Interface<T> {
     wake: (Mutex<()>, Condvar),
     /// The clock of the last sample, for cheap checks.
     clock: AtomicU64,
+    /// Why the value is stale (its source is gone), until the next publish.
+    stale: Mutex<Option<String>>,
 }
 
 impl<T: InterfaceValue> Interface<T> {
@@ -575,6 +577,7 @@ impl<T: InterfaceValue> Interface<T> {
             users: AtomicUsize::new(0),
             wake: (Mutex::new(()), Condvar::new()),
             clock: AtomicU64::new(0),
+            stale: Mutex::new(None),
         }
     }
 
@@ -635,6 +638,9 @@ impl<T: InterfaceValue> Interface<T> {
         }));
         self.clock.store(clock, Ordering::Release);
         w.published(stamp);
+        if self.stale.lock().is_some() {
+            *self.stale.lock() = None;
+        }
         (clock, old)
     }
 
@@ -682,6 +688,18 @@ impl<T: InterfaceValue> Interface<T> {
     pub fn name(&self) -> &str {
         &self.name
     }
+
+    /// Marks the value stale: its source is gone (a device unplugged, a server
+    /// down), so the latest value is old and will stay so. `ps`, `echo` and
+    /// mastergui show the reason and the growing age; the next publish clears it.
+    pub fn set_stale(&self, why: impl Into<String>) {
+        *self.stale.lock() = Some(why.into());
+    }
+
+    /// Why the value is stale, if it is.
+    pub fn stale(&self) -> Option<String> {
+        self.stale.lock().clone()
+    }
 }
 
 impl Interface<Motors> {
@@ -706,6 +724,8 @@ pub trait AnyInterface: Any + Send + Sync {
     fn age(&self) -> Duration;
     /// New values per second over the last ~2 s.
     fn rate(&self) -> f64;
+    /// Why the value is stale (its source is gone), if it is.
+    fn stale(&self) -> Option<String>;
     fn users(&self) -> usize;
     fn resume(&self) -> usize;
     fn suspend(&self) -> usize;
@@ -736,6 +756,9 @@ impl<T: InterfaceValue> AnyInterface for Interface<T> {
     }
     fn rate(&self) -> f64 {
         self.writer.lock().rate()
+    }
+    fn stale(&self) -> Option<String> {
+        Interface::stale(self)
     }
     fn users(&self) -> usize {
         Interface::users(self)
@@ -919,5 +942,15 @@ mod tests {
         assert_eq!(m.command(Duration::from_secs(10)).v, 300.0);
         std::thread::sleep(Duration::from_millis(20));
         assert_eq!(m.command(Duration::from_millis(5)), Motors::default());
+    }
+
+    #[test]
+    fn stale_until_next_publish() {
+        let l: Interface<Laser> = Interface::new("laser", "t");
+        assert_eq!(l.stale(), None);
+        l.set_stale("player: localhost:6665 closed the connection");
+        assert!(AnyInterface::stale(&l).unwrap().contains("6665"));
+        l.publish(Laser::default()).unwrap();
+        assert_eq!(l.stale(), None);
     }
 }

@@ -514,24 +514,29 @@ pub fn ps(rt: &Runtime, out: &mut dyn Write) {
         w(out, s.ps_line());
     }
     for i in rt.interfaces.all() {
-        w(
-            out,
-            format!(
-                "{}: {:.0} ips, {} user(s), clock {} ({} interface of {})",
-                i.name(),
-                i.rate(),
-                i.users(),
-                i.clock(),
-                i.kind(),
-                i.provider()
-            ),
+        let mut line = format!(
+            "{}: {:.0} ips, {} user(s), clock {} ({} interface of {})",
+            i.name(),
+            i.rate(),
+            i.users(),
+            i.clock(),
+            i.kind(),
+            i.provider()
         );
+        if let Some(why) = i.stale() {
+            line.push_str(&format!(
+                ", STALE for {:.1} s: {why}",
+                i.age().as_secs_f64()
+            ));
+        }
+        w(out, line);
     }
 }
 
 fn echo_line(i: &dyn AnyInterface) -> String {
+    let stale = i.stale().map(|why| format!(" STALE ({why})")).unwrap_or_default();
     format!(
-        "{} clock={} age={:.3}s {}",
+        "{} clock={} age={:.3}s{stale} {}",
         i.name(),
         i.clock(),
         i.age().as_secs_f64(),
