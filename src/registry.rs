@@ -7,40 +7,13 @@
 //! loads. Asking for a component that is not compiled in names the feature that
 //! would add it.
 
-use std::fmt;
-
+pub use crate::conf::Kind;
 use crate::{
     conf::ComponentConf,
     runtime::{Driver, Runtime, Schema},
 };
 
 include!(concat!(env!("OUT_DIR"), "/features.rs"));
-
-/// What a component is.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum Kind {
-    Driver,
-    Service,
-    Schema,
-}
-
-impl Kind {
-    /// Drivers and services are the same kind of object (as in 4.3): a service may
-    /// read a `driver NAME` section and the reverse.
-    pub fn same_family(self, other: Kind) -> bool {
-        self == other || (self != Kind::Schema && other != Kind::Schema)
-    }
-}
-
-impl fmt::Display for Kind {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(match self {
-            Kind::Driver => "driver",
-            Kind::Service => "service",
-            Kind::Schema => "schema",
-        })
-    }
-}
 
 /// Builds a schema from its conf lines.
 pub type SchemaFactory = fn(&ComponentConf, &Runtime) -> anyhow::Result<Box<dyn Schema>>;
