@@ -85,7 +85,11 @@ fn runtime(
     let path = Path::new("jde.conf");
     let rt = Runtime::new(path);
     if let Some(c) = registry::find("mastergui") {
-        let _ = rt.load_component(c, &ComponentConf::empty(Kind::Schema, "mastergui", path));
+        let _ = jderobot::loader::load_entry(
+            &rt,
+            c,
+            &ComponentConf::empty(Kind::Schema, "mastergui", path),
+        );
         let _ = rt.run("mastergui");
         let _ = rt.show("mastergui");
     }

@@ -18,6 +18,7 @@ pub mod fuzzy;
 #[cfg(feature = "gui")]
 pub mod gui;
 pub mod interfaces;
+pub mod loader;
 pub mod namespace;
 pub mod output;
 pub mod progeo;
@@ -33,9 +34,10 @@ pub mod schemas;
 #[path = "../services/mod.rs"]
 pub mod services;
 
+pub use conf::Kind;
 pub use conf::{ComponentConf, Conf};
 pub use interfaces::{Interface, Interfaces, Sample};
-pub use registry::{Component, Kind};
+pub use registry::Entry;
 pub use runtime::{Context, Runtime, Schema, State};
 
 /// Re-exported so that `register_schema!` and friends work from a user's crate.

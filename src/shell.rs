@@ -29,10 +29,9 @@ use std::{
 };
 
 use crate::{
-    conf::Conf,
+    conf::{Conf, Kind},
     interfaces::AnyInterface,
-    output,
-    registry::{self, Kind},
+    loader, output, registry,
     runtime::Runtime,
 };
 
@@ -252,7 +251,7 @@ impl Shell {
                         ));
                     }
                 };
-                rt.load(&self.conf, kind, name, file.as_deref())
+                loader::load(&rt, &self.conf, kind, name, file.as_deref())
                     .map_err(|e| format!("{cmd}: {e}"))?;
                 w(out, format!("{name} loaded"));
                 Ok(Flow::Continue)
@@ -369,19 +368,20 @@ impl Shell {
         let res = match cmd {
             "help" | "?" => return help(true, args, out),
             "cd" | "dir" | "pwd" | "view" => return files(cmd, args, out),
-            "run" => rt.run(schema),
-            "stop" => rt.stop(schema),
-            "show" => rt.show(schema),
-            "hide" => rt.hide(schema),
+            "run" => rt.run(schema).map_err(|e| e.to_string()),
+            "stop" => rt.stop(schema).map_err(|e| e.to_string()),
+            "show" => rt.show(schema).map_err(|e| e.to_string()),
+            "hide" => rt.hide(schema).map_err(|e| e.to_string()),
             "init" => {
                 let file = args.first().map(Path::new);
-                rt.reinit(schema, file).map(|_| {
-                    w(out, format!("{schema} initialized"));
-                })
+                loader::reinit(&rt, schema, file)
+                    .map(|_| w(out, format!("{schema} initialized")))
+                    .map_err(|e| e.to_string())
             }
-            "terminate" => rt.terminate_schema(schema).map(|_| {
-                w(out, format!("{schema} terminated"));
-            }),
+            "terminate" => rt
+                .terminate_schema(schema)
+                .map(|_| w(out, format!("{schema} terminated")))
+                .map_err(|e| e.to_string()),
             "exit" | "quit" => {
                 self.zoomed = None;
                 w(out, String::new());

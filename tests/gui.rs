@@ -27,7 +27,7 @@ fn runtime_with(names: &[(&str, Kind)]) -> Arc<Runtime> {
     let rt = Runtime::new(path);
     for (name, kind) in names {
         let comp = registry::find(name).unwrap_or_else(|| panic!("{name} compiled in"));
-        rt.load_component(comp, &ComponentConf::empty(*kind, name, path))
+        jderobot::loader::load_entry(&rt, comp, &ComponentConf::empty(*kind, name, path))
             .unwrap_or_else(|e| panic!("load {name}: {e}"));
     }
     rt

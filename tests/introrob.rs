@@ -14,7 +14,6 @@ use jderobot::{
     conf::Conf,
     drivers::simulator::{RobotModel, Sim, World},
     interfaces::{Bumpers, Encoders, Laser, Motors, Sonars},
-    runtime::Runtime,
     schemas::introrob::{
         Behaviour, Brain, Inputs, Shared,
         gpp::{self, GridMap, PlanParams},
@@ -365,7 +364,7 @@ fn introrob_through_the_runtime_moves_toward_its_target() {
         ),
     );
     let conf = Conf::load(&conf).expect("conf parses");
-    let rt = Runtime::start(&conf).expect("runtime starts");
+    let rt = jderobot::loader::start(&conf).expect("runtime starts");
     let enc = rt.interfaces.get::<Encoders>("encoders").unwrap();
     let target = [5000.0f32, 2200.0];
     let d = |e: Encoders| ((e.x - target[0]).powi(2) + (e.y - target[1]).powi(2)).sqrt();
@@ -421,7 +420,7 @@ fn conf_errors_name_file_and_line() {
             ),
         );
         let conf = Conf::load(&conf).expect("conf parses");
-        let e = match Runtime::start(&conf) {
+        let e = match jderobot::loader::start(&conf) {
             Ok(rt) => {
                 rt.shutdown();
                 panic!("`{line}` was accepted")
@@ -438,7 +437,7 @@ fn conf_errors_name_file_and_line() {
         "driver simulator\nprovides encoders\nprovides motors\nend_driver\n\
          load_driver simulator\nload_schema introrob\n",
     );
-    let e = Runtime::start(&Conf::load(&conf).unwrap())
+    let e = jderobot::loader::start(&Conf::load(&conf).unwrap())
         .err()
         .unwrap()
         .to_string();
@@ -461,7 +460,7 @@ fn shell_init_with_another_conf_changes_behaviour_and_target() {
             world.display()
         ),
     );
-    let rt = Runtime::start(&Conf::load(&main).unwrap()).expect("starts");
+    let rt = jderobot::loader::start(&Conf::load(&main).unwrap()).expect("starts");
     let shared = rt.names.import::<Shared>("introrob", "state").unwrap();
     assert_eq!(*shared.behaviour.lock(), Behaviour::Teleop);
     let go = write_conf(
@@ -469,7 +468,7 @@ fn shell_init_with_another_conf_changes_behaviour_and_target() {
         "go.conf",
         "schema introrob\nbehaviour gpp\ntarget 5000 3000\nend_schema\n",
     );
-    rt.reinit("introrob", Some(&go)).expect("init");
+    jderobot::loader::reinit(&rt, "introrob", Some(&go)).expect("init");
     let ok = (0..100).any(|_| {
         std::thread::sleep(Duration::from_millis(50));
         shared.view.lock().status.starts_with("gpp:")

@@ -10,12 +10,12 @@ use std::{path::Path, sync::Arc, time::Duration};
 
 use jderobot::{
     ComponentConf, Conf, Runtime,
+    conf::Kind,
     drivers::simulator::{
         BallSpec, Renderer, RobotModel, Sim, SimConf, World, live_balls, loaded_world,
     },
     interfaces::{Encoders, Image, Interface, Laser, Motors, PtMotors},
     progeo::{self, HPoint3D},
-    registry::Kind,
 };
 
 const DT: f64 = 0.01;
@@ -617,7 +617,7 @@ fn stepped_mode_advances_per_command() {
 fn the_example_conf_runs() {
     let conf =
         Conf::load(&root().join("examples/simulator.conf")).unwrap_or_else(|e| panic!("{e}"));
-    let rt = Runtime::start(&conf).unwrap_or_else(|e| panic!("{e}"));
+    let rt = jderobot::loader::start(&conf).unwrap_or_else(|e| panic!("{e}"));
     for name in [
         "encoders",
         "motors",

@@ -82,7 +82,7 @@ fn conf_errors_name_file_and_line() {
             ),
         )
         .unwrap();
-        let e = match Runtime::start(&Conf::load(&file).unwrap()) {
+        let e = match jderobot::loader::start(&Conf::load(&file).unwrap()) {
             Ok(rt) => {
                 rt.shutdown();
                 panic!("`{line}` accepted")

@@ -19,36 +19,17 @@ pub mod widgets;
 use std::{
     collections::VecDeque,
     panic::{AssertUnwindSafe, catch_unwind},
-    process::ExitCode,
     sync::{
         Arc,
         atomic::{AtomicBool, Ordering},
-        mpsc,
     },
     time::{Duration, Instant},
 };
 
 use parking_lot::Mutex;
 
-use crate::{conf::Conf, runtime::Runtime};
-
-/// A schema's GUI panel. It is taken from the schema once, when the schema is
-/// loaded, and lives on the GUI thread: it shares state with its schema through
-/// interfaces or atomics/`Arc`s, never by locking the schema, so drawing never
-/// blocks a schema and a schema never blocks drawing.
-pub trait Panel: Send {
-    /// Draws the panel.
-    fn ui(&mut self, ui: &mut egui::Ui, rt: &Runtime);
-    /// The panel's title (default: the schema's name).
-    fn title(&self) -> Option<String> {
-        None
-    }
-    /// Whether the panel is docked in the window's left side panel (mastergui)
-    /// rather than shown as a movable window.
-    fn docked(&self) -> bool {
-        false
-    }
-}
+pub use crate::runtime::Panel;
+use crate::runtime::Runtime;
 
 /// The services that open the window: `gui` and 4.3's names for it.
 pub const GUI_SERVICES: [&str; 4] = ["gui", "graphics_gtk", "graphics_xforms", "graphics_glut"];
@@ -96,13 +77,6 @@ impl Panel for Broken {
     fn ui(&mut self, ui: &mut egui::Ui, _rt: &Runtime) {
         ui.colored_label(egui::Color32::RED, format!("this panel failed: {}", self.0));
     }
-}
-
-fn panic_text(p: &(dyn std::any::Any + Send)) -> String {
-    p.downcast_ref::<&str>()
-        .map(|s| s.to_string())
-        .or_else(|| p.downcast_ref::<String>().cloned())
-        .unwrap_or_else(|| "panicked".into())
 }
 
 /// The window's contents: a top bar, the docked panels (mastergui) on the left, and
@@ -280,7 +254,7 @@ fn draw_panel(ui: &mut egui::Ui, rt: &Runtime, name: &str, panel: &Mutex<Option<
         ui.push_id(("jde_panel_body", name), |ui| inner.ui(ui, rt));
     }));
     if let Err(e) = r {
-        let msg = panic_text(&*e);
+        let msg = crate::output::panic_text(&*e);
         tracing::error!("{name}: panel failed: {msg}");
         *p = Some(Box::new(Broken(msg)));
     }
@@ -306,106 +280,4 @@ pub fn run_window(host: GuiHost) -> Result<(), String> {
     };
     eframe::run_native("jderobot", options, Box::new(move |_cc| Ok(Box::new(host))))
         .map_err(|e| e.to_string())
-}
-
-/// Says why no window opens when a GUI service is loaded but the run is headless,
-/// and, with a shell, how to watch the run from it.
-pub fn headless_notice(rt: &Runtime, shell: bool) {
-    if gui_loaded(rt) {
-        eprintln!("gui: no display or --headless: running without the window");
-        if shell {
-            eprintln!("gui: watch from the shell instead: `ps`, `echo encoders 5`, `help`");
-        }
-    }
-}
-
-/// Runs the shell on its own thread and, once a GUI service is loaded (now or later
-/// from the shell), the window on this thread. Returns when the shell ends or the
-/// window is closed; the runtime is shut down either way.
-pub fn launch(rt: Arc<Runtime>, conf: Conf, no_shell: bool) -> ExitCode {
-    let host = GuiHost::new(rt.clone());
-    let handle = host.close_handle();
-    let term = terminal::Saved::now();
-    let (tx, rx) = mpsc::channel::<()>();
-    let mut _keep = None;
-    if no_shell {
-        _keep = Some(tx);
-    } else {
-        let (rt2, h) = (rt.clone(), handle.clone());
-        let spawned = std::thread::Builder::new()
-            .name("shell".into())
-            .spawn(move || {
-                crate::shell::run(rt2, conf);
-                h.close();
-                let _ = tx.send(());
-            });
-        if let Err(e) = spawned {
-            eprintln!("cannot start the shell thread: {e}");
-            rt.shutdown();
-            return ExitCode::FAILURE;
-        }
-    }
-    if !gui_loaded(&rt) && rt.status().iter().any(|s| s.shown) {
-        eprintln!(
-            "gui: panels are shown but no GUI service is loaded; `load_service gui` \
-             (in the conf or the shell) opens the window"
-        );
-    }
-    // Wait for a GUI service, or for the shell to end.
-    loop {
-        match rx.recv_timeout(Duration::from_millis(50)) {
-            Err(mpsc::RecvTimeoutError::Timeout) => {}
-            _ => {
-                rt.shutdown();
-                return ExitCode::SUCCESS;
-            }
-        }
-        if gui_loaded(&rt) {
-            break;
-        }
-    }
-    match run_window(host) {
-        Ok(()) => {}
-        Err(e) => {
-            eprintln!("gui: cannot open the window ({e}); running without it");
-            // Wait for the shell (or forever with --no-shell: Ctrl+C ends the run).
-            let _ = rx.recv();
-        }
-    }
-    term.restore();
-    rt.shutdown();
-    ExitCode::SUCCESS
-}
-
-mod terminal {
-    //! Restores the terminal's settings when the window ends the program while
-    //! the line editor (on the shell's thread) has it in raw mode.
-
-    pub struct Saved(Option<libc::termios>);
-
-    impl Saved {
-        pub fn now() -> Self {
-            // SAFETY: tcgetattr only writes into the zeroed struct we own.
-            unsafe {
-                if libc::isatty(0) != 1 {
-                    return Saved(None);
-                }
-                let mut t: libc::termios = std::mem::zeroed();
-                if libc::tcgetattr(0, &mut t) == 0 {
-                    Saved(Some(t))
-                } else {
-                    Saved(None)
-                }
-            }
-        }
-
-        pub fn restore(&self) {
-            if let Some(t) = &self.0 {
-                // SAFETY: restores settings read by tcgetattr on the same fd.
-                unsafe {
-                    libc::tcsetattr(0, libc::TCSANOW, t);
-                }
-            }
-        }
-    }
 }

@@ -41,7 +41,7 @@ pub fn state(rt: &Runtime, name: &str) -> State {
 /// Starts a runtime from conf text (as if read from `test.conf`).
 pub fn start_conf(text: &str) -> Arc<Runtime> {
     let conf = Conf::parse(text, Path::new("test.conf")).unwrap_or_else(|e| panic!("{e}"));
-    Runtime::start(&conf).unwrap_or_else(|e| panic!("{e}"))
+    jderobot::loader::start(&conf).unwrap_or_else(|e| panic!("{e}"))
 }
 
 /// The path of a world under `assets/worlds/`, for conf text.
