@@ -21,9 +21,11 @@ use std::{
 
 use jderobot::{
     ComponentConf, Context, Kind, Runtime, Schema,
-    gui::{GuiHost, Panel, widgets::ImageView},
+    gui::GuiHost,
     interfaces::{Image, Interface},
     registry,
+    runtime::Panel,
+    widgets::ImageView,
 };
 
 /// A schema whose iteration takes `work` (sleeping or spinning) and publishes an image.

@@ -77,7 +77,7 @@ pub struct Teleoperator {
     cycle: Duration,
     last_pantilt: Option<[f32; 2]>,
     #[cfg(feature = "gui")]
-    panel: Option<Box<dyn crate::gui::Panel>>,
+    panel: Option<Box<dyn crate::runtime::Panel>>,
 }
 
 impl Schema for Teleoperator {
@@ -109,7 +109,7 @@ impl Schema for Teleoperator {
         let _ = self.dev.motors.publish(Motors::default());
     }
     #[cfg(feature = "gui")]
-    fn panel(&mut self) -> Option<Box<dyn crate::gui::Panel>> {
+    fn panel(&mut self) -> Option<Box<dyn crate::runtime::Panel>> {
         self.panel.take()
     }
 }
@@ -256,12 +256,13 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
     commands.set_base(base[0], base[1]);
     commands.set_pantilt(pantilt[0], pantilt[1]);
     #[cfg(feature = "gui")]
-    let panel: Option<Box<dyn crate::gui::Panel>> = Some(Box::new(panel::TeleoperatorPanel::new(
-        commands.clone(),
-        dev.clone(),
-        world,
-        crate::drivers::simulator::live_balls(rt),
-    )));
+    let panel: Option<Box<dyn crate::runtime::Panel>> =
+        Some(Box::new(panel::TeleoperatorPanel::new(
+            commands.clone(),
+            dev.clone(),
+            world,
+            crate::drivers::simulator::live_balls(rt),
+        )));
     #[cfg(not(feature = "gui"))]
     let _ = world;
     Ok(Box::new(Teleoperator {
@@ -292,15 +293,13 @@ pub mod panel {
 
     use crate::{
         drivers::simulator::{LiveBalls, World},
-        gui::{
-            Panel,
-            widgets::{
-                ImageView, Joystick, OrbitCamera, PanTiltLimits, PanTiltPad, Segment3D,
-                Wireframe3D, laser_to_world, relative_to_world,
-            },
-        },
         interfaces::{Encoders, Laser},
+        runtime::Panel,
         runtime::Runtime,
+        widgets::{
+            ImageView, Joystick, OrbitCamera, PanTiltLimits, PanTiltPad, Segment3D, Wireframe3D,
+            laser_to_world, relative_to_world,
+        },
     };
 
     use super::{Commands, Devices};

@@ -26,6 +26,8 @@ pub mod registry;
 pub mod runtime;
 pub mod shell;
 pub mod vision;
+#[cfg(feature = "gui")]
+pub mod widgets;
 
 #[path = "../drivers/mod.rs"]
 pub mod drivers;

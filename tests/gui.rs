@@ -11,15 +11,13 @@ use egui::{Pos2, Rect, pos2, vec2};
 use egui_kittest::{Harness, kittest::Queryable};
 use jderobot::{
     ComponentConf, Kind, Runtime, State,
-    gui::{
-        GuiHost,
-        widgets::{
-            ImageView, Joystick, OrbitCamera, PanTiltLimits, PanTiltPad, PixelPick, Wireframe3D,
-            WorldScene, WorldView,
-        },
-    },
+    gui::GuiHost,
     interfaces::{Encoders, Image, Laser},
     registry,
+    widgets::{
+        ImageView, Joystick, OrbitCamera, PanTiltLimits, PanTiltPad, PixelPick, Wireframe3D,
+        WorldScene, WorldView,
+    },
 };
 
 fn runtime_with(names: &[(&str, Kind)]) -> Arc<Runtime> {
@@ -161,9 +159,9 @@ fn a_panel_that_panics_is_replaced_by_a_note() {
         fn iteration(&mut self, _: &jderobot::Context) -> anyhow::Result<()> {
             Ok(())
         }
-        fn panel(&mut self) -> Option<Box<dyn jderobot::gui::Panel>> {
+        fn panel(&mut self) -> Option<Box<dyn jderobot::runtime::Panel>> {
             struct Boom;
-            impl jderobot::gui::Panel for Boom {
+            impl jderobot::runtime::Panel for Boom {
                 fn ui(&mut self, _: &mut egui::Ui, _: &Runtime) {
                     panic!("boom in the panel");
                 }

@@ -372,7 +372,7 @@ pub struct Introrob {
     children: Vec<String>,
     started: Instant,
     #[cfg(feature = "gui")]
-    panel: Option<Box<dyn crate::gui::Panel>>,
+    panel: Option<Box<dyn crate::runtime::Panel>>,
 }
 
 impl Schema for Introrob {
@@ -410,7 +410,7 @@ impl Schema for Introrob {
         let _ = self.motors.publish(Motors::default());
     }
     #[cfg(feature = "gui")]
-    fn panel(&mut self) -> Option<Box<dyn crate::gui::Panel>> {
+    fn panel(&mut self) -> Option<Box<dyn crate::runtime::Panel>> {
         self.panel.take()
     }
 }
@@ -634,7 +634,7 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
     let mut brain = Brain::new(shared.clone());
     brain.cell = s.cell;
     #[cfg(feature = "gui")]
-    let panel: Option<Box<dyn crate::gui::Panel>> = Some(Box::new(panel::IntrorobPanel::new(
+    let panel: Option<Box<dyn crate::runtime::Panel>> = Some(Box::new(panel::IntrorobPanel::new(
         shared.clone(),
         encoders.clone(),
         laser.clone(),

@@ -8,15 +8,13 @@ use egui::{Color32, vec2};
 
 use crate::{
     drivers::simulator::LiveBalls,
-    gui::{
-        Panel,
-        widgets::{
-            ImageView, Joystick, PolarStyle, WorldScene, WorldView, laser_points, polar_view,
-            relative_to_world, sonar_points,
-        },
-    },
     interfaces::{Encoders, Image, Interface, Laser, Sonars},
+    runtime::Panel,
     runtime::Runtime,
+    widgets::{
+        ImageView, Joystick, PolarStyle, WorldScene, WorldView, laser_points, polar_view,
+        relative_to_world, sonar_points,
+    },
 };
 
 use super::{Behaviour, Shared};

@@ -4,7 +4,7 @@
 //! - The window opens when a GUI service is loaded (`load_service gui`, or 4.3's
 //!   `graphics_gtk`, `graphics_xforms`, `graphics_glut`), from the conf or later
 //!   from the shell, provided there is a display and `--headless` was not given.
-//! - A schema offers a [`Panel`] from [`Schema::panel`](crate::runtime::Schema::panel).
+//! - A schema offers a [`Panel`](crate::runtime::Panel) from [`Schema::panel`](crate::runtime::Schema::panel).
 //!   Shown panels (`show NAME` in the conf or the shell, or mastergui's show toggle:
 //!   one state, [`Runtime::show`]) appear in the window: docked ones (mastergui) in a
 //!   left side panel, the others as movable windows. Closing a panel's window hides it.
@@ -13,8 +13,6 @@
 //!   atomics. It repaints at about 30 frames per second.
 //! - Quitting the shell closes the window; closing the window shuts the runtime
 //!   down and the program exits with status 0.
-
-pub mod widgets;
 
 use std::{
     collections::VecDeque,
@@ -28,8 +26,7 @@ use std::{
 
 use parking_lot::Mutex;
 
-pub use crate::runtime::Panel;
-use crate::runtime::Runtime;
+use crate::runtime::{Panel, Runtime};
 
 /// The services that open the window: `gui` and 4.3's names for it.
 pub const GUI_SERVICES: [&str; 4] = ["gui", "graphics_gtk", "graphics_xforms", "graphics_glut"];
