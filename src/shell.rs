@@ -624,12 +624,22 @@ pub fn history_file() -> Option<PathBuf> {
     Some(base.join("jderobot").join("history"))
 }
 
+/// How a shell ended.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ShellEnd {
+    /// The user asked: `quit`, `exit`, or Ctrl+D at the terminal in main state.
+    Quit,
+    /// Piped standard input ended (a script's end, `</dev/null`, a desktop
+    /// launcher): nobody asked the run to stop.
+    EndOfInput,
+}
+
 /// Runs the shell until `quit`, Ctrl+D in main state, or end of piped input.
-pub fn run(rt: Arc<Runtime>, conf: Conf) {
+pub fn run(rt: Arc<Runtime>, conf: Conf) -> ShellEnd {
     let mut shell = Shell::new(rt, conf);
     if std::io::IsTerminal::is_terminal(&std::io::stdin()) {
         match interactive(&mut shell) {
-            Ok(()) => return,
+            Ok(()) => return ShellEnd::Quit,
             Err(e) => eprintln!("line editor unavailable ({e}); reading plain lines"),
         }
     }
@@ -656,9 +666,10 @@ pub fn run(rt: Arc<Runtime>, conf: Conf) {
             continue;
         };
         if shell.execute(line.trim(), &mut out, &mut err) == Flow::Quit {
-            break;
+            return ShellEnd::Quit;
         }
     }
+    ShellEnd::EndOfInput
 }
 
 mod editor {

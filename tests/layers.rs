@@ -18,8 +18,9 @@ const COMPONENT_FOLDERS: [&str; 3] = ["drivers", "services", "schemas"];
 
 /// The layers, top first, read from docs/architecture.md.
 fn layers() -> Vec<Vec<String>> {
-    let doc = fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("docs/architecture.md"))
-        .expect("docs/architecture.md");
+    let doc =
+        fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("docs/architecture.md"))
+            .expect("docs/architecture.md");
     let after = doc
         .split("<!-- layers -->")
         .nth(1)
@@ -92,7 +93,8 @@ fn referenced(code: &str) -> Vec<(usize, String)> {
                 // A `use crate::{...}` group, maybe over several lines.
                 let mut text = group.to_string();
                 let mut j = i;
-                let mut depth = 1 + text.matches('{').count() as i32 - text.matches('}').count() as i32;
+                let mut depth =
+                    1 + text.matches('{').count() as i32 - text.matches('}').count() as i32;
                 while depth > 0 && j + 1 < lines.len() {
                     j += 1;
                     let l = lines[j].split("//").next().unwrap_or("");

@@ -185,7 +185,7 @@ fn run(cli: &Cli) -> ExitCode {
             std::thread::park();
         }
     }
-    shell::run(rt.clone(), conf);
+    let _ = shell::run(rt.clone(), conf);
     rt.shutdown();
     ExitCode::SUCCESS
 }

@@ -11,7 +11,7 @@ use crate::{
     conf::Conf,
     gui::{GuiHost, gui_loaded, run_window},
     runtime::Runtime,
-    shell,
+    shell::{self, ShellEnd},
 };
 
 /// Says why no window opens when a GUI service is loaded but the run is headless,
@@ -26,8 +26,11 @@ pub fn headless_notice(rt: &Runtime, shell: bool) {
 }
 
 /// Runs the shell on its own thread and, once a GUI service is loaded (now or later
-/// from the shell), the window on this thread. Returns when the shell ends or the
-/// window is closed; the runtime is shut down either way.
+/// from the shell), the window on this thread. Returns when the user quits (the
+/// shell's `quit`, the window's Quit or close, SIGINT/SIGTERM); the runtime is shut
+/// down either way. The end of piped standard input ends only the shell while the
+/// window is open: a run started from a desktop launcher, with `</dev/null` or
+/// under `nohup` keeps its window.
 pub fn launch(rt: Arc<Runtime>, conf: Conf, no_shell: bool) -> ExitCode {
     let host = GuiHost::new(rt.clone());
     let handle = host.close_handle();
@@ -41,7 +44,13 @@ pub fn launch(rt: Arc<Runtime>, conf: Conf, no_shell: bool) -> ExitCode {
         let spawned = std::thread::Builder::new()
             .name("shell".into())
             .spawn(move || {
-                shell::run(rt2, conf);
+                if shell::run(rt2.clone(), conf) == ShellEnd::EndOfInput && gui_loaded(&rt2) {
+                    eprintln!(
+                        "shell: end of standard input; the window stays open until it is \
+                         closed (or the process gets SIGINT/SIGTERM)"
+                    );
+                    return;
+                }
                 h.close();
                 let _ = tx.send(());
             });
@@ -60,11 +69,12 @@ pub fn launch(rt: Arc<Runtime>, conf: Conf, no_shell: bool) -> ExitCode {
     // Wait for a GUI service, or for the shell to end.
     loop {
         match rx.recv_timeout(Duration::from_millis(50)) {
-            Err(mpsc::RecvTimeoutError::Timeout) => {}
-            _ => {
+            Ok(()) => {
                 rt.shutdown();
                 return ExitCode::SUCCESS;
             }
+            // Disconnected: the shell's input ended while the window is wanted.
+            Err(_) => {}
         }
         if gui_loaded(&rt) {
             break;
@@ -74,8 +84,13 @@ pub fn launch(rt: Arc<Runtime>, conf: Conf, no_shell: bool) -> ExitCode {
         Ok(()) => {}
         Err(e) => {
             eprintln!("gui: cannot open the window ({e}); running without it");
-            // Wait for the shell (or forever with --no-shell: Ctrl+C ends the run).
-            let _ = rx.recv();
+            // Wait for the shell (or, with no shell or after its input ended, until
+            // Ctrl+C or SIGTERM ends the run).
+            if rx.recv().is_err() {
+                loop {
+                    std::thread::park();
+                }
+            }
         }
     }
     term.restore();
