@@ -459,3 +459,43 @@ fn host_quit_button_and_ctrl_q_ask_to_close() {
     assert!(rt.schema("myschema").expect("loaded").shown());
     rt.shutdown();
 }
+
+/// Panels open beside the docked mastergui, tiled, and stay there: none covers
+/// mastergui's run and show columns, none covers another.
+#[test]
+fn panels_tile_beside_mastergui_and_never_cover_it() {
+    let rt = runtime_with(&[
+        ("gui", Kind::Service),
+        ("mastergui", Kind::Schema),
+        ("myschema", Kind::Schema),
+        ("ping", Kind::Schema),
+    ]);
+    for s in ["mastergui", "myschema", "ping"] {
+        rt.show(s).expect("show");
+    }
+    let host = GuiHost::new(rt.clone());
+    let mut h = Harness::builder()
+        .with_size(vec2(1400.0, 800.0))
+        .build_ui_state(|ui, host: &mut GuiHost| host.ui(ui), host);
+    h.run();
+    h.run();
+    let free = h.state().free_area().expect("free area drawn");
+    let docked = h.get_by_label("run myschema").rect();
+    assert!(
+        docked.max.x <= free.min.x,
+        "mastergui {docked:?} reaches into {free:?}"
+    );
+    let rects = h.state().panel_rects();
+    assert_eq!(rects.len(), 2, "{rects:?}");
+    for (name, r) in &rects {
+        assert!(
+            free.expand(1.0).contains_rect(*r),
+            "{name}'s panel {r:?} leaves the free area {free:?}"
+        );
+    }
+    assert!(
+        !rects[0].1.intersects(rects[1].1),
+        "panels overlap: {rects:?}"
+    );
+    rt.shutdown();
+}

@@ -32,7 +32,9 @@ pub fn headless_notice(rt: &Runtime, shell: bool) {
 /// window is open: a run started from a desktop launcher, with `</dev/null` or
 /// under `nohup` keeps its window.
 pub fn launch(rt: Arc<Runtime>, conf: Conf, no_shell: bool) -> ExitCode {
-    let host = GuiHost::new(rt.clone());
+    // Panel positions are kept beside the shell's history.
+    let layout = shell::history_file().map(|h| h.with_file_name("panels"));
+    let host = GuiHost::new(rt.clone()).with_layout_file(layout);
     let handle = host.close_handle();
     let term = terminal::Saved::now();
     let (tx, rx) = mpsc::channel::<()>();

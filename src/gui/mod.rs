@@ -10,9 +10,20 @@
 //!   left side panel, the others as movable windows. Closing a panel's window hides it.
 //! - The host never locks a schema: it reads [`Runtime::status`] (short locks) and
 //!   calls panels, which share data with their schemas through interfaces or
-//!   atomics. It repaints at about 30 frames per second.
+//!   atomics.
+//! - It repaints when something changed, not on a fixed loop: on input, when an
+//!   interface's value changes or a schema's state or shown flag does (a watcher
+//!   thread looks every [`FRAME_PERIOD`], so at most ~30 frames per second), and
+//!   once per [`HEARTBEAT`] for the rates and ages on screen. A robot standing
+//!   still costs about one frame a second.
+//! - Schema panels open tiled in the area beside the docked mastergui and stay
+//!   inside it, so they never cover its columns; where the user moves them is saved
+//!   when the window closes (`panels` beside the shell's history) and used the next
+//!   time.
 //! - Quitting the shell closes the window; closing the window shuts the runtime
 //!   down and the program exits with status 0.
+
+mod layout;
 
 use std::{
     collections::VecDeque,
@@ -38,8 +49,14 @@ pub fn gui_loaded(rt: &Runtime) -> bool {
         .any(|(n, _)| GUI_SERVICES.contains(&n.as_str()))
 }
 
-/// The frame period the host asks for (about 30 frames per second).
+/// How often the watcher looks for changes (at most about 30 frames per second).
 pub const FRAME_PERIOD: Duration = Duration::from_millis(33);
+
+/// The slowest repaint: rates and ages on screen move even when no value does.
+pub const HEARTBEAT: Duration = Duration::from_secs(1);
+
+/// Size a panel window opens with.
+const PANEL_SIZE: egui::Vec2 = egui::vec2(480.0, 520.0);
 
 /// Closes a running window from another thread (the shell's).
 #[derive(Clone, Default)]
@@ -84,6 +101,7 @@ pub struct GuiHost {
     handle: CloseHandle,
     frames: VecDeque<Instant>,
     quit_clicked: bool,
+    layout: layout::Layout,
 }
 
 impl GuiHost {
@@ -93,7 +111,30 @@ impl GuiHost {
             handle: CloseHandle::default(),
             frames: VecDeque::new(),
             quit_clicked: false,
+            layout: layout::Layout::default(),
         }
+    }
+
+    /// Uses (and on [`save_layout`](Self::save_layout) writes) panel positions kept
+    /// in `file`.
+    pub fn with_layout_file(mut self, file: Option<std::path::PathBuf>) -> Self {
+        self.layout = layout::Layout::load(file);
+        self
+    }
+
+    /// Saves where the panels are, for the next run.
+    pub fn save_layout(&self) {
+        self.layout.save();
+    }
+
+    /// The screen rectangle of each panel window drawn in the last frame, by schema.
+    pub fn panel_rects(&self) -> Vec<(String, egui::Rect)> {
+        self.layout.current()
+    }
+
+    /// The area beside the docked panels, where panel windows live (last frame).
+    pub fn free_area(&self) -> Option<egui::Rect> {
+        self.layout.free
     }
 
     /// A handle that closes the window from another thread.
@@ -206,27 +247,32 @@ impl GuiHost {
                 });
         }
 
-        egui::CentralPanel::default_margins().show(ui, |ui| {
-            if windows.is_empty() {
-                ui.centered_and_justified(|ui| {
-                    ui.weak(
-                        "Schema panels appear here. Show one with `show NAME` in the shell, \
-                         the Panels menu, or mastergui's show toggle.",
-                    );
-                });
-            }
-        });
+        let free = egui::CentralPanel::default_margins()
+            .show(ui, |ui| {
+                if windows.is_empty() {
+                    ui.centered_and_justified(|ui| {
+                        ui.weak(
+                            "Schema panels appear here. Show one with `show NAME` in the shell, \
+                             the Panels menu, or mastergui's show toggle.",
+                        );
+                    });
+                }
+            })
+            .response
+            .rect;
+        self.layout.free = Some(free);
 
         let ctx = ui.ctx().clone();
         for (i, (name, title, slot, has)) in windows.iter().enumerate() {
             let mut open = true;
-            egui::Window::new(title.as_str())
+            let shown = egui::Window::new(title.as_str())
                 .id(egui::Id::unique(("jde_panel", name.as_str())))
                 .open(&mut open)
-                .default_pos([400.0 + 30.0 * i as f32, 60.0 + 30.0 * i as f32])
+                .default_pos(self.layout.place(name, i, free, PANEL_SIZE))
                 // Tall enough for introrob's and teleoperator's panels; it scrolls
                 // (and resizes) when a panel is taller or the screen smaller.
-                .default_height(520.0)
+                .default_size(PANEL_SIZE)
+                .constrain_to(free)
                 .vscroll(true)
                 .show(&ctx, |ui| {
                     if *has {
@@ -235,11 +281,14 @@ impl GuiHost {
                         ui.label(format!("schema `{name}` has no panel"));
                     }
                 });
+            if let Some(r) = shown {
+                self.layout.seen(name, r.response.rect);
+            }
             if !open {
                 let _ = rt.hide(name);
             }
         }
-        ctx.request_repaint_after(FRAME_PERIOD);
+        ctx.request_repaint_after(HEARTBEAT);
     }
 }
 
@@ -264,10 +313,55 @@ impl eframe::App for GuiHost {
         }
         GuiHost::ui(self, ui);
     }
+
+    fn on_exit(&mut self, _gl: Option<&eframe::glow::Context>) {
+        // Closing by any way (Quit, Ctrl+Q, the window manager, the shell) ends here.
+        self.handle.inner.close.store(true, Ordering::Release);
+        self.save_layout();
+    }
+}
+
+/// Wakes the window when something it shows changed: an interface's value, a
+/// schema's state or shown flag, the loaded drivers. Ends when the window closes.
+fn watch_for_changes(rt: Arc<Runtime>, handle: CloseHandle) {
+    let signature = |rt: &Runtime| {
+        let values: u64 = rt
+            .interfaces
+            .all()
+            .iter()
+            .map(|i| i.changes().wrapping_add(i.stale().is_some() as u64))
+            .fold(0u64, |a, c| a.wrapping_mul(31).wrapping_add(c));
+        let states: Vec<(String, crate::runtime::State, bool)> = rt
+            .status()
+            .into_iter()
+            .map(|s| (s.name, s.state, s.shown))
+            .collect();
+        (values, states, rt.drivers().len())
+    };
+    let mut last = signature(&rt);
+    while !handle.requested() {
+        std::thread::sleep(FRAME_PERIOD);
+        let now = signature(&rt);
+        if now != last {
+            last = now;
+            if let Some(ctx) = handle.inner.ctx.lock().as_ref() {
+                ctx.request_repaint();
+            }
+        }
+    }
 }
 
 /// Opens the window on this (the main) thread and returns when it closes.
 pub fn run_window(host: GuiHost) -> Result<(), String> {
+    let (rt, handle) = (host.rt.clone(), host.close_handle());
+    let watcher = std::thread::Builder::new()
+        .name("gui-watch".into())
+        .spawn(move || watch_for_changes(rt, handle));
+    if let Err(e) = watcher {
+        tracing::warn!(
+            "gui: no change watcher ({e}); the window repaints on input and every second"
+        );
+    }
     let options = eframe::NativeOptions {
         viewport: egui::ViewportBuilder::default()
             .with_title("jderobot")

@@ -87,6 +87,8 @@ pub struct Interface<T> {
     clock: AtomicU64,
     /// Why the value is stale (its source is gone), until the next publish.
     stale: Mutex<Option<String>>,
+    /// Publishes that changed the value.
+    changes: AtomicU64,
 }
 
 impl<T: InterfaceValue> Interface<T> {
@@ -115,6 +117,7 @@ impl<T: InterfaceValue> Interface<T> {
             wake: (Mutex::new(()), Condvar::new()),
             clock: AtomicU64::new(0),
             stale: Mutex::new(None),
+            changes: AtomicU64::new(0),
         }
     }
 
@@ -167,6 +170,9 @@ impl<T: InterfaceValue> Interface<T> {
     fn store(&self, w: &mut Writer<T>, value: T) -> (u64, Arc<Sample<T>>) {
         let clock = self.clock.load(Ordering::Relaxed) + 1;
         let stamp = Instant::now();
+        if self.slot.load().value != value {
+            self.changes.fetch_add(1, Ordering::Release);
+        }
         let old = self.slot.swap(Arc::new(Sample {
             clock,
             stamp,
@@ -175,8 +181,9 @@ impl<T: InterfaceValue> Interface<T> {
         }));
         self.clock.store(clock, Ordering::Release);
         w.published(stamp);
-        if self.stale.lock().is_some() {
-            *self.stale.lock() = None;
+        let mut stale = self.stale.lock();
+        if stale.is_some() {
+            *stale = None;
         }
         (clock, old)
     }
@@ -184,6 +191,12 @@ impl<T: InterfaceValue> Interface<T> {
     /// The clock of the latest sample.
     pub fn clock(&self) -> u64 {
         self.clock.load(Ordering::Acquire)
+    }
+
+    /// How many publishes changed the value (a new sample equal to the previous one
+    /// moves the clock, not this): what the GUI repaints on.
+    pub fn changes(&self) -> u64 {
+        self.changes.load(Ordering::Acquire)
     }
 
     /// Someone starts using this interface (4.3's `run` of a virtual schema).
@@ -257,6 +270,8 @@ pub trait AnyInterface: Any + Send + Sync {
     fn provider(&self) -> &str;
     fn is_actuator(&self) -> bool;
     fn clock(&self) -> u64;
+    /// How many publishes changed the value.
+    fn changes(&self) -> u64;
     /// Seconds since the latest value was published.
     fn age(&self) -> Duration;
     /// New values per second over the last ~2 s.
@@ -287,6 +302,9 @@ impl<T: InterfaceValue> AnyInterface for Interface<T> {
     }
     fn clock(&self) -> u64 {
         Interface::clock(self)
+    }
+    fn changes(&self) -> u64 {
+        Interface::changes(self)
     }
     fn age(&self) -> Duration {
         self.read().stamp.elapsed()

@@ -3,7 +3,9 @@
 use std::fmt::Write as _;
 
 /// A value type that an interface can hold.
-pub trait InterfaceValue: Clone + Default + Send + Sync + 'static {
+/// `PartialEq` tells a new value from a repeat of the last one (see
+/// [`Interface::changes`](super::Interface::changes)).
+pub trait InterfaceValue: Clone + Default + PartialEq + Send + Sync + 'static {
     /// The interface family name (`laser`, `motors`, `image`...).
     const KIND: &'static str;
     /// Whether a schema writes it (motors) rather than a driver.
