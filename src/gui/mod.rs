@@ -64,10 +64,21 @@ pub struct CloseHandle {
     inner: Arc<CloseInner>,
 }
 
-#[derive(Default)]
 struct CloseInner {
     close: AtomicBool,
     ctx: Mutex<Option<egui::Context>>,
+    /// When the host last drew a frame.
+    last_frame: Mutex<Instant>,
+}
+
+impl Default for CloseInner {
+    fn default() -> Self {
+        CloseInner {
+            close: AtomicBool::new(false),
+            ctx: Mutex::new(None),
+            last_frame: Mutex::new(Instant::now()),
+        }
+    }
 }
 
 impl CloseHandle {
@@ -102,6 +113,8 @@ pub struct GuiHost {
     frames: VecDeque<Instant>,
     quit_clicked: bool,
     layout: layout::Layout,
+    /// What the last frame showed, to tell whether the next one is needed soon.
+    shown: Option<Signature>,
 }
 
 impl GuiHost {
@@ -112,6 +125,7 @@ impl GuiHost {
             frames: VecDeque::new(),
             quit_clicked: false,
             layout: layout::Layout::default(),
+            shown: None,
         }
     }
 
@@ -288,7 +302,14 @@ impl GuiHost {
                 let _ = rt.hide(name);
             }
         }
-        ctx.request_repaint_after(HEARTBEAT);
+        // Busy (something changed since the last frame): the next frame in one
+        // frame period, as a 30 fps loop would. Idle: the heartbeat, or the watcher
+        // wakes the window at the next change.
+        let now = signature(&rt);
+        let busy = self.shown.as_ref() != Some(&now);
+        self.shown = Some(now);
+        *self.handle.inner.last_frame.lock() = Instant::now();
+        ctx.request_repaint_after(if busy { FRAME_PERIOD } else { HEARTBEAT });
     }
 }
 
@@ -321,30 +342,37 @@ impl eframe::App for GuiHost {
     }
 }
 
-/// Wakes the window when something it shows changed: an interface's value, a
-/// schema's state or shown flag, the loaded drivers. Ends when the window closes.
+/// What the window shows changes with: each interface's value and staleness, each
+/// schema's state and shown flag, the loaded drivers.
+type Signature = (u64, Vec<(String, crate::runtime::State, bool)>, usize);
+
+fn signature(rt: &Runtime) -> Signature {
+    let values = rt
+        .interfaces
+        .all()
+        .iter()
+        .map(|i| i.changes().wrapping_add(i.stale().is_some() as u64))
+        .fold(0u64, |a, c| a.wrapping_mul(31).wrapping_add(c));
+    let states = rt
+        .status()
+        .into_iter()
+        .map(|s| (s.name, s.state, s.shown))
+        .collect();
+    (values, states, rt.drivers().len())
+}
+
+/// Wakes an idle window (one waiting for its heartbeat) as soon as something it
+/// shows changes; a busy window paces itself (see [`GuiHost::ui`]). Ends when the
+/// window closes.
 fn watch_for_changes(rt: Arc<Runtime>, handle: CloseHandle) {
-    let signature = |rt: &Runtime| {
-        let values: u64 = rt
-            .interfaces
-            .all()
-            .iter()
-            .map(|i| i.changes().wrapping_add(i.stale().is_some() as u64))
-            .fold(0u64, |a, c| a.wrapping_mul(31).wrapping_add(c));
-        let states: Vec<(String, crate::runtime::State, bool)> = rt
-            .status()
-            .into_iter()
-            .map(|s| (s.name, s.state, s.shown))
-            .collect();
-        (values, states, rt.drivers().len())
-    };
     let mut last = signature(&rt);
     while !handle.requested() {
         std::thread::sleep(FRAME_PERIOD);
         let now = signature(&rt);
         if now != last {
             last = now;
-            if let Some(ctx) = handle.inner.ctx.lock().as_ref() {
+            let idle = handle.inner.last_frame.lock().elapsed() > 2 * FRAME_PERIOD;
+            if idle && let Some(ctx) = handle.inner.ctx.lock().as_ref() {
                 ctx.request_repaint();
             }
         }

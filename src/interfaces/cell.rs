@@ -14,7 +14,10 @@ use std::{
 use arc_swap::{ArcSwap, Guard};
 use parking_lot::{Condvar, Mutex};
 
-use super::values::{InterfaceValue, Motors};
+use super::{
+    table::InterfaceError,
+    values::{InterfaceValue, Motors},
+};
 
 /// One value of an interface.
 #[derive(Debug)]
@@ -141,8 +144,8 @@ impl<T: InterfaceValue> Interface<T> {
     }
 
     /// Publishes a new value; returns its clock. Never waits for readers.
-    pub fn publish(&self, value: T) -> Result<u64, String> {
-        value.validate(&self.name)?;
+    pub fn publish(&self, value: T) -> Result<u64, InterfaceError> {
+        value.validate(&self.name).map_err(InterfaceError::Rejected)?;
         let mut w = self.writer.lock();
         Ok(self.store(&mut w, value).0)
     }
@@ -150,13 +153,13 @@ impl<T: InterfaceValue> Interface<T> {
     /// Fills a recycled value in place and publishes it. `fill` gets the buffer of a
     /// sample no reader holds any more (or a copy of the latest value), so steady
     /// streams of large values allocate nothing.
-    pub fn write(&self, fill: impl FnOnce(&mut T)) -> Result<u64, String> {
+    pub fn write(&self, fill: impl FnOnce(&mut T)) -> Result<u64, InterfaceError> {
         let mut w = self.writer.lock();
         let mut value = w.spare.take().unwrap_or_else(|| self.read().value.clone());
         fill(&mut value);
         if let Err(e) = value.validate(&self.name) {
             w.spare = Some(value);
-            return Err(e);
+            return Err(InterfaceError::Rejected(e));
         }
         let (clock, old) = self.store(&mut w, value);
         if let Some(s) = Arc::into_inner(old) {
@@ -284,7 +287,7 @@ pub trait AnyInterface: Any + Send + Sync {
     /// The latest value in its units, one line.
     fn describe(&self) -> String;
     /// Sets fields (`v=200 w=10`) on a copy of the latest value and publishes it.
-    fn set_fields(&self, fields: &[(&str, &str)]) -> Result<u64, String>;
+    fn set_fields(&self, fields: &[(&str, &str)]) -> Result<u64, InterfaceError>;
 }
 
 impl<T: InterfaceValue> AnyInterface for Interface<T> {
@@ -327,10 +330,10 @@ impl<T: InterfaceValue> AnyInterface for Interface<T> {
     fn describe(&self) -> String {
         self.read().value.describe()
     }
-    fn set_fields(&self, fields: &[(&str, &str)]) -> Result<u64, String> {
+    fn set_fields(&self, fields: &[(&str, &str)]) -> Result<u64, InterfaceError> {
         let mut v = self.read().value.clone();
         for (f, val) in fields {
-            v.set_field(f, val)?;
+            v.set_field(f, val).map_err(InterfaceError::Field)?;
         }
         self.publish(v)
     }

@@ -67,6 +67,7 @@ mod tests {
         assert!(
             c.publish(Image::new(640, 480))
                 .unwrap_err()
+                .to_string()
                 .contains("320x240")
         );
         let v = t.provide::<Image>("varcolorA", "t").unwrap();

@@ -23,6 +23,12 @@ pub enum InterfaceError {
     },
     #[error("interface `{name}` is already provided by {provider}")]
     Duplicate { name: String, provider: String },
+    /// A value that does not fit its interface (a colorA image not 320x240, ...).
+    #[error("{0}")]
+    Rejected(String),
+    /// A `set NAME FIELD=VALUE` that names no field or gives no valid value.
+    #[error("{0}")]
+    Field(String),
 }
 
 /// An interface and the order it was provided in.
