@@ -62,7 +62,7 @@ pub use schema::{Schema, State};
 pub use slot::{SchemaSlot, SchemaStatus};
 
 use crate::{conf::Kind, interfaces::Interfaces, namespace::Namespace, output};
-use cronos::Cronos;
+use cronos::TimingStats;
 use slot::{Control, schema_thread};
 
 struct LoadedDriver {
@@ -138,7 +138,7 @@ impl Runtime {
             cond: Condvar::new(),
             generation: AtomicU64::new(0),
             cycle_ns: AtomicU64::new(cycle),
-            stats: Mutex::new(Cronos::default()),
+            stats: Mutex::new(TimingStats::default()),
             shown: AtomicBool::new(false),
             thread: Mutex::new(None),
             #[cfg(feature = "gui")]

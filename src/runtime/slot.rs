@@ -15,7 +15,7 @@ use parking_lot::{Condvar, Mutex};
 
 use super::{
     BrotherGroup, Context, Father, Runtime, Schema, State,
-    cronos::{Cronos, Timing},
+    cronos::{TimingStats, Timing},
     pacer::{self, Pacer, now_ns},
 };
 
@@ -43,7 +43,7 @@ pub struct SchemaSlot {
     /// Bumped by every run/stop/terminate so a sleeping thread notices at once.
     pub(super) generation: AtomicU64,
     pub(super) cycle_ns: AtomicU64,
-    pub(super) stats: Mutex<Cronos>,
+    pub(super) stats: Mutex<TimingStats>,
     pub(super) shown: AtomicBool,
     pub(super) thread: Mutex<Option<JoinHandle<()>>>,
     /// The schema's panel; only the GUI thread locks it.
