@@ -72,14 +72,19 @@ fn main() {
         WINDOW.as_secs()
     );
     for (what, conf) in cases {
-        let mut runs: Vec<(String, [Vec<f64>; 2])> = vec![("this build".into(), Default::default())];
+        let mut runs: Vec<(String, [Vec<f64>; 2])> =
+            vec![("this build".into(), Default::default())];
         if let Some(b) = &before {
             runs.push((format!("before ({})", b.display()), Default::default()));
         }
         for _ in 0..RUNS {
             // The binaries and modes alternate so all see the same machine load.
             for (i, (_, cpu)) in runs.iter_mut().enumerate() {
-                let bin = if i == 0 { &now } else { before.as_ref().unwrap() };
+                let bin = if i == 0 {
+                    &now
+                } else {
+                    before.as_ref().unwrap()
+                };
                 cpu[0].push(cpu_percent(bin, conf, false));
                 cpu[1].push(cpu_percent(bin, conf, true));
             }
@@ -94,7 +99,10 @@ fn main() {
             );
         }
         if let [a, b] = gui[..] {
-            println!("{what:<18} GUI ratio this build / before: {:.2}", a / b.max(1e-9));
+            println!(
+                "{what:<18} GUI ratio this build / before: {:.2}",
+                a / b.max(1e-9)
+            );
         }
     }
 }

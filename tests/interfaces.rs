@@ -212,7 +212,12 @@ fn actuators_are_set_by_field_and_sensors_refuse() {
             .contains("expected a number")
     );
     let e = t.get_any("encoders").unwrap();
-    assert!(e.set_fields(&[("x", "1")]).unwrap_err().to_string().contains("sensor"));
+    assert!(
+        e.set_fields(&[("x", "1")])
+            .unwrap_err()
+            .to_string()
+            .contains("sensor")
+    );
 }
 
 #[test]

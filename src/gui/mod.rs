@@ -12,7 +12,7 @@
 //!   calls panels, which share data with their schemas through interfaces or
 //!   atomics.
 //! - It repaints when something changed, not on a fixed loop: on input, when an
-//!   interface's value changes or a schema's state or shown flag does (a watcher
+//!   interface's value changes (its fingerprint, computed when its clock moves) or a schema's state or shown flag does (a watcher
 //!   thread looks every [`FRAME_PERIOD`], so at most ~30 frames per second), and
 //!   once per [`HEARTBEAT`] for the rates and ages on screen. A robot standing
 //!   still costs about one frame a second.
@@ -115,6 +115,7 @@ pub struct GuiHost {
     layout: layout::Layout,
     /// What the last frame showed, to tell whether the next one is needed soon.
     shown: Option<Signature>,
+    prints: Fingerprints,
 }
 
 impl GuiHost {
@@ -126,6 +127,7 @@ impl GuiHost {
             quit_clicked: false,
             layout: layout::Layout::default(),
             shown: None,
+            prints: Fingerprints::default(),
         }
     }
 
@@ -305,7 +307,7 @@ impl GuiHost {
         // Busy (something changed since the last frame): the next frame in one
         // frame period, as a 30 fps loop would. Idle: the heartbeat, or the watcher
         // wakes the window at the next change.
-        let now = signature(&rt);
+        let now = signature(&rt, &mut self.prints);
         let busy = self.shown.as_ref() != Some(&now);
         self.shown = Some(now);
         *self.handle.inner.last_frame.lock() = Instant::now();
@@ -346,29 +348,46 @@ impl eframe::App for GuiHost {
 /// schema's state and shown flag, the loaded drivers.
 type Signature = (u64, Vec<(String, crate::runtime::State, bool)>, usize);
 
-fn signature(rt: &Runtime) -> Signature {
-    let values = rt
-        .interfaces
-        .all()
-        .iter()
-        .map(|i| i.changes().wrapping_add(i.stale().is_some() as u64))
-        .fold(0u64, |a, c| a.wrapping_mul(31).wrapping_add(c));
+/// Fingerprints of interface values, recomputed only when a clock moved.
+#[derive(Default)]
+struct Fingerprints(std::collections::HashMap<String, (u64, u64)>);
+
+impl Fingerprints {
+    /// One number that changes when any interface's value or staleness changes
+    /// (a new sample equal to the previous one does not change it).
+    fn of(&mut self, rt: &Runtime) -> u64 {
+        let mut all = 0u64;
+        for i in rt.interfaces.all() {
+            let clock = i.clock();
+            let e = self.0.entry(i.name().to_string()).or_insert((u64::MAX, 0));
+            if e.0 != clock {
+                *e = (clock, i.fingerprint());
+            }
+            let stale = i.stale().is_some() as u64;
+            all = all.wrapping_mul(31).wrapping_add(e.1 ^ stale);
+        }
+        all
+    }
+}
+
+fn signature(rt: &Runtime, prints: &mut Fingerprints) -> Signature {
     let states = rt
         .status()
         .into_iter()
         .map(|s| (s.name, s.state, s.shown))
         .collect();
-    (values, states, rt.drivers().len())
+    (prints.of(rt), states, rt.drivers().len())
 }
 
 /// Wakes an idle window (one waiting for its heartbeat) as soon as something it
 /// shows changes; a busy window paces itself (see [`GuiHost::ui`]). Ends when the
 /// window closes.
 fn watch_for_changes(rt: Arc<Runtime>, handle: CloseHandle) {
-    let mut last = signature(&rt);
+    let mut prints = Fingerprints::default();
+    let mut last = signature(&rt, &mut prints);
     while !handle.requested() {
         std::thread::sleep(FRAME_PERIOD);
-        let now = signature(&rt);
+        let now = signature(&rt, &mut prints);
         if now != last {
             last = now;
             let idle = handle.inner.last_frame.lock().elapsed() > 2 * FRAME_PERIOD;

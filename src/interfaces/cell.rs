@@ -90,8 +90,6 @@ pub struct Interface<T> {
     clock: AtomicU64,
     /// Why the value is stale (its source is gone), until the next publish.
     stale: Mutex<Option<String>>,
-    /// Publishes that changed the value.
-    changes: AtomicU64,
 }
 
 impl<T: InterfaceValue> Interface<T> {
@@ -120,7 +118,6 @@ impl<T: InterfaceValue> Interface<T> {
             wake: (Mutex::new(()), Condvar::new()),
             clock: AtomicU64::new(0),
             stale: Mutex::new(None),
-            changes: AtomicU64::new(0),
         }
     }
 
@@ -145,7 +142,9 @@ impl<T: InterfaceValue> Interface<T> {
 
     /// Publishes a new value; returns its clock. Never waits for readers.
     pub fn publish(&self, value: T) -> Result<u64, InterfaceError> {
-        value.validate(&self.name).map_err(InterfaceError::Rejected)?;
+        value
+            .validate(&self.name)
+            .map_err(InterfaceError::Rejected)?;
         let mut w = self.writer.lock();
         Ok(self.store(&mut w, value).0)
     }
@@ -173,9 +172,6 @@ impl<T: InterfaceValue> Interface<T> {
     fn store(&self, w: &mut Writer<T>, value: T) -> (u64, Arc<Sample<T>>) {
         let clock = self.clock.load(Ordering::Relaxed) + 1;
         let stamp = Instant::now();
-        if self.slot.load().value != value {
-            self.changes.fetch_add(1, Ordering::Release);
-        }
         let old = self.slot.swap(Arc::new(Sample {
             clock,
             stamp,
@@ -194,12 +190,6 @@ impl<T: InterfaceValue> Interface<T> {
     /// The clock of the latest sample.
     pub fn clock(&self) -> u64 {
         self.clock.load(Ordering::Acquire)
-    }
-
-    /// How many publishes changed the value (a new sample equal to the previous one
-    /// moves the clock, not this): what the GUI repaints on.
-    pub fn changes(&self) -> u64 {
-        self.changes.load(Ordering::Acquire)
     }
 
     /// Someone starts using this interface (4.3's `run` of a virtual schema).
@@ -273,8 +263,9 @@ pub trait AnyInterface: Any + Send + Sync {
     fn provider(&self) -> &str;
     fn is_actuator(&self) -> bool;
     fn clock(&self) -> u64;
-    /// How many publishes changed the value.
-    fn changes(&self) -> u64;
+    /// A fingerprint of the latest value: equal values give equal fingerprints, so
+    /// a viewer can tell a new value from a repeat (the GUI repaints on it).
+    fn fingerprint(&self) -> u64;
     /// Seconds since the latest value was published.
     fn age(&self) -> Duration;
     /// New values per second over the last ~2 s.
@@ -306,8 +297,8 @@ impl<T: InterfaceValue> AnyInterface for Interface<T> {
     fn clock(&self) -> u64 {
         Interface::clock(self)
     }
-    fn changes(&self) -> u64 {
-        Interface::changes(self)
+    fn fingerprint(&self) -> u64 {
+        self.read().value.fingerprint()
     }
     fn age(&self) -> Duration {
         self.read().stamp.elapsed()

@@ -15,7 +15,7 @@ use parking_lot::{Condvar, Mutex};
 
 use super::{
     BrotherGroup, Context, Father, Runtime, Schema, State,
-    cronos::{TimingStats, Timing},
+    cronos::{Timing, TimingStats},
     pacer::{self, Pacer, now_ns},
 };
 
