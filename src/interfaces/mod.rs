@@ -111,4 +111,17 @@ mod tests {
         l.publish(Laser::default()).unwrap();
         assert_eq!(l.stale(), None);
     }
+
+    #[test]
+    fn fingerprints_tell_new_values_from_repeats() {
+        let a = Image::new(64, 48);
+        let mut b = a.clone();
+        assert_eq!(a.fingerprint(), b.fingerprint());
+        b.data[1000] = 1;
+        assert_ne!(a.fingerprint(), b.fingerprint());
+        assert_ne!(Image::new(48, 64).fingerprint(), a.fingerprint());
+        let m = Motors { v: 1.0, w: 0.0 };
+        assert_eq!(m.fingerprint(), m.fingerprint());
+        assert_ne!(m.fingerprint(), Motors::default().fingerprint());
+    }
 }
