@@ -33,9 +33,9 @@ use parking_lot::Mutex;
 
 use crate::{
     conf::{ComponentConf, ConfError, ConfLine},
-    drivers::simulator::World,
     interfaces::{Encoders, Image, Interface, Laser, Motors, PtEncoders, PtMotors, limit},
     runtime::{Context, Runtime, Schema},
+    world::{self, World},
 };
 
 /// Commands shared by the schema, its panel and the name space.
@@ -64,8 +64,8 @@ pub struct Devices {
     pub motors: Arc<Interface<Motors>>,
     pub encoders: Option<Arc<Interface<Encoders>>>,
     pub laser: Option<Arc<Interface<Laser>>>,
-    pub ptmotors: Option<Arc<Interface<PtMotors>>>,
-    pub ptencoders: Option<Arc<Interface<PtEncoders>>>,
+    pub pantilt_motors: Option<Arc<Interface<PtMotors>>>,
+    pub pantilt_encoders: Option<Arc<Interface<PtEncoders>>>,
     pub camera: Option<Arc<Interface<Image>>>,
 }
 
@@ -93,7 +93,7 @@ impl Schema for Teleoperator {
         let base = *self.commands.base.lock();
         self.dev.motors.publish(base).map_err(anyhow::Error::msg)?;
         let pt = *self.commands.pantilt.lock();
-        if let Some(ptm) = &self.dev.ptmotors
+        if let Some(ptm) = &self.dev.pantilt_motors
             && self.last_pantilt != Some(pt)
         {
             ptm.write(|m| {
@@ -193,7 +193,7 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
             World::load(&file).map_err(|e| l.error(format!("world: {e}")))?,
         )),
         Some(None) => None,
-        None => crate::drivers::simulator::loaded_world(rt),
+        None => world::map(&rt.names),
     };
     let name = |k: &str| {
         names
@@ -214,8 +214,8 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
         motors: ifs.get(&motors_name)?,
         encoders: name("encoders").map(|n| ifs.get(&n)).transpose()?,
         laser: name("laser").map(|n| ifs.get(&n)).transpose()?,
-        ptmotors: name("pantiltmotors").map(|n| ifs.get(&n)).transpose()?,
-        ptencoders: name("pantiltencoders").map(|n| ifs.get(&n)).transpose()?,
+        pantilt_motors: name("pantiltmotors").map(|n| ifs.get(&n)).transpose()?,
+        pantilt_encoders: name("pantiltencoders").map(|n| ifs.get(&n)).transpose()?,
         camera: name("camera").map(|n| ifs.get(&n)).transpose()?,
     };
     let children: Vec<String> = [
@@ -260,7 +260,7 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
         commands.clone(),
         dev.clone(),
         world,
-        crate::drivers::simulator::live_balls(rt),
+        world::balls(&rt.names),
     )));
     #[cfg(not(feature = "gui"))]
     let _ = world;
@@ -291,7 +291,6 @@ pub mod panel {
     use egui::{Color32, vec2};
 
     use crate::{
-        drivers::simulator::{LiveBalls, World},
         gui::{
             Panel,
             widgets::{
@@ -301,6 +300,7 @@ pub mod panel {
         },
         interfaces::{Encoders, Laser},
         runtime::Runtime,
+        world::{Ball, LiveBalls, World},
     };
 
     use super::{Commands, Devices};
@@ -378,7 +378,7 @@ pub mod panel {
     }
 
     /// Balls as wireframe spheres: the equator and two meridians, 16 edges each.
-    pub fn ball_segments(balls: &[crate::drivers::simulator::Ball]) -> Vec<Segment3D> {
+    pub fn ball_segments(balls: &[Ball]) -> Vec<Segment3D> {
         let mut out = Vec::new();
         for b in balls {
             let [r, g, bl] = b.color;
@@ -407,7 +407,7 @@ pub mod panel {
         commands: Arc<Commands>,
         dev: Devices,
         walls: Vec<Segment3D>,
-        /// The simulator's balls, drawn as spheres.
+        /// The balls (`world.balls`), drawn as spheres.
         balls: Option<Arc<LiveBalls>>,
         canvas: Wireframe3D,
         joystick: Joystick,
@@ -430,7 +430,7 @@ pub mod panel {
                 elevation_deg: 40.0,
                 ..OrbitCamera::default()
             };
-            let pad = dev.ptmotors.as_ref().map(|m| {
+            let pad = dev.pantilt_motors.as_ref().map(|m| {
                 let limits = PanTiltLimits::from(&m.read().value);
                 let mut p = PanTiltPad::new("teleoperator pantilt", limits);
                 let c = *commands.pantilt.lock();
@@ -463,7 +463,7 @@ pub mod panel {
             let laser = self.dev.laser.as_ref().map(|l| l.snapshot());
             let pt = self
                 .dev
-                .ptencoders
+                .pantilt_encoders
                 .as_ref()
                 .map(|p| p.read().value)
                 .map(|p| (p.pan_angle, p.tilt_angle));

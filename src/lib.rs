@@ -25,6 +25,7 @@ pub mod registry;
 pub mod runtime;
 pub mod shell;
 pub mod vision;
+pub mod world;
 
 #[path = "../drivers/mod.rs"]
 pub mod drivers;

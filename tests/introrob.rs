@@ -2,7 +2,7 @@
 //! controller ([`Brain`]) is driven in a loop against a stepped [`Sim`] (sensors
 //! from the Sim → controller → motors → `Sim::step`), plus one run through the
 //! real runtime and a conf file.
-#![cfg(feature = "introrob")]
+#![cfg(all(feature = "introrob", feature = "simulator"))]
 
 use std::{
     path::{Path, PathBuf},
@@ -12,7 +12,7 @@ use std::{
 
 use jderobot::{
     conf::Conf,
-    drivers::simulator::{RobotModel, Sim, World},
+    drivers::simulator::{RobotModel, Sim},
     interfaces::{Bumpers, Encoders, Laser, Motors, Sonars},
     runtime::Runtime,
     schemas::introrob::{
@@ -20,6 +20,7 @@ use jderobot::{
         gpp::{self, GridMap, PlanParams},
         navigation::{Robot, absolute_to_relative, relative_to_absolute},
     },
+    world::World,
 };
 
 fn assets() -> PathBuf {

@@ -1,6 +1,6 @@
 //! teleoperator through the real runtime: the conf's base and pan-tilt commands
 //! move the simulated robot and its camera; the name space changes them.
-#![cfg(feature = "teleoperator")]
+#![cfg(all(feature = "teleoperator", feature = "simulator"))]
 
 mod common;
 

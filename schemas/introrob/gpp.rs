@@ -19,8 +19,8 @@
 use std::{cmp::Reverse, collections::BinaryHeap};
 
 use crate::{
-    drivers::simulator::World,
     interfaces::{Encoders, Laser, Motors},
+    world::World,
 };
 
 use super::vff::{self, Forces, VffParams};

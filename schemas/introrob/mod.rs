@@ -58,9 +58,9 @@ use parking_lot::Mutex;
 
 use crate::{
     conf::{ComponentConf, ConfError},
-    drivers::simulator::World,
     interfaces::{Bumpers, Encoders, Image, Interface, Laser, Motors, Sonars},
     runtime::{Context, Runtime, Schema},
+    world::{self, World},
 };
 
 use gpp::{Follower, GridMap, PlanParams};
@@ -563,7 +563,7 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
             Some(Arc::new(w))
         }
         None if s.world_none => None,
-        None => crate::drivers::simulator::loaded_world(rt),
+        None => world::map(&rt.names),
     };
     let need = |name: &str, what: &str| -> anyhow::Result<()> {
         if rt.interfaces.contains(name) {
@@ -640,7 +640,7 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
         laser.clone(),
         sonars.clone(),
         camera.clone(),
-        crate::drivers::simulator::live_balls(rt),
+        world::balls(&rt.names),
     )));
     Ok(Box::new(Introrob {
         brain,

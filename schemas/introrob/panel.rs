@@ -7,7 +7,6 @@ use std::sync::Arc;
 use egui::{Color32, vec2};
 
 use crate::{
-    drivers::simulator::LiveBalls,
     gui::{
         Panel,
         widgets::{
@@ -17,6 +16,7 @@ use crate::{
     },
     interfaces::{Encoders, Image, Interface, Laser, Sonars},
     runtime::Runtime,
+    world::LiveBalls,
 };
 
 use super::{Behaviour, Shared};
@@ -29,7 +29,7 @@ pub struct IntrorobPanel {
     sonars: Option<Arc<Interface<Sonars>>>,
     camera: Option<Arc<Interface<Image>>>,
     walls: Vec<[f32; 4]>,
-    /// The simulator's balls, drawn in the world view.
+    /// The balls (`world.balls`), drawn in the world view.
     balls: Option<Arc<LiveBalls>>,
     world: WorldView,
     joystick: Joystick,
