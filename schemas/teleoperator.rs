@@ -14,7 +14,7 @@
 //! max_v 500                # joystick maxima, mm/s and deg/s (4.3's 500 and 30)
 //! max_w 30
 //! world ../assets/worlds/simple.world   # walls for the 3D canvas; default: the
-//!                          #   loaded simulator's world; `none`: none
+//!                          #   exported `world.map` (the simulator's); `none`: none
 //! cycle 100                # ms
 //! motors motors            # interface names (defaults shown); all but motors may
 //! encoders encoders        #   be `none`, and are skipped when nothing provides them
@@ -24,10 +24,18 @@
 //! camera colorA
 //! end_schema
 //! ```
+//! It draws the map from `world.map` and the balls from `world.balls`
+//! ([`crate::world`]) when a driver exports them; without them the canvas shows the
+//! robot and its laser only.
+//!
 //! Name space, component `teleoperator`: `base` ([`parking_lot::Mutex`]`<`[`Motors`]`>`)
 //! and `pantilt` (`Mutex<[f32; 2]>`, longitude and latitude in degrees).
 
-use std::{path::PathBuf, sync::Arc, time::Duration};
+use std::{
+    ops::Bound::{Excluded, Unbounded},
+    sync::Arc,
+    time::Duration,
+};
 
 use parking_lot::Mutex;
 
@@ -114,25 +122,16 @@ impl Schema for Teleoperator {
     }
 }
 
+/// A `KEY A B` line of two finite numbers.
 fn pair(l: &ConfLine, a: &str, b: &str) -> Result<[f32; 2], ConfError> {
     l.expect_args(2, 2, &format!("{} {a} {b}", l.keyword()))?;
-    let (x, y): (f32, f32) = (l.arg(0, a)?, l.arg(1, b)?);
-    if !(x.is_finite() && y.is_finite()) {
-        return Err(l.error(format!("`{}` needs finite numbers", l.keyword())));
-    }
-    Ok([x, y])
+    Ok([l.number(0, a, ..)?, l.number(1, b, ..)?])
 }
 
+/// A `KEY NUMBER` line with a positive number.
 fn positive(l: &ConfLine, what: &str) -> Result<f32, ConfError> {
     l.expect_args(1, 1, &format!("{} <{what}>", l.keyword()))?;
-    let x: f32 = l.arg(0, what)?;
-    if !(x.is_finite() && x > 0.0) {
-        return Err(l.error(format!(
-            "`{}` must be a positive {what}, got {x}",
-            l.keyword()
-        )));
-    }
-    Ok(x)
+    l.number(0, what, (Excluded(0.0), Unbounded))
 }
 
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>> {
@@ -140,7 +139,8 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
     let mut pantilt = [0.0f32, 0.0];
     let (mut max_v, mut max_w) = (500.0f32, 30.0f32);
     let mut cycle = Duration::from_millis(100);
-    let mut world: Option<Option<(PathBuf, ConfLine)>> = None;
+    // None: no `world` line (the exported world.map); Some(None): `world none`.
+    let mut world: Option<Option<Arc<World>>> = None;
     let mut names: Vec<(&str, Option<String>)> = [
         ("motors", "motors"),
         ("encoders", "encoders"),
@@ -164,8 +164,13 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
             }
             "world" => {
                 l.expect_args(1, 1, "world FILE|none")?;
-                let w = &l.args()[0];
-                world = Some((w != "none").then(|| (conf.resolve(w), l.clone())));
+                world = Some(if l.args()[0] == "none" {
+                    None
+                } else {
+                    let file = l.existing_file(0, "the world file")?;
+                    let w = World::load(&file).map_err(|e| l.error(format!("world: {e}")))?;
+                    Some(Arc::new(w))
+                });
             }
             k if names.iter().any(|(n, _)| *n == k) => {
                 l.expect_args(1, 1, &format!("{k} INTERFACE|none"))?;
@@ -188,13 +193,7 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
             }
         }
     }
-    let world = match world {
-        Some(Some((file, l))) => Some(Arc::new(
-            World::load(&file).map_err(|e| l.error(format!("world: {e}")))?,
-        )),
-        Some(None) => None,
-        None => world::map(&rt.names),
-    };
+    let world = world.unwrap_or_else(|| world::map(&rt.names));
     let name = |k: &str| {
         names
             .iter()

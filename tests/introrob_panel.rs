@@ -17,7 +17,7 @@ use egui::vec2;
 use egui_kittest::kittest::Queryable;
 use jderobot::{
     runtime::Runtime,
-    schemas::introrob::{Behaviour, Shared},
+    schemas::introrob::{Behaviour, Dashboard},
 };
 
 fn start(schema: &str, body: &str) -> Arc<Runtime> {
@@ -33,7 +33,7 @@ fn start(schema: &str, body: &str) -> Arc<Runtime> {
 #[test]
 fn introrob_panel_sets_behaviour_target_and_stop() {
     let rt = start("introrob", "behaviour teleop\n");
-    let shared = rt.names.import::<Shared>("introrob", "state").unwrap();
+    let shared = rt.names.import::<Dashboard>("introrob", "state").unwrap();
     let mut h = panel_harness(&rt, "introrob", vec2(1000.0, 700.0));
     h.run();
     h.get_by_label("vff").click();
