@@ -1,8 +1,8 @@
 //! simulator: Pioneer-like robots in a 2D world (2.5D for the camera), so every
 //! robot and vision schema runs with no hardware.
 //!
-//! The core is a plain struct, [`Sim`] (a [`World`](crate::world::World) plus robots and balls), that
-//! [`Sim::step`] advances deterministically; the driver runs it on a thread in real
+//! The core is a plain struct, [`Sim`] (a [`World`](crate::world::World) plus
+//! robots and balls), that [`Sim::step`] advances deterministically; the driver runs it on a thread in real
 //! time (or `speed N` times faster, or lock-stepped with the controller) and
 //! publishes the interfaces below. See `docs/simulator.md` and
 //! `examples/simulator.conf`.
@@ -57,10 +57,11 @@
 //!
 //! # Name space
 //! The driver exports its world under the documented keys of [`crate::world`]:
-//! `world.map`, the static [`World`](crate::world::World) (walls, boxes, where balls start), and
-//! `world.balls`, the balls as they roll ([`LiveBalls`](crate::world::LiveBalls), refreshed at the
-//! encoders' period). Schemas read them with [`crate::world::map`] and
-//! [`crate::world::balls`], whichever driver exported them.
+//! `world.map`, the static [`World`](crate::world::World) (walls, boxes, where
+//! balls start), and `world.balls`, the balls as they roll
+//! ([`LiveBalls`], refreshed at the encoders' period). Schemas read them with
+//! [`crate::world::map`] and [`crate::world::balls`], whichever driver exported
+//! them.
 //!
 //! # Files
 //! - [`conf`]: the conf lines above → a [`Simulation`] ready to run.
@@ -68,6 +69,7 @@
 //! - [`physics`]: [`Sim`], robots, balls and collisions, stepped deterministically.
 //! - [`sensors`]: laser, sonars and bumpers; [`camera`]: the camera and its renderer.
 //! - The world file format, geometry and grid are [`crate::world`]'s.
+
 pub mod camera;
 pub mod conf;
 pub mod driver;

@@ -106,14 +106,15 @@ impl Schema for Teleoperator {
         let base = *self.commands.base.lock();
         self.dev.motors.publish(base).map_err(anyhow::Error::msg)?;
         let pt = *self.commands.pantilt.lock();
-        if let Some(ptm) = &self.dev.pantilt_motors
+        if let Some(pantilt_motors) = &self.dev.pantilt_motors
             && self.last_pantilt != Some(pt)
         {
-            ptm.write(|m| {
-                m.longitude = limit(pt[0], m.min_longitude, m.max_longitude);
-                m.latitude = limit(pt[1], m.min_latitude, m.max_latitude);
-            })
-            .map_err(anyhow::Error::msg)?;
+            pantilt_motors
+                .write(|m| {
+                    m.longitude = limit(pt[0], m.min_longitude, m.max_longitude);
+                    m.latitude = limit(pt[1], m.min_latitude, m.max_latitude);
+                })
+                .map_err(anyhow::Error::msg)?;
             self.last_pantilt = Some(pt);
         }
         Ok(())
