@@ -537,3 +537,35 @@ fn garbage_inputs_do_not_panic() {
         }
     }
 }
+
+/// Without a map (no `world` line and nothing exported as `world.map`, or `world
+/// none`), gpp stands still and says it needs one; the other behaviours still run.
+#[test]
+fn without_a_map_gpp_says_it_needs_one() {
+    let dashboard = Dashboard::new(None, 500.0, 30.0);
+    let mut brain = Brain::new(dashboard.clone());
+    dashboard.set_target(Some([2000.0, 0.0]));
+    dashboard.set_behaviour(Behaviour::Gpp);
+    let laser = Laser {
+        readings: vec![8000; 180],
+        resolution: 1.0,
+    };
+    let input = Inputs {
+        pose: Encoders::default(),
+        laser: &laser,
+        sonars: None,
+        bumpers: None,
+        image: None,
+        time: 0.0,
+    };
+    let m = brain.step(&input);
+    assert_eq!((m.v, m.w), (0.0, 0.0), "gpp without a map stands still");
+    let status = dashboard.view.lock().status.clone();
+    assert!(
+        status.contains("needs a map") && status.contains("world.map"),
+        "{status}"
+    );
+    dashboard.set_behaviour(Behaviour::Vff);
+    let m = brain.step(&input);
+    assert!(m.v > 0.0, "vff needs no map: {m:?}");
+}
