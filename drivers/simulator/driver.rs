@@ -157,6 +157,8 @@ struct NextPublish {
     pantilt_encoders: f64,
 }
 
+/// Whether a sensor is due at `now`; if so, moves its `next` time one `period` on
+/// (skipping ahead after a stall).
 fn is_due(next: &mut f64, now: f64, period: f64) -> bool {
     if now + 1e-9 >= *next {
         *next = (*next + period).max(now + period * 0.5);
@@ -166,6 +168,7 @@ fn is_due(next: &mut f64, now: f64, period: f64) -> bool {
     }
 }
 
+/// Whether a sensor is worth computing: someone uses it, or `publish_always`.
 fn used<T: InterfaceValue>(i: &Interface<T>, always: bool) -> bool {
     always || i.users() > 0
 }
