@@ -28,6 +28,7 @@ pub mod shell;
 pub mod vision;
 #[cfg(feature = "gui")]
 pub mod widgets;
+pub mod world;
 
 #[path = "../drivers/mod.rs"]
 pub mod drivers;
