@@ -3,3 +3,12 @@
 
 #[cfg(feature = "simulator")]
 pub mod simulator;
+#[cfg(feature = "imagefile")]
+pub mod imagefile;
+#[cfg(feature = "mplayer")]
+pub mod mplayer;
+#[cfg(feature = "opencv")]
+pub mod opencv;
+#[cfg(feature = "simulated3D")]
+#[path = "simulated3D/mod.rs"]
+pub mod simulated3d;

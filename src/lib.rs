@@ -18,6 +18,7 @@ pub mod fuzzy;
 #[cfg(feature = "gui")]
 pub mod gui;
 pub mod interfaces;
+pub mod media; // cameras-streams (issue 14): lead, re-place this line; compiled only with feature `_media`
 pub mod namespace;
 pub mod output;
 pub mod progeo;

@@ -1,0 +1,1 @@
+//! mplayer (in progress)

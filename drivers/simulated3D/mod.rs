@@ -1,0 +1,1 @@
+//! simulated3D (in progress)
