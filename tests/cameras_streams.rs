@@ -555,3 +555,38 @@ fn the_example_confs_load() {
         rt.shutdown();
     }
 }
+
+// ------------------------------------------------------- 4:2:0 → BGR vs FFmpeg
+
+/// Our YUV4MPEG2 reader and 4:2:0 → BGR conversion give what FFmpeg's own
+/// conversion gives for the same frame (a colour test card).
+#[test]
+fn y4m_conversion_matches_ffmpeg() {
+    if !need("ffmpeg") {
+        return;
+    }
+    let run = |args: &[&str]| -> Vec<u8> {
+        let out = Command::new("ffmpeg")
+            .args(["-v", "error", "-f", "lavfi", "-i", "smptehdbars=size=320x240:rate=1", "-frames:v", "1"])
+            .args(args)
+            .output()
+            .expect("run ffmpeg");
+        assert!(out.status.success());
+        out.stdout
+    };
+    let y4m = run(&["-pix_fmt", "yuv420p", "-f", "yuv4mpegpipe", "pipe:1"]);
+    let bgr = run(&["-pix_fmt", "bgr24", "-f", "rawvideo", "pipe:1"]);
+    use jderobot::media::y4m;
+    let mut r = &y4m[..];
+    let h = y4m::read_header(&mut r).unwrap().unwrap();
+    assert_eq!((h.width, h.height, h.rate), (320, 240, Some(1.0)));
+    let mut planes = Vec::new();
+    assert!(y4m::read_frame(&mut r, &h, &mut planes).unwrap());
+    let mut ours = vec![0u8; 320 * 240 * 3];
+    y4m::i420_to_bgr(&planes, 320, 240, 320, 240, &mut ours);
+    assert_eq!(ours.len(), bgr.len());
+    let diff: u64 = ours.iter().zip(&bgr).map(|(a, b)| a.abs_diff(*b) as u64).sum();
+    let mean = diff as f64 / ours.len() as f64;
+    // Same matrix; chroma upsampling at colour edges may differ by a little.
+    assert!(mean < 3.0, "mean difference {mean:.2} per channel");
+}

@@ -113,16 +113,24 @@ pub fn i420_to_bgr(src: &[u8], sw: usize, sh: usize, w: usize, h: usize, out: &m
     let (w, h) = (w.min(sw), h.min(sh));
     for row in 0..h {
         let yrow = &yp[row * sw..row * sw + w];
-        let urow = &up[(row / 2) * cw..];
-        let vrow = &vp[(row / 2) * cw..];
+        let urow = &up[(row / 2) * cw..(row / 2) * cw + w.div_ceil(2)];
+        let vrow = &vp[(row / 2) * cw..(row / 2) * cw + w.div_ceil(2)];
         let orow = &mut out[row * w * 3..(row + 1) * w * 3];
-        for (x, (px, &y)) in orow.chunks_exact_mut(3).zip(yrow).enumerate() {
-            let c = 298 * (y as i32 - 16) + 128;
-            let d = urow[x / 2] as i32 - 128;
-            let e = vrow[x / 2] as i32 - 128;
-            px[0] = clamp8((c + 516 * d) >> 8);
-            px[1] = clamp8((c - 100 * d - 208 * e) >> 8);
-            px[2] = clamp8((c + 409 * e) >> 8);
+        // Two pixels share one chroma sample: its terms are computed once.
+        let pairs = orow
+            .chunks_mut(6)
+            .zip(yrow.chunks(2))
+            .zip(urow.iter().zip(vrow));
+        for ((px, ys), (&u, &v)) in pairs {
+            let d = u as i32 - 128;
+            let e = v as i32 - 128;
+            let (bu, guv, rv) = (516 * d + 128, -100 * d - 208 * e + 128, 409 * e + 128);
+            for (p, &y) in px.chunks_exact_mut(3).zip(ys) {
+                let c = 298 * (y as i32 - 16);
+                p[0] = clamp8((c + bu) >> 8);
+                p[1] = clamp8((c + guv) >> 8);
+                p[2] = clamp8((c + rv) >> 8);
+            }
         }
     }
 }
