@@ -85,7 +85,11 @@ fn play(dir: &Path, body: &str, min_frames: u64) -> (u64, f64, u64) {
     }
     let last = i.snapshot();
     rt.shutdown();
-    (last.clock - c0, last.stamp.duration_since(s0).as_secs_f64(), last.clock)
+    (
+        last.clock - c0,
+        last.stamp.duration_since(s0).as_secs_f64(),
+        last.clock,
+    )
 }
 
 /// The program alone: raw frames to a pipe we count; frames per second after the
@@ -122,9 +126,12 @@ fn main() {
     println!("media: 640x480 mpeg4 clip, {FRAMES} frames at {FPS} fps; medians of {REPS} runs");
 
     // Unpaced throughput into varcolorA, and the program alone.
-    let ff_conf = format!("driver opencv\nprovides varcolorA videofile {clip} 640 480 unpaced\nend_driver\nload_driver opencv\n");
-    let mp_conf =
-        format!("driver mplayer\nprovides varcolorA {clip} 640 480 repeat_off unpaced\nend_driver\nload_driver mplayer\n");
+    let ff_conf = format!(
+        "driver opencv\nprovides varcolorA videofile {clip} 640 480 unpaced\nend_driver\nload_driver opencv\n"
+    );
+    let mp_conf = format!(
+        "driver mplayer\nprovides varcolorA {clip} 640 480 repeat_off unpaced\nend_driver\nload_driver mplayer\n"
+    );
     let mut ours = [Vec::new(), Vec::new()];
     let mut refs = [Vec::new(), Vec::new()];
     for _ in 0..REPS {
@@ -186,5 +193,8 @@ fn main() {
         times.push(t.elapsed().as_secs_f64() * 1e3);
     }
     std::hint::black_box(&out);
-    println!("i420_to_bgr 640x480: {:.3} ms (median of 200)", median(times));
+    println!(
+        "i420_to_bgr 640x480: {:.3} ms (median of 200)",
+        median(times)
+    );
 }

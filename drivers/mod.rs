@@ -1,8 +1,6 @@
 //! Drivers: one module per device family. Each connects interfaces to a device and
 //! is compiled in only under the cargo feature of its own name.
 
-#[cfg(feature = "simulator")]
-pub mod simulator;
 #[cfg(feature = "imagefile")]
 pub mod imagefile;
 #[cfg(feature = "mplayer")]
@@ -12,3 +10,5 @@ pub mod opencv;
 #[cfg(feature = "simulated3D")]
 #[path = "simulated3D/mod.rs"]
 pub mod simulated3d;
+#[cfg(feature = "simulator")]
+pub mod simulator;

@@ -24,7 +24,9 @@ fn need(prog: &str) -> bool {
         return true;
     }
     if std::env::var_os("CI").is_some() {
-        panic!("`{prog}` is not installed and CI is set: install the Debian package (ffmpeg, mplayer)");
+        panic!(
+            "`{prog}` is not installed and CI is set: install the Debian package (ffmpeg, mplayer)"
+        );
     }
     eprintln!("skipped: `{prog}` is not installed");
     false
@@ -119,7 +121,11 @@ fn imagefile_reads_43_pnm_and_png_jpeg_bmp() {
     let mut p5 = b"P5\n# grey\n320 240\n255\n".to_vec();
     p5.extend((0..320 * 240).map(|i| (i % 251) as u8));
     std::fs::write(d.join("grey.pgm"), p5).unwrap();
-    std::fs::write(d.join("tiny.ppm"), "P3\n# ascii\n2 1\n255\n255 0 0  0 0 255\n").unwrap();
+    std::fs::write(
+        d.join("tiny.ppm"),
+        "P3\n# ascii\n2 1\n255\n255 0 0  0 0 255\n",
+    )
+    .unwrap();
     if !need("ffmpeg") {
         return;
     }
@@ -139,10 +145,22 @@ fn imagefile_reads_43_pnm_and_png_jpeg_bmp() {
          end_driver\nload_driver imagefile\n",
     )
     .unwrap();
-    let names = ["colorA", "colorB", "colorC", "varcolorA", "varcolorB", "varcolorC", "varcolorD"];
+    let names = [
+        "colorA",
+        "colorB",
+        "colorC",
+        "varcolorA",
+        "varcolorB",
+        "varcolorC",
+        "varcolorD",
+    ];
     std::thread::sleep(Duration::from_millis(250));
     for n in names {
-        assert_eq!(image(&rt, n).clock(), 0, "{n} published before anyone used it");
+        assert_eq!(
+            image(&rt, n).clock(),
+            0,
+            "{n} published before anyone used it"
+        );
         rt.run(n).unwrap();
     }
     for n in names {
@@ -163,10 +181,18 @@ fn imagefile_reads_43_pnm_and_png_jpeg_bmp() {
     assert_eq!(pattern_error(&png), 0.0, "PNG is lossless");
     let bmp = image(&rt, "varcolorB").snapshot();
     assert_eq!((bmp.width, bmp.height), (640, 480));
-    assert!(pattern_error(&bmp) < 2.0, "BMP scaled to 640x480: {}", pattern_error(&bmp));
+    assert!(
+        pattern_error(&bmp) < 2.0,
+        "BMP scaled to 640x480: {}",
+        pattern_error(&bmp)
+    );
     let jpg = image(&rt, "varcolorC").snapshot();
     assert_eq!((jpg.width, jpg.height), (400, 300));
-    assert!(pattern_error(&jpg) < 6.0, "JPEG within its loss: {}", pattern_error(&jpg));
+    assert!(
+        pattern_error(&jpg) < 6.0,
+        "JPEG within its loss: {}",
+        pattern_error(&jpg)
+    );
     let t = image(&rt, "varcolorD").snapshot();
     assert_eq!(t.data, [0, 0, 255, 255, 0, 0]);
     rt.shutdown();
@@ -183,20 +209,53 @@ fn imagefile_bad_files_are_clear_errors() {
     std::fs::write(d.join("notes.txt"), "hello, I am not an image\n").unwrap();
     std::fs::write(d.join("broken.png"), b"\x89PNG\r\n\x1a\n\0\0\0\rIHDR\0\0").unwrap();
     let cases = [
-        ("provides colorA big.ppm", &["test.conf:2", "big.ppm", "image size mismatch", "640x480", "scale"][..]),
-        ("provides colorA short.ppm", &["test.conf:2", "short.ppm", "truncated"][..]),
-        ("provides varcolorA notes.txt", &["notes.txt", "not an image"][..]),
-        ("provides varcolorA broken.png", &["broken.png", "cannot decode"][..]),
-        ("provides varcolorA missing.ppm", &["missing.ppm", "cannot read"][..]),
-        ("provides varcolorA big.ppm 0 10", &["test.conf:2", "0x10"][..]),
-        ("provides colorA big.ppm 640 480", &["test.conf:2", "scale"][..]),
-        ("provides laser big.ppm", &["test.conf:2", "not `laser`"][..]),
+        (
+            "provides colorA big.ppm",
+            &[
+                "test.conf:2",
+                "big.ppm",
+                "image size mismatch",
+                "640x480",
+                "scale",
+            ][..],
+        ),
+        (
+            "provides colorA short.ppm",
+            &["test.conf:2", "short.ppm", "truncated"][..],
+        ),
+        (
+            "provides varcolorA notes.txt",
+            &["notes.txt", "not an image"][..],
+        ),
+        (
+            "provides varcolorA broken.png",
+            &["broken.png", "cannot decode"][..],
+        ),
+        (
+            "provides varcolorA missing.ppm",
+            &["missing.ppm", "cannot read"][..],
+        ),
+        (
+            "provides varcolorA big.ppm 0 10",
+            &["test.conf:2", "0x10"][..],
+        ),
+        (
+            "provides colorA big.ppm 640 480",
+            &["test.conf:2", "scale"][..],
+        ),
+        (
+            "provides laser big.ppm",
+            &["test.conf:2", "not `laser`"][..],
+        ),
         ("frobnicate 1", &["test.conf:2", "frobnicate"][..]),
     ];
     for (line, want) in cases {
-        let e = start_in(d, &format!("driver imagefile\n{line}\nend_driver\nload_driver imagefile\n"))
-            .err()
-            .unwrap_or_else(|| panic!("`{line}` loaded"));
+        let e = start_in(
+            d,
+            &format!("driver imagefile\n{line}\nend_driver\nload_driver imagefile\n"),
+        )
+        .err()
+        .unwrap_or_else(|| panic!("`{line}` loaded"));
         for w in want {
             assert!(e.contains(w), "`{line}`: {w:?} missing in: {e}");
         }
@@ -214,7 +273,11 @@ fn imagefile_reloads_on_resume_and_when_the_file_changes() {
         b
     };
     std::fs::write(&f, flat(10)).unwrap();
-    let rt = start_in(d, "driver imagefile\nprovides varcolorA a.ppm\nend_driver\nload_driver imagefile\n").unwrap();
+    let rt = start_in(
+        d,
+        "driver imagefile\nprovides varcolorA a.ppm\nend_driver\nload_driver imagefile\n",
+    )
+    .unwrap();
     let i = image(&rt, "varcolorA");
     rt.run("varcolorA").unwrap();
     eventually("first image", || i.clock() == 1);
@@ -224,15 +287,22 @@ fn imagefile_reloads_on_resume_and_when_the_file_changes() {
     std::thread::sleep(Duration::from_millis(300));
     assert_eq!(i.clock(), 1, "not read while unused");
     rt.run("varcolorA").unwrap();
-    eventually("reloaded on resume", || i.clock() == 2 && i.read().pixel(0, 0) == [20, 20, 20]);
+    eventually("reloaded on resume", || {
+        i.clock() == 2 && i.read().pixel(0, 0) == [20, 20, 20]
+    });
     // While used: a changed file is published again (mtime granularity: wait a bit).
     std::thread::sleep(Duration::from_millis(1100));
     std::fs::write(&f, flat(30)).unwrap();
-    eventually("reloaded on change", || i.clock() == 3 && i.read().pixel(0, 0) == [30, 30, 30]);
+    eventually("reloaded on change", || {
+        i.clock() == 3 && i.read().pixel(0, 0) == [30, 30, 30]
+    });
     // A file that goes bad: the last image stays, the interface is stale with the reason.
     std::thread::sleep(Duration::from_millis(1100));
     std::fs::write(&f, b"P6\n4 2\n255\n\0\0").unwrap();
-    eventually("stale", || i.stale().is_some_and(|s| s.contains("truncated") && s.contains("a.ppm")));
+    eventually("stale", || {
+        i.stale()
+            .is_some_and(|s| s.contains("truncated") && s.contains("a.ppm"))
+    });
     assert_eq!(i.read().pixel(0, 0), [30, 30, 30]);
     rt.shutdown();
 }
@@ -266,14 +336,24 @@ fn opencv_videofile_plays_every_frame_loops_and_pauses() {
         image(&rt, "varcolorD"),
     );
     std::thread::sleep(Duration::from_millis(300));
-    assert_eq!((a.clock(), b.clock(), c.clock(), s.clock()), (0, 0, 0, 0), "nothing decoded while unused");
+    assert_eq!(
+        (a.clock(), b.clock(), c.clock(), s.clock()),
+        (0, 0, 0, 0),
+        "nothing decoded while unused"
+    );
     // Unpaced, no loop: exactly the file's 20 frames, then stale "end of the video".
     rt.run("varcolorA").unwrap();
-    eventually("end of red.avi", || a.stale().is_some_and(|s| s.contains("end of the video")));
+    eventually("end of red.avi", || {
+        a.stale().is_some_and(|s| s.contains("end of the video"))
+    });
     assert_eq!(a.clock(), 20, "one publish per frame");
     let f = a.snapshot();
     assert_eq!((f.width, f.height), (320, 240));
-    assert!(all_near(&f, [0, 0, 254], 12), "red in BGR: {:?}", f.pixel(10, 10));
+    assert!(
+        all_near(&f, [0, 0, 254], 12),
+        "red in BGR: {:?}",
+        f.pixel(10, 10)
+    );
     // Run again (the driver looks every 50 ms whether it is still used): it plays
     // again from the start.
     rt.stop("varcolorA").unwrap();
@@ -285,19 +365,31 @@ fn opencv_videofile_plays_every_frame_loops_and_pauses() {
     eventually("looping", || b.clock() > 25);
     let f = b.snapshot();
     assert_eq!((f.width, f.height), (320, 240));
-    assert!(all_near(&f, [254, 0, 0], 12), "blue in BGR: {:?}", f.pixel(10, 10));
+    assert!(
+        all_near(&f, [254, 0, 0], 12),
+        "blue in BGR: {:?}",
+        f.pixel(10, 10)
+    );
     // Paused while unused: the clock stops.
     rt.stop("colorB").unwrap();
     std::thread::sleep(Duration::from_millis(200));
     let k = b.clock();
     std::thread::sleep(Duration::from_millis(400));
-    assert!(b.clock() <= k + 1, "decoding while unused: {k} -> {}", b.clock());
+    assert!(
+        b.clock() <= k + 1,
+        "decoding while unused: {k} -> {}",
+        b.clock()
+    );
     // Paced at the file's 25 fps: 10 frames take at least ~0.36 s.
     let t0 = Instant::now();
     rt.run("varcolorC").unwrap();
     eventually("paced clip ends", || c.stale().is_some());
     assert_eq!(c.clock(), 10);
-    assert!(t0.elapsed() >= Duration::from_millis(340), "not paced: {:?}", t0.elapsed());
+    assert!(
+        t0.elapsed() >= Duration::from_millis(340),
+        "not paced: {:?}",
+        t0.elapsed()
+    );
     assert_eq!((c.read().width, c.read().height), (64, 48));
     // A still image, scaled.
     rt.run("varcolorD").unwrap();
@@ -315,16 +407,34 @@ fn opencv_bad_sources_are_clear_errors() {
     let d = dir.path();
     std::fs::write(d.join("garbage.avi"), "this is not a video\n".repeat(100)).unwrap();
     let cases = [
-        ("provides varcolorA videofile missing.avi 320 240", &["test.conf:2", "missing.avi", "no such video file"][..]),
-        ("provides varcolorA videofile garbage.avi", &["test.conf:2", "garbage.avi", "not a video"][..]),
-        ("provides colorA video /dev/video99", &["test.conf:2", "/dev/video99", "no such capture device"][..]),
-        ("provides varcolorA movie x.avi", &["test.conf:2", "`movie`"][..]),
-        ("provides varcolorA videofile x.avi 320 240 sometimes", &["test.conf:2", "`sometimes`"][..]),
+        (
+            "provides varcolorA videofile missing.avi 320 240",
+            &["test.conf:2", "missing.avi", "no such video file"][..],
+        ),
+        (
+            "provides varcolorA videofile garbage.avi",
+            &["test.conf:2", "garbage.avi", "not a video"][..],
+        ),
+        (
+            "provides colorA video /dev/video99",
+            &["test.conf:2", "/dev/video99", "no such capture device"][..],
+        ),
+        (
+            "provides varcolorA movie x.avi",
+            &["test.conf:2", "`movie`"][..],
+        ),
+        (
+            "provides varcolorA videofile x.avi 320 240 sometimes",
+            &["test.conf:2", "`sometimes`"][..],
+        ),
     ];
     for (line, want) in cases {
-        let e = start_in(d, &format!("driver opencv\n{line}\nend_driver\nload_driver opencv\n"))
-            .err()
-            .unwrap_or_else(|| panic!("`{line}` loaded"));
+        let e = start_in(
+            d,
+            &format!("driver opencv\n{line}\nend_driver\nload_driver opencv\n"),
+        )
+        .err()
+        .unwrap_or_else(|| panic!("`{line}` loaded"));
         for w in want {
             assert!(e.contains(w), "`{line}`: {w:?} missing in: {e}");
         }
@@ -343,7 +453,10 @@ fn children_with(pid: u32, needle: &str) -> Vec<u32> {
         let Ok(list) = std::fs::read_to_string(t.path().join("children")) else {
             continue;
         };
-        for c in list.split_whitespace().filter_map(|c| c.parse::<u32>().ok()) {
+        for c in list
+            .split_whitespace()
+            .filter_map(|c| c.parse::<u32>().ok())
+        {
             let cmd = std::fs::read(format!("/proc/{c}/cmdline")).unwrap_or_default();
             if String::from_utf8_lossy(&cmd).contains(needle) {
                 out.push(c);
@@ -355,8 +468,11 @@ fn children_with(pid: u32, needle: &str) -> Vec<u32> {
 
 fn alive(pid: u32) -> bool {
     // A zombie is dead too.
-    std::fs::read_to_string(format!("/proc/{pid}/stat"))
-        .is_ok_and(|s| s.rsplit(')').next().is_some_and(|r| !r.trim_start().starts_with('Z')))
+    std::fs::read_to_string(format!("/proc/{pid}/stat")).is_ok_and(|s| {
+        s.rsplit(')')
+            .next()
+            .is_some_and(|r| !r.trim_start().starts_with('Z'))
+    })
 }
 
 #[test]
@@ -386,14 +502,23 @@ fn mplayer_plays_files_repeats_and_reports_failures() {
         image(&rt, "varcolorD"),
     );
     std::thread::sleep(Duration::from_millis(300));
-    assert!(children_with(std::process::id(), "green.avi").is_empty(), "no mplayer while unused");
+    assert!(
+        children_with(std::process::id(), "green.avi").is_empty(),
+        "no mplayer while unused"
+    );
     assert_eq!(a.clock(), 0);
     rt.run("varcolorA").unwrap();
-    eventually("end of green.avi", || a.stale().is_some_and(|s| s.contains("end of the video")));
+    eventually("end of green.avi", || {
+        a.stale().is_some_and(|s| s.contains("end of the video"))
+    });
     assert_eq!(a.clock(), 12, "one publish per frame, every frame");
     let f = a.snapshot();
     assert_eq!((f.width, f.height), (640, 480));
-    assert!(all_near(&f, [0, 255, 0], 14), "green in BGR: {:?}", f.pixel(5, 5));
+    assert!(
+        all_near(&f, [0, 255, 0], 14),
+        "green in BGR: {:?}",
+        f.pixel(5, 5)
+    );
     // repeat_on: mplayer is started again at the end.
     rt.run("colorB").unwrap();
     eventually("repeating", || b.clock() > 20);
@@ -401,10 +526,16 @@ fn mplayer_plays_files_repeats_and_reports_failures() {
     // An odd size is cropped from mplayer's even one.
     rt.run("varcolorD").unwrap();
     eventually("odd size", || dd.clock() > 0);
-    assert_eq!((dd.read().width, dd.read().height, dd.read().data.len()), (321, 241, 321 * 241 * 3));
+    assert_eq!(
+        (dd.read().width, dd.read().height, dd.read().data.len()),
+        (321, 241, 321 * 241 * 3)
+    );
     // A file mplayer cannot play: stale with mplayer's own words, no frames.
     rt.run("colorC").unwrap();
-    eventually("bad.avi is stale", || c.stale().is_some_and(|s| s.contains("bad.avi") && s.contains("mplayer said")));
+    eventually("bad.avi is stale", || {
+        c.stale()
+            .is_some_and(|s| s.contains("bad.avi") && s.contains("mplayer said"))
+    });
     assert_eq!(c.clock(), 0);
     // The child dies while playing: stale with the reason, then a new mplayer.
     let loops = || children_with(std::process::id(), "loop.avi");
@@ -413,12 +544,21 @@ fn mplayer_plays_files_repeats_and_reports_failures() {
     unsafe {
         libc::kill(victim as i32, libc::SIGKILL);
     }
-    eventually("stale after the kill", || b.stale().is_some_and(|s| s.contains("mplayer")));
+    eventually("stale after the kill", || {
+        b.stale().is_some_and(|s| s.contains("mplayer"))
+    });
     let k = b.clock();
-    eventually("a new mplayer plays again", || b.clock() > k + 3 && b.stale().is_none());
+    eventually("a new mplayer plays again", || {
+        b.clock() > k + 3 && b.stale().is_none()
+    });
     rt.shutdown();
     assert!(
-        poll_until(10, || children_with(std::process::id(), d.to_str().unwrap()).iter().all(|p| !alive(*p))),
+        poll_until(10, || children_with(
+            std::process::id(),
+            d.to_str().unwrap()
+        )
+        .iter()
+        .all(|p| !alive(*p))),
         "mplayer children left after shutdown"
     );
 }
@@ -433,7 +573,11 @@ fn mplayer_never_outlives_jderobot() {
     let d = dir.path();
     clip(d, "long.avi", "testsrc=size=320x240:rate=25", 100);
     let conf = d.join("m.conf");
-    std::fs::write(&conf, "driver mplayer\nprovides colorA long.avi repeat_on\nend_driver\nload_driver mplayer\n").unwrap();
+    std::fs::write(
+        &conf,
+        "driver mplayer\nprovides colorA long.avi repeat_on\nend_driver\nload_driver mplayer\n",
+    )
+    .unwrap();
     let mut child = Command::new(env!("CARGO_BIN_EXE_jderobot"))
         .arg("--headless")
         .arg(&conf)
@@ -445,7 +589,12 @@ fn mplayer_never_outlives_jderobot() {
         .unwrap();
     {
         use std::io::Write;
-        child.stdin.as_mut().unwrap().write_all(b"run colorA\n").unwrap();
+        child
+            .stdin
+            .as_mut()
+            .unwrap()
+            .write_all(b"run colorA\n")
+            .unwrap();
     }
     let mut players = Vec::new();
     assert!(
@@ -470,7 +619,11 @@ fn missing_mplayer_program_is_a_clear_error() {
     let d = dir.path();
     std::fs::write(d.join("x.avi"), "x").unwrap();
     let conf = d.join("m.conf");
-    std::fs::write(&conf, "driver mplayer\nprovides colorA x.avi repeat_on\nend_driver\nload_driver mplayer\n").unwrap();
+    std::fs::write(
+        &conf,
+        "driver mplayer\nprovides colorA x.avi repeat_on\nend_driver\nload_driver mplayer\n",
+    )
+    .unwrap();
     let out = Command::new(env!("CARGO_BIN_EXE_jderobot"))
         .arg("--headless")
         .arg(&conf)
@@ -481,7 +634,10 @@ fn missing_mplayer_program_is_a_clear_error() {
         .unwrap();
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success(), "{err}");
-    assert!(err.contains("`mplayer` program is not installed") && err.contains("package `mplayer`"), "{err}");
+    assert!(
+        err.contains("`mplayer` program is not installed") && err.contains("package `mplayer`"),
+        "{err}"
+    );
     assert!(err.contains("m.conf:4"), "names the load line: {err}");
 }
 
@@ -530,7 +686,9 @@ fn the_cameras_example_runs_in_the_binary() {
         assert!(
             stdout
                 .lines()
-                .any(|l| l.starts_with(&format!("{name} clock=")) && !l.contains("clock=0 ") && l.contains(size)),
+                .any(|l| l.starts_with(&format!("{name} clock="))
+                    && !l.contains("clock=0 ")
+                    && l.contains(size)),
             "no frame of {name} ({size}) in:\n{stdout}\n{stderr}"
         );
     }
@@ -567,7 +725,16 @@ fn y4m_conversion_matches_ffmpeg() {
     }
     let run = |args: &[&str]| -> Vec<u8> {
         let out = Command::new("ffmpeg")
-            .args(["-v", "error", "-f", "lavfi", "-i", "smptehdbars=size=320x240:rate=1", "-frames:v", "1"])
+            .args([
+                "-v",
+                "error",
+                "-f",
+                "lavfi",
+                "-i",
+                "smptehdbars=size=320x240:rate=1",
+                "-frames:v",
+                "1",
+            ])
             .args(args)
             .output()
             .expect("run ffmpeg");
@@ -585,7 +752,11 @@ fn y4m_conversion_matches_ffmpeg() {
     let mut ours = vec![0u8; 320 * 240 * 3];
     y4m::i420_to_bgr(&planes, 320, 240, 320, 240, &mut ours);
     assert_eq!(ours.len(), bgr.len());
-    let diff: u64 = ours.iter().zip(&bgr).map(|(a, b)| a.abs_diff(*b) as u64).sum();
+    let diff: u64 = ours
+        .iter()
+        .zip(&bgr)
+        .map(|(a, b)| a.abs_diff(*b) as u64)
+        .sum();
     let mean = diff as f64 / ours.len() as f64;
     // Same matrix; chroma upsampling at colour edges may differ by a little.
     assert!(mean < 3.0, "mean difference {mean:.2} per channel");

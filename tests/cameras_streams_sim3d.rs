@@ -14,7 +14,11 @@ use jderobot::{
 };
 
 fn asset(name: &str) -> String {
-    root().join("assets/simulated3D").join(name).display().to_string()
+    root()
+        .join("assets/simulated3D")
+        .join(name)
+        .display()
+        .to_string()
 }
 
 fn dark(img: &Image, col: f64, row: f64) -> bool {
@@ -41,20 +45,42 @@ fn lines_are_black_on_white_where_progeo_projects_them() {
         render(&world, &cam, &mut img);
         assert_eq!((img.width, img.height), (cam.columns, cam.rows));
         if let Some(dir) = std::env::var_os("SIM3D_DUMP") {
-            let p = std::path::Path::new(&dir).join(format!("sim3d_{}x{}.ppm", img.width, img.height));
+            let p =
+                std::path::Path::new(&dir).join(format!("sim3d_{}x{}.ppm", img.width, img.height));
             std::fs::write(p, jderobot::media::still::encode_ppm(&img)).unwrap();
         }
         let black = img.data.chunks_exact(3).filter(|p| *p == [0, 0, 0]).count();
-        let white = img.data.chunks_exact(3).filter(|p| *p == [255, 255, 255]).count();
-        assert_eq!(black + white, (img.width * img.height) as usize, "only black and white");
+        let white = img
+            .data
+            .chunks_exact(3)
+            .filter(|p| *p == [255, 255, 255])
+            .count();
+        assert_eq!(
+            black + white,
+            (img.width * img.height) as usize,
+            "only black and white"
+        );
         assert!(black > 500, "lines drawn: {black} black pixels");
         // The table's top corners (750 mm high) are in view and drawn.
         let mut seen = 0;
-        for (x, y) in [(3200.0, 2000.0), (4800.0, 2000.0), (4800.0, 2800.0), (3200.0, 2800.0)] {
+        for (x, y) in [
+            (3200.0, 2000.0),
+            (4800.0, 2000.0),
+            (4800.0, 2800.0),
+            (3200.0, 2800.0),
+        ] {
             let p = cam.project(HPoint3D::point(x, y, 750.0));
             let (c, r) = cam.optical_to_graphic(p);
-            if p.h > 0.0 && c >= 1.0 && r >= 1.0 && c < img.width as f64 - 1.0 && r < img.height as f64 - 1.0 {
-                assert!(dark(&img, c, r), "table corner ({x}, {y}) at ({c:.1}, {r:.1}) not drawn");
+            if p.h > 0.0
+                && c >= 1.0
+                && r >= 1.0
+                && c < img.width as f64 - 1.0
+                && r < img.height as f64 - 1.0
+            {
+                assert!(
+                    dark(&img, c, r),
+                    "table corner ({x}, {y}) at ({c:.1}, {r:.1}) not drawn"
+                );
                 seen += 1;
             }
         }
@@ -81,7 +107,11 @@ fn the_driver_renders_only_while_used() {
     assert_eq!(a.clock(), 0, "colorA is not used: not rendered");
     let world = World::load(asset("robotics-lab.world")).unwrap();
     let mut want = Image::default();
-    render(&world, &PinholeCamera::load(asset("cameraB")).unwrap(), &mut want);
+    render(
+        &world,
+        &PinholeCamera::load(asset("cameraB")).unwrap(),
+        &mut want,
+    );
     assert!(b.read().value == want, "the published frame is the drawing");
     rt.stop("varcolorB").unwrap();
     std::thread::sleep(std::time::Duration::from_millis(100));
@@ -104,12 +134,26 @@ fn conf_errors_name_the_line() {
             Err(e) => e.to_string(),
         }
     };
-    let e = bad(&format!("worldfile {}\nprovides colorA {}", asset("robotics-lab.world"), asset("cameraB")));
-    assert!(e.contains("t.conf:3") && e.contains("640x480") && e.contains("varcolor"), "{e}");
+    let e = bad(&format!(
+        "worldfile {}\nprovides colorA {}",
+        asset("robotics-lab.world"),
+        asset("cameraB")
+    ));
+    assert!(
+        e.contains("t.conf:3") && e.contains("640x480") && e.contains("varcolor"),
+        "{e}"
+    );
     let e = bad(&format!("provides colorA {}", asset("cameraA")));
     assert!(e.contains("no `worldfile` line"), "{e}");
     let e = bad("worldfile /nonexistent/world\nprovides colorA x");
-    assert!(e.contains("t.conf:2") && e.contains("/nonexistent/world"), "{e}");
-    let e = bad(&format!("worldfile {}\nprovides laser {}", asset("robotics-lab.world"), asset("cameraA")));
+    assert!(
+        e.contains("t.conf:2") && e.contains("/nonexistent/world"),
+        "{e}"
+    );
+    let e = bad(&format!(
+        "worldfile {}\nprovides laser {}",
+        asset("robotics-lab.world"),
+        asset("cameraA")
+    ));
     assert!(e.contains("not `laser`"), "{e}");
 }

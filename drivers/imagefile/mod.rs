@@ -57,7 +57,8 @@ pub struct Source {
 pub fn size(l: &ConfLine, i: usize) -> Result<(u32, u32), crate::conf::ConfError> {
     let w: u32 = l.arg(i, "a width W in pixels")?;
     let h: u32 = l.arg(i + 1, "a height H in pixels")?;
-    if !(1..=16384).contains(&w) || !(1..=16384).contains(&h) || (w as u64 * h as u64) > MAX_PIXELS {
+    if !(1..=16384).contains(&w) || !(1..=16384).contains(&h) || (w as u64 * h as u64) > MAX_PIXELS
+    {
         return Err(l.error(format!(
             "`{}`: {w}x{h} is not an image size (1..16384 pixels each)",
             l.keyword()
@@ -78,7 +79,9 @@ pub fn parse(conf: &ComponentConf) -> anyhow::Result<Vec<(Source, ConfLine)>> {
         let var = matches!(iface, "varcolorA" | "varcolorB" | "varcolorC" | "varcolorD");
         if !color && !var {
             return Err(l
-                .error(format!("imagefile provides colorA..D and varcolorA..D, not `{iface}`; usage: {USAGE}"))
+                .error(format!(
+                    "imagefile provides colorA..D and varcolorA..D, not `{iface}`; usage: {USAGE}"
+                ))
                 .into());
         }
         let fit = if color {
@@ -119,7 +122,10 @@ pub fn parse(conf: &ComponentConf) -> anyhow::Result<Vec<(Source, ConfLine)>> {
         ));
     }
     if out.is_empty() {
-        anyhow::bail!("imagefile `{}`: no `provides` line; usage: {USAGE}", conf.file.display());
+        anyhow::bail!(
+            "imagefile `{}`: no `provides` line; usage: {USAGE}",
+            conf.file.display()
+        );
     }
     Ok(out)
 }
@@ -138,7 +144,8 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
     let sources = parse(conf)?;
     let mut specs = Vec::new();
     for (s, line) in sources {
-        let img = load_fitted(&s.path, s.fit, &s.interface).map_err(|e| line.error(e.to_string()))?;
+        let img =
+            load_fitted(&s.path, s.fit, &s.interface).map_err(|e| line.error(e.to_string()))?;
         let iface: Arc<Interface<Image>> = rt.interfaces.provide_value(
             &s.interface,
             &conf.name,

@@ -82,8 +82,14 @@ fn repeat(l: &ConfLine, word: Option<&String>) -> anyhow::Result<bool> {
     match word.map(String::as_str) {
         Some("repeat_on") => Ok(true),
         Some("repeat_off") => Ok(false),
-        Some(w) => Err(l.error(format!("`{w}` is not repeat_on or repeat_off; usage: {USAGE}")).into()),
-        None => Err(l.error(format!("missing repeat_on|repeat_off; usage: {USAGE}")).into()),
+        Some(w) => Err(l
+            .error(format!(
+                "`{w}` is not repeat_on or repeat_off; usage: {USAGE}"
+            ))
+            .into()),
+        None => Err(l
+            .error(format!("missing repeat_on|repeat_off; usage: {USAGE}"))
+            .into()),
     }
 }
 
@@ -92,7 +98,10 @@ fn unpaced(l: &ConfLine, rest: &[String]) -> anyhow::Result<bool> {
         [] => Ok(true),
         [w] if w == "unpaced" => Ok(false),
         _ => Err(l
-            .error(format!("`{}` is not understood here; expected `unpaced` or nothing; usage: {USAGE}", rest.join(" ")))
+            .error(format!(
+                "`{}` is not understood here; expected `unpaced` or nothing; usage: {USAGE}",
+                rest.join(" ")
+            ))
             .into()),
     }
 }
@@ -118,11 +127,15 @@ pub fn parse(conf: &ComponentConf) -> anyhow::Result<Vec<(Source, ConfLine)>> {
         let var = matches!(iface, "varcolorA" | "varcolorB" | "varcolorC" | "varcolorD");
         if !color && !var {
             return Err(l
-                .error(format!("mplayer provides colorA..D and varcolorA..D, not `{iface}`; usage: {USAGE}"))
+                .error(format!(
+                    "mplayer provides colorA..D and varcolorA..D, not `{iface}`; usage: {USAGE}"
+                ))
                 .into());
         }
         if a.len() < 3 {
-            return Err(l.error(format!("`provides {iface}` is too short; usage: {USAGE}")).into());
+            return Err(l
+                .error(format!("`provides {iface}` is too short; usage: {USAGE}"))
+                .into());
         }
         let src = if color && a[1] == "v4l" {
             l.expect_args(4, 4, "provides colorX v4l DEV cam|tv|composite|s-video")?;
@@ -132,7 +145,9 @@ pub fn parse(conf: &ComponentConf) -> anyhow::Result<Vec<(Source, ConfLine)>> {
                 "s-video" => 2,
                 other => {
                     return Err(l
-                        .error(format!("`{other}` is not a v4l input; expected cam, tv, composite or s-video"))
+                        .error(format!(
+                            "`{other}` is not a v4l input; expected cam, tv, composite or s-video"
+                        ))
                         .into());
                 }
             };
@@ -159,13 +174,19 @@ pub fn parse(conf: &ComponentConf) -> anyhow::Result<Vec<(Source, ConfLine)>> {
         } else {
             if a.len() < 5 {
                 return Err(l
-                    .error(format!("`provides {iface}` needs FILE W H repeat_on|off; usage: {USAGE}"))
+                    .error(format!(
+                        "`provides {iface}` needs FILE W H repeat_on|off; usage: {USAGE}"
+                    ))
                     .into());
             }
             let w: u32 = l.arg(2, "a width W in pixels")?;
             let h: u32 = l.arg(3, "a height H in pixels")?;
             if !(2..=8192).contains(&w) || !(2..=8192).contains(&h) {
-                return Err(l.error(format!("`provides {iface}`: {w}x{h} is not a size in 2..8192 pixels")).into());
+                return Err(l
+                    .error(format!(
+                        "`provides {iface}`: {w}x{h} is not a size in 2..8192 pixels"
+                    ))
+                    .into());
             }
             Source {
                 interface: iface.into(),
@@ -229,9 +250,9 @@ struct Y4m {
 
 impl Y4m {
     fn said(&self) -> String {
-        let s = self
-            .child
-            .said(|l| !l.starts_with("BENCHMARK") && !l.starts_with("Exiting") && !l.starts_with("MPlayer"));
+        let s = self.child.said(|l| {
+            !l.starts_with("BENCHMARK") && !l.starts_with("Exiting") && !l.starts_with("MPlayer")
+        });
         let lines: Vec<&str> = s.split(" | ").collect();
         lines[lines.len().saturating_sub(4)..].join(" | ")
     }
@@ -285,7 +306,8 @@ impl Frames for Y4m {
         let Some(h) = self.header else { return };
         out.width = self.width;
         out.height = self.height;
-        out.data.resize(self.width as usize * self.height as usize * 3, 0);
+        out.data
+            .resize(self.width as usize * self.height as usize * 3, 0);
         y4m::i420_to_bgr(
             &self.buf,
             h.width as usize,
@@ -318,7 +340,8 @@ impl Driver for MPlayer {
 
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>> {
     let sources = parse(conf)?;
-    let mplayer = require_program("mplayer", "mplayer").map_err(|e| anyhow::anyhow!("mplayer driver: {e}"))?;
+    let mplayer = require_program("mplayer", "mplayer")
+        .map_err(|e| anyhow::anyhow!("mplayer driver: {e}"))?;
     let mut streams = Vec::new();
     for (src, line) in sources {
         let (label, live) = match &src.input {
@@ -330,9 +353,11 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
             }
             Input::V4l { device, .. } => (format!("mplayer {device}"), true),
         };
-        let iface: Arc<Interface<Image>> =
-            rt.interfaces
-                .provide_value(&src.interface, &conf.name, Image::new(src.width, src.height))?;
+        let iface: Arc<Interface<Image>> = rt.interfaces.provide_value(
+            &src.interface,
+            &conf.name,
+            Image::new(src.width, src.height),
+        )?;
         let (s2, m2, l2) = (src.clone(), mplayer.clone(), label.clone());
         let open = move |killer: &Killer| -> Result<Box<dyn Frames>, MediaError> {
             let child = Child::spawn(command(&m2, &s2), FramePipe::Fd3, killer, "mplayer")?;

@@ -92,7 +92,9 @@ pub struct Source {
 fn dim(l: &ConfLine, i: usize, what: &str) -> anyhow::Result<u32> {
     let v: u32 = l.arg(i, what)?;
     if !(1..=16384).contains(&v) {
-        return Err(l.error(format!("`provides`: {what} {v} is out of range 1..16384")).into());
+        return Err(l
+            .error(format!("`provides`: {what} {v} is out of range 1..16384"))
+            .into());
     }
     Ok(v)
 }
@@ -110,11 +112,17 @@ pub fn parse(conf: &ComponentConf) -> anyhow::Result<Vec<(Source, ConfLine)>> {
         let var = matches!(iface, "varcolorA" | "varcolorB" | "varcolorC" | "varcolorD");
         if !color && !var {
             return Err(l
-                .error(format!("opencv provides colorA..D and varcolorA..D, not `{iface}`; usage: {USAGE}"))
+                .error(format!(
+                    "opencv provides colorA..D and varcolorA..D, not `{iface}`; usage: {USAGE}"
+                ))
                 .into());
         }
         if a.len() < 3 {
-            return Err(l.error(format!("`provides {iface}` needs a source and a path; usage: {USAGE}")).into());
+            return Err(l
+                .error(format!(
+                    "`provides {iface}` needs a source and a path; usage: {USAGE}"
+                ))
+                .into());
         }
         let kind = match a[1].as_str() {
             "image" => Kind::Image,
@@ -122,12 +130,18 @@ pub fn parse(conf: &ComponentConf) -> anyhow::Result<Vec<(Source, ConfLine)>> {
             "videofile" => Kind::VideoFile,
             other => {
                 return Err(l
-                    .error(format!("`provides {iface}`: source `{other}` is not image, video or videofile"))
+                    .error(format!(
+                        "`provides {iface}`: source `{other}` is not image, video or videofile"
+                    ))
                     .into());
             }
         };
         let mut i = 3;
-        let mut size = if color { Some((COLOR_WIDTH, COLOR_HEIGHT)) } else { None };
+        let mut size = if color {
+            Some((COLOR_WIDTH, COLOR_HEIGHT))
+        } else {
+            None
+        };
         if var {
             match a.get(3).map(String::as_str) {
                 Some("autosize") => i = 4,
@@ -190,7 +204,9 @@ pub struct Probe {
 fn parse_rate(s: &str) -> Option<f64> {
     let (n, d) = s.split_once('/').unwrap_or((s, "1"));
     let (n, d) = (n.trim().parse::<f64>().ok()?, d.trim().parse::<f64>().ok()?);
-    (n > 0.0 && d > 0.0).then(|| n / d).filter(|r| r.is_finite() && *r < 10_000.0)
+    (n > 0.0 && d > 0.0)
+        .then(|| n / d)
+        .filter(|r| r.is_finite() && *r < 10_000.0)
 }
 
 /// Runs `ffprobe` on a file (or a V4L2 device) for its first video stream's size
@@ -243,7 +259,13 @@ pub fn probe(path: &Path, device: bool) -> Result<Probe, MediaError> {
         }
     };
     let (text, said) = reader.join().unwrap_or_default();
-    let said: String = said.split_whitespace().collect::<Vec<_>>().join(" ").chars().take(400).collect();
+    let said: String = said
+        .split_whitespace()
+        .collect::<Vec<_>>()
+        .join(" ")
+        .chars()
+        .take(400)
+        .collect();
     let (mut w, mut h, mut avg, mut r) = (0, 0, None, None);
     for line in text.lines() {
         match line.split_once('=') {
@@ -260,7 +282,10 @@ pub fn probe(path: &Path, device: bool) -> Result<Probe, MediaError> {
             Some(_) if said.is_empty() => "ffprobe found no video stream in it".to_string(),
             Some(_) => format!("ffprobe: {said}"),
         };
-        return Err(MediaError::format(path, format!("not a video FFmpeg can read: {why}")));
+        return Err(MediaError::format(
+            path,
+            format!("not a video FFmpeg can read: {why}"),
+        ));
     }
     Ok(Probe {
         width: w,
@@ -280,7 +305,13 @@ struct RawBgr {
 }
 
 impl RawBgr {
-    fn spawn(src: &Source, w: u32, h: u32, rate: Option<f64>, killer: &Killer) -> Result<RawBgr, MediaError> {
+    fn spawn(
+        src: &Source,
+        w: u32,
+        h: u32,
+        rate: Option<f64>,
+        killer: &Killer,
+    ) -> Result<RawBgr, MediaError> {
         let ffmpeg = require_program("ffmpeg", "ffmpeg")?;
         let mut cmd = Command::new(ffmpeg);
         cmd.args(["-nostdin", "-hide_banner", "-loglevel", "error"]);
@@ -378,9 +409,11 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
                     None => Fit::Auto,
                 };
                 let img = load_fitted(&src.path, fit, &src.interface).map_err(at)?;
-                let iface: Arc<Interface<Image>> =
-                    rt.interfaces
-                        .provide_value(&src.interface, &conf.name, Image::new(img.width, img.height))?;
+                let iface: Arc<Interface<Image>> = rt.interfaces.provide_value(
+                    &src.interface,
+                    &conf.name,
+                    Image::new(img.width, img.height),
+                )?;
                 stills.push(StillSpec {
                     path: src.path.clone(),
                     fit,
@@ -396,7 +429,11 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
                         .error(format!(
                             "{}: no such {}",
                             src.path.display(),
-                            if device { "capture device" } else { "video file" }
+                            if device {
+                                "capture device"
+                            } else {
+                                "video file"
+                            }
                         ))
                         .into());
                 }
@@ -409,14 +446,20 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
                     .size
                     .or(probed.map(|p| (p.width, p.height)))
                     .unwrap_or((COLOR_WIDTH, COLOR_HEIGHT));
-                let rate = if device { None } else { probed.and_then(|p| p.rate) };
+                let rate = if device {
+                    None
+                } else {
+                    probed.and_then(|p| p.rate)
+                };
                 let iface: Arc<Interface<Image>> =
-                    rt.interfaces.provide_value(&src.interface, &conf.name, Image::new(w, h))?;
+                    rt.interfaces
+                        .provide_value(&src.interface, &conf.name, Image::new(w, h))?;
                 let s2 = src.clone();
                 let spec = StreamSpec {
                     label: format!("ffmpeg {}", src.path.display()),
                     open: Box::new(move |killer: &Killer| {
-                        RawBgr::spawn(&s2, w, h, rate, killer).map(|f| Box::new(f) as Box<dyn Frames>)
+                        RawBgr::spawn(&s2, w, h, rate, killer)
+                            .map(|f| Box::new(f) as Box<dyn Frames>)
                     }),
                     pace: src.pace && !device,
                     repeat: src.repeat,
@@ -430,7 +473,8 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
     }
     if !stills.is_empty() {
         workers.push(Worker::Stills(
-            Stills::start("opencv images", stills).context("cannot start the opencv image thread")?,
+            Stills::start("opencv images", stills)
+                .context("cannot start the opencv image thread")?,
         ));
     }
     Ok(Box::new(OpenCv { workers }))

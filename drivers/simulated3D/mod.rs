@@ -72,7 +72,10 @@ pub fn render(world: &World, cam: &PinholeCamera, img: &mut Image) {
 /// A line from (column, row) `(x0, y0)` to `(x1, y1)`, clipped to the image
 /// (Bresenham on the rounded ends, as 4.3's line drawer).
 pub fn draw_line(img: &mut Image, x0: f64, y0: f64, x1: f64, y1: f64, bgr: [u8; 3]) {
-    if ![x0, y0, x1, y1].iter().all(|v| v.is_finite() && v.abs() < 1e6) {
+    if ![x0, y0, x1, y1]
+        .iter()
+        .all(|v| v.is_finite() && v.abs() < 1e6)
+    {
         return;
     }
     let (mut x, mut y) = (x0.round() as i64, y0.round() as i64);
@@ -126,15 +129,21 @@ pub fn parse(conf: &ComponentConf) -> anyhow::Result<Sim3dConf> {
                 let var = matches!(iface, "varcolorA" | "varcolorB" | "varcolorC" | "varcolorD");
                 if !color && !var {
                     return Err(l
-                        .error(format!("simulated3D provides colorA..D and varcolorA..D, not `{iface}`"))
+                        .error(format!(
+                            "simulated3D provides colorA..D and varcolorA..D, not `{iface}`"
+                        ))
                         .into());
                 }
                 let path = conf.resolve(&l.args()[1]);
-                let cam = PinholeCamera::load(&path).map_err(|e| l.error(format!("camera file: {e}")))?;
+                let cam =
+                    PinholeCamera::load(&path).map_err(|e| l.error(format!("camera file: {e}")))?;
                 let (c, r) = (cam.columns, cam.rows);
                 if !(1..=8192).contains(&c) || !(1..=8192).contains(&r) {
                     return Err(l
-                        .error(format!("{}: columns {c} rows {r} is not an image size (1..8192)", path.display()))
+                        .error(format!(
+                            "{}: columns {c} rows {r} is not an image size (1..8192)",
+                            path.display()
+                        ))
                         .into());
                 }
                 if color && (c, r) != (COLOR_WIDTH, COLOR_HEIGHT) {
@@ -153,7 +162,8 @@ pub fn parse(conf: &ComponentConf) -> anyhow::Result<Sim3dConf> {
             _ => return Err(conf.unknown(l, &format!("`{USAGE}`")).into()),
         }
     }
-    let world = world.ok_or_else(|| anyhow::anyhow!("simulated3D: no `worldfile` line; usage: {USAGE}"))?;
+    let world =
+        world.ok_or_else(|| anyhow::anyhow!("simulated3D: no `worldfile` line; usage: {USAGE}"))?;
     if cameras.is_empty() {
         anyhow::bail!("simulated3D: no `provides` line; usage: {USAGE}");
     }
@@ -184,9 +194,9 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
     let sc = parse(conf)?;
     let mut cams: Vec<(Arc<Interface<Image>>, PinholeCamera)> = Vec::new();
     for (name, cam) in sc.cameras {
-        let iface = rt
-            .interfaces
-            .provide_value(&name, &conf.name, Image::new(cam.columns, cam.rows))?;
+        let iface =
+            rt.interfaces
+                .provide_value(&name, &conf.name, Image::new(cam.columns, cam.rows))?;
         cams.push((iface, cam));
     }
     let world = sc.world;

@@ -88,7 +88,10 @@ pub fn require_program(program: &str, package: &'static str) -> Result<PathBuf, 
 
 /// Whether a source names a URL (`scheme://...`) rather than a local file.
 pub fn is_url(source: &str) -> bool {
-    source
-        .split_once("://")
-        .is_some_and(|(scheme, _)| !scheme.is_empty() && scheme.chars().all(|c| c.is_ascii_alphanumeric() || c == '+'))
+    source.split_once("://").is_some_and(|(scheme, _)| {
+        !scheme.is_empty()
+            && scheme
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || c == '+')
+    })
 }

@@ -58,7 +58,10 @@ pub fn decode_image(bytes: &[u8], path: &Path) -> Result<Image, MediaError> {
     limits.max_alloc = Some(MAX_PIXELS * 4 + (1 << 20));
     reader.limits(limits);
     let img = reader.decode().map_err(|e| {
-        MediaError::format(path, format!("cannot decode this {format:?} image ({e}); is it truncated?"))
+        MediaError::format(
+            path,
+            format!("cannot decode this {format:?} image ({e}); is it truncated?"),
+        )
     })?;
     let rgb = img.to_rgb8();
     let (width, height) = rgb.dimensions();
@@ -84,7 +87,10 @@ impl Header<'_> {
         while self.i < self.b.len() {
             match self.b[self.i] {
                 b'#' => {
-                    while self.i < self.b.len() && self.b[self.i] != b'\n' && self.b[self.i] != b'\r' {
+                    while self.i < self.b.len()
+                        && self.b[self.i] != b'\n'
+                        && self.b[self.i] != b'\r'
+                    {
                         self.i += 1;
                     }
                 }
@@ -103,7 +109,10 @@ impl Header<'_> {
         if start == self.i || self.i - start > 9 {
             return None;
         }
-        std::str::from_utf8(&self.b[start..self.i]).ok()?.parse().ok()
+        std::str::from_utf8(&self.b[start..self.i])
+            .ok()?
+            .parse()
+            .ok()
     }
 }
 
@@ -287,9 +296,13 @@ mod tests {
         assert!(e.to_string().starts_with("short.ppm: truncated"), "{e}");
         let e = decode_image(b"P6 2", p("h.ppm")).unwrap_err().to_string();
         assert!(e.contains("h.ppm: bad PNM header"), "{e}");
-        let e = decode_image(b"hello world", p("x.txt")).unwrap_err().to_string();
+        let e = decode_image(b"hello world", p("x.txt"))
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("x.txt: not an image"), "{e}");
-        let e = decode_image(b"P6 99999 99999 255\n", p("big.ppm")).unwrap_err().to_string();
+        let e = decode_image(b"P6 99999 99999 255\n", p("big.ppm"))
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("size"), "{e}");
     }
 

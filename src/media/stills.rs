@@ -113,27 +113,29 @@ impl Stills {
                 error: None,
             })
             .collect();
-        let thread = std::thread::Builder::new().name(name.to_string()).spawn(move || {
-            while !s.load(Ordering::Acquire) {
-                for e in &mut entries {
-                    let used = e.spec.iface.users() > 0;
-                    if used && !e.used {
-                        let reload = e.spec.first.is_none();
-                        e.publish(reload);
-                    } else if used && mtime(&e.spec.path) != e.mtime {
-                        e.publish(true);
+        let thread = std::thread::Builder::new()
+            .name(name.to_string())
+            .spawn(move || {
+                while !s.load(Ordering::Acquire) {
+                    for e in &mut entries {
+                        let used = e.spec.iface.users() > 0;
+                        if used && !e.used {
+                            let reload = e.spec.first.is_none();
+                            e.publish(reload);
+                        } else if used && mtime(&e.spec.path) != e.mtime {
+                            e.publish(true);
+                        }
+                        e.used = used;
                     }
-                    e.used = used;
-                }
-                // Sleep on the first interface, so a resume of it is served at once.
-                match entries.first() {
-                    Some(e) if !e.used => {
-                        e.spec.iface.wait_used(TICK);
+                    // Sleep on the first interface, so a resume of it is served at once.
+                    match entries.first() {
+                        Some(e) if !e.used => {
+                            e.spec.iface.wait_used(TICK);
+                        }
+                        _ => std::thread::sleep(TICK),
                     }
-                    _ => std::thread::sleep(TICK),
                 }
-            }
-        })?;
+            })?;
         Ok(Stills {
             stop,
             thread: Some(thread),

@@ -118,7 +118,12 @@ enum Outcome {
 }
 
 impl Worker {
-    fn new(spec: StreamSpec, iface: Arc<Interface<Image>>, stop: Arc<AtomicBool>, killer: Killer) -> Self {
+    fn new(
+        spec: StreamSpec,
+        iface: Arc<Interface<Image>>,
+        stop: Arc<AtomicBool>,
+        killer: Killer,
+    ) -> Self {
         Worker {
             spec,
             iface,
@@ -218,14 +223,19 @@ impl Worker {
                             self.pause_for(RETRY);
                         }
                         Ok(()) if count == 0 => {
-                            let why = format!("{}: no frames (not a video it can play?)", self.spec.label);
+                            let why = format!(
+                                "{}: no frames (not a video it can play?)",
+                                self.spec.label
+                            );
                             self.report(why);
                             self.pause_for(RETRY);
                         }
                         Ok(()) if self.spec.repeat => {}
                         Ok(()) => {
-                            self.iface
-                                .set_stale(format!("{}: end of the video (repeat off; stop and run again to replay)", self.spec.label));
+                            self.iface.set_stale(format!(
+                                "{}: end of the video (repeat off; stop and run again to replay)",
+                                self.spec.label
+                            ));
                             while self.pause_for(POLL) {}
                             pacer.reset();
                         }

@@ -34,7 +34,9 @@ fn read_line(r: &mut impl Read, max: usize) -> Result<Option<Vec<u8>>, String> {
             Ok(_) if b[0] == b'\n' => return Ok(Some(line)),
             Ok(_) => {
                 if line.len() >= max {
-                    return Err(format!("a header line longer than {max} bytes: not a YUV4MPEG2 stream"));
+                    return Err(format!(
+                        "a header line longer than {max} bytes: not a YUV4MPEG2 stream"
+                    ));
                 }
                 line.push(b[0]);
             }
@@ -52,7 +54,10 @@ pub fn read_header(r: &mut impl Read) -> Result<Option<Y4mHeader>, String> {
     let line = String::from_utf8_lossy(&line).into_owned();
     let mut words = line.split(' ');
     if words.next() != Some("YUV4MPEG2") {
-        return Err(format!("not a YUV4MPEG2 stream (it starts with `{}`)", line.chars().take(40).collect::<String>()));
+        return Err(format!(
+            "not a YUV4MPEG2 stream (it starts with `{}`)",
+            line.chars().take(40).collect::<String>()
+        ));
     }
     let (mut width, mut height, mut rate) = (0u32, 0u32, None);
     for w in words {
@@ -67,7 +72,9 @@ pub fn read_header(r: &mut impl Read) -> Result<Option<Y4mHeader>, String> {
                 })
             }
             "C" if !val.starts_with("420") => {
-                return Err(format!("YUV4MPEG2 colour space C{val} is not supported (expected 4:2:0)"));
+                return Err(format!(
+                    "YUV4MPEG2 colour space C{val} is not supported (expected 4:2:0)"
+                ));
             }
             _ => {}
         }
@@ -75,7 +82,11 @@ pub fn read_header(r: &mut impl Read) -> Result<Option<Y4mHeader>, String> {
     if width == 0 || height == 0 || width as u64 * height as u64 > super::still::MAX_PIXELS {
         return Err(format!("YUV4MPEG2 header with a bad size: `{line}`"));
     }
-    Ok(Some(Y4mHeader { width, height, rate }))
+    Ok(Some(Y4mHeader {
+        width,
+        height,
+        rate,
+    }))
 }
 
 /// Reads the next frame's planes into `buf`; false at a clean end of stream.
@@ -163,7 +174,11 @@ mod tests {
         assert!(read_header(&mut &b"hello\n"[..]).is_err());
         assert_eq!(read_header(&mut &b""[..]).unwrap(), None);
         assert!(read_header(&mut &b"YUV4MPEG2 W2 H2 C444\n"[..]).is_err());
-        let h = Y4mHeader { width: 2, height: 2, rate: None };
+        let h = Y4mHeader {
+            width: 2,
+            height: 2,
+            rate: None,
+        };
         assert!(read_frame(&mut &b"FRAME\n\x01"[..], &h, &mut Vec::new()).is_err());
     }
 }
