@@ -44,10 +44,14 @@ fn lines_are_black_on_white_where_progeo_projects_them() {
         let mut img = Image::default();
         render(&world, &cam, &mut img);
         assert_eq!((img.width, img.height), (cam.columns, cam.rows));
+        // SIM3D_DUMP=DIR writes the drawings there, to look at.
         if let Some(dir) = std::env::var_os("SIM3D_DUMP") {
             let p =
                 std::path::Path::new(&dir).join(format!("sim3d_{}x{}.ppm", img.width, img.height));
-            std::fs::write(p, jderobot::media::still::encode_ppm(&img)).unwrap();
+            // Binary PPM (black and white: BGR and RGB are the same).
+            let mut ppm = format!("P6\n{} {}\n255\n", img.width, img.height).into_bytes();
+            ppm.extend_from_slice(&img.data);
+            std::fs::write(p, ppm).unwrap();
         }
         let black = img.data.chunks_exact(3).filter(|p| *p == [0, 0, 0]).count();
         let white = img
