@@ -771,3 +771,55 @@ fn y4m_conversion_matches_ffmpeg() {
     // Same matrix; chroma upsampling at colour edges may differ by a little.
     assert!(mean < 3.0, "mean difference {mean:.2} per channel");
 }
+
+#[test]
+fn mplayer_conf_errors_name_the_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let cases = [
+        (
+            "provides colorA clip.avi",
+            &["test.conf:2", "too short", "repeat_on|off"][..],
+        ),
+        (
+            "provides colorA clip.avi repeat_maybe",
+            &["test.conf:2", "`repeat_maybe`"][..],
+        ),
+        (
+            "provides varcolorA clip.avi repeat_on",
+            &["test.conf:2", "FILE W H"][..],
+        ),
+        (
+            "provides varcolorA clip.avi 640 x repeat_on",
+            &["test.conf:2", "`x`"][..],
+        ),
+        (
+            "provides varcolorA clip.avi 1 480 repeat_on",
+            &["test.conf:2", "1x480"][..],
+        ),
+        (
+            "provides colorA v4l /dev/video0 hdmi",
+            &["test.conf:2", "`hdmi`", "s-video"][..],
+        ),
+        (
+            "provides colorA clip.avi repeat_on fast",
+            &["test.conf:2", "`fast`", "unpaced"][..],
+        ),
+        (
+            "provides laser clip.avi",
+            &["test.conf:2", "not `laser`"][..],
+        ),
+        ("volume 3", &["test.conf:2", "volume"][..]),
+    ];
+    for (line, want) in cases {
+        let e = start_in(
+            d,
+            &format!("driver mplayer\n{line}\nend_driver\nload_driver mplayer\n"),
+        )
+        .err()
+        .unwrap_or_else(|| panic!("`{line}` loaded"));
+        for w in want {
+            assert!(e.contains(w), "`{line}`: {w:?} missing in: {e}");
+        }
+    }
+}
