@@ -60,6 +60,7 @@ use crate::{
         MediaError,
         child::{Child, FramePipe, Killer},
         require_program,
+        still::MAX_PIXELS,
         stills::{Fit, StillSpec, Stills, load_fitted},
         stream::{Frames, Stream, StreamSpec},
     },
@@ -146,7 +147,13 @@ pub fn parse(conf: &ComponentConf) -> anyhow::Result<Vec<(Source, ConfLine)>> {
             match a.get(3).map(String::as_str) {
                 Some("autosize") => i = 4,
                 Some(w) if w.parse::<u32>().is_ok() => {
-                    size = Some((dim(l, 3, "width W")?, dim(l, 4, "height H")?));
+                    let (w, h) = (dim(l, 3, "width W")?, dim(l, 4, "height H")?);
+                    if w as u64 * h as u64 > MAX_PIXELS {
+                        return Err(l
+                            .error(format!("`provides {iface}`: {w}x{h} is too large (at most {MAX_PIXELS} pixels)"))
+                            .into());
+                    }
+                    size = Some((w, h));
                     i = 5;
                 }
                 _ => {}
@@ -285,6 +292,12 @@ pub fn probe(path: &Path, device: bool) -> Result<Probe, MediaError> {
         return Err(MediaError::format(
             path,
             format!("not a video FFmpeg can read: {why}"),
+        ));
+    }
+    if w as u64 * h as u64 > MAX_PIXELS {
+        return Err(MediaError::format(
+            path,
+            format!("{w}x{h} video is too large (at most {MAX_PIXELS} pixels); give a size W H"),
         ));
     }
     Ok(Probe {
