@@ -7,6 +7,8 @@ pub mod imagefile;
 pub mod mplayer;
 #[cfg(feature = "opencv")]
 pub mod opencv;
+#[cfg(feature = "replay")]
+pub mod replay;
 #[cfg(feature = "simulated3D")]
 #[path = "simulated3D/mod.rs"]
 pub mod simulated3d;

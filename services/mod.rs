@@ -3,3 +3,5 @@
 
 #[cfg(feature = "gui")]
 pub mod gui;
+#[cfg(feature = "recorder")]
+pub mod recorder;

@@ -19,6 +19,8 @@ pub mod fuzzy;
 pub mod gui;
 pub mod interfaces;
 pub mod loader;
+#[cfg(feature = "_mcap")]
+pub mod mcapfmt;
 #[cfg(feature = "_media")]
 pub mod media;
 pub mod namespace;

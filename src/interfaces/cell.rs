@@ -167,15 +167,48 @@ impl<T: InterfaceValue> Interface<T> {
         Ok(clock)
     }
 
+    /// Publishes a recorded value with its recorded clock and wall time (for a
+    /// replay driver, so that a schema sees the clocks of the original run). The
+    /// clock must be greater than the current one.
+    pub fn publish_recorded(
+        &self,
+        clock: u64,
+        time: SystemTime,
+        value: T,
+    ) -> Result<u64, InterfaceError> {
+        value
+            .validate(&self.name)
+            .map_err(InterfaceError::Rejected)?;
+        let mut w = self.writer.lock();
+        let current = self.clock.load(Ordering::Relaxed);
+        if clock <= current {
+            return Err(InterfaceError::Rejected(format!(
+                "{}: recorded clock {clock} is not after the current clock {current}",
+                self.name
+            )));
+        }
+        Ok(self.store_at(&mut w, clock, time, value).0)
+    }
+
     /// Swaps in a new sample (the caller holds the writer lock); returns its clock
     /// and the previous sample.
     fn store(&self, w: &mut Writer<T>, value: T) -> (u64, Arc<Sample<T>>) {
         let clock = self.clock.load(Ordering::Relaxed) + 1;
+        self.store_at(w, clock, SystemTime::now(), value)
+    }
+
+    fn store_at(
+        &self,
+        w: &mut Writer<T>,
+        clock: u64,
+        time: SystemTime,
+        value: T,
+    ) -> (u64, Arc<Sample<T>>) {
         let stamp = Instant::now();
         let old = self.slot.swap(Arc::new(Sample {
             clock,
             stamp,
-            time: SystemTime::now(),
+            time,
             value,
         }));
         self.clock.store(clock, Ordering::Release);

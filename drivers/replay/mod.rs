@@ -1,0 +1,378 @@
+//! replay: provides the interfaces recorded in an MCAP file (by the `recorder`
+//! service) with their recorded clocks, values and wall times, so any schema runs
+//! on a recording as on the robot. See `docs/recording.md` and `examples/replay.conf`.
+//!
+//! # Conf
+//! ```text
+//! driver replay
+//! file run.mcap          # relative to the conf file
+//! provides laser         # interfaces to provide (repeatable); none: every channel of the file
+//! provides encoders
+//! speed 1.0              # 1.0 = as recorded; N = N times faster; max = as fast as possible
+//! loop off               # on: start again at the end
+//! start 2.5              # seconds after the recording's first message (default 0)
+//! end 8                  # seconds after the first message (default: the end)
+//! stepped off            # on: publish only when the shell says `step [N]` (N messages)
+//! end_driver
+//! ```
+//!
+//! # Interfaces
+//! Each recorded channel becomes the interface of the same name and kind (image
+//! BGR, laser mm, encoders mm/rad, sonars mm, ...; see `crate::interfaces`). Each
+//! message is published with its recorded clock (`Interface::publish_recorded`),
+//! so a schema sees the clocks of the original run. Actuator channels (motors,
+//! pantiltmotors) are provided so schemas can write them, but the recorded values
+//! are not published and what schemas write moves nothing (a recorder running
+//! beside the replay records it). When the replay ends (without `loop`), sensor
+//! interfaces are marked stale ("replay: end of FILE"). In a loop, the clocks go on
+//! increasing: the second pass publishes clock + the last clock of the first pass.
+//!
+//! A file cut short (a run killed mid-write) replays up to its last complete
+//! chunk, with a warning naming what was lost; a file that is not MCAP, or a
+//! channel of a kind jderobot does not know, is a clear error at load.
+//!
+//! # Name space
+//! In `stepped on`, exports `replay.step` ([`StepGate`](crate::mcapfmt::StepGate));
+//! the shell's `step [N]` lets N messages through.
+//!
+//! No system package is needed. The file is read into memory whole.
+
+use std::{
+    collections::BTreeMap,
+    path::PathBuf,
+    sync::{
+        Arc,
+        atomic::{AtomicBool, Ordering},
+    },
+    thread::JoinHandle,
+    time::{Duration, Instant},
+};
+
+use anyhow::{Context as _, bail};
+
+use crate::{
+    conf::ComponentConf,
+    interfaces::{
+        Bumpers, Encoders, Image, Interface, Laser, Motors, PtEncoders, PtMotors, Sonars,
+    },
+    mcapfmt::{self, Recorded, StepGate, Summary},
+    runtime::{Driver, Runtime},
+};
+
+/// A provided interface, typed.
+enum Target {
+    Image(Arc<Interface<Image>>),
+    Laser(Arc<Interface<Laser>>),
+    Encoders(Arc<Interface<Encoders>>),
+    Sonars(Arc<Interface<Sonars>>),
+    Bumpers(Arc<Interface<Bumpers>>),
+    PtEncoders(Arc<Interface<PtEncoders>>),
+    /// Actuators: provided, never published.
+    Motors(#[allow(dead_code)] Arc<Interface<Motors>>),
+    PtMotors(#[allow(dead_code)] Arc<Interface<PtMotors>>),
+}
+
+impl Target {
+    fn provide(rt: &Runtime, name: &str, kind: &str, provider: &str) -> anyhow::Result<Target> {
+        let i = &rt.interfaces;
+        Ok(match kind {
+            "image" => Target::Image(i.provide(name, provider)?),
+            "laser" => Target::Laser(i.provide(name, provider)?),
+            "encoders" => Target::Encoders(i.provide(name, provider)?),
+            "sonars" => Target::Sonars(i.provide(name, provider)?),
+            "bumpers" => Target::Bumpers(i.provide(name, provider)?),
+            "pantiltencoders" => Target::PtEncoders(i.provide(name, provider)?),
+            "motors" => Target::Motors(i.provide(name, provider)?),
+            "pantiltmotors" => Target::PtMotors(i.provide(name, provider)?),
+            other => bail!("replay: channel `{name}` holds `{other}`, not an interface jderobot knows"),
+        })
+    }
+
+    /// Publishes a decoded value with its clock (shifted by `offset` in a loop).
+    fn publish(&self, clock: u64, time_ns: u64, value: Recorded) -> Result<(), String> {
+        let t = mcapfmt::from_nanos(time_ns);
+        let r = match (self, value) {
+            (Target::Image(i), Recorded::Image(v)) => i.publish_recorded(clock, t, v),
+            (Target::Laser(i), Recorded::Laser(v)) => i.publish_recorded(clock, t, v),
+            (Target::Encoders(i), Recorded::Encoders(v)) => i.publish_recorded(clock, t, v),
+            (Target::Sonars(i), Recorded::Sonars(v)) => i.publish_recorded(clock, t, v),
+            (Target::Bumpers(i), Recorded::Bumpers(v)) => i.publish_recorded(clock, t, v),
+            (Target::PtEncoders(i), Recorded::PtEncoders(v)) => i.publish_recorded(clock, t, v),
+            (Target::Motors(_) | Target::PtMotors(_), _) => return Ok(()),
+            _ => return Err("the message's kind differs from the channel's".into()),
+        };
+        r.map(|_| ()).map_err(|e| e.to_string())
+    }
+
+    fn set_stale(&self, why: &str) {
+        match self {
+            Target::Image(i) => i.set_stale(why),
+            Target::Laser(i) => i.set_stale(why),
+            Target::Encoders(i) => i.set_stale(why),
+            Target::Sonars(i) => i.set_stale(why),
+            Target::Bumpers(i) => i.set_stale(why),
+            Target::PtEncoders(i) => i.set_stale(why),
+            Target::Motors(_) | Target::PtMotors(_) => {}
+        }
+    }
+}
+
+/// The replay's settings.
+#[derive(Clone, Debug)]
+struct Settings {
+    file: PathBuf,
+    provides: Vec<String>,
+    /// None: as fast as possible.
+    speed: Option<f64>,
+    looping: bool,
+    start: f64,
+    end: Option<f64>,
+    stepped: bool,
+}
+
+fn parse(conf: &ComponentConf) -> Result<Settings, crate::conf::ConfError> {
+    let mut s = Settings {
+        file: PathBuf::new(),
+        provides: Vec::new(),
+        speed: Some(1.0),
+        looping: false,
+        start: 0.0,
+        end: None,
+        stepped: false,
+    };
+    let mut file = None;
+    for line in &conf.lines {
+        match line.keyword() {
+            "file" => {
+                line.expect_args(1, 1, "file PATH.mcap")?;
+                file = Some(line.existing_file(0, "an MCAP file")?);
+            }
+            "provides" => {
+                line.expect_args(1, usize::MAX, "provides NAME...")?;
+                for i in 0..line.args().len() {
+                    // Any channel name (recorded names may carry a robot suffix).
+                    s.provides.push(line.word(i, "a channel name")?.to_string());
+                }
+            }
+            "speed" => {
+                line.expect_args(1, 1, "speed N | speed max")?;
+                s.speed = if line.args()[0] == "max" {
+                    None
+                } else {
+                    Some(line.number::<f64>(0, "a speed factor or `max`", 0.001..=1000.0)?)
+                };
+            }
+            "loop" => {
+                line.expect_args(1, 1, "loop on|off")?;
+                s.looping = line.on_off(0, "on or off")?;
+            }
+            "start" => {
+                line.expect_args(1, 1, "start SECONDS")?;
+                s.start = line.number::<f64>(0, "seconds", 0.0..)?;
+            }
+            "end" => {
+                line.expect_args(1, 1, "end SECONDS")?;
+                s.end = Some(line.number::<f64>(0, "seconds", 0.0..)?);
+            }
+            "stepped" => {
+                line.expect_args(1, 1, "stepped on|off")?;
+                s.stepped = line.on_off(0, "on or off")?;
+            }
+            _ => {
+                return Err(conf.unknown(
+                    line,
+                    "file, provides, speed, loop, start, end or stepped",
+                ));
+            }
+        }
+    }
+    if let (Some(e), st) = (s.end, s.start)
+        && e <= st
+    {
+        let line = conf.line("end").expect("end was read");
+        return Err(line.error(format!("`end {e}` must be after `start {st}`")));
+    }
+    if let Some(f) = file {
+        s.file = f;
+    }
+    Ok(s)
+}
+
+/// The running replay.
+pub struct Replay {
+    stop: Arc<AtomicBool>,
+    thread: Option<JoinHandle<()>>,
+}
+
+fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>> {
+    let settings = parse(conf)?;
+    if settings.file.as_os_str().is_empty() {
+        bail!(
+            "{}: driver {} needs a `file PATH.mcap` line",
+            conf.file.display(),
+            conf.name
+        );
+    }
+    let (summary, bytes) = Summary::read(&settings.file)?;
+    if let Some(lost) = &summary.lost {
+        tracing::warn!(
+            "replay: {} was cut short; it replays its {} complete messages ({lost})",
+            settings.file.display(),
+            summary.messages
+        );
+    }
+    let wanted: Vec<String> = if settings.provides.is_empty() {
+        summary.channels.iter().map(|c| c.topic.clone()).collect()
+    } else {
+        settings.provides.clone()
+    };
+    let mut targets: BTreeMap<String, (String, Target)> = BTreeMap::new();
+    for name in &wanted {
+        let Some(c) = summary.channels.iter().find(|c| &c.topic == name) else {
+            bail!(
+                "replay: {} has no channel `{name}`; it has {}",
+                settings.file.display(),
+                summary
+                    .channels
+                    .iter()
+                    .map(|c| c.topic.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            );
+        };
+        let Some(kind) = c.kind.clone() else {
+            bail!(
+                "replay: channel `{name}` of {} (schema `{}`, encoding `{}`) was not written by jderobot's recorder",
+                settings.file.display(),
+                c.schema,
+                c.encoding
+            );
+        };
+        let target = Target::provide(rt, name, &kind, &conf.name)?;
+        targets.insert(name.clone(), (kind, target));
+    }
+    let gate = if settings.stepped {
+        let g = Arc::new(StepGate::default());
+        rt.names
+            .export_arc("replay", "step", g.clone())
+            .context("replay: only one stepped replay can run")?;
+        Some(g)
+    } else {
+        None
+    };
+    let stop = Arc::new(AtomicBool::new(false));
+    let thread = {
+        let stop = stop.clone();
+        std::thread::Builder::new()
+            .name("replay".into())
+            .spawn(move || run(&bytes, &summary, &settings, &targets, gate.as_deref(), &stop))?
+    };
+    Ok(Box::new(Replay {
+        stop,
+        thread: Some(thread),
+    }))
+}
+
+/// Publishes the file's messages, paced, until the end (or forever in a loop).
+fn run(
+    bytes: &[u8],
+    summary: &Summary,
+    settings: &Settings,
+    targets: &BTreeMap<String, (String, Target)>,
+    gate: Option<&StepGate>,
+    stop: &AtomicBool,
+) {
+    let from = summary.start_ns + (settings.start * 1e9) as u64;
+    let to = settings
+        .end
+        .map(|e| summary.start_ns + (e * 1e9) as u64)
+        .unwrap_or(u64::MAX);
+    // Clocks keep increasing across loop passes.
+    let mut offset = 0u64;
+    let mut last_clock = 0u64;
+    let mut errors = 0u32;
+    'passes: loop {
+        let t0 = Instant::now();
+        let stream = match mcap::MessageStream::new_with_options(
+            bytes,
+            mcap::read::Options::IgnoreEndMagic.into(),
+        ) {
+            Ok(s) => s,
+            Err(e) => {
+                tracing::error!("replay: {}: {e}", settings.file.display());
+                break;
+            }
+        };
+        for m in stream {
+            if stop.load(Ordering::Acquire) {
+                return;
+            }
+            let Ok(m) = m else { break };
+            if m.log_time < from || m.log_time > to {
+                continue;
+            }
+            let Some((kind, target)) = targets.get(&m.channel.topic) else {
+                continue;
+            };
+            if let Some(g) = gate {
+                while !g.take(Duration::from_millis(100)) {
+                    if stop.load(Ordering::Acquire) {
+                        return;
+                    }
+                }
+            } else if let Some(speed) = settings.speed {
+                let due = t0 + Duration::from_secs_f64((m.log_time - from) as f64 / 1e9 / speed);
+                while let Some(wait) = due.checked_duration_since(Instant::now()) {
+                    if stop.load(Ordering::Acquire) {
+                        return;
+                    }
+                    std::thread::sleep(wait.min(Duration::from_millis(50)));
+                }
+            }
+            match mcapfmt::decode(&m.channel.topic, kind, &m.data) {
+                Ok(d) => {
+                    last_clock = last_clock.max(d.clock + offset);
+                    if let Err(e) = target.publish(d.clock + offset, d.time_ns, d.value) {
+                        errors += 1;
+                        if errors <= 5 {
+                            tracing::warn!("replay: {e}");
+                        }
+                    }
+                }
+                Err(e) => {
+                    errors += 1;
+                    if errors <= 5 {
+                        tracing::warn!("replay: {}: {e}", settings.file.display());
+                    }
+                }
+            }
+            if let Some(g) = gate {
+                g.published.fetch_add(1, Ordering::Relaxed);
+            }
+        }
+        if !settings.looping {
+            break 'passes;
+        }
+        offset = last_clock;
+    }
+    let why = format!("replay: end of {}", settings.file.display());
+    for (_, t) in targets.values() {
+        t.set_stale(&why);
+    }
+}
+
+impl Driver for Replay {
+    fn terminate(&mut self) {
+        self.stop.store(true, Ordering::Release);
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+crate::register_driver!(
+    Driver,
+    "replay",
+    "provides the interfaces recorded in an MCAP file, with their recorded clocks (speed, loop, start/end, stepped)",
+    create
+);

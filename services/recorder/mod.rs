@@ -1,0 +1,520 @@
+//! recorder: records interfaces into an MCAP file (the log format of ROS 2,
+//! Foxglove and copper-rs) that the `replay` driver, Foxglove Studio and Python's
+//! `mcap` package read. See `docs/recording.md` and `examples/recorder.conf`.
+//!
+//! One channel per interface (topic = its name), JSON messages with Foxglove's
+//! schemas where they fit (`foxglove.RawImage`, `foxglove.LaserScan`,
+//! `foxglove.PoseInFrame` for encoders) and `jderobot.KIND` JSON schemas for the
+//! rest; every message carries the interface's clock and the sample's wall time
+//! (the format is `crate::mcapfmt`'s).
+//!
+//! # Conf
+//! ```text
+//! service recorder
+//! records laser encoders colorA    # interfaces to record (repeatable); `records all` (default):
+//!                                  #   every interface of a kind jderobot records, provided
+//!                                  #   by the drivers loaded before the recorder
+//! file run.mcap                    # relative to the conf; default recording-YYYYMMDD-HHMMSS.mcap
+//!                                  #   in the current directory (UTC)
+//! split 500 MB                     # start a new file (NAME-1.mcap, ...) past 500 MB, or `split 10 min`
+//! compression zstd                 # zstd (default) | lz4 | none: chunk compression
+//! images raw                       # raw (only): foxglove.RawImage bgr8
+//! queue 64                         # messages waiting for the disk at most; more are dropped
+//! start on                         # on (default): record from the start; off: wait for `record start`
+//! end_service
+//! ```
+//!
+//! # Interfaces and name space
+//! It provides no interface. It uses the recorded ones (as a user, so drivers that
+//! compute sensors only on demand compute them). It exports `recorder.status`
+//! ([`RecorderStatus`](crate::mcapfmt::RecorderStatus)): the shell's `ps` and
+//! `record status` print it (file, seconds, messages, MB, **dropped**), and
+//! `record start|stop` switch it.
+//!
+//! Writing never blocks a schema: a poller thread takes each new sample (shared,
+//! no copy) into a bounded queue and a writer thread encodes and writes it; when
+//! the queue is full the sample is dropped and counted. Chunks are closed at
+//! least once a second, so a run killed mid-write loses at most the last second.
+//!
+//! No system package is needed (zstd and lz4 are compiled in).
+
+use std::{
+    fs::File,
+    path::{Path, PathBuf},
+    sync::{
+        Arc,
+        atomic::{AtomicBool, Ordering},
+        mpsc::{Receiver, RecvTimeoutError, SyncSender, TrySendError, sync_channel},
+    },
+    thread::JoinHandle,
+    time::{Duration, Instant, SystemTime, UNIX_EPOCH},
+};
+
+use anyhow::Context as _;
+
+use crate::{
+    conf::ComponentConf,
+    interfaces::Interfaces,
+    mcapfmt::{self, RecorderStatus, Snapshot, Source},
+    runtime::{Driver, Runtime},
+};
+
+/// Where a file is cut into the next.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Split {
+    None,
+    Bytes(u64),
+    Time(Duration),
+}
+
+/// The recorder's settings.
+#[derive(Clone, Debug)]
+struct Settings {
+    records: Option<Vec<String>>,
+    file: PathBuf,
+    split: Split,
+    compression: Option<mcap::Compression>,
+    queue: usize,
+    start: bool,
+}
+
+fn utc_stamp(t: SystemTime) -> String {
+    let secs = t.duration_since(UNIX_EPOCH).map(|d| d.as_secs()).unwrap_or(0) as i64;
+    let (days, rem) = (secs.div_euclid(86400), secs.rem_euclid(86400));
+    // Civil date from days since 1970-01-01 (Howard Hinnant's algorithm).
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1460 + doe / 36524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let d = doy - (153 * mp + 2) / 5 + 1;
+    let m = if mp < 10 { mp + 3 } else { mp - 9 };
+    let y = yoe + era * 400 + i64::from(m <= 2);
+    format!(
+        "{y:04}{m:02}{d:02}-{:02}{:02}{:02}",
+        rem / 3600,
+        rem / 60 % 60,
+        rem % 60
+    )
+}
+
+fn parse(conf: &ComponentConf) -> Result<Settings, crate::conf::ConfError> {
+    let mut s = Settings {
+        records: None,
+        file: PathBuf::from(format!("recording-{}.mcap", utc_stamp(SystemTime::now()))),
+        split: Split::None,
+        compression: Some(mcap::Compression::Zstd),
+        queue: 64,
+        start: true,
+    };
+    for line in &conf.lines {
+        match line.keyword() {
+            "records" => {
+                line.expect_args(1, usize::MAX, "records NAME... | records all")?;
+                if line.args().len() == 1 && line.args()[0] == "all" {
+                    s.records = None;
+                } else {
+                    let mut names = s.records.take().unwrap_or_default();
+                    for i in 0..line.args().len() {
+                        names.push(line.interface(i)?);
+                    }
+                    s.records = Some(names);
+                }
+            }
+            "file" => {
+                line.expect_args(1, 1, "file PATH")?;
+                s.file = line.path(0, "a file path")?;
+            }
+            "split" => {
+                line.expect_args(2, 2, "split N MB | split N min")?;
+                let unit = line.choice(1, "a unit", &["MB", "min"])?;
+                s.split = if unit == "MB" {
+                    Split::Bytes(line.number::<u64>(0, "megabytes", 1..=1_000_000)? * 1_000_000)
+                } else {
+                    Split::Time(Duration::from_secs(
+                        line.number::<u64>(0, "minutes", 1..=100_000)? * 60,
+                    ))
+                };
+            }
+            "compression" => {
+                line.expect_args(1, 1, "compression zstd|lz4|none")?;
+                s.compression = match line.choice(0, "a compression", &["zstd", "lz4", "none"])? {
+                    "zstd" => Some(mcap::Compression::Zstd),
+                    "lz4" => Some(mcap::Compression::Lz4),
+                    _ => None,
+                };
+            }
+            "images" => {
+                line.expect_args(1, 1, "images raw")?;
+                if line.choice(0, "an image format", &["raw", "jpeg"])? == "jpeg" {
+                    return Err(line.error(
+                        "`images jpeg` (foxglove.CompressedImage) is not implemented yet; use `images raw`",
+                    ));
+                }
+            }
+            "queue" => {
+                line.expect_args(1, 1, "queue MESSAGES")?;
+                s.queue = line.number::<usize>(0, "messages", 1..=100_000)?;
+            }
+            "start" => {
+                line.expect_args(1, 1, "start on|off")?;
+                s.start = line.on_off(0, "on or off")?;
+            }
+            _ => {
+                return Err(conf.unknown(
+                    line,
+                    "records, file, split, compression, images, queue or start",
+                ));
+            }
+        }
+    }
+    Ok(s)
+}
+
+/// The running recorder.
+pub struct Recorder {
+    stop: Arc<AtomicBool>,
+    poller: Option<JoinHandle<()>>,
+    writer: Option<JoinHandle<()>>,
+    status: Arc<RecorderStatus>,
+    used: Vec<Source>,
+}
+
+type Item = (usize, Arc<str>, Snapshot);
+
+/// The name of the `n`th file of a split recording: `run.mcap`, `run-1.mcap`, ...
+fn nth_file(base: &Path, n: u32) -> PathBuf {
+    if n == 0 {
+        return base.to_path_buf();
+    }
+    let stem = base.file_stem().and_then(|s| s.to_str()).unwrap_or("recording");
+    let ext = base.extension().and_then(|s| s.to_str()).unwrap_or("mcap");
+    base.with_file_name(format!("{stem}-{n}.{ext}"))
+}
+
+/// Finds the sources to record (all recordable interfaces, or the named ones).
+fn sources(interfaces: &Interfaces, records: &Option<Vec<String>>) -> anyhow::Result<Vec<Source>> {
+    match records {
+        None => Ok(interfaces
+            .names()
+            .iter()
+            .filter_map(|n| Source::find(interfaces, n))
+            .collect()),
+        Some(names) => names
+            .iter()
+            .map(|n| {
+                let any = interfaces
+                    .get_any(n)
+                    .with_context(|| format!("recorder: cannot record `{n}`"))?;
+                Source::find(interfaces, n).ok_or_else(|| {
+                    anyhow::anyhow!(
+                        "recorder: `{n}` is a {} interface; jderobot records {}",
+                        any.kind(),
+                        mcapfmt::KINDS.join(", ")
+                    )
+                })
+            })
+            .collect(),
+    }
+}
+
+fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>> {
+    let settings = parse(conf)?;
+    let status = Arc::new(RecorderStatus::default());
+    status.want.store(settings.start, Ordering::Release);
+    rt.names
+        .export_arc("recorder", "status", status.clone())
+        .context("recorder: only one recorder can run")?;
+    let mut srcs = sources(&rt.interfaces, &settings.records)?;
+    if srcs.is_empty() {
+        tracing::warn!(
+            "recorder: no interface to record (load the drivers before the recorder)"
+        );
+    }
+    for s in &srcs {
+        if !s.any().is_actuator() {
+            s.any().resume();
+        }
+    }
+    let used = srcs.clone();
+    let (tx, rx) = sync_channel::<Item>(settings.queue);
+    let stop = Arc::new(AtomicBool::new(false));
+    let writer = {
+        let status = status.clone();
+        let settings = settings.clone();
+        std::thread::Builder::new()
+            .name("recorder-writer".into())
+            .spawn(move || write_loop(rx, settings, status))?
+    };
+    let poller = {
+        let status = status.clone();
+        let stop = stop.clone();
+        std::thread::Builder::new()
+            .name("recorder-poller".into())
+            .spawn(move || {
+                poll_loop(&mut srcs, tx, &status, &stop);
+            })?
+    };
+    Ok(Box::new(Recorder {
+        stop,
+        poller: Some(poller),
+        writer: Some(writer),
+        status,
+        used,
+    }))
+}
+
+/// Takes every new sample of every source into the queue; drops (and counts)
+/// what does not fit.
+fn poll_loop(
+    srcs: &mut [Source],
+    tx: SyncSender<Item>,
+    status: &RecorderStatus,
+    stop: &AtomicBool,
+) {
+    let names: Vec<Arc<str>> = srcs.iter().map(|s| Arc::from(s.any().name())).collect();
+    let mut last: Vec<u64> = vec![0; srcs.len()];
+    let mut was_recording = false;
+    while !stop.load(Ordering::Acquire) {
+        let want = status.want.load(Ordering::Acquire);
+        if want && !was_recording {
+            // A new file starts with the latest value of each interface.
+            last.iter_mut().for_each(|l| *l = 0);
+        }
+        was_recording = want;
+        if want {
+            for (i, s) in srcs.iter().enumerate() {
+                let clock = s.any().clock();
+                if clock == 0 || clock == last[i] {
+                    continue;
+                }
+                let snap = s.snapshot();
+                let c = snap.clock();
+                if last[i] != 0 && c > last[i] + 1 {
+                    // Replaced before we polled (faster than 1 kHz): lost.
+                    status.dropped.fetch_add(c - last[i] - 1, Ordering::Relaxed);
+                }
+                last[i] = c;
+                match tx.try_send((i, names[i].clone(), snap)) {
+                    Ok(()) => {}
+                    Err(TrySendError::Full(_)) => {
+                        status.dropped.fetch_add(1, Ordering::Relaxed);
+                    }
+                    Err(TrySendError::Disconnected(_)) => return,
+                }
+            }
+        }
+        std::thread::sleep(Duration::from_millis(1));
+    }
+}
+
+/// One open file.
+struct Open {
+    writer: mcap::Writer<File>,
+    path: PathBuf,
+    opened: Instant,
+    channels: Vec<Option<u16>>,
+    sequence: u32,
+}
+
+fn open(settings: &Settings, n: u32) -> anyhow::Result<Open> {
+    let path = nth_file(&settings.file, n);
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("recorder: cannot create directory {}", dir.display()))?;
+    }
+    let file = File::create(&path)
+        .with_context(|| format!("recorder: cannot create {}", path.display()))?;
+    let writer = mcap::WriteOptions::new()
+        .compression(settings.compression)
+        .profile("")
+        .library(concat!("jderobot ", env!("CARGO_PKG_VERSION")))
+        .chunk_size(Some(4 * 1024 * 1024))
+        .create(file)
+        .with_context(|| format!("recorder: cannot start {}", path.display()))?;
+    Ok(Open {
+        writer,
+        path,
+        opened: Instant::now(),
+        channels: Vec::new(),
+        sequence: 0,
+    })
+}
+
+fn close(o: Open, status: &RecorderStatus) {
+    let Open {
+        mut writer, path, ..
+    } = o;
+    if let Err(e) = writer.finish() {
+        *status.error.lock() = Some(format!("{}: {e}", path.display()));
+    }
+    drop(writer);
+    if let Ok(m) = std::fs::metadata(&path) {
+        status.bytes.store(m.len(), Ordering::Relaxed);
+    }
+    status.recording.store(false, Ordering::Release);
+}
+
+fn write_one(o: &mut Open, item: &Item, buf: &mut Vec<u8>) -> anyhow::Result<()> {
+    let (i, name, snap) = item;
+    if o.channels.len() <= *i {
+        o.channels.resize(*i + 1, None);
+    }
+    let channel = match o.channels[*i] {
+        Some(c) => c,
+        None => {
+            let kind = match snap {
+                Snapshot::Image(_) => "image",
+                Snapshot::Laser(_) => "laser",
+                Snapshot::Encoders(_) => "encoders",
+                Snapshot::Motors(_) => "motors",
+                Snapshot::Sonars(_) => "sonars",
+                Snapshot::Bumpers(_) => "bumpers",
+                Snapshot::PtEncoders(_) => "pantiltencoders",
+                Snapshot::PtMotors(_) => "pantiltmotors",
+            };
+            let (schema_name, schema) = mcapfmt::schema(kind);
+            let sid = o
+                .writer
+                .add_schema(&schema_name, "jsonschema", schema.as_bytes())?;
+            let c = o
+                .writer
+                .add_channel(sid, name, "json", &mcapfmt::metadata(kind))?;
+            o.channels[*i] = Some(c);
+            c
+        }
+    };
+    mcapfmt::encode(name, snap, buf);
+    let t = mcapfmt::nanos(snap.time());
+    o.sequence = o.sequence.wrapping_add(1);
+    o.writer.write_to_known_channel(
+        &mcap::records::MessageHeader {
+            channel_id: channel,
+            sequence: o.sequence,
+            log_time: t,
+            publish_time: t,
+        },
+        buf,
+    )?;
+    Ok(())
+}
+
+/// Encodes and writes what the poller queues; opens, splits and closes files.
+fn write_loop(rx: Receiver<Item>, settings: Settings, status: Arc<RecorderStatus>) {
+    let mut file: Option<Open> = None;
+    let mut n = 0u32;
+    let mut buf = Vec::new();
+    let mut flushed = Instant::now();
+    loop {
+        let item = rx.recv_timeout(Duration::from_millis(100));
+        let want = status.want.load(Ordering::Acquire);
+        if !want && let Some(o) = file.take() {
+            close(o, &status);
+        }
+        match item {
+            Ok(item) => {
+                if !want {
+                    continue;
+                }
+                if file.is_none() {
+                    match open(&settings, n) {
+                        Ok(o) => {
+                            n += 1;
+                            *status.file.lock() = Some((o.path.clone(), Instant::now()));
+                            status.messages.store(0, Ordering::Relaxed);
+                            status.bytes.store(0, Ordering::Relaxed);
+                            status.recording.store(true, Ordering::Release);
+                            file = Some(o);
+                        }
+                        Err(e) => {
+                            tracing::error!("{e:#}");
+                            *status.error.lock() = Some(format!("{e:#}"));
+                            status.want.store(false, Ordering::Release);
+                            continue;
+                        }
+                    }
+                }
+                let o = file.as_mut().expect("opened above");
+                if let Err(e) = write_one(o, &item, &mut buf) {
+                    let msg = format!("{}: {e:#}", o.path.display());
+                    tracing::error!("recorder: {msg}; recording stops");
+                    *status.error.lock() = Some(msg);
+                    status.want.store(false, Ordering::Release);
+                    continue;
+                }
+                status.messages.fetch_add(1, Ordering::Relaxed);
+            }
+            Err(RecvTimeoutError::Timeout) => {}
+            Err(RecvTimeoutError::Disconnected) => break,
+        }
+        if flushed.elapsed() >= Duration::from_secs(1) {
+            flushed = Instant::now();
+            if let Some(o) = file.as_mut() {
+                // Close the chunk: a run killed now loses at most the last second.
+                if let Err(e) = o.writer.flush() {
+                    *status.error.lock() = Some(format!("{}: {e}", o.path.display()));
+                }
+                let len = std::fs::metadata(&o.path).map(|m| m.len()).unwrap_or(0);
+                status.bytes.store(len, Ordering::Relaxed);
+                let split = match settings.split {
+                    Split::None => false,
+                    Split::Bytes(b) => len >= b,
+                    Split::Time(t) => o.opened.elapsed() >= t,
+                };
+                if split && let Some(o) = file.take() {
+                    close(o, &status);
+                }
+            }
+        }
+    }
+    if let Some(o) = file.take() {
+        close(o, &status);
+    }
+}
+
+impl Driver for Recorder {
+    fn terminate(&mut self) {
+        self.stop.store(true, Ordering::Release);
+        if let Some(p) = self.poller.take() {
+            let _ = p.join();
+        }
+        // The poller dropped its sender: the writer drains the queue and closes the file.
+        if let Some(w) = self.writer.take() {
+            let _ = w.join();
+        }
+        for s in &self.used {
+            if !s.any().is_actuator() {
+                s.any().suspend();
+            }
+        }
+        tracing::info!("recorder: {}", self.status.line());
+    }
+}
+
+crate::register_driver!(
+    Service,
+    "recorder",
+    "records interfaces into an MCAP file (Foxglove schemas, zstd/lz4) for replay, Foxglove and Python",
+    create
+);
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn utc_stamps() {
+        assert_eq!(utc_stamp(UNIX_EPOCH), "19700101-000000");
+        assert_eq!(
+            utc_stamp(UNIX_EPOCH + Duration::from_secs(1_764_023_400)),
+            "20251124-223000"
+        );
+    }
+
+    #[test]
+    fn split_names() {
+        assert_eq!(nth_file(Path::new("a/run.mcap"), 0), Path::new("a/run.mcap"));
+        assert_eq!(nth_file(Path::new("a/run.mcap"), 2), Path::new("a/run-2.mcap"));
+    }
+}

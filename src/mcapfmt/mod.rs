@@ -1,0 +1,583 @@
+//! mcapfmt: interfaces as MCAP messages, the format that the `recorder` service
+//! writes and the `replay` driver and `jderobot info` read (see `docs/recording.md`).
+//!
+//! One MCAP channel per interface (topic = the interface name), JSON message
+//! encoding, a JSON schema per channel. Where a Foxglove schema fits, the channel
+//! uses it, so Foxglove Studio shows the file as it is:
+//!
+//! | interface kind | schema name | message |
+//! |---|---|---|
+//! | `image` | `foxglove.RawImage` | `encoding` `bgr8`, `data` base64 |
+//! | `laser` | `foxglove.LaserScan` | `ranges` in m, angles in rad (−π/2 first) |
+//! | `encoders` | `foxglove.PoseInFrame` | position in m, orientation a quaternion about z |
+//! | others | `jderobot.KIND` | the interface's fields in its units |
+//!
+//! Every message also carries `clock` (the interface's clock: the sample's number)
+//! and `jderobot`, the value in its own units exactly (f32 as JSON's shortest
+//! round-trip text), so a replay gives back bit-identical values. `timestamp`
+//! and the MCAP log and publish times are the sample's wall time (ns since the
+//! Unix epoch). The channel metadata `jderobot.kind` names the interface kind.
+//!
+//! [`Source`] polls a typed interface for new samples without copying them;
+//! [`encode`] and [`decode`] turn a sample into a message and back; [`Summary`]
+//! reads a file (complete or cut short) for `jderobot info`; [`RecorderStatus`]
+//! and [`StepGate`] are what the recorder and replay export in the name space
+//! (keys `recorder.status` and `replay.step`) for the shell.
+
+mod base64;
+mod status;
+mod summary;
+
+pub use status::{RecorderStatus, StepGate};
+pub use summary::{ChannelSummary, ReadError, Summary};
+
+use std::{
+    collections::BTreeMap,
+    fmt::Write as _,
+    sync::Arc,
+    time::{Duration, SystemTime, UNIX_EPOCH},
+};
+
+use serde_json::{Value, json};
+
+use crate::interfaces::{
+    AnyInterface, Bumpers, Encoders, Image, Interface, Interfaces, Laser, Motors, PtEncoders,
+    PtMotors, Sample, Sonars,
+};
+
+/// The metadata key of a channel that names the interface kind.
+pub const KIND_KEY: &str = "jderobot.kind";
+
+/// Errors decoding a message.
+#[derive(Debug, thiserror::Error)]
+pub enum FormatError {
+    #[error("channel `{topic}`: {what}")]
+    Bad { topic: String, what: String },
+    #[error("channel `{topic}`: interface kind `{kind}` is not one jderobot records")]
+    Kind { topic: String, kind: String },
+}
+
+fn bad(topic: &str, what: impl Into<String>) -> FormatError {
+    FormatError::Bad {
+        topic: topic.into(),
+        what: what.into(),
+    }
+}
+
+/// One recorded value, whatever its interface kind.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Recorded {
+    Image(Image),
+    Laser(Laser),
+    Encoders(Encoders),
+    Motors(Motors),
+    Sonars(Sonars),
+    Bumpers(Bumpers),
+    PtEncoders(PtEncoders),
+    PtMotors(PtMotors),
+}
+
+/// The interface kinds jderobot records (`AnyInterface::kind`).
+pub const KINDS: &[&str] = &[
+    "image",
+    "laser",
+    "encoders",
+    "motors",
+    "sonars",
+    "bumpers",
+    "pantiltencoders",
+    "pantiltmotors",
+];
+
+/// A sample shared with its interface (no copy), ready to encode.
+#[derive(Clone)]
+pub enum Snapshot {
+    Image(Arc<Sample<Image>>),
+    Laser(Arc<Sample<Laser>>),
+    Encoders(Arc<Sample<Encoders>>),
+    Motors(Arc<Sample<Motors>>),
+    Sonars(Arc<Sample<Sonars>>),
+    Bumpers(Arc<Sample<Bumpers>>),
+    PtEncoders(Arc<Sample<PtEncoders>>),
+    PtMotors(Arc<Sample<PtMotors>>),
+}
+
+impl Snapshot {
+    pub fn clock(&self) -> u64 {
+        match self {
+            Snapshot::Image(s) => s.clock,
+            Snapshot::Laser(s) => s.clock,
+            Snapshot::Encoders(s) => s.clock,
+            Snapshot::Motors(s) => s.clock,
+            Snapshot::Sonars(s) => s.clock,
+            Snapshot::Bumpers(s) => s.clock,
+            Snapshot::PtEncoders(s) => s.clock,
+            Snapshot::PtMotors(s) => s.clock,
+        }
+    }
+    pub fn time(&self) -> SystemTime {
+        match self {
+            Snapshot::Image(s) => s.time,
+            Snapshot::Laser(s) => s.time,
+            Snapshot::Encoders(s) => s.time,
+            Snapshot::Motors(s) => s.time,
+            Snapshot::Sonars(s) => s.time,
+            Snapshot::Bumpers(s) => s.time,
+            Snapshot::PtEncoders(s) => s.time,
+            Snapshot::PtMotors(s) => s.time,
+        }
+    }
+}
+
+/// A typed interface to poll for new samples.
+#[derive(Clone)]
+pub enum Source {
+    Image(Arc<Interface<Image>>),
+    Laser(Arc<Interface<Laser>>),
+    Encoders(Arc<Interface<Encoders>>),
+    Motors(Arc<Interface<Motors>>),
+    Sonars(Arc<Interface<Sonars>>),
+    Bumpers(Arc<Interface<Bumpers>>),
+    PtEncoders(Arc<Interface<PtEncoders>>),
+    PtMotors(Arc<Interface<PtMotors>>),
+}
+
+impl Source {
+    /// The typed interface `name`, or `None` when its kind is not recorded.
+    pub fn find(interfaces: &Interfaces, name: &str) -> Option<Source> {
+        let kind = interfaces.get_any(name).ok()?.kind();
+        Some(match kind {
+            "image" => Source::Image(interfaces.get(name).ok()?),
+            "laser" => Source::Laser(interfaces.get(name).ok()?),
+            "encoders" => Source::Encoders(interfaces.get(name).ok()?),
+            "motors" => Source::Motors(interfaces.get(name).ok()?),
+            "sonars" => Source::Sonars(interfaces.get(name).ok()?),
+            "bumpers" => Source::Bumpers(interfaces.get(name).ok()?),
+            "pantiltencoders" => Source::PtEncoders(interfaces.get(name).ok()?),
+            "pantiltmotors" => Source::PtMotors(interfaces.get(name).ok()?),
+            _ => return None,
+        })
+    }
+
+    pub fn any(&self) -> &dyn AnyInterface {
+        match self {
+            Source::Image(i) => &**i,
+            Source::Laser(i) => &**i,
+            Source::Encoders(i) => &**i,
+            Source::Motors(i) => &**i,
+            Source::Sonars(i) => &**i,
+            Source::Bumpers(i) => &**i,
+            Source::PtEncoders(i) => &**i,
+            Source::PtMotors(i) => &**i,
+        }
+    }
+
+    /// The latest sample, shared (no copy).
+    pub fn snapshot(&self) -> Snapshot {
+        match self {
+            Source::Image(i) => Snapshot::Image(i.snapshot()),
+            Source::Laser(i) => Snapshot::Laser(i.snapshot()),
+            Source::Encoders(i) => Snapshot::Encoders(i.snapshot()),
+            Source::Motors(i) => Snapshot::Motors(i.snapshot()),
+            Source::Sonars(i) => Snapshot::Sonars(i.snapshot()),
+            Source::Bumpers(i) => Snapshot::Bumpers(i.snapshot()),
+            Source::PtEncoders(i) => Snapshot::PtEncoders(i.snapshot()),
+            Source::PtMotors(i) => Snapshot::PtMotors(i.snapshot()),
+        }
+    }
+}
+
+/// Nanoseconds since the Unix epoch.
+pub fn nanos(t: SystemTime) -> u64 {
+    t.duration_since(UNIX_EPOCH)
+        .map(|d| d.as_nanos() as u64)
+        .unwrap_or(0)
+}
+
+/// The time `ns` nanoseconds after the Unix epoch.
+pub fn from_nanos(ns: u64) -> SystemTime {
+    UNIX_EPOCH + Duration::from_nanos(ns)
+}
+
+/// The schema (name, JSON schema text) of an interface kind.
+pub fn schema(kind: &str) -> (String, String) {
+    let ts = r#""timestamp":{"type":"object","title":"time","properties":{"sec":{"type":"integer","minimum":0},"nsec":{"type":"integer","minimum":0,"maximum":999999999}}},"clock":{"type":"integer","description":"the interface's clock: the sample's number"}"#;
+    let vec3 = r#"{"type":"object","properties":{"x":{"type":"number"},"y":{"type":"number"},"z":{"type":"number"}}}"#;
+    let quat = r#"{"type":"object","properties":{"x":{"type":"number"},"y":{"type":"number"},"z":{"type":"number"},"w":{"type":"number"}}}"#;
+    let pose = format!(
+        r#"{{"type":"object","properties":{{"position":{vec3},"orientation":{quat}}}}}"#
+    );
+    match kind {
+        "image" => (
+            "foxglove.RawImage".into(),
+            format!(
+                r#"{{"title":"foxglove.RawImage","description":"A raw image (jderobot: BGR, bgr8)","type":"object","properties":{{{ts},"frame_id":{{"type":"string"}},"width":{{"type":"integer","minimum":0}},"height":{{"type":"integer","minimum":0}},"encoding":{{"type":"string"}},"step":{{"type":"integer","minimum":0}},"data":{{"type":"string","contentEncoding":"base64"}}}}}}"#
+            ),
+        ),
+        "laser" => (
+            "foxglove.LaserScan".into(),
+            format!(
+                r#"{{"title":"foxglove.LaserScan","description":"A laser scan (jderobot: ranges in m, the raw mm in jderobot.readings)","type":"object","properties":{{{ts},"frame_id":{{"type":"string"}},"pose":{pose},"start_angle":{{"type":"number"}},"end_angle":{{"type":"number"}},"ranges":{{"type":"array","items":{{"type":"number"}}}},"intensities":{{"type":"array","items":{{"type":"number"}}}},"jderobot":{{"type":"object","properties":{{"readings":{{"type":"array","items":{{"type":"integer"}}}},"resolution":{{"type":"number"}}}}}}}}}}"#
+            ),
+        ),
+        "encoders" => (
+            "foxglove.PoseInFrame".into(),
+            format!(
+                r#"{{"title":"foxglove.PoseInFrame","description":"Odometry (jderobot encoders: x, y mm, theta rad in jderobot)","type":"object","properties":{{{ts},"frame_id":{{"type":"string"}},"pose":{pose},"jderobot":{{"type":"object"}}}}}}"#
+            ),
+        ),
+        other => (
+            format!("jderobot.{other}"),
+            format!(
+                r#"{{"title":"jderobot.{other}","description":"a jderobot {other} interface value in its units (see src/interfaces)","type":"object","properties":{{{ts},"jderobot":{{"type":"object"}}}}}}"#
+            ),
+        ),
+    }
+}
+
+fn stamp_json(out: &mut String, ns: u64, clock: u64) {
+    let _ = write!(
+        out,
+        r#""timestamp":{{"sec":{},"nsec":{}}},"clock":{clock}"#,
+        ns / 1_000_000_000,
+        ns % 1_000_000_000
+    );
+}
+
+fn f32_json(v: f32) -> Value {
+    // JSON has no NaN or infinity; jderobot's values are finite (validated).
+    serde_json::Number::from_f64(v as f64)
+        .map(Value::Number)
+        .unwrap_or(Value::Null)
+}
+
+/// Encodes a sample of interface `name` as a JSON message into `out` (cleared first).
+pub fn encode(name: &str, snap: &Snapshot, out: &mut Vec<u8>) {
+    out.clear();
+    let ns = nanos(snap.time());
+    let clock = snap.clock();
+    let mut s = String::with_capacity(256);
+    s.push('{');
+    stamp_json(&mut s, ns, clock);
+    match snap {
+        Snapshot::Image(img) => {
+            let _ = write!(
+                s,
+                r#","frame_id":{},"width":{},"height":{},"encoding":"bgr8","step":{},"data":""#,
+                Value::String(name.into()),
+                img.width,
+                img.height,
+                img.width * 3
+            );
+            out.extend_from_slice(s.as_bytes());
+            base64::encode_into(&img.data, out);
+            out.extend_from_slice(b"\"}");
+            return;
+        }
+        Snapshot::Laser(l) => {
+            let res = if l.resolution > 0.0 { l.resolution } else { 1.0 };
+            let start = -std::f64::consts::FRAC_PI_2;
+            let end = start
+                + ((l.readings.len().max(1) - 1) as f64 / res as f64).to_radians();
+            let _ = write!(
+                s,
+                r#","frame_id":{},"pose":{{"position":{{"x":0.019,"y":0,"z":0}},"orientation":{{"x":0,"y":0,"z":0,"w":1}}}},"start_angle":{start},"end_angle":{end},"ranges":["#,
+                Value::String(name.into())
+            );
+            for (i, r) in l.readings.iter().enumerate() {
+                if i > 0 {
+                    s.push(',');
+                }
+                let _ = write!(s, "{}", *r as f64 / 1000.0);
+            }
+            s.push_str(r#"],"intensities":[],"jderobot":{"readings":["#);
+            for (i, r) in l.readings.iter().enumerate() {
+                if i > 0 {
+                    s.push(',');
+                }
+                let _ = write!(s, "{r}");
+            }
+            let _ = write!(s, r#"],"resolution":{}}}}}"#, f32_json(l.resolution));
+        }
+        Snapshot::Encoders(e) => {
+            let half = e.theta as f64 / 2.0;
+            let _ = write!(
+                s,
+                r#","frame_id":"odom","pose":{{"position":{{"x":{},"y":{},"z":0}},"orientation":{{"x":0,"y":0,"z":{},"w":{}}}}},"jderobot":{}}}"#,
+                e.x as f64 / 1000.0,
+                e.y as f64 / 1000.0,
+                half.sin(),
+                half.cos(),
+                json!({"x": f32_json(e.x), "y": f32_json(e.y), "theta": f32_json(e.theta),
+                       "cos": f32_json(e.cos), "sin": f32_json(e.sin)})
+            );
+        }
+        Snapshot::Motors(m) => {
+            let _ = write!(
+                s,
+                r#","jderobot":{}}}"#,
+                json!({"v": f32_json(m.v), "w": f32_json(m.w)})
+            );
+        }
+        Snapshot::Sonars(v) => {
+            let us: Vec<Value> = v.us.iter().map(|x| f32_json(*x)).collect();
+            let _ = write!(s, r#","jderobot":{}}}"#, json!({ "us": us }));
+        }
+        Snapshot::Bumpers(b) => {
+            let _ = write!(s, r#","jderobot":{}}}"#, json!({ "bumpers": b.bumpers }));
+        }
+        Snapshot::PtEncoders(p) => {
+            let _ = write!(
+                s,
+                r#","jderobot":{}}}"#,
+                json!({"pan_angle": f32_json(p.pan_angle), "tilt_angle": f32_json(p.tilt_angle)})
+            );
+        }
+        Snapshot::PtMotors(p) => {
+            let _ = write!(
+                s,
+                r#","jderobot":{}}}"#,
+                json!({
+                    "longitude": f32_json(p.longitude), "latitude": f32_json(p.latitude),
+                    "longitude_speed": f32_json(p.longitude_speed),
+                    "latitude_speed": f32_json(p.latitude_speed),
+                    "max_longitude": f32_json(p.max_longitude), "min_longitude": f32_json(p.min_longitude),
+                    "max_latitude": f32_json(p.max_latitude), "min_latitude": f32_json(p.min_latitude),
+                    "max_longitude_speed": f32_json(p.max_longitude_speed),
+                    "max_latitude_speed": f32_json(p.max_latitude_speed),
+                })
+            );
+        }
+    }
+    out.extend_from_slice(s.as_bytes());
+}
+
+/// The channel metadata of an interface kind.
+pub fn metadata(kind: &str) -> BTreeMap<String, String> {
+    BTreeMap::from([(KIND_KEY.to_string(), kind.to_string())])
+}
+
+/// The interface kind of a channel: its metadata, or what its schema name says.
+pub fn channel_kind(metadata: &BTreeMap<String, String>, schema: Option<&str>) -> Option<String> {
+    if let Some(k) = metadata.get(KIND_KEY) {
+        return Some(k.clone());
+    }
+    match schema? {
+        "foxglove.RawImage" => Some("image".into()),
+        "foxglove.LaserScan" => Some("laser".into()),
+        "foxglove.PoseInFrame" => Some("encoders".into()),
+        s => s.strip_prefix("jderobot.").map(str::to_string),
+    }
+}
+
+/// A decoded message: the interface's clock, its wall time and its value.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Decoded {
+    pub clock: u64,
+    pub time_ns: u64,
+    pub value: Recorded,
+}
+
+fn get<'a>(v: &'a Value, key: &str, topic: &str) -> Result<&'a Value, FormatError> {
+    v.get(key)
+        .ok_or_else(|| bad(topic, format!("the message has no `{key}`")))
+}
+
+fn num(v: &Value, key: &str, topic: &str) -> Result<f64, FormatError> {
+    get(v, key, topic)?
+        .as_f64()
+        .ok_or_else(|| bad(topic, format!("`{key}` is not a number")))
+}
+
+fn f32_of(v: &Value, key: &str, topic: &str) -> Result<f32, FormatError> {
+    Ok(num(v, key, topic)? as f32)
+}
+
+fn f32_array(v: &Value, key: &str, topic: &str) -> Result<Vec<f32>, FormatError> {
+    get(v, key, topic)?
+        .as_array()
+        .ok_or_else(|| bad(topic, format!("`{key}` is not an array")))?
+        .iter()
+        .map(|x| {
+            x.as_f64()
+                .map(|f| f as f32)
+                .ok_or_else(|| bad(topic, format!("`{key}` holds a non-number")))
+        })
+        .collect()
+}
+
+/// Decodes a message of interface kind `kind` on channel `topic`.
+pub fn decode(topic: &str, kind: &str, data: &[u8]) -> Result<Decoded, FormatError> {
+    let v: Value = serde_json::from_slice(data)
+        .map_err(|e| bad(topic, format!("the message is not JSON: {e}")))?;
+    let ts = get(&v, "timestamp", topic)?;
+    let time_ns = num(ts, "sec", topic)? as u64 * 1_000_000_000 + num(ts, "nsec", topic)? as u64;
+    let clock = get(&v, "clock", topic)?
+        .as_u64()
+        .ok_or_else(|| bad(topic, "`clock` is not a whole number"))?;
+    let value = match kind {
+        "image" => {
+            let width = num(&v, "width", topic)? as u32;
+            let height = num(&v, "height", topic)? as u32;
+            let enc = get(&v, "encoding", topic)?.as_str().unwrap_or("");
+            if enc != "bgr8" {
+                return Err(bad(topic, format!("image encoding `{enc}`; jderobot reads bgr8")));
+            }
+            let text = get(&v, "data", topic)?
+                .as_str()
+                .ok_or_else(|| bad(topic, "`data` is not a base64 string"))?;
+            let data = base64::decode(text.as_bytes())
+                .ok_or_else(|| bad(topic, "`data` is not valid base64"))?;
+            if data.len() != width as usize * height as usize * 3 {
+                return Err(bad(
+                    topic,
+                    format!("{width}x{height} bgr8 needs {} bytes, the data has {}", width as usize * height as usize * 3, data.len()),
+                ));
+            }
+            Recorded::Image(Image {
+                width,
+                height,
+                data,
+            })
+        }
+        "laser" => {
+            let j = get(&v, "jderobot", topic)?;
+            let readings = get(j, "readings", topic)?
+                .as_array()
+                .ok_or_else(|| bad(topic, "`readings` is not an array"))?
+                .iter()
+                .map(|x| {
+                    x.as_i64()
+                        .map(|r| r as i32)
+                        .ok_or_else(|| bad(topic, "a laser reading is not a whole number"))
+                })
+                .collect::<Result<Vec<_>, _>>()?;
+            Recorded::Laser(Laser {
+                readings,
+                resolution: f32_of(j, "resolution", topic)?,
+            })
+        }
+        "encoders" => {
+            let j = get(&v, "jderobot", topic)?;
+            Recorded::Encoders(Encoders {
+                x: f32_of(j, "x", topic)?,
+                y: f32_of(j, "y", topic)?,
+                theta: f32_of(j, "theta", topic)?,
+                cos: f32_of(j, "cos", topic)?,
+                sin: f32_of(j, "sin", topic)?,
+            })
+        }
+        "motors" => {
+            let j = get(&v, "jderobot", topic)?;
+            Recorded::Motors(Motors {
+                v: f32_of(j, "v", topic)?,
+                w: f32_of(j, "w", topic)?,
+            })
+        }
+        "sonars" => Recorded::Sonars(Sonars {
+            us: f32_array(get(&v, "jderobot", topic)?, "us", topic)?,
+        }),
+        "bumpers" => {
+            let j = get(&v, "jderobot", topic)?;
+            let bumpers = get(j, "bumpers", topic)?
+                .as_array()
+                .ok_or_else(|| bad(topic, "`bumpers` is not an array"))?
+                .iter()
+                .map(|x| x.as_u64().map(|b| b as u8).ok_or_else(|| bad(topic, "a bumper is not 0 or 1")))
+                .collect::<Result<Vec<_>, _>>()?;
+            Recorded::Bumpers(Bumpers { bumpers })
+        }
+        "pantiltencoders" => {
+            let j = get(&v, "jderobot", topic)?;
+            Recorded::PtEncoders(PtEncoders {
+                pan_angle: f32_of(j, "pan_angle", topic)?,
+                tilt_angle: f32_of(j, "tilt_angle", topic)?,
+            })
+        }
+        "pantiltmotors" => {
+            let j = get(&v, "jderobot", topic)?;
+            Recorded::PtMotors(PtMotors {
+                longitude: f32_of(j, "longitude", topic)?,
+                latitude: f32_of(j, "latitude", topic)?,
+                longitude_speed: f32_of(j, "longitude_speed", topic)?,
+                latitude_speed: f32_of(j, "latitude_speed", topic)?,
+                max_longitude: f32_of(j, "max_longitude", topic)?,
+                min_longitude: f32_of(j, "min_longitude", topic)?,
+                max_latitude: f32_of(j, "max_latitude", topic)?,
+                min_latitude: f32_of(j, "min_latitude", topic)?,
+                max_longitude_speed: f32_of(j, "max_longitude_speed", topic)?,
+                max_latitude_speed: f32_of(j, "max_latitude_speed", topic)?,
+            })
+        }
+        other => {
+            return Err(FormatError::Kind {
+                topic: topic.into(),
+                kind: other.into(),
+            });
+        }
+    };
+    Ok(Decoded {
+        clock,
+        time_ns,
+        value,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::time::Instant;
+
+    fn sample<T>(clock: u64, value: T) -> Arc<Sample<T>> {
+        Arc::new(Sample {
+            clock,
+            stamp: Instant::now(),
+            time: from_nanos(1_700_000_000_123_456_789),
+            value,
+        })
+    }
+
+    #[test]
+    fn values_round_trip_exactly() {
+        let cases = vec![
+            (
+                Snapshot::Laser(sample(3, Laser { readings: vec![1, 8000, 123, -1], resolution: 1.0 })),
+                Recorded::Laser(Laser { readings: vec![1, 8000, 123, -1], resolution: 1.0 }),
+                "laser",
+            ),
+            (
+                Snapshot::Encoders(sample(4, Encoders { x: 1000.25, y: -3.1, theta: 6.2831, cos: 0.1, sin: 0.3 })),
+                Recorded::Encoders(Encoders { x: 1000.25, y: -3.1, theta: 6.2831, cos: 0.1, sin: 0.3 }),
+                "encoders",
+            ),
+            (
+                Snapshot::Sonars(sample(5, Sonars { us: vec![0.1, 5000.0, 333.3] })),
+                Recorded::Sonars(Sonars { us: vec![0.1, 5000.0, 333.3] }),
+                "sonars",
+            ),
+            (
+                Snapshot::Image(sample(6, Image { width: 2, height: 1, data: vec![1, 2, 3, 250, 251, 252] })),
+                Recorded::Image(Image { width: 2, height: 1, data: vec![1, 2, 3, 250, 251, 252] }),
+                "image",
+            ),
+        ];
+        let mut buf = Vec::new();
+        for (snap, value, kind) in cases {
+            encode("x", &snap, &mut buf);
+            let d = decode("x", kind, &buf).unwrap();
+            assert_eq!(d.value, value);
+            assert_eq!(d.clock, snap.clock());
+            assert_eq!(d.time_ns, 1_700_000_000_123_456_789);
+        }
+    }
+
+    #[test]
+    fn garbage_is_a_clear_error() {
+        let e = decode("laser", "laser", b"{not json").unwrap_err().to_string();
+        assert!(e.contains("laser") && e.contains("not JSON"), "{e}");
+        let e = decode("laser", "laser", br#"{"timestamp":{"sec":1,"nsec":2},"clock":1}"#)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("jderobot"), "{e}");
+    }
+}
