@@ -36,6 +36,10 @@
 //! the queue is full the sample is dropped and counted. Chunks are closed at
 //! least once a second, so a run killed mid-write loses at most the last second.
 //!
+//! Recording starts 0.3 s after the recorder is loaded (so that `jderobot check`,
+//! which builds and shuts down every component at once, leaves no file behind);
+//! the first message of each channel is the interface's latest value then.
+//!
 //! No system package is needed (zstd and lz4 are compiled in).
 
 use std::{
@@ -181,6 +185,9 @@ pub struct Recorder {
     used: Vec<Source>,
 }
 
+/// Recording starts this long after the recorder is loaded.
+const STARTUP_GRACE: Duration = Duration::from_millis(300);
+
 type Item = (usize, Arc<str>, Snapshot);
 
 /// The name of the `n`th file of a split recording: `run.mcap`, `run-1.mcap`, ...
@@ -276,6 +283,15 @@ fn poll_loop(
     let names: Vec<Arc<str>> = srcs.iter().map(|s| Arc::from(s.any().name())).collect();
     let mut last: Vec<u64> = vec![0; srcs.len()];
     let mut was_recording = false;
+    // A grace period: `jderobot check` builds and shuts down a recorder at once,
+    // and must not leave a file behind.
+    let t0 = Instant::now();
+    while t0.elapsed() < STARTUP_GRACE {
+        if stop.load(Ordering::Acquire) {
+            return;
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
     while !stop.load(Ordering::Acquire) {
         let want = status.want.load(Ordering::Acquire);
         if want && !was_recording {

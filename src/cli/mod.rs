@@ -46,6 +46,13 @@ pub enum Command {
         /// The conf file to check.
         conf: PathBuf,
     },
+    /// Print what an MCAP recording holds: channels, counts, rates, duration, and
+    /// what was lost if the file was cut short.
+    #[cfg(feature = "_mcap")]
+    Info {
+        /// The .mcap file.
+        file: PathBuf,
+    },
 }
 
 /// Runs the program; returns its exit code.
@@ -64,6 +71,8 @@ pub fn main() -> ExitCode {
             ExitCode::SUCCESS
         }
         Some(Command::Check { conf }) => check(&conf),
+        #[cfg(feature = "_mcap")]
+        Some(Command::Info { file }) => info(&file),
         None => run(&cli),
     }
 }
@@ -87,6 +96,21 @@ fn list() {
             "\nnot compiled in (add with `--features NAME`): {}",
             names.join(", ")
         );
+    }
+}
+
+/// `jderobot info FILE.mcap`.
+#[cfg(feature = "_mcap")]
+fn info(file: &std::path::Path) -> ExitCode {
+    match crate::mcapfmt::Summary::read(file) {
+        Ok((s, _)) => {
+            print!("{}", s.report(file));
+            ExitCode::SUCCESS
+        }
+        Err(e) => {
+            eprintln!("{e}");
+            ExitCode::FAILURE
+        }
     }
 }
 
