@@ -98,6 +98,16 @@ const MAIN_COMMANDS: &[CommandDoc] = &[
         "NAME FIELD=VALUE...",
         "Write fields of actuator interface NAME",
     ),
+    (
+        "record",
+        "start|stop|status",
+        "Start or stop the loaded recorder, or print what it wrote",
+    ),
+    (
+        "step",
+        "[N]",
+        "Let a stepped replay publish its next N messages (default 1)",
+    ),
     ("show_license", "", "Show the license"),
     ("exit", "", "Quit using jderobot"),
     ("quit", "", "Quit using jderobot"),
@@ -260,6 +270,8 @@ impl Shell {
                 ps(&rt, out);
                 Ok(Flow::Continue)
             }
+            "record" => record(&rt, args, out),
+            "step" => step(&rt, args, out),
             "run" => rt
                 .run(one("NAME")?)
                 .map(|_| Flow::Continue)
@@ -508,6 +520,84 @@ fn files(cmd: &str, args: &[&str], out: &mut dyn Write) -> Result<Flow, String> 
     Ok(Flow::Continue)
 }
 
+/// `record start|stop|status`: talks to the loaded recorder through the name
+/// space (`recorder.status`).
+fn record(rt: &Runtime, args: &[&str], out: &mut dyn Write) -> Result<Flow, String> {
+    #[cfg(feature = "_mcap")]
+    {
+        let status = rt
+            .names
+            .import::<crate::mcapfmt::RecorderStatus>("recorder", "status")
+            .map_err(|_| "record: no recorder is loaded (load_service recorder)".to_string())?;
+        match args {
+            ["start"] => {
+                status.want.store(true, Ordering::Release);
+                w(out, "recording".into());
+            }
+            ["stop"] => {
+                status.want.store(false, Ordering::Release);
+                // The writer closes the file within 0.1 s.
+                let t0 = Instant::now();
+                while status.recording.load(Ordering::Acquire)
+                    && t0.elapsed() < Duration::from_secs(5)
+                {
+                    std::thread::sleep(Duration::from_millis(10));
+                }
+                w(out, status.line());
+            }
+            ["status"] | [] => w(out, status.line()),
+            _ => return Err("record: Usage: record start|stop|status".into()),
+        }
+        Ok(Flow::Continue)
+    }
+    #[cfg(not(feature = "_mcap"))]
+    {
+        let _ = (rt, args, out);
+        Err("record: this binary has no recorder (cargo feature `recorder`)".into())
+    }
+}
+
+/// `step [N]`: lets a stepped replay (`replay.step`) publish N more messages.
+fn step(rt: &Runtime, args: &[&str], out: &mut dyn Write) -> Result<Flow, String> {
+    #[cfg(feature = "_mcap")]
+    {
+        let n = match args {
+            [] => 1,
+            [n] => n
+                .parse::<u64>()
+                .ok()
+                .filter(|n| (1..=1_000_000).contains(n))
+                .ok_or_else(|| format!("step: `{n}` is not a count from 1 to 1000000"))?,
+            _ => return Err("step: Usage: step [N]".into()),
+        };
+        let gate = rt
+            .names
+            .import::<crate::mcapfmt::StepGate>("replay", "step")
+            .map_err(|_| "step: no stepped replay is loaded (driver replay with `stepped on`)".to_string())?;
+        let before = gate.published.load(Ordering::Acquire);
+        gate.step(n);
+        let t0 = Instant::now();
+        while gate.published.load(Ordering::Acquire) < before + n
+            && t0.elapsed() < Duration::from_secs(2)
+        {
+            std::thread::sleep(Duration::from_millis(2));
+        }
+        w(
+            out,
+            format!(
+                "replay: {} messages published",
+                gate.published.load(Ordering::Acquire)
+            ),
+        );
+        Ok(Flow::Continue)
+    }
+    #[cfg(not(feature = "_mcap"))]
+    {
+        let _ = (rt, args, out);
+        Err("step: this binary has no replay (cargo feature `replay`)".into())
+    }
+}
+
 /// Prints `ps`: every schema (4.3's line plus jitter) and every interface.
 pub fn ps(rt: &Runtime, out: &mut dyn Write) {
     for s in rt.status() {
@@ -530,6 +620,13 @@ pub fn ps(rt: &Runtime, out: &mut dyn Write) {
             ));
         }
         w(out, line);
+    }
+    #[cfg(feature = "_mcap")]
+    if let Ok(status) = rt
+        .names
+        .import::<crate::mcapfmt::RecorderStatus>("recorder", "status")
+    {
+        w(out, format!("recorder: {}", status.line()));
     }
 }
 
