@@ -1,0 +1,108 @@
+//! The Python `mcap` package (PyPI) reads what the recorder writes, and the
+//! messages match their JSON schemas and Foxglove's definitions
+//! (scripts/check_mcap.py, in the venv that .ci/run makes: target/py-venv).
+//! Without that venv the test skips with a note, but FAILS under `CI`.
+#![cfg(all(feature = "recorder", feature = "simulator"))]
+
+mod common;
+
+use std::{
+    path::PathBuf,
+    process::{Command, Stdio},
+};
+
+use common::{root, world_path};
+use jderobot::mcapfmt::{self, Recorded};
+
+const BIN: &str = env!("CARGO_BIN_EXE_jderobot");
+
+/// The venv's python, with the packages the check needs, or None (skip; CI fails).
+fn python() -> Option<PathBuf> {
+    let py = std::env::var_os("JDEROBOT_PYTHON")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| root().join("target/py-venv/bin/python"));
+    let ok = Command::new(&py)
+        .args(["-c", "import mcap, jsonschema, foxglove_schemas_protobuf"])
+        .stderr(Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success());
+    if ok {
+        return Some(py);
+    }
+    let note = format!(
+        "{} cannot import mcap, jsonschema and foxglove_schemas_protobuf; make the venv as .ci/run does",
+        py.display()
+    );
+    assert!(std::env::var_os("CI").is_none(), "under CI: {note}");
+    eprintln!("SKIPPED: {note}");
+    None
+}
+
+#[test]
+fn python_mcap_reads_the_recording_by_the_documented_schemas() {
+    let Some(py) = python() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let conf = dir.path().join("r.conf");
+    std::fs::write(
+        &conf,
+        format!(
+            "driver simulator\nworld {}\nprovides encoders\nprovides motors\nprovides laser\n\
+             provides sonars\nprovides colorA\nend_driver\n\
+             service recorder\nfile p.mcap\ncompression lz4\nend_service\n\
+             load_driver simulator\nload_service recorder\n",
+            world_path("simple.world")
+        ),
+    )
+    .unwrap();
+    let out = Command::new(BIN)
+        .args(["--headless", "--no-shell", "--for", "3"])
+        .arg(&conf)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    for file in [
+        dir.path().join("p.mcap"),
+        root().join("assets/recordings/simple.mcap"),
+    ] {
+        let out = Command::new(&py)
+            .arg(root().join("scripts/check_mcap.py"))
+            .arg(&file)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}: {}",
+            file.display(),
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        // What Python read equals what jderobot reads.
+        let (summary, bytes) = mcapfmt::Summary::read(&file).unwrap();
+        for c in &summary.channels {
+            assert_eq!(v["channels"][&c.topic].as_u64(), Some(c.messages), "{}", c.topic);
+        }
+        let mut laser = None;
+        let mut image = None;
+        for m in mcap::MessageStream::new(&bytes).unwrap() {
+            let m = m.unwrap();
+            let kind = mcapfmt::channel_kind(&m.channel.metadata, None).unwrap();
+            match mcapfmt::decode(&m.channel.topic, &kind, &m.data).unwrap().value {
+                Recorded::Laser(l) if laser.is_none() => laser = Some(l),
+                Recorded::Image(i) if image.is_none() => image = Some(i),
+                _ => {}
+            }
+        }
+        let laser = laser.expect("a laser message");
+        let py_laser: Vec<i64> = v["laser0"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|x| x.as_i64().unwrap())
+            .collect();
+        assert_eq!(py_laser, laser.readings.iter().map(|&r| r as i64).collect::<Vec<_>>());
+        let image = image.expect("an image message");
+        let sum: u64 = image.data.iter().map(|&b| b as u64).sum();
+        assert_eq!(v["image0"]["width"].as_u64(), Some(image.width as u64));
+        assert_eq!(v["image0"]["sum"].as_u64(), Some(sum));
+    }
+}
