@@ -1,1 +1,291 @@
-fn main() {}
+//! recorder and replay benchmarks (harness = false; medians of several rounds):
+//!
+//! 1. Write throughput: the writer's path (encode + MCAP chunk writing, no
+//!    compression and zstd) for the load "640x480 BGR at 30 fps + laser 10 Hz +
+//!    encoders 20 Hz + sonars 10 Hz", as seconds of robot time written per wall
+//!    second (x real time).
+//! 2. The recorder service at 1x on that load for 5 s: messages dropped, CPU of
+//!    its threads (recorder-poller + recorder-writer, from /proc) as % of one core.
+//! 3. The replay driver at `speed max`: laser messages/s and 640x480 frames/s
+//!    published into interfaces.
+//! 4. File size of 10 s of the simulator (colorA, laser, encoders, sonars): zstd,
+//!    lz4 and no compression.
+//!
+//! Run: `cargo bench --features full --bench recorder`.
+
+use std::{
+    path::Path,
+    sync::{Arc, atomic::Ordering},
+    time::{Duration, Instant, SystemTime},
+};
+
+use jderobot::{
+    Conf, Runtime,
+    conf::Kind,
+    interfaces::{Encoders, Image, Interface, Laser, Sample, Sonars},
+    loader,
+    mcapfmt::{self, RecorderStatus, Snapshot},
+};
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(|a, b| a.partial_cmp(b).unwrap());
+    v[v.len() / 2]
+}
+
+fn sample<T>(clock: u64, t: SystemTime, value: T) -> Arc<Sample<T>> {
+    Arc::new(Sample {
+        clock,
+        stamp: Instant::now(),
+        time: t,
+        value,
+    })
+}
+
+fn noisy_image(seed: u64) -> Image {
+    let mut img = Image::new(640, 480);
+    let mut x = seed | 1;
+    for (i, b) in img.data.iter_mut().enumerate() {
+        // Smooth gradient plus a little noise: like a camera, not like random bytes.
+        x ^= x << 13;
+        x ^= x >> 7;
+        x ^= x << 17;
+        *b = ((i / 3 % 640) as u64 / 3 + (x & 7)) as u8;
+    }
+    img
+}
+
+/// One second of the load: (channel, snapshot) in time order.
+fn one_second(t0: SystemTime, second: u64) -> Vec<(&'static str, Snapshot)> {
+    let mut v = Vec::new();
+    let img = noisy_image(second + 1);
+    for k in 0..60u64 {
+        // 60 slots of 1/60 s
+        let t = t0 + Duration::from_secs(second) + Duration::from_millis(k * 1000 / 60);
+        if k % 2 == 0 {
+            v.push(("camera", Snapshot::Image(sample(second * 30 + k / 2 + 1, t, img.clone()))));
+        }
+        if k % 3 == 0 {
+            let e = Encoders { x: k as f32, y: 2.0, theta: 1.0, cos: 0.5, sin: 0.8 };
+            v.push(("encoders", Snapshot::Encoders(sample(second * 20 + k / 3 + 1, t, e))));
+        }
+        if k % 6 == 0 {
+            let l = Laser { readings: (0..180).map(|i| 1000 + i * 7 + k as i32).collect(), resolution: 1.0 };
+            v.push(("laser", Snapshot::Laser(sample(second * 10 + k / 6 + 1, t, l))));
+            let s = Sonars { us: (0..16).map(|i| 500.0 + i as f32).collect() };
+            v.push(("sonars", Snapshot::Sonars(sample(second * 10 + k / 6 + 1, t, s))));
+        }
+    }
+    v
+}
+
+fn write_file(path: &Path, compression: Option<mcap::Compression>, seconds: &[Vec<(&str, Snapshot)>]) -> u64 {
+    let mut w = mcap::WriteOptions::new()
+        .compression(compression)
+        .chunk_size(Some(4 * 1024 * 1024))
+        .create(std::fs::File::create(path).unwrap())
+        .unwrap();
+    let mut channels = std::collections::HashMap::new();
+    let mut buf = Vec::new();
+    let mut seq = 0u32;
+    for sec in seconds {
+        for (name, snap) in sec {
+            let kind = match snap {
+                Snapshot::Image(_) => "image",
+                Snapshot::Laser(_) => "laser",
+                Snapshot::Encoders(_) => "encoders",
+                _ => "sonars",
+            };
+            let id = *channels.entry(*name).or_insert_with(|| {
+                let (sn, sd) = mcapfmt::schema(kind);
+                let s = w.add_schema(&sn, "jsonschema", sd.as_bytes()).unwrap();
+                w.add_channel(s, name, "json", &mcapfmt::metadata(kind)).unwrap()
+            });
+            mcapfmt::encode(name, snap, &mut buf);
+            seq += 1;
+            let t = mcapfmt::nanos(snap.time());
+            w.write_to_known_channel(
+                &mcap::records::MessageHeader { channel_id: id, sequence: seq, log_time: t, publish_time: t },
+                &buf,
+            )
+            .unwrap();
+        }
+    }
+    w.finish().unwrap();
+    std::fs::metadata(path).unwrap().len()
+}
+
+/// CPU seconds of this process's threads whose name starts with `prefix`.
+fn thread_cpu(prefix: &str) -> f64 {
+    let tick = 100.0; // USER_HZ
+    let mut total = 0.0;
+    for e in std::fs::read_dir("/proc/self/task").unwrap().flatten() {
+        let comm = std::fs::read_to_string(e.path().join("comm")).unwrap_or_default();
+        if !comm.trim().starts_with(prefix) {
+            continue;
+        }
+        let stat = std::fs::read_to_string(e.path().join("stat")).unwrap_or_default();
+        let after = stat.rsplit(')').next().unwrap_or("");
+        let f: Vec<&str> = after.split_whitespace().collect();
+        // fields after ")": state(0) ... utime(11) stime(12)
+        if f.len() > 12 {
+            total += (f[11].parse::<f64>().unwrap_or(0.0) + f[12].parse::<f64>().unwrap_or(0.0)) / tick;
+        }
+    }
+    total
+}
+
+fn main() {
+    let dir = tempfile::tempdir().unwrap();
+    let t0 = SystemTime::now();
+    let secs = 5u64;
+    let load: Vec<_> = (0..secs).map(|s| one_second(t0, s)).collect();
+    let raw_mb_s = 640.0 * 480.0 * 3.0 * 30.0 / 1e6;
+    println!("## recorder / replay (load: 640x480 BGR 30 fps + laser 10 Hz + encoders 20 Hz + sonars 10 Hz = {raw_mb_s:.1} MB/s of pixels)");
+
+    // 1. Write throughput.
+    for (label, c) in [("none", None), ("lz4", Some(mcap::Compression::Lz4)), ("zstd", Some(mcap::Compression::Zstd))] {
+        let mut xs = Vec::new();
+        let mut size = 0;
+        for _ in 0..5 {
+            let t = Instant::now();
+            size = write_file(&dir.path().join("w.mcap"), c, &load);
+            xs.push(secs as f64 / t.elapsed().as_secs_f64());
+        }
+        println!(
+            "write throughput, compression {label:>4}: median {:.1}x real time ({} MB for {secs} s)",
+            median(xs),
+            size / 1_000_000
+        );
+    }
+
+    // 2. The recorder service at 1x.
+    {
+        let conf_path = dir.path().join("rec.conf");
+        std::fs::write(
+            &conf_path,
+            "service recorder\nfile live.mcap\ncompression none\nend_service\n",
+        )
+        .unwrap();
+        let conf = Conf::load(&conf_path).unwrap();
+        let rt: Arc<Runtime> = Runtime::new(&conf_path);
+        let cam: Arc<Interface<Image>> = rt.interfaces.provide("varcolorA", "bench").unwrap();
+        let laser: Arc<Interface<Laser>> = rt.interfaces.provide("laser", "bench").unwrap();
+        let enc: Arc<Interface<Encoders>> = rt.interfaces.provide("encoders", "bench").unwrap();
+        let son: Arc<Interface<Sonars>> = rt.interfaces.provide("sonars", "bench").unwrap();
+        loader::load(&rt, &conf, Some(Kind::Service), "recorder", None).unwrap();
+        let status = rt.names.import::<RecorderStatus>("recorder", "status").unwrap();
+        std::thread::sleep(Duration::from_millis(400));
+        let cpu0 = thread_cpu("recorder-");
+        let start = Instant::now();
+        let imgs = [noisy_image(1), noisy_image(2)];
+        let mut k = 0u64;
+        let run = Duration::from_secs(5);
+        while start.elapsed() < run {
+            let due = start + Duration::from_millis(k * 1000 / 60);
+            if let Some(w) = due.checked_duration_since(Instant::now()) {
+                std::thread::sleep(w);
+            }
+            if k % 2 == 0 {
+                cam.publish(imgs[(k / 2 % 2) as usize].clone()).unwrap();
+            }
+            if k % 3 == 0 {
+                enc.publish(Encoders { x: k as f32, ..Encoders::default() }).unwrap();
+            }
+            if k % 6 == 0 {
+                laser.publish(Laser { readings: vec![1000 + k as i32; 180], resolution: 1.0 }).unwrap();
+                son.publish(Sonars { us: vec![k as f32; 16] }).unwrap();
+            }
+            k += 1;
+        }
+        let wall = start.elapsed().as_secs_f64();
+        let cpu = thread_cpu("recorder-") - cpu0;
+        let written = status.messages.load(Ordering::Relaxed);
+        let dropped = status.dropped.load(Ordering::Relaxed);
+        rt.shutdown();
+        println!(
+            "recorder service at 1x for {wall:.1} s: {written} messages written, {dropped} dropped, recorder threads CPU {:.0} % of one core",
+            cpu / wall * 100.0
+        );
+    }
+
+    // 3. Replay at speed max.
+    for (what, keep) in [("laser messages", "laser"), ("640x480 frames", "camera")] {
+        let file = dir.path().join(format!("{keep}.mcap"));
+        let n_secs: u64 = if keep == "laser" { 100 } else { 10 };
+        let only: Vec<Vec<(&str, Snapshot)>> = (0..n_secs)
+            .map(|s| {
+                let mut v = one_second(t0, s);
+                v.retain(|(n, _)| *n == keep);
+                // laser: 10 per second; stretch to 100 per second of file
+                v
+            })
+            .collect();
+        write_file(&file, Some(mcap::Compression::Zstd), &only);
+        let count: usize = only.iter().map(Vec::len).sum();
+        let mut rates = Vec::new();
+        for _ in 0..3 {
+            let conf_path = dir.path().join("replay.conf");
+            std::fs::write(
+                &conf_path,
+                format!("driver replay\nfile {}\nspeed max\nend_driver\n", file.display()),
+            )
+            .unwrap();
+            let conf = Conf::load(&conf_path).unwrap();
+            let rt: Arc<Runtime> = Runtime::new(&conf_path);
+            let t = Instant::now();
+            loader::load(&rt, &conf, Some(Kind::Driver), "replay", None).unwrap();
+            let iface = rt.interfaces.get_any(keep).unwrap();
+            let last = only.last().unwrap().last().unwrap().1.clock();
+            while iface.clock() < last {
+                std::thread::sleep(Duration::from_micros(200));
+            }
+            rates.push(count as f64 / t.elapsed().as_secs_f64());
+            rt.shutdown();
+        }
+        println!("replay speed max: median {:.0} {what}/s ({count} in the file)", median(rates));
+    }
+
+    // 4. File size for 10 s of the simulator.
+    {
+        let conf_path = dir.path().join("sim.conf");
+        std::fs::write(
+            &conf_path,
+            format!(
+                "driver simulator\nworld {}/assets/worlds/simple.world\nprovides encoders\nprovides motors\n\
+                 provides laser\nprovides sonars\nprovides colorA\npublish_always on\nend_driver\n\
+                 service recorder\nfile sim.mcap\ncompression none\nend_service\n\
+                 load_driver simulator\nload_service recorder\nset motors v=200 w=10\n",
+                env!("CARGO_MANIFEST_DIR")
+            ),
+        )
+        .unwrap();
+        let conf = Conf::load(&conf_path).unwrap();
+        let rt = loader::start(&conf).unwrap();
+        let motors = rt.interfaces.get::<jderobot::interfaces::Motors>("motors").unwrap();
+        let t = Instant::now();
+        while t.elapsed() < Duration::from_secs(10) {
+            motors.publish(jderobot::interfaces::Motors { v: 200.0, w: 10.0 }).unwrap();
+            std::thread::sleep(Duration::from_millis(100));
+        }
+        rt.shutdown();
+        let raw = dir.path().join("sim.mcap");
+        let raw_size = std::fs::metadata(&raw).unwrap().len();
+        // The same messages rewritten with zstd and lz4 chunks.
+        let bytes = std::fs::read(&raw).unwrap();
+        for (label, c) in [("zstd", mcap::Compression::Zstd), ("lz4", mcap::Compression::Lz4)] {
+            let out = dir.path().join(format!("sim-{label}.mcap"));
+            let mut w = mcap::WriteOptions::new().compression(Some(c)).chunk_size(Some(4 * 1024 * 1024)).create(std::fs::File::create(&out).unwrap()).unwrap();
+            for m in mcap::MessageStream::new(&bytes).unwrap() {
+                w.write(&m.unwrap()).unwrap();
+            }
+            w.finish().unwrap();
+            let size = std::fs::metadata(&out).unwrap().len();
+            println!(
+                "10 s of the simulator (colorA, laser, encoders, sonars, motors): raw {:.2} MB, {label} {:.2} MB (ratio {:.1}x)",
+                raw_size as f64 / 1e6,
+                size as f64 / 1e6,
+                raw_size as f64 / size as f64
+            );
+        }
+    }
+}
