@@ -79,6 +79,15 @@ fn one_second(t0: SystemTime, second: u64) -> Vec<(&'static str, Snapshot)> {
 }
 
 fn write_file(path: &Path, compression: Option<mcap::Compression>, seconds: &[Vec<(&str, Snapshot)>]) -> u64 {
+    write_profile(path, compression, seconds, false)
+}
+
+fn write_profile(
+    path: &Path,
+    compression: Option<mcap::Compression>,
+    seconds: &[Vec<(&str, Snapshot)>],
+    ros2: bool,
+) -> u64 {
     let mut w = mcap::WriteOptions::new()
         .compression(compression)
         .chunk_size(Some(4 * 1024 * 1024))
@@ -96,11 +105,23 @@ fn write_file(path: &Path, compression: Option<mcap::Compression>, seconds: &[Ve
                 _ => "sonars",
             };
             let id = *channels.entry(*name).or_insert_with(|| {
-                let (sn, sd) = mcapfmt::schema(kind);
-                let s = w.add_schema(&sn, "jsonschema", sd.as_bytes()).unwrap();
-                w.add_channel(s, name, "json", &mcapfmt::metadata(kind)).unwrap()
+                if ros2 {
+                    let (sn, sd) = mcapfmt::ros2::schema(kind).unwrap_or(("jderobot/Other", String::new()));
+                    let s = w.add_schema(sn, "ros2msg", sd.as_bytes()).unwrap();
+                    w.add_channel(s, name, "cdr", &mcapfmt::metadata(kind)).unwrap()
+                } else {
+                    let (sn, sd) = mcapfmt::schema(kind);
+                    let s = w.add_schema(&sn, "jsonschema", sd.as_bytes()).unwrap();
+                    w.add_channel(s, name, "json", &mcapfmt::metadata(kind)).unwrap()
+                }
             });
-            mcapfmt::encode(name, snap, &mut buf);
+            if ros2 {
+                if !mcapfmt::ros2::encode(name, snap, &mut buf) {
+                    continue;
+                }
+            } else {
+                mcapfmt::encode(name, snap, &mut buf);
+            }
             seq += 1;
             let t = mcapfmt::nanos(snap.time());
             w.write_to_known_channel(
@@ -143,16 +164,21 @@ fn main() {
     println!("## recorder / replay (load: 640x480 BGR 30 fps + laser 10 Hz + encoders 20 Hz + sonars 10 Hz = {raw_mb_s:.1} MB/s of pixels)");
 
     // 1. Write throughput.
-    for (label, c) in [("none", None), ("lz4", Some(mcap::Compression::Lz4)), ("zstd", Some(mcap::Compression::Zstd))] {
+    for (label, c, ros2) in [
+        ("none", None, false),
+        ("lz4", Some(mcap::Compression::Lz4), false),
+        ("zstd", Some(mcap::Compression::Zstd), false),
+        ("none, profile ros2 (CDR, no base64; sonars not carried)", None, true),
+    ] {
         let mut xs = Vec::new();
         let mut size = 0;
         for _ in 0..5 {
             let t = Instant::now();
-            size = write_file(&dir.path().join("w.mcap"), c, &load);
+            size = write_profile(&dir.path().join("w.mcap"), c, &load, ros2);
             xs.push(secs as f64 / t.elapsed().as_secs_f64());
         }
         println!(
-            "write throughput, compression {label:>4}: median {:.1}x real time ({} MB for {secs} s)",
+            "write throughput, compression {label}: median {:.1}x real time ({} MB for {secs} s)",
             median(xs),
             size / 1_000_000
         );
@@ -254,7 +280,7 @@ fn main() {
                 "driver simulator\nworld {}/assets/worlds/simple.world\nprovides encoders\nprovides motors\n\
                  provides laser\nprovides sonars\nprovides colorA\npublish_always on\nend_driver\n\
                  service recorder\nfile sim.mcap\ncompression none\nend_service\n\
-                 load_driver simulator\nload_service recorder\nset motors v=200 w=10\n",
+                 load_driver simulator\nload_service recorder\n",
                 env!("CARGO_MANIFEST_DIR")
             ),
         )

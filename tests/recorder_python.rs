@@ -106,3 +106,105 @@ fn python_mcap_reads_the_recording_by_the_documented_schemas() {
         assert_eq!(v["image0"]["sum"].as_u64(), Some(sum));
     }
 }
+
+/// The venv's python if it has `rosbags` (else skip; CI fails).
+fn python_rosbags() -> Option<PathBuf> {
+    let py = python()?;
+    let ok = Command::new(&py)
+        .args(["-c", "import rosbags.rosbag2, rosbags.typesys"])
+        .stderr(Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success());
+    if ok {
+        return Some(py);
+    }
+    let note = format!("{} cannot import rosbags; make the venv as .ci/run does", py.display());
+    assert!(std::env::var_os("CI").is_none(), "under CI: {note}");
+    eprintln!("SKIPPED: {note}");
+    None
+}
+
+#[test]
+fn rosbags_opens_the_ros2_profile_and_the_replay_reads_it_back() {
+    let Some(py) = python_rosbags() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let conf = dir.path().join("r.conf");
+    std::fs::write(
+        &conf,
+        format!(
+            "driver simulator\nworld {}\nprovides encoders\nprovides motors\nprovides laser\n\
+             provides sonars\nprovides colorA\nend_driver\n\
+             service recorder\nfile ros.mcap\nprofile ros2\nend_service\n\
+             load_driver simulator\nload_service recorder\n",
+            world_path("simple.world")
+        ),
+    )
+    .unwrap();
+    let out = Command::new(BIN)
+        .args(["--headless", "--no-shell", "--for", "3"])
+        .arg(&conf)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let file = dir.path().join("ros.mcap");
+    let out = Command::new(&py)
+        .arg(root().join("scripts/check_ros2.py"))
+        .arg(&file)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["connections"]["/laser"][0], "sensor_msgs/msg/LaserScan", "{v}");
+    assert_eq!(v["connections"]["/colorA"][0], "sensor_msgs/msg/Image", "{v}");
+    assert_eq!(v["connections"]["/encoders"][0], "nav_msgs/msg/Odometry", "{v}");
+    assert_eq!(v["image0"]["encoding"], "bgr8");
+
+    // jderobot's replay reads the same file: the first laser and image agree.
+    let (summary, bytes) = mcapfmt::Summary::read(&file).unwrap();
+    assert_eq!(summary.profile, "ros2");
+    let mut laser = None;
+    let mut image = None;
+    for m in mcap::MessageStream::new(&bytes).unwrap() {
+        let m = m.unwrap();
+        let kind = mcapfmt::channel_kind(&m.channel.metadata, None).unwrap();
+        let d = mcapfmt::decode_message(
+            &m.channel.topic,
+            &kind,
+            &m.channel.message_encoding,
+            m.sequence,
+            m.log_time,
+            &m.data,
+        )
+        .unwrap();
+        match d.value {
+            Recorded::Laser(l) if laser.is_none() => laser = Some(l),
+            Recorded::Image(i) if image.is_none() => image = Some(i),
+            _ => {}
+        }
+    }
+    let laser = laser.unwrap();
+    let py_laser: Vec<i64> = v["laser0"].as_array().unwrap().iter().map(|x| x.as_i64().unwrap()).collect();
+    assert_eq!(py_laser, laser.readings.iter().map(|&r| r as i64).collect::<Vec<_>>());
+    let image = image.unwrap();
+    let sum: u64 = image.data.iter().map(|&b| b as u64).sum();
+    assert_eq!(v["image0"]["sum"].as_u64(), Some(sum));
+
+    // Replayed by the binary and recorded again (jderobot's profile): same laser.
+    let replay = dir.path().join("replay.conf");
+    std::fs::write(
+        &replay,
+        "driver replay\nfile ros.mcap\nspeed 2\nend_driver\n\
+         service recorder\nfile back.mcap\nend_service\n\
+         load_driver replay\nload_service recorder\n",
+    )
+    .unwrap();
+    let out = Command::new(BIN)
+        .args(["--headless", "--no-shell", "--for", "3"])
+        .arg(&replay)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let (back, _) = mcapfmt::Summary::read(&dir.path().join("back.mcap")).unwrap();
+    let names: Vec<&str> = back.channels.iter().map(|c| c.topic.as_str()).collect();
+    assert!(names.contains(&"laser") && names.contains(&"colorA") && names.contains(&"encoders"), "{names:?}");
+}

@@ -16,6 +16,10 @@
 //! end_driver
 //! ```
 //!
+//! Both profiles of the recorder are read: jderobot's (JSON, Foxglove schemas)
+//! and `ros2` (CDR: LaserScan, Image, Odometry, Twist; the clock is the MCAP
+//! message sequence), where topic `/laser/robot2` is interface `laser.robot2`.
+//!
 //! # Interfaces
 //! Each recorded channel becomes the interface of the same name and kind (image
 //! BGR, laser mm, encoders mm/rad, sonars mm, ...; see `crate::interfaces`). Each
@@ -222,34 +226,39 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
         );
     }
     let wanted: Vec<String> = if settings.provides.is_empty() {
-        summary.channels.iter().map(|c| c.topic.clone()).collect()
+        summary.channels.iter().map(|c| c.name.clone()).collect()
     } else {
         settings.provides.clone()
     };
     let mut targets: BTreeMap<String, (String, Target)> = BTreeMap::new();
     for name in &wanted {
-        let Some(c) = summary.channels.iter().find(|c| &c.topic == name) else {
+        let Some(c) = summary
+            .channels
+            .iter()
+            .find(|c| &c.name == name || &c.topic == name)
+        else {
             bail!(
                 "replay: {} has no channel `{name}`; it has {}",
                 settings.file.display(),
                 summary
                     .channels
                     .iter()
-                    .map(|c| c.topic.as_str())
+                    .map(|c| c.name.as_str())
                     .collect::<Vec<_>>()
                     .join(", ")
             );
         };
         let Some(kind) = c.kind.clone() else {
             bail!(
-                "replay: channel `{name}` of {} (schema `{}`, encoding `{}`) was not written by jderobot's recorder",
+                "replay: channel `{}` of {} (schema `{}`, encoding `{}`) was not written by jderobot's recorder",
+                c.topic,
                 settings.file.display(),
                 c.schema,
                 c.encoding
             );
         };
-        let target = Target::provide(rt, name, &kind, &conf.name)?;
-        targets.insert(name.clone(), (kind, target));
+        let target = Target::provide(rt, &c.name, &kind, &conf.name)?;
+        targets.insert(c.topic.clone(), (kind, target));
     }
     let gate = if settings.stepped {
         let g = Arc::new(StepGate::default());
@@ -329,7 +338,14 @@ fn run(
                     std::thread::sleep(wait.min(Duration::from_millis(50)));
                 }
             }
-            match mcapfmt::decode(&m.channel.topic, kind, &m.data) {
+            match mcapfmt::decode_message(
+                &m.channel.topic,
+                kind,
+                &m.channel.message_encoding,
+                m.sequence,
+                m.log_time,
+                &m.data,
+            ) {
                 Ok(d) => {
                     last_clock = last_clock.max(d.clock + offset);
                     if let Err(e) = target.publish(d.clock + offset, d.time_ns, d.value) {

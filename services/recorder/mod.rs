@@ -19,6 +19,8 @@
 //! split 500 MB                     # start a new file (NAME-1.mcap, ...) past 500 MB, or `split 10 min`
 //! compression zstd                 # zstd (default) | lz4 | none: chunk compression
 //! images raw                       # raw (only): foxglove.RawImage bgr8
+//! profile foxglove                 # foxglove (default): JSON, Foxglove schemas; ros2: rosbag2
+//!                                  #   (CDR: LaserScan, Image, Odometry, Twist; other kinds skipped)
 //! queue 64                         # messages waiting for the disk at most; more are dropped
 //! start on                         # on (default): record from the start; off: wait for `record start`
 //! end_service
@@ -80,6 +82,8 @@ struct Settings {
     compression: Option<mcap::Compression>,
     queue: usize,
     start: bool,
+    /// The `ros2` profile: rosbag2-compatible CDR messages.
+    ros2: bool,
 }
 
 fn utc_stamp(t: SystemTime) -> String {
@@ -111,6 +115,7 @@ fn parse(conf: &ComponentConf) -> Result<Settings, crate::conf::ConfError> {
         compression: Some(mcap::Compression::Zstd),
         queue: 64,
         start: true,
+        ros2: false,
     };
     for line in &conf.lines {
         match line.keyword() {
@@ -161,6 +166,10 @@ fn parse(conf: &ComponentConf) -> Result<Settings, crate::conf::ConfError> {
                 line.expect_args(1, 1, "queue MESSAGES")?;
                 s.queue = line.number::<usize>(0, "messages", 1..=100_000)?;
             }
+            "profile" => {
+                line.expect_args(1, 1, "profile foxglove|ros2")?;
+                s.ros2 = line.choice(0, "a profile", &["foxglove", "ros2"])? == "ros2";
+            }
             "start" => {
                 line.expect_args(1, 1, "start on|off")?;
                 s.start = line.on_off(0, "on or off")?;
@@ -168,7 +177,7 @@ fn parse(conf: &ComponentConf) -> Result<Settings, crate::conf::ConfError> {
             _ => {
                 return Err(conf.unknown(
                     line,
-                    "records, file, split, compression, images, queue or start",
+                    "records, file, split, compression, images, queue, profile or start",
                 ));
             }
         }
@@ -344,7 +353,7 @@ fn open(settings: &Settings, n: u32) -> anyhow::Result<Open> {
         .with_context(|| format!("recorder: cannot create {}", path.display()))?;
     let writer = mcap::WriteOptions::new()
         .compression(settings.compression)
-        .profile("")
+        .profile(if settings.ros2 { "ros2" } else { "" })
         .library(concat!("jderobot ", env!("CARGO_PKG_VERSION")))
         .chunk_size(Some(4 * 1024 * 1024))
         .create(file)
@@ -372,7 +381,7 @@ fn close(o: Open, status: &RecorderStatus) {
     status.recording.store(false, Ordering::Release);
 }
 
-fn write_one(o: &mut Open, item: &Item, buf: &mut Vec<u8>) -> anyhow::Result<()> {
+fn write_one(o: &mut Open, item: &Item, buf: &mut Vec<u8>, ros2: bool) -> anyhow::Result<()> {
     let (i, name, snap) = item;
     if o.channels.len() <= *i {
         o.channels.resize(*i + 1, None);
@@ -390,24 +399,50 @@ fn write_one(o: &mut Open, item: &Item, buf: &mut Vec<u8>) -> anyhow::Result<()>
                 Snapshot::PtEncoders(_) => "pantiltencoders",
                 Snapshot::PtMotors(_) => "pantiltmotors",
             };
-            let (schema_name, schema) = mcapfmt::schema(kind);
-            let sid = o
-                .writer
-                .add_schema(&schema_name, "jsonschema", schema.as_bytes())?;
-            let c = o
-                .writer
-                .add_channel(sid, name, "json", &mcapfmt::metadata(kind))?;
+            let c = if ros2 {
+                let Some((type_name, def)) = mcapfmt::ros2::schema(kind) else {
+                    // Not in the profile: never written (said once, at the first sample).
+                    tracing::warn!(
+                        "recorder: profile ros2 carries laser, image, encoders and motors; `{name}` ({kind}) is not recorded"
+                    );
+                    o.channels[*i] = Some(u16::MAX);
+                    return Ok(());
+                };
+                let sid = o.writer.add_schema(type_name, "ros2msg", def.as_bytes())?;
+                let mut meta = mcapfmt::metadata(kind);
+                meta.insert(mcapfmt::NAME_KEY.into(), name.to_string());
+                meta.insert("offered_qos_profiles".into(), String::new());
+                o.writer
+                    .add_channel(sid, &mcapfmt::ros2::topic(name), "cdr", &meta)?
+            } else {
+                let (schema_name, schema) = mcapfmt::schema(kind);
+                let sid = o
+                    .writer
+                    .add_schema(&schema_name, "jsonschema", schema.as_bytes())?;
+                o.writer
+                    .add_channel(sid, name, "json", &mcapfmt::metadata(kind))?
+            };
             o.channels[*i] = Some(c);
             c
         }
     };
-    mcapfmt::encode(name, snap, buf);
+    if channel == u16::MAX {
+        return Ok(());
+    }
+    let sequence = if ros2 {
+        mcapfmt::ros2::encode(name, snap, buf);
+        // ROS messages have no clock: the sequence is the interface's clock.
+        snap.clock() as u32
+    } else {
+        mcapfmt::encode(name, snap, buf);
+        o.sequence = o.sequence.wrapping_add(1);
+        o.sequence
+    };
     let t = mcapfmt::nanos(snap.time());
-    o.sequence = o.sequence.wrapping_add(1);
     o.writer.write_to_known_channel(
         &mcap::records::MessageHeader {
             channel_id: channel,
-            sequence: o.sequence,
+            sequence,
             log_time: t,
             publish_time: t,
         },
@@ -452,7 +487,7 @@ fn write_loop(rx: Receiver<Item>, settings: Settings, status: Arc<RecorderStatus
                     }
                 }
                 let o = file.as_mut().expect("opened above");
-                if let Err(e) = write_one(o, &item, &mut buf) {
+                if let Err(e) = write_one(o, &item, &mut buf, settings.ros2) {
                     let msg = format!("{}: {e:#}", o.path.display());
                     tracing::error!("recorder: {msg}; recording stops");
                     *status.error.lock() = Some(msg);

@@ -25,6 +25,7 @@
 //! (keys `recorder.status` and `replay.step`) for the shell.
 
 mod base64;
+pub mod ros2;
 mod status;
 mod summary;
 
@@ -47,6 +48,9 @@ use crate::interfaces::{
 
 /// The metadata key of a channel that names the interface kind.
 pub const KIND_KEY: &str = "jderobot.kind";
+/// The metadata key of a channel that names the interface (in the `ros2`
+/// profile, where the topic is `/laser`).
+pub const NAME_KEY: &str = "jderobot.interface";
 
 /// Errors decoding a message.
 #[derive(Debug, thiserror::Error)]
@@ -357,6 +361,35 @@ pub fn metadata(kind: &str) -> BTreeMap<String, String> {
     BTreeMap::from([(KIND_KEY.to_string(), kind.to_string())])
 }
 
+/// The interface a channel replays into: its `jderobot.interface` metadata, or
+/// the topic (`/laser/robot2` → `laser.robot2`).
+pub fn interface_name(topic: &str, metadata: &BTreeMap<String, String>) -> String {
+    if let Some(n) = metadata.get(NAME_KEY) {
+        return n.clone();
+    }
+    topic.trim_start_matches('/').replace('/', ".")
+}
+
+/// Decodes a message by its channel's encoding: `json` (this module's schemas)
+/// or `cdr` (the `ros2` profile; the clock is the MCAP `sequence`).
+pub fn decode_message(
+    topic: &str,
+    kind: &str,
+    encoding: &str,
+    sequence: u32,
+    log_time: u64,
+    data: &[u8],
+) -> Result<Decoded, FormatError> {
+    match encoding {
+        "json" => decode(topic, kind, data),
+        "cdr" => ros2::decode(topic, kind, data, sequence as u64, log_time),
+        other => Err(bad(
+            topic,
+            format!("message encoding `{other}`; jderobot reads json and cdr"),
+        )),
+    }
+}
+
 /// The interface kind of a channel: its metadata, or what its schema name says.
 pub fn channel_kind(metadata: &BTreeMap<String, String>, schema: Option<&str>) -> Option<String> {
     if let Some(k) = metadata.get(KIND_KEY) {
@@ -366,7 +399,9 @@ pub fn channel_kind(metadata: &BTreeMap<String, String>, schema: Option<&str>) -
         "foxglove.RawImage" => Some("image".into()),
         "foxglove.LaserScan" => Some("laser".into()),
         "foxglove.PoseInFrame" => Some("encoders".into()),
-        s => s.strip_prefix("jderobot.").map(str::to_string),
+        s => ros2::kind_of(s)
+            .map(str::to_string)
+            .or_else(|| s.strip_prefix("jderobot.").map(str::to_string)),
     }
 }
 

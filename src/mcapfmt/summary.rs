@@ -3,12 +3,14 @@
 
 use std::{collections::BTreeMap, fmt::Write as _, path::Path};
 
-use super::channel_kind;
+use super::{channel_kind, interface_name};
 
 /// One channel of a file.
 #[derive(Clone, Debug, Default)]
 pub struct ChannelSummary {
     pub topic: String,
+    /// The interface it replays into (`laser` for topic `/laser` in a ros2 file).
+    pub name: String,
     /// The interface kind (`laser`...), if the channel is one jderobot reads.
     pub kind: Option<String>,
     pub schema: String,
@@ -36,6 +38,8 @@ pub struct Summary {
     pub start_ns: u64,
     pub end_ns: u64,
     pub bytes: u64,
+    /// The MCAP profile (`ros2` for rosbag2 files, empty for jderobot's own).
+    pub profile: String,
     /// The file ends with its footer and magic (it was closed properly).
     pub complete: bool,
     /// Why reading stopped early (a file cut short: the rest is lost).
@@ -81,6 +85,7 @@ impl Summary {
         .map_err(|e| e.to_string())?;
         let mut by_id: BTreeMap<u16, ChannelSummary> = BTreeMap::new();
         let mut s = Summary {
+            profile: profile(bytes),
             bytes: bytes.len() as u64,
             complete,
             ..Summary::default()
@@ -97,6 +102,7 @@ impl Summary {
                 let schema = m.channel.schema.as_ref().map(|s| s.name.clone());
                 ChannelSummary {
                     topic: m.channel.topic.clone(),
+                    name: interface_name(&m.channel.topic, &m.channel.metadata),
                     kind: channel_kind(&m.channel.metadata, schema.as_deref()),
                     schema: schema.unwrap_or_default(),
                     encoding: m.channel.message_encoding.clone(),
@@ -129,7 +135,13 @@ impl Summary {
     /// The text `jderobot info` prints.
     pub fn report(&self, path: &Path) -> String {
         let mut o = String::new();
-        let _ = writeln!(o, "file: {} ({} bytes)", path.display(), self.bytes);
+        let _ = writeln!(
+            o,
+            "file: {} ({} bytes, profile `{}`)",
+            path.display(),
+            self.bytes,
+            self.profile
+        );
         let _ = writeln!(
             o,
             "duration: {:.3} s, {} messages, {} channels",
@@ -166,4 +178,18 @@ impl Summary {
         }
         o
     }
+}
+
+/// The profile string of the header record right after the magic.
+fn profile(bytes: &[u8]) -> String {
+    let m = mcap::MAGIC.len();
+    // opcode (1) + record length (8) + string length (4) + string
+    let Some(len) = bytes.get(m + 9..m + 13) else {
+        return String::new();
+    };
+    let n = u32::from_le_bytes(len.try_into().expect("4")) as usize;
+    bytes
+        .get(m + 13..m + 13 + n)
+        .map(|p| String::from_utf8_lossy(p).into_owned())
+        .unwrap_or_default()
 }
