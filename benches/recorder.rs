@@ -62,23 +62,50 @@ fn one_second(t0: SystemTime, second: u64) -> Vec<(&'static str, Snapshot)> {
         // 60 slots of 1/60 s
         let t = t0 + Duration::from_secs(second) + Duration::from_millis(k * 1000 / 60);
         if k % 2 == 0 {
-            v.push(("camera", Snapshot::Image(sample(second * 30 + k / 2 + 1, t, img.clone()))));
+            v.push((
+                "camera",
+                Snapshot::Image(sample(second * 30 + k / 2 + 1, t, img.clone())),
+            ));
         }
         if k % 3 == 0 {
-            let e = Encoders { x: k as f32, y: 2.0, theta: 1.0, cos: 0.5, sin: 0.8 };
-            v.push(("encoders", Snapshot::Encoders(sample(second * 20 + k / 3 + 1, t, e))));
+            let e = Encoders {
+                x: k as f32,
+                y: 2.0,
+                theta: 1.0,
+                cos: 0.5,
+                sin: 0.8,
+            };
+            v.push((
+                "encoders",
+                Snapshot::Encoders(sample(second * 20 + k / 3 + 1, t, e)),
+            ));
         }
         if k % 6 == 0 {
-            let l = Laser { readings: (0..180).map(|i| 1000 + i * 7 + k as i32).collect(), resolution: 1.0 };
-            v.push(("laser", Snapshot::Laser(sample(second * 10 + k / 6 + 1, t, l))));
-            let s = Sonars { us: (0..16).map(|i| 500.0 + i as f32).collect() };
-            v.push(("sonars", Snapshot::Sonars(sample(second * 10 + k / 6 + 1, t, s))));
+            let l = Laser {
+                readings: (0..180).map(|i| 1000 + i * 7 + k as i32).collect(),
+                resolution: 1.0,
+            };
+            v.push((
+                "laser",
+                Snapshot::Laser(sample(second * 10 + k / 6 + 1, t, l)),
+            ));
+            let s = Sonars {
+                us: (0..16).map(|i| 500.0 + i as f32).collect(),
+            };
+            v.push((
+                "sonars",
+                Snapshot::Sonars(sample(second * 10 + k / 6 + 1, t, s)),
+            ));
         }
     }
     v
 }
 
-fn write_file(path: &Path, compression: Option<mcap::Compression>, seconds: &[Vec<(&str, Snapshot)>]) -> u64 {
+fn write_file(
+    path: &Path,
+    compression: Option<mcap::Compression>,
+    seconds: &[Vec<(&str, Snapshot)>],
+) -> u64 {
     write_profile(path, compression, seconds, false)
 }
 
@@ -106,13 +133,16 @@ fn write_profile(
             };
             let id = *channels.entry(*name).or_insert_with(|| {
                 if ros2 {
-                    let (sn, sd) = mcapfmt::ros2::schema(kind).unwrap_or(("jderobot/Other", String::new()));
+                    let (sn, sd) =
+                        mcapfmt::ros2::schema(kind).unwrap_or(("jderobot/Other", String::new()));
                     let s = w.add_schema(sn, "ros2msg", sd.as_bytes()).unwrap();
-                    w.add_channel(s, name, "cdr", &mcapfmt::metadata(kind)).unwrap()
+                    w.add_channel(s, name, "cdr", &mcapfmt::metadata(kind))
+                        .unwrap()
                 } else {
                     let (sn, sd) = mcapfmt::schema(kind);
                     let s = w.add_schema(&sn, "jsonschema", sd.as_bytes()).unwrap();
-                    w.add_channel(s, name, "json", &mcapfmt::metadata(kind)).unwrap()
+                    w.add_channel(s, name, "json", &mcapfmt::metadata(kind))
+                        .unwrap()
                 }
             });
             if ros2 {
@@ -125,7 +155,12 @@ fn write_profile(
             seq += 1;
             let t = mcapfmt::nanos(snap.time());
             w.write_to_known_channel(
-                &mcap::records::MessageHeader { channel_id: id, sequence: seq, log_time: t, publish_time: t },
+                &mcap::records::MessageHeader {
+                    channel_id: id,
+                    sequence: seq,
+                    log_time: t,
+                    publish_time: t,
+                },
                 &buf,
             )
             .unwrap();
@@ -149,7 +184,8 @@ fn thread_cpu(prefix: &str) -> f64 {
         let f: Vec<&str> = after.split_whitespace().collect();
         // fields after ")": state(0) ... utime(11) stime(12)
         if f.len() > 12 {
-            total += (f[11].parse::<f64>().unwrap_or(0.0) + f[12].parse::<f64>().unwrap_or(0.0)) / tick;
+            total +=
+                (f[11].parse::<f64>().unwrap_or(0.0) + f[12].parse::<f64>().unwrap_or(0.0)) / tick;
         }
     }
     total
@@ -161,14 +197,20 @@ fn main() {
     let secs = 5u64;
     let load: Vec<_> = (0..secs).map(|s| one_second(t0, s)).collect();
     let raw_mb_s = 640.0 * 480.0 * 3.0 * 30.0 / 1e6;
-    println!("## recorder / replay (load: 640x480 BGR 30 fps + laser 10 Hz + encoders 20 Hz + sonars 10 Hz = {raw_mb_s:.1} MB/s of pixels)");
+    println!(
+        "## recorder / replay (load: 640x480 BGR 30 fps + laser 10 Hz + encoders 20 Hz + sonars 10 Hz = {raw_mb_s:.1} MB/s of pixels)"
+    );
 
     // 1. Write throughput.
     for (label, c, ros2) in [
         ("none", None, false),
         ("lz4", Some(mcap::Compression::Lz4), false),
         ("zstd", Some(mcap::Compression::Zstd), false),
-        ("none, profile ros2 (CDR, no base64; sonars not carried)", None, true),
+        (
+            "none, profile ros2 (CDR, no base64; sonars not carried)",
+            None,
+            true,
+        ),
     ] {
         let mut xs = Vec::new();
         let mut size = 0;
@@ -199,7 +241,10 @@ fn main() {
         let enc: Arc<Interface<Encoders>> = rt.interfaces.provide("encoders", "bench").unwrap();
         let son: Arc<Interface<Sonars>> = rt.interfaces.provide("sonars", "bench").unwrap();
         loader::load(&rt, &conf, Some(Kind::Service), "recorder", None).unwrap();
-        let status = rt.names.import::<RecorderStatus>("recorder", "status").unwrap();
+        let status = rt
+            .names
+            .import::<RecorderStatus>("recorder", "status")
+            .unwrap();
         std::thread::sleep(Duration::from_millis(400));
         let cpu0 = thread_cpu("recorder-");
         let start = Instant::now();
@@ -215,11 +260,23 @@ fn main() {
                 cam.publish(imgs[(k / 2 % 2) as usize].clone()).unwrap();
             }
             if k % 3 == 0 {
-                enc.publish(Encoders { x: k as f32, ..Encoders::default() }).unwrap();
+                enc.publish(Encoders {
+                    x: k as f32,
+                    ..Encoders::default()
+                })
+                .unwrap();
             }
             if k % 6 == 0 {
-                laser.publish(Laser { readings: vec![1000 + k as i32; 180], resolution: 1.0 }).unwrap();
-                son.publish(Sonars { us: vec![k as f32; 16] }).unwrap();
+                laser
+                    .publish(Laser {
+                        readings: vec![1000 + k as i32; 180],
+                        resolution: 1.0,
+                    })
+                    .unwrap();
+                son.publish(Sonars {
+                    us: vec![k as f32; 16],
+                })
+                .unwrap();
             }
             k += 1;
         }
@@ -253,7 +310,10 @@ fn main() {
             let conf_path = dir.path().join("replay.conf");
             std::fs::write(
                 &conf_path,
-                format!("driver replay\nfile {}\nspeed max\nend_driver\n", file.display()),
+                format!(
+                    "driver replay\nfile {}\nspeed max\nend_driver\n",
+                    file.display()
+                ),
             )
             .unwrap();
             let conf = Conf::load(&conf_path).unwrap();
@@ -268,7 +328,10 @@ fn main() {
             rates.push(count as f64 / t.elapsed().as_secs_f64());
             rt.shutdown();
         }
-        println!("replay speed max: median {:.0} {what}/s ({count} in the file)", median(rates));
+        println!(
+            "replay speed max: median {:.0} {what}/s ({count} in the file)",
+            median(rates)
+        );
     }
 
     // 4. File size for 10 s of the simulator.
@@ -287,10 +350,15 @@ fn main() {
         .unwrap();
         let conf = Conf::load(&conf_path).unwrap();
         let rt = loader::start(&conf).unwrap();
-        let motors = rt.interfaces.get::<jderobot::interfaces::Motors>("motors").unwrap();
+        let motors = rt
+            .interfaces
+            .get::<jderobot::interfaces::Motors>("motors")
+            .unwrap();
         let t = Instant::now();
         while t.elapsed() < Duration::from_secs(10) {
-            motors.publish(jderobot::interfaces::Motors { v: 200.0, w: 10.0 }).unwrap();
+            motors
+                .publish(jderobot::interfaces::Motors { v: 200.0, w: 10.0 })
+                .unwrap();
             std::thread::sleep(Duration::from_millis(100));
         }
         rt.shutdown();
@@ -298,9 +366,16 @@ fn main() {
         let raw_size = std::fs::metadata(&raw).unwrap().len();
         // The same messages rewritten with zstd and lz4 chunks.
         let bytes = std::fs::read(&raw).unwrap();
-        for (label, c) in [("zstd", mcap::Compression::Zstd), ("lz4", mcap::Compression::Lz4)] {
+        for (label, c) in [
+            ("zstd", mcap::Compression::Zstd),
+            ("lz4", mcap::Compression::Lz4),
+        ] {
             let out = dir.path().join(format!("sim-{label}.mcap"));
-            let mut w = mcap::WriteOptions::new().compression(Some(c)).chunk_size(Some(4 * 1024 * 1024)).create(std::fs::File::create(&out).unwrap()).unwrap();
+            let mut w = mcap::WriteOptions::new()
+                .compression(Some(c))
+                .chunk_size(Some(4 * 1024 * 1024))
+                .create(std::fs::File::create(&out).unwrap())
+                .unwrap();
             for m in mcap::MessageStream::new(&bytes).unwrap() {
                 w.write(&m.unwrap()).unwrap();
             }

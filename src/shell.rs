@@ -573,7 +573,9 @@ fn step(rt: &Runtime, args: &[&str], out: &mut dyn Write) -> Result<Flow, String
         let gate = rt
             .names
             .import::<crate::mcapfmt::StepGate>("replay", "step")
-            .map_err(|_| "step: no stepped replay is loaded (driver replay with `stepped on`)".to_string())?;
+            .map_err(|_| {
+                "step: no stepped replay is loaded (driver replay with `stepped on`)".to_string()
+            })?;
         let before = gate.published.load(Ordering::Acquire);
         gate.step(n);
         let t0 = Instant::now();

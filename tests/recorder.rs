@@ -64,11 +64,9 @@ fn simulator_conf(dir: &Path, file: &str) -> PathBuf {
 fn messages(path: &Path) -> (Summary, BTreeMap<String, Vec<Decoded>>) {
     let (summary, bytes) = Summary::read(path).unwrap_or_else(|e| panic!("{e}"));
     let mut by: BTreeMap<String, Vec<Decoded>> = BTreeMap::new();
-    let stream = mcap::MessageStream::new_with_options(
-        &bytes,
-        mcap::read::Options::IgnoreEndMagic.into(),
-    )
-    .unwrap();
+    let stream =
+        mcap::MessageStream::new_with_options(&bytes, mcap::read::Options::IgnoreEndMagic.into())
+            .unwrap();
     for m in stream {
         let Ok(m) = m else { break };
         let kind = mcapfmt::channel_kind(
@@ -92,7 +90,12 @@ fn ten_seconds_of_the_simulator_come_back_with_clocks_and_values() {
     let a = dir.path().join("a.mcap");
     let (summary, recorded) = messages(&a);
     assert!(summary.complete && summary.lost.is_none(), "{summary:?}");
-    for (name, min) in [("laser", 60), ("encoders", 120), ("sonars", 60), ("colorA", 60)] {
+    for (name, min) in [
+        ("laser", 60),
+        ("encoders", 120),
+        ("sonars", 60),
+        ("colorA", 60),
+    ] {
         let v = recorded
             .get(name)
             .unwrap_or_else(|| panic!("no channel {name}: {:?}", recorded.keys()));
@@ -104,7 +107,9 @@ fn ten_seconds_of_the_simulator_come_back_with_clocks_and_values() {
         }
     }
     match &recorded["colorA"][0].value {
-        Recorded::Image(i) => assert_eq!((i.width, i.height, i.data.len()), (320, 240, 320 * 240 * 3)),
+        Recorded::Image(i) => {
+            assert_eq!((i.width, i.height, i.data.len()), (320, 240, 320 * 240 * 3))
+        }
         other => panic!("colorA holds {other:?}"),
     }
     match &recorded["laser"][0].value {
@@ -132,8 +137,16 @@ fn ten_seconds_of_the_simulator_come_back_with_clocks_and_values() {
         let first = orig
             .iter()
             .position(|d| d.clock == back[0].clock)
-            .unwrap_or_else(|| panic!("{name}: replayed clock {} was never recorded", back[0].clock));
-        assert!(first < orig.len() / 5, "{name}: the replay started at message {first}");
+            .unwrap_or_else(|| {
+                panic!(
+                    "{name}: replayed clock {} was never recorded",
+                    back[0].clock
+                )
+            });
+        assert!(
+            first < orig.len() / 5,
+            "{name}: the replay started at message {first}"
+        );
         assert_eq!(
             &orig[first..],
             &back[..],
@@ -176,7 +189,10 @@ fn a_recording_killed_with_sigkill_replays_what_it_wrote() {
     let report = text(&info.stdout);
     assert!(info.status.success(), "{}", text(&info.stderr));
     assert!(report.contains("complete: NO"), "{report}");
-    assert!(report.contains("laser") && report.contains("foxglove.LaserScan"), "{report}");
+    assert!(
+        report.contains("laser") && report.contains("foxglove.LaserScan"),
+        "{report}"
+    );
 
     let (summary, written) = messages(&file);
     assert!(summary.messages >= 100);
@@ -194,7 +210,10 @@ fn a_recording_killed_with_sigkill_replays_what_it_wrote() {
     let (_, back) = messages(&dir.path().join("back.mcap"));
     let last = written["laser"].last().unwrap();
     let got = back["laser"].last().unwrap();
-    assert_eq!(got, last, "the replay ends on the last complete laser message");
+    assert_eq!(
+        got, last,
+        "the replay ends on the last complete laser message"
+    );
 }
 
 #[test]
@@ -204,16 +223,17 @@ fn info_and_replay_refuse_foreign_files_clearly() {
     let out = Command::new(BIN).arg("info").arg(&junk).output().unwrap();
     assert!(!out.status.success());
     let err = text(&out.stderr);
-    assert!(err.contains("junk.mcap") && err.contains("not an MCAP file"), "{err}");
+    assert!(
+        err.contains("junk.mcap") && err.contains("not an MCAP file"),
+        "{err}"
+    );
 
     // A real MCAP file whose channel jderobot did not write.
     let foreign = dir.path().join("foreign.mcap");
     {
         let mut w = mcap::Writer::new(std::fs::File::create(&foreign).unwrap()).unwrap();
         let s = w.add_schema("pkg/Thing", "ros2msg", b"int32 x").unwrap();
-        let c = w
-            .add_channel(s, "/thing", "cdr", &BTreeMap::new())
-            .unwrap();
+        let c = w.add_channel(s, "/thing", "cdr", &BTreeMap::new()).unwrap();
         w.write_to_known_channel(
             &mcap::records::MessageHeader {
                 channel_id: c,
@@ -226,9 +246,17 @@ fn info_and_replay_refuse_foreign_files_clearly() {
         .unwrap();
         w.finish().unwrap();
     }
-    let out = Command::new(BIN).arg("info").arg(&foreign).output().unwrap();
+    let out = Command::new(BIN)
+        .arg("info")
+        .arg(&foreign)
+        .output()
+        .unwrap();
     assert!(out.status.success());
-    assert!(text(&out.stdout).contains("(foreign)"), "{}", text(&out.stdout));
+    assert!(
+        text(&out.stdout).contains("(foreign)"),
+        "{}",
+        text(&out.stdout)
+    );
     let conf = write(
         dir.path(),
         "f.conf",
@@ -247,13 +275,34 @@ fn info_and_replay_refuse_foreign_files_clearly() {
 fn bad_conf_lines_name_file_and_line() {
     let dir = tempfile::tempdir().unwrap();
     for (body, want) in [
-        ("service recorder\ncompression gzip\nend_service\nload_service recorder\n", "f.conf:2"),
-        ("service recorder\nsplit 10 GB\nend_service\nload_service recorder\n", "f.conf:2"),
-        ("service recorder\nimages jpeg\nend_service\nload_service recorder\n", "not implemented"),
-        ("service recorder\nrecords nosuch\nend_service\nload_service recorder\n", "nosuch"),
-        ("driver replay\nfile missing.mcap\nend_driver\nload_driver replay\n", "f.conf:2"),
-        ("driver replay\nspeed fast\nend_driver\nload_driver replay\n", "f.conf:2"),
-        ("driver replay\nbogus 1\nend_driver\nload_driver replay\n", "f.conf:2"),
+        (
+            "service recorder\ncompression gzip\nend_service\nload_service recorder\n",
+            "f.conf:2",
+        ),
+        (
+            "service recorder\nsplit 10 GB\nend_service\nload_service recorder\n",
+            "f.conf:2",
+        ),
+        (
+            "service recorder\nimages jpeg\nend_service\nload_service recorder\n",
+            "not implemented",
+        ),
+        (
+            "service recorder\nrecords nosuch\nend_service\nload_service recorder\n",
+            "nosuch",
+        ),
+        (
+            "driver replay\nfile missing.mcap\nend_driver\nload_driver replay\n",
+            "f.conf:2",
+        ),
+        (
+            "driver replay\nspeed fast\nend_driver\nload_driver replay\n",
+            "f.conf:2",
+        ),
+        (
+            "driver replay\nbogus 1\nend_driver\nload_driver replay\n",
+            "f.conf:2",
+        ),
     ] {
         let conf = write(dir.path(), "f.conf", body);
         let out = Command::new(BIN).arg("check").arg(&conf).output().unwrap();

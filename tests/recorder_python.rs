@@ -59,7 +59,11 @@ fn python_mcap_reads_the_recording_by_the_documented_schemas() {
         .arg(&conf)
         .output()
         .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     for file in [
         dir.path().join("p.mcap"),
         root().join("assets/recordings/simple.mcap"),
@@ -79,14 +83,22 @@ fn python_mcap_reads_the_recording_by_the_documented_schemas() {
         // What Python read equals what jderobot reads.
         let (summary, bytes) = mcapfmt::Summary::read(&file).unwrap();
         for c in &summary.channels {
-            assert_eq!(v["channels"][&c.topic].as_u64(), Some(c.messages), "{}", c.topic);
+            assert_eq!(
+                v["channels"][&c.topic].as_u64(),
+                Some(c.messages),
+                "{}",
+                c.topic
+            );
         }
         let mut laser = None;
         let mut image = None;
         for m in mcap::MessageStream::new(&bytes).unwrap() {
             let m = m.unwrap();
             let kind = mcapfmt::channel_kind(&m.channel.metadata, None).unwrap();
-            match mcapfmt::decode(&m.channel.topic, &kind, &m.data).unwrap().value {
+            match mcapfmt::decode(&m.channel.topic, &kind, &m.data)
+                .unwrap()
+                .value
+            {
                 Recorded::Laser(l) if laser.is_none() => laser = Some(l),
                 Recorded::Image(i) if image.is_none() => image = Some(i),
                 _ => {}
@@ -99,7 +111,10 @@ fn python_mcap_reads_the_recording_by_the_documented_schemas() {
             .iter()
             .map(|x| x.as_i64().unwrap())
             .collect();
-        assert_eq!(py_laser, laser.readings.iter().map(|&r| r as i64).collect::<Vec<_>>());
+        assert_eq!(
+            py_laser,
+            laser.readings.iter().map(|&r| r as i64).collect::<Vec<_>>()
+        );
         let image = image.expect("an image message");
         let sum: u64 = image.data.iter().map(|&b| b as u64).sum();
         assert_eq!(v["image0"]["width"].as_u64(), Some(image.width as u64));
@@ -118,7 +133,10 @@ fn python_rosbags() -> Option<PathBuf> {
     if ok {
         return Some(py);
     }
-    let note = format!("{} cannot import rosbags; make the venv as .ci/run does", py.display());
+    let note = format!(
+        "{} cannot import rosbags; make the venv as .ci/run does",
+        py.display()
+    );
     assert!(std::env::var_os("CI").is_none(), "under CI: {note}");
     eprintln!("SKIPPED: {note}");
     None
@@ -145,18 +163,35 @@ fn rosbags_opens_the_ros2_profile_and_the_replay_reads_it_back() {
         .arg(&conf)
         .output()
         .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let file = dir.path().join("ros.mcap");
     let out = Command::new(&py)
         .arg(root().join("scripts/check_ros2.py"))
         .arg(&file)
         .output()
         .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-    assert_eq!(v["connections"]["/laser"][0], "sensor_msgs/msg/LaserScan", "{v}");
-    assert_eq!(v["connections"]["/colorA"][0], "sensor_msgs/msg/Image", "{v}");
-    assert_eq!(v["connections"]["/encoders"][0], "nav_msgs/msg/Odometry", "{v}");
+    assert_eq!(
+        v["connections"]["/laser"][0], "sensor_msgs/msg/LaserScan",
+        "{v}"
+    );
+    assert_eq!(
+        v["connections"]["/colorA"][0], "sensor_msgs/msg/Image",
+        "{v}"
+    );
+    assert_eq!(
+        v["connections"]["/encoders"][0], "nav_msgs/msg/Odometry",
+        "{v}"
+    );
     assert_eq!(v["image0"]["encoding"], "bgr8");
 
     // jderobot's replay reads the same file: the first laser and image agree.
@@ -183,8 +218,16 @@ fn rosbags_opens_the_ros2_profile_and_the_replay_reads_it_back() {
         }
     }
     let laser = laser.unwrap();
-    let py_laser: Vec<i64> = v["laser0"].as_array().unwrap().iter().map(|x| x.as_i64().unwrap()).collect();
-    assert_eq!(py_laser, laser.readings.iter().map(|&r| r as i64).collect::<Vec<_>>());
+    let py_laser: Vec<i64> = v["laser0"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_i64().unwrap())
+        .collect();
+    assert_eq!(
+        py_laser,
+        laser.readings.iter().map(|&r| r as i64).collect::<Vec<_>>()
+    );
     let image = image.unwrap();
     let sum: u64 = image.data.iter().map(|&b| b as u64).sum();
     assert_eq!(v["image0"]["sum"].as_u64(), Some(sum));
@@ -203,8 +246,15 @@ fn rosbags_opens_the_ros2_profile_and_the_replay_reads_it_back() {
         .arg(&replay)
         .output()
         .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let (back, _) = mcapfmt::Summary::read(&dir.path().join("back.mcap")).unwrap();
     let names: Vec<&str> = back.channels.iter().map(|c| c.topic.as_str()).collect();
-    assert!(names.contains(&"laser") && names.contains(&"colorA") && names.contains(&"encoders"), "{names:?}");
+    assert!(
+        names.contains(&"laser") && names.contains(&"colorA") && names.contains(&"encoders"),
+        "{names:?}"
+    );
 }

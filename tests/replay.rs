@@ -90,7 +90,10 @@ fn stepped_replay_advances_only_on_step_and_record_start_stop_work() {
     assert!(out.contains("replay: 1 messages published"), "{out}\n{err}");
     assert!(out.contains("replay: 3 messages published"), "{out}\n{err}");
     assert!(out.contains("replay: 5 messages published"), "{out}\n{err}");
-    assert!(out.contains("recorder: recording ") && out.contains("s.mcap: "), "{out}");
+    assert!(
+        out.contains("recorder: recording ") && out.contains("s.mcap: "),
+        "{out}"
+    );
     assert!(out.contains("s.mcap): 3 messages"), "{out}");
     assert!(err.contains("step: `x` is not a count"), "{err}");
     let (s, _) = Summary::read(&dir.path().join("s.mcap")).unwrap();
@@ -122,12 +125,23 @@ fn start_and_end_cut_the_recording_and_motors_move_nothing() {
     let laser = cut.channels.iter().find(|c| c.topic == "laser").unwrap();
     let span = (laser.last_ns - laser.first_ns) as f64 / 1e9;
     // (the recorder starts 0.3 s after load: 0.6 s of the recording at speed 2)
-    assert!(span <= 4.05 && span > 2.5, "replayed span {span} s, wanted 2..6 s");
-    assert!(laser.first_ns >= full.start_ns + 1_950_000_000, "started too early");
-    assert!(laser.last_ns <= full.start_ns + 6_000_000_000, "ended too late");
+    assert!(
+        span <= 4.05 && span > 2.5,
+        "replayed span {span} s, wanted 2..6 s"
+    );
+    assert!(
+        laser.first_ns >= full.start_ns + 1_950_000_000,
+        "started too early"
+    );
+    assert!(
+        laser.last_ns <= full.start_ns + 6_000_000_000,
+        "ended too late"
+    );
     let motors = &by["motors"];
     assert!(
-        motors.iter().all(|d| d.value == Recorded::Motors(Motors { v: 500.0, w: 30.0 })),
+        motors
+            .iter()
+            .all(|d| d.value == Recorded::Motors(Motors { v: 500.0, w: 30.0 })),
         "only the command written during the replay is recorded: {motors:?}"
     );
     let (_, orig) = messages(Path::new(&recording()));

@@ -88,7 +88,9 @@ impl Target {
             "pantiltencoders" => Target::PtEncoders(i.provide(name, provider)?),
             "motors" => Target::Motors(i.provide(name, provider)?),
             "pantiltmotors" => Target::PtMotors(i.provide(name, provider)?),
-            other => bail!("replay: channel `{name}` holds `{other}`, not an interface jderobot knows"),
+            other => {
+                bail!("replay: channel `{name}` holds `{other}`, not an interface jderobot knows")
+            }
         })
     }
 
@@ -183,10 +185,9 @@ fn parse(conf: &ComponentConf) -> Result<Settings, crate::conf::ConfError> {
                 s.stepped = line.on_off(0, "on or off")?;
             }
             _ => {
-                return Err(conf.unknown(
-                    line,
-                    "file, provides, speed, loop, start, end or stepped",
-                ));
+                return Err(
+                    conf.unknown(line, "file, provides, speed, loop, start, end or stepped")
+                );
             }
         }
     }
@@ -274,7 +275,16 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
         let stop = stop.clone();
         std::thread::Builder::new()
             .name("replay".into())
-            .spawn(move || run(&bytes, &summary, &settings, &targets, gate.as_deref(), &stop))?
+            .spawn(move || {
+                run(
+                    &bytes,
+                    &summary,
+                    &settings,
+                    &targets,
+                    gate.as_deref(),
+                    &stop,
+                )
+            })?
     };
     Ok(Box::new(Replay {
         stop,

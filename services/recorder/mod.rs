@@ -87,7 +87,10 @@ struct Settings {
 }
 
 fn utc_stamp(t: SystemTime) -> String {
-    let secs = t.duration_since(UNIX_EPOCH).map(|d| d.as_secs()).unwrap_or(0) as i64;
+    let secs = t
+        .duration_since(UNIX_EPOCH)
+        .map(|d| d.as_secs())
+        .unwrap_or(0) as i64;
     let (days, rem) = (secs.div_euclid(86400), secs.rem_euclid(86400));
     // Civil date from days since 1970-01-01 (Howard Hinnant's algorithm).
     let z = days + 719_468;
@@ -204,7 +207,10 @@ fn nth_file(base: &Path, n: u32) -> PathBuf {
     if n == 0 {
         return base.to_path_buf();
     }
-    let stem = base.file_stem().and_then(|s| s.to_str()).unwrap_or("recording");
+    let stem = base
+        .file_stem()
+        .and_then(|s| s.to_str())
+        .unwrap_or("recording");
     let ext = base.extension().and_then(|s| s.to_str()).unwrap_or("mcap");
     base.with_file_name(format!("{stem}-{n}.{ext}"))
 }
@@ -244,9 +250,7 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
         .context("recorder: only one recorder can run")?;
     let mut srcs = sources(&rt.interfaces, &settings.records)?;
     if srcs.is_empty() {
-        tracing::warn!(
-            "recorder: no interface to record (load the drivers before the recorder)"
-        );
+        tracing::warn!("recorder: no interface to record (load the drivers before the recorder)");
     }
     for s in &srcs {
         if !s.any().is_actuator() {
@@ -565,7 +569,13 @@ mod tests {
 
     #[test]
     fn split_names() {
-        assert_eq!(nth_file(Path::new("a/run.mcap"), 0), Path::new("a/run.mcap"));
-        assert_eq!(nth_file(Path::new("a/run.mcap"), 2), Path::new("a/run-2.mcap"));
+        assert_eq!(
+            nth_file(Path::new("a/run.mcap"), 0),
+            Path::new("a/run.mcap")
+        );
+        assert_eq!(
+            nth_file(Path::new("a/run.mcap"), 2),
+            Path::new("a/run-2.mcap")
+        );
     }
 }

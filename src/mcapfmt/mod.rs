@@ -208,9 +208,8 @@ pub fn schema(kind: &str) -> (String, String) {
     let ts = r#""timestamp":{"type":"object","title":"time","properties":{"sec":{"type":"integer","minimum":0},"nsec":{"type":"integer","minimum":0,"maximum":999999999}}},"clock":{"type":"integer","description":"the interface's clock: the sample's number"}"#;
     let vec3 = r#"{"type":"object","properties":{"x":{"type":"number"},"y":{"type":"number"},"z":{"type":"number"}}}"#;
     let quat = r#"{"type":"object","properties":{"x":{"type":"number"},"y":{"type":"number"},"z":{"type":"number"},"w":{"type":"number"}}}"#;
-    let pose = format!(
-        r#"{{"type":"object","properties":{{"position":{vec3},"orientation":{quat}}}}}"#
-    );
+    let pose =
+        format!(r#"{{"type":"object","properties":{{"position":{vec3},"orientation":{quat}}}}}"#);
     match kind {
         "image" => (
             "foxglove.RawImage".into(),
@@ -279,10 +278,13 @@ pub fn encode(name: &str, snap: &Snapshot, out: &mut Vec<u8>) {
             return;
         }
         Snapshot::Laser(l) => {
-            let res = if l.resolution > 0.0 { l.resolution } else { 1.0 };
+            let res = if l.resolution > 0.0 {
+                l.resolution
+            } else {
+                1.0
+            };
             let start = -std::f64::consts::FRAC_PI_2;
-            let end = start
-                + ((l.readings.len().max(1) - 1) as f64 / res as f64).to_radians();
+            let end = start + ((l.readings.len().max(1) - 1) as f64 / res as f64).to_radians();
             let _ = write!(
                 s,
                 r#","frame_id":{},"pose":{{"position":{{"x":0.019,"y":0,"z":0}},"orientation":{{"x":0,"y":0,"z":0,"w":1}}}},"start_angle":{start},"end_angle":{end},"ranges":["#,
@@ -456,7 +458,10 @@ pub fn decode(topic: &str, kind: &str, data: &[u8]) -> Result<Decoded, FormatErr
             let height = num(&v, "height", topic)? as u32;
             let enc = get(&v, "encoding", topic)?.as_str().unwrap_or("");
             if enc != "bgr8" {
-                return Err(bad(topic, format!("image encoding `{enc}`; jderobot reads bgr8")));
+                return Err(bad(
+                    topic,
+                    format!("image encoding `{enc}`; jderobot reads bgr8"),
+                ));
             }
             let text = get(&v, "data", topic)?
                 .as_str()
@@ -466,7 +471,11 @@ pub fn decode(topic: &str, kind: &str, data: &[u8]) -> Result<Decoded, FormatErr
             if data.len() != width as usize * height as usize * 3 {
                 return Err(bad(
                     topic,
-                    format!("{width}x{height} bgr8 needs {} bytes, the data has {}", width as usize * height as usize * 3, data.len()),
+                    format!(
+                        "{width}x{height} bgr8 needs {} bytes, the data has {}",
+                        width as usize * height as usize * 3,
+                        data.len()
+                    ),
                 ));
             }
             Recorded::Image(Image {
@@ -518,7 +527,11 @@ pub fn decode(topic: &str, kind: &str, data: &[u8]) -> Result<Decoded, FormatErr
                 .as_array()
                 .ok_or_else(|| bad(topic, "`bumpers` is not an array"))?
                 .iter()
-                .map(|x| x.as_u64().map(|b| b as u8).ok_or_else(|| bad(topic, "a bumper is not 0 or 1")))
+                .map(|x| {
+                    x.as_u64()
+                        .map(|b| b as u8)
+                        .ok_or_else(|| bad(topic, "a bumper is not 0 or 1"))
+                })
                 .collect::<Result<Vec<_>, _>>()?;
             Recorded::Bumpers(Bumpers { bumpers })
         }
@@ -576,23 +589,65 @@ mod tests {
     fn values_round_trip_exactly() {
         let cases = vec![
             (
-                Snapshot::Laser(sample(3, Laser { readings: vec![1, 8000, 123, -1], resolution: 1.0 })),
-                Recorded::Laser(Laser { readings: vec![1, 8000, 123, -1], resolution: 1.0 }),
+                Snapshot::Laser(sample(
+                    3,
+                    Laser {
+                        readings: vec![1, 8000, 123, -1],
+                        resolution: 1.0,
+                    },
+                )),
+                Recorded::Laser(Laser {
+                    readings: vec![1, 8000, 123, -1],
+                    resolution: 1.0,
+                }),
                 "laser",
             ),
             (
-                Snapshot::Encoders(sample(4, Encoders { x: 1000.25, y: -3.1, theta: 6.2831, cos: 0.1, sin: 0.3 })),
-                Recorded::Encoders(Encoders { x: 1000.25, y: -3.1, theta: 6.2831, cos: 0.1, sin: 0.3 }),
+                Snapshot::Encoders(sample(
+                    4,
+                    Encoders {
+                        x: 1000.25,
+                        y: -3.1,
+                        theta: 6.2831,
+                        cos: 0.1,
+                        sin: 0.3,
+                    },
+                )),
+                Recorded::Encoders(Encoders {
+                    x: 1000.25,
+                    y: -3.1,
+                    theta: 6.2831,
+                    cos: 0.1,
+                    sin: 0.3,
+                }),
                 "encoders",
             ),
             (
-                Snapshot::Sonars(sample(5, Sonars { us: vec![0.1, 5000.0, 333.3] })),
-                Recorded::Sonars(Sonars { us: vec![0.1, 5000.0, 333.3] }),
+                Snapshot::Sonars(sample(
+                    5,
+                    Sonars {
+                        us: vec![0.1, 5000.0, 333.3],
+                    },
+                )),
+                Recorded::Sonars(Sonars {
+                    us: vec![0.1, 5000.0, 333.3],
+                }),
                 "sonars",
             ),
             (
-                Snapshot::Image(sample(6, Image { width: 2, height: 1, data: vec![1, 2, 3, 250, 251, 252] })),
-                Recorded::Image(Image { width: 2, height: 1, data: vec![1, 2, 3, 250, 251, 252] }),
+                Snapshot::Image(sample(
+                    6,
+                    Image {
+                        width: 2,
+                        height: 1,
+                        data: vec![1, 2, 3, 250, 251, 252],
+                    },
+                )),
+                Recorded::Image(Image {
+                    width: 2,
+                    height: 1,
+                    data: vec![1, 2, 3, 250, 251, 252],
+                }),
                 "image",
             ),
         ];
@@ -608,11 +663,17 @@ mod tests {
 
     #[test]
     fn garbage_is_a_clear_error() {
-        let e = decode("laser", "laser", b"{not json").unwrap_err().to_string();
-        assert!(e.contains("laser") && e.contains("not JSON"), "{e}");
-        let e = decode("laser", "laser", br#"{"timestamp":{"sec":1,"nsec":2},"clock":1}"#)
+        let e = decode("laser", "laser", b"{not json")
             .unwrap_err()
             .to_string();
+        assert!(e.contains("laser") && e.contains("not JSON"), "{e}");
+        let e = decode(
+            "laser",
+            "laser",
+            br#"{"timestamp":{"sec":1,"nsec":2},"clock":1}"#,
+        )
+        .unwrap_err()
+        .to_string();
         assert!(e.contains("jderobot"), "{e}");
     }
 }

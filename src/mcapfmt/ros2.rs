@@ -121,7 +121,11 @@ pub fn encode(name: &str, snap: &Snapshot, out: &mut Vec<u8>) -> bool {
     match snap {
         Snapshot::Laser(l) => {
             w.header(l.time, name);
-            let res = if l.resolution > 0.0 { l.resolution } else { 1.0 };
+            let res = if l.resolution > 0.0 {
+                l.resolution
+            } else {
+                1.0
+            };
             let inc = (1.0 / res as f64).to_radians();
             let min = -std::f64::consts::FRAC_PI_2;
             w.f32(min as f32);
@@ -256,7 +260,13 @@ pub fn decode(
             } else {
                 1.0
             };
-            (t, Recorded::Laser(Laser { readings, resolution }))
+            (
+                t,
+                Recorded::Laser(Laser {
+                    readings,
+                    resolution,
+                }),
+            )
         }
         "image" => {
             let t = r.header()?;
@@ -273,7 +283,14 @@ pub fn decode(
                 ));
             }
             let bytes = r.take(n, 1)?.to_vec();
-            (t, Recorded::Image(Image { width, height, data: bytes }))
+            (
+                t,
+                Recorded::Image(Image {
+                    width,
+                    height,
+                    data: bytes,
+                }),
+            )
         }
         "encoders" => {
             let t = r.header()?;

@@ -50,10 +50,7 @@ pub struct Summary {
 #[derive(Debug, thiserror::Error)]
 pub enum ReadError {
     #[error("{path}: {error}")]
-    Io {
-        path: String,
-        error: std::io::Error,
-    },
+    Io { path: String, error: std::io::Error },
     #[error("{path}: not an MCAP file ({error})")]
     NotMcap { path: String, error: String },
 }
