@@ -4,17 +4,21 @@ const ALPHABET: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwx
 
 /// Appends the base64 text of `data` to `out`.
 pub fn encode_into(data: &[u8], out: &mut Vec<u8>) {
-    out.reserve(data.len().div_ceil(3) * 4);
-    let mut chunks = data.chunks_exact(3);
-    for c in &mut chunks {
+    let start = out.len();
+    let whole = data.len() / 3;
+    // Fill a pre-sized slice: no capacity check per byte.
+    out.resize(start + whole * 4, 0);
+    for (c, o) in data
+        .chunks_exact(3)
+        .zip(out[start..].chunks_exact_mut(4))
+    {
         let n = (c[0] as u32) << 16 | (c[1] as u32) << 8 | c[2] as u32;
-        out.extend_from_slice(&[
-            ALPHABET[(n >> 18) as usize & 63],
-            ALPHABET[(n >> 12) as usize & 63],
-            ALPHABET[(n >> 6) as usize & 63],
-            ALPHABET[n as usize & 63],
-        ]);
+        o[0] = ALPHABET[(n >> 18) as usize & 63];
+        o[1] = ALPHABET[(n >> 12) as usize & 63];
+        o[2] = ALPHABET[(n >> 6) as usize & 63];
+        o[3] = ALPHABET[n as usize & 63];
     }
+    let chunks = data.chunks_exact(3);
     match chunks.remainder() {
         [a] => {
             let n = (*a as u32) << 16;
