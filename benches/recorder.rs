@@ -61,13 +61,13 @@ fn one_second(t0: SystemTime, second: u64) -> Vec<(&'static str, Snapshot)> {
     for k in 0..60u64 {
         // 60 slots of 1/60 s
         let t = t0 + Duration::from_secs(second) + Duration::from_millis(k * 1000 / 60);
-        if k % 2 == 0 {
+        if k.is_multiple_of(2) {
             v.push((
                 "camera",
                 Snapshot::Image(sample(second * 30 + k / 2 + 1, t, img.clone())),
             ));
         }
-        if k % 3 == 0 {
+        if k.is_multiple_of(3) {
             let e = Encoders {
                 x: k as f32,
                 y: 2.0,
@@ -80,7 +80,7 @@ fn one_second(t0: SystemTime, second: u64) -> Vec<(&'static str, Snapshot)> {
                 Snapshot::Encoders(sample(second * 20 + k / 3 + 1, t, e)),
             ));
         }
-        if k % 6 == 0 {
+        if k.is_multiple_of(6) {
             let l = Laser {
                 readings: (0..180).map(|i| 1000 + i * 7 + k as i32).collect(),
                 resolution: 1.0,
@@ -256,17 +256,17 @@ fn main() {
             if let Some(w) = due.checked_duration_since(Instant::now()) {
                 std::thread::sleep(w);
             }
-            if k % 2 == 0 {
+            if k.is_multiple_of(2) {
                 cam.publish(imgs[(k / 2 % 2) as usize].clone()).unwrap();
             }
-            if k % 3 == 0 {
+            if k.is_multiple_of(3) {
                 enc.publish(Encoders {
                     x: k as f32,
                     ..Encoders::default()
                 })
                 .unwrap();
             }
-            if k % 6 == 0 {
+            if k.is_multiple_of(6) {
                 laser
                     .publish(Laser {
                         readings: vec![1000 + k as i32; 180],

@@ -8,10 +8,7 @@ pub fn encode_into(data: &[u8], out: &mut Vec<u8>) {
     let whole = data.len() / 3;
     // Fill a pre-sized slice: no capacity check per byte.
     out.resize(start + whole * 4, 0);
-    for (c, o) in data
-        .chunks_exact(3)
-        .zip(out[start..].chunks_exact_mut(4))
-    {
+    for (c, o) in data.chunks_exact(3).zip(out[start..].chunks_exact_mut(4)) {
         let n = (c[0] as u32) << 16 | (c[1] as u32) << 8 | c[2] as u32;
         o[0] = ALPHABET[(n >> 18) as usize & 63];
         o[1] = ALPHABET[(n >> 12) as usize & 63];

@@ -608,7 +608,7 @@ mod tests {
                     Encoders {
                         x: 1000.25,
                         y: -3.1,
-                        theta: 6.2831,
+                        theta: 5.5,
                         cos: 0.1,
                         sin: 0.3,
                     },
@@ -616,7 +616,7 @@ mod tests {
                 Recorded::Encoders(Encoders {
                     x: 1000.25,
                     y: -3.1,
-                    theta: 6.2831,
+                    theta: 5.5,
                     cos: 0.1,
                     sin: 0.3,
                 }),
