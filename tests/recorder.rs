@@ -316,3 +316,36 @@ fn bad_conf_lines_name_file_and_line() {
     assert!(out.status.success(), "{}", text(&out.stderr));
     assert!(!dir.path().join("never.mcap").exists());
 }
+
+#[test]
+fn split_starts_new_files_that_each_read_alone() {
+    let dir = tempfile::tempdir().unwrap();
+    let conf = write(
+        dir.path(),
+        "split.conf",
+        &format!(
+            "driver simulator\nworld {}\nprovides laser\nprovides colorA\nend_driver\n\
+             service recorder\nfile parts/run.mcap\ncompression none\nsplit 1 MB\nend_service\n\
+             load_driver simulator\nload_service recorder\n",
+            world_path("simple.world")
+        ),
+    );
+    run_for(&conf, 4.0);
+    let parts = dir.path().join("parts");
+    let mut files: Vec<_> = std::fs::read_dir(&parts)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().into_string().unwrap())
+        .collect();
+    files.sort();
+    // ~3 MB/s of base64 images: several files of about 1 MB (closed each second).
+    assert!(files.len() >= 3, "{files:?}");
+    assert!(files.contains(&"run.mcap".into()) && files.contains(&"run-1.mcap".into()), "{files:?}");
+    let mut last_clock = 0;
+    for f in ["run.mcap", "run-1.mcap", "run-2.mcap"] {
+        let (s, by) = messages(&parts.join(f));
+        assert!(s.complete, "{f} is not closed");
+        let laser = &by["laser"];
+        assert!(laser[0].clock > last_clock, "{f}: clocks go on across files");
+        last_clock = laser.last().unwrap().clock;
+    }
+}
