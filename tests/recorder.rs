@@ -339,13 +339,19 @@ fn split_starts_new_files_that_each_read_alone() {
     files.sort();
     // ~3 MB/s of base64 images: several files of about 1 MB (closed each second).
     assert!(files.len() >= 3, "{files:?}");
-    assert!(files.contains(&"run.mcap".into()) && files.contains(&"run-1.mcap".into()), "{files:?}");
+    assert!(
+        files.contains(&"run.mcap".into()) && files.contains(&"run-1.mcap".into()),
+        "{files:?}"
+    );
     let mut last_clock = 0;
     for f in ["run.mcap", "run-1.mcap", "run-2.mcap"] {
         let (s, by) = messages(&parts.join(f));
         assert!(s.complete, "{f} is not closed");
         let laser = &by["laser"];
-        assert!(laser[0].clock > last_clock, "{f}: clocks go on across files");
+        assert!(
+            laser[0].clock > last_clock,
+            "{f}: clocks go on across files"
+        );
         last_clock = laser.last().unwrap().clock;
     }
 }

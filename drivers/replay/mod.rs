@@ -12,7 +12,8 @@
 //! loop off               # on: start again at the end
 //! start 2.5              # seconds after the recording's first message (default 0)
 //! end 8                  # seconds after the first message (default: the end)
-//! stepped off            # on: publish only when the shell says `step [N]` (N messages)
+//! stepped off            # on: publish only when the shell says `step [N]` (N messages);
+//!                        #   motors: lock-step with the controller (below)
 //! end_driver
 //! ```
 //!
@@ -34,6 +35,14 @@
 //! A file cut short (a run killed mid-write) replays up to its last complete
 //! chunk, with a warning naming what was lost; a file that is not MCAP, or a
 //! channel of a kind jderobot does not know, is a clear error at load.
+//!
+//! # Lock-step (`stepped motors`): deterministic replay
+//! The recording's motors messages cut it into steps: what the robot sensed after
+//! each command. The replay publishes the first step at once, then the next one
+//! each time a schema writes a new command to `motors`, whatever the schema's
+//! timing. A controller that is a function of what it senses (introrob's VFF) then
+//! sees the same inputs in the same order as in the live run (which ran the
+//! simulator with `stepped MS`) and gives the same commands.
 //!
 //! # Name space
 //! In `stepped on`, exports `replay.step` ([`StepGate`](crate::mcapfmt::StepGate));
@@ -134,6 +143,8 @@ struct Settings {
     start: f64,
     end: Option<f64>,
     stepped: bool,
+    /// Lock-step with the controller on the recording's `motors` channel.
+    lockstep: bool,
 }
 
 fn parse(conf: &ComponentConf) -> Result<Settings, crate::conf::ConfError> {
@@ -145,6 +156,7 @@ fn parse(conf: &ComponentConf) -> Result<Settings, crate::conf::ConfError> {
         start: 0.0,
         end: None,
         stepped: false,
+        lockstep: false,
     };
     let mut file = None;
     for line in &conf.lines {
@@ -181,8 +193,12 @@ fn parse(conf: &ComponentConf) -> Result<Settings, crate::conf::ConfError> {
                 s.end = Some(line.number::<f64>(0, "seconds", 0.0..)?);
             }
             "stepped" => {
-                line.expect_args(1, 1, "stepped on|off")?;
-                s.stepped = line.on_off(0, "on or off")?;
+                line.expect_args(1, 1, "stepped on|off|motors")?;
+                if line.args()[0] == "motors" {
+                    s.lockstep = true;
+                } else {
+                    s.stepped = line.on_off(0, "on, off or motors")?;
+                }
             }
             _ => {
                 return Err(
@@ -261,6 +277,13 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
         let target = Target::provide(rt, &c.name, &kind, &conf.name)?;
         targets.insert(c.topic.clone(), (kind, target));
     }
+    if settings.lockstep && !targets.values().any(|(kind, _)| kind == "motors") {
+        bail!(
+            "{}: `stepped motors` needs a motors channel in {} (provided)",
+            conf.name,
+            settings.file.display()
+        );
+    }
     let gate = if settings.stepped {
         let g = Arc::new(StepGate::default());
         rt.names
@@ -310,6 +333,12 @@ fn run(
     let mut offset = 0u64;
     let mut last_clock = 0u64;
     let mut errors = 0u32;
+    // Lock-step: the motors interface and the clock of the last command seen.
+    let motors = targets.values().find_map(|(_, t)| match t {
+        Target::Motors(m) if settings.lockstep => Some(m.clone()),
+        _ => None,
+    });
+    let mut seen = motors.as_ref().map(|m| m.clock()).unwrap_or(0);
     'passes: loop {
         let t0 = Instant::now();
         let stream = match mcap::MessageStream::new_with_options(
@@ -333,7 +362,20 @@ fn run(
             let Some((kind, target)) = targets.get(&m.channel.topic) else {
                 continue;
             };
-            if let Some(g) = gate {
+            if let (Some(motors), Target::Motors(_)) = (&motors, target) {
+                // A recorded command: the next step waits for the schema's own.
+                while motors.clock() == seen {
+                    if stop.load(Ordering::Acquire) {
+                        return;
+                    }
+                    std::thread::sleep(Duration::from_millis(1));
+                }
+                seen = motors.clock();
+                continue;
+            }
+            if motors.is_some() {
+                // lock-step: no pacing
+            } else if let Some(g) = gate {
                 while !g.take(Duration::from_millis(100)) {
                     if stop.load(Ordering::Acquire) {
                         return;

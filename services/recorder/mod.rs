@@ -296,6 +296,7 @@ fn poll_loop(
     let names: Vec<Arc<str>> = srcs.iter().map(|s| Arc::from(s.any().name())).collect();
     let mut last: Vec<u64> = vec![0; srcs.len()];
     let mut was_recording = false;
+    let mut fresh: Vec<(usize, Snapshot)> = Vec::with_capacity(srcs.len());
     // A grace period: `jderobot check` builds and shuts down a recorder at once,
     // and must not leave a file behind.
     let t0 = Instant::now();
@@ -313,6 +314,7 @@ fn poll_loop(
         }
         was_recording = want;
         if want {
+            fresh.clear();
             for (i, s) in srcs.iter().enumerate() {
                 let clock = s.any().clock();
                 if clock == 0 || clock == last[i] {
@@ -325,6 +327,12 @@ fn poll_loop(
                     status.dropped.fetch_add(c - last[i] - 1, Ordering::Relaxed);
                 }
                 last[i] = c;
+                fresh.push((i, snap));
+            }
+            // In publication order (a command and the sensing it caused can be
+            // new in one pass): what a lock-step replay relies on.
+            fresh.sort_by_key(|(_, s)| s.time());
+            for (i, snap) in fresh.drain(..) {
                 match tx.try_send((i, names[i].clone(), snap)) {
                     Ok(()) => {}
                     Err(TrySendError::Full(_)) => {
