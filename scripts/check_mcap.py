@@ -4,7 +4,7 @@ a notebook would, and checks it against the documented schemas:
 
 - every message validates against its channel's JSON schema (`jsonschema`);
 - channels named after a Foxglove schema (foxglove.RawImage, foxglove.LaserScan,
-  foxglove.PoseInFrame) match Foxglove's own definition, taken from the
+  foxglove.PoseInFrame, foxglove.CompressedImage) match Foxglove's own definition, taken from the
   `foxglove-schemas-protobuf` package: every field present, with the JSON type its
   protobuf type maps to (Foxglove's JSON encoding: bytes as base64, Timestamp as
   {sec, nsec});
@@ -26,11 +26,13 @@ import jsonschema
 from mcap.reader import make_reader
 from google.protobuf.descriptor import FieldDescriptor as FD
 from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
+from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
 from foxglove_schemas_protobuf.LaserScan_pb2 import LaserScan
 from foxglove_schemas_protobuf.PoseInFrame_pb2 import PoseInFrame
 
 FOXGLOVE = {
     "foxglove.RawImage": RawImage.DESCRIPTOR,
+    "foxglove.CompressedImage": CompressedImage.DESCRIPTOR,
     "foxglove.LaserScan": LaserScan.DESCRIPTOR,
     "foxglove.PoseInFrame": PoseInFrame.DESCRIPTOR,
 }
@@ -112,6 +114,11 @@ def main():
                 if len(ranges) != len(mm) or any(abs(r * 1000 - m) > 1e-6 for r, m in zip(ranges, mm)):
                     fail(f"{topic}: ranges (m) are not the readings (mm) / 1000")
                 out["laser0"] = mm
+            if schema.name == "foxglove.CompressedImage" and "jpeg0" not in out:
+                data = base64.b64decode(msg["data"], validate=True)
+                if msg["format"] != "jpeg" or data[:2] != b"\xff\xd8":
+                    fail(f"{topic}: not a JPEG")
+                out["jpeg0"] = len(data)
             if schema.name == "foxglove.RawImage" and "image0" not in out:
                 data = base64.b64decode(msg["data"], validate=True)
                 w, h = msg["width"], msg["height"]

@@ -284,8 +284,8 @@ fn bad_conf_lines_name_file_and_line() {
             "f.conf:2",
         ),
         (
-            "service recorder\nimages jpeg\nend_service\nload_service recorder\n",
-            "not implemented",
+            "service recorder\nimages jpeg 0\nend_service\nload_service recorder\n",
+            "f.conf:2",
         ),
         (
             "service recorder\nrecords nosuch\nend_service\nload_service recorder\n",
@@ -354,4 +354,56 @@ fn split_starts_new_files_that_each_read_alone() {
         );
         last_clock = laser.last().unwrap().clock;
     }
+}
+
+#[test]
+fn jpeg_images_come_back_close_to_the_raw_ones() {
+    // The robot stands still: every frame of a run is the same picture.
+    let dir = tempfile::tempdir().unwrap();
+    let mut firsts = Vec::new();
+    for (file, images) in [("raw.mcap", "raw"), ("jpeg.mcap", "jpeg 90")] {
+        let conf = write(
+            dir.path(),
+            "j.conf",
+            &format!(
+                "driver simulator\nworld {}\nprovides colorA\nend_driver\n\
+                 service recorder\nfile {file}\nimages {images}\nend_service\n\
+                 load_driver simulator\nload_service recorder\n",
+                world_path("simple.world")
+            ),
+        );
+        run_for(&conf, 1.5);
+        let (summary, by) = messages(&dir.path().join(file));
+        let schema = &summary.channels[0].schema;
+        assert_eq!(
+            schema,
+            if images == "raw" {
+                "foxglove.RawImage"
+            } else {
+                "foxglove.CompressedImage"
+            }
+        );
+        match &by["colorA"][0].value {
+            Recorded::Image(i) => firsts.push(i.clone()),
+            other => panic!("{other:?}"),
+        }
+    }
+    let (raw, jpeg) = (&firsts[0], &firsts[1]);
+    assert_eq!((jpeg.width, jpeg.height), (raw.width, raw.height));
+    let diff: f64 = raw
+        .data
+        .iter()
+        .zip(&jpeg.data)
+        .map(|(a, b)| (*a as f64 - *b as f64).abs())
+        .sum::<f64>()
+        / raw.data.len() as f64;
+    assert!(
+        diff < 4.0,
+        "JPEG differs from raw by {diff:.2} per channel on average"
+    );
+    let sizes: Vec<u64> = ["raw.mcap", "jpeg.mcap"]
+        .iter()
+        .map(|f| std::fs::metadata(dir.path().join(f)).unwrap().len())
+        .collect();
+    eprintln!("raw {} bytes, jpeg {} bytes", sizes[0], sizes[1]);
 }

@@ -18,7 +18,8 @@
 //!                                  #   in the current directory (UTC)
 //! split 500 MB                     # start a new file (NAME-1.mcap, ...) past 500 MB, or `split 10 min`
 //! compression zstd                 # zstd (default) | lz4 | none: chunk compression
-//! images raw                       # raw (only): foxglove.RawImage bgr8
+//! images raw                       # raw: foxglove.RawImage bgr8 (default); jpeg [QUALITY]:
+//!                                  #   foxglove.CompressedImage (quality 1..100, default 90)
 //! profile foxglove                 # foxglove (default): JSON, Foxglove schemas; ros2: rosbag2
 //!                                  #   (CDR: LaserScan, Image, Odometry, Twist; other kinds skipped)
 //! queue 64                         # messages waiting for the disk at most; more are dropped
@@ -84,6 +85,8 @@ struct Settings {
     start: bool,
     /// The `ros2` profile: rosbag2-compatible CDR messages.
     ros2: bool,
+    /// `images jpeg [QUALITY]`: foxglove.CompressedImage at this quality.
+    jpeg: Option<u8>,
 }
 
 fn utc_stamp(t: SystemTime) -> String {
@@ -119,6 +122,7 @@ fn parse(conf: &ComponentConf) -> Result<Settings, crate::conf::ConfError> {
         queue: 64,
         start: true,
         ros2: false,
+        jpeg: None,
     };
     for line in &conf.lines {
         match line.keyword() {
@@ -158,12 +162,16 @@ fn parse(conf: &ComponentConf) -> Result<Settings, crate::conf::ConfError> {
                 };
             }
             "images" => {
-                line.expect_args(1, 1, "images raw")?;
-                if line.choice(0, "an image format", &["raw", "jpeg"])? == "jpeg" {
-                    return Err(line.error(
-                        "`images jpeg` (foxglove.CompressedImage) is not implemented yet; use `images raw`",
-                    ));
-                }
+                line.expect_args(1, 2, "images raw | images jpeg [QUALITY]")?;
+                s.jpeg = if line.choice(0, "an image format", &["raw", "jpeg"])? == "jpeg" {
+                    Some(if line.args().len() == 2 {
+                        line.number::<u8>(1, "a JPEG quality", 1..=100)?
+                    } else {
+                        90
+                    })
+                } else {
+                    None
+                };
             }
             "queue" => {
                 line.expect_args(1, 1, "queue MESSAGES")?;
@@ -393,7 +401,14 @@ fn close(o: Open, status: &RecorderStatus) {
     status.recording.store(false, Ordering::Release);
 }
 
-fn write_one(o: &mut Open, item: &Item, buf: &mut Vec<u8>, ros2: bool) -> anyhow::Result<()> {
+fn write_one(
+    o: &mut Open,
+    item: &Item,
+    buf: &mut Vec<u8>,
+    settings: &Settings,
+) -> anyhow::Result<()> {
+    let ros2 = settings.ros2;
+    let jpeg = if ros2 { None } else { settings.jpeg };
     let (i, name, snap) = item;
     if o.channels.len() <= *i {
         o.channels.resize(*i + 1, None);
@@ -427,7 +442,12 @@ fn write_one(o: &mut Open, item: &Item, buf: &mut Vec<u8>, ros2: bool) -> anyhow
                 o.writer
                     .add_channel(sid, &mcapfmt::ros2::topic(name), "cdr", &meta)?
             } else {
-                let (schema_name, schema) = mcapfmt::schema(kind);
+                let schema_kind = if kind == "image" && jpeg.is_some() {
+                    "image/jpeg"
+                } else {
+                    kind
+                };
+                let (schema_name, schema) = mcapfmt::schema(schema_kind);
                 let sid = o
                     .writer
                     .add_schema(&schema_name, "jsonschema", schema.as_bytes())?;
@@ -446,7 +466,10 @@ fn write_one(o: &mut Open, item: &Item, buf: &mut Vec<u8>, ros2: bool) -> anyhow
         // ROS messages have no clock: the sequence is the interface's clock.
         snap.clock() as u32
     } else {
-        mcapfmt::encode(name, snap, buf);
+        match (snap, jpeg) {
+            (Snapshot::Image(img), Some(q)) => mcapfmt::encode_jpeg(name, img, q, buf),
+            _ => mcapfmt::encode(name, snap, buf),
+        }
         o.sequence = o.sequence.wrapping_add(1);
         o.sequence
     };
@@ -499,7 +522,7 @@ fn write_loop(rx: Receiver<Item>, settings: Settings, status: Arc<RecorderStatus
                     }
                 }
                 let o = file.as_mut().expect("opened above");
-                if let Err(e) = write_one(o, &item, &mut buf, settings.ros2) {
+                if let Err(e) = write_one(o, &item, &mut buf, &settings) {
                     let msg = format!("{}: {e:#}", o.path.display());
                     tracing::error!("recorder: {msg}; recording stops");
                     *status.error.lock() = Some(msg);

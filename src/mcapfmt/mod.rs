@@ -217,6 +217,12 @@ pub fn schema(kind: &str) -> (String, String) {
                 r#"{{"title":"foxglove.RawImage","description":"A raw image (jderobot: BGR, bgr8)","type":"object","properties":{{{ts},"frame_id":{{"type":"string"}},"width":{{"type":"integer","minimum":0}},"height":{{"type":"integer","minimum":0}},"encoding":{{"type":"string"}},"step":{{"type":"integer","minimum":0}},"data":{{"type":"string","contentEncoding":"base64"}}}}}}"#
             ),
         ),
+        "image/jpeg" => (
+            "foxglove.CompressedImage".into(),
+            format!(
+                r#"{{"title":"foxglove.CompressedImage","description":"A compressed image (jderobot: JPEG of a BGR image)","type":"object","properties":{{{ts},"frame_id":{{"type":"string"}},"format":{{"type":"string"}},"data":{{"type":"string","contentEncoding":"base64"}}}}}}"#
+            ),
+        ),
         "laser" => (
             "foxglove.LaserScan".into(),
             format!(
@@ -358,6 +364,36 @@ pub fn encode(name: &str, snap: &Snapshot, out: &mut Vec<u8>) {
     out.extend_from_slice(s.as_bytes());
 }
 
+/// Encodes an image sample as a `foxglove.CompressedImage` JPEG message (quality
+/// 1..=100) into `out`.
+pub fn encode_jpeg(name: &str, snap: &Sample<Image>, quality: u8, out: &mut Vec<u8>) {
+    out.clear();
+    let mut rgb = Vec::with_capacity(snap.data.len());
+    for p in snap.data.chunks_exact(3) {
+        rgb.extend_from_slice(&[p[2], p[1], p[0]]);
+    }
+    let mut jpeg = Vec::new();
+    let encoded = image::codecs::jpeg::JpegEncoder::new_with_quality(&mut jpeg, quality).encode(
+        &rgb,
+        snap.width,
+        snap.height,
+        image::ExtendedColorType::Rgb8,
+    );
+    if encoded.is_err() {
+        jpeg.clear();
+    }
+    let mut s = String::from("{");
+    stamp_json(&mut s, nanos(snap.time), snap.clock);
+    let _ = write!(
+        s,
+        r#","frame_id":{},"format":"jpeg","data":""#,
+        Value::String(name.into())
+    );
+    out.extend_from_slice(s.as_bytes());
+    base64::encode_into(&jpeg, out);
+    out.extend_from_slice(b"\"}");
+}
+
 /// The channel metadata of an interface kind.
 pub fn metadata(kind: &str) -> BTreeMap<String, String> {
     BTreeMap::from([(KIND_KEY.to_string(), kind.to_string())])
@@ -398,7 +434,7 @@ pub fn channel_kind(metadata: &BTreeMap<String, String>, schema: Option<&str>) -
         return Some(k.clone());
     }
     match schema? {
-        "foxglove.RawImage" => Some("image".into()),
+        "foxglove.RawImage" | "foxglove.CompressedImage" => Some("image".into()),
         "foxglove.LaserScan" => Some("laser".into()),
         "foxglove.PoseInFrame" => Some("encoders".into()),
         s => ros2::kind_of(s)
@@ -453,6 +489,37 @@ pub fn decode(topic: &str, kind: &str, data: &[u8]) -> Result<Decoded, FormatErr
         .as_u64()
         .ok_or_else(|| bad(topic, "`clock` is not a whole number"))?;
     let value = match kind {
+        "image" if v.get("format").is_some() => {
+            let format = get(&v, "format", topic)?.as_str().unwrap_or("");
+            let text = get(&v, "data", topic)?
+                .as_str()
+                .ok_or_else(|| bad(topic, "`data` is not a base64 string"))?;
+            let data = base64::decode(text.as_bytes())
+                .ok_or_else(|| bad(topic, "`data` is not valid base64"))?;
+            let fmt = match format {
+                "jpeg" => image::ImageFormat::Jpeg,
+                "png" => image::ImageFormat::Png,
+                other => {
+                    return Err(bad(
+                        topic,
+                        format!("compressed image format `{other}`; jderobot reads jpeg and png"),
+                    ));
+                }
+            };
+            let rgb = image::load_from_memory_with_format(&data, fmt)
+                .map_err(|e| bad(topic, format!("the {format} image does not decode: {e}")))?
+                .to_rgb8();
+            let (width, height) = rgb.dimensions();
+            let mut bgr = rgb.into_raw();
+            for p in bgr.chunks_exact_mut(3) {
+                p.swap(0, 2);
+            }
+            Recorded::Image(Image {
+                width,
+                height,
+                data: bgr,
+            })
+        }
         "image" => {
             let width = num(&v, "width", topic)? as u32;
             let height = num(&v, "height", topic)? as u32;
