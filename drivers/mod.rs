@@ -3,3 +3,6 @@
 
 #[cfg(feature = "simulator")]
 pub mod simulator;
+
+#[cfg(feature = "player")]
+pub mod player;
