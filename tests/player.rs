@@ -480,6 +480,13 @@ impl Bin {
             .spawn()
             .expect("start jderobot");
         let out = child.stdout.take().unwrap();
+        // Standard error (the log) is read too, so the child never blocks on it.
+        let err = child.stderr.take().unwrap();
+        std::thread::spawn(move || {
+            for l in BufReader::new(err).lines().map_while(Result::ok) {
+                eprintln!("jderobot: {l}");
+            }
+        });
         let (tx, rx) = std::sync::mpsc::channel();
         std::thread::spawn(move || {
             for l in BufReader::new(out).lines().map_while(Result::ok) {
@@ -607,11 +614,19 @@ fn introrob_vff_reaches_a_target_in_the_emulators_world() {
             .replace("# target 3000 -2000", "target 3000 -2000")
     });
     let mut bin = Bin::start(&conf);
+    let mut last = Instant::now();
     let reached = poll_until(90, || {
         let w = emu.world();
+        if last.elapsed() > Duration::from_secs(5) {
+            last = Instant::now();
+            eprintln!("robot at ({:.2}, {:.2}, {:.2}) v={:.2} w={:.2} cmds={}", w.x, w.y, w.a, w.v, w.w, w.commands.len());
+        }
         (w.x - 3.0).hypot(w.y + 2.0) < 0.3
     });
-    let (x, y) = (emu.world().x, emu.world().y);
+    let (x, y) = {
+        let w = emu.world();
+        (w.x, w.y)
+    };
     bin.send("ps");
     let _ = bin.line("introrob: ");
     bin.quit();
