@@ -486,14 +486,11 @@ fn serve(s: &Shared, mut stream: TcpStream, port: u16) -> std::io::Result<()> {
                         c.queue.pop_front();
                     }
                 } else {
-                    for (m, is_scan) in msgs.into_iter().map(|m| {
-                        let scan = m.len() > 12 && m[8..12] == LASER.to_be_bytes();
-                        (m, scan)
-                    }) {
-                        stream.write_all(&m)?;
-                        if is_scan {
+                    for m in msgs {
+                        if m.len() > 12 && m[8..12] == LASER.to_be_bytes() {
                             *s.last_scan_write.lock().unwrap() = Some(Instant::now());
                         }
+                        stream.write_all(&m)?;
                     }
                 }
             }
