@@ -514,6 +514,18 @@ impl Bin {
         }
         panic!("no line starting with `{prefix}`; saw:\n{}", self.seen.join("\n"));
     }
+    /// Every line that arrives within `d`.
+    fn collect(&mut self, d: Duration) -> Vec<String> {
+        let t0 = Instant::now();
+        let mut v = Vec::new();
+        while t0.elapsed() < d {
+            if let Ok(l) = self.lines.recv_timeout(Duration::from_millis(50)) {
+                self.seen.push(l.clone());
+                v.push(l);
+            }
+        }
+        v
+    }
     fn quit(mut self) {
         self.send("quit");
         let ok = poll_until(20, || self.child.try_wait().ok().flatten().is_some());
@@ -563,7 +575,7 @@ fn the_binary_with_the_example_conf_drives_from_the_shell() {
     let ps = bin.line("encoders: ");
     assert!(ps.contains("player"), "{ps}");
     bin.quit();
-    assert_eq!(emu.world().v, 0.0, "quitting zeroes the motors");
+    eventually("quitting zeroes the motors", || emu.world().v == 0.0);
 }
 
 #[test]
@@ -601,6 +613,17 @@ fn the_binary_reports_a_missing_server_and_a_lost_one() {
     bin.send("echo encoders 1");
     let l = bin.line("encoders clock=");
     assert!(!l.contains("STALE"), "{l}");
+    // A server that comes back but refuses every subscription for a while: the
+    // driver keeps retrying, and says so once, not once per attempt.
+    emu.shared.faults.nack_all.store(true, Ordering::Release);
+    emu.go_down();
+    emu.come_back();
+    let during = bin.collect(Duration::from_secs(4));
+    emu.shared.faults.nack_all.store(false, Ordering::Release);
+    bin.line("player: reconnected");
+    let lost = during.iter().filter(|l| l.contains("lost the Player server")).count();
+    assert_eq!(lost, 1, "one line per change of state: {during:?}");
+    assert!(!during.iter().any(|l| l.contains("reconnected")), "{during:?}");
     bin.quit();
 }
 

@@ -35,7 +35,7 @@
 //! | `sonars` | sonar RANGES or ranger RANGE | mm, one per sonar |
 //! | `bumpers` | bumper STATE | one byte per bumper, 1 = pressed |
 //! | `pantiltencoders` | ptz STATE | pan, tilt rad → deg |
-//! | `pantiltmotors` | ptz CMD_STATE | longitude, latitude deg → pan, tilt rad (limited); speeds deg/s → rad/s; sent when the command changes |
+//! | `pantiltmotors` | ptz CMD_STATE | longitude, latitude deg → pan, tilt rad (limited); speeds deg/s → rad/s (0 = the maximum); sent when the command changes |
 //! | `colorA..D`, `varcolorA..D` | camera STATE | RGB888, MONO8, MONO16, RGB565 or JPEG → BGR |
 //!
 //! # Name space
@@ -180,12 +180,19 @@ impl Device {
         }
         if interf == interf::PTZ
             && h.subtype == sub::PTZ_DATA_STATE
-            && let Ok(p) = xdr::decode_ptz(p)
+            && self.ptmotors.is_some()
         {
-            self.zoom = p.zoom;
+            // Without pantiltencoders, still learn the zoom to send back unchanged.
+            self.zoom = xdr::decode_ptz(p)?.zoom;
         }
         Ok(())
     }
+}
+
+/// A pan-tilt speed (deg/s): 0 (or less) means the unit's maximum, as 4.3's
+/// pantilt drivers did.
+fn speed(v: f32, max: f32) -> f32 {
+    if v > 0.0 { limit(v, 0.0, max) } else { max }
 }
 
 /// The driver's state shared by the thread.
@@ -284,8 +291,8 @@ impl Session {
                     pan: limit(s.longitude, s.min_longitude, s.max_longitude).to_radians(),
                     tilt: limit(s.latitude, s.min_latitude, s.max_latitude).to_radians(),
                     zoom: d.zoom,
-                    panspeed: limit(s.longitude_speed, 0.0, s.max_longitude_speed).to_radians(),
-                    tiltspeed: limit(s.latitude_speed, 0.0, s.max_latitude_speed).to_radians(),
+                    panspeed: speed(s.longitude_speed, s.max_longitude_speed).to_radians(),
+                    tiltspeed: speed(s.latitude_speed, s.max_latitude_speed).to_radians(),
                 };
                 c.send(d.addr, msg::CMD, sub::PTZ_CMD_STATE, &xdr::ptz_cmd(&cmd))?;
             }
@@ -294,7 +301,7 @@ impl Session {
     }
 
     /// Works on one connection until it fails or the driver stops.
-    fn serve(&mut self, c: &mut Conn) -> Result<(), ConnError> {
+    fn serve(&mut self, c: &mut Conn, up: &mut dyn FnMut()) -> Result<(), ConnError> {
         if self.pc.mode == DataMode::Pull {
             let devices = &mut self.devices;
             c.request(
@@ -309,8 +316,13 @@ impl Session {
         let mut awaiting_synch = false;
         let mut last_pull = Instant::now() - Duration::from_secs(1);
         let mut silent_since = Instant::now();
+        let mut first = true;
         while !self.stop.load(Ordering::Acquire) {
             self.sync_subscriptions(c)?;
+            if first {
+                first = false;
+                up();
+            }
             let now = Instant::now();
             if now >= next_cmd {
                 self.commands(c)?;
@@ -372,23 +384,21 @@ impl Session {
     }
 
     /// The driver thread: serve, and on failure mark stale, reconnect, resubscribe.
+    /// It logs once per change of state: a loss (with its reason) and the
+    /// reconnection after it; a server that keeps failing the same way right
+    /// after each reconnection (e.g. refusing a subscription) is not logged again,
+    /// and the backoff keeps growing (100 ms doubling to 2 s).
     fn run(mut self, first: Conn) {
         let srv = server(&self.pc);
         let mut conn = Some(first);
         let mut backoff = Duration::from_millis(100);
         let mut lost_since: Option<Instant> = None;
+        let mut last_why: Option<String> = None;
+        let mut announced_down = false;
         while !self.stop.load(Ordering::Acquire) {
             let Some(mut c) = conn.take() else {
                 match Conn::open(&self.pc.host, self.pc.port, self.pc.timeout) {
-                    Ok(c) => {
-                        let down = lost_since.take().map(|t| t.elapsed().as_secs_f64()).unwrap_or(0.0);
-                        tracing::warn!(
-                            "player: reconnected to the Player server at {srv} after {down:.1} s; subscribing again"
-                        );
-                        crate::output::println(format!("player: reconnected to {srv}"));
-                        backoff = Duration::from_millis(100);
-                        conn = Some(c);
-                    }
+                    Ok(c) => conn = Some(c),
                     Err(_) => {
                         let until = Instant::now() + backoff;
                         while Instant::now() < until && !self.stop.load(Ordering::Acquire) {
@@ -399,19 +409,36 @@ impl Session {
                 }
                 continue;
             };
-            let result = self.serve(&mut c);
+            let began = Instant::now();
+            let result = self.serve(&mut c, &mut || {
+                if announced_down {
+                    announced_down = false;
+                    let down = lost_since.take().map(|t| t.elapsed().as_secs_f64()).unwrap_or(0.0);
+                    let m = format!("player: reconnected to the Player server at {srv} after {down:.1} s; subscribed again");
+                    tracing::warn!("{m}");
+                    crate::output::println(m);
+                }
+            });
             c.close();
             match result {
                 Ok(()) => break,
                 Err(e) => {
                     let why = format!("player: lost the Player server at {srv}: {e}; reconnecting");
-                    tracing::warn!("{why}");
-                    crate::output::println(why.clone());
+                    let long = began.elapsed() > Duration::from_secs(5);
+                    if long {
+                        backoff = Duration::from_millis(100);
+                    }
+                    if !announced_down && (long || last_why.as_deref() != Some(why.as_str())) {
+                        tracing::warn!("{why}");
+                        crate::output::println(why.clone());
+                        announced_down = true;
+                        lost_since = Some(Instant::now());
+                    }
+                    last_why = Some(why.clone());
                     for d in &mut self.devices {
                         d.subscribed = false;
                         d.set_stale(&why);
                     }
-                    lost_since = Some(Instant::now());
                 }
             }
         }
