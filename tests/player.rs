@@ -604,10 +604,13 @@ fn the_binary_reports_a_missing_server_and_a_lost_one() {
     bin.send("echo encoders 1");
     bin.line("encoders clock=");
     emu.go_down();
-    std::thread::sleep(Duration::from_millis(500));
-    bin.send("ps");
-    let ps = bin.line("encoders: ");
-    assert!(ps.contains("STALE") && ps.contains("lost the Player server"), "{ps}");
+    let mut ps = String::new();
+    let stale = poll_until(20, || {
+        bin.send("ps");
+        ps = bin.line("encoders: ");
+        ps.contains("STALE")
+    });
+    assert!(stale && ps.contains("lost the Player server"), "{ps}");
     emu.come_back();
     eventually("resubscribed", || emu.subscribed(4, 0));
     bin.send("echo encoders 1");
@@ -617,9 +620,13 @@ fn the_binary_reports_a_missing_server_and_a_lost_one() {
     // driver keeps retrying, and says so once, not once per attempt.
     emu.shared.faults.nack_all.store(true, Ordering::Release);
     emu.go_down();
+    let attempts0 = emu.shared.accepted.load(Ordering::Acquire);
     emu.come_back();
     let during = bin.collect(Duration::from_secs(4));
+    let attempts = emu.shared.accepted.load(Ordering::Acquire) - attempts0;
     emu.shared.faults.nack_all.store(false, Ordering::Release);
+    // 100 ms doubling to 2 s: about 5 attempts in 4 s, not a tight loop.
+    assert!((1..=12).contains(&attempts), "{attempts} connections in 4 s");
     bin.line("player: reconnected");
     let lost = during.iter().filter(|l| l.contains("lost the Player server")).count();
     assert_eq!(lost, 1, "one line per change of state: {during:?}");

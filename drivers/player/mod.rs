@@ -109,12 +109,13 @@ impl Device {
     }
 
     fn set_stale(&self, why: &str) {
-        for s in &self.sinks {
-            s.set_stale(why);
-        }
+        // Motors to zero first: whoever sees a stale sensor sees stopped motors.
         if let Some(m) = &self.motors {
             let _ = m.publish(Motors::default());
             m.set_stale(why);
+        }
+        for s in &self.sinks {
+            s.set_stale(why);
         }
         if let Some(m) = &self.ptmotors {
             m.set_stale(why);
@@ -383,27 +384,32 @@ impl Session {
         Ok(())
     }
 
+    /// Sleeps `d`, or less if the driver stops.
+    fn pause(&self, d: Duration) {
+        let until = Instant::now() + d;
+        while Instant::now() < until && !self.stop.load(Ordering::Acquire) {
+            std::thread::sleep(Duration::from_millis(10));
+        }
+    }
+
     /// The driver thread: serve, and on failure mark stale, reconnect, resubscribe.
     /// It logs once per change of state: a loss (with its reason) and the
-    /// reconnection after it; a server that keeps failing the same way right
-    /// after each reconnection (e.g. refusing a subscription) is not logged again,
-    /// and the backoff keeps growing (100 ms doubling to 2 s).
+    /// reconnection after it, once the devices are subscribed again; attempts
+    /// that fail before that (no server, a refused subscription) are not logged,
+    /// and the backoff (100 ms doubling to 2 s) restarts only after a session
+    /// that lasted 5 s.
     fn run(mut self, first: Conn) {
         let srv = server(&self.pc);
         let mut conn = Some(first);
         let mut backoff = Duration::from_millis(100);
         let mut lost_since: Option<Instant> = None;
-        let mut last_why: Option<String> = None;
         let mut announced_down = false;
         while !self.stop.load(Ordering::Acquire) {
             let Some(mut c) = conn.take() else {
                 match Conn::open(&self.pc.host, self.pc.port, self.pc.timeout) {
                     Ok(c) => conn = Some(c),
                     Err(_) => {
-                        let until = Instant::now() + backoff;
-                        while Instant::now() < until && !self.stop.load(Ordering::Acquire) {
-                            std::thread::sleep(Duration::from_millis(10));
-                        }
+                        self.pause(backoff);
                         backoff = (backoff * 2).min(Duration::from_secs(2));
                     }
                 }
@@ -424,17 +430,20 @@ impl Session {
                 Ok(()) => break,
                 Err(e) => {
                     let why = format!("player: lost the Player server at {srv}: {e}; reconnecting");
-                    let long = began.elapsed() > Duration::from_secs(5);
-                    if long {
+                    if began.elapsed() > Duration::from_secs(5) {
                         backoff = Duration::from_millis(100);
+                    } else {
+                        // A session that failed at once (a refused subscription, a
+                        // garbled stream): wait before the next attempt.
+                        self.pause(backoff);
+                        backoff = (backoff * 2).min(Duration::from_secs(2));
                     }
-                    if !announced_down && (long || last_why.as_deref() != Some(why.as_str())) {
+                    if !announced_down {
                         tracing::warn!("{why}");
                         crate::output::println(why.clone());
                         announced_down = true;
                         lost_since = Some(Instant::now());
                     }
-                    last_why = Some(why.clone());
                     for d in &mut self.devices {
                         d.subscribed = false;
                         d.set_stale(&why);
