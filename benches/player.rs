@@ -81,7 +81,11 @@ fn main() {
          3fd33333 33333333 00000000",
     );
     let enc: Interface<Encoders> = Interface::new("encoders", "bench");
-    let off = Offset { x: 1000.0, y: 1000.0, theta_deg: 90.0 };
+    let off = Offset {
+        x: 1000.0,
+        y: 1000.0,
+        theta_deg: 90.0,
+    };
     let position = per_call(50_000, || {
         let p = xdr::decode_position2d(black_box(&pos)).unwrap();
         enc.publish(sinks::encoders(&p, &off)).unwrap();
@@ -97,7 +101,10 @@ fn main() {
     });
 
     println!("player codec (median per call):");
-    println!("  anchor: 180 BE floats swapped to mm (C-style loop)  {:>8.0} ns", anchor);
+    println!(
+        "  anchor: 180 BE floats swapped to mm (C-style loop)  {:>8.0} ns",
+        anchor
+    );
     println!(
         "  laser scan (180) decoded into the `laser` interface  {:>8.0} ns  ({:.2}x the anchor; goal <= 2000 ns)",
         scan,
@@ -144,6 +151,45 @@ fn main() {
         }
         std::hint::spin_loop();
     }
+    // Commands: from a motors publish to the server receiving it (one cycle, 75 ms,
+    // at most; about half a cycle on average).
+    let emu2 = player_emulator::Emulator::with_devices(vec![(4, 0)]);
+    let text = format!(
+        "driver player\nhostname 127.0.0.1 port {}\nprovides motors\nend_driver\nload_driver player\n",
+        emu2.port
+    );
+    let conf = Conf::parse(&text, Path::new("bench.conf")).unwrap();
+    let rt2 = Runtime::start(&conf).unwrap_or_else(|e| panic!("{e}"));
+    let motors: Arc<Interface<jderobot::interfaces::Motors>> =
+        rt2.interfaces.get("motors").unwrap();
+    rt2.run("motors").unwrap();
+    let mut cmd_lat = Vec::new();
+    for k in 1..=40 {
+        let v = 10.0 * k as f32;
+        let t = Instant::now();
+        motors
+            .publish(jderobot::interfaces::Motors { v, w: 0.0 })
+            .unwrap();
+        loop {
+            let got = emu2
+                .world()
+                .commands
+                .iter()
+                .rev()
+                .find(|c| (c.0 - v as f64 / 1000.0).abs() < 1e-9)
+                .map(|c| c.2);
+            if let Some(at) = got {
+                cmd_lat.push(at.saturating_duration_since(t).as_secs_f64() * 1e3);
+                break;
+            }
+            if t.elapsed() > Duration::from_secs(2) {
+                break;
+            }
+            std::thread::sleep(Duration::from_micros(200));
+        }
+    }
+    rt2.shutdown();
+    cmd_lat.sort_by(f64::total_cmp);
     rt.shutdown();
     let n = lat.len();
     let p50 = median(lat.clone());
@@ -151,4 +197,10 @@ fn main() {
     let p90 = lat.get(n * 9 / 10).copied().unwrap_or(f64::NAN);
     println!("player latency over loopback (emulator write -> laser clock), {n} scans:");
     println!("  p50 {p50:.0} us, p90 {p90:.0} us  (goal p50 <= 100 us)");
+    println!(
+        "player commands (motors publish -> server), {} commands: p50 {:.1} ms, max {:.1} ms  (goal: within one 75 ms cycle)",
+        cmd_lat.len(),
+        cmd_lat.get(cmd_lat.len() / 2).copied().unwrap_or(f64::NAN),
+        cmd_lat.last().copied().unwrap_or(f64::NAN)
+    );
 }

@@ -74,7 +74,10 @@ impl Conn {
         stream.set_write_timeout(Some(timeout))?;
         let mut banner = [0u8; xdr::BANNER_LEN];
         (&stream).read_exact(&mut banner).map_err(|e| {
-            if matches!(e.kind(), io::ErrorKind::WouldBlock | io::ErrorKind::TimedOut) {
+            if matches!(
+                e.kind(),
+                io::ErrorKind::WouldBlock | io::ErrorKind::TimedOut
+            ) {
                 ConnError::Protocol(format!(
                     "no Player banner within {} ms (is it a Player server?)",
                     timeout.as_millis()
@@ -104,7 +107,13 @@ impl Conn {
     }
 
     /// Sends one message.
-    pub fn send(&mut self, addr: Addr, mtype: u32, subtype: u32, payload: &[u8]) -> Result<u32, ConnError> {
+    pub fn send(
+        &mut self,
+        addr: Addr,
+        mtype: u32,
+        subtype: u32,
+        payload: &[u8],
+    ) -> Result<u32, ConnError> {
         self.seq = self.seq.wrapping_add(1);
         let seq = self.seq;
         self.out.clear();
@@ -171,7 +180,14 @@ impl Conn {
                 self.buf.extend_from_slice(&chunk[..k]);
                 self.drain(on)
             }
-            Err(e) if matches!(e.kind(), io::ErrorKind::WouldBlock | io::ErrorKind::TimedOut) => Ok(0),
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    io::ErrorKind::WouldBlock | io::ErrorKind::TimedOut
+                ) =>
+            {
+                Ok(0)
+            }
             Err(e) if e.kind() == io::ErrorKind::Interrupted => Ok(0),
             Err(e) => Err(e.into()),
         }

@@ -105,7 +105,10 @@ fn interf_code(name: &str) -> Option<u32> {
 fn finite(l: &ConfLine, i: usize, what: &str) -> anyhow::Result<f64> {
     let v: f64 = l.arg(i, what)?;
     if !v.is_finite() {
-        return Err(err(l, format!("`{}`: {what} must be a finite number", l.keyword())));
+        return Err(err(
+            l,
+            format!("`{}`: {what} must be a finite number", l.keyword()),
+        ));
     }
     Ok(v)
 }
@@ -195,7 +198,10 @@ impl PlayerConf {
                     if let Some(o) = wants.iter().find(|o| o.name == w.name) {
                         return Err(err(
                             l,
-                            format!("`{}` is already provided at line {}", w.name, o.line.at.line),
+                            format!(
+                                "`{}` is already provided at line {}",
+                                w.name, o.line.at.line
+                            ),
                         ));
                     }
                     wants.push(w);
@@ -228,9 +234,15 @@ fn parse_provides(l: &ConfLine) -> anyhow::Result<Want> {
     while i < rest.len() {
         match rest[i] {
             "index" => {
-                let v = rest.get(i + 1).and_then(|s| s.parse::<u32>().ok()).ok_or_else(|| {
-                    err(l, format!("`provides {what}`: `index` needs a device index (0, 1, ...)"))
-                })?;
+                let v = rest
+                    .get(i + 1)
+                    .and_then(|s| s.parse::<u32>().ok())
+                    .ok_or_else(|| {
+                        err(
+                            l,
+                            format!("`provides {what}`: `index` needs a device index (0, 1, ...)"),
+                        )
+                    })?;
                 index = Some(v);
                 i += 2;
             }
@@ -278,9 +290,16 @@ fn parse_provides(l: &ConfLine) -> anyhow::Result<Want> {
         "laser" => match numbers.as_slice() {
             [] => Kind::Laser(180, 1.0),
             [n, r] => {
-                let n = n.parse::<usize>().ok().filter(|n| (1..=720).contains(n)).ok_or_else(|| {
-                    err(l, format!("`provides laser`: `{n}` is not a number of readings 1..720"))
-                })?;
+                let n = n
+                    .parse::<usize>()
+                    .ok()
+                    .filter(|n| (1..=720).contains(n))
+                    .ok_or_else(|| {
+                        err(
+                            l,
+                            format!("`provides laser`: `{n}` is not a number of readings 1..720"),
+                        )
+                    })?;
                 let r = r.parse::<f64>().ok().filter(|r| *r > 0.0 && r.is_finite()).ok_or_else(|| {
                     err(l, format!("`provides laser`: `{r}` is not a positive resolution (readings/deg)"))
                 })?;
@@ -289,7 +308,9 @@ fn parse_provides(l: &ConfLine) -> anyhow::Result<Want> {
             _ => {
                 return Err(err(
                     l,
-                    format!("`provides laser` takes N R (e.g. `provides laser 180 1`); usage: {USAGE_PROVIDES}"),
+                    format!(
+                        "`provides laser` takes N R (e.g. `provides laser 180 1`); usage: {USAGE_PROVIDES}"
+                    ),
                 ));
             }
         },
@@ -316,7 +337,9 @@ fn parse_provides(l: &ConfLine) -> anyhow::Result<Want> {
                 _ => {
                     return Err(err(
                         l,
-                        format!("the player driver does not provide `{other}`; usage: {USAGE_PROVIDES}"),
+                        format!(
+                            "the player driver does not provide `{other}`; usage: {USAGE_PROVIDES}"
+                        ),
                     ));
                 }
             }
@@ -362,7 +385,11 @@ pub fn choose(w: &Want, devices: &[Addr], server: &str) -> anyhow::Result<Addr> 
         if devices.is_empty() {
             "no devices".to_string()
         } else {
-            devices.iter().map(|a| a.to_string()).collect::<Vec<_>>().join(", ")
+            devices
+                .iter()
+                .map(|a| a.to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
         }
     };
     let missing = |what: String| -> anyhow::Error {
@@ -379,11 +406,19 @@ pub fn choose(w: &Want, devices: &[Addr], server: &str) -> anyhow::Result<Addr> 
     let idx = w.index.unwrap_or(0);
     if let Some((code, k)) = w.device {
         let a = Addr::new(code, k.or(w.index).unwrap_or(0));
-        return if has(a) { Ok(a) } else { Err(missing(a.to_string())) };
+        return if has(a) {
+            Ok(a)
+        } else {
+            Err(missing(a.to_string()))
+        };
     }
     let one = |code: u32| {
         let a = Addr::new(code, idx);
-        if has(a) { Ok(a) } else { Err(missing(a.to_string())) }
+        if has(a) {
+            Ok(a)
+        } else {
+            Err(missing(a.to_string()))
+        }
     };
     match w.kind {
         Kind::Encoders | Kind::Motors => one(interf::POSITION2D),

@@ -96,15 +96,19 @@ struct Device {
     zoom: f32,
     ptm_sent: u64,
     scratch: Vec<u8>,
+    /// The latest camera frame, converted before it is swapped into the interface.
+    frame: Image,
+    bad_frame: bool,
     blob_clock: u64,
 }
 
 impl Device {
     fn used(&self, motors_timeout: Duration) -> bool {
         self.sinks.iter().any(Sink::used)
-            || self.motors.as_ref().is_some_and(|m| {
-                m.users() > 0 || m.command(motors_timeout) != Motors::default()
-            })
+            || self
+                .motors
+                .as_ref()
+                .is_some_and(|m| m.users() > 0 || m.command(motors_timeout) != Motors::default())
             || self.ptmotors.as_ref().is_some_and(|m| m.users() > 0)
     }
 
@@ -125,7 +129,9 @@ impl Device {
     /// Feeds one DATA message to the sinks.
     fn data(&mut self, h: &Header, p: &[u8]) -> Result<(), XdrError> {
         let interf = self.addr.interf;
+        let addr = self.addr;
         let (ranger, zoom, scratch) = (&self.ranger, &mut self.zoom, &mut self.scratch);
+        let (frame, bad_frame) = (&mut self.frame, &mut self.bad_frame);
         let blob_clock = &mut self.blob_clock;
         for s in &mut self.sinks {
             match (interf, h.subtype, s) {
@@ -133,17 +139,27 @@ impl Device {
                     let p = xdr::decode_position2d(p)?;
                     let _ = i.publish(sinks::encoders(&p, o));
                 }
-                (interf::LASER, sub::LASER_DATA_SCAN | sub::LASER_DATA_SCANPOSE, Sink::Laser(i, m)) => {
+                (
+                    interf::LASER,
+                    sub::LASER_DATA_SCAN | sub::LASER_DATA_SCANPOSE,
+                    Sink::Laser(i, m),
+                ) => {
                     let (info, ranges) = xdr::decode_scan(p)?;
                     // rangertolaser's first scans can carry an all-zero geometry.
-                    if info.resolution > 0.0 && info.resolution.is_finite() && info.min_angle.is_finite() {
+                    if info.resolution > 0.0
+                        && info.resolution.is_finite()
+                        && info.min_angle.is_finite()
+                    {
                         let _ = i.write(|l| m.fill_f32(&info, ranges, l));
                     }
                 }
                 (interf::RANGER, sub::RANGER_DATA_RANGE, Sink::Laser(i, m)) => {
                     let (n, raw) = xdr::decode_ranger(p)?;
                     let cfg = ranger.unwrap_or_else(|| sinks::default_ranger_config(n));
-                    if cfg.angular_res > 0.0 && cfg.angular_res.is_finite() && cfg.min_angle.is_finite() {
+                    if cfg.angular_res > 0.0
+                        && cfg.angular_res.is_finite()
+                        && cfg.min_angle.is_finite()
+                    {
                         let _ = i.write(|l| m.fill_f64(&cfg, n, raw, l));
                     }
                 }
@@ -165,11 +181,20 @@ impl Device {
                     let _ = i.publish(sinks::pantilt(&p));
                 }
                 (interf::CAMERA, sub::CAMERA_DATA_STATE, Sink::Camera(i, fixed)) => {
+                    // A well-formed message whose image we cannot use (an unknown
+                    // format, a broken JPEG) is skipped, said once; the connection stays.
                     let (info, data) = xdr::decode_camera(p)?;
-                    let mut res = Ok(());
-                    let fixed = *fixed;
-                    let _ = i.write(|img| res = sinks::camera_image(&info, data, fixed, scratch, img));
-                    res?;
+                    match sinks::camera_image(&info, data, *fixed, scratch, frame) {
+                        Ok(()) => {
+                            *bad_frame = false;
+                            let _ = i.write(|img| std::mem::swap(img, frame));
+                        }
+                        Err(e) if !*bad_frame => {
+                            *bad_frame = true;
+                            tracing::warn!("player: {addr}: camera frame skipped: {e}");
+                        }
+                        Err(_) => {}
+                    }
                 }
                 (interf::BLOBFINDER, sub::BLOBFINDER_DATA_BLOBS, Sink::Blobs(b)) => {
                     let (w, hh, blobs) = xdr::decode_blobs(p)?;
@@ -179,10 +204,7 @@ impl Device {
                 _ => {}
             }
         }
-        if interf == interf::PTZ
-            && h.subtype == sub::PTZ_DATA_STATE
-            && self.ptmotors.is_some()
-        {
+        if interf == interf::PTZ && h.subtype == sub::PTZ_DATA_STATE && self.ptmotors.is_some() {
             // Without pantiltencoders, still learn the zoom to send back unchanged.
             self.zoom = xdr::decode_ptz(p)?.zoom;
         }
@@ -239,7 +261,11 @@ impl Session {
                 let z = xdr::cmd_vel(0.0, 0.0, 0.0, true);
                 c.send(addr, msg::CMD, sub::POSITION2D_CMD_VEL, &z)?;
             }
-            let access = if want { player::OPEN_MODE } else { player::CLOSE_MODE };
+            let access = if want {
+                player::OPEN_MODE
+            } else {
+                player::CLOSE_MODE
+            };
             let devices = &mut self.devices;
             let reply = c.request(
                 Addr::PLAYER,
@@ -260,7 +286,9 @@ impl Session {
             self.devices[k].subscribed = want;
             if want && addr.interf == interf::RANGER {
                 let devices = &mut self.devices;
-                let r = c.request(addr, sub::RANGER_REQ_GET_CONFIG, &[], t, &mut |h, p| dispatch(devices, h, p));
+                let r = c.request(addr, sub::RANGER_REQ_GET_CONFIG, &[], t, &mut |h, p| {
+                    dispatch(devices, h, p)
+                });
                 self.devices[k].ranger = match r {
                     Ok(Reply::Ack(p)) => xdr::decode_ranger_config(&p).ok(),
                     Ok(Reply::Nack) | Err(ConnError::Timeout { .. }) => None,
@@ -279,7 +307,12 @@ impl Session {
             {
                 let cmd = m.command(self.pc.motors_timeout);
                 let cmd = Motors::limited(cmd.v, cmd.w, MAX_V, MAX_W);
-                let p = xdr::cmd_vel(cmd.v as f64 / 1000.0, 0.0, (cmd.w as f64).to_radians(), true);
+                let p = xdr::cmd_vel(
+                    cmd.v as f64 / 1000.0,
+                    0.0,
+                    (cmd.w as f64).to_radians(),
+                    true,
+                );
                 c.send(d.addr, msg::CMD, sub::POSITION2D_CMD_VEL, &p)?;
             }
             if let Some(m) = &d.ptmotors
@@ -481,7 +514,13 @@ impl Drop for PlayerDriver {
 
 /// Asks the server for its devices.
 pub fn device_list(c: &mut Conn, timeout: Duration) -> Result<Vec<Addr>, ConnError> {
-    match c.request(Addr::PLAYER, player::REQ_DEVLIST, &xdr::devlist_req(), timeout, &mut |_, _| Ok(()))? {
+    match c.request(
+        Addr::PLAYER,
+        player::REQ_DEVLIST,
+        &xdr::devlist_req(),
+        timeout,
+        &mut |_, _| Ok(()),
+    )? {
         Reply::Ack(p) => Ok(xdr::decode_devlist(&p)?),
         Reply::Nack => Err(ConnError::Protocol("the server refused REQ_DEVLIST".into())),
     }
@@ -503,8 +542,9 @@ impl PlayerDriver {
                  `hostname H port P` in the player driver's conf"
             )
         })?;
-        let list = device_list(&mut c, pc.timeout)
-            .map_err(|e| anyhow::anyhow!("the Player server at {srv} did not list its devices: {e}"))?;
+        let list = device_list(&mut c, pc.timeout).map_err(|e| {
+            anyhow::anyhow!("the Player server at {srv} did not list its devices: {e}")
+        })?;
         let mut devices: BTreeMap<Addr, Device> = BTreeMap::new();
         let mut motors_all = Vec::new();
         for w in &pc.wants {
@@ -519,12 +559,18 @@ impl PlayerDriver {
                 zoom: 0.0,
                 ptm_sent: 0,
                 scratch: Vec::new(),
+                frame: Image::default(),
+                bad_frame: false,
                 blob_clock: 0,
             });
             let off = pc.offset(&w.robot);
             match &w.kind {
                 Kind::Encoders => d.sinks.push(Sink::Encoders(
-                    ifaces.provide_value(&w.name, provider, sinks::encoders(&Default::default(), &off))?,
+                    ifaces.provide_value(
+                        &w.name,
+                        provider,
+                        sinks::encoders(&Default::default(), &off),
+                    )?,
                     off,
                 )),
                 Kind::Motors => {
@@ -532,20 +578,37 @@ impl PlayerDriver {
                     motors_all.push(m.clone());
                     d.motors = Some(m);
                 }
-                Kind::Laser(n, r) => d
+                Kind::Laser(n, r) => d.sinks.push(Sink::Laser(
+                    ifaces.provide(&w.name, provider)?,
+                    LaserMap::new(*n, *r),
+                )),
+                Kind::Sonars => d
                     .sinks
-                    .push(Sink::Laser(ifaces.provide(&w.name, provider)?, LaserMap::new(*n, *r))),
-                Kind::Sonars => d.sinks.push(Sink::Sonars(ifaces.provide(&w.name, provider)?)),
-                Kind::Bumpers => d.sinks.push(Sink::Bumpers(ifaces.provide(&w.name, provider)?)),
-                Kind::PanTiltEncoders => d.sinks.push(Sink::PtEncoders(ifaces.provide(&w.name, provider)?)),
+                    .push(Sink::Sonars(ifaces.provide(&w.name, provider)?)),
+                Kind::Bumpers => d
+                    .sinks
+                    .push(Sink::Bumpers(ifaces.provide(&w.name, provider)?)),
+                Kind::PanTiltEncoders => d
+                    .sinks
+                    .push(Sink::PtEncoders(ifaces.provide(&w.name, provider)?)),
                 Kind::PanTiltMotors => d.ptmotors = Some(ifaces.provide(&w.name, provider)?),
                 Kind::Camera(fixed) => {
-                    let init = if *fixed { Image::new(320, 240) } else { Image::default() };
-                    d.sinks
-                        .push(Sink::Camera(ifaces.provide_value(&w.name, provider, init)?, *fixed));
+                    let init = if *fixed {
+                        Image::new(320, 240)
+                    } else {
+                        Image::default()
+                    };
+                    d.sinks.push(Sink::Camera(
+                        ifaces.provide_value(&w.name, provider, init)?,
+                        *fixed,
+                    ));
                 }
                 Kind::Blobs => {
-                    let b = names.export(provider, &w.name, LiveBlobs::from_pointee(BlobFrame::default()))?;
+                    let b = names.export(
+                        provider,
+                        &w.name,
+                        LiveBlobs::from_pointee(BlobFrame::default()),
+                    )?;
                     d.sinks.push(Sink::Blobs(b));
                 }
             }
@@ -553,7 +616,11 @@ impl PlayerDriver {
         tracing::info!(
             "player: connected to Player {} at {srv}; devices used: {}",
             c.version,
-            devices.keys().map(|a| a.to_string()).collect::<Vec<_>>().join(", ")
+            devices
+                .keys()
+                .map(|a| a.to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
         );
         let stop = Arc::new(AtomicBool::new(false));
         let session = Session {
@@ -575,7 +642,12 @@ impl PlayerDriver {
 
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>> {
     let pc = PlayerConf::parse(conf)?;
-    Ok(Box::new(PlayerDriver::start(pc, &rt.interfaces, &rt.names, &conf.name)?))
+    Ok(Box::new(PlayerDriver::start(
+        pc,
+        &rt.interfaces,
+        &rt.names,
+        &conf.name,
+    )?))
 }
 
 crate::register_driver!(

@@ -9,7 +9,7 @@ use crate::interfaces::{
 };
 
 use super::conf::Offset;
-use super::xdr::{self, RangerConfig, ScanInfo, XdrError, camera, be_f32, be_f64};
+use super::xdr::{self, RangerConfig, ScanInfo, XdrError, be_f32, be_f64, camera};
 
 /// One blob seen by a Player blobfinder.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -152,7 +152,8 @@ pub fn sonars_f32(n: usize, raw: &[u8], out: &mut Sonars) {
 
 pub fn sonars_f64(n: usize, raw: &[u8], out: &mut Sonars) {
     out.us.clear();
-    out.us.extend((0..n).map(|i| (be_f64(raw, i) * 1000.0) as f32));
+    out.us
+        .extend((0..n).map(|i| (be_f64(raw, i) * 1000.0) as f32));
 }
 
 pub fn bumpers(raw: &[u8], out: &mut Bumpers) {
@@ -181,7 +182,9 @@ pub fn camera_image(
 ) -> Result<(), XdrError> {
     let (w, h) = (info.width, info.height);
     if w == 0 || h == 0 || w > MAX_SIDE || h > MAX_SIDE {
-        return Err(XdrError::Bad(format!("camera image size {w}x{h} is out of 1..{MAX_SIDE}")));
+        return Err(XdrError::Bad(format!(
+            "camera image size {w}x{h} is out of 1..{MAX_SIDE}"
+        )));
     }
     let px = w as usize * h as usize;
     // The frame in BGR at its own size, in `scratch`.
@@ -228,10 +231,18 @@ pub fn camera_image(
                         let r = ((v >> 11) & 0x1f) as u8;
                         let g = ((v >> 5) & 0x3f) as u8;
                         let b = (v & 0x1f) as u8;
-                        scratch.extend_from_slice(&[b << 3 | b >> 2, g << 2 | g >> 4, r << 3 | r >> 2]);
+                        scratch.extend_from_slice(&[
+                            b << 3 | b >> 2,
+                            g << 2 | g >> 4,
+                            r << 3 | r >> 2,
+                        ]);
                     }
                 }
-                f => return Err(XdrError::Bad(format!("camera format {f} is not supported (1, 2, 4 or 5)"))),
+                f => {
+                    return Err(XdrError::Bad(format!(
+                        "camera format {f} is not supported (1, 2, 4 or 5)"
+                    )));
+                }
             }
         }
         camera::JPEG => {
@@ -253,7 +264,11 @@ pub fn camera_image(
             d.decode_into(scratch)
                 .map_err(|e| XdrError::Bad(format!("camera JPEG: {e:?}")))?;
         }
-        c => return Err(XdrError::Bad(format!("camera compression {c} is not supported (0 raw, 1 JPEG)"))),
+        c => {
+            return Err(XdrError::Bad(format!(
+                "camera compression {c} is not supported (0 raw, 1 JPEG)"
+            )));
+        }
     }
     if !fixed {
         out.width = w;
@@ -263,7 +278,8 @@ pub fn camera_image(
     }
     out.width = COLOR_WIDTH;
     out.height = COLOR_HEIGHT;
-    out.data.resize((COLOR_WIDTH * COLOR_HEIGHT * 3) as usize, 0);
+    out.data
+        .resize((COLOR_WIDTH * COLOR_HEIGHT * 3) as usize, 0);
     for y in 0..COLOR_HEIGHT as usize {
         let sy = y * h as usize / COLOR_HEIGHT as usize;
         for x in 0..COLOR_WIDTH as usize {

@@ -222,13 +222,23 @@ fn put_opaque(b: &mut Vec<u8>, bytes: &[u8]) {
     put_u32(b, bytes.len() as u32);
     put_u32(b, bytes.len() as u32);
     b.extend_from_slice(bytes);
-    while b.len() % 4 != 0 {
+    while !b.len().is_multiple_of(4) {
         b.push(0);
     }
 }
 
 /// A server message: host 127.0.0.1 packed little-endian, robot = port.
-pub fn server_msg(port: u16, interf: u32, index: u32, mtype: u32, subtype: u32, time: f64, seq: u32, payload: &[u8]) -> Vec<u8> {
+#[allow(clippy::too_many_arguments)]
+pub fn server_msg(
+    port: u16,
+    interf: u32,
+    index: u32,
+    mtype: u32,
+    subtype: u32,
+    time: f64,
+    seq: u32,
+    payload: &[u8],
+) -> Vec<u8> {
     let mut b = Vec::with_capacity(40 + payload.len());
     b.extend_from_slice(&[1, 0, 0, 127]);
     put_u32(&mut b, port as u32);
@@ -315,7 +325,9 @@ impl Emulator {
         });
         let mut threads = Vec::new();
         let s = shared.clone();
-        threads.push(std::thread::spawn(move || acceptor(s, Some(listener), port)));
+        threads.push(std::thread::spawn(move || {
+            acceptor(s, Some(listener), port)
+        }));
         let s = shared.clone();
         threads.push(std::thread::spawn(move || {
             let mut last = Instant::now();
@@ -327,7 +339,11 @@ impl Emulator {
                 s.world.lock().unwrap().step(dt);
             }
         }));
-        Emulator { port, shared, threads }
+        Emulator {
+            port,
+            shared,
+            threads,
+        }
     }
 
     pub fn world(&self) -> std::sync::MutexGuard<'_, World> {
@@ -349,7 +365,11 @@ impl Emulator {
     }
 
     pub fn subscribed(&self, interf: u32, index: u32) -> bool {
-        self.shared.subscribed.lock().unwrap().contains(&(interf, index))
+        self.shared
+            .subscribed
+            .lock()
+            .unwrap()
+            .contains(&(interf, index))
     }
 }
 
@@ -430,7 +450,11 @@ fn serve(s: &Shared, mut stream: TcpStream, port: u16) -> std::io::Result<()> {
         match stream.read(&mut chunk) {
             Ok(0) => break Ok(()),
             Ok(n) => buf.extend_from_slice(&chunk[..n]),
-            Err(e) if matches!(e.kind(), std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut) => {}
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
+                ) => {}
             Err(e) => break Err(e),
         }
         // Whole messages from the client.
@@ -444,7 +468,9 @@ fn serve(s: &Shared, mut stream: TcpStream, port: u16) -> std::io::Result<()> {
             let payload = buf[40..40 + size].to_vec();
             buf.drain(..40 + size);
             if !s.faults.stall.load(Ordering::Acquire) {
-                for out in handle(s, &mut c, port, interf, index, mtype, subtype, seq, &payload) {
+                for out in handle(
+                    s, &mut c, port, interf, index, mtype, subtype, seq, &payload,
+                ) {
                     stream.write_all(&out)?;
                 }
             }
@@ -510,7 +536,17 @@ fn has(s: &Shared, interf: u32, index: u32) -> bool {
 }
 
 #[allow(clippy::too_many_arguments)]
-fn handle(s: &Shared, c: &mut Client, port: u16, interf: u32, index: u32, mtype: u32, subtype: u32, seq: u32, p: &[u8]) -> Vec<Vec<u8>> {
+fn handle(
+    s: &Shared,
+    c: &mut Client,
+    port: u16,
+    interf: u32,
+    index: u32,
+    mtype: u32,
+    subtype: u32,
+    seq: u32,
+    p: &[u8],
+) -> Vec<Vec<u8>> {
     let time = s.world.lock().unwrap().time;
     let ack = |payload: &[u8]| server_msg(port, interf, index, 4, subtype, time, seq, payload);
     let nack = || server_msg(port, interf, index, 6, subtype, time, seq, &[]);
@@ -591,7 +627,12 @@ fn handle(s: &Shared, c: &mut Client, port: u16, interf: u32, index: u32, mtype:
         (RANGER, 3) if subtype == 5 => {
             let mut out = Vec::new();
             let (lo, hi, res, max) = if index == 1 {
-                (-std::f64::consts::FRAC_PI_2, std::f64::consts::FRAC_PI_2, std::f64::consts::PI / 180.0, 8.0)
+                (
+                    -std::f64::consts::FRAC_PI_2,
+                    std::f64::consts::FRAC_PI_2,
+                    std::f64::consts::PI / 180.0,
+                    8.0,
+                )
             } else {
                 (0.0, 0.0, 0.0, 5.0)
             };
@@ -602,7 +643,13 @@ fn handle(s: &Shared, c: &mut Client, port: u16, interf: u32, index: u32, mtype:
         }
         (LASER, 3) if subtype == 3 => {
             let mut out = Vec::new();
-            for v in [-std::f32::consts::FRAC_PI_2, std::f32::consts::FRAC_PI_2, 0.017453292, 8.0, 0.02] {
+            for v in [
+                -std::f32::consts::FRAC_PI_2,
+                std::f32::consts::FRAC_PI_2,
+                0.017453292,
+                8.0,
+                0.02,
+            ] {
                 put_f32(&mut out, v);
             }
             put_u32(&mut out, 0);
