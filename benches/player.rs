@@ -166,6 +166,8 @@ fn main() {
     let mut cmd_lat = Vec::new();
     for k in 1..=40 {
         let v = 10.0 * k as f32;
+        // At a different phase of the driver's 75 ms cycle each time.
+        std::thread::sleep(Duration::from_millis((k * 17 % 75) as u64));
         let t = Instant::now();
         motors
             .publish(jderobot::interfaces::Motors { v, w: 0.0 })
