@@ -1,5 +1,7 @@
 //! Drivers: one module per device family. Each connects interfaces to a device and
 //! is compiled in only under the cargo feature of its own name.
 
+#[cfg(feature = "firewire")]
+pub mod firewire;
 #[cfg(feature = "simulator")]
 pub mod simulator;

@@ -1,0 +1,504 @@
+//! Camera pixel formats → BGR (the layout of every jderobot [`Image`]): what the
+//! firewire, video4linux2 and gige drivers get from their devices.
+//!
+//! | source | function | equal to |
+//! |---|---|---|
+//! | YUYV / UYVY 4:2:2, video range (V4L2, GigE) | [`yuv422_to_bgr`] with [`YuvMatrix::Bt601`] | OpenCV `cvtColor(COLOR_YUV2BGR_YUYV / _UYVY)` (same fixed point) |
+//! | YUYV / UYVY 4:2:2, IIDC (FireWire) | [`yuv422_to_bgr`] with [`YuvMatrix::Iidc`] | libdc1394 `dc1394_convert_to_RGB8` (then R↔B) |
+//! | YUV 4:1:1 (UYYVYY), 4:4:4 (UYV), IIDC | [`yuv411_to_bgr`], [`yuv444_to_bgr`] | libdc1394 `dc1394_convert_to_RGB8` |
+//! | YUV 4:2:0 planar (I420 / YV12) | [`yuv420_to_bgr`] | OpenCV `COLOR_YUV2BGR_I420` (same formula, nearest chroma) |
+//! | Bayer RGGB, GBRG, GRBG, BGGR (8 bit) | [`bayer_to_bgr`] | libdc1394 `dc1394_bayer_decoding_8bit(.., DC1394_BAYER_METHOD_BILINEAR)` (borders black) |
+//! | RGB24 / BGR24 | [`rgb_to_bgr`], `copy_from_slice` | — |
+//! | GREY / MONO8 | [`grey_to_bgr`] | — |
+//!
+//! Every function takes the source bytes, the size in pixels and the BGR
+//! destination (`w*h*3` bytes), and checks the lengths: a short source (a
+//! truncated frame) is an error, never a panic or a read past the end. Sizes are
+//! in pixels; strides are `w*bytes_per_pixel` (no row padding) unless the function
+//! takes a `stride`.
+//!
+//! The tests in `tests/cameras_dev.rs` check the IIDC and Bayer paths against the
+//! system's libdc1394 byte for byte; `scripts/compare_opencv.py` compares the
+//! BT.601 path and the Bayer path with OpenCV (time and agreement).
+//!
+//! [`Image`]: crate::interfaces::Image
+
+use thiserror::Error;
+
+/// A conversion that could not run.
+#[derive(Debug, Error, PartialEq, Eq)]
+pub enum PixError {
+    #[error("{format} frame of {w}x{h} needs {need} bytes, got {got} (truncated frame?)")]
+    Short {
+        format: &'static str,
+        w: u32,
+        h: u32,
+        need: usize,
+        got: usize,
+    },
+    #[error("{format}: size {w}x{h} is not allowed ({why})")]
+    Size {
+        format: &'static str,
+        w: u32,
+        h: u32,
+        why: &'static str,
+    },
+}
+
+/// Which YUV→RGB formula.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum YuvMatrix {
+    /// ITU-R BT.601, video range (Y 16..235): V4L2's default for YUYV and what
+    /// OpenCV's `COLOR_YUV2BGR_*` computes, bit for bit.
+    Bt601,
+    /// IIDC (FireWire) full range, as libdc1394 converts: R = Y + 1.402 V,
+    /// G = Y − 0.344 U − 0.714 V, B = Y + 1.772 U in 10-bit fixed point.
+    Iidc,
+}
+
+/// Byte order of packed 4:2:2.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Yuv422Order {
+    /// Y0 U Y1 V (V4L2 `YUYV`, GenICam `YUV422_YUYV_Packed`).
+    Yuyv,
+    /// U Y0 V Y1 (IIDC's order, V4L2 `UYVY`, GenICam `YUV422Packed`).
+    Uyvy,
+}
+
+/// A Bayer colour filter, named by its top-left 2x2 cell read row by row.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Bayer {
+    Rggb,
+    Gbrg,
+    Grbg,
+    Bggr,
+}
+
+impl Bayer {
+    /// From its name (`RGGB`, `rggb`, `BayerRG8`-style names are the gige driver's business).
+    pub fn parse(s: &str) -> Option<Bayer> {
+        Some(match s.to_ascii_uppercase().as_str() {
+            "RGGB" => Bayer::Rggb,
+            "GBRG" => Bayer::Gbrg,
+            "GRBG" => Bayer::Grbg,
+            "BGGR" => Bayer::Bggr,
+            _ => return None,
+        })
+    }
+}
+
+fn check(
+    format: &'static str,
+    src: usize,
+    need: usize,
+    w: u32,
+    h: u32,
+    dst: &mut Vec<u8>,
+) -> Result<(), PixError> {
+    if src < need {
+        return Err(PixError::Short {
+            format,
+            w,
+            h,
+            need,
+            got: src,
+        });
+    }
+    dst.resize(w as usize * h as usize * 3, 0);
+    Ok(())
+}
+
+// OpenCV's BT.601 fixed point (modules/imgproc/src/color_yuv.simd.hpp).
+const CY: i32 = 1_220_542;
+const CUB: i32 = 2_116_026;
+const CUG: i32 = -409_993;
+const CVG: i32 = -852_492;
+const CVR: i32 = 1_673_527;
+const SHIFT: i32 = 20;
+const HALF: i32 = 1 << (SHIFT - 1);
+
+#[inline(always)]
+fn sat(v: i32) -> u8 {
+    v.clamp(0, 255) as u8
+}
+
+/// Per-chroma terms of one pair of pixels: (b, g, r) added to the luma term.
+#[inline(always)]
+fn chroma_bt601(u: u8, v: u8) -> (i32, i32, i32) {
+    let u = u as i32 - 128;
+    let v = v as i32 - 128;
+    (HALF + CUB * u, HALF + CVG * v + CUG * u, HALF + CVR * v)
+}
+
+#[inline(always)]
+fn put_bt601(y: u8, (cb, cg, cr): (i32, i32, i32), out: &mut [u8]) {
+    let y = (y as i32 - 16).max(0) * CY;
+    out[0] = sat((y + cb) >> SHIFT);
+    out[1] = sat((y + cg) >> SHIFT);
+    out[2] = sat((y + cr) >> SHIFT);
+}
+
+#[inline(always)]
+fn put_iidc(y: u8, u: i32, v: i32, out: &mut [u8]) {
+    let y = y as i32;
+    out[2] = sat(y + ((v * 1436) >> 10));
+    out[1] = sat(y - ((u * 352 + v * 731) >> 10));
+    out[0] = sat(y + ((u * 1814) >> 10));
+}
+
+/// Packed 4:2:2 (2 bytes per pixel) → BGR. `w` must be even.
+pub fn yuv422_to_bgr(
+    src: &[u8],
+    w: u32,
+    h: u32,
+    order: Yuv422Order,
+    matrix: YuvMatrix,
+    dst: &mut Vec<u8>,
+) -> Result<(), PixError> {
+    if w % 2 != 0 {
+        return Err(PixError::Size {
+            format: "YUV 4:2:2",
+            w,
+            h,
+            why: "the width must be even",
+        });
+    }
+    let n = w as usize * h as usize;
+    check("YUV 4:2:2", src.len(), n * 2, w, h, dst)?;
+    let (iy0, iu, iy1, iv) = match order {
+        Yuv422Order::Yuyv => (0, 1, 2, 3),
+        Yuv422Order::Uyvy => (1, 0, 3, 2),
+    };
+    let pairs = src[..n * 2].chunks_exact(4).zip(dst.chunks_exact_mut(6));
+    match matrix {
+        YuvMatrix::Bt601 => {
+            for (s, d) in pairs {
+                let c = chroma_bt601(s[iu], s[iv]);
+                let (d0, d1) = d.split_at_mut(3);
+                put_bt601(s[iy0], c, d0);
+                put_bt601(s[iy1], c, d1);
+            }
+        }
+        YuvMatrix::Iidc => {
+            for (s, d) in pairs {
+                let u = s[iu] as i32 - 128;
+                let v = s[iv] as i32 - 128;
+                let (d0, d1) = d.split_at_mut(3);
+                put_iidc(s[iy0], u, v, d0);
+                put_iidc(s[iy1], u, v, d1);
+            }
+        }
+    }
+    Ok(())
+}
+
+/// IIDC YUV 4:1:1 (U Y0 Y1 V Y2 Y3, 6 bytes per 4 pixels) → BGR, libdc1394's formula.
+/// `w` must be a multiple of 4.
+pub fn yuv411_to_bgr(src: &[u8], w: u32, h: u32, dst: &mut Vec<u8>) -> Result<(), PixError> {
+    if w % 4 != 0 {
+        return Err(PixError::Size {
+            format: "YUV 4:1:1",
+            w,
+            h,
+            why: "the width must be a multiple of 4",
+        });
+    }
+    let n = w as usize * h as usize;
+    check("YUV 4:1:1", src.len(), n * 3 / 2, w, h, dst)?;
+    for (s, d) in src[..n * 3 / 2]
+        .chunks_exact(6)
+        .zip(dst.chunks_exact_mut(12))
+    {
+        let u = s[0] as i32 - 128;
+        let v = s[3] as i32 - 128;
+        put_iidc(s[1], u, v, &mut d[0..3]);
+        put_iidc(s[2], u, v, &mut d[3..6]);
+        put_iidc(s[4], u, v, &mut d[6..9]);
+        put_iidc(s[5], u, v, &mut d[9..12]);
+    }
+    Ok(())
+}
+
+/// IIDC YUV 4:4:4 (U Y V per pixel) → BGR, libdc1394's formula.
+pub fn yuv444_to_bgr(src: &[u8], w: u32, h: u32, dst: &mut Vec<u8>) -> Result<(), PixError> {
+    let n = w as usize * h as usize;
+    check("YUV 4:4:4", src.len(), n * 3, w, h, dst)?;
+    for (s, d) in src[..n * 3].chunks_exact(3).zip(dst.chunks_exact_mut(3)) {
+        put_iidc(s[1], s[0] as i32 - 128, s[2] as i32 - 128, d);
+    }
+    Ok(())
+}
+
+/// Planar 4:2:0 (Y plane, then U and V planes at half size: I420; `swap_uv` for
+/// YV12) → BGR with BT.601 video range. `w` and `h` must be even.
+pub fn yuv420_to_bgr(
+    src: &[u8],
+    w: u32,
+    h: u32,
+    swap_uv: bool,
+    dst: &mut Vec<u8>,
+) -> Result<(), PixError> {
+    if w % 2 != 0 || h % 2 != 0 {
+        return Err(PixError::Size {
+            format: "YUV 4:2:0",
+            w,
+            h,
+            why: "the width and height must be even",
+        });
+    }
+    let (wu, hu) = (w as usize, h as usize);
+    let n = wu * hu;
+    let q = n / 4;
+    check("YUV 4:2:0", src.len(), n + 2 * q, w, h, dst)?;
+    let (yp, rest) = src.split_at(n);
+    let (mut up, mut vp) = (&rest[..q], &rest[q..2 * q]);
+    if swap_uv {
+        std::mem::swap(&mut up, &mut vp);
+    }
+    for row in 0..hu {
+        let yr = &yp[row * wu..(row + 1) * wu];
+        let ur = &up[(row / 2) * (wu / 2)..(row / 2 + 1) * (wu / 2)];
+        let vr = &vp[(row / 2) * (wu / 2)..(row / 2 + 1) * (wu / 2)];
+        let dr = &mut dst[row * wu * 3..(row + 1) * wu * 3];
+        for (((y, d), u), v) in yr
+            .chunks_exact(2)
+            .zip(dr.chunks_exact_mut(6))
+            .zip(ur)
+            .zip(vr)
+        {
+            let c = chroma_bt601(*u, *v);
+            let (d0, d1) = d.split_at_mut(3);
+            put_bt601(y[0], c, d0);
+            put_bt601(y[1], c, d1);
+        }
+    }
+    Ok(())
+}
+
+/// RGB24 → BGR (swaps the outer channels).
+pub fn rgb_to_bgr(src: &[u8], w: u32, h: u32, dst: &mut Vec<u8>) -> Result<(), PixError> {
+    let n = w as usize * h as usize;
+    check("RGB24", src.len(), n * 3, w, h, dst)?;
+    for (s, d) in src[..n * 3].chunks_exact(3).zip(dst.chunks_exact_mut(3)) {
+        d[0] = s[2];
+        d[1] = s[1];
+        d[2] = s[0];
+    }
+    Ok(())
+}
+
+/// BGR24 → BGR (a copy, with the length check).
+pub fn bgr_to_bgr(src: &[u8], w: u32, h: u32, dst: &mut Vec<u8>) -> Result<(), PixError> {
+    let n = w as usize * h as usize * 3;
+    check("BGR24", src.len(), n, w, h, dst)?;
+    dst.copy_from_slice(&src[..n]);
+    Ok(())
+}
+
+/// 8-bit grey → BGR (the same value in the three channels).
+pub fn grey_to_bgr(src: &[u8], w: u32, h: u32, dst: &mut Vec<u8>) -> Result<(), PixError> {
+    let n = w as usize * h as usize;
+    check("GREY", src.len(), n, w, h, dst)?;
+    for (s, d) in src[..n].iter().zip(dst.chunks_exact_mut(3)) {
+        d[0] = *s;
+        d[1] = *s;
+        d[2] = *s;
+    }
+    Ok(())
+}
+
+/// 8-bit Bayer mosaic → BGR by bilinear interpolation, libdc1394's
+/// `DC1394_BAYER_METHOD_BILINEAR` to the byte: at a red or blue site the other
+/// of the two is the rounded mean of the 4 diagonal neighbours and green the
+/// rounded mean of the 4 direct ones; at a green site red and blue are the rounded
+/// means of the 2 horizontal or 2 vertical neighbours. The 1-pixel border is black
+/// (libdc1394 clears it). `w` and `h` must be at least 3.
+pub fn bayer_to_bgr(
+    src: &[u8],
+    w: u32,
+    h: u32,
+    pattern: Bayer,
+    dst: &mut Vec<u8>,
+) -> Result<(), PixError> {
+    if w < 3 || h < 3 {
+        return Err(PixError::Size {
+            format: "Bayer",
+            w,
+            h,
+            why: "it must be at least 3x3",
+        });
+    }
+    let (wu, hu) = (w as usize, h as usize);
+    check("Bayer", src.len(), wu * hu, w, h, dst)?;
+    // Top and bottom rows black.
+    dst[..wu * 3].fill(0);
+    dst[(hu - 1) * wu * 3..].fill(0);
+    // Colour of the site (0, 0): which channel (B=0, G=1, R=2), per row parity.
+    // Row parity p, column parity q → channel.
+    let ch = |p: usize, q: usize| -> usize {
+        let cell = match pattern {
+            Bayer::Rggb => [[2, 1], [1, 0]],
+            Bayer::Gbrg => [[1, 0], [2, 1]],
+            Bayer::Grbg => [[1, 2], [0, 1]],
+            Bayer::Bggr => [[0, 1], [1, 2]],
+        };
+        cell[p][q]
+    };
+    for y in 1..hu - 1 {
+        let up = &src[(y - 1) * wu..y * wu];
+        let mid = &src[y * wu..(y + 1) * wu];
+        let dn = &src[(y + 1) * wu..(y + 2) * wu];
+        let out = &mut dst[y * wu * 3..(y + 1) * wu * 3];
+        out[..3].fill(0);
+        out[(wu - 1) * 3..].fill(0);
+        let p = y & 1;
+        // The two kinds of site in this row, by column parity.
+        for q in 0..2 {
+            let c = ch(p, q);
+            let x0 = if q == 1 { 1 } else { 2 };
+            if c == 1 {
+                // Green site: horizontal neighbours are the row's other colour.
+                let hc = ch(p, 1 - q);
+                let vc = 2 - hc;
+                bayer_green(up, mid, dn, out, x0, wu, hc, vc);
+            } else {
+                bayer_rb(up, mid, dn, out, x0, wu, c, 2 - c);
+            }
+        }
+    }
+    Ok(())
+}
+
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn bayer_green(
+    up: &[u8],
+    mid: &[u8],
+    dn: &[u8],
+    out: &mut [u8],
+    x0: usize,
+    wu: usize,
+    hc: usize,
+    vc: usize,
+) {
+    let mut x = x0;
+    while x < wu - 1 {
+        let o = &mut out[x * 3..x * 3 + 3];
+        o[1] = mid[x];
+        o[hc] = ((mid[x - 1] as u16 + mid[x + 1] as u16 + 1) >> 1) as u8;
+        o[vc] = ((up[x] as u16 + dn[x] as u16 + 1) >> 1) as u8;
+        x += 2;
+    }
+}
+
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn bayer_rb(
+    up: &[u8],
+    mid: &[u8],
+    dn: &[u8],
+    out: &mut [u8],
+    x0: usize,
+    wu: usize,
+    c: usize,
+    other: usize,
+) {
+    let mut x = x0;
+    while x < wu - 1 {
+        let o = &mut out[x * 3..x * 3 + 3];
+        o[c] = mid[x];
+        o[1] =
+            ((up[x] as u16 + dn[x] as u16 + mid[x - 1] as u16 + mid[x + 1] as u16 + 2) >> 2) as u8;
+        o[other] = ((up[x - 1] as u16 + up[x + 1] as u16 + dn[x - 1] as u16 + dn[x + 1] as u16 + 2)
+            >> 2) as u8;
+        x += 2;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn short_frames_are_errors() {
+        let mut d = Vec::new();
+        let e = yuv422_to_bgr(&[0; 10], 4, 2, Yuv422Order::Yuyv, YuvMatrix::Bt601, &mut d);
+        assert!(matches!(
+            e,
+            Err(PixError::Short {
+                need: 16,
+                got: 10,
+                ..
+            })
+        ));
+        assert!(bayer_to_bgr(&[0; 8], 3, 3, Bayer::Rggb, &mut d).is_err());
+        assert!(grey_to_bgr(&[0; 3], 2, 2, &mut d).is_err());
+        assert!(yuv420_to_bgr(&[0; 5], 2, 2, false, &mut d).is_err());
+    }
+
+    #[test]
+    fn grey_and_rgb() {
+        let mut d = Vec::new();
+        grey_to_bgr(&[7, 9], 2, 1, &mut d).unwrap();
+        assert_eq!(d, [7, 7, 7, 9, 9, 9]);
+        rgb_to_bgr(&[1, 2, 3], 1, 1, &mut d).unwrap();
+        assert_eq!(d, [3, 2, 1]);
+    }
+
+    #[test]
+    fn bt601_black_white_and_red() {
+        let mut d = Vec::new();
+        // Y=16 black, Y=235 white, neutral chroma.
+        yuv422_to_bgr(
+            &[16, 128, 235, 128],
+            2,
+            1,
+            Yuv422Order::Yuyv,
+            YuvMatrix::Bt601,
+            &mut d,
+        )
+        .unwrap();
+        assert_eq!(d, [0, 0, 0, 255, 255, 255]);
+        // BT.601 red (Y 81, U 90, V 240) → close to (0, 0, 255).
+        yuv422_to_bgr(
+            &[90, 81, 240, 81],
+            2,
+            1,
+            Yuv422Order::Uyvy,
+            YuvMatrix::Bt601,
+            &mut d,
+        )
+        .unwrap();
+        assert!(d[2] >= 250 && d[1] <= 3 && d[0] <= 3, "{d:?}");
+    }
+
+    #[test]
+    fn bayer_flat_field_is_flat_inside() {
+        // A mosaic of a uniform colour (R 200, G 100, B 50) in each pattern.
+        for pat in [Bayer::Rggb, Bayer::Gbrg, Bayer::Grbg, Bayer::Bggr] {
+            let (w, h) = (8usize, 6usize);
+            let names = match pat {
+                Bayer::Rggb => [[2, 1], [1, 0]],
+                Bayer::Gbrg => [[1, 0], [2, 1]],
+                Bayer::Grbg => [[1, 2], [0, 1]],
+                Bayer::Bggr => [[0, 1], [1, 2]],
+            };
+            let val = [50u8, 100, 200];
+            let src: Vec<u8> = (0..w * h)
+                .map(|i| val[names[(i / w) % 2][(i % w) % 2]])
+                .collect();
+            let mut d = Vec::new();
+            bayer_to_bgr(&src, w as u32, h as u32, pat, &mut d).unwrap();
+            for y in 1..h - 1 {
+                for x in 1..w - 1 {
+                    assert_eq!(
+                        &d[(y * w + x) * 3..(y * w + x) * 3 + 3],
+                        &val,
+                        "{pat:?} {x},{y}"
+                    );
+                }
+            }
+            assert_eq!(&d[..3], &[0, 0, 0]);
+        }
+    }
+}
