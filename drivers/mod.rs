@@ -5,3 +5,5 @@
 pub mod firewire;
 #[cfg(feature = "simulator")]
 pub mod simulator;
+#[cfg(feature = "video4linux2")]
+pub mod video4linux2;
