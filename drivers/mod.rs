@@ -7,3 +7,5 @@ pub mod firewire;
 pub mod simulator;
 #[cfg(feature = "video4linux2")]
 pub mod video4linux2;
+#[cfg(feature = "gige")]
+pub mod gige;
