@@ -165,31 +165,119 @@ pub fn yuv422_to_bgr(
     }
     let n = w as usize * h as usize;
     check("YUV 4:2:2", src.len(), n * 2, w, h, dst)?;
-    let (iy0, iu, iy1, iv) = match order {
-        Yuv422Order::Yuyv => (0, 1, 2, 3),
-        Yuv422Order::Uyvy => (1, 0, 3, 2),
+    if n == 0 {
+        return Ok(());
+    }
+    let rows = src[..n * 2]
+        .chunks_exact(w as usize * 2)
+        .zip(dst.chunks_exact_mut(w as usize * 3));
+    let f = match (order, matrix) {
+        (Yuv422Order::Yuyv, YuvMatrix::Bt601) => row_422::<true, false>,
+        (Yuv422Order::Uyvy, YuvMatrix::Bt601) => row_422::<false, false>,
+        (Yuv422Order::Yuyv, YuvMatrix::Iidc) => row_422::<true, true>,
+        (Yuv422Order::Uyvy, YuvMatrix::Iidc) => row_422::<false, true>,
     };
-    let pairs = src[..n * 2].chunks_exact(4).zip(dst.chunks_exact_mut(6));
-    match matrix {
-        YuvMatrix::Bt601 => {
-            for (s, d) in pairs {
-                let c = chroma_bt601(s[iu], s[iv]);
-                let (d0, d1) = d.split_at_mut(3);
-                put_bt601(s[iy0], c, d0);
-                put_bt601(s[iy1], c, d1);
-            }
-        }
-        YuvMatrix::Iidc => {
-            for (s, d) in pairs {
-                let u = s[iu] as i32 - 128;
-                let v = s[iv] as i32 - 128;
-                let (d0, d1) = d.split_at_mut(3);
-                put_iidc(s[iy0], u, v, d0);
-                put_iidc(s[iy1], u, v, d1);
-            }
-        }
+    for (s, d) in rows {
+        f(s, d);
     }
     Ok(())
+}
+
+/// One row of packed 4:2:2: dispatches to the AVX2 build when the CPU has it.
+fn row_422<const YUYV: bool, const IIDC: bool>(src: &[u8], dst: &mut [u8]) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU has AVX2 (checked just above).
+        return unsafe { row_422_avx2::<YUYV, IIDC>(src, dst) };
+    }
+    row_422_portable::<YUYV, IIDC>(src, dst)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn row_422_avx2<const YUYV: bool, const IIDC: bool>(src: &[u8], dst: &mut [u8]) {
+    row_422_portable::<YUYV, IIDC>(src, dst)
+}
+
+/// Pixels per block of the 4:2:2 rows: planar arrays of this length vectorise.
+const YUV_BLOCK: usize = 128;
+
+/// One row, in blocks of [`YUV_BLOCK`] pixels: de-interleave Y, U, V into
+/// per-pixel arrays (U and V repeated for both pixels of a pair), compute B, G, R
+/// planes, interleave them; the tail pair by pair with the same arithmetic.
+#[inline(always)]
+fn row_422_portable<const YUYV: bool, const IIDC: bool>(src: &[u8], dst: &mut [u8]) {
+    const N: usize = YUV_BLOCK;
+    let (iy0, iu, iy1, iv) = if YUYV { (0, 1, 2, 3) } else { (1, 0, 3, 2) };
+    let mut sc = src.chunks_exact(N * 2);
+    let mut dc = dst.chunks_exact_mut(N * 3);
+    for (s, d) in (&mut sc).zip(&mut dc) {
+        let mut y = [0i32; N];
+        let mut u = [0i32; N];
+        let mut v = [0i32; N];
+        for k in 0..N / 2 {
+            y[2 * k] = s[4 * k + iy0] as i32;
+            y[2 * k + 1] = s[4 * k + iy1] as i32;
+            u[2 * k] = s[4 * k + iu] as i32 - 128;
+            u[2 * k + 1] = s[4 * k + iu] as i32 - 128;
+            v[2 * k] = s[4 * k + iv] as i32 - 128;
+            v[2 * k + 1] = s[4 * k + iv] as i32 - 128;
+        }
+        let mut b = [0u8; N];
+        let mut g = [0u8; N];
+        let mut r = [0u8; N];
+        for k in 0..N {
+            let px = if IIDC {
+                iidc(y[k], u[k], v[k])
+            } else {
+                bt601(y[k], u[k], v[k])
+            };
+            b[k] = px[0];
+            g[k] = px[1];
+            r[k] = px[2];
+        }
+        for k in 0..N {
+            d[3 * k] = b[k];
+            d[3 * k + 1] = g[k];
+            d[3 * k + 2] = r[k];
+        }
+    }
+    for (s, d) in sc
+        .remainder()
+        .chunks_exact(4)
+        .zip(dc.into_remainder().chunks_exact_mut(6))
+    {
+        let (u, v) = (s[iu] as i32 - 128, s[iv] as i32 - 128);
+        for (j, iy) in [iy0, iy1].into_iter().enumerate() {
+            let px = if IIDC {
+                iidc(s[iy] as i32, u, v)
+            } else {
+                bt601(s[iy] as i32, u, v)
+            };
+            d[3 * j..3 * j + 3].copy_from_slice(&px);
+        }
+    }
+}
+
+/// BT.601 video range, OpenCV's fixed point: (b, g, r) of Y and centred U, V.
+#[inline(always)]
+fn bt601(y: i32, u: i32, v: i32) -> [u8; 3] {
+    let y = (y - 16).max(0) * CY + HALF;
+    [
+        sat((y + CUB * u) >> SHIFT),
+        sat((y + CVG * v + CUG * u) >> SHIFT),
+        sat((y + CVR * v) >> SHIFT),
+    ]
+}
+
+/// libdc1394's YUV2RGB: (b, g, r) of Y and centred U, V.
+#[inline(always)]
+fn iidc(y: i32, u: i32, v: i32) -> [u8; 3] {
+    [
+        sat(y + ((u * 1814) >> 10)),
+        sat(y - ((u * 352 + v * 731) >> 10)),
+        sat(y + ((v * 1436) >> 10)),
+    ]
 }
 
 /// IIDC YUV 4:1:1 (U Y0 Y1 V Y2 Y3, 6 bytes per 4 pixels) → BGR, libdc1394's formula.
@@ -333,91 +421,157 @@ pub fn bayer_to_bgr(
     // Top and bottom rows black.
     dst[..wu * 3].fill(0);
     dst[(hu - 1) * wu * 3..].fill(0);
-    // Colour of the site (0, 0): which channel (B=0, G=1, R=2), per row parity.
-    // Row parity p, column parity q → channel.
-    let ch = |p: usize, q: usize| -> usize {
-        let cell = match pattern {
-            Bayer::Rggb => [[2, 1], [1, 0]],
-            Bayer::Gbrg => [[1, 0], [2, 1]],
-            Bayer::Grbg => [[1, 2], [0, 1]],
-            Bayer::Bggr => [[0, 1], [1, 2]],
-        };
-        cell[p][q]
+    // The colour of the top-left site and its right neighbour (B 0, G 1, R 2).
+    let cell = match pattern {
+        Bayer::Rggb => [[2, 1], [1, 0]],
+        Bayer::Gbrg => [[1, 0], [2, 1]],
+        Bayer::Grbg => [[1, 2], [0, 1]],
+        Bayer::Bggr => [[0, 1], [1, 2]],
     };
     for y in 1..hu - 1 {
+        let c = cell[y & 1];
+        let green_first = c[0] == 1;
+        let red = c[0] == 2 || c[1] == 2;
         let up = &src[(y - 1) * wu..y * wu];
         let mid = &src[y * wu..(y + 1) * wu];
         let dn = &src[(y + 1) * wu..(y + 2) * wu];
         let out = &mut dst[y * wu * 3..(y + 1) * wu * 3];
         out[..3].fill(0);
         out[(wu - 1) * 3..].fill(0);
-        let p = y & 1;
-        // The two kinds of site in this row, by column parity.
-        for q in 0..2 {
-            let c = ch(p, q);
-            let x0 = if q == 1 { 1 } else { 2 };
-            if c == 1 {
-                // Green site: horizontal neighbours are the row's other colour.
-                let hc = ch(p, 1 - q);
-                let vc = 2 - hc;
-                bayer_green(up, mid, dn, out, x0, wu, hc, vc);
-            } else {
-                bayer_rb(up, mid, dn, out, x0, wu, c, 2 - c);
-            }
-        }
+        let f = match (green_first, red) {
+            (false, false) => bayer_row::<false, false>,
+            (false, true) => bayer_row::<false, true>,
+            (true, false) => bayer_row::<true, false>,
+            (true, true) => bayer_row::<true, true>,
+        };
+        f(up, mid, dn, out);
     }
     Ok(())
 }
 
-#[inline(always)]
-#[allow(clippy::too_many_arguments)]
-fn bayer_green(
-    up: &[u8],
-    mid: &[u8],
-    dn: &[u8],
-    out: &mut [u8],
-    x0: usize,
-    wu: usize,
-    hc: usize,
-    vc: usize,
-) {
-    let mut x = x0;
-    while x < wu - 1 {
-        let o = &mut out[x * 3..x * 3 + 3];
-        o[1] = mid[x];
-        o[hc] = ((mid[x - 1] as u16 + mid[x + 1] as u16 + 1) >> 1) as u8;
-        o[vc] = ((up[x] as u16 + dn[x] as u16 + 1) >> 1) as u8;
-        x += 2;
+/// One Bayer row: dispatches to the AVX2 build when the CPU has it.
+/// `GF`: the row's even columns are green; `RED`: its other colour is red.
+fn bayer_row<const GF: bool, const RED: bool>(up: &[u8], mid: &[u8], dn: &[u8], out: &mut [u8]) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU has AVX2 (checked just above).
+        return unsafe { bayer_row_avx2::<GF, RED>(up, mid, dn, out) };
     }
+    bayer_row_portable::<GF, RED>(up, mid, dn, out)
 }
 
-#[inline(always)]
-#[allow(clippy::too_many_arguments)]
-fn bayer_rb(
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn bayer_row_avx2<const GF: bool, const RED: bool>(
     up: &[u8],
     mid: &[u8],
     dn: &[u8],
     out: &mut [u8],
-    x0: usize,
-    wu: usize,
-    c: usize,
-    other: usize,
 ) {
-    let mut x = x0;
-    while x < wu - 1 {
+    bayer_row_portable::<GF, RED>(up, mid, dn, out)
+}
+
+/// Pixels per block of a Bayer row.
+const BAYER_BLOCK: usize = 64;
+
+/// Interior pixels 1..w-1 of one row, in blocks: every pixel computes the five
+/// candidates (centre, 4-cross mean, 4-diagonal mean, 2-horizontal mean,
+/// 2-vertical mean) and a mask picks per site (green or not), so the block
+/// vectorises; then B, G, R are interleaved. The tail pixel by pixel.
+#[inline(always)]
+fn bayer_row_portable<const GF: bool, const RED: bool>(
+    up: &[u8],
+    mid: &[u8],
+    dn: &[u8],
+    out: &mut [u8],
+) {
+    const N: usize = BAYER_BLOCK;
+    let w = mid.len();
+    // nc: channel of the row's non-green colour; oc: the colour of the rows above/below.
+    let (nc, oc) = if RED { (2, 0) } else { (0, 2) };
+    let mut x0 = 1;
+    while x0 + N < w {
+        let u = &up[x0 - 1..x0 + N + 1];
+        let m = &mid[x0 - 1..x0 + N + 1];
+        let d = &dn[x0 - 1..x0 + N + 1];
+        let par0 = x0 & 1;
+        let mut ch = [[0u8; N]; 3];
+        for k in 0..N {
+            let (ul, uc, ur) = (u[k] as u16, u[k + 1] as u16, u[k + 2] as u16);
+            let (ml, mc, mr) = (m[k] as u16, m[k + 1] as u16, m[k + 2] as u16);
+            let (dl, dc, dr) = (d[k] as u16, d[k + 1] as u16, d[k + 2] as u16);
+            let center = mc as u8;
+            let cross = ((uc + dc + ml + mr + 2) >> 2) as u8;
+            let diag = ((ul + ur + dl + dr + 2) >> 2) as u8;
+            let hor = ((ml + mr + 1) >> 1) as u8;
+            let ver = ((uc + dc + 1) >> 1) as u8;
+            // 0xFF at green sites.
+            let gm = 0u8.wrapping_sub((((k + par0) & 1 == 0) == GF) as u8);
+            let pick = |at_green: u8, other: u8| (at_green & gm) | (other & !gm);
+            ch[1][k] = pick(center, cross);
+            ch[nc][k] = pick(hor, center);
+            ch[oc][k] = pick(ver, diag);
+        }
+        let o = &mut out[x0 * 3..(x0 + N) * 3];
+        for k in 0..N {
+            o[3 * k] = ch[0][k];
+            o[3 * k + 1] = ch[1][k];
+            o[3 * k + 2] = ch[2][k];
+        }
+        x0 += N;
+    }
+    for x in x0..w - 1 {
+        let (ul, uc, ur) = (up[x - 1] as u16, up[x] as u16, up[x + 1] as u16);
+        let (ml, mc, mr) = (mid[x - 1] as u16, mid[x] as u16, mid[x + 1] as u16);
+        let (dl, dc, dr) = (dn[x - 1] as u16, dn[x] as u16, dn[x + 1] as u16);
         let o = &mut out[x * 3..x * 3 + 3];
-        o[c] = mid[x];
-        o[1] =
-            ((up[x] as u16 + dn[x] as u16 + mid[x - 1] as u16 + mid[x + 1] as u16 + 2) >> 2) as u8;
-        o[other] = ((up[x - 1] as u16 + up[x + 1] as u16 + dn[x - 1] as u16 + dn[x + 1] as u16 + 2)
-            >> 2) as u8;
-        x += 2;
+        if ((x & 1) == 0) == GF {
+            o[1] = mc as u8;
+            o[nc] = ((ml + mr + 1) >> 1) as u8;
+            o[oc] = ((uc + dc + 1) >> 1) as u8;
+        } else {
+            o[nc] = mc as u8;
+            o[1] = ((uc + dc + ml + mr + 2) >> 2) as u8;
+            o[oc] = ((ul + ur + dl + dr + 2) >> 2) as u8;
+        }
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn noise(n: usize) -> Vec<u8> {
+        let mut s = 0x9e37_79b9u32;
+        (0..n)
+            .map(|_| {
+                s ^= s << 13;
+                s ^= s >> 17;
+                s ^= s << 5;
+                (s >> 11) as u8
+            })
+            .collect()
+    }
+
+    /// The portable build and the dispatched (AVX2 where the CPU has it) agree.
+    #[test]
+    fn portable_and_dispatched_rows_agree() {
+        let w = 3 * YUV_BLOCK + 10;
+        let src = noise(w * 2);
+        let (mut a, mut b) = (vec![0; w * 3], vec![0; w * 3]);
+        row_422::<true, false>(&src, &mut a);
+        row_422_portable::<true, false>(&src, &mut b);
+        assert_eq!(a, b);
+        row_422::<false, true>(&src, &mut a);
+        row_422_portable::<false, true>(&src, &mut b);
+        assert_eq!(a, b);
+        let w = 3 * BAYER_BLOCK + 7;
+        let src = noise(w * 3);
+        let (up, mid, dn) = (&src[..w], &src[w..2 * w], &src[2 * w..]);
+        bayer_row::<true, false>(up, mid, dn, &mut a[..w * 3]);
+        bayer_row_portable::<true, false>(up, mid, dn, &mut b[..w * 3]);
+        assert_eq!(a[..w * 3], b[..w * 3]);
+    }
 
     #[test]
     fn short_frames_are_errors() {
