@@ -480,6 +480,9 @@ impl Drop for Open {
 
 /// Frames a driver thread dropped (incomplete buffers), for tests and benchmarks.
 pub static DROPPED: AtomicU64 = AtomicU64::new(0);
+/// Frames the camera sent that never reached the driver (gaps in the buffers'
+/// frame ids while acquiring), for tests and benchmarks.
+pub static SKIPPED: AtomicU64 = AtomicU64::new(0);
 
 const NO_FRAME_STALE: Duration = Duration::from_secs(5);
 const RETRY: Duration = Duration::from_secs(2);
@@ -490,6 +493,7 @@ fn capture_thread(c: GigeConf, iface: Arc<Interface<Image>>, stop: Arc<AtomicBoo
     let mut last_err = String::new();
     let mut last_frame = Instant::now();
     let mut next_try = Instant::now();
+    let mut last_id: Option<u64> = None;
     while !stop.load(Ordering::Acquire) {
         if !iface.wait_used(Duration::from_millis(200)) {
             if let Some(d) = dev.as_mut() {
@@ -527,6 +531,7 @@ fn capture_thread(c: GigeConf, iface: Arc<Interface<Image>>, stop: Arc<AtomicBoo
                 continue;
             }
             last_frame = Instant::now();
+            last_id = None;
         }
         let Some(buf) = d.stream.timeout_pop_buffer(200_000) else {
             if last_frame.elapsed() > NO_FRAME_STALE {
@@ -542,6 +547,13 @@ fn capture_thread(c: GigeConf, iface: Arc<Interface<Image>>, stop: Arc<AtomicBoo
             }
             continue;
         };
+        let id = buf.frame_id();
+        if let Some(l) = last_id
+            && id > l + 1
+        {
+            SKIPPED.fetch_add(id - l - 1, Ordering::Relaxed);
+        }
+        last_id = Some(id);
         if buf.status() == BufferStatus::Success {
             let (w, h) = (buf.image_width() as u32, buf.image_height() as u32);
             let (p, len) = buf.data();
