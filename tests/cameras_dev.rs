@@ -223,3 +223,12 @@ fn no_bus_or_no_camera_is_a_clear_error() {
     }
     assert!(e.unwrap_err().contains("camera 0"));
 }
+
+/// examples/firewire.conf parses and its driver lines are the driver's.
+#[test]
+fn the_example_conf_parses() {
+    let conf = Conf::load(&common::root().join("examples/firewire.conf")).unwrap();
+    let c = conf.component_conf(Kind::Driver, "firewire", None).unwrap();
+    let cams = firewire::parse(&c).unwrap();
+    assert_eq!((cams[0].iface.as_str(), cams[0].width), ("varcolorA", 640));
+}

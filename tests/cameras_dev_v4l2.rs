@@ -209,3 +209,14 @@ fn mjpeg_frames_decode_like_ffmpeg() {
     );
     assert!(v4l2::convert(b"MJPG", b"garbage", w, h, 0, &mut out, &mut scratch).is_err());
 }
+
+/// examples/video4linux2.conf parses and its driver lines are the driver's.
+#[test]
+fn the_example_conf_parses() {
+    let conf = Conf::load(&common::root().join("examples/video4linux2.conf")).unwrap();
+    let c = conf
+        .component_conf(Kind::Driver, "video4linux2", None)
+        .unwrap();
+    let devs = v4l2::parse(&c, false).unwrap();
+    assert_eq!(devs[0].device, Path::new("/dev/video0"));
+}
