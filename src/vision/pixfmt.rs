@@ -212,25 +212,27 @@ fn row_422_portable<const YUYV: bool, const IIDC: bool>(src: &[u8], dst: &mut [u
     let mut sc = src.chunks_exact(N * 2);
     let mut dc = dst.chunks_exact_mut(N * 3);
     for (s, d) in (&mut sc).zip(&mut dc) {
-        let mut y = [0i32; N];
-        let mut u = [0i32; N];
-        let mut v = [0i32; N];
+        // De-interleave as bytes (cheap shuffles), widen in the arithmetic loop.
+        let mut y = [0u8; N];
+        let mut u = [0u8; N];
+        let mut v = [0u8; N];
         for k in 0..N / 2 {
-            y[2 * k] = s[4 * k + iy0] as i32;
-            y[2 * k + 1] = s[4 * k + iy1] as i32;
-            u[2 * k] = s[4 * k + iu] as i32 - 128;
-            u[2 * k + 1] = s[4 * k + iu] as i32 - 128;
-            v[2 * k] = s[4 * k + iv] as i32 - 128;
-            v[2 * k + 1] = s[4 * k + iv] as i32 - 128;
+            y[2 * k] = s[4 * k + iy0];
+            y[2 * k + 1] = s[4 * k + iy1];
+            u[2 * k] = s[4 * k + iu];
+            u[2 * k + 1] = s[4 * k + iu];
+            v[2 * k] = s[4 * k + iv];
+            v[2 * k + 1] = s[4 * k + iv];
         }
         let mut b = [0u8; N];
         let mut g = [0u8; N];
         let mut r = [0u8; N];
         for k in 0..N {
+            let (yy, uu, vv) = (y[k] as i32, u[k] as i32 - 128, v[k] as i32 - 128);
             let px = if IIDC {
-                iidc(y[k], u[k], v[k])
+                iidc(yy, uu, vv)
             } else {
-                bt601(y[k], u[k], v[k])
+                bt601(yy, uu, vv)
             };
             b[k] = px[0];
             g[k] = px[1];
