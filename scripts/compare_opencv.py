@@ -185,11 +185,19 @@ def main():
     bayer[1::2, 1::2] = a[1::2, 1::2, 0]
     bayer.tofile(os.path.join(d, "a.bayer"))
 
-    subprocess.check_call(
-        ["cargo", "build", "--release", "--example", "vision_compare"], cwd=ROOT
-    )
-    target = os.environ.get("CARGO_TARGET_DIR") or os.path.join(ROOT, "target")
-    exe = os.path.join(target, "release", "examples", "vision_compare")
+    # The executable cargo reports (the target dir may be shared, with other trees
+    # linking their own build to the same examples/vision_compare name).
+    built = subprocess.check_output(
+        ["cargo", "build", "--release", "--example", "vision_compare",
+         "--message-format=json-render-diagnostics"], cwd=ROOT
+    ).decode()
+    exe = None
+    for line in built.splitlines():
+        msg = json.loads(line)
+        if msg.get("reason") == "compiler-artifact" and msg["target"]["name"] == "vision_compare":
+            exe = msg.get("executable") or exe
+    if exe is None:
+        sys.exit("cargo did not report the vision_compare executable")
     # glibc hands every allocation above 128 KiB fresh mmapped pages (page faults on
     # first touch) until its dynamic threshold adapts; a long-running process (Python
     # here, a schema in jderobot) reuses its heap instead. Give the Rust process that
