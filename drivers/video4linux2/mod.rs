@@ -210,7 +210,13 @@ pub fn convert(
         b"GBRG" => pixfmt::bayer_to_bgr(data, w, h, Bayer::Gbrg, out),
         b"GRBG" => pixfmt::bayer_to_bgr(data, w, h, Bayer::Grbg, out),
         b"RGGB" => pixfmt::bayer_to_bgr(data, w, h, Bayer::Rggb, out),
-        b"MJPG" | b"JPEG" => return decode_jpeg(data, w, h, out),
+        b"MJPG" | b"JPEG" => {
+            // A decoder bug on a corrupt frame must not take the capture thread down.
+            return std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                decode_jpeg(data, w, h, out)
+            }))
+            .unwrap_or_else(|_| Err("MJPEG frame: the decoder failed (corrupt frame)".into()));
+        }
         other => {
             return Err(format!(
                 "pixel format {} is not supported",

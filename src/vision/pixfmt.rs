@@ -122,22 +122,6 @@ fn sat(v: i32) -> u8 {
     v.clamp(0, 255) as u8
 }
 
-/// Per-chroma terms of one pair of pixels: (b, g, r) added to the luma term.
-#[inline(always)]
-fn chroma_bt601(u: u8, v: u8) -> (i32, i32, i32) {
-    let u = u as i32 - 128;
-    let v = v as i32 - 128;
-    (HALF + CUB * u, HALF + CVG * v + CUG * u, HALF + CVR * v)
-}
-
-#[inline(always)]
-fn put_bt601(y: u8, (cb, cg, cr): (i32, i32, i32), out: &mut [u8]) {
-    let y = (y as i32 - 16).max(0) * CY;
-    out[0] = sat((y + cb) >> SHIFT);
-    out[1] = sat((y + cg) >> SHIFT);
-    out[2] = sat((y + cr) >> SHIFT);
-}
-
 #[inline(always)]
 fn put_iidc(y: u8, u: i32, v: i32, out: &mut [u8]) {
     let y = y as i32;
@@ -224,25 +208,7 @@ fn row_422_portable<const YUYV: bool, const IIDC: bool>(src: &[u8], dst: &mut [u
             v[2 * k] = s[4 * k + iv];
             v[2 * k + 1] = s[4 * k + iv];
         }
-        let mut b = [0u8; N];
-        let mut g = [0u8; N];
-        let mut r = [0u8; N];
-        for k in 0..N {
-            let (yy, uu, vv) = (y[k] as i32, u[k] as i32 - 128, v[k] as i32 - 128);
-            let px = if IIDC {
-                iidc(yy, uu, vv)
-            } else {
-                bt601(yy, uu, vv)
-            };
-            b[k] = px[0];
-            g[k] = px[1];
-            r[k] = px[2];
-        }
-        for k in 0..N {
-            d[3 * k] = b[k];
-            d[3 * k + 1] = g[k];
-            d[3 * k + 2] = r[k];
-        }
+        yuv_block::<IIDC>(&y, &u, &v, d);
     }
     for (s, d) in sc
         .remainder()
@@ -258,6 +224,122 @@ fn row_422_portable<const YUYV: bool, const IIDC: bool>(src: &[u8], dst: &mut [u
             };
             d[3 * j..3 * j + 3].copy_from_slice(&px);
         }
+    }
+}
+
+/// B, G, R of one block of per-pixel Y, U, V bytes, interleaved into `d`
+/// (`3 * YUV_BLOCK` bytes).
+#[inline(always)]
+fn yuv_block<const IIDC: bool>(
+    y: &[u8; YUV_BLOCK],
+    u: &[u8; YUV_BLOCK],
+    v: &[u8; YUV_BLOCK],
+    d: &mut [u8],
+) {
+    const N: usize = YUV_BLOCK;
+    let mut b = [0u8; N];
+    let mut g = [0u8; N];
+    let mut r = [0u8; N];
+    for k in 0..N {
+        let (yy, uu, vv) = (y[k] as i32, u[k] as i32 - 128, v[k] as i32 - 128);
+        let px = if IIDC {
+            iidc(yy, uu, vv)
+        } else {
+            bt601(yy, uu, vv)
+        };
+        b[k] = px[0];
+        g[k] = px[1];
+        r[k] = px[2];
+    }
+    let d = &mut d[..3 * N];
+    for k in 0..N {
+        d[3 * k] = b[k];
+        d[3 * k + 1] = g[k];
+        d[3 * k + 2] = r[k];
+    }
+}
+
+/// One row of IIDC 4:1:1 (U Y0 Y1 V Y2 Y3), blocks as [`yuv_block`].
+fn row_411(src: &[u8], dst: &mut [u8]) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU has AVX2 (checked just above).
+        return unsafe { row_411_avx2(src, dst) };
+    }
+    row_411_portable(src, dst)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn row_411_avx2(src: &[u8], dst: &mut [u8]) {
+    row_411_portable(src, dst)
+}
+
+#[inline(always)]
+fn row_411_portable(src: &[u8], dst: &mut [u8]) {
+    const N: usize = YUV_BLOCK;
+    let mut sc = src.chunks_exact(N * 3 / 2);
+    let mut dc = dst.chunks_exact_mut(N * 3);
+    for (s, d) in (&mut sc).zip(&mut dc) {
+        let (mut y, mut u, mut v) = ([0u8; N], [0u8; N], [0u8; N]);
+        for k in 0..N / 4 {
+            let q = &s[6 * k..6 * k + 6];
+            y[4 * k..4 * k + 4].copy_from_slice(&[q[1], q[2], q[4], q[5]]);
+            u[4 * k..4 * k + 4].fill(q[0]);
+            v[4 * k..4 * k + 4].fill(q[3]);
+        }
+        yuv_block::<true>(&y, &u, &v, d);
+    }
+    for (s, d) in sc
+        .remainder()
+        .chunks_exact(6)
+        .zip(dc.into_remainder().chunks_exact_mut(12))
+    {
+        let (u, v) = (s[0] as i32 - 128, s[3] as i32 - 128);
+        for (j, iy) in [1, 2, 4, 5].into_iter().enumerate() {
+            d[3 * j..3 * j + 3].copy_from_slice(&iidc(s[iy] as i32, u, v));
+        }
+    }
+}
+
+/// One row of planar 4:2:0: the row's Y and its (half-width) U and V rows.
+fn row_420(y: &[u8], u: &[u8], v: &[u8], dst: &mut [u8]) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU has AVX2 (checked just above).
+        return unsafe { row_420_avx2(y, u, v, dst) };
+    }
+    row_420_portable(y, u, v, dst)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn row_420_avx2(y: &[u8], u: &[u8], v: &[u8], dst: &mut [u8]) {
+    row_420_portable(y, u, v, dst)
+}
+
+#[inline(always)]
+fn row_420_portable(yr: &[u8], ur: &[u8], vr: &[u8], dst: &mut [u8]) {
+    const N: usize = YUV_BLOCK;
+    let w = yr.len();
+    let mut x = 0;
+    while x + N <= w {
+        let mut y = [0u8; N];
+        y.copy_from_slice(&yr[x..x + N]);
+        let (mut u, mut v) = ([0u8; N], [0u8; N]);
+        let (uh, vh) = (&ur[x / 2..x / 2 + N / 2], &vr[x / 2..x / 2 + N / 2]);
+        for k in 0..N / 2 {
+            u[2 * k] = uh[k];
+            u[2 * k + 1] = uh[k];
+            v[2 * k] = vh[k];
+            v[2 * k + 1] = vh[k];
+        }
+        yuv_block::<false>(&y, &u, &v, &mut dst[3 * x..3 * (x + N)]);
+        x += N;
+    }
+    for x in x..w {
+        let px = bt601(yr[x] as i32, ur[x / 2] as i32 - 128, vr[x / 2] as i32 - 128);
+        dst[3 * x..3 * x + 3].copy_from_slice(&px);
     }
 }
 
@@ -295,16 +377,14 @@ pub fn yuv411_to_bgr(src: &[u8], w: u32, h: u32, dst: &mut Vec<u8>) -> Result<()
     }
     let n = w as usize * h as usize;
     check("YUV 4:1:1", src.len(), n * 3 / 2, w, h, dst)?;
-    for (s, d) in src[..n * 3 / 2]
-        .chunks_exact(6)
-        .zip(dst.chunks_exact_mut(12))
-    {
-        let u = s[0] as i32 - 128;
-        let v = s[3] as i32 - 128;
-        put_iidc(s[1], u, v, &mut d[0..3]);
-        put_iidc(s[2], u, v, &mut d[3..6]);
-        put_iidc(s[4], u, v, &mut d[6..9]);
-        put_iidc(s[5], u, v, &mut d[9..12]);
+    if n == 0 {
+        return Ok(());
+    }
+    let rows = src[..n * 3 / 2]
+        .chunks_exact(w as usize * 3 / 2)
+        .zip(dst.chunks_exact_mut(w as usize * 3));
+    for (s, d) in rows {
+        row_411(s, d);
     }
     Ok(())
 }
@@ -349,18 +429,7 @@ pub fn yuv420_to_bgr(
         let yr = &yp[row * wu..(row + 1) * wu];
         let ur = &up[(row / 2) * (wu / 2)..(row / 2 + 1) * (wu / 2)];
         let vr = &vp[(row / 2) * (wu / 2)..(row / 2 + 1) * (wu / 2)];
-        let dr = &mut dst[row * wu * 3..(row + 1) * wu * 3];
-        for (((y, d), u), v) in yr
-            .chunks_exact(2)
-            .zip(dr.chunks_exact_mut(6))
-            .zip(ur)
-            .zip(vr)
-        {
-            let c = chroma_bt601(*u, *v);
-            let (d0, d1) = d.split_at_mut(3);
-            put_bt601(y[0], c, d0);
-            put_bt601(y[1], c, d1);
-        }
+        row_420(yr, ur, vr, &mut dst[row * wu * 3..(row + 1) * wu * 3]);
     }
     Ok(())
 }
@@ -573,6 +642,27 @@ mod tests {
         bayer_row::<true, false>(up, mid, dn, &mut a[..w * 3]);
         bayer_row_portable::<true, false>(up, mid, dn, &mut b[..w * 3]);
         assert_eq!(a[..w * 3], b[..w * 3]);
+    }
+
+    /// Planar 4:2:0 in blocks equals the per-pixel formula with nearest chroma.
+    #[test]
+    fn yuv420_blocks_equal_per_pixel() {
+        let (w, h) = (2 * YUV_BLOCK + 6, 4);
+        let src = noise(w * h * 3 / 2);
+        let mut got = Vec::new();
+        yuv420_to_bgr(&src, w as u32, h as u32, true, &mut got).unwrap();
+        let (yp, up, vp) = (
+            &src[..w * h],
+            &src[w * h + w * h / 4..w * h + w * h / 2],
+            &src[w * h..w * h + w * h / 4],
+        );
+        for y in 0..h {
+            for x in 0..w {
+                let c = (y / 2) * (w / 2) + x / 2;
+                let want = bt601(yp[y * w + x] as i32, up[c] as i32 - 128, vp[c] as i32 - 128);
+                assert_eq!(got[(y * w + x) * 3..(y * w + x) * 3 + 3], want, "{x},{y}");
+            }
+        }
     }
 
     #[test]
