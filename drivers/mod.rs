@@ -3,9 +3,9 @@
 
 #[cfg(feature = "firewire")]
 pub mod firewire;
+#[cfg(feature = "gige")]
+pub mod gige;
 #[cfg(feature = "simulator")]
 pub mod simulator;
 #[cfg(feature = "video4linux2")]
 pub mod video4linux2;
-#[cfg(feature = "gige")]
-pub mod gige;

@@ -282,14 +282,14 @@ fn coding_name(c: dc1394color_coding_t) -> &'static str {
 }
 
 /// An open camera, capturing; stops and frees everything on drop.
-struct Open {
+struct Session {
     cam: *mut dc1394camera_t,
     fd: c_int,
     _ctx: Ctx,
 }
 
-impl Open {
-    fn open(c: &CamConf) -> Result<Open, String> {
+impl Session {
+    fn open(c: &CamConf) -> Result<Session, String> {
         let ctx = Ctx::new().map_err(|e| format!("camera {}: {e}", c.cam))?;
         let ids = ctx
             .cameras()
@@ -310,13 +310,13 @@ impl Open {
                 take_log()
             ));
         }
-        // From here on, `open` owns the camera (Drop stops and frees it).
-        let mut open = Open {
+        // From here on, `session` owns the camera (Drop stops and frees it).
+        let mut session = Session {
             cam,
             fd: -1,
             _ctx: ctx,
         };
-        let mode = open.choose_mode(c)?;
+        let mode = session.choose_mode(c)?;
         let ck = |e: dc1394error_t, what: &str| -> Result<(), String> {
             if e == DC1394_SUCCESS {
                 Ok(())
@@ -359,13 +359,13 @@ impl Open {
                 dc1394_capture_setup(cam, 4, DC1394_CAPTURE_FLAGS_DEFAULT),
                 "setting up capture",
             )?;
-            open.fd = dc1394_capture_get_fileno(cam);
+            session.fd = dc1394_capture_get_fileno(cam);
             ck(
                 dc1394_video_set_transmission(cam, DC1394_ON),
                 "starting transmission",
             )?;
         }
-        Ok(open)
+        Ok(session)
     }
 
     /// The fixed IIDC mode of exactly the wanted size and its fastest frame rate.
@@ -493,7 +493,7 @@ impl Open {
     }
 }
 
-impl Drop for Open {
+impl Drop for Session {
     fn drop(&mut self) {
         // SAFETY: valid camera; stopping an idle capture is harmless.
         unsafe {
@@ -558,7 +558,7 @@ const NO_FRAME_STALE: Duration = Duration::from_secs(5);
 const RETRY: Duration = Duration::from_secs(2);
 
 fn capture_thread(c: CamConf, iface: Arc<Interface<Image>>, stop: Arc<AtomicBool>) {
-    let mut dev: Option<Open> = None;
+    let mut dev: Option<Session> = None;
     let mut next_try = Instant::now();
     let mut last_frame = Instant::now();
     let mut last_err = String::new();
@@ -573,7 +573,7 @@ fn capture_thread(c: CamConf, iface: Arc<Interface<Image>>, stop: Arc<AtomicBool
                 std::thread::sleep(Duration::from_millis(100));
                 continue;
             }
-            match Open::open(&c) {
+            match Session::open(&c) {
                 Ok(d) => {
                     if !last_err.is_empty() {
                         tracing::info!("firewire: camera {} is back", c.cam);

@@ -328,7 +328,7 @@ fn gerr(e: aravis::glib::Error) -> String {
 }
 
 /// An open, configured camera.
-struct Open {
+struct Session {
     camera: Camera,
     stream: aravis::Stream,
     w: u32,
@@ -337,8 +337,8 @@ struct Open {
     acquiring: bool,
 }
 
-impl Open {
-    fn open(c: &GigeConf) -> Result<Open, String> {
+impl Session {
+    fn open(c: &GigeConf) -> Result<Session, String> {
         if c.camera.starts_with("Fake") {
             enable_fake();
         }
@@ -444,7 +444,7 @@ impl Open {
         for _ in 0..8 {
             stream.push_buffer(Buffer::new_allocate(payload));
         }
-        Ok(Open {
+        Ok(Session {
             camera,
             stream,
             w: w as u32,
@@ -472,7 +472,7 @@ impl Open {
     }
 }
 
-impl Drop for Open {
+impl Drop for Session {
     fn drop(&mut self) {
         self.stop();
     }
@@ -488,7 +488,7 @@ const NO_FRAME_STALE: Duration = Duration::from_secs(5);
 const RETRY: Duration = Duration::from_secs(2);
 
 fn capture_thread(c: GigeConf, iface: Arc<Interface<Image>>, stop: Arc<AtomicBool>) {
-    let mut dev: Option<Open> = None;
+    let mut dev: Option<Session> = None;
     let mut out = Vec::new();
     let mut last_err = String::new();
     let mut last_frame = Instant::now();
@@ -506,7 +506,7 @@ fn capture_thread(c: GigeConf, iface: Arc<Interface<Image>>, stop: Arc<AtomicBoo
                 std::thread::sleep(Duration::from_millis(50));
                 continue;
             }
-            match Open::open(&c) {
+            match Session::open(&c) {
                 Ok(d) => {
                     last_err.clear();
                     dev = Some(d);
@@ -602,7 +602,7 @@ impl Drop for Gige {
 
 /// Opens and configures camera `c` once (what `create` checks): Ok((w, h, payload)).
 pub fn check(c: &GigeConf) -> Result<(u32, u32, usize), String> {
-    Open::open(c).map(|o| (o.w, o.h, o.payload))
+    Session::open(c).map(|o| (o.w, o.h, o.payload))
 }
 
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>> {

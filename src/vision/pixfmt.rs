@@ -139,7 +139,7 @@ pub fn yuv422_to_bgr(
     matrix: YuvMatrix,
     dst: &mut Vec<u8>,
 ) -> Result<(), PixError> {
-    if w % 2 != 0 {
+    if !w.is_multiple_of(2) {
         return Err(PixError::Size {
             format: "YUV 4:2:2",
             w,
@@ -367,7 +367,7 @@ fn iidc(y: i32, u: i32, v: i32) -> [u8; 3] {
 /// IIDC YUV 4:1:1 (U Y0 Y1 V Y2 Y3, 6 bytes per 4 pixels) → BGR, libdc1394's formula.
 /// `w` must be a multiple of 4.
 pub fn yuv411_to_bgr(src: &[u8], w: u32, h: u32, dst: &mut Vec<u8>) -> Result<(), PixError> {
-    if w % 4 != 0 {
+    if !w.is_multiple_of(4) {
         return Err(PixError::Size {
             format: "YUV 4:1:1",
             w,
@@ -408,7 +408,7 @@ pub fn yuv420_to_bgr(
     swap_uv: bool,
     dst: &mut Vec<u8>,
 ) -> Result<(), PixError> {
-    if w % 2 != 0 || h % 2 != 0 {
+    if !w.is_multiple_of(2) || !h.is_multiple_of(2) {
         return Err(PixError::Size {
             format: "YUV 4:2:0",
             w,
