@@ -28,8 +28,12 @@
 //! - The camera transmits only while someone uses the interface (resume/suspend):
 //!   capture is set up on the first user and stopped (transmission off, ISO
 //!   bandwidth released) when the last one leaves.
-//! - At start the driver checks that camera `CAM` exists; no bus or no such camera
-//!   is an error naming the camera number, the conf line and what libdc1394 found.
+//! - At start the driver checks that camera `CAM` exists; with no bus or no such
+//!   camera it prints a message naming the conf line, the camera number and what
+//!   libdc1394 found, and the interface is stale with that reason (shown by `ps`,
+//!   `echo` and mastergui) until the camera appears: the driver tries again every
+//!   2 s while the interface is used. A size the camera has no mode for is an
+//!   error when the camera is opened (listing its modes), shown the same way.
 //! - A camera unplugged while running (dequeue fails, or no frame for 5 s) marks
 //!   the interface stale with the reason; the driver tries to open camera `CAM`
 //!   again every 2 s and goes on when it is back. Nothing blocks other schemas:
@@ -295,11 +299,13 @@ impl Session {
             .cameras()
             .map_err(|e| format!("camera {}: {e}", c.cam))?;
         let Some(&(guid, unit)) = ids.get(c.cam as usize) else {
-            return Err(format!(
-                "camera {} not found: libdc1394 finds {} camera(s) on the bus",
-                c.cam,
-                ids.len()
-            ));
+            return Err(probe(c.cam).err().unwrap_or_else(|| {
+                format!(
+                    "camera {} not found: libdc1394 finds {} camera(s) on the bus",
+                    c.cam,
+                    ids.len()
+                )
+            }));
         };
         // SAFETY: valid context and an id libdc1394 just listed.
         let cam = unsafe { dc1394_camera_new_unit(ctx.0, guid, unit) };
@@ -557,11 +563,15 @@ const NO_FRAME_STALE: Duration = Duration::from_secs(5);
 /// Wait between attempts to open an absent camera.
 const RETRY: Duration = Duration::from_secs(2);
 
-fn capture_thread(c: CamConf, iface: Arc<Interface<Image>>, stop: Arc<AtomicBool>) {
+fn capture_thread(
+    c: CamConf,
+    iface: Arc<Interface<Image>>,
+    stop: Arc<AtomicBool>,
+    mut last_err: String,
+) {
     let mut dev: Option<Session> = None;
     let mut next_try = Instant::now();
     let mut last_frame = Instant::now();
-    let mut last_err = String::new();
     let mut buf = Vec::new();
     while !stop.load(Ordering::Acquire) {
         if !iface.wait_used(Duration::from_millis(200)) {
@@ -651,20 +661,34 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
         tracing::info!("firewire22: the same driver as firewire (libdc1394 2.x)");
     }
     let cams = parse(conf)?;
-    for c in &cams {
-        probe(c.cam).map_err(|e| anyhow::anyhow!("{}: driver {}: {e}", c.at, conf.name))?;
-    }
     let stop = Arc::new(AtomicBool::new(false));
     let mut threads = Vec::new();
     for c in cams {
         let iface =
             rt.interfaces
                 .provide_value(&c.iface, &conf.name, Image::new(c.width, c.height))?;
+        // An absent camera (or bus) is not fatal: the interface is stale with the
+        // reason until the camera appears, and the capture thread keeps trying.
+        let absent = match probe(c.cam) {
+            Ok(_) => String::new(),
+            Err(e) => {
+                crate::output::println(format!(
+                    "{}: driver {}: {e}; {} stays stale until camera {} appears (tried every {} s while used)",
+                    c.at,
+                    conf.name,
+                    c.iface,
+                    c.cam,
+                    RETRY.as_secs()
+                ));
+                iface.set_stale(e.clone());
+                e
+            }
+        };
         let s = stop.clone();
         threads.push(
             std::thread::Builder::new()
                 .name(format!("firewire-{}", c.cam))
-                .spawn(move || capture_thread(c, iface, s))
+                .spawn(move || capture_thread(c, iface, s, absent))
                 .context("cannot start a firewire capture thread")?,
         );
     }
