@@ -67,17 +67,25 @@ fn start(body: &str) -> Result<Arc<Runtime>, String> {
     Runtime::start(&conf).map_err(|e| e.to_string())
 }
 
+/// An unknown camera: a stale interface whose reason names it and lists what
+/// Aravis sees; jderobot runs on.
 #[test]
-fn an_unknown_camera_is_a_clear_error() {
-    let e = start("provides varcolorA No-Such-Camera-42\n")
-        .err()
-        .expect("no such camera");
-    println!("{e}");
+fn an_unknown_camera_is_a_stale_interface_with_the_reason() {
+    let rt =
+        start("provides varcolorA No-Such-Camera-42 320 240\n").unwrap_or_else(|e| panic!("{e}"));
+    let img = rt.interfaces.get::<Image>("varcolorA").unwrap();
+    let why = img.stale().expect("stale from the start");
+    println!("{why}");
     assert!(
-        e.contains("gige.conf:2") && e.contains("`No-Such-Camera-42`"),
-        "{e}"
+        why.contains("`No-Such-Camera-42`") && why.contains("Aravis sees"),
+        "{why}"
     );
-    assert!(e.contains("Aravis sees"), "{e}");
+    img.resume();
+    std::thread::sleep(Duration::from_millis(500));
+    assert_eq!(img.clock(), 0);
+    assert!(img.stale().is_some());
+    img.suspend();
+    rt.shutdown();
 }
 
 #[test]
@@ -175,7 +183,7 @@ fn fake_gv_camera_program_by_address_unplug_and_back() {
     // The program needs a moment to listen.
     let mut r = Err(String::new());
     for _ in 0..20 {
-        r = gige::check(&c);
+        r = gige::check(&c).map_err(|e| format!("{e:?}"));
         if r.is_ok() {
             break;
         }

@@ -8,7 +8,9 @@ mod common;
 
 use std::{path::Path, process::Command};
 
-use jderobot::{ComponentConf, Conf, Kind, Runtime, drivers::video4linux2 as v4l2};
+use jderobot::{
+    ComponentConf, Conf, Kind, Runtime, drivers::video4linux2 as v4l2, interfaces::Image,
+};
 
 fn parse(name: &str, text: &str) -> anyhow::Result<Vec<v4l2::DevConf>> {
     v4l2::parse(
@@ -82,19 +84,34 @@ fn start_error(driver: &str, provides: &str) -> String {
     }
 }
 
+/// A missing node: a message naming the conf line and the device, a stale
+/// interface, and jderobot runs on (the driver would open it when it appears).
 #[test]
-fn a_missing_device_is_a_clear_error() {
-    let e = start_error("video4linux2", "provides varcolorA /dev/video97 0 640 480");
-    println!("{e}");
-    assert!(
-        e.contains("cam.conf:2") && e.contains("/dev/video97: no such device"),
-        "{e}"
-    );
-    let e = start_error("video4linux", "provides colorA /dev/video97");
-    assert!(
-        e.contains("cam.conf:2") && e.contains("/dev/video97"),
-        "{e}"
-    );
+fn a_missing_device_is_a_message_and_a_stale_interface() {
+    for (driver, provides, iface) in [
+        (
+            "video4linux2",
+            "provides varcolorA /dev/video97 0 640 480",
+            "varcolorA",
+        ),
+        ("video4linux", "provides colorB /dev/video97", "colorB"),
+    ] {
+        let text = format!("driver {driver}\n{provides}\nend_driver\nload_driver {driver}\n");
+        let conf = Conf::parse(&text, Path::new("cam.conf")).unwrap();
+        let rt = Runtime::start(&conf).unwrap_or_else(|e| panic!("{e}"));
+        let img = rt.interfaces.get::<Image>(iface).unwrap();
+        let why = img.stale().expect("stale from the start");
+        println!("{driver}: {why}");
+        assert!(why.contains("/dev/video97: no such device"), "{why}");
+        img.resume();
+        std::thread::sleep(std::time::Duration::from_millis(500));
+        assert_eq!(img.clock(), 0);
+        assert!(img.stale().is_some());
+        img.suspend();
+        rt.shutdown();
+    }
+    let c = &parse("video4linux2", "provides colorA /dev/video97 0\n").unwrap()[0];
+    assert!(matches!(v4l2::check(c), Err(v4l2::CheckError::Absent(_))));
 }
 
 #[test]

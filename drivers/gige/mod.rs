@@ -26,9 +26,11 @@
 //! [`crate::vision::pixfmt`]'s (YUV: BT.601 video range; Bayer: bilinear).
 //!
 //! # Behaviour
-//! - At start the camera must answer: an unknown id is an error naming the conf
-//!   line and the cameras Aravis can see; a size or pixel format the camera
-//!   refuses is an error with the camera's bounds / formats.
+//! - At start: a camera that does not answer (unknown id, unplugged, unreachable)
+//!   is a printed message naming the conf line and the cameras Aravis can see, and
+//!   a stale interface with that reason; the driver tries again every 2 s while
+//!   the interface is used. A size or pixel format the camera refuses is an error
+//!   with the camera's bounds / formats.
 //! - Acquisition runs only while someone uses the interface (resume/suspend).
 //! - A camera that stops answering (no frame for 5 s, or the stream fails) marks
 //!   the interface stale; the driver reopens it every 2 s. Each camera has its
@@ -339,13 +341,18 @@ struct Session {
 
 impl Session {
     fn open(c: &GigeConf) -> Result<Session, String> {
+        Self::configure(Self::connect(c)?, c)
+    }
+
+    /// Finds and opens the camera (fails when it is absent).
+    fn connect(c: &GigeConf) -> Result<Camera, String> {
         if c.camera.starts_with("Fake") {
             enable_fake();
         }
         if CString::new(c.camera.clone()).is_err() {
             return Err(format!("camera id `{}` contains a NUL byte", c.camera));
         }
-        let camera = Camera::new(Some(&c.camera)).map_err(|e| {
+        Camera::new(Some(&c.camera)).map_err(|e| {
             let ids = device_ids();
             format!(
                 "camera `{}`: Aravis cannot open it ({}); Aravis sees {}",
@@ -358,7 +365,11 @@ impl Session {
                     ids.join(", ")
                 }
             )
-        })?;
+        })
+    }
+
+    /// Sets the camera up as the conf says (fails when it cannot do it).
+    fn configure(camera: Camera, c: &GigeConf) -> Result<Session, String> {
         let fail = |what: &str, e: aravis::glib::Error| {
             format!("camera `{}`: {what}: {}", c.camera, gerr(e))
         };
@@ -487,10 +498,14 @@ pub static SKIPPED: AtomicU64 = AtomicU64::new(0);
 const NO_FRAME_STALE: Duration = Duration::from_secs(5);
 const RETRY: Duration = Duration::from_secs(2);
 
-fn capture_thread(c: GigeConf, iface: Arc<Interface<Image>>, stop: Arc<AtomicBool>) {
+fn capture_thread(
+    c: GigeConf,
+    iface: Arc<Interface<Image>>,
+    stop: Arc<AtomicBool>,
+    mut last_err: String,
+) {
     let mut dev: Option<Session> = None;
     let mut out = Vec::new();
-    let mut last_err = String::new();
     let mut last_frame = Instant::now();
     let mut next_try = Instant::now();
     let mut last_id: Option<u64> = None;
@@ -600,33 +615,61 @@ impl Drop for Gige {
     }
 }
 
+/// What `check` found wrong.
+#[derive(Debug, PartialEq)]
+pub enum CheckError {
+    /// Aravis cannot find or open the camera: the driver waits for it.
+    Absent(String),
+    /// The camera is there but cannot do what the conf asks.
+    Unusable(String),
+}
+
 /// Opens and configures camera `c` once (what `create` checks): Ok((w, h, payload)).
-pub fn check(c: &GigeConf) -> Result<(u32, u32, usize), String> {
-    Session::open(c).map(|o| (o.w, o.h, o.payload))
+pub fn check(c: &GigeConf) -> Result<(u32, u32, usize), CheckError> {
+    let camera = Session::connect(c).map_err(CheckError::Absent)?;
+    Session::configure(camera, c)
+        .map(|o| (o.w, o.h, o.payload))
+        .map_err(CheckError::Unusable)
 }
 
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>> {
     let cams = parse(conf)?;
-    let mut sizes = Vec::new();
+    // (size, why absent) per camera.
+    let mut found = Vec::new();
     for c in &cams {
-        let (w, h, _) =
-            check(c).map_err(|e| anyhow::anyhow!("{}: driver {}: {e}", c.at, conf.name))?;
-        if c.iface.starts_with("color") && (w, h) != (COLOR_WIDTH, COLOR_HEIGHT) {
-            anyhow::bail!("{}: {} needs 320x240, camera gives {w}x{h}", c.at, c.iface);
+        match check(c) {
+            Ok((w, h, _)) => {
+                if c.iface.starts_with("color") && (w, h) != (COLOR_WIDTH, COLOR_HEIGHT) {
+                    anyhow::bail!("{}: {} needs 320x240, camera gives {w}x{h}", c.at, c.iface);
+                }
+                found.push(((w, h), String::new()));
+            }
+            Err(CheckError::Absent(e)) => found.push((c.size.unwrap_or((0, 0)), e)),
+            Err(CheckError::Unusable(e)) => anyhow::bail!("{}: driver {}: {e}", c.at, conf.name),
         }
-        sizes.push((w, h));
     }
     let stop = Arc::new(AtomicBool::new(false));
     let mut threads = Vec::new();
-    for (c, (w, h)) in cams.into_iter().zip(sizes) {
+    for (c, ((w, h), absent)) in cams.into_iter().zip(found) {
         let iface = rt
             .interfaces
             .provide_value(&c.iface, &conf.name, Image::new(w, h))?;
+        if !absent.is_empty() {
+            // Not there (yet): a message and a stale interface; the thread keeps trying.
+            crate::output::println(format!(
+                "{}: driver {}: {absent}; {} stays stale until the camera answers (tried every {} s while used)",
+                c.at,
+                conf.name,
+                c.iface,
+                RETRY.as_secs()
+            ));
+            iface.set_stale(absent.clone());
+        }
         let s = stop.clone();
         threads.push(
             std::thread::Builder::new()
                 .name(format!("gige-{}", c.camera))
-                .spawn(move || capture_thread(c, iface, s))
+                .spawn(move || capture_thread(c, iface, s, absent))
                 .context("cannot start a gige capture thread")?,
         );
     }

@@ -27,9 +27,11 @@
 //! OpenCV computes it) and MJPEG is decoded with `zune-jpeg`.
 //!
 //! # Behaviour
-//! - At start: a missing device, a node that is not a V4L2 capture device, an input
-//!   it does not have, or a size it cannot deliver is an error naming the conf line
-//!   and, for sizes, listing what the device offers per format.
+//! - At start: a node that is not a V4L2 capture device, an input it does not
+//!   have, or a size it cannot deliver is an error naming the conf line and, for
+//!   sizes, listing what the device offers per format. A device that is not there
+//!   (yet) is a printed message and a stale interface with the reason; the driver
+//!   tries again every 2 s while the interface is used.
 //! - The device streams only while someone uses the interface (resume/suspend).
 //! - Unplugged while running (the read fails, or no frame for 5 s) → the interface
 //!   is marked stale with the reason; the driver reopens the device every 2 s and
@@ -381,10 +383,22 @@ fn negotiate(dev: &Device, c: &DevConf) -> Result<([u8; 4], u32), String> {
     ))
 }
 
+/// What `check` found wrong.
+#[derive(Debug, PartialEq)]
+pub enum CheckError {
+    /// The node does not exist (yet): the driver waits for it.
+    Absent(String),
+    /// The device is there but cannot do what the conf asks.
+    Unusable(String),
+}
+
 /// Opens, selects the input and negotiates: everything `create` checks.
-pub fn check(c: &DevConf) -> Result<(), String> {
-    let dev = open_device(c)?;
-    negotiate(&dev, c).map(|_| ())
+pub fn check(c: &DevConf) -> Result<(), CheckError> {
+    if !c.device.exists() {
+        return open_device(c).map(|_| ()).map_err(CheckError::Absent);
+    }
+    let dev = open_device(c).map_err(CheckError::Unusable)?;
+    negotiate(&dev, c).map(|_| ()).map_err(CheckError::Unusable)
 }
 
 const NO_FRAME_STALE: Duration = Duration::from_secs(5);
@@ -454,10 +468,14 @@ fn stream_session(
     result
 }
 
-fn capture_thread(c: DevConf, iface: Arc<Interface<Image>>, stop: Arc<AtomicBool>) {
+fn capture_thread(
+    c: DevConf,
+    iface: Arc<Interface<Image>>,
+    stop: Arc<AtomicBool>,
+    mut last_err: String,
+) {
     let mut out = Vec::new();
     let mut scratch = Vec::new();
-    let mut last_err = String::new();
     while !stop.load(Ordering::Acquire) {
         if !iface.wait_used(Duration::from_millis(200)) {
             continue;
@@ -502,15 +520,33 @@ impl Drop for V4l2 {
 
 fn start(conf: &ComponentConf, rt: &Runtime, v4l1: bool) -> anyhow::Result<Box<dyn Driver>> {
     let devs = parse(conf, v4l1)?;
+    let mut absent = Vec::new();
     for d in &devs {
-        check(d).map_err(|e| anyhow::anyhow!("{}: driver {}: {e}", d.at, conf.name))?;
+        match check(d) {
+            Ok(()) => absent.push(String::new()),
+            Err(CheckError::Absent(e)) => absent.push(e),
+            Err(CheckError::Unusable(e)) => {
+                anyhow::bail!("{}: driver {}: {e}", d.at, conf.name)
+            }
+        }
     }
     let stop = Arc::new(AtomicBool::new(false));
     let mut threads = Vec::new();
-    for d in devs {
+    for (d, absent) in devs.into_iter().zip(absent) {
         let iface =
             rt.interfaces
                 .provide_value(&d.iface, &conf.name, Image::new(d.width, d.height))?;
+        if !absent.is_empty() {
+            // Not there (yet): a message and a stale interface; the thread keeps trying.
+            crate::output::println(format!(
+                "{}: driver {}: {absent}; {} stays stale until the device appears (tried every {} s while used)",
+                d.at,
+                conf.name,
+                d.iface,
+                RETRY.as_secs()
+            ));
+            iface.set_stale(absent.clone());
+        }
         let s = stop.clone();
         let name = Path::new(&d.device)
             .file_name()
@@ -519,7 +555,7 @@ fn start(conf: &ComponentConf, rt: &Runtime, v4l1: bool) -> anyhow::Result<Box<d
         threads.push(
             std::thread::Builder::new()
                 .name(format!("v4l2-{name}"))
-                .spawn(move || capture_thread(d, iface, s))
+                .spawn(move || capture_thread(d, iface, s, absent))
                 .context("cannot start a video4linux2 capture thread")?,
         );
     }
