@@ -235,8 +235,8 @@ impl<T: InterfaceValue> Interface<T> {
     /// Marks the value stale: its source is gone (a device unplugged, a server
     /// down), so the latest value is old and will stay so. `ps`, `echo` and
     /// mastergui show the reason and the growing age; the next publish clears it.
-    pub fn set_stale(&self, why: impl Into<String>) {
-        *self.stale.lock() = Some(why.into());
+    pub fn set_stale(&self, why: impl std::fmt::Display) {
+        *self.stale.lock() = Some(why.to_string());
     }
 
     /// Why the value is stale, if it is.
