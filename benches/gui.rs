@@ -21,9 +21,11 @@ use std::{
 
 use jderobot::{
     ComponentConf, Context, Kind, Runtime, Schema,
-    gui::{GuiHost, Panel, widgets::ImageView},
+    gui::GuiHost,
     interfaces::{Image, Interface},
     registry,
+    runtime::Panel,
+    widgets::ImageView,
 };
 
 /// A schema whose iteration takes `work` (sleeping or spinning) and publishes an image.
@@ -85,7 +87,11 @@ fn runtime(
     let path = Path::new("jde.conf");
     let rt = Runtime::new(path);
     if let Some(c) = registry::find("mastergui") {
-        let _ = rt.load_component(c, &ComponentConf::empty(Kind::Schema, "mastergui", path));
+        let _ = jderobot::loader::load_entry(
+            &rt,
+            c,
+            &ComponentConf::empty(Kind::Schema, "mastergui", path),
+        );
         let _ = rt.run("mastergui");
         let _ = rt.show("mastergui");
     }

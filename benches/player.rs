@@ -130,7 +130,7 @@ fn main() {
         emu.port
     );
     let conf = Conf::parse(&text, Path::new("bench.conf")).unwrap();
-    let rt = Runtime::start(&conf).unwrap_or_else(|e| panic!("{e}"));
+    let rt = jderobot::loader::start(&conf).unwrap_or_else(|e| panic!("{e}"));
     let laser: Arc<Interface<Laser>> = rt.interfaces.get("laser").unwrap();
     rt.run("laser").unwrap();
     let mut lat = Vec::new();
@@ -159,7 +159,7 @@ fn main() {
         emu2.port
     );
     let conf = Conf::parse(&text, Path::new("bench.conf")).unwrap();
-    let rt2 = Runtime::start(&conf).unwrap_or_else(|e| panic!("{e}"));
+    let rt2 = jderobot::loader::start(&conf).unwrap_or_else(|e| panic!("{e}"));
     let motors: Arc<Interface<jderobot::interfaces::Motors>> =
         rt2.interfaces.get("motors").unwrap();
     rt2.run("motors").unwrap();

@@ -12,8 +12,9 @@ use std::{
 };
 
 use jderobot::{
-    drivers::simulator::{Renderer, RobotModel, Sim, World},
+    drivers::simulator::{Renderer, RobotModel, Sim},
     interfaces::{Image, Laser, Motors, Sonars},
+    world::World,
 };
 
 const DT: f64 = 0.01;

@@ -29,8 +29,9 @@ use parking_lot::Mutex;
 
 use crate::{
     conf::ComponentConf,
-    gui::{Panel, widgets::TimePlot},
+    runtime::Panel,
     runtime::{Context, Runtime, Schema, State},
+    widgets::TimePlot,
 };
 
 /// The mastergui schema: samples ips for the plot; the panel does the rest.

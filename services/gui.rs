@@ -20,7 +20,7 @@ use crate::{
     runtime::{Driver, Runtime},
 };
 
-/// The GUI service (the window itself runs on the main thread, see [`crate::gui::launch`]).
+/// The GUI service (the window itself runs on the main thread, see `crate::cli`).
 pub struct GuiService;
 
 impl Driver for GuiService {}

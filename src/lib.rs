@@ -18,6 +18,9 @@ pub mod fuzzy;
 #[cfg(feature = "gui")]
 pub mod gui;
 pub mod interfaces;
+pub mod loader;
+#[cfg(feature = "_media")]
+pub mod media;
 pub mod namespace;
 pub mod output;
 pub mod progeo;
@@ -25,6 +28,9 @@ pub mod registry;
 pub mod runtime;
 pub mod shell;
 pub mod vision;
+#[cfg(feature = "gui")]
+pub mod widgets;
+pub mod world;
 
 #[path = "../drivers/mod.rs"]
 pub mod drivers;
@@ -33,9 +39,10 @@ pub mod schemas;
 #[path = "../services/mod.rs"]
 pub mod services;
 
+pub use conf::Kind;
 pub use conf::{ComponentConf, Conf};
 pub use interfaces::{Interface, Interfaces, Sample};
-pub use registry::{Component, Kind};
+pub use registry::Entry;
 pub use runtime::{Context, Runtime, Schema, State};
 
 /// Re-exported so that `register_schema!` and friends work from a user's crate.

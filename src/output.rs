@@ -77,3 +77,12 @@ impl Drop for LogLine {
         let _ = std::io::stderr().lock().write_all(&self.0);
     }
 }
+
+/// What a panic said (its `&str` or `String` payload), for the one-line reports of
+/// a schema, a panel or a driver thread that panicked.
+pub fn panic_text(p: &(dyn std::any::Any + Send)) -> String {
+    p.downcast_ref::<&str>()
+        .map(|s| s.to_string())
+        .or_else(|| p.downcast_ref::<String>().cloned())
+        .unwrap_or_else(|| "panicked".into())
+}

@@ -1,46 +1,18 @@
 //! The compile-time component registry.
 //!
-//! Every driver, service and schema submits a [`Component`] through `inventory`
+//! Every driver, service and schema submits a [`Entry`] through `inventory`
 //! (with [`register_schema!`](crate::register_schema) or
 //! [`register_driver!`](crate::register_driver)), from a module compiled only under
 //! the cargo feature of its own name. The conf loader instantiates only what a conf
 //! loads. Asking for a component that is not compiled in names the feature that
 //! would add it.
 
-use std::fmt;
-
 use crate::{
-    conf::ComponentConf,
+    conf::{ComponentConf, Kind},
     runtime::{Driver, Runtime, Schema},
 };
 
 include!(concat!(env!("OUT_DIR"), "/features.rs"));
-
-/// What a component is.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum Kind {
-    Driver,
-    Service,
-    Schema,
-}
-
-impl Kind {
-    /// Drivers and services are the same kind of object (as in 4.3): a service may
-    /// read a `driver NAME` section and the reverse.
-    pub fn same_family(self, other: Kind) -> bool {
-        self == other || (self != Kind::Schema && other != Kind::Schema)
-    }
-}
-
-impl fmt::Display for Kind {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(match self {
-            Kind::Driver => "driver",
-            Kind::Service => "service",
-            Kind::Schema => "schema",
-        })
-    }
-}
 
 /// Builds a schema from its conf lines.
 pub type SchemaFactory = fn(&ComponentConf, &Runtime) -> anyhow::Result<Box<dyn Schema>>;
@@ -54,8 +26,8 @@ pub enum Factory {
     Driver(DriverFactory),
 }
 
-/// A registered component.
-pub struct Component {
+/// A registered component: what `jderobot list` shows and how to build it.
+pub struct Entry {
     pub kind: Kind,
     pub name: &'static str,
     /// One line for `jderobot list` and help texts.
@@ -65,46 +37,70 @@ pub struct Component {
     pub factory: Factory,
 }
 
-inventory::collect!(Component);
+inventory::collect!(Entry);
 
 /// Every compiled-in component, sorted by kind then name.
-pub fn components() -> Vec<&'static Component> {
-    let mut v: Vec<&'static Component> = inventory::iter::<Component>.into_iter().collect();
+pub fn components() -> Vec<&'static Entry> {
+    let mut v: Vec<&'static Entry> = inventory::iter::<Entry>.into_iter().collect();
     v.sort_by_key(|c| (c.kind as u8, c.name));
     v
 }
 
 /// The compiled-in component called `name`.
-pub fn find(name: &str) -> Option<&'static Component> {
-    inventory::iter::<Component>
+pub fn find(name: &str) -> Option<&'static Entry> {
+    inventory::iter::<Entry>
         .into_iter()
         .find(|c| c.name == name)
 }
 
-/// Looks a component up for a load line, with an error that says what to do.
-pub fn lookup(kind: Option<Kind>, name: &str) -> Result<&'static Component, String> {
+/// Why a load line names nothing this binary can load; each message says what to do.
+#[derive(Debug, thiserror::Error, PartialEq, Eq)]
+pub enum LookupError {
+    #[error("`{name}` is a {is}, not a {asked}; load it with `load_{is} {name}`")]
+    WrongKind { name: String, is: Kind, asked: Kind },
+    /// The component exists as a cargo feature that this binary was built without.
+    #[error(
+        "{what} `{name}` is not compiled into this binary; rebuild with \
+         `cargo build --release --features {name}` (or `--features full`)"
+    )]
+    NotCompiled { what: String, name: String },
+    #[error(
+        "no {what} called `{name}`; compiled in: {compiled}; cargo features that add components: {features}"
+    )]
+    Unknown {
+        what: String,
+        name: String,
+        compiled: String,
+        features: String,
+    },
+}
+
+/// Looks a component up for a load line (`kind` `None` for `load NAME`).
+pub fn lookup(kind: Option<Kind>, name: &str) -> Result<&'static Entry, LookupError> {
     if let Some(c) = find(name) {
         return match kind {
-            Some(k) if !k.same_family(c.kind) => Err(format!(
-                "`{name}` is a {}, not a {k}; load it with `load_{} {name}`",
-                c.kind, c.kind
-            )),
+            Some(k) if !k.same_family(c.kind) => Err(LookupError::WrongKind {
+                name: name.into(),
+                is: c.kind,
+                asked: k,
+            }),
             _ => Ok(c),
         };
     }
     let what = kind.map(|k| k.to_string()).unwrap_or("component".into());
     if ALL_COMPONENT_FEATURES.contains(&name) {
-        return Err(format!(
-            "{what} `{name}` is not compiled into this binary; rebuild with \
-             `cargo build --release --features {name}` (or `--features full`)"
-        ));
+        return Err(LookupError::NotCompiled {
+            what,
+            name: name.into(),
+        });
     }
     let compiled: Vec<&str> = components().iter().map(|c| c.name).collect();
-    Err(format!(
-        "no {what} called `{name}`; compiled in: {}; cargo features that add components: {}",
-        compiled.join(", "),
-        ALL_COMPONENT_FEATURES.join(", ")
-    ))
+    Err(LookupError::Unknown {
+        what,
+        name: name.into(),
+        compiled: compiled.join(", "),
+        features: ALL_COMPONENT_FEATURES.join(", "),
+    })
 }
 
 /// Registers a schema: `register_schema!("name", "summary", factory_fn)`.
@@ -118,8 +114,8 @@ macro_rules! register_schema {
     };
     ($name:literal, $summary:literal, $factory:expr, $feature:literal) => {
         $crate::inventory::submit! {
-            $crate::registry::Component {
-                kind: $crate::registry::Kind::Schema,
+            $crate::registry::Entry {
+                kind: $crate::conf::Kind::Schema,
                 name: $name,
                 summary: $summary,
                 feature: $feature,
@@ -139,8 +135,8 @@ macro_rules! register_driver {
     };
     ($kind:ident, $name:literal, $summary:literal, $factory:expr, $feature:literal) => {
         $crate::inventory::submit! {
-            $crate::registry::Component {
-                kind: $crate::registry::Kind::$kind,
+            $crate::registry::Entry {
+                kind: $crate::conf::Kind::$kind,
                 name: $name,
                 summary: $summary,
                 feature: $feature,

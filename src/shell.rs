@@ -29,10 +29,9 @@ use std::{
 };
 
 use crate::{
-    conf::Conf,
+    conf::{Conf, Kind},
     interfaces::AnyInterface,
-    output,
-    registry::{self, Kind},
+    loader, output, registry,
     runtime::Runtime,
 };
 
@@ -252,7 +251,7 @@ impl Shell {
                         ));
                     }
                 };
-                rt.load(&self.conf, kind, name, file.as_deref())
+                loader::load(&rt, &self.conf, kind, name, file.as_deref())
                     .map_err(|e| format!("{cmd}: {e}"))?;
                 w(out, format!("{name} loaded"));
                 Ok(Flow::Continue)
@@ -369,19 +368,20 @@ impl Shell {
         let res = match cmd {
             "help" | "?" => return help(true, args, out),
             "cd" | "dir" | "pwd" | "view" => return files(cmd, args, out),
-            "run" => rt.run(schema),
-            "stop" => rt.stop(schema),
-            "show" => rt.show(schema),
-            "hide" => rt.hide(schema),
+            "run" => rt.run(schema).map_err(|e| e.to_string()),
+            "stop" => rt.stop(schema).map_err(|e| e.to_string()),
+            "show" => rt.show(schema).map_err(|e| e.to_string()),
+            "hide" => rt.hide(schema).map_err(|e| e.to_string()),
             "init" => {
                 let file = args.first().map(Path::new);
-                rt.reinit(schema, file).map(|_| {
-                    w(out, format!("{schema} initialized"));
-                })
+                loader::reinit(&rt, schema, file)
+                    .map(|_| w(out, format!("{schema} initialized")))
+                    .map_err(|e| e.to_string())
             }
-            "terminate" => rt.terminate_schema(schema).map(|_| {
-                w(out, format!("{schema} terminated"));
-            }),
+            "terminate" => rt
+                .terminate_schema(schema)
+                .map(|_| w(out, format!("{schema} terminated")))
+                .map_err(|e| e.to_string()),
             "exit" | "quit" => {
                 self.zoomed = None;
                 w(out, String::new());
@@ -534,7 +534,10 @@ pub fn ps(rt: &Runtime, out: &mut dyn Write) {
 }
 
 fn echo_line(i: &dyn AnyInterface) -> String {
-    let stale = i.stale().map(|why| format!(" STALE ({why})")).unwrap_or_default();
+    let stale = i
+        .stale()
+        .map(|why| format!(" STALE ({why})"))
+        .unwrap_or_default();
     format!(
         "{} clock={} age={:.3}s{stale} {}",
         i.name(),
@@ -621,12 +624,22 @@ pub fn history_file() -> Option<PathBuf> {
     Some(base.join("jderobot").join("history"))
 }
 
+/// How a shell ended.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ShellEnd {
+    /// The user asked: `quit`, `exit`, or Ctrl+D at the terminal in main state.
+    Quit,
+    /// Piped standard input ended (a script's end, `</dev/null`, a desktop
+    /// launcher): nobody asked the run to stop.
+    EndOfInput,
+}
+
 /// Runs the shell until `quit`, Ctrl+D in main state, or end of piped input.
-pub fn run(rt: Arc<Runtime>, conf: Conf) {
+pub fn run(rt: Arc<Runtime>, conf: Conf) -> ShellEnd {
     let mut shell = Shell::new(rt, conf);
     if std::io::IsTerminal::is_terminal(&std::io::stdin()) {
         match interactive(&mut shell) {
-            Ok(()) => return,
+            Ok(()) => return ShellEnd::Quit,
             Err(e) => eprintln!("line editor unavailable ({e}); reading plain lines"),
         }
     }
@@ -653,9 +666,10 @@ pub fn run(rt: Arc<Runtime>, conf: Conf) {
             continue;
         };
         if shell.execute(line.trim(), &mut out, &mut err) == Flow::Quit {
-            break;
+            return ShellEnd::Quit;
         }
     }
+    ShellEnd::EndOfInput
 }
 
 mod editor {

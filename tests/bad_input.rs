@@ -16,11 +16,12 @@ use std::path::Path;
 
 use jderobot::{
     Conf,
-    drivers::simulator::{RobotModel, Sim, World as SimWorld},
+    drivers::simulator::{RobotModel, Sim},
     fuzzy::Controller,
     interfaces::{Image, Laser, Sonars},
     progeo::{HPoint3D, PinholeCamera, World as CamWorld},
     vision::{Kernel, convolve},
+    world::World as SimWorld,
 };
 
 /// Tokens a mutation may put in place of another: the numbers and words that

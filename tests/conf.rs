@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 use jderobot::{
     Kind,
     conf::{Action, Conf},
-    registry, runtime,
+    registry,
 };
 
 fn parse(text: &str) -> Result<Conf, String> {
@@ -13,7 +13,7 @@ fn parse(text: &str) -> Result<Conf, String> {
 }
 
 fn check(text: &str) -> Vec<String> {
-    runtime::check(&parse(text).unwrap())
+    jderobot::loader::check(&parse(text).unwrap())
         .into_iter()
         .map(|e| e.to_string())
         .collect()

@@ -11,15 +11,13 @@ use egui::{Pos2, Rect, pos2, vec2};
 use egui_kittest::{Harness, kittest::Queryable};
 use jderobot::{
     ComponentConf, Kind, Runtime, State,
-    gui::{
-        GuiHost,
-        widgets::{
-            ImageView, Joystick, OrbitCamera, PanTiltLimits, PanTiltPad, PixelPick, Wireframe3D,
-            WorldScene, WorldView,
-        },
-    },
+    gui::GuiHost,
     interfaces::{Encoders, Image, Laser},
     registry,
+    widgets::{
+        ImageView, Joystick, OrbitCamera, PanTiltLimits, PanTiltPad, PixelPick, Wireframe3D,
+        WorldScene, WorldView,
+    },
 };
 
 fn runtime_with(names: &[(&str, Kind)]) -> Arc<Runtime> {
@@ -27,7 +25,7 @@ fn runtime_with(names: &[(&str, Kind)]) -> Arc<Runtime> {
     let rt = Runtime::new(path);
     for (name, kind) in names {
         let comp = registry::find(name).unwrap_or_else(|| panic!("{name} compiled in"));
-        rt.load_component(comp, &ComponentConf::empty(*kind, name, path))
+        jderobot::loader::load_entry(&rt, comp, &ComponentConf::empty(*kind, name, path))
             .unwrap_or_else(|e| panic!("load {name}: {e}"));
     }
     rt
@@ -161,9 +159,9 @@ fn a_panel_that_panics_is_replaced_by_a_note() {
         fn iteration(&mut self, _: &jderobot::Context) -> anyhow::Result<()> {
             Ok(())
         }
-        fn panel(&mut self) -> Option<Box<dyn jderobot::gui::Panel>> {
+        fn panel(&mut self) -> Option<Box<dyn jderobot::runtime::Panel>> {
             struct Boom;
-            impl jderobot::gui::Panel for Boom {
+            impl jderobot::runtime::Panel for Boom {
                 fn ui(&mut self, _: &mut egui::Ui, _: &Runtime) {
                     panic!("boom in the panel");
                 }
@@ -459,5 +457,45 @@ fn host_quit_button_and_ctrl_q_ask_to_close() {
     h.get_by_label("myschema").click();
     h.run();
     assert!(rt.schema("myschema").expect("loaded").shown());
+    rt.shutdown();
+}
+
+/// Panels open beside the docked mastergui, tiled, and stay there: none covers
+/// mastergui's run and show columns, none covers another.
+#[test]
+fn panels_tile_beside_mastergui_and_never_cover_it() {
+    let rt = runtime_with(&[
+        ("gui", Kind::Service),
+        ("mastergui", Kind::Schema),
+        ("myschema", Kind::Schema),
+        ("ping", Kind::Schema),
+    ]);
+    for s in ["mastergui", "myschema", "ping"] {
+        rt.show(s).expect("show");
+    }
+    let host = GuiHost::new(rt.clone());
+    let mut h = Harness::builder()
+        .with_size(vec2(1400.0, 800.0))
+        .build_ui_state(|ui, host: &mut GuiHost| host.ui(ui), host);
+    h.run();
+    h.run();
+    let free = h.state().free_area().expect("free area drawn");
+    let docked = h.get_by_label("run myschema").rect();
+    assert!(
+        docked.max.x <= free.min.x,
+        "mastergui {docked:?} reaches into {free:?}"
+    );
+    let rects = h.state().panel_rects();
+    assert_eq!(rects.len(), 2, "{rects:?}");
+    for (name, r) in &rects {
+        assert!(
+            free.expand(1.0).contains_rect(*r),
+            "{name}'s panel {r:?} leaves the free area {free:?}"
+        );
+    }
+    assert!(
+        !rects[0].1.intersects(rects[1].1),
+        "panels overlap: {rects:?}"
+    );
     rt.shutdown();
 }

@@ -2,7 +2,7 @@
 //! controller ([`Brain`]) is driven in a loop against a stepped [`Sim`] (sensors
 //! from the Sim → controller → motors → `Sim::step`), plus one run through the
 //! real runtime and a conf file.
-#![cfg(feature = "introrob")]
+#![cfg(all(feature = "introrob", feature = "simulator"))]
 
 use std::{
     path::{Path, PathBuf},
@@ -12,14 +12,14 @@ use std::{
 
 use jderobot::{
     conf::Conf,
-    drivers::simulator::{RobotModel, Sim, World},
+    drivers::simulator::{RobotModel, Sim},
     interfaces::{Bumpers, Encoders, Laser, Motors, Sonars},
-    runtime::Runtime,
     schemas::introrob::{
-        Behaviour, Brain, Inputs, Shared,
+        Behaviour, Brain, Dashboard, Inputs,
         gpp::{self, GridMap, PlanParams},
         navigation::{Robot, absolute_to_relative, relative_to_absolute},
     },
+    world::World,
 };
 
 fn assets() -> PathBuf {
@@ -49,7 +49,7 @@ impl Bench {
     fn new(w: World, pose: (f64, f64, f64), max_v: f32, max_w: f32) -> Bench {
         let mut sim = Sim::new(w.clone(), 1);
         sim.add_robot("robot1", RobotModel::default(), pose.0, pose.1, pose.2);
-        let shared = Shared::new(Some(Arc::new(w)), max_v, max_w);
+        let shared = Dashboard::new(Some(Arc::new(w)), max_v, max_w);
         Bench {
             sim,
             brain: Brain::new(shared),
@@ -62,8 +62,8 @@ impl Bench {
         }
     }
 
-    fn shared(&self) -> &Shared {
-        &self.brain.shared
+    fn dashboard(&self) -> &Dashboard {
+        &self.brain.dashboard
     }
 
     fn pose(&self) -> Encoders {
@@ -124,16 +124,16 @@ fn vff_crosses_the_simple_room_without_touching_anything() {
     // straight line passes the tip of the partition at x = 3000.
     let target = [5000.0, 2200.0];
     let mut b = Bench::new(world("simple.world"), (1000.0, 1000.0, 90.0), 400.0, 40.0);
-    b.shared().set_target(Some(target));
-    b.shared().set_behaviour(Behaviour::Vff);
+    b.dashboard().set_target(Some(target));
+    b.dashboard().set_behaviour(Behaviour::Vff);
     let reached = b.run_until(120.0, |b| {
-        b.shared().view.lock().status == "vff: target reached"
+        b.dashboard().view.lock().status == "vff: target reached"
     });
     let last = b.track.last().copied().unwrap();
     assert!(
         reached,
         "VFF did not reach {target:?} in 120 s; ended at {last:?}, status {:?}",
-        b.shared().view.lock().status
+        b.dashboard().view.lock().status
     );
     assert!(
         b.distance_to(target) < 200.0,
@@ -164,10 +164,10 @@ fn vff_targets_elsewhere_in_the_room() {
         ((1000.0, 1000.0, 0.0), [2000.0, 3300.0]),
     ] {
         let mut b = Bench::new(world("simple.world"), start, 400.0, 40.0);
-        b.shared().set_target(Some(target));
-        b.shared().set_behaviour(Behaviour::Vff);
+        b.dashboard().set_target(Some(target));
+        b.dashboard().set_behaviour(Behaviour::Vff);
         let reached = b.run_until(120.0, |b| {
-            b.shared().view.lock().status == "vff: target reached"
+            b.dashboard().view.lock().status == "vff: target reached"
         });
         assert!(
             reached,
@@ -184,12 +184,12 @@ fn gpp_plans_through_doors_and_the_robot_follows_without_collision() {
     // north door into the room opposite.
     let goal = [2500.0, 12000.0];
     let mut b = Bench::new(world("building.world"), (3000.0, 3000.0, 90.0), 400.0, 40.0);
-    b.shared().set_target(Some(goal));
-    b.shared().set_behaviour(Behaviour::Gpp);
+    b.dashboard().set_target(Some(goal));
+    b.dashboard().set_behaviour(Behaviour::Gpp);
     let reached = b.run_until(240.0, |b| {
-        b.shared().view.lock().status == "gpp: goal reached"
+        b.dashboard().view.lock().status == "gpp: goal reached"
     });
-    let status = b.shared().view.lock().status.clone();
+    let status = b.dashboard().view.lock().status.clone();
     assert!(
         reached,
         "GPP did not reach {goal:?}; ended at {:?}, status {status:?}",
@@ -226,14 +226,14 @@ fn gpp_through_the_door_between_two_south_rooms() {
     // The internal door between the two south-west rooms (x = 5000, y 2500..3500).
     let goal = [7500.0, 3000.0];
     let mut b = Bench::new(world("building.world"), (3000.0, 3000.0, 90.0), 400.0, 40.0);
-    b.shared().set_target(Some(goal));
-    b.shared().set_behaviour(Behaviour::Gpp);
+    b.dashboard().set_target(Some(goal));
+    b.dashboard().set_behaviour(Behaviour::Gpp);
     let reached = b.run_until(120.0, |b| {
-        b.shared().view.lock().status == "gpp: goal reached"
+        b.dashboard().view.lock().status == "gpp: goal reached"
     });
     assert!(reached, "not reached; ended at {:?}", b.track.last());
     assert!(!b.collided);
-    let path = b.shared().view.lock().path.clone();
+    let path = b.dashboard().view.lock().path.clone();
     assert!(path.len() > 10);
 }
 
@@ -270,24 +270,24 @@ fn gpp_reports_unreachable_and_blocked_goals() {
 #[test]
 fn teleoperation_moves_the_robot_as_commanded() {
     let mut b = Bench::new(world("simple.world"), (1000.0, 2000.0, 0.0), 500.0, 30.0);
-    b.shared().set_behaviour(Behaviour::Teleop);
+    b.dashboard().set_behaviour(Behaviour::Teleop);
     // 300 mm/s ahead for 3 s: about 900 mm less the acceleration ramp (300 mm/s²).
-    b.shared().set_teleop(300.0, 0.0);
+    b.dashboard().set_teleop(300.0, 0.0);
     b.run_until(3.0, |_| false);
     let p = b.pose();
     assert!((p.x - 1000.0 - 825.0).abs() < 60.0, "x = {}", p.x);
     assert!((p.y - 2000.0).abs() < 5.0, "y = {}", p.y);
     // Turn in place at 30 deg/s for 3 s: about 90 degrees less the ramp.
-    b.shared().set_teleop(0.0, 30.0);
+    b.dashboard().set_teleop(0.0, 30.0);
     b.run_until(3.0, |_| false);
     let p2 = b.pose();
     let turned = (p2.theta - p.theta).to_degrees().rem_euclid(360.0);
     assert!((turned - 85.0).abs() < 8.0, "turned {turned}");
     // Commands beyond the maxima are clamped (500 mm/s, 30 deg/s).
-    b.shared().set_teleop(5000.0, -900.0);
-    assert_eq!(*b.shared().teleop.lock(), Motors { v: 500.0, w: -30.0 });
+    b.dashboard().set_teleop(5000.0, -900.0);
+    assert_eq!(*b.dashboard().teleop.lock(), Motors { v: 500.0, w: -30.0 });
     // Stop: the robot comes to rest.
-    b.shared().set_behaviour(Behaviour::Stop);
+    b.dashboard().set_behaviour(Behaviour::Stop);
     b.run_until(3.0, |_| false);
     let a = b.pose();
     b.run_until(1.0, |_| false);
@@ -302,13 +302,13 @@ fn teleoperation_moves_the_robot_as_commanded() {
 #[test]
 fn your_code_sample_wanders_safely() {
     let mut b = Bench::new(world("simple.world"), (1000.0, 1000.0, 0.0), 500.0, 30.0);
-    b.shared().set_behaviour(Behaviour::YourCode);
+    b.dashboard().set_behaviour(Behaviour::YourCode);
     b.run_until(60.0, |_| false);
     assert!(!b.collided, "the sample touched something");
     let odometer = b.sim.robots[0].odometer;
     assert!(odometer > 2000.0, "the sample barely moved: {odometer} mm");
     // It drew its two sample segments.
-    assert_eq!(b.shared().view.lock().drawings.len(), 2);
+    assert_eq!(b.dashboard().view.lock().drawings.len(), 2);
 }
 
 #[test]
@@ -365,7 +365,7 @@ fn introrob_through_the_runtime_moves_toward_its_target() {
         ),
     );
     let conf = Conf::load(&conf).expect("conf parses");
-    let rt = Runtime::start(&conf).expect("runtime starts");
+    let rt = jderobot::loader::start(&conf).expect("runtime starts");
     let enc = rt.interfaces.get::<Encoders>("encoders").unwrap();
     let target = [5000.0f32, 2200.0];
     let d = |e: Encoders| ((e.x - target[0]).powi(2) + (e.y - target[1]).powi(2)).sqrt();
@@ -379,7 +379,7 @@ fn introrob_through_the_runtime_moves_toward_its_target() {
     // The simulator's world came from the simulator's section (no `world` line).
     let shared = rt
         .names
-        .import::<Shared>("introrob", "state")
+        .import::<Dashboard>("introrob", "state")
         .expect("introrob exports its state");
     assert!(
         shared.world.is_some(),
@@ -407,7 +407,7 @@ fn conf_errors_name_file_and_line() {
     for (line, expect) in [
         ("behaviour fly", "unknown behaviour `fly`"),
         ("target 1 two", "expected Y in mm"),
-        ("max_v -3", "positive"),
+        ("max_v -3", "must be above 0"),
         ("wibble 3", "don't know what to do"),
         ("world nowhere.world", "world"),
     ] {
@@ -421,7 +421,7 @@ fn conf_errors_name_file_and_line() {
             ),
         );
         let conf = Conf::load(&conf).expect("conf parses");
-        let e = match Runtime::start(&conf) {
+        let e = match jderobot::loader::start(&conf) {
             Ok(rt) => {
                 rt.shutdown();
                 panic!("`{line}` was accepted")
@@ -438,7 +438,7 @@ fn conf_errors_name_file_and_line() {
         "driver simulator\nprovides encoders\nprovides motors\nend_driver\n\
          load_driver simulator\nload_schema introrob\n",
     );
-    let e = Runtime::start(&Conf::load(&conf).unwrap())
+    let e = jderobot::loader::start(&Conf::load(&conf).unwrap())
         .err()
         .unwrap()
         .to_string();
@@ -461,15 +461,15 @@ fn shell_init_with_another_conf_changes_behaviour_and_target() {
             world.display()
         ),
     );
-    let rt = Runtime::start(&Conf::load(&main).unwrap()).expect("starts");
-    let shared = rt.names.import::<Shared>("introrob", "state").unwrap();
+    let rt = jderobot::loader::start(&Conf::load(&main).unwrap()).expect("starts");
+    let shared = rt.names.import::<Dashboard>("introrob", "state").unwrap();
     assert_eq!(*shared.behaviour.lock(), Behaviour::Teleop);
     let go = write_conf(
         dir.path(),
         "go.conf",
         "schema introrob\nbehaviour gpp\ntarget 5000 3000\nend_schema\n",
     );
-    rt.reinit("introrob", Some(&go)).expect("init");
+    jderobot::loader::reinit(&rt, "introrob", Some(&go)).expect("init");
     let ok = (0..100).any(|_| {
         std::thread::sleep(Duration::from_millis(50));
         shared.view.lock().status.starts_with("gpp:")
@@ -490,7 +490,7 @@ fn garbage_inputs_do_not_panic() {
     // brain answers with finite commands.
     let w = world("simple.world");
     for (max_v, max_w) in [(400.0, 40.0), (-1.0, f32::NAN), (f32::INFINITY, 0.0)] {
-        let shared = Shared::new(Some(Arc::new(w.clone())), max_v, max_w);
+        let shared = Dashboard::new(Some(Arc::new(w.clone())), max_v, max_w);
         let mut brain = Brain::new(shared.clone());
         let scans = [
             Laser::default(),
@@ -535,4 +535,36 @@ fn garbage_inputs_do_not_panic() {
             }
         }
     }
+}
+
+/// Without a map (no `world` line and nothing exported as `world.map`, or `world
+/// none`), gpp stands still and says it needs one; the other behaviours still run.
+#[test]
+fn without_a_map_gpp_says_it_needs_one() {
+    let dashboard = Dashboard::new(None, 500.0, 30.0);
+    let mut brain = Brain::new(dashboard.clone());
+    dashboard.set_target(Some([2000.0, 0.0]));
+    dashboard.set_behaviour(Behaviour::Gpp);
+    let laser = Laser {
+        readings: vec![8000; 180],
+        resolution: 1.0,
+    };
+    let input = Inputs {
+        pose: Encoders::default(),
+        laser: &laser,
+        sonars: None,
+        bumpers: None,
+        image: None,
+        time: 0.0,
+    };
+    let m = brain.step(&input);
+    assert_eq!((m.v, m.w), (0.0, 0.0), "gpp without a map stands still");
+    let status = dashboard.view.lock().status.clone();
+    assert!(
+        status.contains("needs a map") && status.contains("world.map"),
+        "{status}"
+    );
+    dashboard.set_behaviour(Behaviour::Vff);
+    let m = brain.step(&input);
+    assert!(m.v > 0.0, "vff needs no map: {m:?}");
 }

@@ -1,7 +1,12 @@
 //! introrob's and teleoperator's panels through egui_kittest, headless (no
 //! display, no GPU): the behaviour buttons, the world view's click target, STOP,
 //! and the teleoperator's pan-tilt pad reach the schemas' shared state.
-#![cfg(all(feature = "gui", feature = "introrob", feature = "teleoperator"))]
+#![cfg(all(
+    feature = "gui",
+    feature = "introrob",
+    feature = "teleoperator",
+    feature = "simulator"
+))]
 
 mod common;
 
@@ -12,7 +17,7 @@ use egui::vec2;
 use egui_kittest::kittest::Queryable;
 use jderobot::{
     runtime::Runtime,
-    schemas::introrob::{Behaviour, Shared},
+    schemas::introrob::{Behaviour, Dashboard},
 };
 
 fn start(schema: &str, body: &str) -> Arc<Runtime> {
@@ -28,7 +33,7 @@ fn start(schema: &str, body: &str) -> Arc<Runtime> {
 #[test]
 fn introrob_panel_sets_behaviour_target_and_stop() {
     let rt = start("introrob", "behaviour teleop\n");
-    let shared = rt.names.import::<Shared>("introrob", "state").unwrap();
+    let shared = rt.names.import::<Dashboard>("introrob", "state").unwrap();
     let mut h = panel_harness(&rt, "introrob", vec2(1000.0, 700.0));
     h.run();
     h.get_by_label("vff").click();
@@ -77,7 +82,7 @@ fn teleoperator_panel_draws_and_stops() {
 /// teleoperator's 3D canvas draws a ball as a wireframe sphere resting on the floor.
 #[test]
 fn balls_are_wireframe_spheres_on_the_floor() {
-    use jderobot::{drivers::simulator::Ball, schemas::teleoperator::panel::ball_segments};
+    use jderobot::{schemas::teleoperator::panel::ball_segments, world::Ball};
     let ball = Ball {
         pos: [4500.0, 1200.0],
         vel: [0.0, 0.0],

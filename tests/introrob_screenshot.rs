@@ -7,7 +7,12 @@
 //!
 //! Needs a display (CI runs it under `xvfb-run -a`) and imagemagick; without them
 //! it says why and passes without checking anything.
-#![cfg(all(feature = "gui", feature = "mastergui", feature = "introrob"))]
+#![cfg(all(
+    feature = "gui",
+    feature = "mastergui",
+    feature = "introrob",
+    feature = "simulator"
+))]
 
 mod common;
 

@@ -10,12 +10,11 @@ use std::{path::Path, sync::Arc, time::Duration};
 
 use jderobot::{
     ComponentConf, Conf, Runtime,
-    drivers::simulator::{
-        BallSpec, Renderer, RobotModel, Sim, SimConf, World, live_balls, loaded_world,
-    },
+    conf::Kind,
+    drivers::simulator::{Renderer, RobotModel, Sim, Simulation},
     interfaces::{Encoders, Image, Interface, Laser, Motors, PtMotors},
     progeo::{self, HPoint3D},
-    registry::Kind,
+    world::{self, BallSpec, World},
 };
 
 const DT: f64 = 0.01;
@@ -452,9 +451,9 @@ fn world_file_errors_name_file_and_line() {
     );
 }
 
-fn sim_conf(text: &str) -> anyhow::Result<SimConf> {
+fn sim_conf(text: &str) -> anyhow::Result<Simulation> {
     let c = ComponentConf::from_text(Kind::Driver, "simulator", text).unwrap();
-    SimConf::parse(&c)
+    Ok(Simulation::parse(&c)?)
 }
 
 #[test]
@@ -506,12 +505,12 @@ fn start(body: &str) -> Arc<Runtime> {
     ))
 }
 
-/// The balls as they roll are in the name space (`simulator.balls`): a robot
+/// The balls as they roll are in the name space (`world.balls`): a robot
 /// driving into simple.world's red ball pushes it east.
 #[test]
 fn the_driver_publishes_the_balls_as_they_roll() {
     let rt = start("robot robot1 3900 1200 0\nprovides encoders\nprovides motors\nspeed 4\n");
-    let live = live_balls(&rt).expect("simulator.balls");
+    let live = world::balls(&rt.names).expect("world.balls");
     let balls = live.load();
     assert_eq!(balls.len(), 1, "simple.world has one ball");
     assert_eq!((balls[0].pos, balls[0].radius), ([4500.0, 1200.0], 110.0));
@@ -534,7 +533,7 @@ fn the_driver_loads_from_a_conf_and_publishes() {
     let laser: Arc<Interface<Laser>> = rt.interfaces.get("laser").unwrap();
     assert!(rt.interfaces.get::<Laser>("laser.robot2").is_ok());
     // The static world is in the name space for schemas that draw or plan over it.
-    let world = loaded_world(&rt).expect("simulator.world");
+    let world = world::map(&rt.names).expect("world.map");
     assert!(world.segments.len() >= 5, "the room and its partition");
     assert!(rt.interfaces.get::<Encoders>("encoders.robot2").is_ok());
     eventually("encoders published a few times", || enc.clock() > 3);
@@ -617,7 +616,7 @@ fn stepped_mode_advances_per_command() {
 fn the_example_conf_runs() {
     let conf =
         Conf::load(&root().join("examples/simulator.conf")).unwrap_or_else(|e| panic!("{e}"));
-    let rt = Runtime::start(&conf).unwrap_or_else(|e| panic!("{e}"));
+    let rt = jderobot::loader::start(&conf).unwrap_or_else(|e| panic!("{e}"));
     for name in [
         "encoders",
         "motors",

@@ -1,6 +1,6 @@
 //! teleoperator through the real runtime: the conf's base and pan-tilt commands
 //! move the simulated robot and its camera; the name space changes them.
-#![cfg(feature = "teleoperator")]
+#![cfg(all(feature = "teleoperator", feature = "simulator"))]
 
 mod common;
 
@@ -68,7 +68,7 @@ fn conf_commands_drive_the_base_and_aim_the_pantilt() {
 fn conf_errors_name_file_and_line() {
     for (line, expect) in [
         ("base 1\n", "takes 2 argument"),
-        ("max_w 0\n", "positive"),
+        ("max_w 0\n", "must be above 0"),
         ("motors none\n", "needs a motors interface"),
         ("frobnicate\n", "don't know what to do"),
     ] {
@@ -82,7 +82,7 @@ fn conf_errors_name_file_and_line() {
             ),
         )
         .unwrap();
-        let e = match Runtime::start(&Conf::load(&file).unwrap()) {
+        let e = match jderobot::loader::start(&Conf::load(&file).unwrap()) {
             Ok(rt) => {
                 rt.shutdown();
                 panic!("`{line}` accepted")

@@ -46,11 +46,16 @@
 //! # Behaviour
 //! A device is subscribed only while one of its interfaces is used (resume/suspend),
 //! or while a fresh non-zero motors command is pending; blobfinders stay subscribed.
-//! At start the driver connects, asks the server for its device list and fails
-//! with a clear error if the server is not there or lacks a device. If the server
-//! goes away later, every interface is marked stale, the motors are set to zero and
-//! the driver reconnects with backoff and subscribes again; it logs once per change.
-//! A malformed or oversized message drops the connection, which is then reopened.
+//! At start the driver connects and asks the server for its device list
+//! (REQ_DEVLIST); a device the server lacks is a start error naming the line, the
+//! device and the server's list. A server that is not there is one error naming
+//! host:port and what to start; the interfaces stay stale and the driver keeps
+//! trying, then binds the lines once the server answers (so `jderobot check` and a
+//! run without the server still work, as for the other device drivers). If the
+//! server goes away later, every interface is marked stale, the motors are set to
+//! zero and the driver reconnects with backoff and subscribes again; it logs once
+//! per change. A malformed or oversized message drops the connection, which is
+//! then reopened.
 
 pub mod client;
 pub mod conf;
@@ -222,6 +227,10 @@ fn speed(v: f32, max: f32) -> f32 {
 struct Session {
     pc: PlayerConf,
     devices: Vec<Device>,
+    /// Lines waiting for the server's device list (it was not there at start).
+    pending: Vec<Pending>,
+    /// Lines the server has no device for (said once, left stale).
+    unbound: Vec<Pending>,
     stop: Arc<AtomicBool>,
 }
 
@@ -336,6 +345,7 @@ impl Session {
 
     /// Works on one connection until it fails or the driver stops.
     fn serve(&mut self, c: &mut Conn, up: &mut dyn FnMut()) -> Result<(), ConnError> {
+        self.bind_pending(c)?;
         if self.pc.mode == DataMode::Pull {
             let devices = &mut self.devices;
             c.request(
@@ -431,12 +441,12 @@ impl Session {
     /// that fail before that (no server, a refused subscription) are not logged,
     /// and the backoff (100 ms doubling to 2 s) restarts only after a session
     /// that lasted 5 s.
-    fn run(mut self, first: Conn) {
+    fn run(mut self, first: Option<Conn>) {
         let srv = server(&self.pc);
-        let mut conn = Some(first);
+        let mut announced_down = first.is_none();
+        let mut lost_since = first.is_none().then(Instant::now);
+        let mut conn = first;
         let mut backoff = Duration::from_millis(100);
-        let mut lost_since: Option<Instant> = None;
-        let mut announced_down = false;
         while !self.stop.load(Ordering::Acquire) {
             let Some(mut c) = conn.take() else {
                 match Conn::open(&self.pc.host, self.pc.port, self.pc.timeout) {
@@ -453,7 +463,9 @@ impl Session {
                 if announced_down {
                     announced_down = false;
                     let down = lost_since.take().map(|t| t.elapsed().as_secs_f64()).unwrap_or(0.0);
-                    let m = format!("player: reconnected to the Player server at {srv} after {down:.1} s; subscribed again");
+                    let m = format!(
+                        "player: reconnected to the Player server at {srv} after {down:.1} s; subscribed again"
+                    );
                     tracing::warn!("{m}");
                     crate::output::println(m);
                 }
@@ -526,8 +538,94 @@ pub fn device_list(c: &mut Conn, timeout: Duration) -> Result<Vec<Addr>, ConnErr
     }
 }
 
+/// One `provides` line's interface, before it is bound to a Player device.
+enum Binding {
+    Sink(Sink),
+    Motors(Arc<Interface<Motors>>),
+    PtMotors(Arc<Interface<PtMotors>>),
+}
+
+/// A `provides` line waiting for the server's device list.
+struct Pending {
+    want: conf::Want,
+    binding: Binding,
+}
+
+impl Pending {
+    fn set_stale(&self, why: &str) {
+        match &self.binding {
+            Binding::Sink(s) => s.set_stale(why),
+            Binding::Motors(m) => {
+                let _ = m.publish(Motors::default());
+                m.set_stale(why);
+            }
+            Binding::PtMotors(m) => m.set_stale(why),
+        }
+    }
+}
+
+/// Binds each pending line to a device of `list`; the lines that find none come
+/// back with their error (naming the line, the device and the server's list).
+fn bind(pending: Vec<Pending>, list: &[Addr], srv: &str) -> (Vec<Device>, Vec<(Pending, String)>) {
+    let mut devices: BTreeMap<Addr, Device> = BTreeMap::new();
+    let mut failed = Vec::new();
+    for p in pending {
+        let addr = match conf::choose(&p.want, list, srv) {
+            Ok(a) => a,
+            Err(e) => {
+                failed.push((p, format!("player: {e:#}")));
+                continue;
+            }
+        };
+        let d = devices.entry(addr).or_insert_with(|| Device {
+            addr,
+            sinks: Vec::new(),
+            motors: None,
+            ptmotors: None,
+            subscribed: false,
+            ranger: None,
+            zoom: 0.0,
+            ptm_sent: 0,
+            scratch: Vec::new(),
+            frame: Image::default(),
+            bad_frame: false,
+            blob_clock: 0,
+        });
+        match p.binding {
+            Binding::Sink(s) => d.sinks.push(s),
+            Binding::Motors(m) => d.motors = Some(m),
+            Binding::PtMotors(m) => d.ptmotors = Some(m),
+        }
+    }
+    (devices.into_values().collect(), failed)
+}
+
+impl Session {
+    /// Binds the lines still waiting for a device list (the server was not there
+    /// at start); a line the server cannot serve is said once and left stale.
+    fn bind_pending(&mut self, c: &mut Conn) -> Result<(), ConnError> {
+        if self.pending.is_empty() {
+            return Ok(());
+        }
+        let list = device_list(c, self.pc.timeout)?;
+        let srv = server(&self.pc);
+        let (devices, failed) = bind(std::mem::take(&mut self.pending), &list, &srv);
+        self.devices = devices;
+        for (p, why) in failed {
+            tracing::error!("{why}");
+            crate::output::println(why.clone());
+            p.set_stale(&why);
+            self.unbound.push(p);
+        }
+        Ok(())
+    }
+}
+
 impl PlayerDriver {
-    /// Connects to the server, checks the devices and starts the thread.
+    /// Provides the interfaces, connects to the server, binds each line to one of
+    /// its devices and starts the thread. A device the server lacks is an error.
+    /// A server that is not there is said once; the interfaces stay stale and the
+    /// thread keeps trying (and binds the lines once it answers).
     pub fn start(
         pc: PlayerConf,
         ifaces: &Interfaces,
@@ -535,37 +633,12 @@ impl PlayerDriver {
         provider: &str,
     ) -> anyhow::Result<PlayerDriver> {
         let srv = server(&pc);
-        let mut c = Conn::open(&pc.host, pc.port, pc.timeout).map_err(|e| {
-            anyhow::anyhow!(
-                "cannot reach a Player server at {srv} ({e}). Start one first: for Stage, \
-                 `player /usr/share/stage/worlds/simple.cfg` (or your robot's .cfg); or fix \
-                 `hostname H port P` in the player driver's conf"
-            )
-        })?;
-        let list = device_list(&mut c, pc.timeout).map_err(|e| {
-            anyhow::anyhow!("the Player server at {srv} did not list its devices: {e}")
-        })?;
-        let mut devices: BTreeMap<Addr, Device> = BTreeMap::new();
+        let mut pending = Vec::new();
         let mut motors_all = Vec::new();
         for w in &pc.wants {
-            let addr = conf::choose(w, &list, &srv)?;
-            let d = devices.entry(addr).or_insert_with(|| Device {
-                addr,
-                sinks: Vec::new(),
-                motors: None,
-                ptmotors: None,
-                subscribed: false,
-                ranger: None,
-                zoom: 0.0,
-                ptm_sent: 0,
-                scratch: Vec::new(),
-                frame: Image::default(),
-                bad_frame: false,
-                blob_clock: 0,
-            });
             let off = pc.offset(&w.robot);
-            match &w.kind {
-                Kind::Encoders => d.sinks.push(Sink::Encoders(
+            let binding = match &w.kind {
+                Kind::Encoders => Binding::Sink(Sink::Encoders(
                     ifaces.provide_value(
                         &w.name,
                         provider,
@@ -576,32 +649,28 @@ impl PlayerDriver {
                 Kind::Motors => {
                     let m = ifaces.provide::<Motors>(&w.name, provider)?;
                     motors_all.push(m.clone());
-                    d.motors = Some(m);
+                    Binding::Motors(m)
                 }
-                Kind::Laser(n, r) => d.sinks.push(Sink::Laser(
+                Kind::Laser(n, r) => Binding::Sink(Sink::Laser(
                     ifaces.provide(&w.name, provider)?,
                     LaserMap::new(*n, *r),
                 )),
-                Kind::Sonars => d
-                    .sinks
-                    .push(Sink::Sonars(ifaces.provide(&w.name, provider)?)),
-                Kind::Bumpers => d
-                    .sinks
-                    .push(Sink::Bumpers(ifaces.provide(&w.name, provider)?)),
-                Kind::PanTiltEncoders => d
-                    .sinks
-                    .push(Sink::PtEncoders(ifaces.provide(&w.name, provider)?)),
-                Kind::PanTiltMotors => d.ptmotors = Some(ifaces.provide(&w.name, provider)?),
+                Kind::Sonars => Binding::Sink(Sink::Sonars(ifaces.provide(&w.name, provider)?)),
+                Kind::Bumpers => Binding::Sink(Sink::Bumpers(ifaces.provide(&w.name, provider)?)),
+                Kind::PanTiltEncoders => {
+                    Binding::Sink(Sink::PtEncoders(ifaces.provide(&w.name, provider)?))
+                }
+                Kind::PanTiltMotors => Binding::PtMotors(ifaces.provide(&w.name, provider)?),
                 Kind::Camera(fixed) => {
                     let init = if *fixed {
                         Image::new(320, 240)
                     } else {
                         Image::default()
                     };
-                    d.sinks.push(Sink::Camera(
+                    Binding::Sink(Sink::Camera(
                         ifaces.provide_value(&w.name, provider, init)?,
                         *fixed,
-                    ));
+                    ))
                 }
                 Kind::Blobs => {
                     let b = names.export(
@@ -609,28 +678,59 @@ impl PlayerDriver {
                         &w.name,
                         LiveBlobs::from_pointee(BlobFrame::default()),
                     )?;
-                    d.sinks.push(Sink::Blobs(b));
+                    Binding::Sink(Sink::Blobs(b))
                 }
-            }
+            };
+            pending.push(Pending {
+                want: w.clone(),
+                binding,
+            });
         }
-        tracing::info!(
-            "player: connected to Player {} at {srv}; devices used: {}",
-            c.version,
-            devices
-                .keys()
-                .map(|a| a.to_string())
-                .collect::<Vec<_>>()
-                .join(", ")
-        );
+        let (conn, devices, pending) = match Conn::open(&pc.host, pc.port, pc.timeout) {
+            Ok(mut c) => {
+                let list = device_list(&mut c, pc.timeout).map_err(|e| {
+                    anyhow::anyhow!("the Player server at {srv} did not list its devices: {e}")
+                })?;
+                let (devices, failed) = bind(pending, &list, &srv);
+                if let Some((_, why)) = failed.into_iter().next() {
+                    c.close();
+                    return Err(anyhow::anyhow!("{}", why.trim_start_matches("player: ")));
+                }
+                tracing::info!(
+                    "player: connected to Player {} at {srv}; devices used: {}",
+                    c.version,
+                    devices
+                        .iter()
+                        .map(|d| d.addr.to_string())
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                );
+                (Some(c), devices, Vec::new())
+            }
+            Err(e) => {
+                let why = format!(
+                    "player: cannot reach a Player server at {srv} ({e}). Start one first: for \
+                     Stage, `player /usr/share/stage/worlds/simple.cfg` (or your robot's .cfg); or \
+                     fix `hostname H port P` in the player driver's conf. Retrying in the background"
+                );
+                tracing::error!("{why}");
+                for p in &pending {
+                    p.set_stale(&why);
+                }
+                (None, Vec::new(), pending)
+            }
+        };
         let stop = Arc::new(AtomicBool::new(false));
         let session = Session {
             pc,
-            devices: devices.into_values().collect(),
+            devices,
+            pending,
+            unbound: Vec::new(),
             stop: stop.clone(),
         };
         let thread = std::thread::Builder::new()
             .name("player".into())
-            .spawn(move || session.run(c))
+            .spawn(move || session.run(conn))
             .context("cannot start the player thread")?;
         Ok(PlayerDriver {
             stop,

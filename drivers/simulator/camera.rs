@@ -13,9 +13,10 @@
 use crate::{
     interfaces::Image,
     progeo::{HPoint3D, PinholeCamera, focal_from_fov},
+    world::Rgb,
 };
 
-use super::{physics::Sim, world::Rgb};
+use super::physics::Sim;
 
 fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
     [a[0] - b[0], a[1] - b[1], a[2] - b[2]]

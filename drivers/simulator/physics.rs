@@ -4,7 +4,7 @@
 
 use crate::interfaces::{Encoders, Motors, PtEncoders, PtMotors};
 
-use super::world::{P2, Segment, World, closest_on_segment};
+use crate::world::{Ball, Point2, Segment, World, closest_on_segment};
 
 /// A tiny deterministic random number generator (xorshift64*), with Gaussian draws.
 #[derive(Clone, Debug)]
@@ -71,13 +71,13 @@ pub struct RobotModel {
     pub laser_count: usize,
     pub laser_resolution: f64,
     pub laser_range: f64,
-    pub laser_pos: P2,
+    pub laser_pos: Point2,
     /// Sonars: (x mm, y mm, angle deg) on the robot; range mm; half-aperture deg.
     pub sonars: Vec<(f64, f64, f64)>,
     pub sonar_range: f64,
     pub sonar_aperture: f64,
     /// Camera (on the pan-tilt unit): position (x, y) on the robot and height, mm.
-    pub camera_pos: P2,
+    pub camera_pos: Point2,
     pub camera_height: f64,
     /// Horizontal field of view, degrees.
     pub camera_fov: f64,
@@ -148,7 +148,7 @@ impl Pose {
         }
     }
     /// A point given in the robot's frame, in world coordinates.
-    pub fn apply(&self, p: P2) -> P2 {
+    pub fn apply(&self, p: Point2) -> Point2 {
         let (s, c) = self.theta.sin_cos();
         [self.x + c * p[0] - s * p[1], self.y + s * p[0] + c * p[1]]
     }
@@ -179,16 +179,6 @@ pub struct Robot {
     pub odometer: f64,
 }
 
-/// A ball as it moves.
-#[derive(Clone, Debug)]
-pub struct Ball {
-    pub pos: P2,
-    pub vel: P2,
-    pub radius: f64,
-    pub color: [u8; 3],
-    pub friction: f64,
-}
-
 /// Restitution of ball bounces.
 const RESTITUTION: f64 = 0.6;
 
@@ -208,17 +198,7 @@ impl Sim {
     /// A simulation of `world` with no robots; `seed` drives all noise.
     pub fn new(mut world: World, seed: u64) -> Sim {
         world.finish();
-        let balls = world
-            .balls
-            .iter()
-            .map(|b| Ball {
-                pos: b.pos,
-                vel: [0.0, 0.0],
-                radius: b.radius,
-                color: b.color,
-                friction: b.friction,
-            })
-            .collect();
+        let balls = world.balls.iter().map(Ball::from).collect();
         Sim {
             world,
             robots: Vec::new(),
@@ -296,8 +276,8 @@ impl Sim {
 
     /// Whether a disc at `p` of radius `r` overlaps a wall, a box or another robot.
     /// Returns the direction from `p` to the contact.
-    fn blocked(&self, me: usize, p: P2, r: f64) -> Option<P2> {
-        let mut hit: Option<(f64, P2)> = None;
+    fn blocked(&self, me: usize, p: Point2, r: f64) -> Option<Point2> {
+        let mut hit: Option<(f64, Point2)> = None;
         self.world.near(p, r, |s: &Segment| {
             let q = closest_on_segment(p, s);
             let d2 = (q[0] - p[0]).powi(2) + (q[1] - p[1]).powi(2);
@@ -524,7 +504,7 @@ impl Sim {
                     b.pos[1] + b.vel[1] * dt / subs as f64,
                 ];
                 let (p, r) = (b.pos, b.radius);
-                let mut fix: Vec<(P2, P2)> = Vec::new();
+                let mut fix: Vec<(Point2, Point2)> = Vec::new();
                 self.world.near(p, r, |s: &Segment| {
                     let q = closest_on_segment(p, s);
                     let d = [p[0] - q[0], p[1] - q[1]];

@@ -3,15 +3,14 @@
 
 use crate::interfaces::{Bumpers, Laser, Sonars};
 
-use super::{
-    physics::Sim,
-    world::{P2, ray_circle},
-};
+use crate::world::{Point2, ray_circle};
+
+use super::physics::Sim;
 
 impl Sim {
     /// The nearest obstacle along the ray from `o` in unit direction `d`, within
     /// `max` mm, ignoring robot `me` itself.
-    pub fn cast(&self, me: usize, o: P2, d: P2, max: f64) -> f64 {
+    pub fn cast(&self, me: usize, o: Point2, d: Point2, max: f64) -> f64 {
         let mut best = self.world.cast(o, d, max).map_or(max, |(t, _)| t);
         for b in &self.balls {
             if let Some(t) = ray_circle(o, d, b.pos, b.radius) {

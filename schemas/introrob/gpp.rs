@@ -1,7 +1,7 @@
 //! Gradient Path Planning over the world map, and a path follower.
 //!
 //! 1. [`GridMap::from_world`]: an occupancy grid (default 50 mm cells) with every
-//!    wall and box face of a simulator [`World`] drawn into it, and each cell's
+//!    wall and box face of a [`World`] drawn into it, and each cell's
 //!    clearance (distance to the nearest occupied cell, Euclidean by nearest-seed
 //!    propagation).
 //! 2. [`Field::new`]: the navigation function. Cells closer to an obstacle than the
@@ -19,8 +19,8 @@
 use std::{cmp::Reverse, collections::BinaryHeap};
 
 use crate::{
-    drivers::simulator::World,
     interfaces::{Encoders, Laser, Motors},
+    world::World,
 };
 
 use super::vff::{self, Forces, VffParams};
@@ -28,7 +28,10 @@ use super::vff::{self, Forces, VffParams};
 /// Why a plan failed.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum PlanError {
-    #[error("the map is empty: no world walls (give introrob a `world FILE` line)")]
+    #[error(
+        "the map is empty: no walls (give introrob a `world FILE` line, or load a driver that \
+         exports world.map, such as the simulator)"
+    )]
     EmptyMap,
     #[error("the goal ({0:.0}, {1:.0}) mm is outside the map")]
     GoalOutside(f32, f32),

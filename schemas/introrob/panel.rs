@@ -7,29 +7,26 @@ use std::sync::Arc;
 use egui::{Color32, vec2};
 
 use crate::{
-    drivers::simulator::LiveBalls,
-    gui::{
-        Panel,
-        widgets::{
-            ImageView, Joystick, PolarStyle, WorldScene, WorldView, laser_points, polar_view,
-            relative_to_world, sonar_points,
-        },
-    },
     interfaces::{Encoders, Image, Interface, Laser, Sonars},
-    runtime::Runtime,
+    runtime::{Panel, Runtime},
+    widgets::{
+        ImageView, Joystick, PolarStyle, WorldScene, WorldView, laser_points, polar_view,
+        relative_to_world, sonar_points,
+    },
+    world::LiveBalls,
 };
 
-use super::{Behaviour, Shared};
+use super::{Behaviour, Dashboard};
 
-/// The panel; it shares [`Shared`] with the schema and reads the interfaces.
+/// The panel; it shares the [`Dashboard`] with the brain and reads the interfaces.
 pub struct IntrorobPanel {
-    shared: Arc<Shared>,
+    dashboard: Arc<Dashboard>,
     encoders: Arc<Interface<Encoders>>,
     laser: Arc<Interface<Laser>>,
     sonars: Option<Arc<Interface<Sonars>>>,
     camera: Option<Arc<Interface<Image>>>,
     walls: Vec<[f32; 4]>,
-    /// The simulator's balls, drawn in the world view.
+    /// The balls (`world.balls`), drawn in the world view.
     balls: Option<Arc<LiveBalls>>,
     world: WorldView,
     joystick: Joystick,
@@ -39,14 +36,14 @@ pub struct IntrorobPanel {
 
 impl IntrorobPanel {
     pub fn new(
-        shared: Arc<Shared>,
+        dashboard: Arc<Dashboard>,
         encoders: Arc<Interface<Encoders>>,
         laser: Arc<Interface<Laser>>,
         sonars: Option<Arc<Interface<Sonars>>>,
         camera: Option<Arc<Interface<Image>>>,
         balls: Option<Arc<LiveBalls>>,
     ) -> IntrorobPanel {
-        let walls = shared
+        let walls = dashboard
             .world
             .as_ref()
             .map(|w| {
@@ -57,7 +54,7 @@ impl IntrorobPanel {
             })
             .unwrap_or_default();
         let mut world = WorldView::new("introrob world");
-        if let Some((lo, hi)) = shared.world.as_ref().and_then(|w| w.bounds()) {
+        if let Some((lo, hi)) = dashboard.world.as_ref().and_then(|w| w.bounds()) {
             world.center = [
                 ((lo[0] + hi[0]) / 2.0) as f32,
                 ((lo[1] + hi[1]) / 2.0) as f32,
@@ -65,9 +62,9 @@ impl IntrorobPanel {
             world.width_mm =
                 ((hi[0] - lo[0]).max((hi[1] - lo[1]) * 1.4) as f32 + 1000.0).clamp(500.0, 20000.0);
         }
-        let joystick = Joystick::new("introrob joystick", shared.max_v, shared.max_w);
+        let joystick = Joystick::new("introrob joystick", dashboard.max_v, dashboard.max_w);
         IntrorobPanel {
-            shared,
+            dashboard,
             encoders,
             laser,
             sonars,
@@ -84,20 +81,20 @@ impl IntrorobPanel {
     fn controls(&mut self, ui: &mut egui::Ui) {
         ui.horizontal(|ui| {
             ui.label("behaviour:");
-            let mut b = *self.shared.behaviour.lock();
+            let mut b = *self.dashboard.behaviour.lock();
             let before = b;
             for x in Behaviour::ALL {
                 ui.selectable_value(&mut b, x, x.as_str());
             }
             if b != before {
-                self.shared.set_behaviour(b);
+                self.dashboard.set_behaviour(b);
             }
             if ui.button("STOP").clicked() {
-                self.shared.set_teleop(0.0, 0.0);
-                self.shared.set_behaviour(Behaviour::Stop);
+                self.dashboard.set_teleop(0.0, 0.0);
+                self.dashboard.set_behaviour(Behaviour::Stop);
             }
         });
-        let view = self.shared.view.lock().clone();
+        let view = self.dashboard.view.lock().clone();
         ui.label(format!(
             "{}   |   v {:.0} mm/s  w {:.1} deg/s",
             view.status, view.command.v, view.command.w
@@ -118,9 +115,9 @@ impl Panel for IntrorobPanel {
             self.world.center = [pose.x, pose.y];
         }
         self.placed = true;
-        // The shared target shows as the view's cross (set by conf, shell or click).
-        self.world.target = *self.shared.target.lock();
-        let view = self.shared.view.lock().clone();
+        // The target shows as the view's cross (set by conf, shell or click).
+        self.world.target = *self.dashboard.target.lock();
+        let view = self.dashboard.view.lock().clone();
         let mut segs: Vec<([f32; 4], Color32)> = Vec::new();
         let path_c = Color32::from_rgb(230, 140, 0);
         for w in view.path.windows(2) {
@@ -169,7 +166,7 @@ impl Panel for IntrorobPanel {
                 };
                 let r = self.world.show(ui, vec2(440.0, 330.0), &scene);
                 if let Some(t) = r.clicked {
-                    self.shared.set_target(Some(t));
+                    self.dashboard.set_target(Some(t));
                 }
                 ui.small("click: target · drag: pan · wheel: zoom · right click: the robot");
             });
@@ -177,9 +174,9 @@ impl Panel for IntrorobPanel {
                 ui.label("teleoperation");
                 let r = self.joystick.show(ui, 140.0);
                 if r.changed() {
-                    self.shared.set_teleop(self.joystick.v, self.joystick.w);
+                    self.dashboard.set_teleop(self.joystick.v, self.joystick.w);
                     if self.joystick.v != 0.0 || self.joystick.w != 0.0 {
-                        self.shared.set_behaviour(Behaviour::Teleop);
+                        self.dashboard.set_behaviour(Behaviour::Teleop);
                     }
                 }
                 ui.label("laser");

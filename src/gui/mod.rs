@@ -4,51 +4,40 @@
 //! - The window opens when a GUI service is loaded (`load_service gui`, or 4.3's
 //!   `graphics_gtk`, `graphics_xforms`, `graphics_glut`), from the conf or later
 //!   from the shell, provided there is a display and `--headless` was not given.
-//! - A schema offers a [`Panel`] from [`Schema::panel`](crate::runtime::Schema::panel).
+//! - A schema offers a [`Panel`](crate::runtime::Panel) from [`Schema::panel`](crate::runtime::Schema::panel).
 //!   Shown panels (`show NAME` in the conf or the shell, or mastergui's show toggle:
 //!   one state, [`Runtime::show`]) appear in the window: docked ones (mastergui) in a
 //!   left side panel, the others as movable windows. Closing a panel's window hides it.
 //! - The host never locks a schema: it reads [`Runtime::status`] (short locks) and
 //!   calls panels, which share data with their schemas through interfaces or
-//!   atomics. It repaints at about 30 frames per second.
+//!   atomics.
+//! - It repaints when something changed, not on a fixed loop: on input, when an
+//!   interface's value changes (its fingerprint, computed when its clock moves) or a schema's state or shown flag does (a watcher
+//!   thread looks every [`FRAME_PERIOD`], so at most ~30 frames per second), and
+//!   once per [`HEARTBEAT`] for the rates and ages on screen. A robot standing
+//!   still costs about one frame a second.
+//! - Schema panels open tiled in the area beside the docked mastergui and stay
+//!   inside it, so they never cover its columns; where the user moves them is saved
+//!   when the window closes (`panels` beside the shell's history) and used the next
+//!   time.
 //! - Quitting the shell closes the window; closing the window shuts the runtime
 //!   down and the program exits with status 0.
 
-pub mod widgets;
+mod layout;
 
 use std::{
     collections::VecDeque,
     panic::{AssertUnwindSafe, catch_unwind},
-    process::ExitCode,
     sync::{
         Arc,
         atomic::{AtomicBool, Ordering},
-        mpsc,
     },
     time::{Duration, Instant},
 };
 
 use parking_lot::Mutex;
 
-use crate::{conf::Conf, runtime::Runtime};
-
-/// A schema's GUI panel. It is taken from the schema once, when the schema is
-/// loaded, and lives on the GUI thread: it shares state with its schema through
-/// interfaces or atomics/`Arc`s, never by locking the schema, so drawing never
-/// blocks a schema and a schema never blocks drawing.
-pub trait Panel: Send {
-    /// Draws the panel.
-    fn ui(&mut self, ui: &mut egui::Ui, rt: &Runtime);
-    /// The panel's title (default: the schema's name).
-    fn title(&self) -> Option<String> {
-        None
-    }
-    /// Whether the panel is docked in the window's left side panel (mastergui)
-    /// rather than shown as a movable window.
-    fn docked(&self) -> bool {
-        false
-    }
-}
+use crate::runtime::{Panel, Runtime};
 
 /// The services that open the window: `gui` and 4.3's names for it.
 pub const GUI_SERVICES: [&str; 4] = ["gui", "graphics_gtk", "graphics_xforms", "graphics_glut"];
@@ -60,8 +49,14 @@ pub fn gui_loaded(rt: &Runtime) -> bool {
         .any(|(n, _)| GUI_SERVICES.contains(&n.as_str()))
 }
 
-/// The frame period the host asks for (about 30 frames per second).
+/// How often the watcher looks for changes (at most about 30 frames per second).
 pub const FRAME_PERIOD: Duration = Duration::from_millis(33);
+
+/// The slowest repaint: rates and ages on screen move even when no value does.
+pub const HEARTBEAT: Duration = Duration::from_secs(1);
+
+/// Size a panel window opens with.
+const PANEL_SIZE: egui::Vec2 = egui::vec2(480.0, 520.0);
 
 /// Closes a running window from another thread (the shell's).
 #[derive(Clone, Default)]
@@ -69,10 +64,21 @@ pub struct CloseHandle {
     inner: Arc<CloseInner>,
 }
 
-#[derive(Default)]
 struct CloseInner {
     close: AtomicBool,
     ctx: Mutex<Option<egui::Context>>,
+    /// When the host last drew a frame.
+    last_frame: Mutex<Instant>,
+}
+
+impl Default for CloseInner {
+    fn default() -> Self {
+        CloseInner {
+            close: AtomicBool::new(false),
+            ctx: Mutex::new(None),
+            last_frame: Mutex::new(Instant::now()),
+        }
+    }
 }
 
 impl CloseHandle {
@@ -98,13 +104,6 @@ impl Panel for Broken {
     }
 }
 
-fn panic_text(p: &(dyn std::any::Any + Send)) -> String {
-    p.downcast_ref::<&str>()
-        .map(|s| s.to_string())
-        .or_else(|| p.downcast_ref::<String>().cloned())
-        .unwrap_or_else(|| "panicked".into())
-}
-
 /// The window's contents: a top bar, the docked panels (mastergui) on the left, and
 /// the other shown panels as windows. Usable without eframe (tests, benchmarks):
 /// call [`GuiHost::ui`] from any egui pass.
@@ -113,6 +112,10 @@ pub struct GuiHost {
     handle: CloseHandle,
     frames: VecDeque<Instant>,
     quit_clicked: bool,
+    layout: layout::Layout,
+    /// What the last frame showed, to tell whether the next one is needed soon.
+    shown: Option<Signature>,
+    prints: Fingerprints,
 }
 
 impl GuiHost {
@@ -122,7 +125,32 @@ impl GuiHost {
             handle: CloseHandle::default(),
             frames: VecDeque::new(),
             quit_clicked: false,
+            layout: layout::Layout::default(),
+            shown: None,
+            prints: Fingerprints::default(),
         }
+    }
+
+    /// Uses (and on [`save_layout`](Self::save_layout) writes) panel positions kept
+    /// in `file`.
+    pub fn with_layout_file(mut self, file: Option<std::path::PathBuf>) -> Self {
+        self.layout = layout::Layout::load(file);
+        self
+    }
+
+    /// Saves where the panels are, for the next run.
+    pub fn save_layout(&self) {
+        self.layout.save();
+    }
+
+    /// The screen rectangle of each panel window drawn in the last frame, by schema.
+    pub fn panel_rects(&self) -> Vec<(String, egui::Rect)> {
+        self.layout.current()
+    }
+
+    /// The area beside the docked panels, where panel windows live (last frame).
+    pub fn free_area(&self) -> Option<egui::Rect> {
+        self.layout.free
     }
 
     /// A handle that closes the window from another thread.
@@ -235,27 +263,32 @@ impl GuiHost {
                 });
         }
 
-        egui::CentralPanel::default_margins().show(ui, |ui| {
-            if windows.is_empty() {
-                ui.centered_and_justified(|ui| {
-                    ui.weak(
-                        "Schema panels appear here. Show one with `show NAME` in the shell, \
-                         the Panels menu, or mastergui's show toggle.",
-                    );
-                });
-            }
-        });
+        let free = egui::CentralPanel::default_margins()
+            .show(ui, |ui| {
+                if windows.is_empty() {
+                    ui.centered_and_justified(|ui| {
+                        ui.weak(
+                            "Schema panels appear here. Show one with `show NAME` in the shell, \
+                             the Panels menu, or mastergui's show toggle.",
+                        );
+                    });
+                }
+            })
+            .response
+            .rect;
+        self.layout.free = Some(free);
 
         let ctx = ui.ctx().clone();
         for (i, (name, title, slot, has)) in windows.iter().enumerate() {
             let mut open = true;
-            egui::Window::new(title.as_str())
+            let shown = egui::Window::new(title.as_str())
                 .id(egui::Id::unique(("jde_panel", name.as_str())))
                 .open(&mut open)
-                .default_pos([400.0 + 30.0 * i as f32, 60.0 + 30.0 * i as f32])
+                .default_pos(self.layout.place(name, i, free, PANEL_SIZE))
                 // Tall enough for introrob's and teleoperator's panels; it scrolls
                 // (and resizes) when a panel is taller or the screen smaller.
-                .default_height(520.0)
+                .default_size(PANEL_SIZE)
+                .constrain_to(free)
                 .vscroll(true)
                 .show(&ctx, |ui| {
                     if *has {
@@ -264,11 +297,21 @@ impl GuiHost {
                         ui.label(format!("schema `{name}` has no panel"));
                     }
                 });
+            if let Some(r) = shown {
+                self.layout.seen(name, r.response.rect);
+            }
             if !open {
                 let _ = rt.hide(name);
             }
         }
-        ctx.request_repaint_after(FRAME_PERIOD);
+        // Busy (something changed since the last frame): the next frame in one
+        // frame period, as a 30 fps loop would. Idle: the heartbeat, or the watcher
+        // wakes the window at the next change.
+        let now = signature(&rt, &mut self.prints);
+        let busy = self.shown.as_ref() != Some(&now);
+        self.shown = Some(now);
+        *self.handle.inner.last_frame.lock() = Instant::now();
+        ctx.request_repaint_after(if busy { FRAME_PERIOD } else { HEARTBEAT });
     }
 }
 
@@ -280,7 +323,7 @@ fn draw_panel(ui: &mut egui::Ui, rt: &Runtime, name: &str, panel: &Mutex<Option<
         ui.push_id(("jde_panel_body", name), |ui| inner.ui(ui, rt));
     }));
     if let Err(e) = r {
-        let msg = panic_text(&*e);
+        let msg = crate::output::panic_text(&*e);
         tracing::error!("{name}: panel failed: {msg}");
         *p = Some(Box::new(Broken(msg)));
     }
@@ -293,10 +336,79 @@ impl eframe::App for GuiHost {
         }
         GuiHost::ui(self, ui);
     }
+
+    fn on_exit(&mut self, _gl: Option<&eframe::glow::Context>) {
+        // Closing by any way (Quit, Ctrl+Q, the window manager, the shell) ends here.
+        self.handle.inner.close.store(true, Ordering::Release);
+        self.save_layout();
+    }
+}
+
+/// What the window shows changes with: each interface's value and staleness, each
+/// schema's state and shown flag, the loaded drivers.
+type Signature = (u64, Vec<(String, crate::runtime::State, bool)>, usize);
+
+/// Fingerprints of interface values, recomputed only when a clock moved.
+#[derive(Default)]
+struct Fingerprints(std::collections::HashMap<String, (u64, u64)>);
+
+impl Fingerprints {
+    /// One number that changes when any interface's value or staleness changes
+    /// (a new sample equal to the previous one does not change it).
+    fn of(&mut self, rt: &Runtime) -> u64 {
+        let mut all = 0u64;
+        for i in rt.interfaces.all() {
+            let clock = i.clock();
+            let e = self.0.entry(i.name().to_string()).or_insert((u64::MAX, 0));
+            if e.0 != clock {
+                *e = (clock, i.fingerprint());
+            }
+            let stale = i.stale().is_some() as u64;
+            all = all.wrapping_mul(31).wrapping_add(e.1 ^ stale);
+        }
+        all
+    }
+}
+
+fn signature(rt: &Runtime, prints: &mut Fingerprints) -> Signature {
+    let states = rt
+        .status()
+        .into_iter()
+        .map(|s| (s.name, s.state, s.shown))
+        .collect();
+    (prints.of(rt), states, rt.drivers().len())
+}
+
+/// Wakes an idle window (one waiting for its heartbeat) as soon as something it
+/// shows changes; a busy window paces itself (see [`GuiHost::ui`]). Ends when the
+/// window closes.
+fn watch_for_changes(rt: Arc<Runtime>, handle: CloseHandle) {
+    let mut prints = Fingerprints::default();
+    let mut last = signature(&rt, &mut prints);
+    while !handle.requested() {
+        std::thread::sleep(FRAME_PERIOD);
+        let now = signature(&rt, &mut prints);
+        if now != last {
+            last = now;
+            let idle = handle.inner.last_frame.lock().elapsed() > 2 * FRAME_PERIOD;
+            if idle && let Some(ctx) = handle.inner.ctx.lock().as_ref() {
+                ctx.request_repaint();
+            }
+        }
+    }
 }
 
 /// Opens the window on this (the main) thread and returns when it closes.
 pub fn run_window(host: GuiHost) -> Result<(), String> {
+    let (rt, handle) = (host.rt.clone(), host.close_handle());
+    let watcher = std::thread::Builder::new()
+        .name("gui-watch".into())
+        .spawn(move || watch_for_changes(rt, handle));
+    if let Err(e) = watcher {
+        tracing::warn!(
+            "gui: no change watcher ({e}); the window repaints on input and every second"
+        );
+    }
     let options = eframe::NativeOptions {
         viewport: egui::ViewportBuilder::default()
             .with_title("jderobot")
@@ -306,106 +418,4 @@ pub fn run_window(host: GuiHost) -> Result<(), String> {
     };
     eframe::run_native("jderobot", options, Box::new(move |_cc| Ok(Box::new(host))))
         .map_err(|e| e.to_string())
-}
-
-/// Says why no window opens when a GUI service is loaded but the run is headless,
-/// and, with a shell, how to watch the run from it.
-pub fn headless_notice(rt: &Runtime, shell: bool) {
-    if gui_loaded(rt) {
-        eprintln!("gui: no display or --headless: running without the window");
-        if shell {
-            eprintln!("gui: watch from the shell instead: `ps`, `echo encoders 5`, `help`");
-        }
-    }
-}
-
-/// Runs the shell on its own thread and, once a GUI service is loaded (now or later
-/// from the shell), the window on this thread. Returns when the shell ends or the
-/// window is closed; the runtime is shut down either way.
-pub fn launch(rt: Arc<Runtime>, conf: Conf, no_shell: bool) -> ExitCode {
-    let host = GuiHost::new(rt.clone());
-    let handle = host.close_handle();
-    let term = terminal::Saved::now();
-    let (tx, rx) = mpsc::channel::<()>();
-    let mut _keep = None;
-    if no_shell {
-        _keep = Some(tx);
-    } else {
-        let (rt2, h) = (rt.clone(), handle.clone());
-        let spawned = std::thread::Builder::new()
-            .name("shell".into())
-            .spawn(move || {
-                crate::shell::run(rt2, conf);
-                h.close();
-                let _ = tx.send(());
-            });
-        if let Err(e) = spawned {
-            eprintln!("cannot start the shell thread: {e}");
-            rt.shutdown();
-            return ExitCode::FAILURE;
-        }
-    }
-    if !gui_loaded(&rt) && rt.status().iter().any(|s| s.shown) {
-        eprintln!(
-            "gui: panels are shown but no GUI service is loaded; `load_service gui` \
-             (in the conf or the shell) opens the window"
-        );
-    }
-    // Wait for a GUI service, or for the shell to end.
-    loop {
-        match rx.recv_timeout(Duration::from_millis(50)) {
-            Err(mpsc::RecvTimeoutError::Timeout) => {}
-            _ => {
-                rt.shutdown();
-                return ExitCode::SUCCESS;
-            }
-        }
-        if gui_loaded(&rt) {
-            break;
-        }
-    }
-    match run_window(host) {
-        Ok(()) => {}
-        Err(e) => {
-            eprintln!("gui: cannot open the window ({e}); running without it");
-            // Wait for the shell (or forever with --no-shell: Ctrl+C ends the run).
-            let _ = rx.recv();
-        }
-    }
-    term.restore();
-    rt.shutdown();
-    ExitCode::SUCCESS
-}
-
-mod terminal {
-    //! Restores the terminal's settings when the window ends the program while
-    //! the line editor (on the shell's thread) has it in raw mode.
-
-    pub struct Saved(Option<libc::termios>);
-
-    impl Saved {
-        pub fn now() -> Self {
-            // SAFETY: tcgetattr only writes into the zeroed struct we own.
-            unsafe {
-                if libc::isatty(0) != 1 {
-                    return Saved(None);
-                }
-                let mut t: libc::termios = std::mem::zeroed();
-                if libc::tcgetattr(0, &mut t) == 0 {
-                    Saved(Some(t))
-                } else {
-                    Saved(None)
-                }
-            }
-        }
-
-        pub fn restore(&self) {
-            if let Some(t) = &self.0 {
-                // SAFETY: restores settings read by tcgetattr on the same fd.
-                unsafe {
-                    libc::tcsetattr(0, libc::TCSANOW, t);
-                }
-            }
-        }
-    }
 }

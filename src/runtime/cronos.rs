@@ -14,9 +14,10 @@ use super::pacer::now_ns;
 pub const WINDOW: usize = 512;
 const IPS_WINDOW_NS: u64 = 2_000_000_000;
 
-/// Timing statistics of one schema.
+/// Timing statistics of one schema (what 4.3's cronos thread kept): iteration starts
+/// for ips, lateness after each deadline for jitter.
 #[derive(Debug, Default)]
-pub struct Cronos {
+pub struct TimingStats {
     since_ns: u64,
     starts: VecDeque<u64>,
     jitter_ns: VecDeque<u64>,
@@ -40,7 +41,7 @@ pub struct Timing {
     pub overruns: u64,
 }
 
-impl Cronos {
+impl TimingStats {
     /// Starts a new activation (the schema was run).
     pub fn activate(&mut self, cycle_ns: u64) {
         self.since_ns = now_ns();
@@ -119,8 +120,8 @@ mod tests {
 
     const MS: u64 = 1_000_000;
 
-    fn cronos_run_at(t0: u64, cycle: u64) -> Cronos {
-        let mut c = Cronos::default();
+    fn cronos_run_at(t0: u64, cycle: u64) -> TimingStats {
+        let mut c = TimingStats::default();
         c.activate(cycle);
         c.since_ns = t0;
         c

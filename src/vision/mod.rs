@@ -42,6 +42,7 @@
 mod convolve;
 mod flow;
 mod homography;
+pub mod pixfmt;
 mod sobel;
 
 pub use convolve::{Kernel, KernelError, convolve};

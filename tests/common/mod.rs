@@ -41,7 +41,7 @@ pub fn state(rt: &Runtime, name: &str) -> State {
 /// Starts a runtime from conf text (as if read from `test.conf`).
 pub fn start_conf(text: &str) -> Arc<Runtime> {
     let conf = Conf::parse(text, Path::new("test.conf")).unwrap_or_else(|e| panic!("{e}"));
-    Runtime::start(&conf).unwrap_or_else(|e| panic!("{e}"))
+    jderobot::loader::start(&conf).unwrap_or_else(|e| panic!("{e}"))
 }
 
 /// The path of a world under `assets/worlds/`, for conf text.
@@ -84,15 +84,26 @@ pub fn have(cmd: &str) -> bool {
 }
 
 /// Whether a screenshot test can run here: an X display and imagemagick's
-/// `tools`. If not, says why (naming `test`) so the test can pass without checking.
+/// `tools`. If not, says why (naming `test`): under `CI` the test fails, elsewhere
+/// it skips.
 pub fn can_screenshot(test: &str, tools: &[&str]) -> bool {
+    // Under CI a test that cannot run fails with the reason; elsewhere it says why
+    // and skips.
+    let ci = std::env::var_os("CI").is_some_and(|v| !v.is_empty());
+    let missing = |why: String| {
+        if ci {
+            panic!("{test} cannot run under CI: {why}");
+        }
+        eprintln!("skipped: {why}");
+        false
+    };
     if std::env::var_os("DISPLAY").is_none_or(|d| d.is_empty()) {
-        eprintln!("skipped: DISPLAY is not set (run under `xvfb-run -a cargo test --test {test}`)");
-        return false;
+        return missing(format!(
+            "DISPLAY is not set (run under `xvfb-run -a cargo test --test {test}`)"
+        ));
     }
     if let Some(t) = tools.iter().find(|t| !have(t)) {
-        eprintln!("skipped: imagemagick's `{t}` is not installed");
-        return false;
+        return missing(format!("`{t}` is not installed"));
     }
     true
 }

@@ -307,7 +307,12 @@ impl Emulator {
     }
 
     pub fn with_devices(devices: Vec<(u32, u32)>) -> Emulator {
-        let listener = TcpListener::bind("127.0.0.1:0").expect("bind");
+        Self::on_port(devices, 0)
+    }
+
+    /// Starts on `port` (0: a free one).
+    pub fn on_port(devices: Vec<(u32, u32)>, port: u16) -> Emulator {
+        let listener = TcpListener::bind(("127.0.0.1", port)).expect("bind");
         let port = listener.local_addr().unwrap().port();
         let shared = Arc::new(Shared {
             world: Mutex::new(World::default()),

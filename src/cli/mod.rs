@@ -7,7 +7,10 @@ use std::{path::PathBuf, process::ExitCode, time::Duration};
 
 use clap::{Parser, Subcommand};
 
-use crate::{conf::Conf, registry, runtime, shell};
+#[cfg(feature = "gui")]
+mod window;
+
+use crate::{conf::Conf, loader, registry, shell};
 
 /// jderobot: program a robot as concurrent periodic schemas.
 ///
@@ -95,9 +98,9 @@ fn check(file: &std::path::Path) -> ExitCode {
             return ExitCode::FAILURE;
         }
     };
-    let mut problems = runtime::check(&conf);
+    let mut problems = loader::check(&conf);
     if problems.is_empty()
-        && let Err(e) = runtime::check_loads(&conf)
+        && let Err(e) = loader::check_loads(&conf)
     {
         problems.push(e);
     }
@@ -130,7 +133,7 @@ fn run(cli: &Cli) -> ExitCode {
             return ExitCode::from(2);
         }
     };
-    let problems = runtime::check(&conf);
+    let problems = loader::check(&conf);
     if !problems.is_empty() {
         for p in problems {
             eprintln!("{p}");
@@ -138,14 +141,14 @@ fn run(cli: &Cli) -> ExitCode {
         return ExitCode::from(2);
     }
     eprintln!("Configuration from {}", cli.conf.display());
-    let rt = match runtime::Runtime::start(&conf) {
+    let rt = match loader::start(&conf) {
         Ok(rt) => rt,
         Err(e) => {
             eprintln!("{e}");
             return ExitCode::FAILURE;
         }
     };
-    let headless = cli.headless || !crate::runtime::display_available();
+    let headless = cli.headless || !display_available();
     #[cfg(not(feature = "gui"))]
     if !headless {
         tracing::warn!("this binary has no GUI compiled in; running headless");
@@ -173,16 +176,22 @@ fn run(cli: &Cli) -> ExitCode {
     // service is loaded) on this one.
     #[cfg(feature = "gui")]
     if !headless {
-        return crate::gui::launch(rt, conf, cli.no_shell);
+        return window::launch(rt, conf, cli.no_shell);
     }
     #[cfg(feature = "gui")]
-    crate::gui::headless_notice(&rt, !cli.no_shell);
+    window::headless_notice(&rt, !cli.no_shell);
     if cli.no_shell {
         loop {
             std::thread::park();
         }
     }
-    shell::run(rt.clone(), conf);
+    let _ = shell::run(rt.clone(), conf);
     rt.shutdown();
     ExitCode::SUCCESS
+}
+
+/// Whether a graphical display is reachable (X11 or Wayland).
+pub fn display_available() -> bool {
+    std::env::var_os("DISPLAY").is_some_and(|d| !d.is_empty())
+        || std::env::var_os("WAYLAND_DISPLAY").is_some_and(|d| !d.is_empty())
 }

@@ -25,7 +25,37 @@ use std::{
     sync::Arc,
 };
 
-use crate::registry::Kind;
+mod component;
+mod line;
+
+pub use component::ComponentConf;
+pub use line::{ConfLine, ImageInterface};
+
+/// What a component is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Kind {
+    Driver,
+    Service,
+    Schema,
+}
+
+impl Kind {
+    /// Drivers and services are the same kind of object (as in 4.3): a service may
+    /// read a `driver NAME` section and the reverse.
+    pub fn same_family(self, other: Kind) -> bool {
+        self == other || (self != Kind::Schema && other != Kind::Schema)
+    }
+}
+
+impl fmt::Display for Kind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Kind::Driver => "driver",
+            Kind::Service => "service",
+            Kind::Schema => "schema",
+        })
+    }
+}
 
 /// Where a line came from.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -59,65 +89,6 @@ impl fmt::Display for ConfErrors {
                 writeln!(f)?;
             }
             write!(f, "{e}")?;
-        }
-        Ok(())
-    }
-}
-
-/// One non-blank, non-comment line, split into words.
-#[derive(Clone, Debug)]
-pub struct ConfLine {
-    pub at: Location,
-    pub words: Vec<String>,
-}
-
-impl ConfLine {
-    /// The first word.
-    pub fn keyword(&self) -> &str {
-        &self.words[0]
-    }
-    /// Words after the keyword.
-    pub fn args(&self) -> &[String] {
-        &self.words[1..]
-    }
-    /// An error located at this line.
-    pub fn error(&self, message: impl Into<String>) -> ConfError {
-        ConfError {
-            at: self.at.clone(),
-            message: message.into(),
-        }
-    }
-    /// Argument `i` (0 = first word after the keyword) parsed as `T`, with an error
-    /// that names the line, the argument and what was expected.
-    pub fn arg<T: std::str::FromStr>(&self, i: usize, what: &str) -> Result<T, ConfError> {
-        let word = self.words.get(i + 1).ok_or_else(|| {
-            self.error(format!(
-                "`{}` needs {what} as argument {}",
-                self.keyword(),
-                i + 1
-            ))
-        })?;
-        word.parse().map_err(|_| {
-            self.error(format!(
-                "`{}`: argument {} is `{word}`, expected {what}",
-                self.keyword(),
-                i + 1
-            ))
-        })
-    }
-    /// Fails unless the line has between `min` and `max` arguments.
-    pub fn expect_args(&self, min: usize, max: usize, usage: &str) -> Result<(), ConfError> {
-        let n = self.args().len();
-        if n < min || n > max {
-            return Err(self.error(format!(
-                "`{}` takes {}; usage: {usage}",
-                self.keyword(),
-                if min == max {
-                    format!("{min} argument(s), got {n}")
-                } else {
-                    format!("{min} to {max} arguments, got {n}")
-                }
-            )));
         }
         Ok(())
     }
@@ -164,107 +135,9 @@ pub struct Conf {
     pub directives: Vec<Directive>,
 }
 
-/// The lines a component gets: its section or its own file.
-#[derive(Clone, Debug)]
-pub struct ComponentConf {
-    pub kind: Kind,
-    pub name: String,
-    /// The file these lines came from (main conf or the component's own file).
-    pub file: PathBuf,
-    pub lines: Vec<ConfLine>,
-}
-
-impl ComponentConf {
-    /// A conf with no lines (a component loaded with no section).
-    pub fn empty(kind: Kind, name: &str, file: &Path) -> Self {
-        ComponentConf {
-            kind,
-            name: name.to_string(),
-            file: file.to_path_buf(),
-            lines: Vec::new(),
-        }
-    }
-
-    /// Builds a conf from text, as if it were the body of the component's section.
-    /// Handy for tests and for components created from code.
-    pub fn from_text(kind: Kind, name: &str, text: &str) -> Result<Self, ConfErrors> {
-        let file: Arc<Path> = Arc::from(Path::new("<inline>"));
-        let lines = split_lines(&file, text)
-            .into_iter()
-            .map(|(at, words)| ConfLine { at, words })
-            .collect();
-        Ok(ComponentConf {
-            kind,
-            name: name.to_string(),
-            file: file.to_path_buf(),
-            lines,
-        })
-    }
-
-    /// Lines whose keyword is `key`.
-    pub fn lines_with<'a>(&'a self, key: &'a str) -> impl Iterator<Item = &'a ConfLine> + 'a {
-        self.lines.iter().filter(move |l| l.keyword() == key)
-    }
-
-    /// The last line with keyword `key`, if any (later lines override earlier ones).
-    pub fn line<'a>(&'a self, key: &'a str) -> Option<&'a ConfLine> {
-        self.lines_with(key).last()
-    }
-
-    /// `provides NAME ...` lines.
-    pub fn provides(&self) -> impl Iterator<Item = &ConfLine> {
-        self.lines_with("provides")
-    }
-
-    /// A single-valued `key VALUE` line parsed as `T`, or `default` when absent.
-    pub fn value_or<T: std::str::FromStr>(
-        &self,
-        key: &str,
-        what: &str,
-        default: T,
-    ) -> Result<T, ConfError> {
-        match self.line(key) {
-            Some(l) => {
-                l.expect_args(1, 1, &format!("{key} <{what}>"))?;
-                l.arg(0, what)
-            }
-            None => Ok(default),
-        }
-    }
-
-    /// A path value resolved relative to the directory of the file it came from.
-    pub fn resolve(&self, path: &str) -> PathBuf {
-        let p = Path::new(path);
-        if p.is_absolute() {
-            return p.to_path_buf();
-        }
-        self.file
-            .parent()
-            .map(|d| d.join(p))
-            .unwrap_or_else(|| p.to_path_buf())
-    }
-
-    /// The motor-safety timeout (`motors_timeout MS`, default 500 ms): a motors
-    /// command older than this counts as zero for every driver that moves a robot.
-    pub fn motors_timeout(&self) -> Result<std::time::Duration, ConfError> {
-        let ms: u64 = self.value_or("motors_timeout", "milliseconds", 500)?;
-        Ok(std::time::Duration::from_millis(ms))
-    }
-
-    /// An error for a line the component does not understand.
-    pub fn unknown(&self, line: &ConfLine, expected: &str) -> ConfError {
-        line.error(format!(
-            "{} {}: I don't know what to do with `{}`; expected {expected}",
-            self.kind,
-            self.name,
-            line.words.join(" ")
-        ))
-    }
-}
-
 /// Splits text into (location, words), dropping blank lines and `#` comments
 /// (a `#` starts a comment at the start of a line or after a word).
-fn split_lines(file: &Arc<Path>, text: &str) -> Vec<(Location, Vec<String>)> {
+pub(crate) fn split_lines(file: &Arc<Path>, text: &str) -> Vec<(Location, Vec<String>)> {
     let mut out = Vec::new();
     for (i, raw) in text.lines().enumerate() {
         let content = match raw.find('#') {

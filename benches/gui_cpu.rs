@@ -1,0 +1,108 @@
+//! The GUI's CPU: the real binary's window under the current display (CI: Xvfb with
+//! software GL), with introrob driving (examples/introrob.conf) and with the robot
+//! standing still (benches/data/gui_still.conf). Prints the process's CPU (% of
+//! one core, user + system from /proc) over 8 s after 3 s of warm-up, median of
+//! 3 runs each, with the window and `--headless`: the difference is the GUI's.
+//!
+//! With `JDEROBOT_BEFORE=/path/to/old/jderobot` it runs that binary the same way,
+//! in the same process, and prints the ratios (after / before).
+//!
+//! `xvfb-run -a cargo bench --bench gui_cpu` (needs a display).
+
+use std::{
+    path::{Path, PathBuf},
+    process::{Command, Stdio},
+    time::{Duration, Instant},
+};
+
+const RUNS: usize = 3;
+const WARMUP: Duration = Duration::from_secs(3);
+const WINDOW: Duration = Duration::from_secs(8);
+
+/// User + system CPU time of process `pid`, in clock ticks.
+fn cpu_ticks(pid: u32) -> Option<u64> {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
+    // Fields after the command name (which may hold spaces) start after ") ".
+    let rest = stat.rsplit_once(") ")?.1;
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    Some(f.get(11)?.parse::<u64>().ok()? + f.get(12)?.parse::<u64>().ok()?)
+}
+
+/// % of one core that `bin` uses running `conf` with its window.
+fn cpu_percent(bin: &Path, conf: &str, headless: bool) -> f64 {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut child = Command::new(bin)
+        .args(["--no-shell", conf])
+        .args(headless.then_some("--headless"))
+        .current_dir(root)
+        .env("LIBGL_ALWAYS_SOFTWARE", "1")
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("start jderobot");
+    std::thread::sleep(WARMUP);
+    let tick = unsafe { libc::sysconf(libc::_SC_CLK_TCK) } as f64;
+    let (t0, c0) = (Instant::now(), cpu_ticks(child.id()).expect("running"));
+    std::thread::sleep(WINDOW);
+    let (t1, c1) = (Instant::now(), cpu_ticks(child.id()).expect("running"));
+    let _ = child.kill();
+    let _ = child.wait();
+    100.0 * (c1 - c0) as f64 / tick / (t1 - t0).as_secs_f64()
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+fn main() {
+    if std::env::var_os("DISPLAY").is_none_or(|d| d.is_empty()) {
+        eprintln!("gui_cpu: needs a display; run `xvfb-run -a cargo bench --bench gui_cpu`");
+        return;
+    }
+    let now = PathBuf::from(env!("CARGO_BIN_EXE_jderobot"));
+    let before = std::env::var_os("JDEROBOT_BEFORE").map(PathBuf::from);
+    let cases = [
+        ("introrob driving", "examples/introrob.conf"),
+        ("nothing moving", "benches/data/gui_still.conf"),
+    ];
+    println!(
+        "CPU, % of one core, median of {RUNS} runs of {} s: window, headless, and the GUI's part (window - headless)",
+        WINDOW.as_secs()
+    );
+    for (what, conf) in cases {
+        let mut runs: Vec<(String, [Vec<f64>; 2])> =
+            vec![("this build".into(), Default::default())];
+        if let Some(b) = &before {
+            runs.push((format!("before ({})", b.display()), Default::default()));
+        }
+        for _ in 0..RUNS {
+            // The binaries and modes alternate so all see the same machine load.
+            for (i, (_, cpu)) in runs.iter_mut().enumerate() {
+                let bin = if i == 0 {
+                    &now
+                } else {
+                    before.as_ref().unwrap()
+                };
+                cpu[0].push(cpu_percent(bin, conf, false));
+                cpu[1].push(cpu_percent(bin, conf, true));
+            }
+        }
+        let mut gui = Vec::new();
+        for (name, [window, headless]) in runs {
+            let (w, h) = (median(window), median(headless));
+            gui.push(w - h);
+            println!(
+                "{what:<18} {name:<28} window {w:6.1} %  headless {h:6.1} %  GUI {:6.1} %",
+                w - h
+            );
+        }
+        if let [a, b] = gui[..] {
+            println!(
+                "{what:<18} GUI ratio this build / before: {:.2}",
+                a / b.max(1e-9)
+            );
+        }
+    }
+}

@@ -1,0 +1,384 @@
+//! mplayer: any video the `mplayer` program plays (files, URLs, V4L2 devices), as
+//! JDE 4.3's `mplayer` driver.
+//!
+//! 4.3 ran mplayer and mencoder through named pipes. We run the real `mplayer`
+//! (Debian package `mplayer`) as a child process with `-vo yuv4mpeg:file=/dev/fd/3`:
+//! it writes a YUV4MPEG2 stream (a one-line header with size and frame rate, then
+//! 4:2:0 frames) on a pipe that is its file descriptor 3, while its messages go to
+//! its standard output and error, which we keep for error messages. yuv4mpeg is
+//! the raw video output mplayer has on every build (there is no raw BGR one) and
+//! its header carries the frame rate; `-vf scale=W:H` sizes the frames and we
+//! convert 4:2:0 to BGR ([`crate::media::y4m`]). mplayer runs with `-benchmark`
+//! (no sleeping of its own) and the pipe's back-pressure holds it: the driver paces
+//! the frames at the rate in the header, or not at all with `unpaced`. The child
+//! never outlives jderobot (see [`crate::media::child`]).
+//!
+//! # Conf (the seed's lines)
+//! ```text
+//! driver mplayer
+//! provides colorA clip.avi repeat_on               # FILE|URL repeat_on|off: 320x240
+//! provides varcolorB clip.avi 640 480 repeat_off   # FILE W H repeat_on|off
+//! provides colorC v4l /dev/video0 composite        # cam|tv|composite|s-video
+//! provides varcolorD http://host/stream.mp4 320 240 repeat_off unpaced
+//! end_driver
+//! ```
+//! A trailing `unpaced` publishes frames as fast as mplayer decodes them instead of
+//! at the video's rate. Relative file names are relative to the conf file. The v4l
+//! inputs map to mplayer's `-tv driver=v4l2:device=DEV:input=N`: `cam` and `tv`
+//! input 0, `composite` 1, `s-video` 2.
+//!
+//! # Interfaces
+//! `colorA..D` (320x240) and `varcolorA..D` (W x H), BGR. Frames are decoded only
+//! while the interface is used (a suspended file is paused; a device is closed),
+//! the clock moves once per new frame. At the end of a file mplayer starts again
+//! with `repeat_on`; with `repeat_off` the last frame stays, the interface is
+//! marked stale ("end of the video") and the video plays again after the next
+//! stop and run. A missing `mplayer` program is an error when the driver loads;
+//! a file mplayer cannot play, an mplayer that dies or a device that goes away
+//! marks the interface stale with mplayer's own message, and the driver retries
+//! every 2 s while the interface is used.
+
+use std::{path::Path, process::Command, sync::Arc};
+
+use anyhow::Context as _;
+
+use crate::{
+    conf::{ComponentConf, ConfLine},
+    interfaces::{COLOR_HEIGHT, COLOR_WIDTH, Image, Interface},
+    media::{
+        MediaError,
+        child::{Child, FramePipe, Killer},
+        is_url, require_program,
+        stream::{Frames, Stream, StreamSpec},
+        y4m::{self, Y4mHeader},
+    },
+    runtime::{Driver, Runtime},
+};
+
+const USAGE: &str = "provides colorA..D FILE|URL repeat_on|off [unpaced], \
+provides colorA..D v4l DEV cam|tv|composite|s-video, provides varcolorA..D FILE|URL W H repeat_on|off [unpaced]";
+
+/// Where the video comes from.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Input {
+    /// A file (resolved) or a URL.
+    File(String),
+    /// A V4L2 device and input number.
+    V4l { device: String, input: u32 },
+}
+
+/// One `provides` line, parsed.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Source {
+    pub interface: String,
+    pub input: Input,
+    pub width: u32,
+    pub height: u32,
+    pub repeat: bool,
+    pub pace: bool,
+}
+
+fn repeat(l: &ConfLine, word: Option<&String>) -> anyhow::Result<bool> {
+    match word.map(String::as_str) {
+        Some("repeat_on") => Ok(true),
+        Some("repeat_off") => Ok(false),
+        Some(w) => Err(l
+            .error(format!(
+                "`{w}` is not repeat_on or repeat_off; usage: {USAGE}"
+            ))
+            .into()),
+        None => Err(l
+            .error(format!("missing repeat_on|repeat_off; usage: {USAGE}"))
+            .into()),
+    }
+}
+
+fn unpaced(l: &ConfLine, rest: &[String]) -> anyhow::Result<bool> {
+    match rest {
+        [] => Ok(true),
+        [w] if w == "unpaced" => Ok(false),
+        _ => Err(l
+            .error(format!(
+                "`{}` is not understood here; expected `unpaced` or nothing; usage: {USAGE}",
+                rest.join(" ")
+            ))
+            .into()),
+    }
+}
+
+fn file_or_url(conf: &ComponentConf, s: &str) -> String {
+    if is_url(s) {
+        s.to_string()
+    } else {
+        conf.resolve(s).display().to_string()
+    }
+}
+
+/// Parses the driver's lines.
+pub fn parse(conf: &ComponentConf) -> anyhow::Result<Vec<(Source, ConfLine)>> {
+    let mut out: Vec<(Source, ConfLine)> = Vec::new();
+    for l in &conf.lines {
+        if l.keyword() != "provides" {
+            return Err(conf.unknown(l, &format!("`{USAGE}`")).into());
+        }
+        let a = l.args();
+        let image = l.image_interface(0, "mplayer", USAGE)?;
+        let (iface, color) = (image.name.as_str(), image.fixed_size);
+        if a.len() < 3 {
+            return Err(l
+                .error(format!("`provides {iface}` is too short; usage: {USAGE}"))
+                .into());
+        }
+        let src = if color && a[1] == "v4l" {
+            l.expect_args(4, 4, "provides colorX v4l DEV cam|tv|composite|s-video")?;
+            let input = match a[3].as_str() {
+                "cam" | "tv" => 0,
+                "composite" => 1,
+                "s-video" => 2,
+                other => {
+                    return Err(l
+                        .error(format!(
+                            "`{other}` is not a v4l input; expected cam, tv, composite or s-video"
+                        ))
+                        .into());
+                }
+            };
+            Source {
+                interface: iface.into(),
+                input: Input::V4l {
+                    device: a[2].clone(),
+                    input,
+                },
+                width: COLOR_WIDTH,
+                height: COLOR_HEIGHT,
+                repeat: false,
+                pace: false,
+            }
+        } else if color {
+            Source {
+                interface: iface.into(),
+                input: Input::File(file_or_url(conf, &a[1])),
+                width: COLOR_WIDTH,
+                height: COLOR_HEIGHT,
+                repeat: repeat(l, a.get(2))?,
+                pace: unpaced(l, &a[3..])?,
+            }
+        } else {
+            if a.len() < 5 {
+                return Err(l
+                    .error(format!(
+                        "`provides {iface}` needs FILE W H repeat_on|off; usage: {USAGE}"
+                    ))
+                    .into());
+            }
+            let w: u32 = l.arg(2, "a width W in pixels")?;
+            let h: u32 = l.arg(3, "a height H in pixels")?;
+            if !(2..=8192).contains(&w) || !(2..=8192).contains(&h) {
+                return Err(l
+                    .error(format!(
+                        "`provides {iface}`: {w}x{h} is not a size in 2..8192 pixels"
+                    ))
+                    .into());
+            }
+            Source {
+                interface: iface.into(),
+                input: Input::File(file_or_url(conf, &a[1])),
+                width: w,
+                height: h,
+                repeat: repeat(l, a.get(4))?,
+                pace: unpaced(l, &a[5..])?,
+            }
+        };
+        if out.iter().any(|(s, _)| s.interface == iface) {
+            return Err(l.error(format!("`{iface}` is provided twice")).into());
+        }
+        out.push((src, l.clone()));
+    }
+    if out.is_empty() {
+        anyhow::bail!("mplayer: no `provides` line; usage: {USAGE}");
+    }
+    Ok(out)
+}
+
+/// The mplayer command line for a source.
+pub fn command(mplayer: &Path, src: &Source) -> Command {
+    let mut cmd = Command::new(mplayer);
+    cmd.args([
+        "-quiet",
+        "-noconsolecontrols",
+        "-nolirc",
+        "-nojoystick",
+        "-nomouseinput",
+        "-nosound",
+        "-noaspect",
+        "-benchmark",
+        "-vo",
+        "yuv4mpeg:file=/dev/fd/3",
+        "-vf",
+    ])
+    .arg(format!("scale={}:{}", src.width, src.height));
+    match &src.input {
+        Input::File(f) => {
+            cmd.arg("--").arg(f);
+        }
+        Input::V4l { device, input } => {
+            cmd.arg("-tv")
+                .arg(format!("driver=v4l2:device={device}:input={input}"))
+                .arg("tv://");
+        }
+    }
+    cmd
+}
+
+/// A YUV4MPEG2 stream from an mplayer child.
+struct Y4m {
+    child: Child,
+    header: Option<Y4mHeader>,
+    width: u32,
+    height: u32,
+    buf: Vec<u8>,
+    label: String,
+}
+
+impl Y4m {
+    fn said(&self) -> String {
+        let s = self.child.said(|l| {
+            !l.starts_with("BENCHMARK") && !l.starts_with("Exiting") && !l.starts_with("MPlayer")
+        });
+        let lines: Vec<&str> = s.split(" | ").collect();
+        lines[lines.len().saturating_sub(4)..].join(" | ")
+    }
+
+    fn fail(&self, what: impl std::fmt::Display) -> MediaError {
+        let said = self.said();
+        MediaError::Child(if said.is_empty() {
+            format!("{}: {what}", self.label)
+        } else {
+            format!("{}: {what}; mplayer said: {said}", self.label)
+        })
+    }
+}
+
+impl Y4m {
+    /// Reads the stream header (size and rate) that mplayer writes first.
+    fn start(&mut self) -> Result<(), MediaError> {
+        let h = match y4m::read_header(self.child.frames()) {
+            Ok(Some(h)) => h,
+            Ok(None) => {
+                // Let mplayer finish printing why before we quote it.
+                std::thread::sleep(std::time::Duration::from_millis(100));
+                return Err(self.fail("no frames (a file or device mplayer cannot play?)"));
+            }
+            Err(e) => return Err(self.fail(e)),
+        };
+        if h.width < self.width || h.height < self.height {
+            return Err(self.fail(format!(
+                "mplayer wrote {}x{} frames, expected {}x{}",
+                h.width, h.height, self.width, self.height
+            )));
+        }
+        self.header = Some(h);
+        Ok(())
+    }
+}
+
+impl Frames for Y4m {
+    fn rate(&self) -> Option<f64> {
+        self.header.and_then(|h| h.rate)
+    }
+
+    fn read(&mut self) -> Result<bool, MediaError> {
+        let Some(h) = self.header else {
+            return Err(self.fail("no stream header"));
+        };
+        y4m::read_frame(self.child.frames(), &h, &mut self.buf).map_err(|e| self.fail(e))
+    }
+
+    fn fill(&self, out: &mut Image) {
+        let Some(h) = self.header else { return };
+        out.width = self.width;
+        out.height = self.height;
+        out.data
+            .resize(self.width as usize * self.height as usize * 3, 0);
+        y4m::i420_to_bgr(
+            &self.buf,
+            h.width as usize,
+            h.height as usize,
+            self.width as usize,
+            self.height as usize,
+            &mut out.data,
+        );
+    }
+
+    fn finish(self: Box<Self>) -> Result<(), MediaError> {
+        let label = self.label.clone();
+        self.child
+            .finish()
+            .map_err(|e| MediaError::Child(format!("{label}: {e}")))
+    }
+}
+
+struct MPlayer {
+    streams: Vec<Stream>,
+}
+
+impl Driver for MPlayer {
+    fn terminate(&mut self) {
+        for s in &mut self.streams {
+            s.stop();
+        }
+    }
+}
+
+fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>> {
+    let sources = parse(conf)?;
+    let mplayer = require_program("mplayer", "mplayer")
+        .map_err(|e| anyhow::anyhow!("mplayer driver: {e}"))?;
+    let mut streams = Vec::new();
+    for (src, line) in sources {
+        let (label, live) = match &src.input {
+            Input::File(f) => {
+                if !is_url(f) && !Path::new(f).exists() {
+                    return Err(line.error(format!("{f}: no such video file")).into());
+                }
+                (format!("mplayer {f}"), is_url(f))
+            }
+            Input::V4l { device, .. } => (format!("mplayer {device}"), true),
+        };
+        let iface: Arc<Interface<Image>> = rt.interfaces.provide_value(
+            &src.interface,
+            &conf.name,
+            Image::new(src.width, src.height),
+        )?;
+        let (s2, m2, l2) = (src.clone(), mplayer.clone(), label.clone());
+        let open = move |killer: &Killer| -> Result<Box<dyn Frames>, MediaError> {
+            let child = Child::spawn(command(&m2, &s2), FramePipe::Fd3, killer, "mplayer")?;
+            let mut y = Y4m {
+                child,
+                header: None,
+                width: s2.width,
+                height: s2.height,
+                buf: Vec::new(),
+                label: l2.clone(),
+            };
+            y.start()?;
+            Ok(Box::new(y))
+        };
+        let spec = StreamSpec {
+            label,
+            open: Box::new(open),
+            pace: src.pace,
+            repeat: src.repeat,
+            pause: !live,
+        };
+        streams.push(Stream::start(spec, iface).context("cannot start an mplayer thread")?);
+    }
+    Ok(Box::new(MPlayer { streams }))
+}
+
+crate::register_driver!(
+    Driver,
+    "mplayer",
+    "any video the mplayer program plays (files, URLs, V4L2) on colorA..D / varcolorA..D",
+    create
+);

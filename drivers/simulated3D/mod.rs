@@ -1,0 +1,242 @@
+//! simulated3D: synthetic camera images of a 3D wireframe world, as JDE 4.3.1's
+//! `simulated3D` driver.
+//!
+//! The world is a set of 3D segments (4.3's world file, the one extrinsics reads);
+//! each camera is a progeo pinhole camera (4.3's camera file). Every 33 ms the
+//! driver renders each camera someone uses: white background, the world's lines
+//! in black, projected with [`crate::progeo`] (`project`, `displayline`, optical
+//! to graphic coordinates). No system package needed.
+//!
+//! # Conf (the seed's lines)
+//! ```text
+//! driver simulated3D
+//! worldfile ../assets/simulated3D/robotics-lab.world
+//! provides colorA ../assets/simulated3D/cameraA     # the camera file must say 320x240
+//! provides varcolorB ../assets/simulated3D/cameraB  # any size: the file's columns x rows
+//! end_driver
+//! load_driver simulated3D
+//! ```
+//! Relative paths are relative to the conf file. The world file holds
+//! `worldline X1 Y1 Z1 H1 X2 Y2 Z2 H2` lines (mm; the other keys of extrinsics'
+//! world files are read and ignored); the camera file holds `positionX..H`,
+//! `FOApositionX..H`, `roll` (radians), `fx`, `fy`, `skew`, `u0`, `v0`, `columns`,
+//! `rows` (see [`crate::progeo`]). Errors in either name `file:line`.
+//!
+//! # Interfaces
+//! `colorA..D` (320x240) and `varcolorA..D` (the camera file's size), BGR. A
+//! camera is rendered only while its interface is used; each render is one new
+//! frame (clock + 1), every 33 ms as in 4.3. Segments that cross a camera's
+//! plane are drawn clipped (4.3.0 left them out; 4.3.1 drew them).
+
+use std::{
+    sync::{
+        Arc,
+        atomic::{AtomicBool, Ordering},
+    },
+    thread::JoinHandle,
+    time::{Duration, Instant},
+};
+
+use anyhow::Context as _;
+
+use crate::{
+    conf::ComponentConf,
+    interfaces::{COLOR_HEIGHT, COLOR_WIDTH, Image, Interface},
+    progeo::{PinholeCamera, World},
+    runtime::{Driver, Runtime},
+};
+
+const USAGE: &str = "worldfile FILE, provides colorA..D|varcolorA..D CAMERA_FILE";
+
+/// The render period, as 4.3 (33 ms).
+pub const PERIOD: Duration = Duration::from_millis(33);
+
+/// Draws `world`'s lines in black on white through `cam` into `img` (resized to
+/// the camera's columns x rows).
+pub fn render(world: &World, cam: &PinholeCamera, img: &mut Image) {
+    let (w, h) = (cam.columns, cam.rows);
+    img.width = w;
+    img.height = h;
+    img.data.clear();
+    img.data.resize(w as usize * h as usize * 3, 255);
+    for (a, b) in &world.lines {
+        let (pa, pb) = (cam.project(*a), cam.project(*b));
+        if let Some((ga, gb)) = cam.displayline(pa, pb) {
+            let (c0, r0) = cam.optical_to_graphic(ga);
+            let (c1, r1) = cam.optical_to_graphic(gb);
+            draw_line(img, c0, r0, c1, r1, [0, 0, 0]);
+        }
+    }
+}
+
+/// A line from (column, row) `(x0, y0)` to `(x1, y1)`, clipped to the image
+/// (Bresenham on the rounded ends, as 4.3's line drawer).
+pub fn draw_line(img: &mut Image, x0: f64, y0: f64, x1: f64, y1: f64, bgr: [u8; 3]) {
+    if ![x0, y0, x1, y1]
+        .iter()
+        .all(|v| v.is_finite() && v.abs() < 1e6)
+    {
+        return;
+    }
+    let (mut x, mut y) = (x0.round() as i64, y0.round() as i64);
+    let (xe, ye) = (x1.round() as i64, y1.round() as i64);
+    let (dx, dy) = ((xe - x).abs(), -(ye - y).abs());
+    let (sx, sy) = (if x < xe { 1 } else { -1 }, if y < ye { 1 } else { -1 });
+    let mut err = dx + dy;
+    let (w, h) = (img.width as i64, img.height as i64);
+    loop {
+        if (0..w).contains(&x) && (0..h).contains(&y) {
+            let i = ((y * w + x) * 3) as usize;
+            img.data[i..i + 3].copy_from_slice(&bgr);
+        }
+        if x == xe && y == ye {
+            break;
+        }
+        let e2 = 2 * err;
+        if e2 >= dy {
+            err += dy;
+            x += sx;
+        }
+        if e2 <= dx {
+            err += dx;
+            y += sy;
+        }
+    }
+}
+
+/// The driver's settings.
+pub struct Sim3dConf {
+    pub world: World,
+    /// (interface, camera).
+    pub cameras: Vec<(String, PinholeCamera)>,
+}
+
+/// Parses the driver's lines and reads the world and camera files.
+pub fn parse(conf: &ComponentConf) -> anyhow::Result<Sim3dConf> {
+    let mut world = None;
+    let mut cameras: Vec<(String, PinholeCamera)> = Vec::new();
+    for l in &conf.lines {
+        match l.keyword() {
+            "worldfile" => {
+                l.expect_args(1, 1, "worldfile FILE")?;
+                let path = conf.resolve(&l.args()[0]);
+                world = Some(World::load(&path).map_err(|e| l.error(format!("world file: {e}")))?);
+            }
+            "provides" => {
+                l.expect_args(2, 2, "provides colorA..D|varcolorA..D CAMERA_FILE")?;
+                let image = l.image_interface(
+                    0,
+                    "simulated3D",
+                    "provides colorA..D|varcolorA..D CAMERA_FILE",
+                )?;
+                let (iface, color) = (image.name.as_str(), image.fixed_size);
+                let path = conf.resolve(&l.args()[1]);
+                let cam =
+                    PinholeCamera::load(&path).map_err(|e| l.error(format!("camera file: {e}")))?;
+                let (c, r) = (cam.columns, cam.rows);
+                if !(1..=8192).contains(&c) || !(1..=8192).contains(&r) {
+                    return Err(l
+                        .error(format!(
+                            "{}: columns {c} rows {r} is not an image size (1..8192)",
+                            path.display()
+                        ))
+                        .into());
+                }
+                if color && (c, r) != (COLOR_WIDTH, COLOR_HEIGHT) {
+                    return Err(l
+                        .error(format!(
+                            "{}: the camera is {c}x{r}, but {iface} is {COLOR_WIDTH}x{COLOR_HEIGHT}; use a varcolor interface",
+                            path.display()
+                        ))
+                        .into());
+                }
+                if cameras.iter().any(|(n, _)| n == iface) {
+                    return Err(l.error(format!("`{iface}` is provided twice")).into());
+                }
+                cameras.push((iface.to_string(), cam));
+            }
+            _ => return Err(conf.unknown(l, &format!("`{USAGE}`")).into()),
+        }
+    }
+    let world =
+        world.ok_or_else(|| anyhow::anyhow!("simulated3D: no `worldfile` line; usage: {USAGE}"))?;
+    if cameras.is_empty() {
+        anyhow::bail!("simulated3D: no `provides` line; usage: {USAGE}");
+    }
+    Ok(Sim3dConf { world, cameras })
+}
+
+struct Simulated3D {
+    stop: Arc<AtomicBool>,
+    thread: Option<JoinHandle<()>>,
+}
+
+impl Driver for Simulated3D {
+    fn terminate(&mut self) {
+        self.stop.store(true, Ordering::Release);
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+impl Drop for Simulated3D {
+    fn drop(&mut self) {
+        self.terminate();
+    }
+}
+
+fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>> {
+    let sc = parse(conf)?;
+    let mut cams: Vec<(Arc<Interface<Image>>, PinholeCamera)> = Vec::new();
+    for (name, cam) in sc.cameras {
+        let iface =
+            rt.interfaces
+                .provide_value(&name, &conf.name, Image::new(cam.columns, cam.rows))?;
+        cams.push((iface, cam));
+    }
+    let world = sc.world;
+    let stop = Arc::new(AtomicBool::new(false));
+    let s = stop.clone();
+    let thread = std::thread::Builder::new()
+        .name("simulated3D".into())
+        .spawn(move || {
+            let mut next = Instant::now();
+            while !s.load(Ordering::Acquire) {
+                let mut any = false;
+                for (iface, cam) in &cams {
+                    if iface.users() > 0 {
+                        any = true;
+                        if let Err(e) = iface.write(|img| render(&world, cam, img)) {
+                            iface.set_stale(e.to_string());
+                        }
+                    }
+                }
+                if !any {
+                    // Nobody looks: sleep until the first camera is used (or a tick).
+                    cams[0].0.wait_used(PERIOD);
+                    next = Instant::now();
+                    continue;
+                }
+                next += PERIOD;
+                let now = Instant::now();
+                if next > now {
+                    std::thread::sleep(next - now);
+                } else {
+                    next = now;
+                }
+            }
+        })
+        .context("cannot start the simulated3D thread")?;
+    Ok(Box::new(Simulated3D {
+        stop,
+        thread: Some(thread),
+    }))
+}
+
+crate::register_driver!(
+    Driver,
+    "simulated3D",
+    "synthetic camera images of a 3D wireframe world (progeo cameras, black lines on white)",
+    create
+);

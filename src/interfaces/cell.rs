@@ -1,0 +1,331 @@
+//! One named, typed interface: the latest sample behind an atomic pointer, the
+//! writer's recycled buffer, resume/suspend counting, staleness.
+
+use std::{
+    any::Any,
+    collections::VecDeque,
+    sync::{
+        Arc,
+        atomic::{AtomicU64, AtomicUsize, Ordering},
+    },
+    time::{Duration, Instant, SystemTime},
+};
+
+use arc_swap::{ArcSwap, Guard};
+use parking_lot::{Condvar, Mutex};
+
+use super::{
+    table::InterfaceError,
+    values::{InterfaceValue, Motors},
+};
+
+/// One value of an interface.
+#[derive(Debug)]
+pub struct Sample<T> {
+    /// Increases by one with every new value; 0 is the initial default value.
+    pub clock: u64,
+    /// When the value was published (monotonic).
+    pub stamp: Instant,
+    /// When the value was published (wall clock).
+    pub time: SystemTime,
+    pub value: T,
+}
+
+impl<T> std::ops::Deref for Sample<T> {
+    type Target = T;
+    fn deref(&self) -> &T {
+        &self.value
+    }
+}
+
+/// What writers share: a recycled buffer and recent publish times (for the rate).
+struct Writer<T> {
+    spare: Option<T>,
+    recent: VecDeque<Instant>,
+    first: Option<Instant>,
+}
+
+const RATE_WINDOW: Duration = Duration::from_secs(2);
+
+impl<T> Writer<T> {
+    fn published(&mut self, at: Instant) {
+        self.first.get_or_insert(at);
+        self.recent.push_back(at);
+        while self
+            .recent
+            .front()
+            .is_some_and(|t| at.duration_since(*t) > RATE_WINDOW)
+        {
+            self.recent.pop_front();
+        }
+    }
+
+    fn rate(&self) -> f64 {
+        let Some(first) = self.first else { return 0.0 };
+        let now = Instant::now();
+        let window = now.duration_since(first).min(RATE_WINDOW).as_secs_f64();
+        let n = self
+            .recent
+            .iter()
+            .filter(|t| now.duration_since(**t) <= RATE_WINDOW)
+            .count();
+        if window < 0.05 {
+            0.0
+        } else {
+            n as f64 / window
+        }
+    }
+}
+
+/// One named, typed interface.
+pub struct Interface<T> {
+    name: String,
+    provider: String,
+    slot: ArcSwap<Sample<T>>,
+    /// Serialises writers (readers never take it).
+    writer: Mutex<Writer<T>>,
+    users: AtomicUsize,
+    wake: (Mutex<()>, Condvar),
+    /// The clock of the last sample, for cheap checks.
+    clock: AtomicU64,
+    /// Why the value is stale (its source is gone), until the next publish.
+    stale: Mutex<Option<String>>,
+}
+
+impl<T: InterfaceValue> Interface<T> {
+    /// A new interface holding `T::default()` at clock 0.
+    pub fn new(name: &str, provider: &str) -> Self {
+        Self::with_value(name, provider, T::default())
+    }
+
+    /// A new interface holding `initial` at clock 0.
+    pub fn with_value(name: &str, provider: &str, initial: T) -> Self {
+        Interface {
+            name: name.to_string(),
+            provider: provider.to_string(),
+            slot: ArcSwap::from_pointee(Sample {
+                clock: 0,
+                stamp: Instant::now(),
+                time: SystemTime::now(),
+                value: initial,
+            }),
+            writer: Mutex::new(Writer {
+                spare: None,
+                recent: VecDeque::new(),
+                first: None,
+            }),
+            users: AtomicUsize::new(0),
+            wake: (Mutex::new(()), Condvar::new()),
+            clock: AtomicU64::new(0),
+            stale: Mutex::new(None),
+        }
+    }
+
+    /// The latest sample, as cheap as reading a local variable: an atomic load, no
+    /// copy and no lock. Hold the guard only while you work on this sample; use
+    /// [`snapshot`](Self::snapshot) to keep it longer.
+    #[inline]
+    pub fn read(&self) -> Guard<Arc<Sample<T>>> {
+        self.slot.load()
+    }
+
+    /// The latest sample, owned (one reference-count increment).
+    pub fn snapshot(&self) -> Arc<Sample<T>> {
+        self.slot.load_full()
+    }
+
+    /// The latest sample if it is younger than `max_age`.
+    pub fn fresh(&self, max_age: Duration) -> Option<Arc<Sample<T>>> {
+        let s = self.snapshot();
+        (s.clock > 0 && s.stamp.elapsed() <= max_age).then_some(s)
+    }
+
+    /// Publishes a new value; returns its clock. Never waits for readers.
+    pub fn publish(&self, value: T) -> Result<u64, InterfaceError> {
+        value
+            .validate(&self.name)
+            .map_err(InterfaceError::Rejected)?;
+        let mut w = self.writer.lock();
+        Ok(self.store(&mut w, value).0)
+    }
+
+    /// Fills a recycled value in place and publishes it. `fill` gets the buffer of a
+    /// sample no reader holds any more (or a copy of the latest value), so steady
+    /// streams of large values allocate nothing.
+    pub fn write(&self, fill: impl FnOnce(&mut T)) -> Result<u64, InterfaceError> {
+        let mut w = self.writer.lock();
+        let mut value = w.spare.take().unwrap_or_else(|| self.read().value.clone());
+        fill(&mut value);
+        if let Err(e) = value.validate(&self.name) {
+            w.spare = Some(value);
+            return Err(InterfaceError::Rejected(e));
+        }
+        let (clock, old) = self.store(&mut w, value);
+        if let Some(s) = Arc::into_inner(old) {
+            w.spare = Some(s.value);
+        }
+        Ok(clock)
+    }
+
+    /// Swaps in a new sample (the caller holds the writer lock); returns its clock
+    /// and the previous sample.
+    fn store(&self, w: &mut Writer<T>, value: T) -> (u64, Arc<Sample<T>>) {
+        let clock = self.clock.load(Ordering::Relaxed) + 1;
+        let stamp = Instant::now();
+        let old = self.slot.swap(Arc::new(Sample {
+            clock,
+            stamp,
+            time: SystemTime::now(),
+            value,
+        }));
+        self.clock.store(clock, Ordering::Release);
+        w.published(stamp);
+        let mut stale = self.stale.lock();
+        if stale.is_some() {
+            *stale = None;
+        }
+        (clock, old)
+    }
+
+    /// The clock of the latest sample.
+    pub fn clock(&self) -> u64 {
+        self.clock.load(Ordering::Acquire)
+    }
+
+    /// Someone starts using this interface (4.3's `run` of a virtual schema).
+    pub fn resume(&self) -> usize {
+        let n = self.users.fetch_add(1, Ordering::AcqRel) + 1;
+        if n == 1 {
+            let _g = self.wake.0.lock();
+            self.wake.1.notify_all();
+        }
+        n
+    }
+
+    /// Someone stops using it (4.3's `stop`); never goes below zero.
+    pub fn suspend(&self) -> usize {
+        self.users
+            .fetch_update(Ordering::AcqRel, Ordering::Acquire, |n| {
+                Some(n.saturating_sub(1))
+            })
+            .map(|n| n.saturating_sub(1))
+            .unwrap_or(0)
+    }
+
+    /// How many users have resumed it.
+    pub fn users(&self) -> usize {
+        self.users.load(Ordering::Acquire)
+    }
+
+    /// Blocks until someone uses the interface or `timeout` passes; returns whether
+    /// it is in use. Drivers sleep here while nobody needs their data.
+    pub fn wait_used(&self, timeout: Duration) -> bool {
+        let mut g = self.wake.0.lock();
+        if self.users() > 0 {
+            return true;
+        }
+        self.wake.1.wait_for(&mut g, timeout);
+        self.users() > 0
+    }
+
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// Marks the value stale: its source is gone (a device unplugged, a server
+    /// down), so the latest value is old and will stay so. `ps`, `echo` and
+    /// mastergui show the reason and the growing age; the next publish clears it.
+    pub fn set_stale(&self, why: impl std::fmt::Display) {
+        *self.stale.lock() = Some(why.to_string());
+    }
+
+    /// Why the value is stale, if it is.
+    pub fn stale(&self) -> Option<String> {
+        self.stale.lock().clone()
+    }
+}
+
+impl Interface<Motors> {
+    /// The motors command a driver should apply: the latest one, or zero if it is
+    /// older than `timeout` (the controller may have died: a robot must not keep
+    /// driving on a stale command).
+    pub fn command(&self, timeout: Duration) -> Motors {
+        self.fresh(timeout).map(|s| s.value).unwrap_or_default()
+    }
+}
+
+/// What every interface offers whatever its type (for the shell, the GUI, `ps`).
+pub trait AnyInterface: Any + Send + Sync {
+    fn name(&self) -> &str;
+    /// The interface family (`laser`, `image`, ...).
+    fn kind(&self) -> &'static str;
+    /// The component that provides it.
+    fn provider(&self) -> &str;
+    fn is_actuator(&self) -> bool;
+    fn clock(&self) -> u64;
+    /// A fingerprint of the latest value: equal values give equal fingerprints, so
+    /// a viewer can tell a new value from a repeat (the GUI repaints on it).
+    fn fingerprint(&self) -> u64;
+    /// Seconds since the latest value was published.
+    fn age(&self) -> Duration;
+    /// New values per second over the last ~2 s.
+    fn rate(&self) -> f64;
+    /// Why the value is stale (its source is gone), if it is.
+    fn stale(&self) -> Option<String>;
+    fn users(&self) -> usize;
+    fn resume(&self) -> usize;
+    fn suspend(&self) -> usize;
+    /// The latest value in its units, one line.
+    fn describe(&self) -> String;
+    /// Sets fields (`v=200 w=10`) on a copy of the latest value and publishes it.
+    fn set_fields(&self, fields: &[(&str, &str)]) -> Result<u64, InterfaceError>;
+}
+
+impl<T: InterfaceValue> AnyInterface for Interface<T> {
+    fn name(&self) -> &str {
+        &self.name
+    }
+    fn kind(&self) -> &'static str {
+        T::KIND
+    }
+    fn provider(&self) -> &str {
+        &self.provider
+    }
+    fn is_actuator(&self) -> bool {
+        T::ACTUATOR
+    }
+    fn clock(&self) -> u64 {
+        Interface::clock(self)
+    }
+    fn fingerprint(&self) -> u64 {
+        self.read().value.fingerprint()
+    }
+    fn age(&self) -> Duration {
+        self.read().stamp.elapsed()
+    }
+    fn rate(&self) -> f64 {
+        self.writer.lock().rate()
+    }
+    fn stale(&self) -> Option<String> {
+        Interface::stale(self)
+    }
+    fn users(&self) -> usize {
+        Interface::users(self)
+    }
+    fn resume(&self) -> usize {
+        Interface::resume(self)
+    }
+    fn suspend(&self) -> usize {
+        Interface::suspend(self)
+    }
+    fn describe(&self) -> String {
+        self.read().value.describe()
+    }
+    fn set_fields(&self, fields: &[(&str, &str)]) -> Result<u64, InterfaceError> {
+        let mut v = self.read().value.clone();
+        for (f, val) in fields {
+            v.set_field(f, val).map_err(InterfaceError::Field)?;
+        }
+        self.publish(v)
+    }
+}

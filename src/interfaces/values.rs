@@ -1,0 +1,415 @@
+//! The value types interfaces hold, with their fields' units.
+
+use std::fmt::Write as _;
+
+/// A value type that an interface can hold.
+pub trait InterfaceValue: Clone + Default + Send + Sync + 'static {
+    /// The interface family name (`laser`, `motors`, `image`...).
+    const KIND: &'static str;
+    /// Whether a schema writes it (motors) rather than a driver.
+    const ACTUATOR: bool = false;
+    /// The value's fields in their units, one line (for `echo`).
+    fn describe(&self) -> String;
+    /// Sets one field from text (for `set`); sensors refuse.
+    fn set_field(&mut self, field: &str, _value: &str) -> Result<(), String> {
+        Err(format!(
+            "`{field}`: {} is a sensor interface; only actuators can be set",
+            Self::KIND
+        ))
+    }
+    /// A fingerprint of the value: equal values give equal fingerprints (what a
+    /// viewer compares to tell a new value from a repeat). By default a hash of
+    /// [`describe`](Self::describe).
+    fn fingerprint(&self) -> u64 {
+        fold_bytes(self.describe().as_bytes())
+    }
+    /// Checks a value before it is published on interface `name`.
+    fn validate(&self, _name: &str) -> Result<(), String> {
+        Ok(())
+    }
+}
+
+fn set_f32(field: &str, value: &str, target: &mut f32) -> Result<(), String> {
+    *target = value
+        .parse::<f32>()
+        .ok()
+        .filter(|v| v.is_finite())
+        .ok_or_else(|| format!("`{field}={value}`: expected a number"))?;
+    Ok(())
+}
+
+/// A BGR image, rows top to bottom, no padding: `data[(row*width+col)*3]` is blue.
+#[derive(Clone, Default, PartialEq, Eq)]
+pub struct Image {
+    pub width: u32,
+    pub height: u32,
+    pub data: Vec<u8>,
+}
+
+impl std::fmt::Debug for Image {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "Image({}x{} BGR)", self.width, self.height)
+    }
+}
+
+/// The fixed size of `colorA..D` (SIFNTSC).
+pub const COLOR_WIDTH: u32 = 320;
+pub const COLOR_HEIGHT: u32 = 240;
+
+impl Image {
+    /// A black image.
+    pub fn new(width: u32, height: u32) -> Self {
+        Image {
+            width,
+            height,
+            data: vec![0; width as usize * height as usize * 3],
+        }
+    }
+    /// The (b, g, r) pixel at column `x`, row `y`.
+    pub fn pixel(&self, x: u32, y: u32) -> [u8; 3] {
+        let i = (y as usize * self.width as usize + x as usize) * 3;
+        [self.data[i], self.data[i + 1], self.data[i + 2]]
+    }
+}
+
+/// A fast fingerprint of bytes (a multiply-rotate fold over 8-byte words, several
+/// GB/s): for telling a new value from a repeat, not for security.
+pub fn fold_bytes(bytes: &[u8]) -> u64 {
+    const K: u64 = 0x9E37_79B9_7F4A_7C15;
+    let mut h = bytes.len() as u64;
+    let mut words = bytes.chunks_exact(8);
+    for w in &mut words {
+        let v = u64::from_le_bytes(w.try_into().expect("8 bytes"));
+        h = (h ^ v).wrapping_mul(K).rotate_left(29);
+    }
+    for &b in words.remainder() {
+        h = (h ^ b as u64).wrapping_mul(K).rotate_left(29);
+    }
+    h
+}
+
+impl InterfaceValue for Image {
+    const KIND: &'static str = "image";
+    fn fingerprint(&self) -> u64 {
+        fold_bytes(&self.data) ^ ((self.width as u64) << 32 | self.height as u64)
+    }
+    fn describe(&self) -> String {
+        format!(
+            "{}x{} BGR ({} bytes)",
+            self.width,
+            self.height,
+            self.data.len()
+        )
+    }
+    fn validate(&self, name: &str) -> Result<(), String> {
+        if self.data.len() != self.width as usize * self.height as usize * 3 {
+            return Err(format!(
+                "{name}: image data is {} bytes, but {}x{} BGR needs {}",
+                self.data.len(),
+                self.width,
+                self.height,
+                self.width as usize * self.height as usize * 3
+            ));
+        }
+        if name.starts_with("color") && (self.width, self.height) != (COLOR_WIDTH, COLOR_HEIGHT) {
+            return Err(format!(
+                "{name}: colorA..D images are {COLOR_WIDTH}x{COLOR_HEIGHT}, got {}x{}; use a varcolor interface for other sizes",
+                self.width, self.height
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Laser ranges in mm, counter-clockwise from the robot's right; with 180 readings
+/// at 1 per degree, index 90 is straight ahead (reading i is at −90 + i/resolution deg).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Laser {
+    pub readings: Vec<i32>,
+    /// Readings per degree.
+    pub resolution: f32,
+}
+
+impl InterfaceValue for Laser {
+    const KIND: &'static str = "laser";
+    fn describe(&self) -> String {
+        let mut s = format!(
+            "number={} resolution={} readings/deg readings(mm)=[",
+            self.readings.len(),
+            self.resolution
+        );
+        for (i, r) in self.readings.iter().enumerate() {
+            if i > 0 {
+                s.push(' ');
+            }
+            let _ = write!(s, "{r}");
+        }
+        s.push(']');
+        s
+    }
+}
+
+/// Sonar ranges in mm, one per sonar (Pioneer ring order).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Sonars {
+    pub us: Vec<f32>,
+}
+
+impl InterfaceValue for Sonars {
+    const KIND: &'static str = "sonars";
+    fn describe(&self) -> String {
+        let v: Vec<String> = self.us.iter().map(|u| format!("{u:.0}")).collect();
+        format!("number={} us(mm)=[{}]", self.us.len(), v.join(" "))
+    }
+}
+
+/// Robot pose from odometry: the seed's `robot[5]` = x, y (mm), θ (rad, (0, 2π]), cos θ, sin θ.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Encoders {
+    pub x: f32,
+    pub y: f32,
+    pub theta: f32,
+    pub cos: f32,
+    pub sin: f32,
+}
+
+impl Default for Encoders {
+    fn default() -> Self {
+        Encoders::from_pose(0.0, 0.0, 0.0)
+    }
+}
+
+impl Encoders {
+    /// From a pose with θ in radians (any range); stores θ normalised to (0, 2π] as 4.3 did.
+    pub fn from_pose(x: f32, y: f32, theta: f32) -> Self {
+        let tau = std::f32::consts::TAU;
+        let mut t = theta.rem_euclid(tau);
+        if t <= 0.0 {
+            t += tau;
+        }
+        Encoders {
+            x,
+            y,
+            theta: t,
+            cos: theta.cos(),
+            sin: theta.sin(),
+        }
+    }
+    /// The seed's `robot[5]` array.
+    pub fn robot(&self) -> [f32; 5] {
+        [self.x, self.y, self.theta, self.cos, self.sin]
+    }
+}
+
+impl InterfaceValue for Encoders {
+    const KIND: &'static str = "encoders";
+    fn describe(&self) -> String {
+        format!(
+            "x={:.1} mm y={:.1} mm theta={:.4} rad ({:.2} deg) cos={:.4} sin={:.4}",
+            self.x,
+            self.y,
+            self.theta,
+            self.theta.to_degrees(),
+            self.cos,
+            self.sin
+        )
+    }
+}
+
+/// Base velocity command: `v` mm/s forward, `w` deg/s counter-clockwise.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Motors {
+    pub v: f32,
+    pub w: f32,
+}
+
+impl Motors {
+    /// The command (v, w) made safe to send: a non-finite speed counts as 0, and each
+    /// is limited to ±its maximum. What every schema and panel that drives a base uses.
+    pub fn limited(v: f32, w: f32, max_v: f32, max_w: f32) -> Motors {
+        let finite = |x: f32| if x.is_finite() { x } else { 0.0 };
+        Motors {
+            v: limit(finite(v), -max_v, max_v),
+            w: limit(finite(w), -max_w, max_w),
+        }
+    }
+}
+
+/// `x` limited to [lo, hi]; unlike `f32::clamp` it never panics (bad bounds or NaN:
+/// a NaN counts as 0).
+pub fn limit(x: f32, lo: f32, hi: f32) -> f32 {
+    if x.is_nan() {
+        0.0f32.max(lo).min(hi)
+    } else {
+        x.max(lo).min(hi)
+    }
+}
+
+impl InterfaceValue for Motors {
+    const KIND: &'static str = "motors";
+    const ACTUATOR: bool = true;
+    fn describe(&self) -> String {
+        format!("v={:.1} mm/s w={:.2} deg/s", self.v, self.w)
+    }
+    fn set_field(&mut self, field: &str, value: &str) -> Result<(), String> {
+        match field {
+            "v" => set_f32(field, value, &mut self.v),
+            "w" => set_f32(field, value, &mut self.w),
+            _ => Err(format!(
+                "motors has no field `{field}`; fields: v (mm/s), w (deg/s)"
+            )),
+        }
+    }
+}
+
+/// Pan-tilt angles in degrees.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PtEncoders {
+    pub pan_angle: f32,
+    pub tilt_angle: f32,
+}
+
+impl InterfaceValue for PtEncoders {
+    const KIND: &'static str = "pantiltencoders";
+    fn describe(&self) -> String {
+        format!(
+            "pan_angle={:.2} deg tilt_angle={:.2} deg",
+            self.pan_angle, self.tilt_angle
+        )
+    }
+}
+
+/// Pan-tilt command (deg, deg/s) and the unit's limits (read-only).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PtMotors {
+    pub longitude: f32,
+    pub latitude: f32,
+    pub longitude_speed: f32,
+    pub latitude_speed: f32,
+    pub max_longitude: f32,
+    pub min_longitude: f32,
+    pub max_latitude: f32,
+    pub min_latitude: f32,
+    pub max_longitude_speed: f32,
+    pub max_latitude_speed: f32,
+}
+
+impl Default for PtMotors {
+    /// Limits of the Directed Perception PTU that 4.3 used.
+    fn default() -> Self {
+        PtMotors {
+            longitude: 0.0,
+            latitude: 0.0,
+            longitude_speed: 0.0,
+            latitude_speed: 0.0,
+            max_longitude: 159.13,
+            min_longitude: -159.13,
+            max_latitude: 30.0,
+            min_latitude: -46.0,
+            max_longitude_speed: 205.89,
+            max_latitude_speed: 205.89,
+        }
+    }
+}
+
+impl InterfaceValue for PtMotors {
+    const KIND: &'static str = "pantiltmotors";
+    const ACTUATOR: bool = true;
+    fn describe(&self) -> String {
+        format!(
+            "longitude={:.2} deg latitude={:.2} deg longitude_speed={:.2} deg/s latitude_speed={:.2} deg/s \
+             limits: longitude [{:.2}, {:.2}] latitude [{:.2}, {:.2}] speed <= {:.2}/{:.2} deg/s",
+            self.longitude,
+            self.latitude,
+            self.longitude_speed,
+            self.latitude_speed,
+            self.min_longitude,
+            self.max_longitude,
+            self.min_latitude,
+            self.max_latitude,
+            self.max_longitude_speed,
+            self.max_latitude_speed
+        )
+    }
+    fn set_field(&mut self, field: &str, value: &str) -> Result<(), String> {
+        match field {
+            "longitude" => set_f32(field, value, &mut self.longitude),
+            "latitude" => set_f32(field, value, &mut self.latitude),
+            "longitude_speed" => set_f32(field, value, &mut self.longitude_speed),
+            "latitude_speed" => set_f32(field, value, &mut self.latitude_speed),
+            _ => Err(format!(
+                "pantiltmotors has no settable field `{field}`; fields: longitude, latitude (deg), \
+                 longitude_speed, latitude_speed (deg/s)"
+            )),
+        }
+    }
+}
+
+/// Zoom position.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ZoomEncoders {
+    pub zoom_position: f32,
+}
+
+impl InterfaceValue for ZoomEncoders {
+    const KIND: &'static str = "zoomencoders";
+    fn describe(&self) -> String {
+        format!("zoom_position={:.2}", self.zoom_position)
+    }
+}
+
+/// Zoom command and limits (read-only).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ZoomMotors {
+    pub zoom: f32,
+    pub zoom_speed: f32,
+    pub max_zoom: f32,
+    pub min_zoom: f32,
+    pub max_zoom_speed: f32,
+}
+
+impl Default for ZoomMotors {
+    /// Limits of the Sony EVI-D100 that 4.3 used.
+    fn default() -> Self {
+        ZoomMotors {
+            zoom: 0.0,
+            zoom_speed: 0.0,
+            max_zoom: 40.0,
+            min_zoom: 0.0,
+            max_zoom_speed: 7.0,
+        }
+    }
+}
+
+impl InterfaceValue for ZoomMotors {
+    const KIND: &'static str = "zoommotors";
+    const ACTUATOR: bool = true;
+    fn describe(&self) -> String {
+        format!(
+            "zoom={:.2} zoom_speed={:.2} limits: zoom [{:.2}, {:.2}] speed <= {:.2}",
+            self.zoom, self.zoom_speed, self.min_zoom, self.max_zoom, self.max_zoom_speed
+        )
+    }
+    fn set_field(&mut self, field: &str, value: &str) -> Result<(), String> {
+        match field {
+            "zoom" => set_f32(field, value, &mut self.zoom),
+            "zoom_speed" => set_f32(field, value, &mut self.zoom_speed),
+            _ => Err(format!(
+                "zoommotors has no settable field `{field}`; fields: zoom, zoom_speed"
+            )),
+        }
+    }
+}
+
+/// Bumpers: one byte per bumper, 1 = pressed.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Bumpers {
+    pub bumpers: Vec<u8>,
+}
+
+impl InterfaceValue for Bumpers {
+    const KIND: &'static str = "bumpers";
+    fn describe(&self) -> String {
+        format!("number={} bumpers={:?}", self.bumpers.len(), self.bumpers)
+    }
+}
