@@ -18,7 +18,7 @@ use std::{
 };
 
 use jderobot::{
-    Conf, Runtime,
+    Conf,
     drivers::player::{
         LaserMap, Offset, sinks,
         xdr::{self, Addr, Header},
