@@ -3,3 +3,7 @@
 
 #[cfg(feature = "simulator")]
 pub mod simulator;
+#[cfg(feature = "evi")]
+pub mod evi;
+#[cfg(feature = "pantilt")]
+pub mod pantilt;
