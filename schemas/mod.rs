@@ -11,3 +11,5 @@ pub mod myschema;
 pub mod pingpong;
 #[cfg(feature = "teleoperator")]
 pub mod teleoperator;
+#[cfg(feature = "followball")]
+pub mod followball;
