@@ -160,6 +160,8 @@ pub struct State {
     limits: bool,
     /// Every byte the unit received.
     pub received: Vec<u8>,
+    /// When the latest bytes arrived.
+    pub last_rx: Option<Instant>,
     pub faults: Faults,
 }
 
@@ -293,6 +295,7 @@ impl Ptu {
             echo: true,
             limits: false,
             received: Vec::new(),
+            last_rx: None,
             faults: Faults::default(),
         }));
         let stop = Arc::new(AtomicBool::new(false));
@@ -359,6 +362,9 @@ fn serve(pty: Pty, state: &Mutex<State>, stop: &AtomicBool) {
         st.pan.step(dt);
         st.tilt.step(dt);
         st.received.extend_from_slice(&buf[..n]);
+        if n > 0 {
+            st.last_rx = Some(Instant::now());
+        }
         let mut out = Vec::new();
         for &c in &buf[..n] {
             if matches!(c, b' ' | b'\r' | b'\n') {

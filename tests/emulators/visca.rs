@@ -75,6 +75,8 @@ pub struct State {
     zoom_target: f64,
     sockets: [Option<Job>; 2],
     pub received: Vec<u8>,
+    /// When the latest bytes arrived.
+    pub last_rx: Option<Instant>,
     pub faults: Faults,
 }
 
@@ -92,6 +94,7 @@ impl State {
             zoom_target: 0.0,
             sockets: [None, None],
             received: Vec::new(),
+            last_rx: None,
             faults: Faults::default(),
         }
     }
@@ -255,6 +258,9 @@ impl Evi {
                 s.step(now.duration_since(last).as_secs_f64(), &mut out);
                 last = now;
                 s.received.extend_from_slice(&buf[..n]);
+                if n > 0 {
+                    s.last_rx = Some(Instant::now());
+                }
                 for &b in &buf[..n] {
                     packet.push(b);
                     if b == 0xFF {
