@@ -13,3 +13,5 @@ pub mod pingpong;
 pub mod teleoperator;
 #[cfg(feature = "followball")]
 pub mod followball;
+#[cfg(feature = "naooperator")]
+pub mod naooperator;

@@ -293,3 +293,20 @@ fn conf_errors_name_the_line() {
         assert!(err.contains(expect), "{err}");
     }
 }
+
+/// Not a test: an emulated EVI-D100 to try `examples/evi.conf` without a camera.
+/// `EVI_PATH=/tmp/evi cargo test --features full --test evi -- --ignored --nocapture emulator`
+/// then `serial /tmp/evi` in the conf; it runs for `EVI_SECONDS` (default 600).
+#[test]
+#[ignore = "an emulator for trying the example by hand"]
+fn emulator() {
+    let path = std::env::var("EVI_PATH").unwrap_or_else(|_| "/tmp/evi".into());
+    let secs: u64 = std::env::var("EVI_SECONDS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(600);
+    let _ = std::fs::remove_file(&path);
+    let _cam = Evi::start(std::path::Path::new(&path));
+    println!("emulated EVI-D100 at {path} for {secs} s");
+    std::thread::sleep(Duration::from_secs(secs));
+}

@@ -289,3 +289,20 @@ fn conf_errors_name_the_line() {
         assert!(err.contains(expect), "{err}");
     }
 }
+
+/// Not a test: an emulated PTU to try `examples/pantilt.conf` without a unit.
+/// `PTU_PATH=/tmp/ptu cargo test --features full --test pantilt -- --ignored --nocapture emulator`
+/// then `serial /tmp/ptu` in the conf; it runs for `PTU_SECONDS` (default 600).
+#[test]
+#[ignore = "an emulator for trying the example by hand"]
+fn emulator() {
+    let path = std::env::var("PTU_PATH").unwrap_or_else(|_| "/tmp/ptu".into());
+    let secs: u64 = std::env::var("PTU_SECONDS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(600);
+    let _ = std::fs::remove_file(&path);
+    let _unit = Ptu::start(std::path::Path::new(&path));
+    println!("emulated PTU at {path} for {secs} s");
+    std::thread::sleep(Duration::from_secs(secs));
+}
