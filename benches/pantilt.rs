@@ -68,7 +68,10 @@ fn followball(w: u32, h: u32, goal_ms: f64) {
     let here = PtEncoders::default();
     let lim = PtMotors::default();
     let (d, _) = t.decide(&img);
-    assert!(d.centroid.is_some() && d.moving, "the bench scene has a ball");
+    assert!(
+        d.centroid.is_some() && d.moving,
+        "the bench scene has a ball"
+    );
     let reps = 200;
     let mut ours = Vec::with_capacity(reps);
     let mut refs = Vec::with_capacity(reps);

@@ -162,7 +162,11 @@ impl Tracker {
         // A ball moving away from the centre for two frames in a row is followed
         // before it leaves the dead band (a ball at rest inside it is not).
         let away = self.last_dist.is_some_and(|p| dist > p + 0.5);
-        self.growing = if away { self.growing.saturating_add(1) } else { 0 };
+        self.growing = if away {
+            self.growing.saturating_add(1)
+        } else {
+            0
+        };
         self.last_dist = Some(dist);
         if dist > s.deadband || (dist > s.deadband / 4.0 && self.growing >= 2) {
             self.moving = true;
@@ -307,13 +311,21 @@ pub fn parse(conf: &ComponentConf) -> anyhow::Result<(Settings, [String; 3], Dur
                 l.expect_args(1, 1, "image INTERFACE")?;
                 let n = l.interface(0)?;
                 if crate::interfaces::family(&n) != Some(Image::KIND) {
-                    return Err(l.error(format!("`image`: `{n}` is not an image interface (colorA..D, varcolorA..D)")).into());
+                    return Err(l
+                        .error(format!(
+                            "`image`: `{n}` is not an image interface (colorA..D, varcolorA..D)"
+                        ))
+                        .into());
                 }
                 names[0] = n;
             }
             "pantiltencoders" | "pantiltmotors" => {
                 l.expect_args(1, 1, &format!("{} INTERFACE", l.keyword()))?;
-                let i = if l.keyword() == "pantiltencoders" { 1 } else { 2 };
+                let i = if l.keyword() == "pantiltencoders" {
+                    1
+                } else {
+                    2
+                };
                 names[i] = l.args()[0].clone();
             }
             "hmin" => hmin = one_number(l, "a hue in radians", 0.0, tau)?,
@@ -328,9 +340,8 @@ pub fn parse(conf: &ComponentConf) -> anyhow::Result<(Settings, [String; 3], Dur
                 s.min_pixels = l.number(0, "a pixel count", 0..=76_800)?;
             }
             "cycle" => {
-                cycle = Duration::from_millis(
-                    one_number(l, "a period in ms", 1.0, 10_000.0)? as u64,
-                );
+                cycle =
+                    Duration::from_millis(one_number(l, "a period in ms", 1.0, 10_000.0)? as u64);
             }
             "invert" => {
                 l.expect_args(1, 1, "invert pan|tilt")?;

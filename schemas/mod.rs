@@ -1,17 +1,17 @@
 //! Schemas: the periodic units of behaviour. Each is compiled in only under the
 //! cargo feature of its own name.
 
+#[cfg(feature = "followball")]
+pub mod followball;
 #[cfg(feature = "introrob")]
 pub mod introrob;
 #[cfg(feature = "mastergui")]
 pub mod mastergui;
 #[cfg(feature = "myschema")]
 pub mod myschema;
+#[cfg(feature = "naooperator")]
+pub mod naooperator;
 #[cfg(feature = "pingpong")]
 pub mod pingpong;
 #[cfg(feature = "teleoperator")]
 pub mod teleoperator;
-#[cfg(feature = "followball")]
-pub mod followball;
-#[cfg(feature = "naooperator")]
-pub mod naooperator;

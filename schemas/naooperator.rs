@@ -217,7 +217,10 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
     commands.set_head(head[0], head[1]);
     Ok(Box::new(NaoOperator {
         #[cfg(feature = "gui")]
-        panel: Some(Box::new(panel::NaoPanel::new(commands.clone(), dev.clone()))),
+        panel: Some(Box::new(panel::NaoPanel::new(
+            commands.clone(),
+            dev.clone(),
+        ))),
         commands,
         dev,
         children,
@@ -258,10 +261,8 @@ mod panel {
     impl NaoPanel {
         pub fn new(commands: Arc<Commands>, dev: Devices) -> Self {
             let pad = dev.ptmotors.as_ref().map(|m| {
-                let mut p = PanTiltPad::new(
-                    "naooperator head",
-                    PanTiltLimits::from(&m.read().value),
-                );
+                let mut p =
+                    PanTiltPad::new("naooperator head", PanTiltLimits::from(&m.read().value));
                 let h = *commands.head.lock();
                 (p.longitude, p.latitude) = (h[0], h[1]);
                 p

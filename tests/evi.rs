@@ -24,8 +24,8 @@ use visca::{Evi, Faults};
 /// Address set, IF_Clear, power inquiry, power on (the emulated camera starts in
 /// standby), then the first position inquiry.
 const INIT: &[u8] = &[
-    0x88, 0x30, 0x01, 0xFF, 0x88, 0x01, 0x00, 0x01, 0xFF, 0x81, 0x09, 0x04, 0x00, 0xFF, 0x81,
-    0x01, 0x04, 0x00, 0x02, 0xFF, 0x81, 0x09, 0x06, 0x12, 0xFF,
+    0x88, 0x30, 0x01, 0xFF, 0x88, 0x01, 0x00, 0x01, 0xFF, 0x81, 0x09, 0x04, 0x00, 0xFF, 0x81, 0x01,
+    0x04, 0x00, 0x02, 0xFF, 0x81, 0x09, 0x06, 0x12, 0xFF,
 ];
 const POWER_OFF: &[u8] = &[0x81, 0x01, 0x04, 0x00, 0x03, 0xFF];
 
@@ -109,10 +109,16 @@ fn shell_sets_the_head_echo_follows_and_quit_powers_off() {
     let status = child.wait().unwrap();
     let echo = echo.unwrap_or_default();
     assert!(got, "no echo line");
-    assert!(echo.contains("pan_angle=30.00 deg") || echo.contains("pan_angle=29.99 deg"), "{echo}");
+    assert!(
+        echo.contains("pan_angle=30.00 deg") || echo.contains("pan_angle=29.99 deg"),
+        "{echo}"
+    );
     assert!(echo.contains("tilt_angle=-10.00 deg"), "{echo}");
     assert!(status.success(), "{status:?}");
-    assert!(cam.received().ends_with(POWER_OFF), "power off on terminate");
+    assert!(
+        cam.received().ends_with(POWER_OFF),
+        "power off on terminate"
+    );
     assert!(!cam.power());
 }
 
@@ -148,14 +154,19 @@ fn zoom_speed_tables_stop_buffer_full_and_not_executable() {
     eventually("running", || pte.clock() > 2);
     let m = ptm.read().value;
     assert_eq!((m.max_longitude, m.min_latitude), (100.0, -25.0));
-    assert_eq!((m.max_longitude_speed, m.max_latitude_speed), (300.0, 125.0));
+    assert_eq!(
+        (m.max_longitude_speed, m.max_latitude_speed),
+        (300.0, 125.0)
+    );
     assert_eq!(zm.read().max_zoom, 40.0);
     cam.clear_received();
     // Zoom 20 of 40: 0x3800.
     set(&zm, |z| z.zoom = 20.0);
     let zoom = [0x81, 0x01, 0x04, 0x47, 0x03, 0x08, 0x00, 0x00, 0xFF];
     eventually("zoom packet", || contains(&cam.received(), &zoom));
-    eventually("zoom reached", || (ze.read().zoom_position - 20.0).abs() < 0.01);
+    eventually("zoom reached", || {
+        (ze.read().zoom_position - 20.0).abs() < 0.01
+    });
     // Speed tables: 10 deg/s pan → mode 9 (11 deg/s), 3 deg/s tilt → mode 3; -100 deg
     // = 0xF725, 25 deg (beyond: clamped) = 0x0190.
     cam.clear_received();
@@ -177,7 +188,11 @@ fn zoom_speed_tables_stop_buffer_full_and_not_executable() {
     });
     eventually("a stop command", || commands(&cam).len() >= 2);
     let stop = commands(&cam)[1].clone();
-    assert_eq!(stop[..6], [0x81, 0x01, 0x06, 0x02, 0x18, 0x14], "{stop:02X?}");
+    assert_eq!(
+        stop[..6],
+        [0x81, 0x01, 0x06, 0x02, 0x18, 0x14],
+        "{stop:02X?}"
+    );
     let pan = i16::from_be_bytes([stop[6] << 4 | stop[7], stop[8] << 4 | stop[9]]);
     assert!(pan < 0 && pan > -2267, "stopped on the way: {pan}");
     let here = cam.position().0;
@@ -198,7 +213,9 @@ fn zoom_speed_tables_stop_buffer_full_and_not_executable() {
     let home = [
         0x81, 0x01, 0x06, 0x02, 0x18, 0x14, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0xFF,
     ];
-    eventually("retried", || commands(&cam).iter().filter(|p| **p == home).count() >= 3);
+    eventually("retried", || {
+        commands(&cam).iter().filter(|p| **p == home).count() >= 3
+    });
     assert!(ptm.stale().is_none(), "buffer full is not a fault");
     cam.set_faults(Faults::default());
     eventually("home once a socket frees", || {
@@ -211,7 +228,10 @@ fn zoom_speed_tables_stop_buffer_full_and_not_executable() {
     set(&ptm, |m| m.longitude = 45.0);
     eventually("refused", || ptm.stale().is_some());
     let why = ptm.stale().unwrap();
-    assert!(why.contains("not executable (0x41)") && why.contains("evi"), "{why}");
+    assert!(
+        why.contains("not executable (0x41)") && why.contains("evi"),
+        "{why}"
+    );
     assert!(pte.stale().is_none(), "the encoders still answer");
     cam.set_power(true);
     set(&ptm, |m| m.longitude = 40.0);
@@ -230,10 +250,15 @@ fn faults_mark_everything_stale_until_the_camera_answers() {
     eventually("stale: no port", || pte.stale().is_some());
     let name = port.display().to_string();
     let why = pte.stale().unwrap();
-    assert!(why.contains(&name) && why.contains("does not exist"), "{why}");
+    assert!(
+        why.contains(&name) && why.contains("does not exist"),
+        "{why}"
+    );
     assert!(ptm.stale().is_some() && ze.stale().is_some() && zm.stale().is_some());
     let cam = Evi::start(&port);
-    eventually("found once plugged in", || pte.stale().is_none() && ze.stale().is_none());
+    eventually("found once plugged in", || {
+        pte.stale().is_none() && ze.stale().is_none()
+    });
     for (faults, expect) in [
         (
             Faults {
@@ -263,8 +288,13 @@ fn faults_mark_everything_stale_until_the_camera_answers() {
         assert!(why.contains(&name) && why.contains(expect), "{why}");
         cam.set_faults(Faults::default());
         cam.clear_received();
-        eventually("recovered", || pte.stale().is_none() && zm.stale().is_none());
-        assert!(cam.received().starts_with(&[0x88, 0x30, 0x01, 0xFF]), "init again");
+        eventually("recovered", || {
+            pte.stale().is_none() && zm.stale().is_none()
+        });
+        assert!(
+            cam.received().starts_with(&[0x88, 0x30, 0x01, 0xFF]),
+            "init again"
+        );
     }
     cam.unplug();
     eventually("stale after unplugging", || pte.stale().is_some());
@@ -278,9 +308,18 @@ fn faults_mark_everything_stale_until_the_camera_answers() {
 #[test]
 fn conf_errors_name_the_line() {
     for (text, expect) in [
-        ("driver evi\nprovides zoommotors\nend_driver\nload_driver evi\n", "serial DEVICE"),
-        ("driver evi\nserial /dev/null\nprovides colorA\nend_driver\nload_driver evi\n", "not `colorA`"),
-        ("driver evi\nserial /dev/null\ncamera 9\nprovides zoommotors\nend_driver\nload_driver evi\n", "test.conf:3"),
+        (
+            "driver evi\nprovides zoommotors\nend_driver\nload_driver evi\n",
+            "serial DEVICE",
+        ),
+        (
+            "driver evi\nserial /dev/null\nprovides colorA\nend_driver\nload_driver evi\n",
+            "not `colorA`",
+        ),
+        (
+            "driver evi\nserial /dev/null\ncamera 9\nprovides zoommotors\nend_driver\nload_driver evi\n",
+            "test.conf:3",
+        ),
     ] {
         let conf = jderobot::Conf::parse(text, std::path::Path::new("test.conf")).unwrap();
         let err = match jderobot::loader::start(&conf) {

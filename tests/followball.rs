@@ -53,9 +53,8 @@ fn keeps_a_rolling_ball_within_40_px_of_the_centre() {
         .names
         .import::<LiveBalls>("simulator", "balls")
         .expect("the simulator exports its balls");
-    let off_centre = |img: &Image| {
-        red_blob(img).map(|(x, y, _)| ((x - 160.0).hypot(y - 120.0), x, y))
-    };
+    let off_centre =
+        |img: &Image| red_blob(img).map(|(x, y, _)| ((x - 160.0).hypot(y - 120.0), x, y));
     // At first the ball is off to the right and below (about 16° and 10°).
     eventually("a first frame", || cam.clock() > 0);
     let first = off_centre(&cam.read().value).expect("the ball is in view");
@@ -74,7 +73,11 @@ fn keeps_a_rolling_ball_within_40_px_of_the_centre() {
     let mut last = cam.clock();
     let mut rolling_seen = Duration::ZERO;
     while t0.elapsed() < Duration::from_secs(9) {
-        let v = if t0.elapsed() < Duration::from_millis(1500) { 200.0 } else { 0.0 };
+        let v = if t0.elapsed() < Duration::from_millis(1500) {
+            200.0
+        } else {
+            0.0
+        };
         push.publish(Motors { v, w: 0.0 }).unwrap();
         let s = cam.snapshot();
         let speed = {

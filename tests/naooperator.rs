@@ -48,7 +48,11 @@ fn walks_turns_the_head_and_stops() {
     eventually("turns in place", || motors.read().w == 20.0);
     rt.stop("naooperator").unwrap();
     std::thread::sleep(Duration::from_millis(300));
-    assert_eq!(motors.read().value, Motors::default(), "stopping stops the walk");
+    assert_eq!(
+        motors.read().value,
+        Motors::default(),
+        "stopping stops the walk"
+    );
     rt.shutdown();
 }
 
@@ -57,12 +61,18 @@ fn walks_turns_the_head_and_stops() {
 fn panel_has_joystick_head_and_camera() {
     use egui_kittest::kittest::Queryable;
     let rt = start_conf(&conf(""));
-    let cam = rt.interfaces.get::<jderobot::interfaces::Image>("varcolorA").unwrap();
+    let cam = rt
+        .interfaces
+        .get::<jderobot::interfaces::Image>("varcolorA")
+        .unwrap();
     eventually("a camera frame", || cam.clock() > 0);
     let mut h = common::panel_harness(&rt, "naooperator", egui::vec2(700.0, 420.0));
     h.run();
     for label in ["walk", "head", "camera", "STOP"] {
-        assert!(h.query_by_label(label).is_some(), "no `{label}` in the panel");
+        assert!(
+            h.query_by_label(label).is_some(),
+            "no `{label}` in the panel"
+        );
     }
     rt.shutdown();
 }

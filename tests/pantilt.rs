@@ -23,7 +23,8 @@ use ptu::{Faults, Ptu};
 const ENC: f64 = 3.086 / 60.0;
 
 /// 4.3's init sequence, byte for byte, then the limit queries.
-const INIT: &[u8] = b"\xFF\xFF\nI\nCI\nPB1000\nTB1000\nPU6000\nTU6000\nPL31\nTL31\nPS2900\nTS2900\n\
+const INIT: &[u8] =
+    b"\xFF\xFF\nI\nCI\nPB1000\nTB1000\nPU6000\nTU6000\nPL31\nTL31\nPS2900\nTS2900\n\
 PA9000\nTA9000\nPHL\nPML\nTHL\nTML\nPP0\nTP0\nLE\nPN\nPX\nTN\nTX\n";
 
 fn conf(port: &std::path::Path, extra: &str) -> String {
@@ -105,17 +106,14 @@ fn shell_sets_the_head_and_echo_follows() {
     let echo = echo.unwrap_or_default();
     assert!(got, "no echo line");
     let field = |name: &str| -> f64 {
-        let i = echo.find(name).unwrap_or_else(|| panic!("{name} in {echo}")) + name.len();
+        let i = echo
+            .find(name)
+            .unwrap_or_else(|| panic!("{name} in {echo}"))
+            + name.len();
         echo[i..].split(' ').next().unwrap().parse().unwrap()
     };
-    assert!(
-        (field("pan_angle=") - 583.0 * ENC).abs() < 0.006,
-        "{echo}"
-    );
-    assert!(
-        (field("tilt_angle=") + 194.0 * ENC).abs() < 0.006,
-        "{echo}"
-    );
+    assert!((field("pan_angle=") - 583.0 * ENC).abs() < 0.006, "{echo}");
+    assert!((field("tilt_angle=") + 194.0 * ENC).abs() < 0.006, "{echo}");
     assert!(!echo.contains("STALE"), "{echo}");
     assert!(status.success(), "{status:?}");
     let _ = child.stderr.take();
@@ -144,8 +142,14 @@ fn limits_from_the_unit_commands_on_change_and_speed_zero() {
     let (enc, mot) = ifaces(&rt);
     eventually("limits read", || mot.read().max_longitude != 159.13);
     let m = mot.read().value;
-    assert!((m.max_longitude as f64 - 3090.0 * ENC).abs() < 1e-3, "{m:?}");
-    assert!((m.min_longitude as f64 + 3090.0 * ENC).abs() < 1e-3, "{m:?}");
+    assert!(
+        (m.max_longitude as f64 - 3090.0 * ENC).abs() < 1e-3,
+        "{m:?}"
+    );
+    assert!(
+        (m.min_longitude as f64 + 3090.0 * ENC).abs() < 1e-3,
+        "{m:?}"
+    );
     assert!((m.max_latitude as f64 - 604.0 * ENC).abs() < 1e-3, "{m:?}");
     assert!((m.min_latitude as f64 + 907.0 * ENC).abs() < 1e-3, "{m:?}");
     assert_eq!(m.max_longitude_speed, 205.89);
@@ -210,7 +214,10 @@ fn missing_port_and_a_file_are_clear_errors_and_the_run_goes_on() {
     let (enc, _) = ifaces(&rt);
     eventually("stale", || enc.stale().is_some());
     let why = enc.stale().unwrap();
-    assert!(why.contains("notatty") && why.contains("not a serial device"), "{why}");
+    assert!(
+        why.contains("notatty") && why.contains("not a serial device"),
+        "{why}"
+    );
     rt.shutdown();
 }
 
@@ -254,8 +261,13 @@ fn silence_garbage_refusal_and_unplugging_mark_the_head_stale_until_it_answers()
         // It answers again: reopened, init again, fresh values.
         unit.clear_received();
         unit.set_faults(Faults::default());
-        eventually("recovered", || enc.stale().is_none() && mot.stale().is_none());
-        assert!(unit.received().windows(3).any(|w| w == b"LE\n"), "init again");
+        eventually("recovered", || {
+            enc.stale().is_none() && mot.stale().is_none()
+        });
+        assert!(
+            unit.received().windows(3).any(|w| w == b"LE\n"),
+            "init again"
+        );
     }
     // Unplugged: the port goes away; plugged back at the same path: it comes back.
     unit.unplug();
@@ -273,10 +285,22 @@ fn silence_garbage_refusal_and_unplugging_mark_the_head_stale_until_it_answers()
 #[test]
 fn conf_errors_name_the_line() {
     for (text, expect) in [
-        ("driver pantilt\nprovides pantiltencoders\nend_driver\nload_driver pantilt\n", "serial DEVICE"),
-        ("driver pantilt\nserial /dev/null\nprovides laser\nend_driver\nload_driver pantilt\n", "not `laser`"),
-        ("driver pantilt\nserial /dev/null\nbaud x\nprovides pantiltencoders\nend_driver\nload_driver pantilt\n", "test.conf:3"),
-        ("driver pantilt\nserial /dev/null\npoll 0\nprovides pantiltencoders\nend_driver\nload_driver pantilt\n", "period in ms"),
+        (
+            "driver pantilt\nprovides pantiltencoders\nend_driver\nload_driver pantilt\n",
+            "serial DEVICE",
+        ),
+        (
+            "driver pantilt\nserial /dev/null\nprovides laser\nend_driver\nload_driver pantilt\n",
+            "not `laser`",
+        ),
+        (
+            "driver pantilt\nserial /dev/null\nbaud x\nprovides pantiltencoders\nend_driver\nload_driver pantilt\n",
+            "test.conf:3",
+        ),
+        (
+            "driver pantilt\nserial /dev/null\npoll 0\nprovides pantiltencoders\nend_driver\nload_driver pantilt\n",
+            "period in ms",
+        ),
     ] {
         let conf = jderobot::Conf::parse(text, std::path::Path::new("test.conf")).unwrap();
         let err = match jderobot::loader::start(&conf) {

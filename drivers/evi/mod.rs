@@ -155,13 +155,17 @@ impl EviConf {
 pub enum LinkError {
     #[error("{port}: {what}")]
     Open { port: String, what: String },
-    #[error("{port}: no answer to `{command}` in {ms} ms (is the EVI powered (its standby lamp), on this port, at 9600 baud?)")]
+    #[error(
+        "{port}: no answer to `{command}` in {ms} ms (is the EVI powered (its standby lamp), on this port, at 9600 baud?)"
+    )]
     Silent {
         port: String,
         command: String,
         ms: u128,
     },
-    #[error("{port}: unexpected bytes `{bytes}` in answer to `{command}` (not VISCA from camera {camera}: another device on this port, or a wrong address?)")]
+    #[error(
+        "{port}: unexpected bytes `{bytes}` in answer to `{command}` (not VISCA from camera {camera}: another device on this port, or a wrong address?)"
+    )]
     Garbage {
         port: String,
         command: String,
@@ -193,7 +197,8 @@ pub fn open_port(path: &str) -> Result<Box<dyn serialport::SerialPort>, LinkErro
         Err(e) => return Err(open_err(format!("cannot be read: {e}"))),
         Ok(m) if m.is_file() || m.is_dir() => {
             return Err(open_err(
-                "is not a serial device (a regular file or directory); check the `serial` line".into(),
+                "is not a serial device (a regular file or directory); check the `serial` line"
+                    .into(),
             ));
         }
         Ok(_) => {}
@@ -230,7 +235,12 @@ pub struct Link {
 }
 
 impl Link {
-    pub fn new(port: Box<dyn serialport::SerialPort>, name: &str, addr: u8, timeout: Duration) -> Link {
+    pub fn new(
+        port: Box<dyn serialport::SerialPort>,
+        name: &str,
+        addr: u8,
+        timeout: Duration,
+    ) -> Link {
         Link {
             port,
             name: name.to_string(),
@@ -266,9 +276,10 @@ impl Link {
                 // Collect the rest of it for the message.
                 let t1 = Instant::now();
                 while t1.elapsed() < Duration::from_millis(20) && self.buf.len() < MAX_PACKET {
-                    match self.port.read(&mut b) {
-                        Ok(n) if n > 0 => self.buf.extend_from_slice(&b[..n]),
-                        _ => {}
+                    if let Ok(n) = self.port.read(&mut b)
+                        && n > 0
+                    {
+                        self.buf.extend_from_slice(&b[..n]);
                     }
                 }
                 let bytes = protocol::hex(&self.buf[..self.buf.len().min(MAX_PACKET)]);
@@ -404,7 +415,11 @@ impl Link {
     pub fn pantilt(&mut self) -> Result<(i32, i32), LinkError> {
         let q = protocol::pantilt_inquiry(self.addr);
         let a = self.inquiry(&q)?;
-        match (a.len(), protocol::from_nibbles(a.get(..4).unwrap_or(&[])), protocol::from_nibbles(a.get(4..8).unwrap_or(&[]))) {
+        match (
+            a.len(),
+            protocol::from_nibbles(a.get(..4).unwrap_or(&[])),
+            protocol::from_nibbles(a.get(4..8).unwrap_or(&[])),
+        ) {
             (8, Some(p), Some(t)) => Ok((p, t)),
             _ => Err(self.garbage(&q, protocol::hex(&a))),
         }
@@ -517,10 +532,12 @@ fn try_command<T: crate::interfaces::InterfaceValue>(
             error: ViscaError::BufferFull,
             ..
         }) => Ok(false),
-        Err(e @ LinkError::Visca {
-            error: ViscaError::NotExecutable | ViscaError::NoSocket | ViscaError::Cancelled,
-            ..
-        }) => {
+        Err(
+            e @ LinkError::Visca {
+                error: ViscaError::NotExecutable | ViscaError::NoSocket | ViscaError::Cancelled,
+                ..
+            },
+        ) => {
             let why = format!("{}: {e}", sh.provider);
             crate::output::println(why.clone());
             if let Some(i) = refused {
@@ -563,7 +580,8 @@ fn session(sh: &Shared, link: &mut Link) -> Result<(), LinkError> {
             if pt.clock != Some(c) {
                 let target = pantilt_target(&m.read().value, here);
                 if pt.sent != Some(target) {
-                    let p = protocol::pantilt_absolute(addr, target.0, target.1, target.2, target.3);
+                    let p =
+                        protocol::pantilt_absolute(addr, target.0, target.1, target.2, target.3);
                     if try_command(sh, link, &p, Some(m.as_ref()))? {
                         pt.sent = Some(target);
                         pt.clock = Some(c);
@@ -597,8 +615,16 @@ fn session(sh: &Shared, link: &mut Link) -> Result<(), LinkError> {
             here = link.pantilt()?;
             if let Some(e) = &sh.pte {
                 let _ = e.publish(PtEncoders {
-                    pan_angle: protocol::units_to_deg(here.0, protocol::PAN_LIMIT, protocol::PAN_UNITS),
-                    tilt_angle: protocol::units_to_deg(here.1, protocol::TILT_LIMIT, protocol::TILT_UNITS),
+                    pan_angle: protocol::units_to_deg(
+                        here.0,
+                        protocol::PAN_LIMIT,
+                        protocol::PAN_UNITS,
+                    ),
+                    tilt_angle: protocol::units_to_deg(
+                        here.1,
+                        protocol::TILT_LIMIT,
+                        protocol::TILT_UNITS,
+                    ),
                 });
             }
             if let Some(e) = &sh.ze {

@@ -136,7 +136,14 @@ pub fn if_clear() -> Vec<u8> {
     vec![0x88, 0x01, 0x00, 0x01, END]
 }
 pub fn power(addr: u8, on: bool) -> Vec<u8> {
-    vec![0x80 | addr, 0x01, 0x04, 0x00, if on { 0x02 } else { 0x03 }, END]
+    vec![
+        0x80 | addr,
+        0x01,
+        0x04,
+        0x00,
+        if on { 0x02 } else { 0x03 },
+        END,
+    ]
 }
 pub fn power_inquiry(addr: u8) -> Vec<u8> {
     vec![0x80 | addr, 0x09, 0x04, 0x00, END]
@@ -168,7 +175,7 @@ pub fn zoom_direct(addr: u8, units: i32) -> Vec<u8> {
 /// The speed mode for `speed` deg/s: the slowest mode at least that fast (so an
 /// axis never moves slower than asked), at most `modes`; None for 0 (stop).
 pub fn speed_mode(speed: f32, modes: u8) -> Option<u8> {
-    if !(speed > 0.0) {
+    if speed.is_nan() || speed <= 0.0 {
         return None;
     }
     let n = modes as usize;
@@ -231,7 +238,9 @@ mod tests {
         assert_eq!(deg_to_units(-25.0, TILT_LIMIT, TILT_UNITS) as u16, 0xFE70);
         assert_eq!(
             pantilt_absolute(1, 0x18, 0x14, 680, -160),
-            [0x81, 1, 6, 2, 0x18, 0x14, 0, 2, 0xA, 8, 0xF, 0xF, 6, 0, 0xFF]
+            [
+                0x81, 1, 6, 2, 0x18, 0x14, 0, 2, 0xA, 8, 0xF, 0xF, 6, 0, 0xFF
+            ]
         );
         assert_eq!(from_nibbles(&[0xF, 0xF, 6, 0]), Some(-160));
         assert_eq!(from_nibbles(&[0x10, 0, 0, 0]), None);

@@ -139,7 +139,9 @@ impl PtuConf {
 pub enum LinkError {
     #[error("{port}: {what}")]
     Open { port: String, what: String },
-    #[error("{port}: no reply to `{command}` in {ms} ms (is the PTU powered, on this port, at {baud} baud?)")]
+    #[error(
+        "{port}: no reply to `{command}` in {ms} ms (is the PTU powered, on this port, at {baud} baud?)"
+    )]
     Silent {
         port: String,
         command: String,
@@ -171,7 +173,8 @@ pub fn open_port(path: &str, baud: u32) -> Result<Box<dyn serialport::SerialPort
         Err(e) => return Err(open_err(format!("cannot be read: {e}"))),
         Ok(m) if m.is_file() || m.is_dir() => {
             return Err(open_err(
-                "is not a serial device (a regular file or directory); check the `serial` line".into(),
+                "is not a serial device (a regular file or directory); check the `serial` line"
+                    .into(),
             ));
         }
         Ok(_) => {}
@@ -206,7 +209,12 @@ pub struct Link {
 const MAX_LINE: usize = 256;
 
 impl Link {
-    pub fn new(port: Box<dyn serialport::SerialPort>, name: &str, baud: u32, timeout: Duration) -> Link {
+    pub fn new(
+        port: Box<dyn serialport::SerialPort>,
+        name: &str,
+        baud: u32,
+        timeout: Duration,
+    ) -> Link {
         Link {
             port,
             name: name.to_string(),
@@ -330,7 +338,10 @@ pub fn init(link: &mut Link) -> Result<Limits, LinkError> {
         link.command(std::str::from_utf8(c).unwrap_or_default())?;
     }
     Ok(Limits {
-        pan: (link.query(Axis::Pan, Query::Min)?, link.query(Axis::Pan, Query::Max)?),
+        pan: (
+            link.query(Axis::Pan, Query::Min)?,
+            link.query(Axis::Pan, Query::Max)?,
+        ),
         tilt: (
             link.query(Axis::Tilt, Query::Min)?,
             link.query(Axis::Tilt, Query::Max)?,
@@ -466,8 +477,22 @@ fn session(sh: &Shared, link: &mut Link) -> Result<(), LinkError> {
                 seen_clock = Some(c);
                 let v = m.read().value;
                 cmds.clear();
-                axis_commands(Axis::Pan, v.longitude, v.longitude_speed, limits.pan, &mut sent[0], &mut cmds);
-                axis_commands(Axis::Tilt, v.latitude, v.latitude_speed, limits.tilt, &mut sent[1], &mut cmds);
+                axis_commands(
+                    Axis::Pan,
+                    v.longitude,
+                    v.longitude_speed,
+                    limits.pan,
+                    &mut sent[0],
+                    &mut cmds,
+                );
+                axis_commands(
+                    Axis::Tilt,
+                    v.latitude,
+                    v.latitude_speed,
+                    limits.tilt,
+                    &mut sent[1],
+                    &mut cmds,
+                );
                 for c in &cmds {
                     link.command(c)?;
                 }
@@ -546,7 +571,10 @@ impl Drop for PtuDriver {
 pub fn start(conf: PtuConf, rt: &Runtime, provider: &str) -> anyhow::Result<PtuDriver> {
     let enc = conf
         .encoders
-        .then(|| rt.interfaces.provide::<PtEncoders>("pantiltencoders", provider))
+        .then(|| {
+            rt.interfaces
+                .provide::<PtEncoders>("pantiltencoders", provider)
+        })
         .transpose()?;
     let mot = conf
         .motors

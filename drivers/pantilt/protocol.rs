@@ -127,7 +127,9 @@ pub fn parse_query(command: &str, text: &str, axis: Axis, what: &str) -> Result<
     let words: Vec<&str> = text.split_whitespace().collect();
     match words.as_slice() {
         [prefix, ax, w, "is", n]
-            if *ax == axis.word() && *w == what && matches!(*prefix, "Current" | "Minimum" | "Maximum") =>
+            if *ax == axis.word()
+                && *w == what
+                && matches!(*prefix, "Current" | "Minimum" | "Maximum") =>
         {
             n.parse::<i64>().map_err(|_| garbage())
         }
@@ -181,7 +183,11 @@ mod tests {
     #[test]
     fn replies_are_parsed_strictly() {
         assert_eq!(
-            parse_query_line(Axis::Pan, Query::Position, b"PP * Current Pan position is -12"),
+            parse_query_line(
+                Axis::Pan,
+                Query::Position,
+                b"PP * Current Pan position is -12"
+            ),
             Ok(-12)
         );
         assert_eq!(

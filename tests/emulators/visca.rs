@@ -102,10 +102,18 @@ impl State {
     fn step(&mut self, dt: f64, out: &mut Vec<u8>) {
         let go = |x: &mut f64, t: f64, v: f64| {
             let d = t - *x;
-            *x = if d.abs() <= v * dt { t } else { *x + v * dt * d.signum() };
+            *x = if d.abs() <= v * dt {
+                t
+            } else {
+                *x + v * dt * d.signum()
+            };
         };
         go(&mut self.pan, self.pan_target, self.pan_speed * PAN_PER_DEG);
-        go(&mut self.tilt, self.tilt_target, self.tilt_speed * TILT_PER_DEG);
+        go(
+            &mut self.tilt,
+            self.tilt_target,
+            self.tilt_speed * TILT_PER_DEG,
+        );
         go(&mut self.zoom, self.zoom_target, 0x4000 as f64 / 2.0);
         for (i, s) in self.sockets.iter_mut().enumerate() {
             let done = match s {
@@ -122,7 +130,12 @@ impl State {
 
     fn nib(v: f64) -> [u8; 4] {
         let u = v.round() as i32 as u16;
-        [(u >> 12) as u8 & 15, (u >> 8) as u8 & 15, (u >> 4) as u8 & 15, u as u8 & 15]
+        [
+            (u >> 12) as u8 & 15,
+            (u >> 8) as u8 & 15,
+            (u >> 4) as u8 & 15,
+            u as u8 & 15,
+        ]
     }
 
     fn value(n: &[u8]) -> Option<i32> {
@@ -306,7 +319,11 @@ impl Evi {
     /// Pan, tilt, zoom in device units.
     pub fn position(&self) -> (i32, i32, i32) {
         let s = self.state.lock();
-        (s.pan.round() as i32, s.tilt.round() as i32, s.zoom.round() as i32)
+        (
+            s.pan.round() as i32,
+            s.tilt.round() as i32,
+            s.zoom.round() as i32,
+        )
     }
     pub fn power(&self) -> bool {
         self.state.lock().power
