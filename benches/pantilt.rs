@@ -22,7 +22,7 @@ use std::{
 
 use jderobot::{
     interfaces::{Image, PtEncoders, PtMotors, ZoomMotors},
-    schemas::followball::{Settings, Tracker, command},
+    schemas::followball::{Settings, Stop, Tracker, command},
 };
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -78,7 +78,7 @@ fn followball(w: u32, h: u32, goal_ms: f64) {
     for _ in 0..reps {
         let t0 = Instant::now();
         let (d, mask) = t.decide(black_box(&img));
-        black_box(command(&d, &here, &lim));
+        black_box(command(&d, &here, &lim, Stop::Position));
         black_box(mask);
         ours.push(t0.elapsed().as_secs_f64() * 1e3);
         let t0 = Instant::now();

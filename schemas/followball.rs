@@ -18,7 +18,9 @@
 //! head stops. Pixel figures scale with the image's width (and height).
 //!
 //! Stopping is "go where you are" rather than speed 0, because drivers differ on
-//! speed 0 (the PTU stops, the simulator and the EVI use their maximum speed).
+//! speed 0 (the PTU stops, the simulator and the EVI use their maximum speed);
+//! `stop speed0` sends speed 0 instead, as 4.3 did with the PTU, whose encoders are
+//! polled only every 300 ms (going back to a position 300 ms old would jerk).
 //! The pan direction follows the interfaces' convention (pan counter-clockwise, tilt
 //! up, as the simulator); `invert pan` suits a head whose positive pan turns right
 //! (the EVI, as 4.3 used it).
@@ -38,6 +40,7 @@
 //! deadband 40                  # px at 320 columns
 //! min_pixels 400               # px at 320x240
 //! cycle 30                     # ms
+//! stop position                # or speed0 (the PTU, as 4.3)
 //! invert pan                   # and/or `invert tilt`
 //! end_schema
 //! ```
@@ -83,6 +86,19 @@ pub struct Settings {
     pub min_pixels: usize,
     pub invert_pan: bool,
     pub invert_tilt: bool,
+    /// How an axis is stopped.
+    pub stop: Stop,
+}
+
+/// How followball stops an axis.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Stop {
+    /// Command the axis to where the encoders say it is (works with every driver).
+    #[default]
+    Position,
+    /// Speed 0 (4.3 with the PTU, whose `PS0` stops where the axis is; better than
+    /// `position` when the encoders are polled slowly).
+    Speed0,
 }
 
 impl Default for Settings {
@@ -93,6 +109,7 @@ impl Default for Settings {
             min_pixels: 400,
             invert_pan: false,
             invert_tilt: false,
+            stop: Stop::Position,
         }
     }
 }
@@ -187,14 +204,17 @@ impl Tracker {
     }
 }
 
-/// The pan-tilt command for signed speeds: toward the limit on that side at |speed|,
-/// or where the head is at the minimum speed to hold.
-pub fn command(d: &Decision, here: &PtEncoders, m: &PtMotors) -> PtMotors {
+/// The pan-tilt command for signed speeds: toward the limit on that side at |speed|;
+/// a zero speed stops the axis as `stop` says (where the head is, at the minimum
+/// speed; or speed 0).
+pub fn command(d: &Decision, here: &PtEncoders, m: &PtMotors, stop: Stop) -> PtMotors {
     let axis = |speed: f32, cur: f32, lo: f32, hi: f32, hold: f32| -> (f32, f32) {
         if speed > 0.0 {
             (hi, speed)
         } else if speed < 0.0 {
             (lo, -speed)
+        } else if stop == Stop::Speed0 {
+            (cur, 0.0)
         } else {
             (cur, hold)
         }
@@ -263,7 +283,12 @@ impl Schema for FollowBall {
         self.last_clock = img.clock;
         let (d, mask) = self.tracker.decide(&img.value);
         let here = self.pte.read().value;
-        let cmd = command(&d, &here, &self.ptm.read().value);
+        let cmd = command(
+            &d,
+            &here,
+            &self.ptm.read().value,
+            self.tracker.settings.stop,
+        );
         if self.last_cmd != Some(cmd) {
             self.ptm.publish(cmd).map_err(anyhow::Error::msg)?;
             self.last_cmd = Some(cmd);
@@ -278,7 +303,12 @@ impl Schema for FollowBall {
     fn on_stop(&mut self, _ctx: &Context) {
         // Hold the head where it is.
         let here = self.pte.read().value;
-        let cmd = command(&Decision::default(), &here, &self.ptm.read().value);
+        let cmd = command(
+            &Decision::default(),
+            &here,
+            &self.ptm.read().value,
+            self.tracker.settings.stop,
+        );
         let _ = self.ptm.publish(cmd);
     }
     #[cfg(feature = "gui")]
@@ -343,6 +373,13 @@ pub fn parse(conf: &ComponentConf) -> anyhow::Result<(Settings, [String; 3], Dur
                 cycle =
                     Duration::from_millis(one_number(l, "a period in ms", 1.0, 10_000.0)? as u64);
             }
+            "stop" => {
+                l.expect_args(1, 1, "stop position|speed0")?;
+                s.stop = match l.choice(0, "how to stop", &["position", "speed0"])? {
+                    "position" => Stop::Position,
+                    _ => Stop::Speed0,
+                };
+            }
             "invert" => {
                 l.expect_args(1, 1, "invert pan|tilt")?;
                 match l.choice(0, "the axis", &["pan", "tilt"])? {
@@ -355,7 +392,7 @@ pub fn parse(conf: &ComponentConf) -> anyhow::Result<(Settings, [String; 3], Dur
                     .unknown(
                         l,
                         "image, pantiltencoders, pantiltmotors, hmin, hmax, smin, smax, vmin, vmax, \
-                         deadband, min_pixels, cycle or invert",
+                         deadband, min_pixels, cycle, stop or invert",
                     )
                     .into());
             }
@@ -515,5 +552,71 @@ mod panel {
                 ));
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A grey image with a red disc of radius `r` at (cx, cy).
+    fn disc(w: u32, h: u32, cx: f32, cy: f32, r: f32) -> Image {
+        let mut img = Image::new(w, h);
+        for (i, p) in img.data.chunks_exact_mut(3).enumerate() {
+            let (x, y) = ((i as u32 % w) as f32, (i as u32 / w) as f32);
+            let red = (x - cx).hypot(y - cy) < r;
+            p.copy_from_slice(if red {
+                &[20, 20, 200]
+            } else {
+                &[120, 120, 120]
+            });
+        }
+        img
+    }
+
+    #[test]
+    fn directions_dead_band_ramps_and_size() {
+        let mut t = Tracker::new(Settings::default());
+        // Right and below: pan clockwise (negative), tilt down (negative).
+        let (d, _) = t.decide(&disc(320, 240, 260.0, 200.0, 15.0));
+        assert!(d.moving && d.speed.0 < 0.0 && d.speed.1 < 0.0, "{d:?}");
+        // Offsets of 100 and 80 px: on 4.3's ramps.
+        let pan = 350.0 * ENC + (2150.0 * ENC) * (100.0 - 40.0) / 120.0;
+        assert!((d.speed.0 + pan).abs() < 0.5, "{d:?}");
+        // Left and above: the other way; `invert pan` flips pan only.
+        let (d, _) = t.decide(&disc(320, 240, 60.0, 40.0, 15.0));
+        assert!(d.speed.0 > 0.0 && d.speed.1 > 0.0, "{d:?}");
+        // Centred: the head holds.
+        let mut t = Tracker::new(Settings::default());
+        let (d, _) = t.decide(&disc(320, 240, 165.0, 118.0, 15.0));
+        assert!(!d.moving && d.speed == (0.0, 0.0), "{d:?}");
+        // Too small (under 400 pixels): no ball.
+        let (d, _) = t.decide(&disc(320, 240, 60.0, 40.0, 10.0));
+        assert_eq!(d.centroid, None);
+        // 640x480: the same ball (scaled) gives the same speeds.
+        let mut a = Tracker::new(Settings::default());
+        let mut b = Tracker::new(Settings::default());
+        let (da, _) = a.decide(&disc(320, 240, 260.0, 200.0, 15.0));
+        let (db, _) = b.decide(&disc(640, 480, 520.0, 400.0, 30.0));
+        assert!((da.speed.0 - db.speed.0).abs() < 0.5 && (da.speed.1 - db.speed.1).abs() < 0.5);
+    }
+
+    #[test]
+    fn commands_go_to_a_limit_or_stop() {
+        let lim = PtMotors::default();
+        let here = PtEncoders {
+            pan_angle: 12.0,
+            tilt_angle: -3.0,
+        };
+        let d = Decision {
+            speed: (-20.0, 0.0),
+            ..Decision::default()
+        };
+        let c = command(&d, &here, &lim, Stop::Position);
+        assert_eq!((c.longitude, c.longitude_speed), (lim.min_longitude, 20.0));
+        assert_eq!(c.latitude, -3.0);
+        assert!(c.latitude_speed > 0.0);
+        let c = command(&d, &here, &lim, Stop::Speed0);
+        assert_eq!((c.latitude, c.latitude_speed), (-3.0, 0.0));
     }
 }

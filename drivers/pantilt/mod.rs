@@ -299,10 +299,21 @@ impl Link {
         }
     }
 
+    /// The reply line to `cmd`, skipping a line that only echoes the command (a
+    /// unit in echo mode may end the echo with its own line end).
+    fn reply_line(&mut self, cmd: &str) -> Result<Vec<u8>, LinkError> {
+        loop {
+            let line = self.read_line(cmd)?;
+            if line.trim_ascii() != cmd.as_bytes() {
+                return Ok(line);
+            }
+        }
+    }
+
     /// Sends `cmd` and checks its `*` reply; returns the reply's text.
     pub fn command(&mut self, cmd: &str) -> Result<String, LinkError> {
         self.send(cmd.as_bytes())?;
-        let line = self.read_line(cmd)?;
+        let line = self.reply_line(cmd)?;
         protocol::parse_reply(cmd, &line)
             .map(str::to_string)
             .map_err(|source| LinkError::Reply {
@@ -315,7 +326,7 @@ impl Link {
     pub fn query(&mut self, axis: Axis, q: Query) -> Result<i64, LinkError> {
         let (cmd, _) = protocol::query(axis, q);
         self.send(cmd.as_bytes())?;
-        let line = self.read_line(&cmd)?;
+        let line = self.reply_line(&cmd)?;
         protocol::parse_query_line(axis, q, &line).map_err(|source| LinkError::Reply {
             port: self.name.clone(),
             source,
