@@ -243,12 +243,16 @@ pub fn command(d: &Decision, here: &PtEncoders, m: &PtMotors, stop: Stop) -> PtM
 }
 
 /// What the panel shows: the last image, its mask, the decision and the command.
+/// The image and mask are kept only while the panel is drawn (so the image
+/// driver's buffers are recycled when nobody looks).
 #[derive(Clone, Default)]
 pub struct Status {
     pub image: Option<Arc<crate::interfaces::Sample<Image>>>,
     pub mask: Vec<u8>,
     pub decision: Decision,
     pub command: Option<PtMotors>,
+    /// When the panel last drew.
+    pub drawn: Option<std::time::Instant>,
 }
 
 pub struct FollowBall {
@@ -294,8 +298,14 @@ impl Schema for FollowBall {
             self.last_cmd = Some(cmd);
         }
         let mut s = self.status.lock();
-        s.image = Some(img);
-        s.mask = mask;
+        if s.drawn
+            .is_some_and(|t| t.elapsed() < Duration::from_secs(1))
+        {
+            s.image = Some(img);
+            s.mask = mask;
+        } else {
+            s.image = None;
+        }
         s.decision = d;
         s.command = Some(cmd);
         Ok(())
@@ -488,7 +498,8 @@ mod panel {
 
         fn ui(&mut self, ui: &mut egui::Ui, _rt: &Runtime) {
             let (image, d, cmd) = {
-                let s = self.status.lock();
+                let mut s = self.status.lock();
+                s.drawn = Some(std::time::Instant::now());
                 if let Some(img) = &s.image
                     && img.clock != self.shown_clock
                     && s.mask.len() == img.width as usize * img.height as usize
@@ -507,6 +518,8 @@ mod panel {
             };
             let Some(img) = image else {
                 ui.label("(no image yet: is the image interface running?)");
+                ui.ctx()
+                    .request_repaint_after(std::time::Duration::from_millis(100));
                 return;
             };
             let r = ui
@@ -547,7 +560,7 @@ mod panel {
             ));
             if let Some(c) = cmd {
                 ui.label(format!(
-                    "pan → {:.1}° at {:.1}°/s   tilt → {:.1}° at {:.1}°/s",
+                    "pan to {:.1}° at {:.1}°/s   tilt to {:.1}° at {:.1}°/s",
                     c.longitude, c.longitude_speed, c.latitude, c.latitude_speed
                 ));
             }

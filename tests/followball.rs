@@ -148,3 +148,37 @@ fn conf_errors_name_the_line() {
         assert!(err.contains(expect), "{body}: {err}");
     }
 }
+
+/// The panel draws the filtered image, the ball's offset and the pan-tilt commands.
+#[cfg(feature = "gui")]
+#[test]
+fn panel_shows_offset_and_commands() {
+    use egui_kittest::kittest::Queryable;
+    let dir = tempfile::tempdir().unwrap();
+    let world = dir.path().join("ball.world");
+    std::fs::write(
+        &world,
+        "floor_tile 0\nroom -6000 -6000 9000 9000\nball 2000 -600 150 red\n",
+    )
+    .unwrap();
+    let rt = start_conf(&format!(
+        "driver simulator\nworld {}\nrobot robot1 0 0 0\nprovides colorA\nprovides pantiltencoders\n\
+         provides pantiltmotors\nend_driver\nschema followball\nend_schema\n\
+         load_driver simulator\nload_schema followball\nrun followball\n",
+        world.display()
+    ));
+    let mut h = common::panel_harness(&rt, "followball", egui::vec2(420.0, 360.0));
+    let mut seen = false;
+    for _ in 0..200 {
+        h.run();
+        if h.query_by_label_contains("pixels ").is_some()
+            && h.query_by_label_contains("pan to ").is_some()
+        {
+            seen = true;
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    rt.shutdown();
+    assert!(seen, "the panel shows the offset and the commands");
+}
