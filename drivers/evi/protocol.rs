@@ -263,6 +263,16 @@ mod tests {
             classify(1, &[0x90, 0x50, 0x02, 0xFF]),
             Some(Reply::Answer(vec![2]))
         );
+        for (code, e) in [
+            (0x03, ViscaError::BufferFull),
+            (0x04, ViscaError::Cancelled),
+            (0x05, ViscaError::NoSocket),
+        ] {
+            assert_eq!(
+                classify(1, &[0x90, 0x62, code, 0xFF]),
+                Some(Reply::Error(2, e))
+            );
+        }
         assert_eq!(classify(1, &[0xA0, 0x41, 0xFF]), None);
         assert_eq!(classify(1, b"* ok\xFF"), None);
     }
