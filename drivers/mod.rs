@@ -1,6 +1,8 @@
 //! Drivers: one module per device family. Each connects interfaces to a device and
 //! is compiled in only under the cargo feature of its own name.
 
+#[cfg(feature = "evi")]
+pub mod evi;
 #[cfg(feature = "firewire")]
 pub mod firewire;
 #[cfg(feature = "gige")]
@@ -11,6 +13,8 @@ pub mod imagefile;
 pub mod mplayer;
 #[cfg(feature = "opencv")]
 pub mod opencv;
+#[cfg(feature = "pantilt")]
+pub mod pantilt;
 #[cfg(feature = "simulated3D")]
 #[path = "simulated3D/mod.rs"]
 pub mod simulated3d;
