@@ -3,3 +3,6 @@
 
 #[cfg(feature = "simulator")]
 pub mod simulator;
+
+#[cfg(feature = "networkclient")]
+pub mod networkclient;

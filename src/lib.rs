@@ -19,6 +19,7 @@ pub mod fuzzy;
 pub mod gui;
 pub mod interfaces;
 pub mod namespace;
+pub mod netwire; // issue 15 (network branch): the lead re-places this line
 pub mod output;
 pub mod progeo;
 pub mod registry;

@@ -534,7 +534,10 @@ pub fn ps(rt: &Runtime, out: &mut dyn Write) {
 }
 
 fn echo_line(i: &dyn AnyInterface) -> String {
-    let stale = i.stale().map(|why| format!(" STALE ({why})")).unwrap_or_default();
+    let stale = i
+        .stale()
+        .map(|why| format!(" STALE ({why})"))
+        .unwrap_or_default();
     format!(
         "{} clock={} age={:.3}s{stale} {}",
         i.name(),
