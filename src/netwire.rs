@@ -866,7 +866,8 @@ mod tests {
         let (name, tok) = split_name(&n);
         assert_eq!(name, "jdec");
         assert_eq!(tok, b"s3cret");
-        let (_, none) = split_name(&client_name(None).unwrap());
+        let plain = client_name(None).unwrap();
+        let (_, none) = split_name(&plain);
         assert!(none.is_empty());
         assert!(client_name(Some("far too long a secret")).is_err());
     }
