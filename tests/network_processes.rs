@@ -78,7 +78,11 @@ impl Proc {
             found = t[from..].lines().find(|l| ok(l)).map(String::from);
             found.is_some()
         });
-        assert!(done, "timed out waiting for {what}; output:\n{}", self.text());
+        assert!(
+            done,
+            "timed out waiting for {what}; output:\n{}",
+            self.text()
+        );
         found.unwrap()
     }
 
@@ -102,12 +106,26 @@ fn free_port() -> u16 {
 
 /// `NAME: N ips` from a `ps` line.
 fn rate(line: &str) -> f64 {
-    line.split(": ").nth(1).unwrap().split(' ').next().unwrap().parse().unwrap()
+    line.split(": ")
+        .nth(1)
+        .unwrap()
+        .split(' ')
+        .next()
+        .unwrap()
+        .parse()
+        .unwrap()
 }
 
 fn xy(echo: &str) -> (f64, f64) {
     let f = |k: &str| -> f64 {
-        echo.split(k).nth(1).unwrap().split(' ').next().unwrap().parse().unwrap()
+        echo.split(k)
+            .nth(1)
+            .unwrap()
+            .split(' ')
+            .next()
+            .unwrap()
+            .parse()
+            .unwrap()
     };
     (f(" x="), f(" y="))
 }

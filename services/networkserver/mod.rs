@@ -859,7 +859,7 @@ fn handle(
 
 fn writer(cl: &Client, sh: &Shared) {
     let period = Duration::from_millis(netwire::PUSH_PERIOD_MS);
-    let poll = Duration::from_micros(200);
+    let mut waiting_since: Option<Instant> = None;
     let mut next_push = Instant::now() + period;
     let mut last_push = [0u64; 5];
     let mut last_img = vec![0u64; sh.sources.images.len()];
@@ -880,6 +880,7 @@ fn writer(cl: &Client, sh: &Shared) {
         let ready = (0..st.images.len())
             .find(|&k| st.images[k] > 0 && sh.sources.images[k].1.clock() != last_img[k]);
         if let Some(k) = ready {
+            waiting_since = None;
             st.images[k] -= 1;
             drop(st);
             let (netid, iface) = &sh.sources.images[k];
@@ -916,8 +917,16 @@ fn writer(cl: &Client, sh: &Shared) {
                 .record_lateness(Instant::now().saturating_duration_since(deadline));
             continue;
         }
-        let waiting = st.images.iter().any(|n| *n > 0);
-        let until = if waiting {
+        // Interfaces have no publish notification: poll for a new frame while a
+        // request waits, finely at first (a fast camera's next frame comes soon),
+        // then every 0.5 ms (a slow camera's does not).
+        let until = if st.images.iter().any(|n| *n > 0) {
+            let since = *waiting_since.get_or_insert(now);
+            let poll = if now - since < Duration::from_millis(2) {
+                Duration::from_micros(50)
+            } else {
+                Duration::from_micros(500)
+            };
             (now + poll).min(next_push)
         } else {
             next_push
