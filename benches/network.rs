@@ -273,7 +273,7 @@ fn hundred_clients(secs: f64) -> (f64, f64, u64, f64) {
                 let mut s = TcpStream::connect(addr).unwrap();
                 s.set_read_timeout(Some(Duration::from_millis(200)))
                     .unwrap();
-                s.write_all(b"jdec\0\0\0\0\0\0\0\0\0\0\0\0\0\0\0\027\n11\n")
+                s.write_all(b"jdec\0\0\0\0\0\0\0\0\0\0\0\0\0\0\0\x0027\n11\n")
                     .unwrap();
                 let mut b = vec![0u8; 1 << 16];
                 while !st.load(Ordering::Relaxed) {

@@ -329,7 +329,7 @@ fn bad_clients_are_dropped_alone_and_memory_stays_bounded() {
         let mut s = TcpStream::connect(addr).unwrap();
         slowest = slowest.max(tc.elapsed());
         if k % 2 == 0 {
-            let _ = s.write_all(b"jdec\0\0\0\0\0\0\0\0\0\0\0\0\0\0\0\027\n");
+            let _ = s.write_all(b"jdec\0\0\0\0\0\0\0\0\0\0\0\0\0\0\0\x0027\n");
         }
         drop(s);
         // Keep within the listen backlog (a flood beyond it only makes the kernel
