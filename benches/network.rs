@@ -32,8 +32,8 @@ use jderobot::{
 const W: u32 = 640;
 const H: u32 = 480;
 const FRAME: usize = (W * H * 3) as usize;
-const ROUNDS: usize = 5;
-const SECS: f64 = 1.5;
+const ROUNDS: usize = 9;
+const SECS: f64 = 1.0;
 
 fn median(v: &mut [f64]) -> f64 {
     v.sort_by(|a, b| a.partial_cmp(b).unwrap());
@@ -153,12 +153,15 @@ fn net_fps(l: &Link) -> f64 {
             let _ = src.write(|i| i.data[0] = 255);
             let mut cur = src.snapshot();
             let mut sent = stats.frames.load(Ordering::Relaxed);
+            let mut at = Instant::now();
             while !stop.load(Ordering::Relaxed) {
                 // Taken: held by the slot, `cur` and the server; or the server
                 // finished a frame (maybe this one) and wants a newer one.
                 let done = stats.frames.load(Ordering::Relaxed);
-                if Arc::strong_count(&cur) > 2 || done != sent {
+                // (And at least every millisecond, as a camera would.)
+                if Arc::strong_count(&cur) > 2 || done != sent || at.elapsed().as_micros() > 1000 {
                     sent = done;
+                    at = Instant::now();
                     drop(cur);
                     k = k.wrapping_add(1);
                     let _ = src.write(|i| i.data[0] = k);
@@ -171,9 +174,23 @@ fn net_fps(l: &Link) -> f64 {
         thread::sleep(Duration::from_millis(300));
         let c0 = l.dst.clock();
         let t0 = Instant::now();
-        thread::sleep(Duration::from_secs_f64(SECS));
+        let (mut last, mut since, mut gap) = (c0, Instant::now(), Duration::ZERO);
+        while t0.elapsed().as_secs_f64() < SECS {
+            thread::sleep(Duration::from_millis(1));
+            let c = l.dst.clock();
+            if c != last {
+                (last, since) = (c, Instant::now());
+            }
+            gap = gap.max(since.elapsed());
+        }
         let fps = (l.dst.clock() - c0) as f64 / t0.elapsed().as_secs_f64();
         stop.store(true, Ordering::Relaxed);
+        if gap > Duration::from_millis(100) {
+            println!(
+                "    (no frame for {:.0} ms in this round)",
+                gap.as_secs_f64() * 1e3
+            );
+        }
         fps
     })
 }
@@ -309,6 +326,32 @@ fn main() {
     let mut l = link();
     // Warm up the link.
     net_fps(&l);
+    if std::env::var_os("NET_BENCH_DEBUG").is_some() {
+        for r in 0..40 {
+            let f = net_fps(&l);
+            if f < 100.0 {
+                println!(
+                    "round {r}: {f:.0} fps; src clock {} dst clock {} frames sent {} clients {}",
+                    l.src.clock(),
+                    l.dst.clock(),
+                    l.server.stats().frames.load(Ordering::Relaxed),
+                    l.server.stats().clients.load(Ordering::Relaxed)
+                );
+                println!("STUCK pid {}", std::process::id());
+                thread::sleep(Duration::from_secs(15));
+                println!(
+                    "  1 s later: src clock {} dst clock {} frames sent {} accepted {} stale {:?}",
+                    l.src.clock(),
+                    l.dst.clock(),
+                    l.server.stats().frames.load(Ordering::Relaxed),
+                    l.server.stats().accepted.load(Ordering::Relaxed),
+                    l.dst.stale()
+                );
+            }
+            raw_fps();
+        }
+        return;
+    }
     let (mut raw, mut net, mut ratio) = (Vec::new(), Vec::new(), Vec::new());
     for r in 0..ROUNDS {
         // Alternate the order so neither side always runs on a warmer machine.
