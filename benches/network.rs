@@ -326,32 +326,6 @@ fn main() {
     let mut l = link();
     // Warm up the link.
     net_fps(&l);
-    if std::env::var_os("NET_BENCH_DEBUG").is_some() {
-        for r in 0..40 {
-            let f = net_fps(&l);
-            if f < 100.0 {
-                println!(
-                    "round {r}: {f:.0} fps; src clock {} dst clock {} frames sent {} clients {}",
-                    l.src.clock(),
-                    l.dst.clock(),
-                    l.server.stats().frames.load(Ordering::Relaxed),
-                    l.server.stats().clients.load(Ordering::Relaxed)
-                );
-                println!("STUCK pid {}", std::process::id());
-                thread::sleep(Duration::from_secs(15));
-                println!(
-                    "  1 s later: src clock {} dst clock {} frames sent {} accepted {} stale {:?}",
-                    l.src.clock(),
-                    l.dst.clock(),
-                    l.server.stats().frames.load(Ordering::Relaxed),
-                    l.server.stats().accepted.load(Ordering::Relaxed),
-                    l.dst.stale()
-                );
-            }
-            raw_fps();
-        }
-        return;
-    }
     let (mut raw, mut net, mut ratio) = (Vec::new(), Vec::new(), Vec::new());
     for r in 0..ROUNDS {
         // Alternate the order so neither side always runs on a warmer machine.
