@@ -536,3 +536,60 @@ fn the_client_reconnects_marks_stale_zeroes_motors_and_resubscribes() {
     assert!(emu2.got("27") && emu2.got("11") && emu2.got("1019 0"));
     rt.shutdown();
 }
+
+#[test]
+fn our_client_against_our_server_with_a_token() {
+    let (srv, addr) = served("token s3cret\n");
+    publish_all(&srv, 5);
+    let h = format!("127.0.0.1 {}", addr.port());
+    let good = Runtime::new(std::path::Path::new("test.conf"));
+    load(
+        &good,
+        Kind::Driver,
+        "networkclient",
+        &format!(
+            "token s3cret\nprovides varcolorB {h} 1\nprovides laser {h}\nprovides motors {h}\n"
+        ),
+    )
+    .unwrap();
+    let bad = Runtime::new(std::path::Path::new("test.conf"));
+    load(
+        &bad,
+        Kind::Driver,
+        "networkclient",
+        &format!("token guess\nprovides laser {h}\n"),
+    )
+    .unwrap();
+    for rt in [&good, &bad] {
+        rt.interfaces.get_any("laser").unwrap().resume();
+    }
+    good.interfaces.get_any("varcolorB").unwrap().resume();
+    let img = good.interfaces.get::<Image>("varcolorB").unwrap();
+    eventually("a 640x480 frame through our client", || {
+        img.read().width == 640
+    });
+    let laser = good.interfaces.get::<Laser>("laser").unwrap();
+    eventually("laser through our client", || {
+        laser.read().readings.len() == 180
+    });
+    good.interfaces
+        .get::<Motors>("motors")
+        .unwrap()
+        .publish(Motors { v: 80.0, w: 3.0 })
+        .unwrap();
+    let m = srv.interfaces.get::<Motors>("motors").unwrap();
+    eventually("motors through our client", || {
+        m.read().v == 80.0 && m.read().w == 3.0
+    });
+    // The wrong token: refused, so the laser stays stale and never arrives.
+    let l = bad.interfaces.get_any("laser").unwrap();
+    eventually("refused client stale", || l.stale().is_some());
+    assert_eq!(l.clock(), 0);
+    bad.shutdown();
+    good.shutdown();
+    eventually(
+        "the server zeroes the motors when our client leaves",
+        || m.read().value == Motors::default(),
+    );
+    srv.shutdown();
+}
