@@ -387,7 +387,7 @@ impl Drop for NetClient {
 const TICK: Duration = Duration::from_millis(10);
 /// The longest line the client accepts (a laser push of 4096 readings fits).
 const MAX_LINE: usize = 64 * 1024;
-/// The largest frame accepted: 8192 x 8192 pixels... capped at 256 MiB.
+/// The largest frame accepted, in bytes (a bigger announced size ends the connection).
 const MAX_FRAME: usize = 256 << 20;
 
 /// One device's connection.

@@ -120,7 +120,7 @@ impl Default for ServerConf {
 }
 
 const EXPECTED: &str =
-    "socket, bind, token, serves, max_clients, max_line, max_queue, timeout or motors_timeout";
+    "socket, bind, token, serves, max_clients, max_line, max_queue or timeout";
 
 fn err(l: &ConfLine, m: impl Into<String>) -> anyhow::Error {
     l.error(m).into()
@@ -214,7 +214,6 @@ impl ServerConf {
                     c.timeout =
                         Duration::from_millis(count(l, "milliseconds", 10, 3_600_000)? as u64)
                 }
-                "motors_timeout" => {}
                 _ => return Err(conf.unknown(l, EXPECTED).into()),
             }
         }
