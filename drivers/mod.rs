@@ -1,6 +1,8 @@
 //! Drivers: one module per device family. Each connects interfaces to a device and
 //! is compiled in only under the cargo feature of its own name.
 
+#[cfg(feature = "evi")]
+pub mod evi;
 #[cfg(feature = "firewire")]
 pub mod firewire;
 #[cfg(feature = "gige")]
@@ -9,8 +11,12 @@ pub mod gige;
 pub mod imagefile;
 #[cfg(feature = "mplayer")]
 pub mod mplayer;
+#[cfg(feature = "networkclient")]
+pub mod networkclient;
 #[cfg(feature = "opencv")]
 pub mod opencv;
+#[cfg(feature = "pantilt")]
+pub mod pantilt;
 #[cfg(feature = "player")]
 pub mod player;
 #[cfg(feature = "simulated3D")]

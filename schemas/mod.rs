@@ -1,12 +1,16 @@
 //! Schemas: the periodic units of behaviour. Each is compiled in only under the
 //! cargo feature of its own name.
 
+#[cfg(feature = "followball")]
+pub mod followball;
 #[cfg(feature = "introrob")]
 pub mod introrob;
 #[cfg(feature = "mastergui")]
 pub mod mastergui;
 #[cfg(feature = "myschema")]
 pub mod myschema;
+#[cfg(feature = "naooperator")]
+pub mod naooperator;
 #[cfg(feature = "pingpong")]
 pub mod pingpong;
 #[cfg(feature = "teleoperator")]

@@ -22,6 +22,7 @@ pub mod loader;
 #[cfg(feature = "_media")]
 pub mod media;
 pub mod namespace;
+pub mod netwire;
 pub mod output;
 pub mod progeo;
 pub mod registry;

@@ -149,9 +149,11 @@ impl<T: InterfaceValue> Interface<T> {
         Ok(self.store(&mut w, value).0)
     }
 
-    /// Fills a recycled value in place and publishes it. `fill` gets the buffer of a
-    /// sample no reader holds any more (or a copy of the latest value), so steady
-    /// streams of large values allocate nothing.
+    /// Fills a recycled value in place and publishes it. `fill` gets the buffer of
+    /// an *older* sample that no reader holds any more (or a copy of the latest
+    /// value), so steady streams of large values allocate nothing. `fill` must set
+    /// the whole value (a frame, a scan); for a partial update, copy the latest value
+    /// (`read().value.clone()`), change it and [`publish`](Self::publish) it.
     pub fn write(&self, fill: impl FnOnce(&mut T)) -> Result<u64, InterfaceError> {
         let mut w = self.writer.lock();
         let mut value = w.spare.take().unwrap_or_else(|| self.read().value.clone());
