@@ -2,49 +2,13 @@
 
 use std::sync::Arc;
 
-use arc_swap::ArcSwap;
-
+pub use crate::blobs::{Blob, BlobFrame, LiveBlobs};
 use crate::interfaces::{
     Bumpers, COLOR_HEIGHT, COLOR_WIDTH, Encoders, Image, Interface, Laser, PtEncoders, Sonars,
 };
 
 use super::conf::Offset;
 use super::xdr::{self, RangerConfig, ScanInfo, XdrError, be_f32, be_f64, camera};
-
-/// One blob seen by a Player blobfinder.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct Blob {
-    /// The server's id (Stage leaves it uninitialised).
-    pub id: u32,
-    /// Colour, 0xRRGGBB.
-    pub color: u32,
-    /// Pixels.
-    pub area: u32,
-    /// Centroid, pixels.
-    pub x: u32,
-    pub y: u32,
-    /// Bounding box, pixels.
-    pub left: u32,
-    pub right: u32,
-    pub top: u32,
-    pub bottom: u32,
-    /// mm.
-    pub range: f32,
-}
-
-/// The latest blobfinder frame.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct BlobFrame {
-    /// Increases with every frame (0: none yet).
-    pub clock: u64,
-    /// The blobfinder's image size, pixels.
-    pub width: u32,
-    pub height: u32,
-    pub blobs: Vec<Blob>,
-}
-
-/// What the driver exports as `player.blobs`: the latest frame; readers never wait.
-pub type LiveBlobs = ArcSwap<BlobFrame>;
 
 /// Maps a scan's samples to the asked N readings at R per degree, as 4.3 did
 /// (reading i at −N/(2R) + i/R degrees, the nearest sample), cached per geometry.
