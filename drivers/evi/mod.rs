@@ -49,16 +49,13 @@ use std::{
         Arc,
         atomic::{AtomicBool, Ordering},
     },
-    thread::JoinHandle,
     time::{Duration, Instant},
 };
-
-use anyhow::Context as _;
 
 use crate::{
     conf::ComponentConf,
     interfaces::{Interface, PtEncoders, PtMotors, ZoomEncoders, ZoomMotors, limit},
-    runtime::{Driver, Runtime},
+    runtime::{Driver, Runtime, Worker},
 };
 use protocol::{Reply, ViscaError};
 
@@ -669,27 +666,6 @@ fn run(sh: Shared) {
     }
 }
 
-/// The running driver.
-pub struct EviDriver {
-    stop: Arc<AtomicBool>,
-    thread: Option<JoinHandle<()>>,
-}
-
-impl Driver for EviDriver {
-    fn terminate(&mut self) {
-        self.stop.store(true, Ordering::Release);
-        if let Some(t) = self.thread.take() {
-            let _ = t.join();
-        }
-    }
-}
-
-impl Drop for EviDriver {
-    fn drop(&mut self) {
-        self.terminate();
-    }
-}
-
 /// 4.3's limits on `pantiltmotors`, speeds at their maxima.
 fn initial_pantilt() -> PtMotors {
     PtMotors {
@@ -708,7 +684,7 @@ fn initial_pantilt() -> PtMotors {
 
 /// Provides the interfaces and starts the thread (a port that cannot be opened is
 /// reported and retried; the rest of the run goes on).
-pub fn start(conf: EviConf, rt: &Runtime, provider: &str) -> anyhow::Result<EviDriver> {
+pub fn start(conf: EviConf, rt: &Runtime, provider: &str) -> anyhow::Result<Worker> {
     let ifs = &rt.interfaces;
     let pte = conf
         .pantiltencoders
@@ -748,14 +724,7 @@ pub fn start(conf: EviConf, rt: &Runtime, provider: &str) -> anyhow::Result<EviD
         zm,
         stop: stop.clone(),
     };
-    let thread = std::thread::Builder::new()
-        .name("evi".into())
-        .spawn(move || run(sh))
-        .context("cannot start the evi thread")?;
-    Ok(EviDriver {
-        stop,
-        thread: Some(thread),
-    })
+    Worker::start("evi", stop, move || run(sh))
 }
 
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>> {

@@ -42,16 +42,13 @@ use std::{
         Arc,
         atomic::{AtomicBool, Ordering},
     },
-    thread::JoinHandle,
     time::{Duration, Instant},
 };
-
-use anyhow::Context as _;
 
 use crate::{
     conf::ComponentConf,
     interfaces::{Interface, PtEncoders, PtMotors, limit},
-    runtime::{Driver, Runtime},
+    runtime::{Driver, Runtime, Worker},
 };
 use protocol::{Axis, ENCOD_TO_DEG, Query, ReplyError};
 
@@ -556,30 +553,9 @@ fn run(sh: Shared) {
     }
 }
 
-/// The running driver.
-pub struct PtuDriver {
-    stop: Arc<AtomicBool>,
-    thread: Option<JoinHandle<()>>,
-}
-
-impl Driver for PtuDriver {
-    fn terminate(&mut self) {
-        self.stop.store(true, Ordering::Release);
-        if let Some(t) = self.thread.take() {
-            let _ = t.join();
-        }
-    }
-}
-
-impl Drop for PtuDriver {
-    fn drop(&mut self) {
-        self.terminate();
-    }
-}
-
 /// Provides the interfaces and starts the thread (which opens the port: a port that
 /// cannot be opened is reported and retried, the rest of the run goes on).
-pub fn start(conf: PtuConf, rt: &Runtime, provider: &str) -> anyhow::Result<PtuDriver> {
+pub fn start(conf: PtuConf, rt: &Runtime, provider: &str) -> anyhow::Result<Worker> {
     let enc = conf
         .encoders
         .then(|| {
@@ -602,14 +578,7 @@ pub fn start(conf: PtuConf, rt: &Runtime, provider: &str) -> anyhow::Result<PtuD
         mot,
         stop: stop.clone(),
     };
-    let thread = std::thread::Builder::new()
-        .name("pantilt".into())
-        .spawn(move || run(sh))
-        .context("cannot start the pantilt thread")?;
-    Ok(PtuDriver {
-        stop,
-        thread: Some(thread),
-    })
+    Worker::start("pantilt", stop, move || run(sh))
 }
 
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>> {

@@ -68,16 +68,13 @@ use std::{
         Arc,
         atomic::{AtomicBool, Ordering},
     },
-    thread::JoinHandle,
     time::{Duration, Instant},
 };
-
-use anyhow::Context as _;
 
 use crate::{
     conf::ComponentConf,
     interfaces::{Image, Interface, Interfaces, Motors, PtMotors, limit},
-    runtime::{Driver, Runtime},
+    runtime::{Driver, Runtime, Worker},
 };
 
 use client::{Conn, ConnError, Reply};
@@ -501,17 +498,13 @@ impl Session {
 
 /// The running driver.
 pub struct PlayerDriver {
-    stop: Arc<AtomicBool>,
-    thread: Option<JoinHandle<()>>,
+    worker: Worker,
     motors: Vec<Arc<Interface<Motors>>>,
 }
 
 impl Driver for PlayerDriver {
     fn terminate(&mut self) {
-        self.stop.store(true, Ordering::Release);
-        if let Some(t) = self.thread.take() {
-            let _ = t.join();
-        }
+        self.worker.stop();
         for m in &self.motors {
             let _ = m.publish(Motors::default());
         }
@@ -728,13 +721,8 @@ impl PlayerDriver {
             unbound: Vec::new(),
             stop: stop.clone(),
         };
-        let thread = std::thread::Builder::new()
-            .name("player".into())
-            .spawn(move || session.run(conn))
-            .context("cannot start the player thread")?;
         Ok(PlayerDriver {
-            stop,
-            thread: Some(thread),
+            worker: Worker::start("player", stop, move || session.run(conn))?,
             motors: motors_all,
         })
     }
