@@ -1,6 +1,8 @@
 //! Schemas: the periodic units of behaviour. Each is compiled in only under the
 //! cargo feature of its own name.
 
+#[cfg(feature = "hsvtuner")]
+pub mod hsvtuner;
 #[cfg(feature = "image_viewer")]
 pub mod image_viewer;
 #[cfg(feature = "introrob")]

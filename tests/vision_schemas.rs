@@ -113,3 +113,160 @@ mod image_viewer {
         assert!(e.is_err());
     }
 }
+
+/// Drags the pointer inside the widget labelled `label` from `a` to `b`
+/// (fractions of its rectangle).
+#[allow(dead_code)]
+fn drag(h: &mut egui_kittest::Harness<'static>, label: &str, a: (f32, f32), b: (f32, f32)) {
+    let r = h.get_by_label(label).rect();
+    let at = |f: (f32, f32)| egui::pos2(r.min.x + f.0 * r.width(), r.min.y + f.1 * r.height());
+    let (pa, pb) = (at(a), at(b));
+    let button = |pos, pressed| egui::Event::PointerButton {
+        pos,
+        button: egui::PointerButton::Primary,
+        pressed,
+        modifiers: Default::default(),
+    };
+    h.input_mut().events.push(egui::Event::PointerMoved(pa));
+    h.input_mut().events.push(button(pa, true));
+    h.run();
+    for k in 1..=8 {
+        let t = k as f32 / 8.0;
+        let p = pa + (pb - pa) * t;
+        h.input_mut().events.push(egui::Event::PointerMoved(p));
+        h.run();
+    }
+    h.input_mut().events.push(button(pb, false));
+    h.run();
+}
+
+#[cfg(feature = "hsvtuner")]
+mod hsvtuner {
+    use super::*;
+    use jderobot::{
+        colorspaces::{Lookup, hsv_mask},
+        interfaces::Image,
+        schemas::hsvtuner::{HsvRadians, Tuner, cheese, filter},
+    };
+    use std::sync::atomic::Ordering;
+
+    const CONF: &str = "hmin 5.5\nhmax 0.7\nsmin 0.4\nsmax 1\nvmin 60\nvmax 255\ncycle 20\n";
+
+    #[test]
+    fn headless_filter_counts_and_publishes_the_output() {
+        let rt = start("hsvtuner", &format!("{CONF}output varcolorD\n"));
+        let st = rt.names.import::<Tuner>("hsvtuner", "state").unwrap();
+        eventually("a filtered image", || st.result.lock().clock > 0);
+        let r = st.result.lock().clone();
+        let src = rt.interfaces.get::<Image>("colorA").unwrap().snapshot();
+        let range = HsvRadians {
+            hmin: 5.5,
+            hmax: 0.7,
+            smin: 0.4,
+            smax: 1.0,
+            vmin: 60.0,
+            vmax: 255.0,
+        };
+        let mask = hsv_mask(&src.value, &range.range(), Lookup::Exact);
+        let want = mask.data.iter().filter(|&&m| m != 0).count();
+        assert!(want > 0, "the testcard has reds");
+        assert_eq!(r.passed, want);
+        assert_eq!(r.hist.iter().map(|&n| n as usize).sum::<usize>(), 320 * 240);
+        // Passing pixels keep their colour; others are grey at V·180/255.
+        for (i, &m) in mask.data.iter().enumerate() {
+            let (p, q) = (
+                &src.value.data[i * 3..i * 3 + 3],
+                &r.image.data[i * 3..i * 3 + 3],
+            );
+            if m != 0 {
+                assert_eq!(p, q);
+            } else {
+                let g = (*p.iter().max().unwrap() as u32 * 180 / 255) as u8;
+                assert_eq!(q, [g, g, g]);
+            }
+        }
+        let out = rt.interfaces.get::<Image>("varcolorD").unwrap();
+        eventually("varcolorD published", || out.clock() > 0);
+        assert_eq!(out.snapshot().value.width, 320);
+        rt.shutdown();
+    }
+
+    #[test]
+    fn hue_wraps_when_hmin_exceeds_hmax() {
+        let mut img = Image::new(3, 1);
+        img.data = vec![0, 0, 255, 0, 255, 0, 255, 0, 0]; // red, green, blue (BGR)
+        let wrap = HsvRadians {
+            hmin: 6.0,
+            hmax: 0.5,
+            smin: 0.0,
+            smax: 1.0,
+            vmin: 0.0,
+            vmax: 255.0,
+        };
+        let (out, passed, _) = filter(&img, &wrap, true);
+        assert_eq!(passed, 1);
+        assert_eq!(out.data, vec![0, 0, 255, 0, 0, 0, 0, 0, 0]);
+        assert_eq!(
+            wrap.conf_lines(),
+            "hmin 6.000\nhmax 0.500\nsmin 0.000\nsmax 1.000\nvmin 0\nvmax 255\n"
+        );
+    }
+
+    #[test]
+    fn cheese_geometry_round_trips() {
+        for &(h, s) in &[(0.3f32, 0.5f32), (3.0, 1.0), (5.9, 0.2)] {
+            let (dx, dy) = cheese::to_screen(h, s, 100.0);
+            let (h2, s2) = cheese::from_screen(dx, dy, 100.0);
+            assert!((h - h2).abs() < 1e-4 && (s - s2).abs() < 1e-4, "{h} {s}");
+        }
+        // Up is hue π/2; a drag from the right (hue 0) to the top gives 0..π/2.
+        let (a, b, smin, smax) = cheese::drag_sector((50.0, 0.0), (0.0, -100.0), 100.0);
+        assert!(a.abs() < 1e-5 && (b - std::f32::consts::FRAC_PI_2).abs() < 1e-5);
+        assert!((smin - 0.5).abs() < 1e-5 && (smax - 1.0).abs() < 1e-5);
+    }
+
+    #[test]
+    fn conf_rejects_a_hue_in_degrees() {
+        let conf = format!(
+            "driver imagefile\nprovides colorA {}\nend_driver\nschema hsvtuner\n\
+             hmin 30\nend_schema\nload_driver imagefile\nload_schema hsvtuner\n",
+            image("testcard.pnm")
+        );
+        let c = jderobot::conf::Conf::parse(&conf, std::path::Path::new("t.conf")).unwrap();
+        let e = jderobot::loader::start(&c)
+            .err()
+            .expect("30 rad is out of range");
+        let e = e.to_string();
+        assert!(e.contains("t.conf:5") && e.contains("radians"), "{e}");
+    }
+
+    #[test]
+    fn panel_toggle_and_cheese_drag_set_the_state() {
+        let rt = start("hsvtuner", CONF);
+        let st = rt.names.import::<Tuner>("hsvtuner", "state").unwrap();
+        eventually("a filtered image", || st.result.lock().clock > 0);
+        let mut h = panel_harness(&rt, "hsvtuner", vec2(800.0, 600.0));
+        h.run();
+        h.get_by_label("toblack").click();
+        h.run();
+        assert!(st.toblack.load(Ordering::Relaxed));
+        eventually("rejected pixels black", || {
+            let r = st.result.lock();
+            r.image.data.chunks_exact(3).any(|p| p == [0, 0, 0])
+                && !r
+                    .image
+                    .data
+                    .chunks_exact(3)
+                    .any(|p| p[0] == p[1] && p[1] == p[2] && p[0] != 0 && p[0] < 180)
+        });
+        // Drag on the cheese from its right edge (hue 0, s 0.9·) to its top.
+        drag(&mut h, "hsvtuner cheese", (0.9, 0.5), (0.5, 0.1));
+        let r = *st.ranges.lock();
+        assert!(r.hmin < 0.1 || r.hmin > 6.2, "{r:?}");
+        assert!((r.hmax - std::f32::consts::FRAC_PI_2).abs() < 0.1, "{r:?}");
+        assert!(r.smax > 0.8 && r.smin > 0.7, "{r:?}");
+        h.get_by_label("Print");
+        h.get_by_label("Copy");
+        rt.shutdown();
+    }
+}
