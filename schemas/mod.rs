@@ -11,6 +11,8 @@ pub mod introrob;
 pub mod mastergui;
 #[cfg(feature = "myschema")]
 pub mod myschema;
+#[cfg(feature = "opencvdemo")]
+pub mod opencvdemo;
 #[cfg(feature = "pingpong")]
 pub mod pingpong;
 #[cfg(feature = "teleoperator")]

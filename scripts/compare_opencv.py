@@ -155,6 +155,7 @@ def main():
     b.tofile(os.path.join(d, "b.bgr"))
     g = cv2.cvtColor(a, cv2.COLOR_BGR2GRAY)
     gb = cv2.cvtColor(b, cv2.COLOR_BGR2GRAY)
+    cv2.Canny(g, 50, 150).tofile(os.path.join(d, "edges.raw"))
     pts = cv2.goodFeaturesToTrack(g, 200, 0.01, 10).reshape(-1, 2)
     np.savetxt(os.path.join(d, "points.txt"), pts, fmt="%.6f")
     # Homography: imgrectifier's 4 clicked corners -> a rectangle, plus 4 more exact pairs.
@@ -172,10 +173,18 @@ def main():
     fin = np.vstack([[12000, 500], fin])
     np.savetxt(os.path.join(d, "fuzzy.txt"), fin, fmt="%.3f")
 
-    subprocess.check_call(
-        ["cargo", "build", "--release", "--example", "vision_compare"], cwd=ROOT
-    )
-    exe = os.path.join(ROOT, "target", "release", "examples", "vision_compare")
+    # The executable's path from cargo itself (CARGO_TARGET_DIR or a shim may move it).
+    out = subprocess.check_output(
+        ["cargo", "build", "--release", "--example", "vision_compare", "--message-format=json"],
+        cwd=ROOT,
+    ).decode()
+    exe = None
+    for line in out.splitlines():
+        msg = json.loads(line)
+        if msg.get("reason") == "compiler-artifact" and msg.get("target", {}).get("name") == "vision_compare":
+            exe = msg.get("executable") or exe
+    if exe is None:
+        sys.exit("compare_opencv: cargo built no vision_compare executable")
     # glibc hands every allocation above 128 KiB fresh mmapped pages (page faults on
     # first touch) until its dynamic threshold adapts; a long-running process (Python
     # here, a schema in jderobot) reuses its heap instead. Give the Rust process that
@@ -225,6 +234,22 @@ def main():
         nd = int((ce != re_).sum())
         add("Canny 50/150 (L1)", "canny", f"{int(np.abs(ce.astype(int) - re_).max())} ({nd} px differ)", t,
             f"{int((ce > 0).sum())} edge px")
+
+        # Hough on the same edges (OpenCV's Canny): lines (rho, theta) in order, and segments.
+        edges = raw("edges.raw", np.uint8, (H, W))
+        t, cl = median_ms(lambda: cv2.HoughLines(edges, 1, np.pi / 180, 80), R)
+        cl = np.zeros((0, 2)) if cl is None else cl.reshape(-1, 2)
+        rl = np.loadtxt(os.path.join(d, "rs_hough.txt"), ndmin=2).reshape(-1, 2)
+        n = min(len(cl), len(rl))
+        diff = float(np.abs(cl[:n] - rl[:n]).max()) if n else 0.0
+        add("HoughLines (1 px, 1°, 80 votes)", "hough_lines",
+            f"{diff:.1e} ({len(cl)} vs {len(rl)} lines)", t, f"{int((edges > 0).sum())} edge px")
+        t, cs = median_ms(lambda: cv2.HoughLinesP(edges, 1, np.pi / 180, 50, minLineLength=30, maxLineGap=5), R)
+        cs = np.zeros((0, 4), int) if cs is None else cs.reshape(-1, 4)
+        rsg = np.loadtxt(os.path.join(d, "rs_houghp.txt"), ndmin=2).reshape(-1, 4).astype(int)
+        same = sum(1 for p, q in zip(cs, rsg) if (p == q).all())
+        add("HoughLinesP (1 px, 1°, 50 votes, length 30, gap 5)", "hough_lines_p",
+            f"{same}/{len(cs)} segments identical ({len(rsg)} ours)", t)
 
         t, cp = median_ms(lambda: cv2.pyrDown(a), R)
         diff = int(np.abs(cp.astype(int) - raw("rs_pyrdown.raw", np.uint8, cp.shape)).max())

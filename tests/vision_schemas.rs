@@ -270,3 +270,113 @@ mod hsvtuner {
         rt.shutdown();
     }
 }
+
+#[cfg(feature = "opencvdemo")]
+mod opencvdemo {
+    use super::*;
+    use jderobot::{
+        interfaces::Image,
+        schemas::opencvdemo::{Demo, Filter, Params, Pipeline, filters::draw_line},
+        vision,
+    };
+
+    #[test]
+    fn every_filter_runs_headless_and_reports_its_ms() {
+        let rt = start("opencvdemo", "output varcolorD\ncycle 10\n");
+        let st = rt.names.import::<Demo>("opencvdemo", "state").unwrap();
+        for f in Filter::ALL {
+            *st.filter.lock() = f;
+            eventually(&format!("{} ran", f.name()), || {
+                st.view.lock().filter == Some(f)
+            });
+        }
+        let times = st.times.lock().clone();
+        assert_eq!(times.len(), Filter::ALL.len(), "{times:?}");
+        assert!(times.values().all(|&ms| ms >= 0.0 && ms < 10_000.0));
+        let out = rt.interfaces.get::<Image>("varcolorD").unwrap();
+        eventually("output published", || out.clock() > 0);
+        rt.shutdown();
+    }
+
+    #[test]
+    fn filters_are_the_vision_library_ops() {
+        let img = Image::new(320, 240); // black
+        let mut src = img.clone();
+        for x in 0..320 {
+            draw_line(&mut src, (x, 0), (x, 239), [(x % 256) as u8, 90, 200]);
+        }
+        draw_line(&mut src, (0, 120), (319, 120), [255, 255, 255]);
+        let p = Params::default();
+        let mut pl = Pipeline::default();
+        let (g, _) = pl.run(Filter::Gray, &src, &p);
+        assert_eq!(g, vision::grayscale(&src).to_bgr());
+        let (c, _) = pl.run(Filter::Convolution, &src, &p);
+        assert_eq!(c, vision::convolve(&src, &p.kernel));
+        let (d, _) = pl.run(Filter::Pyramid, &src, &p);
+        assert_eq!((d.width, d.height), (160, 120));
+        // The white row is a Hough line drawn in red (θ = π/2, ρ = 120 ± 1).
+        let edges = vision::canny(&vision::grayscale(&src), 50.0, 150.0, false);
+        let lines = vision::hough_lines(&edges, 1.0, std::f64::consts::PI / 180.0, 100);
+        assert!(
+            lines
+                .iter()
+                .any(|l| (l.theta - std::f32::consts::FRAC_PI_2).abs() < 0.02
+                    && (l.rho - 120.0).abs() < 2.0),
+            "{lines:?}"
+        );
+        let (hv, _) = pl.run(Filter::HoughStandard, &src, &p);
+        assert!(hv.data.chunks_exact(3).any(|q| q == [0, 0, 255]));
+    }
+
+    #[test]
+    fn conf_kernel_rows_and_errors() {
+        let conf = |body: &str| {
+            format!(
+                "driver imagefile\nprovides colorA {}\nend_driver\nschema opencvdemo\n{body}\
+                 end_schema\nload_driver imagefile\nload_schema opencvdemo\n",
+                image("testcard.pnm")
+            )
+        };
+        let rt = start_conf(&conf(
+            "size 3\nmodulo 16\nrow 1 1 2 1\nrow 2 2 4 2\nrow 3 1 2 1\n",
+        ));
+        let st = rt.names.import::<Demo>("opencvdemo", "state").unwrap();
+        let k = st.params.lock().kernel.clone();
+        assert_eq!(k.values[4], 0.25);
+        rt.shutdown();
+        for (body, line, words) in [
+            ("size 4\n", 5, "odd"),
+            ("size 3\nrow 1 1 2\n", 6, "3 values"),
+            ("size 3\nrow 1 1 1 1\n", 5, "every row"),
+            ("filter blur\n", 5, "expected one of"),
+            ("hmin 7\n", 5, "radians"),
+        ] {
+            let c =
+                jderobot::conf::Conf::parse(&conf(body), std::path::Path::new("t.conf")).unwrap();
+            let e = jderobot::loader::start(&c).err().expect(body).to_string();
+            assert!(
+                e.contains(&format!("t.conf:{line}")) && e.contains(words),
+                "{body}: {e}"
+            );
+        }
+    }
+
+    #[test]
+    fn panel_buttons_pick_the_filter() {
+        let rt = start("opencvdemo", "cycle 10\n");
+        let st = rt.names.import::<Demo>("opencvdemo", "state").unwrap();
+        let mut h = panel_harness(&rt, "opencvdemo", vec2(900.0, 600.0));
+        h.run();
+        h.get_by_label("canny").click();
+        h.run();
+        assert_eq!(*st.filter.lock(), Filter::Canny);
+        eventually("canny view", || {
+            st.view.lock().filter == Some(Filter::Canny)
+        });
+        h.get_by_label("houghp").click();
+        h.run();
+        assert_eq!(*st.filter.lock(), Filter::HoughProbabilistic);
+        assert!(h.query_all_by_label("min length").count() >= 1);
+        rt.shutdown();
+    }
+}

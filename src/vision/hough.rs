@@ -61,7 +61,11 @@ fn trig(n: usize, theta: f64, irho: f64) -> (Vec<f32>, Vec<f32>) {
 }
 
 fn valid(rho: f64, theta: f64) -> bool {
-    rho.is_finite() && theta.is_finite() && rho > 0.0 && theta > 0.0 && theta <= std::f64::consts::PI
+    rho.is_finite()
+        && theta.is_finite()
+        && rho > 0.0
+        && theta > 0.0
+        && theta <= std::f64::consts::PI
 }
 
 super::multiversion! {
@@ -173,8 +177,12 @@ pub fn hough_lines_p(
     let nr = numrho(edges.width, edges.height, rho);
     // OpenCV's HoughLinesP angle table: cos/sin of n·θ in f64.
     let irho = 1.0 / rho;
-    let tc: Vec<f32> = (0..na).map(|n| ((n as f64 * theta).cos() * irho) as f32).collect();
-    let ts: Vec<f32> = (0..na).map(|n| ((n as f64 * theta).sin() * irho) as f32).collect();
+    let tc: Vec<f32> = (0..na)
+        .map(|n| ((n as f64 * theta).cos() * irho) as f32)
+        .collect();
+    let ts: Vec<f32> = (0..na)
+        .map(|n| ((n as f64 * theta).sin() * irho) as f32)
+        .collect();
     let mut acc = vec![0i32; na * nr];
     let mut mask = vec![0u8; w * h];
     let mut nz: Vec<(i32, i32)> = Vec::new();
@@ -230,7 +238,13 @@ pub fn hough_lines_p(
             dx0 = (a * (1 << SHIFT) as f32 / b.abs()).round_ties_even() as i32;
             x0 = (x0 << SHIFT) + (1 << (SHIFT - 1));
         }
-        let at = |x: i32, y: i32| if xflag { (x, y >> SHIFT) } else { (x >> SHIFT, y) };
+        let at = |x: i32, y: i32| {
+            if xflag {
+                (x, y >> SHIFT)
+            } else {
+                (x >> SHIFT, y)
+            }
+        };
         let mut end = [(j, i); 2];
         for (k, e) in end.iter_mut().enumerate() {
             let (dx, dy) = if k > 0 { (-dx0, -dy0) } else { (dx0, dy0) };
@@ -322,14 +336,19 @@ mod tests {
                 .iter()
                 .any(|l| (l.rho - rho).abs() < 0.6 && (l.theta - theta).abs() < 0.02)
         };
-        assert!(has(40.0, 0.0) && has(30.0, std::f32::consts::FRAC_PI_2), "{lines:?}");
+        assert!(
+            has(40.0, 0.0) && has(30.0, std::f32::consts::FRAC_PI_2),
+            "{lines:?}"
+        );
         let segs = hough_lines_p(&g, 1.0, std::f64::consts::PI / 180.0, 50, 50, 3);
         assert!(
-            segs.iter().any(|s| s.x1 == 40 && s.x2 == 40 && (s.y1 - s.y2).abs() >= 95),
+            segs.iter()
+                .any(|s| s.x1 == 40 && s.x2 == 40 && (s.y1 - s.y2).abs() >= 95),
             "{segs:?}"
         );
         assert!(
-            segs.iter().any(|s| s.y1 == 30 && s.y2 == 30 && (s.x1 - s.x2).abs() >= 95),
+            segs.iter()
+                .any(|s| s.y1 == 30 && s.y2 == 30 && (s.x1 - s.x2).abs() >= 95),
             "{segs:?}"
         );
     }
