@@ -68,17 +68,50 @@ fn valid(rho: f64, theta: f64) -> bool {
         && theta <= std::f64::consts::PI
 }
 
+/// `round_half_even(v)` for |v| < 2^22 (clamped there), by the float trick that
+/// vectorises (no libm call, no saturating cast): adding 1.5·2^23 leaves the
+/// rounded integer in the low mantissa bits, in the default rounding mode (to
+/// nearest, ties to even), exactly as OpenCV's `cvRound`.
+#[inline(always)]
+fn round_even(v: f32) -> i32 {
+    const MAGIC: f32 = 12_582_912.0; // 1.5 * 2^23
+    (v.clamp(-4_000_000.0, 4_000_000.0) + MAGIC).to_bits() as i32 - MAGIC.to_bits() as i32
+}
+
 super::multiversion! {
-    fn vote_row(xs: &[f32], ys: &[f32], c: f32, s: f32, off: i32, row: &mut [u32], buf: &mut [i32]) {
-        for (cx, cy) in xs.chunks(buf.len()).zip(ys.chunks(buf.len())) {
-            let b = &mut buf[..cx.len()];
-            for ((r, &x), &y) in b.iter_mut().zip(cx).zip(cy) {
-                *r = (x * c + y * s).round_ties_even() as i32 + off;
-            }
-            for &r in b.iter() {
-                if let Some(v) = row.get_mut(r as usize) {
-                    *v += 1;
+    /// The accumulator indices of point (x, y) for every angle: row n's cell
+    /// `n * stride + round(x·cos n + y·sin n) + off`, clamped into the row.
+    fn indices(x: f32, y: f32, c: &[f32], s: &[f32], off: i32, stride: usize, out: &mut [u32]) {
+        let last = stride as i32 - 1;
+        for (n, ((o, &cn), &sn)) in out.iter_mut().zip(c).zip(s).enumerate() {
+            let r = (round_even(x * cn + y * sn) + off).clamp(0, last);
+            *o = (n * stride) as u32 + r as u32;
+        }
+    }
+}
+
+super::multiversion! {
+    /// Votes of every point for one angle into `row`. Runs of points along an edge
+    /// vote for the same cell, and increments of one address wait for each other:
+    /// four interleaved u16 counters per cell (`sub`, zero on entry and on return)
+    /// keep four in flight; they are folded into `row` at most every 4·65535 points.
+    fn vote_row(xs: &[f32], ys: &[f32], c: f32, s: f32, off: i32, row: &mut [u32], sub: &mut [u16], buf: &mut [u32]) {
+        let last = row.len() as i32 - 1;
+        let fold = 4 * 65_535 / buf.len() * buf.len();
+        for (fx, fy) in xs.chunks(fold).zip(ys.chunks(fold)) {
+            for (cx, cy) in fx.chunks(buf.len()).zip(fy.chunks(buf.len())) {
+                let b = &mut buf[..cx.len()];
+                for (k, ((r, &x), &y)) in b.iter_mut().zip(cx).zip(cy).enumerate() {
+                    let cell = (round_even(x * c + y * s) + off).clamp(0, last);
+                    *r = cell as u32 * 4 + (k & 3) as u32;
                 }
+                for &r in b.iter() {
+                    sub[r as usize] += 1;
+                }
+            }
+            for (v, s4) in row.iter_mut().zip(sub.chunks_exact_mut(4)) {
+                *v += s4.iter().map(|&x| x as u32).sum::<u32>();
+                s4.fill(0);
             }
         }
     }
@@ -105,27 +138,30 @@ pub fn hough_lines(edges: &GrayImage, rho: f64, theta: f64, threshold: u32) -> V
             }
         }
     }
-    // The accumulator with OpenCV's one-cell border: (na + 2) rows of nr + 2.
+    // The accumulator with OpenCV's one-cell border: (na + 2) rows of nr + 2,
+    // filled angle by angle (one row, in L1, per pass over the points).
     let stride = nr + 2;
     let mut acc = vec![0u32; (na + 2) * stride];
     let off = (nr as i32 - 1) / 2 + 1;
-    let mut buf = vec![0i32; 256];
+    let mut sub = vec![0u16; stride * 4];
+    let mut buf = vec![0u32; 256];
     for n in 0..na {
         let row = &mut acc[(n + 1) * stride..(n + 2) * stride];
-        vote_row(&xs, &ys, tc[n], ts[n], off, row, &mut buf);
+        vote_row(&xs, &ys, tc[n], ts[n], off, row, &mut sub, &mut buf);
     }
+    // Local maxima, row by row (the sort below fixes the order).
     let mut found = Vec::new();
-    for r in 0..nr {
-        for n in 0..na {
-            let b = (n + 1) * stride + r + 1;
-            let v = acc[b];
-            if v > threshold
-                && v > acc[b - 1]
-                && v >= acc[b + 1]
-                && v > acc[b - stride]
-                && v >= acc[b + stride]
-            {
-                found.push(b);
+    for n in 0..na {
+        let b0 = (n + 1) * stride;
+        let (up, row, down) = (
+            &acc[b0 - stride..b0],
+            &acc[b0..b0 + stride],
+            &acc[b0 + stride..b0 + 2 * stride],
+        );
+        for r in 1..=nr {
+            let v = row[r];
+            if v > threshold && v > row[r - 1] && v >= row[r + 1] && v > up[r] && v >= down[r] {
+                found.push(b0 + r);
             }
         }
     }
@@ -195,10 +231,7 @@ pub fn hough_lines_p(
         }
     }
     let half = (nr as i32 - 1) / 2;
-    let rindex = |n: usize, x: i32, y: i32| -> usize {
-        let r = (x as f32 * tc[n] + y as f32 * ts[n]).round_ties_even() as i32 + half;
-        n * nr + r.clamp(0, nr as i32 - 1) as usize
-    };
+    let mut cells = vec![0u32; na];
     let mut rng = CvRng(u64::MAX);
     const SHIFT: i32 = 16;
     let mut count = nz.len();
@@ -212,11 +245,12 @@ pub fn hough_lines_p(
         }
         let mut max_val = threshold as i32 - 1;
         let mut max_n = 0;
-        for n in 0..na {
-            let k = rindex(n, j, i);
-            acc[k] += 1;
-            if max_val < acc[k] {
-                max_val = acc[k];
+        indices(j as f32, i as f32, &tc, &ts, half, nr, &mut cells);
+        for (n, &k) in cells.iter().enumerate() {
+            let a = &mut acc[k as usize];
+            *a += 1;
+            if max_val < *a {
+                max_val = *a;
                 max_n = n;
             }
         }
@@ -281,8 +315,9 @@ pub fn hough_lines_p(
                 let m = &mut mask[i1 as usize * w + j1 as usize];
                 if *m != 0 {
                     if good {
-                        for n in 0..na {
-                            acc[rindex(n, j1, i1)] -= 1;
+                        indices(j1 as f32, i1 as f32, &tc, &ts, half, nr, &mut cells);
+                        for &k in &cells {
+                            acc[k as usize] -= 1;
                         }
                     }
                     *m = 0;
@@ -316,6 +351,13 @@ mod tests {
             g.data[(y * w + x) as usize] = 255;
         }
         g
+    }
+
+    #[test]
+    fn round_even_is_round_half_even() {
+        for v in [0.5f32, 1.5, 2.5, -0.5, -1.5, -2.5, 3.49, -3.51, 1234.5, -99.25, 0.0, 7.0] {
+            assert_eq!(round_even(v), v.round_ties_even() as i32, "{v}");
+        }
     }
 
     #[test]
