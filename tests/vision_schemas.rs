@@ -380,3 +380,103 @@ mod opencvdemo {
         rt.shutdown();
     }
 }
+
+#[cfg(feature = "colortuner")]
+mod colortuner {
+    use super::*;
+    use jderobot::{
+        colorspaces::{Background, Lookup, filter},
+        interfaces::Image,
+        schemas::colortuner::{ColorTuner, PLANE, Ranges, Space, plane_hist},
+    };
+
+    #[test]
+    fn headless_filter_in_each_space_is_the_library_filter() {
+        let rt = start("colortuner", "cycle 10\noutput varcolorD\n");
+        let st = rt
+            .names
+            .import::<ColorTuner>("colortuner", "state")
+            .unwrap();
+        let src = rt.interfaces.get::<Image>("colorA").unwrap();
+        for space in Space::ALL {
+            let mut r = Ranges {
+                space,
+                ..Ranges::default()
+            };
+            r.rgb = [150.0, 255.0, 0.0, 100.0, 0.0, 100.0];
+            r.yuv = [0.1, 0.9, -0.436, 0.0, 0.1, 0.615];
+            *st.ranges.lock() = r;
+            eventually(&format!("{} filtered", space.name()), || {
+                let res = st.result.lock();
+                let s = src.snapshot();
+                res.clock > 0
+                    && res.image == filter(&s.value, &r.filter(), Lookup::Exact, Background::Grey)
+            });
+            let res = st.result.lock().clone();
+            assert_eq!(res.hist.iter().sum::<u32>(), 320 * 240);
+        }
+        let out = rt.interfaces.get::<Image>("varcolorD").unwrap();
+        eventually("output published", || out.clock() > 0);
+        rt.shutdown();
+    }
+
+    #[test]
+    fn a_picked_pixel_passes_in_every_space() {
+        for bgr in [[30u8, 40, 200], [200, 90, 10], [128, 128, 128], [0, 255, 0]] {
+            for space in Space::ALL {
+                let mut r = Ranges {
+                    space,
+                    ..Ranges::default()
+                };
+                r.pick(bgr);
+                let mut img = Image::new(1, 1);
+                img.data = bgr.to_vec();
+                let out = filter(&img, &r.filter(), Lookup::Exact, Background::Black);
+                assert_eq!(out.data, bgr.to_vec(), "{bgr:?} in {}: {r:?}", space.name());
+            }
+        }
+        let mut img = Image::new(2, 1);
+        img.data = vec![0, 0, 255, 255, 255, 255];
+        let h = plane_hist(&img, Space::Rgb);
+        assert_eq!(h.len(), PLANE * PLANE);
+        assert_eq!(h[PLANE - 1], 1); // pure red: R right, G bottom
+        assert_eq!(h[PLANE * PLANE - 1], 1); // white: top right
+    }
+
+    #[test]
+    fn panel_click_picks_and_plane_drag_draws_the_box() {
+        let rt = start("colortuner", "cycle 10\nspace rgb\n");
+        let st = rt
+            .names
+            .import::<ColorTuner>("colortuner", "state")
+            .unwrap();
+        eventually("a filtered image", || st.result.lock().clock > 0);
+        let mut h = panel_harness(&rt, "colortuner", vec2(900.0, 700.0));
+        h.run();
+        h.get_by_label("colortuner image").click();
+        h.run();
+        let src = rt.interfaces.get::<Image>("colorA").unwrap().snapshot();
+        // The click lands at the view's centre pixel (160, 120).
+        let i = (120 * 320 + 160) * 3;
+        let bgr = [
+            src.value.data[i],
+            src.value.data[i + 1],
+            src.value.data[i + 2],
+        ];
+        let mut want = Ranges {
+            space: Space::Rgb,
+            ..Ranges::default()
+        };
+        want.pick(bgr);
+        assert_eq!(st.ranges.lock().rgb, want.rgb);
+        // A drag over the lower-left quarter of the plane: R 0..~127, G 0..~127.
+        drag(&mut h, "colortuner plane", (0.02, 0.98), (0.5, 0.5));
+        let r = st.ranges.lock().rgb;
+        assert!(r[0] < 10.0 && (r[1] - 127.5).abs() < 8.0, "{r:?}");
+        assert!(r[2] < 10.0 && (r[3] - 127.5).abs() < 8.0, "{r:?}");
+        h.get_by_label("yuv").click();
+        h.run();
+        assert_eq!(st.ranges.lock().space, Space::Yuv);
+        rt.shutdown();
+    }
+}

@@ -355,7 +355,9 @@ mod tests {
 
     #[test]
     fn round_even_is_round_half_even() {
-        for v in [0.5f32, 1.5, 2.5, -0.5, -1.5, -2.5, 3.49, -3.51, 1234.5, -99.25, 0.0, 7.0] {
+        for v in [
+            0.5f32, 1.5, 2.5, -0.5, -1.5, -2.5, 3.49, -3.51, 1234.5, -99.25, 0.0, 7.0,
+        ] {
             assert_eq!(round_even(v), v.round_ties_even() as i32, "{v}");
         }
     }
