@@ -7,6 +7,8 @@ pub mod colortuner;
 pub mod hsvtuner;
 #[cfg(feature = "image_viewer")]
 pub mod image_viewer;
+#[cfg(feature = "imagerectifier")]
+pub mod imagerectifier;
 #[cfg(feature = "introrob")]
 pub mod introrob;
 #[cfg(feature = "mastergui")]

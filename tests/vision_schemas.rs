@@ -480,3 +480,137 @@ mod colortuner {
         rt.shutdown();
     }
 }
+
+/// Clicks inside the widget labelled `label` at `f` (fractions of its rectangle).
+#[allow(dead_code)]
+fn click_at(h: &mut egui_kittest::Harness<'static>, label: &str, f: (f32, f32)) {
+    let r = h.get_by_label(label).rect();
+    let p = egui::pos2(r.min.x + f.0 * r.width(), r.min.y + f.1 * r.height());
+    let button = |pressed| egui::Event::PointerButton {
+        pos: p,
+        button: egui::PointerButton::Primary,
+        pressed,
+        modifiers: Default::default(),
+    };
+    h.input_mut().events.push(egui::Event::PointerMoved(p));
+    h.input_mut().events.push(button(true));
+    h.input_mut().events.push(button(false));
+    h.run();
+}
+
+#[cfg(feature = "imagerectifier")]
+mod imagerectifier {
+    use super::*;
+    use jderobot::{
+        interfaces::Image,
+        schemas::imagerectifier::{Points, Rectifier, eight_numbers},
+        vision,
+    };
+
+    fn apply(h: &nalgebra::Matrix3<f64>, (x, y): (f64, f64)) -> (f64, f64) {
+        let v = h * nalgebra::Vector3::new(x, y, 1.0);
+        (v.x / v.z, v.y / v.z)
+    }
+
+    #[test]
+    fn conf_points_solve_headless_and_warp_each_frame() {
+        let dir = tempfile::tempdir().unwrap();
+        let save = dir.path().join("h.txt");
+        let rt = start(
+            "imagerectifier",
+            &format!(
+                "points 40 30 290 50 270 215 50 200\nrectangle 0 0 319 239\nsave {}\n\
+                 output varcolorD\ncycle 10\n",
+                save.display()
+            ),
+        );
+        let st = rt
+            .names
+            .import::<Rectifier>("imagerectifier", "state")
+            .unwrap();
+        let h = st.points.lock().homography.expect("solved at load");
+        for (s, d) in [((40.0, 30.0), (0.0, 0.0)), ((270.0, 215.0), (319.0, 239.0))] {
+            let p = apply(&h, s);
+            assert!(
+                (p.0 - d.0).abs() < 1e-6 && (p.1 - d.1).abs() < 1e-6,
+                "{p:?}"
+            );
+        }
+        let out = rt.interfaces.get::<Image>("varcolorD").unwrap();
+        eventually("rectified frame published", || out.clock() > 0);
+        let src = rt.interfaces.get::<Image>("colorA").unwrap().snapshot();
+        assert_eq!(
+            out.snapshot().value,
+            vision::warp_perspective(&src.value, &h, 320, 240)
+        );
+        st.save();
+        let text = std::fs::read_to_string(&save).unwrap();
+        assert_eq!(text.trim(), eight_numbers(&h));
+        assert_eq!(text.split_whitespace().count(), 8);
+        rt.shutdown();
+    }
+
+    #[test]
+    fn clicks_undo_discard_and_degenerate_points() {
+        let mut p = Points::default();
+        assert!(p.rectify().unwrap_err().contains("4 input points"));
+        for (x, y) in [(0.0, 0.0), (10.0, 0.0), (10.0, 10.0), (0.0, 10.0)] {
+            p.click(x, y, false);
+        }
+        assert!(p.rectangle_mode);
+        p.click(99.0, 99.0, false); // ignored: rectangle mode
+        assert_eq!(p.src.len(), 4);
+        p.click(0.0, 0.0, true);
+        assert!(p.rectify().unwrap_err().contains("2 output corners"));
+        p.click(20.0, 20.0, true);
+        let h = p.rectify().unwrap();
+        assert!((h[(0, 0)] - 2.0).abs() < 1e-9 && (h[(1, 1)] - 2.0).abs() < 1e-9);
+        p.undo();
+        assert_eq!((p.src.len(), p.rect.len(), p.homography), (4, 1, None));
+        p.discard();
+        assert_eq!(p, Points::default());
+        for (x, y) in [(0.0, 0.0), (5.0, 0.0), (10.0, 0.0), (0.0, 10.0)] {
+            p.click(x, y, false);
+        }
+        p.click(0.0, 0.0, true);
+        p.click(9.0, 9.0, true);
+        assert!(p.rectify().unwrap_err().contains("degenerate"));
+    }
+
+    #[test]
+    fn panel_clicks_then_rectify() {
+        let rt = start("imagerectifier", "cycle 10\n");
+        let st = rt
+            .names
+            .import::<Rectifier>("imagerectifier", "state")
+            .unwrap();
+        let colora = rt.interfaces.get::<Image>("colorA").unwrap();
+        eventually("colorA published", || colora.clock() > 0);
+        let mut h = panel_harness(&rt, "imagerectifier", vec2(900.0, 500.0));
+        h.run();
+        for f in [(0.1, 0.1), (0.9, 0.15), (0.85, 0.9), (0.15, 0.85)] {
+            click_at(&mut h, "imagerectifier input", f);
+        }
+        assert_eq!(st.points.lock().src.len(), 4);
+        assert!(st.points.lock().rectangle_mode);
+        click_at(&mut h, "imagerectifier output", (0.0, 0.0));
+        click_at(&mut h, "imagerectifier output", (0.999, 0.999));
+        h.get_by_label("Rectify").click();
+        h.run();
+        let p = st.points.lock().clone();
+        let hm = p.homography.expect("solved");
+        let q = apply(&hm, p.src[2]);
+        assert!(
+            (q.0 - 319.0).abs() < 1e-6 && (q.1 - 239.0).abs() < 1e-6,
+            "{q:?}"
+        );
+        eventually("rectified", || st.result.lock().clock > 0);
+        h.get_by_label("Undo").click();
+        h.run();
+        assert_eq!(st.points.lock().rect.len(), 1);
+        h.get_by_label("Discard").click();
+        h.run();
+        assert!(st.points.lock().src.is_empty());
+        rt.shutdown();
+    }
+}
