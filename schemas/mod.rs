@@ -3,6 +3,8 @@
 
 #[cfg(feature = "colortuner")]
 pub mod colortuner;
+#[cfg(feature = "extrinsics")]
+pub mod extrinsics;
 #[cfg(feature = "hsvtuner")]
 pub mod hsvtuner;
 #[cfg(feature = "image_viewer")]

@@ -614,3 +614,131 @@ mod imagerectifier {
         rt.shutdown();
     }
 }
+
+#[cfg(feature = "extrinsics")]
+mod extrinsics {
+    use super::*;
+    use jderobot::{
+        interfaces::Image,
+        progeo::PinholeCamera,
+        schemas::extrinsics::{Extrinsics, projected_lines},
+    };
+    use std::sync::atomic::Ordering;
+
+    /// room.world with its camera files in `dir` (cameraINfile: the sample cam-in).
+    fn world_in(dir: &std::path::Path) -> String {
+        let text = std::fs::read_to_string(root().join("assets/cameras/room.world")).unwrap();
+        let text = text
+            .replace(
+                "cameraINfile assets/cameras/cam-in",
+                &format!(
+                    "cameraINfile {}",
+                    root().join("assets/cameras/cam-in").display()
+                ),
+            )
+            .replace("cameraOUTfile /tmp/cam-out", "cameraOUTfile cam-out");
+        let w = dir.join("room.world");
+        std::fs::write(&w, text).unwrap();
+        w.display().to_string()
+    }
+
+    #[test]
+    fn loads_the_sample_writes_camera_out_and_draws_the_horizon() {
+        let dir = tempfile::tempdir().unwrap();
+        let rt = start(
+            "extrinsics",
+            &format!(
+                "world {}\noutput varcolorD\ncycle 10\n",
+                world_in(dir.path())
+            ),
+        );
+        let st = rt
+            .names
+            .import::<Extrinsics>("extrinsics", "state")
+            .unwrap();
+        let sample = PinholeCamera::load(root().join("assets/cameras/cam-in")).unwrap();
+        // cameraOUTfile is written at load (beside the world file), the camera as read.
+        let out = PinholeCamera::load(dir.path().join("cam-out")).unwrap();
+        assert_eq!(out.to_file_string(), sample.to_file_string());
+        // The sample world through cam-in: only the far floor edge, on the horizon
+        // (optical row u0 = 120 = graphic row 119), across the whole width.
+        let lines = projected_lines(&sample, &st.world, 320, 240);
+        assert_eq!(lines.len(), 1, "{lines:?}");
+        let img = rt.interfaces.get::<Image>("varcolorD").unwrap();
+        eventually("drawn frame", || img.clock() > 0);
+        let d = img.snapshot();
+        // Red, but for the green cross at the optical centre (column v0 = 160).
+        let px = |x: usize| &d.value.data[(119 * 320 + x) * 3..(119 * 320 + x) * 3 + 3];
+        let red = (0..320).filter(|&x| px(x) == [0, 0, 255]).count();
+        let green = (0..320).filter(|&x| px(x) == [0, 255, 0]).count();
+        assert_eq!((red, green), (320 - 13, 13), "on the horizon row");
+        assert_eq!(px(160), [0, 255, 0]);
+        // Moving along the optical axis (+Y here) moves position and FOA; Undo reads
+        // cameraOUTfile, Save writes it, Reload reads cameraINfile.
+        st.advance(500.0);
+        let c = st.camera.lock().clone();
+        assert!((c.position.y - (sample.position.y + 500.0)).abs() < 1e-9);
+        assert!((c.foa.y - (sample.foa.y + 500.0)).abs() < 1e-9);
+        st.undo();
+        assert_eq!(st.camera.lock().position.y, sample.position.y);
+        st.fixed_foa.store(true, Ordering::Relaxed);
+        st.translate([100.0, 0.0, 0.0]);
+        assert_eq!(st.camera.lock().foa.x, sample.foa.x);
+        st.save();
+        st.reload();
+        assert_eq!(st.camera.lock().position.x, sample.position.x);
+        st.undo();
+        assert_eq!(st.camera.lock().position.x, sample.position.x + 100.0);
+        rt.shutdown();
+    }
+
+    #[test]
+    fn a_world_without_camera_files_is_a_conf_error() {
+        let dir = tempfile::tempdir().unwrap();
+        let w = dir.path().join("w.world");
+        std::fs::write(&w, "worldline 0 0 0 1 1 1 1 1\n").unwrap();
+        let conf = format!(
+            "driver imagefile\nprovides colorA {}\nend_driver\nschema extrinsics\n\
+             world {}\nend_schema\nload_driver imagefile\nload_schema extrinsics\n",
+            image("testcard.pnm"),
+            w.display()
+        );
+        let c = jderobot::conf::Conf::parse(&conf, std::path::Path::new("t.conf")).unwrap();
+        let e = jderobot::loader::start(&c)
+            .err()
+            .expect("no cameraINfile")
+            .to_string();
+        assert!(e.contains("t.conf:5") && e.contains("cameraINfile"), "{e}");
+    }
+
+    #[test]
+    fn panel_toggles_and_buttons() {
+        let dir = tempfile::tempdir().unwrap();
+        let rt = start(
+            "extrinsics",
+            &format!("world {}\ncycle 10\n", world_in(dir.path())),
+        );
+        let st = rt
+            .names
+            .import::<Extrinsics>("extrinsics", "state")
+            .unwrap();
+        let mut h = panel_harness(&rt, "extrinsics", vec2(900.0, 700.0));
+        h.run();
+        h.get_by_label("fixed FOA").click();
+        h.run();
+        assert!(st.fixed_foa.load(Ordering::Relaxed));
+        h.get_by_label("flip").click();
+        h.run();
+        assert!(st.flip.load(Ordering::Relaxed));
+        h.get_by_label("Save").click();
+        h.run();
+        assert!(
+            st.message.lock().starts_with("saved"),
+            "{}",
+            st.message.lock()
+        );
+        h.get_by_label("extrinsics external");
+        h.get_by_label("extrinsics image");
+        rt.shutdown();
+    }
+}
