@@ -165,8 +165,18 @@ pub fn draw(img: &Image, cam: &PinholeCamera, world: &World, flip: bool) -> Imag
             d.copy_from_slice(&s);
         }
     }
+    // Three pixels wide, so the lines survive the panel's downscaling.
     for (a, b) in projected_lines(cam, world, img.width, img.height) {
-        draw_line(&mut out, a, b, [0, 0, 255]);
+        let across_y = (b.0 - a.0).abs() >= (b.1 - a.1).abs();
+        for o in [-1.0, 0.0, 1.0] {
+            let (dx, dy) = if across_y { (0.0, o) } else { (o, 0.0) };
+            draw_line(
+                &mut out,
+                (a.0 + dx, a.1 + dy),
+                (b.0 + dx, b.1 + dy),
+                [0, 0, 255],
+            );
+        }
     }
     let sx = img.width as f64 / cam.columns.max(1) as f64;
     let sy = img.height as f64 / cam.rows.max(1) as f64;

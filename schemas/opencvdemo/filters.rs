@@ -127,6 +127,15 @@ pub fn polar_ends(rho: f32, theta: f32) -> ((i32, i32), (i32, i32)) {
 }
 
 const RED: [u8; 3] = [0, 0, 255];
+
+/// A line three pixels wide (so it survives the panel's downscaling).
+pub fn draw_thick(img: &mut Image, a: (i32, i32), b: (i32, i32), bgr: [u8; 3]) {
+    let across_y = (b.0 - a.0).abs() >= (b.1 - a.1).abs();
+    for o in [-1, 0, 1] {
+        let (dx, dy) = if across_y { (0, o) } else { (o, 0) };
+        draw_line(img, (a.0 + dx, a.1 + dy), (b.0 + dx, b.1 + dy), bgr);
+    }
+}
 const GREEN: [u8; 3] = [0, 255, 0];
 
 impl Pipeline {
@@ -195,7 +204,7 @@ impl Pipeline {
                     vision::hough_lines(&e, 1.0, std::f64::consts::PI / 180.0, p.hough_votes);
                 for l in lines.iter().take(100) {
                     let (a, b) = polar_ends(l.rho, l.theta);
-                    draw_line(&mut out, a, b, RED);
+                    draw_thick(&mut out, a, b, RED);
                 }
                 out
             }
@@ -204,7 +213,7 @@ impl Pipeline {
                 let mut out = img.clone();
                 let (v, len, gap) = p.houghp;
                 for s in vision::hough_lines_p(&e, 1.0, std::f64::consts::PI / 180.0, v, len, gap) {
-                    draw_line(&mut out, (s.x1, s.y1), (s.x2, s.y2), RED);
+                    draw_thick(&mut out, (s.x1, s.y1), (s.x2, s.y2), RED);
                 }
                 out
             }
