@@ -292,7 +292,7 @@ mod opencvdemo {
         }
         let times = st.times.lock().clone();
         assert_eq!(times.len(), Filter::ALL.len(), "{times:?}");
-        assert!(times.values().all(|&ms| ms >= 0.0 && ms < 10_000.0));
+        assert!(times.values().all(|ms| (0.0..10_000.0).contains(ms)));
         let out = rt.interfaces.get::<Image>("varcolorD").unwrap();
         eventually("output published", || out.clock() > 0);
         rt.shutdown();

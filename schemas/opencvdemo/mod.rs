@@ -204,7 +204,7 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
             "size" => {
                 l.expect_args(1, 1, "size N (odd, 1..15)")?;
                 let n: usize = l.number(0, "kernel size", 1..=15)?;
-                if n % 2 == 0 {
+                if n.is_multiple_of(2) {
                     return Err(l.error("size must be odd (4.3 took 3 or 5)").into());
                 }
                 size = Some((n, l.clone()));

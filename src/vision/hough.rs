@@ -95,7 +95,8 @@ super::multiversion! {
     /// vote for the same cell, and increments of one address wait for each other:
     /// four interleaved u16 counters per cell (`sub`, zero on entry and on return)
     /// keep four in flight; they are folded into `row` at most every 4·65535 points.
-    fn vote_row(xs: &[f32], ys: &[f32], c: f32, s: f32, off: i32, row: &mut [u32], sub: &mut [u16], buf: &mut [u32]) {
+    fn vote_row(pts: (&[f32], &[f32]), cs: (f32, f32), off: i32, row: &mut [u32], sub: &mut [u16], buf: &mut [u32]) {
+        let ((xs, ys), (c, s)) = (pts, cs);
         let last = row.len() as i32 - 1;
         let fold = 4 * 65_535 / buf.len() * buf.len();
         for (fx, fy) in xs.chunks(fold).zip(ys.chunks(fold)) {
@@ -147,7 +148,7 @@ pub fn hough_lines(edges: &GrayImage, rho: f64, theta: f64, threshold: u32) -> V
     let mut buf = vec![0u32; 256];
     for n in 0..na {
         let row = &mut acc[(n + 1) * stride..(n + 2) * stride];
-        vote_row(&xs, &ys, tc[n], ts[n], off, row, &mut sub, &mut buf);
+        vote_row((&xs, &ys), (tc[n], ts[n]), off, row, &mut sub, &mut buf);
     }
     // Local maxima, row by row (the sort below fixes the order).
     let mut found = Vec::new();
