@@ -1,6 +1,8 @@
 //! Schemas: the periodic units of behaviour. Each is compiled in only under the
 //! cargo feature of its own name.
 
+#[cfg(feature = "calibrador")]
+pub mod calibrador;
 #[cfg(feature = "colortuner")]
 pub mod colortuner;
 #[cfg(feature = "extrinsics")]

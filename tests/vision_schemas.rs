@@ -742,3 +742,173 @@ mod extrinsics {
         rt.shutdown();
     }
 }
+
+#[cfg(feature = "calibrador")]
+mod calibrador {
+    use super::*;
+    use jderobot::{
+        progeo::{HPoint3D, PinholeCamera},
+        schemas::calibrador::{Calibrador, CalibrationError, calibrate},
+    };
+
+    /// Two faces of a box (x = 0 and y = 0 planes) and its floor: 7x7 points each,
+    /// 60 mm apart, 3D points not in one plane.
+    fn pattern() -> Vec<[f64; 3]> {
+        let mut v = Vec::new();
+        for i in 1..=7 {
+            for j in 1..=7 {
+                let (a, b) = (i as f64 * 60.0, j as f64 * 60.0);
+                v.push([0.0, a, b]);
+                v.push([a, 0.0, b]);
+                v.push([a, b, 0.0]);
+            }
+        }
+        v
+    }
+
+    /// A known 640x480 progeo camera looking at the pattern.
+    fn truth() -> PinholeCamera {
+        let mut c = PinholeCamera::new(
+            HPoint3D::point(1400.0, 1100.0, 900.0),
+            HPoint3D::point(150.0, 150.0, 150.0),
+            620.0,
+            640,
+            480,
+        );
+        c.fdisty = 600.0;
+        c.u0 = 250.0;
+        c.v0 = 330.0;
+        c.roll = 0.12;
+        c.update_camera_matrix();
+        c
+    }
+
+    /// The pattern's graphic pixels through `cam`, with Gaussian noise of `sigma` px.
+    fn render(cam: &PinholeCamera, pts: &[[f64; 3]], sigma: f64) -> Vec<(f64, f64)> {
+        let mut seed = 7u64;
+        let mut uniform = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((seed >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+        };
+        let mut gauss = || {
+            let (a, b) = (uniform(), uniform());
+            (-2.0 * a.ln()).sqrt() * (std::f64::consts::TAU * b).cos()
+        };
+        pts.iter()
+            .map(|p| {
+                let q = cam
+                    .project_visible(HPoint3D::point(p[0], p[1], p[2]))
+                    .expect("visible");
+                let (c, r) = cam.optical_to_graphic(q);
+                (c + sigma * gauss(), r + sigma * gauss())
+            })
+            .collect()
+    }
+
+    #[test]
+    fn synthetic_views_give_k_and_position_within_one_percent() {
+        let cam = truth();
+        let pts = pattern();
+        for sigma in [0.0, 0.5] {
+            let img = render(&cam, &pts, sigma);
+            let c = calibrate(&pts, &img).unwrap();
+            // OpenCV's fx goes with columns (progeo's fdisty), fy with rows (fdistx);
+            // cx = v0, cy = rows - 1 - u0.
+            let rel = |a: f64, b: f64| (a - b).abs() / b;
+            assert!(
+                rel(c.fx, 600.0) < 0.01 && rel(c.fy, 620.0) < 0.01,
+                "{sigma}: {c:?}"
+            );
+            assert!(
+                rel(c.cx, 330.0) < 0.01 && rel(c.cy, 479.0 - 250.0) < 0.01,
+                "{sigma}: {c:?}"
+            );
+            let p = c.position();
+            let want = nalgebra::Vector3::new(1400.0, 1100.0, 900.0);
+            let dist = (want - nalgebra::Vector3::new(150.0, 150.0, 150.0)).norm();
+            assert!((p - want).norm() < 0.01 * dist, "{sigma}: {p:?}");
+            assert!(c.rms < 0.05 + 1.5 * sigma, "{sigma}: rms {}", c.rms);
+            // The progeo camera reprojects the pattern as the calibration does.
+            let back = c.to_progeo(640, 480);
+            assert!((back.roll - 0.12).abs() < 0.01, "roll {}", back.roll);
+            for (w, i) in pts.iter().zip(&render(&back, &pts, 0.0)) {
+                let q = c.project(*w).unwrap();
+                assert!((q.0 - i.0).abs() < 1e-6 && (q.1 - i.1).abs() < 1e-6);
+            }
+        }
+        // Too few or coplanar points are errors, not panics.
+        assert_eq!(
+            calibrate(&pts[..5], &render(&cam, &pts[..5], 0.0)),
+            Err(CalibrationError::TooFew(5))
+        );
+        let flat: Vec<[f64; 3]> = pts.iter().copied().filter(|p| p[2] == 0.0).collect();
+        assert!(calibrate(&flat, &render(&cam, &flat, 0.0)).is_err());
+    }
+
+    #[test]
+    fn conf_points_calibrate_headless_and_save_a_progeo_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let cam = truth();
+        let pts = pattern();
+        let img = render(&cam, &pts, 0.0);
+        let mut body = String::new();
+        for (p, i) in pts.iter().zip(&img) {
+            body += &format!("point {} {} {} {} {}\n", p[0], p[1], p[2], i.0, i.1);
+        }
+        let out = dir.path().join("cam");
+        body += &format!("camera_out {}\n", out.display());
+        let rt = start("calibrador", &body);
+        let st = rt
+            .names
+            .import::<Calibrador>("calibrador", "state")
+            .unwrap();
+        let c = st.result.lock().clone().expect("calibrated at load");
+        assert!(c.rms < 0.01, "{c:?}");
+        *st.size.lock() = (640, 480);
+        st.save();
+        let saved = PinholeCamera::load(&out).unwrap();
+        assert_eq!((saved.columns, saved.rows), (640, 480));
+        assert!(
+            (saved.u0 - 250.0).abs() < 0.01 && (saved.v0 - 330.0).abs() < 0.01,
+            "{saved:?}"
+        );
+        assert!((saved.position.x - 1400.0).abs() < 1.0, "{saved:?}");
+        rt.shutdown();
+    }
+
+    #[test]
+    fn panel_clicks_give_points_in_order() {
+        let rt = start("calibrador", "point 0 0 0\npoint 100 0 0\npoint 0 100 0\n");
+        let st = rt
+            .names
+            .import::<Calibrador>("calibrador", "state")
+            .unwrap();
+        let colora = rt
+            .interfaces
+            .get::<jderobot::interfaces::Image>("colorA")
+            .unwrap();
+        eventually("colorA published", || colora.clock() > 0);
+        let mut h = panel_harness(&rt, "calibrador", vec2(600.0, 500.0));
+        h.run();
+        h.get_by_label("click point 1 of 3: (0, 0, 0) mm");
+        click_at(&mut h, "calibrador image", (0.25, 0.25));
+        click_at(&mut h, "calibrador image", (0.75, 0.25));
+        let p = st.points.lock().clone();
+        let (u, v) = p[0].image.unwrap();
+        assert!((u - 80.5).abs() < 2.0 && (v - 60.5).abs() < 2.0, "{u} {v}");
+        assert!(p[1].image.is_some() && p[2].image.is_none());
+        h.get_by_label("Undo").click();
+        h.run();
+        assert!(st.points.lock()[1].image.is_none());
+        h.get_by_label("Calibrate").click();
+        h.run();
+        assert!(
+            st.message.lock().contains("6 or more"),
+            "{}",
+            st.message.lock()
+        );
+        rt.shutdown();
+    }
+}
