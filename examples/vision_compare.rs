@@ -7,7 +7,8 @@
 //! ```
 //! Inputs in DIR: `a.bgr`, `b.bgr` (raw BGR frames), `points.txt` (`x y` per line),
 //! `homography.txt` (`sx sy dx dy` per line), `hsv.txt` (`hmin hmax smin smax vmin
-//! vmax`, H in degrees), `edges.raw` (u8 edges for the Hough transforms), `fuzzy.txt` (`var1 var2` per line, for
+//! vmax`, H in degrees), `edges.raw` (u8 edges for the Hough transforms), `calib.txt` (`X Y Z U V`: a 3D
+//! pattern and its noisy pixels, for calibrador's solver), `fuzzy.txt` (`var1 var2` per line, for
 //! `assets/fuzzy/example.fzz`). Outputs: `rs_*.raw` (u8 or little-endian i16),
 //! `rs_*.txt`.
 
@@ -17,6 +18,7 @@ use jderobot::{
     colorspaces::{HsvRange, Lookup, hsv_mask},
     fuzzy::{Controller, Inference},
     interfaces::Image,
+    schemas::calibrador::calibrate,
     vision::{self, Kernel, LkParams},
 };
 
@@ -128,6 +130,22 @@ fn main() -> anyhow::Result<()> {
         .map(|l| format!("{} {} {} {}\n", l.x1, l.y1, l.x2, l.y2))
         .collect();
     fs::write(dir.join("rs_houghp.txt"), s)?;
+
+    // calibrador's solver on `calib.txt` (X Y Z U V per line: a 3D pattern, noisy pixels).
+    let cal = numbers(&dir.join("calib.txt"))?;
+    let world: Vec<[f64; 3]> = cal.iter().map(|r| [r[0], r[1], r[2]]).collect();
+    let pix: Vec<(f64, f64)> = cal.iter().map(|r| (r[3], r[4])).collect();
+    let (t, c) = median_ms(repeats, || calibrate(&world, &pix));
+    times.push(("calibrate".into(), t));
+    let c = c.map_err(|e| anyhow::anyhow!("calibrate: {e}"))?;
+    let pos = c.position();
+    fs::write(
+        dir.join("rs_calib.txt"),
+        format!(
+            "{} {} {} {} {} {} {} {}\n",
+            c.rms, c.fx, c.fy, c.cx, c.cy, pos.x, pos.y, pos.z
+        ),
+    )?;
 
     let (t, p) = median_ms(repeats, || vision::pyr_down(&a));
     times.push(("pyrdown".into(), t));

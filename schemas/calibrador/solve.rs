@@ -159,11 +159,12 @@ pub fn dlt(world: &[[f64; 3]], image: &[(f64, f64)]) -> Result<Matrix3x4<f64>, C
     Ok(p)
 }
 
+/// K (intrinsics), R (world → camera rotation), t (translation, mm).
+pub type Krt = (Matrix3<f64>, Matrix3<f64>, Vector3<f64>);
+
 /// K, R, t of a projection matrix (RQ decomposition, positive focal lengths,
 /// det R = +1, the pattern in front).
-pub fn decompose(
-    p: &Matrix3x4<f64>,
-) -> Result<(Matrix3<f64>, Matrix3<f64>, Vector3<f64>), CalibrationError> {
+pub fn decompose(p: &Matrix3x4<f64>) -> Result<Krt, CalibrationError> {
     let mut p = *p;
     let m = p.fixed_view::<3, 3>(0, 0).into_owned();
     if m.determinant() < 0.0 {
