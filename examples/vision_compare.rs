@@ -7,9 +7,11 @@
 //! ```
 //! Inputs in DIR: `a.bgr`, `b.bgr` (raw BGR frames), `points.txt` (`x y` per line),
 //! `homography.txt` (`sx sy dx dy` per line), `hsv.txt` (`hmin hmax smin smax vmin
-//! vmax`, H in degrees), `edges.raw` (u8 edges for the Hough transforms), `calib.txt` (`X Y Z U V`: a 3D
-//! pattern and its noisy pixels, for calibrador's solver), `fuzzy.txt` (`var1 var2` per line, for
-//! `assets/fuzzy/example.fzz`). Outputs: `rs_*.raw` (u8 or little-endian i16),
+//! vmax`, H in degrees), `edges.raw` (u8 edges for the Hough transforms), `calib.txt`
+//! (`X Y Z U V`: a 3D pattern and its noisy pixels, for calibrador's solver),
+//! `fuzzy.txt` (`var1 var2` per line, for `assets/fuzzy/example.fzz`), `a.yuyv`
+//! (YUYV 4:2:2), `a.bayer` (RGGB mosaic).
+//! Outputs: `rs_*.raw` (u8 or little-endian i16),
 //! `rs_*.txt`.
 
 use std::{fs, path::Path, time::Instant};
@@ -19,7 +21,10 @@ use jderobot::{
     fuzzy::{Controller, Inference},
     interfaces::Image,
     schemas::calibrador::calibrate,
-    vision::{self, Kernel, LkParams},
+    vision::{
+        self, Kernel, LkParams,
+        pixfmt::{self, Bayer, Yuv422Order, YuvMatrix},
+    },
 };
 
 fn median_ms<T>(repeats: usize, mut f: impl FnMut() -> T) -> (f64, T) {
@@ -190,6 +195,22 @@ fn main() -> anyhow::Result<()> {
     let (t, wp) = median_ms(repeats, || vision::warp_perspective(&a, &hm, w, h));
     times.push(("warp_perspective".into(), t));
     write_u8("rs_warp.raw", &wp.data)?;
+
+    // Camera pixel formats → BGR (the drivers' conversions), into a reused buffer.
+    let yuyv = fs::read(dir.join("a.yuyv"))?;
+    let mut out = Vec::new();
+    let (t, ()) = median_ms(repeats, || {
+        pixfmt::yuv422_to_bgr(&yuyv, w, h, Yuv422Order::Yuyv, YuvMatrix::Bt601, &mut out)
+            .expect("YUYV frame")
+    });
+    times.push(("yuyv_bgr".into(), t));
+    write_u8("rs_yuyv.raw", &out)?;
+    let bayer = fs::read(dir.join("a.bayer"))?;
+    let (t, ()) = median_ms(repeats, || {
+        pixfmt::bayer_to_bgr(&bayer, w, h, Bayer::Rggb, &mut out).expect("Bayer frame")
+    });
+    times.push(("bayer_bgr".into(), t));
+    write_u8("rs_bayer.raw", &out)?;
 
     let mut fz = Controller::from_file("assets/fuzzy/example.fzz")?;
     let inputs = numbers(&dir.join("fuzzy.txt"))?;

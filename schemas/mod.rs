@@ -7,6 +7,8 @@ pub mod calibrador;
 pub mod colortuner;
 #[cfg(feature = "extrinsics")]
 pub mod extrinsics;
+#[cfg(feature = "followball")]
+pub mod followball;
 #[cfg(feature = "hsvtuner")]
 pub mod hsvtuner;
 #[cfg(feature = "image_viewer")]
@@ -19,6 +21,8 @@ pub mod introrob;
 pub mod mastergui;
 #[cfg(feature = "myschema")]
 pub mod myschema;
+#[cfg(feature = "naooperator")]
+pub mod naooperator;
 #[cfg(feature = "opencvdemo")]
 pub mod opencvdemo;
 #[cfg(feature = "pingpong")]

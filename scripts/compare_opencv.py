@@ -190,19 +190,33 @@ def main():
     fin = np.column_stack([rng.uniform(7000, 20000, 40), rng.uniform(150, 800, 40)])
     fin = np.vstack([[12000, 500], fin])
     np.savetxt(os.path.join(d, "fuzzy.txt"), fin, fmt="%.3f")
+    # Camera frames: YUYV 4:2:2 (BT.601 video range) and an RGGB Bayer mosaic of the scene.
+    yuv = cv2.cvtColor(a, cv2.COLOR_BGR2YUV)
+    yuyv = np.empty((H, W, 2), np.uint8)
+    yuyv[:, :, 0] = (yuv[:, :, 0].astype(np.int32) * 219 // 255 + 16).astype(np.uint8)
+    yuyv[:, 0::2, 1] = yuv[:, 0::2, 1]
+    yuyv[:, 1::2, 1] = yuv[:, 0::2, 2]
+    yuyv.tofile(os.path.join(d, "a.yuyv"))
+    bayer = np.empty((H, W), np.uint8)
+    bayer[0::2, 0::2] = a[0::2, 0::2, 2]
+    bayer[0::2, 1::2] = a[0::2, 1::2, 1]
+    bayer[1::2, 0::2] = a[1::2, 0::2, 1]
+    bayer[1::2, 1::2] = a[1::2, 1::2, 0]
+    bayer.tofile(os.path.join(d, "a.bayer"))
 
-    # The executable's path from cargo itself (CARGO_TARGET_DIR or a shim may move it).
-    out = subprocess.check_output(
-        ["cargo", "build", "--release", "--example", "vision_compare", "--message-format=json"],
-        cwd=ROOT,
+    # The executable cargo reports (the target dir may be shared, with other trees
+    # linking their own build to the same examples/vision_compare name).
+    built = subprocess.check_output(
+        ["cargo", "build", "--release", "--example", "vision_compare",
+         "--message-format=json-render-diagnostics"], cwd=ROOT
     ).decode()
     exe = None
-    for line in out.splitlines():
+    for line in built.splitlines():
         msg = json.loads(line)
-        if msg.get("reason") == "compiler-artifact" and msg.get("target", {}).get("name") == "vision_compare":
+        if msg.get("reason") == "compiler-artifact" and msg["target"]["name"] == "vision_compare":
             exe = msg.get("executable") or exe
     if exe is None:
-        sys.exit("compare_opencv: cargo built no vision_compare executable")
+        sys.exit("cargo did not report the vision_compare executable")
     # glibc hands every allocation above 128 KiB fresh mmapped pages (page faults on
     # first touch) until its dynamic threshold adapts; a long-running process (Python
     # here, a schema in jderobot) reuses its heap instead. Give the Rust process that
@@ -327,6 +341,19 @@ def main():
         rw = raw("rs_warp.raw", np.uint8, (H, W, 3))
         add("warpPerspective (bilinear, BGR)", "warp_perspective",
             f"{int(np.abs(cw.astype(int) - rw).max())} ({int((cw != rw).sum())} values differ)", t)
+
+        # Camera conversions (the drivers' pixfmt), into a preallocated output as the
+        # drivers do. OpenCV names Bayer codes by the second row: an RGGB mosaic is BayerBG.
+        out = np.empty((H, W, 3), np.uint8)
+        t, cy = median_ms(lambda: cv2.cvtColor(yuyv, cv2.COLOR_YUV2BGR_YUYV, dst=out), R)
+        ry = raw("rs_yuyv.raw", np.uint8, (H, W, 3))
+        add("YUYV -> BGR (BT.601)", "yuyv_bgr",
+            f"{int(np.abs(cy.astype(int) - ry).max())} ({int((cy != ry).sum())} values differ)", t)
+        t, cb = median_ms(lambda: cv2.cvtColor(bayer, cv2.COLOR_BayerBG2BGR, dst=out), R)
+        rb = raw("rs_bayer.raw", np.uint8, (H, W, 3))
+        inner = np.abs(cb[1:-1, 1:-1].astype(int) - rb[1:-1, 1:-1]).max()
+        add("Bayer RGGB -> BGR (bilinear)", "bayer_bgr", f"{int(inner)} inside the 1-px border", t,
+            "libdc1394's border is black, OpenCV's replicated")
 
         # Fuzzy: 4.3's inference against a Python transcription; Mamdani against scikit-fuzzy.
         labels = {

@@ -3,3 +3,6 @@
 
 #[cfg(feature = "gui")]
 pub mod gui;
+
+#[cfg(feature = "networkserver")]
+pub mod networkserver;

@@ -124,16 +124,12 @@ pub fn parse(conf: &ComponentConf) -> anyhow::Result<Sim3dConf> {
             }
             "provides" => {
                 l.expect_args(2, 2, "provides colorA..D|varcolorA..D CAMERA_FILE")?;
-                let iface = l.args()[0].as_str();
-                let color = matches!(iface, "colorA" | "colorB" | "colorC" | "colorD");
-                let var = matches!(iface, "varcolorA" | "varcolorB" | "varcolorC" | "varcolorD");
-                if !color && !var {
-                    return Err(l
-                        .error(format!(
-                            "simulated3D provides colorA..D and varcolorA..D, not `{iface}`"
-                        ))
-                        .into());
-                }
+                let image = l.image_interface(
+                    0,
+                    "simulated3D",
+                    "provides colorA..D|varcolorA..D CAMERA_FILE",
+                )?;
+                let (iface, color) = (image.name.as_str(), image.fixed_size);
                 let path = conf.resolve(&l.args()[1]);
                 let cam =
                     PinholeCamera::load(&path).map_err(|e| l.error(format!("camera file: {e}")))?;

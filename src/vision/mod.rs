@@ -43,6 +43,7 @@ mod convolve;
 mod flow;
 mod homography;
 mod hough;
+pub mod pixfmt;
 mod sobel;
 
 pub use convolve::{Kernel, KernelError, convolve};
