@@ -42,12 +42,14 @@
 mod convolve;
 mod flow;
 mod homography;
+mod hough;
 pub mod pixfmt;
 mod sobel;
 
 pub use convolve::{Kernel, KernelError, convolve};
 pub use flow::{LkParams, TrackedPoint, optical_flow_pyr_lk};
 pub use homography::{find_homography, warp_perspective};
+pub use hough::{PolarLine, Segment, hough_lines, hough_lines_p};
 pub use sobel::{canny, sobel, sobel_with_border};
 
 use crate::interfaces::Image;
