@@ -7,8 +7,11 @@
 //! ```
 //! Inputs in DIR: `a.bgr`, `b.bgr` (raw BGR frames), `points.txt` (`x y` per line),
 //! `homography.txt` (`sx sy dx dy` per line), `hsv.txt` (`hmin hmax smin smax vmin
-//! vmax`, H in degrees), `fuzzy.txt` (`var1 var2` per line, for
-//! `assets/fuzzy/example.fzz`). Outputs: `rs_*.raw` (u8 or little-endian i16),
+//! vmax`, H in degrees), `edges.raw` (u8 edges for the Hough transforms), `calib.txt`
+//! (`X Y Z U V`: a 3D pattern and its noisy pixels, for calibrador's solver),
+//! `fuzzy.txt` (`var1 var2` per line, for `assets/fuzzy/example.fzz`), `a.yuyv`
+//! (YUYV 4:2:2), `a.bayer` (RGGB mosaic).
+//! Outputs: `rs_*.raw` (u8 or little-endian i16),
 //! `rs_*.txt`.
 
 use std::{fs, path::Path, time::Instant};
@@ -17,7 +20,11 @@ use jderobot::{
     colorspaces::{HsvRange, Lookup, hsv_mask},
     fuzzy::{Controller, Inference},
     interfaces::Image,
-    vision::{self, Kernel, LkParams},
+    schemas::calibrador::calibrate,
+    vision::{
+        self, Kernel, LkParams,
+        pixfmt::{self, Bayer, Yuv422Order, YuvMatrix},
+    },
 };
 
 fn median_ms<T>(repeats: usize, mut f: impl FnMut() -> T) -> (f64, T) {
@@ -101,6 +108,50 @@ fn main() -> anyhow::Result<()> {
     times.push(("canny".into(), t));
     write_u8("rs_canny.raw", &e.data)?;
 
+    // Hough on OpenCV's Canny edges (edges.raw), so both sides vote the same points.
+    let edges = vision::GrayImage {
+        width: w,
+        height: h,
+        data: fs::read(dir.join("edges.raw"))?,
+    };
+    anyhow::ensure!(
+        edges.data.len() == (w * h) as usize,
+        "edges.raw: wrong size"
+    );
+    let theta = std::f64::consts::PI / 180.0;
+    let (t, lines) = median_ms(repeats, || vision::hough_lines(&edges, 1.0, theta, 80));
+    times.push(("hough_lines".into(), t));
+    let s: String = lines
+        .iter()
+        .map(|l| format!("{} {}\n", l.rho, l.theta))
+        .collect();
+    fs::write(dir.join("rs_hough.txt"), s)?;
+    let (t, segs) = median_ms(repeats, || {
+        vision::hough_lines_p(&edges, 1.0, theta, 50, 30, 5)
+    });
+    times.push(("hough_lines_p".into(), t));
+    let s: String = segs
+        .iter()
+        .map(|l| format!("{} {} {} {}\n", l.x1, l.y1, l.x2, l.y2))
+        .collect();
+    fs::write(dir.join("rs_houghp.txt"), s)?;
+
+    // calibrador's solver on `calib.txt` (X Y Z U V per line: a 3D pattern, noisy pixels).
+    let cal = numbers(&dir.join("calib.txt"))?;
+    let world: Vec<[f64; 3]> = cal.iter().map(|r| [r[0], r[1], r[2]]).collect();
+    let pix: Vec<(f64, f64)> = cal.iter().map(|r| (r[3], r[4])).collect();
+    let (t, c) = median_ms(repeats, || calibrate(&world, &pix));
+    times.push(("calibrate".into(), t));
+    let c = c.map_err(|e| anyhow::anyhow!("calibrate: {e}"))?;
+    let pos = c.position();
+    fs::write(
+        dir.join("rs_calib.txt"),
+        format!(
+            "{} {} {} {} {} {} {} {}\n",
+            c.rms, c.fx, c.fy, c.cx, c.cy, pos.x, pos.y, pos.z
+        ),
+    )?;
+
     let (t, p) = median_ms(repeats, || vision::pyr_down(&a));
     times.push(("pyrdown".into(), t));
     write_u8("rs_pyrdown.raw", &p.data)?;
@@ -144,6 +195,22 @@ fn main() -> anyhow::Result<()> {
     let (t, wp) = median_ms(repeats, || vision::warp_perspective(&a, &hm, w, h));
     times.push(("warp_perspective".into(), t));
     write_u8("rs_warp.raw", &wp.data)?;
+
+    // Camera pixel formats → BGR (the drivers' conversions), into a reused buffer.
+    let yuyv = fs::read(dir.join("a.yuyv"))?;
+    let mut out = Vec::new();
+    let (t, ()) = median_ms(repeats, || {
+        pixfmt::yuv422_to_bgr(&yuyv, w, h, Yuv422Order::Yuyv, YuvMatrix::Bt601, &mut out)
+            .expect("YUYV frame")
+    });
+    times.push(("yuyv_bgr".into(), t));
+    write_u8("rs_yuyv.raw", &out)?;
+    let bayer = fs::read(dir.join("a.bayer"))?;
+    let (t, ()) = median_ms(repeats, || {
+        pixfmt::bayer_to_bgr(&bayer, w, h, Bayer::Rggb, &mut out).expect("Bayer frame")
+    });
+    times.push(("bayer_bgr".into(), t));
+    write_u8("rs_bayer.raw", &out)?;
 
     let mut fz = Controller::from_file("assets/fuzzy/example.fzz")?;
     let inputs = numbers(&dir.join("fuzzy.txt"))?;

@@ -155,6 +155,25 @@ def main():
     b.tofile(os.path.join(d, "b.bgr"))
     g = cv2.cvtColor(a, cv2.COLOR_BGR2GRAY)
     gb = cv2.cvtColor(b, cv2.COLOR_BGR2GRAY)
+    cv2.Canny(g, 50, 150).tofile(os.path.join(d, "edges.raw"))
+    # calibrador: a box corner (3 planes, 7x7 points 60 mm apart) seen by a known
+    # 640x480 camera, pixels with 0.5 px Gaussian noise.
+    obj = []
+    for i in range(1, 8):
+        for j in range(1, 8):
+            a_, b_ = i * 60.0, j * 60.0
+            obj += [[0, a_, b_], [a_, 0, b_], [a_, b_, 0]]
+    obj = np.float64(obj)
+    cam_c = np.float64([1400, 1100, 900])
+    fwd = np.float64([150, 150, 150]) - cam_c
+    fwd /= np.linalg.norm(fwd)
+    right = np.cross(fwd, [0, 0, 1.0])
+    right /= np.linalg.norm(right)
+    rot = np.array([right, np.cross(fwd, right), fwd])
+    k_true = np.float64([[600, 0, 330], [0, 620, 229], [0, 0, 1]])
+    cc = (rot @ (obj - cam_c).T).T
+    pix = (k_true @ (cc / cc[:, 2:3]).T).T[:, :2] + np.random.default_rng(5).normal(0, 0.5, (len(obj), 2))
+    np.savetxt(os.path.join(d, "calib.txt"), np.hstack([obj, pix]), fmt="%.10g")
     pts = cv2.goodFeaturesToTrack(g, 200, 0.01, 10).reshape(-1, 2)
     np.savetxt(os.path.join(d, "points.txt"), pts, fmt="%.6f")
     # Homography: imgrectifier's 4 clicked corners -> a rectangle, plus 4 more exact pairs.
@@ -171,11 +190,33 @@ def main():
     fin = np.column_stack([rng.uniform(7000, 20000, 40), rng.uniform(150, 800, 40)])
     fin = np.vstack([[12000, 500], fin])
     np.savetxt(os.path.join(d, "fuzzy.txt"), fin, fmt="%.3f")
+    # Camera frames: YUYV 4:2:2 (BT.601 video range) and an RGGB Bayer mosaic of the scene.
+    yuv = cv2.cvtColor(a, cv2.COLOR_BGR2YUV)
+    yuyv = np.empty((H, W, 2), np.uint8)
+    yuyv[:, :, 0] = (yuv[:, :, 0].astype(np.int32) * 219 // 255 + 16).astype(np.uint8)
+    yuyv[:, 0::2, 1] = yuv[:, 0::2, 1]
+    yuyv[:, 1::2, 1] = yuv[:, 0::2, 2]
+    yuyv.tofile(os.path.join(d, "a.yuyv"))
+    bayer = np.empty((H, W), np.uint8)
+    bayer[0::2, 0::2] = a[0::2, 0::2, 2]
+    bayer[0::2, 1::2] = a[0::2, 1::2, 1]
+    bayer[1::2, 0::2] = a[1::2, 0::2, 1]
+    bayer[1::2, 1::2] = a[1::2, 1::2, 0]
+    bayer.tofile(os.path.join(d, "a.bayer"))
 
-    subprocess.check_call(
-        ["cargo", "build", "--release", "--example", "vision_compare"], cwd=ROOT
-    )
-    exe = os.path.join(ROOT, "target", "release", "examples", "vision_compare")
+    # The executable cargo reports (the target dir may be shared, with other trees
+    # linking their own build to the same examples/vision_compare name).
+    built = subprocess.check_output(
+        ["cargo", "build", "--release", "--example", "vision_compare",
+         "--message-format=json-render-diagnostics"], cwd=ROOT
+    ).decode()
+    exe = None
+    for line in built.splitlines():
+        msg = json.loads(line)
+        if msg.get("reason") == "compiler-artifact" and msg["target"]["name"] == "vision_compare":
+            exe = msg.get("executable") or exe
+    if exe is None:
+        sys.exit("cargo did not report the vision_compare executable")
     # glibc hands every allocation above 128 KiB fresh mmapped pages (page faults on
     # first touch) until its dynamic threshold adapts; a long-running process (Python
     # here, a schema in jderobot) reuses its heap instead. Give the Rust process that
@@ -226,6 +267,42 @@ def main():
         add("Canny 50/150 (L1)", "canny", f"{int(np.abs(ce.astype(int) - re_).max())} ({nd} px differ)", t,
             f"{int((ce > 0).sum())} edge px")
 
+        # Hough on the same edges (OpenCV's Canny): lines (rho, theta) in order, and segments.
+        edges = raw("edges.raw", np.uint8, (H, W))
+        t, cl = median_ms(lambda: cv2.HoughLines(edges, 1, np.pi / 180, 80), R)
+        cl = np.zeros((0, 2)) if cl is None else cl.reshape(-1, 2)
+        rl = np.loadtxt(os.path.join(d, "rs_hough.txt"), ndmin=2).reshape(-1, 2)
+        n = min(len(cl), len(rl))
+        diff = float(np.abs(cl[:n] - rl[:n]).max()) if n else 0.0
+        add("HoughLines (1 px, 1°, 80 votes)", "hough_lines",
+            f"{diff:.1e} ({len(cl)} vs {len(rl)} lines)", t, f"{int((edges > 0).sum())} edge px")
+        t, cs = median_ms(lambda: cv2.HoughLinesP(edges, 1, np.pi / 180, 50, minLineLength=30, maxLineGap=5), R)
+        cs = np.zeros((0, 4), int) if cs is None else cs.reshape(-1, 4)
+        rsg = np.loadtxt(os.path.join(d, "rs_houghp.txt"), ndmin=2).reshape(-1, 4).astype(int)
+        same = sum(1 for p, q in zip(cs, rsg) if (p == q).all())
+        add("HoughLinesP (1 px, 1°, 50 votes, length 30, gap 5)", "hough_lines_p",
+            f"{same}/{len(cs)} segments identical ({len(rsg)} ours)", t)
+
+        # calibrador: reprojection error against OpenCV's calibrateCamera (pinhole
+        # only: no distortion, started from a rough guess) and solvePnP with its K.
+        cal = np.loadtxt(os.path.join(d, "calib.txt"))
+        o3, p2 = cal[:, :3].astype(np.float32), cal[:, 3:].astype(np.float32)
+        flags = (cv2.CALIB_USE_INTRINSIC_GUESS | cv2.CALIB_ZERO_TANGENT_DIST | cv2.CALIB_FIX_K1
+                 | cv2.CALIB_FIX_K2 | cv2.CALIB_FIX_K3)
+        k0 = np.float64([[500, 0, 320], [0, 500, 240], [0, 0, 1]])
+
+        def cvcal():
+            return cv2.calibrateCamera([o3], [p2], (W, H), k0.copy(), None, flags=flags)
+
+        t, (cv_rms, kc, dc, rv, tv) = median_ms(cvcal, max(3, R // 5))
+        ok, rv2, tv2 = cv2.solvePnP(o3, p2, kc, dc)
+        proj, _ = cv2.projectPoints(o3, rv2, tv2, kc, dc)
+        pnp_rms = float(np.sqrt(((proj.reshape(-1, 2) - p2) ** 2).sum(1).mean()))
+        rc = np.loadtxt(os.path.join(d, "rs_calib.txt"))
+        add("calibrador (147 pts, 3 planes, 0.5 px noise) vs calibrateCamera", "calibrate",
+            f"rms {rc[0]:.4f} vs {cv_rms:.4f} px (solvePnP {pnp_rms:.4f})", t,
+            f"fx {rc[1]:.2f}/{kc[0, 0]:.2f} fy {rc[2]:.2f}/{kc[1, 1]:.2f} (true 600/620)")
+
         t, cp = median_ms(lambda: cv2.pyrDown(a), R)
         diff = int(np.abs(cp.astype(int) - raw("rs_pyrdown.raw", np.uint8, cp.shape)).max())
         add("pyrDown (BGR)", "pyrdown", str(diff), t)
@@ -264,6 +341,19 @@ def main():
         rw = raw("rs_warp.raw", np.uint8, (H, W, 3))
         add("warpPerspective (bilinear, BGR)", "warp_perspective",
             f"{int(np.abs(cw.astype(int) - rw).max())} ({int((cw != rw).sum())} values differ)", t)
+
+        # Camera conversions (the drivers' pixfmt), into a preallocated output as the
+        # drivers do. OpenCV names Bayer codes by the second row: an RGGB mosaic is BayerBG.
+        out = np.empty((H, W, 3), np.uint8)
+        t, cy = median_ms(lambda: cv2.cvtColor(yuyv, cv2.COLOR_YUV2BGR_YUYV, dst=out), R)
+        ry = raw("rs_yuyv.raw", np.uint8, (H, W, 3))
+        add("YUYV -> BGR (BT.601)", "yuyv_bgr",
+            f"{int(np.abs(cy.astype(int) - ry).max())} ({int((cy != ry).sum())} values differ)", t)
+        t, cb = median_ms(lambda: cv2.cvtColor(bayer, cv2.COLOR_BayerBG2BGR, dst=out), R)
+        rb = raw("rs_bayer.raw", np.uint8, (H, W, 3))
+        inner = np.abs(cb[1:-1, 1:-1].astype(int) - rb[1:-1, 1:-1]).max()
+        add("Bayer RGGB -> BGR (bilinear)", "bayer_bgr", f"{int(inner)} inside the 1-px border", t,
+            "libdc1394's border is black, OpenCV's replicated")
 
         # Fuzzy: 4.3's inference against a Python transcription; Mamdani against scikit-fuzzy.
         labels = {

@@ -3,5 +3,8 @@
 
 #[cfg(feature = "gui")]
 pub mod gui;
+
+#[cfg(feature = "networkserver")]
+pub mod networkserver;
 #[cfg(feature = "recorder")]
 pub mod recorder;

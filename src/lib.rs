@@ -10,6 +10,7 @@
 //! A user's own crate can link this library, add schemas with
 //! [`register_schema!`] and call [`cli::main`]; see `examples/own_schema.rs`.
 
+pub mod blobs;
 pub mod cli;
 pub mod colorspaces;
 pub mod conf;
@@ -24,6 +25,7 @@ pub mod mcapfmt;
 #[cfg(feature = "_media")]
 pub mod media;
 pub mod namespace;
+pub mod netwire;
 pub mod output;
 pub mod progeo;
 pub mod registry;

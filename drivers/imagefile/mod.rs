@@ -74,16 +74,8 @@ pub fn parse(conf: &ComponentConf) -> anyhow::Result<Vec<(Source, ConfLine)>> {
         if l.keyword() != "provides" {
             return Err(conf.unknown(l, &format!("`{USAGE}`")).into());
         }
-        let iface = l.args().first().map(String::as_str).unwrap_or("");
-        let color = matches!(iface, "colorA" | "colorB" | "colorC" | "colorD");
-        let var = matches!(iface, "varcolorA" | "varcolorB" | "varcolorC" | "varcolorD");
-        if !color && !var {
-            return Err(l
-                .error(format!(
-                    "imagefile provides colorA..D and varcolorA..D, not `{iface}`; usage: {USAGE}"
-                ))
-                .into());
-        }
+        let image = l.image_interface(0, "imagefile", USAGE)?;
+        let (iface, color) = (image.name.as_str(), image.fixed_size);
         let fit = if color {
             l.expect_args(2, 3, &format!("provides {iface} FILE [scale]"))?;
             match l.args().get(2).map(String::as_str) {

@@ -122,16 +122,8 @@ pub fn parse(conf: &ComponentConf) -> anyhow::Result<Vec<(Source, ConfLine)>> {
             return Err(conf.unknown(l, &format!("`{USAGE}`")).into());
         }
         let a = l.args();
-        let iface = a.first().map(String::as_str).unwrap_or("");
-        let color = matches!(iface, "colorA" | "colorB" | "colorC" | "colorD");
-        let var = matches!(iface, "varcolorA" | "varcolorB" | "varcolorC" | "varcolorD");
-        if !color && !var {
-            return Err(l
-                .error(format!(
-                    "mplayer provides colorA..D and varcolorA..D, not `{iface}`; usage: {USAGE}"
-                ))
-                .into());
-        }
+        let image = l.image_interface(0, "mplayer", USAGE)?;
+        let (iface, color) = (image.name.as_str(), image.fixed_size);
         if a.len() < 3 {
             return Err(l
                 .error(format!("`provides {iface}` is too short; usage: {USAGE}"))

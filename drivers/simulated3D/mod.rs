@@ -33,17 +33,14 @@ use std::{
         Arc,
         atomic::{AtomicBool, Ordering},
     },
-    thread::JoinHandle,
     time::{Duration, Instant},
 };
-
-use anyhow::Context as _;
 
 use crate::{
     conf::ComponentConf,
     interfaces::{COLOR_HEIGHT, COLOR_WIDTH, Image, Interface},
     progeo::{PinholeCamera, World},
-    runtime::{Driver, Runtime},
+    runtime::{Driver, Runtime, Worker},
 };
 
 const USAGE: &str = "worldfile FILE, provides colorA..D|varcolorA..D CAMERA_FILE";
@@ -124,16 +121,12 @@ pub fn parse(conf: &ComponentConf) -> anyhow::Result<Sim3dConf> {
             }
             "provides" => {
                 l.expect_args(2, 2, "provides colorA..D|varcolorA..D CAMERA_FILE")?;
-                let iface = l.args()[0].as_str();
-                let color = matches!(iface, "colorA" | "colorB" | "colorC" | "colorD");
-                let var = matches!(iface, "varcolorA" | "varcolorB" | "varcolorC" | "varcolorD");
-                if !color && !var {
-                    return Err(l
-                        .error(format!(
-                            "simulated3D provides colorA..D and varcolorA..D, not `{iface}`"
-                        ))
-                        .into());
-                }
+                let image = l.image_interface(
+                    0,
+                    "simulated3D",
+                    "provides colorA..D|varcolorA..D CAMERA_FILE",
+                )?;
+                let (iface, color) = (image.name.as_str(), image.fixed_size);
                 let path = conf.resolve(&l.args()[1]);
                 let cam =
                     PinholeCamera::load(&path).map_err(|e| l.error(format!("camera file: {e}")))?;
@@ -170,26 +163,6 @@ pub fn parse(conf: &ComponentConf) -> anyhow::Result<Sim3dConf> {
     Ok(Sim3dConf { world, cameras })
 }
 
-struct Simulated3D {
-    stop: Arc<AtomicBool>,
-    thread: Option<JoinHandle<()>>,
-}
-
-impl Driver for Simulated3D {
-    fn terminate(&mut self) {
-        self.stop.store(true, Ordering::Release);
-        if let Some(t) = self.thread.take() {
-            let _ = t.join();
-        }
-    }
-}
-
-impl Drop for Simulated3D {
-    fn drop(&mut self) {
-        self.terminate();
-    }
-}
-
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>> {
     let sc = parse(conf)?;
     let mut cams: Vec<(Arc<Interface<Image>>, PinholeCamera)> = Vec::new();
@@ -202,40 +175,34 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
     let world = sc.world;
     let stop = Arc::new(AtomicBool::new(false));
     let s = stop.clone();
-    let thread = std::thread::Builder::new()
-        .name("simulated3D".into())
-        .spawn(move || {
-            let mut next = Instant::now();
-            while !s.load(Ordering::Acquire) {
-                let mut any = false;
-                for (iface, cam) in &cams {
-                    if iface.users() > 0 {
-                        any = true;
-                        if let Err(e) = iface.write(|img| render(&world, cam, img)) {
-                            iface.set_stale(e.to_string());
-                        }
+    let worker = Worker::start("simulated3D", stop, move || {
+        let mut next = Instant::now();
+        while !s.load(Ordering::Acquire) {
+            let mut any = false;
+            for (iface, cam) in &cams {
+                if iface.users() > 0 {
+                    any = true;
+                    if let Err(e) = iface.write(|img| render(&world, cam, img)) {
+                        iface.set_stale(e.to_string());
                     }
                 }
-                if !any {
-                    // Nobody looks: sleep until the first camera is used (or a tick).
-                    cams[0].0.wait_used(PERIOD);
-                    next = Instant::now();
-                    continue;
-                }
-                next += PERIOD;
-                let now = Instant::now();
-                if next > now {
-                    std::thread::sleep(next - now);
-                } else {
-                    next = now;
-                }
             }
-        })
-        .context("cannot start the simulated3D thread")?;
-    Ok(Box::new(Simulated3D {
-        stop,
-        thread: Some(thread),
-    }))
+            if !any {
+                // Nobody looks: sleep until the first camera is used (or a tick).
+                cams[0].0.wait_used(PERIOD);
+                next = Instant::now();
+                continue;
+            }
+            next += PERIOD;
+            let now = Instant::now();
+            if next > now {
+                std::thread::sleep(next - now);
+            } else {
+                next = now;
+            }
+        }
+    })?;
+    Ok(Box::new(worker))
 }
 
 crate::register_driver!(

@@ -8,18 +8,15 @@ use std::{
         Arc,
         atomic::{AtomicBool, Ordering},
     },
-    thread::JoinHandle,
     time::{Duration, Instant},
 };
-
-use anyhow::Context as _;
 
 use crate::{
     interfaces::{
         Bumpers, Encoders, Image, Interface, InterfaceValue, Interfaces, Laser, Motors, PtEncoders,
         PtMotors, Sonars,
     },
-    runtime::Driver,
+    runtime::{Driver, Worker},
     world::LiveBalls,
 };
 
@@ -48,8 +45,7 @@ struct Outputs {
 
 /// The running driver: a thread that steps the simulation and publishes.
 pub struct SimDriver {
-    stop: Arc<AtomicBool>,
-    thread: Option<JoinHandle<()>>,
+    worker: Worker,
     motors: Vec<Arc<Interface<Motors>>>,
 }
 
@@ -116,24 +112,16 @@ impl SimDriver {
         let motors = robots.iter().filter_map(|r| r.motors.clone()).collect();
         let stop = Arc::new(AtomicBool::new(false));
         let stop2 = stop.clone();
-        let thread = std::thread::Builder::new()
-            .name("simulator".into())
-            .spawn(move || run(simulation, Outputs { robots, balls }, &stop2))
-            .context("cannot start the simulator thread")?;
-        Ok(SimDriver {
-            stop,
-            thread: Some(thread),
-            motors,
-        })
+        let worker = Worker::start("simulator", stop, move || {
+            run(simulation, Outputs { robots, balls }, &stop2)
+        })?;
+        Ok(SimDriver { worker, motors })
     }
 }
 
 impl Driver for SimDriver {
     fn terminate(&mut self) {
-        self.stop.store(true, Ordering::Release);
-        if let Some(t) = self.thread.take() {
-            let _ = t.join();
-        }
+        self.worker.stop();
         for m in &self.motors {
             let _ = m.publish(Motors::default());
         }

@@ -109,12 +109,11 @@ impl Schema for Teleoperator {
         if let Some(pantilt_motors) = &self.dev.pantilt_motors
             && self.last_pantilt != Some(pt)
         {
-            pantilt_motors
-                .write(|m| {
-                    m.longitude = limit(pt[0], m.min_longitude, m.max_longitude);
-                    m.latitude = limit(pt[1], m.min_latitude, m.max_latitude);
-                })
-                .map_err(anyhow::Error::msg)?;
+            // A partial update: start from the latest value (its limits and speeds).
+            let mut m = pantilt_motors.read().value;
+            m.longitude = limit(pt[0], m.min_longitude, m.max_longitude);
+            m.latitude = limit(pt[1], m.min_latitude, m.max_latitude);
+            pantilt_motors.publish(m)?;
             self.last_pantilt = Some(pt);
         }
         Ok(())

@@ -70,13 +70,11 @@ pub fn launch(rt: Arc<Runtime>, conf: Conf, no_shell: bool) -> ExitCode {
     }
     // Wait for a GUI service, or for the shell to end.
     loop {
-        match rx.recv_timeout(Duration::from_millis(50)) {
-            Ok(()) => {
-                rt.shutdown();
-                return ExitCode::SUCCESS;
-            }
-            // Disconnected: the shell's input ended while the window is wanted.
-            Err(_) => {}
+        // Disconnected (no message) means the shell's input ended while the window
+        // is wanted: keep waiting for it.
+        if rx.recv_timeout(Duration::from_millis(50)).is_ok() {
+            rt.shutdown();
+            return ExitCode::SUCCESS;
         }
         if gui_loaded(&rt) {
             break;

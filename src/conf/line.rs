@@ -67,6 +67,15 @@ impl ConfLine {
     }
 }
 
+/// An image interface named on a line: `colorA..D` (320x240) or `varcolorA..D`
+/// (any size).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct ImageInterface {
+    pub name: String,
+    /// `colorA..D`: the size is fixed at 320x240.
+    pub fixed_size: bool,
+}
+
 /// A number type the vocabulary reads ([`ConfLine::number`]).
 pub trait ConfNumber: std::str::FromStr + PartialOrd + Copy + std::fmt::Display {
     /// Whether the value is a usable number (finite for floats).
@@ -204,6 +213,28 @@ impl ConfLine {
             None => None,
         };
         Ok(interfaces::interface_name(&base, suffix))
+    }
+
+    /// Argument `i` as an image interface (`colorA..D` or `varcolorA..D`), for
+    /// `component` whose line reads `usage`.
+    pub fn image_interface(
+        &self,
+        i: usize,
+        component: &str,
+        usage: &str,
+    ) -> Result<ImageInterface, ConfError> {
+        let w = self.word(i, "an image interface (colorA..D or varcolorA..D)")?;
+        let fixed_size = matches!(w, "colorA" | "colorB" | "colorC" | "colorD");
+        let var = matches!(w, "varcolorA" | "varcolorB" | "varcolorC" | "varcolorD");
+        if !fixed_size && !var {
+            return Err(self.error(format!(
+                "{component} provides colorA..D and varcolorA..D, not `{w}`; usage: {usage}"
+            )));
+        }
+        Ok(ImageInterface {
+            name: w.to_string(),
+            fixed_size,
+        })
     }
 
     /// Argument `i` as a file path, relative to the directory of the conf file this

@@ -29,7 +29,7 @@ mod component;
 mod line;
 
 pub use component::ComponentConf;
-pub use line::ConfLine;
+pub use line::{ConfLine, ImageInterface};
 
 /// What a component is.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]

@@ -4,7 +4,7 @@
 //! - The window opens when a GUI service is loaded (`load_service gui`, or 4.3's
 //!   `graphics_gtk`, `graphics_xforms`, `graphics_glut`), from the conf or later
 //!   from the shell, provided there is a display and `--headless` was not given.
-//! - A schema offers a [`Panel`](crate::runtime::Panel) from [`Schema::panel`](crate::runtime::Schema::panel).
+//! - A schema offers a [`Panel`] from [`Schema::panel`](crate::runtime::Schema::panel).
 //!   Shown panels (`show NAME` in the conf or the shell, or mastergui's show toggle:
 //!   one state, [`Runtime::show`]) appear in the window: docked ones (mastergui) in a
 //!   left side panel, the others as movable windows. Closing a panel's window hides it.

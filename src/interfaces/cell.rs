@@ -149,9 +149,11 @@ impl<T: InterfaceValue> Interface<T> {
         Ok(self.store(&mut w, value).0)
     }
 
-    /// Fills a recycled value in place and publishes it. `fill` gets the buffer of a
-    /// sample no reader holds any more (or a copy of the latest value), so steady
-    /// streams of large values allocate nothing.
+    /// Fills a recycled value in place and publishes it. `fill` gets the buffer of
+    /// an *older* sample that no reader holds any more (or a copy of the latest
+    /// value), so steady streams of large values allocate nothing. `fill` must set
+    /// the whole value (a frame, a scan); for a partial update, copy the latest value
+    /// (`read().value.clone()`), change it and [`publish`](Self::publish) it.
     pub fn write(&self, fill: impl FnOnce(&mut T)) -> Result<u64, InterfaceError> {
         let mut w = self.writer.lock();
         let mut value = w.spare.take().unwrap_or_else(|| self.read().value.clone());
@@ -268,8 +270,8 @@ impl<T: InterfaceValue> Interface<T> {
     /// Marks the value stale: its source is gone (a device unplugged, a server
     /// down), so the latest value is old and will stay so. `ps`, `echo` and
     /// mastergui show the reason and the growing age; the next publish clears it.
-    pub fn set_stale(&self, why: impl Into<String>) {
-        *self.stale.lock() = Some(why.into());
+    pub fn set_stale(&self, why: impl std::fmt::Display) {
+        *self.stale.lock() = Some(why.to_string());
     }
 
     /// Why the value is stale, if it is.

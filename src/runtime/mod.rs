@@ -54,7 +54,7 @@ use parking_lot::{Condvar, Mutex, RwLock};
 
 pub use arbitration::{Arbitration, BrotherGroup, Father};
 pub use context::Context;
-pub use driver::Driver;
+pub use driver::{Driver, Worker};
 pub use error::RuntimeError;
 #[cfg(feature = "gui")]
 pub use panel::Panel;

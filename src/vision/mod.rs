@@ -12,6 +12,8 @@
 //! | convolution | [`convolve`] with a [`Kernel`] | `filter2D(.., delta = offset)` |
 //! | optical flow | [`optical_flow_pyr_lk`] | `calcOpticalFlowPyrLK` |
 //! | homography | [`find_homography`], [`warp_perspective`] | `findHomography(.., 0)`, `warpPerspective` |
+//! | Hough lines | [`hough_lines`], [`hough_lines_p`] | `HoughLines`, `HoughLinesP` (same RNG visiting order) |
+//! | camera pixel formats | [`pixfmt`] (YUYV, UYVY, YUV 4:2:0/4:1:1, Bayer, RGB, GREY → BGR) | `cvtColor(YUV2BGR_YUYV, BayerBG2BGR, ...)`, libdc1394's conversions |
 //!
 //! Units: pixels; graphic coordinates (x = column to the right, y = row down) in
 //! this module. Images are BGR bytes, rows top to bottom, no padding; single-channel
@@ -42,11 +44,14 @@
 mod convolve;
 mod flow;
 mod homography;
+mod hough;
+pub mod pixfmt;
 mod sobel;
 
 pub use convolve::{Kernel, KernelError, convolve};
 pub use flow::{LkParams, TrackedPoint, optical_flow_pyr_lk};
 pub use homography::{find_homography, warp_perspective};
+pub use hough::{PolarLine, Segment, hough_lines, hough_lines_p};
 pub use sobel::{canny, sobel, sobel_with_border};
 
 use crate::interfaces::Image;

@@ -2,7 +2,7 @@
 //!
 //! | widget | shows | interaction |
 //! |---|---|---|
-//! | [`ImageView`] | a BGR [`Image`] of any size, scaled to fit | click → [`PixelPick`] (pixel coordinates and colour) |
+//! | [`ImageView`] | a BGR [`Image`](crate::interfaces::Image) of any size, scaled to fit | click → [`PixelPick`] (pixel coordinates and colour) |
 //! | [`polar_view`] | laser or sonar ranges around the robot | none |
 //! | [`WorldView`] | robot pose, walls, laser points, a target, a 1 m grid | drag pans, scroll zooms, click sets the target (world mm), right click recentres on the robot |
 //! | [`TimePlot`] | scalars against time (egui_plot) | egui_plot's zoom and pan |

@@ -1,0 +1,381 @@
+//! networkserver → networkclient over loopback, against references measured in the
+//! same run (a harness that prints medians and ratios):
+//!
+//! 1. 640x480 BGR frames per second from a server interface to a client interface,
+//!    against a raw TCP copy of the same bytes (a thread writing header + pixels
+//!    back to back, another reading them): the limit. Goal ≥ 80 %.
+//! 2. Frame latency at 100 frames/s: from the publish on the server's interface to
+//!    the publish on the client's (both stamps taken by the interfaces). Goal p50 ≤ 1 ms.
+//! 3. 100 clients subscribed to laser and encoders (new values at 100 Hz): push
+//!    lateness after each 33 ms deadline (p50, p99; goal p99 ≤ 5 ms) and the server
+//!    threads' CPU time.
+//!
+//! Run: `cargo bench --features full --bench network`.
+
+use std::{
+    io::{BufRead, BufReader, Read, Write},
+    net::{TcpListener, TcpStream},
+    sync::{
+        Arc,
+        atomic::{AtomicBool, Ordering},
+    },
+    thread,
+    time::{Duration, Instant},
+};
+
+use jderobot::{
+    drivers::networkclient::{ClientConf, NetClient, Remote},
+    interfaces::{Encoders, Image, Interface, Interfaces, Laser},
+    services::networkserver::{NetServer, ServerConf, Sources},
+};
+
+const W: u32 = 640;
+const H: u32 = 480;
+const FRAME: usize = (W * H * 3) as usize;
+const ROUNDS: usize = 9;
+const SECS: f64 = 1.0;
+
+fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(|a, b| a.partial_cmp(b).unwrap());
+    v[v.len() / 2]
+}
+
+fn percentile(v: &mut [f64], p: f64) -> f64 {
+    v.sort_by(|a, b| a.partial_cmp(b).unwrap());
+    let i = ((p / 100.0) * (v.len() - 1) as f64).round() as usize;
+    v[i]
+}
+
+/// Raw TCP: frames (a 1020 header and the pixels) written back to back for `SECS`.
+fn raw_fps() -> f64 {
+    let l = TcpListener::bind("127.0.0.1:0").unwrap();
+    let addr = l.local_addr().unwrap();
+    let stop = Arc::new(AtomicBool::new(false));
+    let st = stop.clone();
+    let sender = thread::spawn(move || {
+        let (mut s, _) = l.accept().unwrap();
+        s.set_nodelay(true).unwrap();
+        let px = vec![7u8; FRAME];
+        let mut k = 0u64;
+        while !st.load(Ordering::Relaxed) {
+            k += 1;
+            let hdr = format!("1020 {k} 0 {W} {H} 3\n");
+            if s.write_all(hdr.as_bytes()).is_err() || s.write_all(&px).is_err() {
+                break;
+            }
+        }
+    });
+    let s = TcpStream::connect(addr).unwrap();
+    let mut r = BufReader::new(s);
+    let mut px = vec![0u8; FRAME];
+    let mut line = String::new();
+    // Warm up, then count.
+    for _ in 0..20 {
+        line.clear();
+        r.read_line(&mut line).unwrap();
+        r.read_exact(&mut px).unwrap();
+    }
+    let t0 = Instant::now();
+    let mut n = 0;
+    while t0.elapsed().as_secs_f64() < SECS {
+        line.clear();
+        r.read_line(&mut line).unwrap();
+        r.read_exact(&mut px).unwrap();
+        n += 1;
+    }
+    let fps = n as f64 / t0.elapsed().as_secs_f64();
+    stop.store(true, Ordering::Relaxed);
+    drop(r);
+    sender.join().unwrap();
+    fps
+}
+
+/// A server with a 640x480 `varcolorA` (network id 0) and a client interface fed by it.
+struct Link {
+    src: Arc<Interface<Image>>,
+    dst: Arc<Interface<Image>>,
+    server: NetServer,
+    client: NetClient,
+    _ifaces: Interfaces,
+}
+
+fn link() -> Link {
+    let src = Arc::new(Interface::with_value(
+        "varcolorA",
+        "robot",
+        Image::new(W, H),
+    ));
+    let server = NetServer::start(
+        ServerConf::default(),
+        Sources {
+            images: vec![(0, src.clone())],
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let port = server.local_addr().port();
+    let ifaces = Interfaces::default();
+    let cc = ClientConf {
+        remotes: vec![Remote {
+            name: "varcolorA".into(),
+            host: "127.0.0.1".into(),
+            port,
+            netid: Some(0),
+            size: Some((W, H)),
+        }],
+        initial: (0.0, 0.0, 0.0),
+        token: None,
+        motors_timeout: Duration::from_millis(500),
+        depth: 2,
+    };
+    let client = NetClient::start(cc, &ifaces, "bench").unwrap();
+    let dst = ifaces.get::<Image>("varcolorA").unwrap();
+    dst.resume();
+    Link {
+        src,
+        dst,
+        server,
+        client,
+        _ifaces: ifaces,
+    }
+}
+
+/// Frames per second through server and client. The producer acts as a camera
+/// that always has the next frame ready: as soon as the server takes the latest
+/// frame (holds it to send it), it fills the next one (a full copy, as a camera
+/// driver writes every pixel of every frame).
+fn net_fps(l: &Link) -> f64 {
+    let stop = AtomicBool::new(false);
+    thread::scope(|sc| {
+        sc.spawn(|| {
+            let (src, stats) = (&l.src, l.server.stats());
+            let mut k = 0u8;
+            let _ = src.write(|i| i.data[0] = 255);
+            let mut cur = src.snapshot();
+            let mut sent = stats.frames.load(Ordering::Relaxed);
+            let mut at = Instant::now();
+            while !stop.load(Ordering::Relaxed) {
+                // Taken: held by the slot, `cur` and the server; or the server
+                // finished a frame (maybe this one) and wants a newer one.
+                let done = stats.frames.load(Ordering::Relaxed);
+                // (And at least every millisecond, as a camera would.)
+                if Arc::strong_count(&cur) > 2 || done != sent || at.elapsed().as_micros() > 1000 {
+                    sent = done;
+                    at = Instant::now();
+                    drop(cur);
+                    k = k.wrapping_add(1);
+                    let _ = src.write(|i| i.data[0] = k);
+                    cur = src.snapshot();
+                } else {
+                    thread::sleep(Duration::from_micros(30));
+                }
+            }
+        });
+        thread::sleep(Duration::from_millis(300));
+        let c0 = l.dst.clock();
+        let t0 = Instant::now();
+        let (mut last, mut since, mut gap) = (c0, Instant::now(), Duration::ZERO);
+        while t0.elapsed().as_secs_f64() < SECS {
+            thread::sleep(Duration::from_millis(1));
+            let c = l.dst.clock();
+            if c != last {
+                (last, since) = (c, Instant::now());
+            }
+            gap = gap.max(since.elapsed());
+        }
+        let fps = (l.dst.clock() - c0) as f64 / t0.elapsed().as_secs_f64();
+        stop.store(true, Ordering::Relaxed);
+        if gap > Duration::from_millis(100) {
+            println!(
+                "    (no frame for {:.0} ms in this round)",
+                gap.as_secs_f64() * 1e3
+            );
+        }
+        fps
+    })
+}
+
+/// Latencies (ms) of `n` frames published at 100 Hz.
+fn latencies(l: &Link, n: usize) -> Vec<f64> {
+    let mut sent = Vec::with_capacity(n);
+    let mut out = Vec::with_capacity(n);
+    let mut last_dst = l.dst.clock();
+    let mut next = Instant::now();
+    for k in 1..=n as u64 {
+        next += Duration::from_millis(10);
+        l.src
+            .write(|i| i.data[..8].copy_from_slice(&k.to_le_bytes()))
+            .unwrap();
+        sent.push(l.src.read().stamp);
+        // Collect what arrived meanwhile.
+        while Instant::now() < next {
+            let c = l.dst.clock();
+            if c != last_dst {
+                last_dst = c;
+                let s = l.dst.snapshot();
+                let id = u64::from_le_bytes(s.data[..8].try_into().unwrap()) as usize;
+                if (1..=sent.len()).contains(&id) {
+                    out.push(s.stamp.duration_since(sent[id - 1]).as_secs_f64() * 1e3);
+                }
+            }
+            thread::sleep(Duration::from_micros(20));
+        }
+    }
+    out
+}
+
+/// CPU seconds of this process's threads whose name starts with `prefix` (from
+/// `/proc/self/task/*/schedstat`, nanoseconds on a CPU: precise, unlike the
+/// 10 ms ticks of `stat`). Threads that ended are not counted.
+fn threads_cpu(prefix: &str) -> f64 {
+    let mut total = 0.0;
+    let Ok(dir) = std::fs::read_dir("/proc/self/task") else {
+        return 0.0;
+    };
+    for t in dir.flatten() {
+        let Ok(comm) = std::fs::read_to_string(t.path().join("comm")) else {
+            continue;
+        };
+        if !comm.starts_with(prefix) {
+            continue;
+        }
+        let Ok(st) = std::fs::read_to_string(t.path().join("schedstat")) else {
+            continue;
+        };
+        total += st
+            .split(' ')
+            .next()
+            .and_then(|n| n.parse::<f64>().ok())
+            .unwrap_or(0.0)
+            / 1e9;
+    }
+    total
+}
+
+/// 100 clients on laser + encoders for `secs`: (p50 ms, p99 ms, pushes, server CPU %).
+fn hundred_clients(secs: f64) -> (f64, f64, u64, f64) {
+    let laser = Arc::new(Interface::<Laser>::new("laser", "robot"));
+    let enc = Arc::new(Interface::<Encoders>::new("encoders", "robot"));
+    let server = NetServer::start(
+        ServerConf::default(),
+        Sources {
+            laser: Some(laser.clone()),
+            encoders: Some(enc.clone()),
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let addr = server.local_addr();
+    let stop = Arc::new(AtomicBool::new(false));
+    let producer = {
+        let (st, laser, enc) = (stop.clone(), laser.clone(), enc.clone());
+        thread::spawn(move || {
+            let mut k = 0;
+            while !st.load(Ordering::Relaxed) {
+                k += 1;
+                let _ = laser.write(|l| {
+                    l.readings.clear();
+                    l.readings.extend((0..180).map(|i| 1000 + (i + k) % 7000));
+                    l.resolution = 1.0;
+                });
+                let _ = enc.publish(Encoders::from_pose(k as f32, 0.0, 1.0));
+                thread::sleep(Duration::from_millis(10));
+            }
+        })
+    };
+    let clients: Vec<_> = (0..100)
+        .map(|_| {
+            let st = stop.clone();
+            thread::spawn(move || {
+                let mut s = TcpStream::connect(addr).unwrap();
+                s.set_read_timeout(Some(Duration::from_millis(200)))
+                    .unwrap();
+                s.write_all(b"jdec\0\0\0\0\0\0\0\0\0\0\0\0\0\0\0\x0027\n11\n")
+                    .unwrap();
+                let mut b = vec![0u8; 1 << 16];
+                while !st.load(Ordering::Relaxed) {
+                    let _ = s.read(&mut b);
+                }
+            })
+        })
+        .collect();
+    thread::sleep(Duration::from_millis(500));
+    server.stats().reset_lateness();
+    let p0 = server.stats().pushes.load(Ordering::Relaxed);
+    let cpu0 = threads_cpu("nsrv");
+    let t0 = Instant::now();
+    thread::sleep(Duration::from_secs_f64(secs));
+    let cpu = (threads_cpu("nsrv") - cpu0) / t0.elapsed().as_secs_f64() * 100.0;
+    let pushes = server.stats().pushes.load(Ordering::Relaxed) - p0;
+    let p50 = server.stats().push_lateness(50.0).as_secs_f64() * 1e3;
+    let p99 = server.stats().push_lateness(99.0).as_secs_f64() * 1e3;
+    stop.store(true, Ordering::Relaxed);
+    for c in clients {
+        c.join().unwrap();
+    }
+    producer.join().unwrap();
+    drop(server);
+    (p50, p99, pushes, cpu)
+}
+
+fn main() {
+    if std::env::args().any(|a| a == "--list") {
+        return;
+    }
+    println!("networkserver -> networkclient, loopback, {W}x{H} BGR ({FRAME} bytes a frame)");
+    let mut l = link();
+    // Warm up the link.
+    net_fps(&l);
+    let (mut raw, mut net, mut ratio) = (Vec::new(), Vec::new(), Vec::new());
+    for r in 0..ROUNDS {
+        // Alternate the order so neither side always runs on a warmer machine.
+        let (a, b) = if r % 2 == 0 {
+            let a = raw_fps();
+            (a, net_fps(&l))
+        } else {
+            let b = net_fps(&l);
+            (raw_fps(), b)
+        };
+        println!(
+            "  round {r}: raw TCP {a:.0} frames/s, server->client interface {b:.0} frames/s ({:.0} %)",
+            b / a * 100.0
+        );
+        raw.push(a);
+        net.push(b);
+        ratio.push(b / a);
+    }
+    println!(
+        "frames/s: raw TCP copy median {:.0}, networkserver->networkclient median {:.0}: {:.0} % of raw (goal >= 80 %)",
+        median(&mut raw),
+        median(&mut net),
+        median(&mut ratio) * 100.0
+    );
+    let mut lat = latencies(&l, 300);
+    println!(
+        "frame latency at 100 frames/s ({} frames): p50 {:.3} ms, p90 {:.3} ms, p99 {:.3} ms (goal p50 <= 1 ms)",
+        lat.len(),
+        percentile(&mut lat, 50.0),
+        percentile(&mut lat, 90.0),
+        percentile(&mut lat, 99.0)
+    );
+    l.client.stop();
+    l.server.stop();
+    let mut p50s = Vec::new();
+    let mut p99s = Vec::new();
+    let mut cpus = Vec::new();
+    for r in 0..3 {
+        let (p50, p99, pushes, cpu) = hundred_clients(3.0);
+        println!(
+            "  round {r}: 100 clients, {pushes} push rounds: lateness p50 {p50:.2} ms p99 {p99:.2} ms, server CPU {cpu:.1} % of a core"
+        );
+        p50s.push(p50);
+        p99s.push(p99);
+        cpus.push(cpu);
+    }
+    println!(
+        "100 clients on laser+encoders every 33 ms: push lateness median p50 {:.2} ms, median p99 {:.2} ms (goal p99 <= 5 ms); server CPU median {:.1} % of one core",
+        median(&mut p50s),
+        median(&mut p99s),
+        median(&mut cpus)
+    );
+}

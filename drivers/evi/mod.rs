@@ -1,0 +1,740 @@
+//! evi: the Sony EVI-D100 (and D100P) pan-tilt-zoom camera over VISCA on a serial
+//! line, as JDE 4.3's `evi` driver drove it. The video goes through any image
+//! driver (video4linux2, firewire ...); this driver moves the head and the zoom.
+//!
+//! # Conf
+//! ```text
+//! driver evi
+//! serial /dev/ttyUSB0        # the serial port (required); 9600 baud, 8N1
+//! camera 1                   # VISCA address 1..7 (default 1, after an address set)
+//! poll 100                   # ms between position inquiries (default 100)
+//! reply_timeout 1000         # ms to wait for an answer before the camera counts as silent
+//! provides pantiltencoders
+//! provides pantiltmotors
+//! provides zoomencoders
+//! provides zoommotors
+//! end_driver
+//! ```
+//!
+//! # Interfaces
+//! | interface | fields and units |
+//! |---|---|
+//! | `pantiltencoders` | `pan_angle` (±100), `tilt_angle` (±25) deg, from the position inquiry; positive pan is VISCA's (to the right), as 4.3 |
+//! | `pantiltmotors` | `longitude` ±100, `latitude` ±25 deg; `longitude_speed` ≤ 300, `latitude_speed` ≤ 125 deg/s, mapped to VISCA speed modes 1..24 / 1..20 by 4.3's table (the slowest mode at least as fast as asked); speed 0 = stop where the head is (4.3: current position at the axis' maximum speed) |
+//! | `zoomencoders` | `zoom_position` 0..40 (10x optical × 4x digital; device units 0..0x7000 linear) |
+//! | `zoommotors` | `zoom` 0..40; `zoom_speed` 0..7 is kept as 4.3 had it, but the D100's direct zoom runs at its own speed |
+//!
+//! # Behaviour
+//! - Opening: VISCA address set (`88 30 01 FF`), IF_Clear (`88 01 00 01 FF`), power
+//!   inquiry and power on if the camera is off; then position and zoom are
+//!   inquired every `poll` ms. Power goes off on terminate (`81 01 04 00 03 FF`).
+//! - A command goes out only when it changes, and waits for its ACK. Errors as the
+//!   VISCA documents define them: 0x02 syntax error (a camera that is not an EVI, or
+//!   a broken line: the port is reopened), 0x03 buffer full (sent again when a
+//!   socket frees), 0x04 cancelled and 0x05 no socket (noted), 0x41 not executable
+//!   (reported, the motors interface is marked stale with the reason until a new
+//!   command comes).
+//! - Silence, garbage or a vanished port: reported once naming the port, every
+//!   provided interface marked stale, and the port reopened every second until the
+//!   camera answers (the run goes on).
+//!
+//! System packages: none (the `serialport` crate without libudev). Your user needs
+//! access to the port (usually the `dialout` group).
+
+pub mod protocol;
+
+use std::{
+    io::{Read, Write},
+    sync::{
+        Arc,
+        atomic::{AtomicBool, Ordering},
+    },
+    time::{Duration, Instant},
+};
+
+use crate::{
+    conf::ComponentConf,
+    interfaces::{Interface, PtEncoders, PtMotors, ZoomEncoders, ZoomMotors, limit},
+    runtime::{Driver, Runtime, Worker},
+};
+use protocol::{Reply, ViscaError};
+
+/// The driver's settings.
+#[derive(Clone, Debug)]
+pub struct EviConf {
+    pub serial: String,
+    pub camera: u8,
+    pub poll: Duration,
+    pub reply_timeout: Duration,
+    pub pantiltencoders: bool,
+    pub pantiltmotors: bool,
+    pub zoomencoders: bool,
+    pub zoommotors: bool,
+}
+
+impl EviConf {
+    pub fn parse(conf: &ComponentConf) -> anyhow::Result<EviConf> {
+        let mut c = EviConf {
+            serial: String::new(),
+            camera: 1,
+            poll: Duration::from_millis(100),
+            reply_timeout: Duration::from_millis(1000),
+            pantiltencoders: false,
+            pantiltmotors: false,
+            zoomencoders: false,
+            zoommotors: false,
+        };
+        let mut serial = None;
+        for l in &conf.lines {
+            match l.keyword() {
+                "serial" => {
+                    l.expect_args(1, 1, "serial DEVICE")?;
+                    serial = Some(l.args()[0].clone());
+                }
+                "camera" => {
+                    l.expect_args(1, 1, "camera ADDRESS")?;
+                    c.camera = l.number(0, "a VISCA address", 1..=7)?;
+                }
+                "poll" => {
+                    l.expect_args(1, 1, "poll MS")?;
+                    c.poll = Duration::from_millis(l.number(0, "a period in ms", 10..=10_000)?);
+                }
+                "reply_timeout" => {
+                    l.expect_args(1, 1, "reply_timeout MS")?;
+                    c.reply_timeout =
+                        Duration::from_millis(l.number(0, "a timeout in ms", 10..=60_000)?);
+                }
+                "provides" => {
+                    l.expect_args(
+                        1,
+                        1,
+                        "provides pantiltencoders|pantiltmotors|zoomencoders|zoommotors",
+                    )?;
+                    match l.interface(0)?.as_str() {
+                        "pantiltencoders" => c.pantiltencoders = true,
+                        "pantiltmotors" => c.pantiltmotors = true,
+                        "zoomencoders" => c.zoomencoders = true,
+                        "zoommotors" => c.zoommotors = true,
+                        other => {
+                            return Err(l
+                                .error(format!(
+                                    "evi provides pantiltencoders, pantiltmotors, zoomencoders and zoommotors, not `{other}`"
+                                ))
+                                .into());
+                        }
+                    }
+                }
+                _ => {
+                    return Err(conf
+                        .unknown(l, "serial, camera, poll, reply_timeout or provides")
+                        .into());
+                }
+            }
+        }
+        c.serial = serial.ok_or_else(|| {
+            anyhow::anyhow!(
+                "{}: driver evi needs a `serial DEVICE` line (e.g. `serial /dev/ttyUSB0`)",
+                conf.file.display()
+            )
+        })?;
+        if !(c.pantiltencoders || c.pantiltmotors || c.zoomencoders || c.zoommotors) {
+            anyhow::bail!(
+                "{}: driver evi provides nothing; add `provides pantiltencoders`, `pantiltmotors`, `zoomencoders` or `zoommotors`",
+                conf.file.display()
+            );
+        }
+        Ok(c)
+    }
+}
+
+/// Why the link to the camera failed.
+#[derive(Debug, thiserror::Error)]
+pub enum LinkError {
+    #[error("{port}: {what}")]
+    Open { port: String, what: String },
+    #[error(
+        "{port}: no answer to `{command}` in {ms} ms (is the EVI powered (its standby lamp), on this port, at 9600 baud?)"
+    )]
+    Silent {
+        port: String,
+        command: String,
+        ms: u128,
+    },
+    #[error(
+        "{port}: unexpected bytes `{bytes}` in answer to `{command}` (not VISCA from camera {camera}: another device on this port, or a wrong address?)"
+    )]
+    Garbage {
+        port: String,
+        command: String,
+        bytes: String,
+        camera: u8,
+    },
+    #[error("{port}: the camera answered `{command}` with {error}")]
+    Visca {
+        port: String,
+        command: String,
+        error: ViscaError,
+    },
+    #[error("{port}: the port failed ({what}); was the camera unplugged?")]
+    Io { port: String, what: String },
+}
+
+/// Opens `path` as a serial port at 9600 baud, with errors that say what to check.
+pub fn open_port(path: &str) -> Result<Box<dyn serialport::SerialPort>, LinkError> {
+    let open_err = |what: String| LinkError::Open {
+        port: path.to_string(),
+        what,
+    };
+    match std::fs::metadata(path) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            return Err(open_err(
+                "does not exist (is the camera's VISCA cable plugged in? `ls /dev/ttyUSB* /dev/ttyS*` lists the ports)".into(),
+            ));
+        }
+        Err(e) => return Err(open_err(format!("cannot be read: {e}"))),
+        Ok(m) if m.is_file() || m.is_dir() => {
+            return Err(open_err(
+                "is not a serial device (a regular file or directory); check the `serial` line"
+                    .into(),
+            ));
+        }
+        Ok(_) => {}
+    }
+    serialport::new(path, 9600)
+        .timeout(Duration::from_millis(5))
+        .open()
+        .map_err(|e| {
+            let what = match e.kind() {
+                serialport::ErrorKind::Io(std::io::ErrorKind::PermissionDenied) => format!(
+                    "permission denied ({e}); add your user to the group that owns it (`ls -l {path}`, usually `dialout`)"
+                ),
+                serialport::ErrorKind::NoDevice => {
+                    format!("no device ({e}); is the camera plugged in?")
+                }
+                _ => format!("cannot be opened as a serial port: {e}"),
+            };
+            open_err(what)
+        })
+}
+
+/// The longest VISCA packet is 16 bytes.
+const MAX_PACKET: usize = 16;
+
+/// A packet link to one camera.
+pub struct Link {
+    port: Box<dyn serialport::SerialPort>,
+    name: String,
+    addr: u8,
+    timeout: Duration,
+    buf: Vec<u8>,
+    /// Sockets whose command has not completed yet.
+    pub busy: [bool; 3],
+}
+
+impl Link {
+    pub fn new(
+        port: Box<dyn serialport::SerialPort>,
+        name: &str,
+        addr: u8,
+        timeout: Duration,
+    ) -> Link {
+        Link {
+            port,
+            name: name.to_string(),
+            addr,
+            timeout,
+            buf: Vec::with_capacity(64),
+            busy: [false; 3],
+        }
+    }
+
+    fn io(&self, e: std::io::Error) -> LinkError {
+        LinkError::Io {
+            port: self.name.clone(),
+            what: e.to_string(),
+        }
+    }
+
+    pub fn send(&mut self, p: &[u8]) -> Result<(), LinkError> {
+        self.port.write_all(p).map_err(|e| self.io(e))?;
+        self.port.flush().map_err(|e| self.io(e))
+    }
+
+    /// The next packet (up to and with `FF`) within `timeout`; None on timeout.
+    fn packet(&mut self, command: &[u8], timeout: Duration) -> Result<Option<Vec<u8>>, LinkError> {
+        let t0 = Instant::now();
+        let mut b = [0u8; 64];
+        loop {
+            if let Some(i) = self.buf.iter().position(|&c| c == protocol::END) {
+                return Ok(Some(self.buf.drain(..=i).collect()));
+            }
+            // Every VISCA packet starts with a byte of the form 1xxx xxxx.
+            if self.buf.first().is_some_and(|&b| b & 0x80 == 0) {
+                // Collect the rest of it for the message.
+                let t1 = Instant::now();
+                while t1.elapsed() < Duration::from_millis(20) && self.buf.len() < MAX_PACKET {
+                    if let Ok(n) = self.port.read(&mut b)
+                        && n > 0
+                    {
+                        self.buf.extend_from_slice(&b[..n]);
+                    }
+                }
+                let bytes = protocol::hex(&self.buf[..self.buf.len().min(MAX_PACKET)]);
+                self.buf.clear();
+                return Err(self.garbage(command, bytes));
+            }
+            if self.buf.len() > MAX_PACKET {
+                let bytes = protocol::hex(&self.buf[..MAX_PACKET]);
+                self.buf.clear();
+                return Err(self.garbage(command, bytes));
+            }
+            if t0.elapsed() > timeout {
+                return Ok(None);
+            }
+            match self.port.read(&mut b) {
+                Ok(0) => return Err(self.io(std::io::ErrorKind::UnexpectedEof.into())),
+                Ok(n) => self.buf.extend_from_slice(&b[..n]),
+                Err(e) if e.kind() == std::io::ErrorKind::TimedOut => {}
+                Err(e) => return Err(self.io(e)),
+            }
+        }
+    }
+
+    fn garbage(&self, command: &[u8], bytes: String) -> LinkError {
+        LinkError::Garbage {
+            port: self.name.clone(),
+            command: protocol::hex(command),
+            bytes,
+            camera: self.addr,
+        }
+    }
+
+    fn silent(&self, command: &[u8]) -> LinkError {
+        LinkError::Silent {
+            port: self.name.clone(),
+            command: protocol::hex(command),
+            ms: self.timeout.as_millis(),
+        }
+    }
+
+    /// The next classified reply to `command`; completions of earlier commands on
+    /// the way free their sockets.
+    fn reply(&mut self, command: &[u8], timeout: Duration) -> Result<Reply, LinkError> {
+        let t0 = Instant::now();
+        loop {
+            let left = timeout.saturating_sub(t0.elapsed());
+            let Some(p) = self.packet(command, left)? else {
+                return Err(self.silent(command));
+            };
+            match protocol::classify(self.addr, &p) {
+                None => return Err(self.garbage(command, protocol::hex(&p))),
+                Some(Reply::Completion(s)) => self.free(s),
+                Some(Reply::Error(s, ViscaError::Cancelled)) if s != 0 => self.free(s),
+                Some(r) => return Ok(r),
+            }
+        }
+    }
+
+    fn free(&mut self, socket: u8) {
+        if let Some(b) = self.busy.get_mut(socket as usize) {
+            *b = false;
+        }
+    }
+
+    /// Sends a broadcast and expects `expect` back.
+    pub fn broadcast(&mut self, p: &[u8], expect: &[u8]) -> Result<(), LinkError> {
+        self.send(p)?;
+        match self.reply(p, self.timeout)? {
+            Reply::Broadcast(b) if b == expect => Ok(()),
+            other => Err(self.garbage(p, format!("{other:?}"))),
+        }
+    }
+
+    /// Sends a command and waits for its ACK (not its completion); returns the
+    /// socket it went into. A VISCA error is returned as such.
+    pub fn command(&mut self, p: &[u8]) -> Result<u8, LinkError> {
+        self.send(p)?;
+        match self.reply(p, self.timeout)? {
+            Reply::Ack(s) => {
+                if let Some(b) = self.busy.get_mut(s as usize) {
+                    *b = true;
+                }
+                Ok(s)
+            }
+            Reply::Error(_, error) => Err(LinkError::Visca {
+                port: self.name.clone(),
+                command: protocol::hex(p),
+                error,
+            }),
+            other => Err(self.garbage(p, format!("{other:?}"))),
+        }
+    }
+
+    /// Sends a command and waits for its ACK and its completion (power on/off).
+    pub fn command_done(&mut self, p: &[u8], timeout: Duration) -> Result<(), LinkError> {
+        let s = self.command(p)?;
+        let t0 = Instant::now();
+        while self.busy.get(s as usize).copied().unwrap_or(false) {
+            let left = timeout.saturating_sub(t0.elapsed());
+            let Some(packet) = self.packet(p, left)? else {
+                return Err(self.silent(p));
+            };
+            match protocol::classify(self.addr, &packet) {
+                Some(Reply::Completion(x)) => self.free(x),
+                Some(Reply::Error(_, error)) => {
+                    return Err(LinkError::Visca {
+                        port: self.name.clone(),
+                        command: protocol::hex(p),
+                        error,
+                    });
+                }
+                _ => return Err(self.garbage(p, protocol::hex(&packet))),
+            }
+        }
+        Ok(())
+    }
+
+    /// Sends an inquiry; returns the answer's bytes.
+    pub fn inquiry(&mut self, p: &[u8]) -> Result<Vec<u8>, LinkError> {
+        self.send(p)?;
+        match self.reply(p, self.timeout)? {
+            Reply::Answer(a) => Ok(a),
+            Reply::Error(_, error) => Err(LinkError::Visca {
+                port: self.name.clone(),
+                command: protocol::hex(p),
+                error,
+            }),
+            other => Err(self.garbage(p, format!("{other:?}"))),
+        }
+    }
+
+    /// Pan and tilt, device units.
+    pub fn pantilt(&mut self) -> Result<(i32, i32), LinkError> {
+        let q = protocol::pantilt_inquiry(self.addr);
+        let a = self.inquiry(&q)?;
+        match (
+            a.len(),
+            protocol::from_nibbles(a.get(..4).unwrap_or(&[])),
+            protocol::from_nibbles(a.get(4..8).unwrap_or(&[])),
+        ) {
+            (8, Some(p), Some(t)) => Ok((p, t)),
+            _ => Err(self.garbage(&q, protocol::hex(&a))),
+        }
+    }
+
+    /// Zoom, device units.
+    pub fn zoom(&mut self) -> Result<i32, LinkError> {
+        let q = protocol::zoom_inquiry(self.addr);
+        let a = self.inquiry(&q)?;
+        match (a.len(), protocol::from_nibbles(&a)) {
+            (4, Some(z)) => Ok(z),
+            _ => Err(self.garbage(&q, protocol::hex(&a))),
+        }
+    }
+}
+
+/// Address set, IF_Clear, power on if it is off.
+pub fn init(link: &mut Link) -> Result<(), LinkError> {
+    link.broadcast(&protocol::address_set(), &[0x88, 0x30, 0x02, 0xFF])?;
+    link.broadcast(&protocol::if_clear(), &protocol::if_clear())?;
+    let q = protocol::power_inquiry(link.addr);
+    let on = match link.inquiry(&q)?.as_slice() {
+        [0x02] => true,
+        [0x03] | [0x04] => false,
+        other => return Err(link.garbage(&q, protocol::hex(other))),
+    };
+    if !on {
+        link.command_done(&protocol::power(link.addr, true), Duration::from_secs(15))?;
+    }
+    Ok(())
+}
+
+/// The pan-tilt command for a `PtMotors` value, 4.3's way; `here` is the current
+/// position (units) for speed 0. Returns (pan mode, tilt mode, pan, tilt).
+pub fn pantilt_target(m: &PtMotors, here: (i32, i32)) -> (u8, u8, i32, i32) {
+    let pan_speed = limit(m.longitude_speed, 0.0, protocol::PAN_MAX_SPEED);
+    let tilt_speed = limit(m.latitude_speed, 0.0, protocol::TILT_MAX_SPEED);
+    let (pm, pan) = match protocol::speed_mode(pan_speed, protocol::PAN_MODES) {
+        Some(mode) => (
+            mode,
+            protocol::deg_to_units(m.longitude, protocol::PAN_LIMIT, protocol::PAN_UNITS),
+        ),
+        None => (protocol::PAN_MODES, here.0),
+    };
+    let (tm, tilt) = match protocol::speed_mode(tilt_speed, protocol::TILT_MODES) {
+        Some(mode) => (
+            mode,
+            protocol::deg_to_units(m.latitude, protocol::TILT_LIMIT, protocol::TILT_UNITS),
+        ),
+        None => (protocol::TILT_MODES, here.1),
+    };
+    (pm, tm, pan, tilt)
+}
+
+struct Shared {
+    conf: EviConf,
+    provider: String,
+    pte: Option<Arc<Interface<PtEncoders>>>,
+    ptm: Option<Arc<Interface<PtMotors>>>,
+    ze: Option<Arc<Interface<ZoomEncoders>>>,
+    zm: Option<Arc<Interface<ZoomMotors>>>,
+    stop: Arc<AtomicBool>,
+}
+
+impl Shared {
+    fn stale(&self, why: &str) {
+        if let Some(i) = &self.pte {
+            i.set_stale(why);
+        }
+        if let Some(i) = &self.ptm {
+            i.set_stale(why);
+        }
+        if let Some(i) = &self.ze {
+            i.set_stale(why);
+        }
+        if let Some(i) = &self.zm {
+            i.set_stale(why);
+        }
+    }
+    fn stopping(&self) -> bool {
+        self.stop.load(Ordering::Acquire)
+    }
+    fn sleep(&self, d: Duration) {
+        let t0 = Instant::now();
+        while !self.stopping() && t0.elapsed() < d {
+            std::thread::sleep(Duration::from_millis(20).min(d));
+        }
+    }
+}
+
+/// What was last sent for a command interface, and the interface clock it answered.
+#[derive(Default)]
+struct Pending<K> {
+    sent: Option<K>,
+    clock: Option<u64>,
+}
+
+/// Sends `p` unless a busy buffer says to try later; VISCA refusals are reported on
+/// `refused` (an interface to mark stale). Returns whether it went out (or was
+/// refused for good).
+fn try_command<T: crate::interfaces::InterfaceValue>(
+    sh: &Shared,
+    link: &mut Link,
+    p: &[u8],
+    refused: Option<&Interface<T>>,
+) -> Result<bool, LinkError> {
+    match link.command(p) {
+        Ok(_) => Ok(true),
+        Err(LinkError::Visca {
+            error: ViscaError::BufferFull,
+            ..
+        }) => Ok(false),
+        Err(
+            e @ LinkError::Visca {
+                error: ViscaError::NotExecutable | ViscaError::NoSocket | ViscaError::Cancelled,
+                ..
+            },
+        ) => {
+            let why = format!("{}: {e}", sh.provider);
+            crate::output::println(why.clone());
+            if let Some(i) = refused {
+                i.set_stale(why);
+            }
+            Ok(true)
+        }
+        Err(e) => Err(e),
+    }
+}
+
+fn session(sh: &Shared, link: &mut Link) -> Result<(), LinkError> {
+    init(link)?;
+    let addr = link.addr;
+    let mut here = link.pantilt()?;
+    let mut pt: Pending<(u8, u8, i32, i32)> = Pending::default();
+    let mut zoom: Pending<i32> = Pending::default();
+    // The head is where it is: the initial command (clock 0) asks nothing of it.
+    if let Some(m) = &sh.ptm {
+        let mut v = m.read().value;
+        if m.clock() == 0 {
+            v.longitude = protocol::units_to_deg(here.0, protocol::PAN_LIMIT, protocol::PAN_UNITS);
+            v.latitude = protocol::units_to_deg(here.1, protocol::TILT_LIMIT, protocol::TILT_UNITS);
+        }
+        let _ = m.publish(v);
+        pt.clock = Some(m.clock());
+    }
+    if let Some(z) = &sh.zm {
+        let mut v = z.read().value;
+        if z.clock() == 0 {
+            v.zoom = protocol::units_to_zoom(link.zoom()?);
+        }
+        let _ = z.publish(v);
+        zoom.clock = Some(z.clock());
+    }
+    let mut next_poll = Instant::now();
+    while !sh.stopping() {
+        if let Some(m) = &sh.ptm {
+            let c = m.clock();
+            if pt.clock != Some(c) {
+                let target = pantilt_target(&m.read().value, here);
+                if pt.sent != Some(target) {
+                    let p =
+                        protocol::pantilt_absolute(addr, target.0, target.1, target.2, target.3);
+                    if try_command(sh, link, &p, Some(m.as_ref()))? {
+                        pt.sent = Some(target);
+                        pt.clock = Some(c);
+                    }
+                } else {
+                    pt.clock = Some(c);
+                }
+            }
+        }
+        if let Some(z) = &sh.zm {
+            let c = z.clock();
+            if zoom.clock != Some(c) {
+                let units = protocol::zoom_to_units(z.read().zoom);
+                if zoom.sent != Some(units) {
+                    let p = protocol::zoom_direct(addr, units);
+                    if try_command(sh, link, &p, Some(z.as_ref()))? {
+                        zoom.sent = Some(units);
+                        zoom.clock = Some(c);
+                    }
+                } else {
+                    zoom.clock = Some(c);
+                }
+            }
+        }
+        let now = Instant::now();
+        if now >= next_poll {
+            next_poll += sh.conf.poll;
+            if next_poll < now {
+                next_poll = now + sh.conf.poll;
+            }
+            here = link.pantilt()?;
+            if let Some(e) = &sh.pte {
+                let _ = e.publish(PtEncoders {
+                    pan_angle: protocol::units_to_deg(
+                        here.0,
+                        protocol::PAN_LIMIT,
+                        protocol::PAN_UNITS,
+                    ),
+                    tilt_angle: protocol::units_to_deg(
+                        here.1,
+                        protocol::TILT_LIMIT,
+                        protocol::TILT_UNITS,
+                    ),
+                });
+            }
+            if let Some(e) = &sh.ze {
+                let z = link.zoom()?;
+                let _ = e.publish(ZoomEncoders {
+                    zoom_position: protocol::units_to_zoom(z),
+                });
+            }
+        }
+        let wait = next_poll.saturating_duration_since(Instant::now());
+        std::thread::sleep(wait.min(Duration::from_micros(500)));
+    }
+    // Terminate: power off, as 4.3.
+    link.command_done(&protocol::power(addr, false), Duration::from_secs(2))
+}
+
+fn run(sh: Shared) {
+    let port = sh.conf.serial.clone();
+    let mut last_error: Option<String> = None;
+    while !sh.stopping() {
+        let result = open_port(&port).and_then(|p| {
+            let mut link = Link::new(p, &port, sh.conf.camera, sh.conf.reply_timeout);
+            session(&sh, &mut link)
+        });
+        match result {
+            Ok(()) => return,
+            Err(e) => {
+                let why = format!("{}: {e}", sh.provider);
+                if sh.stopping() {
+                    tracing::warn!("{why}");
+                    return;
+                }
+                if last_error.as_deref() != Some(why.as_str()) {
+                    crate::output::println(format!("{why}; retrying every second"));
+                    tracing::warn!("{why}");
+                    last_error = Some(why.clone());
+                }
+                sh.stale(&why);
+                sh.sleep(Duration::from_secs(1));
+            }
+        }
+    }
+}
+
+/// 4.3's limits on `pantiltmotors`, speeds at their maxima.
+fn initial_pantilt() -> PtMotors {
+    PtMotors {
+        longitude: 0.0,
+        latitude: 0.0,
+        longitude_speed: protocol::PAN_MAX_SPEED,
+        latitude_speed: protocol::TILT_MAX_SPEED,
+        max_longitude: protocol::PAN_LIMIT,
+        min_longitude: -protocol::PAN_LIMIT,
+        max_latitude: protocol::TILT_LIMIT,
+        min_latitude: -protocol::TILT_LIMIT,
+        max_longitude_speed: protocol::PAN_MAX_SPEED,
+        max_latitude_speed: protocol::TILT_MAX_SPEED,
+    }
+}
+
+/// Provides the interfaces and starts the thread (a port that cannot be opened is
+/// reported and retried; the rest of the run goes on).
+pub fn start(conf: EviConf, rt: &Runtime, provider: &str) -> anyhow::Result<Worker> {
+    let ifs = &rt.interfaces;
+    let pte = conf
+        .pantiltencoders
+        .then(|| ifs.provide::<PtEncoders>("pantiltencoders", provider))
+        .transpose()?;
+    let ptm = conf
+        .pantiltmotors
+        .then(|| ifs.provide_value("pantiltmotors", provider, initial_pantilt()))
+        .transpose()?;
+    let ze = conf
+        .zoomencoders
+        .then(|| ifs.provide::<ZoomEncoders>("zoomencoders", provider))
+        .transpose()?;
+    let zm = conf
+        .zoommotors
+        .then(|| {
+            ifs.provide_value(
+                "zoommotors",
+                provider,
+                ZoomMotors {
+                    zoom: 0.0,
+                    zoom_speed: protocol::ZOOM_MAX_SPEED,
+                    max_zoom: protocol::ZOOM_MAX,
+                    min_zoom: 0.0,
+                    max_zoom_speed: protocol::ZOOM_MAX_SPEED,
+                },
+            )
+        })
+        .transpose()?;
+    let stop = Arc::new(AtomicBool::new(false));
+    let sh = Shared {
+        conf,
+        provider: provider.to_string(),
+        pte,
+        ptm,
+        ze,
+        zm,
+        stop: stop.clone(),
+    };
+    Worker::start("evi", stop, move || run(sh))
+}
+
+fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>> {
+    let c = EviConf::parse(conf)?;
+    Ok(Box::new(start(c, rt, &conf.name)?))
+}
+
+crate::register_driver!(
+    Driver,
+    "evi",
+    "Sony EVI-D100 pan-tilt-zoom camera over VISCA: pantiltencoders, pantiltmotors, zoomencoders, zoommotors",
+    create
+);

@@ -1,0 +1,851 @@
+//! Driver `networkclient`: a robot's interfaces served by `networkserver` on another
+//! machine (ours or JDE 4.3's), provided here as if they were local. It speaks
+//! 4.3's wire protocol ([`crate::netwire`]): one TCP connection per device, the
+//! 20-byte client name, `1019`/`1020` images, subscription pushes every 33 ms,
+//! `22`/`23` motors, pan-tilt and zoom messages, goodbye. See `docs/network.md`.
+//!
+//! # Conf
+//! ```text
+//! driver networkclient
+//! provides colorA robot.local 3001 0        # NAME HOST PORT NETID: a 320x240 image
+//! provides varcolorA robot.local 3001 1 640 480   # NETID W H: frames must be W x H
+//! provides varcolorB robot.local 3001 2     # NETID alone: any size
+//! provides laser robot.local 3001           # laser, sonars, encoders, motors,
+//! provides encoders robot.local 3001        #   pantiltencoders, pantiltmotors,
+//! provides motors robot.local 3001          #   zoomencoders, zoommotors
+//! initial_position 1000 1000 90             # X Y mm, THETA deg: where the remote odometry's
+//!                                           #   origin is in this side's world (default 0 0 0)
+//! token s3cret                              # the server's token, if it has one
+//! motors_timeout 500                        # ms: an older motors command is sent as zero
+//! depth 2                                   # image requests kept in flight (pipelining)
+//! end_driver
+//! ```
+//!
+//! # Interfaces (the server's units)
+//! | interface | what |
+//! |---|---|
+//! | `colorA..D` | 320x240 BGR; `varcolorA..D` any size (or exactly `W H` when given) |
+//! | `laser` | readings in mm, as many as the server sends; resolution 1 reading/deg when 180 |
+//! | `encoders` | x, y mm, θ rad (0, 2π] (sent in degrees), after `initial_position` |
+//! | `sonars` | mm, one per sonar |
+//! | `motors` | v mm/s, w deg/s: sent as `22 v 0.0` / `23 w 0.0` every 100 ms and on change |
+//! | `pantiltencoders`, `zoomencoders` | deg; zoom position |
+//! | `pantiltmotors`, `zoommotors` | commands sent on change; limits asked (`1004`, `1022`) on connect |
+//!
+//! Sensors and images are subscribed/requested only while someone uses the
+//! interface. When a server goes away the driver reconnects with backoff (0.1 s
+//! doubling to 5 s), marks each interface stale with the reason meanwhile (`ps`,
+//! `echo` and mastergui show it), publishes zero on `motors`, and subscribes again
+//! when the server is back. An image of an unexpected size is an error naming both
+//! sizes (logged once; the interface is stale) and the connection goes on.
+//! Image requests are pipelined (`depth`, default 2), so frame rate is not bound by
+//! one round trip per frame.
+//!
+//! 4.3 differences: 4.3 exited when a `colorA` frame was not 320x240; it had no
+//! reconnection (a server restart left stale values forever) and no `varcolor`
+//! without a fixed size.
+//!
+//! System packages: none.
+
+use std::{
+    io::{self, Write},
+    net::{SocketAddr, TcpStream, ToSocketAddrs},
+    sync::{
+        Arc,
+        atomic::{AtomicBool, Ordering},
+    },
+    thread::JoinHandle,
+    time::{Duration, Instant},
+};
+
+use anyhow::Context as _;
+
+use crate::{
+    conf::{ComponentConf, ConfLine},
+    interfaces::{
+        COLOR_HEIGHT, COLOR_WIDTH, Encoders, Image, Interface, Interfaces, Laser, Motors,
+        PtEncoders, PtMotors, Sonars, ZoomEncoders, ZoomMotors, canonical, family,
+    },
+    netwire::{self, Device, LineEvent, LineReader, Message, Request},
+    runtime::{Driver, Runtime},
+};
+
+/// One `provides` line.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Remote {
+    /// Local interface name.
+    pub name: String,
+    pub host: String,
+    pub port: u16,
+    /// Images: network id and the required size (None = any).
+    pub netid: Option<u32>,
+    pub size: Option<(u32, u32)>,
+}
+
+/// The driver's settings.
+#[derive(Clone, Debug)]
+pub struct ClientConf {
+    pub remotes: Vec<Remote>,
+    /// x, y mm, θ deg.
+    pub initial: (f32, f32, f32),
+    pub token: Option<String>,
+    pub motors_timeout: Duration,
+    pub depth: u32,
+}
+
+const USAGE: &str = "provides colorA..D HOST PORT NETID, provides varcolorA..D HOST PORT NETID [W H], \
+provides laser|sonars|encoders|motors|pantiltencoders|pantiltmotors|zoomencoders|zoommotors HOST PORT";
+
+const EXPECTED: &str = "provides, initial_position, token, motors_timeout or depth";
+
+fn err(l: &ConfLine, m: impl Into<String>) -> anyhow::Error {
+    l.error(m).into()
+}
+
+impl ClientConf {
+    pub fn parse(conf: &ComponentConf) -> anyhow::Result<ClientConf> {
+        let mut c = ClientConf {
+            remotes: Vec::new(),
+            initial: (0.0, 0.0, 0.0),
+            token: None,
+            motors_timeout: conf.motors_timeout()?,
+            depth: 2,
+        };
+        for l in &conf.lines {
+            match l.keyword() {
+                "provides" => {
+                    let a = l.args();
+                    if a.len() < 3 {
+                        return Err(err(
+                            l,
+                            format!("`provides` needs NAME HOST PORT; usage: {USAGE}"),
+                        ));
+                    }
+                    let name = canonical(&a[0]);
+                    let fam = family(&name).ok_or_else(|| {
+                        err(
+                            l,
+                            format!("`provides {}`: not an interface; usage: {USAGE}", a[0]),
+                        )
+                    })?;
+                    if fam == "bumpers" {
+                        return Err(err(
+                            l,
+                            "4.3's wire has no bumpers message; bumpers cannot be provided",
+                        ));
+                    }
+                    let port: u16 = l.arg(2, "a TCP port 1..65535")?;
+                    let mut r = Remote {
+                        name: name.clone(),
+                        host: a[1].clone(),
+                        port,
+                        netid: None,
+                        size: None,
+                    };
+                    if fam == "image" {
+                        let var = name.starts_with("varcolor");
+                        match (a.len(), var) {
+                            (4, _) => {}
+                            (6, true) => {
+                                let dim = |i: usize| -> anyhow::Result<u32> {
+                                    let v: u32 = l.arg(i, "a size in pixels 1..8192")?;
+                                    if !(1..=8192).contains(&v) {
+                                        return Err(err(
+                                            l,
+                                            format!(
+                                                "`provides {name}`: size {v} is out of 1..8192"
+                                            ),
+                                        ));
+                                    }
+                                    Ok(v)
+                                };
+                                r.size = Some((dim(4)?, dim(5)?));
+                            }
+                            _ => {
+                                return Err(err(
+                                    l,
+                                    format!(
+                                        "`provides {name}` takes HOST PORT NETID{}; usage: {USAGE}",
+                                        if var { " [W H]" } else { "" }
+                                    ),
+                                ));
+                            }
+                        }
+                        r.netid = Some(l.arg(3, "a network id (0, 1, 2 ...)")?);
+                        if !var {
+                            r.size = Some((COLOR_WIDTH, COLOR_HEIGHT));
+                        }
+                    } else if a.len() != 3 {
+                        return Err(err(
+                            l,
+                            format!("`provides {name}` takes HOST PORT only; usage: {USAGE}"),
+                        ));
+                    }
+                    if c.remotes.iter().any(|x| x.name == name) {
+                        return Err(err(l, format!("interface `{name}` is provided twice")));
+                    }
+                    c.remotes.push(r);
+                }
+                "initial_position" => {
+                    l.expect_args(3, 3, "initial_position X_MM Y_MM THETA_DEG")?;
+                    let f = |i: usize, what: &str| -> anyhow::Result<f32> {
+                        let v: f32 = l.arg(i, what)?;
+                        if !v.is_finite() {
+                            return Err(err(
+                                l,
+                                format!("`initial_position`: {what} must be finite"),
+                            ));
+                        }
+                        Ok(v)
+                    };
+                    c.initial = (
+                        f(0, "X in mm")?,
+                        f(1, "Y in mm")?,
+                        f(2, "THETA in degrees")?,
+                    );
+                }
+                "token" => {
+                    l.expect_args(1, 1, "token SECRET")?;
+                    netwire::check_token(&l.args()[0])
+                        .map_err(|e| err(l, format!("`token`: {e}")))?;
+                    c.token = Some(l.args()[0].clone());
+                }
+                "depth" => {
+                    l.expect_args(1, 1, "depth N")?;
+                    let d: u32 = l.arg(0, "a number of requests 1..16")?;
+                    if !(1..=16).contains(&d) {
+                        return Err(err(l, format!("`depth`: {d} is out of 1..16")));
+                    }
+                    c.depth = d;
+                }
+                "motors_timeout" => {}
+                _ => return Err(conf.unknown(l, EXPECTED).into()),
+            }
+        }
+        if c.remotes.is_empty() {
+            return Err(anyhow::anyhow!(
+                "{}: networkclient has no `provides` line; usage: {USAGE}",
+                conf.file.display()
+            ));
+        }
+        Ok(c)
+    }
+}
+
+/// A device and its local interface.
+#[derive(Clone)]
+enum Dev {
+    Image(Arc<Interface<Image>>, u32, Option<(u32, u32)>),
+    Laser(Arc<Interface<Laser>>),
+    Encoders(Arc<Interface<Encoders>>, (f32, f32, f32)),
+    Sonars(Arc<Interface<Sonars>>),
+    PtEncoders(Arc<Interface<PtEncoders>>),
+    ZoomEncoders(Arc<Interface<ZoomEncoders>>),
+    Motors(Arc<Interface<Motors>>, Duration),
+    PtMotors(Arc<Interface<PtMotors>>),
+    ZoomMotors(Arc<Interface<ZoomMotors>>),
+}
+
+impl Dev {
+    fn set_stale(&self, why: &str) {
+        match self {
+            Dev::Image(i, ..) => i.set_stale(why),
+            Dev::Laser(i) => i.set_stale(why),
+            Dev::Encoders(i, _) => i.set_stale(why),
+            Dev::Sonars(i) => i.set_stale(why),
+            Dev::PtEncoders(i) => i.set_stale(why),
+            Dev::ZoomEncoders(i) => i.set_stale(why),
+            Dev::Motors(i, _) => {
+                let _ = i.publish(Motors::default());
+                i.set_stale(why);
+            }
+            Dev::PtMotors(i) => i.set_stale(why),
+            Dev::ZoomMotors(i) => i.set_stale(why),
+        }
+    }
+
+    /// Whether anybody uses it (actuators always count as used).
+    fn used(&self) -> bool {
+        match self {
+            Dev::Image(i, ..) => i.users() > 0,
+            Dev::Laser(i) => i.users() > 0,
+            Dev::Encoders(i, _) => i.users() > 0,
+            Dev::Sonars(i) => i.users() > 0,
+            Dev::PtEncoders(i) => i.users() > 0,
+            Dev::ZoomEncoders(i) => i.users() > 0,
+            _ => true,
+        }
+    }
+
+    fn wait_used(&self, t: Duration) -> bool {
+        match self {
+            Dev::Image(i, ..) => i.wait_used(t),
+            Dev::Laser(i) => i.wait_used(t),
+            Dev::Encoders(i, _) => i.wait_used(t),
+            Dev::Sonars(i) => i.wait_used(t),
+            Dev::PtEncoders(i) => i.wait_used(t),
+            Dev::ZoomEncoders(i) => i.wait_used(t),
+            _ => true,
+        }
+    }
+
+    fn device(&self) -> Option<Device> {
+        Some(match self {
+            Dev::Laser(_) => Device::Laser,
+            Dev::Encoders(..) => Device::Encoders,
+            Dev::Sonars(_) => Device::Sonars,
+            Dev::PtEncoders(_) => Device::PtEncoders,
+            Dev::ZoomEncoders(_) => Device::ZoomEncoders,
+            _ => return None,
+        })
+    }
+}
+
+/// The running driver: one thread per device connection.
+pub struct NetClient {
+    stop: Arc<AtomicBool>,
+    threads: Vec<JoinHandle<()>>,
+}
+
+impl NetClient {
+    /// Provides the interfaces of `cc` on `ifaces` and starts one connection thread each.
+    pub fn start(cc: ClientConf, ifaces: &Interfaces, provider: &str) -> anyhow::Result<NetClient> {
+        let name = netwire::client_name(cc.token.as_deref()).map_err(anyhow::Error::msg)?;
+        let stop = Arc::new(AtomicBool::new(false));
+        let mut devs = Vec::new();
+        for r in &cc.remotes {
+            let dev = match family(&r.name).unwrap_or("") {
+                "image" => {
+                    let (w, h) = r.size.unwrap_or((COLOR_WIDTH, COLOR_HEIGHT));
+                    Dev::Image(
+                        ifaces.provide_value(&r.name, provider, Image::new(w, h))?,
+                        r.netid.unwrap_or(0),
+                        r.size,
+                    )
+                }
+                "laser" => Dev::Laser(ifaces.provide(&r.name, provider)?),
+                "encoders" => {
+                    let (x, y, t) = cc.initial;
+                    Dev::Encoders(
+                        ifaces.provide_value(
+                            &r.name,
+                            provider,
+                            Encoders::from_pose(x, y, t.to_radians()),
+                        )?,
+                        cc.initial,
+                    )
+                }
+                "sonars" => Dev::Sonars(ifaces.provide(&r.name, provider)?),
+                "pantiltencoders" => Dev::PtEncoders(ifaces.provide(&r.name, provider)?),
+                "zoomencoders" => Dev::ZoomEncoders(ifaces.provide(&r.name, provider)?),
+                "motors" => Dev::Motors(ifaces.provide(&r.name, provider)?, cc.motors_timeout),
+                "pantiltmotors" => Dev::PtMotors(ifaces.provide(&r.name, provider)?),
+                "zoommotors" => Dev::ZoomMotors(ifaces.provide(&r.name, provider)?),
+                other => anyhow::bail!("networkclient: cannot provide a {other} interface"),
+            };
+            devs.push((r.clone(), dev));
+        }
+        let mut threads = Vec::new();
+        for (r, dev) in devs {
+            let link = Link {
+                remote: r.clone(),
+                dev,
+                stop: stop.clone(),
+                name,
+                depth: cc.depth,
+            };
+            let t = std::thread::Builder::new()
+                .name(format!("ncli-{}", r.name))
+                .spawn(move || link.run())
+                .context("networkclient: cannot start a thread")?;
+            threads.push(t);
+        }
+        Ok(NetClient { stop, threads })
+    }
+
+    pub fn stop(&mut self) {
+        self.stop.store(true, Ordering::Release);
+        for t in self.threads.drain(..) {
+            let _ = t.join();
+        }
+    }
+}
+
+impl Driver for NetClient {
+    fn terminate(&mut self) {
+        self.stop();
+    }
+}
+
+impl Drop for NetClient {
+    fn drop(&mut self) {
+        self.stop();
+    }
+}
+
+/// How often a connection thread checks for stop, use and motor commands.
+const TICK: Duration = Duration::from_millis(10);
+/// The longest line the client accepts (a laser push of 4096 readings fits).
+const MAX_LINE: usize = 64 * 1024;
+/// The largest frame accepted, in bytes (a bigger announced size ends the connection).
+const MAX_FRAME: usize = 256 << 20;
+
+/// One device's connection.
+struct Link {
+    remote: Remote,
+    dev: Dev,
+    stop: Arc<AtomicBool>,
+    name: [u8; netwire::NAME_LEN],
+    depth: u32,
+}
+
+/// How a session ended.
+enum End {
+    Stopped,
+    Lost(String),
+}
+
+impl Link {
+    fn stopping(&self) -> bool {
+        self.stop.load(Ordering::Acquire)
+    }
+
+    fn where_(&self) -> String {
+        format!("{}:{}", self.remote.host, self.remote.port)
+    }
+
+    fn sleep(&self, d: Duration) {
+        let t0 = Instant::now();
+        while !self.stopping() && t0.elapsed() < d {
+            std::thread::sleep(TICK.min(d));
+        }
+    }
+
+    fn run(self) {
+        let mut backoff = Duration::from_millis(100);
+        let mut said: Option<String> = None;
+        while !self.stopping() {
+            if !self.dev.wait_used(Duration::from_millis(100)) {
+                continue;
+            }
+            let stream = match self.connect() {
+                Ok(s) => s,
+                Err(e) => {
+                    let why = format!(
+                        "networkclient: cannot connect to {} for {} ({e}); retrying in {:.1} s",
+                        self.where_(),
+                        self.remote.name,
+                        backoff.as_secs_f64()
+                    );
+                    self.dev.set_stale(&why);
+                    let short: String = why.split(" (").next().unwrap_or("").to_string();
+                    if said.as_deref() != Some(short.as_str()) {
+                        tracing::warn!("{why}");
+                        said = Some(short);
+                    }
+                    self.sleep(backoff);
+                    backoff = (backoff * 2).min(Duration::from_secs(5));
+                    continue;
+                }
+            };
+            if said.take().is_some() {
+                tracing::warn!(
+                    "networkclient: {} connected again to {}",
+                    self.remote.name,
+                    self.where_()
+                );
+            }
+            let t0 = Instant::now();
+            match self.session(&stream) {
+                End::Stopped => return,
+                End::Lost(why) => {
+                    let why = format!(
+                        "networkclient: {} for {}: {why}; reconnecting",
+                        self.where_(),
+                        self.remote.name
+                    );
+                    tracing::warn!("{why}");
+                    said = Some(String::new());
+                    self.dev.set_stale(&why);
+                    let _ = stream.shutdown(std::net::Shutdown::Both);
+                    if t0.elapsed() > Duration::from_secs(2) {
+                        backoff = Duration::from_millis(100);
+                    }
+                    self.sleep(backoff);
+                    backoff = (backoff * 2).min(Duration::from_secs(5));
+                }
+            }
+        }
+    }
+
+    fn connect(&self) -> io::Result<TcpStream> {
+        let addrs: Vec<SocketAddr> = (self.remote.host.as_str(), self.remote.port)
+            .to_socket_addrs()?
+            .collect();
+        let mut last = io::Error::new(io::ErrorKind::NotFound, "no address for the host");
+        for a in addrs {
+            match TcpStream::connect_timeout(&a, Duration::from_secs(2)) {
+                Ok(s) => {
+                    s.set_nodelay(true)?;
+                    s.set_write_timeout(Some(Duration::from_secs(5)))?;
+                    (&s).write_all(&self.name)?;
+                    return Ok(s);
+                }
+                Err(e) => last = e,
+            }
+        }
+        Err(last)
+    }
+
+    fn session(&self, s: &TcpStream) -> End {
+        let r = match &self.dev {
+            Dev::Image(i, netid, size) => self.image_session(s, i, *netid, *size),
+            Dev::Motors(m, timeout) => self.motors_session(s, m, *timeout),
+            Dev::PtMotors(p) => self.ptmotors_session(s, p),
+            Dev::ZoomMotors(z) => self.zoommotors_session(s, z),
+            _ => self.sensor_session(s),
+        };
+        match r {
+            Ok(()) => End::Stopped,
+            Err(e) => End::Lost(e),
+        }
+    }
+
+    fn send(&self, mut s: &TcpStream, reqs: &[Request]) -> Result<(), String> {
+        let mut out = Vec::new();
+        for r in reqs {
+            r.write_to(&mut out);
+        }
+        s.write_all(&out).map_err(|e| format!("cannot send: {e}"))
+    }
+
+    /// Reads lines until one arrives, a tick passes (None) or the connection ends.
+    fn next_line<'a>(
+        &self,
+        lr: &'a mut LineReader,
+        mut s: &TcpStream,
+    ) -> Result<Option<&'a [u8]>, String> {
+        match lr.read_line(&mut s) {
+            Ok(LineEvent::Line(l)) => Ok(Some(l)),
+            Ok(LineEvent::Closed) => Err("the server closed the connection".into()),
+            Err(e) if netwire::is_timeout(&e) => Ok(None),
+            Err(e) => Err(format!("connection error: {e}")),
+        }
+    }
+
+    fn sensor_session(&self, s: &TcpStream) -> Result<(), String> {
+        let dev = self.dev.device().expect("a sensor");
+        let _ = s.set_read_timeout(Some(Duration::from_millis(50)));
+        let mut lr = LineReader::new(MAX_LINE);
+        let mut subscribed = false;
+        loop {
+            if self.stopping() {
+                let _ = self.send(s, &[Request::Unsubscribe(dev), Request::Goodbye]);
+                return Ok(());
+            }
+            let used = self.dev.used();
+            if used != subscribed {
+                let r = if used {
+                    Request::Subscribe(dev)
+                } else {
+                    Request::Unsubscribe(dev)
+                };
+                self.send(s, &[r])?;
+                subscribed = used;
+            }
+            let Some(line) = self.next_line(&mut lr, s)? else {
+                continue;
+            };
+            match Message::parse(line) {
+                Ok(m) => self.publish(m),
+                Err(e) => {
+                    return Err(format!("the server sent a bad line: {e}"));
+                }
+            }
+        }
+    }
+
+    fn publish(&self, m: Message) {
+        match (&self.dev, m) {
+            (Dev::Laser(i), Message::Laser { readings, .. }) => {
+                let _ = i.write(|l| {
+                    l.readings.clear();
+                    l.readings.extend_from_slice(&readings);
+                    if l.resolution <= 0.0 {
+                        l.resolution = (readings.len() as f32 / 180.0).max(f32::MIN_POSITIVE);
+                    }
+                });
+            }
+            (
+                Dev::Encoders(i, (x0, y0, t0)),
+                Message::Encoders {
+                    x, y, theta_deg, ..
+                },
+            ) => {
+                let (s, c) = t0.to_radians().sin_cos();
+                let gx = x0 + c * x - s * y;
+                let gy = y0 + s * x + c * y;
+                let _ = i.publish(Encoders::from_pose(gx, gy, (theta_deg + t0).to_radians()));
+            }
+            (Dev::Sonars(i), Message::Sonars { us, .. }) => {
+                let n = us.iter().map(|(k, _)| k + 1).max().unwrap_or(0);
+                let _ = i.write(|v| {
+                    v.us.clear();
+                    v.us.resize(n, 0.0);
+                    for (k, u) in &us {
+                        v.us[*k] = *u;
+                    }
+                });
+            }
+            (Dev::PtEncoders(i), Message::PtEncoders { pan, tilt, .. }) => {
+                let _ = i.publish(PtEncoders {
+                    pan_angle: pan,
+                    tilt_angle: tilt,
+                });
+            }
+            (Dev::ZoomEncoders(i), Message::ZoomEncoders { zoom, .. }) => {
+                let _ = i.publish(ZoomEncoders {
+                    zoom_position: zoom,
+                });
+            }
+            (_, Message::Error(t)) => {
+                tracing::warn!(
+                    "networkclient: {} for {} says: {t}",
+                    self.where_(),
+                    self.remote.name
+                );
+            }
+            (_, m) => tracing::debug!("networkclient: unexpected {m:?}"),
+        }
+    }
+
+    fn image_session(
+        &self,
+        s: &TcpStream,
+        iface: &Interface<Image>,
+        netid: u32,
+        size: Option<(u32, u32)>,
+    ) -> Result<(), String> {
+        let _ = s.set_read_timeout(Some(Duration::from_millis(50)));
+        let mut lr = LineReader::new(MAX_LINE);
+        let mut inflight = 0u32;
+        let mut buf: Vec<u8> = Vec::new();
+        let mut reported: Option<(u32, u32)> = None;
+        let mut stalled_since: Option<Instant> = None;
+        loop {
+            if self.stopping() {
+                let _ = self.send(s, &[Request::GoodbyeImages]);
+                return Ok(());
+            }
+            if iface.users() > 0 && inflight < self.depth {
+                let n = self.depth - inflight;
+                self.send(s, &vec![Request::ImageQuery(netid); n as usize])?;
+                inflight += n;
+            }
+            let Some(line) = self.next_line(&mut lr, s)? else {
+                continue;
+            };
+            let m = Message::parse(line).map_err(|e| format!("the server sent a bad line: {e}"))?;
+            let (width, height) = match m {
+                Message::Image {
+                    netid: id,
+                    width,
+                    height,
+                    depth,
+                    ..
+                } => {
+                    if id != netid || depth != 3 {
+                        return Err(format!(
+                            "the server sent image {id} with depth {depth}; asked for image {netid}, depth 3"
+                        ));
+                    }
+                    (width, height)
+                }
+                other => {
+                    self.publish(other);
+                    continue;
+                }
+            };
+            inflight = inflight.saturating_sub(1);
+            let bytes = width as usize * height as usize * 3;
+            if bytes > MAX_FRAME {
+                return Err(format!(
+                    "the server announced a {width}x{height} frame ({bytes} bytes), over the {MAX_FRAME}-byte limit"
+                ));
+            }
+            buf.resize(bytes, 0);
+            let stop = &self.stop;
+            lr.read_exact(&mut &*s, &mut buf, || {
+                let t0 = *stalled_since.get_or_insert_with(Instant::now);
+                !stop.load(Ordering::Acquire) && t0.elapsed() < Duration::from_secs(10)
+            })
+            .map_err(|e| format!("while reading a {width}x{height} frame: {e}"))?;
+            stalled_since = None;
+            if let Some((w, h)) = size
+                && (w, h) != (width, height)
+            {
+                let why = format!(
+                    "networkclient: {} sends {width}x{height} images for {}, which is {w}x{h} here; frames dropped{}",
+                    self.where_(),
+                    self.remote.name,
+                    if self.remote.name.starts_with("color") {
+                        " (use a varcolor interface for other sizes)"
+                    } else {
+                        ""
+                    }
+                );
+                if reported != Some((width, height)) {
+                    tracing::error!("{why}");
+                    reported = Some((width, height));
+                }
+                iface.set_stale(why);
+                continue;
+            }
+            let _ = iface.write(|img| {
+                img.width = width;
+                img.height = height;
+                std::mem::swap(&mut img.data, &mut buf);
+            });
+        }
+    }
+
+    fn motors_session(
+        &self,
+        s: &TcpStream,
+        m: &Interface<Motors>,
+        timeout: Duration,
+    ) -> Result<(), String> {
+        let _ = s.set_read_timeout(Some(TICK));
+        let mut lr = LineReader::new(MAX_LINE);
+        let mut last_sent = Instant::now() - Duration::from_secs(1);
+        let mut last_clock = u64::MAX;
+        loop {
+            if self.stopping() {
+                let zero = [
+                    Request::DriveSpeed { v: 0.0, ac: 0.0 },
+                    Request::SteerSpeed { w: 0.0, ac: 0.0 },
+                    Request::Goodbye,
+                ];
+                let _ = self.send(s, &zero);
+                return Ok(());
+            }
+            let clock = m.clock();
+            if clock != last_clock || last_sent.elapsed() >= Duration::from_millis(100) {
+                let c = m.command(timeout);
+                self.send(
+                    s,
+                    &[
+                        Request::DriveSpeed { v: c.v, ac: 0.0 },
+                        Request::SteerSpeed { w: c.w, ac: 0.0 },
+                    ],
+                )?;
+                last_clock = clock;
+                last_sent = Instant::now();
+            }
+            // The read doubles as the tick's sleep and notices a closed server.
+            if let Some(line) = self.next_line(&mut lr, s)?
+                && let Ok(msg) = Message::parse(line)
+            {
+                self.publish(msg);
+            }
+        }
+    }
+
+    fn ptmotors_session(&self, s: &TcpStream, p: &Interface<PtMotors>) -> Result<(), String> {
+        let _ = s.set_read_timeout(Some(TICK));
+        let mut lr = LineReader::new(MAX_LINE);
+        self.send(s, &[Request::PtLimitsQuery])?;
+        let mut last_clock = u64::MAX;
+        let cmd = |c: &PtMotors| Request::PtPosition {
+            pan: c.longitude,
+            tilt: c.latitude,
+            pan_speed: c.longitude_speed,
+            tilt_speed: c.latitude_speed,
+        };
+        loop {
+            if self.stopping() {
+                let _ = self.send(s, &[cmd(&p.read().value), Request::Goodbye]);
+                return Ok(());
+            }
+            let clock = p.clock();
+            if clock != last_clock {
+                if clock > 0 {
+                    self.send(s, &[cmd(&p.read().value)])?;
+                }
+                last_clock = clock;
+            }
+            if let Some(line) = self.next_line(&mut lr, s)? {
+                match Message::parse(line) {
+                    Ok(Message::PtLimits(v)) => {
+                        let mut c = p.read().value;
+                        c.max_longitude = v[0];
+                        c.max_latitude = v[1];
+                        c.min_longitude = v[2];
+                        c.min_latitude = v[3];
+                        c.max_longitude_speed = v[4];
+                        c.max_latitude_speed = v[5];
+                        if let Ok(k) = p.publish(c) {
+                            last_clock = k;
+                        }
+                    }
+                    Ok(m) => self.publish(m),
+                    Err(e) => return Err(format!("the server sent a bad line: {e}")),
+                }
+            }
+        }
+    }
+
+    fn zoommotors_session(&self, s: &TcpStream, z: &Interface<ZoomMotors>) -> Result<(), String> {
+        let _ = s.set_read_timeout(Some(TICK));
+        let mut lr = LineReader::new(MAX_LINE);
+        self.send(s, &[Request::ZoomLimitsQuery])?;
+        let mut last_clock = u64::MAX;
+        loop {
+            if self.stopping() {
+                let _ = self.send(s, &[Request::Goodbye]);
+                return Ok(());
+            }
+            let clock = z.clock();
+            if clock != last_clock {
+                if clock > 0 {
+                    let c = z.read().value;
+                    self.send(
+                        s,
+                        &[Request::ZoomPosition {
+                            zoom: c.zoom,
+                            speed: c.zoom_speed,
+                        }],
+                    )?;
+                }
+                last_clock = clock;
+            }
+            if let Some(line) = self.next_line(&mut lr, s)? {
+                match Message::parse(line) {
+                    Ok(Message::ZoomLimits(v)) => {
+                        let mut c = z.read().value;
+                        c.max_zoom = v[0];
+                        c.min_zoom = v[1];
+                        c.max_zoom_speed = v[2];
+                        if let Ok(k) = z.publish(c) {
+                            last_clock = k;
+                        }
+                    }
+                    Ok(m) => self.publish(m),
+                    Err(e) => return Err(format!("the server sent a bad line: {e}")),
+                }
+            }
+        }
+    }
+}
+
+fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>> {
+    let cc = ClientConf::parse(conf)?;
+    Ok(Box::new(NetClient::start(cc, &rt.interfaces, &conf.name)?))
+}
+
+crate::register_driver!(
+    Driver,
+    "networkclient",
+    "a robot's interfaces served by networkserver (4.3 wire) on another machine",
+    create
+);

@@ -1,0 +1,594 @@
+//! pantilt: the Directed Perception pan-tilt unit (PTU-46) on a serial line, with
+//! its ASCII command set, as JDE 4.3's `pantilt` driver drove it.
+//!
+//! # Conf
+//! ```text
+//! driver pantilt
+//! serial /dev/ttyUSB0        # the serial port (required)
+//! baud 9600                  # line speed (default 9600, the unit's default)
+//! poll 300                   # ms between position queries (default 300, as 4.3)
+//! reply_timeout 1000         # ms to wait for a reply before the unit counts as silent
+//! provides pantiltencoders
+//! provides pantiltmotors
+//! end_driver
+//! ```
+//!
+//! # Interfaces
+//! | interface | fields and units |
+//! |---|---|
+//! | `pantiltencoders` | `pan_angle`, `tilt_angle` deg (encoder steps × 3.086/60, 4.3's `ENCOD_TO_DEG`), polled every `poll` ms |
+//! | `pantiltmotors` | `longitude`, `latitude` deg (clamped to the limits the unit reports: `PN PX TN TX`); `longitude_speed`, `latitude_speed` deg/s in [0, 205.89]; speed 0 stops the axis (`PS0`, as 4.3); limits read-only |
+//!
+//! # Behaviour
+//! - Opening: 4.3's init sequence (`\xFF\xFF`, `I`, `CI`, `PB1000` ... `PP0`, `TP0`,
+//!   `LE`), then the limits are queried (`PN`, `PX`, `TN`, `TX`) and published on
+//!   `pantiltmotors`; its speeds start at the init's 2900 steps/s (149.15 deg/s).
+//! - A command goes out only when it changes (`PS`/`TS` before `PP`/`TP`), within a
+//!   millisecond of being set; positions are polled with `PP` and `TP`.
+//! - Every reply is parsed strictly (optional echo, then `*` or `!`). An error reply
+//!   (`!`), silence, garbage (another device, a wrong baud rate) or a vanished port
+//!   is reported once, naming the port and what to check; both interfaces are marked
+//!   stale with the reason, and the driver reopens the port every second until the
+//!   unit answers again (then runs the init again). The rest of the run goes on.
+//!
+//! System packages: none (the `serialport` crate without libudev). Your user needs
+//! access to the port (usually the `dialout` group).
+
+pub mod protocol;
+
+use std::{
+    io::{Read, Write},
+    sync::{
+        Arc,
+        atomic::{AtomicBool, Ordering},
+    },
+    time::{Duration, Instant},
+};
+
+use crate::{
+    conf::ComponentConf,
+    interfaces::{Interface, PtEncoders, PtMotors, limit},
+    runtime::{Driver, Runtime, Worker},
+};
+use protocol::{Axis, ENCOD_TO_DEG, Query, ReplyError};
+
+/// The driver's settings.
+#[derive(Clone, Debug)]
+pub struct PtuConf {
+    pub serial: String,
+    pub baud: u32,
+    pub poll: Duration,
+    pub reply_timeout: Duration,
+    pub encoders: bool,
+    pub motors: bool,
+}
+
+impl PtuConf {
+    /// Parses the driver's lines (errors name file:line).
+    pub fn parse(conf: &ComponentConf) -> anyhow::Result<PtuConf> {
+        let mut c = PtuConf {
+            serial: String::new(),
+            baud: 9600,
+            poll: Duration::from_millis(300),
+            reply_timeout: Duration::from_millis(1000),
+            encoders: false,
+            motors: false,
+        };
+        let mut serial = None;
+        for l in &conf.lines {
+            match l.keyword() {
+                "serial" => {
+                    l.expect_args(1, 1, "serial DEVICE")?;
+                    serial = Some(l.args()[0].clone());
+                }
+                "baud" => {
+                    l.expect_args(1, 1, "baud RATE")?;
+                    c.baud = l.number(0, "a baud rate", 300..=115_200)?;
+                }
+                "poll" => {
+                    l.expect_args(1, 1, "poll MS")?;
+                    c.poll = Duration::from_millis(l.number(0, "a period in ms", 10..=10_000)?);
+                }
+                "reply_timeout" => {
+                    l.expect_args(1, 1, "reply_timeout MS")?;
+                    c.reply_timeout =
+                        Duration::from_millis(l.number(0, "a timeout in ms", 10..=60_000)?);
+                }
+                "provides" => {
+                    l.expect_args(1, 1, "provides pantiltencoders|pantiltmotors")?;
+                    match l.interface(0)?.as_str() {
+                        "pantiltencoders" => c.encoders = true,
+                        "pantiltmotors" => c.motors = true,
+                        other => {
+                            return Err(l
+                                .error(format!(
+                                    "pantilt provides pantiltencoders and pantiltmotors, not `{other}`"
+                                ))
+                                .into());
+                        }
+                    }
+                }
+                _ => {
+                    return Err(conf
+                        .unknown(l, "serial, baud, poll, reply_timeout or provides")
+                        .into());
+                }
+            }
+        }
+        c.serial = serial.ok_or_else(|| {
+            anyhow::anyhow!(
+                "{}: driver pantilt needs a `serial DEVICE` line (e.g. `serial /dev/ttyUSB0`)",
+                conf.file.display()
+            )
+        })?;
+        if !c.encoders && !c.motors {
+            anyhow::bail!(
+                "{}: driver pantilt provides nothing; add `provides pantiltencoders` and/or `provides pantiltmotors`",
+                conf.file.display()
+            );
+        }
+        Ok(c)
+    }
+}
+
+/// Why the link to the unit failed.
+#[derive(Debug, thiserror::Error)]
+pub enum LinkError {
+    #[error("{port}: {what}")]
+    Open { port: String, what: String },
+    #[error(
+        "{port}: no reply to `{command}` in {ms} ms (is the PTU powered, on this port, at {baud} baud?)"
+    )]
+    Silent {
+        port: String,
+        command: String,
+        ms: u128,
+        baud: u32,
+    },
+    #[error("{port}: {source}")]
+    Reply {
+        port: String,
+        #[source]
+        source: ReplyError,
+    },
+    #[error("{port}: the port failed ({what}); was the unit unplugged?")]
+    Io { port: String, what: String },
+}
+
+/// Opens `path` as a serial port, with errors that say what to check.
+pub fn open_port(path: &str, baud: u32) -> Result<Box<dyn serialport::SerialPort>, LinkError> {
+    let open_err = |what: String| LinkError::Open {
+        port: path.to_string(),
+        what,
+    };
+    match std::fs::metadata(path) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            return Err(open_err(
+                "does not exist (is the unit plugged in? `ls /dev/ttyUSB* /dev/ttyS*` lists the ports)".into(),
+            ));
+        }
+        Err(e) => return Err(open_err(format!("cannot be read: {e}"))),
+        Ok(m) if m.is_file() || m.is_dir() => {
+            return Err(open_err(
+                "is not a serial device (a regular file or directory); check the `serial` line"
+                    .into(),
+            ));
+        }
+        Ok(_) => {}
+    }
+    serialport::new(path, baud)
+        .timeout(Duration::from_millis(5))
+        .open()
+        .map_err(|e| {
+            let what = match e.kind() {
+                serialport::ErrorKind::Io(std::io::ErrorKind::PermissionDenied) => format!(
+                    "permission denied ({e}); add your user to the group that owns it (`ls -l {path}`, usually `dialout`)"
+                ),
+                serialport::ErrorKind::NoDevice => {
+                    format!("no device ({e}); is the unit plugged in?")
+                }
+                _ => format!("cannot be opened as a serial port: {e}"),
+            };
+            open_err(what)
+        })
+}
+
+/// A line-oriented link to the unit.
+pub struct Link {
+    port: Box<dyn serialport::SerialPort>,
+    name: String,
+    baud: u32,
+    timeout: Duration,
+    buf: Vec<u8>,
+}
+
+/// The longest reply line accepted (a PTU's longest is ~50 characters).
+const MAX_LINE: usize = 256;
+
+impl Link {
+    pub fn new(
+        port: Box<dyn serialport::SerialPort>,
+        name: &str,
+        baud: u32,
+        timeout: Duration,
+    ) -> Link {
+        Link {
+            port,
+            name: name.to_string(),
+            baud,
+            timeout,
+            buf: Vec::with_capacity(MAX_LINE),
+        }
+    }
+
+    fn io(&self, e: std::io::Error) -> LinkError {
+        LinkError::Io {
+            port: self.name.clone(),
+            what: e.to_string(),
+        }
+    }
+
+    /// Writes `cmd` and its `\n`.
+    pub fn send(&mut self, cmd: &[u8]) -> Result<(), LinkError> {
+        let mut out = Vec::with_capacity(cmd.len() + 1);
+        out.extend_from_slice(cmd);
+        out.push(b'\n');
+        self.port.write_all(&out).map_err(|e| self.io(e))?;
+        self.port.flush().map_err(|e| self.io(e))
+    }
+
+    /// Discards what arrives for `wait`.
+    pub fn drain(&mut self, wait: Duration) -> Result<(), LinkError> {
+        let t0 = Instant::now();
+        let mut b = [0u8; 256];
+        while t0.elapsed() < wait {
+            match self.port.read(&mut b) {
+                Ok(0) => return Err(self.io(std::io::ErrorKind::UnexpectedEof.into())),
+                Ok(_) => {}
+                Err(e) if e.kind() == std::io::ErrorKind::TimedOut => {}
+                Err(e) => return Err(self.io(e)),
+            }
+        }
+        self.buf.clear();
+        Ok(())
+    }
+
+    /// Reads one line (without `\r\n`) answering `command`.
+    pub fn read_line(&mut self, command: &str) -> Result<Vec<u8>, LinkError> {
+        let t0 = Instant::now();
+        let mut b = [0u8; 64];
+        loop {
+            if let Some(i) = self.buf.iter().position(|&c| c == b'\n') {
+                let mut line: Vec<u8> = self.buf.drain(..=i).collect();
+                while matches!(line.last(), Some(b'\n' | b'\r')) {
+                    line.pop();
+                }
+                if line.iter().all(|c| c.is_ascii_whitespace()) {
+                    continue;
+                }
+                return Ok(line);
+            }
+            if self.buf.len() > MAX_LINE {
+                let reply = protocol::printable(&self.buf[..MAX_LINE.min(60)]);
+                self.buf.clear();
+                return Err(LinkError::Reply {
+                    port: self.name.clone(),
+                    source: ReplyError::Garbage {
+                        command: command.to_string(),
+                        reply: format!("{reply}... (a line of over {MAX_LINE} bytes)"),
+                    },
+                });
+            }
+            if t0.elapsed() > self.timeout {
+                return Err(LinkError::Silent {
+                    port: self.name.clone(),
+                    command: command.to_string(),
+                    ms: self.timeout.as_millis(),
+                    baud: self.baud,
+                });
+            }
+            match self.port.read(&mut b) {
+                Ok(0) => return Err(self.io(std::io::ErrorKind::UnexpectedEof.into())),
+                Ok(n) => self.buf.extend_from_slice(&b[..n]),
+                Err(e) if e.kind() == std::io::ErrorKind::TimedOut => {}
+                Err(e) => return Err(self.io(e)),
+            }
+        }
+    }
+
+    /// The reply line to `cmd`, skipping a line that only echoes the command (a
+    /// unit in echo mode may end the echo with its own line end).
+    fn reply_line(&mut self, cmd: &str) -> Result<Vec<u8>, LinkError> {
+        loop {
+            let line = self.read_line(cmd)?;
+            if line.trim_ascii() != cmd.as_bytes() {
+                return Ok(line);
+            }
+        }
+    }
+
+    /// Sends `cmd` and checks its `*` reply; returns the reply's text.
+    pub fn command(&mut self, cmd: &str) -> Result<String, LinkError> {
+        self.send(cmd.as_bytes())?;
+        let line = self.reply_line(cmd)?;
+        protocol::parse_reply(cmd, &line)
+            .map(str::to_string)
+            .map_err(|source| LinkError::Reply {
+                port: self.name.clone(),
+                source,
+            })
+    }
+
+    /// Asks `q` of `axis`; returns the steps.
+    pub fn query(&mut self, axis: Axis, q: Query) -> Result<i64, LinkError> {
+        let (cmd, _) = protocol::query(axis, q);
+        self.send(cmd.as_bytes())?;
+        let line = self.reply_line(&cmd)?;
+        protocol::parse_query_line(axis, q, &line).map_err(|source| LinkError::Reply {
+            port: self.name.clone(),
+            source,
+        })
+    }
+}
+
+/// The unit's limits in steps.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Limits {
+    pub pan: (i64, i64),
+    pub tilt: (i64, i64),
+}
+
+/// Runs 4.3's init sequence and queries the limits.
+pub fn init(link: &mut Link) -> Result<Limits, LinkError> {
+    link.send(protocol::FLUSH)?;
+    link.drain(Duration::from_millis(100))?;
+    for c in protocol::INIT {
+        link.command(std::str::from_utf8(c).unwrap_or_default())?;
+    }
+    Ok(Limits {
+        pan: (
+            link.query(Axis::Pan, Query::Min)?,
+            link.query(Axis::Pan, Query::Max)?,
+        ),
+        tilt: (
+            link.query(Axis::Tilt, Query::Min)?,
+            link.query(Axis::Tilt, Query::Max)?,
+        ),
+    })
+}
+
+/// What was last sent on an axis (steps, steps/s).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Sent {
+    pub position: Option<i64>,
+    pub speed: Option<i64>,
+}
+
+/// The commands that take an axis from `sent` to the command (`deg`, `speed` deg/s),
+/// 4.3's way: speed clamped to [0, 205.89]; speed 0 sends `PS0` alone; otherwise the
+/// position is clamped to the unit's limits; only what changed is sent, the speed
+/// before the position.
+pub fn axis_commands(
+    axis: Axis,
+    deg: f32,
+    speed: f32,
+    limits: (i64, i64),
+    sent: &mut Sent,
+    out: &mut Vec<String>,
+) {
+    let speed = limit(speed, 0.0, protocol::MAX_SPEED);
+    let speed_steps = (speed as f64 / ENCOD_TO_DEG).round() as i64;
+    if sent.speed != Some(speed_steps) {
+        out.push(protocol::speed_command(axis, speed_steps));
+        sent.speed = Some(speed_steps);
+        if speed_steps == 0 {
+            // The axis stops where it is: the next non-zero speed resends the position.
+            sent.position = None;
+        }
+    }
+    if speed_steps == 0 {
+        return;
+    }
+    let lo = protocol::steps_to_deg(limits.0) as f32;
+    let hi = protocol::steps_to_deg(limits.1) as f32;
+    let pos = protocol::deg_to_steps(limit(deg, lo, hi) as f64).clamp(limits.0, limits.1);
+    if sent.position != Some(pos) {
+        out.push(protocol::position_command(axis, pos));
+        sent.position = Some(pos);
+    }
+}
+
+/// The initial `pantiltmotors` value: home, the init's speed, 4.3's limits until
+/// the unit's are read.
+fn initial_motors() -> PtMotors {
+    let s = (protocol::INIT_SPEED_STEPS as f64 * ENCOD_TO_DEG) as f32;
+    PtMotors {
+        longitude_speed: s,
+        latitude_speed: s,
+        max_longitude_speed: protocol::MAX_SPEED,
+        max_latitude_speed: protocol::MAX_SPEED,
+        ..PtMotors::default()
+    }
+}
+
+struct Shared {
+    conf: PtuConf,
+    provider: String,
+    enc: Option<Arc<Interface<PtEncoders>>>,
+    mot: Option<Arc<Interface<PtMotors>>>,
+    stop: Arc<AtomicBool>,
+}
+
+impl Shared {
+    fn stale(&self, why: &str) {
+        if let Some(e) = &self.enc {
+            e.set_stale(why);
+        }
+        if let Some(m) = &self.mot {
+            m.set_stale(why);
+        }
+    }
+    fn stopping(&self) -> bool {
+        self.stop.load(Ordering::Acquire)
+    }
+    /// Sleeps up to `d`, waking early on stop.
+    fn sleep(&self, d: Duration) {
+        let t0 = Instant::now();
+        while !self.stopping() && t0.elapsed() < d {
+            std::thread::sleep(Duration::from_millis(20).min(d));
+        }
+    }
+}
+
+/// One session with the unit: init, then poll and command until an error.
+fn session(sh: &Shared, link: &mut Link) -> Result<(), LinkError> {
+    let limits = init(link)?;
+    let pan_lim = (
+        protocol::steps_to_deg(limits.pan.0) as f32,
+        protocol::steps_to_deg(limits.pan.1) as f32,
+    );
+    let tilt_lim = (
+        protocol::steps_to_deg(limits.tilt.0) as f32,
+        protocol::steps_to_deg(limits.tilt.1) as f32,
+    );
+    if let Some(m) = &sh.mot {
+        // A copy of the latest command with the unit's limits (not `write`, whose
+        // recycled buffer may hold an older command).
+        let mut v = m.read().value;
+        (v.min_longitude, v.max_longitude) = pan_lim;
+        (v.min_latitude, v.max_latitude) = tilt_lim;
+        v.max_longitude_speed = protocol::MAX_SPEED;
+        v.max_latitude_speed = protocol::MAX_SPEED;
+        let _ = m.publish(v);
+    }
+    // What the init sequence left on the unit.
+    let mut sent = [
+        Sent {
+            position: Some(0),
+            speed: Some(protocol::INIT_SPEED_STEPS),
+        },
+        Sent {
+            position: Some(0),
+            speed: Some(protocol::INIT_SPEED_STEPS),
+        },
+    ];
+    let mut seen_clock = None;
+    let mut cmds = Vec::new();
+    let mut next_poll = Instant::now();
+    loop {
+        if sh.stopping() {
+            return Ok(());
+        }
+        if let Some(m) = &sh.mot {
+            let c = m.clock();
+            if seen_clock != Some(c) {
+                seen_clock = Some(c);
+                let v = m.read().value;
+                cmds.clear();
+                axis_commands(
+                    Axis::Pan,
+                    v.longitude,
+                    v.longitude_speed,
+                    limits.pan,
+                    &mut sent[0],
+                    &mut cmds,
+                );
+                axis_commands(
+                    Axis::Tilt,
+                    v.latitude,
+                    v.latitude_speed,
+                    limits.tilt,
+                    &mut sent[1],
+                    &mut cmds,
+                );
+                for c in &cmds {
+                    link.command(c)?;
+                }
+            }
+        }
+        let now = Instant::now();
+        if now >= next_poll {
+            // Absolute deadlines: the period does not drift with the reply time.
+            next_poll += sh.conf.poll;
+            if next_poll < now {
+                next_poll = now + sh.conf.poll;
+            }
+            let pan = link.query(Axis::Pan, Query::Position)?;
+            let tilt = link.query(Axis::Tilt, Query::Position)?;
+            if let Some(e) = &sh.enc {
+                let _ = e.publish(PtEncoders {
+                    pan_angle: protocol::steps_to_deg(pan) as f32,
+                    tilt_angle: protocol::steps_to_deg(tilt) as f32,
+                });
+            }
+        }
+        // Commands go out within half a millisecond; polls on time.
+        let wait = next_poll.saturating_duration_since(Instant::now());
+        std::thread::sleep(wait.min(Duration::from_micros(500)));
+    }
+}
+
+/// The driver thread: open, run a session, report and retry.
+fn run(sh: Shared) {
+    let port = sh.conf.serial.clone();
+    let mut last_error: Option<String> = None;
+    while !sh.stopping() {
+        let result = open_port(&port, sh.conf.baud).and_then(|p| {
+            let mut link = Link::new(p, &port, sh.conf.baud, sh.conf.reply_timeout);
+            session(&sh, &mut link)
+        });
+        match result {
+            Ok(()) => return,
+            Err(e) => {
+                let why = format!("{}: {e}", sh.provider);
+                if last_error.as_deref() != Some(why.as_str()) {
+                    crate::output::println(format!("{why}; retrying every second"));
+                    tracing::warn!("{why}");
+                    last_error = Some(why.clone());
+                }
+                sh.stale(&why);
+                sh.sleep(Duration::from_secs(1));
+            }
+        }
+    }
+}
+
+/// Provides the interfaces and starts the thread (which opens the port: a port that
+/// cannot be opened is reported and retried, the rest of the run goes on).
+pub fn start(conf: PtuConf, rt: &Runtime, provider: &str) -> anyhow::Result<Worker> {
+    let enc = conf
+        .encoders
+        .then(|| {
+            rt.interfaces
+                .provide::<PtEncoders>("pantiltencoders", provider)
+        })
+        .transpose()?;
+    let mot = conf
+        .motors
+        .then(|| {
+            rt.interfaces
+                .provide_value("pantiltmotors", provider, initial_motors())
+        })
+        .transpose()?;
+    let stop = Arc::new(AtomicBool::new(false));
+    let sh = Shared {
+        conf,
+        provider: provider.to_string(),
+        enc,
+        mot,
+        stop: stop.clone(),
+    };
+    Worker::start("pantilt", stop, move || run(sh))
+}
+
+fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>> {
+    let c = PtuConf::parse(conf)?;
+    Ok(Box::new(start(c, rt, &conf.name)?))
+}
+
+crate::register_driver!(
+    Driver,
+    "pantilt",
+    "Directed Perception pan-tilt unit on a serial line: pantiltencoders, pantiltmotors",
+    create
+);

@@ -1,0 +1,590 @@
+//! video4linux2 (and `video4linux`, 4.3's V4L1 driver name: V4L1 is gone from
+//! Linux, so its lines run on this same code with a notice): webcams, USB and PCI
+//! capture cards and anything else with a V4L2 capture node (`/dev/videoN`),
+//! through the `v4l` crate (its bindings are generated with bindgen at build time:
+//! Debian `clang` / `libclang-dev`; no library needed at run time).
+//!
+//! # Conf (the seed's lines)
+//! ```text
+//! driver video4linux2
+//! provides colorA /dev/video1 0            # colorX DEV INPUT: 320x240
+//! provides varcolorA /dev/video0 0 176 144 # varcolorX DEV INPUT W H
+//! end_driver
+//!
+//! driver video4linux                       # 4.3's V4L1 lines, input 0
+//! provides varcolorA /dev/video0 640 480   # varcolorX DEV W H
+//! provides colorB /dev/video1              # colorX DEV
+//! end_driver
+//! ```
+//!
+//! # Interfaces
+//! `colorA..D` (320x240 BGR) and `varcolorA..D` (W x H BGR); the clock moves once
+//! per captured frame. The driver selects input `INPUT` (`VIDIOC_S_INPUT`) and
+//! negotiates the first pixel format the device offers at exactly W x H, in this
+//! order: BGR24, RGB24, YUYV, UYVY, YUV420 (I420, YV12), MJPEG, GREY, 8-bit Bayer
+//! (BA81, GBRG, GRBG, RGGB). Frames are converted to BGR by
+//! [`crate::vision::pixfmt`] (YUV with BT.601 video range, as V4L2 defines it and
+//! OpenCV computes it) and MJPEG is decoded with `zune-jpeg`.
+//!
+//! # Behaviour
+//! - At start: a node that is not a V4L2 capture device, an input it does not
+//!   have, or a size it cannot deliver is an error naming the conf line and, for
+//!   sizes, listing what the device offers per format. A device that is not there
+//!   (yet) is a printed message and a stale interface with the reason; the driver
+//!   tries again every 2 s while the interface is used.
+//! - The device streams only while someone uses the interface (resume/suspend).
+//! - Unplugged while running (the read fails, or no frame for 5 s) → the interface
+//!   is marked stale with the reason; the driver reopens the device every 2 s and
+//!   goes on when it is back. Each device has its own thread; reads wait at most
+//!   200 ms, so nothing else waits on a camera.
+
+use std::{
+    path::{Path, PathBuf},
+    sync::{
+        Arc,
+        atomic::{AtomicBool, Ordering},
+    },
+    thread::JoinHandle,
+    time::{Duration, Instant},
+};
+
+use anyhow::Context as _;
+use v4l::{
+    Device, FourCC, buffer::Type, capability::Flags, framesize::FrameSizeEnum,
+    io::traits::CaptureStream, prelude::MmapStream, video::Capture,
+};
+
+use crate::{
+    conf::{ComponentConf, ConfLine},
+    interfaces::{COLOR_HEIGHT, COLOR_WIDTH, Image, Interface},
+    runtime::{Driver, Runtime},
+    vision::pixfmt::{self, Bayer, Yuv422Order, YuvMatrix},
+};
+
+const USAGE: &str = "provides colorA..D DEV INPUT or provides varcolorA..D DEV INPUT W H";
+const USAGE_V4L1: &str = "provides colorA..D DEV [INPUT] or provides varcolorA..D DEV [INPUT] W H";
+
+/// One device to capture from, parsed from a `provides` line.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DevConf {
+    pub iface: String,
+    pub device: PathBuf,
+    pub input: u32,
+    pub width: u32,
+    pub height: u32,
+    /// `file:line` of the provides line.
+    pub at: String,
+}
+
+/// Parses the driver's lines; `v4l1` accepts 4.3's video4linux lines (no INPUT).
+pub fn parse(conf: &ComponentConf, v4l1: bool) -> anyhow::Result<Vec<DevConf>> {
+    let mut out = Vec::new();
+    for l in &conf.lines {
+        if l.keyword() != "provides" {
+            return Err(conf.unknown(l, "`provides` lines").into());
+        }
+        out.push(parse_provides(conf, l, v4l1)?);
+    }
+    if out.is_empty() {
+        anyhow::bail!(
+            "driver {}: no `provides` line in {}; usage: {}",
+            conf.name,
+            conf.file.display(),
+            if v4l1 { USAGE_V4L1 } else { USAGE }
+        );
+    }
+    Ok(out)
+}
+
+fn parse_provides(conf: &ComponentConf, l: &ConfLine, v4l1: bool) -> anyhow::Result<DevConf> {
+    let usage = if v4l1 { USAGE_V4L1 } else { USAGE };
+    let name = l
+        .args()
+        .first()
+        .ok_or_else(|| l.error(format!("`provides` needs an interface; usage: {usage}")))?;
+    let var = match name.as_str() {
+        "colorA" | "colorB" | "colorC" | "colorD" => false,
+        "varcolorA" | "varcolorB" | "varcolorC" | "varcolorD" => true,
+        other => {
+            return Err(l
+                .error(format!(
+                    "{} provides colorA..D or varcolorA..D, not `{other}`; usage: {usage}",
+                    conf.name
+                ))
+                .into());
+        }
+    };
+    let n = l.args().len();
+    let device: String = l.arg(1, "a device (/dev/videoN)")?;
+    // Where INPUT and W H are, given the number of words.
+    let (input_at, size_at) = match (var, v4l1, n) {
+        (false, _, 3) => (Some(2), None),
+        (false, true, 2) => (None, None),
+        (true, _, 5) => (Some(2), Some(3)),
+        (true, true, 4) => (None, Some(2)),
+        _ => {
+            return Err(l
+                .error(format!(
+                    "`provides {name}` has {} argument(s) after the interface; usage: {usage}",
+                    n - 1
+                ))
+                .into());
+        }
+    };
+    let input = match input_at {
+        Some(i) => l.arg(i, "an input number (0 for most cameras)")?,
+        None => 0,
+    };
+    let (width, height) = match size_at {
+        Some(i) => {
+            let w: u32 = l.arg(i, "a width in pixels")?;
+            let h: u32 = l.arg(i + 1, "a height in pixels")?;
+            if w == 0 || h == 0 || w > 8192 || h > 8192 {
+                return Err(l
+                    .error(format!("size {w}x{h} is out of range (1..8192)"))
+                    .into());
+            }
+            (w, h)
+        }
+        None => (COLOR_WIDTH, COLOR_HEIGHT),
+    };
+    Ok(DevConf {
+        iface: name.clone(),
+        device: conf.resolve(&device),
+        input,
+        width,
+        height,
+        at: l.at.to_string(),
+    })
+}
+
+/// The formats the driver can convert, in order of preference.
+pub const FORMATS: &[&[u8; 4]] = &[
+    b"BGR3", b"RGB3", b"YUYV", b"UYVY", b"YU12", b"YV12", b"MJPG", b"JPEG", b"GREY", b"BA81",
+    b"GBRG", b"GRBG", b"RGGB",
+];
+
+/// Converts one frame of `fourcc` (`stride` bytes per row for packed formats; 0 =
+/// no padding) into BGR.
+pub fn convert(
+    fourcc: &[u8; 4],
+    data: &[u8],
+    w: u32,
+    h: u32,
+    stride: u32,
+    out: &mut Vec<u8>,
+    scratch: &mut Vec<u8>,
+) -> Result<(), String> {
+    let bpp = match fourcc {
+        b"BGR3" | b"RGB3" => 3,
+        b"YUYV" | b"UYVY" => 2,
+        b"GREY" | b"BA81" | b"GBRG" | b"GRBG" | b"RGGB" => 1,
+        _ => 0,
+    };
+    // Packed formats with row padding: compact the rows first.
+    let data = if bpp > 0 && stride as usize > w as usize * bpp {
+        let (row, s) = (w as usize * bpp, stride as usize);
+        let need = s * (h as usize - 1) + row;
+        if data.len() < need {
+            return Err(format!(
+                "frame of {}x{h} with stride {s} needs {need} bytes, got {} (truncated frame?)",
+                w,
+                data.len()
+            ));
+        }
+        scratch.clear();
+        for y in 0..h as usize {
+            scratch.extend_from_slice(&data[y * s..y * s + row]);
+        }
+        &scratch[..]
+    } else {
+        data
+    };
+    let r = match fourcc {
+        b"BGR3" => pixfmt::bgr_to_bgr(data, w, h, out),
+        b"RGB3" => pixfmt::rgb_to_bgr(data, w, h, out),
+        b"YUYV" => pixfmt::yuv422_to_bgr(data, w, h, Yuv422Order::Yuyv, YuvMatrix::Bt601, out),
+        b"UYVY" => pixfmt::yuv422_to_bgr(data, w, h, Yuv422Order::Uyvy, YuvMatrix::Bt601, out),
+        b"YU12" => pixfmt::yuv420_to_bgr(data, w, h, false, out),
+        b"YV12" => pixfmt::yuv420_to_bgr(data, w, h, true, out),
+        b"GREY" => pixfmt::grey_to_bgr(data, w, h, out),
+        b"BA81" => pixfmt::bayer_to_bgr(data, w, h, Bayer::Bggr, out),
+        b"GBRG" => pixfmt::bayer_to_bgr(data, w, h, Bayer::Gbrg, out),
+        b"GRBG" => pixfmt::bayer_to_bgr(data, w, h, Bayer::Grbg, out),
+        b"RGGB" => pixfmt::bayer_to_bgr(data, w, h, Bayer::Rggb, out),
+        b"MJPG" | b"JPEG" => {
+            // A decoder bug on a corrupt frame must not take the capture thread down.
+            return std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                decode_jpeg(data, w, h, out)
+            }))
+            .unwrap_or_else(|_| Err("MJPEG frame: the decoder failed (corrupt frame)".into()));
+        }
+        other => {
+            return Err(format!(
+                "pixel format {} is not supported",
+                String::from_utf8_lossy(other)
+            ));
+        }
+    };
+    r.map_err(|e| e.to_string())
+}
+
+/// Decodes one MJPEG frame (a JPEG image) to BGR; it must be `w` x `h`.
+pub fn decode_jpeg(data: &[u8], w: u32, h: u32, out: &mut Vec<u8>) -> Result<(), String> {
+    use zune_jpeg::{
+        JpegDecoder,
+        zune_core::{colorspace::ColorSpace, options::DecoderOptions},
+    };
+    let opts = DecoderOptions::default().jpeg_set_out_colorspace(ColorSpace::BGR);
+    let mut d = JpegDecoder::new_with_options(std::io::Cursor::new(data), opts);
+    d.decode_headers()
+        .map_err(|e| format!("MJPEG frame: {e:?}"))?;
+    let (dw, dh) = d.dimensions().unwrap_or((0, 0));
+    if (dw as u32, dh as u32) != (w, h) {
+        return Err(format!(
+            "MJPEG frame is {dw}x{dh}, the stream was set to {w}x{h}"
+        ));
+    }
+    out.resize(w as usize * h as usize * 3, 0);
+    d.decode_into(out)
+        .map_err(|e| format!("MJPEG frame: {e:?}"))
+}
+
+fn fourcc_name(f: &FourCC) -> String {
+    String::from_utf8_lossy(&f.repr).into_owned()
+}
+
+/// Opens `path` as a V4L2 capture device (clear errors for a missing node or one
+/// that is not a capture device).
+fn open_device(c: &DevConf) -> Result<Device, String> {
+    let p = &c.device;
+    if !p.exists() {
+        return Err(format!(
+            "{}: no such device (is the camera plugged in? `v4l2-ctl --list-devices` lists them)",
+            p.display()
+        ));
+    }
+    let dev = Device::with_path(p).map_err(|e| format!("{}: cannot open: {e}", p.display()))?;
+    let caps = dev.query_caps().map_err(|e| {
+        format!(
+            "{}: not a video4linux2 device (VIDIOC_QUERYCAP: {e})",
+            p.display()
+        )
+    })?;
+    if !caps.capabilities.contains(Flags::VIDEO_CAPTURE)
+        || !caps.capabilities.contains(Flags::STREAMING)
+    {
+        return Err(format!(
+            "{}: `{}` ({}) is not a streaming video capture device (capabilities: {})",
+            p.display(),
+            caps.card,
+            caps.driver,
+            caps.capabilities
+        ));
+    }
+    let mut input = c.input as std::os::raw::c_int;
+    // SAFETY: VIDIOC_S_INPUT takes a pointer to an int on a valid fd.
+    let r = unsafe {
+        v4l::v4l2::ioctl(
+            dev.handle().fd(),
+            v4l::v4l2::vidioc::VIDIOC_S_INPUT,
+            &mut input as *mut _ as *mut std::os::raw::c_void,
+        )
+    };
+    if let Err(e) = r {
+        return Err(format!(
+            "{}: cannot select input {} ({e}); `v4l2-ctl -d {} --list-inputs` lists the inputs",
+            p.display(),
+            c.input,
+            p.display()
+        ));
+    }
+    Ok(dev)
+}
+
+/// Whether a frame size entry allows `w` x `h`.
+fn size_fits(s: &FrameSizeEnum, w: u32, h: u32) -> bool {
+    match s {
+        FrameSizeEnum::Discrete(d) => d.width == w && d.height == h,
+        FrameSizeEnum::Stepwise(s) => {
+            (s.min_width..=s.max_width).contains(&w)
+                && (s.min_height..=s.max_height).contains(&h)
+                && (w - s.min_width).is_multiple_of(s.step_width.max(1))
+                && (h - s.min_height).is_multiple_of(s.step_height.max(1))
+        }
+    }
+}
+
+fn size_text(s: &FrameSizeEnum) -> String {
+    match s {
+        FrameSizeEnum::Discrete(d) => format!("{}x{}", d.width, d.height),
+        FrameSizeEnum::Stepwise(s) => format!(
+            "{}x{}..{}x{} (step {}x{})",
+            s.min_width, s.min_height, s.max_width, s.max_height, s.step_width, s.step_height
+        ),
+    }
+}
+
+/// Picks and sets a format of exactly the wanted size; returns (fourcc, stride).
+fn negotiate(dev: &Device, c: &DevConf) -> Result<([u8; 4], u32), String> {
+    let p = c.device.display();
+    let formats = dev
+        .enum_formats()
+        .map_err(|e| format!("{p}: cannot list its formats ({e})"))?;
+    let mut offered = Vec::new();
+    let mut candidates = Vec::new();
+    for f in &formats {
+        let sizes = dev.enum_framesizes(f.fourcc).unwrap_or_default();
+        offered.push(format!(
+            "{} [{}]",
+            fourcc_name(&f.fourcc),
+            if sizes.is_empty() {
+                "sizes not listed".to_string()
+            } else {
+                sizes
+                    .iter()
+                    .map(|s| size_text(&s.size))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            }
+        ));
+        let Some(rank) = FORMATS.iter().position(|x| **x == f.fourcc.repr) else {
+            continue;
+        };
+        if sizes.is_empty() || sizes.iter().any(|s| size_fits(&s.size, c.width, c.height)) {
+            candidates.push((rank, f.fourcc));
+        }
+    }
+    candidates.sort_by_key(|c| c.0);
+    for (_, fourcc) in candidates {
+        let want = v4l::Format::new(c.width, c.height, fourcc);
+        if let Ok(got) = dev.set_format(&want)
+            && got.width == c.width
+            && got.height == c.height
+            && got.fourcc == fourcc
+        {
+            return Ok((fourcc.repr, got.stride));
+        }
+    }
+    Err(format!(
+        "{p}: cannot deliver {}x{} in a format this driver converts ({}); the device offers: {}",
+        c.width,
+        c.height,
+        FORMATS
+            .iter()
+            .map(|f| String::from_utf8_lossy(*f).into_owned())
+            .collect::<Vec<_>>()
+            .join(" "),
+        if offered.is_empty() {
+            "no formats".to_string()
+        } else {
+            offered.join("; ")
+        }
+    ))
+}
+
+/// What `check` found wrong.
+#[derive(Debug, PartialEq)]
+pub enum CheckError {
+    /// The node does not exist (yet): the driver waits for it.
+    Absent(String),
+    /// The device is there but cannot do what the conf asks.
+    Unusable(String),
+}
+
+/// Opens, selects the input and negotiates: everything `create` checks.
+pub fn check(c: &DevConf) -> Result<(), CheckError> {
+    if !c.device.exists() {
+        return open_device(c).map(|_| ()).map_err(CheckError::Absent);
+    }
+    let dev = open_device(c).map_err(CheckError::Unusable)?;
+    negotiate(&dev, c).map(|_| ()).map_err(CheckError::Unusable)
+}
+
+const NO_FRAME_STALE: Duration = Duration::from_secs(5);
+const RETRY: Duration = Duration::from_secs(2);
+
+/// Stops a stream; the `v4l` crate panics in `Drop` on some errors (other than
+/// ENODEV), which must not take the capture thread down.
+fn drop_stream(s: MmapStream<'_>) {
+    let _ = std::panic::catch_unwind(std::panic::AssertUnwindSafe(move || drop(s)));
+}
+
+fn stream_session(
+    c: &DevConf,
+    iface: &Interface<Image>,
+    stop: &AtomicBool,
+    out: &mut Vec<u8>,
+    scratch: &mut Vec<u8>,
+) -> Result<(), String> {
+    let dev = open_device(c)?;
+    let (fourcc, stride) = negotiate(&dev, c)?;
+    let mut stream = MmapStream::with_buffers(&dev, Type::VideoCapture, 4)
+        .map_err(|e| format!("{}: cannot map capture buffers ({e})", c.device.display()))?;
+    stream.set_timeout(Duration::from_millis(200));
+    let mut last = Instant::now();
+    let result = loop {
+        if stop.load(Ordering::Acquire) || iface.users() == 0 {
+            break Ok(());
+        }
+        match stream.next() {
+            Ok((buf, meta)) => {
+                let used = (meta.bytesused as usize).min(buf.len());
+                let data = if used > 0 { &buf[..used] } else { buf };
+                match convert(&fourcc, data, c.width, c.height, stride, out, scratch) {
+                    Ok(()) => {
+                        last = Instant::now();
+                        let (w, h) = (c.width, c.height);
+                        if let Err(e) = iface.write(|img| {
+                            img.width = w;
+                            img.height = h;
+                            std::mem::swap(&mut img.data, out);
+                        }) {
+                            iface.set_stale(e);
+                        }
+                    }
+                    // A corrupt frame (MJPEG glitch): skip it.
+                    Err(e) => tracing::debug!("{}: {e}", c.device.display()),
+                }
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::TimedOut => {
+                if last.elapsed() > NO_FRAME_STALE {
+                    iface.set_stale(format!(
+                        "{}: no frame for {} s",
+                        c.device.display(),
+                        last.elapsed().as_secs()
+                    ));
+                }
+            }
+            Err(e) => {
+                break Err(format!(
+                    "{}: capture failed ({e}; unplugged?)",
+                    c.device.display()
+                ));
+            }
+        }
+    };
+    drop_stream(stream);
+    result
+}
+
+fn capture_thread(
+    c: DevConf,
+    iface: Arc<Interface<Image>>,
+    stop: Arc<AtomicBool>,
+    mut last_err: String,
+) {
+    let mut out = Vec::new();
+    let mut scratch = Vec::new();
+    while !stop.load(Ordering::Acquire) {
+        if !iface.wait_used(Duration::from_millis(200)) {
+            continue;
+        }
+        match stream_session(&c, &iface, &stop, &mut out, &mut scratch) {
+            Ok(()) => last_err.clear(), // suspended or stopping
+            Err(e) => {
+                if e != last_err {
+                    tracing::warn!("video4linux2: {e}; retrying every {} s", RETRY.as_secs());
+                }
+                iface.set_stale(e.clone());
+                last_err = e;
+                let until = Instant::now() + RETRY;
+                while Instant::now() < until && !stop.load(Ordering::Acquire) {
+                    std::thread::sleep(Duration::from_millis(50));
+                }
+            }
+        }
+    }
+}
+
+/// The running driver: one capture thread per device.
+pub struct V4l2 {
+    stop: Arc<AtomicBool>,
+    threads: Vec<JoinHandle<()>>,
+}
+
+impl Driver for V4l2 {
+    fn terminate(&mut self) {
+        self.stop.store(true, Ordering::Release);
+        for t in self.threads.drain(..) {
+            let _ = t.join();
+        }
+    }
+}
+
+impl Drop for V4l2 {
+    fn drop(&mut self) {
+        self.terminate();
+    }
+}
+
+fn start(conf: &ComponentConf, rt: &Runtime, v4l1: bool) -> anyhow::Result<Box<dyn Driver>> {
+    let devs = parse(conf, v4l1)?;
+    let mut absent = Vec::new();
+    for d in &devs {
+        match check(d) {
+            Ok(()) => absent.push(String::new()),
+            Err(CheckError::Absent(e)) => absent.push(e),
+            Err(CheckError::Unusable(e)) => {
+                anyhow::bail!("{}: driver {}: {e}", d.at, conf.name)
+            }
+        }
+    }
+    let stop = Arc::new(AtomicBool::new(false));
+    let mut threads = Vec::new();
+    for (d, absent) in devs.into_iter().zip(absent) {
+        let iface =
+            rt.interfaces
+                .provide_value(&d.iface, &conf.name, Image::new(d.width, d.height))?;
+        if !absent.is_empty() {
+            // Not there (yet): a message and a stale interface; the thread keeps trying.
+            crate::output::println(format!(
+                "{}: driver {}: {absent}; {} stays stale until the device appears (tried every {} s while used)",
+                d.at,
+                conf.name,
+                d.iface,
+                RETRY.as_secs()
+            ));
+            iface.set_stale(absent.clone());
+        }
+        let s = stop.clone();
+        let name = Path::new(&d.device)
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        threads.push(
+            std::thread::Builder::new()
+                .name(format!("v4l2-{name}"))
+                .spawn(move || capture_thread(d, iface, s, absent))
+                .context("cannot start a video4linux2 capture thread")?,
+        );
+    }
+    Ok(Box::new(V4l2 { stop, threads }))
+}
+
+fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>> {
+    start(conf, rt, false)
+}
+
+fn create_v4l1(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>> {
+    crate::output::println(format!(
+        "{}: V4L1 no longer exists in Linux; running the video4linux2 driver on these lines (input 0 unless given)",
+        conf.name
+    ));
+    start(conf, rt, true)
+}
+
+crate::register_driver!(
+    Driver,
+    "video4linux2",
+    "V4L2 capture devices (webcams, capture cards): colorA..D, varcolorA..D",
+    create
+);
+
+crate::register_driver!(
+    Driver,
+    "video4linux",
+    "4.3's V4L1 lines, run by the video4linux2 driver: colorA..D, varcolorA..D",
+    create_v4l1,
+    "video4linux"
+);

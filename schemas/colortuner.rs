@@ -1,0 +1,634 @@
+//! colortuner: colour filters in HSV, RGB or YUV on any image interface (4.3.1's
+//! colortuner).
+//!
+//! Min/max per channel; pixels inside keep their colour, the others become grey
+//! (or black). A click on the image sets the ranges around that pixel's colour.
+//! Under the sliders, the colour plane of the chosen space (HSV: H across, S up;
+//! YUV: U across, V up; RGB: R across, G up) shows where the image's pixels fall
+//! (bins with at least `threshold` pixels, a slider) and the selected box; drag on
+//! the plane to draw a new box.
+//!
+//! Conf (every line optional):
+//! ```text
+//! schema colortuner
+//! image colorA          # colorA..D or varcolorA..D (the panel can switch)
+//! space hsv             # hsv | rgb | yuv
+//! hsv 0 1 0.2 1 0 255   # hmin hmax (rad 0..2π, wraps) smin smax (0..1) vmin vmax (0..255)
+//! rgb 0 255 0 255 0 255 # rmin rmax gmin gmax bmin bmax (0..255)
+//! yuv 0 1 -0.436 0.436 -0.615 0.615  # Y 0..1, U ±0.436, V ±0.615
+//! toblack off
+//! threshold 5           # pixels a plane bin needs to be drawn
+//! output varcolorD      # optional: publish the filtered image on this new interface
+//! cycle 100
+//! end_schema
+//! ```
+//! Interfaces used: the `image` (BGR); provided: `output` if given.
+//!
+//! Headless it filters each new frame and exports, component `colortuner`, `state`
+//! ([`ColorTuner`]: space, ranges, result). System packages: none.
+
+use std::{
+    sync::{
+        Arc,
+        atomic::{AtomicBool, AtomicU32, Ordering},
+    },
+    time::Duration,
+};
+
+use parking_lot::Mutex;
+
+use crate::{
+    colorspaces::{
+        Background, ColourFilter, HsvRange, Lookup, RgbRange, YuvRange, filter, hsv_table, mask,
+        rgb2hsv, rgb2yuv, yuv_table,
+    },
+    conf::{ComponentConf, ConfLine},
+    interfaces::{Image, Interface},
+    runtime::{Context, Runtime, Schema},
+};
+
+const TAU: f32 = std::f32::consts::TAU;
+
+/// The colour space filtered in.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Space {
+    Hsv,
+    Rgb,
+    Yuv,
+}
+
+impl Space {
+    pub const ALL: [Space; 3] = [Space::Hsv, Space::Rgb, Space::Yuv];
+    pub fn name(self) -> &'static str {
+        match self {
+            Space::Hsv => "hsv",
+            Space::Rgb => "rgb",
+            Space::Yuv => "yuv",
+        }
+    }
+    /// Channel names and ranges (HSV's H in radians).
+    pub fn channels(self) -> [(&'static str, f32, f32); 3] {
+        match self {
+            Space::Hsv => [("H rad", 0.0, TAU), ("S", 0.0, 1.0), ("V", 0.0, 255.0)],
+            Space::Rgb => [("R", 0.0, 255.0), ("G", 0.0, 255.0), ("B", 0.0, 255.0)],
+            Space::Yuv => [("Y", 0.0, 1.0), ("U", -0.436, 0.436), ("V", -0.615, 0.615)],
+        }
+    }
+    /// A pixel's three channel values in this space (H in radians).
+    pub fn of(self, bgr: [u8; 3]) -> [f32; 3] {
+        let [b, g, r] = bgr;
+        match self {
+            Space::Hsv => {
+                let c = rgb2hsv(r, g, b);
+                [c.h.to_radians(), c.s, c.v]
+            }
+            Space::Rgb => [r as f32, g as f32, b as f32],
+            Space::Yuv => {
+                let c = rgb2yuv(r, g, b);
+                [c.y, c.u, c.v]
+            }
+        }
+    }
+}
+
+/// Min/max of the three channels of each space: `[c0min, c0max, c1min, ...]`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Ranges {
+    pub space: Space,
+    pub hsv: [f32; 6],
+    pub rgb: [f32; 6],
+    pub yuv: [f32; 6],
+}
+
+impl Default for Ranges {
+    fn default() -> Self {
+        Ranges {
+            space: Space::Hsv,
+            hsv: [0.0, 1.0, 0.2, 1.0, 0.0, 255.0],
+            rgb: [0.0, 255.0, 0.0, 255.0, 0.0, 255.0],
+            yuv: [0.0, 1.0, -0.436, 0.436, -0.615, 0.615],
+        }
+    }
+}
+
+impl Ranges {
+    pub fn current(&self) -> &[f32; 6] {
+        match self.space {
+            Space::Hsv => &self.hsv,
+            Space::Rgb => &self.rgb,
+            Space::Yuv => &self.yuv,
+        }
+    }
+    pub fn current_mut(&mut self) -> &mut [f32; 6] {
+        match self.space {
+            Space::Hsv => &mut self.hsv,
+            Space::Rgb => &mut self.rgb,
+            Space::Yuv => &mut self.yuv,
+        }
+    }
+    /// The colorspaces filter of the current space.
+    pub fn filter(&self) -> ColourFilter {
+        match self.space {
+            Space::Hsv => {
+                let h = self.hsv;
+                ColourFilter::Hsv(HsvRange::from_radians(h[0], h[1], h[2], h[3], h[4], h[5]))
+            }
+            Space::Rgb => {
+                let c = self.rgb.map(|v| v.round().clamp(0.0, 255.0) as u8);
+                ColourFilter::Rgb(RgbRange {
+                    rmin: c[0],
+                    rmax: c[1],
+                    gmin: c[2],
+                    gmax: c[3],
+                    bmin: c[4],
+                    bmax: c[5],
+                })
+            }
+            Space::Yuv => {
+                let y = self.yuv;
+                ColourFilter::Yuv(YuvRange {
+                    ymin: y[0],
+                    ymax: y[1],
+                    umin: y[2],
+                    umax: y[3],
+                    vmin: y[4],
+                    vmax: y[5],
+                })
+            }
+        }
+    }
+    /// Sets the current space's ranges around a pixel's colour (a click): ±10 % of
+    /// each channel's span (H ±0.3 rad, wrapping).
+    pub fn pick(&mut self, bgr: [u8; 3]) {
+        let sp = self.space;
+        let v = sp.of(bgr);
+        let ch = sp.channels();
+        let r = self.current_mut();
+        for k in 0..3 {
+            let (_, lo, hi) = ch[k];
+            let d = if sp == Space::Hsv && k == 0 {
+                0.3
+            } else {
+                (hi - lo) * 0.1
+            };
+            if sp == Space::Hsv && k == 0 {
+                r[0] = (v[0] - d).rem_euclid(TAU);
+                r[1] = (v[0] + d).rem_euclid(TAU);
+            } else {
+                r[2 * k] = (v[k] - d).max(lo);
+                r[2 * k + 1] = (v[k] + d).min(hi);
+            }
+        }
+    }
+}
+
+/// Side of the colour plane's histogram (bins per axis).
+pub const PLANE: usize = 64;
+
+/// The plane coordinates (0..1 across, 0..1 up) of a colour in `space`: its first
+/// two channels, scaled to their ranges.
+pub fn plane_xy(space: Space, bgr: [u8; 3]) -> (f32, f32) {
+    let v = space.of(bgr);
+    let ch = space.channels();
+    let f = |k: usize| ((v[k] - ch[k].1) / (ch[k].2 - ch[k].1)).clamp(0.0, 1.0);
+    (f(0), f(1))
+}
+
+/// The image's pixel counts on the plane of `space`: `hist[row * PLANE + col]`,
+/// row 0 at the bottom.
+pub fn plane_hist(img: &Image, space: Space) -> Vec<u32> {
+    let mut hist = vec![0u32; PLANE * PLANE];
+    let n = (img.width as usize * img.height as usize).min(img.data.len() / 3);
+    let ch = space.channels();
+    let scale = |v: f32, k: usize| {
+        (((v - ch[k].1) / (ch[k].2 - ch[k].1) * PLANE as f32) as usize).min(PLANE - 1)
+    };
+    for p in img.data[..n * 3].chunks_exact(3) {
+        let (a, b) = match space {
+            Space::Hsv => {
+                let c = hsv_table().get(p[2], p[1], p[0]);
+                (c.h.to_radians(), c.s)
+            }
+            Space::Rgb => (p[2] as f32, p[1] as f32),
+            Space::Yuv => {
+                let c = yuv_table().get(p[2], p[1], p[0]);
+                (c.y, c.u)
+            }
+        };
+        hist[scale(b, 1) * PLANE + scale(a, 0)] += 1;
+    }
+    hist
+}
+
+/// What one iteration computed.
+#[derive(Clone, Debug, Default)]
+pub struct Result {
+    pub image: Image,
+    pub clock: u64,
+    pub passed: usize,
+    pub hist: Vec<u32>,
+}
+
+/// The state shared by the schema, its panel and the name space.
+pub struct ColorTuner {
+    pub ranges: Mutex<Ranges>,
+    pub toblack: AtomicBool,
+    pub threshold: AtomicU32,
+    pub source: Mutex<String>,
+    pub result: Mutex<Result>,
+    pub choices: Vec<String>,
+}
+
+/// Filters `img` with `ranges`: the view, the count that passed, the plane.
+pub fn run_filter(img: &Image, ranges: &Ranges, toblack: bool) -> (Image, usize, Vec<u32>) {
+    let f = ranges.filter();
+    let bg = if toblack {
+        Background::Black
+    } else {
+        Background::Grey
+    };
+    let out = filter(img, &f, Lookup::Exact, bg);
+    let passed = mask(img, &f, Lookup::Exact)
+        .data
+        .iter()
+        .filter(|&&m| m != 0)
+        .count();
+    (out, passed, plane_hist(img, ranges.space))
+}
+
+/// The schema.
+pub struct ColorTunerSchema {
+    pub state: Arc<ColorTuner>,
+    used: Option<Arc<Interface<Image>>>,
+    output: Option<Arc<Interface<Image>>>,
+    last: Option<(String, u64, Ranges, bool)>,
+    cycle: Duration,
+    #[cfg(feature = "gui")]
+    panel: Option<Box<dyn crate::runtime::Panel>>,
+}
+
+impl ColorTunerSchema {
+    fn follow_source(&mut self, rt: &Runtime) -> anyhow::Result<Arc<Interface<Image>>> {
+        let name = self.state.source.lock().clone();
+        if let Some(u) = &self.used
+            && u.name() == name
+        {
+            return Ok(u.clone());
+        }
+        let new = rt.interfaces.get::<Image>(&name)?;
+        new.resume();
+        if let Some(old) = self.used.replace(new.clone()) {
+            old.suspend();
+        }
+        Ok(new)
+    }
+}
+
+impl Schema for ColorTunerSchema {
+    fn cycle(&self) -> Duration {
+        self.cycle
+    }
+    fn on_run(&mut self, ctx: &Context) -> anyhow::Result<()> {
+        self.follow_source(ctx.runtime())?;
+        self.last = None;
+        Ok(())
+    }
+    fn iteration(&mut self, ctx: &Context) -> anyhow::Result<()> {
+        let src = self.follow_source(ctx.runtime())?;
+        let s = src.snapshot();
+        let ranges = *self.state.ranges.lock();
+        let toblack = self.state.toblack.load(Ordering::Relaxed);
+        let key = (src.name().to_string(), s.clock, ranges, toblack);
+        if s.clock == 0 || self.last.as_ref() == Some(&key) {
+            return Ok(());
+        }
+        let (image, passed, hist) = run_filter(&s.value, &ranges, toblack);
+        if let Some(o) = &self.output {
+            o.publish(image.clone()).map_err(anyhow::Error::msg)?;
+        }
+        *self.state.result.lock() = Result {
+            image,
+            clock: s.clock,
+            passed,
+            hist,
+        };
+        self.last = Some(key);
+        Ok(())
+    }
+    fn on_stop(&mut self, _ctx: &Context) {
+        if let Some(u) = self.used.take() {
+            u.suspend();
+        }
+    }
+    #[cfg(feature = "gui")]
+    fn panel(&mut self) -> Option<Box<dyn crate::runtime::Panel>> {
+        self.panel.take()
+    }
+}
+
+fn six(l: &ConfLine, space: Space) -> anyhow::Result<[f32; 6]> {
+    let ch = space.channels();
+    l.expect_args(
+        6,
+        6,
+        &format!(
+            "{} {}min {}max {}min {}max {}min {}max",
+            l.keyword(),
+            ch[0].0,
+            ch[0].0,
+            ch[1].0,
+            ch[1].0,
+            ch[2].0,
+            ch[2].0
+        ),
+    )?;
+    let mut v = [0.0; 6];
+    for (i, x) in v.iter_mut().enumerate() {
+        let (name, lo, hi) = ch[i / 2];
+        *x = l.number(i, &format!("{name} ({lo}..{hi})"), lo..=hi)?;
+    }
+    Ok(v)
+}
+
+fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>> {
+    let mut r = Ranges::default();
+    let mut toblack = false;
+    let mut threshold = 5u32;
+    let mut source = "colorA".to_string();
+    let mut output = None;
+    let mut cycle = Duration::from_millis(100);
+    for l in &conf.lines {
+        match l.keyword() {
+            "space" => {
+                l.expect_args(1, 1, "space hsv|rgb|yuv")?;
+                let w = l.choice(0, "the colour space", &["hsv", "rgb", "yuv"])?;
+                r.space = Space::ALL
+                    .into_iter()
+                    .find(|s| s.name() == w)
+                    .unwrap_or(Space::Hsv);
+            }
+            "hsv" => r.hsv = six(l, Space::Hsv)?,
+            "rgb" => r.rgb = six(l, Space::Rgb)?,
+            "yuv" => r.yuv = six(l, Space::Yuv)?,
+            "toblack" => {
+                l.expect_args(1, 1, "toblack on|off")?;
+                toblack = l.on_off(0, "toblack")?;
+            }
+            "threshold" => {
+                l.expect_args(1, 1, "threshold PIXELS")?;
+                threshold = l.number(0, "pixels per plane bin", 1..=1_000_000)?;
+            }
+            "image" => {
+                l.expect_args(1, 1, "image INTERFACE (colorA..D, varcolorA..D)")?;
+                source = l.interface(0)?;
+                match rt.interfaces.get_any(&source) {
+                    Ok(a) if a.kind() == "image" => {}
+                    Ok(a) => {
+                        return Err(l
+                            .error(format!(
+                                "{source} is a {} interface, not an image",
+                                a.kind()
+                            ))
+                            .into());
+                    }
+                    Err(e) => return Err(l.error(format!("image: {e}")).into()),
+                }
+            }
+            "output" => {
+                l.expect_args(1, 1, "output INTERFACE (a new image interface)")?;
+                output = Some((l.interface(0)?, l.clone()));
+            }
+            "cycle" => {
+                l.expect_args(1, 1, "cycle MS")?;
+                cycle = Duration::from_millis(l.number(0, "period in ms", 1..=10_000)?);
+            }
+            _ => {
+                return Err(conf
+                    .unknown(
+                        l,
+                        "image, space, hsv, rgb, yuv, toblack, threshold, output or cycle",
+                    )
+                    .into());
+            }
+        }
+    }
+    rt.interfaces.get::<Image>(&source)?;
+    let output = match output {
+        Some((name, l)) => Some(
+            rt.interfaces
+                .provide::<Image>(&name, &conf.name)
+                .map_err(|e| l.error(format!("output: {e}")))?,
+        ),
+        None => None,
+    };
+    let choices = rt
+        .interfaces
+        .all()
+        .iter()
+        .filter(|i| i.kind() == "image" && output.as_ref().is_none_or(|o| o.name() != i.name()))
+        .map(|i| i.name().to_string())
+        .collect();
+    let state = Arc::new(ColorTuner {
+        ranges: Mutex::new(r),
+        toblack: AtomicBool::new(toblack),
+        threshold: AtomicU32::new(threshold),
+        source: Mutex::new(source),
+        result: Mutex::new(Result::default()),
+        choices,
+    });
+    rt.names
+        .export_arc(&conf.name, "state", state.clone())
+        .map_err(anyhow::Error::msg)?;
+    Ok(Box::new(ColorTunerSchema {
+        #[cfg(feature = "gui")]
+        panel: Some(Box::new(panel::ColorTunerPanel::new(state.clone()))),
+        state,
+        used: None,
+        output,
+        last: None,
+        cycle,
+    }))
+}
+
+crate::register_schema!(
+    "colortuner",
+    "colour filters in HSV, RGB or YUV: sliders, click to pick, colour plane with a draggable box",
+    create
+);
+
+#[cfg(feature = "gui")]
+pub mod panel {
+    //! colortuner's panel.
+    use super::*;
+    use crate::widgets::{ImageView, label_response};
+    use egui::{Color32, Rect, Sense, Stroke, pos2, vec2};
+
+    pub struct ColorTunerPanel {
+        state: Arc<ColorTuner>,
+        view: ImageView,
+    }
+
+    impl ColorTunerPanel {
+        pub fn new(state: Arc<ColorTuner>) -> Self {
+            ColorTunerPanel {
+                state,
+                view: ImageView::new("colortuner image"),
+            }
+        }
+    }
+
+    /// The colour a plane bin stands for (for drawing).
+    fn bin_colour(space: Space, x: f32, y: f32) -> Color32 {
+        match space {
+            Space::Hsv => {
+                let (r, g, b) = crate::colorspaces::hsv2rgb_u8(crate::colorspaces::Hsv {
+                    h: x * 360.0,
+                    s: y,
+                    v: 255.0,
+                });
+                Color32::from_rgb(r, g, b)
+            }
+            Space::Rgb => Color32::from_rgb((x * 255.0) as u8, (y * 255.0) as u8, 128),
+            Space::Yuv => {
+                let v = (x * 255.0) as u8;
+                Color32::from_rgb(v, v, v)
+            }
+        }
+    }
+
+    fn plane(ui: &mut egui::Ui, r: &mut Ranges, hist: &[u32], threshold: u32) {
+        let side = 200.0;
+        let (rect, resp) = ui.allocate_exact_size(vec2(side, side), Sense::click_and_drag());
+        label_response(&resp, "colortuner plane");
+        let p = ui.painter_at(rect);
+        p.rect_filled(rect, 0.0, Color32::from_gray(25));
+        let cell = side / PLANE as f32;
+        if hist.len() == PLANE * PLANE {
+            for (i, &n) in hist.iter().enumerate() {
+                if n >= threshold {
+                    let (row, col) = (i / PLANE, i % PLANE);
+                    let x = rect.min.x + col as f32 * cell;
+                    let y = rect.max.y - (row + 1) as f32 * cell;
+                    let c = bin_colour(
+                        r.space,
+                        col as f32 / PLANE as f32,
+                        row as f32 / PLANE as f32,
+                    );
+                    p.rect_filled(Rect::from_min_size(pos2(x, y), vec2(cell, cell)), 0.0, c);
+                }
+            }
+        }
+        let ch = r.space.channels();
+        let to_f = |k: usize, v: f32| (v - ch[k].1) / (ch[k].2 - ch[k].1);
+        let cur = *r.current();
+        let (x0, x1) = (to_f(0, cur[0]), to_f(0, cur[1]));
+        let (y0, y1) = (to_f(1, cur[2]), to_f(1, cur[3]));
+        let sx = |f: f32| rect.min.x + f * side;
+        let sy = |f: f32| rect.max.y - f * side;
+        let stroke = Stroke::new(2.0, Color32::WHITE);
+        if x0 <= x1 {
+            p.rect_stroke(
+                Rect::from_two_pos(pos2(sx(x0), sy(y0)), pos2(sx(x1), sy(y1))),
+                0.0,
+                stroke,
+                egui::StrokeKind::Middle,
+            );
+        } else {
+            // A wrapping hue range: two boxes, to the right edge and from the left.
+            for (a, b) in [(x0, 1.0), (0.0, x1)] {
+                p.rect_stroke(
+                    Rect::from_two_pos(pos2(sx(a), sy(y0)), pos2(sx(b), sy(y1))),
+                    0.0,
+                    stroke,
+                    egui::StrokeKind::Middle,
+                );
+            }
+        }
+        if resp.dragged()
+            && let (Some(a), Some(b)) = (
+                ui.input(|i| i.pointer.press_origin()),
+                resp.interact_pointer_pos(),
+            )
+        {
+            let fx = |x: f32| ((x - rect.min.x) / side).clamp(0.0, 1.0);
+            let fy = |y: f32| ((rect.max.y - y) / side).clamp(0.0, 1.0);
+            let from = |k: usize, f: f32| ch[k].1 + f * (ch[k].2 - ch[k].1);
+            let c = r.current_mut();
+            c[0] = from(0, fx(a.x).min(fx(b.x)));
+            c[1] = from(0, fx(a.x).max(fx(b.x)));
+            c[2] = from(1, fy(a.y).min(fy(b.y)));
+            c[3] = from(1, fy(a.y).max(fy(b.y)));
+        }
+    }
+
+    impl crate::runtime::Panel for ColorTunerPanel {
+        fn ui(&mut self, ui: &mut egui::Ui, rt: &Runtime) {
+            let mut r = *self.state.ranges.lock();
+            let before = r;
+            let res = self.state.result.lock().clone();
+            ui.horizontal(|ui| {
+                let mut src = self.state.source.lock().clone();
+                egui::ComboBox::new("colortuner source", "image")
+                    .selected_text(&src)
+                    .show_ui(ui, |ui| {
+                        for c in &self.state.choices {
+                            ui.selectable_value(&mut src, c.clone(), c);
+                        }
+                    });
+                *self.state.source.lock() = src;
+                for s in Space::ALL {
+                    ui.radio_value(&mut r.space, s, s.name());
+                }
+                let mut black = self.state.toblack.load(Ordering::Relaxed);
+                if ui.checkbox(&mut black, "toblack").changed() {
+                    self.state.toblack.store(black, Ordering::Relaxed);
+                }
+                ui.label(format!("passed {} px", res.passed));
+            });
+            ui.horizontal_top(|ui| {
+                ui.vertical(|ui| {
+                    ui.set_max_width(230.0);
+                    let ch = r.space.channels();
+                    let c = r.current_mut();
+                    for (k, (name, lo, hi)) in ch.iter().enumerate() {
+                        ui.add(
+                            egui::Slider::new(&mut c[2 * k], *lo..=*hi).text(format!("{name} min")),
+                        );
+                        ui.add(
+                            egui::Slider::new(&mut c[2 * k + 1], *lo..=*hi)
+                                .text(format!("{name} max")),
+                        );
+                    }
+                    let mut t = self.state.threshold.load(Ordering::Relaxed);
+                    if ui
+                        .add(egui::Slider::new(&mut t, 1..=500).text("threshold"))
+                        .changed()
+                    {
+                        self.state.threshold.store(t, Ordering::Relaxed);
+                    }
+                    // The plane of the space the result was computed in.
+                    if res.hist.len() == PLANE * PLANE {
+                        plane(ui, &mut r, &res.hist, t);
+                    }
+                });
+                ui.vertical(|ui| {
+                    let shown = self.view.show(ui, &res.image, res.clock);
+                    if let Some(pk) = shown.pick {
+                        // The colour under the click in the source (not the filtered view).
+                        let s = self.state.source.lock().clone();
+                        if let Ok(src) = rt.interfaces.get::<Image>(&s) {
+                            let v = src.snapshot();
+                            let i = (pk.y as usize * v.value.width as usize + pk.x as usize) * 3;
+                            if let Some(&[b, g, rr]) = v.value.data.get(i..i + 3) {
+                                r.pick([b, g, rr]);
+                            }
+                        }
+                    }
+                });
+            });
+            if r != before {
+                *self.state.ranges.lock() = r;
+            }
+        }
+    }
+}

@@ -1,0 +1,496 @@
+//! hsvtuner: find the HSV ranges of a colour on a live image (4.3's hsvtuner).
+//!
+//! Pixels whose H, S and V are in range keep their colour; the others become black
+//! (`toblack`) or grey at V·180/255. The hue test wraps through 0 when
+//! `hmin > hmax` (H ≥ hmin or H ≤ hmax). The panel has the sliders (H 0..2π rad,
+//! S 0..1, V 0..255), the filtered image, and the H–S "cheese": hue as angle, saturation
+//! as radius, the selected sector outlined and the image's colour histogram under it
+//! (drag on the cheese to select a sector). "Print" and "Copy" give the ranges as the
+//! conf lines `hmin .. vmax` that opencvdemo (and followball) accept.
+//!
+//! Conf (every line optional; defaults are 4.3's):
+//! ```text
+//! schema hsvtuner
+//! image colorA         # the image to tune on: colorA..D or varcolorA..D
+//! hmin 0               # H range, radians 0..2π (wraps when hmin > hmax)
+//! hmax 1
+//! smin 0.2             # S range, 0..1
+//! smax 0.4
+//! vmin 0               # V range, 0..255 (V = max(R, G, B))
+//! vmax 255
+//! toblack off          # on: rejected pixels black; off: grey
+//! output varcolorD     # optional: publish the filtered image on this (new)
+//!                      #   image interface, so `echo varcolorD` shows it headless
+//! cycle 100            # ms (4.3's 100)
+//! end_schema
+//! ```
+//! Interfaces used: the `image` (BGR); provided: `output` if given.
+//!
+//! Headless the schema filters every cycle and exports, component `hsvtuner`:
+//! `state` ([`Tuner`]: the ranges, the toggle, the image in use, the pixels that
+//! passed, the colour histogram). System packages: none.
+
+use std::{
+    sync::{
+        Arc,
+        atomic::{AtomicBool, Ordering},
+    },
+    time::Duration,
+};
+
+use parking_lot::Mutex;
+
+use crate::{
+    colorspaces::{HsvRange, Lookup, hsv_mask, hsv_table},
+    conf::{ComponentConf, ConfLine},
+    interfaces::{Image, Interface},
+    runtime::{Context, Runtime, Schema},
+};
+
+const TAU: f32 = std::f32::consts::TAU;
+
+/// HSV ranges in 4.3's GUI and conf units: H radians 0..2π, S 0..1, V 0..255.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HsvRadians {
+    pub hmin: f32,
+    pub hmax: f32,
+    pub smin: f32,
+    pub smax: f32,
+    pub vmin: f32,
+    pub vmax: f32,
+}
+
+impl Default for HsvRadians {
+    /// 4.3's defaults: H 0..1 rad, S 0.2..0.4, V 0..255.
+    fn default() -> Self {
+        HsvRadians {
+            hmin: 0.0,
+            hmax: 1.0,
+            smin: 0.2,
+            smax: 0.4,
+            vmin: 0.0,
+            vmax: 255.0,
+        }
+    }
+}
+
+impl HsvRadians {
+    /// The colorspaces range (H in degrees).
+    pub fn range(&self) -> HsvRange {
+        HsvRange::from_radians(
+            self.hmin, self.hmax, self.smin, self.smax, self.vmin, self.vmax,
+        )
+    }
+    /// The conf lines that opencvdemo and followball accept, one per key.
+    pub fn conf_lines(&self) -> String {
+        format!(
+            "hmin {:.3}\nhmax {:.3}\nsmin {:.3}\nsmax {:.3}\nvmin {:.0}\nvmax {:.0}\n",
+            self.hmin, self.hmax, self.smin, self.smax, self.vmin, self.vmax
+        )
+    }
+}
+
+/// Hue bins (10° each) and saturation bins (0.1 each) of the colour histogram.
+pub const HUE_BINS: usize = 36;
+pub const SAT_BINS: usize = 10;
+
+/// What one iteration computed.
+#[derive(Clone, Debug, Default)]
+pub struct Filtered {
+    /// The filtered image.
+    pub image: Image,
+    /// The source image's clock.
+    pub clock: u64,
+    /// How many pixels passed.
+    pub passed: usize,
+    /// Pixel counts per (hue bin, saturation bin): `hist[h * SAT_BINS + s]`.
+    pub hist: Vec<u32>,
+}
+
+/// The state shared by the schema, its panel and the name space.
+pub struct Tuner {
+    pub ranges: Mutex<HsvRadians>,
+    pub toblack: AtomicBool,
+    /// The image interface tuned on (the panel may switch it).
+    pub source: Mutex<String>,
+    pub result: Mutex<Filtered>,
+    /// Every image interface of the run (the panel's choice).
+    pub choices: Vec<String>,
+}
+
+/// Filters `img`: the image with rejected pixels black or grey, the count that
+/// passed and the H–S histogram.
+pub fn filter(img: &Image, ranges: &HsvRadians, toblack: bool) -> (Image, usize, Vec<u32>) {
+    let mask = hsv_mask(img, &ranges.range(), Lookup::Exact);
+    let mut out = img.clone();
+    let n = (img.width as usize * img.height as usize).min(img.data.len() / 3);
+    let mut passed = 0;
+    let mut hist = vec![0u32; HUE_BINS * SAT_BINS];
+    let t = hsv_table();
+    for (p, &k) in out.data[..n * 3].chunks_exact_mut(3).zip(mask.data.iter()) {
+        let c = t.get(p[2], p[1], p[0]);
+        let hb = ((c.h / 360.0 * HUE_BINS as f32) as usize).min(HUE_BINS - 1);
+        let sb = ((c.s * SAT_BINS as f32) as usize).min(SAT_BINS - 1);
+        hist[hb * SAT_BINS + sb] += 1;
+        if k == 0 {
+            let g = if toblack {
+                0
+            } else {
+                (p[0].max(p[1]).max(p[2]) as u32 * 180 / 255) as u8
+            };
+            p.fill(g);
+        } else {
+            passed += 1;
+        }
+    }
+    (out, passed, hist)
+}
+
+/// The schema.
+pub struct HsvTuner {
+    pub state: Arc<Tuner>,
+    used: Option<Arc<Interface<Image>>>,
+    output: Option<Arc<Interface<Image>>>,
+    last: (String, u64, HsvRadians, bool),
+    cycle: Duration,
+    #[cfg(feature = "gui")]
+    panel: Option<Box<dyn crate::runtime::Panel>>,
+}
+
+impl HsvTuner {
+    /// Uses (resumes) the selected source, releasing the previous one.
+    fn follow_source(&mut self, rt: &Runtime) -> anyhow::Result<Arc<Interface<Image>>> {
+        let name = self.state.source.lock().clone();
+        if let Some(u) = &self.used
+            && u.name() == name
+        {
+            return Ok(u.clone());
+        }
+        let new = rt.interfaces.get::<Image>(&name)?;
+        new.resume();
+        if let Some(old) = self.used.replace(new.clone()) {
+            old.suspend();
+        }
+        Ok(new)
+    }
+}
+
+impl Schema for HsvTuner {
+    fn cycle(&self) -> Duration {
+        self.cycle
+    }
+    fn on_run(&mut self, ctx: &Context) -> anyhow::Result<()> {
+        self.follow_source(ctx.runtime())?;
+        Ok(())
+    }
+    fn iteration(&mut self, ctx: &Context) -> anyhow::Result<()> {
+        let src = self.follow_source(ctx.runtime())?;
+        let s = src.snapshot();
+        let ranges = *self.state.ranges.lock();
+        let toblack = self.state.toblack.load(Ordering::Relaxed);
+        let key = (src.name().to_string(), s.clock, ranges, toblack);
+        if key == self.last {
+            return Ok(());
+        }
+        let (image, passed, hist) = filter(&s.value, &ranges, toblack);
+        if let Some(o) = &self.output {
+            o.publish(image.clone()).map_err(anyhow::Error::msg)?;
+        }
+        *self.state.result.lock() = Filtered {
+            image,
+            clock: s.clock,
+            passed,
+            hist,
+        };
+        self.last = key;
+        Ok(())
+    }
+    fn on_stop(&mut self, _ctx: &Context) {
+        if let Some(u) = self.used.take() {
+            u.suspend();
+        }
+    }
+    #[cfg(feature = "gui")]
+    fn panel(&mut self) -> Option<Box<dyn crate::runtime::Panel>> {
+        self.panel.take()
+    }
+}
+
+fn one(l: &ConfLine, lo: f32, hi: f32, what: &str) -> anyhow::Result<f32> {
+    l.expect_args(1, 1, &format!("{} <{what}>", l.keyword()))?;
+    Ok(l.number(0, what, lo..=hi)?)
+}
+
+fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>> {
+    let mut r = HsvRadians::default();
+    let mut toblack = false;
+    let mut source = "colorA".to_string();
+    let mut output = None;
+    let mut cycle = Duration::from_millis(100);
+    for l in &conf.lines {
+        match l.keyword() {
+            "hmin" => r.hmin = one(l, 0.0, TAU, "hue in radians, 0..2π")?,
+            "hmax" => r.hmax = one(l, 0.0, TAU, "hue in radians, 0..2π")?,
+            "smin" => r.smin = one(l, 0.0, 1.0, "saturation 0..1")?,
+            "smax" => r.smax = one(l, 0.0, 1.0, "saturation 0..1")?,
+            "vmin" => r.vmin = one(l, 0.0, 255.0, "value 0..255")?,
+            "vmax" => r.vmax = one(l, 0.0, 255.0, "value 0..255")?,
+            "toblack" => {
+                l.expect_args(1, 1, "toblack on|off")?;
+                toblack = l.on_off(0, "toblack")?;
+            }
+            "image" => {
+                l.expect_args(1, 1, "image INTERFACE (colorA..D, varcolorA..D)")?;
+                source = l.interface(0)?;
+                match rt.interfaces.get_any(&source) {
+                    Ok(a) if a.kind() == "image" => {}
+                    Ok(a) => {
+                        return Err(l
+                            .error(format!(
+                                "{source} is a {} interface, not an image",
+                                a.kind()
+                            ))
+                            .into());
+                    }
+                    Err(e) => return Err(l.error(format!("image: {e}")).into()),
+                }
+            }
+            "output" => {
+                l.expect_args(1, 1, "output INTERFACE (a new image interface)")?;
+                output = Some((l.interface(0)?, l.clone()));
+            }
+            "cycle" => {
+                l.expect_args(1, 1, "cycle MS")?;
+                cycle = Duration::from_millis(l.number(0, "period in ms", 1..=10_000)?);
+            }
+            _ => {
+                return Err(conf
+                    .unknown(
+                        l,
+                        "image, hmin, hmax, smin, smax, vmin, vmax, toblack, output or cycle",
+                    )
+                    .into());
+            }
+        }
+    }
+    // Fails here (naming the interface) rather than at run when nothing provides it.
+    rt.interfaces.get::<Image>(&source)?;
+    let output = match output {
+        Some((name, l)) => Some(
+            rt.interfaces
+                .provide::<Image>(&name, &conf.name)
+                .map_err(|e| l.error(format!("output: {e}")))?,
+        ),
+        None => None,
+    };
+    let choices = rt
+        .interfaces
+        .all()
+        .iter()
+        .filter(|i| i.kind() == "image" && output.as_ref().is_none_or(|o| o.name() != i.name()))
+        .map(|i| i.name().to_string())
+        .collect();
+    let state = Arc::new(Tuner {
+        ranges: Mutex::new(r),
+        toblack: AtomicBool::new(toblack),
+        source: Mutex::new(source),
+        result: Mutex::new(Filtered::default()),
+        choices,
+    });
+    rt.names
+        .export_arc(&conf.name, "state", state.clone())
+        .map_err(anyhow::Error::msg)?;
+    Ok(Box::new(HsvTuner {
+        #[cfg(feature = "gui")]
+        panel: Some(Box::new(panel::TunerPanel::new(state.clone()))),
+        state,
+        used: None,
+        output,
+        last: (String::new(), u64::MAX, r, toblack),
+        cycle,
+    }))
+}
+
+crate::register_schema!(
+    "hsvtuner",
+    "HSV range tuning on a live image: sliders, H-S cheese map, filtered view, conf lines",
+    create
+);
+
+/// The H–S "cheese" geometry: hue as the angle (counter-clockwise from the right),
+/// saturation as the radius.
+pub mod cheese {
+    use super::TAU;
+
+    /// Screen offset (from the centre, y down) of (hue rad, saturation) on a
+    /// cheese of `radius`.
+    pub fn to_screen(h: f32, s: f32, radius: f32) -> (f32, f32) {
+        (s * radius * h.cos(), -s * radius * h.sin())
+    }
+
+    /// (hue rad 0..2π, saturation 0..1, clamped) of a screen offset.
+    pub fn from_screen(dx: f32, dy: f32, radius: f32) -> (f32, f32) {
+        let h = (-dy).atan2(dx).rem_euclid(TAU);
+        let s = ((dx * dx + dy * dy).sqrt() / radius.max(1e-6)).min(1.0);
+        (h, s)
+    }
+
+    /// The sector dragged from `a` to `b` (screen offsets): hmin, hmax (counter-
+    /// clockwise from a to b, so it may wrap), smin, smax.
+    pub fn drag_sector(a: (f32, f32), b: (f32, f32), radius: f32) -> (f32, f32, f32, f32) {
+        let (h0, s0) = from_screen(a.0, a.1, radius);
+        let (h1, s1) = from_screen(b.0, b.1, radius);
+        (h0, h1, s0.min(s1), s0.max(s1))
+    }
+}
+
+#[cfg(feature = "gui")]
+pub mod panel {
+    //! hsvtuner's panel.
+    use super::*;
+    use crate::{colorspaces::Hsv, colorspaces::hsv2rgb_u8, output, widgets::ImageView};
+    use egui::{Color32, Pos2, Sense, Shape, Stroke, pos2, vec2};
+
+    pub struct TunerPanel {
+        state: Arc<Tuner>,
+        view: ImageView,
+        drag_from: Option<(f32, f32)>,
+    }
+
+    impl TunerPanel {
+        pub fn new(state: Arc<Tuner>) -> Self {
+            TunerPanel {
+                state,
+                view: ImageView::new("hsvtuner image"),
+                drag_from: None,
+            }
+        }
+
+        fn cheese(&mut self, ui: &mut egui::Ui, r: &mut HsvRadians, hist: &[u32]) {
+            let side = 220.0;
+            let (rect, resp) = ui.allocate_exact_size(vec2(side, side), Sense::click_and_drag());
+            crate::widgets::label_response(&resp, "hsvtuner cheese");
+            let c = rect.center();
+            let radius = side * 0.45;
+            let p = ui.painter_at(rect);
+            p.circle_filled(c, radius, Color32::from_gray(30));
+            // The histogram: each populated (hue, sat) bin as a dot of its colour.
+            let max = hist.iter().copied().max().unwrap_or(0).max(1) as f32;
+            for (i, &n) in hist.iter().enumerate() {
+                if n == 0 {
+                    continue;
+                }
+                let (hb, sb) = (i / SAT_BINS, i % SAT_BINS);
+                let h = (hb as f32 + 0.5) / HUE_BINS as f32 * TAU;
+                let s = (sb as f32 + 0.5) / SAT_BINS as f32;
+                let (dx, dy) = cheese::to_screen(h, s, radius);
+                let (rr, gg, bb) = hsv2rgb_u8(Hsv {
+                    h: h.to_degrees(),
+                    s,
+                    v: 255.0,
+                });
+                let size = 1.5 + 3.0 * (n as f32 / max).sqrt();
+                p.circle_filled(
+                    pos2(c.x + dx, c.y + dy),
+                    size,
+                    Color32::from_rgb(rr, gg, bb),
+                );
+            }
+            // The selected sector, counter-clockwise from hmin to hmax.
+            let span = (r.hmax - r.hmin).rem_euclid(TAU);
+            let span = if r.hmax >= r.hmin {
+                r.hmax - r.hmin
+            } else {
+                span
+            };
+            let steps = 32;
+            let mut pts: Vec<Pos2> = Vec::new();
+            for k in 0..=steps {
+                let h = r.hmin + span * k as f32 / steps as f32;
+                let (dx, dy) = cheese::to_screen(h, r.smax, radius);
+                pts.push(pos2(c.x + dx, c.y + dy));
+            }
+            for k in (0..=steps).rev() {
+                let h = r.hmin + span * k as f32 / steps as f32;
+                let (dx, dy) = cheese::to_screen(h, r.smin, radius);
+                pts.push(pos2(c.x + dx, c.y + dy));
+            }
+            p.add(Shape::closed_line(pts, Stroke::new(2.0, Color32::WHITE)));
+            if resp.drag_started()
+                && let Some(pos) = ui.input(|i| i.pointer.press_origin())
+            {
+                self.drag_from = Some((pos.x - c.x, pos.y - c.y));
+            }
+            if resp.dragged()
+                && let (Some(a), Some(pos)) = (self.drag_from, resp.interact_pointer_pos())
+            {
+                let (hmin, hmax, smin, smax) =
+                    cheese::drag_sector(a, (pos.x - c.x, pos.y - c.y), radius);
+                r.hmin = hmin;
+                r.hmax = hmax;
+                r.smin = smin;
+                r.smax = smax;
+            }
+            if resp.drag_stopped() {
+                self.drag_from = None;
+            }
+        }
+    }
+
+    impl crate::runtime::Panel for TunerPanel {
+        fn ui(&mut self, ui: &mut egui::Ui, _rt: &Runtime) {
+            let mut r = *self.state.ranges.lock();
+            let before = r;
+            let res = self.state.result.lock().clone();
+            ui.horizontal(|ui| {
+                let mut src = self.state.source.lock().clone();
+                egui::ComboBox::new("hsvtuner source", "image")
+                    .selected_text(&src)
+                    .show_ui(ui, |ui| {
+                        for c in &self.state.choices {
+                            ui.selectable_value(&mut src, c.clone(), c);
+                        }
+                    });
+                *self.state.source.lock() = src;
+                let mut black = self.state.toblack.load(Ordering::Relaxed);
+                if ui.checkbox(&mut black, "toblack").changed() {
+                    self.state.toblack.store(black, Ordering::Relaxed);
+                }
+                let total = (res.image.width * res.image.height).max(1) as f32;
+                ui.label(format!(
+                    "passed {} px ({:.1} %)",
+                    res.passed,
+                    res.passed as f32 * 100.0 / total
+                ));
+            });
+            ui.horizontal_top(|ui| {
+                ui.vertical(|ui| {
+                    ui.set_max_width(230.0);
+                    ui.add(egui::Slider::new(&mut r.hmin, 0.0..=TAU).text("Hmin rad"));
+                    ui.add(egui::Slider::new(&mut r.hmax, 0.0..=TAU).text("Hmax rad"));
+                    ui.add(egui::Slider::new(&mut r.smin, 0.0..=1.0).text("Smin"));
+                    ui.add(egui::Slider::new(&mut r.smax, 0.0..=1.0).text("Smax"));
+                    ui.add(egui::Slider::new(&mut r.vmin, 0.0..=255.0).text("Vmin"));
+                    ui.add(egui::Slider::new(&mut r.vmax, 0.0..=255.0).text("Vmax"));
+                    self.cheese(ui, &mut r, &res.hist);
+                    ui.horizontal(|ui| {
+                        if ui.button("Print").clicked() {
+                            for line in r.conf_lines().lines() {
+                                output::println(line);
+                            }
+                        }
+                        if ui.button("Copy").clicked() {
+                            ui.ctx().copy_text(r.conf_lines());
+                        }
+                    });
+                });
+                ui.vertical(|ui| {
+                    self.view.show(ui, &res.image, res.clock);
+                });
+            });
+            if r != before {
+                *self.state.ranges.lock() = r;
+            }
+        }
+    }
+}

@@ -1,0 +1,439 @@
+//! imagerectifier: rectify a plane seen in perspective (4.3's imgrectifier).
+//!
+//! Click 4 points on the input in order (top-left, top-right, bottom-right,
+//! bottom-left of the plane), then, in "rectangle mode", 2 opposite corners on the
+//! output: the 8-parameter homography (h33 = 1) from the 4 pairs is solved by the
+//! vision library's [`find_homography`] and the live image is warped with it
+//! ([`warp_perspective`]). Buttons: Rectify, Undo (the last point), Discard (all),
+//! Rectangle mode, Save (the 8 numbers to the `save` file); the 8 numbers are also
+//! printed.
+//!
+//! Conf (every line optional):
+//! ```text
+//! schema imagerectifier
+//! image colorA                 # colorA..D or varcolorA..D
+//! points 60 40 250 50 270 200 40 190   # optional: the 4 input points (x y each,
+//! rectangle 0 0 319 239        #   pixels) and the output rectangle (x1 y1 x2 y2):
+//!                              #   with both the homography is solved at load
+//! save homography.txt          # where Save writes the 8 numbers (relative to the conf)
+//! output varcolorD             # optional: publish the rectified image here
+//! cycle 100
+//! end_schema
+//! ```
+//! Interfaces used: the `image` (BGR); provided: `output` if given (the input's size).
+//!
+//! Headless it warps each new frame once a homography is known and exports,
+//! component `imagerectifier`, `state` ([`Rectifier`]: points, homography, result).
+//! System packages: none.
+
+use std::{path::PathBuf, sync::Arc, time::Duration};
+
+use nalgebra::Matrix3;
+use parking_lot::Mutex;
+
+use crate::{
+    conf::{ComponentConf, ConfLine},
+    interfaces::{Image, Interface},
+    runtime::{Context, Runtime, Schema},
+    vision::{find_homography, warp_perspective},
+};
+
+/// The clicks and the solution.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Points {
+    /// Input points, in click order (at most 4).
+    pub src: Vec<(f64, f64)>,
+    /// Output rectangle corners (at most 2).
+    pub rect: Vec<(f64, f64)>,
+    /// Whether clicks go to the output (rectangle mode).
+    pub rectangle_mode: bool,
+    /// The homography (input → output pixels, h33 = 1), once solved.
+    pub homography: Option<Matrix3<f64>>,
+}
+
+impl Points {
+    /// Adds a click on the input (`output` false) or the output; ignores extra ones.
+    pub fn click(&mut self, x: f64, y: f64, output: bool) {
+        if output {
+            if self.rectangle_mode && self.rect.len() < 2 {
+                self.rect.push((x, y));
+            }
+        } else if !self.rectangle_mode && self.src.len() < 4 {
+            self.src.push((x, y));
+            if self.src.len() == 4 {
+                self.rectangle_mode = true;
+            }
+        }
+    }
+    /// Removes the last point (the output's first, then the input's).
+    pub fn undo(&mut self) {
+        if self.rect.pop().is_none() {
+            self.src.pop();
+            self.rectangle_mode = false;
+        }
+        self.homography = None;
+    }
+    /// Forgets everything.
+    pub fn discard(&mut self) {
+        *self = Points::default();
+    }
+    /// The 4 output corners in the input points' order.
+    pub fn corners(&self) -> Option<[(f64, f64); 4]> {
+        let [(x1, y1), (x2, y2)] = self.rect[..] else {
+            return None;
+        };
+        let (l, r) = (x1.min(x2), x1.max(x2));
+        let (t, b) = (y1.min(y2), y1.max(y2));
+        Some([(l, t), (r, t), (r, b), (l, b)])
+    }
+    /// Solves the homography; an error says what is missing.
+    pub fn rectify(&mut self) -> Result<Matrix3<f64>, String> {
+        if self.src.len() != 4 {
+            return Err(format!("click 4 input points (have {})", self.src.len()));
+        }
+        let Some(dst) = self.corners() else {
+            return Err(format!(
+                "rectangle mode: click 2 output corners (have {})",
+                self.rect.len()
+            ));
+        };
+        let h = find_homography(&self.src, &dst)
+            .ok_or("the 4 input points are degenerate (3 in a line?)")?;
+        self.homography = Some(h);
+        Ok(h)
+    }
+}
+
+/// The 8 numbers h11 h12 h13 h21 h22 h23 h31 h32 (h33 = 1), one line.
+pub fn eight_numbers(h: &Matrix3<f64>) -> String {
+    let v = [
+        h[(0, 0)],
+        h[(0, 1)],
+        h[(0, 2)],
+        h[(1, 0)],
+        h[(1, 1)],
+        h[(1, 2)],
+        h[(2, 0)],
+        h[(2, 1)],
+    ];
+    v.iter()
+        .map(|x| format!("{x:.9}"))
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+/// The last rectified frame.
+#[derive(Clone, Debug, Default)]
+pub struct Rectified {
+    pub image: Image,
+    pub clock: u64,
+}
+
+/// The state shared by the schema, its panel and the name space.
+pub struct Rectifier {
+    pub points: Mutex<Points>,
+    pub result: Mutex<Rectified>,
+    pub source: String,
+    /// Where Save writes (None: no `save` line, Save says so).
+    pub save: Option<PathBuf>,
+    /// The last message (solved, saved, or what is missing).
+    pub message: Mutex<String>,
+}
+
+impl Rectifier {
+    /// Solves, prints the 8 numbers and sets the message.
+    pub fn rectify(&self) {
+        let r = self.points.lock().rectify();
+        *self.message.lock() = match r {
+            Ok(h) => {
+                let s = eight_numbers(&h);
+                crate::output::println(format!("imagerectifier: homography {s}"));
+                s
+            }
+            Err(e) => e,
+        };
+    }
+    /// Writes the 8 numbers to the `save` file.
+    pub fn save(&self) {
+        let h = self.points.lock().homography;
+        *self.message.lock() = match (h, &self.save) {
+            (None, _) => "nothing to save: rectify first".into(),
+            (Some(_), None) => "no `save FILE` line in the conf".into(),
+            (Some(h), Some(p)) => match std::fs::write(p, eight_numbers(&h) + "\n") {
+                Ok(()) => format!("saved {}", p.display()),
+                Err(e) => format!("save {}: {e}", p.display()),
+            },
+        };
+    }
+}
+
+/// The schema.
+pub struct ImageRectifier {
+    pub state: Arc<Rectifier>,
+    image: Arc<Interface<Image>>,
+    output: Option<Arc<Interface<Image>>>,
+    last: Option<(u64, Option<Matrix3<f64>>)>,
+    cycle: Duration,
+    #[cfg(feature = "gui")]
+    panel: Option<Box<dyn crate::runtime::Panel>>,
+}
+
+impl Schema for ImageRectifier {
+    fn cycle(&self) -> Duration {
+        self.cycle
+    }
+    fn on_run(&mut self, ctx: &Context) -> anyhow::Result<()> {
+        ctx.run_children(&[self.image.name()], None)?;
+        self.last = None;
+        Ok(())
+    }
+    fn iteration(&mut self, _ctx: &Context) -> anyhow::Result<()> {
+        let s = self.image.snapshot();
+        let h = self.state.points.lock().homography;
+        let key = (s.clock, h);
+        if s.clock == 0 || self.last == Some(key) {
+            return Ok(());
+        }
+        if let Some(h) = h {
+            let image = warp_perspective(&s.value, &h, s.value.width, s.value.height);
+            if let Some(o) = &self.output {
+                o.publish(image.clone()).map_err(anyhow::Error::msg)?;
+            }
+            *self.state.result.lock() = Rectified {
+                image,
+                clock: s.clock,
+            };
+        }
+        self.last = Some(key);
+        Ok(())
+    }
+    #[cfg(feature = "gui")]
+    fn panel(&mut self) -> Option<Box<dyn crate::runtime::Panel>> {
+        self.panel.take()
+    }
+}
+
+fn numbers(l: &ConfLine, n: usize, usage: &str) -> anyhow::Result<Vec<f64>> {
+    l.expect_args(n, n, usage)?;
+    (0..n)
+        .map(|i| Ok(l.number::<f64>(i, "pixel coordinate", -100_000.0..=100_000.0)?))
+        .collect()
+}
+
+fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>> {
+    let mut source = "colorA".to_string();
+    let mut points = Points::default();
+    let mut save = None;
+    let mut output = None;
+    let mut cycle = Duration::from_millis(100);
+    let mut solve_line = None;
+    for l in &conf.lines {
+        match l.keyword() {
+            "image" => {
+                l.expect_args(1, 1, "image INTERFACE (colorA..D, varcolorA..D)")?;
+                source = l.interface(0)?;
+                match rt.interfaces.get_any(&source) {
+                    Ok(a) if a.kind() == "image" => {}
+                    Ok(a) => {
+                        return Err(l
+                            .error(format!(
+                                "{source} is a {} interface, not an image",
+                                a.kind()
+                            ))
+                            .into());
+                    }
+                    Err(e) => return Err(l.error(format!("image: {e}")).into()),
+                }
+            }
+            "points" => {
+                let v = numbers(l, 8, "points X1 Y1 X2 Y2 X3 Y3 X4 Y4")?;
+                points.src = v.chunks(2).map(|p| (p[0], p[1])).collect();
+                points.rectangle_mode = true;
+                solve_line = Some(l.clone());
+            }
+            "rectangle" => {
+                let v = numbers(l, 4, "rectangle X1 Y1 X2 Y2")?;
+                points.rect = vec![(v[0], v[1]), (v[2], v[3])];
+                solve_line = Some(l.clone());
+            }
+            "save" => {
+                l.expect_args(1, 1, "save FILE")?;
+                save = Some(l.path(0, "the file for the 8 numbers")?);
+            }
+            "output" => {
+                l.expect_args(1, 1, "output INTERFACE (a new image interface)")?;
+                output = Some((l.interface(0)?, l.clone()));
+            }
+            "cycle" => {
+                l.expect_args(1, 1, "cycle MS")?;
+                cycle = Duration::from_millis(l.number(0, "period in ms", 1..=10_000)?);
+            }
+            _ => {
+                return Err(conf
+                    .unknown(l, "image, points, rectangle, save, output or cycle")
+                    .into());
+            }
+        }
+    }
+    if let Some(l) = solve_line {
+        points
+            .rectify()
+            .map_err(|e| l.error(format!("points/rectangle: {e}")))?;
+    }
+    let image = rt.interfaces.get::<Image>(&source)?;
+    let output = match output {
+        Some((name, l)) => Some(
+            rt.interfaces
+                .provide::<Image>(&name, &conf.name)
+                .map_err(|e| l.error(format!("output: {e}")))?,
+        ),
+        None => None,
+    };
+    let state = Arc::new(Rectifier {
+        points: Mutex::new(points),
+        result: Mutex::new(Rectified::default()),
+        source,
+        save,
+        message: Mutex::new(String::new()),
+    });
+    rt.names
+        .export_arc(&conf.name, "state", state.clone())
+        .map_err(anyhow::Error::msg)?;
+    Ok(Box::new(ImageRectifier {
+        #[cfg(feature = "gui")]
+        panel: Some(Box::new(panel::RectifierPanel::new(
+            state.clone(),
+            image.clone(),
+        ))),
+        state,
+        image,
+        output,
+        last: None,
+        cycle,
+    }))
+}
+
+crate::register_schema!(
+    "imagerectifier",
+    "click 4 points and a rectangle: the homography is solved and the live image rectified",
+    create
+);
+
+#[cfg(feature = "gui")]
+pub mod panel {
+    //! imagerectifier's panel: input and output side by side, the buttons.
+    use super::*;
+    use crate::widgets::{ImageView, pixel_rect};
+    use egui::{Color32, Stroke};
+
+    pub struct RectifierPanel {
+        state: Arc<Rectifier>,
+        image: Arc<Interface<Image>>,
+        input: ImageView,
+        output: ImageView,
+        help: bool,
+    }
+
+    impl RectifierPanel {
+        pub fn new(state: Arc<Rectifier>, image: Arc<Interface<Image>>) -> Self {
+            RectifierPanel {
+                state,
+                image,
+                input: ImageView::new("imagerectifier input"),
+                output: ImageView::new("imagerectifier output"),
+                help: false,
+            }
+        }
+    }
+
+    fn marks(ui: &egui::Ui, rect: egui::Rect, img: &Image, pts: &[(f64, f64)], c: Color32) {
+        let p = ui.painter_at(rect);
+        for (k, &(x, y)) in pts.iter().enumerate() {
+            if x < 0.0 || y < 0.0 || x >= img.width as f64 || y >= img.height as f64 {
+                continue;
+            }
+            let r = pixel_rect(rect, img.width, img.height, x as u32, y as u32).center();
+            p.circle_stroke(r, 5.0, Stroke::new(2.0, c));
+            p.text(
+                r + egui::vec2(6.0, -6.0),
+                egui::Align2::LEFT_BOTTOM,
+                format!("{}", k + 1),
+                egui::FontId::proportional(12.0),
+                c,
+            );
+        }
+    }
+
+    impl crate::runtime::Panel for RectifierPanel {
+        fn ui(&mut self, ui: &mut egui::Ui, _rt: &Runtime) {
+            let s = self.image.snapshot();
+            let res = self.state.result.lock().clone();
+            let pts = self.state.points.lock().clone();
+            ui.horizontal(|ui| {
+                if ui.button("Rectify").clicked() {
+                    self.state.rectify();
+                }
+                if ui.button("Undo").clicked() {
+                    self.state.points.lock().undo();
+                }
+                if ui.button("Discard").clicked() {
+                    self.state.points.lock().discard();
+                }
+                let mut mode = pts.rectangle_mode;
+                if ui.toggle_value(&mut mode, "Rectangle mode").changed() {
+                    self.state.points.lock().rectangle_mode = mode;
+                }
+                if ui.button("Save").clicked() {
+                    self.state.save();
+                }
+                ui.toggle_value(&mut self.help, "Help");
+            });
+            if self.help {
+                ui.label(
+                    "Click 4 points on the input in order: top-left, top-right, \
+                     bottom-right, bottom-left of the plane. Rectangle mode then takes 2 \
+                     opposite corners on the output. Rectify solves the homography.",
+                );
+            }
+            ui.label(self.state.message.lock().clone());
+            let half = (ui.available_width() / 2.0 - 8.0).max(120.0);
+            ui.horizontal_top(|ui| {
+                ui.vertical(|ui| {
+                    ui.set_max_width(half);
+                    ui.label(format!(
+                        "input {} ({} of 4 points)",
+                        self.state.source,
+                        pts.src.len()
+                    ));
+                    let r = self.input.show_sample(ui, &s);
+                    marks(ui, r.rect, &s.value, &pts.src, Color32::RED);
+                    if let Some(p) = r.pick {
+                        self.state
+                            .points
+                            .lock()
+                            .click(p.x as f64, p.y as f64, false);
+                    }
+                });
+                ui.vertical(|ui| {
+                    ui.set_max_width(half);
+                    ui.label(format!("output ({} of 2 corners)", pts.rect.len()));
+                    // The rectified frame once solved; the input until then.
+                    let r = if pts.homography.is_some() && res.clock > 0 {
+                        self.output.show(ui, &res.image, res.clock)
+                    } else {
+                        self.output.show_sample(ui, &s)
+                    };
+                    let shown = if pts.homography.is_some() && res.clock > 0 {
+                        &res.image
+                    } else {
+                        &s.value
+                    };
+                    marks(ui, r.rect, shown, &pts.rect, Color32::GREEN);
+                    if let Some(p) = r.pick {
+                        self.state.points.lock().click(p.x as f64, p.y as f64, true);
+                    }
+                });
+            });
+        }
+    }
+}

@@ -1,0 +1,417 @@
+//! Hough lines: standard ([`hough_lines`], OpenCV's `HoughLines`) and probabilistic
+//! ([`hough_lines_p`], OpenCV's `HoughLinesP`), on an edge image (any non-zero pixel
+//! is an edge point).
+//!
+//! Both follow OpenCV 4's definitions step by step so results are the same lines in
+//! the same order: the trigonometric tables in f32 (`sin`/`cos` of the f32 angle in
+//! f64, times 1/ρ), `r = round_half_even(x·cos + y·sin) + (numrho − 1)/2`, the
+//! angle count `floor(π/θ) + 1` less one when the last angle is π, local maxima with
+//! OpenCV's strict/non-strict neighbour tests, sorted by votes then index; the
+//! probabilistic transform visits points in the order of OpenCV's `cv::RNG` seeded
+//! with `(uint64)-1` and walks segments in 16-bit fixed point.
+//!
+//! The standard transform votes angle by angle (one accumulator row, which stays in
+//! L1, per pass over the points) instead of point by point, and computes the rows'
+//! indices in vectorised blocks; the counts are the same.
+
+use super::GrayImage;
+
+/// A line in normal form: `x·cos θ + y·sin θ = ρ` (pixels, radians 0..π).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PolarLine {
+    pub rho: f32,
+    pub theta: f32,
+    /// The accumulator votes.
+    pub votes: u32,
+}
+
+/// A segment from (x1, y1) to (x2, y2), pixels.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Segment {
+    pub x1: i32,
+    pub y1: i32,
+    pub x2: i32,
+    pub y2: i32,
+}
+
+fn numangle(theta: f64) -> usize {
+    let pi = std::f64::consts::PI;
+    let mut n = (pi / theta).floor() as i64 + 1;
+    if n > 1 && (pi - (n - 1) as f64 * theta).abs() < theta / 2.0 {
+        n -= 1;
+    }
+    n.max(1) as usize
+}
+
+fn numrho(width: u32, height: u32, rho: f64) -> usize {
+    ((((width + height) * 2 + 1) as f64 / rho).round_ties_even() as i64).max(1) as usize
+}
+
+/// (cos, sin) tables times 1/ρ, as OpenCV's `createTrigTable` (f32 angle steps).
+fn trig(n: usize, theta: f64, irho: f64) -> (Vec<f32>, Vec<f32>) {
+    let mut c = Vec::with_capacity(n);
+    let mut s = Vec::with_capacity(n);
+    let mut ang = 0.0f32;
+    for _ in 0..n {
+        s.push((f64::from(ang).sin() * irho) as f32);
+        c.push((f64::from(ang).cos() * irho) as f32);
+        ang += theta as f32;
+    }
+    (c, s)
+}
+
+fn valid(rho: f64, theta: f64) -> bool {
+    rho.is_finite()
+        && theta.is_finite()
+        && rho > 0.0
+        && theta > 0.0
+        && theta <= std::f64::consts::PI
+}
+
+/// `round_half_even(v)` for |v| < 2^22 (clamped there), by the float trick that
+/// vectorises (no libm call, no saturating cast): adding 1.5·2^23 leaves the
+/// rounded integer in the low mantissa bits, in the default rounding mode (to
+/// nearest, ties to even), exactly as OpenCV's `cvRound`.
+#[inline(always)]
+fn round_even(v: f32) -> i32 {
+    const MAGIC: f32 = 12_582_912.0; // 1.5 * 2^23
+    (v.clamp(-4_000_000.0, 4_000_000.0) + MAGIC).to_bits() as i32 - MAGIC.to_bits() as i32
+}
+
+super::multiversion! {
+    /// The accumulator indices of point (x, y) for every angle: row n's cell
+    /// `n * stride + round(x·cos n + y·sin n) + off`, clamped into the row.
+    fn indices(x: f32, y: f32, c: &[f32], s: &[f32], off: i32, stride: usize, out: &mut [u32]) {
+        let last = stride as i32 - 1;
+        for (n, ((o, &cn), &sn)) in out.iter_mut().zip(c).zip(s).enumerate() {
+            let r = (round_even(x * cn + y * sn) + off).clamp(0, last);
+            *o = (n * stride) as u32 + r as u32;
+        }
+    }
+}
+
+super::multiversion! {
+    /// Votes of every point for one angle into `row`. Runs of points along an edge
+    /// vote for the same cell, and increments of one address wait for each other:
+    /// four interleaved u16 counters per cell (`sub`, zero on entry and on return)
+    /// keep four in flight; they are folded into `row` at most every 4·65535 points.
+    fn vote_row(pts: (&[f32], &[f32]), cs: (f32, f32), off: i32, row: &mut [u32], sub: &mut [u16], buf: &mut [u32]) {
+        let ((xs, ys), (c, s)) = (pts, cs);
+        let last = row.len() as i32 - 1;
+        let fold = 4 * 65_535 / buf.len() * buf.len();
+        for (fx, fy) in xs.chunks(fold).zip(ys.chunks(fold)) {
+            for (cx, cy) in fx.chunks(buf.len()).zip(fy.chunks(buf.len())) {
+                let b = &mut buf[..cx.len()];
+                for (k, ((r, &x), &y)) in b.iter_mut().zip(cx).zip(cy).enumerate() {
+                    let cell = (round_even(x * c + y * s) + off).clamp(0, last);
+                    *r = cell as u32 * 4 + (k & 3) as u32;
+                }
+                for &r in b.iter() {
+                    sub[r as usize] += 1;
+                }
+            }
+            for (v, s4) in row.iter_mut().zip(sub.chunks_exact_mut(4)) {
+                *v += s4.iter().map(|&x| x as u32).sum::<u32>();
+                s4.fill(0);
+            }
+        }
+    }
+}
+
+/// OpenCV's `HoughLines(edges, rho, theta, threshold)` (srn = stn = 0,
+/// θ in 0..π): lines with more than `threshold` votes, most voted first.
+/// Bad steps (not positive, θ > π) give no lines.
+pub fn hough_lines(edges: &GrayImage, rho: f64, theta: f64, threshold: u32) -> Vec<PolarLine> {
+    if !valid(rho, theta) || edges.width == 0 || edges.height == 0 {
+        return Vec::new();
+    }
+    let (w, h) = (edges.width as usize, edges.height as usize);
+    let na = numangle(theta);
+    let nr = numrho(edges.width, edges.height, rho);
+    let (tc, ts) = trig(na, theta, 1.0 / rho);
+    let mut xs = Vec::new();
+    let mut ys = Vec::new();
+    for (i, row) in edges.data.chunks_exact(w).take(h).enumerate() {
+        for (j, &v) in row.iter().enumerate() {
+            if v != 0 {
+                xs.push(j as f32);
+                ys.push(i as f32);
+            }
+        }
+    }
+    // The accumulator with OpenCV's one-cell border: (na + 2) rows of nr + 2,
+    // filled angle by angle (one row, in L1, per pass over the points).
+    let stride = nr + 2;
+    let mut acc = vec![0u32; (na + 2) * stride];
+    let off = (nr as i32 - 1) / 2 + 1;
+    let mut sub = vec![0u16; stride * 4];
+    let mut buf = vec![0u32; 256];
+    for n in 0..na {
+        let row = &mut acc[(n + 1) * stride..(n + 2) * stride];
+        vote_row((&xs, &ys), (tc[n], ts[n]), off, row, &mut sub, &mut buf);
+    }
+    // Local maxima, row by row (the sort below fixes the order).
+    let mut found = Vec::new();
+    for n in 0..na {
+        let b0 = (n + 1) * stride;
+        let (up, row, down) = (
+            &acc[b0 - stride..b0],
+            &acc[b0..b0 + stride],
+            &acc[b0 + stride..b0 + 2 * stride],
+        );
+        for r in 1..=nr {
+            let v = row[r];
+            if v > threshold && v > row[r - 1] && v >= row[r + 1] && v > up[r] && v >= down[r] {
+                found.push(b0 + r);
+            }
+        }
+    }
+    found.sort_unstable_by(|&a, &b| acc[b].cmp(&acc[a]).then(a.cmp(&b)));
+    found
+        .iter()
+        .map(|&idx| {
+            let n = idx / stride - 1;
+            let r = idx - (n + 1) * stride - 1;
+            PolarLine {
+                rho: (r as f32 - (nr as f32 - 1.0) * 0.5) * rho as f32,
+                theta: n as f32 * theta as f32,
+                votes: acc[idx],
+            }
+        })
+        .collect()
+}
+
+/// OpenCV's `cv::RNG` (multiply-with-carry), for the same visiting order.
+struct CvRng(u64);
+
+impl CvRng {
+    fn next(&mut self) -> u32 {
+        self.0 = u64::from(self.0 as u32) * 4_164_903_690 + (self.0 >> 32);
+        self.0 as u32
+    }
+    fn uniform(&mut self, a: u32, b: u32) -> u32 {
+        if a == b { a } else { self.next() % (b - a) + a }
+    }
+}
+
+/// OpenCV's `HoughLinesP(edges, rho, theta, threshold, min_line_length,
+/// max_line_gap)`: segments, in the order found.
+pub fn hough_lines_p(
+    edges: &GrayImage,
+    rho: f64,
+    theta: f64,
+    threshold: u32,
+    min_line_length: i32,
+    max_line_gap: i32,
+) -> Vec<Segment> {
+    let mut lines = Vec::new();
+    if !valid(rho, theta) || edges.width == 0 || edges.height == 0 {
+        return lines;
+    }
+    let (width, height) = (edges.width as i32, edges.height as i32);
+    let (w, h) = (width as usize, height as usize);
+    let na = numangle(theta);
+    let nr = numrho(edges.width, edges.height, rho);
+    // OpenCV's HoughLinesP angle table: cos/sin of n·θ in f64.
+    let irho = 1.0 / rho;
+    let tc: Vec<f32> = (0..na)
+        .map(|n| ((n as f64 * theta).cos() * irho) as f32)
+        .collect();
+    let ts: Vec<f32> = (0..na)
+        .map(|n| ((n as f64 * theta).sin() * irho) as f32)
+        .collect();
+    let mut acc = vec![0i32; na * nr];
+    let mut mask = vec![0u8; w * h];
+    let mut nz: Vec<(i32, i32)> = Vec::new();
+    for (i, row) in edges.data.chunks_exact(w).take(h).enumerate() {
+        for (j, &v) in row.iter().enumerate() {
+            if v != 0 {
+                mask[i * w + j] = 1;
+                nz.push((j as i32, i as i32));
+            }
+        }
+    }
+    let half = (nr as i32 - 1) / 2;
+    let mut cells = vec![0u32; na];
+    let mut rng = CvRng(u64::MAX);
+    const SHIFT: i32 = 16;
+    let mut count = nz.len();
+    while count > 0 {
+        let idx = rng.uniform(0, count as u32) as usize;
+        let (j, i) = nz[idx];
+        nz[idx] = nz[count - 1];
+        count -= 1;
+        if mask[i as usize * w + j as usize] == 0 {
+            continue;
+        }
+        let mut max_val = threshold as i32 - 1;
+        let mut max_n = 0;
+        indices(j as f32, i as f32, &tc, &ts, half, nr, &mut cells);
+        for (n, &k) in cells.iter().enumerate() {
+            let a = &mut acc[k as usize];
+            *a += 1;
+            if max_val < *a {
+                max_val = *a;
+                max_n = n;
+            }
+        }
+        if max_val < threshold as i32 {
+            continue;
+        }
+        let a = -ts[max_n];
+        let b = tc[max_n];
+        let (mut x0, mut y0) = (j, i);
+        let (dx0, dy0, xflag);
+        if a.abs() > b.abs() {
+            xflag = true;
+            dx0 = if a > 0.0 { 1 } else { -1 };
+            dy0 = (b * (1 << SHIFT) as f32 / a.abs()).round_ties_even() as i32;
+            y0 = (y0 << SHIFT) + (1 << (SHIFT - 1));
+        } else {
+            xflag = false;
+            dy0 = if b > 0.0 { 1 } else { -1 };
+            dx0 = (a * (1 << SHIFT) as f32 / b.abs()).round_ties_even() as i32;
+            x0 = (x0 << SHIFT) + (1 << (SHIFT - 1));
+        }
+        let at = |x: i32, y: i32| {
+            if xflag {
+                (x, y >> SHIFT)
+            } else {
+                (x >> SHIFT, y)
+            }
+        };
+        let mut end = [(j, i); 2];
+        for (k, e) in end.iter_mut().enumerate() {
+            let (dx, dy) = if k > 0 { (-dx0, -dy0) } else { (dx0, dy0) };
+            let (mut x, mut y, mut gap) = (x0, y0, 0);
+            loop {
+                let (j1, i1) = at(x, y);
+                if j1 < 0 || j1 >= width || i1 < 0 || i1 >= height {
+                    break;
+                }
+                if mask[i1 as usize * w + j1 as usize] != 0 {
+                    gap = 0;
+                    *e = (j1, i1);
+                } else {
+                    gap += 1;
+                    if gap > max_line_gap {
+                        break;
+                    }
+                }
+                x += dx;
+                y += dy;
+            }
+        }
+        let good = (end[1].0 - end[0].0).abs() >= min_line_length
+            || (end[1].1 - end[0].1).abs() >= min_line_length;
+        for (k, e) in end.iter().enumerate() {
+            let (dx, dy) = if k > 0 { (-dx0, -dy0) } else { (dx0, dy0) };
+            let (mut x, mut y) = (x0, y0);
+            loop {
+                let (j1, i1) = at(x, y);
+                // The walk ends at the segment's end, found inside the image above.
+                if j1 < 0 || j1 >= width || i1 < 0 || i1 >= height {
+                    break;
+                }
+                let m = &mut mask[i1 as usize * w + j1 as usize];
+                if *m != 0 {
+                    if good {
+                        indices(j1 as f32, i1 as f32, &tc, &ts, half, nr, &mut cells);
+                        for &k in &cells {
+                            acc[k as usize] -= 1;
+                        }
+                    }
+                    *m = 0;
+                }
+                if (j1, i1) == *e {
+                    break;
+                }
+                x += dx;
+                y += dy;
+            }
+        }
+        if good {
+            lines.push(Segment {
+                x1: end[0].0,
+                y1: end[0].1,
+                x2: end[1].0,
+                y2: end[1].1,
+            });
+        }
+    }
+    lines
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn image_with(points: impl Iterator<Item = (u32, u32)>, w: u32, h: u32) -> GrayImage {
+        let mut g = GrayImage::new(w, h);
+        for (x, y) in points {
+            g.data[(y * w + x) as usize] = 255;
+        }
+        g
+    }
+
+    #[test]
+    fn round_even_is_round_half_even() {
+        for v in [
+            0.5f32, 1.5, 2.5, -0.5, -1.5, -2.5, 3.49, -3.51, 1234.5, -99.25, 0.0, 7.0,
+        ] {
+            assert_eq!(round_even(v), v.round_ties_even() as i32, "{v}");
+        }
+    }
+
+    #[test]
+    fn opencv_angle_and_rho_counts() {
+        assert_eq!(numangle(std::f64::consts::PI / 180.0), 180);
+        assert_eq!(numrho(640, 480, 1.0), 2241);
+    }
+
+    #[test]
+    fn a_vertical_and_a_horizontal_line() {
+        // x = 40 (θ = 0, ρ = 40) and y = 30 (θ = π/2, ρ = 30), 100 points each.
+        let pts = (0..100).map(|y| (40, y)).chain((0..100).map(|x| (x, 30)));
+        let g = image_with(pts, 120, 100);
+        let lines = hough_lines(&g, 1.0, std::f64::consts::PI / 180.0, 80);
+        assert!(lines.len() >= 2, "{lines:?}");
+        let has = |rho: f32, theta: f32| {
+            lines
+                .iter()
+                .any(|l| (l.rho - rho).abs() < 0.6 && (l.theta - theta).abs() < 0.02)
+        };
+        assert!(
+            has(40.0, 0.0) && has(30.0, std::f32::consts::FRAC_PI_2),
+            "{lines:?}"
+        );
+        let segs = hough_lines_p(&g, 1.0, std::f64::consts::PI / 180.0, 50, 50, 3);
+        assert!(
+            segs.iter()
+                .any(|s| s.x1 == 40 && s.x2 == 40 && (s.y1 - s.y2).abs() >= 95),
+            "{segs:?}"
+        );
+        assert!(
+            segs.iter()
+                .any(|s| s.y1 == 30 && s.y2 == 30 && (s.x1 - s.x2).abs() >= 95),
+            "{segs:?}"
+        );
+    }
+
+    #[test]
+    fn bad_steps_and_empty_images_give_nothing() {
+        let g = image_with([(1, 1)].into_iter(), 4, 4);
+        assert!(hough_lines(&g, 0.0, 0.1, 0).is_empty());
+        assert!(hough_lines(&g, 1.0, f64::NAN, 0).is_empty());
+        assert!(hough_lines_p(&g, -1.0, 0.1, 0, 1, 1).is_empty());
+        assert!(hough_lines(&GrayImage::new(0, 0), 1.0, 0.1, 0).is_empty());
+    }
+
+    #[test]
+    fn cv_rng_matches_opencv_first_values() {
+        // cv::RNG rng((uint64)-1): state = 0xffffffff * 4164903690 + 0xffffffff.
+        let mut r = CvRng(u64::MAX);
+        let s = 0xffff_ffffu64 * 4_164_903_690 + 0xffff_ffff;
+        assert_eq!(r.next(), s as u32);
+    }
+}

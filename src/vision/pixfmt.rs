@@ -1,0 +1,750 @@
+//! Camera pixel formats → BGR (the layout of every jderobot [`Image`]): what the
+//! firewire, video4linux2 and gige drivers get from their devices.
+//!
+//! | source | function | equal to |
+//! |---|---|---|
+//! | YUYV / UYVY 4:2:2, video range (V4L2, GigE) | [`yuv422_to_bgr`] with [`YuvMatrix::Bt601`] | OpenCV `cvtColor(COLOR_YUV2BGR_YUYV / _UYVY)` (same fixed point) |
+//! | YUYV / UYVY 4:2:2, IIDC (FireWire) | [`yuv422_to_bgr`] with [`YuvMatrix::Iidc`] | libdc1394 `dc1394_convert_to_RGB8` (then R↔B) |
+//! | YUV 4:1:1 (UYYVYY), 4:4:4 (UYV), IIDC | [`yuv411_to_bgr`], [`yuv444_to_bgr`] | libdc1394 `dc1394_convert_to_RGB8` |
+//! | YUV 4:2:0 planar (I420 / YV12) | [`yuv420_to_bgr`] | OpenCV `COLOR_YUV2BGR_I420` (same formula, nearest chroma) |
+//! | Bayer RGGB, GBRG, GRBG, BGGR (8 bit) | [`bayer_to_bgr`] | libdc1394 `dc1394_bayer_decoding_8bit(.., DC1394_BAYER_METHOD_BILINEAR)` (borders black) |
+//! | RGB24 / BGR24 | [`rgb_to_bgr`], `copy_from_slice` | — |
+//! | GREY / MONO8 | [`grey_to_bgr`] | — |
+//!
+//! Every function takes the source bytes, the size in pixels and the BGR
+//! destination (`w*h*3` bytes), and checks the lengths: a short source (a
+//! truncated frame) is an error, never a panic or a read past the end. Sizes are
+//! in pixels; strides are `w*bytes_per_pixel` (no row padding) unless the function
+//! takes a `stride`.
+//!
+//! The tests in `tests/cameras_dev.rs` check the IIDC and Bayer paths against the
+//! system's libdc1394 byte for byte; `scripts/compare_opencv.py` compares the
+//! BT.601 path and the Bayer path with OpenCV (time and agreement).
+//!
+//! [`Image`]: crate::interfaces::Image
+
+use thiserror::Error;
+
+/// A conversion that could not run.
+#[derive(Debug, Error, PartialEq, Eq)]
+pub enum PixError {
+    #[error("{format} frame of {w}x{h} needs {need} bytes, got {got} (truncated frame?)")]
+    Short {
+        format: &'static str,
+        w: u32,
+        h: u32,
+        need: usize,
+        got: usize,
+    },
+    #[error("{format}: size {w}x{h} is not allowed ({why})")]
+    Size {
+        format: &'static str,
+        w: u32,
+        h: u32,
+        why: &'static str,
+    },
+}
+
+/// Which YUV→RGB formula.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum YuvMatrix {
+    /// ITU-R BT.601, video range (Y 16..235): V4L2's default for YUYV and what
+    /// OpenCV's `COLOR_YUV2BGR_*` computes, bit for bit.
+    Bt601,
+    /// IIDC (FireWire) full range, as libdc1394 converts: R = Y + 1.402 V,
+    /// G = Y − 0.344 U − 0.714 V, B = Y + 1.772 U in 10-bit fixed point.
+    Iidc,
+}
+
+/// Byte order of packed 4:2:2.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Yuv422Order {
+    /// Y0 U Y1 V (V4L2 `YUYV`, GenICam `YUV422_YUYV_Packed`).
+    Yuyv,
+    /// U Y0 V Y1 (IIDC's order, V4L2 `UYVY`, GenICam `YUV422Packed`).
+    Uyvy,
+}
+
+/// A Bayer colour filter, named by its top-left 2x2 cell read row by row.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Bayer {
+    Rggb,
+    Gbrg,
+    Grbg,
+    Bggr,
+}
+
+impl Bayer {
+    /// From its name (`RGGB`, `rggb`, `BayerRG8`-style names are the gige driver's business).
+    pub fn parse(s: &str) -> Option<Bayer> {
+        Some(match s.to_ascii_uppercase().as_str() {
+            "RGGB" => Bayer::Rggb,
+            "GBRG" => Bayer::Gbrg,
+            "GRBG" => Bayer::Grbg,
+            "BGGR" => Bayer::Bggr,
+            _ => return None,
+        })
+    }
+}
+
+fn check(
+    format: &'static str,
+    src: usize,
+    need: usize,
+    w: u32,
+    h: u32,
+    dst: &mut Vec<u8>,
+) -> Result<(), PixError> {
+    if src < need {
+        return Err(PixError::Short {
+            format,
+            w,
+            h,
+            need,
+            got: src,
+        });
+    }
+    dst.resize(w as usize * h as usize * 3, 0);
+    Ok(())
+}
+
+// OpenCV's BT.601 fixed point (modules/imgproc/src/color_yuv.simd.hpp).
+const CY: i32 = 1_220_542;
+const CUB: i32 = 2_116_026;
+const CUG: i32 = -409_993;
+const CVG: i32 = -852_492;
+const CVR: i32 = 1_673_527;
+const SHIFT: i32 = 20;
+const HALF: i32 = 1 << (SHIFT - 1);
+
+#[inline(always)]
+fn sat(v: i32) -> u8 {
+    v.clamp(0, 255) as u8
+}
+
+#[inline(always)]
+fn put_iidc(y: u8, u: i32, v: i32, out: &mut [u8]) {
+    let y = y as i32;
+    out[2] = sat(y + ((v * 1436) >> 10));
+    out[1] = sat(y - ((u * 352 + v * 731) >> 10));
+    out[0] = sat(y + ((u * 1814) >> 10));
+}
+
+/// Packed 4:2:2 (2 bytes per pixel) → BGR. `w` must be even.
+pub fn yuv422_to_bgr(
+    src: &[u8],
+    w: u32,
+    h: u32,
+    order: Yuv422Order,
+    matrix: YuvMatrix,
+    dst: &mut Vec<u8>,
+) -> Result<(), PixError> {
+    if !w.is_multiple_of(2) {
+        return Err(PixError::Size {
+            format: "YUV 4:2:2",
+            w,
+            h,
+            why: "the width must be even",
+        });
+    }
+    let n = w as usize * h as usize;
+    check("YUV 4:2:2", src.len(), n * 2, w, h, dst)?;
+    if n == 0 {
+        return Ok(());
+    }
+    let rows = src[..n * 2]
+        .chunks_exact(w as usize * 2)
+        .zip(dst.chunks_exact_mut(w as usize * 3));
+    let f = match (order, matrix) {
+        (Yuv422Order::Yuyv, YuvMatrix::Bt601) => row_422::<true, false>,
+        (Yuv422Order::Uyvy, YuvMatrix::Bt601) => row_422::<false, false>,
+        (Yuv422Order::Yuyv, YuvMatrix::Iidc) => row_422::<true, true>,
+        (Yuv422Order::Uyvy, YuvMatrix::Iidc) => row_422::<false, true>,
+    };
+    for (s, d) in rows {
+        f(s, d);
+    }
+    Ok(())
+}
+
+/// One row of packed 4:2:2: dispatches to the AVX2 build when the CPU has it.
+fn row_422<const YUYV: bool, const IIDC: bool>(src: &[u8], dst: &mut [u8]) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU has AVX2 (checked just above).
+        return unsafe { row_422_avx2::<YUYV, IIDC>(src, dst) };
+    }
+    row_422_portable::<YUYV, IIDC>(src, dst)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn row_422_avx2<const YUYV: bool, const IIDC: bool>(src: &[u8], dst: &mut [u8]) {
+    row_422_portable::<YUYV, IIDC>(src, dst)
+}
+
+/// Pixels per block of the 4:2:2 rows: planar arrays of this length vectorise.
+const YUV_BLOCK: usize = 128;
+
+/// One row, in blocks of [`YUV_BLOCK`] pixels: de-interleave Y, U, V into
+/// per-pixel arrays (U and V repeated for both pixels of a pair), compute B, G, R
+/// planes, interleave them; the tail pair by pair with the same arithmetic.
+#[inline(always)]
+fn row_422_portable<const YUYV: bool, const IIDC: bool>(src: &[u8], dst: &mut [u8]) {
+    const N: usize = YUV_BLOCK;
+    let (iy0, iu, iy1, iv) = if YUYV { (0, 1, 2, 3) } else { (1, 0, 3, 2) };
+    let mut sc = src.chunks_exact(N * 2);
+    let mut dc = dst.chunks_exact_mut(N * 3);
+    for (s, d) in (&mut sc).zip(&mut dc) {
+        // De-interleave as bytes (cheap shuffles), widen in the arithmetic loop.
+        let mut y = [0u8; N];
+        let mut u = [0u8; N];
+        let mut v = [0u8; N];
+        for k in 0..N / 2 {
+            y[2 * k] = s[4 * k + iy0];
+            y[2 * k + 1] = s[4 * k + iy1];
+            u[2 * k] = s[4 * k + iu];
+            u[2 * k + 1] = s[4 * k + iu];
+            v[2 * k] = s[4 * k + iv];
+            v[2 * k + 1] = s[4 * k + iv];
+        }
+        yuv_block::<IIDC>(&y, &u, &v, d);
+    }
+    for (s, d) in sc
+        .remainder()
+        .chunks_exact(4)
+        .zip(dc.into_remainder().chunks_exact_mut(6))
+    {
+        let (u, v) = (s[iu] as i32 - 128, s[iv] as i32 - 128);
+        for (j, iy) in [iy0, iy1].into_iter().enumerate() {
+            let px = if IIDC {
+                iidc(s[iy] as i32, u, v)
+            } else {
+                bt601(s[iy] as i32, u, v)
+            };
+            d[3 * j..3 * j + 3].copy_from_slice(&px);
+        }
+    }
+}
+
+/// B, G, R of one block of per-pixel Y, U, V bytes, interleaved into `d`
+/// (`3 * YUV_BLOCK` bytes).
+#[inline(always)]
+fn yuv_block<const IIDC: bool>(
+    y: &[u8; YUV_BLOCK],
+    u: &[u8; YUV_BLOCK],
+    v: &[u8; YUV_BLOCK],
+    d: &mut [u8],
+) {
+    const N: usize = YUV_BLOCK;
+    let mut b = [0u8; N];
+    let mut g = [0u8; N];
+    let mut r = [0u8; N];
+    for k in 0..N {
+        let (yy, uu, vv) = (y[k] as i32, u[k] as i32 - 128, v[k] as i32 - 128);
+        let px = if IIDC {
+            iidc(yy, uu, vv)
+        } else {
+            bt601(yy, uu, vv)
+        };
+        b[k] = px[0];
+        g[k] = px[1];
+        r[k] = px[2];
+    }
+    let d = &mut d[..3 * N];
+    for k in 0..N {
+        d[3 * k] = b[k];
+        d[3 * k + 1] = g[k];
+        d[3 * k + 2] = r[k];
+    }
+}
+
+/// One row of IIDC 4:1:1 (U Y0 Y1 V Y2 Y3), blocks as [`yuv_block`].
+fn row_411(src: &[u8], dst: &mut [u8]) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU has AVX2 (checked just above).
+        return unsafe { row_411_avx2(src, dst) };
+    }
+    row_411_portable(src, dst)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn row_411_avx2(src: &[u8], dst: &mut [u8]) {
+    row_411_portable(src, dst)
+}
+
+#[inline(always)]
+fn row_411_portable(src: &[u8], dst: &mut [u8]) {
+    const N: usize = YUV_BLOCK;
+    let mut sc = src.chunks_exact(N * 3 / 2);
+    let mut dc = dst.chunks_exact_mut(N * 3);
+    for (s, d) in (&mut sc).zip(&mut dc) {
+        let (mut y, mut u, mut v) = ([0u8; N], [0u8; N], [0u8; N]);
+        for k in 0..N / 4 {
+            let q = &s[6 * k..6 * k + 6];
+            y[4 * k..4 * k + 4].copy_from_slice(&[q[1], q[2], q[4], q[5]]);
+            u[4 * k..4 * k + 4].fill(q[0]);
+            v[4 * k..4 * k + 4].fill(q[3]);
+        }
+        yuv_block::<true>(&y, &u, &v, d);
+    }
+    for (s, d) in sc
+        .remainder()
+        .chunks_exact(6)
+        .zip(dc.into_remainder().chunks_exact_mut(12))
+    {
+        let (u, v) = (s[0] as i32 - 128, s[3] as i32 - 128);
+        for (j, iy) in [1, 2, 4, 5].into_iter().enumerate() {
+            d[3 * j..3 * j + 3].copy_from_slice(&iidc(s[iy] as i32, u, v));
+        }
+    }
+}
+
+/// One row of planar 4:2:0: the row's Y and its (half-width) U and V rows.
+fn row_420(y: &[u8], u: &[u8], v: &[u8], dst: &mut [u8]) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU has AVX2 (checked just above).
+        return unsafe { row_420_avx2(y, u, v, dst) };
+    }
+    row_420_portable(y, u, v, dst)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn row_420_avx2(y: &[u8], u: &[u8], v: &[u8], dst: &mut [u8]) {
+    row_420_portable(y, u, v, dst)
+}
+
+#[inline(always)]
+fn row_420_portable(yr: &[u8], ur: &[u8], vr: &[u8], dst: &mut [u8]) {
+    const N: usize = YUV_BLOCK;
+    let w = yr.len();
+    let mut x = 0;
+    while x + N <= w {
+        let mut y = [0u8; N];
+        y.copy_from_slice(&yr[x..x + N]);
+        let (mut u, mut v) = ([0u8; N], [0u8; N]);
+        let (uh, vh) = (&ur[x / 2..x / 2 + N / 2], &vr[x / 2..x / 2 + N / 2]);
+        for k in 0..N / 2 {
+            u[2 * k] = uh[k];
+            u[2 * k + 1] = uh[k];
+            v[2 * k] = vh[k];
+            v[2 * k + 1] = vh[k];
+        }
+        yuv_block::<false>(&y, &u, &v, &mut dst[3 * x..3 * (x + N)]);
+        x += N;
+    }
+    for x in x..w {
+        let px = bt601(yr[x] as i32, ur[x / 2] as i32 - 128, vr[x / 2] as i32 - 128);
+        dst[3 * x..3 * x + 3].copy_from_slice(&px);
+    }
+}
+
+/// BT.601 video range, OpenCV's fixed point: (b, g, r) of Y and centred U, V.
+#[inline(always)]
+fn bt601(y: i32, u: i32, v: i32) -> [u8; 3] {
+    let y = (y - 16).max(0) * CY + HALF;
+    [
+        sat((y + CUB * u) >> SHIFT),
+        sat((y + CVG * v + CUG * u) >> SHIFT),
+        sat((y + CVR * v) >> SHIFT),
+    ]
+}
+
+/// libdc1394's YUV2RGB: (b, g, r) of Y and centred U, V.
+#[inline(always)]
+fn iidc(y: i32, u: i32, v: i32) -> [u8; 3] {
+    [
+        sat(y + ((u * 1814) >> 10)),
+        sat(y - ((u * 352 + v * 731) >> 10)),
+        sat(y + ((v * 1436) >> 10)),
+    ]
+}
+
+/// IIDC YUV 4:1:1 (U Y0 Y1 V Y2 Y3, 6 bytes per 4 pixels) → BGR, libdc1394's formula.
+/// `w` must be a multiple of 4.
+pub fn yuv411_to_bgr(src: &[u8], w: u32, h: u32, dst: &mut Vec<u8>) -> Result<(), PixError> {
+    if !w.is_multiple_of(4) {
+        return Err(PixError::Size {
+            format: "YUV 4:1:1",
+            w,
+            h,
+            why: "the width must be a multiple of 4",
+        });
+    }
+    let n = w as usize * h as usize;
+    check("YUV 4:1:1", src.len(), n * 3 / 2, w, h, dst)?;
+    if n == 0 {
+        return Ok(());
+    }
+    let rows = src[..n * 3 / 2]
+        .chunks_exact(w as usize * 3 / 2)
+        .zip(dst.chunks_exact_mut(w as usize * 3));
+    for (s, d) in rows {
+        row_411(s, d);
+    }
+    Ok(())
+}
+
+/// IIDC YUV 4:4:4 (U Y V per pixel) → BGR, libdc1394's formula.
+pub fn yuv444_to_bgr(src: &[u8], w: u32, h: u32, dst: &mut Vec<u8>) -> Result<(), PixError> {
+    let n = w as usize * h as usize;
+    check("YUV 4:4:4", src.len(), n * 3, w, h, dst)?;
+    for (s, d) in src[..n * 3].chunks_exact(3).zip(dst.chunks_exact_mut(3)) {
+        put_iidc(s[1], s[0] as i32 - 128, s[2] as i32 - 128, d);
+    }
+    Ok(())
+}
+
+/// Planar 4:2:0 (Y plane, then U and V planes at half size: I420; `swap_uv` for
+/// YV12) → BGR with BT.601 video range. `w` and `h` must be even.
+pub fn yuv420_to_bgr(
+    src: &[u8],
+    w: u32,
+    h: u32,
+    swap_uv: bool,
+    dst: &mut Vec<u8>,
+) -> Result<(), PixError> {
+    if !w.is_multiple_of(2) || !h.is_multiple_of(2) {
+        return Err(PixError::Size {
+            format: "YUV 4:2:0",
+            w,
+            h,
+            why: "the width and height must be even",
+        });
+    }
+    let (wu, hu) = (w as usize, h as usize);
+    let n = wu * hu;
+    let q = n / 4;
+    check("YUV 4:2:0", src.len(), n + 2 * q, w, h, dst)?;
+    let (yp, rest) = src.split_at(n);
+    let (mut up, mut vp) = (&rest[..q], &rest[q..2 * q]);
+    if swap_uv {
+        std::mem::swap(&mut up, &mut vp);
+    }
+    for row in 0..hu {
+        let yr = &yp[row * wu..(row + 1) * wu];
+        let ur = &up[(row / 2) * (wu / 2)..(row / 2 + 1) * (wu / 2)];
+        let vr = &vp[(row / 2) * (wu / 2)..(row / 2 + 1) * (wu / 2)];
+        row_420(yr, ur, vr, &mut dst[row * wu * 3..(row + 1) * wu * 3]);
+    }
+    Ok(())
+}
+
+/// RGB24 → BGR (swaps the outer channels).
+pub fn rgb_to_bgr(src: &[u8], w: u32, h: u32, dst: &mut Vec<u8>) -> Result<(), PixError> {
+    let n = w as usize * h as usize;
+    check("RGB24", src.len(), n * 3, w, h, dst)?;
+    for (s, d) in src[..n * 3].chunks_exact(3).zip(dst.chunks_exact_mut(3)) {
+        d[0] = s[2];
+        d[1] = s[1];
+        d[2] = s[0];
+    }
+    Ok(())
+}
+
+/// BGR24 → BGR (a copy, with the length check).
+pub fn bgr_to_bgr(src: &[u8], w: u32, h: u32, dst: &mut Vec<u8>) -> Result<(), PixError> {
+    let n = w as usize * h as usize * 3;
+    check("BGR24", src.len(), n, w, h, dst)?;
+    dst.copy_from_slice(&src[..n]);
+    Ok(())
+}
+
+/// 8-bit grey → BGR (the same value in the three channels).
+pub fn grey_to_bgr(src: &[u8], w: u32, h: u32, dst: &mut Vec<u8>) -> Result<(), PixError> {
+    let n = w as usize * h as usize;
+    check("GREY", src.len(), n, w, h, dst)?;
+    for (s, d) in src[..n].iter().zip(dst.chunks_exact_mut(3)) {
+        d[0] = *s;
+        d[1] = *s;
+        d[2] = *s;
+    }
+    Ok(())
+}
+
+/// 8-bit Bayer mosaic → BGR by bilinear interpolation, libdc1394's
+/// `DC1394_BAYER_METHOD_BILINEAR` to the byte: at a red or blue site the other
+/// of the two is the rounded mean of the 4 diagonal neighbours and green the
+/// rounded mean of the 4 direct ones; at a green site red and blue are the rounded
+/// means of the 2 horizontal or 2 vertical neighbours. The 1-pixel border is black
+/// (libdc1394 clears it). `w` and `h` must be at least 3.
+pub fn bayer_to_bgr(
+    src: &[u8],
+    w: u32,
+    h: u32,
+    pattern: Bayer,
+    dst: &mut Vec<u8>,
+) -> Result<(), PixError> {
+    if w < 3 || h < 3 {
+        return Err(PixError::Size {
+            format: "Bayer",
+            w,
+            h,
+            why: "it must be at least 3x3",
+        });
+    }
+    let (wu, hu) = (w as usize, h as usize);
+    check("Bayer", src.len(), wu * hu, w, h, dst)?;
+    // Top and bottom rows black.
+    dst[..wu * 3].fill(0);
+    dst[(hu - 1) * wu * 3..].fill(0);
+    // The colour of the top-left site and its right neighbour (B 0, G 1, R 2).
+    let cell = match pattern {
+        Bayer::Rggb => [[2, 1], [1, 0]],
+        Bayer::Gbrg => [[1, 0], [2, 1]],
+        Bayer::Grbg => [[1, 2], [0, 1]],
+        Bayer::Bggr => [[0, 1], [1, 2]],
+    };
+    for y in 1..hu - 1 {
+        let c = cell[y & 1];
+        let green_first = c[0] == 1;
+        let red = c[0] == 2 || c[1] == 2;
+        let up = &src[(y - 1) * wu..y * wu];
+        let mid = &src[y * wu..(y + 1) * wu];
+        let dn = &src[(y + 1) * wu..(y + 2) * wu];
+        let out = &mut dst[y * wu * 3..(y + 1) * wu * 3];
+        out[..3].fill(0);
+        out[(wu - 1) * 3..].fill(0);
+        let f = match (green_first, red) {
+            (false, false) => bayer_row::<false, false>,
+            (false, true) => bayer_row::<false, true>,
+            (true, false) => bayer_row::<true, false>,
+            (true, true) => bayer_row::<true, true>,
+        };
+        f(up, mid, dn, out);
+    }
+    Ok(())
+}
+
+/// One Bayer row: dispatches to the AVX2 build when the CPU has it.
+/// `GF`: the row's even columns are green; `RED`: its other colour is red.
+fn bayer_row<const GF: bool, const RED: bool>(up: &[u8], mid: &[u8], dn: &[u8], out: &mut [u8]) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU has AVX2 (checked just above).
+        return unsafe { bayer_row_avx2::<GF, RED>(up, mid, dn, out) };
+    }
+    bayer_row_portable::<GF, RED>(up, mid, dn, out)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn bayer_row_avx2<const GF: bool, const RED: bool>(
+    up: &[u8],
+    mid: &[u8],
+    dn: &[u8],
+    out: &mut [u8],
+) {
+    bayer_row_portable::<GF, RED>(up, mid, dn, out)
+}
+
+/// Pixels per block of a Bayer row.
+const BAYER_BLOCK: usize = 64;
+
+/// Interior pixels 1..w-1 of one row, in blocks: every pixel computes the five
+/// candidates (centre, 4-cross mean, 4-diagonal mean, 2-horizontal mean,
+/// 2-vertical mean) and a mask picks per site (green or not), so the block
+/// vectorises; then B, G, R are interleaved. The tail pixel by pixel.
+#[inline(always)]
+fn bayer_row_portable<const GF: bool, const RED: bool>(
+    up: &[u8],
+    mid: &[u8],
+    dn: &[u8],
+    out: &mut [u8],
+) {
+    const N: usize = BAYER_BLOCK;
+    let w = mid.len();
+    // nc: channel of the row's non-green colour; oc: the colour of the rows above/below.
+    let (nc, oc) = if RED { (2, 0) } else { (0, 2) };
+    let mut x0 = 1;
+    while x0 + N < w {
+        let u = &up[x0 - 1..x0 + N + 1];
+        let m = &mid[x0 - 1..x0 + N + 1];
+        let d = &dn[x0 - 1..x0 + N + 1];
+        let par0 = x0 & 1;
+        let mut ch = [[0u8; N]; 3];
+        for k in 0..N {
+            let (ul, uc, ur) = (u[k] as u16, u[k + 1] as u16, u[k + 2] as u16);
+            let (ml, mc, mr) = (m[k] as u16, m[k + 1] as u16, m[k + 2] as u16);
+            let (dl, dc, dr) = (d[k] as u16, d[k + 1] as u16, d[k + 2] as u16);
+            let center = mc as u8;
+            let cross = ((uc + dc + ml + mr + 2) >> 2) as u8;
+            let diag = ((ul + ur + dl + dr + 2) >> 2) as u8;
+            let hor = ((ml + mr + 1) >> 1) as u8;
+            let ver = ((uc + dc + 1) >> 1) as u8;
+            // 0xFF at green sites.
+            let gm = 0u8.wrapping_sub((((k + par0) & 1 == 0) == GF) as u8);
+            let pick = |at_green: u8, other: u8| (at_green & gm) | (other & !gm);
+            ch[1][k] = pick(center, cross);
+            ch[nc][k] = pick(hor, center);
+            ch[oc][k] = pick(ver, diag);
+        }
+        let o = &mut out[x0 * 3..(x0 + N) * 3];
+        for k in 0..N {
+            o[3 * k] = ch[0][k];
+            o[3 * k + 1] = ch[1][k];
+            o[3 * k + 2] = ch[2][k];
+        }
+        x0 += N;
+    }
+    for x in x0..w - 1 {
+        let (ul, uc, ur) = (up[x - 1] as u16, up[x] as u16, up[x + 1] as u16);
+        let (ml, mc, mr) = (mid[x - 1] as u16, mid[x] as u16, mid[x + 1] as u16);
+        let (dl, dc, dr) = (dn[x - 1] as u16, dn[x] as u16, dn[x + 1] as u16);
+        let o = &mut out[x * 3..x * 3 + 3];
+        if ((x & 1) == 0) == GF {
+            o[1] = mc as u8;
+            o[nc] = ((ml + mr + 1) >> 1) as u8;
+            o[oc] = ((uc + dc + 1) >> 1) as u8;
+        } else {
+            o[nc] = mc as u8;
+            o[1] = ((uc + dc + ml + mr + 2) >> 2) as u8;
+            o[oc] = ((ul + ur + dl + dr + 2) >> 2) as u8;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn noise(n: usize) -> Vec<u8> {
+        let mut s = 0x9e37_79b9u32;
+        (0..n)
+            .map(|_| {
+                s ^= s << 13;
+                s ^= s >> 17;
+                s ^= s << 5;
+                (s >> 11) as u8
+            })
+            .collect()
+    }
+
+    /// The portable build and the dispatched (AVX2 where the CPU has it) agree.
+    #[test]
+    fn portable_and_dispatched_rows_agree() {
+        let w = 3 * YUV_BLOCK + 10;
+        let src = noise(w * 2);
+        let (mut a, mut b) = (vec![0; w * 3], vec![0; w * 3]);
+        row_422::<true, false>(&src, &mut a);
+        row_422_portable::<true, false>(&src, &mut b);
+        assert_eq!(a, b);
+        row_422::<false, true>(&src, &mut a);
+        row_422_portable::<false, true>(&src, &mut b);
+        assert_eq!(a, b);
+        let w = 3 * BAYER_BLOCK + 7;
+        let src = noise(w * 3);
+        let (up, mid, dn) = (&src[..w], &src[w..2 * w], &src[2 * w..]);
+        bayer_row::<true, false>(up, mid, dn, &mut a[..w * 3]);
+        bayer_row_portable::<true, false>(up, mid, dn, &mut b[..w * 3]);
+        assert_eq!(a[..w * 3], b[..w * 3]);
+    }
+
+    /// Planar 4:2:0 in blocks equals the per-pixel formula with nearest chroma.
+    #[test]
+    fn yuv420_blocks_equal_per_pixel() {
+        let (w, h) = (2 * YUV_BLOCK + 6, 4);
+        let src = noise(w * h * 3 / 2);
+        let mut got = Vec::new();
+        yuv420_to_bgr(&src, w as u32, h as u32, true, &mut got).unwrap();
+        let (yp, up, vp) = (
+            &src[..w * h],
+            &src[w * h + w * h / 4..w * h + w * h / 2],
+            &src[w * h..w * h + w * h / 4],
+        );
+        for y in 0..h {
+            for x in 0..w {
+                let c = (y / 2) * (w / 2) + x / 2;
+                let want = bt601(yp[y * w + x] as i32, up[c] as i32 - 128, vp[c] as i32 - 128);
+                assert_eq!(got[(y * w + x) * 3..(y * w + x) * 3 + 3], want, "{x},{y}");
+            }
+        }
+    }
+
+    #[test]
+    fn short_frames_are_errors() {
+        let mut d = Vec::new();
+        let e = yuv422_to_bgr(&[0; 10], 4, 2, Yuv422Order::Yuyv, YuvMatrix::Bt601, &mut d);
+        assert!(matches!(
+            e,
+            Err(PixError::Short {
+                need: 16,
+                got: 10,
+                ..
+            })
+        ));
+        assert!(bayer_to_bgr(&[0; 8], 3, 3, Bayer::Rggb, &mut d).is_err());
+        assert!(grey_to_bgr(&[0; 3], 2, 2, &mut d).is_err());
+        assert!(yuv420_to_bgr(&[0; 5], 2, 2, false, &mut d).is_err());
+    }
+
+    #[test]
+    fn grey_and_rgb() {
+        let mut d = Vec::new();
+        grey_to_bgr(&[7, 9], 2, 1, &mut d).unwrap();
+        assert_eq!(d, [7, 7, 7, 9, 9, 9]);
+        rgb_to_bgr(&[1, 2, 3], 1, 1, &mut d).unwrap();
+        assert_eq!(d, [3, 2, 1]);
+    }
+
+    #[test]
+    fn bt601_black_white_and_red() {
+        let mut d = Vec::new();
+        // Y=16 black, Y=235 white, neutral chroma.
+        yuv422_to_bgr(
+            &[16, 128, 235, 128],
+            2,
+            1,
+            Yuv422Order::Yuyv,
+            YuvMatrix::Bt601,
+            &mut d,
+        )
+        .unwrap();
+        assert_eq!(d, [0, 0, 0, 255, 255, 255]);
+        // BT.601 red (Y 81, U 90, V 240) → close to (0, 0, 255).
+        yuv422_to_bgr(
+            &[90, 81, 240, 81],
+            2,
+            1,
+            Yuv422Order::Uyvy,
+            YuvMatrix::Bt601,
+            &mut d,
+        )
+        .unwrap();
+        assert!(d[2] >= 250 && d[1] <= 3 && d[0] <= 3, "{d:?}");
+    }
+
+    #[test]
+    fn bayer_flat_field_is_flat_inside() {
+        // A mosaic of a uniform colour (R 200, G 100, B 50) in each pattern.
+        for pat in [Bayer::Rggb, Bayer::Gbrg, Bayer::Grbg, Bayer::Bggr] {
+            let (w, h) = (8usize, 6usize);
+            let names = match pat {
+                Bayer::Rggb => [[2, 1], [1, 0]],
+                Bayer::Gbrg => [[1, 0], [2, 1]],
+                Bayer::Grbg => [[1, 2], [0, 1]],
+                Bayer::Bggr => [[0, 1], [1, 2]],
+            };
+            let val = [50u8, 100, 200];
+            let src: Vec<u8> = (0..w * h)
+                .map(|i| val[names[(i / w) % 2][(i % w) % 2]])
+                .collect();
+            let mut d = Vec::new();
+            bayer_to_bgr(&src, w as u32, h as u32, pat, &mut d).unwrap();
+            for y in 1..h - 1 {
+                for x in 1..w - 1 {
+                    assert_eq!(
+                        &d[(y * w + x) * 3..(y * w + x) * 3 + 3],
+                        &val,
+                        "{pat:?} {x},{y}"
+                    );
+                }
+            }
+            assert_eq!(&d[..3], &[0, 0, 0]);
+        }
+    }
+}

@@ -1,0 +1,399 @@
+//! networkserver under bad clients, over real loopback sockets: 10,000 mutated and
+//! random lines, partial lines, huge lines, silent clients, too many clients, 1,000
+//! connect/disconnect cycles and a client that stops reading mid-image. Meanwhile
+//! a well-behaved client keeps getting its laser pushes and frames, memory stays
+//! bounded and nothing panics.
+#![cfg(feature = "networkserver")]
+
+mod common;
+
+use std::{
+    io::{ErrorKind, Read, Write},
+    net::{SocketAddr, TcpStream},
+    sync::{
+        Arc, Mutex,
+        atomic::{AtomicBool, AtomicUsize, Ordering},
+    },
+    thread,
+    time::{Duration, Instant},
+};
+
+use jderobot::{
+    interfaces::{Encoders, Image, Interface, Laser, Motors, ZoomMotors},
+    services::networkserver::{NetServer, ServerConf, Sources},
+};
+
+static PANICS: AtomicUsize = AtomicUsize::new(0);
+
+fn rss_kib() -> u64 {
+    let s = std::fs::read_to_string("/proc/self/statm").unwrap();
+    let pages: u64 = s.split(' ').nth(1).unwrap().parse().unwrap();
+    pages * 4
+}
+
+/// A small deterministic generator (xorshift).
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> u64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        self.0
+    }
+    fn below(&mut self, n: usize) -> usize {
+        (self.next() % n as u64) as usize
+    }
+}
+
+const CORPUS: &[&str] = &[
+    "27",
+    "28",
+    "11",
+    "12",
+    "2",
+    "3",
+    "1001",
+    "1025",
+    "1019 0",
+    "1019 1",
+    "22 100.0 0.0",
+    "23 -10.0 0.0",
+    "1006 10.0 5.0 20.0 20.0",
+    "1004",
+    "1022",
+    "1024 2.0 1.0",
+    "5",
+    "1000 junk",
+];
+
+fn mutate(rng: &mut Rng) -> Vec<u8> {
+    if rng.below(4) == 0 {
+        // Random bytes, any but the newline.
+        let n = rng.below(80);
+        return (0..n)
+            .map(|_| {
+                let b = rng.below(256) as u8;
+                if b == b'\n' { b'x' } else { b }
+            })
+            .collect();
+    }
+    let mut l = CORPUS[rng.below(CORPUS.len())].as_bytes().to_vec();
+    for _ in 0..1 + rng.below(3) {
+        match rng.below(6) {
+            0 if !l.is_empty() => {
+                let i = rng.below(l.len());
+                l[i] = rng.below(256) as u8;
+            }
+            1 => {
+                let i = rng.below(l.len() + 1);
+                l.insert(i, b"0123456789 -.e+naif"[rng.below(19)]);
+            }
+            2 if !l.is_empty() => {
+                let i = rng.below(l.len());
+                l.remove(i);
+            }
+            3 => l.extend_from_slice(b" 99999999999999999999999"),
+            4 => l.extend_from_slice(b" nan inf -0"),
+            _ => l.extend_from_slice(&l.clone()),
+        }
+    }
+    l.retain(|&b| b != b'\n');
+    l
+}
+
+fn connect(addr: SocketAddr) -> TcpStream {
+    let s = TcpStream::connect(addr).unwrap();
+    s.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
+    (&s).write_all(b"jdec\0\0\0\0\0\0\0\0\0\0\0\0\0\0\0\0")
+        .unwrap();
+    s
+}
+
+/// Reads until the server closes (true) or `secs` pass (false), dropping the data.
+fn closed_within(s: &mut TcpStream, secs: f64) -> bool {
+    let t0 = Instant::now();
+    s.set_read_timeout(Some(Duration::from_millis(100)))
+        .unwrap();
+    let mut b = vec![0u8; 1 << 16];
+    while t0.elapsed().as_secs_f64() < secs {
+        match s.read(&mut b) {
+            Ok(0) => return true,
+            Ok(_) => {}
+            Err(e) if e.kind() == ErrorKind::ConnectionReset => return true,
+            Err(_) => {}
+        }
+    }
+    false
+}
+
+const PROBE_REPLY: &[u8] = b"1023 40.00 0.00 7.00\n";
+
+#[test]
+fn bad_clients_are_dropped_alone_and_memory_stays_bounded() {
+    let prev = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |i| {
+        PANICS.fetch_add(1, Ordering::Relaxed);
+        prev(i)
+    }));
+    let laser = Arc::new(Interface::<Laser>::new("laser", "robot"));
+    let encoders = Arc::new(Interface::<Encoders>::new("encoders", "robot"));
+    let motors = Arc::new(Interface::<Motors>::new("motors", "robot"));
+    let zoom = Arc::new(Interface::<ZoomMotors>::new("zoommotors", "robot"));
+    let small = Arc::new(Interface::with_value(
+        "colorA",
+        "robot",
+        Image::new(320, 240),
+    ));
+    let big = Arc::new(Interface::with_value(
+        "varcolorA",
+        "robot",
+        Image::new(1280, 960),
+    ));
+    let sources = Sources {
+        images: vec![(0, small.clone()), (1, big.clone())],
+        laser: Some(laser.clone()),
+        encoders: Some(encoders.clone()),
+        motors: Some(motors.clone()),
+        zm: Some(zoom.clone()),
+        ..Default::default()
+    };
+    let conf = ServerConf {
+        timeout: Duration::from_millis(300),
+        max_clients: 64,
+        ..Default::default()
+    };
+    let mut server = NetServer::start(conf, sources).unwrap();
+    let addr = server.local_addr();
+
+    // The robot: new values at 50 Hz.
+    let stop = Arc::new(AtomicBool::new(false));
+    let producer = {
+        let (stop, laser, small, big) = (stop.clone(), laser.clone(), small.clone(), big.clone());
+        thread::Builder::new()
+            .name("producer".into())
+            .spawn(move || {
+                let mut k = 0i32;
+                while !stop.load(Ordering::Acquire) {
+                    k += 1;
+                    laser
+                        .publish(Laser {
+                            readings: vec![k; 180],
+                            resolution: 1.0,
+                        })
+                        .unwrap();
+                    small.write(|i| i.data[0] = k as u8).unwrap();
+                    big.write(|i| i.data[0] = k as u8).unwrap();
+                    thread::sleep(Duration::from_millis(20));
+                }
+            })
+            .unwrap()
+    };
+
+    // The good client: laser pushes and frames all along.
+    let gaps = Arc::new(Mutex::new((0usize, Duration::ZERO, 0usize)));
+    let good_stop = Arc::new(AtomicBool::new(false));
+    let good = {
+        let (stop, gaps) = (good_stop.clone(), gaps.clone());
+        thread::spawn(move || {
+            let mut robot = connect(addr);
+            robot
+                .set_read_timeout(Some(Duration::from_millis(500)))
+                .unwrap();
+            robot.write_all(b"27\n").unwrap();
+            let mut cam = connect(addr);
+            cam.set_read_timeout(Some(Duration::from_secs(20))).unwrap();
+            let mut buf = vec![0u8; 1 << 16];
+            let mut last = Instant::now();
+            let mut frame = vec![0u8; 320 * 240 * 3];
+            while !stop.load(Ordering::Acquire) {
+                let n = match robot.read(&mut buf) {
+                    Ok(n) => n,
+                    Err(e) if e.kind() == ErrorKind::WouldBlock => 0,
+                    Err(e) => panic!("the good client's pushes: {e}"),
+                };
+                let mut g = gaps.lock().unwrap();
+                g.1 = g.1.max(last.elapsed());
+                if n == 0 {
+                    continue;
+                }
+                g.0 += buf[..n].windows(3).filter(|w| w == b"26 ").count();
+                last = Instant::now();
+                drop(g);
+                // One frame per push round.
+                cam.write_all(b"1019 0\n").unwrap();
+                let mut hdr = Vec::new();
+                let mut b = [0u8; 1];
+                while b[0] != b'\n' {
+                    cam.read_exact(&mut b).expect("frames keep coming");
+                    hdr.push(b[0]);
+                }
+                assert!(
+                    hdr.starts_with(b"1020 "),
+                    "{:?}",
+                    String::from_utf8_lossy(&hdr)
+                );
+                cam.read_exact(&mut frame).unwrap();
+                gaps.lock().unwrap().2 += 1;
+            }
+        })
+    };
+    thread::sleep(Duration::from_millis(300));
+    let rss0 = rss_kib();
+    let t0 = Instant::now();
+
+    // 10,000 mutated and random lines, each followed by a probe (1022) so we know
+    // whether the server went on or dropped us.
+    let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
+    let mut s = connect(addr);
+    let (mut answered, mut dropped) = (0, 0);
+    for _ in 0..10_000 {
+        let mut line = mutate(&mut rng);
+        line.push(b'\n');
+        line.extend_from_slice(b"1022\n");
+        if s.write_all(&line).is_err() {
+            s = connect(addr);
+            continue;
+        }
+        let mut got = Vec::new();
+        let mut b = [0u8; 8192];
+        let end = loop {
+            match s.read(&mut b) {
+                Ok(0) => break false,
+                Ok(n) => {
+                    got.extend_from_slice(&b[..n]);
+                    if got.windows(PROBE_REPLY.len()).any(|w| w == PROBE_REPLY) {
+                        break true;
+                    }
+                }
+                Err(e) if e.kind() == ErrorKind::ConnectionReset => break false,
+                Err(e) => panic!("no answer and no close after a mutated line: {e}"),
+            }
+        };
+        if end {
+            answered += 1;
+        } else {
+            dropped += 1;
+            s = connect(addr);
+        }
+    }
+    eprintln!(
+        "mutated lines: {answered} answered, {dropped} dropped the client ({:.1} s)",
+        t0.elapsed().as_secs_f64()
+    );
+    assert!(answered > 100 && dropped > 100, "{answered} / {dropped}");
+
+    // Partial lines, huge lines, silent clients: each dropped within the timeout.
+    let mut partial: Vec<TcpStream> = (0..5)
+        .map(|_| {
+            let mut s = connect(addr);
+            s.write_all(b"27").unwrap();
+            s
+        })
+        .collect();
+    let mut silent: Vec<TcpStream> = (0..5).map(|_| TcpStream::connect(addr).unwrap()).collect();
+    let mut huge = connect(addr);
+    let _ = huge.write_all(&vec![b'7'; 1 << 20]);
+    for s in partial
+        .iter_mut()
+        .chain(silent.iter_mut())
+        .chain([&mut huge])
+    {
+        assert!(closed_within(s, 5.0), "a bad client was not dropped");
+    }
+
+    eprintln!(
+        "partial/huge/silent done at {:.1} s",
+        t0.elapsed().as_secs_f64()
+    );
+    // Too many clients: the extra ones get a 1027 line and are closed.
+    let crowd: Vec<TcpStream> = (0..70).map(|_| connect(addr)).collect();
+    let mut refused = 0;
+    thread::sleep(Duration::from_millis(200));
+    for mut c in crowd {
+        c.set_nonblocking(true).unwrap();
+        let mut b = [0u8; 64];
+        if let Ok(n) = c.read(&mut b)
+            && b[..n].starts_with(b"1027 too many clients")
+        {
+            refused += 1;
+        }
+    }
+    assert!(refused >= 6, "only {refused} refused beyond max_clients");
+
+    eprintln!("crowd done at {:.1} s", t0.elapsed().as_secs_f64());
+    // 1,000 connect/disconnect cycles (half never say their name).
+    let mut slowest = Duration::ZERO;
+    let accepted0 = server.stats().accepted.load(Ordering::Acquire);
+    for k in 0..1000 {
+        let tc = Instant::now();
+        let mut s = TcpStream::connect(addr).unwrap();
+        slowest = slowest.max(tc.elapsed());
+        if k % 2 == 0 {
+            let _ = s.write_all(b"jdec\0\0\0\0\0\0\0\0\0\0\0\0\0\0\0\x0027\n");
+        }
+        drop(s);
+        // Keep within the listen backlog (a flood beyond it only makes the kernel
+        // drop SYNs, which costs the test 1 s retries, not the server anything).
+        if k % 50 == 49 {
+            let want = accepted0 + k as u64 - 40;
+            common::poll_until(10, || {
+                server.stats().accepted.load(Ordering::Acquire) >= want
+            });
+        }
+    }
+
+    eprintln!(
+        "cycles done at {:.1} s (slowest connect {slowest:?}); good client so far {:?}",
+        t0.elapsed().as_secs_f64(),
+        gaps.lock().unwrap()
+    );
+    common::eventually("the cycled clients accepted and gone", || {
+        server.stats().accepted.load(Ordering::Acquire) >= accepted0 + 1000
+            && server.stats().clients.load(Ordering::Acquire) <= 4
+    });
+    // A client that asks for big frames and stops reading mid-image.
+    let mut stuck = connect(addr);
+    stuck
+        .write_all(b"1019 1\n1019 1\n1019 1\n1019 1\n")
+        .unwrap();
+    let mut b = vec![0u8; 1000];
+    stuck.read_exact(&mut b).unwrap();
+    thread::sleep(Duration::from_millis(1500));
+    assert!(
+        closed_within(&mut stuck, 5.0),
+        "the stuck reader was not dropped"
+    );
+
+    // Let the server reap, then compare.
+    common::eventually("dropped clients gone", || {
+        server.stats().clients.load(Ordering::Acquire) <= 4
+    });
+    let rss1 = rss_kib();
+    let elapsed = t0.elapsed();
+    good_stop.store(true, Ordering::Release);
+    good.join().expect("the good client kept being served");
+    stop.store(true, Ordering::Release);
+    producer.join().unwrap();
+    let (pushes, gap, frames) = *gaps.lock().unwrap();
+    eprintln!(
+        "{:.1} s of abuse: the good client got {pushes} laser pushes (longest gap {:.0} ms) and {frames} frames; RSS {rss0} -> {rss1} KiB",
+        elapsed.as_secs_f64(),
+        gap.as_secs_f64() * 1e3
+    );
+    assert!(
+        pushes as f64 > elapsed.as_secs_f64() * 10.0,
+        "{pushes} pushes"
+    );
+    assert!(frames > 10, "{frames} frames");
+    assert!(
+        gap < Duration::from_secs(3),
+        "the good client waited {gap:?}"
+    );
+    assert!(
+        rss1 < rss0 + 48 * 1024,
+        "RSS grew from {rss0} to {rss1} KiB"
+    );
+    assert!(server.stats().dropped.load(Ordering::Relaxed) > 100);
+    server.stop();
+    assert_eq!(PANICS.load(Ordering::Relaxed), 0, "something panicked");
+}

@@ -1,0 +1,200 @@
+//! Two real `jderobot` processes on loopback: one runs the simulator and
+//! networkserver, the other networkclient and introrob (headless). introrob drives
+//! the remote robot, images and laser arrive, `ps` shows the remote interfaces'
+//! rates; when the server process goes away they turn stale and come back with a
+//! new server process.
+#![cfg(all(
+    feature = "networkserver",
+    feature = "networkclient",
+    feature = "simulator",
+    feature = "introrob"
+))]
+
+mod common;
+
+use std::{
+    io::{BufRead, BufReader, Write},
+    path::Path,
+    process::{Child, Command, Stdio},
+    sync::{Arc, Mutex},
+    time::Duration,
+};
+
+/// A running `jderobot --headless CONF` whose shell we type into.
+struct Proc {
+    child: Child,
+    out: Arc<Mutex<String>>,
+}
+
+impl Proc {
+    fn start(conf: &Path) -> Proc {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_jderobot"))
+            .arg("--headless")
+            .arg(conf)
+            .env("RUST_LOG", "warn")
+            .env_remove("DISPLAY")
+            .env_remove("WAYLAND_DISPLAY")
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("start jderobot");
+        let out = Arc::new(Mutex::new(String::new()));
+        for pipe in [
+            Box::new(child.stdout.take().unwrap()) as Box<dyn std::io::Read + Send>,
+            Box::new(child.stderr.take().unwrap()),
+        ] {
+            let out = out.clone();
+            std::thread::spawn(move || {
+                for l in BufReader::new(pipe).lines().map_while(Result::ok) {
+                    let mut o = out.lock().unwrap();
+                    o.push_str(&l);
+                    o.push('\n');
+                }
+            });
+        }
+        Proc { child, out }
+    }
+
+    fn send(&mut self, cmd: &str) {
+        let stdin = self.child.stdin.as_mut().unwrap();
+        let _ = stdin.write_all(format!("{cmd}\n").as_bytes());
+        let _ = stdin.flush();
+    }
+
+    fn text(&self) -> String {
+        self.out.lock().unwrap().clone()
+    }
+
+    /// Types `cmd` until a line of its answer (after this call) satisfies `ok`;
+    /// returns that line.
+    fn ask_until(&mut self, cmd: &str, what: &str, ok: impl Fn(&str) -> bool) -> String {
+        let mut found = None;
+        let done = common::poll_until(30, || {
+            let from = self.text().len();
+            self.send(cmd);
+            std::thread::sleep(Duration::from_millis(300));
+            let t = self.text();
+            found = t[from..].lines().find(|l| ok(l)).map(String::from);
+            found.is_some()
+        });
+        assert!(
+            done,
+            "timed out waiting for {what}; output:\n{}",
+            self.text()
+        );
+        found.unwrap()
+    }
+
+    fn quit(mut self) {
+        self.send("quit");
+        if !common::poll_until(20, || self.child.try_wait().ok().flatten().is_some()) {
+            let _ = self.child.kill();
+            let _ = self.child.wait();
+            panic!("jderobot did not quit; output:\n{}", self.text());
+        }
+    }
+}
+
+fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+/// `NAME: N ips` from a `ps` line.
+fn rate(line: &str) -> f64 {
+    line.split(": ")
+        .nth(1)
+        .unwrap()
+        .split(' ')
+        .next()
+        .unwrap()
+        .parse()
+        .unwrap()
+}
+
+fn xy(echo: &str) -> (f64, f64) {
+    let f = |k: &str| -> f64 {
+        echo.split(k)
+            .nth(1)
+            .unwrap()
+            .split(' ')
+            .next()
+            .unwrap()
+            .parse()
+            .unwrap()
+    };
+    (f(" x="), f(" y="))
+}
+
+#[test]
+fn introrob_drives_a_robot_served_by_another_process() {
+    let dir = tempfile::tempdir().unwrap();
+    let world = common::world_path("simple.world");
+    let port = free_port();
+    let server_conf = dir.path().join("robot.conf");
+    std::fs::write(
+        &server_conf,
+        format!(
+            "driver simulator\nworld {world}\nrobot robot1 1000 1000 90\nprovides encoders\nprovides motors\n\
+             provides laser 180 1\nprovides sonars\nprovides colorA\nend_driver\n\
+             driver networkserver\nsocket {port}\nserves colorA 0\nserves laser\nserves sonars\n\
+             serves encoders\nserves motors\nend_driver\n\
+             load_driver simulator\nload_service networkserver\n"
+        ),
+    )
+    .unwrap();
+    let client_conf = dir.path().join("gui.conf");
+    let h = format!("127.0.0.1 {port}");
+    std::fs::write(
+        &client_conf,
+        format!(
+            "driver networkclient\nprovides colorA {h} 0\nprovides laser {h}\nprovides sonars {h}\n\
+             provides encoders {h}\nprovides motors {h}\nend_driver\n\
+             schema introrob\nbehaviour vff\ntarget 5000 2200\nmax_v 400\nworld {world}\nend_schema\n\
+             load_driver networkclient\nload_schema introrob\nrun introrob\n"
+        ),
+    )
+    .unwrap();
+
+    let mut robot = Proc::start(&server_conf);
+    let start = robot.ask_until("echo encoders", "the robot's pose", |l| {
+        l.starts_with("encoders clock=")
+    });
+    let mut gui = Proc::start(&client_conf);
+    // The remote interfaces arrive at their rates.
+    for name in ["laser", "colorA", "encoders"] {
+        let l = gui.ask_until("ps", &format!("{name} arriving"), |l| {
+            l.starts_with(&format!("{name}: ")) && l.contains("networkclient") && rate(l) >= 3.0
+        });
+        eprintln!("{l}");
+    }
+    gui.ask_until("echo colorA", "a 320x240 image", |l| {
+        l.starts_with("colorA clock=") && l.contains("320x240 BGR")
+    });
+    // introrob drives the remote robot: its pose in the server process changes.
+    let (x0, y0) = xy(&start);
+    robot.ask_until("echo encoders", "the robot moving", |l| {
+        l.starts_with("encoders clock=") && {
+            let (x, y) = xy(l);
+            (x - x0).hypot(y - y0) > 150.0
+        }
+    });
+    robot.quit();
+    // The server is gone: stale, with the reason.
+    let l = gui.ask_until("ps", "laser stale", |l| {
+        l.starts_with("laser: ") && l.contains("STALE")
+    });
+    assert!(l.contains(&port.to_string()), "{l}");
+    // A new server process on the same port: the client resubscribes.
+    let mut robot = Proc::start(&server_conf);
+    gui.ask_until("ps", "laser fresh again", |l| {
+        l.starts_with("laser: ") && !l.contains("STALE") && rate(l) >= 3.0
+    });
+    gui.quit();
+    robot.send("echo motors");
+    robot.quit();
+}

@@ -1,0 +1,595 @@
+//! networkserver and networkclient on the 4.3 wire, over real loopback sockets:
+//! a 4.3-style client (tests/emulators/jde43_client.rs) byte for byte against our
+//! server, and our client against a 4.3-style server (jde43_server.rs), every
+//! message kind of reference §4.
+#![cfg(all(feature = "networkserver", feature = "networkclient"))]
+
+mod common;
+#[path = "emulators/jde43_client.rs"]
+mod jde43_client;
+#[path = "emulators/jde43_server.rs"]
+mod jde43_server;
+
+use std::{net::SocketAddr, sync::Arc, time::Duration};
+
+use common::{eventually, poll_until};
+use jde43_client::Client43;
+use jde43_server::{Robot43, Server43};
+use jderobot::{
+    ComponentConf, Kind, Runtime,
+    interfaces::{
+        Encoders, Image, Laser, Motors, PtEncoders, PtMotors, Sonars, ZoomEncoders, ZoomMotors,
+    },
+    registry,
+};
+
+fn load(rt: &Runtime, kind: Kind, name: &str, text: &str) -> Result<(), String> {
+    let comp = registry::find(name).expect("compiled in");
+    let conf = ComponentConf::from_text(kind, name, text).unwrap();
+    jderobot::loader::load_entry(rt, comp, &conf).map_err(|e| e.to_string())
+}
+
+/// A runtime with every servable interface (provider `robot`) and a networkserver.
+fn served(extra: &str) -> (Arc<Runtime>, SocketAddr) {
+    let rt = Runtime::new(std::path::Path::new("test.conf"));
+    let i = &rt.interfaces;
+    i.provide_value("colorA", "robot", Image::new(320, 240))
+        .unwrap();
+    i.provide_value("varcolorB", "robot", Image::new(640, 480))
+        .unwrap();
+    i.provide::<Laser>("laser", "robot").unwrap();
+    i.provide::<Encoders>("encoders", "robot").unwrap();
+    i.provide::<Sonars>("sonars", "robot").unwrap();
+    i.provide::<Motors>("motors", "robot").unwrap();
+    i.provide::<PtEncoders>("pantiltencoders", "robot").unwrap();
+    i.provide::<PtMotors>("pantiltmotors", "robot").unwrap();
+    i.provide::<ZoomEncoders>("zoomencoders", "robot").unwrap();
+    i.provide::<ZoomMotors>("zoommotors", "robot").unwrap();
+    let text = format!(
+        "socket 0\nserves colorA 0\nserves varcolorB 1\nserves laser\nserves encoders\nserves sonars\n\
+         serves motors\nserves ptencoders\nserves ptmotors\nserves zencoders\nserves zmotors\n{extra}"
+    );
+    load(&rt, Kind::Service, "networkserver", &text).unwrap();
+    let addr = *rt
+        .names
+        .import::<SocketAddr>("networkserver", "address")
+        .unwrap();
+    (rt, addr)
+}
+
+/// Publishes a recognisable value on every sensor.
+fn publish_all(rt: &Runtime, k: u8) {
+    let i = &rt.interfaces;
+    let mut a = Image::new(320, 240);
+    for (n, b) in a.data.iter_mut().enumerate() {
+        *b = (n % 253) as u8 ^ k;
+    }
+    i.get::<Image>("colorA").unwrap().publish(a).unwrap();
+    let mut b = Image::new(640, 480);
+    b.data[0] = k;
+    i.get::<Image>("varcolorB").unwrap().publish(b).unwrap();
+    i.get::<Laser>("laser")
+        .unwrap()
+        .publish(Laser {
+            readings: (0..180).map(|r| 500 + r).collect(),
+            resolution: 1.0,
+        })
+        .unwrap();
+    i.get::<Encoders>("encoders")
+        .unwrap()
+        .publish(Encoders::from_pose(1234.5, -50.25, 90f32.to_radians()))
+        .unwrap();
+    i.get::<Sonars>("sonars")
+        .unwrap()
+        .publish(Sonars {
+            us: (0..16).map(|u| 100.0 + u as f32).collect(),
+        })
+        .unwrap();
+    i.get::<PtEncoders>("pantiltencoders")
+        .unwrap()
+        .publish(PtEncoders {
+            pan_angle: 10.25,
+            tilt_angle: -5.0,
+        })
+        .unwrap();
+    i.get::<ZoomEncoders>("zoomencoders")
+        .unwrap()
+        .publish(ZoomEncoders { zoom_position: 2.5 })
+        .unwrap();
+}
+
+#[test]
+fn a_4_3_client_gets_every_message_kind_from_our_server() {
+    let (rt, addr) = served("");
+    assert!(addr.ip().is_loopback(), "bound to {addr}, not loopback");
+    publish_all(&rt, 1);
+
+    // Images: one connection per camera, each query answered with a new frame.
+    let mut cam = Client43::connect(addr, None);
+    let (h, px) = cam.image(0);
+    assert_eq!(&h[2..], ["0", "320", "240", "3"], "{h:?}");
+    assert_eq!(
+        px,
+        rt.interfaces.get::<Image>("colorA").unwrap().read().data
+    );
+    let clock0: u64 = h[1].parse().unwrap();
+    cam.send("1019 0");
+    std::thread::sleep(Duration::from_millis(50));
+    publish_all(&rt, 2);
+    let (h2, px2) = cam.read_image();
+    assert!(
+        h2[1].parse::<u64>().unwrap() > clock0,
+        "a new frame: {h2:?}"
+    );
+    assert_eq!((px[0], px2[0]), (1, 2), "the new frame's pixels");
+    let mut var = Client43::connect(addr, None);
+    let (h, px) = var.image(1);
+    assert_eq!(&h[2..], ["1", "640", "480", "3"]);
+    assert_eq!(px.len(), 640 * 480 * 3);
+    var.send("1000");
+    assert!(var.closed_within(5), "1000 (goodbye images) closes");
+
+    // Subscriptions: pushes in 4.3's formats.
+    let mut robot = Client43::connect(addr, None);
+    for s in ["27", "11", "2", "1001", "1025"] {
+        robot.send(s);
+    }
+    let laser = robot.expect("26");
+    assert_eq!(laser.len(), 2 + 180);
+    assert_eq!(laser[2], "500");
+    assert_eq!(laser[181], "679");
+    let enc = robot.expect("10");
+    assert_eq!(&enc[2..5], ["1234.5", "-50.2", "90.00000"], "{enc:?}");
+    assert_eq!(enc.len(), 6);
+    let son = robot.expect("1");
+    // 4.3 sent laser.number (180) pairs; the sonars' own 16 now.
+    assert_eq!(son.len(), 2 + 2 * 16, "{son:?}");
+    assert_eq!(&son[2..6], ["0", "100.0", "1", "101.0"]);
+    let pt = robot.expect("1003");
+    assert_eq!(&pt[2..], ["10.2", "-5.0"]);
+    let z = robot.expect("1021");
+    assert_eq!(&z[2..], ["2.5"]);
+
+    // Commands.
+    robot.send("22 150.0 0.0");
+    robot.send("23 -10.5 0.0");
+    robot.send("1006 20.0 -10.0 30.0 40.0");
+    robot.send("1024 5.0 1.0");
+    robot.send("1004");
+    let lim = robot.expect("1005");
+    assert_eq!(
+        &lim[1..],
+        ["159.13", "30.00", "-159.13", "-46.00", "205.89", "205.89"]
+    );
+    robot.send("1022");
+    assert_eq!(&robot.expect("1023")[1..], ["40.00", "0.00", "7.00"]);
+    let m = rt.interfaces.get::<Motors>("motors").unwrap();
+    assert_eq!((m.read().v, m.read().w), (150.0, -10.5));
+    let p = rt
+        .interfaces
+        .get::<PtMotors>("pantiltmotors")
+        .unwrap()
+        .read()
+        .value;
+    assert_eq!(
+        (p.longitude, p.latitude, p.longitude_speed, p.latitude_speed),
+        (20.0, -10.0, 30.0, 40.0)
+    );
+    let zm = rt
+        .interfaces
+        .get::<ZoomMotors>("zoommotors")
+        .unwrap()
+        .read()
+        .value;
+    assert_eq!((zm.zoom, zm.zoom_speed), (5.0, 1.0));
+    // The subscriptions resumed the served interfaces (a simulator computes them).
+    assert!(rt.interfaces.get_any("laser").unwrap().users() >= 1);
+
+    // Unsubscribe: no more laser lines once what was in flight is read.
+    robot.send("28");
+    robot.send("1004");
+    robot.expect("1005");
+    publish_all(&rt, 3);
+    robot.send("1022");
+    let mut saw_laser = false;
+    loop {
+        let l = robot.line().unwrap();
+        if l.starts_with("1023") {
+            break;
+        }
+        saw_laser |= l.starts_with("26 ");
+    }
+    std::thread::sleep(Duration::from_millis(100));
+    robot.send("1022");
+    loop {
+        let l = robot.line().unwrap();
+        assert!(!l.starts_with("26 "), "laser after 28: {l}");
+        if l.starts_with("1023") {
+            break;
+        }
+    }
+    let _ = saw_laser;
+    // Goodbye: the server closes, the motors the client drove go to zero.
+    robot.send("0");
+    assert!(robot.closed_within(5), "0 (goodbye) closes");
+    eventually("motors zeroed after the driving client left", || {
+        m.read().value == Motors::default()
+    });
+    eventually("the laser suspended", || {
+        rt.interfaces.get_any("laser").unwrap().users() == 0
+    });
+    rt.shutdown();
+}
+
+#[test]
+fn zoom_needs_zoom_motors_not_pantilt_and_unserved_devices_get_1027() {
+    // 4.3 obeyed 1024 only when pan-tilt motors were served.
+    let rt = Runtime::new(std::path::Path::new("test.conf"));
+    rt.interfaces
+        .provide::<ZoomMotors>("zoommotors", "robot")
+        .unwrap();
+    load(
+        &rt,
+        Kind::Service,
+        "networkserver",
+        "socket 0\nserves zoommotors\n",
+    )
+    .unwrap();
+    let addr = *rt
+        .names
+        .import::<SocketAddr>("networkserver", "address")
+        .unwrap();
+    let mut c = Client43::connect(addr, None);
+    c.send("1024 7.0 2.0");
+    c.send("27");
+    let e = c.expect("1027");
+    assert!(e.join(" ").contains("laser is not served"), "{e:?}");
+    c.send("1004");
+    let e = c.expect("1027");
+    assert!(e.join(" ").contains("ptmotors"), "{e:?}");
+    let z = rt.interfaces.get::<ZoomMotors>("zoommotors").unwrap();
+    assert_eq!(z.read().zoom, 7.0);
+    rt.shutdown();
+}
+
+#[test]
+fn a_token_in_the_name_is_required_when_configured() {
+    let (rt, addr) = served("token s3cret\n");
+    let mut no = Client43::connect(addr, None);
+    no.send("1022");
+    let e = no.expect("1027");
+    assert!(e.join(" ").contains("token"), "{e:?}");
+    assert!(no.closed_within(5));
+    let mut wrong = Client43::connect(addr, Some("guess"));
+    assert!(wrong.closed_within(5));
+    let mut yes = Client43::connect(addr, Some("s3cret"));
+    yes.send("1022");
+    yes.expect("1023");
+    rt.shutdown();
+}
+
+#[test]
+fn conf_errors_name_the_line() {
+    let rt = Runtime::new(std::path::Path::new("test.conf"));
+    let e = load(
+        &rt,
+        Kind::Service,
+        "networkserver",
+        "socket 0\nserves laser\n",
+    )
+    .unwrap_err();
+    assert!(
+        e.contains("serves laser") && e.contains("before networkserver"),
+        "{e}"
+    );
+    let e = load(&rt, Kind::Service, "networkserver", "serves laser\n").unwrap_err();
+    assert!(e.contains("socket PORT"), "{e}");
+    let e = load(
+        &rt,
+        Kind::Service,
+        "networkserver",
+        "socket 0\nserves colorA\n",
+    )
+    .unwrap_err();
+    assert!(e.contains("<inline>:2") && e.contains("network id"), "{e}");
+    let e = load(
+        &rt,
+        Kind::Service,
+        "networkserver",
+        "socket 0\nbind nowhere\n",
+    )
+    .unwrap_err();
+    assert!(e.contains("<inline>:2") && e.contains("IP address"), "{e}");
+    let e = load(&rt, Kind::Service, "networkserver", "socket 0\ntoken a b\n").unwrap_err();
+    assert!(e.contains("token SECRET"), "{e}");
+    let e = load(
+        &rt,
+        Kind::Driver,
+        "networkclient",
+        "provides colorA host 3001\n",
+    )
+    .unwrap_err();
+    assert!(e.contains("<inline>:1") && e.contains("NETID"), "{e}");
+    let e = load(
+        &rt,
+        Kind::Driver,
+        "networkclient",
+        "provides laser host port\n",
+    )
+    .unwrap_err();
+    assert!(e.contains("TCP port"), "{e}");
+    let e = load(&rt, Kind::Driver, "networkclient", "provides laser h 1 2\n").unwrap_err();
+    assert!(e.contains("HOST PORT only"), "{e}");
+    let e = load(&rt, Kind::Driver, "networkclient", "initial_position 1 2\n").unwrap_err();
+    assert!(e.contains("initial_position X_MM Y_MM THETA_DEG"), "{e}");
+}
+
+fn robot43() -> Robot43 {
+    Robot43 {
+        sizes: vec![(320, 240), (640, 480), (160, 120)],
+        laser_number: 180,
+        sonars_number: 16,
+    }
+}
+
+fn client_conf(port: u16, extra: &str) -> String {
+    let h = format!("127.0.0.1 {port}");
+    format!(
+        "provides colorA {h} 0\nprovides varcolorA {h} 1\nprovides laser {h}\nprovides encoders {h}\n\
+         provides sonars {h}\nprovides motors {h}\nprovides pantiltencoders {h}\nprovides pantiltmotors {h}\n\
+         provides zoomencoders {h}\nprovides zoommotors {h}\ninitial_position 1000 2000 90\n{extra}"
+    )
+}
+
+fn use_all(rt: &Runtime) {
+    for n in [
+        "colorA",
+        "varcolorA",
+        "laser",
+        "encoders",
+        "sonars",
+        "pantiltencoders",
+        "zoomencoders",
+    ] {
+        rt.interfaces.get_any(n).unwrap().resume();
+    }
+}
+
+#[test]
+fn our_client_against_a_4_3_server() {
+    let emu = Server43::start(0, robot43());
+    let rt = Runtime::new(std::path::Path::new("test.conf"));
+    load(
+        &rt,
+        Kind::Driver,
+        "networkclient",
+        &client_conf(emu.addr.port(), ""),
+    )
+    .unwrap();
+    use_all(&rt);
+    let i = &rt.interfaces;
+    eventually("every device subscribed and queried", || {
+        [
+            "1019 0", "1019 1", "27", "11", "2", "1001", "1025", "1004", "1022",
+        ]
+        .iter()
+        .all(|l| emu.got(l))
+    });
+    // Names: `jdec` and NULs, one per connection (10 devices).
+    eventually("ten connections", || emu.names.lock().unwrap().len() == 10);
+    for n in emu.names.lock().unwrap().iter() {
+        assert_eq!(n, b"jdec\0\0\0\0\0\0\0\0\0\0\0\0\0\0\0\0");
+    }
+    eventually("frames and pushes arrive", || {
+        [
+            "colorA",
+            "varcolorA",
+            "laser",
+            "encoders",
+            "sonars",
+            "pantiltencoders",
+            "zoomencoders",
+        ]
+        .iter()
+        .all(|n| i.get_any(n).unwrap().clock() > 2)
+    });
+    let a = i.get::<Image>("colorA").unwrap().snapshot();
+    assert_eq!((a.width, a.height), (320, 240));
+    let off = a.data[0] as u64;
+    for (k, b) in a.data.iter().enumerate().take(5000) {
+        assert_eq!(*b as u64, (k as u64 + off) % 251, "pixel byte {k}");
+    }
+    let v = i.get::<Image>("varcolorA").unwrap().snapshot();
+    assert_eq!((v.width, v.height), (640, 480));
+    let l = i.get::<Laser>("laser").unwrap().snapshot();
+    assert_eq!(l.readings.len(), 180);
+    assert_eq!((l.readings[0], l.readings[179]), (1000, 1179));
+    // Remote (1500, -250) at 90 deg, seen from an origin at (1000, 2000) turned 90 deg.
+    let e = i.get::<Encoders>("encoders").unwrap().snapshot();
+    assert!(
+        (e.x - 1250.0).abs() < 0.5 && (e.y - 3500.0).abs() < 0.5,
+        "{e:?}"
+    );
+    assert!((e.theta.to_degrees() - 180.0).abs() < 0.01, "{e:?}");
+    let s = i.get::<Sonars>("sonars").unwrap().snapshot();
+    assert_eq!(s.us.len(), 16);
+    assert_eq!(s.us[15], 315.0);
+    let p = i.get::<PtEncoders>("pantiltencoders").unwrap().snapshot();
+    assert_eq!((p.pan_angle, p.tilt_angle), (12.5, -7.5));
+    assert_eq!(
+        i.get::<ZoomEncoders>("zoomencoders")
+            .unwrap()
+            .read()
+            .zoom_position,
+        3.0
+    );
+    // Limits from 1005 / 1023.
+    eventually("pan-tilt limits", || {
+        i.get::<PtMotors>("pantiltmotors")
+            .unwrap()
+            .read()
+            .min_latitude
+            == -46.0
+    });
+    eventually("zoom limits", || {
+        i.get::<ZoomMotors>("zoommotors").unwrap().read().max_zoom == 40.0
+    });
+    // Commands, as 4.3 wrote them.
+    assert!(emu.got("22 0.0 0.0") && emu.got("23 0.0 0.0"));
+    i.get::<Motors>("motors")
+        .unwrap()
+        .publish(Motors { v: 120.0, w: -5.0 })
+        .unwrap();
+    eventually("22/23 carry the command", || {
+        emu.got("22 120.0 0.0") && emu.got("23 -5.0 0.0")
+    });
+    let ptm = i.get::<PtMotors>("pantiltmotors").unwrap();
+    let mut c = ptm.read().value;
+    c.longitude = 30.0;
+    c.latitude = -10.0;
+    c.longitude_speed = 50.0;
+    ptm.publish(c).unwrap();
+    eventually("1006", || emu.got("1006 30.00 -10.00 50.00 0.00"));
+    let zm = i.get::<ZoomMotors>("zoommotors").unwrap();
+    let mut z = zm.read().value;
+    z.zoom = 4.0;
+    z.zoom_speed = 1.5;
+    zm.publish(z).unwrap();
+    eventually("1024", || emu.got("1024 4.00 1.50"));
+    // Unused: the laser is unsubscribed.
+    i.get_any("laser").unwrap().suspend();
+    eventually("28", || emu.got("28"));
+    // Terminate: zero speeds, then goodbye; images say 1000.
+    rt.shutdown();
+    eventually("goodbyes", || {
+        emu.count("22 0.0 0.0") >= 2 && emu.got("0") && emu.got("1000")
+    });
+}
+
+#[test]
+fn a_frame_of_the_wrong_size_is_an_error_naming_both_sizes() {
+    // Network id 1 is 640x480, but colorA is 320x240 here.
+    let emu = Server43::start(0, robot43());
+    let rt = Runtime::new(std::path::Path::new("test.conf"));
+    let h = format!("127.0.0.1 {}", emu.addr.port());
+    load(
+        &rt,
+        Kind::Driver,
+        "networkclient",
+        &format!(
+            "provides colorA {h} 1\nprovides varcolorB {h} 2 320 240\nprovides varcolorC {h} 2\n"
+        ),
+    )
+    .unwrap();
+    for n in ["colorA", "varcolorB", "varcolorC"] {
+        rt.interfaces.get_any(n).unwrap().resume();
+    }
+    let a = rt.interfaces.get_any("colorA").unwrap();
+    eventually("colorA stale with both sizes", || {
+        a.stale()
+            .is_some_and(|w| w.contains("640x480") && w.contains("320x240"))
+    });
+    let b = rt.interfaces.get_any("varcolorB").unwrap();
+    eventually("varcolorB stale with both sizes", || {
+        b.stale()
+            .is_some_and(|w| w.contains("160x120") && w.contains("320x240"))
+    });
+    // varcolor without a size takes any size; the bad ones keep asking (no exit).
+    let c = rt.interfaces.get::<Image>("varcolorC").unwrap();
+    eventually("varcolorC any size", || c.read().width == 160);
+    let n = emu.count("1019 1");
+    eventually("colorA keeps asking", || emu.count("1019 1") > n + 3);
+    assert_eq!(a.clock(), 0);
+    rt.shutdown();
+}
+
+#[test]
+fn the_client_reconnects_marks_stale_zeroes_motors_and_resubscribes() {
+    let mut emu = Server43::start(0, robot43());
+    let port = emu.addr.port();
+    let rt = Runtime::new(std::path::Path::new("test.conf"));
+    load(&rt, Kind::Driver, "networkclient", &client_conf(port, "")).unwrap();
+    use_all(&rt);
+    let i = &rt.interfaces;
+    let laser = i.get_any("laser").unwrap();
+    let motors = i.get::<Motors>("motors").unwrap();
+    eventually("laser arrives", || laser.clock() > 2);
+    motors.publish(Motors { v: 100.0, w: 0.0 }).unwrap();
+    emu.shutdown();
+    eventually("stale while the server is away", || {
+        laser.stale().is_some_and(|w| w.contains(&port.to_string()))
+    });
+    for n in ["colorA", "encoders", "sonars", "pantiltencoders"] {
+        eventually(n, || i.get_any(n).unwrap().stale().is_some());
+    }
+    eventually("motors zero", || {
+        motors.read().value == Motors::default() && motors.stale().is_some()
+    });
+    // The server comes back on the same port.
+    let emu2 = Server43::start(port, robot43());
+    let c = laser.clock();
+    assert!(
+        poll_until(20, || laser.clock() > c + 2),
+        "no laser after the server came back"
+    );
+    assert!(laser.stale().is_none());
+    assert!(emu2.got("27") && emu2.got("11") && emu2.got("1019 0"));
+    rt.shutdown();
+}
+
+#[test]
+fn our_client_against_our_server_with_a_token() {
+    let (srv, addr) = served("token s3cret\n");
+    publish_all(&srv, 5);
+    let h = format!("127.0.0.1 {}", addr.port());
+    let good = Runtime::new(std::path::Path::new("test.conf"));
+    load(
+        &good,
+        Kind::Driver,
+        "networkclient",
+        &format!(
+            "token s3cret\nprovides varcolorB {h} 1\nprovides laser {h}\nprovides motors {h}\n"
+        ),
+    )
+    .unwrap();
+    let bad = Runtime::new(std::path::Path::new("test.conf"));
+    load(
+        &bad,
+        Kind::Driver,
+        "networkclient",
+        &format!("token guess\nprovides laser {h}\n"),
+    )
+    .unwrap();
+    for rt in [&good, &bad] {
+        rt.interfaces.get_any("laser").unwrap().resume();
+    }
+    good.interfaces.get_any("varcolorB").unwrap().resume();
+    let img = good.interfaces.get::<Image>("varcolorB").unwrap();
+    eventually("a 640x480 frame through our client", || {
+        img.read().width == 640
+    });
+    let laser = good.interfaces.get::<Laser>("laser").unwrap();
+    eventually("laser through our client", || {
+        laser.read().readings.len() == 180
+    });
+    good.interfaces
+        .get::<Motors>("motors")
+        .unwrap()
+        .publish(Motors { v: 80.0, w: 3.0 })
+        .unwrap();
+    let m = srv.interfaces.get::<Motors>("motors").unwrap();
+    eventually("motors through our client", || {
+        m.read().v == 80.0 && m.read().w == 3.0
+    });
+    // The wrong token: refused, so the laser stays stale and never arrives.
+    let l = bad.interfaces.get_any("laser").unwrap();
+    eventually("refused client stale", || l.stale().is_some());
+    assert_eq!(l.clock(), 0);
+    bad.shutdown();
+    good.shutdown();
+    eventually(
+        "the server zeroes the motors when our client leaves",
+        || m.read().value == Motors::default(),
+    );
+    srv.shutdown();
+}
