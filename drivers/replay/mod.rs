@@ -57,7 +57,6 @@ use std::{
         Arc,
         atomic::{AtomicBool, Ordering},
     },
-    thread::JoinHandle,
     time::{Duration, Instant},
 };
 
@@ -69,7 +68,7 @@ use crate::{
         Bumpers, Encoders, Image, Interface, Laser, Motors, PtEncoders, PtMotors, Sonars,
     },
     mcapfmt::{self, Recorded, StepGate, Summary},
-    runtime::{Driver, Runtime},
+    runtime::{Driver, Runtime, Worker},
 };
 
 /// A provided interface, typed.
@@ -219,12 +218,6 @@ fn parse(conf: &ComponentConf) -> Result<Settings, crate::conf::ConfError> {
     Ok(s)
 }
 
-/// The running replay.
-pub struct Replay {
-    stop: Arc<AtomicBool>,
-    thread: Option<JoinHandle<()>>,
-}
-
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>> {
     let settings = parse(conf)?;
     if settings.file.as_os_str().is_empty() {
@@ -294,25 +287,20 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
         None
     };
     let stop = Arc::new(AtomicBool::new(false));
-    let thread = {
-        let stop = stop.clone();
-        std::thread::Builder::new()
-            .name("replay".into())
-            .spawn(move || {
-                run(
-                    &bytes,
-                    &summary,
-                    &settings,
-                    &targets,
-                    gate.as_deref(),
-                    &stop,
-                )
-            })?
+    let worker = {
+        let flag = stop.clone();
+        Worker::start("replay", stop, move || {
+            run(
+                &bytes,
+                &summary,
+                &settings,
+                &targets,
+                gate.as_deref(),
+                &flag,
+            )
+        })?
     };
-    Ok(Box::new(Replay {
-        stop,
-        thread: Some(thread),
-    }))
+    Ok(Box::new(worker))
 }
 
 /// Publishes the file's messages, paced, until the end (or forever in a loop).
@@ -426,15 +414,6 @@ fn run(
     let why = format!("replay: end of {}", settings.file.display());
     for (_, t) in targets.values() {
         t.set_stale(&why);
-    }
-}
-
-impl Driver for Replay {
-    fn terminate(&mut self) {
-        self.stop.store(true, Ordering::Release);
-        if let Some(t) = self.thread.take() {
-            let _ = t.join();
-        }
     }
 }
 
