@@ -185,6 +185,11 @@ impl MasterPanel {
         for (name, kind) in &providers {
             let mine: Vec<_> = ifaces.iter().filter(|i| i.provider() == name).collect();
             ui.label(RichText::new(format!("{name} ({kind})")).strong());
+            #[cfg(feature = "_mcap")]
+            if name == "recorder" {
+                recorder_row(ui, rt);
+                continue;
+            }
             if mine.is_empty() {
                 ui.label("  no interfaces");
                 continue;
@@ -222,6 +227,34 @@ impl MasterPanel {
                 });
         }
     }
+}
+
+/// The recorder's line (file, time, messages, size, dropped) and a start/stop
+/// toggle, through its `recorder.status` export (as the shell's `record`).
+#[cfg(feature = "_mcap")]
+fn recorder_row(ui: &mut egui::Ui, rt: &Runtime) {
+    use std::sync::atomic::Ordering;
+    let Ok(status) = rt
+        .names
+        .import::<crate::mcapfmt::RecorderStatus>("recorder", "status")
+    else {
+        ui.label("  recorder status not exported");
+        return;
+    };
+    ui.horizontal(|ui| {
+        let mut on = status.want.load(Ordering::Acquire);
+        if toggle(
+            ui,
+            &mut on,
+            "record",
+            "start or stop recording (the shell's `record start|stop`)",
+        )
+        .changed()
+        {
+            status.want.store(on, Ordering::Release);
+        }
+        ui.label(status.line());
+    });
 }
 
 impl Panel for MasterPanel {

@@ -499,3 +499,37 @@ fn panels_tile_beside_mastergui_and_never_cover_it() {
     );
     rt.shutdown();
 }
+
+/// mastergui shows the recorder's line (time, messages, size, dropped) and its
+/// record toggle starts and stops it, as the shell's `record start|stop`.
+#[test]
+fn mastergui_shows_and_toggles_the_recorder() {
+    use std::sync::atomic::Ordering;
+    struct Idle;
+    impl jderobot::runtime::Driver for Idle {}
+    let rt = runtime_with(&[("mastergui", Kind::Schema)]);
+    rt.add_driver("recorder", Kind::Service, Box::new(Idle))
+        .unwrap();
+    let status = rt
+        .names
+        .export(
+            "recorder",
+            "status",
+            jderobot::mcapfmt::RecorderStatus::default(),
+        )
+        .unwrap();
+    status.messages.store(42, Ordering::Relaxed);
+    let mut h = panel_harness(&rt, "mastergui", vec2(900.0, 700.0));
+    h.run();
+    h.get_by_label_contains("42 messages");
+    h.get_by_label("record").click();
+    h.run();
+    assert!(
+        status.want.load(Ordering::Acquire),
+        "the toggle asks to record"
+    );
+    h.get_by_label("record").click();
+    h.run();
+    assert!(!status.want.load(Ordering::Acquire), "and to stop");
+    rt.shutdown();
+}

@@ -2,18 +2,45 @@
 
 const ALPHABET: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
 
+/// Two base64 characters for each 12-bit value: one lookup per 12 bits instead of
+/// one per 6 (the recorder base64-encodes every raw frame).
+static PAIRS: [[u8; 2]; 4096] = {
+    let mut t = [[0u8; 2]; 4096];
+    let mut i = 0;
+    while i < 4096 {
+        t[i] = [ALPHABET[i >> 6], ALPHABET[i & 63]];
+        i += 1;
+    }
+    t
+};
+
 /// Appends the base64 text of `data` to `out`.
 pub fn encode_into(data: &[u8], out: &mut Vec<u8>) {
     let start = out.len();
     let whole = data.len() / 3;
     // Fill a pre-sized slice: no capacity check per byte.
     out.resize(start + whole * 4, 0);
-    for (c, o) in data.chunks_exact(3).zip(out[start..].chunks_exact_mut(4)) {
-        let n = (c[0] as u32) << 16 | (c[1] as u32) << 8 | c[2] as u32;
-        o[0] = ALPHABET[(n >> 18) as usize & 63];
-        o[1] = ALPHABET[(n >> 12) as usize & 63];
-        o[2] = ALPHABET[(n >> 6) as usize & 63];
-        o[3] = ALPHABET[n as usize & 63];
+    let dst = &mut out[start..];
+    // Six bytes (two groups) per step from one 8-byte load where the input allows.
+    let mut groups = 0;
+    let six = data.len().saturating_sub(2) / 6;
+    for k in 0..six {
+        let w = u64::from_be_bytes(data[k * 6..k * 6 + 8].try_into().expect("8 bytes"));
+        let o = &mut dst[k * 8..k * 8 + 8];
+        let n = (w >> 16) as usize;
+        o[0..2].copy_from_slice(&PAIRS[(n >> 36) & 4095]);
+        o[2..4].copy_from_slice(&PAIRS[(n >> 24) & 4095]);
+        o[4..6].copy_from_slice(&PAIRS[(n >> 12) & 4095]);
+        o[6..8].copy_from_slice(&PAIRS[n & 4095]);
+        groups += 2;
+    }
+    for (c, o) in data[groups * 3..]
+        .chunks_exact(3)
+        .zip(dst[groups * 4..].chunks_exact_mut(4))
+    {
+        let n = ((c[0] as usize) << 16) | ((c[1] as usize) << 8) | c[2] as usize;
+        o[0..2].copy_from_slice(&PAIRS[n >> 12]);
+        o[2..4].copy_from_slice(&PAIRS[n & 4095]);
     }
     let chunks = data.chunks_exact(3);
     match chunks.remainder() {
@@ -99,6 +126,35 @@ mod tests {
             super::encode_into(raw, &mut out);
             assert_eq!(out, text);
             assert_eq!(super::decode(text).unwrap(), raw);
+        }
+        // Every length around the 6-byte fast path, against the plain definition.
+        for len in 0..40usize {
+            let raw: Vec<u8> = (0..len).map(|i| (i * 37 + 11) as u8).collect();
+            let mut out = Vec::new();
+            super::encode_into(&raw, &mut out);
+            assert_eq!(super::decode(&out).unwrap(), raw, "length {len}");
+            let plain: Vec<u8> = raw
+                .chunks(3)
+                .flat_map(|c| {
+                    let n = (c[0] as u32) << 16
+                        | (*c.get(1).unwrap_or(&0) as u32) << 8
+                        | *c.get(2).unwrap_or(&0) as u32;
+                    let a = super::ALPHABET;
+                    let mut q = vec![a[(n >> 18) as usize & 63], a[(n >> 12) as usize & 63]];
+                    q.push(if c.len() > 1 {
+                        a[(n >> 6) as usize & 63]
+                    } else {
+                        b'='
+                    });
+                    q.push(if c.len() > 2 {
+                        a[n as usize & 63]
+                    } else {
+                        b'='
+                    });
+                    q
+                })
+                .collect();
+            assert_eq!(out, plain, "length {len}");
         }
         assert!(super::decode(b"Zm9").is_none());
         assert!(super::decode(b"Zm!v").is_none());
