@@ -1,6 +1,8 @@
 //! Runs jderobot's vision, colour and fuzzy operations on inputs written by
 //! `scripts/compare_opencv.py`, writes the outputs next to them and prints the median
-//! time of each op (milliseconds, one thread) as JSON.
+//! time of each op (milliseconds, one thread) as JSON. The script runs it once per
+//! input frame and round: its synthetic scene and each photograph in `assets/photos/`
+//! (a directory of inputs each).
 //!
 //! ```text
 //! cargo run --release --example vision_compare -- DIR WIDTH HEIGHT REPEATS

@@ -2,12 +2,14 @@
 """Compare jderobot's vision/colour/fuzzy libraries with OpenCV and scikit-fuzzy.
 
 Creates a venv under target/compare-venv (pip: opencv-python-headless, numpy,
-scikit-fuzzy), writes a synthetic 640x480 scene and a shifted second frame, runs
-`examples/vision_compare.rs` (release build) and the same operations through
-OpenCV (cv2.setNumThreads(1)) / scikit-fuzzy, and prints a Markdown table: per op
-the agreement (max abs difference) and the times. The two sides run in alternating
-rounds (ROUNDS, 5 by default), each timing every op REPEATS times; per op and side
-the table keeps the fastest round's median, so load from other processes on a
+scikit-fuzzy), writes a synthetic 640x480 scene and a shifted second frame, and the
+same for every 640x480 photograph in assets/photos/ (real pictures: many edges and
+textures), runs `examples/vision_compare.rs` (release build) on each input and the
+same operations through OpenCV (cv2.setNumThreads(1)) / scikit-fuzzy, and prints
+Markdown tables: per input and op the agreement (max abs difference) and the times,
+then a summary of the photographs. The two sides run in alternating rounds (ROUNDS,
+5 by default), each timing every op REPEATS times on every input; per input, op and
+side the table keeps the fastest round's median, so load from other processes on a
 shared machine does not decide a ratio.
 
     python3 scripts/compare_opencv.py [--repeats 50] [--rounds 5] [--markdown-out FILE]
@@ -23,7 +25,10 @@ import time
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 VENV = os.path.join(ROOT, "target", "compare-venv")
+PHOTOS = os.path.join(ROOT, "assets", "photos")
 W, H = 640, 480
+# Ops whose input does not depend on the image: tabled for the synthetic scene only.
+IMAGE_FREE = {"calibrate", "find_homography", "fuzzy_jde", "fuzzy_mamdani"}
 
 
 def ensure_venv():
@@ -146,63 +151,74 @@ def main():
     R = args.repeats
     cv2.setNumThreads(1)
 
-    d = tempfile.mkdtemp(prefix="jderobot-compare-")
-    a = scene(np, cv2)
-    # Second frame: the scene moved by a sub-pixel shift and slightly re-noised.
-    m = np.float32([[1, 0, 2.3], [0, 1, -1.7]])
-    b = cv2.warpAffine(a, m, (W, H), borderMode=cv2.BORDER_REFLECT_101)
-    a.tofile(os.path.join(d, "a.bgr"))
-    b.tofile(os.path.join(d, "b.bgr"))
-    g = cv2.cvtColor(a, cv2.COLOR_BGR2GRAY)
-    gb = cv2.cvtColor(b, cv2.COLOR_BGR2GRAY)
-    cv2.Canny(g, 50, 150).tofile(os.path.join(d, "edges.raw"))
-    # calibrador: a box corner (3 planes, 7x7 points 60 mm apart) seen by a known
-    # 640x480 camera, pixels with 0.5 px Gaussian noise.
-    obj = []
-    for i in range(1, 8):
-        for j in range(1, 8):
-            a_, b_ = i * 60.0, j * 60.0
-            obj += [[0, a_, b_], [a_, 0, b_], [a_, b_, 0]]
-    obj = np.float64(obj)
-    cam_c = np.float64([1400, 1100, 900])
-    fwd = np.float64([150, 150, 150]) - cam_c
-    fwd /= np.linalg.norm(fwd)
-    right = np.cross(fwd, [0, 0, 1.0])
-    right /= np.linalg.norm(right)
-    rot = np.array([right, np.cross(fwd, right), fwd])
-    k_true = np.float64([[600, 0, 330], [0, 620, 229], [0, 0, 1]])
-    cc = (rot @ (obj - cam_c).T).T
-    pix = (k_true @ (cc / cc[:, 2:3]).T).T[:, :2] + np.random.default_rng(5).normal(0, 0.5, (len(obj), 2))
-    np.savetxt(os.path.join(d, "calib.txt"), np.hstack([obj, pix]), fmt="%.10g")
-    pts = cv2.goodFeaturesToTrack(g, 200, 0.01, 10).reshape(-1, 2)
-    np.savetxt(os.path.join(d, "points.txt"), pts, fmt="%.6f")
-    # Homography: imgrectifier's 4 clicked corners -> a rectangle, plus 4 more exact pairs.
-    src = np.float64([[100, 80], [560, 40], [600, 450], [60, 400]])
-    dst = np.float64([[0, 0], [639, 0], [639, 479], [0, 479]])
-    htrue = cv2.getPerspectiveTransform(src.astype(np.float32), dst.astype(np.float32))
-    extra = np.float64([[300, 200], [200, 300], [450, 120], [500, 350]])
-    ex = cv2.perspectiveTransform(extra.reshape(-1, 1, 2), htrue).reshape(-1, 2)
-    src8, dst8 = np.vstack([src, extra]), np.vstack([dst, ex])
-    np.savetxt(os.path.join(d, "homography.txt"), np.hstack([src8, dst8]), fmt="%.17g")
-    hsv = [200.5, 265.3, 0.2137, 0.9, 40.5, 250.5]  # H degrees, S 0..1, V 0..255
-    np.savetxt(os.path.join(d, "hsv.txt"), [hsv], fmt="%.6f")
-    rng = np.random.default_rng(7)
-    fin = np.column_stack([rng.uniform(7000, 20000, 40), rng.uniform(150, 800, 40)])
-    fin = np.vstack([[12000, 500], fin])
-    np.savetxt(os.path.join(d, "fuzzy.txt"), fin, fmt="%.3f")
-    # Camera frames: YUYV 4:2:2 (BT.601 video range) and an RGGB Bayer mosaic of the scene.
-    yuv = cv2.cvtColor(a, cv2.COLOR_BGR2YUV)
-    yuyv = np.empty((H, W, 2), np.uint8)
-    yuyv[:, :, 0] = (yuv[:, :, 0].astype(np.int32) * 219 // 255 + 16).astype(np.uint8)
-    yuyv[:, 0::2, 1] = yuv[:, 0::2, 1]
-    yuyv[:, 1::2, 1] = yuv[:, 0::2, 2]
-    yuyv.tofile(os.path.join(d, "a.yuyv"))
-    bayer = np.empty((H, W), np.uint8)
-    bayer[0::2, 0::2] = a[0::2, 0::2, 2]
-    bayer[0::2, 1::2] = a[0::2, 1::2, 1]
-    bayer[1::2, 0::2] = a[1::2, 0::2, 1]
-    bayer[1::2, 1::2] = a[1::2, 1::2, 0]
-    bayer.tofile(os.path.join(d, "a.bayer"))
+    def setup(a):
+        """Writes the inputs for BGR frame `a` (640x480) into a new directory."""
+        d = tempfile.mkdtemp(prefix="jderobot-compare-")
+        # Second frame: the scene moved by a sub-pixel shift and slightly re-noised.
+        m = np.float32([[1, 0, 2.3], [0, 1, -1.7]])
+        b = cv2.warpAffine(a, m, (W, H), borderMode=cv2.BORDER_REFLECT_101)
+        a.tofile(os.path.join(d, "a.bgr"))
+        b.tofile(os.path.join(d, "b.bgr"))
+        g = cv2.cvtColor(a, cv2.COLOR_BGR2GRAY)
+        gb = cv2.cvtColor(b, cv2.COLOR_BGR2GRAY)
+        cv2.Canny(g, 50, 150).tofile(os.path.join(d, "edges.raw"))
+        # calibrador: a box corner (3 planes, 7x7 points 60 mm apart) seen by a known
+        # 640x480 camera, pixels with 0.5 px Gaussian noise.
+        obj = []
+        for i in range(1, 8):
+            for j in range(1, 8):
+                a_, b_ = i * 60.0, j * 60.0
+                obj += [[0, a_, b_], [a_, 0, b_], [a_, b_, 0]]
+        obj = np.float64(obj)
+        cam_c = np.float64([1400, 1100, 900])
+        fwd = np.float64([150, 150, 150]) - cam_c
+        fwd /= np.linalg.norm(fwd)
+        right = np.cross(fwd, [0, 0, 1.0])
+        right /= np.linalg.norm(right)
+        rot = np.array([right, np.cross(fwd, right), fwd])
+        k_true = np.float64([[600, 0, 330], [0, 620, 229], [0, 0, 1]])
+        cc = (rot @ (obj - cam_c).T).T
+        pix = (k_true @ (cc / cc[:, 2:3]).T).T[:, :2] + np.random.default_rng(5).normal(0, 0.5, (len(obj), 2))
+        np.savetxt(os.path.join(d, "calib.txt"), np.hstack([obj, pix]), fmt="%.10g")
+        pts = cv2.goodFeaturesToTrack(g, 200, 0.01, 10).reshape(-1, 2)
+        np.savetxt(os.path.join(d, "points.txt"), pts, fmt="%.6f")
+        # Homography: imgrectifier's 4 clicked corners -> a rectangle, plus 4 more exact pairs.
+        src = np.float64([[100, 80], [560, 40], [600, 450], [60, 400]])
+        dst = np.float64([[0, 0], [639, 0], [639, 479], [0, 479]])
+        htrue = cv2.getPerspectiveTransform(src.astype(np.float32), dst.astype(np.float32))
+        extra = np.float64([[300, 200], [200, 300], [450, 120], [500, 350]])
+        ex = cv2.perspectiveTransform(extra.reshape(-1, 1, 2), htrue).reshape(-1, 2)
+        src8, dst8 = np.vstack([src, extra]), np.vstack([dst, ex])
+        np.savetxt(os.path.join(d, "homography.txt"), np.hstack([src8, dst8]), fmt="%.17g")
+        hsv = [200.5, 265.3, 0.2137, 0.9, 40.5, 250.5]  # H degrees, S 0..1, V 0..255
+        np.savetxt(os.path.join(d, "hsv.txt"), [hsv], fmt="%.6f")
+        rng = np.random.default_rng(7)
+        fin = np.column_stack([rng.uniform(7000, 20000, 40), rng.uniform(150, 800, 40)])
+        fin = np.vstack([[12000, 500], fin])
+        np.savetxt(os.path.join(d, "fuzzy.txt"), fin, fmt="%.3f")
+        # Camera frames: YUYV 4:2:2 (BT.601 video range) and an RGGB Bayer mosaic of the scene.
+        yuv = cv2.cvtColor(a, cv2.COLOR_BGR2YUV)
+        yuyv = np.empty((H, W, 2), np.uint8)
+        yuyv[:, :, 0] = (yuv[:, :, 0].astype(np.int32) * 219 // 255 + 16).astype(np.uint8)
+        yuyv[:, 0::2, 1] = yuv[:, 0::2, 1]
+        yuyv[:, 1::2, 1] = yuv[:, 0::2, 2]
+        yuyv.tofile(os.path.join(d, "a.yuyv"))
+        bayer = np.empty((H, W), np.uint8)
+        bayer[0::2, 0::2] = a[0::2, 0::2, 2]
+        bayer[0::2, 1::2] = a[0::2, 1::2, 1]
+        bayer[1::2, 0::2] = a[1::2, 0::2, 1]
+        bayer[1::2, 1::2] = a[1::2, 1::2, 0]
+        bayer.tofile(os.path.join(d, "a.bayer"))
+        return dict(d=d, a=a, b=b, g=g, gb=gb, pts=pts, fin=fin, hsv=hsv, yuyv=yuyv,
+                    bayer=bayer, src8=src8, dst8=dst8)
+
+    photos = sorted(f for f in os.listdir(PHOTOS) if f.endswith((".jpg", ".png")))
+    inputs = [("synthetic scene", setup(scene(np, cv2)))]
+    for f in photos:
+        img = cv2.imread(os.path.join(PHOTOS, f))
+        if img is None or img.shape != (H, W, 3):
+            sys.exit(f"{PHOTOS}/{f}: not a {W}x{H} colour image")
+        inputs.append((os.path.splitext(f)[0], setup(img)))
 
     # The executable cargo reports (the target dir may be shared, with other trees
     # linking their own build to the same examples/vision_compare name).
@@ -224,8 +240,10 @@ def main():
     env = dict(os.environ)
     if not args.untuned_malloc:
         env.update(MALLOC_MMAP_THRESHOLD_="67108864", MALLOC_TRIM_THRESHOLD_="134217728")
-    def measure():
+    def measure(ctx):
         """One round: the Rust side's times and outputs, then OpenCV's; the rows."""
+        d, a, b, g, gb, pts, fin, hsv, yuyv, bayer, src8, dst8 = (ctx[k] for k in (
+            "d", "a", "b", "g", "gb", "pts", "fin", "hsv", "yuyv", "bayer", "src8", "dst8"))
         rs = json.loads(
             subprocess.check_output([exe, d, str(W), str(H), str(R)], cwd=ROOT, env=env).decode()
         )
@@ -236,7 +254,7 @@ def main():
         rows = []  # (op, agreement, rust ms, opencv ms, note)
 
         def add(op, rs_key, diff, cv_ms, note=""):
-            rows.append((op, diff, rs[rs_key], cv_ms, note))
+            rows.append((op, diff, rs[rs_key], cv_ms, note, rs_key))
 
         t, cg = median_ms(lambda: cv2.cvtColor(a, cv2.COLOR_BGR2GRAY), R)
         diff = int(np.abs(cg.astype(int) - raw("rs_gray.raw", np.uint8, (H, W))).max())
@@ -426,29 +444,48 @@ def main():
             f"vs scikit-fuzzy (universe step 0.01); with the singleton firing: {sdiff:.1e}")
         return rows
 
-    # The machine is shared: alternate the two sides over ROUNDS rounds and keep, per
-    # op and side, the fastest round's median (the least disturbed). Outputs are the
-    # same every round.
-    rounds = [measure() for _ in range(args.rounds)]
-    rows = []
-    for k, (op, diff, _, _, note) in enumerate(rounds[-1]):
-        rows.append((op, diff, min(r[k][2] for r in rounds), min(r[k][3] for r in rounds), note))
-
-    lines = [
-        "| op (640x480, 1 thread) | max abs diff | jderobot ms | reference ms | ratio | note |",
-        "|---|---|---|---|---|---|",
-    ]
-    for op, diff, r_ms, c_ms, note in rows:
-        lines.append(f"| {op} | {diff} | {r_ms:.3f} | {c_ms:.3f} | {r_ms / c_ms:.2f}x | {note} |")
-    table = "\n".join(lines)
+    # The machine is shared: alternate the two sides over ROUNDS rounds (each round
+    # runs every input) and keep, per input, op and side, the fastest round's median
+    # (the least disturbed). Outputs are the same every round.
+    rounds = [[measure(ctx) for _, ctx in inputs] for _ in range(args.rounds)]
+    tables = []
+    per_input = []
+    for n, (name, ctx) in enumerate(inputs):
+        rows = []
+        for k, (op, diff, _, _, note, key) in enumerate(rounds[-1][n]):
+            if n > 0 and key in IMAGE_FREE:
+                continue
+            rows.append((op, diff, min(r[n][k][2] for r in rounds), min(r[n][k][3] for r in rounds), note))
+        per_input.append(rows)
+        lines = [
+            f"| op ({name}, 640x480, 1 thread) | max abs diff | jderobot ms | reference ms | ratio | note |",
+            "|---|---|---|---|---|---|",
+        ]
+        for op, diff, r_ms, c_ms, note in rows:
+            lines.append(f"| {op} | {diff} | {r_ms:.3f} | {c_ms:.3f} | {r_ms / c_ms:.2f}x | {note} |")
+        tables.append("\n".join(lines))
+    # Summary of the photographs: per image op, ours / OpenCV's ms and the ratio (the
+    # agreement is in each photograph's own table).
+    names = [name for name, _ in inputs[1:]]
+    lines = ["| op (photographs, 640x480; jderobot / OpenCV ms) | " + " | ".join(names) + " | worst ratio |",
+             "|---|" + "---|" * (len(names) + 1)]
+    for k, row in enumerate(per_input[0] if len(per_input) == 1 else per_input[1]):
+        cells, worst = [], 0.0
+        for rows in per_input[1:]:
+            _, diff, r_ms, c_ms, _ = rows[k]
+            worst = max(worst, r_ms / c_ms)
+            cells.append(f"{r_ms:.3f} / {c_ms:.3f} ({r_ms / c_ms:.2f}x)")
+        lines.append(f"| {row[0]} | " + " | ".join(cells) + f" | {worst:.2f}x |")
+    if names:
+        tables.append("\n".join(lines))
+    table = "\n\n".join(tables)
     print(f"OpenCV {cv2.__version__}, numpy {np.__version__}, scikit-fuzzy {fuzz.__version__}; "
           f"per side the fastest of {args.rounds} alternating rounds' medians of {R} runs; "
-          f"inputs in {d}")
+          f"photos from {PHOTOS}; inputs in {', '.join(ctx['d'] for _, ctx in inputs)}")
     print(table)
     if args.markdown_out:
         with open(args.markdown_out, "w") as f:
             f.write(table + "\n")
-
 
 if __name__ == "__main__":
     main()

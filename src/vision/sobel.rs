@@ -121,14 +121,69 @@ multiversion! {
 }
 
 multiversion! {
-    /// Bit k of `mask[c]`: `row[32c + k] > low` (32 comparisons a word, which the
+    /// Non-maximum suppression of one row, without branches so that it runs as
+    /// vector code (the gradient directions of a textured photograph are
+    /// unpredictable): `map[x]` = 2 (local maximum above `high`), 0 (local maximum
+    /// above `low`: a candidate) or 1 (not an edge). `prev`, `cur`, `next` are the
+    /// magnitudes of rows y - 1, y, y + 1 (`mags`) with one element of border at each end.
+    fn suppress_row(
+        mags: [&[i32]; 3],
+        dx: &[i16],
+        dy: &[i16],
+        low: i32,
+        high: i32,
+        map: &mut [u8],
+    ) {
+        let w = map.len();
+        let [prev, cur, next] = mags;
+        let (dx, dy) = (&dx[..w], &dy[..w]);
+        let (p0, p1, p2) = (&prev[..w], &prev[1..w + 1], &prev[2..w + 2]);
+        let (c0, c1, c2) = (&cur[..w], &cur[1..w + 1], &cur[2..w + 2]);
+        let (n0, n1, n2) = (&next[..w], &next[1..w + 1], &next[2..w + 2]);
+        for x in 0..w {
+            let m = c1[x];
+            let (xs, ys) = (dx[x] as i32, dy[x] as i32);
+            let ax = xs.abs();
+            let ay = ys.abs() << CANNY_SHIFT;
+            let tg22x = ax * TG22;
+            let tg67x = tg22x + (ax << (CANNY_SHIFT + 1));
+            let (horizontal, vertical) = (ay < tg22x, ay > tg67x);
+            let diagonal = !horizontal & !vertical;
+            // Along a diagonal the column step down is -1 when dx and dy have
+            // opposite signs: up-right and down-left, else up-left and down-right.
+            let opposite = (xs ^ ys) < 0;
+            // Every neighbour is loaded and the pair chosen by bit masks: a select
+            // of loads would become a select of addresses (gathered, slow).
+            let blend = |c: bool, a: i32, b: i32| {
+                let k = -(c as i32);
+                (a & k) | (b & !k)
+            };
+            let (q0, q1, q2) = (p0[x], p1[x], p2[x]);
+            let (m0, m2) = (c0[x], c2[x]);
+            let (r0, r1, r2) = (n0[x], n1[x], n2[x]);
+            let up = blend(vertical, q1, blend(opposite, q2, q0));
+            let down = blend(vertical, r1, blend(opposite, r0, r2));
+            let before = blend(horizontal, m0, up);
+            let after = blend(horizontal, m2, down);
+            // OpenCV's ties: strict on the first neighbour, and on the second too
+            // along a diagonal.
+            let is_max =
+                (m > low) & (m > before) & ((m > after) | ((m == after) & !diagonal));
+            let strong = (m > high) as u8;
+            map[x] = if is_max { 2 * strong } else { 1 };
+        }
+    }
+}
+
+multiversion! {
+    /// Bit k of `mask[c]`: `row[32c + k] == 2` (32 comparisons a word, which the
     /// compiler turns into vector compares).
-    fn above_mask(row: &[i32], low: i32, mask: &mut [u32]) {
+    fn strong_mask(row: &[u8], mask: &mut [u32]) {
         for (m, c) in mask.iter_mut().zip(row.chunks(32)) {
             *m = c
                 .iter()
                 .enumerate()
-                .fold(0, |bits, (k, &v)| bits | (((v > low) as u32) << k));
+                .fold(0, |bits, (k, &v)| bits | (((v == 2) as u32) << k));
         }
     }
 }
@@ -191,9 +246,8 @@ pub fn canny(img: &GrayImage, low: f64, high: f64, l2: bool) -> GrayImage {
     // border of 1s.
     let mut map = vec![1u8; mw * (h + 2)];
     let mut stack: Vec<usize> = Vec::with_capacity(w * h / 8);
-    // Bit k of above[c]: pixel 32c + k of the row is above `low`. Most pixels are
-    // not, so the suppression below visits only those.
-    let mut above = vec![0u32; w.div_ceil(32)];
+    // Bit k of strong[c]: pixel 32c + k of the row was marked 2 (to be pushed).
+    let mut strong = vec![0u32; w.div_ceil(32)];
     for y in 0..h {
         if y + 1 < h {
             win.fill(y + 1, &mut sobel, l2);
@@ -206,48 +260,14 @@ pub fn canny(img: &GrayImage, low: f64, high: f64, l2: bool) -> GrayImage {
         };
         let (cur, dxr, dyr) = (&win.mag[y % 3], &win.dx[y % 3], &win.dy[y % 3]);
         let base = (y + 1) * mw + 1;
-        above_mask(&cur[1..=w], low, &mut above);
-        for (c, &bits) in above.iter().enumerate() {
+        let row = &mut map[base..base + w];
+        suppress_row([prev, cur, next], dxr, dyr, low, high, row);
+        strong_mask(row, &mut strong);
+        for (c, &bits) in strong.iter().enumerate() {
             let mut bits = bits;
             while bits != 0 {
-                let x = c * 32 + bits.trailing_zeros() as usize;
+                stack.push(base + c * 32 + bits.trailing_zeros() as usize);
                 bits &= bits - 1;
-                let i = x + 1; // x in the bordered magnitude rows
-                let m = cur[i];
-                // The gradient's direction picks the two neighbours across the edge:
-                // horizontal, vertical or one of the diagonals (selected without
-                // branches: the directions are unpredictable).
-                let (xs, ys) = (dxr[x] as i32, dyr[x] as i32);
-                let ax = xs.abs();
-                let ay = ys.abs() << CANNY_SHIFT;
-                let tg22x = ax * TG22;
-                let tg67x = tg22x + (ax << (CANNY_SHIFT + 1));
-                let (horizontal, vertical) = (ay < tg22x, ay > tg67x);
-                let diagonal = !horizontal & !vertical;
-                // Across rows: straight up and down, or along the diagonal whose
-                // column step is -1 when dx and dy have opposite signs.
-                let step = if vertical { 0 } else { ((xs ^ ys) >> 31) | 1 } as isize;
-                let (up, down) = (
-                    prev[i.wrapping_add_signed(-step)],
-                    next[i.wrapping_add_signed(step)],
-                );
-                let (before, after) = if horizontal {
-                    (cur[i - 1], cur[i + 1])
-                } else {
-                    (up, down)
-                };
-                // OpenCV's ties: strict on the first neighbour, and on the second too
-                // along a diagonal.
-                let is_max = (m > before) & ((m > after) | ((m == after) & !diagonal));
-                if is_max {
-                    let j = base + x;
-                    if m > high {
-                        map[j] = 2;
-                        stack.push(j);
-                    } else {
-                        map[j] = 0;
-                    }
-                }
             }
         }
     }
