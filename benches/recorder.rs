@@ -14,7 +14,7 @@
 //! Run: `cargo bench --features full --bench recorder`.
 
 use std::{
-    path::Path,
+    path::{Path, PathBuf},
     sync::{Arc, atomic::Ordering},
     time::{Duration, Instant, SystemTime},
 };
@@ -115,9 +115,7 @@ fn write_profile(
     seconds: &[Vec<(&str, Snapshot)>],
     ros2: bool,
 ) -> u64 {
-    let mut w = mcap::WriteOptions::new()
-        .compression(compression)
-        .chunk_size(Some(4 * 1024 * 1024))
+    let mut w = mcapfmt::write_options(compression, ros2)
         .create(std::fs::File::create(path).unwrap())
         .unwrap();
     let mut channels = std::collections::HashMap::new();
@@ -201,7 +199,13 @@ fn main() {
         "## recorder / replay (load: 640x480 BGR 30 fps + laser 10 Hz + encoders 20 Hz + sonars 10 Hz = {raw_mb_s:.1} MB/s of pixels)"
     );
 
-    // 1. Write throughput.
+    // 1. Write throughput: to a file in the temporary directory (on this machine's
+    // disk, through the page cache) and, where there is one, to a file in /dev/shm
+    // (memory: what the recorder's own path can do, whatever the disk).
+    let shm = tempfile::tempdir_in("/dev/shm").ok();
+    let targets: Vec<(&str, PathBuf)> = std::iter::once(("disk", dir.path().join("w.mcap")))
+        .chain(shm.as_ref().map(|d| ("memory", d.path().join("w.mcap"))))
+        .collect();
     for (label, c, ros2) in [
         ("none", None, false),
         ("lz4", Some(mcap::Compression::Lz4), false),
@@ -212,18 +216,21 @@ fn main() {
             true,
         ),
     ] {
-        let mut xs = Vec::new();
-        let mut size = 0;
-        for _ in 0..5 {
-            let t = Instant::now();
-            size = write_profile(&dir.path().join("w.mcap"), c, &load, ros2);
-            xs.push(secs as f64 / t.elapsed().as_secs_f64());
+        for (to, file) in &targets {
+            let mut xs = Vec::new();
+            let mut size = 0;
+            for _ in 0..5 {
+                let t = Instant::now();
+                size = write_profile(file, c, &load, ros2);
+                xs.push(secs as f64 / t.elapsed().as_secs_f64());
+            }
+            let _ = std::fs::remove_file(file);
+            println!(
+                "write throughput to {to}, compression {label}: median {:.1}x real time ({} MB for {secs} s)",
+                median(xs),
+                size / 1_000_000
+            );
         }
-        println!(
-            "write throughput, compression {label}: median {:.1}x real time ({} MB for {secs} s)",
-            median(xs),
-            size / 1_000_000
-        );
     }
 
     // 2. The recorder service at 1x.

@@ -371,11 +371,7 @@ fn open(settings: &Settings, n: u32) -> anyhow::Result<Open> {
     }
     let file = File::create(&path)
         .with_context(|| format!("recorder: cannot create {}", path.display()))?;
-    let writer = mcap::WriteOptions::new()
-        .compression(settings.compression)
-        .profile(if settings.ros2 { "ros2" } else { "" })
-        .library(concat!("jderobot ", env!("CARGO_PKG_VERSION")))
-        .chunk_size(Some(4 * 1024 * 1024))
+    let writer = mcapfmt::write_options(settings.compression, settings.ros2)
         .create(file)
         .with_context(|| format!("recorder: cannot start {}", path.display()))?;
     Ok(Open {

@@ -260,6 +260,19 @@ fn f32_json(v: f32) -> Value {
         .unwrap_or(Value::Null)
 }
 
+/// How the recorder writes MCAP: chunks of 4 MiB (closed at least every second by
+/// the recorder, so a kill loses at most that), `compression`, the `ros2` profile or
+/// none. Each chunk carries its CRC; the data-section CRC (a second pass over every
+/// byte, checkable only on a complete file) is left out, as MCAP allows.
+pub fn write_options(compression: Option<mcap::Compression>, ros2: bool) -> mcap::WriteOptions {
+    mcap::WriteOptions::new()
+        .compression(compression)
+        .profile(if ros2 { "ros2" } else { "" })
+        .library(concat!("jderobot ", env!("CARGO_PKG_VERSION")))
+        .chunk_size(Some(4 * 1024 * 1024))
+        .calculate_data_section_crc(false)
+}
+
 /// Encodes a sample of interface `name` as a JSON message into `out` (cleared first).
 pub fn encode(name: &str, snap: &Snapshot, out: &mut Vec<u8>) {
     out.clear();
