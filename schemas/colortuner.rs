@@ -380,19 +380,7 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
             }
             "image" => {
                 l.expect_args(1, 1, "image INTERFACE (colorA..D, varcolorA..D)")?;
-                source = l.interface(0)?;
-                match rt.interfaces.get_any(&source) {
-                    Ok(a) if a.kind() == "image" => {}
-                    Ok(a) => {
-                        return Err(l
-                            .error(format!(
-                                "{source} is a {} interface, not an image",
-                                a.kind()
-                            ))
-                            .into());
-                    }
-                    Err(e) => return Err(l.error(format!("image: {e}")).into()),
-                }
+                source = rt.image_interface(l, 0)?;
             }
             "output" => {
                 l.expect_args(1, 1, "output INTERFACE (a new image interface)")?;

@@ -162,17 +162,7 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
                 l.expect_args(1, 8, "images INTERFACE... (colorA..D, varcolorA..D)")?;
                 let mut v = Vec::new();
                 for i in 0..l.args().len() {
-                    let n = l.interface(i)?;
-                    match rt.interfaces.get_any(&n) {
-                        Ok(a) if a.kind() != "image" => {
-                            return Err(l
-                                .error(format!("{n} is a {} interface, not an image", a.kind()))
-                                .into());
-                        }
-                        Ok(_) => {}
-                        Err(e) => return Err(l.error(format!("images: {e}")).into()),
-                    }
-                    v.push(n);
+                    v.push(rt.image_interface(l, i)?);
                 }
                 names = Some(v);
             }

@@ -61,7 +61,12 @@ pub use panel::Panel;
 pub use schema::{Schema, State};
 pub use slot::{SchemaSlot, SchemaStatus};
 
-use crate::{conf::Kind, interfaces::Interfaces, namespace::Namespace, output};
+use crate::{
+    conf::{ConfError, ConfLine, Kind},
+    interfaces::{Image, InterfaceValue, Interfaces},
+    namespace::Namespace,
+    output,
+};
 use cronos::TimingStats;
 use slot::{Control, schema_thread};
 
@@ -215,6 +220,18 @@ impl Runtime {
             .iter()
             .map(|d| (d.name.clone(), d.kind))
             .collect()
+    }
+
+    /// The provided image interface (`colorA..D`, `varcolorA..D`) that argument `i` of
+    /// a component's conf line names (canonical name), or an error at that line
+    /// saying what is wrong: not an interface, not provided, not an image.
+    pub fn image_interface(&self, line: &ConfLine, i: usize) -> Result<String, ConfError> {
+        let name = line.interface(i)?;
+        match self.interfaces.get_any(&name) {
+            Ok(a) if a.kind() == Image::KIND => Ok(name),
+            Ok(a) => Err(line.error(format!("{name} is a {} interface, not an image", a.kind()))),
+            Err(e) => Err(line.error(format!("{}: {e}", line.keyword()))),
+        }
     }
 
     /// The error for a name that is not loaded, listing what is.
