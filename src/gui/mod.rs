@@ -279,17 +279,23 @@ impl GuiHost {
         self.layout.free = Some(free);
 
         let ctx = ui.ctx().clone();
+        // A lone panel gets the whole free width; several share it as tiles.
+        let size = if windows.len() == 1 {
+            egui::vec2((free.width() - 2.0).max(PANEL_SIZE.x), PANEL_SIZE.y)
+        } else {
+            PANEL_SIZE
+        };
         for (i, (name, title, slot, has)) in windows.iter().enumerate() {
             let mut open = true;
             let shown = egui::Window::new(title.as_str())
                 .id(egui::Id::unique(("jde_panel", name.as_str())))
                 .open(&mut open)
-                .default_pos(self.layout.place(name, i, free, PANEL_SIZE))
+                .default_pos(self.layout.place(name, i, free, size))
                 // Tall enough for introrob's and teleoperator's panels; it scrolls
-                // (and resizes) when a panel is taller or the screen smaller.
-                .default_size(PANEL_SIZE)
+                // both ways (and resizes) when a panel is larger than the free area.
+                .default_size(size)
                 .constrain_to(free)
-                .vscroll(true)
+                .scroll(true)
                 .show(&ctx, |ui| {
                     if *has {
                         draw_panel(ui, &rt, name, &slot.panel);
