@@ -272,7 +272,7 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
             }
             "cycle" => {
                 l.expect_args(1, 1, "cycle MS")?;
-                cycle = Duration::from_millis(l.number(0, "period in ms", 1..=10_000)?);
+                cycle = l.millis(0, "period in ms", 1..=10_000)?;
             }
             _ => return Err(conf.unknown(l, "world, image, output or cycle").into()),
         }

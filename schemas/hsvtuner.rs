@@ -249,7 +249,7 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
             }
             "cycle" => {
                 l.expect_args(1, 1, "cycle MS")?;
-                cycle = Duration::from_millis(l.number(0, "period in ms", 1..=10_000)?);
+                cycle = l.millis(0, "period in ms", 1..=10_000)?;
             }
             _ => {
                 return Err(conf
@@ -273,10 +273,9 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
     };
     let choices = rt
         .interfaces
-        .all()
-        .iter()
-        .filter(|i| i.kind() == "image" && output.as_ref().is_none_or(|o| o.name() != i.name()))
-        .map(|i| i.name().to_string())
+        .names_of::<Image>()
+        .into_iter()
+        .filter(|n| output.as_ref().is_none_or(|o| o.name() != n))
         .collect();
     let state = Arc::new(Tuner {
         ranges: Mutex::new(r),

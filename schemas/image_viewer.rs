@@ -168,8 +168,7 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
             }
             "cycle" => {
                 l.expect_args(1, 1, "cycle MS")?;
-                let ms: u64 = l.number(0, "period in ms", 1..=10_000)?;
-                cycle = Duration::from_millis(ms);
+                cycle = l.millis(0, "period in ms", 1..=10_000)?;
             }
             "save_dir" => {
                 l.expect_args(1, 1, "save_dir DIRECTORY")?;
@@ -178,14 +177,7 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
             _ => return Err(conf.unknown(l, "images, cycle or save_dir").into()),
         }
     }
-    let names = names.unwrap_or_else(|| {
-        rt.interfaces
-            .all()
-            .iter()
-            .filter(|i| i.kind() == "image")
-            .map(|i| i.name().to_string())
-            .collect()
-    });
+    let names = names.unwrap_or_else(|| rt.interfaces.names_of::<Image>());
     let images = names
         .iter()
         .map(|n| rt.interfaces.get::<Image>(n))

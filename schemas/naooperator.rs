@@ -143,7 +143,7 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
             }
             "cycle" => {
                 l.expect_args(1, 1, "cycle MS")?;
-                cycle = Duration::from_millis(l.number(0, "a period in ms", 1..=10_000)?);
+                cycle = l.millis(0, "a period in ms", 1..=10_000)?;
             }
             k if names.iter().any(|(n, _)| *n == k) => {
                 l.expect_args(1, 1, &format!("{k} INTERFACE|none"))?;

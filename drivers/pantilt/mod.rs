@@ -87,12 +87,11 @@ impl PtuConf {
                 }
                 "poll" => {
                     l.expect_args(1, 1, "poll MS")?;
-                    c.poll = Duration::from_millis(l.number(0, "a period in ms", 10..=10_000)?);
+                    c.poll = l.millis(0, "a period in ms", 10..=10_000)?;
                 }
                 "reply_timeout" => {
                     l.expect_args(1, 1, "reply_timeout MS")?;
-                    c.reply_timeout =
-                        Duration::from_millis(l.number(0, "a timeout in ms", 10..=60_000)?);
+                    c.reply_timeout = l.millis(0, "a timeout in ms", 10..=60_000)?;
                 }
                 "provides" => {
                     l.expect_args(1, 1, "provides pantiltencoders|pantiltmotors")?;

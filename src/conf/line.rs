@@ -147,6 +147,19 @@ impl ConfLine {
         Ok(v)
     }
 
+    /// Argument `i` as a duration in milliseconds within `range` (a `cycle`, `poll`,
+    /// or timeout line).
+    pub fn millis(
+        &self,
+        i: usize,
+        what: &str,
+        range: impl RangeBounds<u64>,
+    ) -> Result<std::time::Duration, ConfError> {
+        Ok(std::time::Duration::from_millis(
+            self.number(i, what, range)?,
+        ))
+    }
+
     /// Arguments `i` and `i+1` as an (x, y) point of finite numbers.
     pub fn point(&self, i: usize, what: &str) -> Result<(f64, f64), ConfError> {
         Ok((

@@ -115,6 +115,16 @@ impl Interfaces {
         self.all().iter().map(|i| i.name().to_string()).collect()
     }
 
+    /// Names of the interfaces holding `T` (every image interface, ...), in the
+    /// order provided.
+    pub fn names_of<T: InterfaceValue>(&self) -> Vec<String> {
+        self.all()
+            .iter()
+            .filter(|i| i.kind() == T::KIND)
+            .map(|i| i.name().to_string())
+            .collect()
+    }
+
     pub fn contains(&self, name: &str) -> bool {
         self.table.read().contains_key(&canonical(name))
     }
