@@ -120,21 +120,8 @@ pub fn parse(conf: &ComponentConf) -> anyhow::Result<Vec<CamConf>> {
 }
 
 fn parse_provides(l: &ConfLine) -> anyhow::Result<CamConf> {
-    let name = l
-        .args()
-        .first()
-        .ok_or_else(|| l.error(format!("`provides` needs an interface; usage: {USAGE}")))?;
-    let var = match name.as_str() {
-        "colorA" | "colorB" | "colorC" | "colorD" => false,
-        "varcolorA" | "varcolorB" | "varcolorC" | "varcolorD" => true,
-        other => {
-            return Err(l
-                .error(format!(
-                    "firewire provides colorA..D or varcolorA..D, not `{other}`; usage: {USAGE}"
-                ))
-                .into());
-        }
-    };
+    let image = l.image_interface(0, "firewire", USAGE)?;
+    let (name, var) = (image.name, !image.fixed_size);
     let cam: u32 = l.arg(1, "a camera number (0, 1, ...)")?;
     let (width, height, rest) = if var {
         l.expect_args(4, 5, USAGE)?;

@@ -167,21 +167,8 @@ pub fn parse(conf: &ComponentConf) -> anyhow::Result<Vec<GigeConf>> {
 }
 
 fn parse_provides(l: &ConfLine) -> anyhow::Result<GigeConf> {
-    let name = l
-        .args()
-        .first()
-        .ok_or_else(|| l.error(format!("`provides` needs an interface; usage: {USAGE}")))?;
-    let var = match name.as_str() {
-        "colorA" | "colorB" | "colorC" | "colorD" => false,
-        "varcolorA" | "varcolorB" | "varcolorC" | "varcolorD" => true,
-        other => {
-            return Err(l
-                .error(format!(
-                    "gige provides colorA..D or varcolorA..D, not `{other}`; usage: {USAGE}"
-                ))
-                .into());
-        }
-    };
+    let image = l.image_interface(0, "gige", USAGE)?;
+    let (name, var) = (image.name, !image.fixed_size);
     let camera: String = l.arg(1, "a camera id")?;
     let n = l.args().len();
     let (size, fmt_at) = match (var, n) {

@@ -98,22 +98,8 @@ pub fn parse(conf: &ComponentConf, v4l1: bool) -> anyhow::Result<Vec<DevConf>> {
 
 fn parse_provides(conf: &ComponentConf, l: &ConfLine, v4l1: bool) -> anyhow::Result<DevConf> {
     let usage = if v4l1 { USAGE_V4L1 } else { USAGE };
-    let name = l
-        .args()
-        .first()
-        .ok_or_else(|| l.error(format!("`provides` needs an interface; usage: {usage}")))?;
-    let var = match name.as_str() {
-        "colorA" | "colorB" | "colorC" | "colorD" => false,
-        "varcolorA" | "varcolorB" | "varcolorC" | "varcolorD" => true,
-        other => {
-            return Err(l
-                .error(format!(
-                    "{} provides colorA..D or varcolorA..D, not `{other}`; usage: {usage}",
-                    conf.name
-                ))
-                .into());
-        }
-    };
+    let image = l.image_interface(0, &conf.name, usage)?;
+    let (name, var) = (image.name, !image.fixed_size);
     let n = l.args().len();
     let device: String = l.arg(1, "a device (/dev/videoN)")?;
     // Where INPUT and W H are, given the number of words.

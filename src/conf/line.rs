@@ -241,7 +241,7 @@ impl ConfLine {
         let var = matches!(w, "varcolorA" | "varcolorB" | "varcolorC" | "varcolorD");
         if !fixed_size && !var {
             return Err(self.error(format!(
-                "{component} provides colorA..D and varcolorA..D, not `{w}`; usage: {usage}"
+                "{component} provides colorA..D or varcolorA..D, not `{w}`; usage: {usage}"
             )));
         }
         Ok(ImageInterface {
