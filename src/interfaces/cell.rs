@@ -11,7 +11,7 @@ use std::{
     time::{Duration, Instant, SystemTime},
 };
 
-use arc_swap::{ArcSwap, Guard};
+use arc_swap::{ArcSwap, ArcSwapOption, Guard};
 use parking_lot::{Condvar, Mutex};
 
 use super::{
@@ -89,7 +89,8 @@ pub struct Interface<T> {
     /// The clock of the last sample, for cheap checks.
     clock: AtomicU64,
     /// Why the value is stale (its source is gone), until the next publish.
-    stale: Mutex<Option<String>>,
+    /// An atomic pointer like the sample, so a publish never waits for a reader.
+    stale: ArcSwapOption<String>,
 }
 
 impl<T: InterfaceValue> Interface<T> {
@@ -117,7 +118,7 @@ impl<T: InterfaceValue> Interface<T> {
             users: AtomicUsize::new(0),
             wake: (Mutex::new(()), Condvar::new()),
             clock: AtomicU64::new(0),
-            stale: Mutex::new(None),
+            stale: ArcSwapOption::empty(),
         }
     }
 
@@ -215,9 +216,8 @@ impl<T: InterfaceValue> Interface<T> {
         }));
         self.clock.store(clock, Ordering::Release);
         w.published(stamp);
-        let mut stale = self.stale.lock();
-        if stale.is_some() {
-            *stale = None;
+        if self.stale.load().is_some() {
+            self.stale.store(None);
         }
         (clock, old)
     }
@@ -271,12 +271,12 @@ impl<T: InterfaceValue> Interface<T> {
     /// down), so the latest value is old and will stay so. `ps`, `echo` and
     /// mastergui show the reason and the growing age; the next publish clears it.
     pub fn set_stale(&self, why: impl std::fmt::Display) {
-        *self.stale.lock() = Some(why.to_string());
+        self.stale.store(Some(Arc::new(why.to_string())));
     }
 
     /// Why the value is stale, if it is.
     pub fn stale(&self) -> Option<String> {
-        self.stale.lock().clone()
+        self.stale.load_full().map(|why| why.as_ref().clone())
     }
 }
 
