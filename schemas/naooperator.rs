@@ -36,7 +36,7 @@ use parking_lot::Mutex;
 
 use crate::{
     conf::{ComponentConf, ConfLine},
-    interfaces::{Image, Interface, Motors, PtEncoders, PtMotors, limit},
+    interfaces::{Image, Interface, Motors, PtEncoders, PtMotors},
     runtime::{Context, Runtime, Schema},
 };
 
@@ -93,11 +93,7 @@ impl Schema for NaoOperator {
         if let Some(ptm) = &self.dev.ptmotors
             && self.last_head != Some(head)
         {
-            // A copy of the latest command (keeps its speeds and limits).
-            let mut m = ptm.read().value;
-            m.longitude = limit(head[0], m.min_longitude, m.max_longitude);
-            m.latitude = limit(head[1], m.min_latitude, m.max_latitude);
-            ptm.publish(m).map_err(anyhow::Error::msg)?;
+            ptm.point(head[0], head[1])?;
             self.last_head = Some(head);
         }
         Ok(())

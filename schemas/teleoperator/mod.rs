@@ -46,7 +46,7 @@ use parking_lot::Mutex;
 
 use crate::{
     conf::{ComponentConf, ConfError, ConfLine},
-    interfaces::{Encoders, Image, Interface, Laser, Motors, PtEncoders, PtMotors, limit},
+    interfaces::{Encoders, Image, Interface, Laser, Motors, PtEncoders, PtMotors},
     runtime::{Context, Runtime, Schema},
     world::{self, World},
 };
@@ -109,11 +109,7 @@ impl Schema for Teleoperator {
         if let Some(pantilt_motors) = &self.dev.pantilt_motors
             && self.last_pantilt != Some(pt)
         {
-            // A partial update: start from the latest value (its limits and speeds).
-            let mut m = pantilt_motors.read().value;
-            m.longitude = limit(pt[0], m.min_longitude, m.max_longitude);
-            m.latitude = limit(pt[1], m.min_latitude, m.max_latitude);
-            pantilt_motors.publish(m)?;
+            pantilt_motors.point(pt[0], pt[1])?;
             self.last_pantilt = Some(pt);
         }
         Ok(())

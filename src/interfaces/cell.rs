@@ -16,7 +16,7 @@ use parking_lot::{Condvar, Mutex};
 
 use super::{
     table::InterfaceError,
-    values::{InterfaceValue, Motors},
+    values::{InterfaceValue, Motors, PtMotors, limit},
 };
 
 /// One value of an interface.
@@ -286,6 +286,18 @@ impl Interface<Motors> {
     /// driving on a stale command).
     pub fn command(&self, timeout: Duration) -> Motors {
         self.fresh(timeout).map(|s| s.value).unwrap_or_default()
+    }
+}
+
+impl Interface<PtMotors> {
+    /// Points the unit at (`longitude`, `latitude`) degrees, limited to its range,
+    /// keeping the latest speeds and limits: the partial update every pan-tilt
+    /// operator makes (see [`write`](Self::write) for why it is not one).
+    pub fn point(&self, longitude: f32, latitude: f32) -> Result<u64, InterfaceError> {
+        let mut m = self.read().value;
+        m.longitude = limit(longitude, m.min_longitude, m.max_longitude);
+        m.latitude = limit(latitude, m.min_latitude, m.max_latitude);
+        self.publish(m)
     }
 }
 
