@@ -43,7 +43,7 @@ use crate::{
         rgb2hsv, rgb2yuv, yuv_table,
     },
     conf::{ComponentConf, ConfLine},
-    interfaces::{Image, Interface},
+    interfaces::{Image, InUse, Interface},
     runtime::{Context, Runtime, Schema},
 };
 
@@ -259,7 +259,7 @@ pub fn run_filter(img: &Image, ranges: &Ranges, toblack: bool) -> (Image, usize,
 /// The schema.
 pub struct ColorTunerSchema {
     pub state: Arc<ColorTuner>,
-    used: Option<Arc<Interface<Image>>>,
+    used: InUse<Image>,
     output: Option<Arc<Interface<Image>>>,
     last: Option<(String, u64, Ranges, bool)>,
     cycle: Duration,
@@ -270,17 +270,7 @@ pub struct ColorTunerSchema {
 impl ColorTunerSchema {
     fn follow_source(&mut self, rt: &Runtime) -> anyhow::Result<Arc<Interface<Image>>> {
         let name = self.state.source.lock().clone();
-        if let Some(u) = &self.used
-            && u.name() == name
-        {
-            return Ok(u.clone());
-        }
-        let new = rt.interfaces.get::<Image>(&name)?;
-        new.resume();
-        if let Some(old) = self.used.replace(new.clone()) {
-            old.suspend();
-        }
-        Ok(new)
+        Ok(self.used.follow(&rt.interfaces, &name)?)
     }
 }
 
@@ -316,9 +306,7 @@ impl Schema for ColorTunerSchema {
         Ok(())
     }
     fn on_stop(&mut self, _ctx: &Context) {
-        if let Some(u) = self.used.take() {
-            u.suspend();
-        }
+        self.used.release();
     }
     #[cfg(feature = "gui")]
     fn panel(&mut self) -> Option<Box<dyn crate::runtime::Panel>> {
@@ -430,7 +418,7 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
         #[cfg(feature = "gui")]
         panel: Some(Box::new(panel::ColorTunerPanel::new(state.clone()))),
         state,
-        used: None,
+        used: InUse::default(),
         output,
         last: None,
         cycle,

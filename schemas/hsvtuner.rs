@@ -43,7 +43,7 @@ use parking_lot::Mutex;
 use crate::{
     colorspaces::{HsvRange, Lookup, hsv_mask, hsv_table},
     conf::{ComponentConf, ConfLine},
-    interfaces::{Image, Interface},
+    interfaces::{Image, InUse, Interface},
     runtime::{Context, Runtime, Schema},
 };
 
@@ -149,7 +149,7 @@ pub fn filter(img: &Image, ranges: &HsvRadians, toblack: bool) -> (Image, usize,
 /// The schema.
 pub struct HsvTuner {
     pub state: Arc<Tuner>,
-    used: Option<Arc<Interface<Image>>>,
+    used: InUse<Image>,
     output: Option<Arc<Interface<Image>>>,
     last: (String, u64, HsvRadians, bool),
     cycle: Duration,
@@ -161,17 +161,7 @@ impl HsvTuner {
     /// Uses (resumes) the selected source, releasing the previous one.
     fn follow_source(&mut self, rt: &Runtime) -> anyhow::Result<Arc<Interface<Image>>> {
         let name = self.state.source.lock().clone();
-        if let Some(u) = &self.used
-            && u.name() == name
-        {
-            return Ok(u.clone());
-        }
-        let new = rt.interfaces.get::<Image>(&name)?;
-        new.resume();
-        if let Some(old) = self.used.replace(new.clone()) {
-            old.suspend();
-        }
-        Ok(new)
+        Ok(self.used.follow(&rt.interfaces, &name)?)
     }
 }
 
@@ -206,9 +196,7 @@ impl Schema for HsvTuner {
         Ok(())
     }
     fn on_stop(&mut self, _ctx: &Context) {
-        if let Some(u) = self.used.take() {
-            u.suspend();
-        }
+        self.used.release();
     }
     #[cfg(feature = "gui")]
     fn panel(&mut self) -> Option<Box<dyn crate::runtime::Panel>> {
@@ -291,7 +279,7 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
         #[cfg(feature = "gui")]
         panel: Some(Box::new(panel::TunerPanel::new(state.clone()))),
         state,
-        used: None,
+        used: InUse::default(),
         output,
         last: (String::new(), u64::MAX, r, toblack),
         cycle,

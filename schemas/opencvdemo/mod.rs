@@ -48,7 +48,7 @@ pub use filters::{Filter, Params, Pipeline};
 use crate::{
     colorspaces::HsvRange,
     conf::{ComponentConf, ConfLine},
-    interfaces::{Image, Interface},
+    interfaces::{Image, InUse, Interface},
     runtime::{Context, Runtime, Schema},
     vision::Kernel,
 };
@@ -83,7 +83,7 @@ pub struct Demo {
 /// The schema.
 pub struct OpencvDemo {
     pub state: Arc<Demo>,
-    used: Option<Arc<Interface<Image>>>,
+    used: InUse<Image>,
     output: Option<Arc<Interface<Image>>>,
     pipeline: Pipeline,
     last: Option<(String, u64, Filter, Params)>,
@@ -95,17 +95,7 @@ pub struct OpencvDemo {
 impl OpencvDemo {
     fn follow_source(&mut self, rt: &Runtime) -> anyhow::Result<Arc<Interface<Image>>> {
         let name = self.state.source.lock().clone();
-        if let Some(u) = &self.used
-            && u.name() == name
-        {
-            return Ok(u.clone());
-        }
-        let new = rt.interfaces.get::<Image>(&name)?;
-        new.resume();
-        if let Some(old) = self.used.replace(new.clone()) {
-            old.suspend();
-        }
-        Ok(new)
+        Ok(self.used.follow(&rt.interfaces, &name)?)
     }
 }
 
@@ -149,9 +139,7 @@ impl Schema for OpencvDemo {
         Ok(())
     }
     fn on_stop(&mut self, _ctx: &Context) {
-        if let Some(u) = self.used.take() {
-            u.suspend();
-        }
+        self.used.release();
     }
     #[cfg(feature = "gui")]
     fn panel(&mut self) -> Option<Box<dyn crate::runtime::Panel>> {
@@ -319,7 +307,7 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
         #[cfg(feature = "gui")]
         panel: Some(Box::new(panel::DemoPanel::new(state.clone()))),
         state,
-        used: None,
+        used: InUse::default(),
         output,
         pipeline: Pipeline::default(),
         last: None,

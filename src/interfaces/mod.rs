@@ -35,7 +35,7 @@ mod values;
 
 pub use cell::{AnyInterface, Interface, Sample};
 pub use names::{STANDARD_NAMES, canonical, family, interface_name};
-pub use table::{InterfaceError, Interfaces};
+pub use table::{InUse, InterfaceError, Interfaces};
 pub use values::{
     Bumpers, COLOR_HEIGHT, COLOR_WIDTH, Encoders, Image, InterfaceValue, Laser, Motors, PtEncoders,
     PtMotors, Sonars, ZoomEncoders, ZoomMotors, limit,

@@ -129,3 +129,45 @@ impl Interfaces {
         self.table.read().contains_key(&canonical(name))
     }
 }
+
+/// The one interface of a type a schema uses at a time, chosen by name while it
+/// runs (a panel's source picker): following a new name resumes that interface and
+/// suspends the previous one, so its driver works only for what is watched;
+/// [`release`](Self::release) (at stop) suspends it.
+pub struct InUse<T> {
+    iface: Option<Arc<Interface<T>>>,
+}
+
+impl<T> Default for InUse<T> {
+    fn default() -> Self {
+        InUse { iface: None }
+    }
+}
+
+impl<T: InterfaceValue> InUse<T> {
+    /// The interface `name`, resumed; the previous one, if another, is suspended.
+    pub fn follow(
+        &mut self,
+        table: &Interfaces,
+        name: &str,
+    ) -> Result<Arc<Interface<T>>, InterfaceError> {
+        if let Some(u) = &self.iface
+            && u.name() == canonical(name)
+        {
+            return Ok(u.clone());
+        }
+        let new = table.get::<T>(name)?;
+        new.resume();
+        if let Some(old) = self.iface.replace(new.clone()) {
+            old.suspend();
+        }
+        Ok(new)
+    }
+
+    /// Stops using the interface (suspends it).
+    pub fn release(&mut self) {
+        if let Some(u) = self.iface.take() {
+            u.suspend();
+        }
+    }
+}
