@@ -12,10 +12,12 @@
 //!   calls panels, which share data with their schemas through interfaces or
 //!   atomics.
 //! - It repaints when something changed, not on a fixed loop: on input, when an
-//!   interface's value changes (its fingerprint, computed when its clock moves) or a schema's state or shown flag does (a watcher
-//!   thread looks every [`FRAME_PERIOD`], so at most ~30 frames per second), and
-//!   once per [`HEARTBEAT`] for the rates and ages on screen. A robot standing
-//!   still costs about one frame a second.
+//!   interface's value changes (its fingerprint, taken when its clock moves) or a
+//!   schema's state or shown flag does, and once per [`HEARTBEAT`] for the rates
+//!   and ages on screen. A frame that saw a change asks for the next one a
+//!   [`FRAME_PERIOD`] later (at most ~30 fps); an idle window is woken by a watcher
+//!   thread that compares what was last drawn with the runtime every
+//!   [`FRAME_PERIOD`]. A robot standing still costs about one frame a second.
 //! - Schema panels open tiled in the area beside the docked mastergui and stay
 //!   inside it, so they never cover its columns; where the user moves them is saved
 //!   when the window closes (`panels` beside the shell's history) and used the next
@@ -67,8 +69,8 @@ pub struct CloseHandle {
 struct CloseInner {
     close: AtomicBool,
     ctx: Mutex<Option<egui::Context>>,
-    /// When the host last drew a frame.
-    last_frame: Mutex<Instant>,
+    /// When the host last drew a frame, and what it showed then.
+    last_frame: Mutex<(Instant, Option<Signature>)>,
 }
 
 impl Default for CloseInner {
@@ -76,7 +78,7 @@ impl Default for CloseInner {
         CloseInner {
             close: AtomicBool::new(false),
             ctx: Mutex::new(None),
-            last_frame: Mutex::new(Instant::now()),
+            last_frame: Mutex::new((Instant::now(), None)),
         }
     }
 }
@@ -113,8 +115,6 @@ pub struct GuiHost {
     frames: VecDeque<Instant>,
     quit_clicked: bool,
     layout: layout::Layout,
-    /// What the last frame showed, to tell whether the next one is needed soon.
-    shown: Option<Signature>,
     prints: Fingerprints,
 }
 
@@ -126,7 +126,6 @@ impl GuiHost {
             frames: VecDeque::new(),
             quit_clicked: false,
             layout: layout::Layout::default(),
-            shown: None,
             prints: Fingerprints::default(),
         }
     }
@@ -314,9 +313,10 @@ impl GuiHost {
         // frame period, as a 30 fps loop would. Idle: the heartbeat, or the watcher
         // wakes the window at the next change.
         let now = signature(&rt, &mut self.prints);
-        let busy = self.shown.as_ref() != Some(&now);
-        self.shown = Some(now);
-        *self.handle.inner.last_frame.lock() = Instant::now();
+        let mut last = self.handle.inner.last_frame.lock();
+        let busy = last.1.as_ref() != Some(&now);
+        *last = (Instant::now(), Some(now));
+        drop(last);
         ctx.request_repaint_after(if busy { FRAME_PERIOD } else { HEARTBEAT });
     }
 }
@@ -390,16 +390,20 @@ fn signature(rt: &Runtime, prints: &mut Fingerprints) -> Signature {
 /// window closes.
 fn watch_for_changes(rt: Arc<Runtime>, handle: CloseHandle) {
     let mut prints = Fingerprints::default();
-    let mut last = signature(&rt, &mut prints);
     while !handle.requested() {
         std::thread::sleep(FRAME_PERIOD);
-        let now = signature(&rt, &mut prints);
-        if now != last {
-            last = now;
-            let idle = handle.inner.last_frame.lock().elapsed() > 2 * FRAME_PERIOD;
-            if idle && let Some(ctx) = handle.inner.ctx.lock().as_ref() {
-                ctx.request_repaint();
+        // A busy window compares for itself at each frame: look only when idle.
+        let drawn = {
+            let last = handle.inner.last_frame.lock();
+            if last.0.elapsed() <= 2 * FRAME_PERIOD {
+                continue;
             }
+            last.1.clone()
+        };
+        if drawn != Some(signature(&rt, &mut prints))
+            && let Some(ctx) = handle.inner.ctx.lock().as_ref()
+        {
+            ctx.request_repaint();
         }
     }
 }
