@@ -8,3 +8,5 @@ pub mod gui;
 pub mod networkserver;
 #[cfg(feature = "recorder")]
 pub mod recorder;
+#[cfg(feature = "zenoh")]
+pub mod zenoh;

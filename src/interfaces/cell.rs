@@ -6,8 +6,9 @@ use std::{
     collections::VecDeque,
     sync::{
         Arc,
-        atomic::{AtomicU64, AtomicUsize, Ordering},
+        atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering},
     },
+    thread::Thread,
     time::{Duration, Instant, SystemTime},
 };
 
@@ -91,6 +92,50 @@ pub struct Interface<T> {
     /// Why the value is stale (its source is gone), until the next publish.
     /// An atomic pointer like the sample, so a publish never waits for a reader.
     stale: ArcSwapOption<String>,
+    /// Threads to wake on every new value (see [`Watch`]); none on most interfaces.
+    watches: ArcSwapOption<Vec<Arc<Watch>>>,
+}
+
+/// Wakes one thread when any interface it watches gets a new value, so a thread
+/// that forwards values (a network publisher) sleeps until there is something to
+/// send instead of polling clocks. A publish pays one atomic load when nobody
+/// watches, and an unpark per watching thread otherwise.
+pub struct Watch {
+    thread: Thread,
+    woken: AtomicBool,
+}
+
+impl Watch {
+    /// A watch that wakes the calling thread (only that thread may [`wait`](Self::wait)).
+    pub fn for_current_thread() -> Arc<Watch> {
+        Arc::new(Watch {
+            thread: std::thread::current(),
+            woken: AtomicBool::new(false),
+        })
+    }
+
+    /// Sleeps until a watched interface publishes or `timeout` passes; true when
+    /// something was published since the previous call.
+    pub fn wait(&self, timeout: Duration) -> bool {
+        let deadline = Instant::now() + timeout;
+        loop {
+            if self.woken.swap(false, Ordering::AcqRel) {
+                return true;
+            }
+            let now = Instant::now();
+            if now >= deadline {
+                return false;
+            }
+            std::thread::park_timeout(deadline - now);
+        }
+    }
+
+    /// Wakes the thread now (for a stop request).
+    pub fn wake(&self) {
+        if !self.woken.swap(true, Ordering::AcqRel) {
+            self.thread.unpark();
+        }
+    }
 }
 
 impl<T: InterfaceValue> Interface<T> {
@@ -119,6 +164,7 @@ impl<T: InterfaceValue> Interface<T> {
             wake: (Mutex::new(()), Condvar::new()),
             clock: AtomicU64::new(0),
             stale: ArcSwapOption::empty(),
+            watches: ArcSwapOption::empty(),
         }
     }
 
@@ -219,6 +265,9 @@ impl<T: InterfaceValue> Interface<T> {
         if self.stale.load().is_some() {
             self.stale.store(None);
         }
+        if let Some(watches) = &*self.watches.load() {
+            watches.iter().for_each(|w| w.wake());
+        }
         (clock, old)
     }
 
@@ -278,6 +327,28 @@ impl<T: InterfaceValue> Interface<T> {
     pub fn stale(&self) -> Option<String> {
         self.stale.load_full().map(|why| why.as_ref().clone())
     }
+
+    /// Wakes `watch`'s thread on every new value from now on.
+    pub fn watch(&self, watch: &Arc<Watch>) {
+        self.watches.rcu(|ws| {
+            let mut v: Vec<Arc<Watch>> = ws.as_deref().cloned().unwrap_or_default();
+            v.push(watch.clone());
+            Some(Arc::new(v))
+        });
+    }
+
+    /// Stops waking `watch`'s thread.
+    pub fn unwatch(&self, watch: &Arc<Watch>) {
+        self.watches.rcu(|ws| {
+            let v: Vec<Arc<Watch>> = ws
+                .iter()
+                .flat_map(|v| v.iter())
+                .filter(|w| !Arc::ptr_eq(w, watch))
+                .cloned()
+                .collect();
+            (!v.is_empty()).then(|| Arc::new(v))
+        });
+    }
 }
 
 impl Interface<Motors> {
@@ -326,6 +397,12 @@ pub trait AnyInterface: Any + Send + Sync {
     fn describe(&self) -> String;
     /// Sets fields (`v=200 w=10`) on a copy of the latest value and publishes it.
     fn set_fields(&self, fields: &[(&str, &str)]) -> Result<u64, InterfaceError>;
+    /// See [`Interface::set_stale`].
+    fn set_stale(&self, why: &str);
+    /// See [`Interface::watch`].
+    fn watch(&self, watch: &Arc<Watch>);
+    /// See [`Interface::unwatch`].
+    fn unwatch(&self, watch: &Arc<Watch>);
 }
 
 impl<T: InterfaceValue> AnyInterface for Interface<T> {
@@ -374,5 +451,14 @@ impl<T: InterfaceValue> AnyInterface for Interface<T> {
             v.set_field(f, val).map_err(InterfaceError::Field)?;
         }
         self.publish(v)
+    }
+    fn set_stale(&self, why: &str) {
+        Interface::set_stale(self, why)
+    }
+    fn watch(&self, watch: &Arc<Watch>) {
+        Interface::watch(self, watch)
+    }
+    fn unwatch(&self, watch: &Arc<Watch>) {
+        Interface::unwatch(self, watch)
     }
 }

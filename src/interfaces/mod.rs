@@ -33,7 +33,7 @@ mod names;
 mod table;
 mod values;
 
-pub use cell::{AnyInterface, Interface, Sample};
+pub use cell::{AnyInterface, Interface, Sample, Watch};
 pub use names::{STANDARD_NAMES, canonical, family, interface_name};
 pub use table::{InUse, InterfaceError, Interfaces};
 pub use values::{
@@ -44,7 +44,27 @@ pub use values::{
 #[cfg(test)]
 mod tests {
     use super::*;
-    use std::time::Duration;
+    use std::{sync::Arc, time::Duration};
+
+    #[test]
+    fn a_watch_wakes_its_thread_on_publish_until_unwatched() {
+        let i: Arc<Interface<Motors>> = Arc::new(Interface::new("motors", "test"));
+        let w = Watch::for_current_thread();
+        i.watch(&w);
+        assert!(!w.wait(Duration::from_millis(10)), "nothing published yet");
+        let writer = {
+            let i = i.clone();
+            std::thread::spawn(move || {
+                std::thread::sleep(Duration::from_millis(20));
+                i.publish(Motors { v: 1.0, w: 0.0 }).unwrap();
+            })
+        };
+        assert!(w.wait(Duration::from_secs(10)), "woken by the publish");
+        writer.join().unwrap();
+        i.unwatch(&w);
+        i.publish(Motors { v: 2.0, w: 0.0 }).unwrap();
+        assert!(!w.wait(Duration::from_millis(10)), "unwatched");
+    }
 
     #[test]
     fn clock_increases_and_read_sees_latest() {

@@ -2,6 +2,8 @@
 //! what it needs.
 #![allow(dead_code)]
 
+pub mod process;
+
 use std::{
     path::{Path, PathBuf},
     process::{Command, Stdio},

@@ -1,0 +1,383 @@
+//! One interface on Zenoh, either way: [`Outbound`] puts every new local value on
+//! a key (sensors of a robot, actuators written by a remote controller);
+//! [`inbound`] subscribes a key and publishes what arrives into a local interface.
+//! Liveliness tokens say who is there: the serving side declares `<key>/served`,
+//! a controller writing an actuator declares `<key>/driven/<session id>`.
+
+use std::{
+    sync::{
+        Arc,
+        atomic::{AtomicBool, Ordering},
+    },
+    time::{Duration, SystemTime},
+};
+
+use zenoh::{
+    Session, Wait,
+    bytes::Encoding,
+    matching::MatchingListener,
+    pubsub::{Publisher, Subscriber},
+    qos::CongestionControl,
+    sample::{Locality, Sample as ZSample, SampleKind},
+};
+
+use super::wire::{self, Format, Wire};
+use crate::{
+    interfaces::{AnyInterface, Interface, Motors, Watch},
+    mcapfmt,
+};
+
+/// How one interface travels.
+#[derive(Clone, Debug)]
+pub struct Route {
+    pub key: String,
+    pub format: Format,
+    /// Images as JPEG of this quality (`images jpeg Q`); raw BGR when `None`.
+    pub jpeg: Option<u8>,
+}
+
+impl Route {
+    /// Whether this kind goes as a ROS 2 message on this route.
+    fn ros2(&self, kind: &str) -> bool {
+        self.format == Format::Ros2 && wire::ros2_type(kind).is_some()
+    }
+}
+
+/// Puts every new value of a local interface on its key.
+pub trait Outbound: Send {
+    fn interface(&self) -> &dyn AnyInterface;
+    /// Sends the latest value if it is new and somebody listens; errors are
+    /// logged once per key until a put succeeds again.
+    fn send_if_new(&mut self);
+}
+
+struct Out<T: Wire> {
+    iface: Arc<Interface<T>>,
+    /// Dropped before the publisher it listens on (fields drop in order).
+    _listener: MatchingListener<()>,
+    publisher: Publisher<'static>,
+    route: Route,
+    /// A subscriber matches the key (kept by Zenoh's matching listener).
+    matching: Arc<AtomicBool>,
+    last: u64,
+    gid: [u8; 16],
+    failing: bool,
+}
+
+impl<T: Wire> Outbound for Out<T> {
+    fn interface(&self) -> &dyn AnyInterface {
+        &*self.iface
+    }
+
+    fn send_if_new(&mut self) {
+        let s = self.iface.snapshot();
+        if s.clock == self.last || s.clock == 0 || !self.matching.load(Ordering::Acquire) {
+            return;
+        }
+        self.last = s.clock;
+        let mut payload = Vec::new();
+        let (encoding, attachment) = if self.route.ros2(T::KIND) {
+            let snap = T::ros2(&s).expect("kinds with a ROS type have a snapshot");
+            mcapfmt::ros2::encode(self.iface.name(), &snap, &mut payload);
+            let a = wire::rmw_attachment(s.clock, s.time, &self.gid);
+            (Encoding::ZENOH_BYTES, a.to_vec())
+        } else {
+            let a = wire::attachment(s.clock, s.time).to_vec();
+            match self.route.jpeg.and_then(|q| s.value.to_jpeg(q)) {
+                Some(jpeg) => {
+                    payload = jpeg;
+                    (Encoding::IMAGE_JPEG, a)
+                }
+                None => {
+                    s.value.put(&mut payload);
+                    (
+                        Encoding::ZENOH_BYTES.with_schema(wire::encoding(T::KIND)),
+                        a,
+                    )
+                }
+            }
+        };
+        let put = self
+            .publisher
+            .put(payload)
+            .encoding(encoding)
+            .attachment(attachment)
+            .wait();
+        match put {
+            Ok(()) => self.failing = false,
+            Err(e) if !self.failing => {
+                self.failing = true;
+                tracing::warn!("zenoh: cannot put `{}` on {}: {e}", self.iface.name(), self.route.key);
+            }
+            Err(_) => {}
+        }
+    }
+}
+
+/// An [`Outbound`] for interface `iface` (of value type `T`) on `route`. While a
+/// subscriber matches, a sensor is resumed (its driver computes it) and
+/// suspended again when the last one leaves.
+pub fn outbound<T: Wire>(
+    session: &Session,
+    iface: Arc<dyn AnyInterface>,
+    route: Route,
+    interfaces: &crate::interfaces::Interfaces,
+) -> anyhow::Result<Box<dyn Outbound>> {
+    let typed: Arc<Interface<T>> = interfaces.get(iface.name())?;
+    let publisher = session
+        .declare_publisher(route.key.clone())
+        .congestion_control(CongestionControl::Drop)
+        .express(T::KIND != "image")
+        .wait()
+        .map_err(|e| anyhow::anyhow!("zenoh: cannot publish on `{}`: {e}", route.key))?;
+    let matching = Arc::new(AtomicBool::new(false));
+    let listener = {
+        let matching = matching.clone();
+        let iface = iface.clone();
+        publisher
+            .matching_listener()
+            .callback(move |status| {
+                let now = status.matching();
+                if matching.swap(now, Ordering::AcqRel) != now && !iface.is_actuator() {
+                    if now {
+                        iface.resume();
+                    } else {
+                        iface.suspend();
+                    }
+                }
+            })
+            .wait()
+            .map_err(|e| anyhow::anyhow!("zenoh: cannot watch subscribers of `{}`: {e}", route.key))?
+    };
+    let mut gid = [0u8; 16];
+    let zid = session.zid().to_le_bytes();
+    gid[..zid.len().min(16)].copy_from_slice(&zid[..zid.len().min(16)]);
+    Ok(Box::new(Out {
+        iface: typed,
+        _listener: listener,
+        publisher,
+        route,
+        matching,
+        last: 0,
+        gid,
+        failing: false,
+    }))
+}
+
+/// Decodes a sample for an interface of type `T` on `route`: (clock, wall time,
+/// value); the clock is 0 when the sample carries none.
+fn decode<T: Wire>(route: &Route, sample: &ZSample) -> Result<(u64, SystemTime, T), String> {
+    let payload = sample.payload().to_bytes();
+    if route.ros2(T::KIND) {
+        let (clock, time) = sample
+            .attachment()
+            .and_then(|a| wire::read_rmw_attachment(&a.to_bytes()))
+            .unwrap_or((0, SystemTime::now()));
+        let d = mcapfmt::ros2::decode(&route.key, T::KIND, &payload, clock, mcapfmt::nanos(time))
+            .map_err(|e| e.to_string())?;
+        let v = T::from_ros2(d.value).ok_or("a ROS message of another type")?;
+        return Ok((clock, mcapfmt::from_nanos(d.time_ns), v));
+    }
+    let (clock, time) = sample
+        .attachment()
+        .and_then(|a| wire::read_attachment(&a.to_bytes()))
+        .unwrap_or((0, SystemTime::now()));
+    let v = if *sample.encoding() == Encoding::IMAGE_JPEG {
+        T::from_jpeg(&payload)?
+    } else {
+        T::take(&payload)?
+    };
+    Ok((clock, time, v))
+}
+
+/// Publishes a received value into the local interface, with the sender's clock
+/// when it is ahead of the local one (so `ps` shows the robot's clocks and a
+/// gap is a lost sample), else with the next local clock (the sender restarted).
+fn publish_in<T: Wire>(iface: &Interface<T>, clock: u64, time: SystemTime, v: T) -> Result<(), String> {
+    let r = if clock > iface.clock() {
+        iface.publish_recorded(clock, time, v)
+    } else {
+        iface.publish(v)
+    };
+    r.map(|_| ()).map_err(|e| e.to_string())
+}
+
+/// Subscribes `route.key` and publishes what arrives into `iface`. A payload
+/// that is not a value of its kind is dropped with one log line (until a good
+/// one arrives again).
+pub fn inbound<T: Wire>(
+    session: &Session,
+    iface: Arc<Interface<T>>,
+    route: Route,
+) -> anyhow::Result<Subscriber<()>> {
+    let key = route.key.clone();
+    let warned = AtomicBool::new(false);
+    session
+        .declare_subscriber(route.key.clone())
+        .allowed_origin(Locality::Remote)
+        .callback(move |sample| {
+            if sample.kind() != SampleKind::Put {
+                return;
+            }
+            let result = decode::<T>(&route, &sample)
+                .and_then(|(clock, time, v)| publish_in(&iface, clock, time, v));
+            match result {
+                Ok(()) => warned.store(false, Ordering::Relaxed),
+                Err(e) if !warned.swap(true, Ordering::Relaxed) => tracing::warn!(
+                    "zenoh: dropped a sample on `{}` for `{}`: {e} (see docs/zenoh.md for the layout)",
+                    route.key,
+                    iface.name()
+                ),
+                Err(_) => {}
+            }
+        })
+        .wait()
+        .map_err(|e| anyhow::anyhow!("zenoh: cannot subscribe `{key}`: {e}"))
+}
+
+/// Watches the serving side of `key` (its `<key>/served` token): while it is
+/// absent `iface` is stale, and a `motors` interface is zeroed.
+pub fn watch_server(
+    session: &Session,
+    key: &str,
+    iface: Arc<dyn AnyInterface>,
+    interfaces: &crate::interfaces::Interfaces,
+) -> anyhow::Result<Box<dyn Send>> {
+    let token = format!("{key}/served");
+    let motors: Option<Arc<Interface<Motors>>> = (iface.kind() == "motors")
+        .then(|| interfaces.get(iface.name()).ok())
+        .flatten();
+    iface.set_stale(&format!("zenoh: waiting for `{key}` (nobody serves it yet)"));
+    let gone = {
+        let key = key.to_string();
+        move |iface: &dyn AnyInterface| {
+            iface.set_stale(&format!("zenoh: `{key}` is gone (its robot left)"));
+            if let Some(m) = &motors {
+                let _ = m.publish(Motors::default());
+            }
+        }
+    };
+    let sub = session
+        .liveliness()
+        .declare_subscriber(token.clone())
+        .history(true)
+        .callback(move |s| match s.kind() {
+            SampleKind::Put if iface.users() == 0 => iface.set_stale(&format!(
+                "zenoh: served by its robot; not subscribed while nobody uses it (`run {}`)",
+                iface.name()
+            )),
+            SampleKind::Put => tracing::info!("zenoh: `{}` is served", s.key_expr()),
+            SampleKind::Delete => {
+                tracing::warn!("zenoh: `{}` went away; `{}` is stale", s.key_expr(), iface.name());
+                gone(&*iface);
+            }
+        })
+        .wait()
+        .map_err(|e| anyhow::anyhow!("zenoh: cannot watch `{token}`: {e}"))?;
+    Ok(Box::new(sub))
+}
+
+/// On the serving side of `motors`: zeroes the local command when the last
+/// remote writer (a `<key>/driven/*` token) leaves, so a killed controller stops
+/// the robot at once rather than after `motors_timeout`.
+pub fn watch_writers(
+    session: &Session,
+    key: &str,
+    motors: Arc<Interface<Motors>>,
+) -> anyhow::Result<Box<dyn Send>> {
+    let writers = parking_lot::Mutex::new(std::collections::BTreeSet::<String>::new());
+    let sub = session
+        .liveliness()
+        .declare_subscriber(format!("{key}/driven/*"))
+        .history(true)
+        .callback(move |s| {
+            let mut w = writers.lock();
+            match s.kind() {
+                SampleKind::Put => {
+                    w.insert(s.key_expr().to_string());
+                }
+                SampleKind::Delete => {
+                    w.remove(s.key_expr().as_str());
+                    if w.is_empty() {
+                        tracing::warn!("zenoh: the last writer of `{}` left: motors stop", motors.name());
+                        let _ = motors.publish(Motors::default());
+                    }
+                }
+            }
+        })
+        .wait()
+        .map_err(|e| anyhow::anyhow!("zenoh: cannot watch the writers of `{key}`: {e}"))?;
+    Ok(Box::new(sub))
+}
+
+/// Declares a liveliness token (kept alive as long as the returned value).
+pub fn token(session: &Session, key: String) -> anyhow::Result<Box<dyn Send>> {
+    let t = session
+        .liveliness()
+        .declare_token(key.clone())
+        .wait()
+        .map_err(|e| anyhow::anyhow!("zenoh: cannot declare `{key}`: {e}"))?;
+    Ok(Box::new(t))
+}
+
+/// The names served under `prefix` (`jderobot/<robot>` or `<domain>/<robot>`),
+/// read from their tokens; waits up to `wait` for the first answers.
+pub fn discover(session: &Session, prefix: &str, wait: Duration) -> Vec<String> {
+    let deadline = std::time::Instant::now() + wait;
+    loop {
+        let mut names = std::collections::BTreeSet::new();
+        for pattern in [format!("{prefix}/*/served"), format!("{prefix}/*/*/*/served")] {
+            let Ok(replies) = session
+                .liveliness()
+                .get(pattern)
+                .timeout(Duration::from_millis(500))
+                .wait()
+            else {
+                continue;
+            };
+            while let Ok(reply) = replies.recv() {
+                if let Ok(s) = reply.result() {
+                    let key = s.key_expr().as_str();
+                    if let Some(name) = key
+                        .strip_prefix(prefix)
+                        .and_then(|k| k.strip_prefix('/'))
+                        .and_then(|k| k.split('/').next())
+                    {
+                        names.insert(name.to_string());
+                    }
+                }
+            }
+        }
+        if !names.is_empty() || std::time::Instant::now() >= deadline {
+            return names.into_iter().collect();
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+/// The thread that puts new values: it sleeps on a [`Watch`] of every outbound
+/// interface until one publishes (or `stop` is set), and calls `tick` at least
+/// every 100 ms (on-demand subscriptions).
+pub fn run_outbound(
+    mut outs: Vec<Box<dyn Outbound>>,
+    watch: &Arc<Watch>,
+    stop: &AtomicBool,
+    mut tick: impl FnMut(),
+) {
+    for o in &outs {
+        o.interface().watch(watch);
+    }
+    while !stop.load(Ordering::Acquire) {
+        for o in outs.iter_mut() {
+            o.send_if_new();
+        }
+        tick();
+        watch.wait(Duration::from_millis(100));
+    }
+    for o in &outs {
+        o.interface().unwatch(watch);
+    }
+}
+
+/// Keeps anything alive (subscribers, tokens, listeners) until dropped.
+pub type Keep = Vec<Box<dyn Send>>;

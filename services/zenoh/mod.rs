@@ -1,0 +1,476 @@
+//! zenoh: this process's interfaces on Zenoh (the pub/sub engine of dora-rs,
+//! copper-rs and ROS 2's rmw_zenoh), and remote ones provided here as if local.
+//! Both halves live in one component with one Zenoh session: load it as a service
+//! on the robot (`publishes`) and as a driver beside the schemas (`provides`), or
+//! both at once. See `docs/zenoh.md` for keys, byte layouts and Python examples.
+//!
+//! # Conf
+//! ```text
+//! service zenoh
+//! robot pioneer                 # the robot's name in default keys (default `robot`)
+//! publishes all                 # every local interface of a kind that travels, or one by one:
+//! publishes colorA              #   on jderobot/<robot>/colorA
+//! publishes laser lab/front     #   on a key of your own
+//! provides all pioneer          # every interface robot `pioneer` serves (asked at start), or:
+//! provides laser                #   robot <robot>'s laser (key jderobot/<robot>/laser) as `laser`
+//! provides laser2 lab/front     #   a key of your own; a non-standard name takes the kind of
+//!                               #   the key's last chunk (`laser2` from .../front: say
+//!                               #   `provides laser2 lab/front laser`)
+//! format jderobot               # jderobot (default): docs/zenoh.md layouts; ros2: CDR on
+//!                               #   rmw_zenoh keys for laser, images, encoders, motors
+//! domain 0                      # ROS 2 domain id of `format ros2` keys (0..232)
+//! images raw                    # raw BGR (default) | jpeg [QUALITY 1..100, default 80]
+//! mode peer                     # peer (default) | client | router
+//! listen tcp/0.0.0.0:7447       # repeatable; default tcp/127.0.0.1:0 (loopback, any port)
+//! connect tcp/10.0.0.2:7447     # repeatable
+//! scouting loopback             # loopback (default) | lan | off: multicast discovery of peers
+//! config zenoh.json5            # a Zenoh config file (ACL, TLS, timeouts), applied first
+//! discover 3000                 # ms that `provides all` waits for the robot (default 3000)
+//! end_service
+//! ```
+//!
+//! # Interfaces
+//! `publishes`: sensors (`colorA..D`, `varcolorA..D`, `laser`, `sonars`, `encoders`,
+//! `bumpers`, `pantiltencoders`, `zoomencoders`) are put on their key with every new
+//! value, while some subscriber matches (the interface is resumed meanwhile, so a
+//! driver that computes on demand computes); actuators (`motors`, `pantiltmotors`,
+//! `zoommotors`) are subscribed, and what a remote controller writes goes to the local
+//! one (whose driver still applies its `motors_timeout`; when the last remote writer
+//! leaves, motors are zeroed at once).
+//!
+//! `provides`: the remote interfaces are created here with the sender's clocks and
+//! times, in the units of `crate::interfaces`. Sensors are subscribed while a local
+//! user uses them; local writes to an actuator are put on its key. Each is stale
+//! (and `motors` zeroed) while its robot is absent: the serving side holds a Zenoh
+//! liveliness token `<key>/served`, which disappears within the session's lease
+//! when the robot's process dies (at once when its connection closes).
+//!
+//! A payload that is not a value of its kind is dropped with one log line per key.
+//!
+//! System packages: none (Zenoh is compiled in, TCP transport only).
+
+mod links;
+mod session;
+pub mod wire;
+
+use std::{
+    sync::{
+        Arc,
+        atomic::{AtomicBool, Ordering},
+        mpsc::sync_channel,
+    },
+    thread::JoinHandle,
+    time::Duration,
+};
+
+use zenoh::{Session, Wait, key_expr::KeyExpr, pubsub::Subscriber};
+
+use crate::{
+    conf::{ComponentConf, ConfError, ConfLine},
+    interfaces::{self, AnyInterface, Interface, Interfaces, Watch},
+    runtime::{Driver, Runtime},
+};
+use links::{Keep, Outbound, Route};
+pub use session::{Scouting, SessionConf};
+use wire::{Format, Wire, by_kind};
+
+/// What to publish or provide: one interface, or all.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Which {
+    All,
+    /// The interface name and its key (`None`: the default key).
+    One { name: String, key: Option<String>, kind: Option<String> },
+}
+
+/// The component's conf.
+#[derive(Clone, Debug)]
+pub struct Settings {
+    pub robot: String,
+    pub publishes: Vec<Which>,
+    /// `provides all ROBOT` is `(All, ROBOT)`; `provides NAME [KEY]` is `(One, robot)`.
+    pub provides: Vec<(Which, String)>,
+    pub format: Format,
+    pub domain: u32,
+    pub jpeg: Option<u8>,
+    pub session: SessionConf,
+    pub discover: Duration,
+}
+
+const USAGE_PUBLISHES: &str = "publishes all | publishes NAME [KEY]";
+const USAGE_PROVIDES: &str = "provides all ROBOT | provides NAME [KEY [KIND]]";
+
+/// A key chunk (robot name): no `/` and none of Zenoh's special characters.
+fn chunk<'a>(l: &'a ConfLine, i: usize, what: &str) -> Result<&'a str, ConfError> {
+    let w = l.word(i, what)?;
+    if w.is_empty() || w.contains(['/', '*', '$', '#', '?', '@']) {
+        return Err(l.error(format!(
+            "`{}`: {what} `{w}` cannot be a key chunk (no / * $ # ? @)",
+            l.keyword()
+        )));
+    }
+    Ok(w)
+}
+
+fn key(l: &ConfLine, i: usize) -> Result<String, ConfError> {
+    let w = l.word(i, "a key expression")?;
+    match KeyExpr::try_from(w) {
+        Ok(k) if !k.as_str().contains('*') && !k.as_str().contains('$') => Ok(w.to_string()),
+        Ok(_) => Err(l.error(format!(
+            "`{}`: key `{w}` has a wildcard; name one key (e.g. lab/robot1/laser)",
+            l.keyword()
+        ))),
+        Err(e) => Err(l.error(format!("`{}`: `{w}` is not a Zenoh key: {e}", l.keyword()))),
+    }
+}
+
+fn kind_word(l: &ConfLine, i: usize) -> Result<String, ConfError> {
+    let w = l.word(i, "an interface kind")?;
+    let kinds = [
+        "image", "laser", "sonars", "encoders", "motors", "pantiltencoders", "pantiltmotors",
+        "zoomencoders", "zoommotors", "bumpers",
+    ];
+    l.choice(i, "the interface kind", &kinds).map(str::to_string)?;
+    Ok(w.to_string())
+}
+
+/// Reads the conf (every error names file:line and the fix).
+pub fn parse(conf: &ComponentConf) -> Result<Settings, ConfError> {
+    let robot = match conf.line("robot") {
+        Some(l) => {
+            l.expect_args(1, 1, "robot NAME")?;
+            chunk(l, 0, "the robot name")?.to_string()
+        }
+        None => "robot".into(),
+    };
+    let mut s = Settings {
+        robot: robot.clone(),
+        publishes: Vec::new(),
+        provides: Vec::new(),
+        format: Format::Jderobot,
+        domain: 0,
+        jpeg: None,
+        session: SessionConf::parse(conf)?,
+        discover: Duration::from_millis(3000),
+    };
+    for l in &conf.lines {
+        match l.keyword() {
+            "publishes" => {
+                l.expect_args(1, 2, USAGE_PUBLISHES)?;
+                s.publishes.push(if l.args()[0] == "all" {
+                    l.expect_args(1, 1, USAGE_PUBLISHES)?;
+                    Which::All
+                } else {
+                    Which::One {
+                        name: interfaces::canonical(l.word(0, "an interface name")?),
+                        key: (l.args().len() > 1).then(|| key(l, 1)).transpose()?,
+                        kind: None,
+                    }
+                });
+            }
+            "provides" => {
+                l.expect_args(1, 3, USAGE_PROVIDES)?;
+                if l.args()[0] == "all" {
+                    l.expect_args(2, 2, USAGE_PROVIDES)?;
+                    s.provides.push((Which::All, chunk(l, 1, "the robot name")?.into()));
+                } else {
+                    let name = interfaces::canonical(l.word(0, "an interface name")?);
+                    let kind = match l.args().len() {
+                        3 => Some(kind_word(l, 2)?),
+                        _ => None,
+                    };
+                    if kind.is_none() && interfaces::family(&name).is_none() {
+                        return Err(l.error(format!(
+                            "`provides {name}`: `{name}` is not a standard interface name, so \
+                             say its kind: provides {name} KEY KIND (KIND: image, laser, encoders, ...)"
+                        )));
+                    }
+                    let key = (l.args().len() > 1).then(|| key(l, 1)).transpose()?;
+                    s.provides
+                        .push((Which::One { name, key, kind }, robot.clone()));
+                }
+            }
+            "format" => {
+                l.expect_args(1, 1, "format jderobot|ros2")?;
+                s.format = match l.choice(0, "the format", &["jderobot", "ros2"])? {
+                    "ros2" => Format::Ros2,
+                    _ => Format::Jderobot,
+                };
+            }
+            "domain" => {
+                l.expect_args(1, 1, "domain 0..232")?;
+                s.domain = l.number(0, "the ROS 2 domain id", 0..=232)?;
+            }
+            "images" => {
+                l.expect_args(1, 2, "images raw | images jpeg [QUALITY]")?;
+                s.jpeg = match l.choice(0, "the image encoding", &["raw", "jpeg"])? {
+                    "jpeg" if l.args().len() == 2 => Some(l.number(1, "the JPEG quality", 1..=100)?),
+                    "jpeg" => Some(80),
+                    _ => {
+                        l.expect_args(1, 1, "images raw")?;
+                        None
+                    }
+                };
+            }
+            "discover" => {
+                l.expect_args(1, 1, "discover MILLISECONDS")?;
+                s.discover = l.millis(0, "the discovery wait", 0..=600_000)?;
+            }
+            "robot" | "mode" | "listen" | "connect" | "scouting" | "config" => {}
+            _ => {
+                return Err(conf.unknown(
+                    l,
+                    "robot, publishes, provides, format, domain, images, mode, listen, connect, \
+                     scouting, config, discover",
+                ));
+            }
+        }
+    }
+    Ok(s)
+}
+
+/// The interface kinds that travel.
+fn travels(kind: &str) -> bool {
+    by_kind!(kind, travels_as(), false)
+}
+
+fn travels_as<T: Wire>() -> bool {
+    true
+}
+
+struct Zenoh {
+    session: Session,
+    stop: Arc<AtomicBool>,
+    watch: Option<Arc<Watch>>,
+    thread: Option<JoinHandle<()>>,
+    keep: Keep,
+}
+
+impl Driver for Zenoh {
+    fn terminate(&mut self) {
+        self.stop.store(true, Ordering::Release);
+        if let Some(w) = &self.watch {
+            w.wake();
+        }
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+        self.keep.clear();
+        let _ = self.session.close().wait();
+    }
+}
+
+impl Drop for Zenoh {
+    fn drop(&mut self) {
+        self.terminate();
+    }
+}
+
+/// A remote sensor subscribed only while a local user uses it.
+struct OnDemand {
+    iface: Arc<dyn AnyInterface>,
+    subscribe: Box<dyn Fn() -> anyhow::Result<Subscriber<()>> + Send>,
+    sub: Option<Subscriber<()>>,
+}
+
+impl OnDemand {
+    fn update(&mut self) {
+        let used = self.iface.users() > 0;
+        if used && self.sub.is_none() {
+            match (self.subscribe)() {
+                Ok(s) => self.sub = Some(s),
+                Err(e) => tracing::warn!("{e}"),
+            }
+        } else if !used && self.sub.is_some() {
+            self.sub = None;
+        }
+    }
+}
+
+/// Everything create() sets up, before the thread starts.
+#[derive(Default)]
+struct Plan {
+    outs: Vec<Box<dyn Outbound>>,
+    on_demand: Vec<OnDemand>,
+    keep: Keep,
+}
+
+fn route(s: &Settings, robot: &str, name: &str, kind: &str, key: &Option<String>) -> Route {
+    Route {
+        key: key
+            .clone()
+            .unwrap_or_else(|| wire::default_key(s.format, s.domain, robot, name, kind)),
+        format: s.format,
+        jpeg: s.jpeg,
+    }
+}
+
+/// Serves a local interface: a sensor is put, an actuator subscribed.
+fn serve<T: Wire>(
+    session: &Session,
+    rt: &Runtime,
+    iface: Arc<dyn AnyInterface>,
+    route: Route,
+    plan: &mut Plan,
+) -> anyhow::Result<()> {
+    plan.keep.push(links::token(session, format!("{}/served", route.key))?);
+    if iface.is_actuator() {
+        let typed: Arc<Interface<T>> = rt.interfaces.get(iface.name())?;
+        if T::KIND == "motors" {
+            let motors = rt.interfaces.get(iface.name())?;
+            plan.keep.push(links::watch_writers(session, &route.key, motors)?);
+        }
+        plan.keep.push(Box::new(links::inbound(session, typed, route)?));
+    } else {
+        plan.outs
+            .push(links::outbound::<T>(session, iface, route, &rt.interfaces)?);
+    }
+    Ok(())
+}
+
+/// Provides a remote interface here: a sensor is subscribed on demand, an
+/// actuator's local writes are put.
+fn provide<T: Wire>(
+    session: &Session,
+    rt: &Runtime,
+    name: &str,
+    route: Route,
+    plan: &mut Plan,
+) -> anyhow::Result<()> {
+    let typed: Arc<Interface<T>> = rt.interfaces.provide(name, "zenoh").map_err(|e| {
+        anyhow::anyhow!("zenoh: cannot provide `{name}`: {e}")
+    })?;
+    let any: Arc<dyn AnyInterface> = typed.clone();
+    plan.keep
+        .push(links::watch_server(session, &route.key, any.clone(), &rt.interfaces)?);
+    if T::ACTUATOR {
+        plan.keep.push(links::token(
+            session,
+            format!("{}/driven/{}", route.key, session.zid()),
+        )?);
+        plan.outs
+            .push(links::outbound::<T>(session, any, route, &rt.interfaces)?);
+    } else {
+        let session = session.clone();
+        plan.on_demand.push(OnDemand {
+            iface: any,
+            subscribe: Box::new(move || links::inbound(&session, typed.clone(), route.clone())),
+            sub: None,
+        });
+    }
+    Ok(())
+}
+
+fn publishes(s: &Settings, interfaces: &Interfaces) -> anyhow::Result<Vec<(Arc<dyn AnyInterface>, Option<String>)>> {
+    let mut v: Vec<(Arc<dyn AnyInterface>, Option<String>)> = Vec::new();
+    for w in &s.publishes {
+        match w {
+            Which::All => {
+                for i in interfaces.all() {
+                    if travels(i.kind()) && i.provider() != "zenoh" && !v.iter().any(|(j, _)| j.name() == i.name()) {
+                        v.push((i, None));
+                    }
+                }
+            }
+            Which::One { name, key, .. } => {
+                let i = interfaces.get_any(name).map_err(|_| {
+                    anyhow::anyhow!(
+                        "zenoh: `publishes {name}`: no such interface here (have: {}); load the \
+                         driver that provides it before zenoh",
+                        interfaces.names().join(", ")
+                    )
+                })?;
+                if !travels(i.kind()) {
+                    anyhow::bail!("zenoh: `publishes {name}`: interfaces of kind {} do not travel", i.kind());
+                }
+                v.retain(|(j, _)| j.name() != name);
+                v.push((i, key.clone()));
+            }
+        }
+    }
+    Ok(v)
+}
+
+fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>> {
+    let s = parse(conf)?;
+    let served = publishes(&s, &rt.interfaces)?;
+    let session = s.session.open()?;
+    let mut plan = Plan::default();
+    for (iface, key) in served {
+        let kind = iface.kind();
+        let r = route(&s, &s.robot, iface.name(), kind, &key);
+        tracing::info!("zenoh: serving `{}` on {}", iface.name(), r.key);
+        by_kind!(kind, serve(&session, rt, iface, r, &mut plan), Ok(()))?;
+    }
+    for (which, robot) in &s.provides {
+        let wanted: Vec<(String, Option<String>, Option<String>)> = match which {
+            Which::One { name, key, kind } => vec![(name.clone(), key.clone(), kind.clone())],
+            Which::All => {
+                let prefix = match s.format {
+                    Format::Jderobot => format!("jderobot/{robot}"),
+                    Format::Ros2 => format!("{}/{robot}", s.domain),
+                };
+                let names = links::discover(&session, &prefix, s.discover);
+                if names.is_empty() {
+                    anyhow::bail!(
+                        "zenoh: `provides all {robot}`: no interface of robot `{robot}` answered \
+                         within {} ms (is its jderobot running with `robot {robot}` and \
+                         `publishes all`? this side listens on {} and connects to {}); name the \
+                         interfaces with `provides NAME` lines to start without it",
+                        s.discover.as_millis(),
+                        if s.session.listen.is_empty() { "loopback".into() } else { s.session.listen.join(" ") },
+                        if s.session.connect.is_empty() { "nothing (scouting only)".into() } else { s.session.connect.join(" ") },
+                    );
+                }
+                names
+                    .into_iter()
+                    .filter(|n| {
+                        let known = interfaces::family(n).is_some();
+                        if !known {
+                            tracing::warn!(
+                                "zenoh: robot `{robot}` serves `{n}`, not a standard name: add \
+                                 `provides {n} KEY KIND` to take it"
+                            );
+                        }
+                        known
+                    })
+                    .map(|n| (n, None, None))
+                    .collect()
+            }
+        };
+        for (name, key, kind) in wanted {
+            let kind: String = kind.or_else(|| interfaces::family(&name).map(str::to_string)).unwrap_or_default();
+            let r = route(&s, robot, &name, &kind, &key);
+            tracing::info!("zenoh: providing `{name}` from {}", r.key);
+            by_kind!(kind.as_str(), provide(&session, rt, &name, r, &mut plan), Ok(()))?;
+        }
+    }
+    let stop = Arc::new(AtomicBool::new(false));
+    let (tx, rx) = sync_channel(1);
+    let thread = {
+        let stop = stop.clone();
+        let outs = std::mem::take(&mut plan.outs);
+        let mut on_demand = std::mem::take(&mut plan.on_demand);
+        std::thread::Builder::new().name("zenoh".into()).spawn(move || {
+            let watch = Watch::for_current_thread();
+            let _ = tx.send(watch.clone());
+            links::run_outbound(outs, &watch, &stop, || {
+                on_demand.iter_mut().for_each(OnDemand::update)
+            });
+        })?
+    };
+    let watch = rx.recv().ok();
+    Ok(Box::new(Zenoh {
+        session,
+        stop,
+        watch,
+        thread: Some(thread),
+        keep: plan.keep,
+    }))
+}
+
+crate::register_driver!(
+    Service,
+    "zenoh",
+    "publishes interfaces on Zenoh and provides remote ones (Python and ROS 2 can join)",
+    create
+);

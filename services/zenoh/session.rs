@@ -1,0 +1,205 @@
+//! The Zenoh session of a conf: `mode`, `listen`, `connect`, `scouting` and a
+//! Zenoh config file (ACL, TLS, timeouts: Zenoh's own format, passed through).
+
+use std::path::PathBuf;
+
+use zenoh::{Config, Wait};
+
+use crate::conf::{ComponentConf, ConfError};
+
+/// How multicast scouting finds peers (`scouting` line).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Scouting {
+    /// On the loopback interface only: processes of this machine find each other.
+    Loopback,
+    /// On every interface (Zenoh's `auto`): the whole LAN.
+    Lan,
+    /// None: peers are only those of `connect`/`listen` lines (and their gossip).
+    Off,
+}
+
+/// The session lines.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SessionConf {
+    pub mode: &'static str,
+    pub listen: Vec<String>,
+    pub connect: Vec<String>,
+    pub scouting: Scouting,
+    pub config: Option<PathBuf>,
+}
+
+impl SessionConf {
+    /// Reads `mode`, `listen`, `connect`, `scouting`, `config` (later lines of a
+    /// single-valued key override earlier ones; listen/connect repeat).
+    pub fn parse(conf: &ComponentConf) -> Result<SessionConf, ConfError> {
+        let mode = match conf.line("mode") {
+            Some(l) => {
+                l.expect_args(1, 1, "mode peer|client|router")?;
+                l.choice(0, "the session mode", &["peer", "client", "router"])?
+            }
+            None => "peer",
+        };
+        let endpoints = |key: &str| -> Result<Vec<String>, ConfError> {
+            let mut v = Vec::new();
+            for l in conf.lines_with(key) {
+                l.expect_args(1, usize::MAX, &format!("{key} ENDPOINT... (e.g. tcp/127.0.0.1:7447)"))?;
+                for w in l.args() {
+                    check_endpoint(w).map_err(|e| l.error(format!("`{key}`: {e}")))?;
+                    v.push(w.clone());
+                }
+            }
+            Ok(v)
+        };
+        let scouting = match conf.line("scouting") {
+            Some(l) => {
+                l.expect_args(1, 1, "scouting loopback|lan|off")?;
+                match l.choice(0, "scouting", &["loopback", "lan", "off"])? {
+                    "loopback" => Scouting::Loopback,
+                    "lan" => Scouting::Lan,
+                    _ => Scouting::Off,
+                }
+            }
+            None => Scouting::Loopback,
+        };
+        let config = match conf.line("config") {
+            Some(l) => {
+                l.expect_args(1, 1, "config FILE.json5")?;
+                Some(l.existing_file(0, "the Zenoh config file")?)
+            }
+            None => None,
+        };
+        if mode == "client" && conf.lines_with("connect").next().is_none() && config.is_none() {
+            let l = conf.line("mode").expect("mode line read above");
+            return Err(l.error(
+                "`mode client` needs a router to connect to: add `connect tcp/HOST:7447`",
+            ));
+        }
+        Ok(SessionConf {
+            mode,
+            listen: endpoints("listen")?,
+            connect: endpoints("connect")?,
+            scouting,
+            config,
+        })
+    }
+
+    /// The Zenoh config: the file's (or Zenoh's defaults), then these lines. With
+    /// neither a file nor `listen` lines a peer listens on loopback only.
+    pub fn config(&self) -> anyhow::Result<Config> {
+        let mut c = match &self.config {
+            Some(p) => Config::from_file(p).map_err(|e| {
+                anyhow::anyhow!("zenoh: the config file {} is not valid: {e}", p.display())
+            })?,
+            None => Config::default(),
+        };
+        let set = |c: &mut Config, key: &str, value: String| {
+            c.insert_json5(key, &value)
+                .map_err(|e| anyhow::anyhow!("zenoh: cannot set {key} to {value}: {e}"))
+        };
+        set(&mut c, "mode", format!("{:?}", self.mode))?;
+        if !self.listen.is_empty() {
+            set(&mut c, "listen/endpoints", json_list(&self.listen))?;
+        } else if self.config.is_none() && self.mode != "client" {
+            set(&mut c, "listen/endpoints", json_list(&["tcp/127.0.0.1:0".into()]))?;
+        }
+        if !self.connect.is_empty() {
+            set(&mut c, "connect/endpoints", json_list(&self.connect))?;
+        }
+        if self.config.is_none() || self.scouting != Scouting::Loopback {
+            match self.scouting {
+                Scouting::Loopback => {
+                    set(&mut c, "scouting/multicast/enabled", "true".into())?;
+                    set(&mut c, "scouting/multicast/interface", "\"lo\"".into())?;
+                }
+                Scouting::Lan => {
+                    set(&mut c, "scouting/multicast/enabled", "true".into())?;
+                    set(&mut c, "scouting/multicast/interface", "\"auto\"".into())?;
+                }
+                Scouting::Off => set(&mut c, "scouting/multicast/enabled", "false".into())?,
+            }
+        }
+        Ok(c)
+    }
+
+    /// Opens the session; the error names the endpoints and the likely fix.
+    pub fn open(&self) -> anyhow::Result<zenoh::Session> {
+        let config = self.config()?;
+        zenoh::open(config).wait().map_err(|e| {
+            anyhow::anyhow!(
+                "zenoh: cannot open a {} session (listen {}; connect {}): {e}{}",
+                self.mode,
+                list_or_default(&self.listen),
+                list_or_default(&self.connect),
+                if self.listen.is_empty() {
+                    ""
+                } else {
+                    " (is another process listening on that port?)"
+                }
+            )
+        })
+    }
+}
+
+fn list_or_default(v: &[String]) -> String {
+    if v.is_empty() {
+        "default".into()
+    } else {
+        v.join(" ")
+    }
+}
+
+fn json_list(v: &[String]) -> String {
+    let items: Vec<String> = v.iter().map(|s| format!("{s:?}")).collect();
+    format!("[{}]", items.join(","))
+}
+
+/// An endpoint this binary can use: `tcp/HOST:PORT` (other transports need a
+/// Zenoh built with them; say so instead of failing at open).
+fn check_endpoint(e: &str) -> Result<(), String> {
+    let (proto, addr) = e
+        .split_once('/')
+        .ok_or_else(|| format!("`{e}` is not an endpoint; write PROTOCOL/HOST:PORT, e.g. tcp/127.0.0.1:7447"))?;
+    if proto != "tcp" {
+        return Err(format!(
+            "`{e}`: this jderobot's Zenoh speaks tcp only (built with Zenoh's transport_tcp; \
+             {proto} needs Zenoh's transport_{proto} feature)"
+        ));
+    }
+    let hostport = addr.split('#').next().unwrap_or(addr);
+    match hostport.rsplit_once(':') {
+        Some((host, port)) if !host.is_empty() && port.parse::<u16>().is_ok() => Ok(()),
+        _ => Err(format!("`{e}`: expected tcp/HOST:PORT, e.g. tcp/127.0.0.1:7447")),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::conf::Kind;
+
+    fn parse(text: &str) -> Result<SessionConf, ConfError> {
+        SessionConf::parse(&ComponentConf::from_text(Kind::Service, "zenoh", text).unwrap())
+    }
+
+    #[test]
+    fn defaults_are_a_loopback_peer() {
+        let s = parse("").unwrap();
+        assert_eq!(s.mode, "peer");
+        assert_eq!(s.scouting, Scouting::Loopback);
+        let c = s.config().unwrap();
+        let listen = c.get_json("listen/endpoints").unwrap();
+        assert!(listen.contains("tcp/127.0.0.1:0"), "{listen}");
+    }
+
+    #[test]
+    fn bad_lines_say_what_is_right() {
+        let e = parse("connect udp/1.2.3.4:7447").unwrap_err().to_string();
+        assert!(e.contains("tcp only") && e.contains("transport_udp"), "{e}");
+        let e = parse("listen tcp/localhost").unwrap_err().to_string();
+        assert!(e.contains("tcp/HOST:PORT"), "{e}");
+        let e = parse("mode client").unwrap_err().to_string();
+        assert!(e.contains("connect tcp/HOST:7447"), "{e}");
+        let e = parse("mode boss").unwrap_err().to_string();
+        assert!(e.contains("peer, client, router"), "{e}");
+    }
+}

@@ -1,0 +1,448 @@
+//! What travels on Zenoh: each interface's payload (the `jderobot` format, one
+//! fixed little-endian layout per kind, documented in `docs/zenoh.md`), the
+//! attachment (the interface's clock and wall time), and the `ros2` format (CDR
+//! messages on rmw_zenoh's key expressions, with rmw_zenoh's attachment).
+
+use std::{
+    sync::Arc,
+    time::{Duration, SystemTime, UNIX_EPOCH},
+};
+
+use crate::{
+    interfaces::{
+        Bumpers, Encoders, Image, InterfaceValue, Laser, Motors, PtEncoders, PtMotors, Sample,
+        Sonars, ZoomEncoders, ZoomMotors,
+    },
+    mcapfmt::{self, Recorded, Snapshot},
+};
+
+/// How values are written on the wire (`format` line).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Format {
+    /// The layouts of `docs/zenoh.md`, on `jderobot/<robot>/<interface>`.
+    Jderobot,
+    /// CDR (sensor_msgs/LaserScan, Image, nav_msgs/Odometry, geometry_msgs/Twist)
+    /// on rmw_zenoh's keys; kinds without a ROS message stay in `Jderobot`.
+    Ros2,
+}
+
+/// The Zenoh encoding of `jderobot` payloads: `jderobot/<kind>`.
+pub fn encoding(kind: &str) -> String {
+    format!("jderobot/{kind}")
+}
+
+/// The attachment of a `jderobot` sample: clock (u64) and wall time (u64 ns since
+/// the Unix epoch), little-endian.
+pub fn attachment(clock: u64, time: SystemTime) -> [u8; 16] {
+    let mut a = [0u8; 16];
+    a[..8].copy_from_slice(&clock.to_le_bytes());
+    a[8..].copy_from_slice(&mcapfmt::nanos(time).to_le_bytes());
+    a
+}
+
+/// Reads a `jderobot` attachment: (clock, wall time).
+pub fn read_attachment(a: &[u8]) -> Option<(u64, SystemTime)> {
+    let a: &[u8; 16] = a.try_into().ok()?;
+    let clock = u64::from_le_bytes(a[..8].try_into().ok()?);
+    let ns = u64::from_le_bytes(a[8..].try_into().ok()?);
+    Some((clock, UNIX_EPOCH + Duration::from_nanos(ns)))
+}
+
+/// rmw_zenoh's attachment (Jazzy): sequence number (i64), source timestamp (i64
+/// ns), source GID (16 bytes), in zenoh-ext's serialization (little-endian
+/// integers, a fixed array without length).
+pub fn rmw_attachment(sequence: u64, time: SystemTime, gid: &[u8; 16]) -> [u8; 32] {
+    let mut a = [0u8; 32];
+    a[..8].copy_from_slice(&(sequence as i64).to_le_bytes());
+    a[8..16].copy_from_slice(&(mcapfmt::nanos(time) as i64).to_le_bytes());
+    a[16..].copy_from_slice(gid);
+    a
+}
+
+/// Reads rmw_zenoh's attachment: (sequence number, source time).
+pub fn read_rmw_attachment(a: &[u8]) -> Option<(u64, SystemTime)> {
+    let a: &[u8; 32] = a.try_into().ok()?;
+    let seq = i64::from_le_bytes(a[..8].try_into().ok()?);
+    let ns = i64::from_le_bytes(a[8..16].try_into().ok()?);
+    Some((seq.max(0) as u64, UNIX_EPOCH + Duration::from_nanos(ns.max(0) as u64)))
+}
+
+/// The ROS 2 type of a kind in the `ros2` format: (DDS type name as rmw_zenoh
+/// writes it in keys, RIHS01 type hash of ROS 2 Jazzy). The hashes are checked
+/// against `rosbags`' own computation in `tests/zenoh_python.rs`.
+pub fn ros2_type(kind: &str) -> Option<(&'static str, &'static str)> {
+    Some(match kind {
+        "laser" => (
+            "sensor_msgs::msg::dds_::LaserScan_",
+            "RIHS01_64c191398013af96509d518dac71d5164f9382553fce5c1f8cca5be7924bd828",
+        ),
+        "image" => (
+            "sensor_msgs::msg::dds_::Image_",
+            "RIHS01_d31d41a9a4c4bc8eae9be757b0beed306564f7526c88ea6a4588fb9582527d47",
+        ),
+        "encoders" => (
+            "nav_msgs::msg::dds_::Odometry_",
+            "RIHS01_3cc97dc7fb7502f8714462c526d369e35b603cfc34d946e3f2eda2766dfec6e0",
+        ),
+        "motors" => (
+            "geometry_msgs::msg::dds_::Twist_",
+            "RIHS01_9c45bf16fe0983d80e3cfe750d6835843d265a9a6c46bd2e609fcddde6fb8d2a",
+        ),
+        _ => return None,
+    })
+}
+
+/// The default key of interface `name` of robot `robot`: `jderobot/<robot>/<name>`
+/// (`jderobot` format), or rmw_zenoh's `<domain>/<robot>/<name>/<type>/<hash>`
+/// (the ROS 2 topic `/<robot>/<name>`) in the `ros2` format for kinds with a ROS
+/// message. A suffixed name `laser.robot2` keeps its dot (a valid key chunk).
+pub fn default_key(format: Format, domain: u32, robot: &str, name: &str, kind: &str) -> String {
+    match (format, ros2_type(kind)) {
+        (Format::Ros2, Some((ty, hash))) => format!("{domain}/{robot}/{name}/{ty}/{hash}"),
+        _ => format!("jderobot/{robot}/{name}"),
+    }
+}
+
+/// Why a payload was not a value.
+pub type WireError = String;
+
+/// A value that travels on Zenoh.
+pub trait Wire: InterfaceValue + Sized {
+    /// Appends the `jderobot` layout of the value.
+    fn put(&self, out: &mut Vec<u8>);
+    /// Reads the `jderobot` layout (the whole payload).
+    fn take(b: &[u8]) -> Result<Self, WireError>;
+    /// The sample as a message of the `ros2` format, for the kinds that have one.
+    fn ros2(_s: &Arc<Sample<Self>>) -> Option<Snapshot> {
+        None
+    }
+    /// A value decoded from the `ros2` format.
+    fn from_ros2(_r: Recorded) -> Option<Self> {
+        None
+    }
+    /// JPEG bytes of the value (images, `images jpeg`); `None` for other kinds.
+    fn to_jpeg(&self, _quality: u8) -> Option<Vec<u8>> {
+        None
+    }
+    /// A value from a JPEG payload (images only).
+    fn from_jpeg(_b: &[u8]) -> Result<Self, WireError> {
+        Err(format!("a JPEG image on a {} key", Self::KIND))
+    }
+}
+
+/// A little-endian reader that fails with what was short.
+struct Bytes<'a>(&'a [u8]);
+
+impl<'a> Bytes<'a> {
+    fn take(&mut self, n: usize, what: &str) -> Result<&'a [u8], WireError> {
+        if self.0.len() < n {
+            return Err(format!(
+                "payload too short: {what} needs {n} bytes, {} left",
+                self.0.len()
+            ));
+        }
+        let (a, b) = self.0.split_at(n);
+        self.0 = b;
+        Ok(a)
+    }
+    fn u32(&mut self, what: &str) -> Result<u32, WireError> {
+        Ok(u32::from_le_bytes(self.take(4, what)?.try_into().expect("4")))
+    }
+    fn f32(&mut self, what: &str) -> Result<f32, WireError> {
+        Ok(f32::from_le_bytes(self.take(4, what)?.try_into().expect("4")))
+    }
+    /// A u32 count of `size`-byte items that must fill the rest exactly.
+    fn count(&mut self, size: usize, what: &str) -> Result<usize, WireError> {
+        let n = self.u32(&format!("the {what} count"))? as usize;
+        if n.checked_mul(size) != Some(self.0.len()) {
+            return Err(format!(
+                "{n} {what} announced but {} bytes follow ({} expected)",
+                self.0.len(),
+                n.saturating_mul(size)
+            ));
+        }
+        Ok(n)
+    }
+    fn end(&self) -> Result<(), WireError> {
+        if self.0.is_empty() {
+            Ok(())
+        } else {
+            Err(format!("{} bytes too many", self.0.len()))
+        }
+    }
+}
+
+/// Values made of f32 fields only: the fields in order.
+macro_rules! floats {
+    ($t:ty: $($f:ident),+) => {
+        impl Wire for $t {
+            fn put(&self, out: &mut Vec<u8>) {
+                $(out.extend_from_slice(&self.$f.to_le_bytes());)+
+            }
+            fn take(b: &[u8]) -> Result<Self, WireError> {
+                let mut r = Bytes(b);
+                let v = Self { $($f: r.f32(stringify!($f))?,)+ };
+                r.end()?;
+                Ok(v)
+            }
+            floats!(@ros2 $t);
+        }
+    };
+    (@ros2 Encoders) => {
+        fn ros2(s: &Arc<Sample<Self>>) -> Option<Snapshot> {
+            Some(Snapshot::Encoders(s.clone()))
+        }
+        fn from_ros2(r: Recorded) -> Option<Self> {
+            match r { Recorded::Encoders(v) => Some(v), _ => None }
+        }
+    };
+    (@ros2 Motors) => {
+        fn ros2(s: &Arc<Sample<Self>>) -> Option<Snapshot> {
+            Some(Snapshot::Motors(s.clone()))
+        }
+        fn from_ros2(r: Recorded) -> Option<Self> {
+            match r { Recorded::Motors(v) => Some(v), _ => None }
+        }
+    };
+    (@ros2 $t:ty) => {};
+}
+
+floats!(Encoders: x, y, theta, cos, sin);
+floats!(Motors: v, w);
+floats!(PtEncoders: pan_angle, tilt_angle);
+floats!(PtMotors: longitude, latitude, longitude_speed, latitude_speed, max_longitude,
+    min_longitude, max_latitude, min_latitude, max_longitude_speed, max_latitude_speed);
+floats!(ZoomEncoders: zoom_position);
+floats!(ZoomMotors: zoom, zoom_speed, max_zoom, min_zoom, max_zoom_speed);
+
+impl Wire for Image {
+    fn put(&self, out: &mut Vec<u8>) {
+        out.reserve(8 + self.data.len());
+        out.extend_from_slice(&self.width.to_le_bytes());
+        out.extend_from_slice(&self.height.to_le_bytes());
+        out.extend_from_slice(&self.data);
+    }
+    fn take(b: &[u8]) -> Result<Self, WireError> {
+        let mut r = Bytes(b);
+        let width = r.u32("width")?;
+        let height = r.u32("height")?;
+        let n = (width as usize)
+            .checked_mul(height as usize)
+            .and_then(|p| p.checked_mul(3))
+            .ok_or("an image size that overflows")?;
+        if r.0.len() != n {
+            return Err(format!(
+                "a {width}x{height} BGR image needs {n} bytes, {} follow",
+                r.0.len()
+            ));
+        }
+        Ok(Image {
+            width,
+            height,
+            data: r.0.to_vec(),
+        })
+    }
+    fn ros2(s: &Arc<Sample<Self>>) -> Option<Snapshot> {
+        Some(Snapshot::Image(s.clone()))
+    }
+    fn from_ros2(r: Recorded) -> Option<Self> {
+        match r {
+            Recorded::Image(v) => Some(v),
+            _ => None,
+        }
+    }
+    fn to_jpeg(&self, quality: u8) -> Option<Vec<u8>> {
+        let mut rgb = Vec::with_capacity(self.data.len());
+        for p in self.data.chunks_exact(3) {
+            rgb.extend_from_slice(&[p[2], p[1], p[0]]);
+        }
+        let mut jpeg = Vec::new();
+        image::codecs::jpeg::JpegEncoder::new_with_quality(&mut jpeg, quality)
+            .encode(&rgb, self.width, self.height, image::ExtendedColorType::Rgb8)
+            .ok()?;
+        Some(jpeg)
+    }
+    fn from_jpeg(b: &[u8]) -> Result<Self, WireError> {
+        let rgb = image::load_from_memory_with_format(b, image::ImageFormat::Jpeg)
+            .map_err(|e| format!("not a JPEG image: {e}"))?
+            .to_rgb8();
+        let (width, height) = rgb.dimensions();
+        let mut data = rgb.into_raw();
+        for p in data.chunks_exact_mut(3) {
+            p.swap(0, 2);
+        }
+        Ok(Image {
+            width,
+            height,
+            data,
+        })
+    }
+}
+
+impl Wire for Laser {
+    fn put(&self, out: &mut Vec<u8>) {
+        out.extend_from_slice(&(self.readings.len() as u32).to_le_bytes());
+        out.extend_from_slice(&self.resolution.to_le_bytes());
+        for r in &self.readings {
+            out.extend_from_slice(&r.to_le_bytes());
+        }
+    }
+    fn take(b: &[u8]) -> Result<Self, WireError> {
+        let mut r = Bytes(b);
+        let n = r.u32("the reading count")? as usize;
+        let resolution = r.f32("resolution")?;
+        if n.checked_mul(4) != Some(r.0.len()) {
+            return Err(format!(
+                "{n} laser readings announced but {} bytes follow",
+                r.0.len()
+            ));
+        }
+        let readings = r
+            .0
+            .chunks_exact(4)
+            .map(|c| i32::from_le_bytes(c.try_into().expect("4")))
+            .collect();
+        Ok(Laser {
+            readings,
+            resolution,
+        })
+    }
+    fn ros2(s: &Arc<Sample<Self>>) -> Option<Snapshot> {
+        Some(Snapshot::Laser(s.clone()))
+    }
+    fn from_ros2(r: Recorded) -> Option<Self> {
+        match r {
+            Recorded::Laser(v) => Some(v),
+            _ => None,
+        }
+    }
+}
+
+impl Wire for Sonars {
+    fn put(&self, out: &mut Vec<u8>) {
+        out.extend_from_slice(&(self.us.len() as u32).to_le_bytes());
+        for u in &self.us {
+            out.extend_from_slice(&u.to_le_bytes());
+        }
+    }
+    fn take(b: &[u8]) -> Result<Self, WireError> {
+        let mut r = Bytes(b);
+        r.count(4, "sonars")?;
+        let us = r
+            .0
+            .chunks_exact(4)
+            .map(|c| f32::from_le_bytes(c.try_into().expect("4")))
+            .collect();
+        Ok(Sonars { us })
+    }
+}
+
+impl Wire for Bumpers {
+    fn put(&self, out: &mut Vec<u8>) {
+        out.extend_from_slice(&(self.bumpers.len() as u32).to_le_bytes());
+        out.extend_from_slice(&self.bumpers);
+    }
+    fn take(b: &[u8]) -> Result<Self, WireError> {
+        let mut r = Bytes(b);
+        r.count(1, "bumpers")?;
+        Ok(Bumpers {
+            bumpers: r.0.to_vec(),
+        })
+    }
+}
+
+/// Calls `$f::<T>($args)` with `T` the value type of interface kind `$kind`, or
+/// evaluates `$other` for a kind that does not travel.
+macro_rules! by_kind {
+    ($kind:expr, $f:ident ( $($arg:expr),* ), $other:expr) => {
+        match $kind {
+            "image" => $f::<$crate::interfaces::Image>($($arg),*),
+            "laser" => $f::<$crate::interfaces::Laser>($($arg),*),
+            "sonars" => $f::<$crate::interfaces::Sonars>($($arg),*),
+            "encoders" => $f::<$crate::interfaces::Encoders>($($arg),*),
+            "motors" => $f::<$crate::interfaces::Motors>($($arg),*),
+            "pantiltencoders" => $f::<$crate::interfaces::PtEncoders>($($arg),*),
+            "pantiltmotors" => $f::<$crate::interfaces::PtMotors>($($arg),*),
+            "zoomencoders" => $f::<$crate::interfaces::ZoomEncoders>($($arg),*),
+            "zoommotors" => $f::<$crate::interfaces::ZoomMotors>($($arg),*),
+            "bumpers" => $f::<$crate::interfaces::Bumpers>($($arg),*),
+            _ => $other,
+        }
+    };
+}
+pub(crate) use by_kind;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn round_trip<T: Wire + PartialEq + std::fmt::Debug>(v: T) {
+        let mut b = Vec::new();
+        v.put(&mut b);
+        assert_eq!(T::take(&b).unwrap(), v);
+        // Any cut is an error, never a panic.
+        for n in 0..b.len() {
+            assert!(T::take(&b[..n]).is_err() || T::KIND == "bumpers" || T::KIND == "sonars");
+        }
+        b.push(0);
+        assert!(T::take(&b).is_err(), "{}: a byte too many", T::KIND);
+    }
+
+    #[test]
+    fn every_kind_round_trips_and_rejects_cut_payloads() {
+        round_trip(Image {
+            width: 2,
+            height: 1,
+            data: vec![1, 2, 3, 4, 5, 6],
+        });
+        round_trip(Laser {
+            readings: vec![1, -2, 30000],
+            resolution: 1.0,
+        });
+        round_trip(Sonars {
+            us: vec![1.5, 2.5],
+        });
+        round_trip(Bumpers {
+            bumpers: vec![0, 1],
+        });
+        round_trip(Encoders {
+            x: 1.0,
+            y: 2.0,
+            theta: 3.0,
+            cos: 0.5,
+            sin: 0.25,
+        });
+        round_trip(Motors { v: 100.0, w: -5.0 });
+        round_trip(PtMotors {
+            longitude: 10.0,
+            ..PtMotors::default()
+        });
+    }
+
+    #[test]
+    fn layouts_are_the_documented_bytes() {
+        let mut b = Vec::new();
+        Motors { v: 1.0, w: 2.0 }.put(&mut b);
+        assert_eq!(b, [0, 0, 0x80, 0x3f, 0, 0, 0, 0x40]);
+        b.clear();
+        Laser {
+            readings: vec![1000],
+            resolution: 1.0,
+        }
+        .put(&mut b);
+        assert_eq!(b, [1, 0, 0, 0, 0, 0, 0x80, 0x3f, 0xe8, 3, 0, 0]);
+        let t = UNIX_EPOCH + Duration::from_nanos(5);
+        assert_eq!(read_attachment(&attachment(7, t)), Some((7, t)));
+        assert_eq!(read_rmw_attachment(&rmw_attachment(9, t, &[1; 16])), Some((9, t)));
+    }
+
+    #[test]
+    fn garbage_is_an_error_naming_what_was_wrong() {
+        let e = Image::take(&[2, 0, 0, 0, 2, 0, 0, 0, 1]).unwrap_err();
+        assert!(e.contains("2x2") && e.contains("12 bytes"), "{e}");
+        let e = Image::take(&[0xff; 8]).unwrap_err();
+        assert!(!e.is_empty());
+        let e = Laser::take(&[0xff, 0xff, 0xff, 0xff, 0, 0, 0x80, 0x3f]).unwrap_err();
+        assert!(e.contains("laser readings"), "{e}");
+    }
+}

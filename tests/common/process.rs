@@ -1,0 +1,121 @@
+//! A real `jderobot` process driven through its shell (tests that run two
+//! processes talking over the network).
+
+use std::{
+    io::{BufRead, BufReader, Write},
+    path::Path,
+    process::{Child, Command, Stdio},
+    sync::{Arc, Mutex},
+    time::Duration,
+};
+
+/// A running `jderobot --headless CONF` whose shell we type into.
+pub struct Proc {
+    pub child: Child,
+    out: Arc<Mutex<String>>,
+}
+
+impl Proc {
+    pub fn start(conf: &Path) -> Proc {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_jderobot"))
+            .arg("--headless")
+            .arg(conf)
+            .env("RUST_LOG", "warn")
+            .env_remove("DISPLAY")
+            .env_remove("WAYLAND_DISPLAY")
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("start jderobot");
+        let out = Arc::new(Mutex::new(String::new()));
+        for pipe in [
+            Box::new(child.stdout.take().unwrap()) as Box<dyn std::io::Read + Send>,
+            Box::new(child.stderr.take().unwrap()),
+        ] {
+            let out = out.clone();
+            std::thread::spawn(move || {
+                for l in BufReader::new(pipe).lines().map_while(Result::ok) {
+                    let mut o = out.lock().unwrap();
+                    o.push_str(&l);
+                    o.push('\n');
+                }
+            });
+        }
+        Proc { child, out }
+    }
+
+    pub fn send(&mut self, cmd: &str) {
+        let stdin = self.child.stdin.as_mut().unwrap();
+        let _ = stdin.write_all(format!("{cmd}\n").as_bytes());
+        let _ = stdin.flush();
+    }
+
+    pub fn text(&self) -> String {
+        self.out.lock().unwrap().clone()
+    }
+
+    /// Types `cmd` until a line of its answer (after this call) satisfies `ok`;
+    /// returns that line.
+    pub fn ask_until(&mut self, cmd: &str, what: &str, ok: impl Fn(&str) -> bool) -> String {
+        let mut found = None;
+        let done = super::poll_until(30, || {
+            let from = self.text().len();
+            self.send(cmd);
+            std::thread::sleep(Duration::from_millis(300));
+            let t = self.text();
+            found = t[from..].lines().find(|l| ok(l)).map(String::from);
+            found.is_some()
+        });
+        assert!(
+            done,
+            "timed out waiting for {what}; output:\n{}",
+            self.text()
+        );
+        found.unwrap()
+    }
+
+    pub fn quit(mut self) {
+        self.send("quit");
+        if !super::poll_until(20, || self.child.try_wait().ok().flatten().is_some()) {
+            let _ = self.child.kill();
+            let _ = self.child.wait();
+            panic!("jderobot did not quit; output:\n{}", self.text());
+        }
+    }
+}
+
+pub fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+/// `NAME: N ips` from a `ps` line.
+pub fn rate(line: &str) -> f64 {
+    line.split(": ")
+        .nth(1)
+        .unwrap()
+        .split(' ')
+        .next()
+        .unwrap()
+        .parse()
+        .unwrap()
+}
+
+pub fn xy(echo: &str) -> (f64, f64) {
+    let f = |k: &str| -> f64 {
+        echo.split(k)
+            .nth(1)
+            .unwrap()
+            .split(' ')
+            .next()
+            .unwrap()
+            .parse()
+            .unwrap()
+    };
+    (f(" x="), f(" y="))
+}
+

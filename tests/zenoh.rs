@@ -1,0 +1,175 @@
+//! jderobot over Zenoh on loopback: a robot process (simulator + `zenoh`
+//! publishing), a controller (introrob on `zenoh`-provided interfaces) in another
+//! process or in this one, and a raw Zenoh session of the test's own that writes
+//! what a foreign program could (garbage included).
+#![cfg(all(feature = "zenoh", feature = "simulator", feature = "introrob"))]
+
+mod common;
+
+use std::{
+    path::Path,
+    time::{Duration, Instant},
+};
+
+use common::process::{Proc, free_port, rate, xy};
+use jderobot::interfaces::{Laser, Motors};
+use zenoh::Wait;
+
+fn robot_conf(dir: &Path, port: u16, extra: &str) -> std::path::PathBuf {
+    let world = common::world_path("simple.world");
+    let conf = dir.join("robot.conf");
+    std::fs::write(
+        &conf,
+        format!(
+            "driver simulator\nworld {world}\nrobot robot1 1000 1000 90\nprovides encoders\n\
+             provides motors\nprovides laser 180 1\nprovides sonars\nprovides colorA\nend_driver\n\
+             service zenoh\nrobot pioneer\npublishes all\nlisten tcp/127.0.0.1:{port}\n\
+             scouting off\n{extra}end_service\n\
+             load_driver simulator\nload_service zenoh\n"
+        ),
+    )
+    .unwrap();
+    conf
+}
+
+fn echo_v(line: &str) -> f64 {
+    line.split(" v=").nth(1).unwrap().split(' ').next().unwrap().parse().unwrap()
+}
+
+#[test]
+fn introrob_in_one_process_drives_the_simulator_in_another() {
+    let dir = tempfile::tempdir().unwrap();
+    let port = free_port();
+    let world = common::world_path("simple.world");
+    let mut robot = Proc::start(&robot_conf(dir.path(), port, ""));
+    let start = robot.ask_until("echo encoders", "the robot's pose", |l| {
+        l.starts_with("encoders clock=")
+    });
+    let gui_conf = dir.path().join("gui.conf");
+    std::fs::write(
+        &gui_conf,
+        format!(
+            "driver zenoh\nrobot pioneer\nprovides laser\nprovides encoders\nprovides motors\n\
+             provides colorA\nprovides sonars\nconnect tcp/127.0.0.1:{port}\nscouting off\nend_driver\n\
+             schema introrob\nbehaviour vff\ntarget 5000 2200\nmax_v 400\nworld {world}\nend_schema\n\
+             load_driver zenoh\nload_schema introrob\nrun introrob\n"
+        ),
+    )
+    .unwrap();
+    let mut gui = Proc::start(&gui_conf);
+    gui.send("run colorA");
+    gui.send("run sonars");
+    for name in ["laser", "colorA", "encoders", "sonars"] {
+        let l = gui.ask_until("ps", &format!("{name} arriving"), |l| {
+            l.starts_with(&format!("{name}: ")) && l.contains("zenoh") && rate(l) >= 3.0
+        });
+        eprintln!("{l}");
+    }
+    gui.ask_until("echo colorA", "a 320x240 image", |l| {
+        l.starts_with("colorA clock=") && l.contains("320x240 BGR")
+    });
+    let (x0, y0) = xy(&start);
+    robot.ask_until("echo encoders", "the robot moving", |l| {
+        l.starts_with("encoders clock=") && {
+            let (x, y) = xy(l);
+            (x - x0).hypot(y - y0) > 150.0
+        }
+    });
+    robot.ask_until("echo motors", "introrob's command", |l| {
+        l.starts_with("motors clock=") && echo_v(l) > 0.0
+    });
+    // The controller is killed: its writer token goes, the robot's motors are
+    // zeroed at once (motors_timeout would do it within 500 ms anyway).
+    let t = Instant::now();
+    let _ = gui.child.kill();
+    let _ = gui.child.wait();
+    robot.ask_until("echo motors", "motors zero", |l| {
+        l.starts_with("motors clock=") && echo_v(l) == 0.0
+    });
+    eprintln!("motors zero {:?} after the controller was killed", t.elapsed());
+    assert!(robot.text().contains("the last writer of `motors` left"), "{}", robot.text());
+    robot.quit();
+}
+
+#[test]
+fn a_killed_robot_is_stale_within_a_second_and_comes_back_by_itself() {
+    let dir = tempfile::tempdir().unwrap();
+    let port = free_port();
+    let conf = robot_conf(dir.path(), port, "");
+    let mut robot = Proc::start(&conf);
+    robot.ask_until("echo laser", "the simulator", |l| l.starts_with("laser clock="));
+    let rt = common::start_conf(&format!(
+        "driver zenoh\nrobot pioneer\nprovides laser\nprovides motors\n\
+         connect tcp/127.0.0.1:{port}\nscouting off\nend_driver\nload_driver zenoh\n"
+    ));
+    let laser = rt.interfaces.get::<Laser>("laser").unwrap();
+    let motors = rt.interfaces.get::<Motors>("motors").unwrap();
+    laser.resume();
+    common::eventually("laser samples", || {
+        laser.stale().is_none() && laser.read().readings.len() == 180
+    });
+    motors.publish(Motors { v: 100.0, w: 0.0 }).unwrap();
+
+    let _ = robot.child.kill();
+    let t = Instant::now();
+    assert!(
+        common::poll_until(10, || laser.stale().is_some()),
+        "laser never went stale"
+    );
+    let took = t.elapsed();
+    eprintln!("stale {took:?} after kill -9 of the robot: {:?}", laser.stale());
+    assert!(took < Duration::from_secs(1), "stale after {took:?}");
+    assert!(laser.stale().unwrap().contains("gone"), "{:?}", laser.stale());
+    assert_eq!(motors.read().value, Motors::default(), "motors zeroed");
+
+    // A new robot process on the same port: samples flow again without help.
+    let mut robot = Proc::start(&conf);
+    common::eventually("laser fresh again", || {
+        laser.stale().is_none() && laser.read().stamp.elapsed() < Duration::from_millis(500)
+    });
+    robot.send("echo laser");
+    robot.quit();
+    rt.shutdown();
+}
+
+#[test]
+fn garbage_on_a_subscribed_key_is_dropped_with_one_line_and_a_good_command_drives() {
+    let dir = tempfile::tempdir().unwrap();
+    let port = free_port();
+    let mut robot = Proc::start(&robot_conf(dir.path(), port, ""));
+    robot.ask_until("echo laser", "the simulator", |l| l.starts_with("laser clock="));
+    let mut config = zenoh::Config::default();
+    config
+        .insert_json5("connect/endpoints", &format!(r#"["tcp/127.0.0.1:{port}"]"#))
+        .unwrap();
+    config.insert_json5("scouting/multicast/enabled", "false").unwrap();
+    config.insert_json5("listen/endpoints", "[]").unwrap();
+    let session = zenoh::open(config).wait().unwrap();
+    let key = "jderobot/pioneer/motors";
+    common::eventually("the robot's motors subscriber", || {
+        session
+            .declare_publisher(key)
+            .wait()
+            .unwrap()
+            .matching_status()
+            .wait()
+            .unwrap()
+            .matching()
+    });
+    for bad in [&b""[..], b"\x01\x02\x03", &[0xff; 9], &f32::NAN.to_le_bytes().repeat(2)] {
+        session.put(key, bad).wait().unwrap();
+    }
+    // A good command: v = 250 mm/s, w = 0 (two little-endian f32).
+    let good: Vec<u8> = [250f32, 0.0].iter().flat_map(|f| f.to_le_bytes()).collect();
+    robot.ask_until("echo motors", "the good command", |l| {
+        session.put(key, good.clone()).wait().unwrap();
+        l.starts_with("motors clock=") && echo_v(l) == 250.0
+    });
+    let log = robot.text();
+    assert_eq!(
+        log.matches("zenoh: dropped a sample on `jderobot/pioneer/motors`").count(),
+        1,
+        "one line for the garbage:\n{log}"
+    );
+    robot.quit();
+}
