@@ -76,8 +76,8 @@ impl<T: Wire> Outbound for Out<T> {
         }
         self.last = s.clock;
         let mut payload = Vec::new();
-        let (encoding, attachment) = if self.route.ros2(T::KIND) {
-            let snap = T::ros2(&s).expect("kinds with a ROS type have a snapshot");
+        let ros2 = (self.route.format == Format::Ros2).then(|| T::ros2(&s)).flatten();
+        let (encoding, attachment) = if let Some(snap) = ros2 {
             mcapfmt::ros2::encode(self.iface.name(), &snap, &mut payload);
             let a = wire::rmw_attachment(s.clock, s.time, &self.gid);
             (Encoding::ZENOH_BYTES, a.to_vec())
@@ -262,6 +262,7 @@ pub fn watch_server(
         .declare_subscriber(token.clone())
         .history(true)
         .callback(move |s| match s.kind() {
+            SampleKind::Put if iface.is_actuator() => iface.clear_stale(),
             SampleKind::Put if iface.users() == 0 => iface.set_stale(&format!(
                 "zenoh: served by its robot; not subscribed while nobody uses it (`run {}`)",
                 iface.name()

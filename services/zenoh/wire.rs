@@ -174,7 +174,7 @@ impl<'a> Bytes<'a> {
 
 /// Values made of f32 fields only: the fields in order.
 macro_rules! floats {
-    ($t:ty: $($f:ident),+) => {
+    ($t:ident: $($f:ident),+) => {
         impl Wire for $t {
             fn put(&self, out: &mut Vec<u8>) {
                 $(out.extend_from_slice(&self.$f.to_le_bytes());)+
@@ -204,7 +204,7 @@ macro_rules! floats {
             match r { Recorded::Motors(v) => Some(v), _ => None }
         }
     };
-    (@ros2 $t:ty) => {};
+    (@ros2 $t:ident) => {};
 }
 
 floats!(Encoders: x, y, theta, cos, sin);
@@ -417,6 +417,26 @@ mod tests {
             longitude: 10.0,
             ..PtMotors::default()
         });
+    }
+
+    fn has_ros2<T: Wire>() -> bool {
+        T::ros2(&Arc::new(Sample {
+            clock: 1,
+            stamp: std::time::Instant::now(),
+            time: SystemTime::now(),
+            value: T::default(),
+        }))
+        .is_some()
+    }
+
+    #[test]
+    fn every_kind_with_a_ros_type_encodes_as_ros2() {
+        for kind in ["image", "laser", "sonars", "encoders", "motors", "pantiltencoders",
+            "pantiltmotors", "zoomencoders", "zoommotors", "bumpers"]
+        {
+            let ros = by_kind!(kind, has_ros2(), unreachable!());
+            assert_eq!(ros, ros2_type(kind).is_some(), "{kind}");
+        }
     }
 
     #[test]

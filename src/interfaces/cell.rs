@@ -328,6 +328,12 @@ impl<T: InterfaceValue> Interface<T> {
         self.stale.load_full().map(|why| why.as_ref().clone())
     }
 
+    /// The source is back though no new value came: for an actuator whose
+    /// receiver (a remote robot) reappeared. A sensor waits for its next publish.
+    pub fn clear_stale(&self) {
+        self.stale.store(None);
+    }
+
     /// Wakes `watch`'s thread on every new value from now on.
     pub fn watch(&self, watch: &Arc<Watch>) {
         self.watches.rcu(|ws| {
@@ -399,6 +405,8 @@ pub trait AnyInterface: Any + Send + Sync {
     fn set_fields(&self, fields: &[(&str, &str)]) -> Result<u64, InterfaceError>;
     /// See [`Interface::set_stale`].
     fn set_stale(&self, why: &str);
+    /// See [`Interface::clear_stale`].
+    fn clear_stale(&self);
     /// See [`Interface::watch`].
     fn watch(&self, watch: &Arc<Watch>);
     /// See [`Interface::unwatch`].
@@ -454,6 +462,9 @@ impl<T: InterfaceValue> AnyInterface for Interface<T> {
     }
     fn set_stale(&self, why: &str) {
         Interface::set_stale(self, why)
+    }
+    fn clear_stale(&self) {
+        Interface::clear_stale(self)
     }
     fn watch(&self, watch: &Arc<Watch>) {
         Interface::watch(self, watch)
