@@ -17,9 +17,10 @@
 //! end_driver
 //! ```
 //!
-//! Both profiles of the recorder are read: jderobot's (JSON, Foxglove schemas)
-//! and `ros2` (CDR: LaserScan, Image, Odometry, Twist; the clock is the MCAP
-//! message sequence), where topic `/laser/robot2` is interface `laser.robot2`.
+//! Both profiles of the recorder are read: jderobot's (Foxglove schemas: images
+//! and laser in protobuf, the rest JSON) and `ros2` (CDR: LaserScan, Image,
+//! Odometry, Twist), where topic `/laser/robot2` is interface `laser.robot2`;
+//! the clock is the MCAP message sequence (JSON messages carry it too).
 //!
 //! # Interfaces
 //! Each recorded channel becomes the interface of the same name and kind (image
@@ -378,14 +379,7 @@ fn run(
                     std::thread::sleep(wait.min(Duration::from_millis(50)));
                 }
             }
-            match mcapfmt::decode_message(
-                &m.channel.topic,
-                kind,
-                &m.channel.message_encoding,
-                m.sequence,
-                m.log_time,
-                &m.data,
-            ) {
+            match mcapfmt::decode_mcap(kind, &m) {
                 Ok(d) => {
                     last_clock = last_clock.max(d.clock + offset);
                     if let Err(e) = target.publish(d.clock + offset, d.time_ns, d.value) {
