@@ -269,6 +269,40 @@ fn info_and_replay_refuse_foreign_files_clearly() {
         err.contains("/thing") && err.contains("not written by jderobot"),
         "{err}"
     );
+
+    // A recording of before images were protobuf (JSON foxglove.RawImage, base64).
+    let old = dir.path().join("old.mcap");
+    {
+        let mut w = mcap::Writer::new(std::fs::File::create(&old).unwrap()).unwrap();
+        let s = w
+            .add_schema("foxglove.RawImage", "jsonschema", b"{}")
+            .unwrap();
+        let meta = BTreeMap::from([("jderobot.kind".to_string(), "image".to_string())]);
+        let c = w.add_channel(s, "colorA", "json", &meta).unwrap();
+        w.write_to_known_channel(
+            &mcap::records::MessageHeader {
+                channel_id: c,
+                sequence: 1,
+                log_time: 1,
+                publish_time: 1,
+            },
+            br#"{"timestamp":{"sec":0,"nsec":1},"clock":1,"width":1,"height":1,"encoding":"bgr8","step":3,"data":"AAAA"}"#,
+        )
+        .unwrap();
+        w.finish().unwrap();
+    }
+    let conf = write(
+        dir.path(),
+        "o.conf",
+        "driver replay\nfile old.mcap\nend_driver\nload_driver replay\n",
+    );
+    let out = Command::new(BIN).arg("check").arg(&conf).output().unwrap();
+    assert!(!out.status.success());
+    let err = text(&out.stderr);
+    assert!(
+        err.contains("colorA") && err.contains("before") && err.contains("protobuf"),
+        "{err}"
+    );
 }
 
 #[test]

@@ -268,6 +268,14 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
                 c.encoding
             );
         };
+        if matches!(kind.as_str(), "image" | "laser") && c.encoding == "json" {
+            bail!(
+                "replay: channel `{}` of {} is a JSON {kind} channel (`{}`), recorded before jderobot wrote images and laser scans as protobuf; it is not read (record it again)",
+                c.topic,
+                settings.file.display(),
+                c.schema
+            );
+        }
         let target = Target::provide(rt, &c.name, &kind, &conf.name)?;
         targets.insert(c.topic.clone(), (kind, target));
     }
