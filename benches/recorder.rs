@@ -24,7 +24,7 @@ use jderobot::{
     conf::Kind,
     interfaces::{Encoders, Image, Interface, Laser, Sample, Sonars},
     loader,
-    mcapfmt::{self, RecorderStatus, Snapshot},
+    mcapfmt::{self, Profile, RecorderStatus, Snapshot},
 };
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -106,56 +106,36 @@ fn write_file(
     compression: Option<mcap::Compression>,
     seconds: &[Vec<(&str, Snapshot)>],
 ) -> u64 {
-    write_profile(path, compression, seconds, false)
+    write_profile(path, compression, seconds, Profile::Foxglove { jpeg: None })
 }
 
+/// The recorder's writer path: a channel per interface, each sample encoded and
+/// written with its clock as the sequence.
 fn write_profile(
     path: &Path,
     compression: Option<mcap::Compression>,
     seconds: &[Vec<(&str, Snapshot)>],
-    ros2: bool,
+    profile: Profile,
 ) -> u64 {
-    let mut w = mcapfmt::write_options(compression, ros2)
+    let mut w = mcapfmt::write_options(compression, profile)
         .create(std::fs::File::create(path).unwrap())
         .unwrap();
     let mut channels = std::collections::HashMap::new();
     let mut buf = Vec::new();
-    let mut seq = 0u32;
     for sec in seconds {
         for (name, snap) in sec {
-            let kind = match snap {
-                Snapshot::Image(_) => "image",
-                Snapshot::Laser(_) => "laser",
-                Snapshot::Encoders(_) => "encoders",
-                _ => "sonars",
-            };
             let id = *channels.entry(*name).or_insert_with(|| {
-                if ros2 {
-                    let (sn, sd) =
-                        mcapfmt::ros2::schema(kind).unwrap_or(("jderobot/Other", String::new()));
-                    let s = w.add_schema(sn, "ros2msg", sd.as_bytes()).unwrap();
-                    w.add_channel(s, name, "cdr", &mcapfmt::metadata(kind))
-                        .unwrap()
-                } else {
-                    let (sn, sd) = mcapfmt::schema(kind);
-                    let s = w.add_schema(&sn, "jsonschema", sd.as_bytes()).unwrap();
-                    w.add_channel(s, name, "json", &mcapfmt::metadata(kind))
-                        .unwrap()
-                }
+                mcapfmt::add_channel(&mut w, name, snap.kind(), profile).unwrap()
             });
-            if ros2 {
-                if !mcapfmt::ros2::encode(name, snap, &mut buf) {
-                    continue;
-                }
-            } else {
-                mcapfmt::encode(name, snap, &mut buf);
+            let Some(id) = id else { continue };
+            if !mcapfmt::encode(profile, name, snap, &mut buf) {
+                continue;
             }
-            seq += 1;
             let t = mcapfmt::nanos(snap.time());
             w.write_to_known_channel(
                 &mcap::records::MessageHeader {
                     channel_id: id,
-                    sequence: seq,
+                    sequence: snap.clock() as u32,
                     log_time: t,
                     publish_time: t,
                 },
@@ -206,14 +186,15 @@ fn main() {
     let targets: Vec<(&str, PathBuf)> = std::iter::once(("disk", dir.path().join("w.mcap")))
         .chain(shm.as_ref().map(|d| ("memory", d.path().join("w.mcap"))))
         .collect();
-    for (label, c, ros2) in [
-        ("none", None, false),
-        ("lz4", Some(mcap::Compression::Lz4), false),
-        ("zstd", Some(mcap::Compression::Zstd), false),
+    let foxglove = Profile::Foxglove { jpeg: None };
+    for (label, c, profile) in [
+        ("none", None, foxglove),
+        ("lz4", Some(mcap::Compression::Lz4), foxglove),
+        ("zstd", Some(mcap::Compression::Zstd), foxglove),
         (
-            "none, profile ros2 (CDR, no base64; sonars not carried)",
+            "none, profile ros2 (CDR; sonars not carried)",
             None,
-            true,
+            Profile::Ros2,
         ),
     ] {
         for (to, file) in &targets {
@@ -221,7 +202,7 @@ fn main() {
             let mut size = 0;
             for _ in 0..5 {
                 let t = Instant::now();
-                size = write_profile(file, c, &load, ros2);
+                size = write_profile(file, c, &load, profile);
                 xs.push(secs as f64 / t.elapsed().as_secs_f64());
             }
             let _ = std::fs::remove_file(file);

@@ -1,6 +1,8 @@
-//! The Python `mcap` package (PyPI) reads what the recorder writes, and the
-//! messages match their JSON schemas and Foxglove's definitions
-//! (scripts/check_mcap.py, in the venv that .ci/run makes: target/py-venv).
+//! The Python `mcap` package (PyPI) reads what the recorder writes: the protobuf
+//! messages (images, laser) parse with Foxglove's own classes and with the classes
+//! `mcap-protobuf-support` builds from the file's schemas, the JSON ones validate
+//! against their JSON schemas and Foxglove's definitions (scripts/check_mcap.py, in
+//! the venv that .ci/run makes: target/py-venv); rosbags opens the `ros2` profile.
 //! Without that venv the test skips with a note, but FAILS under `CI`.
 #![cfg(all(feature = "recorder", feature = "simulator"))]
 
@@ -22,7 +24,10 @@ fn python() -> Option<PathBuf> {
         .map(PathBuf::from)
         .unwrap_or_else(|| root().join("target/py-venv/bin/python"));
     let ok = Command::new(&py)
-        .args(["-c", "import mcap, jsonschema, foxglove_schemas_protobuf"])
+        .args([
+            "-c",
+            "import mcap, mcap_protobuf, jsonschema, foxglove_schemas_protobuf",
+        ])
         .stderr(Stdio::null())
         .status()
         .is_ok_and(|s| s.success());
@@ -30,7 +35,7 @@ fn python() -> Option<PathBuf> {
         return Some(py);
     }
     let note = format!(
-        "{} cannot import mcap, jsonschema and foxglove_schemas_protobuf; make the venv as .ci/run does",
+        "{} cannot import mcap, mcap_protobuf, jsonschema and foxglove_schemas_protobuf; make the venv as .ci/run does",
         py.display()
     );
     assert!(std::env::var_os("CI").is_none(), "under CI: {note}");
@@ -117,10 +122,7 @@ fn python_mcap_reads_the_recording_by_the_documented_schemas() {
         for m in mcap::MessageStream::new(&bytes).unwrap() {
             let m = m.unwrap();
             let kind = mcapfmt::channel_kind(&m.channel.metadata, None).unwrap();
-            match mcapfmt::decode(&m.channel.topic, &kind, &m.data)
-                .unwrap()
-                .value
-            {
+            match mcapfmt::decode_mcap(&kind, &m).unwrap().value {
                 Recorded::Laser(l) if laser.is_none() => laser = Some(l),
                 Recorded::Image(i) if image.is_none() => image = Some(i),
                 _ => {}
@@ -136,6 +138,12 @@ fn python_mcap_reads_the_recording_by_the_documented_schemas() {
         assert_eq!(
             py_laser,
             laser.readings.iter().map(|&r| r as i64).collect::<Vec<_>>()
+        );
+        let py_res = v["resolution0"].as_f64().unwrap();
+        assert!(
+            (py_res - laser.resolution as f64).abs() < 1e-6,
+            "resolution: Python {py_res}, jderobot {}",
+            laser.resolution
         );
         let image = image.expect("an image message");
         let sum: u64 = image.data.iter().map(|&b| b as u64).sum();
@@ -224,15 +232,7 @@ fn rosbags_opens_the_ros2_profile_and_the_replay_reads_it_back() {
     for m in mcap::MessageStream::new(&bytes).unwrap() {
         let m = m.unwrap();
         let kind = mcapfmt::channel_kind(&m.channel.metadata, None).unwrap();
-        let d = mcapfmt::decode_message(
-            &m.channel.topic,
-            &kind,
-            &m.channel.message_encoding,
-            m.sequence,
-            m.log_time,
-            &m.data,
-        )
-        .unwrap();
+        let d = mcapfmt::decode_mcap(&kind, &m).unwrap();
         match d.value {
             Recorded::Laser(l) if laser.is_none() => laser = Some(l),
             Recorded::Image(i) if image.is_none() => image = Some(i),

@@ -17,9 +17,10 @@
 //! end_driver
 //! ```
 //!
-//! Both profiles of the recorder are read: jderobot's (JSON, Foxglove schemas)
-//! and `ros2` (CDR: LaserScan, Image, Odometry, Twist; the clock is the MCAP
-//! message sequence), where topic `/laser/robot2` is interface `laser.robot2`.
+//! Both profiles of the recorder are read: jderobot's (Foxglove schemas: images
+//! and laser in protobuf, the rest JSON) and `ros2` (CDR: LaserScan, Image,
+//! Odometry, Twist), where topic `/laser/robot2` is interface `laser.robot2`;
+//! the clock is the MCAP message sequence (JSON messages carry it too).
 //!
 //! # Interfaces
 //! Each recorded channel becomes the interface of the same name and kind (image
@@ -267,6 +268,14 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
                 c.encoding
             );
         };
+        if matches!(kind.as_str(), "image" | "laser") && c.encoding == "json" {
+            bail!(
+                "replay: channel `{}` of {} is a JSON {kind} channel (`{}`), recorded before jderobot wrote images and laser scans as protobuf; it is not read (record it again)",
+                c.topic,
+                settings.file.display(),
+                c.schema
+            );
+        }
         let target = Target::provide(rt, &c.name, &kind, &conf.name)?;
         targets.insert(c.topic.clone(), (kind, target));
     }
@@ -378,14 +387,7 @@ fn run(
                     std::thread::sleep(wait.min(Duration::from_millis(50)));
                 }
             }
-            match mcapfmt::decode_message(
-                &m.channel.topic,
-                kind,
-                &m.channel.message_encoding,
-                m.sequence,
-                m.log_time,
-                &m.data,
-            ) {
+            match mcapfmt::decode_mcap(kind, &m) {
                 Ok(d) => {
                     last_clock = last_clock.max(d.clock + offset);
                     if let Err(e) = target.publish(d.clock + offset, d.time_ns, d.value) {

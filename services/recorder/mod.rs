@@ -2,11 +2,12 @@
 //! Foxglove and copper-rs) that the `replay` driver, Foxglove Studio and Python's
 //! `mcap` package read. See `docs/recording.md` and `examples/recorder.conf`.
 //!
-//! One channel per interface (topic = its name), JSON messages with Foxglove's
-//! schemas where they fit (`foxglove.RawImage`, `foxglove.LaserScan`,
-//! `foxglove.PoseInFrame` for encoders) and `jderobot.KIND` JSON schemas for the
-//! rest; every message carries the interface's clock and the sample's wall time
-//! (the format is `crate::mcapfmt`'s).
+//! One channel per interface (topic = its name), with Foxglove's schemas where
+//! they fit: `foxglove.RawImage` / `foxglove.CompressedImage` and
+//! `foxglove.LaserScan` in protobuf, `foxglove.PoseInFrame` (encoders) in JSON, and
+//! `jderobot.KIND` JSON schemas for the rest; every message carries the
+//! interface's clock (the MCAP sequence) and the sample's wall time (the format is
+//! `crate::mcapfmt`'s).
 //!
 //! # Conf
 //! ```text
@@ -20,7 +21,7 @@
 //! compression zstd                 # zstd (default) | lz4 | none: chunk compression
 //! images raw                       # raw: foxglove.RawImage bgr8 (default); jpeg [QUALITY]:
 //!                                  #   foxglove.CompressedImage (quality 1..100, default 90)
-//! profile foxglove                 # foxglove (default): JSON, Foxglove schemas; ros2: rosbag2
+//! profile foxglove                 # foxglove (default): Foxglove schemas (protobuf, JSON); ros2: rosbag2
 //!                                  #   (CDR: LaserScan, Image, Odometry, Twist; other kinds skipped)
 //! queue 64                         # messages waiting for the disk at most; more are dropped
 //! start on                         # on (default): record from the start; off: wait for `record start`
@@ -87,6 +88,16 @@ struct Settings {
     ros2: bool,
     /// `images jpeg [QUALITY]`: foxglove.CompressedImage at this quality.
     jpeg: Option<u8>,
+}
+
+impl Settings {
+    fn profile(&self) -> mcapfmt::Profile {
+        if self.ros2 {
+            mcapfmt::Profile::Ros2
+        } else {
+            mcapfmt::Profile::Foxglove { jpeg: self.jpeg }
+        }
+    }
 }
 
 fn utc_stamp(t: SystemTime) -> String {
@@ -360,7 +371,6 @@ struct Open {
     path: PathBuf,
     opened: Instant,
     channels: Vec<Option<u16>>,
-    sequence: u32,
 }
 
 fn open(settings: &Settings, n: u32) -> anyhow::Result<Open> {
@@ -371,7 +381,7 @@ fn open(settings: &Settings, n: u32) -> anyhow::Result<Open> {
     }
     let file = File::create(&path)
         .with_context(|| format!("recorder: cannot create {}", path.display()))?;
-    let writer = mcapfmt::write_options(settings.compression, settings.ros2)
+    let writer = mcapfmt::write_options(settings.compression, settings.profile())
         .create(file)
         .with_context(|| format!("recorder: cannot start {}", path.display()))?;
     Ok(Open {
@@ -379,7 +389,6 @@ fn open(settings: &Settings, n: u32) -> anyhow::Result<Open> {
         path,
         opened: Instant::now(),
         channels: Vec::new(),
-        sequence: 0,
     })
 }
 
@@ -403,8 +412,7 @@ fn write_one(
     buf: &mut Vec<u8>,
     settings: &Settings,
 ) -> anyhow::Result<()> {
-    let ros2 = settings.ros2;
-    let jpeg = if ros2 { None } else { settings.jpeg };
+    let profile = settings.profile();
     let (i, name, snap) = item;
     if o.channels.len() <= *i {
         o.channels.resize(*i + 1, None);
@@ -412,63 +420,23 @@ fn write_one(
     let channel = match o.channels[*i] {
         Some(c) => c,
         None => {
-            let kind = match snap {
-                Snapshot::Image(_) => "image",
-                Snapshot::Laser(_) => "laser",
-                Snapshot::Encoders(_) => "encoders",
-                Snapshot::Motors(_) => "motors",
-                Snapshot::Sonars(_) => "sonars",
-                Snapshot::Bumpers(_) => "bumpers",
-                Snapshot::PtEncoders(_) => "pantiltencoders",
-                Snapshot::PtMotors(_) => "pantiltmotors",
-            };
-            let c = if ros2 {
-                let Some((type_name, def)) = mcapfmt::ros2::schema(kind) else {
-                    // Not in the profile: never written (said once, at the first sample).
-                    tracing::warn!(
-                        "recorder: profile ros2 carries laser, image, encoders and motors; `{name}` ({kind}) is not recorded"
-                    );
-                    o.channels[*i] = Some(u16::MAX);
-                    return Ok(());
-                };
-                let sid = o.writer.add_schema(type_name, "ros2msg", def.as_bytes())?;
-                let mut meta = mcapfmt::metadata(kind);
-                meta.insert(mcapfmt::NAME_KEY.into(), name.to_string());
-                meta.insert("offered_qos_profiles".into(), String::new());
-                o.writer
-                    .add_channel(sid, &mcapfmt::ros2::topic(name), "cdr", &meta)?
-            } else {
-                let schema_kind = if kind == "image" && jpeg.is_some() {
-                    "image/jpeg"
-                } else {
-                    kind
-                };
-                let (schema_name, schema) = mcapfmt::schema(schema_kind);
-                let sid = o
-                    .writer
-                    .add_schema(&schema_name, "jsonschema", schema.as_bytes())?;
-                o.writer
-                    .add_channel(sid, name, "json", &mcapfmt::metadata(kind))?
-            };
+            let kind = snap.kind();
+            let c = mcapfmt::add_channel(&mut o.writer, name, kind, profile)?.unwrap_or_else(|| {
+                // Not in the profile: never written (said once, at the first sample).
+                tracing::warn!(
+                    "recorder: profile ros2 carries laser, image, encoders and motors; `{name}` ({kind}) is not recorded"
+                );
+                u16::MAX
+            });
             o.channels[*i] = Some(c);
             c
         }
     };
-    if channel == u16::MAX {
+    if channel == u16::MAX || !mcapfmt::encode(profile, name, snap, buf) {
         return Ok(());
     }
-    let sequence = if ros2 {
-        mcapfmt::ros2::encode(name, snap, buf);
-        // ROS messages have no clock: the sequence is the interface's clock.
-        snap.clock() as u32
-    } else {
-        match (snap, jpeg) {
-            (Snapshot::Image(img), Some(q)) => mcapfmt::encode_jpeg(name, img, q, buf),
-            _ => mcapfmt::encode(name, snap, buf),
-        }
-        o.sequence = o.sequence.wrapping_add(1);
-        o.sequence
-    };
+    // The interface's clock is the message's sequence (mod 2^32).
+    let sequence = snap.clock() as u32;
     let t = mcapfmt::nanos(snap.time());
     o.writer.write_to_known_channel(
         &mcap::records::MessageHeader {

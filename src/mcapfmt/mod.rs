@@ -1,30 +1,42 @@
 //! mcapfmt: interfaces as MCAP messages, the format that the `recorder` service
 //! writes and the `replay` driver and `jderobot info` read (see `docs/recording.md`).
 //!
-//! One MCAP channel per interface (topic = the interface name), JSON message
-//! encoding, a JSON schema per channel. Where a Foxglove schema fits, the channel
-//! uses it, so Foxglove Studio shows the file as it is:
+//! One MCAP channel per interface (topic = the interface name; the channel
+//! metadata `jderobot.kind` names the interface kind). The default profile uses
+//! Foxglove's schemas where they fit, so Foxglove shows the file as it is: in
+//! Foxglove's binary encoding, protobuf (schema data: Foxglove's own
+//! `FileDescriptorSet`s, `assets/foxglove/`), where the jderobot value comes back
+//! exactly from Foxglove's fields, and JSON (a JSON schema per channel) elsewhere:
 //!
-//! | interface kind | schema name | message |
-//! |---|---|---|
-//! | `image` | `foxglove.RawImage` | `encoding` `bgr8`, `data` base64 |
-//! | `laser` | `foxglove.LaserScan` | `ranges` in m, angles in rad (−π/2 first) |
-//! | `encoders` | `foxglove.PoseInFrame` | position in m, orientation a quaternion about z |
-//! | others | `jderobot.KIND` | the interface's fields in its units |
+//! | interface kind | schema | encoding | message |
+//! |---|---|---|---|
+//! | `image` | `foxglove.RawImage` | protobuf | `encoding` `bgr8`, `data` the BGR bytes as they are |
+//! | `image` (`images jpeg`) | `foxglove.CompressedImage` | protobuf | `format` `jpeg` |
+//! | `laser` | `foxglove.LaserScan` | protobuf | `ranges` in m (the mm readings / 1000), angles in rad (−π/2 first; `end_angle` gives the resolution back) |
+//! | `encoders` | `foxglove.PoseInFrame` | JSON | position in m, orientation a quaternion about z; `jderobot` = the exact value |
+//! | others | `jderobot.KIND` | JSON | `jderobot` = the interface's fields in its units |
 //!
-//! Every message also carries `clock` (the interface's clock: the sample's number)
-//! and `jderobot`, the value in its own units exactly (f32 as JSON's shortest
-//! round-trip text), so a replay gives back bit-identical values. `timestamp`
-//! and the MCAP log and publish times are the sample's wall time (ns since the
-//! Unix epoch). The channel metadata `jderobot.kind` names the interface kind.
+//! The interface's clock (the sample's number) is the MCAP message `sequence`
+//! (mod 2³², as in the `ros2` profile: 4.5 years of a 30 Hz interface, 49 days of a
+//! 1 kHz one); JSON messages also carry it whole in `clock`. The Foxglove
+//! `timestamp` and the MCAP log and publish times are the sample's wall time (ns
+//! since the Unix epoch). Replay is bit-identical: the protobuf fields give the
+//! value back exactly (mm / 1000 in a double, the resolution from the angles), and
+//! JSON messages carry the f32 values as their shortest round-trip text. Encoders
+//! stay JSON because a quaternion cannot give back jderobot's `cos` and `sin`
+//! (computed from the unnormalised angle, or received as they are from a remote
+//! robot) and Foxglove's protobuf `PoseInFrame` has no field for them; at 20 Hz the
+//! JSON costs nothing. Images and laser scans recorded as JSON (before the
+//! protobuf encoding) are not read.
 //!
 //! [`Source`] polls a typed interface for new samples without copying them;
-//! [`encode`] and [`decode`] turn a sample into a message and back; [`Summary`]
+//! [`add_channel`] and [`encode`] write a sample into an MCAP writer,
+//! [`decode_message`] (or [`decode_mcap`]) reads it back; [`Summary`]
 //! reads a file (complete or cut short) for `jderobot info`; [`RecorderStatus`]
 //! and [`StepGate`] are what the recorder and replay export in the name space
 //! (keys `recorder.status` and `replay.step`) for the shell.
 
-mod base64;
+mod protobuf;
 pub mod ros2;
 mod status;
 mod summary;
@@ -203,32 +215,96 @@ pub fn from_nanos(ns: u64) -> SystemTime {
     UNIX_EPOCH + Duration::from_nanos(ns)
 }
 
-/// The schema (name, JSON schema text) of an interface kind.
-pub fn schema(kind: &str) -> (String, String) {
+/// What a file holds: the profile and, in the default one, how images are written.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Profile {
+    /// Foxglove's schemas (protobuf for images and laser, JSON for the rest);
+    /// images as JPEG of this quality (1..=100) when set, else raw BGR.
+    Foxglove { jpeg: Option<u8> },
+    /// rosbag2: ros2msg schemas, CDR messages (see [`ros2`]).
+    Ros2,
+}
+
+impl Snapshot {
+    /// The interface kind (`AnyInterface::kind`).
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Snapshot::Image(_) => "image",
+            Snapshot::Laser(_) => "laser",
+            Snapshot::Encoders(_) => "encoders",
+            Snapshot::Motors(_) => "motors",
+            Snapshot::Sonars(_) => "sonars",
+            Snapshot::Bumpers(_) => "bumpers",
+            Snapshot::PtEncoders(_) => "pantiltencoders",
+            Snapshot::PtMotors(_) => "pantiltmotors",
+        }
+    }
+}
+
+/// Adds the schema and the channel of interface `name` (of kind `kind`) to
+/// `writer`: the channel id, or `None` when the profile does not carry the kind
+/// (`ros2`: laser, image, encoders and motors only).
+pub fn add_channel<W: std::io::Write + std::io::Seek>(
+    writer: &mut mcap::Writer<W>,
+    name: &str,
+    kind: &str,
+    profile: Profile,
+) -> Result<Option<u16>, mcap::McapError> {
+    let mut meta = metadata(kind);
+    let (schema, data) = match (profile, kind) {
+        (Profile::Ros2, _) => {
+            let Some((type_name, def)) = ros2::schema(kind) else {
+                return Ok(None);
+            };
+            meta.insert(NAME_KEY.into(), name.to_string());
+            meta.insert("offered_qos_profiles".into(), String::new());
+            let sid = writer.add_schema(type_name, "ros2msg", def.as_bytes())?;
+            return writer
+                .add_channel(sid, &ros2::topic(name), "cdr", &meta)
+                .map(Some);
+        }
+        (Profile::Foxglove { jpeg: None }, "image") => ("foxglove.RawImage", protobuf::RAW_IMAGE),
+        (Profile::Foxglove { jpeg: Some(_) }, "image") => {
+            ("foxglove.CompressedImage", protobuf::COMPRESSED_IMAGE)
+        }
+        (_, "laser") => ("foxglove.LaserScan", protobuf::LASER_SCAN),
+        _ => {
+            let (schema_name, text) = json_schema(kind);
+            let sid = writer.add_schema(&schema_name, "jsonschema", text.as_bytes())?;
+            return writer.add_channel(sid, name, "json", &meta).map(Some);
+        }
+    };
+    let sid = writer.add_schema(schema, "protobuf", data)?;
+    writer.add_channel(sid, name, "protobuf", &meta).map(Some)
+}
+
+/// Encodes a sample of interface `name` into `out` (cleared first) as its channel
+/// of [`add_channel`] says; false (and nothing) for a kind the profile does not
+/// carry. The MCAP message's `sequence` is the sample's clock (mod 2³²), its log
+/// and publish times its wall time ([`nanos`]).
+pub fn encode(profile: Profile, name: &str, snap: &Snapshot, out: &mut Vec<u8>) -> bool {
+    let ns = nanos(snap.time());
+    match (profile, snap) {
+        (Profile::Ros2, _) => return ros2::encode(name, snap, out),
+        (Profile::Foxglove { jpeg: Some(q) }, Snapshot::Image(img)) => {
+            encode_jpeg(name, img, q, out)
+        }
+        (_, Snapshot::Image(img)) => protobuf::raw_image(name, ns, img, out),
+        (_, Snapshot::Laser(l)) => protobuf::laser_scan(name, ns, l, out),
+        _ => encode_json(snap, out),
+    }
+    true
+}
+
+/// The JSON schema (name, schema text) of an interface kind written as JSON:
+/// `foxglove.PoseInFrame` for encoders, `jderobot.KIND` for the rest.
+pub fn json_schema(kind: &str) -> (String, String) {
     let ts = r#""timestamp":{"type":"object","title":"time","properties":{"sec":{"type":"integer","minimum":0},"nsec":{"type":"integer","minimum":0,"maximum":999999999}}},"clock":{"type":"integer","description":"the interface's clock: the sample's number"}"#;
     let vec3 = r#"{"type":"object","properties":{"x":{"type":"number"},"y":{"type":"number"},"z":{"type":"number"}}}"#;
     let quat = r#"{"type":"object","properties":{"x":{"type":"number"},"y":{"type":"number"},"z":{"type":"number"},"w":{"type":"number"}}}"#;
     let pose =
         format!(r#"{{"type":"object","properties":{{"position":{vec3},"orientation":{quat}}}}}"#);
     match kind {
-        "image" => (
-            "foxglove.RawImage".into(),
-            format!(
-                r#"{{"title":"foxglove.RawImage","description":"A raw image (jderobot: BGR, bgr8)","type":"object","properties":{{{ts},"frame_id":{{"type":"string"}},"width":{{"type":"integer","minimum":0}},"height":{{"type":"integer","minimum":0}},"encoding":{{"type":"string"}},"step":{{"type":"integer","minimum":0}},"data":{{"type":"string","contentEncoding":"base64"}}}}}}"#
-            ),
-        ),
-        "image/jpeg" => (
-            "foxglove.CompressedImage".into(),
-            format!(
-                r#"{{"title":"foxglove.CompressedImage","description":"A compressed image (jderobot: JPEG of a BGR image)","type":"object","properties":{{{ts},"frame_id":{{"type":"string"}},"format":{{"type":"string"}},"data":{{"type":"string","contentEncoding":"base64"}}}}}}"#
-            ),
-        ),
-        "laser" => (
-            "foxglove.LaserScan".into(),
-            format!(
-                r#"{{"title":"foxglove.LaserScan","description":"A laser scan (jderobot: ranges in m, the raw mm in jderobot.readings)","type":"object","properties":{{{ts},"frame_id":{{"type":"string"}},"pose":{pose},"start_angle":{{"type":"number"}},"end_angle":{{"type":"number"}},"ranges":{{"type":"array","items":{{"type":"number"}}}},"intensities":{{"type":"array","items":{{"type":"number"}}}},"jderobot":{{"type":"object","properties":{{"readings":{{"type":"array","items":{{"type":"integer"}}}},"resolution":{{"type":"number"}}}}}}}}}}"#
-            ),
-        ),
         "encoders" => (
             "foxglove.PoseInFrame".into(),
             format!(
@@ -244,15 +320,6 @@ pub fn schema(kind: &str) -> (String, String) {
     }
 }
 
-fn stamp_json(out: &mut String, ns: u64, clock: u64) {
-    let _ = write!(
-        out,
-        r#""timestamp":{{"sec":{},"nsec":{}}},"clock":{clock}"#,
-        ns / 1_000_000_000,
-        ns % 1_000_000_000
-    );
-}
-
 fn f32_json(v: f32) -> Value {
     // JSON has no NaN or infinity; jderobot's values are finite (validated).
     serde_json::Number::from_f64(v as f64)
@@ -264,123 +331,72 @@ fn f32_json(v: f32) -> Value {
 /// the recorder, so a kill loses at most that), `compression`, the `ros2` profile or
 /// none. Each chunk carries its CRC; the data-section CRC (a second pass over every
 /// byte, checkable only on a complete file) is left out, as MCAP allows.
-pub fn write_options(compression: Option<mcap::Compression>, ros2: bool) -> mcap::WriteOptions {
+pub fn write_options(
+    compression: Option<mcap::Compression>,
+    profile: Profile,
+) -> mcap::WriteOptions {
     mcap::WriteOptions::new()
         .compression(compression)
-        .profile(if ros2 { "ros2" } else { "" })
+        .profile(if profile == Profile::Ros2 { "ros2" } else { "" })
         .library(concat!("jderobot ", env!("CARGO_PKG_VERSION")))
         .chunk_size(Some(4 * 1024 * 1024))
         .calculate_data_section_crc(false)
 }
 
-/// Encodes a sample of interface `name` as a JSON message into `out` (cleared first).
-pub fn encode(name: &str, snap: &Snapshot, out: &mut Vec<u8>) {
+/// Encodes a sample of a JSON channel (encoders and the kinds without a Foxglove
+/// schema) into `out`, cleared first.
+fn encode_json(snap: &Snapshot, out: &mut Vec<u8>) {
     out.clear();
     let ns = nanos(snap.time());
-    let clock = snap.clock();
     let mut s = String::with_capacity(256);
-    s.push('{');
-    stamp_json(&mut s, ns, clock);
-    match snap {
-        Snapshot::Image(img) => {
-            let _ = write!(
-                s,
-                r#","frame_id":{},"width":{},"height":{},"encoding":"bgr8","step":{},"data":""#,
-                Value::String(name.into()),
-                img.width,
-                img.height,
-                img.width * 3
-            );
-            out.extend_from_slice(s.as_bytes());
-            base64::encode_into(&img.data, out);
-            out.extend_from_slice(b"\"}");
-            return;
-        }
-        Snapshot::Laser(l) => {
-            let res = if l.resolution > 0.0 {
-                l.resolution
-            } else {
-                1.0
-            };
-            let start = -std::f64::consts::FRAC_PI_2;
-            let end = start + ((l.readings.len().max(1) - 1) as f64 / res as f64).to_radians();
-            let _ = write!(
-                s,
-                r#","frame_id":{},"pose":{{"position":{{"x":0.019,"y":0,"z":0}},"orientation":{{"x":0,"y":0,"z":0,"w":1}}}},"start_angle":{start},"end_angle":{end},"ranges":["#,
-                Value::String(name.into())
-            );
-            for (i, r) in l.readings.iter().enumerate() {
-                if i > 0 {
-                    s.push(',');
-                }
-                let _ = write!(s, "{}", *r as f64 / 1000.0);
-            }
-            s.push_str(r#"],"intensities":[],"jderobot":{"readings":["#);
-            for (i, r) in l.readings.iter().enumerate() {
-                if i > 0 {
-                    s.push(',');
-                }
-                let _ = write!(s, "{r}");
-            }
-            let _ = write!(s, r#"],"resolution":{}}}}}"#, f32_json(l.resolution));
-        }
+    let _ = write!(
+        s,
+        r#"{{"timestamp":{{"sec":{},"nsec":{}}},"clock":{}"#,
+        ns / 1_000_000_000,
+        ns % 1_000_000_000,
+        snap.clock()
+    );
+    let j = match snap {
         Snapshot::Encoders(e) => {
             let half = e.theta as f64 / 2.0;
             let _ = write!(
                 s,
-                r#","frame_id":"odom","pose":{{"position":{{"x":{},"y":{},"z":0}},"orientation":{{"x":0,"y":0,"z":{},"w":{}}}}},"jderobot":{}}}"#,
+                r#","frame_id":"odom","pose":{{"position":{{"x":{},"y":{},"z":0}},"orientation":{{"x":0,"y":0,"z":{},"w":{}}}}}"#,
                 e.x as f64 / 1000.0,
                 e.y as f64 / 1000.0,
                 half.sin(),
                 half.cos(),
-                json!({"x": f32_json(e.x), "y": f32_json(e.y), "theta": f32_json(e.theta),
-                       "cos": f32_json(e.cos), "sin": f32_json(e.sin)})
             );
+            json!({"x": f32_json(e.x), "y": f32_json(e.y), "theta": f32_json(e.theta),
+                   "cos": f32_json(e.cos), "sin": f32_json(e.sin)})
         }
-        Snapshot::Motors(m) => {
-            let _ = write!(
-                s,
-                r#","jderobot":{}}}"#,
-                json!({"v": f32_json(m.v), "w": f32_json(m.w)})
-            );
-        }
+        Snapshot::Motors(m) => json!({"v": f32_json(m.v), "w": f32_json(m.w)}),
         Snapshot::Sonars(v) => {
-            let us: Vec<Value> = v.us.iter().map(|x| f32_json(*x)).collect();
-            let _ = write!(s, r#","jderobot":{}}}"#, json!({ "us": us }));
+            json!({ "us": v.us.iter().map(|x| f32_json(*x)).collect::<Vec<_>>() })
         }
-        Snapshot::Bumpers(b) => {
-            let _ = write!(s, r#","jderobot":{}}}"#, json!({ "bumpers": b.bumpers }));
-        }
+        Snapshot::Bumpers(b) => json!({ "bumpers": b.bumpers }),
         Snapshot::PtEncoders(p) => {
-            let _ = write!(
-                s,
-                r#","jderobot":{}}}"#,
-                json!({"pan_angle": f32_json(p.pan_angle), "tilt_angle": f32_json(p.tilt_angle)})
-            );
+            json!({"pan_angle": f32_json(p.pan_angle), "tilt_angle": f32_json(p.tilt_angle)})
         }
-        Snapshot::PtMotors(p) => {
-            let _ = write!(
-                s,
-                r#","jderobot":{}}}"#,
-                json!({
-                    "longitude": f32_json(p.longitude), "latitude": f32_json(p.latitude),
-                    "longitude_speed": f32_json(p.longitude_speed),
-                    "latitude_speed": f32_json(p.latitude_speed),
-                    "max_longitude": f32_json(p.max_longitude), "min_longitude": f32_json(p.min_longitude),
-                    "max_latitude": f32_json(p.max_latitude), "min_latitude": f32_json(p.min_latitude),
-                    "max_longitude_speed": f32_json(p.max_longitude_speed),
-                    "max_latitude_speed": f32_json(p.max_latitude_speed),
-                })
-            );
-        }
-    }
+        Snapshot::PtMotors(p) => json!({
+            "longitude": f32_json(p.longitude), "latitude": f32_json(p.latitude),
+            "longitude_speed": f32_json(p.longitude_speed),
+            "latitude_speed": f32_json(p.latitude_speed),
+            "max_longitude": f32_json(p.max_longitude), "min_longitude": f32_json(p.min_longitude),
+            "max_latitude": f32_json(p.max_latitude), "min_latitude": f32_json(p.min_latitude),
+            "max_longitude_speed": f32_json(p.max_longitude_speed),
+            "max_latitude_speed": f32_json(p.max_latitude_speed),
+        }),
+        // Never: `encode` writes images and laser scans as protobuf.
+        Snapshot::Image(_) | Snapshot::Laser(_) => Value::Null,
+    };
+    let _ = write!(s, r#","jderobot":{j}}}"#);
     out.extend_from_slice(s.as_bytes());
 }
 
 /// Encodes an image sample as a `foxglove.CompressedImage` JPEG message (quality
-/// 1..=100) into `out`.
+/// 1..=100, protobuf) into `out`.
 pub fn encode_jpeg(name: &str, snap: &Sample<Image>, quality: u8, out: &mut Vec<u8>) {
-    out.clear();
     let mut rgb = Vec::with_capacity(snap.data.len());
     for p in snap.data.chunks_exact(3) {
         rgb.extend_from_slice(&[p[2], p[1], p[0]]);
@@ -395,16 +411,34 @@ pub fn encode_jpeg(name: &str, snap: &Sample<Image>, quality: u8, out: &mut Vec<
     if encoded.is_err() {
         jpeg.clear();
     }
-    let mut s = String::from("{");
-    stamp_json(&mut s, nanos(snap.time), snap.clock);
-    let _ = write!(
-        s,
-        r#","frame_id":{},"format":"jpeg","data":""#,
-        Value::String(name.into())
-    );
-    out.extend_from_slice(s.as_bytes());
-    base64::encode_into(&jpeg, out);
-    out.extend_from_slice(b"\"}");
+    protobuf::compressed_image(name, nanos(snap.time), "jpeg", &jpeg, out);
+}
+
+/// A compressed image (`jpeg` or `png`) back to BGR.
+fn decode_compressed(topic: &str, format: &str, data: &[u8]) -> Result<Recorded, FormatError> {
+    let fmt = match format {
+        "jpeg" => image::ImageFormat::Jpeg,
+        "png" => image::ImageFormat::Png,
+        other => {
+            return Err(bad(
+                topic,
+                format!("compressed image format `{other}`; jderobot reads jpeg and png"),
+            ));
+        }
+    };
+    let rgb = image::load_from_memory_with_format(data, fmt)
+        .map_err(|e| bad(topic, format!("the {format} image does not decode: {e}")))?
+        .to_rgb8();
+    let (width, height) = rgb.dimensions();
+    let mut bgr = rgb.into_raw();
+    for p in bgr.chunks_exact_mut(3) {
+        p.swap(0, 2);
+    }
+    Ok(Recorded::Image(Image {
+        width,
+        height,
+        data: bgr,
+    }))
 }
 
 /// The channel metadata of an interface kind.
@@ -421,24 +455,65 @@ pub fn interface_name(topic: &str, metadata: &BTreeMap<String, String>) -> Strin
     topic.trim_start_matches('/').replace('/', ".")
 }
 
-/// Decodes a message by its channel's encoding: `json` (this module's schemas)
-/// or `cdr` (the `ros2` profile; the clock is the MCAP `sequence`).
+/// Decodes a message by its channel's encoding: `protobuf` (images, laser: the
+/// clock is the MCAP `sequence`), `json` (the clock is in the message) or `cdr`
+/// (the `ros2` profile; the clock is the `sequence`). `schema` is the channel's
+/// schema name (it tells a raw image from a compressed one).
 pub fn decode_message(
     topic: &str,
     kind: &str,
+    schema: &str,
     encoding: &str,
     sequence: u32,
     log_time: u64,
     data: &[u8],
 ) -> Result<Decoded, FormatError> {
     match encoding {
+        "protobuf" => {
+            let (time_ns, value) = match (kind, schema) {
+                ("image", "foxglove.RawImage") => {
+                    protobuf::decode_image(topic, false, data, log_time)?
+                }
+                ("image", "foxglove.CompressedImage") => {
+                    protobuf::decode_image(topic, true, data, log_time)?
+                }
+                ("laser", "foxglove.LaserScan") => protobuf::decode_laser(topic, data, log_time)?,
+                _ => {
+                    return Err(bad(
+                        topic,
+                        format!(
+                            "a protobuf `{schema}` channel of kind `{kind}`; jderobot reads foxglove.RawImage, foxglove.CompressedImage and foxglove.LaserScan"
+                        ),
+                    ));
+                }
+            };
+            Ok(Decoded {
+                clock: sequence as u64,
+                time_ns,
+                value,
+            })
+        }
         "json" => decode(topic, kind, data),
         "cdr" => ros2::decode(topic, kind, data, sequence as u64, log_time),
         other => Err(bad(
             topic,
-            format!("message encoding `{other}`; jderobot reads json and cdr"),
+            format!("message encoding `{other}`; jderobot reads protobuf, json and cdr"),
         )),
     }
+}
+
+/// Decodes an MCAP message of a channel of interface kind `kind` ([`decode_message`]
+/// with the message's channel, sequence and log time).
+pub fn decode_mcap(kind: &str, m: &mcap::Message) -> Result<Decoded, FormatError> {
+    decode_message(
+        &m.channel.topic,
+        kind,
+        m.channel.schema.as_ref().map_or("", |s| s.name.as_str()),
+        &m.channel.message_encoding,
+        m.sequence,
+        m.log_time,
+        &m.data,
+    )
 }
 
 /// The interface kind of a channel: its metadata, or what its schema name says.
@@ -492,7 +567,8 @@ fn f32_array(v: &Value, key: &str, topic: &str) -> Result<Vec<f32>, FormatError>
         .collect()
 }
 
-/// Decodes a message of interface kind `kind` on channel `topic`.
+/// Decodes a JSON message (encoders and the kinds without a Foxglove schema) of
+/// interface kind `kind` on channel `topic`.
 pub fn decode(topic: &str, kind: &str, data: &[u8]) -> Result<Decoded, FormatError> {
     let v: Value = serde_json::from_slice(data)
         .map_err(|e| bad(topic, format!("the message is not JSON: {e}")))?;
@@ -502,84 +578,13 @@ pub fn decode(topic: &str, kind: &str, data: &[u8]) -> Result<Decoded, FormatErr
         .as_u64()
         .ok_or_else(|| bad(topic, "`clock` is not a whole number"))?;
     let value = match kind {
-        "image" if v.get("format").is_some() => {
-            let format = get(&v, "format", topic)?.as_str().unwrap_or("");
-            let text = get(&v, "data", topic)?
-                .as_str()
-                .ok_or_else(|| bad(topic, "`data` is not a base64 string"))?;
-            let data = base64::decode(text.as_bytes())
-                .ok_or_else(|| bad(topic, "`data` is not valid base64"))?;
-            let fmt = match format {
-                "jpeg" => image::ImageFormat::Jpeg,
-                "png" => image::ImageFormat::Png,
-                other => {
-                    return Err(bad(
-                        topic,
-                        format!("compressed image format `{other}`; jderobot reads jpeg and png"),
-                    ));
-                }
-            };
-            let rgb = image::load_from_memory_with_format(&data, fmt)
-                .map_err(|e| bad(topic, format!("the {format} image does not decode: {e}")))?
-                .to_rgb8();
-            let (width, height) = rgb.dimensions();
-            let mut bgr = rgb.into_raw();
-            for p in bgr.chunks_exact_mut(3) {
-                p.swap(0, 2);
-            }
-            Recorded::Image(Image {
-                width,
-                height,
-                data: bgr,
-            })
-        }
-        "image" => {
-            let width = num(&v, "width", topic)? as u32;
-            let height = num(&v, "height", topic)? as u32;
-            let enc = get(&v, "encoding", topic)?.as_str().unwrap_or("");
-            if enc != "bgr8" {
-                return Err(bad(
-                    topic,
-                    format!("image encoding `{enc}`; jderobot reads bgr8"),
-                ));
-            }
-            let text = get(&v, "data", topic)?
-                .as_str()
-                .ok_or_else(|| bad(topic, "`data` is not a base64 string"))?;
-            let data = base64::decode(text.as_bytes())
-                .ok_or_else(|| bad(topic, "`data` is not valid base64"))?;
-            if data.len() != width as usize * height as usize * 3 {
-                return Err(bad(
-                    topic,
-                    format!(
-                        "{width}x{height} bgr8 needs {} bytes, the data has {}",
-                        width as usize * height as usize * 3,
-                        data.len()
-                    ),
-                ));
-            }
-            Recorded::Image(Image {
-                width,
-                height,
-                data,
-            })
-        }
-        "laser" => {
-            let j = get(&v, "jderobot", topic)?;
-            let readings = get(j, "readings", topic)?
-                .as_array()
-                .ok_or_else(|| bad(topic, "`readings` is not an array"))?
-                .iter()
-                .map(|x| {
-                    x.as_i64()
-                        .map(|r| r as i32)
-                        .ok_or_else(|| bad(topic, "a laser reading is not a whole number"))
-                })
-                .collect::<Result<Vec<_>, _>>()?;
-            Recorded::Laser(Laser {
-                readings,
-                resolution: f32_of(j, "resolution", topic)?,
-            })
+        "image" | "laser" => {
+            return Err(bad(
+                topic,
+                format!(
+                    "a JSON {kind} message: jderobot writes images and laser scans as protobuf (recordings made before that are not read)"
+                ),
+            ));
         }
         "encoders" => {
             let j = get(&v, "jderobot", topic)?;
@@ -731,14 +736,62 @@ mod tests {
                 "image",
             ),
         ];
+        // Written into an MCAP file as the recorder does, read back as the replay does.
+        let profile = Profile::Foxglove { jpeg: None };
+        let mut w = write_options(None, profile)
+            .create(std::io::Cursor::new(Vec::new()))
+            .unwrap();
         let mut buf = Vec::new();
-        for (snap, value, kind) in cases {
-            encode("x", &snap, &mut buf);
-            let d = decode("x", kind, &buf).unwrap();
-            assert_eq!(d.value, value);
+        for (i, (snap, _, kind)) in cases.iter().enumerate() {
+            let name = format!("x{i}");
+            let id = add_channel(&mut w, &name, kind, profile).unwrap().unwrap();
+            assert!(encode(profile, &name, snap, &mut buf));
+            let t = nanos(snap.time());
+            let header = mcap::records::MessageHeader {
+                channel_id: id,
+                sequence: snap.clock() as u32,
+                log_time: t,
+                publish_time: t,
+            };
+            w.write_to_known_channel(&header, &buf).unwrap();
+        }
+        w.finish().unwrap();
+        let file = w.into_inner().into_inner();
+        let mut n = 0;
+        for (m, (snap, value, kind)) in mcap::MessageStream::new(&file).unwrap().zip(&cases) {
+            let d = decode_mcap(kind, &m.unwrap()).unwrap();
+            assert_eq!(&d.value, value);
             assert_eq!(d.clock, snap.clock());
             assert_eq!(d.time_ns, 1_700_000_000_123_456_789);
+            n += 1;
         }
+        assert_eq!(n, cases.len());
+    }
+
+    #[test]
+    fn encoders_keep_cos_and_sin_exactly() {
+        // cos and sin of the unnormalised angle: not what θ (normalised) gives.
+        let e = Encoders::from_pose(1.5, -2.25, -7.3);
+        let snap = Snapshot::Encoders(sample(9, e));
+        let mut buf = Vec::new();
+        assert!(encode(
+            Profile::Foxglove { jpeg: None },
+            "encoders",
+            &snap,
+            &mut buf
+        ));
+        let d = decode_message(
+            "encoders",
+            "encoders",
+            "foxglove.PoseInFrame",
+            "json",
+            0,
+            0,
+            &buf,
+        )
+        .unwrap();
+        assert_eq!(d.value, Recorded::Encoders(e));
+        assert_eq!(d.clock, 9);
     }
 
     #[test]
@@ -748,8 +801,8 @@ mod tests {
             .to_string();
         assert!(e.contains("laser") && e.contains("not JSON"), "{e}");
         let e = decode(
-            "laser",
-            "laser",
+            "motors",
+            "motors",
             br#"{"timestamp":{"sec":1,"nsec":2},"clock":1}"#,
         )
         .unwrap_err()

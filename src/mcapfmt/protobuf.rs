@@ -1,0 +1,454 @@
+//! Foxglove's protobuf messages for images and laser scans, encoded and decoded by
+//! hand (the messages are small and fixed: a few varint and length-delimited fields).
+//!
+//! The MCAP schema data (`protobuf` schema encoding) is Foxglove's own
+//! `FileDescriptorSet` of each message, from the `foxglove-schemas-protobuf` package
+//! (`assets/foxglove/`, see its README). Field numbers below are those descriptors':
+//!
+//! | message | fields |
+//! |---|---|
+//! | `foxglove.RawImage` | 1 timestamp, 7 frame_id, 2 width (fixed32), 3 height (fixed32), 4 encoding, 5 step (fixed32), 6 data (bytes) |
+//! | `foxglove.CompressedImage` | 1 timestamp, 4 frame_id, 2 data (bytes), 3 format |
+//! | `foxglove.LaserScan` | 1 timestamp, 2 frame_id, 3 pose, 4 start_angle, 5 end_angle (double), 6 ranges, 7 intensities (packed double) |
+//! | `google.protobuf.Timestamp` | 1 seconds (int64), 2 nanos (int32) |
+//! | `foxglove.Pose` | 1 position (`Vector3`: 1 x, 2 y, 3 z), 2 orientation (`Quaternion`: 1 x, 2 y, 3 z, 4 w), doubles |
+
+use super::{FormatError, Recorded, bad};
+use crate::interfaces::{Image, Laser};
+
+/// `foxglove.RawImage`'s FileDescriptorSet (Foxglove's, see `assets/foxglove`).
+pub const RAW_IMAGE: &[u8] = include_bytes!("../../assets/foxglove/RawImage.fdset");
+/// `foxglove.CompressedImage`'s FileDescriptorSet.
+pub const COMPRESSED_IMAGE: &[u8] = include_bytes!("../../assets/foxglove/CompressedImage.fdset");
+/// `foxglove.LaserScan`'s FileDescriptorSet.
+pub const LASER_SCAN: &[u8] = include_bytes!("../../assets/foxglove/LaserScan.fdset");
+
+/// The laser's first reading: −90° (jderobot: reading i is at −90 + i/resolution deg).
+pub const START_ANGLE: f64 = -std::f64::consts::FRAC_PI_2;
+
+const VARINT: u64 = 0;
+const I64: u64 = 1;
+const LEN: u64 = 2;
+const I32: u64 = 5;
+
+/// Protobuf wire writing into a buffer.
+pub(super) struct Writer<'a>(pub &'a mut Vec<u8>);
+
+impl Writer<'_> {
+    fn varint(&mut self, mut v: u64) {
+        while v >= 0x80 {
+            self.0.push(v as u8 | 0x80);
+            v >>= 7;
+        }
+        self.0.push(v as u8);
+    }
+    fn tag(&mut self, field: u64, wire: u64) {
+        self.varint(field << 3 | wire);
+    }
+    fn uint(&mut self, field: u64, v: u64) {
+        self.tag(field, VARINT);
+        self.varint(v);
+    }
+    fn fixed32(&mut self, field: u64, v: u32) {
+        self.tag(field, I32);
+        self.0.extend_from_slice(&v.to_le_bytes());
+    }
+    fn double(&mut self, field: u64, v: f64) {
+        self.tag(field, I64);
+        self.0.extend_from_slice(&v.to_le_bytes());
+    }
+    fn bytes(&mut self, field: u64, b: &[u8]) {
+        self.tag(field, LEN);
+        self.varint(b.len() as u64);
+        self.0.extend_from_slice(b);
+    }
+    /// A nested message: its length is written before it once known.
+    fn message(&mut self, field: u64, body: impl FnOnce(&mut Self)) {
+        self.tag(field, LEN);
+        let at = self.0.len();
+        self.0.push(0);
+        body(self);
+        let len = self.0.len() - at - 1;
+        if len < 0x80 {
+            self.0[at] = len as u8;
+        } else {
+            let mut prefix = Vec::new();
+            Writer(&mut prefix).varint(len as u64);
+            self.0.splice(at..at + 1, prefix);
+        }
+    }
+    /// A `google.protobuf.Timestamp` of `ns` nanoseconds since the Unix epoch.
+    fn timestamp(&mut self, field: u64, ns: u64) {
+        self.message(field, |w| {
+            w.uint(1, ns / 1_000_000_000);
+            w.uint(2, ns % 1_000_000_000);
+        });
+    }
+}
+
+/// Encodes a `foxglove.RawImage` (`bgr8`, the bytes as they are) into `out`.
+pub fn raw_image(frame_id: &str, ns: u64, img: &Image, out: &mut Vec<u8>) {
+    out.clear();
+    out.reserve(img.data.len() + 64 + frame_id.len());
+    let mut w = Writer(out);
+    w.timestamp(1, ns);
+    w.bytes(7, frame_id.as_bytes());
+    w.fixed32(2, img.width);
+    w.fixed32(3, img.height);
+    w.bytes(4, b"bgr8");
+    w.fixed32(5, img.width * 3);
+    w.bytes(6, &img.data);
+}
+
+/// Encodes a `foxglove.CompressedImage` (`format`, e.g. `jpeg`) into `out`.
+pub fn compressed_image(frame_id: &str, ns: u64, format: &str, data: &[u8], out: &mut Vec<u8>) {
+    out.clear();
+    out.reserve(data.len() + 64 + frame_id.len());
+    let mut w = Writer(out);
+    w.timestamp(1, ns);
+    w.bytes(4, frame_id.as_bytes());
+    w.bytes(2, data);
+    w.bytes(3, format.as_bytes());
+}
+
+/// The count of angle steps that `end_angle` spans: readings − 1, at least 1 (so
+/// a scan of 0 or 1 readings still carries its resolution; Foxglove draws no angle
+/// from `end_angle` then).
+fn steps(n: usize) -> f64 {
+    n.saturating_sub(1).max(1) as f64
+}
+
+/// Encodes a `foxglove.LaserScan` into `out`: ranges in m (the mm readings / 1000,
+/// exact in a double), the laser at x = 0.019 m, `start_angle` −π/2 and `end_angle`
+/// the last reading's angle (−π/2 + (n−1)/resolution deg in rad), from which the
+/// resolution comes back exactly (a resolution ≤ 0 is written as `end_angle` =
+/// `start_angle` and reads back as 0).
+pub fn laser_scan(frame_id: &str, ns: u64, l: &Laser, out: &mut Vec<u8>) {
+    out.clear();
+    let mut w = Writer(out);
+    w.timestamp(1, ns);
+    w.bytes(2, frame_id.as_bytes());
+    w.message(3, |w| {
+        w.message(1, |w| w.double(1, 0.019));
+        w.message(2, |w| w.double(4, 1.0));
+    });
+    let end = if l.resolution > 0.0 && l.resolution.is_finite() {
+        START_ANGLE + (steps(l.readings.len()) / l.resolution as f64).to_radians()
+    } else {
+        START_ANGLE
+    };
+    w.double(4, START_ANGLE);
+    w.double(5, end);
+    if !l.readings.is_empty() {
+        w.tag(6, LEN);
+        w.varint(8 * l.readings.len() as u64);
+        for r in &l.readings {
+            w.0.extend_from_slice(&(*r as f64 / 1000.0).to_le_bytes());
+        }
+    }
+}
+
+/// One field of a protobuf message.
+enum Value<'a> {
+    Varint(u64),
+    I64([u8; 8]),
+    Len(&'a [u8]),
+    I32([u8; 4]),
+}
+
+/// The fields of a protobuf message, in order; an error for a malformed one.
+struct Fields<'a> {
+    data: &'a [u8],
+    topic: &'a str,
+}
+
+impl<'a> Fields<'a> {
+    fn new(topic: &'a str, data: &'a [u8]) -> Self {
+        Fields { data, topic }
+    }
+    fn varint(&mut self) -> Result<u64, FormatError> {
+        let mut v = 0u64;
+        for i in 0..10 {
+            let (&b, rest) = self
+                .data
+                .split_first()
+                .ok_or_else(|| bad(self.topic, "the protobuf message ends inside a varint"))?;
+            self.data = rest;
+            v |= ((b & 0x7f) as u64) << (7 * i);
+            if b < 0x80 {
+                return Ok(v);
+            }
+        }
+        Err(bad(self.topic, "a protobuf varint longer than 10 bytes"))
+    }
+    fn take(&mut self, n: usize) -> Result<&'a [u8], FormatError> {
+        if n > self.data.len() {
+            return Err(bad(self.topic, "the protobuf message ends early"));
+        }
+        let (a, b) = self.data.split_at(n);
+        self.data = b;
+        Ok(a)
+    }
+    fn next_field(&mut self) -> Option<Result<(u64, Value<'a>), FormatError>> {
+        if self.data.is_empty() {
+            return None;
+        }
+        Some(self.read_field())
+    }
+    fn read_field(&mut self) -> Result<(u64, Value<'a>), FormatError> {
+        let key = self.varint()?;
+        let value = match key & 7 {
+            VARINT => Value::Varint(self.varint()?),
+            I64 => Value::I64(self.take(8)?.try_into().expect("8 bytes")),
+            LEN => {
+                let n = self.varint()?;
+                Value::Len(self.take(usize::try_from(n).unwrap_or(usize::MAX))?)
+            }
+            I32 => Value::I32(self.take(4)?.try_into().expect("4 bytes")),
+            w => {
+                return Err(bad(
+                    self.topic,
+                    format!("protobuf wire type {w} (groups are not used by Foxglove's messages)"),
+                ));
+            }
+        };
+        Ok((key >> 3, value))
+    }
+}
+
+impl<'a> Iterator for Fields<'a> {
+    type Item = Result<(u64, Value<'a>), FormatError>;
+    fn next(&mut self) -> Option<Self::Item> {
+        let r = self.next_field();
+        if matches!(r, Some(Err(_))) {
+            self.data = &[];
+        }
+        r
+    }
+}
+
+fn wrong(topic: &str, message: &str, field: u64) -> FormatError {
+    bad(
+        topic,
+        format!("{message} field {field} has the wrong protobuf wire type"),
+    )
+}
+
+fn timestamp(topic: &str, data: &[u8]) -> Result<u64, FormatError> {
+    let (mut sec, mut nsec) = (0u64, 0u64);
+    for f in Fields::new(topic, data) {
+        match f? {
+            (1, Value::Varint(v)) => sec = v,
+            (2, Value::Varint(v)) => nsec = v,
+            (n @ (1 | 2), _) => return Err(wrong(topic, "Timestamp", n)),
+            _ => {}
+        }
+    }
+    // A negative int64 (before 1970) is not a time jderobot records.
+    if sec > i64::MAX as u64 || nsec >= 1_000_000_000 {
+        return Err(bad(topic, "a Timestamp out of range"));
+    }
+    Ok(sec.saturating_mul(1_000_000_000).saturating_add(nsec))
+}
+
+fn text<'a>(topic: &str, what: &str, b: &'a [u8]) -> Result<&'a str, FormatError> {
+    std::str::from_utf8(b).map_err(|_| bad(topic, format!("`{what}` is not UTF-8")))
+}
+
+/// Decodes a `foxglove.RawImage` (bgr8) or `foxglove.CompressedImage` (jpeg, png;
+/// back to BGR) message: (time ns, image). `log_time` stands for a missing timestamp.
+pub fn decode_image(
+    topic: &str,
+    compressed: bool,
+    data: &[u8],
+    log_time: u64,
+) -> Result<(u64, Recorded), FormatError> {
+    let mut time = log_time;
+    if compressed {
+        let (mut bytes, mut format): (&[u8], &str) = (&[], "");
+        for f in Fields::new(topic, data) {
+            match f? {
+                (1, Value::Len(b)) => time = timestamp(topic, b)?,
+                (2, Value::Len(b)) => bytes = b,
+                (3, Value::Len(b)) => format = text(topic, "format", b)?,
+                (n @ (1..=4), Value::Varint(_) | Value::I32(_) | Value::I64(_)) => {
+                    return Err(wrong(topic, "CompressedImage", n));
+                }
+                _ => {}
+            }
+        }
+        return Ok((time, super::decode_compressed(topic, format, bytes)?));
+    }
+    let (mut width, mut height, mut encoding, mut pixels): (u32, u32, &str, &[u8]) =
+        (0, 0, "", &[]);
+    for f in Fields::new(topic, data) {
+        match f? {
+            (1, Value::Len(b)) => time = timestamp(topic, b)?,
+            (2, Value::I32(b)) => width = u32::from_le_bytes(b),
+            (3, Value::I32(b)) => height = u32::from_le_bytes(b),
+            (4, Value::Len(b)) => encoding = text(topic, "encoding", b)?,
+            (5, Value::I32(_)) => {}
+            (6, Value::Len(b)) => pixels = b,
+            (n @ 1..=7, _) if n != 7 => return Err(wrong(topic, "RawImage", n)),
+            _ => {}
+        }
+    }
+    if encoding != "bgr8" {
+        return Err(bad(
+            topic,
+            format!("image encoding `{encoding}`; jderobot reads bgr8"),
+        ));
+    }
+    let need = width as usize * height as usize * 3;
+    if pixels.len() != need {
+        return Err(bad(
+            topic,
+            format!(
+                "{width}x{height} bgr8 needs {need} bytes, the data has {}",
+                pixels.len()
+            ),
+        ));
+    }
+    Ok((
+        time,
+        Recorded::Image(Image {
+            width,
+            height,
+            data: pixels.to_vec(),
+        }),
+    ))
+}
+
+/// Decodes a `foxglove.LaserScan`: (time ns, the jderobot laser: readings in mm,
+/// resolution in readings/deg from the angles).
+pub fn decode_laser(
+    topic: &str,
+    data: &[u8],
+    log_time: u64,
+) -> Result<(u64, Recorded), FormatError> {
+    let mut time = log_time;
+    let (mut start, mut end) = (0.0f64, 0.0f64);
+    let mut readings = Vec::new();
+    for f in Fields::new(topic, data) {
+        match f? {
+            (1, Value::Len(b)) => time = timestamp(topic, b)?,
+            (4, Value::I64(b)) => start = f64::from_le_bytes(b),
+            (5, Value::I64(b)) => end = f64::from_le_bytes(b),
+            (6, Value::Len(b)) => {
+                if b.len() % 8 != 0 {
+                    return Err(bad(
+                        topic,
+                        "packed `ranges` is not a whole number of doubles",
+                    ));
+                }
+                readings.reserve(b.len() / 8);
+                for c in b.chunks_exact(8) {
+                    readings.push(mm(f64::from_le_bytes(c.try_into().expect("8 bytes"))));
+                }
+            }
+            // Unpacked is valid protobuf too.
+            (6, Value::I64(b)) => readings.push(mm(f64::from_le_bytes(b))),
+            (n @ (1 | 4 | 5), _) => return Err(wrong(topic, "LaserScan", n)),
+            _ => {}
+        }
+    }
+    let span = (end - start).to_degrees();
+    let resolution = if span > 0.0 && span.is_finite() {
+        (steps(readings.len()) / span) as f32
+    } else {
+        0.0
+    };
+    Ok((
+        time,
+        Recorded::Laser(Laser {
+            readings,
+            resolution,
+        }),
+    ))
+}
+
+/// A range in m as jderobot's whole mm (out-of-range values saturate, NaN is 0).
+fn mm(m: f64) -> i32 {
+    (m * 1000.0).round() as i32
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn varints_and_long_nested_messages() {
+        let mut out = Vec::new();
+        let mut w = Writer(&mut out);
+        w.message(3, |w| w.bytes(1, &[7u8; 300]));
+        // tag 3/LEN, length 303 as a two-byte varint, then tag 1/LEN, 300 as varint.
+        assert_eq!(&out[..3], &[0x1a, 0xaf, 0x02]);
+        assert_eq!(&out[3..6], &[0x0a, 0xac, 0x02]);
+        assert_eq!(out.len(), 3 + 3 + 300);
+        let mut f = Fields::new("t", &out);
+        match f.next() {
+            Some(Ok((3, Value::Len(b)))) => assert_eq!(b.len(), 303),
+            _ => panic!("not a nested message"),
+        }
+        assert!(f.next().is_none());
+    }
+
+    #[test]
+    fn laser_resolution_and_readings_come_back_exactly() {
+        let mut out = Vec::new();
+        for res in [
+            1.0f32,
+            2.0,
+            4.0,
+            0.5,
+            0.25,
+            1.0 / 3.0,
+            0.352_112_7,
+            2.844_444_4,
+            10.0,
+            100.0,
+        ] {
+            for n in [0usize, 1, 2, 3, 90, 181, 361, 683, 1081] {
+                let l = Laser {
+                    readings: (0..n as i32)
+                        .map(|i| i * 37 - 5 + i32::MAX / 2 * (i % 2))
+                        .collect(),
+                    resolution: res,
+                };
+                laser_scan("laser", 5, &l, &mut out);
+                let (t, back) = decode_laser("laser", &out, 0).unwrap();
+                assert_eq!(t, 5);
+                assert_eq!(back, Recorded::Laser(l), "resolution {res}, {n} readings");
+            }
+        }
+        let l = Laser {
+            readings: vec![1, 2],
+            resolution: 0.0,
+        };
+        laser_scan("laser", 5, &l, &mut out);
+        assert_eq!(
+            decode_laser("laser", &out, 0).unwrap().1,
+            Recorded::Laser(l)
+        );
+    }
+
+    #[test]
+    fn garbage_is_a_clear_error() {
+        for data in [
+            &[0x0au8, 0x05, 1][..],
+            &[0xff; 11],
+            &[0x0b],
+            &[0x22, 0x02, 0xff, 0xfe],
+        ] {
+            let e = decode_image("cam", false, data, 0).unwrap_err().to_string();
+            assert!(
+                e.contains("cam") && e.contains("protobuf") || e.contains("UTF-8"),
+                "{e}"
+            );
+        }
+        let e = decode_laser("laser", &[0x32, 0x03, 1, 2, 3], 0)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("doubles"), "{e}");
+    }
+}
