@@ -4,6 +4,7 @@
 //! Liveliness tokens say who is there: the serving side declares `<key>/served`,
 //! a controller writing an actuator declares `<key>/driven/<session id>`.
 
+use parking_lot::Mutex;
 use std::{
     sync::{
         Arc,
@@ -14,7 +15,7 @@ use std::{
 
 use zenoh::{
     Session, Wait,
-    bytes::Encoding,
+    bytes::{Encoding, ZBytes},
     matching::MatchingListener,
     pubsub::{Publisher, Subscriber},
     qos::CongestionControl,
@@ -23,7 +24,7 @@ use zenoh::{
 
 use super::wire::{self, Format, Wire};
 use crate::{
-    interfaces::{AnyInterface, Interface, Motors, Watch},
+    interfaces::{AnyInterface, Interface, Motors, Notify, Watch},
     mcapfmt,
 };
 
@@ -43,12 +44,16 @@ impl Route {
     }
 }
 
-/// Puts every new value of a local interface on its key.
-pub trait Outbound: Send {
-    fn interface(&self) -> &dyn AnyInterface;
+/// Puts every new value of a local interface on its key. Small values go at once
+/// on the publishing thread ([`Notify`]: a Zenoh put of a few bytes does not
+/// block); images are sent by the component's thread, woken by a [`Watch`].
+pub trait Outbound: Notify {
+    fn interface(&self) -> Arc<dyn AnyInterface>;
+    /// Sent on the publishing thread (not by the component's thread).
+    fn inline(&self) -> bool;
     /// Sends the latest value if it is new and somebody listens; errors are
     /// logged once per key until a put succeeds again.
-    fn send_if_new(&mut self);
+    fn send_if_new(&self);
 }
 
 struct Out<T: Wire> {
@@ -59,42 +64,51 @@ struct Out<T: Wire> {
     route: Route,
     /// A subscriber matches the key (kept by Zenoh's matching listener).
     matching: Arc<AtomicBool>,
-    last: u64,
     gid: [u8; 16],
-    failing: bool,
+    /// The clock last sent, and whether the last put failed.
+    state: Mutex<(u64, bool)>,
+}
+
+impl<T: Wire> Notify for Out<T> {
+    fn notify(&self) {
+        self.send_if_new();
+    }
 }
 
 impl<T: Wire> Outbound for Out<T> {
-    fn interface(&self) -> &dyn AnyInterface {
-        &*self.iface
+    fn interface(&self) -> Arc<dyn AnyInterface> {
+        self.iface.clone()
     }
 
-    fn send_if_new(&mut self) {
-        let s = self.iface.snapshot();
-        if s.clock == self.last || s.clock == 0 || !self.matching.load(Ordering::Acquire) {
+    fn inline(&self) -> bool {
+        T::KIND != "image"
+    }
+
+    fn send_if_new(&self) {
+        if !self.matching.load(Ordering::Acquire) {
             return;
         }
-        self.last = s.clock;
-        let mut payload = Vec::new();
+        let mut state = self.state.lock();
+        let s = self.iface.snapshot();
+        if s.clock == state.0 || s.clock == 0 {
+            return;
+        }
+        state.0 = s.clock;
         let ros2 = (self.route.format == Format::Ros2).then(|| T::ros2(&s)).flatten();
-        let (encoding, attachment) = if let Some(snap) = ros2 {
-            mcapfmt::ros2::encode(self.iface.name(), &snap, &mut payload);
+        let (payload, encoding, attachment): (ZBytes, Encoding, Vec<u8>) = if let Some(snap) = ros2 {
+            let mut cdr = Vec::new();
+            mcapfmt::ros2::encode(self.iface.name(), &snap, &mut cdr);
             let a = wire::rmw_attachment(s.clock, s.time, &self.gid);
-            (Encoding::ZENOH_BYTES, a.to_vec())
+            (cdr.into(), Encoding::ZENOH_BYTES, a.to_vec())
         } else {
             let a = wire::attachment(s.clock, s.time).to_vec();
             match self.route.jpeg.and_then(|q| s.value.to_jpeg(q)) {
-                Some(jpeg) => {
-                    payload = jpeg;
-                    (Encoding::IMAGE_JPEG, a)
-                }
-                None => {
-                    s.value.put(&mut payload);
-                    (
-                        Encoding::ZENOH_BYTES.with_schema(wire::encoding(T::KIND)),
-                        a,
-                    )
-                }
+                Some(jpeg) => (jpeg.into(), Encoding::IMAGE_JPEG, a),
+                None => (
+                    T::payload(&s),
+                    Encoding::ZENOH_BYTES.with_schema(wire::encoding(T::KIND)),
+                    a,
+                ),
             }
         };
         let put = self
@@ -104,9 +118,9 @@ impl<T: Wire> Outbound for Out<T> {
             .attachment(attachment)
             .wait();
         match put {
-            Ok(()) => self.failing = false,
-            Err(e) if !self.failing => {
-                self.failing = true;
+            Ok(()) => state.1 = false,
+            Err(e) if !state.1 => {
+                state.1 = true;
                 tracing::warn!("zenoh: cannot put `{}` on {}: {e}", self.iface.name(), self.route.key);
             }
             Err(_) => {}
@@ -122,7 +136,7 @@ pub fn outbound<T: Wire>(
     iface: Arc<dyn AnyInterface>,
     route: Route,
     interfaces: &crate::interfaces::Interfaces,
-) -> anyhow::Result<Box<dyn Outbound>> {
+) -> anyhow::Result<Arc<dyn Outbound>> {
     let typed: Arc<Interface<T>> = interfaces.get(iface.name())?;
     let publisher = session
         .declare_publisher(route.key.clone())
@@ -152,52 +166,55 @@ pub fn outbound<T: Wire>(
     let mut gid = [0u8; 16];
     let zid = session.zid().to_le_bytes();
     gid[..zid.len().min(16)].copy_from_slice(&zid[..zid.len().min(16)]);
-    Ok(Box::new(Out {
+    Ok(Arc::new(Out {
         iface: typed,
         _listener: listener,
         publisher,
         route,
         matching,
-        last: 0,
         gid,
-        failing: false,
+        state: Mutex::new((0, false)),
     }))
 }
 
+/// What a received sample does to the local value (fills the recycled buffer).
+type Fill<T> = Box<dyn FnOnce(&mut T)>;
+
 /// Decodes a sample for an interface of type `T` on `route`: (clock, wall time,
-/// value); the clock is 0 when the sample carries none.
-fn decode<T: Wire>(route: &Route, sample: &ZSample) -> Result<(u64, SystemTime, T), String> {
-    let payload = sample.payload().to_bytes();
+/// fill); the clock is 0 when the sample carries none.
+fn decode<T: Wire>(route: &Route, sample: &ZSample) -> Result<(u64, SystemTime, Fill<T>), String> {
     if route.ros2(T::KIND) {
         let (clock, time) = sample
             .attachment()
             .and_then(|a| wire::read_rmw_attachment(&a.to_bytes()))
             .unwrap_or((0, SystemTime::now()));
+        let payload = sample.payload().to_bytes();
         let d = mcapfmt::ros2::decode(&route.key, T::KIND, &payload, clock, mcapfmt::nanos(time))
             .map_err(|e| e.to_string())?;
         let v = T::from_ros2(d.value).ok_or("a ROS message of another type")?;
-        return Ok((clock, mcapfmt::from_nanos(d.time_ns), v));
+        return Ok((clock, mcapfmt::from_nanos(d.time_ns), Box::new(move |d: &mut T| *d = v)));
     }
     let (clock, time) = sample
         .attachment()
         .and_then(|a| wire::read_attachment(&a.to_bytes()))
         .unwrap_or((0, SystemTime::now()));
-    let v = if *sample.encoding() == Encoding::IMAGE_JPEG {
-        T::from_jpeg(&payload)?
+    let fill: Fill<T> = if *sample.encoding() == Encoding::IMAGE_JPEG {
+        let v = T::from_jpeg(&sample.payload().to_bytes())?;
+        Box::new(move |d: &mut T| *d = v)
     } else {
-        T::take(&payload)?
+        T::fill_from(sample.payload())?
     };
-    Ok((clock, time, v))
+    Ok((clock, time, fill))
 }
 
 /// Publishes a received value into the local interface, with the sender's clock
 /// when it is ahead of the local one (so `ps` shows the robot's clocks and a
 /// gap is a lost sample), else with the next local clock (the sender restarted).
-fn publish_in<T: Wire>(iface: &Interface<T>, clock: u64, time: SystemTime, v: T) -> Result<(), String> {
+fn publish_in<T: Wire>(iface: &Interface<T>, clock: u64, time: SystemTime, fill: Fill<T>) -> Result<(), String> {
     let r = if clock > iface.clock() {
-        iface.publish_recorded(clock, time, v)
+        iface.write_recorded(clock, time, fill)
     } else {
-        iface.publish(v)
+        iface.write(fill)
     };
     r.map(|_| ()).map_err(|e| e.to_string())
 }
@@ -220,7 +237,7 @@ pub fn inbound<T: Wire>(
                 return;
             }
             let result = decode::<T>(&route, &sample)
-                .and_then(|(clock, time, v)| publish_in(&iface, clock, time, v));
+                .and_then(|(clock, time, fill)| publish_in(&iface, clock, time, fill));
             match result {
                 Ok(()) => warned.store(false, Ordering::Relaxed),
                 Err(e) if !warned.swap(true, Ordering::Relaxed) => tracing::warn!(
@@ -356,27 +373,35 @@ pub fn discover(session: &Session, prefix: &str, wait: Duration) -> Vec<String> 
     }
 }
 
-/// The thread that puts new values: it sleeps on a [`Watch`] of every outbound
-/// interface until one publishes (or `stop` is set), and calls `tick` at least
-/// every 100 ms (on-demand subscriptions).
+/// The component's thread: it sends the images (sleeping on a [`Watch`] of them
+/// until one publishes, or `stop` is set) and calls `tick` at least every 100 ms
+/// (on-demand subscriptions). Inline outbounds are told by their interfaces.
 pub fn run_outbound(
-    mut outs: Vec<Box<dyn Outbound>>,
+    outs: Vec<Arc<dyn Outbound>>,
     watch: &Arc<Watch>,
     stop: &AtomicBool,
     mut tick: impl FnMut(),
 ) {
-    for o in &outs {
-        o.interface().watch(watch);
+    let (inline, threaded): (Vec<_>, Vec<_>) = outs.into_iter().partition(|o| o.inline());
+    for o in &inline {
+        o.interface().watch(o.clone());
+        o.send_if_new();
+    }
+    for o in &threaded {
+        o.interface().watch(watch.clone());
     }
     while !stop.load(Ordering::Acquire) {
-        for o in outs.iter_mut() {
+        for o in &threaded {
             o.send_if_new();
         }
         tick();
         watch.wait(Duration::from_millis(100));
     }
-    for o in &outs {
-        o.interface().unwatch(watch);
+    for o in &threaded {
+        o.interface().unwatch(&**watch);
+    }
+    for o in &inline {
+        o.interface().unwatch(&**o);
     }
 }
 

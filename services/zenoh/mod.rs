@@ -289,7 +289,7 @@ impl OnDemand {
 /// Everything create() sets up, before the thread starts.
 #[derive(Default)]
 struct Plan {
-    outs: Vec<Box<dyn Outbound>>,
+    outs: Vec<Arc<dyn Outbound>>,
     on_demand: Vec<OnDemand>,
     keep: Keep,
 }

@@ -8,6 +8,8 @@ use std::{
     time::{Duration, SystemTime, UNIX_EPOCH},
 };
 
+use zenoh::bytes::ZBytes;
+
 use crate::{
     interfaces::{
         Bumpers, Encoders, Image, InterfaceValue, Laser, Motors, PtEncoders, PtMotors, Sample,
@@ -112,6 +114,17 @@ pub trait Wire: InterfaceValue + Sized {
     fn put(&self, out: &mut Vec<u8>);
     /// Reads the `jderobot` layout (the whole payload).
     fn take(b: &[u8]) -> Result<Self, WireError>;
+    /// The `jderobot` payload of a sample.
+    fn payload(s: &Arc<Sample<Self>>) -> ZBytes {
+        let mut b = Vec::new();
+        s.value.put(&mut b);
+        b.into()
+    }
+    /// Reads a payload as what it does to the interface's recycled value.
+    fn fill_from(z: &ZBytes) -> Result<Box<dyn FnOnce(&mut Self)>, WireError> {
+        let v = Self::take(&z.to_bytes())?;
+        Ok(Box::new(move |d: &mut Self| *d = v))
+    }
     /// The sample as a message of the `ros2` format, for the kinds that have one.
     fn ros2(_s: &Arc<Sample<Self>>) -> Option<Snapshot> {
         None
@@ -215,7 +228,74 @@ floats!(PtMotors: longitude, latitude, longitude_speed, latitude_speed, max_long
 floats!(ZoomEncoders: zoom_position);
 floats!(ZoomMotors: zoom, zoom_speed, max_zoom, min_zoom, max_zoom_speed);
 
+/// The width and height at the start of an image payload; the size they give
+/// must fit in memory.
+fn image_size(b: &[u8]) -> Result<(u32, u32), WireError> {
+    let mut r = Bytes(b);
+    let width = r.u32("width")?;
+    let height = r.u32("height")?;
+    (width as usize)
+        .checked_mul(height as usize)
+        .and_then(|p| p.checked_mul(3))
+        .filter(|n| *n <= 1 << 30)
+        .ok_or_else(|| format!("a {width}x{height} image is too large"))?;
+    Ok((width, height))
+}
+
+/// An image's pixels shared with its sample, so a frame goes to Zenoh uncopied.
+struct Pixels(Arc<Sample<Image>>);
+
+impl AsRef<[u8]> for Pixels {
+    fn as_ref(&self) -> &[u8] {
+        &self.0.data
+    }
+}
+
 impl Wire for Image {
+    /// The width and height, then the pixels themselves (not copied).
+    fn payload(s: &Arc<Sample<Self>>) -> ZBytes {
+        let mut head = Vec::with_capacity(8);
+        head.extend_from_slice(&s.width.to_le_bytes());
+        head.extend_from_slice(&s.height.to_le_bytes());
+        let mut w = ZBytes::writer();
+        w.append(head.into());
+        w.append(bytes::Bytes::from_owner(Pixels(s.clone())).into());
+        w.finish()
+    }
+    /// One copy, from Zenoh's buffers into the interface's recycled frame.
+    fn fill_from(z: &ZBytes) -> Result<Box<dyn FnOnce(&mut Self)>, WireError> {
+        let mut head = [0u8; 8];
+        let mut got = 0;
+        for s in z.slices() {
+            let n = (8 - got).min(s.len());
+            head[got..got + n].copy_from_slice(&s[..n]);
+            got += n;
+            if got == 8 {
+                break;
+            }
+        }
+        let (width, height) = image_size(&head[..got])?;
+        let n = width as usize * height as usize * 3;
+        if z.len() != 8 + n {
+            return Err(format!(
+                "a {width}x{height} BGR image needs {n} bytes, {} follow",
+                z.len().saturating_sub(8)
+            ));
+        }
+        let z = z.clone();
+        Ok(Box::new(move |img: &mut Image| {
+            img.width = width;
+            img.height = height;
+            img.data.clear();
+            img.data.reserve(n);
+            let mut skip = 8;
+            for s in z.slices() {
+                let k = skip.min(s.len());
+                img.data.extend_from_slice(&s[k..]);
+                skip -= k;
+            }
+        }))
+    }
     fn put(&self, out: &mut Vec<u8>) {
         out.reserve(8 + self.data.len());
         out.extend_from_slice(&self.width.to_le_bytes());
@@ -223,23 +303,20 @@ impl Wire for Image {
         out.extend_from_slice(&self.data);
     }
     fn take(b: &[u8]) -> Result<Self, WireError> {
-        let mut r = Bytes(b);
-        let width = r.u32("width")?;
-        let height = r.u32("height")?;
-        let n = (width as usize)
-            .checked_mul(height as usize)
-            .and_then(|p| p.checked_mul(3))
-            .ok_or("an image size that overflows")?;
+        let (width, height) = image_size(b)?;
+        let mut r = Bytes(&b[8..]);
+        let n = width as usize * height as usize * 3;
         if r.0.len() != n {
             return Err(format!(
                 "a {width}x{height} BGR image needs {n} bytes, {} follow",
                 r.0.len()
             ));
         }
+        let data = r.take(n, "pixels")?.to_vec();
         Ok(Image {
             width,
             height,
-            data: r.0.to_vec(),
+            data,
         })
     }
     fn ros2(s: &Arc<Sample<Self>>) -> Option<Snapshot> {

@@ -92,8 +92,17 @@ pub struct Interface<T> {
     /// Why the value is stale (its source is gone), until the next publish.
     /// An atomic pointer like the sample, so a publish never waits for a reader.
     stale: ArcSwapOption<String>,
-    /// Threads to wake on every new value (see [`Watch`]); none on most interfaces.
-    watches: ArcSwapOption<Vec<Arc<Watch>>>,
+    /// Told of every new value (see [`Interface::watch`]); none on most interfaces.
+    watches: ArcSwapOption<Vec<Arc<dyn Notify>>>,
+}
+
+/// Something told of every new value of an interface it watches
+/// ([`Interface::watch`]): a [`Watch`] waking a thread, or a forwarder that sends
+/// small values on at once.
+pub trait Notify: Send + Sync {
+    /// Called on the publishing thread, after the new sample is visible: keep it
+    /// short and never block (the publisher may be a schema or a driver).
+    fn notify(&self);
 }
 
 /// Wakes one thread when any interface it watches gets a new value, so a thread
@@ -135,6 +144,12 @@ impl Watch {
         if !self.woken.swap(true, Ordering::AcqRel) {
             self.thread.unpark();
         }
+    }
+}
+
+impl Notify for Watch {
+    fn notify(&self) {
+        self.wake();
     }
 }
 
@@ -202,18 +217,7 @@ impl<T: InterfaceValue> Interface<T> {
     /// the whole value (a frame, a scan); for a partial update, copy the latest value
     /// (`read().value.clone()`), change it and [`publish`](Self::publish) it.
     pub fn write(&self, fill: impl FnOnce(&mut T)) -> Result<u64, InterfaceError> {
-        let mut w = self.writer.lock();
-        let mut value = w.spare.take().unwrap_or_else(|| self.read().value.clone());
-        fill(&mut value);
-        if let Err(e) = value.validate(&self.name) {
-            w.spare = Some(value);
-            return Err(InterfaceError::Rejected(e));
-        }
-        let (clock, old) = self.store(&mut w, value);
-        if let Some(s) = Arc::into_inner(old) {
-            w.spare = Some(s.value);
-        }
-        Ok(clock)
+        self.write_at(None, fill)
     }
 
     /// Publishes a recorded value with its recorded clock and wall time (for a
@@ -229,6 +233,50 @@ impl<T: InterfaceValue> Interface<T> {
             .validate(&self.name)
             .map_err(InterfaceError::Rejected)?;
         let mut w = self.writer.lock();
+        self.check_after(clock)?;
+        Ok(self.store_at(&mut w, clock, time, value).0)
+    }
+
+    /// [`write`](Self::write) with a recorded clock and time (see
+    /// [`publish_recorded`](Self::publish_recorded)): a received frame is copied
+    /// into a recycled buffer.
+    pub fn write_recorded(
+        &self,
+        clock: u64,
+        time: SystemTime,
+        fill: impl FnOnce(&mut T),
+    ) -> Result<u64, InterfaceError> {
+        self.write_at(Some((clock, time)), fill)
+    }
+
+    fn write_at(
+        &self,
+        at: Option<(u64, SystemTime)>,
+        fill: impl FnOnce(&mut T),
+    ) -> Result<u64, InterfaceError> {
+        let mut w = self.writer.lock();
+        if let Some((clock, _)) = at {
+            self.check_after(clock)?;
+        }
+        let mut value = w.spare.take().unwrap_or_else(|| self.read().value.clone());
+        fill(&mut value);
+        if let Err(e) = value.validate(&self.name) {
+            w.spare = Some(value);
+            return Err(InterfaceError::Rejected(e));
+        }
+        let (clock, old) = match at {
+            Some((clock, time)) => self.store_at(&mut w, clock, time, value),
+            None => self.store(&mut w, value),
+        };
+        if let Some(s) = Arc::into_inner(old) {
+            w.spare = Some(s.value);
+        }
+        Ok(clock)
+    }
+
+    /// A recorded clock must come after the current one (the caller holds the
+    /// writer lock).
+    fn check_after(&self, clock: u64) -> Result<(), InterfaceError> {
         let current = self.clock.load(Ordering::Relaxed);
         if clock <= current {
             return Err(InterfaceError::Rejected(format!(
@@ -236,7 +284,7 @@ impl<T: InterfaceValue> Interface<T> {
                 self.name
             )));
         }
-        Ok(self.store_at(&mut w, clock, time, value).0)
+        Ok(())
     }
 
     /// Swaps in a new sample (the caller holds the writer lock); returns its clock
@@ -266,7 +314,7 @@ impl<T: InterfaceValue> Interface<T> {
             self.stale.store(None);
         }
         if let Some(watches) = &*self.watches.load() {
-            watches.iter().for_each(|w| w.wake());
+            watches.iter().for_each(|w| w.notify());
         }
         (clock, old)
     }
@@ -334,22 +382,22 @@ impl<T: InterfaceValue> Interface<T> {
         self.stale.store(None);
     }
 
-    /// Wakes `watch`'s thread on every new value from now on.
-    pub fn watch(&self, watch: &Arc<Watch>) {
+    /// Tells `watcher` of every new value from now on.
+    pub fn watch(&self, watcher: Arc<dyn Notify>) {
         self.watches.rcu(|ws| {
-            let mut v: Vec<Arc<Watch>> = ws.as_deref().cloned().unwrap_or_default();
-            v.push(watch.clone());
+            let mut v: Vec<Arc<dyn Notify>> = ws.as_deref().cloned().unwrap_or_default();
+            v.push(watcher.clone());
             Some(Arc::new(v))
         });
     }
 
-    /// Stops waking `watch`'s thread.
-    pub fn unwatch(&self, watch: &Arc<Watch>) {
+    /// Stops telling `watcher`.
+    pub fn unwatch(&self, watcher: &dyn Notify) {
         self.watches.rcu(|ws| {
-            let v: Vec<Arc<Watch>> = ws
+            let v: Vec<Arc<dyn Notify>> = ws
                 .iter()
                 .flat_map(|v| v.iter())
-                .filter(|w| !Arc::ptr_eq(w, watch))
+                .filter(|w| !std::ptr::addr_eq(Arc::as_ptr(w), watcher as *const dyn Notify))
                 .cloned()
                 .collect();
             (!v.is_empty()).then(|| Arc::new(v))
@@ -408,9 +456,9 @@ pub trait AnyInterface: Any + Send + Sync {
     /// See [`Interface::clear_stale`].
     fn clear_stale(&self);
     /// See [`Interface::watch`].
-    fn watch(&self, watch: &Arc<Watch>);
+    fn watch(&self, watcher: Arc<dyn Notify>);
     /// See [`Interface::unwatch`].
-    fn unwatch(&self, watch: &Arc<Watch>);
+    fn unwatch(&self, watcher: &dyn Notify);
 }
 
 impl<T: InterfaceValue> AnyInterface for Interface<T> {
@@ -466,10 +514,10 @@ impl<T: InterfaceValue> AnyInterface for Interface<T> {
     fn clear_stale(&self) {
         Interface::clear_stale(self)
     }
-    fn watch(&self, watch: &Arc<Watch>) {
-        Interface::watch(self, watch)
+    fn watch(&self, watcher: Arc<dyn Notify>) {
+        Interface::watch(self, watcher)
     }
-    fn unwatch(&self, watch: &Arc<Watch>) {
-        Interface::unwatch(self, watch)
+    fn unwatch(&self, watcher: &dyn Notify) {
+        Interface::unwatch(self, watcher)
     }
 }

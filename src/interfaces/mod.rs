@@ -33,7 +33,7 @@ mod names;
 mod table;
 mod values;
 
-pub use cell::{AnyInterface, Interface, Sample, Watch};
+pub use cell::{AnyInterface, Interface, Notify, Sample, Watch};
 pub use names::{STANDARD_NAMES, canonical, family, interface_name};
 pub use table::{InUse, InterfaceError, Interfaces};
 pub use values::{
@@ -50,7 +50,7 @@ mod tests {
     fn a_watch_wakes_its_thread_on_publish_until_unwatched() {
         let i: Arc<Interface<Motors>> = Arc::new(Interface::new("motors", "test"));
         let w = Watch::for_current_thread();
-        i.watch(&w);
+        i.watch(w.clone());
         assert!(!w.wait(Duration::from_millis(10)), "nothing published yet");
         let writer = {
             let i = i.clone();
@@ -61,7 +61,7 @@ mod tests {
         };
         assert!(w.wait(Duration::from_secs(10)), "woken by the publish");
         writer.join().unwrap();
-        i.unwatch(&w);
+        i.unwatch(&*w);
         i.publish(Motors { v: 2.0, w: 0.0 }).unwrap();
         assert!(!w.wait(Duration::from_millis(10)), "unwatched");
     }

@@ -1,0 +1,397 @@
+//! jderobot over Zenoh against Zenoh alone, between two processes on loopback, in
+//! the same run (harness = false; medians of alternating rounds):
+//!
+//! 1. Throughput of 640x480 BGR frames (921,608-byte payloads). Reference: Zenoh's
+//!    throughput example (`z_pub_thr`: one publisher putting the same payload as
+//!    fast as it can, a subscriber counting). Ours: a `zenoh` service publishing
+//!    an image interface that a producer refreshes every 0.1 ms, and a
+//!    `zenoh` driver providing it in the other process (frames published into the
+//!    local interface per second).
+//! 2. `motors` round trips. Reference: Zenoh's `z_ping`/`z_pong` with the same
+//!    payload (8 bytes) and attachment (16 bytes). Ours: a `zenoh` driver's
+//!    `motors` → the other process's `zenoh` service → its `motors` interface → an
+//!    echo thread → its `encoders` interface → back into this process's
+//!    `encoders`: interface to interface, both ways.
+//! 3. Build time is measured by a clean build with and without the feature (see
+//!    docs/zenoh.md), not here.
+//!
+//! Run: `cargo bench --features full --bench zenoh`.
+
+use std::{
+    io::Read,
+    process::{Child, Command, Stdio},
+    sync::{
+        Arc,
+        atomic::{AtomicU64, Ordering},
+    },
+    time::{Duration, Instant},
+};
+
+use jderobot::{
+    Conf, Runtime,
+    conf::Kind,
+    interfaces::{Encoders, Image, Interface, Motors, Watch},
+    loader,
+};
+use zenoh::{Wait, qos::CongestionControl};
+
+const ROUNDS: usize = 3;
+const PINGS: usize = 2000;
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(|a, b| a.partial_cmp(b).unwrap());
+    v[v.len() / 2]
+}
+
+fn percentile(v: &mut [f64], p: f64) -> f64 {
+    v.sort_by(|a, b| a.partial_cmp(b).unwrap());
+    v[((v.len() - 1) as f64 * p).round() as usize]
+}
+
+fn session(listen: Option<u16>, connect: Option<u16>) -> zenoh::Session {
+    let mut c = zenoh::Config::default();
+    let ep = |p: Option<u16>| match p {
+        Some(p) => format!(r#"["tcp/127.0.0.1:{p}"]"#),
+        None => "[]".into(),
+    };
+    c.insert_json5("listen/endpoints", &ep(listen)).unwrap();
+    c.insert_json5("connect/endpoints", &ep(connect)).unwrap();
+    c.insert_json5("scouting/multicast/enabled", "false").unwrap();
+    zenoh::open(c).wait().unwrap()
+}
+
+/// A runtime with `provided` interfaces and the `zenoh` component loaded from `lines`.
+fn runtime(kind: Kind, lines: &str, provide: impl FnOnce(&Runtime)) -> Arc<Runtime> {
+    let dir = std::env::temp_dir().join(format!("jderobot-zbench-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("z.conf");
+    let section = if kind == Kind::Driver { "driver" } else { "service" };
+    std::fs::write(&path, format!("{section} zenoh\n{lines}scouting off\nend_{section}\n")).unwrap();
+    let conf = Conf::load(&path).unwrap();
+    let rt = Runtime::new(&path);
+    provide(&rt);
+    loader::load(&rt, &conf, Some(kind), "zenoh", None).unwrap();
+    rt
+}
+
+fn payload_image() -> Image {
+    let mut img = Image::new(640, 480);
+    for (i, b) in img.data.iter_mut().enumerate() {
+        *b = (i % 251) as u8;
+    }
+    img
+}
+
+// ---- the other process ----
+
+fn child_main(role: &str, port: u16) {
+    match role {
+        "pub-ref" => {
+            let s = session(None, Some(port));
+            let publisher = s
+                .declare_publisher("bench/img")
+                .congestion_control(CongestionControl::Block)
+                .wait()
+                .unwrap();
+            let mut payload = Vec::new();
+            let img = payload_image();
+            payload.extend_from_slice(&640u32.to_le_bytes());
+            payload.extend_from_slice(&480u32.to_le_bytes());
+            payload.extend_from_slice(&img.data);
+            let z = zenoh::bytes::ZBytes::from(payload);
+            loop {
+                publisher.put(z.clone()).wait().unwrap();
+            }
+        }
+        "pub-ours" => {
+            let mut cam: Option<Arc<Interface<Image>>> = None;
+            let _rt = runtime(
+                Kind::Service,
+                &format!("publishes varcolorA bench/img\nconnect tcp/127.0.0.1:{port}\n"),
+                |rt| {
+                    cam = Some(rt.interfaces.provide_value("varcolorA", "bench", payload_image()).unwrap());
+                },
+            );
+            let cam = cam.unwrap();
+            let mut k = 0u8;
+            loop {
+                k = k.wrapping_add(1);
+                cam.write(|img| img.data[0] = k).unwrap();
+                std::thread::sleep(Duration::from_micros(100));
+            }
+        }
+        "pong-ref" => {
+            let s = session(None, Some(port));
+            let publisher = s.declare_publisher("bench/pong").express(true).wait().unwrap();
+            let _sub = s
+                .declare_subscriber("bench/ping")
+                .callback(move |sample| {
+                    let att = sample.attachment().cloned().unwrap();
+                    publisher.put(sample.payload().clone()).attachment(att).wait().unwrap();
+                })
+                .wait()
+                .unwrap();
+            std::thread::park();
+        }
+        "pong-ours" => {
+            let mut ifs = None;
+            let _rt = runtime(
+                Kind::Service,
+                &format!(
+                    "publishes motors bench/motors\npublishes encoders bench/encoders\n\
+                     connect tcp/127.0.0.1:{port}\n"
+                ),
+                |rt| {
+                    let m: Arc<Interface<Motors>> = rt.interfaces.provide("motors", "bench").unwrap();
+                    let e: Arc<Interface<Encoders>> = rt.interfaces.provide("encoders", "bench").unwrap();
+                    ifs = Some((m, e));
+                },
+            );
+            let (motors, encoders) = ifs.unwrap();
+            let watch = Watch::for_current_thread();
+            motors.watch(watch.clone());
+            let mut last = 0;
+            loop {
+                watch.wait(Duration::from_secs(1));
+                let m = motors.snapshot();
+                if m.clock != last {
+                    last = m.clock;
+                    let e = Encoders { x: m.v, y: 0.0, theta: 1.0, cos: 1f32.cos(), sin: 1f32.sin() };
+                    encoders.publish(e).unwrap();
+                }
+            }
+        }
+        other => panic!("unknown role {other}"),
+    }
+}
+
+fn spawn(role: &str, port: u16) -> Child {
+    Command::new(std::env::current_exe().unwrap())
+        .env("ZBENCH_ROLE", role)
+        .env("ZBENCH_PORT", port.to_string())
+        .env("RUST_LOG", "error")
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap()
+}
+
+fn stop(mut c: Child) {
+    let _ = c.kill();
+    let _ = c.wait();
+    let mut err = String::new();
+    if let Some(mut e) = c.stderr.take() {
+        let _ = e.read_to_string(&mut err);
+    }
+    if err.contains("panicked") {
+        panic!("the other process failed:\n{err}");
+    }
+}
+
+fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
+}
+
+// ---- this process ----
+
+/// Frames per second received over a 2 s window after 1.5 s of warm-up.
+fn throughput_ref() -> f64 {
+    let port = free_port();
+    let s = session(Some(port), None);
+    let count = Arc::new(AtomicU64::new(0));
+    let _sub = {
+        let count = count.clone();
+        s.declare_subscriber("bench/img")
+            .callback(move |sample| {
+                assert_eq!(sample.payload().len(), 921_608);
+                count.fetch_add(1, Ordering::Relaxed);
+            })
+            .wait()
+            .unwrap()
+    };
+    let child = spawn("pub-ref", port);
+    std::thread::sleep(Duration::from_millis(1500));
+    let c0 = count.load(Ordering::Relaxed);
+    let t0 = Instant::now();
+    std::thread::sleep(Duration::from_secs(2));
+    let n = count.load(Ordering::Relaxed) - c0;
+    let fps = n as f64 / t0.elapsed().as_secs_f64();
+    stop(child);
+    s.close().wait().unwrap();
+    fps
+}
+
+fn throughput_ours() -> f64 {
+    let port = free_port();
+    let rt = runtime(
+        Kind::Driver,
+        &format!("provides varcolorA bench/img\nlisten tcp/127.0.0.1:{port}\n"),
+        |_| {},
+    );
+    let cam: Arc<Interface<Image>> = rt.interfaces.get("varcolorA").unwrap();
+    cam.resume();
+    let child = spawn("pub-ours", port);
+    // Count the frames published into the local interface.
+    let count = Arc::new(AtomicU64::new(0));
+    let stop_flag = Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let counter = {
+        let (cam, count, stop_flag) = (cam.clone(), count.clone(), stop_flag.clone());
+        std::thread::spawn(move || {
+            let w = Watch::for_current_thread();
+            cam.watch(w.clone());
+            let mut last = cam.read().stamp;
+            while !stop_flag.load(Ordering::Relaxed) {
+                w.wait(Duration::from_millis(100));
+                let s = cam.read();
+                if s.stamp != last {
+                    last = s.stamp;
+                    assert_eq!(s.data.len(), 921_600);
+                    count.fetch_add(1, Ordering::Relaxed);
+                }
+            }
+        })
+    };
+    std::thread::sleep(Duration::from_millis(1500));
+    let c0 = count.load(Ordering::Relaxed);
+    let t0 = Instant::now();
+    std::thread::sleep(Duration::from_secs(2));
+    let n = count.load(Ordering::Relaxed) - c0;
+    let fps = n as f64 / t0.elapsed().as_secs_f64();
+    stop(child);
+    stop_flag.store(true, Ordering::Relaxed);
+    counter.join().unwrap();
+    cam.suspend();
+    rt.shutdown();
+    fps
+}
+
+/// Round-trip times in µs.
+fn pings_ref() -> Vec<f64> {
+    let port = free_port();
+    let s = session(Some(port), None);
+    let watch = Watch::for_current_thread();
+    let got = Arc::new(AtomicU64::new(0));
+    let _sub = {
+        let (got, watch) = (got.clone(), watch.clone());
+        s.declare_subscriber("bench/pong")
+            .callback(move |sample| {
+                let b = sample.payload().to_bytes();
+                got.store(f32::from_le_bytes(b[..4].try_into().unwrap()) as u64, Ordering::Release);
+                watch.wake();
+            })
+            .wait()
+            .unwrap()
+    };
+    let publisher = s.declare_publisher("bench/ping").express(true).wait().unwrap();
+    let child = spawn("pong-ref", port);
+    let mut v = Vec::with_capacity(PINGS);
+    let put = |i: usize| {
+        let mut p = Vec::from((i as f32).to_le_bytes());
+        p.extend_from_slice(&0f32.to_le_bytes());
+        publisher.put(p).attachment(vec![0u8; 16]).wait().unwrap();
+    };
+    // Until the other side answers.
+    let mut i = 1_000_000;
+    while got.load(Ordering::Acquire) != i as u64 {
+        i += 1;
+        put(i);
+        watch.wait(Duration::from_millis(50));
+    }
+    for i in 1..=PINGS {
+        let t = Instant::now();
+        put(i);
+        while got.load(Ordering::Acquire) != i as u64 {
+            watch.wait(Duration::from_secs(1));
+        }
+        v.push(t.elapsed().as_secs_f64() * 1e6);
+    }
+    stop(child);
+    s.close().wait().unwrap();
+    v
+}
+
+fn pings_ours() -> Vec<f64> {
+    let port = free_port();
+    let rt = runtime(
+        Kind::Driver,
+        &format!(
+            "provides motors bench/motors\nprovides encoders bench/encoders\n\
+             listen tcp/127.0.0.1:{port}\n"
+        ),
+        |_| {},
+    );
+    let motors: Arc<Interface<Motors>> = rt.interfaces.get("motors").unwrap();
+    let encoders: Arc<Interface<Encoders>> = rt.interfaces.get("encoders").unwrap();
+    encoders.resume();
+    let watch = Watch::for_current_thread();
+    encoders.watch(watch.clone());
+    let child = spawn("pong-ours", port);
+    let mut v = Vec::with_capacity(PINGS);
+    let mut i = 1_000_000usize;
+    let answered = |i: usize| encoders.read().x == i as f32;
+    while !answered(i) {
+        i += 1;
+        motors.publish(Motors { v: i as f32, w: 0.0 }).unwrap();
+        watch.wait(Duration::from_millis(50));
+    }
+    for i in 1..=PINGS {
+        let t = Instant::now();
+        motors.publish(Motors { v: i as f32, w: 0.0 }).unwrap();
+        while !answered(i) {
+            watch.wait(Duration::from_secs(1));
+        }
+        v.push(t.elapsed().as_secs_f64() * 1e6);
+    }
+    stop(child);
+    encoders.unwatch(&*watch);
+    encoders.suspend();
+    rt.shutdown();
+    v
+}
+
+fn main() {
+    if let (Ok(role), Ok(port)) = (std::env::var("ZBENCH_ROLE"), std::env::var("ZBENCH_PORT")) {
+        child_main(&role, port.parse().unwrap());
+        return;
+    }
+    println!("== 640x480 BGR frames between two processes (frames/s received) ==");
+    let (mut r, mut o) = (Vec::new(), Vec::new());
+    for round in 0..ROUNDS {
+        let a = throughput_ref();
+        let b = throughput_ours();
+        println!("round {round}: zenoh alone {a:.0}  jderobot {b:.0}  ({:.0} %)", 100.0 * b / a);
+        r.push(a);
+        o.push(b);
+    }
+    let ratios: Vec<f64> = r.iter().zip(&o).map(|(a, b)| b / a).collect();
+    println!(
+        "median: zenoh alone {:.0} frames/s ({:.0} MB/s), jderobot {:.0} frames/s: {:.0} % (goal >= 90 %)",
+        median(r.clone()),
+        median(r.clone()) * 0.921_608,
+        median(o.clone()),
+        100.0 * median(ratios)
+    );
+
+    println!("== motors round trips between two processes (µs) ==");
+    let (mut p50r, mut p50o) = (Vec::new(), Vec::new());
+    for round in 0..ROUNDS {
+        let mut a = pings_ref();
+        let mut b = pings_ours();
+        let (a50, a90) = (percentile(&mut a, 0.5), percentile(&mut a, 0.9));
+        let (b50, b90) = (percentile(&mut b, 0.5), percentile(&mut b, 0.9));
+        println!(
+            "round {round}: zenoh alone p50 {a50:.0} p90 {a90:.0}  jderobot p50 {b50:.0} p90 {b90:.0}  (p50 {:.2}x)",
+            b50 / a50
+        );
+        p50r.push(a50);
+        p50o.push(b50);
+    }
+    let ratios: Vec<f64> = p50r.iter().zip(&p50o).map(|(a, b)| b / a).collect();
+    println!(
+        "median p50: zenoh alone {:.0} µs, jderobot {:.0} µs: {:.2}x (goal <= 1.2x)",
+        median(p50r),
+        median(p50o),
+        median(ratios)
+    );
+}
