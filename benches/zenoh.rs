@@ -35,7 +35,7 @@ use jderobot::{
 };
 use zenoh::{Wait, qos::CongestionControl};
 
-const ROUNDS: usize = 3;
+const ROUNDS: usize = 5;
 const PINGS: usize = 2000;
 
 fn median(mut v: Vec<f64>) -> f64 {

@@ -138,10 +138,19 @@ pub fn outbound<T: Wire>(
     interfaces: &crate::interfaces::Interfaces,
 ) -> anyhow::Result<Arc<dyn Outbound>> {
     let typed: Arc<Interface<T>> = interfaces.get(iface.name())?;
+    // Small values go on the publisher's thread: never wait, drop instead. Frames
+    // go from the component's own thread, which waits for room: the link then
+    // carries whole frames back to back (the latest each time), not fragments of
+    // frames dropped halfway.
+    let image = T::KIND == "image";
     let publisher = session
         .declare_publisher(route.key.clone())
-        .congestion_control(CongestionControl::Drop)
-        .express(T::KIND != "image")
+        .congestion_control(if image {
+            CongestionControl::Block
+        } else {
+            CongestionControl::Drop
+        })
+        .express(!image)
         .wait()
         .map_err(|e| anyhow::anyhow!("zenoh: cannot publish on `{}`: {e}", route.key))?;
     let matching = Arc::new(AtomicBool::new(false));
