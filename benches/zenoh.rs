@@ -56,7 +56,8 @@ fn session(listen: Option<u16>, connect: Option<u16>) -> zenoh::Session {
     };
     c.insert_json5("listen/endpoints", &ep(listen)).unwrap();
     c.insert_json5("connect/endpoints", &ep(connect)).unwrap();
-    c.insert_json5("scouting/multicast/enabled", "false").unwrap();
+    c.insert_json5("scouting/multicast/enabled", "false")
+        .unwrap();
     zenoh::open(c).wait().unwrap()
 }
 
@@ -65,8 +66,16 @@ fn runtime(kind: Kind, lines: &str, provide: impl FnOnce(&Runtime)) -> Arc<Runti
     let dir = std::env::temp_dir().join(format!("jderobot-zbench-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("z.conf");
-    let section = if kind == Kind::Driver { "driver" } else { "service" };
-    std::fs::write(&path, format!("{section} zenoh\n{lines}scouting off\nend_{section}\n")).unwrap();
+    let section = if kind == Kind::Driver {
+        "driver"
+    } else {
+        "service"
+    };
+    std::fs::write(
+        &path,
+        format!("{section} zenoh\n{lines}scouting off\nend_{section}\n"),
+    )
+    .unwrap();
     let conf = Conf::load(&path).unwrap();
     let rt = Runtime::new(&path);
     provide(&rt);
@@ -109,7 +118,11 @@ fn child_main(role: &str, port: u16) {
                 Kind::Service,
                 &format!("publishes varcolorA bench/img\nconnect tcp/127.0.0.1:{port}\n"),
                 |rt| {
-                    cam = Some(rt.interfaces.provide_value("varcolorA", "bench", payload_image()).unwrap());
+                    cam = Some(
+                        rt.interfaces
+                            .provide_value("varcolorA", "bench", payload_image())
+                            .unwrap(),
+                    );
                 },
             );
             let cam = cam.unwrap();
@@ -122,12 +135,20 @@ fn child_main(role: &str, port: u16) {
         }
         "pong-ref" => {
             let s = session(None, Some(port));
-            let publisher = s.declare_publisher("bench/pong").express(true).wait().unwrap();
+            let publisher = s
+                .declare_publisher("bench/pong")
+                .express(true)
+                .wait()
+                .unwrap();
             let _sub = s
                 .declare_subscriber("bench/ping")
                 .callback(move |sample| {
                     let att = sample.attachment().cloned().unwrap();
-                    publisher.put(sample.payload().clone()).attachment(att).wait().unwrap();
+                    publisher
+                        .put(sample.payload().clone())
+                        .attachment(att)
+                        .wait()
+                        .unwrap();
                 })
                 .wait()
                 .unwrap();
@@ -142,8 +163,10 @@ fn child_main(role: &str, port: u16) {
                      connect tcp/127.0.0.1:{port}\n"
                 ),
                 |rt| {
-                    let m: Arc<Interface<Motors>> = rt.interfaces.provide("motors", "bench").unwrap();
-                    let e: Arc<Interface<Encoders>> = rt.interfaces.provide("encoders", "bench").unwrap();
+                    let m: Arc<Interface<Motors>> =
+                        rt.interfaces.provide("motors", "bench").unwrap();
+                    let e: Arc<Interface<Encoders>> =
+                        rt.interfaces.provide("encoders", "bench").unwrap();
                     ifs = Some((m, e));
                 },
             );
@@ -156,7 +179,13 @@ fn child_main(role: &str, port: u16) {
                 let m = motors.snapshot();
                 if m.clock != last {
                     last = m.clock;
-                    let e = Encoders { x: m.v, y: 0.0, theta: 1.0, cos: 1f32.cos(), sin: 1f32.sin() };
+                    let e = Encoders {
+                        x: m.v,
+                        y: 0.0,
+                        theta: 1.0,
+                        cos: 1f32.cos(),
+                        sin: 1f32.sin(),
+                    };
                     encoders.publish(e).unwrap();
                 }
             }
@@ -190,7 +219,11 @@ fn stop(mut c: Child) {
 }
 
 fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
 }
 
 // ---- this process ----
@@ -277,13 +310,20 @@ fn pings_ref() -> Vec<f64> {
         s.declare_subscriber("bench/pong")
             .callback(move |sample| {
                 let b = sample.payload().to_bytes();
-                got.store(f32::from_le_bytes(b[..4].try_into().unwrap()) as u64, Ordering::Release);
+                got.store(
+                    f32::from_le_bytes(b[..4].try_into().unwrap()) as u64,
+                    Ordering::Release,
+                );
                 watch.wake();
             })
             .wait()
             .unwrap()
     };
-    let publisher = s.declare_publisher("bench/ping").express(true).wait().unwrap();
+    let publisher = s
+        .declare_publisher("bench/ping")
+        .express(true)
+        .wait()
+        .unwrap();
     let child = spawn("pong-ref", port);
     let mut v = Vec::with_capacity(PINGS);
     let put = |i: usize| {
@@ -332,12 +372,22 @@ fn pings_ours() -> Vec<f64> {
     let answered = |i: usize| encoders.read().x == i as f32;
     while !answered(i) {
         i += 1;
-        motors.publish(Motors { v: i as f32, w: 0.0 }).unwrap();
+        motors
+            .publish(Motors {
+                v: i as f32,
+                w: 0.0,
+            })
+            .unwrap();
         watch.wait(Duration::from_millis(50));
     }
     for i in 1..=PINGS {
         let t = Instant::now();
-        motors.publish(Motors { v: i as f32, w: 0.0 }).unwrap();
+        motors
+            .publish(Motors {
+                v: i as f32,
+                w: 0.0,
+            })
+            .unwrap();
         while !answered(i) {
             watch.wait(Duration::from_secs(1));
         }
@@ -360,7 +410,10 @@ fn main() {
     for round in 0..ROUNDS {
         let a = throughput_ref();
         let b = throughput_ours();
-        println!("round {round}: zenoh alone {a:.0}  jderobot {b:.0}  ({:.0} %)", 100.0 * b / a);
+        println!(
+            "round {round}: zenoh alone {a:.0}  jderobot {b:.0}  ({:.0} %)",
+            100.0 * b / a
+        );
         r.push(a);
         o.push(b);
     }

@@ -33,7 +33,14 @@ fn robot_conf(dir: &Path, port: u16, extra: &str) -> std::path::PathBuf {
 }
 
 fn echo_v(line: &str) -> f64 {
-    line.split(" v=").nth(1).unwrap().split(' ').next().unwrap().parse().unwrap()
+    line.split(" v=")
+        .nth(1)
+        .unwrap()
+        .split(' ')
+        .next()
+        .unwrap()
+        .parse()
+        .unwrap()
 }
 
 #[test]
@@ -86,8 +93,15 @@ fn introrob_in_one_process_drives_the_simulator_in_another() {
     robot.ask_until("echo motors", "motors zero", |l| {
         l.starts_with("motors clock=") && echo_v(l) == 0.0
     });
-    eprintln!("motors zero {:?} after the controller was killed", t.elapsed());
-    assert!(robot.text().contains("the last writer of `motors` left"), "{}", robot.text());
+    eprintln!(
+        "motors zero {:?} after the controller was killed",
+        t.elapsed()
+    );
+    assert!(
+        robot.text().contains("the last writer of `motors` left"),
+        "{}",
+        robot.text()
+    );
     robot.quit();
 }
 
@@ -97,7 +111,9 @@ fn a_killed_robot_is_stale_within_a_second_and_comes_back_by_itself() {
     let port = free_port();
     let conf = robot_conf(dir.path(), port, "");
     let mut robot = Proc::start(&conf);
-    robot.ask_until("echo laser", "the simulator", |l| l.starts_with("laser clock="));
+    robot.ask_until("echo laser", "the simulator", |l| {
+        l.starts_with("laser clock=")
+    });
     let rt = common::start_conf(&format!(
         "driver zenoh\nrobot pioneer\nprovides laser\nprovides motors\n\
          connect tcp/127.0.0.1:{port}\nscouting off\nend_driver\nload_driver zenoh\n"
@@ -117,9 +133,16 @@ fn a_killed_robot_is_stale_within_a_second_and_comes_back_by_itself() {
         "laser never went stale"
     );
     let took = t.elapsed();
-    eprintln!("stale {took:?} after kill -9 of the robot: {:?}", laser.stale());
+    eprintln!(
+        "stale {took:?} after kill -9 of the robot: {:?}",
+        laser.stale()
+    );
     assert!(took < Duration::from_secs(1), "stale after {took:?}");
-    assert!(laser.stale().unwrap().contains("gone"), "{:?}", laser.stale());
+    assert!(
+        laser.stale().unwrap().contains("gone"),
+        "{:?}",
+        laser.stale()
+    );
     assert_eq!(motors.read().value, Motors::default(), "motors zeroed");
 
     // A new robot process on the same port: samples flow again without help.
@@ -137,12 +160,16 @@ fn garbage_on_a_subscribed_key_is_dropped_with_one_line_and_a_good_command_drive
     let dir = tempfile::tempdir().unwrap();
     let port = free_port();
     let mut robot = Proc::start(&robot_conf(dir.path(), port, ""));
-    robot.ask_until("echo laser", "the simulator", |l| l.starts_with("laser clock="));
+    robot.ask_until("echo laser", "the simulator", |l| {
+        l.starts_with("laser clock=")
+    });
     let mut config = zenoh::Config::default();
     config
         .insert_json5("connect/endpoints", &format!(r#"["tcp/127.0.0.1:{port}"]"#))
         .unwrap();
-    config.insert_json5("scouting/multicast/enabled", "false").unwrap();
+    config
+        .insert_json5("scouting/multicast/enabled", "false")
+        .unwrap();
     config.insert_json5("listen/endpoints", "[]").unwrap();
     let session = zenoh::open(config).wait().unwrap();
     let key = "jderobot/pioneer/motors";
@@ -156,7 +183,12 @@ fn garbage_on_a_subscribed_key_is_dropped_with_one_line_and_a_good_command_drive
             .unwrap()
             .matching()
     });
-    for bad in [&b""[..], b"\x01\x02\x03", &[0xff; 9], &f32::NAN.to_le_bytes().repeat(2)] {
+    for bad in [
+        &b""[..],
+        b"\x01\x02\x03",
+        &[0xff; 9],
+        &f32::NAN.to_le_bytes().repeat(2),
+    ] {
         session.put(key, bad).wait().unwrap();
     }
     // A good command: v = 250 mm/s, w = 0 (two little-endian f32).
@@ -167,9 +199,103 @@ fn garbage_on_a_subscribed_key_is_dropped_with_one_line_and_a_good_command_drive
     });
     let log = robot.text();
     assert_eq!(
-        log.matches("zenoh: dropped a sample on `jderobot/pioneer/motors`").count(),
+        log.matches("zenoh: dropped a sample on `jderobot/pioneer/motors`")
+            .count(),
         1,
         "one line for the garbage:\n{log}"
     );
     robot.quit();
+}
+
+#[test]
+fn a_zenoh_config_file_passes_access_control_through() {
+    let dir = tempfile::tempdir().unwrap();
+    let port = free_port();
+    // Zenoh's own ACL: nobody on loopback may put on the robot's motors.
+    std::fs::write(
+        dir.path().join("acl.json5"),
+        r#"{ access_control: { enabled: true, default_permission: "allow",
+             rules: [{ id: "no-motors", permission: "deny", flows: ["ingress"],
+                       messages: ["put"], key_exprs: ["jderobot/pioneer/motors"] }],
+             subjects: [{ id: "loopback", interfaces: ["lo"] }],
+             policies: [{ rules: ["no-motors"], subjects: ["loopback"] }] } }"#,
+    )
+    .unwrap();
+    let mut robot = Proc::start(&robot_conf(dir.path(), port, "config acl.json5\n"));
+    robot.ask_until("echo laser", "the simulator", |l| {
+        l.starts_with("laser clock=")
+    });
+    let mut config = zenoh::Config::default();
+    config
+        .insert_json5("connect/endpoints", &format!(r#"["tcp/127.0.0.1:{port}"]"#))
+        .unwrap();
+    config
+        .insert_json5("scouting/multicast/enabled", "false")
+        .unwrap();
+    config.insert_json5("listen/endpoints", "[]").unwrap();
+    let session = zenoh::open(config).wait().unwrap();
+    // Data still flows out...
+    let laser = session
+        .declare_subscriber("jderobot/pioneer/laser")
+        .wait()
+        .unwrap();
+    assert!(
+        laser
+            .recv_timeout(Duration::from_secs(20))
+            .unwrap()
+            .is_some(),
+        "laser samples under the ACL"
+    );
+    // ...but commands are refused by Zenoh before they reach jderobot.
+    let good: Vec<u8> = [250f32, 0.0].iter().flat_map(|f| f.to_le_bytes()).collect();
+    for _ in 0..20 {
+        session
+            .put("jderobot/pioneer/motors", good.clone())
+            .wait()
+            .unwrap();
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let l = robot.ask_until("echo motors", "motors", |l| l.starts_with("motors clock="));
+    assert_eq!(echo_v(&l), 0.0, "the ACL let a command through: {l}");
+    robot.quit();
+}
+
+#[test]
+fn provides_all_takes_what_the_robot_serves_and_says_what_to_do_without_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let port = free_port();
+    let mut robot = Proc::start(&robot_conf(dir.path(), port, ""));
+    robot.ask_until("echo laser", "the simulator", |l| {
+        l.starts_with("laser clock=")
+    });
+    let rt = common::start_conf(&format!(
+        "driver zenoh\nprovides all pioneer\nconnect tcp/127.0.0.1:{port}\nscouting off\n\
+         end_driver\nload_driver zenoh\n"
+    ));
+    let mut names = rt.interfaces.names();
+    names.sort();
+    assert_eq!(names, ["colorA", "encoders", "laser", "motors", "sonars"]);
+    let enc = rt.interfaces.get_any("encoders").unwrap();
+    enc.resume();
+    common::eventually("encoders", || enc.clock() > 0 && enc.stale().is_none());
+    rt.shutdown();
+    robot.quit();
+
+    // No robot: the start fails and says how to start without it.
+    let conf = jderobot::Conf::parse(
+        &format!(
+            "driver zenoh\nprovides all pioneer\ndiscover 300\nconnect tcp/127.0.0.1:{port}\n\
+             scouting off\nend_driver\nload_driver zenoh\n"
+        ),
+        Path::new("gui.conf"),
+    )
+    .unwrap();
+    let e = jderobot::loader::start(&conf)
+        .err()
+        .expect("no robot")
+        .to_string();
+    assert!(
+        e.contains("robot `pioneer`") && e.contains("provides NAME"),
+        "{e}"
+    );
 }

@@ -58,7 +58,9 @@ fn python_drives(mode: &str, extra: &str) -> Option<serde_json::Value> {
     )
     .unwrap();
     let mut robot = Proc::start(&conf);
-    let start = robot.ask_until("echo encoders", "the robot", |l| l.starts_with("encoders clock="));
+    let start = robot.ask_until("echo encoders", "the robot", |l| {
+        l.starts_with("encoders clock=")
+    });
     let mut child = Command::new(&py)
         .arg(root().join("scripts/zenoh_client.py"))
         .args([mode, &port.to_string(), "pioneer"])
@@ -80,16 +82,23 @@ fn python_drives(mode: &str, extra: &str) -> Option<serde_json::Value> {
     eprintln!("{stdout}");
     // The robot moved, as its own process sees it.
     let (x0, y0) = xy(&start);
-    let now = robot.ask_until("echo encoders", "the pose", |l| l.starts_with("encoders clock="));
+    let now = robot.ask_until("echo encoders", "the pose", |l| {
+        l.starts_with("encoders clock=")
+    });
     let (x, y) = xy(&now);
-    assert!((x - x0).hypot(y - y0) > 100.0, "moved from {start} to {now}");
+    assert!(
+        (x - x0).hypot(y - y0) > 100.0,
+        "moved from {start} to {now}"
+    );
     robot.quit();
     Some(serde_json::from_str(stdout.lines().last().unwrap()).unwrap())
 }
 
 #[test]
 fn python_reads_the_documented_layouts_and_drives_the_robot() {
-    let Some(v) = python_drives("jderobot", "") else { return };
+    let Some(v) = python_drives("jderobot", "") else {
+        return;
+    };
     assert_eq!(v["laser"]["n"], 180, "{v}");
     assert_eq!(v["laser"]["resolution"], 1.0, "{v}");
     assert_eq!(v["image"]["w"], 320, "{v}");
@@ -98,7 +107,10 @@ fn python_reads_the_documented_layouts_and_drives_the_robot() {
     assert_eq!(v["attachment_len"], 16, "{v}");
     assert!(v["laser_clock"].as_u64().unwrap() >= 1, "{v}");
     let age = v["laser_age_s"].as_f64().unwrap();
-    assert!((0.0..5.0).contains(&age), "the attachment's time is the sample's: {v}");
+    assert!(
+        (0.0..5.0).contains(&age),
+        "the attachment's time is the sample's: {v}"
+    );
     for mm in v["laser_first_mm"].as_array().unwrap() {
         let mm = mm.as_i64().unwrap();
         assert!((100..=8000).contains(&mm), "laser in mm: {v}");
@@ -107,7 +119,9 @@ fn python_reads_the_documented_layouts_and_drives_the_robot() {
 
 #[test]
 fn ros2_format_is_cdr_that_rosbags_decodes_on_rmw_zenoh_keys() {
-    let Some(v) = python_drives("ros2", "format ros2\n") else { return };
+    let Some(v) = python_drives("ros2", "format ros2\n") else {
+        return;
+    };
     // The keys were built by Python from rosbags' own RIHS01 type hashes: data
     // arriving on them means ours are the same.
     assert_eq!(v["laser"]["n"], 180, "{v}");

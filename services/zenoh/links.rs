@@ -22,7 +22,7 @@ use zenoh::{
     sample::{Locality, Sample as ZSample, SampleKind},
 };
 
-use super::wire::{self, Format, Wire};
+use super::wire::{self, Fill, Format, Wire};
 use crate::{
     interfaces::{AnyInterface, Interface, Motors, Notify, Watch},
     mcapfmt,
@@ -94,8 +94,11 @@ impl<T: Wire> Outbound for Out<T> {
             return;
         }
         state.0 = s.clock;
-        let ros2 = (self.route.format == Format::Ros2).then(|| T::ros2(&s)).flatten();
-        let (payload, encoding, attachment): (ZBytes, Encoding, Vec<u8>) = if let Some(snap) = ros2 {
+        let ros2 = (self.route.format == Format::Ros2)
+            .then(|| T::ros2(&s))
+            .flatten();
+        let (payload, encoding, attachment): (ZBytes, Encoding, Vec<u8>) = if let Some(snap) = ros2
+        {
             let mut cdr = Vec::new();
             mcapfmt::ros2::encode(self.iface.name(), &snap, &mut cdr);
             let a = wire::rmw_attachment(s.clock, s.time, &self.gid);
@@ -121,7 +124,11 @@ impl<T: Wire> Outbound for Out<T> {
             Ok(()) => state.1 = false,
             Err(e) if !state.1 => {
                 state.1 = true;
-                tracing::warn!("zenoh: cannot put `{}` on {}: {e}", self.iface.name(), self.route.key);
+                tracing::warn!(
+                    "zenoh: cannot put `{}` on {}: {e}",
+                    self.iface.name(),
+                    self.route.key
+                );
             }
             Err(_) => {}
         }
@@ -170,7 +177,9 @@ pub fn outbound<T: Wire>(
                 }
             })
             .wait()
-            .map_err(|e| anyhow::anyhow!("zenoh: cannot watch subscribers of `{}`: {e}", route.key))?
+            .map_err(|e| {
+                anyhow::anyhow!("zenoh: cannot watch subscribers of `{}`: {e}", route.key)
+            })?
     };
     let mut gid = [0u8; 16];
     let zid = session.zid().to_le_bytes();
@@ -186,9 +195,6 @@ pub fn outbound<T: Wire>(
     }))
 }
 
-/// What a received sample does to the local value (fills the recycled buffer).
-type Fill<T> = Box<dyn FnOnce(&mut T)>;
-
 /// Decodes a sample for an interface of type `T` on `route`: (clock, wall time,
 /// fill); the clock is 0 when the sample carries none.
 fn decode<T: Wire>(route: &Route, sample: &ZSample) -> Result<(u64, SystemTime, Fill<T>), String> {
@@ -201,7 +207,11 @@ fn decode<T: Wire>(route: &Route, sample: &ZSample) -> Result<(u64, SystemTime, 
         let d = mcapfmt::ros2::decode(&route.key, T::KIND, &payload, clock, mcapfmt::nanos(time))
             .map_err(|e| e.to_string())?;
         let v = T::from_ros2(d.value).ok_or("a ROS message of another type")?;
-        return Ok((clock, mcapfmt::from_nanos(d.time_ns), Box::new(move |d: &mut T| *d = v)));
+        return Ok((
+            clock,
+            mcapfmt::from_nanos(d.time_ns),
+            Box::new(move |d: &mut T| *d = v),
+        ));
     }
     let (clock, time) = sample
         .attachment()
@@ -219,7 +229,12 @@ fn decode<T: Wire>(route: &Route, sample: &ZSample) -> Result<(u64, SystemTime, 
 /// Publishes a received value into the local interface, with the sender's clock
 /// when it is ahead of the local one (so `ps` shows the robot's clocks and a
 /// gap is a lost sample), else with the next local clock (the sender restarted).
-fn publish_in<T: Wire>(iface: &Interface<T>, clock: u64, time: SystemTime, fill: Fill<T>) -> Result<(), String> {
+fn publish_in<T: Wire>(
+    iface: &Interface<T>,
+    clock: u64,
+    time: SystemTime,
+    fill: Fill<T>,
+) -> Result<(), String> {
     let r = if clock > iface.clock() {
         iface.write_recorded(clock, time, fill)
     } else {
@@ -273,7 +288,9 @@ pub fn watch_server(
     let motors: Option<Arc<Interface<Motors>>> = (iface.kind() == "motors")
         .then(|| interfaces.get(iface.name()).ok())
         .flatten();
-    iface.set_stale(&format!("zenoh: waiting for `{key}` (nobody serves it yet)"));
+    iface.set_stale(&format!(
+        "zenoh: waiting for `{key}` (nobody serves it yet)"
+    ));
     let gone = {
         let key = key.to_string();
         move |iface: &dyn AnyInterface| {
@@ -295,7 +312,11 @@ pub fn watch_server(
             )),
             SampleKind::Put => tracing::info!("zenoh: `{}` is served", s.key_expr()),
             SampleKind::Delete => {
-                tracing::warn!("zenoh: `{}` went away; `{}` is stale", s.key_expr(), iface.name());
+                tracing::warn!(
+                    "zenoh: `{}` went away; `{}` is stale",
+                    s.key_expr(),
+                    iface.name()
+                );
                 gone(&*iface);
             }
         })
@@ -326,7 +347,10 @@ pub fn watch_writers(
                 SampleKind::Delete => {
                     w.remove(s.key_expr().as_str());
                     if w.is_empty() {
-                        tracing::warn!("zenoh: the last writer of `{}` left: motors stop", motors.name());
+                        tracing::warn!(
+                            "zenoh: the last writer of `{}` left: motors stop",
+                            motors.name()
+                        );
                         let _ = motors.publish(Motors::default());
                     }
                 }
@@ -353,7 +377,10 @@ pub fn discover(session: &Session, prefix: &str, wait: Duration) -> Vec<String> 
     let deadline = std::time::Instant::now() + wait;
     loop {
         let mut names = std::collections::BTreeSet::new();
-        for pattern in [format!("{prefix}/*/served"), format!("{prefix}/*/*/*/served")] {
+        for pattern in [
+            format!("{prefix}/*/served"),
+            format!("{prefix}/*/*/*/served"),
+        ] {
             let Ok(replies) = session
                 .liveliness()
                 .get(pattern)

@@ -79,7 +79,11 @@ use wire::{Format, Wire, by_kind};
 pub enum Which {
     All,
     /// The interface name and its key (`None`: the default key).
-    One { name: String, key: Option<String>, kind: Option<String> },
+    One {
+        name: String,
+        key: Option<String>,
+        kind: Option<String>,
+    },
 }
 
 /// The component's conf.
@@ -124,13 +128,7 @@ fn key(l: &ConfLine, i: usize) -> Result<String, ConfError> {
 }
 
 fn kind_word(l: &ConfLine, i: usize) -> Result<String, ConfError> {
-    let w = l.word(i, "an interface kind")?;
-    let kinds = [
-        "image", "laser", "sonars", "encoders", "motors", "pantiltencoders", "pantiltmotors",
-        "zoomencoders", "zoommotors", "bumpers",
-    ];
-    l.choice(i, "the interface kind", &kinds).map(str::to_string)?;
-    Ok(w.to_string())
+    Ok(l.choice(i, "the interface kind", wire::KINDS)?.to_string())
 }
 
 /// Reads the conf (every error names file:line and the fix).
@@ -171,7 +169,8 @@ pub fn parse(conf: &ComponentConf) -> Result<Settings, ConfError> {
                 l.expect_args(1, 3, USAGE_PROVIDES)?;
                 if l.args()[0] == "all" {
                     l.expect_args(2, 2, USAGE_PROVIDES)?;
-                    s.provides.push((Which::All, chunk(l, 1, "the robot name")?.into()));
+                    s.provides
+                        .push((Which::All, chunk(l, 1, "the robot name")?.into()));
                 } else {
                     let name = interfaces::canonical(l.word(0, "an interface name")?);
                     let kind = match l.args().len() {
@@ -203,7 +202,9 @@ pub fn parse(conf: &ComponentConf) -> Result<Settings, ConfError> {
             "images" => {
                 l.expect_args(1, 2, "images raw | images jpeg [QUALITY]")?;
                 s.jpeg = match l.choice(0, "the image encoding", &["raw", "jpeg"])? {
-                    "jpeg" if l.args().len() == 2 => Some(l.number(1, "the JPEG quality", 1..=100)?),
+                    "jpeg" if l.args().len() == 2 => {
+                        Some(l.number(1, "the JPEG quality", 1..=100)?)
+                    }
                     "jpeg" => Some(80),
                     _ => {
                         l.expect_args(1, 1, "images raw")?;
@@ -230,11 +231,7 @@ pub fn parse(conf: &ComponentConf) -> Result<Settings, ConfError> {
 
 /// The interface kinds that travel.
 fn travels(kind: &str) -> bool {
-    by_kind!(kind, travels_as(), false)
-}
-
-fn travels_as<T: Wire>() -> bool {
-    true
+    wire::KINDS.contains(&kind)
 }
 
 struct Zenoh {
@@ -312,14 +309,17 @@ fn serve<T: Wire>(
     route: Route,
     plan: &mut Plan,
 ) -> anyhow::Result<()> {
-    plan.keep.push(links::token(session, format!("{}/served", route.key))?);
+    plan.keep
+        .push(links::token(session, format!("{}/served", route.key))?);
     if iface.is_actuator() {
         let typed: Arc<Interface<T>> = rt.interfaces.get(iface.name())?;
         if T::KIND == "motors" {
             let motors = rt.interfaces.get(iface.name())?;
-            plan.keep.push(links::watch_writers(session, &route.key, motors)?);
+            plan.keep
+                .push(links::watch_writers(session, &route.key, motors)?);
         }
-        plan.keep.push(Box::new(links::inbound(session, typed, route)?));
+        plan.keep
+            .push(Box::new(links::inbound(session, typed, route)?));
     } else {
         plan.outs
             .push(links::outbound::<T>(session, iface, route, &rt.interfaces)?);
@@ -336,12 +336,17 @@ fn provide<T: Wire>(
     route: Route,
     plan: &mut Plan,
 ) -> anyhow::Result<()> {
-    let typed: Arc<Interface<T>> = rt.interfaces.provide(name, "zenoh").map_err(|e| {
-        anyhow::anyhow!("zenoh: cannot provide `{name}`: {e}")
-    })?;
+    let typed: Arc<Interface<T>> = rt
+        .interfaces
+        .provide(name, "zenoh")
+        .map_err(|e| anyhow::anyhow!("zenoh: cannot provide `{name}`: {e}"))?;
     let any: Arc<dyn AnyInterface> = typed.clone();
-    plan.keep
-        .push(links::watch_server(session, &route.key, any.clone(), &rt.interfaces)?);
+    plan.keep.push(links::watch_server(
+        session,
+        &route.key,
+        any.clone(),
+        &rt.interfaces,
+    )?);
     if T::ACTUATOR {
         plan.keep.push(links::token(
             session,
@@ -360,13 +365,19 @@ fn provide<T: Wire>(
     Ok(())
 }
 
-fn publishes(s: &Settings, interfaces: &Interfaces) -> anyhow::Result<Vec<(Arc<dyn AnyInterface>, Option<String>)>> {
-    let mut v: Vec<(Arc<dyn AnyInterface>, Option<String>)> = Vec::new();
+/// The local interfaces to serve, each with its key (`None`: the default).
+type Served = Vec<(Arc<dyn AnyInterface>, Option<String>)>;
+
+fn publishes(s: &Settings, interfaces: &Interfaces) -> anyhow::Result<Served> {
+    let mut v: Served = Vec::new();
     for w in &s.publishes {
         match w {
             Which::All => {
                 for i in interfaces.all() {
-                    if travels(i.kind()) && i.provider() != "zenoh" && !v.iter().any(|(j, _)| j.name() == i.name()) {
+                    if travels(i.kind())
+                        && i.provider() != "zenoh"
+                        && !v.iter().any(|(j, _)| j.name() == i.name())
+                    {
                         v.push((i, None));
                     }
                 }
@@ -380,7 +391,10 @@ fn publishes(s: &Settings, interfaces: &Interfaces) -> anyhow::Result<Vec<(Arc<d
                     )
                 })?;
                 if !travels(i.kind()) {
-                    anyhow::bail!("zenoh: `publishes {name}`: interfaces of kind {} do not travel", i.kind());
+                    anyhow::bail!(
+                        "zenoh: `publishes {name}`: interfaces of kind {} do not travel",
+                        i.kind()
+                    );
                 }
                 v.retain(|(j, _)| j.name() != name);
                 v.push((i, key.clone()));
@@ -417,8 +431,16 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
                          `publishes all`? this side listens on {} and connects to {}); name the \
                          interfaces with `provides NAME` lines to start without it",
                         s.discover.as_millis(),
-                        if s.session.listen.is_empty() { "loopback".into() } else { s.session.listen.join(" ") },
-                        if s.session.connect.is_empty() { "nothing (scouting only)".into() } else { s.session.connect.join(" ") },
+                        if s.session.listen.is_empty() {
+                            "loopback".into()
+                        } else {
+                            s.session.listen.join(" ")
+                        },
+                        if s.session.connect.is_empty() {
+                            "nothing (scouting only)".into()
+                        } else {
+                            s.session.connect.join(" ")
+                        },
                     );
                 }
                 names
@@ -438,10 +460,16 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
             }
         };
         for (name, key, kind) in wanted {
-            let kind: String = kind.or_else(|| interfaces::family(&name).map(str::to_string)).unwrap_or_default();
+            let kind: String = kind
+                .or_else(|| interfaces::family(&name).map(str::to_string))
+                .unwrap_or_default();
             let r = route(&s, robot, &name, &kind, &key);
             tracing::info!("zenoh: providing `{name}` from {}", r.key);
-            by_kind!(kind.as_str(), provide(&session, rt, &name, r, &mut plan), Ok(()))?;
+            by_kind!(
+                kind.as_str(),
+                provide(&session, rt, &name, r, &mut plan),
+                Ok(())
+            )?;
         }
     }
     let stop = Arc::new(AtomicBool::new(false));
@@ -450,13 +478,15 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
         let stop = stop.clone();
         let outs = std::mem::take(&mut plan.outs);
         let mut on_demand = std::mem::take(&mut plan.on_demand);
-        std::thread::Builder::new().name("zenoh".into()).spawn(move || {
-            let watch = Watch::for_current_thread();
-            let _ = tx.send(watch.clone());
-            links::run_outbound(outs, &watch, &stop, || {
-                on_demand.iter_mut().for_each(OnDemand::update)
-            });
-        })?
+        std::thread::Builder::new()
+            .name("zenoh".into())
+            .spawn(move || {
+                let watch = Watch::for_current_thread();
+                let _ = tx.send(watch.clone());
+                links::run_outbound(outs, &watch, &stop, || {
+                    on_demand.iter_mut().for_each(OnDemand::update)
+                });
+            })?
     };
     let watch = rx.recv().ok();
     Ok(Box::new(Zenoh {

@@ -66,7 +66,10 @@ pub fn read_rmw_attachment(a: &[u8]) -> Option<(u64, SystemTime)> {
     let a: &[u8; 32] = a.try_into().ok()?;
     let seq = i64::from_le_bytes(a[..8].try_into().ok()?);
     let ns = i64::from_le_bytes(a[8..16].try_into().ok()?);
-    Some((seq.max(0) as u64, UNIX_EPOCH + Duration::from_nanos(ns.max(0) as u64)))
+    Some((
+        seq.max(0) as u64,
+        UNIX_EPOCH + Duration::from_nanos(ns.max(0) as u64),
+    ))
 }
 
 /// The ROS 2 type of a kind in the `ros2` format: (DDS type name as rmw_zenoh
@@ -108,6 +111,23 @@ pub fn default_key(format: Format, domain: u32, robot: &str, name: &str, kind: &
 /// Why a payload was not a value.
 pub type WireError = String;
 
+/// What a received payload does to the interface's recycled value.
+pub type Fill<T> = Box<dyn FnOnce(&mut T)>;
+
+/// The interface kinds that travel (every kind of `crate::interfaces`).
+pub const KINDS: &[&str] = &[
+    "image",
+    "laser",
+    "sonars",
+    "encoders",
+    "motors",
+    "pantiltencoders",
+    "pantiltmotors",
+    "zoomencoders",
+    "zoommotors",
+    "bumpers",
+];
+
 /// A value that travels on Zenoh.
 pub trait Wire: InterfaceValue + Sized {
     /// Appends the `jderobot` layout of the value.
@@ -121,7 +141,7 @@ pub trait Wire: InterfaceValue + Sized {
         b.into()
     }
     /// Reads a payload as what it does to the interface's recycled value.
-    fn fill_from(z: &ZBytes) -> Result<Box<dyn FnOnce(&mut Self)>, WireError> {
+    fn fill_from(z: &ZBytes) -> Result<Fill<Self>, WireError> {
         let v = Self::take(&z.to_bytes())?;
         Ok(Box::new(move |d: &mut Self| *d = v))
     }
@@ -159,10 +179,14 @@ impl<'a> Bytes<'a> {
         Ok(a)
     }
     fn u32(&mut self, what: &str) -> Result<u32, WireError> {
-        Ok(u32::from_le_bytes(self.take(4, what)?.try_into().expect("4")))
+        Ok(u32::from_le_bytes(
+            self.take(4, what)?.try_into().expect("4"),
+        ))
     }
     fn f32(&mut self, what: &str) -> Result<f32, WireError> {
-        Ok(f32::from_le_bytes(self.take(4, what)?.try_into().expect("4")))
+        Ok(f32::from_le_bytes(
+            self.take(4, what)?.try_into().expect("4"),
+        ))
     }
     /// A u32 count of `size`-byte items that must fill the rest exactly.
     fn count(&mut self, size: usize, what: &str) -> Result<usize, WireError> {
@@ -263,7 +287,7 @@ impl Wire for Image {
         w.finish()
     }
     /// One copy, from Zenoh's buffers into the interface's recycled frame.
-    fn fill_from(z: &ZBytes) -> Result<Box<dyn FnOnce(&mut Self)>, WireError> {
+    fn fill_from(z: &ZBytes) -> Result<Fill<Self>, WireError> {
         let mut head = [0u8; 8];
         let mut got = 0;
         for s in z.slices() {
@@ -335,7 +359,12 @@ impl Wire for Image {
         }
         let mut jpeg = Vec::new();
         image::codecs::jpeg::JpegEncoder::new_with_quality(&mut jpeg, quality)
-            .encode(&rgb, self.width, self.height, image::ExtendedColorType::Rgb8)
+            .encode(
+                &rgb,
+                self.width,
+                self.height,
+                image::ExtendedColorType::Rgb8,
+            )
             .ok()?;
         Some(jpeg)
     }
@@ -374,11 +403,10 @@ impl Wire for Laser {
                 r.0.len()
             ));
         }
-        let readings = r
-            .0
-            .chunks_exact(4)
-            .map(|c| i32::from_le_bytes(c.try_into().expect("4")))
-            .collect();
+        let readings =
+            r.0.chunks_exact(4)
+                .map(|c| i32::from_le_bytes(c.try_into().expect("4")))
+                .collect();
         Ok(Laser {
             readings,
             resolution,
@@ -405,11 +433,10 @@ impl Wire for Sonars {
     fn take(b: &[u8]) -> Result<Self, WireError> {
         let mut r = Bytes(b);
         r.count(4, "sonars")?;
-        let us = r
-            .0
-            .chunks_exact(4)
-            .map(|c| f32::from_le_bytes(c.try_into().expect("4")))
-            .collect();
+        let us =
+            r.0.chunks_exact(4)
+                .map(|c| f32::from_le_bytes(c.try_into().expect("4")))
+                .collect();
         Ok(Sonars { us })
     }
 }
@@ -476,9 +503,7 @@ mod tests {
             readings: vec![1, -2, 30000],
             resolution: 1.0,
         });
-        round_trip(Sonars {
-            us: vec![1.5, 2.5],
-        });
+        round_trip(Sonars { us: vec![1.5, 2.5] });
         round_trip(Bumpers {
             bumpers: vec![0, 1],
         });
@@ -508,9 +533,7 @@ mod tests {
 
     #[test]
     fn every_kind_with_a_ros_type_encodes_as_ros2() {
-        for kind in ["image", "laser", "sonars", "encoders", "motors", "pantiltencoders",
-            "pantiltmotors", "zoomencoders", "zoommotors", "bumpers"]
-        {
+        for &kind in KINDS {
             let ros = by_kind!(kind, has_ros2(), unreachable!());
             assert_eq!(ros, ros2_type(kind).is_some(), "{kind}");
         }
@@ -530,7 +553,10 @@ mod tests {
         assert_eq!(b, [1, 0, 0, 0, 0, 0, 0x80, 0x3f, 0xe8, 3, 0, 0]);
         let t = UNIX_EPOCH + Duration::from_nanos(5);
         assert_eq!(read_attachment(&attachment(7, t)), Some((7, t)));
-        assert_eq!(read_rmw_attachment(&rmw_attachment(9, t, &[1; 16])), Some((9, t)));
+        assert_eq!(
+            read_rmw_attachment(&rmw_attachment(9, t, &[1; 16])),
+            Some((9, t))
+        );
     }
 
     #[test]
