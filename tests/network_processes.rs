@@ -12,7 +12,7 @@
 
 mod common;
 
-use common::process::{Proc, free_port, rate, xy};
+use common::process::{Proc, free_port, rate};
 
 #[test]
 fn introrob_drives_a_robot_served_by_another_process() {
@@ -50,23 +50,8 @@ fn introrob_drives_a_robot_served_by_another_process() {
     });
     let mut gui = Proc::start(&client_conf);
     // The remote interfaces arrive at their rates.
-    for name in ["laser", "colorA", "encoders"] {
-        let l = gui.ask_until("ps", &format!("{name} arriving"), |l| {
-            l.starts_with(&format!("{name}: ")) && l.contains("networkclient") && rate(l) >= 3.0
-        });
-        eprintln!("{l}");
-    }
-    gui.ask_until("echo colorA", "a 320x240 image", |l| {
-        l.starts_with("colorA clock=") && l.contains("320x240 BGR")
-    });
-    // introrob drives the remote robot: its pose in the server process changes.
-    let (x0, y0) = xy(&start);
-    robot.ask_until("echo encoders", "the robot moving", |l| {
-        l.starts_with("encoders clock=") && {
-            let (x, y) = xy(l);
-            (x - x0).hypot(y - y0) > 150.0
-        }
-    });
+    gui.expect_arriving(&["laser", "colorA", "encoders"], "networkclient");
+    robot.expect_moved(&start, 150.0);
     robot.quit();
     // The server is gone: stale, with the reason.
     let l = gui.ask_until("ps", "laser stale", |l| {

@@ -8,10 +8,7 @@
 
 mod common;
 
-use std::{
-    path::PathBuf,
-    process::{Command, Stdio},
-};
+use std::{path::PathBuf, process::Command};
 
 use common::{root, world_path};
 use jderobot::mcapfmt::{self, Recorded};
@@ -20,27 +17,7 @@ const BIN: &str = env!("CARGO_BIN_EXE_jderobot");
 
 /// The venv's python, with the packages the check needs, or None (skip; CI fails).
 fn python() -> Option<PathBuf> {
-    let py = std::env::var_os("JDEROBOT_PYTHON")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| root().join("target/py-venv/bin/python"));
-    let ok = Command::new(&py)
-        .args([
-            "-c",
-            "import mcap, mcap_protobuf, jsonschema, foxglove_schemas_protobuf",
-        ])
-        .stderr(Stdio::null())
-        .status()
-        .is_ok_and(|s| s.success());
-    if ok {
-        return Some(py);
-    }
-    let note = format!(
-        "{} cannot import mcap, mcap_protobuf, jsonschema and foxglove_schemas_protobuf; make the venv as .ci/run does",
-        py.display()
-    );
-    assert!(std::env::var_os("CI").is_none(), "under CI: {note}");
-    eprintln!("SKIPPED: {note}");
-    None
+    common::python_with("mcap, mcap_protobuf, jsonschema, foxglove_schemas_protobuf")
 }
 
 #[test]
@@ -152,24 +129,11 @@ fn python_mcap_reads_the_recording_by_the_documented_schemas() {
     }
 }
 
-/// The venv's python if it has `rosbags` (else skip; CI fails).
+/// The venv's python if it has `rosbags` too (else skip; CI fails).
 fn python_rosbags() -> Option<PathBuf> {
-    let py = python()?;
-    let ok = Command::new(&py)
-        .args(["-c", "import rosbags.rosbag2, rosbags.typesys"])
-        .stderr(Stdio::null())
-        .status()
-        .is_ok_and(|s| s.success());
-    if ok {
-        return Some(py);
-    }
-    let note = format!(
-        "{} cannot import rosbags; make the venv as .ci/run does",
-        py.display()
-    );
-    assert!(std::env::var_os("CI").is_none(), "under CI: {note}");
-    eprintln!("SKIPPED: {note}");
-    None
+    common::python_with(
+        "mcap, mcap_protobuf, jsonschema, foxglove_schemas_protobuf, rosbags.rosbag2, rosbags.typesys",
+    )
 }
 
 #[test]

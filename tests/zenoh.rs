@@ -11,7 +11,7 @@ use std::{
     time::{Duration, Instant},
 };
 
-use common::process::{Proc, free_port, rate, xy};
+use common::process::{Proc, free_port, number_after};
 use jderobot::interfaces::{Laser, Motors};
 use zenoh::Wait;
 
@@ -33,14 +33,20 @@ fn robot_conf(dir: &Path, port: u16, extra: &str) -> std::path::PathBuf {
 }
 
 fn echo_v(line: &str) -> f64 {
-    line.split(" v=")
-        .nth(1)
-        .unwrap()
-        .split(' ')
-        .next()
-        .unwrap()
-        .parse()
-        .unwrap()
+    number_after(line, " v=")
+}
+
+/// A plain Zenoh session of the test's own, connected to the robot.
+fn raw_session(port: u16) -> zenoh::Session {
+    let mut config = zenoh::Config::default();
+    config
+        .insert_json5("connect/endpoints", &format!(r#"["tcp/127.0.0.1:{port}"]"#))
+        .unwrap();
+    config
+        .insert_json5("scouting/multicast/enabled", "false")
+        .unwrap();
+    config.insert_json5("listen/endpoints", "[]").unwrap();
+    zenoh::open(config).wait().unwrap()
 }
 
 #[test]
@@ -66,22 +72,8 @@ fn introrob_in_one_process_drives_the_simulator_in_another() {
     let mut gui = Proc::start(&gui_conf);
     gui.send("run colorA");
     gui.send("run sonars");
-    for name in ["laser", "colorA", "encoders", "sonars"] {
-        let l = gui.ask_until("ps", &format!("{name} arriving"), |l| {
-            l.starts_with(&format!("{name}: ")) && l.contains("zenoh") && rate(l) >= 3.0
-        });
-        eprintln!("{l}");
-    }
-    gui.ask_until("echo colorA", "a 320x240 image", |l| {
-        l.starts_with("colorA clock=") && l.contains("320x240 BGR")
-    });
-    let (x0, y0) = xy(&start);
-    robot.ask_until("echo encoders", "the robot moving", |l| {
-        l.starts_with("encoders clock=") && {
-            let (x, y) = xy(l);
-            (x - x0).hypot(y - y0) > 150.0
-        }
-    });
+    gui.expect_arriving(&["laser", "colorA", "encoders", "sonars"], "zenoh");
+    robot.expect_moved(&start, 150.0);
     robot.ask_until("echo motors", "introrob's command", |l| {
         l.starts_with("motors clock=") && echo_v(l) > 0.0
     });
@@ -163,15 +155,7 @@ fn garbage_on_a_subscribed_key_is_dropped_with_one_line_and_a_good_command_drive
     robot.ask_until("echo laser", "the simulator", |l| {
         l.starts_with("laser clock=")
     });
-    let mut config = zenoh::Config::default();
-    config
-        .insert_json5("connect/endpoints", &format!(r#"["tcp/127.0.0.1:{port}"]"#))
-        .unwrap();
-    config
-        .insert_json5("scouting/multicast/enabled", "false")
-        .unwrap();
-    config.insert_json5("listen/endpoints", "[]").unwrap();
-    let session = zenoh::open(config).wait().unwrap();
+    let session = raw_session(port);
     let key = "jderobot/pioneer/motors";
     common::eventually("the robot's motors subscriber", || {
         session
@@ -225,15 +209,7 @@ fn a_zenoh_config_file_passes_access_control_through() {
     robot.ask_until("echo laser", "the simulator", |l| {
         l.starts_with("laser clock=")
     });
-    let mut config = zenoh::Config::default();
-    config
-        .insert_json5("connect/endpoints", &format!(r#"["tcp/127.0.0.1:{port}"]"#))
-        .unwrap();
-    config
-        .insert_json5("scouting/multicast/enabled", "false")
-        .unwrap();
-    config.insert_json5("listen/endpoints", "[]").unwrap();
-    let session = zenoh::open(config).wait().unwrap();
+    let session = raw_session(port);
     // Data still flows out...
     let laser = session
         .declare_subscriber("jderobot/pioneer/laser")

@@ -8,41 +8,17 @@
 
 mod common;
 
-use std::{
-    path::PathBuf,
-    process::{Command, Stdio},
-};
+use std::process::{Command, Stdio};
 
 use common::{
-    process::{Proc, free_port, xy},
+    process::{Proc, free_port},
     root,
 };
-
-fn python() -> Option<PathBuf> {
-    let py = std::env::var_os("JDEROBOT_PYTHON")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| root().join("target/py-venv/bin/python"));
-    let ok = Command::new(&py)
-        .args(["-c", "import zenoh, rosbags"])
-        .stderr(Stdio::null())
-        .status()
-        .is_ok_and(|s| s.success());
-    if ok {
-        return Some(py);
-    }
-    let note = format!(
-        "{} cannot import zenoh (eclipse-zenoh) and rosbags; make the venv as .ci/run does",
-        py.display()
-    );
-    assert!(std::env::var_os("CI").is_none(), "under CI: {note}");
-    eprintln!("SKIPPED: {note}");
-    None
-}
 
 /// Runs the Python client in `mode` against a robot served with `extra` lines;
 /// returns its JSON line.
 fn python_drives(mode: &str, extra: &str) -> Option<serde_json::Value> {
-    let py = python()?;
+    let py = common::python_with("zenoh, rosbags")?;
     let dir = tempfile::tempdir().unwrap();
     let port = free_port();
     let conf = dir.path().join("robot.conf");
@@ -81,15 +57,7 @@ fn python_drives(mode: &str, extra: &str) -> Option<serde_json::Value> {
     );
     eprintln!("{stdout}");
     // The robot moved, as its own process sees it.
-    let (x0, y0) = xy(&start);
-    let now = robot.ask_until("echo encoders", "the pose", |l| {
-        l.starts_with("encoders clock=")
-    });
-    let (x, y) = xy(&now);
-    assert!(
-        (x - x0).hypot(y - y0) > 100.0,
-        "moved from {start} to {now}"
-    );
+    robot.expect_moved(&start, 100.0);
     robot.quit();
     Some(serde_json::from_str(stdout.lines().last().unwrap()).unwrap())
 }

@@ -353,35 +353,10 @@ impl Wire for Image {
         }
     }
     fn to_jpeg(&self, quality: u8) -> Option<Vec<u8>> {
-        let mut rgb = Vec::with_capacity(self.data.len());
-        for p in self.data.chunks_exact(3) {
-            rgb.extend_from_slice(&[p[2], p[1], p[0]]);
-        }
-        let mut jpeg = Vec::new();
-        image::codecs::jpeg::JpegEncoder::new_with_quality(&mut jpeg, quality)
-            .encode(
-                &rgb,
-                self.width,
-                self.height,
-                image::ExtendedColorType::Rgb8,
-            )
-            .ok()?;
-        Some(jpeg)
+        mcapfmt::jpeg(self, quality)
     }
     fn from_jpeg(b: &[u8]) -> Result<Self, WireError> {
-        let rgb = image::load_from_memory_with_format(b, image::ImageFormat::Jpeg)
-            .map_err(|e| format!("not a JPEG image: {e}"))?
-            .to_rgb8();
-        let (width, height) = rgb.dimensions();
-        let mut data = rgb.into_raw();
-        for p in data.chunks_exact_mut(3) {
-            p.swap(0, 2);
-        }
-        Ok(Image {
-            width,
-            height,
-            data,
-        })
+        mcapfmt::decompress("jpeg", b)
     }
 }
 

@@ -57,6 +57,25 @@ pub const COLOR_WIDTH: u32 = 320;
 pub const COLOR_HEIGHT: u32 = 240;
 
 impl Image {
+    /// An image from RGB bytes (as image libraries give them), turned BGR in place.
+    pub fn from_rgb(width: u32, height: u32, mut rgb: Vec<u8>) -> Self {
+        for p in rgb.chunks_exact_mut(3) {
+            p.swap(0, 2);
+        }
+        Image {
+            width,
+            height,
+            data: rgb,
+        }
+    }
+    /// The pixels as RGB bytes (for image libraries and file formats).
+    pub fn to_rgb(&self) -> Vec<u8> {
+        let mut rgb = Vec::with_capacity(self.data.len());
+        for p in self.data.chunks_exact(3) {
+            rgb.extend_from_slice(&[p[2], p[1], p[0]]);
+        }
+        rgb
+    }
     /// A black image.
     pub fn new(width: u32, height: u32) -> Self {
         Image {

@@ -397,48 +397,47 @@ fn encode_json(snap: &Snapshot, out: &mut Vec<u8>) {
 /// Encodes an image sample as a `foxglove.CompressedImage` JPEG message (quality
 /// 1..=100, protobuf) into `out`.
 pub fn encode_jpeg(name: &str, snap: &Sample<Image>, quality: u8, out: &mut Vec<u8>) {
-    let mut rgb = Vec::with_capacity(snap.data.len());
-    for p in snap.data.chunks_exact(3) {
-        rgb.extend_from_slice(&[p[2], p[1], p[0]]);
-    }
-    let mut jpeg = Vec::new();
-    let encoded = image::codecs::jpeg::JpegEncoder::new_with_quality(&mut jpeg, quality).encode(
-        &rgb,
-        snap.width,
-        snap.height,
-        image::ExtendedColorType::Rgb8,
-    );
-    if encoded.is_err() {
-        jpeg.clear();
-    }
+    let jpeg = jpeg(snap, quality).unwrap_or_default();
     protobuf::compressed_image(name, nanos(snap.time), "jpeg", &jpeg, out);
 }
 
-/// A compressed image (`jpeg` or `png`) back to BGR.
-fn decode_compressed(topic: &str, format: &str, data: &[u8]) -> Result<Recorded, FormatError> {
+/// The JPEG file of an image (quality 1..=100); `None` if the encoder fails.
+pub fn jpeg(img: &Image, quality: u8) -> Option<Vec<u8>> {
+    let mut jpeg = Vec::new();
+    image::codecs::jpeg::JpegEncoder::new_with_quality(&mut jpeg, quality)
+        .encode(
+            &img.to_rgb(),
+            img.width,
+            img.height,
+            image::ExtendedColorType::Rgb8,
+        )
+        .ok()?;
+    Some(jpeg)
+}
+
+/// A `jpeg` or `png` file back to a BGR image; the error says what was wrong.
+pub fn decompress(format: &str, data: &[u8]) -> Result<Image, String> {
     let fmt = match format {
         "jpeg" => image::ImageFormat::Jpeg,
         "png" => image::ImageFormat::Png,
         other => {
-            return Err(bad(
-                topic,
-                format!("compressed image format `{other}`; jderobot reads jpeg and png"),
+            return Err(format!(
+                "compressed image format `{other}`; jderobot reads jpeg and png"
             ));
         }
     };
     let rgb = image::load_from_memory_with_format(data, fmt)
-        .map_err(|e| bad(topic, format!("the {format} image does not decode: {e}")))?
+        .map_err(|e| format!("the {format} image does not decode: {e}"))?
         .to_rgb8();
     let (width, height) = rgb.dimensions();
-    let mut bgr = rgb.into_raw();
-    for p in bgr.chunks_exact_mut(3) {
-        p.swap(0, 2);
-    }
-    Ok(Recorded::Image(Image {
-        width,
-        height,
-        data: bgr,
-    }))
+    Ok(Image::from_rgb(width, height, rgb.into_raw()))
+}
+
+/// A compressed image (`jpeg` or `png`) back to BGR.
+fn decode_compressed(topic: &str, format: &str, data: &[u8]) -> Result<Recorded, FormatError> {
+    decompress(format, data)
+        .map(Recorded::Image)
+        .map_err(|e| bad(topic, e))
 }
 
 /// The channel metadata of an interface kind.

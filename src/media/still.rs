@@ -65,15 +65,7 @@ pub fn decode_image(bytes: &[u8], path: &Path) -> Result<Image, MediaError> {
     })?;
     let rgb = img.to_rgb8();
     let (width, height) = rgb.dimensions();
-    let mut data = rgb.into_raw();
-    for p in data.chunks_exact_mut(3) {
-        p.swap(0, 2);
-    }
-    Ok(Image {
-        width,
-        height,
-        data,
-    })
+    Ok(Image::from_rgb(width, height, rgb.into_raw()))
 }
 
 /// A cursor over a PNM header.
@@ -218,9 +210,7 @@ fn decode_pnm(bytes: &[u8], path: &Path) -> Result<Image, MediaError> {
 /// Writes a BGR image as binary PPM (P6), the format 4.3's imagefile read.
 pub fn encode_ppm(img: &Image) -> Vec<u8> {
     let mut out = format!("P6\n{} {}\n255\n", img.width, img.height).into_bytes();
-    for p in img.data.chunks_exact(3) {
-        out.extend_from_slice(&[p[2], p[1], p[0]]);
-    }
+    out.extend_from_slice(&img.to_rgb());
     out
 }
 

@@ -141,3 +141,27 @@ pub fn quit(mut child: std::process::Child, commands: &str) -> Option<std::proce
     }
     status
 }
+
+/// The test venv's python (`target/py-venv`, which .ci/run makes, or
+/// `$JDEROBOT_PYTHON`) if it imports `modules` (`"mcap, rosbags"`); otherwise
+/// None after a note, so the test skips, but it FAILS under `CI`.
+pub fn python_with(modules: &str) -> Option<PathBuf> {
+    let py = std::env::var_os("JDEROBOT_PYTHON")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| root().join("target/py-venv/bin/python"));
+    let ok = Command::new(&py)
+        .args(["-c", &format!("import {modules}")])
+        .stderr(Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success());
+    if ok {
+        return Some(py);
+    }
+    let note = format!(
+        "{} cannot import {modules}; make the venv as .ci/run does",
+        py.display()
+    );
+    assert!(std::env::var_os("CI").is_none(), "under CI: {note}");
+    eprintln!("SKIPPED: {note}");
+    None
+}

@@ -75,6 +75,32 @@ impl Proc {
         found.unwrap()
     }
 
+    /// The remote interfaces `names` arrive here from `provider` at 3 or more per
+    /// second (`ps`), and `colorA` is a 320x240 image.
+    pub fn expect_arriving(&mut self, names: &[&str], provider: &str) {
+        for name in names {
+            let l = self.ask_until("ps", &format!("{name} arriving"), |l| {
+                l.starts_with(&format!("{name}: ")) && l.contains(provider) && rate(l) >= 3.0
+            });
+            eprintln!("{l}");
+        }
+        self.ask_until("echo colorA", "a 320x240 image", |l| {
+            l.starts_with("colorA clock=") && l.contains("320x240 BGR")
+        });
+    }
+
+    /// Asks `echo encoders` until the robot is more than `mm` from the pose of
+    /// `start` (an earlier `echo encoders` line); returns that line.
+    pub fn expect_moved(&mut self, start: &str, mm: f64) -> String {
+        let (x0, y0) = xy(start);
+        self.ask_until("echo encoders", "the robot moving", |l| {
+            l.starts_with("encoders clock=") && {
+                let (x, y) = xy(l);
+                (x - x0).hypot(y - y0) > mm
+            }
+        })
+    }
+
     pub fn quit(mut self) {
         self.send("quit");
         if !super::poll_until(20, || self.child.try_wait().ok().flatten().is_some()) {
@@ -105,26 +131,21 @@ pub fn free_port() -> u16 {
 
 /// `NAME: N ips` from a `ps` line.
 pub fn rate(line: &str) -> f64 {
-    line.split(": ")
-        .nth(1)
-        .unwrap()
-        .split(' ')
-        .next()
-        .unwrap()
-        .parse()
-        .unwrap()
+    number_after(line, ": ")
 }
 
+/// The number after `key` in a line (`number_after(echo, " v=")`).
+pub fn number_after(line: &str, key: &str) -> f64 {
+    let tail = line
+        .split(key)
+        .nth(1)
+        .unwrap_or_else(|| panic!("no `{key}` in: {line}"));
+    let word = tail.split(' ').next().unwrap();
+    word.parse()
+        .unwrap_or_else(|_| panic!("`{word}` after `{key}` is not a number: {line}"))
+}
+
+/// x and y (mm) from an `echo encoders` line.
 pub fn xy(echo: &str) -> (f64, f64) {
-    let f = |k: &str| -> f64 {
-        echo.split(k)
-            .nth(1)
-            .unwrap()
-            .split(' ')
-            .next()
-            .unwrap()
-            .parse()
-            .unwrap()
-    };
-    (f(" x="), f(" y="))
+    (number_after(echo, " x="), number_after(echo, " y="))
 }
