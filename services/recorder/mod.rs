@@ -35,10 +35,11 @@
 //! `record status` print it (file, seconds, messages, MB, **dropped**), and
 //! `record start|stop` switch it.
 //!
-//! Writing never blocks a schema: a poller thread takes each new sample (shared,
-//! no copy) into a bounded queue and a writer thread encodes and writes it; when
-//! the queue is full the sample is dropped and counted. Chunks are closed at
-//! least once a second, so a run killed mid-write loses at most the last second.
+//! Writing never blocks a schema: a poller thread, woken by each new value, takes
+//! each new sample (shared, no copy) into a bounded queue and a writer thread
+//! encodes and writes it; when the queue is full the sample is dropped and counted.
+//! Chunks are closed at least once a second, so a run killed mid-write loses at
+//! most the last second.
 //!
 //! Recording starts 0.3 s after the recorder is loaded (so that `jderobot check`,
 //! which builds and shuts down every component at once, leaves no file behind);
@@ -62,7 +63,7 @@ use anyhow::Context as _;
 
 use crate::{
     conf::ComponentConf,
-    interfaces::Interfaces,
+    interfaces::{Interfaces, Watch},
     mcapfmt::{self, RecorderStatus, Snapshot, Source},
     runtime::{Driver, Runtime},
 };
@@ -325,7 +326,13 @@ fn poll_loop(
         }
         std::thread::sleep(Duration::from_millis(5));
     }
-    while !stop.load(Ordering::Acquire) {
+    // Woken by every new value instead of polling: no pass over the interfaces
+    // while nothing changes, and a sample is taken within microseconds.
+    let watch = Watch::for_current_thread();
+    for s in srcs.iter() {
+        s.any().watch(watch.clone());
+    }
+    'poll: while !stop.load(Ordering::Acquire) {
         let want = status.want.load(Ordering::Acquire);
         if want && !was_recording {
             // A new file starts with the latest value of each interface.
@@ -342,7 +349,7 @@ fn poll_loop(
                 let snap = s.snapshot();
                 let c = snap.clock();
                 if last[i] != 0 && c > last[i] + 1 {
-                    // Replaced before we polled (faster than 1 kHz): lost.
+                    // Replaced before this thread woke: lost.
                     status.dropped.fetch_add(c - last[i] - 1, Ordering::Relaxed);
                 }
                 last[i] = c;
@@ -357,11 +364,15 @@ fn poll_loop(
                     Err(TrySendError::Full(_)) => {
                         status.dropped.fetch_add(1, Ordering::Relaxed);
                     }
-                    Err(TrySendError::Disconnected(_)) => return,
+                    Err(TrySendError::Disconnected(_)) => break 'poll,
                 }
             }
         }
-        std::thread::sleep(Duration::from_millis(1));
+        // The timeout only bounds how late `stop` and `record start` are seen.
+        watch.wait(Duration::from_millis(50));
+    }
+    for s in srcs.iter() {
+        s.any().unwatch(&*watch);
     }
 }
 
