@@ -12,7 +12,7 @@ use std::{
 };
 
 use common::process::{Proc, free_port, number_after};
-use jderobot::interfaces::{Laser, Motors};
+use jderobot::interfaces::{Laser, Motors, PtMotors};
 use zenoh::Wait;
 
 fn robot_conf(dir: &Path, port: u16, extra: &str) -> std::path::PathBuf {
@@ -22,7 +22,8 @@ fn robot_conf(dir: &Path, port: u16, extra: &str) -> std::path::PathBuf {
         &conf,
         format!(
             "driver simulator\nworld {world}\nrobot robot1 1000 1000 90\nprovides encoders\n\
-             provides motors\nprovides laser 180 1\nprovides sonars\nprovides colorA\nend_driver\n\
+             provides motors\nprovides laser 180 1\nprovides sonars\nprovides colorA\n\
+             provides pantiltencoders\nprovides pantiltmotors\nend_driver\n\
              service zenoh\nrobot pioneer\npublishes all\nlisten tcp/127.0.0.1:{port}\n\
              scouting off\n{extra}end_service\n\
              load_driver simulator\nload_service zenoh\n"
@@ -250,7 +251,18 @@ fn provides_all_takes_what_the_robot_serves_and_says_what_to_do_without_it() {
     ));
     let mut names = rt.interfaces.names();
     names.sort();
-    assert_eq!(names, ["colorA", "encoders", "laser", "motors", "sonars"]);
+    assert_eq!(
+        names,
+        [
+            "colorA",
+            "encoders",
+            "laser",
+            "motors",
+            "pantiltencoders",
+            "pantiltmotors",
+            "sonars"
+        ]
+    );
     let enc = rt.interfaces.get_any("encoders").unwrap();
     enc.resume();
     common::eventually("encoders", || enc.clock() > 0 && enc.stale().is_none());
@@ -274,4 +286,50 @@ fn provides_all_takes_what_the_robot_serves_and_says_what_to_do_without_it() {
         e.contains("robot `pioneer`") && e.contains("provides NAME"),
         "{e}"
     );
+}
+
+#[test]
+fn a_command_written_before_the_robot_came_reaches_it_when_it_does() {
+    let dir = tempfile::tempdir().unwrap();
+    let port = free_port();
+    let rt = common::start_conf(&format!(
+        "driver zenoh\nrobot pioneer\nprovides pantiltmotors\nlisten tcp/127.0.0.1:{port}\n\
+         scouting off\nend_driver\nload_driver zenoh\n"
+    ));
+    let ptm = rt.interfaces.get::<PtMotors>("pantiltmotors").unwrap();
+    assert!(
+        ptm.stale().unwrap().contains("waiting"),
+        "{:?}",
+        ptm.stale()
+    );
+    // A position command, written once while nobody serves it.
+    ptm.publish(PtMotors {
+        longitude: 30.0,
+        latitude: -10.0,
+        longitude_speed: 50.0,
+        latitude_speed: 50.0,
+        max_longitude: 159.0,
+        min_longitude: -159.0,
+        max_latitude: 31.0,
+        min_latitude: -47.0,
+        max_longitude_speed: 100.0,
+        max_latitude_speed: 100.0,
+    })
+    .unwrap();
+    // The robot comes later, connecting to this side.
+    let conf = robot_conf(dir.path(), free_port(), "")
+        .to_string_lossy()
+        .into_owned();
+    let text = std::fs::read_to_string(&conf).unwrap().replace(
+        "listen tcp/127.0.0.1:",
+        &format!("connect tcp/127.0.0.1:{port}\n# was "),
+    );
+    std::fs::write(&conf, text).unwrap();
+    let mut robot = Proc::start(Path::new(&conf));
+    robot.ask_until("echo pantiltmotors", "the command", |l| {
+        l.starts_with("pantiltmotors clock=") && l.contains("longitude=30.00 deg")
+    });
+    common::eventually("the robot seen", || ptm.stale().is_none());
+    robot.quit();
+    rt.shutdown();
 }

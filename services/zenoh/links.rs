@@ -54,6 +54,10 @@ pub trait Outbound: Notify {
     /// Sends the latest value if it is new and somebody listens; errors are
     /// logged once per key until a put succeeds again.
     fn send_if_new(&self);
+    /// Sends the latest value again if a subscriber appeared since the last call
+    /// (called by the component's thread), so a late joiner — a controller, or a
+    /// robot that restarted — has the current value without waiting for the next.
+    fn greet_newcomers(&self);
 }
 
 struct Out<T: Wire> {
@@ -64,6 +68,8 @@ struct Out<T: Wire> {
     route: Route,
     /// A subscriber matches the key (kept by Zenoh's matching listener).
     matching: Arc<AtomicBool>,
+    /// Subscribers appeared since the last [`Outbound::greet_newcomers`].
+    newcomers: Arc<AtomicBool>,
     gid: [u8; 16],
     /// The clock last sent, and whether the last put failed.
     state: Mutex<(u64, bool)>,
@@ -82,6 +88,13 @@ impl<T: Wire> Outbound for Out<T> {
 
     fn inline(&self) -> bool {
         T::KIND != "image"
+    }
+
+    fn greet_newcomers(&self) {
+        if self.newcomers.swap(false, Ordering::AcqRel) {
+            self.state.lock().0 = 0;
+            self.send_if_new();
+        }
     }
 
     fn send_if_new(&self) {
@@ -161,13 +174,17 @@ pub fn outbound<T: Wire>(
         .wait()
         .map_err(|e| anyhow::anyhow!("zenoh: cannot publish on `{}`: {e}", route.key))?;
     let matching = Arc::new(AtomicBool::new(false));
+    let newcomers = Arc::new(AtomicBool::new(false));
     let listener = {
-        let matching = matching.clone();
+        let (matching, newcomers) = (matching.clone(), newcomers.clone());
         let iface = iface.clone();
         publisher
             .matching_listener()
             .callback(move |status| {
                 let now = status.matching();
+                if now {
+                    newcomers.store(true, Ordering::Release);
+                }
                 if matching.swap(now, Ordering::AcqRel) != now && !iface.is_actuator() {
                     if now {
                         iface.resume();
@@ -190,6 +207,7 @@ pub fn outbound<T: Wire>(
         publisher,
         route,
         matching,
+        newcomers,
         gid,
         state: Mutex::new((0, false)),
     }))
@@ -429,6 +447,9 @@ pub fn run_outbound(
     while !stop.load(Ordering::Acquire) {
         for o in &threaded {
             o.send_if_new();
+        }
+        for o in inline.iter().chain(&threaded) {
+            o.greet_newcomers();
         }
         tick();
         watch.wait(Duration::from_millis(100));

@@ -100,8 +100,9 @@ pub struct Interface<T> {
 /// ([`Interface::watch`]): a [`Watch`] waking a thread, or a forwarder that sends
 /// small values on at once.
 pub trait Notify: Send + Sync {
-    /// Called on the publishing thread, after the new sample is visible: keep it
-    /// short and never block (the publisher may be a schema or a driver).
+    /// Called on the publishing thread, after the new sample is visible and the
+    /// interface's writer lock is released: keep it short and never block (the
+    /// publisher may be a schema or a driver).
     fn notify(&self);
 }
 
@@ -207,8 +208,9 @@ impl<T: InterfaceValue> Interface<T> {
         value
             .validate(&self.name)
             .map_err(InterfaceError::Rejected)?;
-        let mut w = self.writer.lock();
-        Ok(self.store(&mut w, value).0)
+        let clock = self.store(&mut self.writer.lock(), value).0;
+        self.tell_watchers();
+        Ok(clock)
     }
 
     /// Fills a recycled value in place and publishes it. `fill` gets the buffer of
@@ -234,7 +236,10 @@ impl<T: InterfaceValue> Interface<T> {
             .map_err(InterfaceError::Rejected)?;
         let mut w = self.writer.lock();
         self.check_after(clock)?;
-        Ok(self.store_at(&mut w, clock, time, value).0)
+        let clock = self.store_at(&mut w, clock, time, value).0;
+        drop(w);
+        self.tell_watchers();
+        Ok(clock)
     }
 
     /// [`write`](Self::write) with a recorded clock and time (see
@@ -271,6 +276,8 @@ impl<T: InterfaceValue> Interface<T> {
         if let Some(s) = Arc::into_inner(old) {
             w.spare = Some(s.value);
         }
+        drop(w);
+        self.tell_watchers();
         Ok(clock)
     }
 
@@ -313,10 +320,15 @@ impl<T: InterfaceValue> Interface<T> {
         if self.stale.load().is_some() {
             self.stale.store(None);
         }
+        (clock, old)
+    }
+
+    /// Tells the watchers of a new value, after the writer lock is released (a
+    /// watcher may publish elsewhere or send on a network).
+    fn tell_watchers(&self) {
         if let Some(watches) = &*self.watches.load() {
             watches.iter().for_each(|w| w.notify());
         }
-        (clock, old)
     }
 
     /// The clock of the latest sample.
