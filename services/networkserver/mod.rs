@@ -70,8 +70,8 @@ use std::{
     io::{self, Write},
     net::{IpAddr, Ipv4Addr, Shutdown, SocketAddr, TcpListener, TcpStream},
     sync::{
-        Arc,
-        atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering},
+        Arc, Weak,
+        atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering, fence},
     },
     thread::JoinHandle,
     time::{Duration, Instant},
@@ -83,8 +83,8 @@ use parking_lot::{Condvar, Mutex};
 use crate::{
     conf::{ComponentConf, ConfLine},
     interfaces::{
-        AnyInterface, Encoders, Image, Interface, Interfaces, Laser, Motors, PtEncoders, PtMotors,
-        Sonars, ZoomEncoders, ZoomMotors, canonical, family,
+        AnyInterface, Encoders, Image, Interface, Interfaces, Laser, Motors, Notify, PtEncoders,
+        PtMotors, Sonars, ZoomEncoders, ZoomMotors, canonical, family,
     },
     netwire::{self, Device, LineEvent, LineReader, Request},
     runtime::{Driver, Runtime},
@@ -526,6 +526,8 @@ struct Client {
     st: Mutex<ClientState>,
     cv: Condvar,
     stream: TcpStream,
+    /// The writer sleeps waiting for a frame (so a new frame must wake it).
+    waiting_frame: AtomicBool,
 }
 
 impl Client {
@@ -608,6 +610,7 @@ fn client(stream: TcpStream, peer: SocketAddr, id: u64, sh: &Arc<Shared>) {
         }),
         cv: Condvar::new(),
         stream: wstream,
+        waiting_frame: AtomicBool::new(false),
     });
     let writer = {
         let cl = cl.clone();
@@ -620,6 +623,10 @@ fn client(stream: TcpStream, peer: SocketAddr, id: u64, sh: &Arc<Shared>) {
         Ok(w) => w,
         Err(e) => return finish(format!("cannot start its writer thread: {e}"), true),
     };
+    let wake: Arc<dyn Notify> = Arc::new(FrameWake(Arc::downgrade(&cl)));
+    for (_, img) in &sh.sources.images {
+        img.watch(wake.clone());
+    }
     let mut resumed = Resumed {
         images: vec![false; sh.sources.images.len()],
         ..Default::default()
@@ -628,6 +635,9 @@ fn client(stream: TcpStream, peer: SocketAddr, id: u64, sh: &Arc<Shared>) {
     reader(&stream, &cl, sh, &mut resumed, &mut drove);
     cl.close("reader ended", false);
     let _ = writer.join();
+    for (_, img) in &sh.sources.images {
+        img.unwatch(&*wake);
+    }
     for i in resumed.subs.iter().flatten() {
         i.suspend();
     }
@@ -861,7 +871,6 @@ fn handle(
 
 fn writer(cl: &Client, sh: &Shared) {
     let period = Duration::from_millis(netwire::PUSH_PERIOD_MS);
-    let mut waiting_since: Option<Instant> = None;
     let mut next_push = Instant::now() + period;
     let mut last_push = [0u64; 5];
     let mut last_img = vec![0u64; sh.sources.images.len()];
@@ -882,7 +891,6 @@ fn writer(cl: &Client, sh: &Shared) {
         let ready = (0..st.images.len())
             .find(|&k| st.images[k] > 0 && sh.sources.images[k].1.clock() != last_img[k]);
         if let Some(k) = ready {
-            waiting_since = None;
             st.images[k] -= 1;
             drop(st);
             let (netid, iface) = &sh.sources.images[k];
@@ -919,21 +927,37 @@ fn writer(cl: &Client, sh: &Shared) {
                 .record_lateness(Instant::now().saturating_duration_since(deadline));
             continue;
         }
-        // Interfaces have no publish notification: poll for a new frame while a
-        // request waits, finely at first (a fast camera's next frame comes soon),
-        // then every 0.5 ms (a slow camera's does not).
-        let until = if st.images.iter().any(|n| *n > 0) {
-            let since = *waiting_since.get_or_insert(now);
-            let poll = if now - since < Duration::from_millis(2) {
-                Duration::from_micros(50)
-            } else {
-                Duration::from_micros(500)
-            };
-            (now + poll).min(next_push)
-        } else {
-            next_push
-        };
-        cl.cv.wait_until(&mut st, until);
+        // Until a new frame of a served image (FrameWake), a request, or the next
+        // push. The flag, set before a last look at the clocks, tells FrameWake to
+        // wake this thread; a frame published before the flag shows is seen by
+        // that look (the SeqCst fences pair with FrameWake's).
+        let wants_frame = st.images.iter().any(|n| *n > 0);
+        cl.waiting_frame.store(wants_frame, Ordering::Relaxed);
+        fence(Ordering::SeqCst);
+        let arrived = (0..st.images.len())
+            .any(|k| st.images[k] > 0 && sh.sources.images[k].1.clock() != last_img[k]);
+        if !arrived {
+            cl.cv.wait_until(&mut st, next_push);
+        }
+        cl.waiting_frame.store(false, Ordering::Relaxed);
+    }
+}
+
+/// Wakes a client's writer when a served image has a new frame, if it sleeps
+/// waiting for one (instead of polling for it; a busy writer costs the camera's
+/// thread one atomic load). It takes the client's lock, so the writer is asleep
+/// on the condition variable, not between its last look and its wait.
+struct FrameWake(Weak<Client>);
+
+impl Notify for FrameWake {
+    fn notify(&self) {
+        fence(Ordering::SeqCst);
+        if let Some(cl) = self.0.upgrade()
+            && cl.waiting_frame.load(Ordering::Relaxed)
+        {
+            let _st = cl.st.lock();
+            cl.cv.notify_all();
+        }
     }
 }
 
