@@ -243,4 +243,31 @@ impl Conn {
     pub fn close(&self) {
         let _ = self.stream.shutdown(std::net::Shutdown::Both);
     }
+
+    /// Ends a session politely: no more writes (a FIN after the last commands),
+    /// then what the server still sends is read and dropped until it closes too
+    /// (at most 300 ms). Closing with unread data resets the connection, and a
+    /// server may then lose the commands still in its receive buffer, such as
+    /// the zero CMD_VEL that stops the robot.
+    pub fn finish(&mut self) {
+        let _ = self.stream.shutdown(std::net::Shutdown::Write);
+        let _ = self
+            .stream
+            .set_read_timeout(Some(Duration::from_millis(20)));
+        let t0 = Instant::now();
+        let mut sink = [0u8; 4096];
+        while t0.elapsed() < Duration::from_millis(300) {
+            match self.stream.read(&mut sink) {
+                Ok(0) => break,
+                Ok(_) => {}
+                Err(e)
+                    if matches!(
+                        e.kind(),
+                        io::ErrorKind::WouldBlock | io::ErrorKind::TimedOut
+                    ) => {}
+                Err(_) => break,
+            }
+        }
+        self.close();
+    }
 }

@@ -467,10 +467,13 @@ impl Session {
                     crate::output::println(m);
                 }
             });
-            c.close();
             match result {
-                Ok(()) => break,
+                Ok(()) => {
+                    c.finish();
+                    break;
+                }
                 Err(e) => {
+                    c.close();
                     let why = format!("player: lost the Player server at {srv}: {e}; reconnecting");
                     if began.elapsed() > Duration::from_secs(5) {
                         backoff = Duration::from_millis(100);
