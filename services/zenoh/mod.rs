@@ -84,6 +84,7 @@ pub enum Which {
     One {
         name: String,
         key: Option<String>,
+        /// The interface kind when the name is not a standard one (`provides`).
         kind: Option<String>,
     },
 }
@@ -506,3 +507,62 @@ crate::register_driver!(
     "publishes interfaces on Zenoh and provides remote ones (Python and ROS 2 can join)",
     create
 );
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::conf::Kind;
+
+    fn parse_text(text: &str) -> Result<Settings, String> {
+        parse(&ComponentConf::from_text(Kind::Service, "zenoh", text).unwrap())
+            .map_err(|e| e.to_string())
+    }
+
+    #[test]
+    fn lines_are_read_with_defaults() {
+        let s = parse_text(
+            "robot pioneer\npublishes all\npublishes laser lab/front\nprovides all r2\n\
+             provides laser2 lab/r2/laser laser\nformat ros2\ndomain 7\nimages jpeg 60\n",
+        )
+        .unwrap();
+        assert_eq!(s.robot, "pioneer");
+        assert_eq!(s.publishes.len(), 2);
+        assert_eq!(s.provides[0], (Which::All, "r2".into()));
+        assert_eq!(
+            s.provides[1].0,
+            Which::One {
+                name: "laser2".into(),
+                key: Some("lab/r2/laser".into()),
+                kind: Some("laser".into())
+            }
+        );
+        assert_eq!((s.format, s.domain, s.jpeg), (Format::Ros2, 7, Some(60)));
+        let d = parse_text("").unwrap();
+        assert_eq!(
+            (d.robot.as_str(), d.format, d.jpeg),
+            ("robot", Format::Jderobot, None)
+        );
+        assert_eq!(
+            wire::default_key(d.format, 0, "robot", "laser", "laser"),
+            "jderobot/robot/laser"
+        );
+    }
+
+    #[test]
+    fn bad_lines_name_the_line_and_the_fix() {
+        for (text, want) in [
+            ("provides laser2 lab/front\n", "say its kind"),
+            ("publishes laser lab/*\n", "wildcard"),
+            ("robot a/b\n", "cannot be a key chunk"),
+            ("images jpeg 200\n", "JPEG quality"),
+            ("format dds\n", "jderobot, ros2"),
+            ("provides all\n", "provides all ROBOT"),
+            ("provides laser a b laser\n", "provides NAME [KEY [KIND]]"),
+            ("provides laser2 a/b wheel\n", "interface kind"),
+            ("colour red\n", "expected robot, publishes"),
+        ] {
+            let e = parse_text(text).unwrap_err();
+            assert!(e.contains(want) && e.contains(':'), "{text:?}: {e}");
+        }
+    }
+}
