@@ -8,7 +8,10 @@
 
 mod common;
 
-use std::{path::PathBuf, process::Command};
+use std::{
+    path::{Path, PathBuf},
+    process::Command,
+};
 
 use common::{root, world_path};
 use jderobot::mcapfmt::{self, Recorded};
@@ -20,50 +23,42 @@ fn python() -> Option<PathBuf> {
     common::python_with("mcap, mcap_protobuf, jsonschema, foxglove_schemas_protobuf")
 }
 
+/// Writes a conf at `conf`: the simulator and a recorder with `lines`.
+fn write_recorder_conf(conf: &Path, lines: &str) {
+    let text = format!(
+        "driver simulator\nworld {}\nprovides encoders\nprovides motors\nprovides laser\n\
+         provides sonars\nprovides colorA\nend_driver\n\
+         service recorder\n{lines}end_service\n\
+         load_driver simulator\nload_service recorder\n",
+        world_path("simple.world")
+    );
+    std::fs::write(conf, text).unwrap();
+}
+
+/// Runs `jderobot --headless --no-shell --for SECS CONF`; it must succeed.
+fn run_for(conf: &Path, secs: u32) {
+    let out = Command::new(BIN)
+        .args(["--headless", "--no-shell", "--for", &secs.to_string()])
+        .arg(conf)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
 #[test]
 fn python_mcap_reads_the_recording_by_the_documented_schemas() {
     let Some(py) = python() else { return };
     let dir = tempfile::tempdir().unwrap();
     let conf = dir.path().join("r.conf");
-    std::fs::write(
-        &conf,
-        format!(
-            "driver simulator\nworld {}\nprovides encoders\nprovides motors\nprovides laser\n\
-             provides sonars\nprovides colorA\nend_driver\n\
-             service recorder\nfile p.mcap\ncompression lz4\nend_service\n\
-             load_driver simulator\nload_service recorder\n",
-            world_path("simple.world")
-        ),
-    )
-    .unwrap();
-    let out = Command::new(BIN)
-        .args(["--headless", "--no-shell", "--for", "3"])
-        .arg(&conf)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    write_recorder_conf(&conf, "file p.mcap\ncompression lz4\n");
+    run_for(&conf, 3);
     // The same with JPEG images (foxglove.CompressedImage).
-    std::fs::write(
-        &conf,
-        std::fs::read_to_string(&conf)
-            .unwrap()
-            .replace("file p.mcap", "file j.mcap\nimages jpeg 80"),
-    )
-    .unwrap();
-    let out = Command::new(BIN)
-        .args(["--headless", "--no-shell", "--for", "2"])
-        .arg(&conf)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    write_recorder_conf(&conf, "file j.mcap\nimages jpeg 80\ncompression lz4\n");
+    run_for(&conf, 2);
     for file in [
         dir.path().join("j.mcap"),
         dir.path().join("p.mcap"),
@@ -141,27 +136,8 @@ fn rosbags_opens_the_ros2_profile_and_the_replay_reads_it_back() {
     let Some(py) = python_rosbags() else { return };
     let dir = tempfile::tempdir().unwrap();
     let conf = dir.path().join("r.conf");
-    std::fs::write(
-        &conf,
-        format!(
-            "driver simulator\nworld {}\nprovides encoders\nprovides motors\nprovides laser\n\
-             provides sonars\nprovides colorA\nend_driver\n\
-             service recorder\nfile ros.mcap\nprofile ros2\nend_service\n\
-             load_driver simulator\nload_service recorder\n",
-            world_path("simple.world")
-        ),
-    )
-    .unwrap();
-    let out = Command::new(BIN)
-        .args(["--headless", "--no-shell", "--for", "3"])
-        .arg(&conf)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    write_recorder_conf(&conf, "file ros.mcap\nprofile ros2\n");
+    run_for(&conf, 3);
     let file = dir.path().join("ros.mcap");
     let out = Command::new(&py)
         .arg(root().join("scripts/check_ros2.py"))
@@ -227,16 +203,7 @@ fn rosbags_opens_the_ros2_profile_and_the_replay_reads_it_back() {
          load_driver replay\nload_service recorder\n",
     )
     .unwrap();
-    let out = Command::new(BIN)
-        .args(["--headless", "--no-shell", "--for", "3"])
-        .arg(&replay)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    run_for(&replay, 3);
     let (back, _) = mcapfmt::Summary::read(&dir.path().join("back.mcap")).unwrap();
     let names: Vec<&str> = back.channels.iter().map(|c| c.topic.as_str()).collect();
     assert!(
