@@ -16,7 +16,10 @@
 use std::time::Duration;
 
 use crate::{
-    conf::ComponentConf,
+    conf::{
+        ComponentConf,
+        settings::{CYCLE, Setting},
+    },
     runtime::{Context, Runtime, Schema},
 };
 
@@ -35,20 +38,25 @@ impl Schema for MySchema {
     }
 }
 
+/// myschema's lines, declared once (`jderobot help myschema`).
+const LINES: &[Setting] = &[CYCLE.default("150")];
+
+/// The values of [`LINES`].
+#[derive(serde::Deserialize)]
+struct Lines {
+    cycle: u64,
+}
+
 fn create(conf: &ComponentConf, _rt: &Runtime) -> anyhow::Result<Box<dyn Schema>> {
-    for l in &conf.lines {
-        if l.keyword() != "cycle" {
-            return Err(conf.unknown(l, "`cycle MS`").into());
-        }
-    }
-    let ms: u64 = conf.value_or("cycle", "milliseconds", 150)?;
+    let lines: Lines = conf.settings(LINES)?;
     Ok(Box::new(MySchema {
-        cycle: Duration::from_millis(ms.max(1)),
+        cycle: Duration::from_millis(lines.cycle),
     }))
 }
 
 crate::register_schema!(
     "myschema",
     "the seed's hello world: prints -->Hello world! each cycle",
-    create
+    create,
+    lines = LINES
 );

@@ -32,36 +32,71 @@
 
 use std::{sync::Arc, time::Duration};
 
-use parking_lot::Mutex;
-
 use crate::{
-    conf::{ComponentConf, ConfLine},
-    interfaces::{Image, Interface, Motors, PtEncoders, PtMotors},
+    conf::{
+        ComponentConf,
+        settings::{CYCLE, Setting, interface},
+    },
+    interfaces::{Image, Interface, PtEncoders, PtMotors},
+    operator::{self, Commands, Operator},
     runtime::{Context, Runtime, Schema},
 };
 
-/// The commands the schema, its panel and the name space share.
-pub struct Commands {
-    pub walk: Arc<Mutex<Motors>>,
-    pub head: Arc<Mutex<[f32; 2]>>,
-    pub max_v: f32,
-    pub max_w: f32,
-}
+/// naooperator's lines, declared once (`jderobot help naooperator`).
+const LINES: &[Setting] = &[
+    operator::BASE
+        .key("walk")
+        .help("the initial walk command (limited to max_v and max_w)"),
+    operator::HEAD
+        .key("head")
+        .help("the initial head command (the robot clamps it to its limits)"),
+    operator::MAX_V,
+    operator::MAX_W,
+    CYCLE.default("100"),
+    Setting::new(
+        "motors",
+        "the interface it walks the robot with",
+        &[interface("INTERFACE")],
+    )
+    .default("motors"),
+    Setting::new(
+        "pantiltmotors",
+        "the head it points (none: no head)",
+        &[interface("INTERFACE")],
+    )
+    .default("pantiltmotors"),
+    Setting::new(
+        "pantiltencoders",
+        "the head angles it shows (none: none)",
+        &[interface("INTERFACE")],
+    )
+    .default("pantiltencoders"),
+    Setting::new(
+        "camera",
+        "the image it shows (4.3.1 used varcolorX; none: none)",
+        &[interface("INTERFACE")],
+    )
+    .default("varcolorA"),
+];
 
-impl Commands {
-    pub fn set_walk(&self, v: f32, w: f32) {
-        *self.walk.lock() = Motors::limited(v, w, self.max_v, self.max_w);
-    }
-    pub fn set_head(&self, longitude: f32, latitude: f32) {
-        let fin = |x: f32| if x.is_finite() { x } else { 0.0 };
-        *self.head.lock() = [fin(longitude), fin(latitude)];
-    }
+/// The values of [`LINES`].
+#[derive(serde::Deserialize)]
+struct Lines {
+    walk: (f32, f32),
+    head: (f32, f32),
+    max_v: f32,
+    max_w: f32,
+    cycle: u64,
+    motors: String,
+    pantiltmotors: String,
+    pantiltencoders: String,
+    camera: String,
 }
 
 /// The interfaces it drives and watches.
 #[derive(Clone)]
 pub struct Devices {
-    pub motors: Arc<Interface<Motors>>,
+    pub motors: Arc<Interface<crate::interfaces::Motors>>,
     pub ptmotors: Option<Arc<Interface<PtMotors>>>,
     pub ptencoders: Option<Arc<Interface<PtEncoders>>>,
     pub camera: Option<Arc<Interface<Image>>>,
@@ -69,10 +104,9 @@ pub struct Devices {
 
 pub struct NaoOperator {
     pub commands: Arc<Commands>,
-    dev: Devices,
+    operator: Operator,
     children: Vec<String>,
     cycle: Duration,
-    last_head: Option<[f32; 2]>,
     #[cfg(feature = "gui")]
     panel: Option<Box<dyn crate::runtime::Panel>>,
 }
@@ -83,23 +117,14 @@ impl Schema for NaoOperator {
     }
     fn on_run(&mut self, ctx: &Context) -> anyhow::Result<()> {
         ctx.run_children(&self.children, None)?;
-        self.last_head = None;
+        self.operator.on_run();
         Ok(())
     }
     fn iteration(&mut self, _ctx: &Context) -> anyhow::Result<()> {
-        let walk = *self.commands.walk.lock();
-        self.dev.motors.publish(walk).map_err(anyhow::Error::msg)?;
-        let head = *self.commands.head.lock();
-        if let Some(ptm) = &self.dev.ptmotors
-            && self.last_head != Some(head)
-        {
-            ptm.point(head[0], head[1])?;
-            self.last_head = Some(head);
-        }
-        Ok(())
+        self.operator.iteration()
     }
     fn on_stop(&mut self, _ctx: &Context) {
-        let _ = self.dev.motors.publish(Motors::default());
+        self.operator.on_stop();
     }
     #[cfg(feature = "gui")]
     fn panel(&mut self) -> Option<Box<dyn crate::runtime::Panel>> {
@@ -107,128 +132,57 @@ impl Schema for NaoOperator {
     }
 }
 
-fn pair(l: &ConfLine, a: &str, b: &str) -> anyhow::Result<[f32; 2]> {
-    l.expect_args(2, 2, &format!("{} {a} {b}", l.keyword()))?;
-    Ok([l.number(0, a, ..)?, l.number(1, b, ..)?])
-}
-
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>> {
-    let (mut walk, mut head) = ([0.0f32; 2], [0.0f32; 2]);
-    let (mut max_v, mut max_w) = (500.0f32, 30.0f32);
-    let mut cycle = Duration::from_millis(100);
-    let mut names: Vec<(&str, Option<String>)> = [
-        ("motors", "motors"),
-        ("pantiltmotors", "pantiltmotors"),
-        ("pantiltencoders", "pantiltencoders"),
-        ("camera", "varcolorA"),
-    ]
-    .into_iter()
-    .map(|(k, v)| (k, Some(v.to_string())))
-    .collect();
-    for l in &conf.lines {
-        match l.keyword() {
-            "walk" => walk = pair(l, "V(mm/s)", "W(deg/s)")?,
-            "head" => head = pair(l, "LONGITUDE(deg)", "LATITUDE(deg)")?,
-            "max_v" => {
-                l.expect_args(1, 1, "max_v MM_S")?;
-                max_v = l.number(0, "a speed in mm/s", 1.0..=1000.0)?;
-            }
-            "max_w" => {
-                l.expect_args(1, 1, "max_w DEG_S")?;
-                max_w = l.number(0, "a turn rate in deg/s", 1.0..=180.0)?;
-            }
-            "cycle" => {
-                l.expect_args(1, 1, "cycle MS")?;
-                cycle = l.millis(0, "a period in ms", 1..=10_000)?;
-            }
-            k if names.iter().any(|(n, _)| *n == k) => {
-                l.expect_args(1, 1, &format!("{k} INTERFACE|none"))?;
-                let v = &l.args()[0];
-                if k == "motors" && v == "none" {
-                    return Err(l.error("naooperator needs a motors interface").into());
-                }
-                if let Some(e) = names.iter_mut().find(|(n, _)| *n == k) {
-                    e.1 = (v != "none").then(|| v.clone());
-                }
-            }
-            _ => {
-                return Err(conf
-                    .unknown(
-                        l,
-                        "walk, head, max_v, max_w, cycle, motors, pantiltmotors, pantiltencoders or camera",
-                    )
-                    .into());
-            }
-        }
-    }
-    let name = |k: &str| {
-        names
-            .iter()
-            .find(|(n, _)| *n == k)
-            .and_then(|(_, v)| v.clone())
-            .filter(|n| rt.interfaces.contains(n))
-    };
-    let Some(motors) = name("motors") else {
+    let lines: Lines = conf.settings(LINES)?;
+    // An interface the conf names, if it is not `none` and something provides it.
+    let name = |n: &str| (n != "none" && rt.interfaces.contains(n)).then(|| n.to_string());
+    let Some(motors) = name(&lines.motors) else {
         anyhow::bail!(
-            "{}: naooperator needs a motors interface; load a driver that provides it (the \
-             simulator, player, networkclient ...) before naooperator",
-            conf.file.display()
+            "{}: naooperator needs a motors interface (`{}` is not provided); load a driver \
+             that provides it (the simulator, player, networkclient ...) before naooperator",
+            conf.file.display(),
+            lines.motors
         );
     };
     let ifs = &rt.interfaces;
+    let names = [
+        Some(motors),
+        name(&lines.pantiltmotors),
+        name(&lines.pantiltencoders),
+        name(&lines.camera),
+    ];
     let dev = Devices {
-        motors: ifs.get(&motors)?,
-        ptmotors: name("pantiltmotors").map(|n| ifs.get(&n)).transpose()?,
-        ptencoders: name("pantiltencoders").map(|n| ifs.get(&n)).transpose()?,
-        camera: name("camera").map(|n| ifs.get(&n)).transpose()?,
+        motors: ifs.get(names[0].as_deref().unwrap_or_default())?,
+        ptmotors: names[1].as_deref().map(|n| ifs.get(n)).transpose()?,
+        ptencoders: names[2].as_deref().map(|n| ifs.get(n)).transpose()?,
+        camera: names[3].as_deref().map(|n| ifs.get(n)).transpose()?,
     };
-    let children: Vec<String> = ["motors", "pantiltmotors", "pantiltencoders", "camera"]
-        .iter()
-        .filter_map(|k| name(k))
-        .collect();
-    let c = conf.name.as_str();
-    let walk_cmd = match rt.names.import::<Mutex<Motors>>(c, "walk") {
-        Ok(a) => a,
-        Err(_) => {
-            let a = Arc::new(Mutex::new(Motors::default()));
-            let _ = rt.names.export_arc(c, "walk", a.clone());
-            a
-        }
-    };
-    let head_cmd = match rt.names.import::<Mutex<[f32; 2]>>(c, "head") {
-        Ok(a) => a,
-        Err(_) => {
-            let a = Arc::new(Mutex::new([0.0f32; 2]));
-            let _ = rt.names.export_arc(c, "head", a.clone());
-            a
-        }
-    };
-    let commands = Arc::new(Commands {
-        walk: walk_cmd,
-        head: head_cmd,
-        max_v,
-        max_w,
-    });
-    commands.set_walk(walk[0], walk[1]);
-    commands.set_head(head[0], head[1]);
+    let commands = Arc::new(Commands::shared(
+        &rt.names,
+        &conf.name,
+        ("walk", "head"),
+        (lines.max_v, lines.max_w),
+        lines.walk,
+        lines.head,
+    ));
     Ok(Box::new(NaoOperator {
         #[cfg(feature = "gui")]
         panel: Some(Box::new(panel::NaoPanel::new(
             commands.clone(),
             dev.clone(),
         ))),
+        operator: Operator::new(commands.clone(), dev.motors.clone(), dev.ptmotors.clone()),
         commands,
-        dev,
-        children,
-        cycle,
-        last_head: None,
+        children: names.into_iter().flatten().collect(),
+        cycle: Duration::from_millis(lines.cycle),
     }))
 }
 
 crate::register_schema!(
     "naooperator",
     "teleoperates a walking robot: walk (v, w), head (pan-tilt) and camera in one panel",
-    create
+    create,
+    lines = LINES
 );
 
 #[cfg(feature = "gui")]
@@ -289,7 +243,7 @@ mod panel {
                 let m = self.dev.motors.read().value;
                 ui.label(format!("walk v {:.0} mm/s  w {:.1} deg/s", m.v, m.w));
                 if ui.button("STOP").clicked() {
-                    self.commands.set_walk(0.0, 0.0);
+                    self.commands.set_base(0.0, 0.0);
                     self.joystick.v = 0.0;
                     self.joystick.w = 0.0;
                 }
@@ -298,7 +252,7 @@ mod panel {
                 ui.vertical(|ui| {
                     ui.label("walk");
                     if self.joystick.show(ui, 140.0).changed() {
-                        self.commands.set_walk(self.joystick.v, self.joystick.w);
+                        self.commands.set_base(self.joystick.v, self.joystick.w);
                     }
                     if let Some(pad) = &mut self.pad {
                         ui.label("head");

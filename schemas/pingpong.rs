@@ -25,7 +25,10 @@ use std::sync::{
 use std::time::Duration;
 
 use crate::{
-    conf::ComponentConf,
+    conf::{
+        ComponentConf,
+        settings::{Setting, int},
+    },
     runtime::{Context, Runtime, Schema},
 };
 
@@ -80,19 +83,28 @@ impl Schema for Player {
     }
 }
 
+/// pingpong's lines, declared once (`jderobot help pingpong`).
+const LINES: &[Setting] = &[Setting::new(
+    "turn",
+    "the parent's iterations per turn",
+    &[int("N", "iterations", 1, 1_000_000)],
+)
+.default("5")];
+
+/// The values of [`LINES`].
+#[derive(serde::Deserialize)]
+struct Lines {
+    turn: u64,
+}
+
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>> {
-    for l in &conf.lines {
-        if l.keyword() != "turn" {
-            return Err(conf.unknown(l, "`turn N`").into());
-        }
-    }
-    let every: u64 = conf.value_or("turn", "a whole number of iterations", 5)?;
+    let lines: Lines = conf.settings(LINES)?;
     let turn = Arc::new(AtomicBool::new(true));
     // Shared through the name space so the children (or anyone) can see whose turn it is.
     let _ = rt.names.export_arc("pingpong", "turn", turn.clone());
     Ok(Box::new(PingPong {
         turn,
-        every: every.max(1),
+        every: lines.turn,
         count: 0,
     }))
 }
@@ -114,17 +126,20 @@ fn create_pong(_: &ComponentConf, _: &Runtime) -> anyhow::Result<Box<dyn Schema>
 crate::register_schema!(
     "pingpong",
     "example parent: runs ping and pong as brothers and arbitrates between them",
-    create
+    create,
+    lines = LINES
 );
 crate::register_schema!(
     "ping",
     "child of pingpong: prints ping N when it wins",
     create_ping,
-    "pingpong"
+    "pingpong",
+    lines = &[]
 );
 crate::register_schema!(
     "pong",
     "child of pingpong: prints pong N when it wins",
     create_pong,
-    "pingpong"
+    "pingpong",
+    lines = &[]
 );

@@ -26,6 +26,7 @@ pub mod mcapfmt;
 pub mod media;
 pub mod namespace;
 pub mod netwire;
+pub mod operator;
 pub mod output;
 pub mod progeo;
 pub mod registry;

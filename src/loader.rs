@@ -9,7 +9,7 @@
 use std::{path::Path, sync::Arc};
 
 use crate::{
-    conf::{Action, ComponentConf, Conf, ConfError, ConfErrors, Kind, Location},
+    conf::{Action, ComponentConf, Conf, ConfError, ConfErrors, Kind, Location, settings},
     interfaces,
     registry::{self, Entry, Factory, LookupError},
     runtime::{Runtime, RuntimeError},
@@ -142,7 +142,8 @@ pub fn reinit(rt: &Runtime, name: &str, conf_file: Option<&Path>) -> Result<(), 
 }
 
 /// Checks a conf without running it: every load names a compiled-in component of
-/// the right kind whose own file exists, no component is loaded twice, and every
+/// the right kind whose own file exists, every declared line of each component is
+/// right ([`settings::check`]), no component is loaded twice, and every
 /// `run`/`show` names something loaded before it. Returns every problem found.
 pub fn check(conf: &Conf) -> Vec<ConfError> {
     let mut errors = Vec::new();
@@ -173,6 +174,9 @@ pub fn check(conf: &Conf) -> Vec<ConfError> {
                         ));
                     }
                     if let Ok(cc) = conf.component_conf(c.kind, name, file.as_deref()) {
+                        if let Some(decl) = c.lines {
+                            errors.extend(settings::check(&cc, decl));
+                        }
                         for l in cc.provides() {
                             if let Some(i) = l.args().first() {
                                 provided.push(interfaces::canonical(i));

@@ -8,7 +8,7 @@
 //! would add it.
 
 use crate::{
-    conf::{ComponentConf, Kind},
+    conf::{ComponentConf, Kind, settings::Setting},
     runtime::{Driver, Runtime, Schema},
 };
 
@@ -35,6 +35,10 @@ pub struct Entry {
     /// The cargo feature that compiles it in (empty for a user's own crate).
     pub feature: &'static str,
     pub factory: Factory,
+    /// The lines it takes, declared once ([`crate::conf::settings`]): `check`
+    /// validates them and `jderobot help NAME` prints them. `None` for a component
+    /// that reads its lines by hand.
+    pub lines: Option<&'static [Setting]>,
 }
 
 inventory::collect!(Entry);
@@ -107,12 +111,23 @@ pub fn lookup(kind: Option<Kind>, name: &str) -> Result<&'static Entry, LookupEr
 ///
 /// `factory_fn: fn(&ComponentConf, &Runtime) -> anyhow::Result<Box<dyn Schema>>`.
 /// The feature is taken to be the name; a user's crate may pass a fourth argument.
+/// A last `lines = DECLARATION` argument declares its lines
+/// ([`crate::conf::settings`]).
 #[macro_export]
 macro_rules! register_schema {
+    ($name:literal, $summary:literal, $factory:expr, lines = $lines:expr) => {
+        $crate::register_schema!(@ $name, $summary, $factory, $name, Some($lines));
+    };
     ($name:literal, $summary:literal, $factory:expr) => {
-        $crate::register_schema!($name, $summary, $factory, $name);
+        $crate::register_schema!(@ $name, $summary, $factory, $name, None);
+    };
+    ($name:literal, $summary:literal, $factory:expr, $feature:literal, lines = $lines:expr) => {
+        $crate::register_schema!(@ $name, $summary, $factory, $feature, Some($lines));
     };
     ($name:literal, $summary:literal, $factory:expr, $feature:literal) => {
+        $crate::register_schema!(@ $name, $summary, $factory, $feature, None);
+    };
+    (@ $name:literal, $summary:literal, $factory:expr, $feature:literal, $lines:expr) => {
         $crate::inventory::submit! {
             $crate::registry::Entry {
                 kind: $crate::conf::Kind::Schema,
@@ -120,6 +135,7 @@ macro_rules! register_schema {
                 summary: $summary,
                 feature: $feature,
                 factory: $crate::registry::Factory::Schema($factory),
+                lines: $lines,
             }
         }
     };
@@ -127,13 +143,23 @@ macro_rules! register_schema {
 
 /// Registers a driver or service:
 /// `register_driver!(Driver|Service, "name", "summary", factory_fn)`; a fifth
-/// argument names the feature when it is not the name (aliases such as `graphics_gtk`).
+/// argument names the feature when it is not the name (aliases such as `graphics_gtk`);
+/// a last `lines = DECLARATION` argument declares its lines.
 #[macro_export]
 macro_rules! register_driver {
+    ($kind:ident, $name:literal, $summary:literal, $factory:expr, lines = $lines:expr) => {
+        $crate::register_driver!(@ $kind, $name, $summary, $factory, $name, Some($lines));
+    };
     ($kind:ident, $name:literal, $summary:literal, $factory:expr) => {
-        $crate::register_driver!($kind, $name, $summary, $factory, $name);
+        $crate::register_driver!(@ $kind, $name, $summary, $factory, $name, None);
+    };
+    ($kind:ident, $name:literal, $summary:literal, $factory:expr, $feature:literal, lines = $lines:expr) => {
+        $crate::register_driver!(@ $kind, $name, $summary, $factory, $feature, Some($lines));
     };
     ($kind:ident, $name:literal, $summary:literal, $factory:expr, $feature:literal) => {
+        $crate::register_driver!(@ $kind, $name, $summary, $factory, $feature, None);
+    };
+    (@ $kind:ident, $name:literal, $summary:literal, $factory:expr, $feature:literal, $lines:expr) => {
         $crate::inventory::submit! {
             $crate::registry::Entry {
                 kind: $crate::conf::Kind::$kind,
@@ -141,6 +167,7 @@ macro_rules! register_driver {
                 summary: $summary,
                 feature: $feature,
                 factory: $crate::registry::Factory::Driver($factory),
+                lines: $lines,
             }
         }
     };

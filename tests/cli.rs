@@ -164,7 +164,7 @@ fn check_reports_file_and_line_and_exits_nonzero() {
     let err = text(&out.stderr);
     assert!(
         err.contains(&format!(
-            "{}:2: `cycle`: argument 1 is `abc`",
+            "{}:2: `cycle`: MS (argument 1) is `abc`, expected a whole number between 1 and 10000 ms",
             cycle.display()
         )),
         "{err}"

@@ -405,10 +405,11 @@ fn conf_errors_name_file_and_line() {
     let dir = tempfile::tempdir().unwrap();
     let world = assets().join("simple.world");
     for (line, expect) in [
-        ("behaviour fly", "unknown behaviour `fly`"),
-        ("target 1 two", "expected Y in mm"),
-        ("max_v -3", "must be above 0"),
-        ("wibble 3", "don't know what to do"),
+        ("behaviour fly", "is `fly`, expected one of teleop"),
+        ("target 1 two", "Y (argument 2) is `two`, expected a number"),
+        ("max_v -3", "between 1 and 1000 mm/s"),
+        ("max_v 4000000000000", "between 1 and 1000 mm/s"),
+        ("wibble 3", "takes no `wibble` line"),
         ("world nowhere.world", "world"),
     ] {
         let conf = write_conf(

@@ -250,5 +250,6 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
 crate::register_schema!(
     "introrob",
     "Pioneer teaching schema: teleoperation, VFF, gradient path planning and your own code",
-    create
+    create,
+    lines = settings::LINES
 );

@@ -1,16 +1,16 @@
-//! introrob's conf lines (see the [module doc](super)) read with the conf
-//! vocabulary of [`ConfLine`]: every error names `file:line`, the argument and
-//! what would be right.
+//! introrob's conf lines (see the [module doc](super)), declared once in
+//! [`LINES`]: every error names `file:line`, the argument and what would be right,
+//! and `jderobot help introrob` prints them.
 
-use std::{
-    ops::Bound::{Excluded, Unbounded},
-    sync::Arc,
-    time::Duration,
-};
+use std::{sync::Arc, time::Duration};
 
 use crate::{
-    conf::{ComponentConf, ConfError, ConfLine},
+    conf::{
+        ComponentConf, ConfError,
+        settings::{CYCLE, Setting, choice, float, interface, word},
+    },
     interfaces::Motors,
+    operator,
     world::World,
 };
 
@@ -53,94 +53,138 @@ pub struct Settings {
     pub names: InterfaceNames,
 }
 
-/// Numbers above zero.
-const POSITIVE: (std::ops::Bound<f32>, std::ops::Bound<f32>) = (Excluded(0.0), Unbounded);
+/// introrob's lines, declared once (`jderobot help introrob`).
+pub const LINES: &[Setting] = &[
+    Setting::new(
+        "behaviour",
+        "what drives the robot at start",
+        &[choice("BEHAVIOUR", BEHAVIOURS)],
+    )
+    .default("teleop"),
+    Setting::new(
+        "behavior",
+        "the same as behaviour",
+        &[choice("BEHAVIOUR", BEHAVIOURS)],
+    ),
+    Setting::new(
+        "target",
+        "vff's and gpp's target, in world coordinates (none: click one in the panel)",
+        &[float("X", "mm", -1e7, 1e7), float("Y", "mm", -1e7, 1e7)],
+    ),
+    operator::BASE
+        .key("teleop")
+        .help("the initial teleoperation command (limited to max_v and max_w)"),
+    operator::MAX_V,
+    operator::MAX_W,
+    CYCLE.default("100"),
+    Setting::new(
+        "cell",
+        "gpp's grid cell",
+        &[float("SIZE", "mm", 10.0, 1000.0)],
+    )
+    .default("50"),
+    Setting::new(
+        "world",
+        "the map for gpp and the panel: a world file, or none (default: the exported world.map)",
+        &[word("FILE|none")],
+    ),
+    Setting::new(
+        "laser",
+        "the laser it avoids obstacles with",
+        &[interface("INTERFACE")],
+    )
+    .default("laser"),
+    Setting::new("encoders", "the robot's pose", &[interface("INTERFACE")]).default("encoders"),
+    Setting::new("motors", "the base it drives", &[interface("INTERFACE")]).default("motors"),
+    Setting::new(
+        "sonars",
+        "sonars it shows (none: none)",
+        &[interface("INTERFACE")],
+    )
+    .default("sonars"),
+    Setting::new(
+        "bumpers",
+        "bumpers it reacts to (none: none)",
+        &[interface("INTERFACE")],
+    )
+    .default("bumpers"),
+    Setting::new(
+        "camera",
+        "the image it shows (none: none)",
+        &[interface("INTERFACE")],
+    )
+    .default("colorA"),
+];
 
-const EXPECTED: &str = "behaviour, target, teleop, max_v, max_w, cycle, cell, world, laser, \
-                        encoders, motors, sonars, bumpers or camera";
+/// The behaviours' names (with 4.3's synonyms).
+const BEHAVIOURS: &[&str] = &[
+    "teleop",
+    "teleoperated",
+    "teleoperation",
+    "stop",
+    "vff",
+    "gpp",
+    "yourcode",
+    "your_code",
+];
 
-/// A `KEY NUMBER` line with a positive number.
-fn positive(l: &ConfLine, what: &str) -> Result<f32, ConfError> {
-    l.expect_args(1, 1, &format!("{} <{what}>", l.keyword()))?;
-    l.number(0, what, POSITIVE)
-}
-
-/// A `KEY INTERFACE` line.
-fn interface_name(l: &ConfLine) -> Result<String, ConfError> {
-    l.expect_args(1, 1, &format!("{} INTERFACE", l.keyword()))?;
-    Ok(l.word(0, "an interface name")?.to_string())
-}
-
-/// A `KEY INTERFACE|none` line.
-fn optional_interface(l: &ConfLine) -> Result<Option<String>, ConfError> {
-    let n = interface_name(l)?;
-    Ok((n != "none").then_some(n))
+/// The values of [`LINES`].
+#[derive(serde::Deserialize)]
+struct Lines {
+    behaviour: String,
+    behavior: Option<String>,
+    target: Option<[f32; 2]>,
+    teleop: (f32, f32),
+    max_v: f32,
+    max_w: f32,
+    cycle: u64,
+    cell: f32,
+    world: Option<String>,
+    laser: String,
+    encoders: String,
+    motors: String,
+    sonars: String,
+    bumpers: String,
+    camera: String,
 }
 
 impl Settings {
     /// Reads introrob's conf lines (every line optional).
     pub fn parse(conf: &ComponentConf) -> Result<Settings, ConfError> {
-        let mut s = Settings {
-            behaviour: Behaviour::Teleop,
-            target: None,
-            teleop: Motors::default(),
-            max_v: 500.0,
-            max_w: 30.0,
-            cycle: Duration::from_millis(100),
-            cell: 50.0,
-            map: MapSource::Exported,
-            names: InterfaceNames {
-                laser: "laser".into(),
-                encoders: "encoders".into(),
-                motors: "motors".into(),
-                sonars: Some("sonars".into()),
-                bumpers: Some("bumpers".into()),
-                camera: Some("colorA".into()),
-            },
-        };
-        for l in &conf.lines {
-            match l.keyword() {
-                "behaviour" | "behavior" => {
-                    l.expect_args(1, 1, "behaviour teleop|stop|vff|gpp|yourcode")?;
-                    s.behaviour = l.args()[0].parse().map_err(|e: String| l.error(e))?;
-                }
-                "target" => {
-                    l.expect_args(2, 2, "target X Y (mm)")?;
-                    s.target = Some([l.number(0, "X in mm", ..)?, l.number(1, "Y in mm", ..)?]);
-                }
-                "teleop" => {
-                    l.expect_args(2, 2, "teleop V W (mm/s, deg/s)")?;
-                    s.teleop = Motors {
-                        v: l.number(0, "v in mm/s", ..)?,
-                        w: l.number(1, "w in deg/s", ..)?,
-                    };
-                }
-                "max_v" => s.max_v = positive(l, "speed in mm/s")?.min(1000.0),
-                "max_w" => s.max_w = positive(l, "speed in deg/s")?.min(180.0),
-                "cycle" => {
-                    let ms = positive(l, "period in ms")?;
-                    s.cycle = Duration::from_secs_f32(ms.clamp(1.0, 10_000.0) / 1000.0);
-                }
-                "cell" => s.cell = positive(l, "cell size in mm")?.clamp(10.0, 1000.0),
-                "world" => {
-                    l.expect_args(1, 1, "world FILE|none")?;
-                    s.map = if l.args()[0] == "none" {
-                        MapSource::Nothing
-                    } else {
-                        let file = l.existing_file(0, "the world file")?;
-                        let w = World::load(&file).map_err(|e| l.error(format!("world: {e}")))?;
-                        MapSource::File(Arc::new(w))
-                    };
-                }
-                "laser" => s.names.laser = interface_name(l)?,
-                "encoders" => s.names.encoders = interface_name(l)?,
-                "motors" => s.names.motors = interface_name(l)?,
-                "sonars" => s.names.sonars = optional_interface(l)?,
-                "bumpers" => s.names.bumpers = optional_interface(l)?,
-                "camera" => s.names.camera = optional_interface(l)?,
-                _ => return Err(conf.unknown(l, EXPECTED)),
+        let l: Lines = conf.settings(LINES)?;
+        let behaviour = l.behavior.as_deref().unwrap_or(&l.behaviour);
+        let optional = |n: String| (n != "none").then_some(n);
+        let map = match l.world.as_deref() {
+            None => MapSource::Exported,
+            Some("none") => MapSource::Nothing,
+            Some(_) => {
+                let line = conf.line("world").expect("a world line");
+                let file = line.existing_file(0, "the world file")?;
+                let w = World::load(&file).map_err(|e| line.error(format!("world: {e}")))?;
+                MapSource::File(Arc::new(w))
             }
-        }
-        Ok(s)
+        };
+        Ok(Settings {
+            // The declared choices are exactly the names Behaviour reads.
+            behaviour: behaviour.parse().unwrap_or(Behaviour::Teleop),
+            target: l.target,
+            teleop: Motors {
+                v: l.teleop.0,
+                w: l.teleop.1,
+            },
+            max_v: l.max_v,
+            max_w: l.max_w,
+            cycle: Duration::from_millis(l.cycle),
+            cell: l.cell,
+            map,
+            names: InterfaceNames {
+                laser: l.laser,
+                encoders: l.encoders,
+                motors: l.motors,
+                sonars: optional(l.sonars),
+                bumpers: optional(l.bumpers),
+                camera: optional(l.camera),
+            },
+        })
     }
 }

@@ -36,39 +36,79 @@
 #[cfg(feature = "gui")]
 pub mod panel;
 
-use std::{
-    ops::Bound::{Excluded, Unbounded},
-    sync::Arc,
-    time::Duration,
-};
-
-use parking_lot::Mutex;
+use std::{sync::Arc, time::Duration};
 
 use crate::{
-    conf::{ComponentConf, ConfError, ConfLine},
+    conf::{
+        ComponentConf,
+        settings::{CYCLE, Setting, interface, word},
+    },
     interfaces::{Encoders, Image, Interface, Laser, Motors, PtEncoders, PtMotors},
+    operator::{self, Commands, Operator},
     runtime::{Context, Runtime, Schema},
     world::{self, World},
 };
 
-/// Commands shared by the schema, its panel and the name space.
-pub struct Commands {
-    pub base: Arc<Mutex<Motors>>,
-    pub pantilt: Arc<Mutex<[f32; 2]>>,
-    pub max_v: f32,
-    pub max_w: f32,
-}
+/// teleoperator's lines, declared once (`jderobot help teleoperator`).
+const LINES: &[Setting] = &[
+    operator::BASE,
+    operator::HEAD,
+    operator::MAX_V,
+    operator::MAX_W,
+    Setting::new(
+        "world",
+        "the walls of the 3D canvas: a world file, or none (default: the exported world.map)",
+        &[word("FILE|none")],
+    ),
+    CYCLE.default("100"),
+    Setting::new("motors", "the base it drives", &[interface("INTERFACE")]).default("motors"),
+    Setting::new(
+        "encoders",
+        "the robot's pose in the 3D canvas (none: none)",
+        &[interface("INTERFACE")],
+    )
+    .default("encoders"),
+    Setting::new(
+        "laser",
+        "the laser in the 3D canvas (none: none)",
+        &[interface("INTERFACE")],
+    )
+    .default("laser"),
+    Setting::new(
+        "pantiltmotors",
+        "the pan-tilt unit it points (none: none)",
+        &[interface("INTERFACE")],
+    )
+    .default("pantiltmotors"),
+    Setting::new(
+        "pantiltencoders",
+        "the pan-tilt angles it shows (none: none)",
+        &[interface("INTERFACE")],
+    )
+    .default("pantiltencoders"),
+    Setting::new(
+        "camera",
+        "the image it shows (none: none)",
+        &[interface("INTERFACE")],
+    )
+    .default("colorA"),
+];
 
-impl Commands {
-    /// Sets the base command, clamped to the maxima.
-    pub fn set_base(&self, v: f32, w: f32) {
-        *self.base.lock() = Motors::limited(v, w, self.max_v, self.max_w);
-    }
-    /// Sets the pan-tilt command (the unit clamps it to its limits).
-    pub fn set_pantilt(&self, longitude: f32, latitude: f32) {
-        let fin = |x: f32| if x.is_finite() { x } else { 0.0 };
-        *self.pantilt.lock() = [fin(longitude), fin(latitude)];
-    }
+/// The values of [`LINES`].
+#[derive(serde::Deserialize)]
+struct Lines {
+    base: (f32, f32),
+    pantilt: (f32, f32),
+    max_v: f32,
+    max_w: f32,
+    world: Option<String>,
+    cycle: u64,
+    motors: String,
+    encoders: String,
+    laser: String,
+    pantiltmotors: String,
+    pantiltencoders: String,
+    camera: String,
 }
 
 /// The interfaces the teleoperator uses (all but motors optional).
@@ -85,10 +125,9 @@ pub struct Devices {
 /// The schema.
 pub struct Teleoperator {
     pub commands: Arc<Commands>,
-    dev: Devices,
+    operator: Operator,
     children: Vec<String>,
     cycle: Duration,
-    last_pantilt: Option<[f32; 2]>,
     #[cfg(feature = "gui")]
     panel: Option<Box<dyn crate::runtime::Panel>>,
 }
@@ -99,23 +138,14 @@ impl Schema for Teleoperator {
     }
     fn on_run(&mut self, ctx: &Context) -> anyhow::Result<()> {
         ctx.run_children(&self.children, None)?;
-        self.last_pantilt = None;
+        self.operator.on_run();
         Ok(())
     }
     fn iteration(&mut self, _ctx: &Context) -> anyhow::Result<()> {
-        let base = *self.commands.base.lock();
-        self.dev.motors.publish(base).map_err(anyhow::Error::msg)?;
-        let pt = *self.commands.pantilt.lock();
-        if let Some(pantilt_motors) = &self.dev.pantilt_motors
-            && self.last_pantilt != Some(pt)
-        {
-            pantilt_motors.point(pt[0], pt[1])?;
-            self.last_pantilt = Some(pt);
-        }
-        Ok(())
+        self.operator.iteration()
     }
     fn on_stop(&mut self, _ctx: &Context) {
-        let _ = self.dev.motors.publish(Motors::default());
+        self.operator.on_stop();
     }
     #[cfg(feature = "gui")]
     fn panel(&mut self) -> Option<Box<dyn crate::runtime::Panel>> {
@@ -123,138 +153,54 @@ impl Schema for Teleoperator {
     }
 }
 
-/// A `KEY A B` line of two finite numbers.
-fn pair(l: &ConfLine, a: &str, b: &str) -> Result<[f32; 2], ConfError> {
-    l.expect_args(2, 2, &format!("{} {a} {b}", l.keyword()))?;
-    Ok([l.number(0, a, ..)?, l.number(1, b, ..)?])
-}
-
-/// A `KEY NUMBER` line with a positive number.
-fn positive(l: &ConfLine, what: &str) -> Result<f32, ConfError> {
-    l.expect_args(1, 1, &format!("{} <{what}>", l.keyword()))?;
-    l.number(0, what, (Excluded(0.0), Unbounded))
-}
-
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>> {
-    let mut base = [0.0f32, 0.0];
-    let mut pantilt = [0.0f32, 0.0];
-    let (mut max_v, mut max_w) = (500.0f32, 30.0f32);
-    let mut cycle = Duration::from_millis(100);
-    // None: no `world` line (the exported world.map); Some(None): `world none`.
-    let mut world: Option<Option<Arc<World>>> = None;
-    let mut names: Vec<(&str, Option<String>)> = [
-        ("motors", "motors"),
-        ("encoders", "encoders"),
-        ("laser", "laser"),
-        ("pantiltmotors", "pantiltmotors"),
-        ("pantiltencoders", "pantiltencoders"),
-        ("camera", "colorA"),
-    ]
-    .into_iter()
-    .map(|(k, v)| (k, Some(v.to_string())))
-    .collect();
-    for l in &conf.lines {
-        match l.keyword() {
-            "base" => base = pair(l, "V(mm/s)", "W(deg/s)")?,
-            "pantilt" => pantilt = pair(l, "LONGITUDE(deg)", "LATITUDE(deg)")?,
-            "max_v" => max_v = positive(l, "speed in mm/s")?.min(1000.0),
-            "max_w" => max_w = positive(l, "speed in deg/s")?.min(180.0),
-            "cycle" => {
-                let ms = positive(l, "period in ms")?;
-                cycle = Duration::from_secs_f32(ms.clamp(1.0, 10_000.0) / 1000.0);
-            }
-            "world" => {
-                l.expect_args(1, 1, "world FILE|none")?;
-                world = Some(if l.args()[0] == "none" {
-                    None
-                } else {
-                    let file = l.existing_file(0, "the world file")?;
-                    let w = World::load(&file).map_err(|e| l.error(format!("world: {e}")))?;
-                    Some(Arc::new(w))
-                });
-            }
-            k if names.iter().any(|(n, _)| *n == k) => {
-                l.expect_args(1, 1, &format!("{k} INTERFACE|none"))?;
-                let v = &l.args()[0];
-                if k == "motors" && v == "none" {
-                    return Err(l.error("teleoperator needs a motors interface").into());
-                }
-                if let Some(e) = names.iter_mut().find(|(n, _)| *n == k) {
-                    e.1 = (v != "none").then(|| v.clone());
-                }
-            }
-            _ => {
-                return Err(conf
-                    .unknown(
-                        l,
-                        "base, pantilt, max_v, max_w, cycle, world, motors, encoders, laser, \
-                         pantiltmotors, pantiltencoders or camera",
-                    )
-                    .into());
-            }
+    let lines: Lines = conf.settings(LINES)?;
+    let world = match lines.world.as_deref() {
+        None => world::map(&rt.names),
+        Some("none") => None,
+        Some(_) => {
+            let l = conf.line("world").expect("a world line");
+            let file = l.existing_file(0, "the world file")?;
+            let w = World::load(&file).map_err(|e| l.error(format!("world: {e}")))?;
+            Some(Arc::new(w))
         }
-    }
-    let world = world.unwrap_or_else(|| world::map(&rt.names));
-    let name = |k: &str| {
-        names
-            .iter()
-            .find(|(n, _)| *n == k)
-            .and_then(|(_, v)| v.clone())
-            .filter(|n| rt.interfaces.contains(n))
     };
-    let Some(motors_name) = name("motors") else {
+    // An interface the conf names, if it is not `none` and something provides it.
+    let name = |n: &str| (n != "none" && rt.interfaces.contains(n)).then(|| n.to_string());
+    let Some(motors_name) = name(&lines.motors) else {
         anyhow::bail!(
-            "{}: teleoperator needs a motors interface; load a driver that provides it (e.g. \
-             the simulator with `provides motors`) before teleoperator",
-            conf.file.display()
+            "{}: teleoperator needs a motors interface (`{}` is not provided); load a driver \
+             that provides it (e.g. the simulator with `provides motors`) before teleoperator",
+            conf.file.display(),
+            lines.motors
         );
     };
     let ifs = &rt.interfaces;
+    let names = [
+        Some(motors_name),
+        name(&lines.encoders),
+        name(&lines.laser),
+        name(&lines.pantiltmotors),
+        name(&lines.pantiltencoders),
+        name(&lines.camera),
+    ];
+    let get = |i: usize| names[i].as_deref();
     let dev = Devices {
-        motors: ifs.get(&motors_name)?,
-        encoders: name("encoders").map(|n| ifs.get(&n)).transpose()?,
-        laser: name("laser").map(|n| ifs.get(&n)).transpose()?,
-        pantilt_motors: name("pantiltmotors").map(|n| ifs.get(&n)).transpose()?,
-        pantilt_encoders: name("pantiltencoders").map(|n| ifs.get(&n)).transpose()?,
-        camera: name("camera").map(|n| ifs.get(&n)).transpose()?,
+        motors: ifs.get(get(0).unwrap_or_default())?,
+        encoders: get(1).map(|n| ifs.get(n)).transpose()?,
+        laser: get(2).map(|n| ifs.get(n)).transpose()?,
+        pantilt_motors: get(3).map(|n| ifs.get(n)).transpose()?,
+        pantilt_encoders: get(4).map(|n| ifs.get(n)).transpose()?,
+        camera: get(5).map(|n| ifs.get(n)).transpose()?,
     };
-    let children: Vec<String> = [
-        "motors",
-        "encoders",
-        "laser",
-        "pantiltmotors",
-        "pantiltencoders",
-        "camera",
-    ]
-    .iter()
-    .filter_map(|k| name(k))
-    .collect();
-    let c = conf.name.as_str();
-    let shared = |n: &str, init| -> Arc<Mutex<[f32; 2]>> {
-        if let Ok(a) = rt.names.import::<Mutex<[f32; 2]>>(c, n) {
-            *a.lock() = init;
-            return a;
-        }
-        let a = Arc::new(Mutex::new(init));
-        let _ = rt.names.export_arc(c, n, a.clone());
-        a
-    };
-    let base_cmd = match rt.names.import::<Mutex<Motors>>(c, "base") {
-        Ok(a) => a,
-        Err(_) => {
-            let a = Arc::new(Mutex::new(Motors::default()));
-            let _ = rt.names.export_arc(c, "base", a.clone());
-            a
-        }
-    };
-    let commands = Arc::new(Commands {
-        base: base_cmd,
-        pantilt: shared("pantilt", [0.0, 0.0]),
-        max_v,
-        max_w,
-    });
-    commands.set_base(base[0], base[1]);
-    commands.set_pantilt(pantilt[0], pantilt[1]);
+    let commands = Arc::new(Commands::shared(
+        &rt.names,
+        &conf.name,
+        ("base", "pantilt"),
+        (lines.max_v, lines.max_w),
+        lines.base,
+        lines.pantilt,
+    ));
     #[cfg(feature = "gui")]
     let panel: Option<Box<dyn crate::runtime::Panel>> =
         Some(Box::new(panel::TeleoperatorPanel::new(
@@ -266,11 +212,14 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
     #[cfg(not(feature = "gui"))]
     let _ = world;
     Ok(Box::new(Teleoperator {
+        operator: Operator::new(
+            commands.clone(),
+            dev.motors.clone(),
+            dev.pantilt_motors.clone(),
+        ),
         commands,
-        dev,
-        children,
-        cycle,
-        last_pantilt: None,
+        children: names.into_iter().flatten().collect(),
+        cycle: Duration::from_millis(lines.cycle),
         #[cfg(feature = "gui")]
         panel,
     }))
@@ -279,5 +228,6 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
 crate::register_schema!(
     "teleoperator",
     "drive the base and the pan-tilt; 3D view of the world, robot and laser; camera image",
-    create
+    create,
+    lines = LINES
 );

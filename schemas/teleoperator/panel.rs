@@ -145,7 +145,7 @@ impl TeleoperatorPanel {
         let pad = dev.pantilt_motors.as_ref().map(|m| {
             let limits = PanTiltLimits::from(&m.read().value);
             let mut p = PanTiltPad::new("teleoperator pantilt", limits);
-            let c = *commands.pantilt.lock();
+            let c = *commands.head.lock();
             (p.longitude, p.latitude) = (c[0], c[1]);
             p
         });
@@ -214,7 +214,7 @@ impl Panel for TeleoperatorPanel {
                     ui.label("pan-tilt");
                     let r = pad.show(ui, vec2(140.0, 90.0), pt);
                     if r.changed() {
-                        self.commands.set_pantilt(pad.longitude, pad.latitude);
+                        self.commands.set_head(pad.longitude, pad.latitude);
                     }
                 }
             });

@@ -1,4 +1,5 @@
-//! The command line: `jderobot [CONF]`, `jderobot list`, `jderobot check CONF`.
+//! The command line: `jderobot [CONF]`, `jderobot list`, `jderobot help NAME`,
+//! `jderobot check CONF`.
 //!
 //! [`main`] is the whole program; `src/main.rs` only calls it, and a user's own
 //! crate that adds schemas calls it too.
@@ -18,7 +19,12 @@ use crate::{conf::Conf, loader, registry, shell};
 /// schemas, runs and shows what it says, then reads shell commands from standard
 /// input (type `help`). Without a display, or with --headless, no GUI starts.
 #[derive(Parser, Debug)]
-#[command(name = "jderobot", version, args_conflicts_with_subcommands = true)]
+#[command(
+    name = "jderobot",
+    version,
+    args_conflicts_with_subcommands = true,
+    disable_help_subcommand = true
+)]
 pub struct Cli {
     #[command(subcommand)]
     pub command: Option<Command>,
@@ -40,6 +46,12 @@ pub struct Cli {
 pub enum Command {
     /// List every component compiled into this binary.
     List,
+    /// Print a component's conf lines: their arguments, types, units, ranges and
+    /// defaults (or this help with no NAME).
+    Help {
+        /// A component (`jderobot list` shows them).
+        name: Option<String>,
+    },
     /// Parse and validate CONF: its grammar, then every component built from its
     /// lines as a run would, without running any schema; exit 1 on problems.
     Check {
@@ -71,6 +83,12 @@ pub fn main() -> ExitCode {
             ExitCode::SUCCESS
         }
         Some(Command::Check { conf }) => check(&conf),
+        Some(Command::Help { name: None }) => {
+            use clap::CommandFactory;
+            let _ = Cli::command().print_long_help();
+            ExitCode::SUCCESS
+        }
+        Some(Command::Help { name: Some(name) }) => help(&name),
         #[cfg(feature = "_mcap")]
         Some(Command::Info { file }) => info(&file),
         None => run(&cli),
@@ -97,6 +115,30 @@ fn list() {
             names.join(", ")
         );
     }
+}
+
+/// `jderobot help NAME`: the component's lines from its declaration.
+fn help(name: &str) -> ExitCode {
+    let entry = match registry::lookup(None, name) {
+        Ok(e) => e,
+        Err(e) => {
+            eprintln!("{e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    match entry.lines {
+        Some(decl) => print!(
+            "{}",
+            crate::conf::settings::help_text(entry.kind, entry.name, entry.summary, decl, "")
+        ),
+        None => println!(
+            "{} {}: {}
+
+Its lines are not declared yet; its module documentation lists them.",
+            entry.kind, entry.name, entry.summary
+        ),
+    }
+    ExitCode::SUCCESS
 }
 
 /// `jderobot info FILE.mcap`.

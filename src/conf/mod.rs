@@ -27,6 +27,7 @@ use std::{
 
 mod component;
 mod line;
+pub mod settings;
 
 pub use component::ComponentConf;
 pub use line::{ConfLine, ImageInterface};
@@ -224,6 +225,12 @@ impl Conf {
                         });
                     }
                     (Some(s), false) if s.kind == kind => {
+                        if !line.args().is_empty() {
+                            errors.push(line.error(format!(
+                                "`{kw}` takes no words after it, got `{}`; put them on a line of their own",
+                                settings::echo(&line.args().join(" "))
+                            )));
+                        }
                         conf.sections.push(open.take().expect("open section"));
                     }
                     (Some(s), false) => errors.push(line.error(format!(
