@@ -55,7 +55,10 @@ use parking_lot::Mutex;
 
 use crate::{
     colorspaces::{HsvRange, Lookup, hsv_mask},
-    conf::{ComponentConf, ConfLine},
+    conf::{
+        ComponentConf,
+        settings::{Arg, CYCLE, Setting, choice, float, int, interface},
+    },
     interfaces::{Image, Interface, InterfaceValue, PtEncoders, PtMotors},
     runtime::{Context, Runtime, Schema},
 };
@@ -327,89 +330,121 @@ impl Schema for FollowBall {
     }
 }
 
-fn one_number(l: &ConfLine, what: &str, lo: f32, hi: f32) -> anyhow::Result<f32> {
-    l.expect_args(1, 1, &format!("{} <{what}>", l.keyword()))?;
-    Ok(l.number(0, what, lo..=hi)?)
+/// A hue in the seed's units (radians).
+const HUE: &[Arg] = &[float("H", "rad", 0.0, std::f64::consts::TAU)];
+/// A saturation, 0..1.
+const SATURATION: &[Arg] = &[float("S", "", 0.0, 1.0)];
+/// A value, 0..255.
+const VALUE: &[Arg] = &[float("V", "", 0.0, 255.0)];
+
+/// followball's lines, declared once (`jderobot help followball`).
+const LINES: &[Setting] = &[
+    Setting::new(
+        "image",
+        "the camera image it filters (colorA..D, varcolorA..D)",
+        &[interface("INTERFACE")],
+    )
+    .default("colorA"),
+    Setting::new(
+        "pantiltencoders",
+        "the head's angles",
+        &[interface("INTERFACE")],
+    )
+    .default("pantiltencoders"),
+    Setting::new(
+        "pantiltmotors",
+        "the head it drives",
+        &[interface("INTERFACE")],
+    )
+    .default("pantiltmotors"),
+    Setting::new(
+        "hmin",
+        "the ball's hue range starts here (wraps through 0 when hmin > hmax)",
+        HUE,
+    )
+    .default("6.0"),
+    Setting::new("hmax", "the ball's hue range ends here", HUE).default("0.35"),
+    Setting::new("smin", "the least saturation of the ball", SATURATION).default("0.5"),
+    Setting::new("smax", "the most saturation of the ball", SATURATION).default("1"),
+    Setting::new("vmin", "the least value of the ball", VALUE).default("60"),
+    Setting::new("vmax", "the most value of the ball", VALUE).default("255"),
+    Setting::new(
+        "deadband",
+        "no motion while the ball is this close to the centre (at 320 columns)",
+        &[float("PX", "px", 1.0, 160.0)],
+    )
+    .default("40"),
+    Setting::new(
+        "min_pixels",
+        "fewer passing pixels than this is no ball (at 320x240)",
+        &[int("N", "px", 0, 76_800)],
+    )
+    .default("400"),
+    CYCLE.default("30"),
+    Setting::new(
+        "stop",
+        "how the head stops: go where it is, or speed 0 (the PTU, as 4.3)",
+        &[choice("HOW", &["position", "speed0"])],
+    )
+    .default("position"),
+    Setting::new(
+        "invert",
+        "an axis whose positive direction is the other way (the EVI's pan)",
+        &[choice("AXIS", &["pan", "tilt"])],
+    )
+    .repeats(),
+];
+
+/// The values of [`LINES`].
+#[derive(serde::Deserialize)]
+struct Lines {
+    image: String,
+    pantiltencoders: String,
+    pantiltmotors: String,
+    hmin: f32,
+    hmax: f32,
+    smin: f32,
+    smax: f32,
+    vmin: f32,
+    vmax: f32,
+    deadband: f32,
+    min_pixels: u32,
+    cycle: u64,
+    stop: String,
+    invert: Vec<String>,
 }
 
 /// Parses the conf: settings, interface names, cycle.
 pub fn parse(conf: &ComponentConf) -> anyhow::Result<(Settings, [String; 3], Duration)> {
-    let mut s = Settings::default();
-    let d = Settings::default().range;
-    let (mut hmin, mut hmax) = (d.hmin.to_radians(), d.hmax.to_radians());
-    let (mut smin, mut smax, mut vmin, mut vmax) = (d.smin, d.smax, d.vmin, d.vmax);
-    let mut names = [
-        "colorA".to_string(),
-        "pantiltencoders".to_string(),
-        "pantiltmotors".to_string(),
-    ];
-    let mut cycle = Duration::from_millis(30);
-    let tau = std::f32::consts::TAU;
-    for l in &conf.lines {
-        match l.keyword() {
-            "image" => {
-                l.expect_args(1, 1, "image INTERFACE")?;
-                let n = l.interface(0)?;
-                if crate::interfaces::family(&n) != Some(Image::KIND) {
-                    return Err(l
-                        .error(format!(
-                            "`image`: `{n}` is not an image interface (colorA..D, varcolorA..D)"
-                        ))
-                        .into());
-                }
-                names[0] = n;
-            }
-            "pantiltencoders" | "pantiltmotors" => {
-                l.expect_args(1, 1, &format!("{} INTERFACE", l.keyword()))?;
-                let i = if l.keyword() == "pantiltencoders" {
-                    1
-                } else {
-                    2
-                };
-                names[i] = l.args()[0].clone();
-            }
-            "hmin" => hmin = one_number(l, "a hue in radians", 0.0, tau)?,
-            "hmax" => hmax = one_number(l, "a hue in radians", 0.0, tau)?,
-            "smin" => smin = one_number(l, "a saturation 0..1", 0.0, 1.0)?,
-            "smax" => smax = one_number(l, "a saturation 0..1", 0.0, 1.0)?,
-            "vmin" => vmin = one_number(l, "a value 0..255", 0.0, 255.0)?,
-            "vmax" => vmax = one_number(l, "a value 0..255", 0.0, 255.0)?,
-            "deadband" => s.deadband = one_number(l, "pixels", 1.0, 160.0)?,
-            "min_pixels" => {
-                l.expect_args(1, 1, "min_pixels N")?;
-                s.min_pixels = l.number(0, "a pixel count", 0..=76_800)?;
-            }
-            "cycle" => {
-                cycle =
-                    Duration::from_millis(one_number(l, "a period in ms", 1.0, 10_000.0)? as u64);
-            }
-            "stop" => {
-                l.expect_args(1, 1, "stop position|speed0")?;
-                s.stop = match l.choice(0, "how to stop", &["position", "speed0"])? {
-                    "position" => Stop::Position,
-                    _ => Stop::Speed0,
-                };
-            }
-            "invert" => {
-                l.expect_args(1, 1, "invert pan|tilt")?;
-                match l.choice(0, "the axis", &["pan", "tilt"])? {
-                    "pan" => s.invert_pan = true,
-                    _ => s.invert_tilt = true,
-                }
-            }
-            _ => {
-                return Err(conf
-                    .unknown(
-                        l,
-                        "image, pantiltencoders, pantiltmotors, hmin, hmax, smin, smax, vmin, vmax, \
-                         deadband, min_pixels, cycle, stop or invert",
-                    )
-                    .into());
-            }
-        }
+    let l: Lines = conf.settings(LINES)?;
+    if crate::interfaces::family(&l.image) != Some(Image::KIND) {
+        let at = conf
+            .line("image")
+            .map(|l| l.at.to_string())
+            .unwrap_or_default();
+        anyhow::bail!(
+            "{at}: `image`: `{}` is not an image interface (colorA..D, varcolorA..D)",
+            l.image
+        );
     }
-    s.range = HsvRange::from_radians(hmin, hmax, smin, smax, vmin, vmax);
-    Ok((s, names, cycle))
+    let s = Settings {
+        deadband: l.deadband,
+        min_pixels: l.min_pixels as _,
+        stop: if l.stop == "speed0" {
+            Stop::Speed0
+        } else {
+            Stop::Position
+        },
+        invert_pan: l.invert.iter().any(|a| a == "pan"),
+        invert_tilt: l.invert.iter().any(|a| a == "tilt"),
+        range: HsvRange::from_radians(l.hmin, l.hmax, l.smin, l.smax, l.vmin, l.vmax),
+    };
+    let names = [
+        crate::interfaces::canonical(&l.image),
+        l.pantiltencoders,
+        l.pantiltmotors,
+    ];
+    Ok((s, names, Duration::from_millis(l.cycle)))
 }
 
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>> {
@@ -452,7 +487,8 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
 crate::register_schema!(
     "followball",
     "keeps a coloured ball centred with a pan-tilt camera (HSV filter, speed control)",
-    create
+    create,
+    lines = LINES
 );
 
 #[cfg(feature = "gui")]

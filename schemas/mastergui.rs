@@ -28,7 +28,10 @@ use egui::{Color32, RichText, WidgetInfo};
 use parking_lot::Mutex;
 
 use crate::{
-    conf::ComponentConf,
+    conf::{
+        ComponentConf,
+        settings::{CYCLE, Setting},
+    },
     runtime::Panel,
     runtime::{Context, Runtime, Schema, State},
     widgets::TimePlot,
@@ -279,15 +282,19 @@ impl Panel for MasterPanel {
     }
 }
 
+/// mastergui's lines, declared once (`jderobot help mastergui`).
+const LINES: &[Setting] = &[CYCLE.default("100")];
+
+/// The values of [`LINES`].
+#[derive(serde::Deserialize)]
+struct Lines {
+    cycle: u64,
+}
+
 fn create(conf: &ComponentConf, _rt: &Runtime) -> anyhow::Result<Box<dyn Schema>> {
-    for l in &conf.lines {
-        if l.keyword() != "cycle" {
-            return Err(conf.unknown(l, "`cycle MS`").into());
-        }
-    }
-    let ms: u64 = conf.value_or("cycle", "milliseconds", 100)?;
+    let lines: Lines = conf.settings(LINES)?;
     Ok(Box::new(MasterGui {
-        cycle: Duration::from_millis(ms.max(1)),
+        cycle: Duration::from_millis(lines.cycle),
         history: Arc::new(Mutex::new(TimePlot::new("mastergui_ips", 60.0))),
         panel_taken: false,
     }))
@@ -296,5 +303,6 @@ fn create(conf: &ComponentConf, _rt: &Runtime) -> anyhow::Result<Box<dyn Schema>
 crate::register_schema!(
     "mastergui",
     "the control panel: every schema's state, ips, run/stop and show/hide; every driver's interfaces",
-    create
+    create,
+    lines = LINES
 );

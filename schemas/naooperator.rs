@@ -140,7 +140,9 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
         anyhow::bail!(
             "{}: naooperator needs a motors interface (`{}` is not provided); load a driver \
              that provides it (the simulator, player, networkclient ...) before naooperator",
-            conf.file.display(),
+            conf.line("motors")
+                .map(|l| l.at.to_string())
+                .unwrap_or_else(|| conf.file.display().to_string()),
             lines.motors
         );
     };

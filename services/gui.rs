@@ -25,17 +25,8 @@ pub struct GuiService;
 
 impl Driver for GuiService {}
 
-fn check_lines(conf: &ComponentConf) -> anyhow::Result<()> {
-    if let Some(l) = conf.lines.first() {
-        return Err(conf
-            .unknown(l, "nothing (the gui service takes no lines)")
-            .into());
-    }
-    Ok(())
-}
-
 fn create(conf: &ComponentConf, _rt: &Runtime) -> anyhow::Result<Box<dyn Driver>> {
-    check_lines(conf)?;
+    conf.check(&[])?;
     Ok(Box::new(GuiService))
 }
 
@@ -61,7 +52,8 @@ crate::register_driver!(
     Service,
     "gui",
     "the egui window: mastergui and the shown schema panels",
-    create
+    create,
+    lines = &[]
 );
 crate::register_driver!(
     Service,

@@ -177,7 +177,7 @@ fn conf_lines_are_checked() {
         ),
         ("provides laser 0\n", "colorA..D or varcolorA..D"),
         ("bayer 0 RGBG\n", "not a Bayer pattern"),
-        ("framerate 30\n", "I don't know what to do"),
+        ("framerate 30\n", "takes no `framerate` line"),
         ("", "no `provides` line"),
     ] {
         let e = parse(bad).unwrap_err().to_string();

@@ -51,9 +51,9 @@ fn conf_lines_are_checked() {
         ),
         (
             "provides varcolorA Fake_1\nframerate Fake_1 0\n",
-            "positive",
+            "between 0.001 and 10000 frames/s",
         ),
-        ("trigger Fake_1\n", "I don't know what to do"),
+        ("trigger Fake_1\n", "takes no `trigger` line"),
         ("", "no `provides` line"),
     ] {
         let e = parse(bad).unwrap_err().to_string();

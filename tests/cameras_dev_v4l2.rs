@@ -60,7 +60,7 @@ fn conf_lines_of_both_names() {
         (
             "video4linux2",
             "device /dev/video0\n",
-            "I don't know what to do",
+            "takes no `device` line",
         ),
         ("video4linux", "provides colorA\n", "needs a device"),
         ("video4linux2", "", "no `provides` line"),

@@ -130,7 +130,7 @@ fn conf_errors_name_the_line() {
         ("hmin 7\n", "test.conf:"),
         ("image laser\n", "not an image interface"),
         ("invert roll\n", "pan, tilt"),
-        ("frobnicate\n", "don't know what to do"),
+        ("frobnicate\n", "takes no `frobnicate` line"),
     ] {
         let text = format!(
             "driver simulator\nprovides colorA\nprovides pantiltencoders\nprovides pantiltmotors\n\

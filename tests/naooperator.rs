@@ -83,7 +83,7 @@ fn needs_motors_and_names_the_line() {
         ("motors none\n", "needs a motors interface"),
         ("walk 1\n", "test.conf:"),
         ("max_v 0\n", "max_v"),
-        ("dance\n", "don't know what to do"),
+        ("dance\n", "takes no `dance` line"),
     ] {
         let conf = jderobot::Conf::parse(&conf(body), std::path::Path::new("test.conf")).unwrap();
         let err = match jderobot::loader::start(&conf) {

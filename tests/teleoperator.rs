@@ -68,9 +68,9 @@ fn conf_commands_drive_the_base_and_aim_the_pantilt() {
 fn conf_errors_name_file_and_line() {
     for (line, expect) in [
         ("base 1\n", "takes 2 argument"),
-        ("max_w 0\n", "must be above 0"),
+        ("max_w 0\n", "between 1 and 180 deg/s"),
         ("motors none\n", "needs a motors interface"),
-        ("frobnicate\n", "don't know what to do"),
+        ("frobnicate\n", "takes no `frobnicate` line"),
     ] {
         let dir = tempfile::tempdir().unwrap();
         let file = dir.path().join("t.conf");

@@ -55,7 +55,10 @@ use std::{
 use anyhow::Context as _;
 
 use crate::{
-    conf::{ComponentConf, ConfLine},
+    conf::{
+        ComponentConf, ConfLine,
+        settings::{self, Setting},
+    },
     interfaces::{COLOR_HEIGHT, COLOR_WIDTH, Image, Interface},
     runtime::{Driver, Runtime},
     vision::pixfmt::{self, Bayer, Yuv422Order, YuvMatrix},
@@ -83,8 +86,23 @@ pub struct CamConf {
     pub at: String,
 }
 
+/// The driver's lines, declared once (`jderobot help firewire`).
+const LINES: &[Setting] = &[
+    settings::provides(USAGE),
+    Setting::new(
+        "bayer",
+        "camera CAM sends a Bayer mosaic in this pattern (decoded to BGR)",
+        &[
+            settings::int("CAM", "", 0, 63),
+            settings::word("RGGB|GBRG|GRBG|BGGR"),
+        ],
+    )
+    .repeats(),
+];
+
 /// Parses the driver's lines.
 pub fn parse(conf: &ComponentConf) -> anyhow::Result<Vec<CamConf>> {
+    conf.check(LINES)?;
     let mut cams: Vec<CamConf> = Vec::new();
     let mut bayers: Vec<(u32, Bayer)> = Vec::new();
     for l in &conf.lines {
@@ -101,7 +119,7 @@ pub fn parse(conf: &ComponentConf) -> anyhow::Result<Vec<CamConf>> {
                 })?;
                 bayers.push((cam, p));
             }
-            _ => return Err(conf.unknown(l, "`provides` or `bayer` lines").into()),
+            _ => {} // refused by the declaration
         }
     }
     for (cam, p) in bayers {
@@ -686,7 +704,8 @@ crate::register_driver!(
     Driver,
     "firewire",
     "IEEE 1394 (IIDC) cameras through libdc1394 2.x: colorA..D, varcolorA..D",
-    create
+    create,
+    lines = LINES
 );
 
 crate::register_driver!(
@@ -694,5 +713,6 @@ crate::register_driver!(
     "firewire22",
     "the firewire driver under 4.3's libdc1394-2.2 name: colorA..D, varcolorA..D",
     create,
-    "firewire22"
+    "firewire22",
+    lines = LINES
 );

@@ -51,7 +51,10 @@ use anyhow::Context as _;
 use aravis::{Buffer, BufferStatus, Camera, CameraExt, CameraExtManual, PixelFormat, StreamExt};
 
 use crate::{
-    conf::{ComponentConf, ConfLine},
+    conf::{
+        ComponentConf, ConfLine,
+        settings::{self, Setting as Line},
+    },
     interfaces::{COLOR_HEIGHT, COLOR_WIDTH, Image, Interface},
     runtime::{Driver, Runtime},
     vision::pixfmt::{self, Bayer, Yuv422Order, YuvMatrix},
@@ -108,8 +111,38 @@ fn setting(l: &ConfLine, what: &str) -> anyhow::Result<(String, Setting)> {
     Ok((cam, v))
 }
 
+/// The driver's lines, declared once (`jderobot help gige`).
+const LINES: &[Line] = &[
+    settings::provides(USAGE),
+    Line::new(
+        "exposure",
+        "a camera's exposure time, or auto",
+        &[
+            settings::word("CAMERA_ID"),
+            settings::word("MICROSECONDS|auto"),
+        ],
+    )
+    .repeats(),
+    Line::new(
+        "gain",
+        "a camera's gain, or auto",
+        &[settings::word("CAMERA_ID"), settings::word("DB|auto")],
+    )
+    .repeats(),
+    Line::new(
+        "framerate",
+        "a camera's frame rate",
+        &[
+            settings::word("CAMERA_ID"),
+            settings::float("FPS", "frames/s", 0.001, 10_000.0),
+        ],
+    )
+    .repeats(),
+];
+
 /// Parses the driver's lines.
 pub fn parse(conf: &ComponentConf) -> anyhow::Result<Vec<GigeConf>> {
+    conf.check(LINES)?;
     let mut cams: Vec<GigeConf> = Vec::new();
     let mut exposure = HashMap::new();
     let mut gain = HashMap::new();
@@ -135,11 +168,7 @@ pub fn parse(conf: &ComponentConf) -> anyhow::Result<Vec<GigeConf>> {
                 }
                 rate.insert(l.args()[0].clone(), f);
             }
-            _ => {
-                return Err(conf
-                    .unknown(l, "`provides`, `exposure`, `gain` or `framerate` lines")
-                    .into());
-            }
+            _ => {} // refused by the declaration
         }
     }
     for known in exposure.keys().chain(gain.keys()).chain(rate.keys()) {
@@ -667,5 +696,6 @@ crate::register_driver!(
     Driver,
     "gige",
     "GigE Vision / USB3 Vision cameras through Aravis 0.8: colorA..D, varcolorA..D",
-    create
+    create,
+    lines = LINES
 );

@@ -34,7 +34,10 @@ use std::sync::Arc;
 use anyhow::Context as _;
 
 use crate::{
-    conf::{ComponentConf, ConfLine},
+    conf::{
+        ComponentConf, ConfLine,
+        settings::{self, Setting},
+    },
     interfaces::{COLOR_HEIGHT, COLOR_WIDTH, Image, Interface},
     media::{
         still::MAX_PIXELS,
@@ -67,13 +70,14 @@ pub fn size(l: &ConfLine, i: usize) -> Result<(u32, u32), crate::conf::ConfError
     Ok((w, h))
 }
 
+/// The driver's lines, declared once (`jderobot help imagefile`).
+const LINES: &[Setting] = &[settings::provides(USAGE)];
+
 /// Parses the driver's lines.
 pub fn parse(conf: &ComponentConf) -> anyhow::Result<Vec<(Source, ConfLine)>> {
+    conf.check(LINES)?;
     let mut out: Vec<(Source, ConfLine)> = Vec::new();
     for l in &conf.lines {
-        if l.keyword() != "provides" {
-            return Err(conf.unknown(l, &format!("`{USAGE}`")).into());
-        }
         let image = l.image_interface(0, "imagefile", USAGE)?;
         let (iface, color) = (image.name.as_str(), image.fixed_size);
         let fit = if color {
@@ -158,5 +162,6 @@ crate::register_driver!(
     Driver,
     "imagefile",
     "images from PNM (4.3), PNG, JPEG and BMP files on colorA..D / varcolorA..D",
-    create
+    create,
+    lines = LINES
 );

@@ -43,7 +43,10 @@ use std::{path::Path, process::Command, sync::Arc};
 use anyhow::Context as _;
 
 use crate::{
-    conf::{ComponentConf, ConfLine},
+    conf::{
+        ComponentConf, ConfLine,
+        settings::{self, Setting},
+    },
     interfaces::{COLOR_HEIGHT, COLOR_WIDTH, Image, Interface},
     media::{
         MediaError,
@@ -114,13 +117,14 @@ fn file_or_url(conf: &ComponentConf, s: &str) -> String {
     }
 }
 
+/// The driver's lines, declared once (`jderobot help mplayer`).
+const LINES: &[Setting] = &[settings::provides(USAGE)];
+
 /// Parses the driver's lines.
 pub fn parse(conf: &ComponentConf) -> anyhow::Result<Vec<(Source, ConfLine)>> {
+    conf.check(LINES)?;
     let mut out: Vec<(Source, ConfLine)> = Vec::new();
     for l in &conf.lines {
-        if l.keyword() != "provides" {
-            return Err(conf.unknown(l, &format!("`{USAGE}`")).into());
-        }
         let a = l.args();
         let image = l.image_interface(0, "mplayer", USAGE)?;
         let (iface, color) = (image.name.as_str(), image.fixed_size);
@@ -380,5 +384,6 @@ crate::register_driver!(
     Driver,
     "mplayer",
     "any video the mplayer program plays (files, URLs, V4L2) on colorA..D / varcolorA..D",
-    create
+    create,
+    lines = LINES
 );

@@ -54,7 +54,10 @@ use std::{
 use anyhow::Context as _;
 
 use crate::{
-    conf::{ComponentConf, ConfLine},
+    conf::{
+        ComponentConf, ConfLine,
+        settings::{self, Setting},
+    },
     interfaces::{COLOR_HEIGHT, COLOR_WIDTH, Image, Interface},
     media::{
         MediaError,
@@ -100,13 +103,14 @@ fn dim(l: &ConfLine, i: usize, what: &str) -> anyhow::Result<u32> {
     Ok(v)
 }
 
+/// The driver's lines, declared once (`jderobot help opencv`).
+const LINES: &[Setting] = &[settings::provides(USAGE)];
+
 /// Parses the driver's lines.
 pub fn parse(conf: &ComponentConf) -> anyhow::Result<Vec<(Source, ConfLine)>> {
+    conf.check(LINES)?;
     let mut out: Vec<(Source, ConfLine)> = Vec::new();
     for l in &conf.lines {
-        if l.keyword() != "provides" {
-            return Err(conf.unknown(l, &format!("`{USAGE}`")).into());
-        }
         let a = l.args();
         let image = l.image_interface(0, "opencv", USAGE)?;
         let (iface, color, var) = (image.name.as_str(), image.fixed_size, !image.fixed_size);
@@ -489,5 +493,6 @@ crate::register_driver!(
     Driver,
     "opencv",
     "images, V4L2 capture devices and video files (through FFmpeg) on colorA..D / varcolorA..D",
-    create
+    create,
+    lines = LINES
 );

@@ -37,7 +37,10 @@ use std::{
 };
 
 use crate::{
-    conf::ComponentConf,
+    conf::{
+        ComponentConf,
+        settings::{self, Setting},
+    },
     interfaces::{COLOR_HEIGHT, COLOR_WIDTH, Image, Interface},
     progeo::{PinholeCamera, World},
     runtime::{Driver, Runtime, Worker},
@@ -108,8 +111,27 @@ pub struct Sim3dConf {
     pub cameras: Vec<(String, PinholeCamera)>,
 }
 
+/// The driver's lines, declared once (`jderobot help simulated3D`).
+const LINES: &[Setting] = &[
+    Setting::new(
+        "worldfile",
+        "the world it renders (a world file)",
+        &[settings::path("FILE")],
+    ),
+    Setting::new(
+        "provides",
+        "a camera: an image interface and its camera file (progeo's format)",
+        &[
+            settings::interface("INTERFACE"),
+            settings::path("CAMERA_FILE"),
+        ],
+    )
+    .repeats(),
+];
+
 /// Parses the driver's lines and reads the world and camera files.
 pub fn parse(conf: &ComponentConf) -> anyhow::Result<Sim3dConf> {
+    conf.check(LINES)?;
     let mut world = None;
     let mut cameras: Vec<(String, PinholeCamera)> = Vec::new();
     for l in &conf.lines {
@@ -152,7 +174,7 @@ pub fn parse(conf: &ComponentConf) -> anyhow::Result<Sim3dConf> {
                 }
                 cameras.push((iface.to_string(), cam));
             }
-            _ => return Err(conf.unknown(l, &format!("`{USAGE}`")).into()),
+            _ => {} // refused by the declaration
         }
     }
     let world =
@@ -209,5 +231,6 @@ crate::register_driver!(
     Driver,
     "simulated3D",
     "synthetic camera images of a 3D wireframe world (progeo cameras, black lines on white)",
-    create
+    create,
+    lines = LINES
 );

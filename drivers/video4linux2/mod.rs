@@ -55,7 +55,10 @@ use v4l::{
 };
 
 use crate::{
-    conf::{ComponentConf, ConfLine},
+    conf::{
+        ComponentConf, ConfLine,
+        settings::{self, Setting},
+    },
     interfaces::{COLOR_HEIGHT, COLOR_WIDTH, Image, Interface},
     runtime::{Driver, Runtime},
     vision::pixfmt::{self, Bayer, Yuv422Order, YuvMatrix},
@@ -76,13 +79,16 @@ pub struct DevConf {
     pub at: String,
 }
 
+/// The driver's lines, declared once (`jderobot help video4linux2`).
+const LINES: &[Setting] = &[settings::provides(USAGE)];
+/// 4.3's video4linux lines.
+const LINES_V4L1: &[Setting] = &[settings::provides(USAGE_V4L1)];
+
 /// Parses the driver's lines; `v4l1` accepts 4.3's video4linux lines (no INPUT).
 pub fn parse(conf: &ComponentConf, v4l1: bool) -> anyhow::Result<Vec<DevConf>> {
+    conf.check(if v4l1 { LINES_V4L1 } else { LINES })?;
     let mut out = Vec::new();
     for l in &conf.lines {
-        if l.keyword() != "provides" {
-            return Err(conf.unknown(l, "`provides` lines").into());
-        }
         out.push(parse_provides(conf, l, v4l1)?);
     }
     if out.is_empty() {
@@ -564,7 +570,8 @@ crate::register_driver!(
     Driver,
     "video4linux2",
     "V4L2 capture devices (webcams, capture cards): colorA..D, varcolorA..D",
-    create
+    create,
+    lines = LINES
 );
 
 crate::register_driver!(
@@ -572,5 +579,6 @@ crate::register_driver!(
     "video4linux",
     "4.3's V4L1 lines, run by the video4linux2 driver: colorA..D, varcolorA..D",
     create_v4l1,
-    "video4linux"
+    "video4linux",
+    lines = LINES_V4L1
 );

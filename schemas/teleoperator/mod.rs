@@ -171,7 +171,9 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
         anyhow::bail!(
             "{}: teleoperator needs a motors interface (`{}` is not provided); load a driver \
              that provides it (e.g. the simulator with `provides motors`) before teleoperator",
-            conf.file.display(),
+            conf.line("motors")
+                .map(|l| l.at.to_string())
+                .unwrap_or_else(|| conf.file.display().to_string()),
             lines.motors
         );
     };

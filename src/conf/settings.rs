@@ -202,6 +202,13 @@ pub const MOTORS_TIMEOUT: Setting = Setting::new(
 )
 .default("500");
 
+/// `provides INTERFACE ...`, any number of them, in the forms `usage` says (a
+/// driver whose provides lines take several forms reads their words itself).
+pub const fn provides(usage: &'static str) -> Setting {
+    const ARGS: &[Arg] = &[interface("INTERFACE"), rest("ARGS").optional()];
+    Setting::new("provides", usage, ARGS).repeats()
+}
+
 /// Says a range in words.
 fn range_words(min: f64, max: f64) -> String {
     let n = |x: f64| {
@@ -446,6 +453,11 @@ fn conf_location(conf: &ComponentConf) -> Location {
 }
 
 impl ComponentConf {
+    /// Checks this component's lines against `decl` (for a component that only
+    /// needs them checked, such as one that takes no lines: `conf.check(&[])`).
+    pub fn check(&self, decl: &[Setting]) -> Result<(), ConfError> {
+        parse(self, decl).map(drop).map_err(|mut e| e.remove(0))
+    }
     /// Parses this component's lines into `T` from their declaration `decl`: every
     /// line checked (type, range, count), defaults filled in. The first problem is
     /// returned ([`check`] gives them all).
