@@ -462,7 +462,7 @@ fn conf_lines_are_checked() {
         .unwrap_err()
         .to_string();
     assert!(
-        e.starts_with("<inline>:2:") && e.contains("fly away"),
+        e.starts_with("<inline>:2:") && e.contains("takes no `fly` line"),
         "{e}"
     );
     let e = sim_conf("provides laser robot9\n").unwrap_err().to_string();
@@ -477,7 +477,10 @@ fn conf_lines_are_checked() {
         .to_string();
     assert!(e.contains("<inline>:2") && e.contains("twice"), "{e}");
     let e = sim_conf("robot a NaN 0 0\n").unwrap_err().to_string();
-    assert!(e.contains("<inline>:1") && e.contains("X in mm"), "{e}");
+    assert!(
+        e.contains("<inline>:1") && e.contains("X (argument 2) is `NaN`, expected a number"),
+        "{e}"
+    );
     let e = sim_conf("speed fast\n").unwrap_err().to_string();
     assert!(e.contains("<inline>:1"), "{e}");
     let c = sim_conf(

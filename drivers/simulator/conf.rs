@@ -10,7 +10,10 @@ use std::{
 };
 
 use crate::{
-    conf::{ComponentConf, ConfError, ConfLine},
+    conf::{
+        ComponentConf, ConfError, ConfLine,
+        settings::{self, MOTORS_TIMEOUT, Setting, choice, float, int, on_off, path, word},
+    },
     interfaces::{COLOR_HEIGHT, COLOR_WIDTH, interface_name},
     world::{World, closest_on_segment},
 };
@@ -83,8 +86,119 @@ pub struct Simulation {
     pub publish_always: bool,
 }
 
-const EXPECTED: &str = "world, robot, initial_position, provides, motors_timeout, speed, stepped, seed, \
-step, period, noise, accel, radius, laser_range, camera_height, camera_fov or publish_always";
+/// The simulator's lines, declared once (`jderobot help simulator`). Their values
+/// are read below, in file order (robots, then what each provides).
+pub const LINES: &[Setting] = &[
+    Setting::new(
+        "world",
+        "the world: walls, starts, balls (a world file)",
+        &[path("FILE")],
+    ),
+    Setting::new(
+        "robot",
+        "a robot; its pose (mm, mm, deg) or the world's next start",
+        &[
+            word("NAME"),
+            float("X", "mm", -1e7, 1e7).optional(),
+            float("Y", "mm", -1e7, 1e7),
+            float("THETA", "deg", -36_000.0, 36_000.0),
+        ],
+    )
+    .repeats(),
+    Setting::new(
+        "initial_position",
+        "the first robot's pose",
+        &[
+            float("X", "mm", -1e7, 1e7),
+            float("Y", "mm", -1e7, 1e7),
+            float("THETA", "deg", -36_000.0, 36_000.0),
+        ],
+    ),
+    settings::provides(USAGE_PROVIDES),
+    MOTORS_TIMEOUT,
+    Setting::new(
+        "speed",
+        "simulated seconds per wall second (1 = real time), or max",
+        &[word("N|max")],
+    ),
+    Setting::new(
+        "stepped",
+        "advance this much simulated time per new command on the first robot's motors",
+        &[float("MS", "ms", 0.001, 60_000.0)],
+    ),
+    Setting::new(
+        "seed",
+        "the noise's random seed",
+        &[int("N", "", 0, i64::MAX)],
+    ),
+    Setting::new(
+        "step",
+        "the physics step",
+        &[float("MS", "ms", 0.001, 100.0)],
+    ),
+    Setting::new(
+        "period",
+        "how often a sensor publishes (simulated time)",
+        &[
+            choice(
+                "SENSOR",
+                &[
+                    "encoders",
+                    "laser",
+                    "sonars",
+                    "bumpers",
+                    "camera",
+                    "pantiltencoders",
+                ],
+            ),
+            float("MS", "ms", 0.001, 60_000.0),
+        ],
+    )
+    .repeats(),
+    Setting::new(
+        "noise",
+        "sensor noise: odometry DISTANCE_FRACTION ANGLE_FRACTION, laser MM or sonars MM",
+        &[
+            choice("SENSOR", &["odometry", "laser", "sonars"]),
+            float("A", "", 0.0, 1e6),
+            float("B", "", 0.0, 1e6).optional(),
+        ],
+    )
+    .repeats(),
+    Setting::new(
+        "accel",
+        "the robot's accelerations",
+        &[
+            float("V", "mm/s²", 0.001, 1e6),
+            float("W", "deg/s²", 0.001, 1e6),
+        ],
+    ),
+    Setting::new(
+        "radius",
+        "the robot's radius",
+        &[float("R", "mm", 0.001, 1e5)],
+    ),
+    Setting::new(
+        "laser_range",
+        "the laser's range",
+        &[float("RANGE", "mm", 0.001, 1e6)],
+    ),
+    Setting::new(
+        "camera_height",
+        "the pan-tilt camera's height",
+        &[float("H", "mm", 0.001, 1e5)],
+    ),
+    Setting::new(
+        "camera_fov",
+        "the pan-tilt camera's horizontal field of view",
+        &[float("FOV", "deg", 0.001, 169.999)],
+    ),
+    Setting::new(
+        "publish_always",
+        "publish sensors even while nobody uses them",
+        &[on_off("SWITCH")],
+    ),
+];
 
 const USAGE_PROVIDES: &str = "provides encoders|motors|sonars|bumpers|pantiltencoders|pantiltmotors|colorA..D [ROBOT], \
 provides laser [N RESOLUTION] [ROBOT], provides varcolorA..D [W H] [ROBOT]";
@@ -115,6 +229,7 @@ struct Settings {
 }
 
 fn settings(conf: &ComponentConf) -> Result<Settings, ConfError> {
+    conf.check(LINES)?;
     let mut s = Settings {
         world: World::new(),
         robots: Vec::new(),
@@ -178,7 +293,7 @@ fn settings(conf: &ComponentConf) -> Result<Settings, ConfError> {
             }
             "step" => {
                 l.expect_args(1, 1, "step MS")?;
-                s.step = l.number(0, "the physics step in ms", POSITIVE)?.min(100.0) / 1000.0;
+                s.step = l.number(0, "the physics step in ms", 0.001..=100.0)? / 1000.0;
             }
             "period" => {
                 l.expect_args(
@@ -253,7 +368,7 @@ fn settings(conf: &ComponentConf) -> Result<Settings, ConfError> {
                 l.expect_args(1, 1, "publish_always on|off")?;
                 s.publish_always = l.on_off(0, "publish_always")?;
             }
-            _ => return Err(conf.unknown(l, EXPECTED)),
+            _ => {} // refused by the declaration
         }
     }
     if s.robots.is_empty() {

@@ -111,5 +111,6 @@ crate::register_driver!(
     Driver,
     "simulator",
     "simulated Pioneer robots in a 2D world: encoders, motors, laser, sonars, bumpers, camera, pan-tilt",
-    create
+    create,
+    lines = conf::LINES
 );

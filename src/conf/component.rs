@@ -88,13 +88,6 @@ impl ComponentConf {
             .unwrap_or_else(|| p.to_path_buf())
     }
 
-    /// The motor-safety timeout (`motors_timeout MS`, default 500 ms): a motors
-    /// command older than this counts as zero for every driver that moves a robot.
-    pub fn motors_timeout(&self) -> Result<std::time::Duration, ConfError> {
-        let ms: u64 = self.value_or("motors_timeout", "milliseconds", 500)?;
-        Ok(std::time::Duration::from_millis(ms))
-    }
-
     /// An error for a line the component does not understand.
     pub fn unknown(&self, line: &ConfLine, expected: &str) -> ConfError {
         line.error(format!(

@@ -453,6 +453,20 @@ fn conf_location(conf: &ComponentConf) -> Location {
 }
 
 impl ComponentConf {
+    /// The motor-safety timeout ([`MOTORS_TIMEOUT`], default 500 ms): a motors
+    /// command older than this counts as zero for every driver that moves a robot.
+    pub fn motors_timeout(&self) -> Result<std::time::Duration, ConfError> {
+        #[derive(serde::Deserialize)]
+        struct Line {
+            motors_timeout: u64,
+        }
+        let only = ComponentConf {
+            lines: self.lines_with(MOTORS_TIMEOUT.key).cloned().collect(),
+            ..self.clone()
+        };
+        let l: Line = only.settings(&[MOTORS_TIMEOUT])?;
+        Ok(std::time::Duration::from_millis(l.motors_timeout))
+    }
     /// Checks this component's lines against `decl` (for a component that only
     /// needs them checked, such as one that takes no lines: `conf.check(&[])`).
     pub fn check(&self, decl: &[Setting]) -> Result<(), ConfError> {
