@@ -62,7 +62,10 @@ use std::{
 use anyhow::Context as _;
 
 use crate::{
-    conf::ComponentConf,
+    conf::{
+        ComponentConf,
+        settings::{Setting, choice, int, on_off, path, rest},
+    },
     interfaces::{Interfaces, Watch},
     mcapfmt::{self, RecorderStatus, Snapshot, Source},
     runtime::{Driver, Runtime},
@@ -125,87 +128,107 @@ fn utc_stamp(t: SystemTime) -> String {
     )
 }
 
+/// The recorder's lines, declared once (`jderobot help recorder`).
+const LINES: &[Setting] = &[
+    Setting::new(
+        "records",
+        "interfaces to record, or all: every interface of a kind jderobot records, provided by \
+         the drivers loaded before the recorder",
+        &[rest("NAME...|all")],
+    )
+    .repeats(),
+    Setting::new(
+        "file",
+        "the file (default recording-YYYYMMDD-HHMMSS.mcap in the current directory, UTC)",
+        &[path("PATH")],
+    ),
+    Setting::new(
+        "split",
+        "start a new file (NAME-1.mcap, ...) past this size or time",
+        &[int("N", "", 1, 1_000_000), choice("UNIT", &["MB", "min"])],
+    ),
+    Setting::new(
+        "compression",
+        "chunk compression",
+        &[choice("COMPRESSION", &["zstd", "lz4", "none"])],
+    )
+    .default("zstd"),
+    Setting::new(
+        "images",
+        "raw: foxglove.RawImage bgr8; jpeg: foxglove.CompressedImage at QUALITY (default 90)",
+        &[
+            choice("FORMAT", &["raw", "jpeg"]),
+            int("QUALITY", "", 1, 100).optional(),
+        ],
+    )
+    .default("raw"),
+    Setting::new(
+        "queue",
+        "messages waiting for the disk at most; more are dropped and counted",
+        &[int("MESSAGES", "", 1, 100_000)],
+    )
+    .default("64"),
+    Setting::new(
+        "profile",
+        "foxglove: Foxglove schemas (protobuf, JSON); ros2: rosbag2 (CDR)",
+        &[choice("PROFILE", &["foxglove", "ros2"])],
+    )
+    .default("foxglove"),
+    Setting::new(
+        "start",
+        "record from the start, or wait for `record start`",
+        &[on_off("SWITCH")],
+    )
+    .default("on"),
+];
+
+/// The values of [`LINES`].
+#[derive(serde::Deserialize)]
+struct Lines {
+    records: Vec<Vec<String>>,
+    file: Option<PathBuf>,
+    split: Option<(u64, String)>,
+    compression: String,
+    images: (String, Option<u8>),
+    queue: usize,
+    profile: String,
+    start: bool,
+}
+
 fn parse(conf: &ComponentConf) -> Result<Settings, crate::conf::ConfError> {
-    let mut s = Settings {
-        records: None,
-        file: PathBuf::from(format!("recording-{}.mcap", utc_stamp(SystemTime::now()))),
-        split: Split::None,
-        compression: Some(mcap::Compression::Zstd),
-        queue: 64,
-        start: true,
-        ros2: false,
-        jpeg: None,
-    };
-    for line in &conf.lines {
-        match line.keyword() {
-            "records" => {
-                line.expect_args(1, usize::MAX, "records NAME... | records all")?;
-                if line.args().len() == 1 && line.args()[0] == "all" {
-                    s.records = None;
-                } else {
-                    let mut names = s.records.take().unwrap_or_default();
-                    for i in 0..line.args().len() {
-                        names.push(line.interface(i)?);
-                    }
-                    s.records = Some(names);
-                }
-            }
-            "file" => {
-                line.expect_args(1, 1, "file PATH")?;
-                s.file = line.path(0, "a file path")?;
-            }
-            "split" => {
-                line.expect_args(2, 2, "split N MB | split N min")?;
-                let unit = line.choice(1, "a unit", &["MB", "min"])?;
-                s.split = if unit == "MB" {
-                    Split::Bytes(line.number::<u64>(0, "megabytes", 1..=1_000_000)? * 1_000_000)
-                } else {
-                    Split::Time(Duration::from_secs(
-                        line.number::<u64>(0, "minutes", 1..=100_000)? * 60,
-                    ))
-                };
-            }
-            "compression" => {
-                line.expect_args(1, 1, "compression zstd|lz4|none")?;
-                s.compression = match line.choice(0, "a compression", &["zstd", "lz4", "none"])? {
-                    "zstd" => Some(mcap::Compression::Zstd),
-                    "lz4" => Some(mcap::Compression::Lz4),
-                    _ => None,
-                };
-            }
-            "images" => {
-                line.expect_args(1, 2, "images raw | images jpeg [QUALITY]")?;
-                s.jpeg = if line.choice(0, "an image format", &["raw", "jpeg"])? == "jpeg" {
-                    Some(if line.args().len() == 2 {
-                        line.number::<u8>(1, "a JPEG quality", 1..=100)?
-                    } else {
-                        90
-                    })
-                } else {
-                    None
-                };
-            }
-            "queue" => {
-                line.expect_args(1, 1, "queue MESSAGES")?;
-                s.queue = line.number::<usize>(0, "messages", 1..=100_000)?;
-            }
-            "profile" => {
-                line.expect_args(1, 1, "profile foxglove|ros2")?;
-                s.ros2 = line.choice(0, "a profile", &["foxglove", "ros2"])? == "ros2";
-            }
-            "start" => {
-                line.expect_args(1, 1, "start on|off")?;
-                s.start = line.on_off(0, "on or off")?;
-            }
-            _ => {
-                return Err(conf.unknown(
-                    line,
-                    "records, file, split, compression, images, queue, profile or start",
-                ));
+    let l: Lines = conf.settings(LINES)?;
+    // `records all` (or no records line): None; else every name on every line.
+    let mut records: Option<Vec<String>> = None;
+    for (line, words) in conf.lines_with("records").zip(&l.records) {
+        if words.len() == 1 && words[0] == "all" {
+            records = None;
+        } else {
+            let names = records.get_or_insert_with(Vec::new);
+            for i in 0..words.len() {
+                names.push(line.interface(i)?);
             }
         }
     }
-    Ok(s)
+    Ok(Settings {
+        records,
+        file: l.file.unwrap_or_else(|| {
+            PathBuf::from(format!("recording-{}.mcap", utc_stamp(SystemTime::now())))
+        }),
+        split: match l.split {
+            None => Split::None,
+            Some((n, unit)) if unit == "MB" => Split::Bytes(n * 1_000_000),
+            Some((n, _)) => Split::Time(Duration::from_secs(n * 60)),
+        },
+        compression: match l.compression.as_str() {
+            "zstd" => Some(mcap::Compression::Zstd),
+            "lz4" => Some(mcap::Compression::Lz4),
+            _ => None,
+        },
+        queue: l.queue,
+        start: l.start,
+        ros2: l.profile == "ros2",
+        jpeg: (l.images.0 == "jpeg").then_some(l.images.1.unwrap_or(90)),
+    })
 }
 
 /// The running recorder.
@@ -557,7 +580,8 @@ crate::register_driver!(
     Service,
     "recorder",
     "records interfaces into an MCAP file (Foxglove schemas, zstd/lz4) for replay, Foxglove and Python",
-    create
+    create,
+    lines = LINES
 );
 
 #[cfg(test)]
