@@ -61,7 +61,9 @@ pub fn read_header(r: &mut impl Read) -> Result<Option<Y4mHeader>, String> {
     }
     let (mut width, mut height, mut rate) = (0u32, 0u32, None);
     for w in words {
-        let (tag, val) = w.split_at(w.len().min(1));
+        // The tag is the first character (split at a char boundary: the line was
+        // made valid UTF-8 with replacement characters, which take 3 bytes).
+        let (tag, val) = w.split_at(w.chars().next().map_or(0, char::len_utf8));
         match tag {
             "W" => width = val.parse().unwrap_or(0),
             "H" => height = val.parse().unwrap_or(0),

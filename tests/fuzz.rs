@@ -1,0 +1,606 @@
+//! Fuzzing every parser of outside bytes, in-process: structure-aware random inputs
+//! (mutations of real seeds: bit flips, byte runs, splices, cut-offs, and for text
+//! the word-level ones: extreme numbers, repeated and dropped words, long tokens).
+//! Stable Rust here has no coverage-guided fuzzer that builds offline (cargo-fuzz
+//! needs nightly; cargo-afl builds AFL++ with LLVM plugins), so this is a seeded,
+//! reproducible random fuzzer; each target runs the same public entry point the
+//! program uses on those bytes.
+//!
+//! For every input it checks: no panic (caught and counted, the first message and
+//! input kept), no hang (a watchdog aborts the run naming the target if one input
+//! takes over 10 s), and no single allocation above [`ALLOC_BOUND`] (a counting
+//! global allocator records the largest).
+//!
+//! CI runs a smoke pass (`FUZZ_INPUTS`, default 10,000 per target); longer runs:
+//! `scripts/fuzz.sh SECONDS` (release build, `FUZZ_SECONDS` per target, prints the
+//! counts). `FUZZ_SEED` changes the random sequence; `FUZZ_TARGET` picks targets
+//! whose name contains it.
+
+use std::{
+    alloc::{GlobalAlloc, Layout, System},
+    panic::{AssertUnwindSafe, catch_unwind},
+    path::{Path, PathBuf},
+    sync::{
+        Arc,
+        atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering},
+    },
+    time::{Duration, Instant},
+};
+
+/// No input may make the program ask for more than this at once.
+const ALLOC_BOUND: usize = 256 << 20;
+
+struct Counting;
+static LARGEST: AtomicUsize = AtomicUsize::new(0);
+static OVER_BOUND: AtomicUsize = AtomicUsize::new(0);
+
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, l: Layout) -> *mut u8 {
+        note(l.size());
+        unsafe { System.alloc(l) }
+    }
+    unsafe fn alloc_zeroed(&self, l: Layout) -> *mut u8 {
+        note(l.size());
+        unsafe { System.alloc_zeroed(l) }
+    }
+    unsafe fn realloc(&self, p: *mut u8, l: Layout, new: usize) -> *mut u8 {
+        note(new);
+        unsafe { System.realloc(p, l, new) }
+    }
+    unsafe fn dealloc(&self, p: *mut u8, l: Layout) {
+        unsafe { System.dealloc(p, l) }
+    }
+}
+
+fn note(size: usize) {
+    LARGEST.fetch_max(size, Ordering::Relaxed);
+    if size > ALLOC_BOUND {
+        OVER_BOUND.fetch_add(1, Ordering::Relaxed);
+    }
+}
+
+#[global_allocator]
+static ALLOC: Counting = Counting;
+
+/// xorshift64*: small, fast, reproducible.
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> u64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
+    }
+    fn below(&mut self, n: usize) -> usize {
+        if n == 0 {
+            0
+        } else {
+            (self.next() % n as u64) as usize
+        }
+    }
+}
+
+/// Words that break number parsers and length checks.
+const NASTY: &[&str] = &[
+    "0",
+    "-1",
+    "nan",
+    "NaN",
+    "inf",
+    "-inf",
+    "1e308",
+    "-1e308",
+    "1e-320",
+    "18446744073709551616",
+    "-9223372036854775809",
+    "4294967296",
+    "65536",
+    "2147483648",
+    "",
+    "#",
+    "end_driver",
+    "provides",
+    "/dev/zero",
+    "/",
+];
+
+/// One mutation of `seed`; `text` adds the word-level ones.
+fn mutate(rng: &mut Rng, seed: &[u8], corpus: &[Vec<u8>], text: bool) -> Vec<u8> {
+    let mut b = seed.to_vec();
+    for _ in 0..1 + rng.below(4) {
+        match rng.below(if text { 10 } else { 7 }) {
+            0 if !b.is_empty() => {
+                let i = rng.below(b.len());
+                b[i] ^= 1 << rng.below(8);
+            }
+            1 if !b.is_empty() => {
+                let i = rng.below(b.len());
+                b[i] = [0, 0xFF, 0x7F, 0x80, b'\n', b' ', b'-', b'9'][rng.below(8)];
+            }
+            2 => {
+                let i = rng.below(b.len() + 1);
+                let n = 1 + rng.below(16);
+                let ins: Vec<u8> = (0..n).map(|_| rng.next() as u8).collect();
+                b.splice(i..i, ins);
+            }
+            3 if !b.is_empty() => {
+                let i = rng.below(b.len());
+                let n = rng.below((b.len() - i).min(64) + 1);
+                b.drain(i..i + n);
+            }
+            4 if !b.is_empty() => b.truncate(rng.below(b.len())),
+            5 if !corpus.is_empty() => {
+                let other = &corpus[rng.below(corpus.len())];
+                let i = rng.below(b.len() + 1);
+                let j = rng.below(other.len() + 1);
+                b.truncate(i);
+                b.extend_from_slice(&other[j..]);
+            }
+            6 if b.len() >= 4 => {
+                // A big-endian or little-endian length field set to something large.
+                let i = rng.below(b.len() - 3);
+                let v: u32 = [u32::MAX, 0x7FFF_FFFF, 0x0100_0000, 0xFFFF][rng.below(4)];
+                let bytes = if rng.below(2) == 0 {
+                    v.to_be_bytes()
+                } else {
+                    v.to_le_bytes()
+                };
+                b[i..i + 4].copy_from_slice(&bytes);
+            }
+            7 | 8 | 9 => {
+                let s = String::from_utf8_lossy(&b).into_owned();
+                let mut words: Vec<String> = s.split(' ').map(String::from).collect();
+                if words.is_empty() {
+                    continue;
+                }
+                let i = rng.below(words.len());
+                match rng.below(4) {
+                    0 => words[i] = NASTY[rng.below(NASTY.len())].into(),
+                    1 => words.insert(i, words[i].clone()),
+                    2 => {
+                        words.remove(i);
+                    }
+                    _ => words[i] = "9".repeat(1 + rng.below(4096)),
+                }
+                b = words.join(" ").into_bytes();
+            }
+            _ => {}
+        }
+    }
+    b
+}
+
+/// A parser under test: its name, its seeds, whether its input is text, and the
+/// call (errors are fine; panics, hangs and huge allocations are not).
+struct Target {
+    name: &'static str,
+    seeds: Vec<Vec<u8>>,
+    text: bool,
+    run: fn(&[u8]),
+}
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+fn files(dir: &str, ext: &[&str]) -> Vec<Vec<u8>> {
+    let mut v: Vec<Vec<u8>> = std::fs::read_dir(root().join(dir))
+        .map(|d| {
+            d.flatten()
+                .map(|e| e.path())
+                .filter(|p| {
+                    p.is_file()
+                        && (ext.is_empty()
+                            || p.extension()
+                                .is_some_and(|x| ext.contains(&x.to_str().unwrap_or(""))))
+                })
+                .filter_map(|p| std::fs::read(p).ok())
+                .collect()
+        })
+        .unwrap_or_default();
+    v.sort();
+    v
+}
+
+fn text(b: &[u8]) -> std::borrow::Cow<'_, str> {
+    String::from_utf8_lossy(b)
+}
+
+fn targets() -> Vec<Target> {
+    use jderobot::{conf::Conf, fuzzy, netwire, progeo, vision, world::World};
+    let p = Path::new("fuzz");
+    let mut t = vec![
+        Target {
+            name: "conf",
+            seeds: files("examples", &["conf"]),
+            text: true,
+            run: |b| {
+                if let Ok(c) = Conf::parse(&text(b), Path::new("fuzz.conf")) {
+                    // Every declared component's lines, checked as `check` does.
+                    let _ = jderobot::loader::check(&c);
+                }
+            },
+        },
+        Target {
+            name: "fzz",
+            seeds: files("assets/fuzzy", &["fzz"]),
+            text: true,
+            run: |b| {
+                let _ = fuzzy::Controller::parse(&text(b), Path::new("f.fzz"));
+                let _ = fuzzy::Controller::parse_lenient(&text(b), Path::new("f.fzz"));
+            },
+        },
+        Target {
+            name: "world",
+            seeds: files("assets/worlds", &["world"]),
+            text: true,
+            run: |b| {
+                let _ = World::parse(&text(b), Path::new("f.world"));
+            },
+        },
+        Target {
+            name: "camera",
+            seeds: [
+                files("assets/cameras", &[]),
+                files("assets/simulated3D", &[]),
+            ]
+            .concat(),
+            text: true,
+            run: |b| {
+                let _ = progeo::PinholeCamera::parse(&text(b), Path::new("cam"));
+                let _ = progeo::World::parse(&text(b), Path::new("room.world"));
+            },
+        },
+        Target {
+            name: "kernel",
+            seeds: files("assets/kernels", &["kernel"]),
+            text: true,
+            run: |b| {
+                let _ = vision::Kernel::parse(&text(b), Path::new("k.kernel"));
+            },
+        },
+        Target {
+            name: "netwire",
+            seeds: [
+                "1000 laser\n",
+                "1001 encoders 5\n",
+                "2000 motors 100 -20\n",
+                "1003 17 12.5 -7.5\n",
+                "1010 3 320 240\n",
+                "1027 too many clients\n",
+                "1004 4 1000 1000 1000 1000\n",
+                "1005 90 0 10 0\n",
+            ]
+            .iter()
+            .map(|s| s.as_bytes().to_vec())
+            .collect(),
+            text: true,
+            run: |b| {
+                let _ = netwire::Request::parse(b);
+                let _ = netwire::Message::parse(b);
+                let mut r = netwire::LineReader::new(4096);
+                let mut input = std::io::Cursor::new(b);
+                for _ in 0..64 {
+                    match r.read_line(&mut input) {
+                        Ok(netwire::LineEvent::Line(l)) => {
+                            let _ = netwire::Message::parse(l);
+                        }
+                        Ok(_) | Err(_) => break,
+                    }
+                }
+            },
+        },
+        Target {
+            name: "pnm_y4m",
+            seeds: vec![
+                std::fs::read(root().join("assets/images/testcard.pnm")).unwrap_or_default(),
+                b"P6\n4 2\n255\n012345678901234567890123".to_vec(),
+                b"P5 2 2 255 abcd".to_vec(),
+                b"YUV4MPEG2 W4 H2 F25:1 C420jpeg\nFRAME\n012345678901".to_vec(),
+            ],
+            text: false,
+            run: |b| {
+                let _ = jderobot::media::still::decode_image(b, Path::new("f.ppm"));
+                let mut r = std::io::Cursor::new(b);
+                if let Ok(Some(h)) = jderobot::media::y4m::read_header(&mut r) {
+                    let mut buf = Vec::new();
+                    for _ in 0..4 {
+                        if !matches!(
+                            jderobot::media::y4m::read_frame(&mut r, &h, &mut buf),
+                            Ok(true)
+                        ) {
+                            break;
+                        }
+                    }
+                }
+            },
+        },
+        Target {
+            name: "jpeg_png",
+            seeds: small_images(),
+            text: false,
+            run: |b| {
+                let _ = jderobot::media::still::decode_image(b, Path::new("f.jpg"));
+                let _ = jderobot::media::still::decode_image(b, Path::new("f.png"));
+            },
+        },
+    ];
+    t.extend(driver_targets(p));
+    t
+}
+
+/// Small JPEG and PNG files (the bundled photos are too big to decode 10,000 times
+/// in a debug build).
+fn small_images() -> Vec<Vec<u8>> {
+    let mut img = jderobot::interfaces::Image::new(16, 12);
+    for (i, b) in img.data.iter_mut().enumerate() {
+        *b = (i * 37 % 251) as u8;
+    }
+    let mut png_file = Vec::new();
+    {
+        let mut e = png::Encoder::new(&mut png_file, 16, 12);
+        e.set_color(png::ColorType::Rgb);
+        let mut w = e.write_header().expect("png header");
+        w.write_image_data(&img.to_rgb()).expect("png data");
+    }
+    vec![
+        jderobot::mcapfmt::jpeg(&img, 90).expect("a jpeg"),
+        jderobot::mcapfmt::jpeg(&img, 20).expect("a jpeg"),
+        png_file,
+    ]
+}
+
+#[allow(unused_variables, unused_mut)]
+fn driver_targets(p: &Path) -> Vec<Target> {
+    let mut t = Vec::new();
+    #[cfg(feature = "player")]
+    {
+        use jderobot::drivers::player::xdr;
+        let mut seeds = Vec::new();
+        for size in [0u32, 8, 24, 52, 200] {
+            let mut m = vec![0u8; 40];
+            m[36..40].copy_from_slice(&size.to_be_bytes());
+            m.extend((0..size).map(|i| (i * 7) as u8));
+            seeds.push(m);
+        }
+        t.push(Target {
+            name: "player_xdr",
+            seeds,
+            text: false,
+            run: |b| {
+                if let Ok(h) = xdr::Header::decode(b) {
+                    let _ = h.size;
+                }
+                let body = b.get(40..).unwrap_or(&[]);
+                let _ = xdr::decode_device_req(body);
+                let _ = xdr::decode_devlist(body);
+                let _ = xdr::decode_position2d(body);
+                let _ = xdr::decode_scan(body);
+                let _ = xdr::decode_ranger(body);
+                let _ = xdr::decode_sonar(body);
+                let _ = xdr::decode_bumpers(body);
+                let _ = xdr::decode_ranger_config(body);
+                let _ = xdr::decode_ptz(body);
+                let _ = xdr::decode_camera(body);
+                let _ = xdr::decode_blobs(body);
+            },
+        });
+    }
+    #[cfg(feature = "evi")]
+    t.push(Target {
+        name: "visca",
+        seeds: vec![
+            vec![0x90, 0x41, 0xFF],
+            vec![0x90, 0x51, 0xFF],
+            vec![
+                0x90, 0x50, 0x0F, 0x0F, 0x0F, 0x0F, 0x00, 0x00, 0x01, 0x02, 0xFF,
+            ],
+            vec![0x90, 0x60, 0x02, 0xFF],
+            vec![0x88, 0x30, 0x02, 0xFF],
+        ],
+        text: false,
+        run: |b| {
+            use jderobot::drivers::evi::protocol;
+            if let Some(protocol::Reply::Answer(a)) = protocol::classify(1, b) {
+                let _ = protocol::from_nibbles(&a);
+            }
+            let _ = protocol::from_nibbles(b);
+        },
+    });
+    #[cfg(feature = "pantilt")]
+    t.push(Target {
+        name: "ptu",
+        seeds: [
+            "* Current Pan position is 1000\r\n",
+            "* Maximum Pan position is 3090\r\n",
+            "* -900\r\n",
+            "! Illegal command\r\n",
+            "*\r\n",
+        ]
+        .iter()
+        .map(|s| s.as_bytes().to_vec())
+        .collect(),
+        text: true,
+        run: |b| {
+            use jderobot::drivers::pantilt::protocol::{self, Axis, Query};
+            let _ = protocol::parse_reply("PP", b);
+            for axis in [Axis::Pan, Axis::Tilt] {
+                for q in [Query::Position, Query::Min, Query::Max] {
+                    let _ = protocol::parse_query_line(axis, q, b);
+                }
+            }
+        },
+    });
+    #[cfg(feature = "zenoh")]
+    t.push(Target {
+        name: "zenoh_wire",
+        seeds: vec![vec![0u8; 16], vec![1u8; 32], vec![0u8; 8], vec![7u8; 200]],
+        text: false,
+        run: |b| {
+            use jderobot::{
+                interfaces::{
+                    Bumpers, Encoders, Image, Laser, Motors, PtEncoders, PtMotors, Sonars,
+                },
+                services::zenoh::wire::{self, Wire},
+            };
+            let _ = wire::read_attachment(b);
+            let _ = wire::read_rmw_attachment(b);
+            let _ = Image::take(b);
+            let _ = Laser::take(b);
+            let _ = Sonars::take(b);
+            let _ = Bumpers::take(b);
+            let _ = Encoders::take(b);
+            let _ = Motors::take(b);
+            let _ = PtEncoders::take(b);
+            let _ = PtMotors::take(b);
+            for kind in ["laser", "encoders", "motors", "colorA", "sonars"] {
+                let _ = jderobot::mcapfmt::ros2::decode("t", kind, b, 0, 0);
+            }
+        },
+    });
+    #[cfg(feature = "_mcap")]
+    t.push(Target {
+        name: "mcap_messages",
+        seeds: vec![
+            br#"{"timestamp":{"sec":1,"nsec":2},"v":100,"w":-20}"#.to_vec(),
+            br#"{"timestamp":{"sec":1,"nsec":2},"pose":{"position":{"x":1,"y":2,"z":0}}}"#.to_vec(),
+            vec![0, 1, 0, 0, 1, 0, 0, 0, 2, 0, 0, 0],
+        ],
+        text: false,
+        run: |b| {
+            for kind in ["motors", "encoders", "laser", "sonars", "colorA"] {
+                let _ = jderobot::mcapfmt::decode("t", kind, b);
+                let _ = jderobot::mcapfmt::ros2::decode("t", kind, b, 0, 0);
+            }
+            let _ = jderobot::mcapfmt::decompress("jpeg", b);
+        },
+    });
+    t
+}
+
+/// What one target's run found.
+#[derive(Debug, Default)]
+struct Found {
+    inputs: u64,
+    panics: u64,
+    first_panic: Option<(String, Vec<u8>)>,
+    slowest: Duration,
+}
+
+fn fuzz(target: &Target, seed: u64, inputs: u64, seconds: Option<f64>) -> Found {
+    let mut rng = Rng(seed ^ 0x9E37_79B9_7F4A_7C15 ^ (target.name.len() as u64) << 32);
+    let mut found = Found::default();
+    let started = Instant::now();
+    let busy = Arc::new(AtomicU64::new(0));
+    let done = Arc::new(AtomicBool::new(false));
+    let current = Arc::new(std::sync::Mutex::new(Vec::new()));
+    // The watchdog: one input over 10 s is a hang.
+    let watchdog = {
+        let (busy, done, name) = (busy.clone(), done.clone(), target.name);
+        let current = current.clone();
+        std::thread::spawn(move || {
+            let mut last = (0, Instant::now());
+            while !done.load(Ordering::Relaxed) {
+                std::thread::sleep(Duration::from_millis(200));
+                let n = busy.load(Ordering::Relaxed);
+                if n != last.0 {
+                    last = (n, Instant::now());
+                } else if last.1.elapsed() > Duration::from_secs(10) {
+                    let input = current.lock().map(|c| c.clone()).unwrap_or_default();
+                    eprintln!(
+                        "fuzz {name}: input {n} hangs (over 10 s): {:?}",
+                        String::from_utf8_lossy(&input[..input.len().min(512)])
+                    );
+                    std::process::abort();
+                }
+            }
+        })
+    };
+    let empty = Vec::new();
+    loop {
+        let out_of_time = seconds.is_some_and(|s| started.elapsed().as_secs_f64() > s);
+        if (seconds.is_none() && found.inputs >= inputs) || out_of_time {
+            break;
+        }
+        let seed_input = if target.seeds.is_empty() {
+            &empty
+        } else {
+            &target.seeds[rng.below(target.seeds.len())]
+        };
+        let input = mutate(&mut rng, seed_input, &target.seeds, target.text);
+        if let Ok(mut c) = current.lock() {
+            c.clone_from(&input);
+        }
+        busy.fetch_add(1, Ordering::Relaxed);
+        let t0 = Instant::now();
+        let r = catch_unwind(AssertUnwindSafe(|| (target.run)(&input)));
+        found.slowest = found.slowest.max(t0.elapsed());
+        found.inputs += 1;
+        if let Err(e) = r {
+            found.panics += 1;
+            if found.first_panic.is_none() {
+                let msg = e
+                    .downcast_ref::<String>()
+                    .cloned()
+                    .or_else(|| e.downcast_ref::<&str>().map(|s| s.to_string()))
+                    .unwrap_or_default();
+                found.first_panic = Some((msg, input));
+            }
+        }
+    }
+    done.store(true, Ordering::Relaxed);
+    let _ = watchdog.join();
+    found
+}
+
+fn env<T: std::str::FromStr>(name: &str) -> Option<T> {
+    std::env::var(name).ok().and_then(|v| v.parse().ok())
+}
+
+#[test]
+fn every_parser_survives_random_inputs() {
+    let inputs: u64 = env("FUZZ_INPUTS").unwrap_or(10_000);
+    let seconds: Option<f64> = env("FUZZ_SECONDS");
+    let seed: u64 = env("FUZZ_SEED").unwrap_or(1);
+    let only: Option<String> = std::env::var("FUZZ_TARGET").ok();
+    // Panics are caught and counted; keep their messages off the output.
+    std::panic::set_hook(Box::new(|_| {}));
+    let mut failures = Vec::new();
+    for t in targets() {
+        if only.as_deref().is_some_and(|o| !t.name.contains(o)) {
+            continue;
+        }
+        assert!(!t.seeds.is_empty(), "target {} has no seeds", t.name);
+        LARGEST.store(0, Ordering::Relaxed);
+        let over_before = OVER_BOUND.load(Ordering::Relaxed);
+        let started = Instant::now();
+        let f = fuzz(&t, seed, inputs, seconds);
+        let over = OVER_BOUND.load(Ordering::Relaxed) - over_before;
+        println!(
+            "fuzz {:<14} {:>10} inputs in {:>6.1} s, {} panics, largest allocation {:.1} MiB, \
+             slowest input {:.1} ms",
+            t.name,
+            f.inputs,
+            started.elapsed().as_secs_f64(),
+            f.panics,
+            LARGEST.load(Ordering::Relaxed) as f64 / (1 << 20) as f64,
+            f.slowest.as_secs_f64() * 1e3
+        );
+        if let Some((msg, input)) = &f.first_panic {
+            let shown: String = input.iter().take(256).map(|b| format!("{b:02x}")).collect();
+            failures.push(format!(
+                "{}: {} panics; first: {msg}; input (hex, first 256 bytes): {shown}",
+                t.name, f.panics
+            ));
+        }
+        if over > 0 {
+            failures.push(format!(
+                "{}: {over} allocations above {} MiB",
+                t.name,
+                ALLOC_BOUND >> 20
+            ));
+        }
+    }
+    let _ = std::panic::take_hook();
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
