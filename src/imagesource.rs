@@ -1,0 +1,235 @@
+//! What the vision schemas share: the image they work on (the `image` line; the
+//! tuners' panels may switch it among the run's image interfaces), the image they
+//! publish (the `output` line), the lines that declare them and the HSV ranges
+//! (`hmin` .. `vmax`, `toblack`), and the frame loop: work on a frame when it is new
+//! or when the parameters changed, and publish the result.
+//!
+//! hsvtuner, colortuner and opencvdemo use all of it (a [`Source`] the panel
+//! switches, [`Frames`] that follows it); imagerectifier, extrinsics, calibrador and
+//! image_viewer a fixed image ([`image`]) and, where they publish, [`output`].
+
+use std::sync::Arc;
+
+use parking_lot::Mutex;
+
+use crate::{
+    conf::{
+        ComponentConf,
+        settings::{Setting, float, interface, on_off},
+    },
+    interfaces::{Image, InUse, Interface, InterfaceError, Interfaces, Sample},
+};
+
+/// `image INTERFACE`: the image a schema works on.
+pub const IMAGE: Setting = Setting::new(
+    "image",
+    "the image it works on: colorA..D or varcolorA..D",
+    &[interface("INTERFACE")],
+)
+.default("colorA");
+/// `output INTERFACE`: a new image interface the result is published on.
+pub const OUTPUT: Setting = Setting::new(
+    "output",
+    "publish the result on this new image interface (so `echo NAME` shows it headless)",
+    &[interface("INTERFACE")],
+);
+/// `toblack on|off`: rejected pixels black, or grey.
+pub const TOBLACK: Setting = Setting::new(
+    "toblack",
+    "rejected pixels black (on) or grey (off)",
+    &[on_off("SWITCH")],
+)
+.default("off");
+
+const TAU: f64 = std::f64::consts::TAU;
+const HUE: &[crate::conf::settings::Arg] = &[float("H", "radians", 0.0, TAU)];
+const SAT: &[crate::conf::settings::Arg] = &[float("S", "", 0.0, 1.0)];
+const VAL: &[crate::conf::settings::Arg] = &[float("V", "", 0.0, 255.0)];
+/// The HSV range lines as 4.3 wrote them (each schema gives its defaults):
+/// hue in radians 0..2π (wrapping through 0 when `hmin > hmax`), saturation
+/// 0..1, value 0..255 (V = max(R, G, B)).
+pub const HMIN: Setting = Setting::new(
+    "hmin",
+    "the hue range's start (wraps when hmin > hmax)",
+    HUE,
+);
+pub const HMAX: Setting = Setting::new("hmax", "the hue range's end", HUE);
+pub const SMIN: Setting = Setting::new("smin", "the saturation range's start", SAT);
+pub const SMAX: Setting = Setting::new("smax", "the saturation range's end", SAT);
+pub const VMIN: Setting = Setting::new("vmin", "the value range's start", VAL);
+pub const VMAX: Setting = Setting::new("vmax", "the value range's end", VAL);
+
+/// An error at the line `key` of `conf`, or (a default value) at its file.
+pub fn error_at(conf: &ComponentConf, key: &str, message: impl std::fmt::Display) -> anyhow::Error {
+    match conf.line(key) {
+        Some(l) => l.error(format!("{key}: {message}")).into(),
+        None => anyhow::anyhow!(
+            "{}: {} {}: {key} (by default): {message}",
+            conf.file.display(),
+            conf.kind,
+            conf.name
+        ),
+    }
+}
+
+/// The image interface `name` of the line `key` (an error at that line when it is
+/// `none`, not provided, or not an image).
+pub fn image(
+    conf: &ComponentConf,
+    ifs: &Interfaces,
+    key: &str,
+    name: &str,
+) -> anyhow::Result<Arc<Interface<Image>>> {
+    if name == "none" {
+        return Err(error_at(
+            conf,
+            key,
+            "needs an image interface (colorA..D or varcolorA..D), not none",
+        ));
+    }
+    ifs.get::<Image>(name).map_err(|e| match e {
+        InterfaceError::WrongType { found, .. } => error_at(
+            conf,
+            key,
+            format!("{name} is a {found} interface, not an image"),
+        ),
+        e => error_at(conf, key, e),
+    })
+}
+
+/// The `output` interface, provided by `conf`'s component (`None` or `none`: none).
+pub fn output(
+    conf: &ComponentConf,
+    ifs: &Interfaces,
+    name: Option<&str>,
+) -> anyhow::Result<Option<Arc<Interface<Image>>>> {
+    match name {
+        None | Some("none") => Ok(None),
+        Some(n) => Ok(Some(
+            ifs.provide::<Image>(n, &conf.name)
+                .map_err(|e| error_at(conf, "output", e))?,
+        )),
+    }
+}
+
+/// The image a tuner works on; its panel may switch it.
+pub struct Source {
+    /// The interface in use.
+    pub name: Mutex<String>,
+    /// Every image interface of the run but the output (the panel's choice).
+    pub choices: Vec<String>,
+}
+
+impl Source {
+    /// The `image` and `output` lines made real: the source (an image interface
+    /// that the run provides) and the output, provided.
+    pub fn open(
+        conf: &ComponentConf,
+        ifs: &Interfaces,
+        image_name: &str,
+        output_name: Option<&str>,
+    ) -> anyhow::Result<(Source, Option<Arc<Interface<Image>>>)> {
+        let name = image(conf, ifs, "image", image_name)?.name().to_string();
+        let output = output(conf, ifs, output_name)?;
+        let choices = ifs
+            .names_of::<Image>()
+            .into_iter()
+            .filter(|n| output.as_ref().is_none_or(|o| o.name() != n))
+            .collect();
+        let source = Source {
+            name: Mutex::new(name),
+            choices,
+        };
+        Ok((source, output))
+    }
+
+    /// The panel's source picker (a combo box labelled `image`).
+    #[cfg(feature = "gui")]
+    pub fn picker(&self, ui: &mut egui::Ui, id: &str) {
+        let mut src = self.name.lock().clone();
+        egui::ComboBox::new(id, "image")
+            .selected_text(&src)
+            .show_ui(ui, |ui| {
+                for c in &self.choices {
+                    ui.selectable_value(&mut src, c.clone(), c);
+                }
+            });
+        *self.name.lock() = src;
+    }
+}
+
+/// The frame loop: which frame to work on, and where the result goes. `K` is what
+/// the result depends on besides the frame (the ranges, the filter ...).
+pub struct Frames<K> {
+    used: InUse<Image>,
+    output: Option<Arc<Interface<Image>>>,
+    last: Option<(String, u64, K)>,
+}
+
+/// A frame to work on.
+pub struct Frame {
+    pub sample: Arc<Sample<Image>>,
+    /// Frames of the same source published since the last one worked on and never
+    /// seen (the schema was slower than the source).
+    pub skipped: u64,
+}
+
+impl<K: PartialEq> Frames<K> {
+    pub fn new(output: Option<Arc<Interface<Image>>>) -> Self {
+        Frames {
+            used: InUse::default(),
+            output,
+            last: None,
+        }
+    }
+    /// On run: uses the source (resumes it) and works on the next frame whatever
+    /// it is.
+    pub fn on_run(&mut self, ifs: &Interfaces, source: &Source) -> Result<(), InterfaceError> {
+        let name = source.name.lock().clone();
+        self.used.follow(ifs, &name)?;
+        self.restart();
+        Ok(())
+    }
+    /// Works on the next frame whatever it is (on run, for a fixed image).
+    pub fn restart(&mut self) {
+        self.last = None;
+    }
+    /// Follows the source (the panel may have switched it) and gives its frame if
+    /// there is one and it, or `key`, changed since the last.
+    pub fn next(
+        &mut self,
+        ifs: &Interfaces,
+        source: &Source,
+        key: K,
+    ) -> Result<Option<Frame>, InterfaceError> {
+        let name = source.name.lock().clone();
+        let iface = self.used.follow(ifs, &name)?;
+        Ok(self.fresh(&iface, key))
+    }
+    /// The frame of a fixed `iface` if there is one and it, or `key`, changed
+    /// since the last.
+    pub fn fresh(&mut self, iface: &Interface<Image>, key: K) -> Option<Frame> {
+        let sample = iface.snapshot();
+        let key = (iface.name().to_string(), sample.clock, key);
+        if sample.clock == 0 || self.last.as_ref() == Some(&key) {
+            return None;
+        }
+        let skipped = match &self.last {
+            Some((name, clock, _)) if *name == key.0 => sample.clock.saturating_sub(clock + 1),
+            _ => 0,
+        };
+        self.last = Some(key);
+        Some(Frame { sample, skipped })
+    }
+    /// Publishes `image` on the output, if there is one.
+    pub fn publish(&self, image: &Image) -> anyhow::Result<()> {
+        if let Some(o) = &self.output {
+            o.publish(image.clone()).map_err(anyhow::Error::msg)?;
+        }
+        Ok(())
+    }
+    /// On stop: stops using the source.
+    pub fn release(&mut self) {
+        self.used.release();
+    }
+}
