@@ -27,12 +27,9 @@
 //! Headless it filters each new frame and exports, component `colortuner`, `state`
 //! ([`ColorTuner`]: space, ranges, result). System packages: none.
 
-use std::{
-    sync::{
-        Arc,
-        atomic::{AtomicBool, AtomicU32, Ordering},
-    },
-    time::Duration,
+use std::sync::{
+    Arc,
+    atomic::{AtomicBool, AtomicU32, Ordering},
 };
 
 use parking_lot::Mutex;
@@ -46,9 +43,9 @@ use crate::{
         ComponentConf,
         settings::{CYCLE, Setting, choice, float, int},
     },
-    imagesource::{self, Frames, Source},
+    imagesource::{self, Frame, Frames, Source, Work},
     interfaces::Image,
-    runtime::{Context, Runtime, Schema},
+    runtime::{Runtime, Schema},
 };
 
 const TAU: f32 = std::f32::consts::TAU;
@@ -260,36 +257,30 @@ pub fn run_filter(img: &Image, ranges: &Ranges, toblack: bool) -> (Image, usize,
     (out, passed, plane_hist(img, ranges.space))
 }
 
-/// The schema.
-pub struct ColorTunerSchema {
+/// What colortuner does with a frame: filters it with the ranges of its state.
+pub struct ColourWork {
     pub state: Arc<ColorTuner>,
-    frames: Frames<(Ranges, bool)>,
-    cycle: Duration,
-    #[cfg(feature = "gui")]
-    panel: Option<Box<dyn crate::runtime::Panel>>,
 }
 
-impl Schema for ColorTunerSchema {
-    fn cycle(&self) -> Duration {
-        self.cycle
+impl Work for ColourWork {
+    type Key = (Ranges, bool);
+    fn source(&self) -> &Source {
+        &self.state.source
     }
-    fn on_run(&mut self, ctx: &Context) -> anyhow::Result<()> {
-        Ok(self
-            .frames
-            .on_run(&ctx.runtime().interfaces, &self.state.source)?)
+    fn key(&self) -> Self::Key {
+        (
+            *self.state.ranges.lock(),
+            self.state.toblack.load(Ordering::Relaxed),
+        )
     }
-    fn iteration(&mut self, ctx: &Context) -> anyhow::Result<()> {
-        let ranges = *self.state.ranges.lock();
-        let toblack = self.state.toblack.load(Ordering::Relaxed);
-        let ifs = &ctx.runtime().interfaces;
-        let Some(f) = self
-            .frames
-            .next(ifs, &self.state.source, (ranges, toblack))?
-        else {
-            return Ok(());
-        };
+    fn work(
+        &mut self,
+        f: &Frame,
+        &(ranges, toblack): &Self::Key,
+        out: &Frames<Self::Key>,
+    ) -> anyhow::Result<()> {
         let (image, passed, hist) = run_filter(&f.sample.value, &ranges, toblack);
-        self.frames.publish(&image)?;
+        out.publish(&image)?;
         *self.state.result.lock() = Result {
             image,
             clock: f.sample.clock,
@@ -297,13 +288,6 @@ impl Schema for ColorTunerSchema {
             hist,
         };
         Ok(())
-    }
-    fn on_stop(&mut self, _ctx: &Context) {
-        self.frames.release();
-    }
-    #[cfg(feature = "gui")]
-    fn panel(&mut self) -> Option<Box<dyn crate::runtime::Panel>> {
-        self.panel.take()
     }
 }
 
@@ -405,13 +389,16 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
     rt.names
         .export_arc(&conf.name, "state", state.clone())
         .map_err(anyhow::Error::msg)?;
-    Ok(Box::new(ColorTunerSchema {
-        #[cfg(feature = "gui")]
-        panel: Some(Box::new(panel::ColorTunerPanel::new(state.clone()))),
-        state,
-        frames: Frames::new(output),
-        cycle: Duration::from_millis(l.cycle),
-    }))
+    let schema = imagesource::Tuner::new(
+        ColourWork {
+            state: state.clone(),
+        },
+        output,
+        l.cycle,
+    );
+    #[cfg(feature = "gui")]
+    let schema = schema.with_panel(panel::ColorTunerPanel::new(state));
+    Ok(Box::new(schema))
 }
 
 crate::register_schema!(

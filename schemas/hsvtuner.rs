@@ -30,12 +30,9 @@
 //! `state` ([`Tuner`]: the ranges, the toggle, the image in use, the pixels that
 //! passed, the colour histogram). System packages: none.
 
-use std::{
-    sync::{
-        Arc,
-        atomic::{AtomicBool, Ordering},
-    },
-    time::Duration,
+use std::sync::{
+    Arc,
+    atomic::{AtomicBool, Ordering},
 };
 
 use parking_lot::Mutex;
@@ -46,9 +43,9 @@ use crate::{
         ComponentConf,
         settings::{CYCLE, Setting},
     },
-    imagesource::{self, Frames, Source},
+    imagesource::{self, Frame, Frames, Source, Work},
     interfaces::Image,
-    runtime::{Context, Runtime, Schema},
+    runtime::{Runtime, Schema},
 };
 
 const TAU: f32 = std::f32::consts::TAU;
@@ -148,34 +145,30 @@ pub fn filter(img: &Image, ranges: &HsvRadians, toblack: bool) -> (Image, usize,
     (out, passed, hist)
 }
 
-/// The schema.
-pub struct HsvTuner {
+/// What hsvtuner does with a frame: filters it with the ranges of its state.
+pub struct HsvWork {
     pub state: Arc<Tuner>,
-    frames: Frames<(HsvRadians, bool)>,
-    cycle: Duration,
-    #[cfg(feature = "gui")]
-    panel: Option<Box<dyn crate::runtime::Panel>>,
 }
 
-impl Schema for HsvTuner {
-    fn cycle(&self) -> Duration {
-        self.cycle
+impl Work for HsvWork {
+    type Key = (HsvRadians, bool);
+    fn source(&self) -> &Source {
+        &self.state.source
     }
-    fn on_run(&mut self, ctx: &Context) -> anyhow::Result<()> {
-        Ok(self
-            .frames
-            .on_run(&ctx.runtime().interfaces, &self.state.source)?)
+    fn key(&self) -> Self::Key {
+        (
+            *self.state.ranges.lock(),
+            self.state.toblack.load(Ordering::Relaxed),
+        )
     }
-    fn iteration(&mut self, ctx: &Context) -> anyhow::Result<()> {
-        let ranges = *self.state.ranges.lock();
-        let toblack = self.state.toblack.load(Ordering::Relaxed);
-        let key = (ranges, toblack);
-        let ifs = &ctx.runtime().interfaces;
-        let Some(f) = self.frames.next(ifs, &self.state.source, key)? else {
-            return Ok(());
-        };
+    fn work(
+        &mut self,
+        f: &Frame,
+        &(ranges, toblack): &Self::Key,
+        out: &Frames<Self::Key>,
+    ) -> anyhow::Result<()> {
         let (image, passed, hist) = filter(&f.sample.value, &ranges, toblack);
-        self.frames.publish(&image)?;
+        out.publish(&image)?;
         *self.state.result.lock() = Filtered {
             image,
             clock: f.sample.clock,
@@ -183,13 +176,6 @@ impl Schema for HsvTuner {
             hist,
         };
         Ok(())
-    }
-    fn on_stop(&mut self, _ctx: &Context) {
-        self.frames.release();
-    }
-    #[cfg(feature = "gui")]
-    fn panel(&mut self) -> Option<Box<dyn crate::runtime::Panel>> {
-        self.panel.take()
     }
 }
 
@@ -243,13 +229,16 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
     rt.names
         .export_arc(&conf.name, "state", state.clone())
         .map_err(anyhow::Error::msg)?;
-    Ok(Box::new(HsvTuner {
-        #[cfg(feature = "gui")]
-        panel: Some(Box::new(panel::TunerPanel::new(state.clone()))),
-        state,
-        frames: Frames::new(output),
-        cycle: Duration::from_millis(l.cycle),
-    }))
+    let schema = imagesource::Tuner::new(
+        HsvWork {
+            state: state.clone(),
+        },
+        output,
+        l.cycle,
+    );
+    #[cfg(feature = "gui")]
+    let schema = schema.with_panel(panel::TunerPanel::new(state));
+    Ok(Box::new(schema))
 }
 
 crate::register_schema!(

@@ -4,11 +4,12 @@
 //! (`hmin` .. `vmax`, `toblack`), and the frame loop: work on a frame when it is new
 //! or when the parameters changed, and publish the result.
 //!
-//! hsvtuner, colortuner and opencvdemo use all of it (a [`Source`] the panel
-//! switches, [`Frames`] that follows it); imagerectifier, extrinsics, calibrador and
-//! image_viewer a fixed image ([`image`]) and, where they publish, [`output`].
+//! hsvtuner, colortuner and opencvdemo are each a [`Tuner`] (the schema) over their
+//! own [`Work`] (what they do with a frame): a [`Source`] the panel switches, and
+//! [`Frames`] that follow it. imagerectifier, extrinsics, calibrador and image_viewer
+//! take a fixed image ([`image`]) and, where they publish, [`output`] and [`Frames`].
 
-use std::sync::Arc;
+use std::{sync::Arc, time::Duration};
 
 use parking_lot::Mutex;
 
@@ -18,6 +19,7 @@ use crate::{
         settings::{Setting, float, interface, on_off},
     },
     interfaces::{Image, InUse, Interface, InterfaceError, Interfaces, Sample},
+    runtime::{Context, Schema},
 };
 
 /// `image INTERFACE`: the image a schema works on.
@@ -221,6 +223,10 @@ impl<K: PartialEq> Frames<K> {
         self.last = Some(key);
         Some(Frame { sample, skipped })
     }
+    /// The key of the last frame worked on.
+    pub fn key(&self) -> Option<&K> {
+        self.last.as_ref().map(|(_, _, k)| k)
+    }
     /// Publishes `image` on the output, if there is one.
     pub fn publish(&self, image: &Image) -> anyhow::Result<()> {
         if let Some(o) = &self.output {
@@ -231,5 +237,80 @@ impl<K: PartialEq> Frames<K> {
     /// On stop: stops using the source.
     pub fn release(&mut self) {
         self.used.release();
+    }
+}
+
+/// What a tuner does with a frame.
+pub trait Work: Send + 'static {
+    /// What the result depends on besides the frame (the ranges, the filter ...).
+    type Key: PartialEq + Send + 'static;
+    /// The image worked on (shared with the panel).
+    fn source(&self) -> &Source;
+    /// The key as it is now.
+    fn key(&self) -> Self::Key;
+    /// Works on `frame`: keeps the result for the panel and the name space, and
+    /// publishes the image through `frames`.
+    fn work(
+        &mut self,
+        frame: &Frame,
+        key: &Self::Key,
+        frames: &Frames<Self::Key>,
+    ) -> anyhow::Result<()>;
+}
+
+/// A schema that works on each new frame of a switchable source (and again on the
+/// same frame when the parameters change): hsvtuner, colortuner, opencvdemo.
+pub struct Tuner<W: Work> {
+    pub work: W,
+    frames: Frames<W::Key>,
+    cycle: Duration,
+    #[cfg(feature = "gui")]
+    panel: Option<Box<dyn crate::runtime::Panel>>,
+}
+
+impl<W: Work> Tuner<W> {
+    pub fn new(work: W, output: Option<Arc<Interface<Image>>>, cycle_ms: u64) -> Self {
+        Tuner {
+            work,
+            frames: Frames::new(output),
+            cycle: Duration::from_millis(cycle_ms),
+            #[cfg(feature = "gui")]
+            panel: None,
+        }
+    }
+    /// With its panel.
+    #[cfg(feature = "gui")]
+    pub fn with_panel(mut self, panel: impl crate::runtime::Panel + 'static) -> Self {
+        self.panel = Some(Box::new(panel));
+        self
+    }
+}
+
+impl<W: Work> Schema for Tuner<W> {
+    fn cycle(&self) -> Duration {
+        self.cycle
+    }
+    fn on_run(&mut self, ctx: &Context) -> anyhow::Result<()> {
+        Ok(self
+            .frames
+            .on_run(&ctx.runtime().interfaces, self.work.source())?)
+    }
+    fn iteration(&mut self, ctx: &Context) -> anyhow::Result<()> {
+        let key = self.work.key();
+        let ifs = &ctx.runtime().interfaces;
+        let Some(frame) = self.frames.next(ifs, self.work.source(), key)? else {
+            return Ok(());
+        };
+        let Some(key) = self.frames.key() else {
+            return Ok(());
+        };
+        self.work.work(&frame, key, &self.frames)
+    }
+    fn on_stop(&mut self, _ctx: &Context) {
+        self.frames.release();
+    }
+    #[cfg(feature = "gui")]
+    fn panel(&mut self) -> Option<Box<dyn crate::runtime::Panel>> {
+        self.panel.take()
     }
 }

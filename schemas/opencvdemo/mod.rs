@@ -39,7 +39,7 @@ pub mod filters;
 #[cfg(feature = "gui")]
 pub mod panel;
 
-use std::{collections::HashMap, sync::Arc, time::Duration};
+use std::{collections::HashMap, sync::Arc};
 
 use parking_lot::Mutex;
 
@@ -51,9 +51,9 @@ use crate::{
         ComponentConf, ConfLine,
         settings::{CYCLE, Setting, choice, float, int, path, rest},
     },
-    imagesource::{self, Frames, Source},
+    imagesource::{self, Frame, Frames, Source, Work},
     interfaces::Image,
-    runtime::{Context, Runtime, Schema},
+    runtime::{Runtime, Schema},
     vision::Kernel,
 };
 
@@ -81,52 +81,38 @@ pub struct Demo {
     pub frames: Mutex<(u64, u64)>,
 }
 
-/// The schema.
-pub struct OpencvDemo {
+/// What opencvdemo does with a frame: runs the chosen filter on it and times it.
+pub struct DemoWork {
     pub state: Arc<Demo>,
-    frames: Frames<(Filter, Params)>,
     pipeline: Pipeline,
-    cycle: Duration,
-    #[cfg(feature = "gui")]
-    panel: Option<Box<dyn crate::runtime::Panel>>,
 }
 
-impl Schema for OpencvDemo {
-    fn cycle(&self) -> Duration {
-        self.cycle
+impl Work for DemoWork {
+    type Key = (Filter, Params);
+    fn source(&self) -> &Source {
+        &self.state.source
     }
-    fn on_run(&mut self, ctx: &Context) -> anyhow::Result<()> {
-        Ok(self
-            .frames
-            .on_run(&ctx.runtime().interfaces, &self.state.source)?)
+    fn key(&self) -> Self::Key {
+        (*self.state.filter.lock(), self.state.params.lock().clone())
     }
-    fn iteration(&mut self, ctx: &Context) -> anyhow::Result<()> {
-        let filter = *self.state.filter.lock();
-        let params = self.state.params.lock().clone();
-        let ifs = &ctx.runtime().interfaces;
-        let key = (filter, params.clone());
-        let Some(f) = self.frames.next(ifs, &self.state.source, key)? else {
-            return Ok(());
-        };
+    fn work(
+        &mut self,
+        f: &Frame,
+        (filter, params): &Self::Key,
+        out: &Frames<Self::Key>,
+    ) -> anyhow::Result<()> {
         self.state.frames.lock().1 += f.skipped;
-        let (image, ms) = self.pipeline.run(filter, &f.sample.value, &params);
-        self.frames.publish(&image)?;
-        self.state.times.lock().insert(filter, ms);
+        let (image, ms) = self.pipeline.run(*filter, &f.sample.value, params);
+        out.publish(&image)?;
+        self.state.times.lock().insert(*filter, ms);
         self.state.frames.lock().0 += 1;
         *self.state.view.lock() = View {
             image,
             clock: f.sample.clock,
-            filter: Some(filter),
+            filter: Some(*filter),
             ms,
         };
         Ok(())
-    }
-    fn on_stop(&mut self, _ctx: &Context) {
-        self.frames.release();
-    }
-    #[cfg(feature = "gui")]
-    fn panel(&mut self) -> Option<Box<dyn crate::runtime::Panel>> {
-        self.panel.take()
     }
 }
 
@@ -304,14 +290,14 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
     rt.names
         .export_arc(&conf.name, "state", state.clone())
         .map_err(anyhow::Error::msg)?;
-    Ok(Box::new(OpencvDemo {
-        #[cfg(feature = "gui")]
-        panel: Some(Box::new(panel::DemoPanel::new(state.clone()))),
-        state,
-        frames: Frames::new(output),
+    let work = DemoWork {
+        state: state.clone(),
         pipeline: Pipeline::default(),
-        cycle: Duration::from_millis(l.cycle),
-    }))
+    };
+    let schema = imagesource::Tuner::new(work, output, l.cycle);
+    #[cfg(feature = "gui")]
+    let schema = schema.with_panel(panel::DemoPanel::new(state));
+    Ok(Box::new(schema))
 }
 
 crate::register_schema!(
