@@ -33,7 +33,6 @@ use std::{
         Arc,
         atomic::{AtomicBool, Ordering},
     },
-    time::Duration,
 };
 
 use parking_lot::Mutex;
@@ -43,10 +42,10 @@ use crate::{
         ComponentConf,
         settings::{CYCLE, Setting, path},
     },
-    imagesource::{self, Frames},
-    interfaces::{Image, Interface},
+    imagesource::{self, Frame, Frames, Source, Work},
+    interfaces::Image,
     progeo::{HPoint2D, HPoint3D, PinholeCamera, World},
-    runtime::{Context, Runtime, Schema},
+    runtime::{Runtime, Schema},
 };
 
 /// The state shared by the schema, its panel and the name space.
@@ -191,39 +190,35 @@ pub fn draw(img: &Image, cam: &PinholeCamera, world: &World, flip: bool) -> Imag
     out
 }
 
-/// The schema.
-pub struct ExtrinsicsSchema {
+/// What extrinsics does with a frame: draws the world on it with the camera.
+pub struct ExtrinsicsWork {
     pub state: Arc<Extrinsics>,
-    image: Arc<Interface<Image>>,
-    frames: Frames<(String, bool)>,
-    cycle: Duration,
-    #[cfg(feature = "gui")]
-    panel: Option<Box<dyn crate::runtime::Panel>>,
+    source: Source,
 }
 
-impl Schema for ExtrinsicsSchema {
-    fn cycle(&self) -> Duration {
-        self.cycle
+impl Work for ExtrinsicsWork {
+    /// The camera (as its file text) and the flip.
+    type Key = (String, bool);
+    fn source(&self) -> &Source {
+        &self.source
     }
-    fn on_run(&mut self, ctx: &Context) -> anyhow::Result<()> {
-        ctx.run_children(&[self.image.name()], None)?;
-        self.frames.restart();
-        Ok(())
+    fn key(&self) -> Self::Key {
+        (
+            self.state.camera.lock().to_file_string(),
+            self.state.flip.load(Ordering::Relaxed),
+        )
     }
-    fn iteration(&mut self, _ctx: &Context) -> anyhow::Result<()> {
+    fn work(
+        &mut self,
+        f: &Frame,
+        &(_, flip): &Self::Key,
+        out: &Frames<Self::Key>,
+    ) -> anyhow::Result<()> {
         let cam = self.state.camera.lock().clone();
-        let flip = self.state.flip.load(Ordering::Relaxed);
-        let Some(f) = self.frames.fresh(&self.image, (cam.to_file_string(), flip)) else {
-            return Ok(());
-        };
-        let out = draw(&f.sample.value, &cam, &self.state.world, flip);
-        self.frames.publish(&out)?;
-        *self.state.drawn.lock() = (out, f.sample.clock);
+        let drawn = draw(&f.sample.value, &cam, &self.state.world, flip);
+        out.publish(&drawn)?;
+        *self.state.drawn.lock() = (drawn, f.sample.clock);
         Ok(())
-    }
-    #[cfg(feature = "gui")]
-    fn panel(&mut self) -> Option<Box<dyn crate::runtime::Panel>> {
-        self.panel.take()
     }
 }
 
@@ -305,14 +300,14 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
     rt.names
         .export_arc(&conf.name, "state", state.clone())
         .map_err(anyhow::Error::msg)?;
-    Ok(Box::new(ExtrinsicsSchema {
-        #[cfg(feature = "gui")]
-        panel: Some(Box::new(panel::ExtrinsicsPanel::new(state.clone()))),
-        state,
-        image,
-        frames: Frames::new(output),
-        cycle: Duration::from_millis(l.cycle),
-    }))
+    let work = ExtrinsicsWork {
+        state: state.clone(),
+        source: Source::fixed(image.name()),
+    };
+    let schema = imagesource::Tuner::new(work, output, l.cycle);
+    #[cfg(feature = "gui")]
+    let schema = schema.with_panel(panel::ExtrinsicsPanel::new(state));
+    Ok(Box::new(schema))
 }
 
 crate::register_schema!(

@@ -26,7 +26,7 @@
 //! component `imagerectifier`, `state` ([`Rectifier`]: points, homography, result).
 //! System packages: none.
 
-use std::{path::PathBuf, sync::Arc, time::Duration};
+use std::{path::PathBuf, sync::Arc};
 
 use nalgebra::Matrix3;
 use parking_lot::Mutex;
@@ -36,9 +36,9 @@ use crate::{
         ComponentConf,
         settings::{Arg, CYCLE, Setting, float, path},
     },
-    imagesource::{self, Frames},
+    imagesource::{self, Frame, Frames, Source, Work},
     interfaces::{Image, Interface},
-    runtime::{Context, Runtime, Schema},
+    runtime::{Runtime, Schema},
     vision::{find_homography, warp_perspective},
 };
 
@@ -171,44 +171,31 @@ impl Rectifier {
     }
 }
 
-/// The schema.
-pub struct ImageRectifier {
+/// What imagerectifier does with a frame: warps it once a homography is known.
+pub struct RectifierWork {
     pub state: Arc<Rectifier>,
-    image: Arc<Interface<Image>>,
-    frames: Frames<Option<Matrix3<f64>>>,
-    cycle: Duration,
-    #[cfg(feature = "gui")]
-    panel: Option<Box<dyn crate::runtime::Panel>>,
+    source: Source,
 }
 
-impl Schema for ImageRectifier {
-    fn cycle(&self) -> Duration {
-        self.cycle
+impl Work for RectifierWork {
+    type Key = Option<Matrix3<f64>>;
+    fn source(&self) -> &Source {
+        &self.source
     }
-    fn on_run(&mut self, ctx: &Context) -> anyhow::Result<()> {
-        ctx.run_children(&[self.image.name()], None)?;
-        self.frames.restart();
-        Ok(())
+    fn key(&self) -> Self::Key {
+        self.state.points.lock().homography
     }
-    fn iteration(&mut self, _ctx: &Context) -> anyhow::Result<()> {
-        let h = self.state.points.lock().homography;
-        let Some(f) = self.frames.fresh(&self.image, h) else {
-            return Ok(());
-        };
+    fn work(&mut self, f: &Frame, h: &Self::Key, out: &Frames<Self::Key>) -> anyhow::Result<()> {
         if let Some(h) = h {
-            let s = &f.sample;
-            let image = warp_perspective(&s.value, &h, s.value.width, s.value.height);
-            self.frames.publish(&image)?;
+            let s = &f.sample.value;
+            let image = warp_perspective(s, h, s.width, s.height);
+            out.publish(&image)?;
             *self.state.result.lock() = Rectified {
                 image,
-                clock: s.clock,
+                clock: f.sample.clock,
             };
         }
         Ok(())
-    }
-    #[cfg(feature = "gui")]
-    fn panel(&mut self) -> Option<Box<dyn crate::runtime::Panel>> {
-        self.panel.take()
     }
 }
 
@@ -292,17 +279,14 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
     rt.names
         .export_arc(&conf.name, "state", state.clone())
         .map_err(anyhow::Error::msg)?;
-    Ok(Box::new(ImageRectifier {
-        #[cfg(feature = "gui")]
-        panel: Some(Box::new(panel::RectifierPanel::new(
-            state.clone(),
-            image.clone(),
-        ))),
-        state,
-        image,
-        frames: Frames::new(output),
-        cycle: Duration::from_millis(l.cycle),
-    }))
+    let work = RectifierWork {
+        state: state.clone(),
+        source: Source::fixed(image.name()),
+    };
+    let schema = imagesource::Tuner::new(work, output, l.cycle);
+    #[cfg(feature = "gui")]
+    let schema = schema.with_panel(panel::RectifierPanel::new(state, image));
+    Ok(Box::new(schema))
 }
 
 crate::register_schema!(

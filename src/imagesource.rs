@@ -7,7 +7,8 @@
 //! hsvtuner, colortuner and opencvdemo are each a [`Tuner`] (the schema) over their
 //! own [`Work`] (what they do with a frame): a [`Source`] the panel switches, and
 //! [`Frames`] that follow it. imagerectifier, extrinsics, calibrador and image_viewer
-//! take a fixed image ([`image`]) and, where they publish, [`output`] and [`Frames`].
+//! take a fixed image ([`image`], [`Source::fixed`]); imagerectifier and extrinsics
+//! are [`Tuner`]s too.
 
 use std::{sync::Arc, time::Duration};
 
@@ -145,6 +146,19 @@ impl Source {
         Ok((source, output))
     }
 
+    /// A fixed image (no choice): `name`, already checked.
+    pub fn fixed(name: &str) -> Source {
+        Source {
+            name: Mutex::new(name.to_string()),
+            choices: Vec::new(),
+        }
+    }
+
+    /// A fixed source has no choices (the schema runs it as its child).
+    pub fn is_fixed(&self) -> bool {
+        self.choices.is_empty()
+    }
+
     /// The panel's source picker (a combo box labelled `image`).
     #[cfg(feature = "gui")]
     pub fn picker(&self, ui: &mut egui::Ui, id: &str) {
@@ -184,16 +198,17 @@ impl<K: PartialEq> Frames<K> {
             last: None,
         }
     }
-    /// On run: uses the source (resumes it) and works on the next frame whatever
-    /// it is.
+    /// On run: uses the source (resumes it; a fixed one is the schema's child, the
+    /// runtime resumes it) and works on the next frame whatever it is.
     pub fn on_run(&mut self, ifs: &Interfaces, source: &Source) -> Result<(), InterfaceError> {
-        let name = source.name.lock().clone();
-        self.used.follow(ifs, &name)?;
+        if !source.is_fixed() {
+            self.used.follow(ifs, &source.name.lock().clone())?;
+        }
         self.restart();
         Ok(())
     }
-    /// Works on the next frame whatever it is (on run, for a fixed image).
-    pub fn restart(&mut self) {
+    /// Works on the next frame whatever it is.
+    fn restart(&mut self) {
         self.last = None;
     }
     /// Follows the source (the panel may have switched it) and gives its frame if
@@ -205,12 +220,16 @@ impl<K: PartialEq> Frames<K> {
         key: K,
     ) -> Result<Option<Frame>, InterfaceError> {
         let name = source.name.lock().clone();
-        let iface = self.used.follow(ifs, &name)?;
+        let iface = if source.is_fixed() {
+            ifs.get::<Image>(&name)?
+        } else {
+            self.used.follow(ifs, &name)?
+        };
         Ok(self.fresh(&iface, key))
     }
-    /// The frame of a fixed `iface` if there is one and it, or `key`, changed
-    /// since the last.
-    pub fn fresh(&mut self, iface: &Interface<Image>, key: K) -> Option<Frame> {
+    /// The frame of `iface` if there is one and it, or `key`, changed since the
+    /// last.
+    fn fresh(&mut self, iface: &Interface<Image>, key: K) -> Option<Frame> {
         let sample = iface.snapshot();
         let key = (iface.name().to_string(), sample.clock, key);
         if sample.clock == 0 || self.last.as_ref() == Some(&key) {
@@ -258,8 +277,10 @@ pub trait Work: Send + 'static {
     ) -> anyhow::Result<()>;
 }
 
-/// A schema that works on each new frame of a switchable source (and again on the
-/// same frame when the parameters change): hsvtuner, colortuner, opencvdemo.
+/// A schema that works on each new frame of its source (and again on the same
+/// frame when the parameters change): hsvtuner, colortuner and opencvdemo (the
+/// panel switches the source), imagerectifier and extrinsics (a fixed source, run
+/// as the schema's child as 4.3 did).
 pub struct Tuner<W: Work> {
     pub work: W,
     frames: Frames<W::Key>,
@@ -291,9 +312,11 @@ impl<W: Work> Schema for Tuner<W> {
         self.cycle
     }
     fn on_run(&mut self, ctx: &Context) -> anyhow::Result<()> {
-        Ok(self
-            .frames
-            .on_run(&ctx.runtime().interfaces, self.work.source())?)
+        let source = self.work.source();
+        if source.is_fixed() {
+            ctx.run_children(&[source.name.lock().as_str()], None)?;
+        }
+        Ok(self.frames.on_run(&ctx.runtime().interfaces, source)?)
     }
     fn iteration(&mut self, ctx: &Context) -> anyhow::Result<()> {
         let key = self.work.key();
