@@ -27,12 +27,7 @@
 //! Headless it filters each new frame and exports, component `colortuner`, `state`
 //! ([`ColorTuner`]: space, ranges, result). System packages: none.
 
-use std::sync::{
-    Arc,
-    atomic::{AtomicBool, AtomicU32, Ordering},
-};
-
-use parking_lot::Mutex;
+use std::sync::Arc;
 
 use crate::{
     colorspaces::{
@@ -43,7 +38,7 @@ use crate::{
         ComponentConf,
         settings::{CYCLE, Setting, choice, float, int},
     },
-    imagesource::{self, Frame, Frames, Source, Work},
+    imagesource::{self, ColourTuner, RangeFilter},
     interfaces::Image,
     runtime::{Runtime, Schema},
 };
@@ -221,23 +216,14 @@ pub fn plane_hist(img: &Image, space: Space) -> Vec<u32> {
     hist
 }
 
-/// What one iteration computed.
-#[derive(Clone, Debug, Default)]
-pub struct Result {
-    pub image: Image,
-    pub clock: u64,
-    pub passed: usize,
-    pub hist: Vec<u32>,
-}
+/// The state shared by the schema, its panel and the name space; its result's
+/// `hist` is the colour plane of the space filtered in ([`plane_hist`]).
+pub type ColorTuner = ColourTuner<Ranges>;
 
-/// The state shared by the schema, its panel and the name space.
-pub struct ColorTuner {
-    pub ranges: Mutex<Ranges>,
-    pub toblack: AtomicBool,
-    pub threshold: AtomicU32,
-    /// The image interface filtered (the panel may switch it).
-    pub source: Source,
-    pub result: Mutex<Result>,
+impl RangeFilter for Ranges {
+    fn filter(&self, img: &Image, toblack: bool) -> (Image, usize, Vec<u32>) {
+        run_filter(img, self, toblack)
+    }
 }
 
 /// Filters `img` with `ranges`: the view, the count that passed, the plane.
@@ -255,40 +241,6 @@ pub fn run_filter(img: &Image, ranges: &Ranges, toblack: bool) -> (Image, usize,
         .filter(|&&m| m != 0)
         .count();
     (out, passed, plane_hist(img, ranges.space))
-}
-
-/// What colortuner does with a frame: filters it with the ranges of its state.
-pub struct ColourWork {
-    pub state: Arc<ColorTuner>,
-}
-
-impl Work for ColourWork {
-    type Key = (Ranges, bool);
-    fn source(&self) -> &Source {
-        &self.state.source
-    }
-    fn key(&self) -> Self::Key {
-        (
-            *self.state.ranges.lock(),
-            self.state.toblack.load(Ordering::Relaxed),
-        )
-    }
-    fn work(
-        &mut self,
-        f: &Frame,
-        &(ranges, toblack): &Self::Key,
-        out: &Frames<Self::Key>,
-    ) -> anyhow::Result<()> {
-        let (image, passed, hist) = run_filter(&f.sample.value, &ranges, toblack);
-        out.publish(&image)?;
-        *self.state.result.lock() = Result {
-            image,
-            clock: f.sample.clock,
-            passed,
-            hist,
-        };
-        Ok(())
-    }
 }
 
 const TAU64: f64 = std::f64::consts::TAU;
@@ -379,25 +331,13 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
         rgb: l.rgb,
         yuv: l.yuv,
     };
-    let state = Arc::new(ColorTuner {
-        ranges: Mutex::new(r),
-        toblack: AtomicBool::new(l.toblack),
-        threshold: AtomicU32::new(l.threshold),
-        source,
-        result: Mutex::new(Result::default()),
-    });
+    let state = Arc::new(ColorTuner::new(r, l.toblack, source));
     rt.names
         .export_arc(&conf.name, "state", state.clone())
         .map_err(anyhow::Error::msg)?;
-    let schema = imagesource::Tuner::new(
-        ColourWork {
-            state: state.clone(),
-        },
-        output,
-        l.cycle,
-    );
+    let schema = imagesource::FrameSchema::new(state.clone(), output, l.cycle);
     #[cfg(feature = "gui")]
-    let schema = schema.with_panel(panel::ColorTunerPanel::new(state));
+    let schema = schema.with_panel(panel::ColorTunerPanel::new(state, l.threshold));
     Ok(Box::new(schema))
 }
 
@@ -418,13 +358,16 @@ pub mod panel {
     pub struct ColorTunerPanel {
         state: Arc<ColorTuner>,
         view: ImageView,
+        /// The pixels a plane bin needs to be drawn.
+        threshold: u32,
     }
 
     impl ColorTunerPanel {
-        pub fn new(state: Arc<ColorTuner>) -> Self {
+        pub fn new(state: Arc<ColorTuner>, threshold: u32) -> Self {
             ColorTunerPanel {
                 state,
                 view: ImageView::new("colortuner image"),
+                threshold,
             }
         }
     }
@@ -523,10 +466,7 @@ pub mod panel {
                 for s in Space::ALL {
                     ui.radio_value(&mut r.space, s, s.name());
                 }
-                let mut black = self.state.toblack.load(Ordering::Relaxed);
-                if ui.checkbox(&mut black, "toblack").changed() {
-                    self.state.toblack.store(black, Ordering::Relaxed);
-                }
+                self.state.toblack_checkbox(ui);
                 ui.label(format!("passed {} px", res.passed));
             });
             ui.horizontal_top(|ui| {
@@ -543,16 +483,11 @@ pub mod panel {
                                 .text(format!("{name} max")),
                         );
                     }
-                    let mut t = self.state.threshold.load(Ordering::Relaxed);
-                    if ui
-                        .add(egui::Slider::new(&mut t, 1..=500).text("threshold"))
-                        .changed()
-                    {
-                        self.state.threshold.store(t, Ordering::Relaxed);
-                    }
+                    let t = &mut self.threshold;
+                    ui.add(egui::Slider::new(t, 1..=500).text("threshold"));
                     // The plane of the space the result was computed in.
                     if res.hist.len() == PLANE * PLANE {
-                        plane(ui, &mut r, &res.hist, t);
+                        plane(ui, &mut r, &res.hist, *t);
                     }
                 });
                 ui.vertical(|ui| {

@@ -30,12 +30,7 @@
 //! `state` ([`Tuner`]: the ranges, the toggle, the image in use, the pixels that
 //! passed, the colour histogram). System packages: none.
 
-use std::sync::{
-    Arc,
-    atomic::{AtomicBool, Ordering},
-};
-
-use parking_lot::Mutex;
+use std::sync::Arc;
 
 use crate::{
     colorspaces::{HsvRange, Lookup, hsv_mask, hsv_table},
@@ -43,7 +38,7 @@ use crate::{
         ComponentConf,
         settings::{CYCLE, Setting},
     },
-    imagesource::{self, Frame, Frames, Source, Work},
+    imagesource::{self, ColourTuner, RangeFilter},
     interfaces::Image,
     runtime::{Runtime, Schema},
 };
@@ -95,26 +90,14 @@ impl HsvRadians {
 pub const HUE_BINS: usize = 36;
 pub const SAT_BINS: usize = 10;
 
-/// What one iteration computed.
-#[derive(Clone, Debug, Default)]
-pub struct Filtered {
-    /// The filtered image.
-    pub image: Image,
-    /// The source image's clock.
-    pub clock: u64,
-    /// How many pixels passed.
-    pub passed: usize,
-    /// Pixel counts per (hue bin, saturation bin): `hist[h * SAT_BINS + s]`.
-    pub hist: Vec<u32>,
-}
+/// The state shared by the schema, its panel and the name space; its result's
+/// `hist` counts pixels per (hue bin, saturation bin): `hist[h * SAT_BINS + s]`.
+pub type Tuner = ColourTuner<HsvRadians>;
 
-/// The state shared by the schema, its panel and the name space.
-pub struct Tuner {
-    pub ranges: Mutex<HsvRadians>,
-    pub toblack: AtomicBool,
-    /// The image interface tuned on (the panel may switch it).
-    pub source: Source,
-    pub result: Mutex<Filtered>,
+impl RangeFilter for HsvRadians {
+    fn filter(&self, img: &Image, toblack: bool) -> (Image, usize, Vec<u32>) {
+        filter(img, self, toblack)
+    }
 }
 
 /// Filters `img`: the image with rejected pixels black or grey, the count that
@@ -143,40 +126,6 @@ pub fn filter(img: &Image, ranges: &HsvRadians, toblack: bool) -> (Image, usize,
         }
     }
     (out, passed, hist)
-}
-
-/// What hsvtuner does with a frame: filters it with the ranges of its state.
-pub struct HsvWork {
-    pub state: Arc<Tuner>,
-}
-
-impl Work for HsvWork {
-    type Key = (HsvRadians, bool);
-    fn source(&self) -> &Source {
-        &self.state.source
-    }
-    fn key(&self) -> Self::Key {
-        (
-            *self.state.ranges.lock(),
-            self.state.toblack.load(Ordering::Relaxed),
-        )
-    }
-    fn work(
-        &mut self,
-        f: &Frame,
-        &(ranges, toblack): &Self::Key,
-        out: &Frames<Self::Key>,
-    ) -> anyhow::Result<()> {
-        let (image, passed, hist) = filter(&f.sample.value, &ranges, toblack);
-        out.publish(&image)?;
-        *self.state.result.lock() = Filtered {
-            image,
-            clock: f.sample.clock,
-            passed,
-            hist,
-        };
-        Ok(())
-    }
 }
 
 /// hsvtuner's lines, declared once (`jderobot help hsvtuner`); defaults are 4.3's.
@@ -220,22 +169,11 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
         vmin: l.vmin,
         vmax: l.vmax,
     };
-    let state = Arc::new(Tuner {
-        ranges: Mutex::new(r),
-        toblack: AtomicBool::new(l.toblack),
-        source,
-        result: Mutex::new(Filtered::default()),
-    });
+    let state = Arc::new(Tuner::new(r, l.toblack, source));
     rt.names
         .export_arc(&conf.name, "state", state.clone())
         .map_err(anyhow::Error::msg)?;
-    let schema = imagesource::Tuner::new(
-        HsvWork {
-            state: state.clone(),
-        },
-        output,
-        l.cycle,
-    );
+    let schema = imagesource::FrameSchema::new(state.clone(), output, l.cycle);
     #[cfg(feature = "gui")]
     let schema = schema.with_panel(panel::TunerPanel::new(state));
     Ok(Box::new(schema))
@@ -375,10 +313,7 @@ pub mod panel {
             let res = self.state.result.lock().clone();
             ui.horizontal(|ui| {
                 self.state.source.picker(ui, "hsvtuner source");
-                let mut black = self.state.toblack.load(Ordering::Relaxed);
-                if ui.checkbox(&mut black, "toblack").changed() {
-                    self.state.toblack.store(black, Ordering::Relaxed);
-                }
+                self.state.toblack_checkbox(ui);
                 let total = (res.image.width * res.image.height).max(1) as f32;
                 ui.label(format!(
                     "passed {} px ({:.1} %)",

@@ -283,7 +283,7 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
         state: state.clone(),
         source: Source::fixed(image.name()),
     };
-    let schema = imagesource::Tuner::new(work, output, l.cycle);
+    let schema = imagesource::FrameSchema::new(work, output, l.cycle);
     #[cfg(feature = "gui")]
     let schema = schema.with_panel(panel::RectifierPanel::new(state, image));
     Ok(Box::new(schema))

@@ -4,13 +4,19 @@
 //! (`hmin` .. `vmax`, `toblack`), and the frame loop: work on a frame when it is new
 //! or when the parameters changed, and publish the result.
 //!
-//! hsvtuner, colortuner and opencvdemo are each a [`Tuner`] (the schema) over their
-//! own [`Work`] (what they do with a frame): a [`Source`] the panel switches, and
-//! [`Frames`] that follow it. imagerectifier, extrinsics, calibrador and image_viewer
-//! take a fixed image ([`image`], [`Source::fixed`]); imagerectifier and extrinsics
-//! are [`Tuner`]s too.
+//! hsvtuner, colortuner, opencvdemo, imagerectifier and extrinsics are each a
+//! [`FrameSchema`] over their own [`Work`] (what they do with a frame), on a
+//! [`Source`] that the tuners' panels switch (the others' is fixed). hsvtuner and
+//! colortuner share more: their state is a [`ColourTuner`] over their ranges
+//! ([`RangeFilter`]). calibrador and image_viewer take a fixed [`image`].
 
-use std::{sync::Arc, time::Duration};
+use std::{
+    sync::{
+        Arc,
+        atomic::{AtomicBool, Ordering},
+    },
+    time::Duration,
+};
 
 use parking_lot::Mutex;
 
@@ -281,7 +287,7 @@ pub trait Work: Send + 'static {
 /// frame when the parameters change): hsvtuner, colortuner and opencvdemo (the
 /// panel switches the source), imagerectifier and extrinsics (a fixed source, run
 /// as the schema's child as 4.3 did).
-pub struct Tuner<W: Work> {
+pub struct FrameSchema<W: Work> {
     pub work: W,
     frames: Frames<W::Key>,
     cycle: Duration,
@@ -289,9 +295,9 @@ pub struct Tuner<W: Work> {
     panel: Option<Box<dyn crate::runtime::Panel>>,
 }
 
-impl<W: Work> Tuner<W> {
+impl<W: Work> FrameSchema<W> {
     pub fn new(work: W, output: Option<Arc<Interface<Image>>>, cycle_ms: u64) -> Self {
-        Tuner {
+        FrameSchema {
             work,
             frames: Frames::new(output),
             cycle: Duration::from_millis(cycle_ms),
@@ -307,7 +313,7 @@ impl<W: Work> Tuner<W> {
     }
 }
 
-impl<W: Work> Schema for Tuner<W> {
+impl<W: Work> Schema for FrameSchema<W> {
     fn cycle(&self) -> Duration {
         self.cycle
     }
@@ -335,5 +341,84 @@ impl<W: Work> Schema for Tuner<W> {
     #[cfg(feature = "gui")]
     fn panel(&mut self) -> Option<Box<dyn crate::runtime::Panel>> {
         self.panel.take()
+    }
+}
+
+/// What a colour tuner computed from a frame.
+#[derive(Clone, Debug, Default)]
+pub struct Filtered {
+    /// The filtered image.
+    pub image: Image,
+    /// The source image's clock.
+    pub clock: u64,
+    /// How many pixels passed.
+    pub passed: usize,
+    /// The image's colours: pixel counts per bin of the tuner's colour plane.
+    pub hist: Vec<u32>,
+}
+
+/// A colour tuner's ranges.
+pub trait RangeFilter: Copy + PartialEq + Send + 'static {
+    /// Filters `img`: the image with rejected pixels black (`toblack`) or grey, the
+    /// count that passed, and the histogram.
+    fn filter(&self, img: &Image, toblack: bool) -> (Image, usize, Vec<u32>);
+}
+
+/// The state of a colour tuner (hsvtuner, colortuner), shared by the schema, its
+/// panel and the name space.
+pub struct ColourTuner<R> {
+    pub ranges: Mutex<R>,
+    pub toblack: AtomicBool,
+    /// The image interface tuned on (the panel may switch it).
+    pub source: Source,
+    pub result: Mutex<Filtered>,
+}
+
+impl<R: RangeFilter> ColourTuner<R> {
+    pub fn new(ranges: R, toblack: bool, source: Source) -> Self {
+        ColourTuner {
+            ranges: Mutex::new(ranges),
+            toblack: AtomicBool::new(toblack),
+            source,
+            result: Mutex::new(Filtered::default()),
+        }
+    }
+}
+
+#[cfg(feature = "gui")]
+impl<R> ColourTuner<R> {
+    /// The panel's `toblack` checkbox.
+    pub fn toblack_checkbox(&self, ui: &mut egui::Ui) {
+        let mut black = self.toblack.load(Ordering::Relaxed);
+        if ui.checkbox(&mut black, "toblack").changed() {
+            self.toblack.store(black, Ordering::Relaxed);
+        }
+    }
+}
+
+/// A colour tuner filters each frame with its ranges.
+impl<R: RangeFilter> Work for Arc<ColourTuner<R>> {
+    type Key = (R, bool);
+    fn source(&self) -> &Source {
+        &self.source
+    }
+    fn key(&self) -> Self::Key {
+        (*self.ranges.lock(), self.toblack.load(Ordering::Relaxed))
+    }
+    fn work(
+        &mut self,
+        f: &Frame,
+        &(ranges, toblack): &Self::Key,
+        out: &Frames<Self::Key>,
+    ) -> anyhow::Result<()> {
+        let (image, passed, hist) = ranges.filter(&f.sample.value, toblack);
+        out.publish(&image)?;
+        *self.result.lock() = Filtered {
+            image,
+            clock: f.sample.clock,
+            passed,
+            hist,
+        };
+        Ok(())
     }
 }

@@ -294,7 +294,7 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
         state: state.clone(),
         pipeline: Pipeline::default(),
     };
-    let schema = imagesource::Tuner::new(work, output, l.cycle);
+    let schema = imagesource::FrameSchema::new(work, output, l.cycle);
     #[cfg(feature = "gui")]
     let schema = schema.with_panel(panel::DemoPanel::new(state));
     Ok(Box::new(schema))
