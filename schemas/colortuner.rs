@@ -22,6 +22,7 @@
 //! cycle 100
 //! end_schema
 //! ```
+//! `jderobot help colortuner` prints these lines with their ranges and defaults.
 //! Interfaces used: the `image` (BGR); provided: `output` if given.
 //!
 //! Headless it filters each new frame and exports, component `colortuner`, `state`

@@ -22,6 +22,7 @@
 //! cycle 100
 //! end_schema
 //! ```
+//! `jderobot help extrinsics` prints these lines with their ranges and defaults.
 //! Interfaces used: the `image` (BGR); provided: `output` if given.
 //!
 //! Headless it draws each new frame and exports, component `extrinsics`, `state`

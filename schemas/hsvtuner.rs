@@ -24,6 +24,7 @@
 //! cycle 100            # ms (4.3's 100)
 //! end_schema
 //! ```
+//! `jderobot help hsvtuner` prints these lines with their ranges and defaults.
 //! Interfaces used: the `image` (BGR); provided: `output` if given.
 //!
 //! Headless the schema filters every cycle and exports, component `hsvtuner`:

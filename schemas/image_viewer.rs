@@ -16,6 +16,7 @@
 //! run image_viewer         # uses (runs) its interfaces, so their drivers publish
 //! show image_viewer
 //! ```
+//! `jderobot help image_viewer` prints these lines with their ranges and defaults.
 //! Interfaces used: the image interfaces named (BGR, 8 bits per channel).
 //!
 //! Headless the schema still computes each view's statistics and exports them in

@@ -20,6 +20,7 @@
 //! cycle 100
 //! end_schema
 //! ```
+//! `jderobot help imagerectifier` prints these lines with their ranges and defaults.
 //! Interfaces used: the `image` (BGR); provided: `output` if given (the input's size).
 //!
 //! Headless it warps each new frame once a homography is known and exports,

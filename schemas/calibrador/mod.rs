@@ -18,6 +18,7 @@
 //! camera_out /tmp/calibrated # where Save writes the progeo camera file
 //! end_schema
 //! ```
+//! `jderobot help calibrador` prints these lines with their ranges and defaults.
 //! With every point's U V given, it calibrates at load (headless). Interfaces used:
 //! the `image` (BGR). Name space, component `calibrador`: `state` ([`Calibrador`]).
 //! System packages: none.

@@ -28,6 +28,7 @@
 //! cycle 33                # ms (a 30 fps source needs ≤ 33)
 //! end_schema
 //! ```
+//! `jderobot help opencvdemo` prints these lines with their ranges and defaults.
 //! Without a valid kernel the default is 4.3's `[1 1 1; 1 -7 1; 1 1 1]`.
 //! Interfaces used: the `image` (BGR); provided: `output` if given.
 //!
