@@ -23,7 +23,7 @@ use parking_lot::Mutex;
 use crate::{
     conf::{
         ComponentConf,
-        settings::{Setting, float, interface, on_off},
+        settings::{Arg, Setting, float, interface, on_off},
     },
     interfaces::{Image, InUse, Interface, InterfaceError, Interfaces, Sample},
     runtime::{Context, Schema},
@@ -51,9 +51,9 @@ pub const TOBLACK: Setting = Setting::new(
 .default("off");
 
 const TAU: f64 = std::f64::consts::TAU;
-const HUE: &[crate::conf::settings::Arg] = &[float("H", "radians", 0.0, TAU)];
-const SAT: &[crate::conf::settings::Arg] = &[float("S", "", 0.0, 1.0)];
-const VAL: &[crate::conf::settings::Arg] = &[float("V", "", 0.0, 255.0)];
+const HUE: &[Arg] = &[float("H", "radians", 0.0, TAU)];
+const SAT: &[Arg] = &[float("S", "", 0.0, 1.0)];
+const VAL: &[Arg] = &[float("V", "", 0.0, 255.0)];
 /// The HSV range lines as 4.3 wrote them (each schema gives its defaults):
 /// hue in radians 0..2π (wrapping through 0 when `hmin > hmax`), saturation
 /// 0..1, value 0..255 (V = max(R, G, B)).
@@ -420,5 +420,42 @@ impl<R: RangeFilter> Work for Arc<ColourTuner<R>> {
             hist,
         };
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn frames_give_each_new_frame_once_and_again_when_the_key_changes() {
+        let ifs = Interfaces::default();
+        let cam = ifs.provide::<Image>("colorA", "test").unwrap();
+        let out = ifs.provide::<Image>("varcolorD", "test").unwrap();
+        let source = Source::fixed("colorA");
+        let mut frames = Frames::new(Some(out.clone()));
+        assert!(
+            frames.next(&ifs, &source, 1).unwrap().is_none(),
+            "no frame yet"
+        );
+        cam.publish(Image::new(320, 240)).unwrap();
+        let f = frames
+            .next(&ifs, &source, 1)
+            .unwrap()
+            .expect("the first frame");
+        assert_eq!((f.sample.clock, f.skipped), (1, 0));
+        assert!(frames.next(&ifs, &source, 1).unwrap().is_none(), "seen");
+        assert!(frames.next(&ifs, &source, 2).unwrap().is_some(), "new key");
+        for _ in 0..3 {
+            cam.publish(Image::new(320, 240)).unwrap();
+        }
+        let f = frames.next(&ifs, &source, 2).unwrap().unwrap();
+        assert_eq!((f.sample.clock, f.skipped), (4, 2));
+        assert_eq!(frames.key(), Some(&2));
+        frames.publish(&f.sample.value).unwrap();
+        assert_eq!(out.clock(), 1);
+        // A missing source is an error, not a panic.
+        let gone = Source::fixed("colorB");
+        assert!(frames.next(&ifs, &gone, 2).is_err());
     }
 }
