@@ -22,29 +22,26 @@
 //! cycle 100
 //! end_schema
 //! ```
+//! `jderobot help colortuner` prints these lines with their ranges and defaults.
 //! Interfaces used: the `image` (BGR); provided: `output` if given.
 //!
 //! Headless it filters each new frame and exports, component `colortuner`, `state`
 //! ([`ColorTuner`]: space, ranges, result). System packages: none.
 
-use std::{
-    sync::{
-        Arc,
-        atomic::{AtomicBool, AtomicU32, Ordering},
-    },
-    time::Duration,
-};
-
-use parking_lot::Mutex;
+use std::sync::Arc;
 
 use crate::{
     colorspaces::{
         Background, ColourFilter, HsvRange, Lookup, RgbRange, YuvRange, filter, hsv_table, mask,
         rgb2hsv, rgb2yuv, yuv_table,
     },
-    conf::{ComponentConf, ConfLine},
-    interfaces::{Image, InUse, Interface},
-    runtime::{Context, Runtime, Schema},
+    conf::{
+        ComponentConf,
+        settings::{CYCLE, Setting, choice, float, int},
+    },
+    imagesource::{self, ColourTuner, RangeFilter},
+    interfaces::Image,
+    runtime::{Runtime, Schema},
 };
 
 const TAU: f32 = std::f32::consts::TAU;
@@ -220,23 +217,14 @@ pub fn plane_hist(img: &Image, space: Space) -> Vec<u32> {
     hist
 }
 
-/// What one iteration computed.
-#[derive(Clone, Debug, Default)]
-pub struct Result {
-    pub image: Image,
-    pub clock: u64,
-    pub passed: usize,
-    pub hist: Vec<u32>,
-}
+/// The state shared by the schema, its panel and the name space; its result's
+/// `hist` is the colour plane of the space filtered in ([`plane_hist`]).
+pub type ColorTuner = ColourTuner<Ranges>;
 
-/// The state shared by the schema, its panel and the name space.
-pub struct ColorTuner {
-    pub ranges: Mutex<Ranges>,
-    pub toblack: AtomicBool,
-    pub threshold: AtomicU32,
-    pub source: Mutex<String>,
-    pub result: Mutex<Result>,
-    pub choices: Vec<String>,
+impl RangeFilter for Ranges {
+    fn filter(&self, img: &Image, toblack: bool) -> (Image, usize, Vec<u32>) {
+        run_filter(img, self, toblack)
+    }
 }
 
 /// Filters `img` with `ranges`: the view, the count that passed, the plane.
@@ -256,179 +244,109 @@ pub fn run_filter(img: &Image, ranges: &Ranges, toblack: bool) -> (Image, usize,
     (out, passed, plane_hist(img, ranges.space))
 }
 
-/// The schema.
-pub struct ColorTunerSchema {
-    pub state: Arc<ColorTuner>,
-    used: InUse<Image>,
-    output: Option<Arc<Interface<Image>>>,
-    last: Option<(String, u64, Ranges, bool)>,
-    cycle: Duration,
-    #[cfg(feature = "gui")]
-    panel: Option<Box<dyn crate::runtime::Panel>>,
-}
+const TAU64: f64 = std::f64::consts::TAU;
 
-impl ColorTunerSchema {
-    fn follow_source(&mut self, rt: &Runtime) -> anyhow::Result<Arc<Interface<Image>>> {
-        let name = self.state.source.lock().clone();
-        Ok(self.used.follow(&rt.interfaces, &name)?)
-    }
-}
+/// colortuner's lines, declared once (`jderobot help colortuner`).
+const LINES: &[Setting] = &[
+    imagesource::IMAGE,
+    Setting::new(
+        "space",
+        "the colour space it filters in",
+        &[choice("SPACE", &["hsv", "rgb", "yuv"])],
+    )
+    .default("hsv"),
+    Setting::new(
+        "hsv",
+        "the HSV ranges: hue wraps through 0 when HMIN > HMAX",
+        &[
+            float("HMIN", "radians", 0.0, TAU64),
+            float("HMAX", "radians", 0.0, TAU64),
+            float("SMIN", "", 0.0, 1.0),
+            float("SMAX", "", 0.0, 1.0),
+            float("VMIN", "", 0.0, 255.0),
+            float("VMAX", "", 0.0, 255.0),
+        ],
+    )
+    .default("0 1 0.2 1 0 255"),
+    Setting::new(
+        "rgb",
+        "the RGB ranges",
+        &[
+            float("RMIN", "", 0.0, 255.0),
+            float("RMAX", "", 0.0, 255.0),
+            float("GMIN", "", 0.0, 255.0),
+            float("GMAX", "", 0.0, 255.0),
+            float("BMIN", "", 0.0, 255.0),
+            float("BMAX", "", 0.0, 255.0),
+        ],
+    )
+    .default("0 255 0 255 0 255"),
+    Setting::new(
+        "yuv",
+        "the YUV ranges",
+        &[
+            float("YMIN", "", 0.0, 1.0),
+            float("YMAX", "", 0.0, 1.0),
+            float("UMIN", "", -0.436, 0.436),
+            float("UMAX", "", -0.436, 0.436),
+            float("VMIN", "", -0.615, 0.615),
+            float("VMAX", "", -0.615, 0.615),
+        ],
+    )
+    .default("0 1 -0.436 0.436 -0.615 0.615"),
+    imagesource::TOBLACK,
+    Setting::new(
+        "threshold",
+        "the pixels a bin of the colour plane needs to be drawn",
+        &[int("PIXELS", "", 1, 1_000_000)],
+    )
+    .default("5"),
+    imagesource::OUTPUT,
+    CYCLE.default("100"),
+];
 
-impl Schema for ColorTunerSchema {
-    fn cycle(&self) -> Duration {
-        self.cycle
-    }
-    fn on_run(&mut self, ctx: &Context) -> anyhow::Result<()> {
-        self.follow_source(ctx.runtime())?;
-        self.last = None;
-        Ok(())
-    }
-    fn iteration(&mut self, ctx: &Context) -> anyhow::Result<()> {
-        let src = self.follow_source(ctx.runtime())?;
-        let s = src.snapshot();
-        let ranges = *self.state.ranges.lock();
-        let toblack = self.state.toblack.load(Ordering::Relaxed);
-        let key = (src.name().to_string(), s.clock, ranges, toblack);
-        if s.clock == 0 || self.last.as_ref() == Some(&key) {
-            return Ok(());
-        }
-        let (image, passed, hist) = run_filter(&s.value, &ranges, toblack);
-        if let Some(o) = &self.output {
-            o.publish(image.clone()).map_err(anyhow::Error::msg)?;
-        }
-        *self.state.result.lock() = Result {
-            image,
-            clock: s.clock,
-            passed,
-            hist,
-        };
-        self.last = Some(key);
-        Ok(())
-    }
-    fn on_stop(&mut self, _ctx: &Context) {
-        self.used.release();
-    }
-    #[cfg(feature = "gui")]
-    fn panel(&mut self) -> Option<Box<dyn crate::runtime::Panel>> {
-        self.panel.take()
-    }
-}
-
-fn six(l: &ConfLine, space: Space) -> anyhow::Result<[f32; 6]> {
-    let ch = space.channels();
-    l.expect_args(
-        6,
-        6,
-        &format!(
-            "{} {}min {}max {}min {}max {}min {}max",
-            l.keyword(),
-            ch[0].0,
-            ch[0].0,
-            ch[1].0,
-            ch[1].0,
-            ch[2].0,
-            ch[2].0
-        ),
-    )?;
-    let mut v = [0.0; 6];
-    for (i, x) in v.iter_mut().enumerate() {
-        let (name, lo, hi) = ch[i / 2];
-        *x = l.number(i, &format!("{name} ({lo}..{hi})"), lo..=hi)?;
-    }
-    Ok(v)
+/// The values of [`LINES`].
+#[derive(serde::Deserialize)]
+struct Lines {
+    image: String,
+    space: String,
+    hsv: [f32; 6],
+    rgb: [f32; 6],
+    yuv: [f32; 6],
+    toblack: bool,
+    threshold: u32,
+    output: Option<String>,
+    cycle: u64,
 }
 
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>> {
-    let mut r = Ranges::default();
-    let mut toblack = false;
-    let mut threshold = 5u32;
-    let mut source = "colorA".to_string();
-    let mut output = None;
-    let mut cycle = Duration::from_millis(100);
-    for l in &conf.lines {
-        match l.keyword() {
-            "space" => {
-                l.expect_args(1, 1, "space hsv|rgb|yuv")?;
-                let w = l.choice(0, "the colour space", &["hsv", "rgb", "yuv"])?;
-                r.space = Space::ALL
-                    .into_iter()
-                    .find(|s| s.name() == w)
-                    .unwrap_or(Space::Hsv);
-            }
-            "hsv" => r.hsv = six(l, Space::Hsv)?,
-            "rgb" => r.rgb = six(l, Space::Rgb)?,
-            "yuv" => r.yuv = six(l, Space::Yuv)?,
-            "toblack" => {
-                l.expect_args(1, 1, "toblack on|off")?;
-                toblack = l.on_off(0, "toblack")?;
-            }
-            "threshold" => {
-                l.expect_args(1, 1, "threshold PIXELS")?;
-                threshold = l.number(0, "pixels per plane bin", 1..=1_000_000)?;
-            }
-            "image" => {
-                l.expect_args(1, 1, "image INTERFACE (colorA..D, varcolorA..D)")?;
-                source = rt.image_interface(l, 0)?;
-            }
-            "output" => {
-                l.expect_args(1, 1, "output INTERFACE (a new image interface)")?;
-                output = Some((l.interface(0)?, l.clone()));
-            }
-            "cycle" => {
-                l.expect_args(1, 1, "cycle MS")?;
-                cycle = l.millis(0, "period in ms", 1..=10_000)?;
-            }
-            _ => {
-                return Err(conf
-                    .unknown(
-                        l,
-                        "image, space, hsv, rgb, yuv, toblack, threshold, output or cycle",
-                    )
-                    .into());
-            }
-        }
-    }
-    rt.interfaces.get::<Image>(&source)?;
-    let output = match output {
-        Some((name, l)) => Some(
-            rt.interfaces
-                .provide::<Image>(&name, &conf.name)
-                .map_err(|e| l.error(format!("output: {e}")))?,
-        ),
-        None => None,
+    let l: Lines = conf.settings(LINES)?;
+    let (source, output) =
+        imagesource::Source::open(conf, &rt.interfaces, &l.image, l.output.as_deref())?;
+    let r = Ranges {
+        space: Space::ALL
+            .into_iter()
+            .find(|s| s.name() == l.space)
+            .unwrap_or(Space::Hsv),
+        hsv: l.hsv,
+        rgb: l.rgb,
+        yuv: l.yuv,
     };
-    let choices = rt
-        .interfaces
-        .names_of::<Image>()
-        .into_iter()
-        .filter(|n| output.as_ref().is_none_or(|o| o.name() != n))
-        .collect();
-    let state = Arc::new(ColorTuner {
-        ranges: Mutex::new(r),
-        toblack: AtomicBool::new(toblack),
-        threshold: AtomicU32::new(threshold),
-        source: Mutex::new(source),
-        result: Mutex::new(Result::default()),
-        choices,
-    });
+    let state = Arc::new(ColorTuner::new(r, l.toblack, source));
     rt.names
         .export_arc(&conf.name, "state", state.clone())
         .map_err(anyhow::Error::msg)?;
-    Ok(Box::new(ColorTunerSchema {
-        #[cfg(feature = "gui")]
-        panel: Some(Box::new(panel::ColorTunerPanel::new(state.clone()))),
-        state,
-        used: InUse::default(),
-        output,
-        last: None,
-        cycle,
-    }))
+    let schema = imagesource::FrameSchema::new(state.clone(), output, l.cycle);
+    #[cfg(feature = "gui")]
+    let schema = schema.with_panel(panel::ColorTunerPanel::new(state, l.threshold));
+    Ok(Box::new(schema))
 }
 
 crate::register_schema!(
     "colortuner",
     "colour filters in HSV, RGB or YUV: sliders, click to pick, colour plane with a draggable box",
-    create
+    create,
+    lines = LINES
 );
 
 #[cfg(feature = "gui")]
@@ -441,13 +359,16 @@ pub mod panel {
     pub struct ColorTunerPanel {
         state: Arc<ColorTuner>,
         view: ImageView,
+        /// The pixels a plane bin needs to be drawn.
+        threshold: u32,
     }
 
     impl ColorTunerPanel {
-        pub fn new(state: Arc<ColorTuner>) -> Self {
+        pub fn new(state: Arc<ColorTuner>, threshold: u32) -> Self {
             ColorTunerPanel {
                 state,
                 view: ImageView::new("colortuner image"),
+                threshold,
             }
         }
     }
@@ -542,22 +463,11 @@ pub mod panel {
             let before = r;
             let res = self.state.result.lock().clone();
             ui.horizontal(|ui| {
-                let mut src = self.state.source.lock().clone();
-                egui::ComboBox::new("colortuner source", "image")
-                    .selected_text(&src)
-                    .show_ui(ui, |ui| {
-                        for c in &self.state.choices {
-                            ui.selectable_value(&mut src, c.clone(), c);
-                        }
-                    });
-                *self.state.source.lock() = src;
+                self.state.source.picker(ui, "colortuner source");
                 for s in Space::ALL {
                     ui.radio_value(&mut r.space, s, s.name());
                 }
-                let mut black = self.state.toblack.load(Ordering::Relaxed);
-                if ui.checkbox(&mut black, "toblack").changed() {
-                    self.state.toblack.store(black, Ordering::Relaxed);
-                }
+                self.state.toblack_checkbox(ui);
                 ui.label(format!("passed {} px", res.passed));
             });
             ui.horizontal_top(|ui| {
@@ -574,23 +484,18 @@ pub mod panel {
                                 .text(format!("{name} max")),
                         );
                     }
-                    let mut t = self.state.threshold.load(Ordering::Relaxed);
-                    if ui
-                        .add(egui::Slider::new(&mut t, 1..=500).text("threshold"))
-                        .changed()
-                    {
-                        self.state.threshold.store(t, Ordering::Relaxed);
-                    }
+                    let t = &mut self.threshold;
+                    ui.add(egui::Slider::new(t, 1..=500).text("threshold"));
                     // The plane of the space the result was computed in.
                     if res.hist.len() == PLANE * PLANE {
-                        plane(ui, &mut r, &res.hist, t);
+                        plane(ui, &mut r, &res.hist, *t);
                     }
                 });
                 ui.vertical(|ui| {
                     let shown = self.view.show(ui, &res.image, res.clock);
                     if let Some(pk) = shown.pick {
                         // The colour under the click in the source (not the filtered view).
-                        let s = self.state.source.lock().clone();
+                        let s = self.state.source.name.lock().clone();
                         if let Ok(src) = rt.interfaces.get::<Image>(&s) {
                             let v = src.snapshot();
                             let i = (pk.y as usize * v.value.width as usize + pk.x as usize) * 3;

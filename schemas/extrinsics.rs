@@ -22,6 +22,7 @@
 //! cycle 100
 //! end_schema
 //! ```
+//! `jderobot help extrinsics` prints these lines with their ranges and defaults.
 //! Interfaces used: the `image` (BGR); provided: `output` if given.
 //!
 //! Headless it draws each new frame and exports, component `extrinsics`, `state`
@@ -33,16 +34,19 @@ use std::{
         Arc,
         atomic::{AtomicBool, Ordering},
     },
-    time::Duration,
 };
 
 use parking_lot::Mutex;
 
 use crate::{
-    conf::ComponentConf,
-    interfaces::{Image, Interface},
+    conf::{
+        ComponentConf,
+        settings::{CYCLE, Setting, path},
+    },
+    imagesource::{self, Frame, Frames, Source, Work},
+    interfaces::Image,
     progeo::{HPoint2D, HPoint3D, PinholeCamera, World},
-    runtime::{Context, Runtime, Schema},
+    runtime::{Runtime, Schema},
 };
 
 /// The state shared by the schema, its panel and the name space.
@@ -187,46 +191,58 @@ pub fn draw(img: &Image, cam: &PinholeCamera, world: &World, flip: bool) -> Imag
     out
 }
 
-/// The schema.
-pub struct ExtrinsicsSchema {
+/// What extrinsics does with a frame: draws the world on it with the camera.
+pub struct ExtrinsicsWork {
     pub state: Arc<Extrinsics>,
-    image: Arc<Interface<Image>>,
-    output: Option<Arc<Interface<Image>>>,
-    last: Option<(u64, String, bool)>,
-    cycle: Duration,
-    #[cfg(feature = "gui")]
-    panel: Option<Box<dyn crate::runtime::Panel>>,
+    source: Source,
 }
 
-impl Schema for ExtrinsicsSchema {
-    fn cycle(&self) -> Duration {
-        self.cycle
+impl Work for ExtrinsicsWork {
+    /// The camera (as its file text) and the flip.
+    type Key = (String, bool);
+    fn source(&self) -> &Source {
+        &self.source
     }
-    fn on_run(&mut self, ctx: &Context) -> anyhow::Result<()> {
-        ctx.run_children(&[self.image.name()], None)?;
-        self.last = None;
-        Ok(())
+    fn key(&self) -> Self::Key {
+        (
+            self.state.camera.lock().to_file_string(),
+            self.state.flip.load(Ordering::Relaxed),
+        )
     }
-    fn iteration(&mut self, _ctx: &Context) -> anyhow::Result<()> {
-        let s = self.image.snapshot();
+    fn work(
+        &mut self,
+        f: &Frame,
+        &(_, flip): &Self::Key,
+        out: &Frames<Self::Key>,
+    ) -> anyhow::Result<()> {
         let cam = self.state.camera.lock().clone();
-        let flip = self.state.flip.load(Ordering::Relaxed);
-        let key = (s.clock, cam.to_file_string(), flip);
-        if s.clock == 0 || self.last.as_ref() == Some(&key) {
-            return Ok(());
-        }
-        let out = draw(&s.value, &cam, &self.state.world, flip);
-        if let Some(o) = &self.output {
-            o.publish(out.clone()).map_err(anyhow::Error::msg)?;
-        }
-        *self.state.drawn.lock() = (out, s.clock);
-        self.last = Some(key);
+        let drawn = draw(&f.sample.value, &cam, &self.state.world, flip);
+        out.publish(&drawn)?;
+        *self.state.drawn.lock() = (drawn, f.sample.clock);
         Ok(())
     }
-    #[cfg(feature = "gui")]
-    fn panel(&mut self) -> Option<Box<dyn crate::runtime::Panel>> {
-        self.panel.take()
-    }
+}
+
+/// extrinsics' lines, declared once (`jderobot help extrinsics`).
+const LINES: &[Setting] = &[
+    Setting::new(
+        "world",
+        "required: the world file (4.3's format) naming cameraINfile and cameraOUTfile \
+         (relative to the world file, or to the current directory as 4.3)",
+        &[path("FILE")],
+    ),
+    imagesource::IMAGE,
+    imagesource::OUTPUT.help("publish the drawn image on this new image interface"),
+    CYCLE.default("100"),
+];
+
+/// The values of [`LINES`].
+#[derive(serde::Deserialize)]
+struct Lines {
+    world: Option<PathBuf>,
+    image: String,
+    output: Option<String>,
+    cycle: u64,
 }
 
 /// A camera file named in a world file: relative to the world file's directory if
@@ -244,40 +260,8 @@ fn resolve(world_file: &Path, p: &Path) -> PathBuf {
 }
 
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>> {
-    let mut world = None;
-    let mut source = "colorA".to_string();
-    let mut output = None;
-    let mut cycle = Duration::from_millis(100);
-    for l in &conf.lines {
-        match l.keyword() {
-            "world" => {
-                l.expect_args(1, 1, "world FILE")?;
-                let f = l.existing_file(0, "the world file")?;
-                let w = World::load(&f).map_err(|e| l.error(format!("world: {e}")))?;
-                let cin = w.camera_in.clone().ok_or_else(|| {
-                    l.error(format!("world {}: no cameraINfile line", f.display()))
-                })?;
-                let cout = w.camera_out.clone().ok_or_else(|| {
-                    l.error(format!("world {}: no cameraOUTfile line", f.display()))
-                })?;
-                world = Some((w, resolve(&f, &cin), resolve(&f, &cout), l.clone()));
-            }
-            "image" => {
-                l.expect_args(1, 1, "image INTERFACE (colorA..D, varcolorA..D)")?;
-                source = rt.image_interface(l, 0)?;
-            }
-            "output" => {
-                l.expect_args(1, 1, "output INTERFACE (a new image interface)")?;
-                output = Some((l.interface(0)?, l.clone()));
-            }
-            "cycle" => {
-                l.expect_args(1, 1, "cycle MS")?;
-                cycle = l.millis(0, "period in ms", 1..=10_000)?;
-            }
-            _ => return Err(conf.unknown(l, "world, image, output or cycle").into()),
-        }
-    }
-    let Some((world, camera_in, camera_out, wl)) = world else {
+    let l: Lines = conf.settings(LINES)?;
+    let (Some(_), Some(wl)) = (l.world, conf.line("world")) else {
         anyhow::bail!(
             "{}: schema {}: a `world FILE` line is required (a world file naming cameraINfile \
              and cameraOUTfile, e.g. assets/cameras/room.world)",
@@ -285,21 +269,25 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
             conf.name
         );
     };
+    let f = wl.existing_file(0, "the world file")?;
+    let world = World::load(&f).map_err(|e| wl.error(format!("world: {e}")))?;
+    let cin = world
+        .camera_in
+        .clone()
+        .ok_or_else(|| wl.error(format!("world {}: no cameraINfile line", f.display())))?;
+    let cout = world
+        .camera_out
+        .clone()
+        .ok_or_else(|| wl.error(format!("world {}: no cameraOUTfile line", f.display())))?;
+    let (camera_in, camera_out) = (resolve(&f, &cin), resolve(&f, &cout));
     let camera =
         PinholeCamera::load(&camera_in).map_err(|e| wl.error(format!("cameraINfile: {e}")))?;
     // As 4.3: write cameraOUTfile at once, so Undo works before any Save.
     camera
         .save(&camera_out)
         .map_err(|e| wl.error(format!("cameraOUTfile: {e}")))?;
-    let image = rt.interfaces.get::<Image>(&source)?;
-    let output = match output {
-        Some((name, l)) => Some(
-            rt.interfaces
-                .provide::<Image>(&name, &conf.name)
-                .map_err(|e| l.error(format!("output: {e}")))?,
-        ),
-        None => None,
-    };
+    let image = imagesource::image(conf, &rt.interfaces, "image", &l.image)?;
+    let output = imagesource::output(conf, &rt.interfaces, l.output.as_deref())?;
     let state = Arc::new(Extrinsics {
         camera: Mutex::new(camera),
         world,
@@ -313,21 +301,21 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
     rt.names
         .export_arc(&conf.name, "state", state.clone())
         .map_err(anyhow::Error::msg)?;
-    Ok(Box::new(ExtrinsicsSchema {
-        #[cfg(feature = "gui")]
-        panel: Some(Box::new(panel::ExtrinsicsPanel::new(state.clone()))),
-        state,
-        image,
-        output,
-        last: None,
-        cycle,
-    }))
+    let work = ExtrinsicsWork {
+        state: state.clone(),
+        source: Source::fixed(image.name()),
+    };
+    let schema = imagesource::FrameSchema::new(work, output, l.cycle);
+    #[cfg(feature = "gui")]
+    let schema = schema.with_panel(panel::ExtrinsicsPanel::new(state));
+    Ok(Box::new(schema))
 }
 
 crate::register_schema!(
     "extrinsics",
     "fit a progeo camera by eye: world lines over the live image, sliders, save/reload/undo",
-    create
+    create,
+    lines = LINES
 );
 
 #[cfg(feature = "gui")]

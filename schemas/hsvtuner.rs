@@ -24,27 +24,24 @@
 //! cycle 100            # ms (4.3's 100)
 //! end_schema
 //! ```
+//! `jderobot help hsvtuner` prints these lines with their ranges and defaults.
 //! Interfaces used: the `image` (BGR); provided: `output` if given.
 //!
 //! Headless the schema filters every cycle and exports, component `hsvtuner`:
 //! `state` ([`Tuner`]: the ranges, the toggle, the image in use, the pixels that
 //! passed, the colour histogram). System packages: none.
 
-use std::{
-    sync::{
-        Arc,
-        atomic::{AtomicBool, Ordering},
-    },
-    time::Duration,
-};
-
-use parking_lot::Mutex;
+use std::sync::Arc;
 
 use crate::{
     colorspaces::{HsvRange, Lookup, hsv_mask, hsv_table},
-    conf::{ComponentConf, ConfLine},
-    interfaces::{Image, InUse, Interface},
-    runtime::{Context, Runtime, Schema},
+    conf::{
+        ComponentConf,
+        settings::{CYCLE, Setting},
+    },
+    imagesource::{self, ColourTuner, RangeFilter},
+    interfaces::Image,
+    runtime::{Runtime, Schema},
 };
 
 const TAU: f32 = std::f32::consts::TAU;
@@ -94,28 +91,14 @@ impl HsvRadians {
 pub const HUE_BINS: usize = 36;
 pub const SAT_BINS: usize = 10;
 
-/// What one iteration computed.
-#[derive(Clone, Debug, Default)]
-pub struct Filtered {
-    /// The filtered image.
-    pub image: Image,
-    /// The source image's clock.
-    pub clock: u64,
-    /// How many pixels passed.
-    pub passed: usize,
-    /// Pixel counts per (hue bin, saturation bin): `hist[h * SAT_BINS + s]`.
-    pub hist: Vec<u32>,
-}
+/// The state shared by the schema, its panel and the name space; its result's
+/// `hist` counts pixels per (hue bin, saturation bin): `hist[h * SAT_BINS + s]`.
+pub type Tuner = ColourTuner<HsvRadians>;
 
-/// The state shared by the schema, its panel and the name space.
-pub struct Tuner {
-    pub ranges: Mutex<HsvRadians>,
-    pub toblack: AtomicBool,
-    /// The image interface tuned on (the panel may switch it).
-    pub source: Mutex<String>,
-    pub result: Mutex<Filtered>,
-    /// Every image interface of the run (the panel's choice).
-    pub choices: Vec<String>,
+impl RangeFilter for HsvRadians {
+    fn filter(&self, img: &Image, toblack: bool) -> (Image, usize, Vec<u32>) {
+        filter(img, self, toblack)
+    }
 }
 
 /// Filters `img`: the image with rejected pixels black or grey, the count that
@@ -146,150 +129,62 @@ pub fn filter(img: &Image, ranges: &HsvRadians, toblack: bool) -> (Image, usize,
     (out, passed, hist)
 }
 
-/// The schema.
-pub struct HsvTuner {
-    pub state: Arc<Tuner>,
-    used: InUse<Image>,
-    output: Option<Arc<Interface<Image>>>,
-    last: (String, u64, HsvRadians, bool),
-    cycle: Duration,
-    #[cfg(feature = "gui")]
-    panel: Option<Box<dyn crate::runtime::Panel>>,
-}
+/// hsvtuner's lines, declared once (`jderobot help hsvtuner`); defaults are 4.3's.
+const LINES: &[Setting] = &[
+    imagesource::IMAGE,
+    imagesource::HMIN.default("0"),
+    imagesource::HMAX.default("1"),
+    imagesource::SMIN.default("0.2"),
+    imagesource::SMAX.default("0.4"),
+    imagesource::VMIN.default("0"),
+    imagesource::VMAX.default("255"),
+    imagesource::TOBLACK,
+    imagesource::OUTPUT,
+    CYCLE.default("100"),
+];
 
-impl HsvTuner {
-    /// Uses (resumes) the selected source, releasing the previous one.
-    fn follow_source(&mut self, rt: &Runtime) -> anyhow::Result<Arc<Interface<Image>>> {
-        let name = self.state.source.lock().clone();
-        Ok(self.used.follow(&rt.interfaces, &name)?)
-    }
-}
-
-impl Schema for HsvTuner {
-    fn cycle(&self) -> Duration {
-        self.cycle
-    }
-    fn on_run(&mut self, ctx: &Context) -> anyhow::Result<()> {
-        self.follow_source(ctx.runtime())?;
-        Ok(())
-    }
-    fn iteration(&mut self, ctx: &Context) -> anyhow::Result<()> {
-        let src = self.follow_source(ctx.runtime())?;
-        let s = src.snapshot();
-        let ranges = *self.state.ranges.lock();
-        let toblack = self.state.toblack.load(Ordering::Relaxed);
-        let key = (src.name().to_string(), s.clock, ranges, toblack);
-        if key == self.last {
-            return Ok(());
-        }
-        let (image, passed, hist) = filter(&s.value, &ranges, toblack);
-        if let Some(o) = &self.output {
-            o.publish(image.clone()).map_err(anyhow::Error::msg)?;
-        }
-        *self.state.result.lock() = Filtered {
-            image,
-            clock: s.clock,
-            passed,
-            hist,
-        };
-        self.last = key;
-        Ok(())
-    }
-    fn on_stop(&mut self, _ctx: &Context) {
-        self.used.release();
-    }
-    #[cfg(feature = "gui")]
-    fn panel(&mut self) -> Option<Box<dyn crate::runtime::Panel>> {
-        self.panel.take()
-    }
-}
-
-fn one(l: &ConfLine, lo: f32, hi: f32, what: &str) -> anyhow::Result<f32> {
-    l.expect_args(1, 1, &format!("{} <{what}>", l.keyword()))?;
-    Ok(l.number(0, what, lo..=hi)?)
+/// The values of [`LINES`].
+#[derive(serde::Deserialize)]
+struct Lines {
+    image: String,
+    hmin: f32,
+    hmax: f32,
+    smin: f32,
+    smax: f32,
+    vmin: f32,
+    vmax: f32,
+    toblack: bool,
+    output: Option<String>,
+    cycle: u64,
 }
 
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>> {
-    let mut r = HsvRadians::default();
-    let mut toblack = false;
-    let mut source = "colorA".to_string();
-    let mut output = None;
-    let mut cycle = Duration::from_millis(100);
-    for l in &conf.lines {
-        match l.keyword() {
-            "hmin" => r.hmin = one(l, 0.0, TAU, "hue in radians, 0..2π")?,
-            "hmax" => r.hmax = one(l, 0.0, TAU, "hue in radians, 0..2π")?,
-            "smin" => r.smin = one(l, 0.0, 1.0, "saturation 0..1")?,
-            "smax" => r.smax = one(l, 0.0, 1.0, "saturation 0..1")?,
-            "vmin" => r.vmin = one(l, 0.0, 255.0, "value 0..255")?,
-            "vmax" => r.vmax = one(l, 0.0, 255.0, "value 0..255")?,
-            "toblack" => {
-                l.expect_args(1, 1, "toblack on|off")?;
-                toblack = l.on_off(0, "toblack")?;
-            }
-            "image" => {
-                l.expect_args(1, 1, "image INTERFACE (colorA..D, varcolorA..D)")?;
-                source = rt.image_interface(l, 0)?;
-            }
-            "output" => {
-                l.expect_args(1, 1, "output INTERFACE (a new image interface)")?;
-                output = Some((l.interface(0)?, l.clone()));
-            }
-            "cycle" => {
-                l.expect_args(1, 1, "cycle MS")?;
-                cycle = l.millis(0, "period in ms", 1..=10_000)?;
-            }
-            _ => {
-                return Err(conf
-                    .unknown(
-                        l,
-                        "image, hmin, hmax, smin, smax, vmin, vmax, toblack, output or cycle",
-                    )
-                    .into());
-            }
-        }
-    }
-    // Fails here (naming the interface) rather than at run when nothing provides it.
-    rt.interfaces.get::<Image>(&source)?;
-    let output = match output {
-        Some((name, l)) => Some(
-            rt.interfaces
-                .provide::<Image>(&name, &conf.name)
-                .map_err(|e| l.error(format!("output: {e}")))?,
-        ),
-        None => None,
+    let l: Lines = conf.settings(LINES)?;
+    let (source, output) =
+        imagesource::Source::open(conf, &rt.interfaces, &l.image, l.output.as_deref())?;
+    let r = HsvRadians {
+        hmin: l.hmin,
+        hmax: l.hmax,
+        smin: l.smin,
+        smax: l.smax,
+        vmin: l.vmin,
+        vmax: l.vmax,
     };
-    let choices = rt
-        .interfaces
-        .names_of::<Image>()
-        .into_iter()
-        .filter(|n| output.as_ref().is_none_or(|o| o.name() != n))
-        .collect();
-    let state = Arc::new(Tuner {
-        ranges: Mutex::new(r),
-        toblack: AtomicBool::new(toblack),
-        source: Mutex::new(source),
-        result: Mutex::new(Filtered::default()),
-        choices,
-    });
+    let state = Arc::new(Tuner::new(r, l.toblack, source));
     rt.names
         .export_arc(&conf.name, "state", state.clone())
         .map_err(anyhow::Error::msg)?;
-    Ok(Box::new(HsvTuner {
-        #[cfg(feature = "gui")]
-        panel: Some(Box::new(panel::TunerPanel::new(state.clone()))),
-        state,
-        used: InUse::default(),
-        output,
-        last: (String::new(), u64::MAX, r, toblack),
-        cycle,
-    }))
+    let schema = imagesource::FrameSchema::new(state.clone(), output, l.cycle);
+    #[cfg(feature = "gui")]
+    let schema = schema.with_panel(panel::TunerPanel::new(state));
+    Ok(Box::new(schema))
 }
 
 crate::register_schema!(
     "hsvtuner",
     "HSV range tuning on a live image: sliders, H-S cheese map, filtered view, conf lines",
-    create
+    create,
+    lines = LINES
 );
 
 /// The H–S "cheese" geometry: hue as the angle (counter-clockwise from the right),
@@ -418,19 +313,8 @@ pub mod panel {
             let before = r;
             let res = self.state.result.lock().clone();
             ui.horizontal(|ui| {
-                let mut src = self.state.source.lock().clone();
-                egui::ComboBox::new("hsvtuner source", "image")
-                    .selected_text(&src)
-                    .show_ui(ui, |ui| {
-                        for c in &self.state.choices {
-                            ui.selectable_value(&mut src, c.clone(), c);
-                        }
-                    });
-                *self.state.source.lock() = src;
-                let mut black = self.state.toblack.load(Ordering::Relaxed);
-                if ui.checkbox(&mut black, "toblack").changed() {
-                    self.state.toblack.store(black, Ordering::Relaxed);
-                }
+                self.state.source.picker(ui, "hsvtuner source");
+                self.state.toblack_checkbox(ui);
                 let total = (res.image.width * res.image.height).max(1) as f32;
                 ui.label(format!(
                     "passed {} px ({:.1} %)",

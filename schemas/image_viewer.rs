@@ -16,6 +16,7 @@
 //! run image_viewer         # uses (runs) its interfaces, so their drivers publish
 //! show image_viewer
 //! ```
+//! `jderobot help image_viewer` prints these lines with their ranges and defaults.
 //! Interfaces used: the image interfaces named (BGR, 8 bits per channel).
 //!
 //! Headless the schema still computes each view's statistics and exports them in
@@ -32,7 +33,11 @@ use std::{
 use parking_lot::Mutex;
 
 use crate::{
-    conf::ComponentConf,
+    conf::{
+        ComponentConf,
+        settings::{CYCLE, Setting, path, rest},
+    },
+    imagesource,
     interfaces::{Image, Interface},
     runtime::{Context, Runtime, Schema},
 };
@@ -152,36 +157,54 @@ pub fn save_png(image: &Image, path: &Path) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// image_viewer's lines, declared once (`jderobot help image_viewer`).
+const LINES: &[Setting] = &[
+    Setting::new(
+        "images",
+        "up to 8 image interfaces to show (colorA..D, varcolorA..D); default: every image \
+         interface the run provides when the schema is loaded",
+        &[rest("INTERFACE")],
+    ),
+    CYCLE
+        .default("100")
+        .help("the period between statistics updates"),
+    Setting::new(
+        "save_dir",
+        "where the panel's Save button writes NAME-CLOCK.png (default: the current directory)",
+        &[path("DIRECTORY")],
+    ),
+];
+
+/// The values of [`LINES`].
+#[derive(serde::Deserialize)]
+struct Lines {
+    images: Option<Vec<String>>,
+    cycle: u64,
+    save_dir: Option<PathBuf>,
+}
+
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>> {
-    let mut names: Option<Vec<String>> = None;
-    let mut cycle = Duration::from_millis(100);
-    let mut save_dir = PathBuf::from(".");
-    for l in &conf.lines {
-        match l.keyword() {
-            "images" => {
-                l.expect_args(1, 8, "images INTERFACE... (colorA..D, varcolorA..D)")?;
-                let mut v = Vec::new();
-                for i in 0..l.args().len() {
-                    v.push(rt.image_interface(l, i)?);
-                }
-                names = Some(v);
-            }
-            "cycle" => {
-                l.expect_args(1, 1, "cycle MS")?;
-                cycle = l.millis(0, "period in ms", 1..=10_000)?;
-            }
-            "save_dir" => {
-                l.expect_args(1, 1, "save_dir DIRECTORY")?;
-                save_dir = l.path(0, "the directory for saved frames")?;
-            }
-            _ => return Err(conf.unknown(l, "images, cycle or save_dir").into()),
+    let l: Lines = conf.settings(LINES)?;
+    let images = match l.images {
+        Some(names) if names.len() > 8 => {
+            return Err(imagesource::error_at(
+                conf,
+                "images",
+                format!("at most 8 interfaces, got {}", names.len()),
+            ));
         }
-    }
-    let names = names.unwrap_or_else(|| rt.interfaces.names_of::<Image>());
-    let images = names
-        .iter()
-        .map(|n| rt.interfaces.get::<Image>(n))
-        .collect::<Result<Vec<_>, _>>()?;
+        Some(names) => names
+            .iter()
+            .map(|n| imagesource::image(conf, &rt.interfaces, "images", n))
+            .collect::<anyhow::Result<Vec<_>>>()?,
+        None => rt
+            .interfaces
+            .names_of::<Image>()
+            .iter()
+            .map(|n| rt.interfaces.get::<Image>(n))
+            .collect::<Result<Vec<_>, _>>()?,
+    };
+    let save_dir = l.save_dir.unwrap_or_else(|| PathBuf::from("."));
     let views = Arc::new(Mutex::new(Vec::new()));
     rt.names
         .export_arc(&conf.name, "views", views.clone())
@@ -203,14 +226,15 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
         ))),
         images,
         views,
-        cycle,
+        cycle: Duration::from_millis(l.cycle),
     }))
 }
 
 crate::register_schema!(
     "image_viewer",
     "every image interface side by side: size, fps, clock, age, pixel BGR/HSV, save PNG",
-    create
+    create,
+    lines = LINES
 );
 
 #[cfg(feature = "gui")]

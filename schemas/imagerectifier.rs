@@ -20,21 +20,26 @@
 //! cycle 100
 //! end_schema
 //! ```
+//! `jderobot help imagerectifier` prints these lines with their ranges and defaults.
 //! Interfaces used: the `image` (BGR); provided: `output` if given (the input's size).
 //!
 //! Headless it warps each new frame once a homography is known and exports,
 //! component `imagerectifier`, `state` ([`Rectifier`]: points, homography, result).
 //! System packages: none.
 
-use std::{path::PathBuf, sync::Arc, time::Duration};
+use std::{path::PathBuf, sync::Arc};
 
 use nalgebra::Matrix3;
 use parking_lot::Mutex;
 
 use crate::{
-    conf::{ComponentConf, ConfLine},
+    conf::{
+        ComponentConf,
+        settings::{Arg, CYCLE, Setting, float, path},
+    },
+    imagesource::{self, Frame, Frames, Source, Work},
     interfaces::{Image, Interface},
-    runtime::{Context, Runtime, Schema},
+    runtime::{Runtime, Schema},
     vision::{find_homography, warp_perspective},
 };
 
@@ -167,144 +172,129 @@ impl Rectifier {
     }
 }
 
-/// The schema.
-pub struct ImageRectifier {
+/// What imagerectifier does with a frame: warps it once a homography is known.
+pub struct RectifierWork {
     pub state: Arc<Rectifier>,
-    image: Arc<Interface<Image>>,
-    output: Option<Arc<Interface<Image>>>,
-    last: Option<(u64, Option<Matrix3<f64>>)>,
-    cycle: Duration,
-    #[cfg(feature = "gui")]
-    panel: Option<Box<dyn crate::runtime::Panel>>,
+    source: Source,
 }
 
-impl Schema for ImageRectifier {
-    fn cycle(&self) -> Duration {
-        self.cycle
+impl Work for RectifierWork {
+    type Key = Option<Matrix3<f64>>;
+    fn source(&self) -> &Source {
+        &self.source
     }
-    fn on_run(&mut self, ctx: &Context) -> anyhow::Result<()> {
-        ctx.run_children(&[self.image.name()], None)?;
-        self.last = None;
-        Ok(())
+    fn key(&self) -> Self::Key {
+        self.state.points.lock().homography
     }
-    fn iteration(&mut self, _ctx: &Context) -> anyhow::Result<()> {
-        let s = self.image.snapshot();
-        let h = self.state.points.lock().homography;
-        let key = (s.clock, h);
-        if s.clock == 0 || self.last == Some(key) {
-            return Ok(());
-        }
+    fn work(&mut self, f: &Frame, h: &Self::Key, out: &Frames<Self::Key>) -> anyhow::Result<()> {
         if let Some(h) = h {
-            let image = warp_perspective(&s.value, &h, s.value.width, s.value.height);
-            if let Some(o) = &self.output {
-                o.publish(image.clone()).map_err(anyhow::Error::msg)?;
-            }
+            let s = &f.sample.value;
+            let image = warp_perspective(s, h, s.width, s.height);
+            out.publish(&image)?;
             *self.state.result.lock() = Rectified {
                 image,
-                clock: s.clock,
+                clock: f.sample.clock,
             };
         }
-        self.last = Some(key);
         Ok(())
-    }
-    #[cfg(feature = "gui")]
-    fn panel(&mut self) -> Option<Box<dyn crate::runtime::Panel>> {
-        self.panel.take()
     }
 }
 
-fn numbers(l: &ConfLine, n: usize, usage: &str) -> anyhow::Result<Vec<f64>> {
-    l.expect_args(n, n, usage)?;
-    (0..n)
-        .map(|i| Ok(l.number::<f64>(i, "pixel coordinate", -100_000.0..=100_000.0)?))
-        .collect()
+/// A pixel coordinate of `points` and `rectangle`.
+const fn px(name: &'static str) -> Arg {
+    float(name, "px", -100_000.0, 100_000.0)
+}
+
+/// imagerectifier's lines, declared once (`jderobot help imagerectifier`).
+const LINES: &[Setting] = &[
+    imagesource::IMAGE,
+    Setting::new(
+        "points",
+        "the 4 input points, in order: top-left, top-right, bottom-right, bottom-left \
+         (with `rectangle`, the homography is solved at load)",
+        &[
+            px("X1"),
+            px("Y1"),
+            px("X2"),
+            px("Y2"),
+            px("X3"),
+            px("Y3"),
+            px("X4"),
+            px("Y4"),
+        ],
+    ),
+    Setting::new(
+        "rectangle",
+        "the output rectangle's opposite corners",
+        &[px("X1"), px("Y1"), px("X2"), px("Y2")],
+    ),
+    Setting::new(
+        "save",
+        "where Save writes the 8 numbers of the homography",
+        &[path("FILE")],
+    ),
+    imagesource::OUTPUT.help("publish the rectified image on this new image interface"),
+    CYCLE.default("100"),
+];
+
+/// The values of [`LINES`].
+#[derive(serde::Deserialize)]
+struct Lines {
+    image: String,
+    points: Option<[f64; 8]>,
+    rectangle: Option<[f64; 4]>,
+    save: Option<PathBuf>,
+    output: Option<String>,
+    cycle: u64,
 }
 
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>> {
-    let mut source = "colorA".to_string();
+    let l: Lines = conf.settings(LINES)?;
     let mut points = Points::default();
-    let mut save = None;
-    let mut output = None;
-    let mut cycle = Duration::from_millis(100);
-    let mut solve_line = None;
-    for l in &conf.lines {
-        match l.keyword() {
-            "image" => {
-                l.expect_args(1, 1, "image INTERFACE (colorA..D, varcolorA..D)")?;
-                source = rt.image_interface(l, 0)?;
-            }
-            "points" => {
-                let v = numbers(l, 8, "points X1 Y1 X2 Y2 X3 Y3 X4 Y4")?;
-                points.src = v.chunks(2).map(|p| (p[0], p[1])).collect();
-                points.rectangle_mode = true;
-                solve_line = Some(l.clone());
-            }
-            "rectangle" => {
-                let v = numbers(l, 4, "rectangle X1 Y1 X2 Y2")?;
-                points.rect = vec![(v[0], v[1]), (v[2], v[3])];
-                solve_line = Some(l.clone());
-            }
-            "save" => {
-                l.expect_args(1, 1, "save FILE")?;
-                save = Some(l.path(0, "the file for the 8 numbers")?);
-            }
-            "output" => {
-                l.expect_args(1, 1, "output INTERFACE (a new image interface)")?;
-                output = Some((l.interface(0)?, l.clone()));
-            }
-            "cycle" => {
-                l.expect_args(1, 1, "cycle MS")?;
-                cycle = l.millis(0, "period in ms", 1..=10_000)?;
-            }
-            _ => {
-                return Err(conf
-                    .unknown(l, "image, points, rectangle, save, output or cycle")
-                    .into());
-            }
-        }
+    if let Some(v) = l.points {
+        points.src = v.chunks(2).map(|p| (p[0], p[1])).collect();
+        points.rectangle_mode = true;
     }
-    if let Some(l) = solve_line {
+    if let Some(v) = l.rectangle {
+        points.rect = vec![(v[0], v[1]), (v[2], v[3])];
+    }
+    // With either line the homography is solved now; an error names the later one.
+    let solve_line = [conf.line("points"), conf.line("rectangle")]
+        .into_iter()
+        .flatten()
+        .max_by_key(|l| l.at.line);
+    if let Some(line) = solve_line {
         points
             .rectify()
-            .map_err(|e| l.error(format!("points/rectangle: {e}")))?;
+            .map_err(|e| line.error(format!("points/rectangle: {e}")))?;
     }
-    let image = rt.interfaces.get::<Image>(&source)?;
-    let output = match output {
-        Some((name, l)) => Some(
-            rt.interfaces
-                .provide::<Image>(&name, &conf.name)
-                .map_err(|e| l.error(format!("output: {e}")))?,
-        ),
-        None => None,
-    };
+    let image = imagesource::image(conf, &rt.interfaces, "image", &l.image)?;
+    let output = imagesource::output(conf, &rt.interfaces, l.output.as_deref())?;
     let state = Arc::new(Rectifier {
         points: Mutex::new(points),
         result: Mutex::new(Rectified::default()),
-        source,
-        save,
+        source: image.name().to_string(),
+        save: l.save,
         message: Mutex::new(String::new()),
     });
     rt.names
         .export_arc(&conf.name, "state", state.clone())
         .map_err(anyhow::Error::msg)?;
-    Ok(Box::new(ImageRectifier {
-        #[cfg(feature = "gui")]
-        panel: Some(Box::new(panel::RectifierPanel::new(
-            state.clone(),
-            image.clone(),
-        ))),
-        state,
-        image,
-        output,
-        last: None,
-        cycle,
-    }))
+    let work = RectifierWork {
+        state: state.clone(),
+        source: Source::fixed(image.name()),
+    };
+    let schema = imagesource::FrameSchema::new(work, output, l.cycle);
+    #[cfg(feature = "gui")]
+    let schema = schema.with_panel(panel::RectifierPanel::new(state, image));
+    Ok(Box::new(schema))
 }
 
 crate::register_schema!(
     "imagerectifier",
     "click 4 points and a rectangle: the homography is solved and the live image rectified",
-    create
+    create,
+    lines = LINES
 );
 
 #[cfg(feature = "gui")]

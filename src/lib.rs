@@ -18,6 +18,7 @@ pub mod files;
 pub mod fuzzy;
 #[cfg(feature = "gui")]
 pub mod gui;
+pub mod imagesource;
 pub mod interfaces;
 pub mod loader;
 #[cfg(feature = "_mcap")]

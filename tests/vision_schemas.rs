@@ -912,3 +912,46 @@ mod calibrador {
         rt.shutdown();
     }
 }
+
+/// `jderobot check` reads the vision schemas' lines from their declarations, without
+/// building anything: each bad line is an error at its own line naming the range or
+/// the usage.
+#[cfg(all(
+    feature = "image_viewer",
+    feature = "hsvtuner",
+    feature = "colortuner",
+    feature = "opencvdemo",
+    feature = "imagerectifier",
+    feature = "extrinsics",
+    feature = "calibrador"
+))]
+#[test]
+fn check_names_the_line_and_the_range_of_every_vision_schema() {
+    for (schema, line, want) in [
+        ("hsvtuner", "hmin 30", "between 0 and 6.28"),
+        ("colortuner", "rgb 0 255 0 255 0 256", "between 0 and 255"),
+        ("colortuner", "space lab", "one of hsv, rgb, yuv"),
+        (
+            "opencvdemo",
+            "houghp 50 30",
+            "usage: houghp VOTES MIN_LENGTH MAX_GAP",
+        ),
+        ("opencvdemo", "row 16 1 2", "between 1 and 15"),
+        ("imagerectifier", "points 1 2 3", "usage: points X1 Y1"),
+        ("extrinsics", "cycle 0", "between 1 and 10000 ms"),
+        ("calibrador", "point 1 2", "usage: point X Y Z [U V]"),
+        ("image_viewer", "save_dir", "usage: save_dir DIRECTORY"),
+    ] {
+        let text = format!("schema {schema}\n{line}\nend_schema\nload_schema {schema}\n");
+        let c = jderobot::conf::Conf::parse(&text, std::path::Path::new("t.conf")).unwrap();
+        let e: Vec<String> = jderobot::loader::check(&c)
+            .iter()
+            .map(ToString::to_string)
+            .collect();
+        assert!(
+            e.iter()
+                .any(|e| e.starts_with("t.conf:2: ") && e.contains(want)),
+            "{schema} `{line}`: {e:?}"
+        );
+    }
+}

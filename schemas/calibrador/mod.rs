@@ -18,6 +18,7 @@
 //! camera_out /tmp/calibrated # where Save writes the progeo camera file
 //! end_schema
 //! ```
+//! `jderobot help calibrador` prints these lines with their ranges and defaults.
 //! With every point's U V given, it calibrates at load (headless). Interfaces used:
 //! the `image` (BGR). Name space, component `calibrador`: `state` ([`Calibrador`]).
 //! System packages: none.
@@ -31,7 +32,11 @@ use parking_lot::Mutex;
 pub use solve::{Calibration, CalibrationError, calibrate};
 
 use crate::{
-    conf::{ComponentConf, ConfLine},
+    conf::{
+        ComponentConf, ConfLine,
+        settings::{Arg, Setting, float, path},
+    },
+    imagesource,
     interfaces::{Image, Interface},
     runtime::{Context, Runtime, Schema},
 };
@@ -169,71 +174,110 @@ fn point_from(words: &[f64]) -> Option<PatternPoint> {
     }
 }
 
-fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>> {
-    let mut source = "colorA".to_string();
+/// A pattern coordinate of `point`.
+const fn mm(name: &'static str) -> Arg {
+    float(name, "mm", -1e9, 1e9)
+}
+/// A pixel of `point`.
+const fn px(name: &'static str) -> Arg {
+    float(name, "px", -1e9, 1e9)
+}
+
+/// calibrador's lines, declared once (`jderobot help calibrador`).
+const LINES: &[Setting] = &[
+    imagesource::IMAGE.help("the image it calibrates (its size goes in the camera file)"),
+    Setting::new(
+        "point",
+        "a pattern point, in clicking order; with U V (column, row) its pixel is given",
+        &[mm("X"), mm("Y"), mm("Z"), px("U").optional(), px("V")],
+    )
+    .repeats(),
+    Setting::new(
+        "pattern",
+        "a file of `X Y Z [U V]` lines (# comments): more points, in order",
+        &[path("FILE")],
+    )
+    .repeats(),
+    Setting::new(
+        "camera_out",
+        "where Save writes the progeo camera file",
+        &[path("FILE")],
+    ),
+];
+
+/// The values of [`LINES`].
+#[derive(serde::Deserialize)]
+struct Lines {
+    image: String,
+    point: Vec<(f64, f64, f64, Option<f64>, Option<f64>)>,
+    pattern: Vec<PathBuf>,
+    camera_out: Option<PathBuf>,
+}
+
+/// The points of a pattern file (an error names the conf line and the file's line).
+fn pattern(line: &ConfLine, f: &std::path::Path) -> anyhow::Result<Vec<PatternPoint>> {
+    let text = std::fs::read_to_string(f)
+        .map_err(|e| line.error(format!("pattern {}: {e}", f.display())))?;
     let mut points = Vec::new();
-    let mut camera_out = None;
-    let mut last_point: Option<ConfLine> = None;
-    for l in &conf.lines {
-        match l.keyword() {
+    for (n, raw) in text.lines().enumerate() {
+        let words = raw.split('#').next().unwrap_or_default().trim();
+        if words.is_empty() {
+            continue;
+        }
+        let v: Option<Vec<f64>> = words
+            .split_whitespace()
+            .map(|w| w.parse::<f64>().ok().filter(|v| v.is_finite()))
+            .collect();
+        let p = v.as_deref().and_then(point_from).ok_or_else(|| {
+            line.error(format!(
+                "pattern {}:{}: expected `X Y Z [U V]` numbers, got `{words}`",
+                f.display(),
+                n + 1
+            ))
+        })?;
+        points.push(p);
+    }
+    Ok(points)
+}
+
+fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>> {
+    let l: Lines = conf.settings(LINES)?;
+    // `point` and `pattern` lines give the points in the order they are written.
+    let (mut given, mut files) = (l.point.into_iter(), l.pattern.into_iter());
+    let mut points = Vec::new();
+    let mut last_point: Option<&ConfLine> = None;
+    for line in &conf.lines {
+        match line.keyword() {
             "point" => {
-                l.expect_args(3, 5, "point X Y Z [U V]")?;
-                if l.args().len() == 4 {
-                    return Err(l.error("point X Y Z [U V]: U needs V").into());
-                }
-                let v = (0..l.args().len())
-                    .map(|i| l.number::<f64>(i, "coordinate", -1e9..=1e9))
-                    .collect::<Result<Vec<_>, _>>()?;
-                points.extend(point_from(&v));
-                last_point = Some(l.clone());
+                let Some((x, y, z, u, v)) = given.next() else {
+                    break;
+                };
+                let image = match (u, v) {
+                    (Some(u), Some(v)) => Some((u, v)),
+                    (None, None) => None,
+                    _ => return Err(line.error("point X Y Z [U V]: U needs V").into()),
+                };
+                points.push(PatternPoint {
+                    world: [x, y, z],
+                    image,
+                });
             }
             "pattern" => {
-                l.expect_args(1, 1, "pattern FILE")?;
-                let f = l.existing_file(0, "the pattern file")?;
-                let text = std::fs::read_to_string(&f)
-                    .map_err(|e| l.error(format!("pattern {}: {e}", f.display())))?;
-                for (n, raw) in text.lines().enumerate() {
-                    let line = raw.split('#').next().unwrap_or_default().trim();
-                    if line.is_empty() {
-                        continue;
-                    }
-                    let v: Option<Vec<f64>> = line
-                        .split_whitespace()
-                        .map(|w| w.parse::<f64>().ok().filter(|v| v.is_finite()))
-                        .collect();
-                    let p = v.as_deref().and_then(point_from).ok_or_else(|| {
-                        l.error(format!(
-                            "pattern {}:{}: expected `X Y Z [U V]` numbers, got `{line}`",
-                            f.display(),
-                            n + 1
-                        ))
-                    })?;
-                    points.push(p);
-                }
-                last_point = Some(l.clone());
+                let Some(f) = files.next() else { break };
+                points.extend(pattern(line, &f)?);
             }
-            "camera_out" => {
-                l.expect_args(1, 1, "camera_out FILE")?;
-                camera_out = Some(l.path(0, "the progeo camera file to write")?);
-            }
-            "image" => {
-                l.expect_args(1, 1, "image INTERFACE (colorA..D, varcolorA..D)")?;
-                source = rt.image_interface(l, 0)?;
-            }
-            _ => {
-                return Err(conf
-                    .unknown(l, "image, point, pattern or camera_out")
-                    .into());
-            }
+            _ => continue,
         }
+        last_point = Some(line);
     }
-    let image = rt.interfaces.get::<Image>(&source)?;
+    let source = l.image;
+    let image = imagesource::image(conf, &rt.interfaces, "image", &source)?;
     let all_given = !points.is_empty() && points.iter().all(|p| p.image.is_some());
     let state = Arc::new(Calibrador {
         points: Mutex::new(points),
         result: Mutex::new(None),
         message: Mutex::new(String::new()),
-        camera_out,
+        camera_out: l.camera_out,
         size: Mutex::new((320, 240)),
     });
     if all_given {
@@ -262,7 +306,8 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
 crate::register_schema!(
     "calibrador",
     "camera calibration from a known 3D pattern: DLT + refinement, K, pose, progeo camera file",
-    create
+    create,
+    lines = LINES
 );
 
 #[cfg(feature = "gui")]

@@ -36,20 +36,22 @@ impl Filter {
         Filter::HoughStandard,
         Filter::HoughProbabilistic,
     ];
+    /// The conf words (and the panel's labels), in [`Filter::ALL`]'s order.
+    pub const NAMES: [&'static str; 10] = [
+        "original",
+        "gray",
+        "color",
+        "canny",
+        "sobel",
+        "flow",
+        "pyramid",
+        "convolution",
+        "hough",
+        "houghp",
+    ];
     /// The conf word (and the panel's label).
     pub fn name(self) -> &'static str {
-        match self {
-            Filter::Original => "original",
-            Filter::Gray => "gray",
-            Filter::ColorFilter => "color",
-            Filter::Canny => "canny",
-            Filter::Sobel => "sobel",
-            Filter::OpticalFlow => "flow",
-            Filter::Pyramid => "pyramid",
-            Filter::Convolution => "convolution",
-            Filter::HoughStandard => "hough",
-            Filter::HoughProbabilistic => "houghp",
-        }
+        Filter::NAMES[self as usize]
     }
     pub fn from_name(s: &str) -> Option<Filter> {
         Filter::ALL.into_iter().find(|f| f.name() == s)

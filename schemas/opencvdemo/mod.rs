@@ -28,6 +28,7 @@
 //! cycle 33                # ms (a 30 fps source needs ≤ 33)
 //! end_schema
 //! ```
+//! `jderobot help opencvdemo` prints these lines with their ranges and defaults.
 //! Without a valid kernel the default is 4.3's `[1 1 1; 1 -7 1; 1 1 1]`.
 //! Interfaces used: the `image` (BGR); provided: `output` if given.
 //!
@@ -39,7 +40,7 @@ pub mod filters;
 #[cfg(feature = "gui")]
 pub mod panel;
 
-use std::{collections::HashMap, sync::Arc, time::Duration};
+use std::{collections::HashMap, sync::Arc};
 
 use parking_lot::Mutex;
 
@@ -47,13 +48,15 @@ pub use filters::{Filter, Params, Pipeline};
 
 use crate::{
     colorspaces::HsvRange,
-    conf::{ComponentConf, ConfLine},
-    interfaces::{Image, InUse, Interface},
-    runtime::{Context, Runtime, Schema},
+    conf::{
+        ComponentConf, ConfLine,
+        settings::{CYCLE, Setting, choice, float, int, path, rest},
+    },
+    imagesource::{self, Frame, Frames, Source, Work},
+    interfaces::Image,
+    runtime::{Runtime, Schema},
     vision::Kernel,
 };
-
-const TAU: f32 = std::f32::consts::TAU;
 
 /// The last view.
 #[derive(Clone, Debug, Default)]
@@ -70,253 +73,237 @@ pub struct View {
 pub struct Demo {
     pub filter: Mutex<Filter>,
     pub params: Mutex<Params>,
-    pub source: Mutex<String>,
+    /// The image interface filtered (the panel may switch it).
+    pub source: Source,
     pub view: Mutex<View>,
     /// The last ms of every filter run so far.
     pub times: Mutex<HashMap<Filter, f64>>,
     /// Frames processed, and frames of the source skipped (clock jumps).
     pub frames: Mutex<(u64, u64)>,
-    /// Every image interface of the run (the panel's choice).
-    pub choices: Vec<String>,
 }
 
-/// The schema.
-pub struct OpencvDemo {
+/// What opencvdemo does with a frame: runs the chosen filter on it and times it.
+pub struct DemoWork {
     pub state: Arc<Demo>,
-    used: InUse<Image>,
-    output: Option<Arc<Interface<Image>>>,
     pipeline: Pipeline,
-    last: Option<(String, u64, Filter, Params)>,
-    cycle: Duration,
-    #[cfg(feature = "gui")]
-    panel: Option<Box<dyn crate::runtime::Panel>>,
 }
 
-impl OpencvDemo {
-    fn follow_source(&mut self, rt: &Runtime) -> anyhow::Result<Arc<Interface<Image>>> {
-        let name = self.state.source.lock().clone();
-        Ok(self.used.follow(&rt.interfaces, &name)?)
+impl Work for DemoWork {
+    type Key = (Filter, Params);
+    fn source(&self) -> &Source {
+        &self.state.source
     }
-}
-
-impl Schema for OpencvDemo {
-    fn cycle(&self) -> Duration {
-        self.cycle
+    fn key(&self) -> Self::Key {
+        (*self.state.filter.lock(), self.state.params.lock().clone())
     }
-    fn on_run(&mut self, ctx: &Context) -> anyhow::Result<()> {
-        self.follow_source(ctx.runtime())?;
-        self.last = None;
-        Ok(())
-    }
-    fn iteration(&mut self, ctx: &Context) -> anyhow::Result<()> {
-        let src = self.follow_source(ctx.runtime())?;
-        let s = src.snapshot();
-        let filter = *self.state.filter.lock();
-        let params = self.state.params.lock().clone();
-        let key = (src.name().to_string(), s.clock, filter, params);
-        if s.clock == 0 || self.last.as_ref() == Some(&key) {
-            return Ok(());
-        }
-        if let Some((name, clock, ..)) = &self.last
-            && *name == key.0
-            && s.clock > clock + 1
-        {
-            self.state.frames.lock().1 += s.clock - clock - 1;
-        }
-        let (image, ms) = self.pipeline.run(filter, &s.value, &key.3);
-        if let Some(o) = &self.output {
-            o.publish(image.clone()).map_err(anyhow::Error::msg)?;
-        }
-        self.state.times.lock().insert(filter, ms);
+    fn work(
+        &mut self,
+        f: &Frame,
+        (filter, params): &Self::Key,
+        out: &Frames<Self::Key>,
+    ) -> anyhow::Result<()> {
+        self.state.frames.lock().1 += f.skipped;
+        let (image, ms) = self.pipeline.run(*filter, &f.sample.value, params);
+        out.publish(&image)?;
+        self.state.times.lock().insert(*filter, ms);
         self.state.frames.lock().0 += 1;
         *self.state.view.lock() = View {
             image,
-            clock: s.clock,
-            filter: Some(filter),
+            clock: f.sample.clock,
+            filter: Some(*filter),
             ms,
         };
-        self.last = Some(key);
         Ok(())
-    }
-    fn on_stop(&mut self, _ctx: &Context) {
-        self.used.release();
-    }
-    #[cfg(feature = "gui")]
-    fn panel(&mut self) -> Option<Box<dyn crate::runtime::Panel>> {
-        self.panel.take()
     }
 }
 
-fn one(l: &ConfLine, lo: f32, hi: f32, what: &str) -> anyhow::Result<f32> {
-    l.expect_args(1, 1, &format!("{} <{what}>", l.keyword()))?;
-    Ok(l.number(0, what, lo..=hi)?)
+/// opencvdemo's lines, declared once (`jderobot help opencvdemo`); defaults are 4.3's.
+const LINES: &[Setting] = &[
+    imagesource::IMAGE,
+    Setting::new(
+        "filter",
+        "the filter shown at start",
+        &[choice("FILTER", &Filter::NAMES)],
+    )
+    .default("original"),
+    imagesource::HMIN.default("3.3"),
+    imagesource::HMAX.default("4.5"),
+    imagesource::SMIN.default("0.2"),
+    imagesource::SMAX.default("1"),
+    imagesource::VMIN.default("80"),
+    imagesource::VMAX.default("255"),
+    Setting::new(
+        "canny",
+        "Canny's low threshold (the high one is 3 times it)",
+        &[float("LOW", "", 1.0, 1000.0)],
+    )
+    .default("50"),
+    Setting::new(
+        "hough",
+        "the votes a standard Hough line needs",
+        &[int("VOTES", "", 1, 100_000)],
+    )
+    .default("100"),
+    Setting::new(
+        "houghp",
+        "probabilistic Hough: the votes a line needs, its minimum length, the largest gap in it",
+        &[
+            int("VOTES", "", 1, 100_000),
+            int("MIN_LENGTH", "px", 0, 100_000),
+            int("MAX_GAP", "px", 0, 100_000),
+        ],
+    )
+    .default("50 30 10"),
+    Setting::new(
+        "size",
+        "the convolution kernel's size (odd; 4.3 took 3 or 5), given by `row` lines",
+        &[int("N", "", 1, 15)],
+    ),
+    Setting::new(
+        "modulo",
+        "the kernel rows are divided by it when it is more than 1",
+        &[int("DIVISOR", "", -1_000_000, 1_000_000)],
+    )
+    .default("1"),
+    Setting::new(
+        "offset",
+        "added to the convolution before saturation",
+        &[int("OFFSET", "", -1_000_000, 1_000_000)],
+    )
+    .default("0"),
+    Setting::new(
+        "row",
+        "row N (1-based) of the kernel: `size` coefficients",
+        &[int("N", "", 1, 15), rest("COEFFICIENTS")],
+    )
+    .repeats(),
+    Setting::new(
+        "kernel",
+        "a kernel file (instead of size and rows; see assets/kernels)",
+        &[path("FILE")],
+    ),
+    imagesource::OUTPUT,
+    CYCLE
+        .default("33")
+        .help("the period of each iteration (a 30 fps source needs 33 or less)"),
+];
+
+/// The values of [`LINES`].
+#[derive(serde::Deserialize)]
+struct Lines {
+    image: String,
+    filter: String,
+    hmin: f32,
+    hmax: f32,
+    smin: f32,
+    smax: f32,
+    vmin: f32,
+    vmax: f32,
+    canny: f64,
+    hough: u32,
+    houghp: (u32, i32, i32),
+    size: Option<usize>,
+    modulo: i32,
+    offset: i32,
+    /// Read from the `row` lines themselves, so each coefficient's error names its line.
+    #[allow(dead_code)]
+    row: serde::de::IgnoredAny,
+    kernel: Option<String>,
+    output: Option<String>,
+    cycle: u64,
+}
+
+/// The kernel: a file, else the rows (all `size` of them, `size` values each).
+fn kernel(conf: &ComponentConf, l: &Lines) -> anyhow::Result<Kernel> {
+    if let Some(k) = &l.kernel {
+        let Some(line) = conf.line("kernel") else {
+            anyhow::bail!("kernel {k}: no kernel line");
+        };
+        let f = line.existing_file(0, "the kernel file")?;
+        return Ok(Kernel::load(&f).map_err(|e| line.error(format!("kernel: {e}")))?);
+    }
+    let mut rows: Vec<(usize, Vec<f32>, &ConfLine)> = Vec::new();
+    for line in conf.lines_with("row") {
+        let n: usize = line.number(0, "row number (1-based)", 1..=15)?;
+        let v = (1..line.args().len())
+            .map(|i| line.number::<f32>(i, "coefficient", ..))
+            .collect::<Result<Vec<_>, _>>()?;
+        rows.push((n, v, line));
+    }
+    let Some(n) = l.size else {
+        if let Some((_, _, line)) = rows.first() {
+            return Err(line.error("row without a `size N` line").into());
+        }
+        return Ok(Kernel {
+            offset: l.offset,
+            ..Kernel::default()
+        });
+    };
+    if n.is_multiple_of(2) {
+        return Err(imagesource::error_at(
+            conf,
+            "size",
+            "must be odd (4.3 took 3 or 5)",
+        ));
+    }
+    let mut grid: Vec<Option<Vec<f32>>> = vec![None; n];
+    for (i, v, line) in rows {
+        if i > n || v.len() != n {
+            return Err(line
+                .error(format!(
+                    "row: kernel size is {n}: rows 1..{n} of {n} values"
+                ))
+                .into());
+        }
+        grid[i - 1] = Some(v);
+    }
+    if grid.iter().any(Option::is_none) {
+        return Err(imagesource::error_at(
+            conf,
+            "size",
+            format!("size {n}: every row 1..{n} must be given"),
+        ));
+    }
+    let g: Vec<Vec<f32>> = grid.into_iter().flatten().collect();
+    let refs: Vec<&[f32]> = g.iter().map(Vec::as_slice).collect();
+    Ok(Kernel::from_rows(&refs, l.modulo, l.offset).unwrap_or_default())
 }
 
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>> {
-    let mut h = [3.3f32, 4.5, 0.2, 1.0, 80.0, 255.0];
-    let mut p = Params::default();
-    let mut filter = Filter::Original;
-    let mut source = "colorA".to_string();
-    let mut output = None;
-    let mut cycle = Duration::from_millis(33);
-    let (mut size, mut modulo, mut offset) = (None::<(usize, ConfLine)>, 1i32, 0i32);
-    let mut rows: Vec<(usize, Vec<f32>, ConfLine)> = Vec::new();
-    let mut kernel_file: Option<Kernel> = None;
-    for l in &conf.lines {
-        match l.keyword() {
-            "hmin" => h[0] = one(l, 0.0, TAU, "hue in radians, 0..2π")?,
-            "hmax" => h[1] = one(l, 0.0, TAU, "hue in radians, 0..2π")?,
-            "smin" => h[2] = one(l, 0.0, 1.0, "saturation 0..1")?,
-            "smax" => h[3] = one(l, 0.0, 1.0, "saturation 0..1")?,
-            "vmin" => h[4] = one(l, 0.0, 255.0, "value 0..255")?,
-            "vmax" => h[5] = one(l, 0.0, 255.0, "value 0..255")?,
-            "canny" => p.canny = one(l, 1.0, 1000.0, "Canny's low threshold")? as f64,
-            "hough" => {
-                l.expect_args(1, 1, "hough VOTES")?;
-                p.hough_votes = l.number(0, "votes", 1..=100_000)?;
-            }
-            "houghp" => {
-                l.expect_args(3, 3, "houghp VOTES MIN_LENGTH MAX_GAP")?;
-                p.houghp = (
-                    l.number(0, "votes", 1..=100_000)?,
-                    l.number(1, "minimum length in px", 0..=100_000)?,
-                    l.number(2, "maximum gap in px", 0..=100_000)?,
-                );
-            }
-            "filter" => {
-                let names: Vec<&str> = Filter::ALL.iter().map(|f| f.name()).collect();
-                l.expect_args(1, 1, &format!("filter {}", names.join("|")))?;
-                filter = Filter::from_name(l.choice(0, "the filter", &names)?)
-                    .unwrap_or(Filter::Original);
-            }
-            "size" => {
-                l.expect_args(1, 1, "size N (odd, 1..15)")?;
-                let n: usize = l.number(0, "kernel size", 1..=15)?;
-                if n.is_multiple_of(2) {
-                    return Err(l.error("size must be odd (4.3 took 3 or 5)").into());
-                }
-                size = Some((n, l.clone()));
-            }
-            "modulo" => {
-                l.expect_args(1, 1, "modulo N")?;
-                modulo = l.number(0, "divisor", -1_000_000..=1_000_000)?;
-            }
-            "offset" => {
-                l.expect_args(1, 1, "offset N")?;
-                offset = l.number(0, "offset", -1_000_000..=1_000_000)?;
-            }
-            "row" => {
-                l.expect_args(2, 16, "row N v1 .. vsize")?;
-                let n: usize = l.number(0, "row number (1-based)", 1..=15)?;
-                let v = (1..l.args().len())
-                    .map(|i| l.number::<f32>(i, "coefficient", ..))
-                    .collect::<Result<Vec<_>, _>>()?;
-                rows.push((n, v, l.clone()));
-            }
-            "kernel" => {
-                l.expect_args(1, 1, "kernel FILE")?;
-                let f = l.existing_file(0, "the kernel file")?;
-                kernel_file = Some(Kernel::load(&f).map_err(|e| l.error(format!("kernel: {e}")))?);
-            }
-            "image" => {
-                l.expect_args(1, 1, "image INTERFACE (colorA..D, varcolorA..D)")?;
-                source = rt.image_interface(l, 0)?;
-            }
-            "output" => {
-                l.expect_args(1, 1, "output INTERFACE (a new image interface)")?;
-                output = Some((l.interface(0)?, l.clone()));
-            }
-            "cycle" => {
-                l.expect_args(1, 1, "cycle MS")?;
-                cycle = l.millis(0, "period in ms", 1..=10_000)?;
-            }
-            _ => {
-                return Err(conf
-                    .unknown(
-                        l,
-                        "image, filter, hmin, hmax, smin, smax, vmin, vmax, canny, hough, \
-                         houghp, size, modulo, offset, row, kernel, output or cycle",
-                    )
-                    .into());
-            }
-        }
-    }
-    p.hsv = HsvRange::from_radians(h[0], h[1], h[2], h[3], h[4], h[5]);
-    // The kernel: a file, else the rows (all `size` of them, `size` values each).
-    p.kernel = match (kernel_file, size) {
-        (Some(k), _) => k,
-        (None, Some((n, sl))) => {
-            let mut grid: Vec<Option<Vec<f32>>> = vec![None; n];
-            for (i, v, l) in &rows {
-                if *i > n || v.len() != n {
-                    return Err(l
-                        .error(format!(
-                            "row: kernel size is {n}: rows 1..{n} of {n} values"
-                        ))
-                        .into());
-                }
-                grid[i - 1] = Some(v.clone());
-            }
-            if grid.iter().any(Option::is_none) {
-                return Err(sl
-                    .error(format!("size {n}: every row 1..{n} must be given"))
-                    .into());
-            }
-            let g: Vec<Vec<f32>> = grid.into_iter().flatten().collect();
-            let refs: Vec<&[f32]> = g.iter().map(Vec::as_slice).collect();
-            Kernel::from_rows(&refs, modulo, offset).unwrap_or_default()
-        }
-        (None, None) => {
-            if let Some((_, _, l)) = rows.first() {
-                return Err(l.error("row without a `size N` line").into());
-            }
-            Kernel {
-                offset,
-                ..Kernel::default()
-            }
-        }
+    let l: Lines = conf.settings(LINES)?;
+    let p = Params {
+        hsv: HsvRange::from_radians(l.hmin, l.hmax, l.smin, l.smax, l.vmin, l.vmax),
+        canny: l.canny,
+        hough_votes: l.hough,
+        houghp: l.houghp,
+        kernel: kernel(conf, &l)?,
     };
-    rt.interfaces.get::<Image>(&source)?;
-    let output = match output {
-        Some((name, l)) => Some(
-            rt.interfaces
-                .provide::<Image>(&name, &conf.name)
-                .map_err(|e| l.error(format!("output: {e}")))?,
-        ),
-        None => None,
-    };
-    let choices = rt
-        .interfaces
-        .names_of::<Image>()
-        .into_iter()
-        .filter(|n| output.as_ref().is_none_or(|o| o.name() != n))
-        .collect();
+    let (source, output) =
+        imagesource::Source::open(conf, &rt.interfaces, &l.image, l.output.as_deref())?;
     let state = Arc::new(Demo {
-        filter: Mutex::new(filter),
+        filter: Mutex::new(Filter::from_name(&l.filter).unwrap_or(Filter::Original)),
         params: Mutex::new(p),
-        source: Mutex::new(source),
+        source,
         view: Mutex::new(View::default()),
         times: Mutex::new(HashMap::new()),
         frames: Mutex::new((0, 0)),
-        choices,
     });
     rt.names
         .export_arc(&conf.name, "state", state.clone())
         .map_err(anyhow::Error::msg)?;
-    Ok(Box::new(OpencvDemo {
-        #[cfg(feature = "gui")]
-        panel: Some(Box::new(panel::DemoPanel::new(state.clone()))),
-        state,
-        used: InUse::default(),
-        output,
+    let work = DemoWork {
+        state: state.clone(),
         pipeline: Pipeline::default(),
-        last: None,
-        cycle,
-    }))
+    };
+    let schema = imagesource::FrameSchema::new(work, output, l.cycle);
+    #[cfg(feature = "gui")]
+    let schema = schema.with_panel(panel::DemoPanel::new(state));
+    Ok(Box::new(schema))
 }
 
 crate::register_schema!(
     "opencvdemo",
     "4.3's image-processing demo: gray, colour filter, Canny, Sobel, flow, pyramid, convolution, Hough",
-    create
+    create,
+    lines = LINES
 );

@@ -27,15 +27,7 @@ impl crate::runtime::Panel for DemoPanel {
         let before = p.clone();
         let times = self.state.times.lock().clone();
         ui.horizontal(|ui| {
-            let mut src = self.state.source.lock().clone();
-            egui::ComboBox::new("opencvdemo source", "image")
-                .selected_text(&src)
-                .show_ui(ui, |ui| {
-                    for c in &self.state.choices {
-                        ui.selectable_value(&mut src, c.clone(), c);
-                    }
-                });
-            *self.state.source.lock() = src;
+            self.state.source.picker(ui, "opencvdemo source");
             let (done, dropped) = *self.state.frames.lock();
             ui.label(format!("{done} frames, {dropped} dropped"));
         });
