@@ -44,15 +44,9 @@ pub mod ffi;
 
 use std::{
     ffi::c_int,
-    sync::{
-        Arc,
-        atomic::{AtomicBool, Ordering},
-    },
-    thread::JoinHandle,
+    sync::Arc,
     time::{Duration, Instant},
 };
-
-use anyhow::Context as _;
 
 use crate::{
     conf::{
@@ -60,7 +54,7 @@ use crate::{
         settings::{self, Setting},
     },
     interfaces::{COLOR_HEIGHT, COLOR_WIDTH, Image, Interface},
-    runtime::{Driver, Runtime},
+    runtime::{Backoff, Device, Driver, Runtime, Supervision, Supervisor},
     vision::pixfmt::{self, Bayer, Yuv422Order, YuvMatrix},
 };
 
@@ -568,96 +562,55 @@ const NO_FRAME_STALE: Duration = Duration::from_secs(5);
 /// Wait between attempts to open an absent camera.
 const RETRY: Duration = Duration::from_secs(2);
 
-fn capture_thread(
+/// One camera under the runtime's [`Supervisor`]: it opens the camera while its
+/// interface is used, and serves it a frame at a time.
+struct Camera {
     c: CamConf,
     iface: Arc<Interface<Image>>,
-    stop: Arc<AtomicBool>,
-    mut last_err: String,
-) {
-    let mut dev: Option<Session> = None;
-    let mut next_try = Instant::now();
-    let mut last_frame = Instant::now();
-    let mut buf = Vec::new();
-    while !stop.load(Ordering::Acquire) {
-        if !iface.wait_used(Duration::from_millis(200)) {
-            dev = None; // nobody uses it: stop transmission
-            continue;
+    buf: Vec<u8>,
+    last_frame: Instant,
+}
+
+impl Device for Camera {
+    type Session = Session;
+    fn open(&mut self) -> Result<Session, String> {
+        let s = Session::open(&self.c)?;
+        self.last_frame = Instant::now();
+        Ok(s)
+    }
+    fn step(&mut self, d: &mut Session) -> Result<(), String> {
+        if d.grab(&self.c, Duration::from_millis(200), &mut self.buf)? {
+            self.last_frame = Instant::now();
+            let (w, h) = (self.c.width, self.c.height);
+            let buf = &mut self.buf;
+            if let Err(e) = self.iface.write(|img| {
+                img.width = w;
+                img.height = h;
+                std::mem::swap(&mut img.data, buf);
+            }) {
+                self.iface.set_stale(e);
+            }
+        } else if self.last_frame.elapsed() > NO_FRAME_STALE {
+            self.iface.set_stale(format!(
+                "camera {}: no frame for {} s",
+                self.c.cam,
+                self.last_frame.elapsed().as_secs()
+            ));
         }
-        let Some(d) = dev.as_mut() else {
-            if Instant::now() < next_try {
-                std::thread::sleep(Duration::from_millis(100));
-                continue;
-            }
-            match Session::open(&c) {
-                Ok(d) => {
-                    if !last_err.is_empty() {
-                        tracing::info!("firewire: camera {} is back", c.cam);
-                    }
-                    last_err.clear();
-                    last_frame = Instant::now();
-                    dev = Some(d);
-                }
-                Err(e) => {
-                    if e != last_err {
-                        tracing::warn!("firewire: {e}; retrying every {}s", RETRY.as_secs());
-                    }
-                    iface.set_stale(e.clone());
-                    last_err = e;
-                    next_try = Instant::now() + RETRY;
-                }
-            }
-            continue;
-        };
-        match d.grab(&c, Duration::from_millis(200), &mut buf) {
-            Ok(true) => {
-                last_frame = Instant::now();
-                let (w, h) = (c.width, c.height);
-                if let Err(e) = iface.write(|img| {
-                    img.width = w;
-                    img.height = h;
-                    std::mem::swap(&mut img.data, &mut buf);
-                }) {
-                    iface.set_stale(e);
-                }
-            }
-            Ok(false) => {
-                if last_frame.elapsed() > NO_FRAME_STALE {
-                    iface.set_stale(format!(
-                        "camera {}: no frame for {} s",
-                        c.cam,
-                        last_frame.elapsed().as_secs()
-                    ));
-                }
-            }
-            Err(e) => {
-                tracing::warn!("firewire: {e}");
-                iface.set_stale(e.clone());
-                last_err = e;
-                dev = None;
-                next_try = Instant::now() + RETRY;
-            }
-        }
+        Ok(())
     }
 }
 
-/// The running driver: one capture thread per camera.
+/// The running driver: one supervised camera each.
 pub struct Firewire {
-    stop: Arc<AtomicBool>,
-    threads: Vec<JoinHandle<()>>,
+    cameras: Vec<Supervisor>,
 }
 
 impl Driver for Firewire {
     fn terminate(&mut self) {
-        self.stop.store(true, Ordering::Release);
-        for t in self.threads.drain(..) {
-            let _ = t.join();
+        for c in &mut self.cameras {
+            c.stop();
         }
-    }
-}
-
-impl Drop for Firewire {
-    fn drop(&mut self) {
-        self.terminate();
     }
 }
 
@@ -666,8 +619,7 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
         tracing::info!("firewire22: the same driver as firewire (libdc1394 2.x)");
     }
     let cams = parse(conf)?;
-    let stop = Arc::new(AtomicBool::new(false));
-    let mut threads = Vec::new();
+    let mut cameras = Vec::new();
     for c in cams {
         let iface =
             rt.interfaces
@@ -689,15 +641,23 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
                 e
             }
         };
-        let s = stop.clone();
-        threads.push(
-            std::thread::Builder::new()
-                .name(format!("firewire-{}", c.cam))
-                .spawn(move || capture_thread(c, iface, s, absent))
-                .context("cannot start a firewire capture thread")?,
-        );
+        cameras.push(Supervisor::start(
+            Supervision {
+                name: format!("firewire camera {}", c.cam),
+                interfaces: vec![iface.clone()],
+                on_demand: true,
+                backoff: Backoff::fixed(RETRY),
+                absent: (!absent.is_empty()).then_some(absent),
+            },
+            Camera {
+                c,
+                iface,
+                buf: Vec::new(),
+                last_frame: Instant::now(),
+            },
+        )?);
     }
-    Ok(Box::new(Firewire { stop, threads }))
+    Ok(Box::new(Firewire { cameras }))
 }
 
 crate::register_driver!(

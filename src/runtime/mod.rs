@@ -41,6 +41,7 @@ pub mod pacer;
 mod panel;
 mod schema;
 mod slot;
+mod supervisor;
 
 use std::{
     path::{Path, PathBuf},
@@ -60,6 +61,7 @@ pub use error::RuntimeError;
 pub use panel::Panel;
 pub use schema::{Schema, State};
 pub use slot::{SchemaSlot, SchemaStatus};
+pub use supervisor::{Backoff, Device, Supervision, Supervisor};
 
 use crate::{
     conf::{ConfError, ConfLine, Kind},
