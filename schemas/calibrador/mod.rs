@@ -190,8 +190,8 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
             "pattern" => {
                 l.expect_args(1, 1, "pattern FILE")?;
                 let f = l.existing_file(0, "the pattern file")?;
-                let text = std::fs::read_to_string(&f)
-                    .map_err(|e| l.error(format!("pattern {}: {e}", f.display())))?;
+                let text = crate::files::FileError::read(&f)
+                    .map_err(|e| l.error(format!("pattern {e}")))?;
                 for (n, raw) in text.lines().enumerate() {
                     let line = raw.split('#').next().unwrap_or_default().trim();
                     if line.is_empty() {
