@@ -17,10 +17,14 @@ pub const MAX_PIXELS: u64 = 1 << 26;
 
 /// Reads an image file (PNM, PNG, JPEG or BMP) into a BGR image.
 pub fn load_image(path: &Path) -> Result<Image, MediaError> {
-    let bytes = std::fs::read(path).map_err(|source| MediaError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
+    let bytes =
+        crate::files::read_limited(path, crate::files::MAX_IMAGE_BYTES).map_err(|e| match e {
+            crate::files::FileError::Io { source, .. } => MediaError::Io {
+                path: path.to_path_buf(),
+                source,
+            },
+            other => MediaError::format(path, other.reason()),
+        })?;
     decode_image(&bytes, path)
 }
 
@@ -53,11 +57,30 @@ pub fn decode_image(bytes: &[u8], path: &Path) -> Result<Image, MediaError> {
             format!("{format:?} images are not supported; use PNM, PNG, JPEG or BMP"),
         ));
     }
-    let mut reader = image::ImageReader::with_format(std::io::Cursor::new(bytes), format);
-    let mut limits = image::Limits::default();
-    limits.max_alloc = Some(MAX_PIXELS * 4 + (1 << 20));
-    reader.limits(limits);
-    let img = reader.decode().map_err(|e| {
+    if format == image::ImageFormat::Jpeg && !jpeg_has_end(bytes) {
+        // The decoder fills a cut-short scan with grey and calls it an image.
+        return Err(MediaError::format(
+            path,
+            "truncated JPEG: no end-of-image marker after the last scan",
+        ));
+    }
+    let reader = || {
+        let mut reader = image::ImageReader::with_format(std::io::Cursor::new(bytes), format);
+        let mut limits = image::Limits::default();
+        limits.max_alloc = Some(MAX_PIXELS * 4 + (1 << 20));
+        reader.limits(limits);
+        reader
+    };
+    // The header's size first: the same pixel limit as PNM and y4m, before any
+    // allocation.
+    let (w, h) = reader().into_dimensions().map_err(|e| {
+        MediaError::format(
+            path,
+            format!("cannot decode this {format:?} image's header ({e}); is it truncated?"),
+        )
+    })?;
+    check_size(w as u64, h as u64, path)?;
+    let img = reader().decode().map_err(|e| {
         MediaError::format(
             path,
             format!("cannot decode this {format:?} image ({e}); is it truncated?"),
@@ -66,6 +89,29 @@ pub fn decode_image(bytes: &[u8], path: &Path) -> Result<Image, MediaError> {
     let rgb = img.to_rgb8();
     let (width, height) = rgb.dimensions();
     Ok(Image::from_rgb(width, height, rgb.into_raw()))
+}
+
+/// Refuses a header's size of no pixels or more than [`MAX_PIXELS`] (every
+/// decoder here: PNM, PNG, JPEG, BMP; y4m checks the same limit).
+fn check_size(width: u64, height: u64, path: &Path) -> Result<(), MediaError> {
+    if width == 0 || height == 0 || width * height > MAX_PIXELS {
+        return Err(MediaError::format(
+            path,
+            format!("bad image header: size {width}x{height} (expected 1..{MAX_PIXELS} pixels)"),
+        ));
+    }
+    Ok(())
+}
+
+/// Whether a JPEG's last scan is followed by its end-of-image marker (FF D9).
+/// Entropy-coded data never holds FF D9 (an FF there is followed by 00 or a
+/// restart marker D0..D7), so a file cut anywhere before its end lacks it.
+fn jpeg_has_end(b: &[u8]) -> bool {
+    let last_sos = b.windows(2).rposition(|w| w == [0xFF, 0xDA]);
+    match last_sos {
+        Some(i) => b[i + 2..].windows(2).any(|w| w == [0xFF, 0xD9]),
+        None => false,
+    }
 }
 
 /// A cursor over a PNM header.
@@ -122,12 +168,7 @@ fn decode_pnm(bytes: &[u8], path: &Path) -> Result<Image, MediaError> {
         })?;
     }
     let [width, height, maxval] = v;
-    if width == 0 || height == 0 || width * height > MAX_PIXELS {
-        return Err(MediaError::format(
-            path,
-            format!("bad PNM header: size {width}x{height} (expected 1..{MAX_PIXELS} pixels)"),
-        ));
-    }
+    check_size(width, height, path)?;
     if !(1..=65535).contains(&maxval) {
         return Err(MediaError::format(
             path,
