@@ -279,7 +279,7 @@ impl ConfLine {
             return Err(self.error(format!(
                 "`{}`: {what} `{}` {problem} (relative paths are relative to {})",
                 self.keyword(),
-                crate::files::shorten(&p.display().to_string()),
+                crate::files::shorten_long_words(&p.display().to_string()),
                 self.at
                     .file
                     .parent()

@@ -5,7 +5,11 @@
 //! `#` comments anywhere in the header (4.3 only allowed whole comment lines),
 //! maxval 1..65535 (16-bit samples are big-endian, scaled to 8 bits). PNG, JPEG
 //! and BMP go through the `image` crate. A file that is none of these, or that is
-//! truncated, is an error naming the file and what was wrong.
+//! truncated (a JPEG without its end-of-image marker after the last scan too), is
+//! an error naming the file and what was wrong. Files are read with
+//! [`crate::files::read_limited`] (regular files only, at most
+//! [`crate::files::MAX_IMAGE_BYTES`]); every format has the same size limit,
+//! [`MAX_PIXELS`], checked from the header before decoding.
 
 use std::path::Path;
 
