@@ -404,6 +404,7 @@ fn laser_server(conf: ServerConf) -> (NetServer, Arc<AtomicBool>, thread::JoinHa
     let laser = Arc::new(Interface::<Laser>::new("laser", "robot"));
     let sources = Sources {
         laser: Some(laser.clone()),
+        motors: Some(Arc::new(Interface::<Motors>::new("motors", "robot"))),
         ..Default::default()
     };
     let server = NetServer::start(conf, sources).unwrap();
@@ -461,11 +462,11 @@ const NAME: &[u8; 20] = b"jdec\0\0\0\0\0\0\0\0\0\0\0\0\0\0\0\0";
 /// Issue 28, N1: clients that send their name and then nothing held their slots
 /// for ever, so once `max_clients` of them were connected every new client got
 /// `1027 too many clients`. An idle client with no subscription is closed after
-/// `idle_timeout`; a subscribed one is not.
+/// `idle_timeout`; a subscribed one is not, nor one that has sent a command.
 #[test]
 fn idle_clients_without_subscription_are_closed() {
     let conf = ServerConf {
-        max_clients: 4,
+        max_clients: 5,
         timeout: Duration::from_millis(500),
         idle_timeout: Duration::from_millis(400),
         ..Default::default()
@@ -476,19 +477,29 @@ fn idle_clients_without_subscription_are_closed() {
     let mut sub = TcpStream::connect(addr).unwrap();
     sub.write_all(NAME).unwrap();
     sub.write_all(b"27\n").unwrap();
+    // One that sets the motors once and then waits.
+    let mut driver = connect(addr);
+    driver.write_all(b"22 100.0 0.0\n").unwrap();
     // Three that only say their name: the table is full.
     let mut idle: Vec<TcpStream> = (0..3).map(|_| connect(addr)).collect();
-    common::eventually("4 clients", || {
-        server.stats().clients.load(Ordering::Acquire) == 4
+    common::eventually("5 clients", || {
+        server.stats().clients.load(Ordering::Acquire) == 5
     });
     for s in &mut idle {
         assert!(closed_within(s, 5.0), "an idle client was not closed");
     }
+    common::eventually("the idle clients gone", || {
+        server.stats().clients.load(Ordering::Acquire) == 2
+    });
     assert!(gets_laser(addr, NAME), "a new client still cannot get in");
     // The subscribed client is still served (closed_within reads its pushes).
     assert!(
         !closed_within(&mut sub, 1.0),
         "a subscribed client was closed"
+    );
+    assert!(
+        !closed_within(&mut driver, 0.2),
+        "a client that drove the motors was closed"
     );
     stop.store(true, Ordering::Release);
     t.join().unwrap();

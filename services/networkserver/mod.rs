@@ -18,8 +18,8 @@
 //! max_queue 32             # image requests + replies waiting per client
 //! timeout 5000             # ms: a client whose name takes longer (in all), holding
 //!                          #   a partial line, or not reading what it is sent is disconnected
-//! idle_timeout 60000       # ms: a client with no subscription, no image request and
-//!                          #   no line for this long is closed (0 = never)
+//! idle_timeout 60000       # ms: a client with no subscription, no image request, no
+//!                          #   command ever and no line for this long is closed (0 = never)
 //! end_driver
 //! load_driver simulator
 //! load_service networkserver   # after the drivers whose interfaces it serves
@@ -41,7 +41,7 @@
 //! - Limits: line length, clients, queued requests, timeouts. A bad client is
 //!   disconnected alone with one log line; the others and the schemas do not notice.
 //!   The name must arrive within `timeout` in all; an idle client with no
-//!   subscription is closed after `idle_timeout`; with the table full, a new
+//!   subscription that has sent no command is closed after `idle_timeout`; with the table full, a new
 //!   connection closes the one that has waited longest (over 250 ms) for its
 //!   name, so a client with the token gets in while strangers hold connections.
 //! - Stopping needs no network: the accept thread polls its nonblocking listener
@@ -110,8 +110,9 @@ pub struct ServerConf {
     pub max_line: usize,
     pub max_queue: usize,
     pub timeout: Duration,
-    /// A client with no subscription, no image request waiting and no line for
-    /// this long is closed (zero: never).
+    /// A client with no subscription, no image request waiting, no motors,
+    /// pan-tilt or zoom command ever and no line for this long is closed (zero:
+    /// never).
     pub idle_timeout: Duration,
 }
 
@@ -785,6 +786,9 @@ fn reader(stream: &TcpStream, cl: &Client, sh: &Shared, resumed: &mut Resumed, d
     let mut r = stream;
     let mut partial_since: Option<Instant> = None;
     let mut last_line = Instant::now();
+    // It sent a motors, pan-tilt or zoom command: a controller, which may send
+    // nothing while the command stands (4.3's pan-tilt client sends on change).
+    let mut commanded = false;
     loop {
         if cl.st.lock().closed || sh.stop.load(Ordering::Acquire) {
             return;
@@ -795,6 +799,13 @@ fn reader(stream: &TcpStream, cl: &Client, sh: &Shared, resumed: &mut Resumed, d
                 last_line = Instant::now();
                 match Request::parse(line) {
                     Ok(req) => {
+                        commanded |= matches!(
+                            req,
+                            Request::DriveSpeed { .. }
+                                | Request::SteerSpeed { .. }
+                                | Request::PtPosition { .. }
+                                | Request::ZoomPosition { .. }
+                        );
                         if let Err((why, bad)) = handle(req, cl, sh, resumed, drove) {
                             cl.close(why, bad);
                             return;
@@ -834,7 +845,10 @@ fn reader(stream: &TcpStream, cl: &Client, sh: &Shared, resumed: &mut Resumed, d
                         return;
                     }
                 }
-                if !conf.idle_timeout.is_zero() && last_line.elapsed() >= conf.idle_timeout {
+                if !conf.idle_timeout.is_zero()
+                    && !commanded
+                    && last_line.elapsed() >= conf.idle_timeout
+                {
                     let st = cl.st.lock();
                     let busy = st.subs.iter().any(|s| *s)
                         || st.images.iter().any(|n| *n > 0)
