@@ -97,14 +97,25 @@ fn kind_of(t: std::fs::FileType) -> &'static str {
     }
 }
 
-/// Reads the whole of the regular file `path`, at most `max` bytes. Opens it
-/// without blocking (so a FIFO cannot hang it), then refuses anything that is not
-/// a regular file (saying what it is) or is larger than `max`.
+/// Reads the whole of the regular file `path`, at most `max` bytes. Refuses
+/// anything that is not a regular file (saying what it is; a device is not even
+/// opened) or is larger than `max`; opens without blocking, so a FIFO put in the
+/// file's place cannot hang it.
 pub fn read_limited(path: &Path, max: u64) -> Result<Vec<u8>, FileError> {
     let io = |source| FileError::Io {
         file: path.to_path_buf(),
         source,
     };
+    // Look before opening (opening a device can have effects: a serial port's
+    // DTR line), then again at what was opened (the path may have changed).
+    if let Ok(m) = std::fs::metadata(path)
+        && !m.is_file()
+    {
+        return Err(FileError::NotRegular {
+            file: path.to_path_buf(),
+            what: kind_of(m.file_type()),
+        });
+    }
     let f = File::options()
         .read(true)
         .custom_flags(libc::O_NONBLOCK)
