@@ -848,6 +848,10 @@ fn huge_headers_and_truncated_images_are_errors() {
         decode_image(&bytes, &f).unwrap_or_else(|e| panic!("{e}"));
     }
     let jpeg = std::fs::read(root().join("assets/photos/astronaut.jpg")).unwrap();
+    // Data after the end marker (a second picture, a motion photo's video) is fine.
+    let mut tail = jpeg.clone();
+    tail.extend_from_slice(&[0xFF, 0xDA, 0, 8, 1, 2, 0xFF, 0xD8, 0xFF, 0xDA, 9]);
+    decode_image(&tail, Path::new("tail.jpg")).unwrap_or_else(|e| panic!("{e}"));
     let huge = with_jpeg_size(jpeg.clone(), 8193, 8192);
     assert!(8193 * 8192 > MAX_PIXELS);
     let e = decode_image(&huge, Path::new("huge.jpg"))
@@ -869,6 +873,11 @@ fn huge_headers_and_truncated_images_are_errors() {
     let mut loaded = Vec::new();
     for k in 1..=35 {
         let cut = jpeg.len() * k / 36;
+        if decode_image(&jpeg[..cut], Path::new("cut.jpg")).is_ok() {
+            loaded.push(cut);
+        }
+    }
+    for cut in [jpeg.len() - 1, jpeg.len() - 2] {
         if decode_image(&jpeg[..cut], Path::new("cut.jpg")).is_ok() {
             loaded.push(cut);
         }

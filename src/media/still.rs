@@ -65,7 +65,7 @@ pub fn decode_image(bytes: &[u8], path: &Path) -> Result<Image, MediaError> {
         // The decoder fills a cut-short scan with grey and calls it an image.
         return Err(MediaError::format(
             path,
-            "truncated JPEG: no end-of-image marker after the last scan",
+            "truncated JPEG: the file ends before its end-of-image marker",
         ));
     }
     let reader = || {
@@ -107,14 +107,42 @@ fn check_size(width: u64, height: u64, path: &Path) -> Result<(), MediaError> {
     Ok(())
 }
 
-/// Whether a JPEG's last scan is followed by its end-of-image marker (FF D9).
-/// Entropy-coded data never holds FF D9 (an FF there is followed by 00 or a
-/// restart marker D0..D7), so a file cut anywhere before its end lacks it.
+/// Whether a JPEG reaches its end-of-image marker (FF D9): walks the segments
+/// (skipping each by its length, so an EXIF thumbnail's markers are not taken
+/// for the image's) and the entropy-coded data (where an FF is followed by 00 or
+/// a restart marker D0..D7). A file cut anywhere before its end never gets there;
+/// data after the marker (a second picture, a video) is not looked at.
 fn jpeg_has_end(b: &[u8]) -> bool {
-    let last_sos = b.windows(2).rposition(|w| w == [0xFF, 0xDA]);
-    match last_sos {
-        Some(i) => b[i + 2..].windows(2).any(|w| w == [0xFF, 0xD9]),
-        None => false,
+    if !b.starts_with(&[0xFF, 0xD8]) {
+        return false;
+    }
+    let mut i = 2;
+    loop {
+        while i < b.len() && b[i] != 0xFF {
+            i += 1;
+        }
+        while i < b.len() && b[i] == 0xFF {
+            i += 1;
+        }
+        let Some(&m) = b.get(i) else {
+            return false;
+        };
+        i += 1;
+        match m {
+            0xD9 => return true,
+            // Stuffed FF in scan data, restart markers, TEM: no length.
+            0x00 | 0x01 | 0xD0..=0xD7 => {}
+            _ => {
+                let Some(len) = b.get(i..i + 2) else {
+                    return false;
+                };
+                let len = u16::from_be_bytes([len[0], len[1]]) as usize;
+                if len < 2 || i + len > b.len() {
+                    return false;
+                }
+                i += len;
+            }
+        }
     }
 }
 
