@@ -41,9 +41,10 @@
 //! - Limits: line length, clients, queued requests, timeouts. A bad client is
 //!   disconnected alone with one log line; the others and the schemas do not notice.
 //!   The name must arrive within `timeout` in all; an idle client with no
-//!   subscription that has sent no command is closed after `idle_timeout`; with the table full, a new
-//!   connection closes the one that has waited longest (over 250 ms) for its
-//!   name, so a client with the token gets in while strangers hold connections.
+//!   subscription that has sent no command is closed after `idle_timeout`; with
+//!   the table full, a new connection closes the one that has waited longest
+//!   (over 250 ms) for its name, so a client with the token gets in while
+//!   strangers hold connections.
 //! - Stopping needs no network: the accept thread polls its nonblocking listener
 //!   with a stop flag (100 ms), where a self-connect would fail with loopback down.
 //! - 4.3 bug fixed: the sonars push carried `laser.number` readings; it carries the
