@@ -162,12 +162,12 @@ pub fn check(conf: &Conf) -> Vec<ConfError> {
                     }
                     loaded.push((name.clone(), c.kind));
                     if let Some(f) = file
-                        && !f.exists()
+                        && let Err(problem) = crate::files::check_regular(f)
                     {
                         errors.push(err(
                             &d.at,
                             format!(
-                                "conf file `{}` of {} `{name}` does not exist",
+                                "conf file `{}` of {} `{name}` {problem}",
                                 f.display(),
                                 c.kind
                             ),

@@ -101,7 +101,7 @@ pub fn lookup(kind: Option<Kind>, name: &str) -> Result<&'static Entry, LookupEr
     let compiled: Vec<&str> = components().iter().map(|c| c.name).collect();
     Err(LookupError::Unknown {
         what,
-        name: name.into(),
+        name: crate::files::shorten(name).into_owned(),
         compiled: compiled.join(", "),
         features: ALL_COMPONENT_FEATURES.join(", "),
     })

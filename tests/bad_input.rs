@@ -323,3 +323,60 @@ fn shell_command_lines() {
     rt.shutdown();
     assert!(!err.is_empty() && !out.is_empty());
 }
+
+/// Issue 28, C1: every reader of a file a conf names (camera, progeo world,
+/// kernel, fuzzy controller, simulator world) reads regular files only, with a
+/// size limit: a directory, a FIFO (which would block), `/dev/zero` (which would
+/// fill memory) and a 64 MiB text file are errors that say what is wrong, at
+/// once.
+#[test]
+fn file_readers_take_regular_files_of_a_sane_size_only() {
+    let dir = tempfile::tempdir().unwrap();
+    let fifo = dir.path().join("pipe.txt");
+    assert!(
+        std::process::Command::new("mkfifo")
+            .arg(&fifo)
+            .status()
+            .unwrap()
+            .success()
+    );
+    let huge = dir.path().join("huge.txt");
+    std::fs::File::create(&huge)
+        .unwrap()
+        .set_len(64 << 20)
+        .unwrap();
+    let cases: [(&Path, &str); 4] = [
+        (dir.path(), "is a directory, not a regular file"),
+        (&fifo, "is a FIFO (named pipe), not a regular file"),
+        (
+            Path::new("/dev/zero"),
+            "is a character device, not a regular file",
+        ),
+        (
+            &huge,
+            "is 67108864 bytes, more than the 16777216 bytes this reads",
+        ),
+    ];
+    for (p, want) in cases {
+        let errors = [
+            (
+                "camera",
+                PinholeCamera::load(p).err().map(|e| e.to_string()),
+            ),
+            (
+                "progeo world",
+                CamWorld::load(p).err().map(|e| e.to_string()),
+            ),
+            ("kernel", Kernel::load(p).err().map(|e| e.to_string())),
+            (
+                "fuzzy",
+                Controller::from_file(p).err().map(|e| e.to_string()),
+            ),
+            ("world", SimWorld::load(p).err().map(|e| e.to_string())),
+        ];
+        for (what, e) in errors {
+            let e = e.unwrap_or_else(|| panic!("the {what} reader accepted {}", p.display()));
+            assert!(e.contains(want), "{what} reader on {}: {e}", p.display());
+        }
+    }
+}

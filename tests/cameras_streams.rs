@@ -823,3 +823,100 @@ fn mplayer_conf_errors_name_the_line() {
         }
     }
 }
+
+/// `bytes` with its JPEG frame header (SOF0..SOF2) saying `w` x `h`.
+fn with_jpeg_size(mut bytes: Vec<u8>, w: u16, h: u16) -> Vec<u8> {
+    let i = bytes
+        .windows(2)
+        .position(|m| m[0] == 0xFF && (0xC0..=0xC2).contains(&m[1]))
+        .expect("a SOF marker");
+    bytes[i + 5..i + 7].copy_from_slice(&h.to_be_bytes());
+    bytes[i + 7..i + 9].copy_from_slice(&w.to_be_bytes());
+    bytes
+}
+
+/// Issue 28, I1 and I2: a 70 KB JPEG whose header says 8193x8192 loaded as a
+/// 201 MB image (PNM refused anything over 67 Mpx: every decoder now has that
+/// limit), and JPEGs cut short loaded with no error (the decoder fills the rest
+/// with grey): a truncated JPEG, PNG or BMP is an error.
+#[test]
+fn huge_headers_and_truncated_images_are_errors() {
+    use jderobot::media::still::{MAX_PIXELS, decode_image};
+    for photo in ["astronaut", "chelsea", "coffee", "gravel"] {
+        let f = root().join(format!("assets/photos/{photo}.jpg"));
+        let bytes = std::fs::read(&f).unwrap();
+        decode_image(&bytes, &f).unwrap_or_else(|e| panic!("{e}"));
+    }
+    let jpeg = std::fs::read(root().join("assets/photos/astronaut.jpg")).unwrap();
+    // Data after the end marker (a second picture, a motion photo's video) is fine.
+    let mut tail = jpeg.clone();
+    tail.extend_from_slice(&[0xFF, 0xDA, 0, 8, 1, 2, 0xFF, 0xD8, 0xFF, 0xDA, 9]);
+    decode_image(&tail, Path::new("tail.jpg")).unwrap_or_else(|e| panic!("{e}"));
+    let huge = with_jpeg_size(jpeg.clone(), 8193, 8192);
+    assert!(8193 * 8192 > MAX_PIXELS);
+    let e = decode_image(&huge, Path::new("huge.jpg"))
+        .err()
+        .expect("a 8193x8192 JPEG header was accepted");
+    assert!(e.to_string().contains("8193x8192"), "{e}");
+    // The same through imagefile, naming the conf line.
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("huge.jpg"), &huge).unwrap();
+    let e = start_in(
+        dir.path(),
+        "driver imagefile\nprovides varcolorA huge.jpg\nend_driver\nload_driver imagefile\n",
+    )
+    .err()
+    .expect("imagefile loaded a 8193x8192 JPEG");
+    assert!(e.contains("test.conf:2") && e.contains("8193x8192"), "{e}");
+
+    // 35 cuts through the JPEG, and some through a PNG and a BMP.
+    let mut loaded = Vec::new();
+    for k in 1..=35 {
+        let cut = jpeg.len() * k / 36;
+        if decode_image(&jpeg[..cut], Path::new("cut.jpg")).is_ok() {
+            loaded.push(cut);
+        }
+    }
+    for cut in [jpeg.len() - 1, jpeg.len() - 2] {
+        if decode_image(&jpeg[..cut], Path::new("cut.jpg")).is_ok() {
+            loaded.push(cut);
+        }
+    }
+    assert!(loaded.is_empty(), "JPEGs cut at {loaded:?} bytes loaded");
+    let png = std::fs::read(root().join("assets/images/mandelbrot.png")).unwrap();
+    let bmp = encode_bmp(&decode_image(&png, Path::new("m.png")).unwrap());
+    assert!(decode_image(&bmp, Path::new("m.bmp")).is_ok());
+    for (name, bytes) in [("cut.png", &png), ("cut.bmp", &bmp)] {
+        for k in 1..=9 {
+            let cut = bytes.len() * k / 10;
+            assert!(
+                decode_image(&bytes[..cut], Path::new(name)).is_err(),
+                "{name} cut at {cut} of {} bytes loaded",
+                bytes.len()
+            );
+        }
+    }
+}
+
+/// A 24-bit BMP of `img` (BGR rows, bottom-up, padded to 4 bytes).
+fn encode_bmp(img: &Image) -> Vec<u8> {
+    let (w, h) = (img.width as usize, img.height as usize);
+    let row = (w * 3).div_ceil(4) * 4;
+    let size = 54 + row * h;
+    let mut b = Vec::with_capacity(size);
+    b.extend_from_slice(b"BM");
+    b.extend_from_slice(&(size as u32).to_le_bytes());
+    b.extend_from_slice(&[0; 4]);
+    b.extend_from_slice(&54u32.to_le_bytes());
+    b.extend_from_slice(&40u32.to_le_bytes());
+    b.extend_from_slice(&(w as i32).to_le_bytes());
+    b.extend_from_slice(&(h as i32).to_le_bytes());
+    b.extend_from_slice(&1u16.to_le_bytes());
+    b.extend_from_slice(&24u16.to_le_bytes());
+    b.extend_from_slice(&[0; 24]);
+    for y in (0..h).rev() {
+        b.extend_from_slice(&img.data[y * w * 3..(y + 1) * w * 3]);
+        b.resize(b.len() + row - w * 3, 0);
+    }
+    b
+}

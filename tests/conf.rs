@@ -281,3 +281,145 @@ fn registry_lists_compiled_components_with_features() {
         );
     }
 }
+
+/// Runs `jderobot check` on `text` (written as `dir/jde.conf`) with at most 1 GiB
+/// of address space and 30 s: a check that reads a device into memory or blocks
+/// on a FIFO fails here instead of taking the machine or the test run with it.
+/// Returns whether it passed and its standard error.
+#[cfg(feature = "full")]
+fn check_bin(dir: &Path, text: &str) -> (bool, String) {
+    use std::{
+        io::Read,
+        os::unix::process::CommandExt,
+        process::{Command, Stdio},
+        time::{Duration, Instant},
+    };
+    let conf = dir.join("jde.conf");
+    std::fs::write(&conf, text).unwrap();
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_jderobot"));
+    cmd.arg("check")
+        .arg(&conf)
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped());
+    // SAFETY: setrlimit is async-signal-safe; nothing else runs in the child.
+    unsafe {
+        cmd.pre_exec(|| {
+            let lim = libc::rlimit {
+                rlim_cur: 1 << 30,
+                rlim_max: 1 << 30,
+            };
+            libc::setrlimit(libc::RLIMIT_AS, &lim);
+            Ok(())
+        });
+    }
+    let mut child = cmd.spawn().unwrap();
+    let mut err = child.stderr.take().unwrap();
+    let reader = std::thread::spawn(move || {
+        let mut s = String::new();
+        let _ = err.read_to_string(&mut s);
+        s
+    });
+    let t0 = Instant::now();
+    let status = loop {
+        if let Some(s) = child.try_wait().unwrap() {
+            break s;
+        }
+        if t0.elapsed() > Duration::from_secs(30) {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!(
+                "`jderobot check` hung on:\n{}",
+                &text[..text.len().min(300)]
+            );
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    (status.success(), reader.join().unwrap())
+}
+
+/// Issue 28, C1 and C3: `provides varcolorA /dev/zero` made `check` read the
+/// device into 4.2 GB, `/dev/urandom` and a FIFO hung it, and `world /dev/zero`
+/// and `file /` were reported as "does not exist". Only regular files are read,
+/// and the error says what the path is.
+#[cfg(feature = "full")]
+#[test]
+fn devices_fifos_and_directories_are_named_not_read() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let fifo = d.join("pipe.ppm");
+    let made = std::process::Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .unwrap();
+    assert!(made.success());
+    let fifo = fifo.display().to_string();
+    let cases: &[(String, &str)] = &[
+        (
+            "driver imagefile\nprovides varcolorA /dev/zero\nend_driver\nload_driver imagefile\n"
+                .into(),
+            "/dev/zero: is a character device, not a regular file",
+        ),
+        (
+            "driver imagefile\nprovides varcolorA /dev/urandom\nend_driver\nload_driver imagefile\n"
+                .into(),
+            "/dev/urandom: is a character device, not a regular file",
+        ),
+        (
+            format!("driver imagefile\nprovides varcolorA {fifo}\nend_driver\nload_driver imagefile\n"),
+            "is a FIFO (named pipe), not a regular file",
+        ),
+        (
+            "driver simulator\nworld /dev/zero\nend_driver\nload_driver simulator\n".into(),
+            "`/dev/zero` is a character device, not a regular file",
+        ),
+        (
+            format!("driver simulator\nworld {fifo}\nend_driver\nload_driver simulator\n"),
+            "is a FIFO (named pipe), not a regular file",
+        ),
+        (
+            "driver replay\nfile /\nend_driver\nload_driver replay\n".into(),
+            "`/` is a directory, not a regular file",
+        ),
+        (
+            "load_schema introrob /dev/zero\n".into(),
+            "`/dev/zero` of schema `introrob` is a character device, not a regular file",
+        ),
+    ];
+    for (text, want) in cases {
+        let (ok, err) = check_bin(d, text);
+        assert!(!ok, "check passed:\n{text}");
+        assert!(err.contains(want), "{want:?} missing in:\n{err}");
+    }
+}
+
+/// Issue 28, C3: a 1 MB word was echoed whole (up to 3 times) in `check`'s
+/// errors. An echoed word is cut to 60 characters with `…` and its length.
+#[cfg(feature = "full")]
+#[test]
+fn a_huge_word_is_cut_in_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let big = "x".repeat(1 << 20);
+    let cases = [
+        format!("load_driver {big}\n"),
+        format!("{big} 1\n"),
+        format!("driver simulator\n{big} 1 2\nend_driver\nload_driver simulator\n"),
+        format!(
+            "driver networkserver\nsocket 0\ntoken {big}\nend_driver\nload_service networkserver\n"
+        ),
+        format!("driver networkserver\nsocket {big}\nend_driver\nload_service networkserver\n"),
+        format!("driver imagefile\nprovides {big} a.ppm\nend_driver\nload_driver imagefile\n"),
+        format!("driver simulator\nworld {big}\nend_driver\nload_driver simulator\n"),
+    ];
+    for text in &cases {
+        let (ok, err) = check_bin(d, text);
+        assert!(!ok, "check passed");
+        assert!(
+            err.len() < 4000,
+            "{} bytes of errors, starting: {}",
+            err.len(),
+            &err[..300.min(err.len())]
+        );
+    }
+}

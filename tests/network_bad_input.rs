@@ -397,3 +397,211 @@ fn bad_clients_are_dropped_alone_and_memory_stays_bounded() {
     server.stop();
     assert_eq!(PANICS.load(Ordering::Relaxed), 0, "something panicked");
 }
+
+/// A server on `laser` alone, a thread publishing it at 50 Hz until the returned
+/// flag is set.
+fn laser_server(conf: ServerConf) -> (NetServer, Arc<AtomicBool>, thread::JoinHandle<()>) {
+    let laser = Arc::new(Interface::<Laser>::new("laser", "robot"));
+    let sources = Sources {
+        laser: Some(laser.clone()),
+        motors: Some(Arc::new(Interface::<Motors>::new("motors", "robot"))),
+        ..Default::default()
+    };
+    let server = NetServer::start(conf, sources).unwrap();
+    let stop = Arc::new(AtomicBool::new(false));
+    let t = {
+        let stop = stop.clone();
+        thread::spawn(move || {
+            let mut k = 0;
+            while !stop.load(Ordering::Acquire) {
+                k += 1;
+                let _ = laser.publish(Laser {
+                    readings: vec![k; 10],
+                    resolution: 1.0,
+                });
+                thread::sleep(Duration::from_millis(20));
+            }
+        })
+    };
+    (server, stop, t)
+}
+
+/// Connects with `name`, subscribes to the laser and says whether a laser push
+/// arrives within 5 s (false on a `1027` refusal or a close).
+fn gets_laser(addr: SocketAddr, name: &[u8]) -> bool {
+    let Ok(mut s) = TcpStream::connect(addr) else {
+        return false;
+    };
+    s.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
+    let mut hello = name.to_vec();
+    hello.extend_from_slice(b"27\n");
+    if s.write_all(&hello).is_err() {
+        return false;
+    }
+    let mut got = Vec::new();
+    let mut b = [0u8; 4096];
+    let t0 = Instant::now();
+    while t0.elapsed() < Duration::from_secs(5) {
+        match s.read(&mut b) {
+            Ok(0) | Err(_) => break,
+            Ok(n) => got.extend_from_slice(&b[..n]),
+        }
+        if got.starts_with(b"26 ") {
+            return true;
+        }
+        if got.starts_with(b"1027") && got.contains(&b'\n') {
+            eprintln!("refused: {}", String::from_utf8_lossy(&got).trim());
+            return false;
+        }
+    }
+    false
+}
+
+const NAME: &[u8; 20] = b"jdec\0\0\0\0\0\0\0\0\0\0\0\0\0\0\0\0";
+
+/// Issue 28, N1: clients that send their name and then nothing held their slots
+/// for ever, so once `max_clients` of them were connected every new client got
+/// `1027 too many clients`. An idle client with no subscription is closed after
+/// `idle_timeout`; a subscribed one is not, nor one that has sent a command.
+#[test]
+fn idle_clients_without_subscription_are_closed() {
+    let conf = ServerConf {
+        max_clients: 5,
+        timeout: Duration::from_millis(500),
+        idle_timeout: Duration::from_millis(400),
+        ..Default::default()
+    };
+    let (server, stop, t) = laser_server(conf);
+    let addr = server.local_addr();
+    // One subscribed client that reads nothing for a while: not idle.
+    let mut sub = TcpStream::connect(addr).unwrap();
+    sub.write_all(NAME).unwrap();
+    sub.write_all(b"27\n").unwrap();
+    // One that sets the motors once and then waits.
+    let mut driver = connect(addr);
+    driver.write_all(b"22 100.0 0.0\n").unwrap();
+    // Three that only say their name: the table is full.
+    let mut idle: Vec<TcpStream> = (0..3).map(|_| connect(addr)).collect();
+    common::eventually("5 clients", || {
+        server.stats().clients.load(Ordering::Acquire) == 5
+    });
+    for s in &mut idle {
+        assert!(closed_within(s, 5.0), "an idle client was not closed");
+    }
+    common::eventually("the idle clients gone", || {
+        server.stats().clients.load(Ordering::Acquire) == 2
+    });
+    assert!(gets_laser(addr, NAME), "a new client still cannot get in");
+    // The subscribed client is still served (closed_within reads its pushes).
+    assert!(
+        !closed_within(&mut sub, 1.0),
+        "a subscribed client was closed"
+    );
+    assert!(
+        !closed_within(&mut driver, 0.2),
+        "a client that drove the motors was closed"
+    );
+    stop.store(true, Ordering::Release);
+    t.join().unwrap();
+}
+
+/// Issue 28, N1: a name sent one byte at a time, each byte within `timeout` of
+/// the last, held a slot for 20 x timeout. The name gets `timeout` in all.
+#[test]
+fn a_slow_name_is_cut_at_the_timeout_in_all() {
+    let conf = ServerConf {
+        timeout: Duration::from_millis(500),
+        ..Default::default()
+    };
+    let (server, stop, t) = laser_server(conf);
+    let mut s = TcpStream::connect(server.local_addr()).unwrap();
+    // One byte every 150 ms: 3 s for the name, each byte well within 500 ms.
+    for b in NAME {
+        if s.write_all(&[*b]).is_err() {
+            break;
+        }
+        thread::sleep(Duration::from_millis(150));
+    }
+    assert!(
+        closed_within(&mut s, 2.0),
+        "a name dribbled over 3 s was accepted (timeout 500 ms)"
+    );
+    stop.store(true, Ordering::Release);
+    t.join().unwrap();
+}
+
+/// Issue 28, N1: while strangers fill the table with connections that never send
+/// a name, a client with the token still gets in (the one waiting longest for
+/// its name makes room).
+#[test]
+fn a_client_with_the_token_gets_in_while_strangers_fill_the_table() {
+    let conf = ServerConf {
+        max_clients: 8,
+        token: Some("s3cret".into()),
+        timeout: Duration::from_secs(10),
+        ..Default::default()
+    };
+    let (server, stop, t) = laser_server(conf);
+    let addr = server.local_addr();
+    let strangers: Vec<TcpStream> = (0..8).map(|_| TcpStream::connect(addr).unwrap()).collect();
+    common::eventually("8 connections", || {
+        server.stats().clients.load(Ordering::Acquire) == 8
+    });
+    thread::sleep(Duration::from_millis(400));
+    let name = jderobot::netwire::client_name(Some("s3cret")).unwrap();
+    assert!(gets_laser(addr, &name), "the token's client was refused");
+    assert!(gets_laser(addr, &name), "a second token client was refused");
+    drop(strangers);
+    stop.store(true, Ordering::Release);
+    t.join().unwrap();
+}
+
+/// Issue 28, N2: with loopback down (a private network namespace), stopping
+/// the networkserver waited for a connection to itself that could not be made:
+/// `check` of examples/networkserver.conf and a run of it never ended.
+#[cfg(feature = "simulator")]
+#[test]
+fn the_server_stops_with_the_network_down() {
+    use std::process::{Command, Stdio};
+    let unshare_works = Command::new("unshare")
+        .args(["-n", "true"])
+        .stderr(Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success());
+    if !unshare_works {
+        assert!(
+            std::env::var("CI").as_deref() != Ok("true"),
+            "`unshare -n` does not work here (needs root or user namespaces); CI must run this test"
+        );
+        eprintln!("skipped: `unshare -n` does not work here");
+        return;
+    }
+    let bin = env!("CARGO_BIN_EXE_jderobot");
+    let conf = common::root().join("examples/networkserver.conf");
+    let ends = |args: &[&str], input: &str, what: &str| {
+        let mut c = Command::new("unshare")
+            .arg("-n")
+            .arg(bin)
+            .args(args)
+            .stdin(Stdio::piped())
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap();
+        let _ = c.stdin.take().unwrap().write_all(input.as_bytes());
+        let t0 = Instant::now();
+        while t0.elapsed() < Duration::from_secs(20) {
+            if let Some(status) = c.try_wait().unwrap() {
+                assert!(status.success(), "{what}: {status}");
+                return;
+            }
+            thread::sleep(Duration::from_millis(20));
+        }
+        let _ = c.kill();
+        let _ = c.wait();
+        panic!("{what} did not end with the network down");
+    };
+    let conf = conf.to_str().unwrap();
+    ends(&["check", conf], "", "check");
+    ends(&[conf, "--headless"], "quit\n", "a run told to quit");
+}

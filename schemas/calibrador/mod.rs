@@ -216,8 +216,7 @@ struct Lines {
 
 /// The points of a pattern file (an error names the conf line and the file's line).
 fn pattern(line: &ConfLine, f: &std::path::Path) -> anyhow::Result<Vec<PatternPoint>> {
-    let text = std::fs::read_to_string(f)
-        .map_err(|e| line.error(format!("pattern {}: {e}", f.display())))?;
+    let text = crate::files::FileError::read(f).map_err(|e| line.error(format!("pattern {e}")))?;
     let mut points = Vec::new();
     for (n, raw) in text.lines().enumerate() {
         let words = raw.split('#').next().unwrap_or_default().trim();

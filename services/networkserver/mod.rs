@@ -16,8 +16,10 @@
 //! max_clients 128          # connections at once (more are refused with a 1027 line)
 //! max_line 1024            # bytes in a request line
 //! max_queue 32             # image requests + replies waiting per client
-//! timeout 5000             # ms: a client silent before its name, holding a partial
-//!                          #   line, or not reading what it is sent is disconnected
+//! timeout 5000             # ms: a client whose name takes longer (in all), holding
+//!                          #   a partial line, or not reading what it is sent is disconnected
+//! idle_timeout 60000       # ms: a client with no subscription, no image request, no
+//!                          #   command ever and no line for this long is closed (0 = never)
 //! end_driver
 //! load_driver simulator
 //! load_service networkserver   # after the drivers whose interfaces it serves
@@ -38,6 +40,13 @@
 //!   watch the traffic reads it, and the data).
 //! - Limits: line length, clients, queued requests, timeouts. A bad client is
 //!   disconnected alone with one log line; the others and the schemas do not notice.
+//!   The name must arrive within `timeout` in all; an idle client with no
+//!   subscription that has sent no command is closed after `idle_timeout`; with
+//!   the table full, a new connection closes the one that has waited longest
+//!   (over 250 ms) for its name, so a client with the token gets in while
+//!   strangers hold connections.
+//! - Stopping needs no network: the accept thread polls its nonblocking listener
+//!   with a stop flag (100 ms), where a self-connect would fail with loopback down.
 //! - 4.3 bug fixed: the sonars push carried `laser.number` readings; it carries the
 //!   sonars' own count.
 //! - 4.3 bug fixed: `1024` (zoom) was obeyed only when pan-tilt motors were
@@ -102,6 +111,10 @@ pub struct ServerConf {
     pub max_line: usize,
     pub max_queue: usize,
     pub timeout: Duration,
+    /// A client with no subscription, no image request waiting, no motors,
+    /// pan-tilt or zoom command ever and no line for this long is closed (zero:
+    /// never).
+    pub idle_timeout: Duration,
 }
 
 impl Default for ServerConf {
@@ -115,11 +128,13 @@ impl Default for ServerConf {
             max_line: 1024,
             max_queue: 32,
             timeout: Duration::from_secs(5),
+            idle_timeout: Duration::from_secs(60),
         }
     }
 }
 
-const EXPECTED: &str = "socket, bind, token, serves, max_clients, max_line, max_queue or timeout";
+const EXPECTED: &str =
+    "socket, bind, token, serves, max_clients, max_line, max_queue, timeout or idle_timeout";
 
 fn err(l: &ConfLine, m: impl Into<String>) -> anyhow::Error {
     l.error(m).into()
@@ -212,6 +227,12 @@ impl ServerConf {
                 "timeout" => {
                     c.timeout =
                         Duration::from_millis(count(l, "milliseconds", 10, 3_600_000)? as u64)
+                }
+                "idle_timeout" => {
+                    c.idle_timeout =
+                        Duration::from_millis(
+                            count(l, "milliseconds (0 = never)", 0, 86_400_000)? as u64
+                        )
                 }
                 _ => return Err(conf.unknown(l, EXPECTED).into()),
             }
@@ -360,10 +381,36 @@ struct Shared {
     stop: AtomicBool,
     stats: Stats,
     epoch: Instant,
-    /// Live connections (to shut them down on terminate) and their threads.
-    clients: Mutex<Vec<(u64, TcpStream)>>,
+    /// Live connections (to shut them down on terminate, and to evict one that
+    /// has not sent its name when the table is full) and their threads.
+    clients: Mutex<Vec<Conn>>,
     threads: Mutex<Vec<JoinHandle<()>>>,
 }
+
+/// A connection in the server's table.
+struct Conn {
+    id: u64,
+    stream: TcpStream,
+    since: Instant,
+    slot: Arc<Slot>,
+}
+
+/// What the accept loop and a connection's thread share.
+#[derive(Default)]
+struct Slot {
+    /// It sent its 20-byte name (and the token, if one is set).
+    named: AtomicBool,
+    /// The accept loop closed it to make room for a new connection.
+    evicted: AtomicBool,
+}
+
+/// How long a connection may have been waiting for its name before a new
+/// connection may evict it from a full table (so a burst of connections does
+/// not evict good clients that have not been read yet).
+const EVICT_AFTER: Duration = Duration::from_millis(250);
+
+/// How often the accept loop looks at the stop flag while no one connects.
+const ACCEPT_TICK_MS: i32 = 100;
 
 /// A running server.
 pub struct NetServer {
@@ -382,6 +429,11 @@ impl NetServer {
             )
         })?;
         let addr = listener.local_addr()?;
+        // Accept polls the listener with a stop flag, so stopping needs no
+        // connection to wake it (none can be made with the network down).
+        listener
+            .set_nonblocking(true)
+            .context("networkserver: cannot make its listener nonblocking")?;
         let shared = Arc::new(Shared {
             conf,
             sources,
@@ -418,22 +470,12 @@ impl NetServer {
         if self.shared.stop.swap(true, Ordering::AcqRel) {
             return;
         }
-        // Wake the accept loop.
-        let wake = match self.addr.ip() {
-            IpAddr::V4(a) if a.is_unspecified() => {
-                SocketAddr::from((Ipv4Addr::LOCALHOST, self.addr.port()))
-            }
-            IpAddr::V6(a) if a.is_unspecified() => {
-                SocketAddr::from((std::net::Ipv6Addr::LOCALHOST, self.addr.port()))
-            }
-            _ => self.addr,
-        };
-        let _ = TcpStream::connect_timeout(&wake, Duration::from_secs(1));
+        // The accept loop sees the flag within ACCEPT_TICK_MS.
         if let Some(t) = self.accept.take() {
             let _ = t.join();
         }
-        for (_, s) in self.shared.clients.lock().iter() {
-            let _ = s.shutdown(Shutdown::Both);
+        for c in self.shared.clients.lock().iter() {
+            let _ = c.stream.shutdown(Shutdown::Both);
         }
         let threads = std::mem::take(&mut *self.shared.threads.lock());
         for t in threads {
@@ -454,15 +496,56 @@ impl Drop for NetServer {
     }
 }
 
+/// Waits until the listener has a connection or ACCEPT_TICK_MS pass.
+fn wait_readable(listener: &TcpListener) {
+    use std::os::fd::AsRawFd;
+    let mut p = libc::pollfd {
+        fd: listener.as_raw_fd(),
+        events: libc::POLLIN,
+        revents: 0,
+    };
+    // SAFETY: one valid pollfd for the duration of the call. An error (EINTR)
+    // only means the caller looks at the stop flag and the listener again.
+    unsafe { libc::poll(&mut p, 1, ACCEPT_TICK_MS) };
+}
+
+/// With the table full, closes the connection that has waited longest for its
+/// name (at least EVICT_AFTER), so a client that knows the token still gets in
+/// while strangers hold connections open. True if one was closed.
+fn evict_unnamed(sh: &Shared) -> bool {
+    let clients = sh.clients.lock();
+    let oldest = clients
+        .iter()
+        .filter(|c| {
+            !c.slot.named.load(Ordering::Acquire)
+                && !c.slot.evicted.load(Ordering::Acquire)
+                && c.since.elapsed() >= EVICT_AFTER
+        })
+        .min_by_key(|c| c.since);
+    match oldest {
+        Some(c) => {
+            c.slot.evicted.store(true, Ordering::Release);
+            let _ = c.stream.shutdown(Shutdown::Both);
+            true
+        }
+        None => false,
+    }
+}
+
 fn accept_loop(listener: TcpListener, sh: Arc<Shared>) {
     let mut next_id = 0u64;
     loop {
+        if sh.stop.load(Ordering::Acquire) {
+            return;
+        }
         let (stream, peer) = match listener.accept() {
             Ok(x) => x,
+            Err(e) if e.kind() == io::ErrorKind::WouldBlock => {
+                wait_readable(&listener);
+                continue;
+            }
+            Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
             Err(e) => {
-                if sh.stop.load(Ordering::Acquire) {
-                    return;
-                }
                 tracing::warn!("networkserver: accept failed: {e}");
                 std::thread::sleep(Duration::from_millis(50));
                 continue;
@@ -471,10 +554,14 @@ fn accept_loop(listener: TcpListener, sh: Arc<Shared>) {
         if sh.stop.load(Ordering::Acquire) {
             return;
         }
+        if let Err(e) = stream.set_nonblocking(false) {
+            tracing::warn!("networkserver: cannot set up the connection from {peer}: {e}");
+            continue;
+        }
         sh.threads.lock().retain(|t| !t.is_finished());
         sh.stats.accepted.fetch_add(1, Ordering::Relaxed);
         let n = sh.stats.clients.load(Ordering::Acquire);
-        if n >= sh.conf.max_clients {
+        if n >= sh.conf.max_clients && !evict_unnamed(&sh) {
             sh.stats.dropped.fetch_add(1, Ordering::Relaxed);
             tracing::warn!(
                 "networkserver: refused {peer}: {n} clients already connected (max_clients {})",
@@ -492,17 +579,28 @@ fn accept_loop(listener: TcpListener, sh: Arc<Shared>) {
         }
         next_id += 1;
         let id = next_id;
+        let Ok(reg) = stream.try_clone() else {
+            continue;
+        };
+        let slot = Arc::new(Slot::default());
+        sh.clients.lock().push(Conn {
+            id,
+            stream: reg,
+            since: Instant::now(),
+            slot: slot.clone(),
+        });
         sh.stats.clients.fetch_add(1, Ordering::AcqRel);
         let sh2 = sh.clone();
         let t = std::thread::Builder::new()
             .name(format!("nsrv-r{id}"))
             .spawn(move || {
-                client(stream, peer, id, &sh2);
+                client(stream, peer, id, &slot, &sh2);
                 sh2.stats.clients.fetch_sub(1, Ordering::AcqRel);
             });
         match t {
             Ok(t) => sh.threads.lock().push(t),
             Err(e) => {
+                sh.clients.lock().retain(|c| c.id != id);
                 sh.stats.clients.fetch_sub(1, Ordering::AcqRel);
                 tracing::warn!("networkserver: cannot start a thread for {peer}: {e}");
             }
@@ -550,13 +648,11 @@ struct Resumed {
     images: Vec<bool>,
 }
 
-fn client(stream: TcpStream, peer: SocketAddr, id: u64, sh: &Arc<Shared>) {
+fn client(stream: TcpStream, peer: SocketAddr, id: u64, slot: &Slot, sh: &Arc<Shared>) {
     let conf = &sh.conf;
     let _ = stream.set_nodelay(true);
-    let Ok(reg) = stream.try_clone() else { return };
-    sh.clients.lock().push((id, reg));
     let finish = |why: String, bad: bool| {
-        sh.clients.lock().retain(|(i, _)| *i != id);
+        sh.clients.lock().retain(|c| c.id != id);
         if bad {
             sh.stats.dropped.fetch_add(1, Ordering::Relaxed);
             tracing::warn!("networkserver: client {peer} disconnected: {why}");
@@ -564,13 +660,18 @@ fn client(stream: TcpStream, peer: SocketAddr, id: u64, sh: &Arc<Shared>) {
             tracing::info!("networkserver: client {peer} left: {why}");
         }
     };
-    // The 20-byte name.
+    // The 20-byte name, within `timeout` in all (not per read: a byte every
+    // few seconds must not hold the connection for minutes).
     let mut name = [0u8; netwire::NAME_LEN];
-    let _ = stream.set_read_timeout(Some(conf.timeout));
     let _ = stream.set_write_timeout(Some(conf.timeout));
-    let mut r = &stream;
-    if let Err(e) = io::Read::read_exact(&mut r, &mut name) {
-        let why = if netwire::is_timeout(&e) {
+    if let Err(e) = read_name(&stream, &mut name, conf.timeout) {
+        let why = if slot.evicted.load(Ordering::Acquire) {
+            format!(
+                "closed to make room: {} connections, and it had sent no name after {} ms",
+                conf.max_clients,
+                EVICT_AFTER.as_millis()
+            )
+        } else if netwire::is_timeout(&e) {
             format!(
                 "sent no 20-byte name within {} ms",
                 conf.timeout.as_millis()
@@ -595,6 +696,10 @@ fn client(stream: TcpStream, peer: SocketAddr, id: u64, sh: &Arc<Shared>) {
     }
     if sh.stop.load(Ordering::Acquire) {
         return finish("server stopping".into(), false);
+    }
+    slot.named.store(true, Ordering::Release);
+    if slot.evicted.load(Ordering::Acquire) {
+        return finish("closed to make room before its name was read".into(), true);
     }
     tracing::info!("networkserver: new client {cname} from {peer}");
     let Ok(wstream) = stream.try_clone() else {
@@ -653,6 +758,27 @@ fn client(stream: TcpStream, peer: SocketAddr, id: u64, sh: &Arc<Shared>) {
     finish(why, bad);
 }
 
+/// Reads exactly `name.len()` bytes within `limit` in all.
+fn read_name(stream: &TcpStream, name: &mut [u8], limit: Duration) -> io::Result<()> {
+    let deadline = Instant::now() + limit;
+    let mut got = 0;
+    let mut r = stream;
+    while got < name.len() {
+        let left = deadline.saturating_duration_since(Instant::now());
+        if left.is_zero() {
+            return Err(io::ErrorKind::TimedOut.into());
+        }
+        stream.set_read_timeout(Some(left))?;
+        match io::Read::read(&mut r, &mut name[got..]) {
+            Ok(0) => return Err(io::ErrorKind::UnexpectedEof.into()),
+            Ok(n) => got += n,
+            Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
+            Err(e) => return Err(e),
+        }
+    }
+    Ok(())
+}
+
 fn reader(stream: &TcpStream, cl: &Client, sh: &Shared, resumed: &mut Resumed, drove: &mut bool) {
     let conf = &sh.conf;
     let tick = Duration::from_millis(100).min(conf.timeout);
@@ -660,6 +786,10 @@ fn reader(stream: &TcpStream, cl: &Client, sh: &Shared, resumed: &mut Resumed, d
     let mut lr = LineReader::new(conf.max_line);
     let mut r = stream;
     let mut partial_since: Option<Instant> = None;
+    let mut last_line = Instant::now();
+    // It sent a motors, pan-tilt or zoom command: a controller, which may send
+    // nothing while the command stands (4.3's pan-tilt client sends on change).
+    let mut commanded = false;
     loop {
         if cl.st.lock().closed || sh.stop.load(Ordering::Acquire) {
             return;
@@ -667,8 +797,16 @@ fn reader(stream: &TcpStream, cl: &Client, sh: &Shared, resumed: &mut Resumed, d
         match lr.read_line(&mut r) {
             Ok(LineEvent::Line(line)) => {
                 partial_since = None;
+                last_line = Instant::now();
                 match Request::parse(line) {
                     Ok(req) => {
+                        commanded |= matches!(
+                            req,
+                            Request::DriveSpeed { .. }
+                                | Request::SteerSpeed { .. }
+                                | Request::PtPosition { .. }
+                                | Request::ZoomPosition { .. }
+                        );
                         if let Err((why, bad)) = handle(req, cl, sh, resumed, drove) {
                             cl.close(why, bad);
                             return;
@@ -704,6 +842,26 @@ fn reader(stream: &TcpStream, cl: &Client, sh: &Shared, resumed: &mut Resumed, d
                                 conf.timeout.as_millis()
                             ),
                             true,
+                        );
+                        return;
+                    }
+                }
+                if !conf.idle_timeout.is_zero()
+                    && !commanded
+                    && last_line.elapsed() >= conf.idle_timeout
+                {
+                    let st = cl.st.lock();
+                    let busy = st.subs.iter().any(|s| *s)
+                        || st.images.iter().any(|n| *n > 0)
+                        || !st.replies.is_empty();
+                    drop(st);
+                    if !busy {
+                        cl.close(
+                            format!(
+                                "idle for {} ms with no subscription (idle_timeout)",
+                                conf.idle_timeout.as_millis()
+                            ),
+                            false,
                         );
                         return;
                     }

@@ -94,7 +94,11 @@ impl ComponentConf {
             "{} {}: I don't know what to do with `{}`; expected {expected}",
             self.kind,
             self.name,
-            line.words.join(" ")
+            line.words
+                .iter()
+                .map(|w| crate::files::shorten(w))
+                .collect::<Vec<_>>()
+                .join(" ")
         ))
     }
 }

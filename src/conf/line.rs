@@ -43,9 +43,10 @@ impl ConfLine {
         })?;
         word.parse().map_err(|_| {
             self.error(format!(
-                "`{}`: argument {} is `{word}`, expected {what}",
-                self.keyword(),
-                i + 1
+                "`{}`: argument {} is `{}`, expected {what}",
+                crate::files::shorten(self.keyword()),
+                i + 1,
+                crate::files::shorten(word)
             ))
         })
     }
@@ -179,8 +180,9 @@ impl ConfLine {
             Ok(false)
         } else {
             Err(self.error(format!(
-                "`{}`: {what} is `{w}`, expected on or off",
-                self.keyword()
+                "`{}`: {what} is `{}`, expected on or off",
+                self.keyword(),
+                crate::files::shorten(w)
             )))
         }
     }
@@ -195,8 +197,9 @@ impl ConfLine {
         let w = self.word(i, &format!("{what} ({})", choices.join("|")))?;
         choices.iter().find(|c| **c == w).copied().ok_or_else(|| {
             self.error(format!(
-                "`{}`: {what} is `{w}`, expected one of {}",
+                "`{}`: {what} is `{}`, expected one of {}",
                 self.keyword(),
+                crate::files::shorten(w),
                 choices.join(", ")
             ))
         })
@@ -208,8 +211,9 @@ impl ConfLine {
         let w = self.word(i, "an interface name")?;
         if w.contains('.') || interfaces::family(w).is_none() {
             return Err(self.error(format!(
-                "`{}`: `{w}` is not an interface; interfaces: {}",
+                "`{}`: `{}` is not an interface; interfaces: {}",
                 self.keyword(),
+                crate::files::shorten(w),
                 interfaces::STANDARD_NAMES.join(", ")
             )));
         }
@@ -241,7 +245,8 @@ impl ConfLine {
         let var = matches!(w, "varcolorA" | "varcolorB" | "varcolorC" | "varcolorD");
         if !fixed_size && !var {
             return Err(self.error(format!(
-                "{component} provides colorA..D or varcolorA..D, not `{w}`; usage: {usage}"
+                "{component} provides colorA..D or varcolorA..D, not `{}`; usage: {usage}",
+                crate::files::shorten(w)
             )));
         }
         Ok(ImageInterface {
@@ -266,14 +271,15 @@ impl ConfLine {
         })
     }
 
-    /// Argument `i` as an existing file (see [`path`](Self::path)).
+    /// Argument `i` as an existing regular file (see [`path`](Self::path)); a
+    /// directory, a device or a FIFO is an error that says what the path is.
     pub fn existing_file(&self, i: usize, what: &str) -> Result<PathBuf, ConfError> {
         let p = self.path(i, what)?;
-        if !p.is_file() {
+        if let Err(problem) = crate::files::check_regular(&p) {
             return Err(self.error(format!(
-                "`{}`: {what} `{}` does not exist (relative paths are relative to {})",
+                "`{}`: {what} `{}` {problem} (relative paths are relative to {})",
                 self.keyword(),
-                p.display(),
+                crate::files::shorten_long_words(&p.display().to_string()),
                 self.at
                     .file
                     .parent()

@@ -73,7 +73,7 @@ impl fmt::Display for Location {
 
 /// One problem in a conf file.
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
-#[error("{at}: {message}")]
+#[error("{at}: {}", crate::files::shorten_long_words(.message))]
 pub struct ConfError {
     pub at: Location,
     pub message: String,
@@ -178,13 +178,13 @@ load_schema, load, run (resume, on), show (guiresume, guion)";
 impl Conf {
     /// Reads and parses a conf file.
     pub fn load(file: &Path) -> Result<Conf, ConfErrors> {
-        let text = std::fs::read_to_string(file).map_err(|e| {
+        let text = crate::files::FileError::read(file).map_err(|e| {
             ConfErrors(vec![ConfError {
                 at: Location {
                     file: Arc::from(file),
                     line: 0,
                 },
-                message: format!("cannot read conf file: {e}"),
+                message: format!("cannot read conf file: {}", e.reason()),
             }])
         })?;
         Conf::parse(&text, file)
@@ -311,7 +311,8 @@ impl Conf {
             "show" | "guiresume" | "guion" => Action::Show(one("show NAME")?),
             other => {
                 return Err(line.error(format!(
-                    "unknown keyword `{other}`; expected one of: {KEYWORDS}"
+                    "unknown keyword `{}`; expected one of: {KEYWORDS}",
+                    crate::files::shorten(other)
                 )));
             }
         };
@@ -340,13 +341,16 @@ impl Conf {
     ) -> Result<ComponentConf, ConfErrors> {
         match own_file {
             Some(path) => {
-                let text = std::fs::read_to_string(path).map_err(|e| {
+                let text = crate::files::FileError::read(path).map_err(|e| {
                     ConfErrors(vec![ConfError {
                         at: Location {
                             file: Arc::from(path),
                             line: 0,
                         },
-                        message: format!("cannot read the conf file of {kind} `{name}`: {e}"),
+                        message: format!(
+                            "cannot read the conf file of {kind} `{name}`: {}",
+                            e.reason()
+                        ),
                     }])
                 })?;
                 // The component's own file may hold its section, or be all its lines.

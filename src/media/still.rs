@@ -5,7 +5,11 @@
 //! `#` comments anywhere in the header (4.3 only allowed whole comment lines),
 //! maxval 1..65535 (16-bit samples are big-endian, scaled to 8 bits). PNG, JPEG
 //! and BMP go through the `image` crate. A file that is none of these, or that is
-//! truncated, is an error naming the file and what was wrong.
+//! truncated (a JPEG without its end-of-image marker after the last scan too), is
+//! an error naming the file and what was wrong. Files are read with
+//! [`crate::files::read_limited`] (regular files only, at most
+//! [`crate::files::MAX_IMAGE_BYTES`]); every format has the same size limit,
+//! [`MAX_PIXELS`], checked from the header before decoding.
 
 use std::path::Path;
 
@@ -17,10 +21,14 @@ pub const MAX_PIXELS: u64 = 1 << 26;
 
 /// Reads an image file (PNM, PNG, JPEG or BMP) into a BGR image.
 pub fn load_image(path: &Path) -> Result<Image, MediaError> {
-    let bytes = std::fs::read(path).map_err(|source| MediaError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
+    let bytes =
+        crate::files::read_limited(path, crate::files::MAX_IMAGE_BYTES).map_err(|e| match e {
+            crate::files::FileError::Io { source, .. } => MediaError::Io {
+                path: path.to_path_buf(),
+                source,
+            },
+            other => MediaError::format(path, other.reason()),
+        })?;
     decode_image(&bytes, path)
 }
 
@@ -53,11 +61,30 @@ pub fn decode_image(bytes: &[u8], path: &Path) -> Result<Image, MediaError> {
             format!("{format:?} images are not supported; use PNM, PNG, JPEG or BMP"),
         ));
     }
-    let mut reader = image::ImageReader::with_format(std::io::Cursor::new(bytes), format);
-    let mut limits = image::Limits::default();
-    limits.max_alloc = Some(MAX_PIXELS * 4 + (1 << 20));
-    reader.limits(limits);
-    let img = reader.decode().map_err(|e| {
+    if format == image::ImageFormat::Jpeg && !jpeg_has_end(bytes) {
+        // The decoder fills a cut-short scan with grey and calls it an image.
+        return Err(MediaError::format(
+            path,
+            "truncated JPEG: the file ends before its end-of-image marker",
+        ));
+    }
+    let reader = || {
+        let mut reader = image::ImageReader::with_format(std::io::Cursor::new(bytes), format);
+        let mut limits = image::Limits::default();
+        limits.max_alloc = Some(MAX_PIXELS * 4 + (1 << 20));
+        reader.limits(limits);
+        reader
+    };
+    // The header's size first: the same pixel limit as PNM and y4m, before any
+    // allocation.
+    let (w, h) = reader().into_dimensions().map_err(|e| {
+        MediaError::format(
+            path,
+            format!("cannot decode this {format:?} image's header ({e}); is it truncated?"),
+        )
+    })?;
+    check_size(w as u64, h as u64, path)?;
+    let img = reader().decode().map_err(|e| {
         MediaError::format(
             path,
             format!("cannot decode this {format:?} image ({e}); is it truncated?"),
@@ -66,6 +93,57 @@ pub fn decode_image(bytes: &[u8], path: &Path) -> Result<Image, MediaError> {
     let rgb = img.to_rgb8();
     let (width, height) = rgb.dimensions();
     Ok(Image::from_rgb(width, height, rgb.into_raw()))
+}
+
+/// Refuses a header's size of no pixels or more than [`MAX_PIXELS`] (every
+/// decoder here: PNM, PNG, JPEG, BMP; y4m checks the same limit).
+fn check_size(width: u64, height: u64, path: &Path) -> Result<(), MediaError> {
+    if width == 0 || height == 0 || width * height > MAX_PIXELS {
+        return Err(MediaError::format(
+            path,
+            format!("bad image header: size {width}x{height} (expected 1..{MAX_PIXELS} pixels)"),
+        ));
+    }
+    Ok(())
+}
+
+/// Whether a JPEG reaches its end-of-image marker (FF D9): walks the segments
+/// (skipping each by its length, so an EXIF thumbnail's markers are not taken
+/// for the image's) and the entropy-coded data (where an FF is followed by 00 or
+/// a restart marker D0..D7). A file cut anywhere before its end never gets there;
+/// data after the marker (a second picture, a video) is not looked at.
+fn jpeg_has_end(b: &[u8]) -> bool {
+    if !b.starts_with(&[0xFF, 0xD8]) {
+        return false;
+    }
+    let mut i = 2;
+    loop {
+        while i < b.len() && b[i] != 0xFF {
+            i += 1;
+        }
+        while i < b.len() && b[i] == 0xFF {
+            i += 1;
+        }
+        let Some(&m) = b.get(i) else {
+            return false;
+        };
+        i += 1;
+        match m {
+            0xD9 => return true,
+            // Stuffed FF in scan data, restart markers, TEM: no length.
+            0x00 | 0x01 | 0xD0..=0xD7 => {}
+            _ => {
+                let Some(len) = b.get(i..i + 2) else {
+                    return false;
+                };
+                let len = u16::from_be_bytes([len[0], len[1]]) as usize;
+                if len < 2 || i + len > b.len() {
+                    return false;
+                }
+                i += len;
+            }
+        }
+    }
 }
 
 /// A cursor over a PNM header.
@@ -122,12 +200,7 @@ fn decode_pnm(bytes: &[u8], path: &Path) -> Result<Image, MediaError> {
         })?;
     }
     let [width, height, maxval] = v;
-    if width == 0 || height == 0 || width * height > MAX_PIXELS {
-        return Err(MediaError::format(
-            path,
-            format!("bad PNM header: size {width}x{height} (expected 1..{MAX_PIXELS} pixels)"),
-        ));
-    }
+    check_size(width, height, path)?;
     if !(1..=65535).contains(&maxval) {
         return Err(MediaError::format(
             path,

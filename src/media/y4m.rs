@@ -82,7 +82,10 @@ pub fn read_header(r: &mut impl Read) -> Result<Option<Y4mHeader>, String> {
         }
     }
     if width == 0 || height == 0 || width as u64 * height as u64 > super::still::MAX_PIXELS {
-        return Err(format!("YUV4MPEG2 header with a bad size: `{line}`"));
+        return Err(format!(
+            "YUV4MPEG2 header with a bad size: `{}`",
+            crate::files::shorten(&line)
+        ));
     }
     Ok(Some(Y4mHeader {
         width,

@@ -15,7 +15,8 @@ pub struct Bitmap {
 
 /// Decodes a PNG into an occupancy bitmap.
 pub fn load_bitmap(file: &Path) -> Result<Bitmap, String> {
-    let bytes = std::fs::read(file).map_err(|e| format!("cannot read: {e}"))?;
+    let bytes = crate::files::read_limited(file, crate::files::MAX_IMAGE_BYTES)
+        .map_err(|e| format!("cannot read: {}", e.reason()))?;
     let mut dec = png::Decoder::new(std::io::Cursor::new(bytes));
     dec.set_transformations(png::Transformations::EXPAND | png::Transformations::STRIP_16);
     let mut reader = dec

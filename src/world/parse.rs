@@ -55,10 +55,10 @@ pub fn parse_color(word: &str) -> Result<Rgb, String> {
 impl World {
     /// Reads a world file.
     pub fn load(file: &Path) -> Result<World, WorldError> {
-        let text = std::fs::read_to_string(file).map_err(|e| WorldError {
+        let text = crate::files::FileError::read(file).map_err(|e| WorldError {
             file: file.to_path_buf(),
             line: 0,
-            message: format!("cannot read world file: {e}"),
+            message: format!("cannot read world file: {}", e.reason()),
         })?;
         World::parse(&text, file)
     }
