@@ -36,19 +36,16 @@
 //!   the interface stale; the driver reopens it every 2 s. Each camera has its
 //!   own thread, which waits for buffers at most 200 ms at a time.
 
+use aravis::{Buffer, BufferStatus, Camera, CameraExt, CameraExtManual, PixelFormat, StreamExt};
 use std::{
     collections::HashMap,
     ffi::{CString, c_char},
     sync::{
         Arc,
-        atomic::{AtomicBool, AtomicU64, Ordering},
+        atomic::{AtomicU64, Ordering},
     },
-    thread::JoinHandle,
     time::{Duration, Instant},
 };
-
-use anyhow::Context as _;
-use aravis::{Buffer, BufferStatus, Camera, CameraExt, CameraExtManual, PixelFormat, StreamExt};
 
 use crate::{
     conf::{
@@ -56,7 +53,7 @@ use crate::{
         settings::{self, Setting as Line},
     },
     interfaces::{COLOR_HEIGHT, COLOR_WIDTH, Image, Interface},
-    runtime::{Driver, Runtime},
+    runtime::{Backoff, Device, Driver, Runtime, Supervision, Supervisor},
     vision::pixfmt::{self, Bayer, Yuv422Order, YuvMatrix},
 };
 
@@ -514,120 +511,87 @@ pub static SKIPPED: AtomicU64 = AtomicU64::new(0);
 const NO_FRAME_STALE: Duration = Duration::from_secs(5);
 const RETRY: Duration = Duration::from_secs(2);
 
-fn capture_thread(
+/// One camera under the runtime's [`Supervisor`]: opened while its interface is
+/// used, acquiring a frame at a time; acquisition pauses while nobody uses it.
+struct Capture {
     c: GigeConf,
     iface: Arc<Interface<Image>>,
-    stop: Arc<AtomicBool>,
-    mut last_err: String,
-) {
-    let mut dev: Option<Session> = None;
-    let mut out = Vec::new();
-    let mut last_frame = Instant::now();
-    let mut next_try = Instant::now();
-    let mut last_id: Option<u64> = None;
-    while !stop.load(Ordering::Acquire) {
-        if !iface.wait_used(Duration::from_millis(200)) {
-            if let Some(d) = dev.as_mut() {
-                d.stop();
-            }
-            continue;
-        }
-        if dev.is_none() {
-            if Instant::now() < next_try {
-                std::thread::sleep(Duration::from_millis(50));
-                continue;
-            }
-            match Session::open(&c) {
-                Ok(d) => {
-                    last_err.clear();
-                    dev = Some(d);
-                }
-                Err(e) => {
-                    if e != last_err {
-                        tracing::warn!("gige: {e}; retrying every {} s", RETRY.as_secs());
-                    }
-                    iface.set_stale(e.clone());
-                    last_err = e;
-                    next_try = Instant::now() + RETRY;
-                    continue;
-                }
-            }
-        }
-        let Some(d) = dev.as_mut() else { continue };
+    out: Vec<u8>,
+    last_frame: Instant,
+    last_id: Option<u64>,
+}
+
+impl Device for Capture {
+    type Session = Session;
+    fn open(&mut self) -> Result<Session, String> {
+        Session::open(&self.c)
+    }
+    fn step(&mut self, d: &mut Session) -> Result<(), String> {
+        let c = &self.c;
         if !d.acquiring {
-            if let Err(e) = d.start() {
-                iface.set_stale(format!("camera `{}`: {e}", c.camera));
-                dev = None;
-                next_try = Instant::now() + RETRY;
-                continue;
-            }
-            last_frame = Instant::now();
-            last_id = None;
+            d.start()
+                .map_err(|e| format!("camera `{}`: {e}", c.camera))?;
+            self.last_frame = Instant::now();
+            self.last_id = None;
         }
         let Some(buf) = d.stream.timeout_pop_buffer(200_000) else {
-            if last_frame.elapsed() > NO_FRAME_STALE {
-                let why = format!(
+            if self.last_frame.elapsed() > NO_FRAME_STALE {
+                return Err(format!(
                     "camera `{}`: no frame for {} s (unplugged or unreachable?)",
                     c.camera,
-                    last_frame.elapsed().as_secs()
-                );
-                tracing::warn!("gige: {why}; reopening");
-                iface.set_stale(why);
-                dev = None;
-                next_try = Instant::now() + RETRY;
+                    self.last_frame.elapsed().as_secs()
+                ));
             }
-            continue;
+            return Ok(());
         };
         let id = buf.frame_id();
-        if let Some(l) = last_id
+        if let Some(l) = self.last_id
             && id > l + 1
         {
             SKIPPED.fetch_add(id - l - 1, Ordering::Relaxed);
         }
-        last_id = Some(id);
+        self.last_id = Some(id);
         if buf.status() == BufferStatus::Success {
             let (w, h) = (buf.image_width() as u32, buf.image_height() as u32);
             let (p, len) = buf.data();
             // SAFETY: the buffer owns `len` bytes at `p` until it is pushed back.
             let data = unsafe { std::slice::from_raw_parts(p as *const u8, len) };
-            match convert(buf.image_pixel_format(), data, w, h, &mut out) {
+            match convert(buf.image_pixel_format(), data, w, h, &mut self.out) {
                 Ok(()) => {
-                    last_frame = Instant::now();
-                    if let Err(e) = iface.write(|img| {
+                    self.last_frame = Instant::now();
+                    let out = &mut self.out;
+                    if let Err(e) = self.iface.write(|img| {
                         img.width = w;
                         img.height = h;
-                        std::mem::swap(&mut img.data, &mut out);
+                        std::mem::swap(&mut img.data, out);
                     }) {
-                        iface.set_stale(e);
+                        self.iface.set_stale(e);
                     }
                 }
-                Err(e) => iface.set_stale(format!("camera `{}`: {e}", c.camera)),
+                Err(e) => self.iface.set_stale(format!("camera `{}`: {e}", c.camera)),
             }
         } else {
             DROPPED.fetch_add(1, Ordering::Relaxed);
         }
         d.stream.push_buffer(buf);
+        Ok(())
+    }
+    fn idle(&mut self, d: &mut Session) -> bool {
+        d.stop();
+        true
     }
 }
 
 /// The running driver: one capture thread per camera.
 pub struct Gige {
-    stop: Arc<AtomicBool>,
-    threads: Vec<JoinHandle<()>>,
+    cameras: Vec<Supervisor>,
 }
 
 impl Driver for Gige {
     fn terminate(&mut self) {
-        self.stop.store(true, Ordering::Release);
-        for t in self.threads.drain(..) {
-            let _ = t.join();
+        for c in &mut self.cameras {
+            c.stop();
         }
-    }
-}
-
-impl Drop for Gige {
-    fn drop(&mut self) {
-        self.terminate();
     }
 }
 
@@ -664,8 +628,7 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
             Err(CheckError::Unusable(e)) => anyhow::bail!("{}: driver {}: {e}", c.at, conf.name),
         }
     }
-    let stop = Arc::new(AtomicBool::new(false));
-    let mut threads = Vec::new();
+    let mut cameras = Vec::new();
     for (c, ((w, h), absent)) in cams.into_iter().zip(found) {
         let iface = rt
             .interfaces
@@ -681,15 +644,24 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
             ));
             iface.set_stale(absent.clone());
         }
-        let s = stop.clone();
-        threads.push(
-            std::thread::Builder::new()
-                .name(format!("gige-{}", c.camera))
-                .spawn(move || capture_thread(c, iface, s, absent))
-                .context("cannot start a gige capture thread")?,
-        );
+        cameras.push(Supervisor::start(
+            Supervision {
+                name: format!("gige camera `{}`", c.camera),
+                interfaces: vec![iface.clone()],
+                on_demand: true,
+                backoff: Backoff::fixed(RETRY),
+                absent: (!absent.is_empty()).then_some(absent),
+            },
+            Capture {
+                c,
+                iface,
+                out: Vec::new(),
+                last_frame: Instant::now(),
+                last_id: None,
+            },
+        )?);
     }
-    Ok(Box::new(Gige { stop, threads }))
+    Ok(Box::new(Gige { cameras }))
 }
 
 crate::register_driver!(

@@ -39,16 +39,11 @@
 //!   200 ms, so nothing else waits on a camera.
 
 use std::{
-    path::{Path, PathBuf},
-    sync::{
-        Arc,
-        atomic::{AtomicBool, Ordering},
-    },
-    thread::JoinHandle,
+    path::PathBuf,
+    sync::Arc,
     time::{Duration, Instant},
 };
 
-use anyhow::Context as _;
 use v4l::{
     Device, FourCC, buffer::Type, capability::Flags, framesize::FrameSizeEnum,
     io::traits::CaptureStream, prelude::MmapStream, video::Capture,
@@ -60,7 +55,7 @@ use crate::{
         settings::{self, Setting},
     },
     interfaces::{COLOR_HEIGHT, COLOR_WIDTH, Image, Interface},
-    runtime::{Driver, Runtime},
+    runtime::{Backoff, Device as Supervised, Driver, Runtime, Supervision, Supervisor},
     vision::pixfmt::{self, Bayer, Yuv422Order, YuvMatrix},
 };
 
@@ -402,111 +397,113 @@ fn drop_stream(s: MmapStream<'_>) {
     let _ = std::panic::catch_unwind(std::panic::AssertUnwindSafe(move || drop(s)));
 }
 
-fn stream_session(
-    c: &DevConf,
-    iface: &Interface<Image>,
-    stop: &AtomicBool,
-    out: &mut Vec<u8>,
-    scratch: &mut Vec<u8>,
-) -> Result<(), String> {
-    let dev = open_device(c)?;
-    let (fourcc, stride) = negotiate(&dev, c)?;
-    let mut stream = MmapStream::with_buffers(&dev, Type::VideoCapture, 4)
-        .map_err(|e| format!("{}: cannot map capture buffers ({e})", c.device.display()))?;
-    stream.set_timeout(Duration::from_millis(200));
-    let mut last = Instant::now();
-    let result = loop {
-        if stop.load(Ordering::Acquire) || iface.users() == 0 {
-            break Ok(());
-        }
+/// An open device, streaming.
+struct Stream {
+    /// Taken at drop, before the device closes.
+    stream: Option<MmapStream<'static>>,
+    _dev: Device,
+    fourcc: [u8; 4],
+    stride: u32,
+}
+
+/// One device under the runtime's [`Supervisor`]: opened while its interface is
+/// used (and closed when nobody does), a frame at a time.
+struct Grabber {
+    c: DevConf,
+    iface: Arc<Interface<Image>>,
+    out: Vec<u8>,
+    scratch: Vec<u8>,
+    last: Instant,
+}
+
+impl Supervised for Grabber {
+    type Session = Stream;
+    fn open(&mut self) -> Result<Stream, String> {
+        let c = &self.c;
+        let dev = open_device(c)?;
+        let (fourcc, stride) = negotiate(&dev, c)?;
+        let mut stream = MmapStream::with_buffers(&dev, Type::VideoCapture, 4)
+            .map_err(|e| format!("{}: cannot map capture buffers ({e})", c.device.display()))?;
+        stream.set_timeout(Duration::from_millis(200));
+        self.last = Instant::now();
+        Ok(Stream {
+            stream: Some(stream),
+            _dev: dev,
+            fourcc,
+            stride,
+        })
+    }
+    fn step(&mut self, s: &mut Stream) -> Result<(), String> {
+        let c = &self.c;
+        let Some(stream) = s.stream.as_mut() else {
+            return Err(format!("{}: the stream is closed", c.device.display()));
+        };
         match stream.next() {
             Ok((buf, meta)) => {
                 let used = (meta.bytesused as usize).min(buf.len());
                 let data = if used > 0 { &buf[..used] } else { buf };
-                match convert(&fourcc, data, c.width, c.height, stride, out, scratch) {
+                let out = &mut self.out;
+                match convert(
+                    &s.fourcc,
+                    data,
+                    c.width,
+                    c.height,
+                    s.stride,
+                    out,
+                    &mut self.scratch,
+                ) {
                     Ok(()) => {
-                        last = Instant::now();
+                        self.last = Instant::now();
                         let (w, h) = (c.width, c.height);
-                        if let Err(e) = iface.write(|img| {
+                        if let Err(e) = self.iface.write(|img| {
                             img.width = w;
                             img.height = h;
                             std::mem::swap(&mut img.data, out);
                         }) {
-                            iface.set_stale(e);
+                            self.iface.set_stale(e);
                         }
                     }
                     // A corrupt frame (MJPEG glitch): skip it.
                     Err(e) => tracing::debug!("{}: {e}", c.device.display()),
                 }
+                Ok(())
             }
             Err(e) if e.kind() == std::io::ErrorKind::TimedOut => {
-                if last.elapsed() > NO_FRAME_STALE {
-                    iface.set_stale(format!(
+                if self.last.elapsed() > NO_FRAME_STALE {
+                    self.iface.set_stale(format!(
                         "{}: no frame for {} s",
                         c.device.display(),
-                        last.elapsed().as_secs()
+                        self.last.elapsed().as_secs()
                     ));
                 }
+                Ok(())
             }
-            Err(e) => {
-                break Err(format!(
-                    "{}: capture failed ({e}; unplugged?)",
-                    c.device.display()
-                ));
-            }
+            Err(e) => Err(format!(
+                "{}: capture failed ({e}; unplugged?)",
+                c.device.display()
+            )),
         }
-    };
-    drop_stream(stream);
-    result
+    }
 }
 
-fn capture_thread(
-    c: DevConf,
-    iface: Arc<Interface<Image>>,
-    stop: Arc<AtomicBool>,
-    mut last_err: String,
-) {
-    let mut out = Vec::new();
-    let mut scratch = Vec::new();
-    while !stop.load(Ordering::Acquire) {
-        if !iface.wait_used(Duration::from_millis(200)) {
-            continue;
-        }
-        match stream_session(&c, &iface, &stop, &mut out, &mut scratch) {
-            Ok(()) => last_err.clear(), // suspended or stopping
-            Err(e) => {
-                if e != last_err {
-                    tracing::warn!("video4linux2: {e}; retrying every {} s", RETRY.as_secs());
-                }
-                iface.set_stale(e.clone());
-                last_err = e;
-                let until = Instant::now() + RETRY;
-                while Instant::now() < until && !stop.load(Ordering::Acquire) {
-                    std::thread::sleep(Duration::from_millis(50));
-                }
-            }
+impl Drop for Stream {
+    fn drop(&mut self) {
+        if let Some(s) = self.stream.take() {
+            drop_stream(s);
         }
     }
 }
 
 /// The running driver: one capture thread per device.
 pub struct V4l2 {
-    stop: Arc<AtomicBool>,
-    threads: Vec<JoinHandle<()>>,
+    devices: Vec<Supervisor>,
 }
 
 impl Driver for V4l2 {
     fn terminate(&mut self) {
-        self.stop.store(true, Ordering::Release);
-        for t in self.threads.drain(..) {
-            let _ = t.join();
+        for d in &mut self.devices {
+            d.stop();
         }
-    }
-}
-
-impl Drop for V4l2 {
-    fn drop(&mut self) {
-        self.terminate();
     }
 }
 
@@ -522,8 +519,7 @@ fn start(conf: &ComponentConf, rt: &Runtime, v4l1: bool) -> anyhow::Result<Box<d
             }
         }
     }
-    let stop = Arc::new(AtomicBool::new(false));
-    let mut threads = Vec::new();
+    let mut devices = Vec::new();
     for (d, absent) in devs.into_iter().zip(absent) {
         let iface =
             rt.interfaces
@@ -539,19 +535,24 @@ fn start(conf: &ComponentConf, rt: &Runtime, v4l1: bool) -> anyhow::Result<Box<d
             ));
             iface.set_stale(absent.clone());
         }
-        let s = stop.clone();
-        let name = Path::new(&d.device)
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default();
-        threads.push(
-            std::thread::Builder::new()
-                .name(format!("v4l2-{name}"))
-                .spawn(move || capture_thread(d, iface, s, absent))
-                .context("cannot start a video4linux2 capture thread")?,
-        );
+        devices.push(Supervisor::start(
+            Supervision {
+                name: format!("video4linux2 {}", d.device.display()),
+                interfaces: vec![iface.clone()],
+                on_demand: true,
+                backoff: Backoff::fixed(RETRY),
+                absent: (!absent.is_empty()).then_some(absent),
+            },
+            Grabber {
+                c: d,
+                iface,
+                out: Vec::new(),
+                scratch: Vec::new(),
+                last: Instant::now(),
+            },
+        )?);
     }
-    Ok(Box::new(V4l2 { stop, threads }))
+    Ok(Box::new(V4l2 { devices }))
 }
 
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>> {

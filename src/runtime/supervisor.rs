@@ -32,9 +32,12 @@ pub trait Device: Send + 'static {
     /// Serves one step (a frame, a poll), returning within about 200 ms so that a
     /// stop is seen promptly; an error is the reason the session is lost.
     fn step(&mut self, session: &mut Self::Session) -> Result<(), String>;
-    /// Nobody uses the device's interfaces any more (an on-demand device): the
-    /// session is dropped after this.
-    fn idle(&mut self, _session: Self::Session) {}
+    /// Nobody uses the device's interfaces any more (an on-demand device): pause
+    /// it (stop acquiring) and return true to keep the session open until somebody
+    /// does, or false to have it closed (the default).
+    fn idle(&mut self, _session: &mut Self::Session) -> bool {
+        false
+    }
     /// The session was lost, or the driver stops: zero what moves.
     fn on_loss(&mut self) {}
 }
@@ -167,8 +170,11 @@ fn run<D: Device>(how: Supervision, mut device: D, stop: &AtomicBool) {
                 break None;
             }
             if !used() {
-                device.idle(session);
-                break Some(None);
+                if !device.idle(&mut session) {
+                    break Some(None);
+                }
+                while !used() && nap(stop, Duration::from_millis(50)) {}
+                continue;
             }
             if let Err(why) = device.step(&mut session) {
                 break Some(Some(why));
