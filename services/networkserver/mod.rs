@@ -90,7 +90,10 @@ use anyhow::Context as _;
 use parking_lot::{Condvar, Mutex};
 
 use crate::{
-    conf::{ComponentConf, ConfLine},
+    conf::{
+        ComponentConf, ConfLine,
+        settings::{Setting, int, interface, word},
+    },
     interfaces::{
         AnyInterface, Encoders, Image, Interface, Interfaces, Laser, Motors, Notify, PtEncoders,
         PtMotors, Sonars, ZoomEncoders, ZoomMotors, canonical, family,
@@ -133,109 +136,145 @@ impl Default for ServerConf {
     }
 }
 
-const EXPECTED: &str =
-    "socket, bind, token, serves, max_clients, max_line, max_queue, timeout or idle_timeout";
+/// The networkserver's lines, declared once (`jderobot help networkserver`).
+const LINES: &[Setting] = &[
+    Setting::new(
+        "socket",
+        "the TCP port it listens on",
+        &[int("PORT", "", 0, 65_535)],
+    ),
+    Setting::new(
+        "bind",
+        "the address it listens on (beyond loopback only when said here: 0.0.0.0, ::)",
+        &[word("ADDRESS")],
+    )
+    .default("127.0.0.1"),
+    Setting::new(
+        "token",
+        "a secret every client must send as its name (`networkclient`'s `token`)",
+        &[word("SECRET")],
+    ),
+    Setting::new(
+        "serves",
+        "an interface it serves; images with their network id (0, 1, 2 ...)",
+        &[
+            interface("NAME"),
+            int("NETID", "", 0, u32::MAX as i64).optional(),
+        ],
+    )
+    .repeats(),
+    Setting::new(
+        "max_clients",
+        "clients at once; more are refused",
+        &[int("N", "", 1, 10_000)],
+    )
+    .default("128"),
+    Setting::new(
+        "max_line",
+        "the longest request line",
+        &[int("BYTES", "bytes", 64, 1 << 20)],
+    )
+    .default("1024"),
+    Setting::new(
+        "max_queue",
+        "requests waiting per client; more close it",
+        &[int("N", "", 1, 4096)],
+    )
+    .default("32"),
+    Setting::new(
+        "timeout",
+        "how long a client's name, or a blocked write, may take",
+        &[int("MS", "ms", 10, 3_600_000)],
+    )
+    .default("5000"),
+    Setting::new(
+        "idle_timeout",
+        "a client that subscribes to nothing and sends nothing this long is closed (0: never)",
+        &[int("MS", "ms", 0, 86_400_000)],
+    )
+    .default("60000"),
+];
+
+/// The values of [`LINES`].
+#[derive(serde::Deserialize)]
+struct Lines {
+    socket: Option<u16>,
+    bind: String,
+    token: Option<String>,
+    serves: Vec<(String, Option<u32>)>,
+    max_clients: usize,
+    max_line: usize,
+    max_queue: usize,
+    timeout: u64,
+    idle_timeout: u64,
+}
 
 fn err(l: &ConfLine, m: impl Into<String>) -> anyhow::Error {
     l.error(m).into()
 }
 
 impl ServerConf {
-    /// Parses the service's conf lines (errors name file:line).
+    /// Reads the service's lines.
     pub fn parse(conf: &ComponentConf) -> anyhow::Result<ServerConf> {
-        let mut c = ServerConf::default();
-        let mut socket = false;
-        let count = |l: &ConfLine, what: &str, lo: usize, hi: usize| -> anyhow::Result<usize> {
-            l.expect_args(1, 1, &format!("{} N", l.keyword()))?;
-            let v: usize = l.arg(0, what)?;
-            if !(lo..=hi).contains(&v) {
-                return Err(err(
-                    l,
-                    format!("`{}`: {v} is out of range {lo}..{hi}", l.keyword()),
-                ));
-            }
-            Ok(v)
+        let lines: Lines = conf.settings(LINES)?;
+        let mut c = ServerConf {
+            max_clients: lines.max_clients,
+            max_line: lines.max_line,
+            max_queue: lines.max_queue,
+            timeout: Duration::from_millis(lines.timeout),
+            idle_timeout: Duration::from_millis(lines.idle_timeout),
+            ..ServerConf::default()
         };
-        for l in &conf.lines {
-            match l.keyword() {
-                "socket" => {
-                    l.expect_args(1, 1, "socket PORT")?;
-                    c.port = l.arg(0, "a TCP port 0..65535")?;
-                    socket = true;
+        c.port = lines.socket.unwrap_or(0);
+        let socket = lines.socket.is_some();
+        c.bind = lines.bind.parse().map_err(|_| {
+            let at = conf.line("bind").map(|l| l.at.to_string()).unwrap_or_default();
+            anyhow::anyhow!(
+                "{at}: `bind`: `{}` is not an IP address; expected one such as 127.0.0.1 or 0.0.0.0",
+                crate::conf::settings::echo(&lines.bind)
+            )
+        })?;
+        if let (Some(t), Some(l)) = (&lines.token, conf.line("token")) {
+            netwire::check_token(t).map_err(|e| err(l, format!("`token`: {e}")))?;
+            c.token = Some(t.clone());
+        }
+        for (l, (name, id)) in conf.lines_with("serves").zip(lines.serves) {
+            let name = canonical(&name);
+            let fam = family(&name).unwrap_or_default();
+            let netid = if fam == "image" {
+                let Some(id) = id else {
+                    return Err(err(
+                        l,
+                        format!(
+                            "`serves {name}` needs its network id: serves {name} NETID (0, 1, 2 ...)"
+                        ),
+                    ));
+                };
+                if c.serves.iter().any(|(_, n)| *n == Some(id)) {
+                    return Err(err(l, format!("network id {id} is served twice")));
                 }
-                "bind" => {
-                    l.expect_args(1, 1, "bind ADDRESS (127.0.0.1, 0.0.0.0, ::1 ...)")?;
-                    c.bind = l.arg(0, "an IP address such as 127.0.0.1 or 0.0.0.0")?;
+                Some(id)
+            } else {
+                if id.is_some() {
+                    return Err(err(l, format!("`serves {name}` takes no network id")));
                 }
-                "token" => {
-                    l.expect_args(1, 1, "token SECRET")?;
-                    netwire::check_token(&l.args()[0])
-                        .map_err(|e| err(l, format!("`token`: {e}")))?;
-                    c.token = Some(l.args()[0].clone());
+                if fam == "bumpers" {
+                    return Err(err(
+                        l,
+                        "4.3's wire has no bumpers message; bumpers cannot be served",
+                    ));
                 }
-                "serves" => {
-                    l.expect_args(1, 2, "serves NAME [NETID]")?;
-                    let name = canonical(&l.args()[0]);
-                    let fam = family(&name).ok_or_else(|| {
-                        err(
-                            l,
-                            format!(
-                                "`serves`: `{name}` is not an interface; expected colorA..D NETID, varcolorA..D NETID, \
-                                 laser, sonars, encoders, motors, pantiltencoders, pantiltmotors, zoomencoders or zoommotors"
-                            ),
-                        )
-                    })?;
-                    let netid = if fam == "image" {
-                        if l.args().len() != 2 {
-                            return Err(err(
-                                l,
-                                format!(
-                                    "`serves {name}` needs its network id: serves {name} NETID (0, 1, 2 ...)"
-                                ),
-                            ));
-                        }
-                        let id: u32 = l.arg(1, "a network id (0, 1, 2 ...)")?;
-                        if c.serves.iter().any(|(_, n)| *n == Some(id)) {
-                            return Err(err(l, format!("network id {id} is served twice")));
-                        }
-                        Some(id)
-                    } else {
-                        if l.args().len() != 1 {
-                            return Err(err(l, format!("`serves {name}` takes no network id")));
-                        }
-                        if fam == "bumpers" {
-                            return Err(err(
-                                l,
-                                "4.3's wire has no bumpers message; bumpers cannot be served",
-                            ));
-                        }
-                        if c.serves.iter().any(|(n, _)| family(n) == Some(fam)) {
-                            return Err(err(
-                                l,
-                                format!(
-                                    "a {fam} interface is served twice (4.3's wire has one per server)"
-                                ),
-                            ));
-                        }
-                        None
-                    };
-                    c.serves.push((name, netid));
+                if c.serves.iter().any(|(n, _)| family(n) == Some(fam)) {
+                    return Err(err(
+                        l,
+                        format!(
+                            "a {fam} interface is served twice (4.3's wire has one per server)"
+                        ),
+                    ));
                 }
-                "max_clients" => c.max_clients = count(l, "a number of clients", 1, 10_000)?,
-                "max_line" => c.max_line = count(l, "a line length in bytes", 64, 1 << 20)?,
-                "max_queue" => c.max_queue = count(l, "a number of queued requests", 1, 4096)?,
-                "timeout" => {
-                    c.timeout =
-                        Duration::from_millis(count(l, "milliseconds", 10, 3_600_000)? as u64)
-                }
-                "idle_timeout" => {
-                    c.idle_timeout =
-                        Duration::from_millis(
-                            count(l, "milliseconds (0 = never)", 0, 86_400_000)? as u64
-                        )
-                }
-                _ => return Err(conf.unknown(l, EXPECTED).into()),
-            }
+                None
+            };
+            c.serves.push((name, netid));
         }
         if !socket {
             return Err(anyhow::anyhow!(
@@ -1208,5 +1247,6 @@ crate::register_driver!(
     Service,
     "networkserver",
     "serves this process's interfaces over TCP with JDE 4.3's wire protocol",
-    create
+    create,
+    lines = LINES
 );
