@@ -278,8 +278,9 @@ fn every_single_byte_flip_is_read_without_panic_or_huge_allocation() {
     assert_alloc_bound();
 }
 
-/// R1, R2 through the binary: `jderobot info` on damaged copies whose chunk
-/// lengths and sizes say gigabytes, under a 1 GiB address space: no abort.
+/// R1, R2 through the binary: `jderobot info` and `check` of a replay conf on
+/// damaged copies whose chunk lengths and sizes say gigabytes, under a 1 GiB
+/// address space: no abort, the damage reported with its offset.
 #[test]
 fn info_on_damaged_sizes_neither_aborts_nor_panics() {
     let dir = tempfile::tempdir().unwrap();
@@ -313,6 +314,28 @@ fn info_on_damaged_sizes_neither_aborts_nor_panics() {
                 "{form} {i}: {text}"
             );
             assert!(!text.contains("cut short"), "{form} {i}: {text}");
+            // `check` of a replay conf loads the file as a run would.
+            let conf = dir.path().join(format!("{form}{i}.conf"));
+            std::fs::write(
+                &conf,
+                format!("driver replay\nfile {form}{i}.mcap\nend_driver\nload_driver replay\n"),
+            )
+            .unwrap();
+            let out = Command::new("sh")
+                .arg("-c")
+                .arg(format!(
+                    "ulimit -v 1048576; exec {BIN} check {}",
+                    conf.display()
+                ))
+                .stdin(Stdio::null())
+                .output()
+                .unwrap();
+            let err = String::from_utf8_lossy(&out.stderr);
+            assert!(out.status.success(), "{form} {i}: {:?}\n{err}", out.status);
+            assert!(
+                err.contains(&format!("is corrupt at byte {at}: ")),
+                "{form} {i}: {err}"
+            );
         }
     }
 }
