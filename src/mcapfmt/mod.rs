@@ -782,6 +782,16 @@ mod tests {
             n += 1;
         }
         assert_eq!(n, cases.len());
+        // The same through jderobot's own reader (what replay uses).
+        let mut back = Vec::new();
+        let o = reader::read_messages(&file, |m| {
+            back.push(decode_read(&m.channel.metadata[KIND_KEY], m).unwrap().value);
+            std::ops::ControlFlow::Continue(())
+        })
+        .unwrap();
+        assert!(o.problems.is_empty() && o.complete, "{o:?}");
+        let want: Vec<Recorded> = cases.iter().map(|c| c.1.clone()).collect();
+        assert_eq!(back, want);
     }
 
     #[test]

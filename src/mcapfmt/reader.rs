@@ -35,8 +35,8 @@
 //! A chunk whose CRC, compression or records are wrong is skipped and reported
 //! as corrupt at its offset; reading goes on with the next record. When the
 //! framing itself is broken (an unknown opcode, a length past the end, a record
-//! that does not parse), the reader looks for the next chunk that parses and goes
-//! on from there. If none follows and the file has no footer, the file was cut
+//! that does not parse), the reader looks for the next chunk record whose header
+//! parses exactly and goes on from there (a linear scan). If none follows and the file has no footer, the file was cut
 //! short there (a run killed mid-write); otherwise that stretch is corrupt.
 //! Channels are taken from the data section, and from the summary section (where
 //! the writer repeats them) when their own record was in a damaged chunk.
@@ -144,7 +144,8 @@ pub struct Outcome {
 
 impl Outcome {
     fn problem(&mut self, damage: Damage, offset: usize, what: impl Into<String>) {
-        if self.problems.len() < MAX_PROBLEMS {
+        // A cut is always listed (it ends the reading).
+        if self.problems.len() < MAX_PROBLEMS || damage == Damage::CutShort {
             self.problems.push(Problem {
                 damage,
                 offset: offset as u64,
@@ -822,22 +823,19 @@ fn chunk(
     Ok(())
 }
 
-/// After broken framing at `from - 1`: the offset of the next chunk that parses
-/// whole (header, size bound, decompression and CRC), or None.
+/// After broken framing at `from - 1`: the offset of the next chunk record whose
+/// header parses exactly (its length, fields and compression agree), or None.
+/// Its contents are checked when it is read, as any chunk's; the scan is linear
+/// (nothing is decompressed here), so a crafted file cannot make it quadratic.
 fn resync(bytes: &[u8], data_end: usize, from: usize) -> Option<usize> {
     let data = &bytes[..data_end];
     let mut at = from;
     while at < data.len() {
-        let rel = data[at..].iter().position(|&b| b == op::CHUNK)?;
-        at += rel;
+        at += data[at..].iter().position(|&b| b == op::CHUNK)?;
         if let Ok((op::CHUNK, body, _)) = record_at(data, at)
-            && let Ok(c) = parse_chunk(body)
-            && let Ok(owned) = decompress(bytes.len(), &c)
+            && parse_chunk(body).is_ok()
         {
-            let records = owned.as_deref().unwrap_or(c.records);
-            if c.uncompressed_crc == 0 || crc32fast::hash(records) == c.uncompressed_crc {
-                return Some(at);
-            }
+            return Some(at);
         }
         at += 1;
     }
