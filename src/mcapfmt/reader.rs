@@ -17,9 +17,9 @@
 //! - A chunk's declared `uncompressed_size` must be at most [`MAX_CHUNK_BYTES`]
 //!   and at most the file's length times the codec's greatest ratio (none: exactly
 //!   the records' length; lz4: 256; zstd: 2¹⁵); it is decompressed into a buffer
-//!   that grows with the data that really comes (never past that size: more or
-//!   fewer bytes and the chunk is corrupt), so a damaged size costs at most twice
-//!   the real data. One chunk is held at a time. zstd's window is at most 2²⁷
+//!   that grows with the data that really comes (from 8 times the compressed
+//!   size, doubling, never past the declared size: more or fewer bytes and the
+//!   chunk is corrupt), so a damaged size costs at most twice the real data. One chunk is held at a time. zstd's window is at most 2²⁷
 //!   bytes (its default), lz4's blocks 4 MiB.
 //! - Strings, maps and byte arrays are borrowed from the file or the chunk;
 //!   schema data is not kept. At most [`MAX_PROBLEMS`] problems are listed.
@@ -36,8 +36,10 @@
 //! as corrupt at its offset; reading goes on with the next record. When the
 //! framing itself is broken (an unknown opcode, a length past the end, a record
 //! that does not parse), the reader looks for the next chunk record whose header
-//! parses exactly and goes on from there (a linear scan). If none follows and the file has no footer, the file was cut
-//! short there (a run killed mid-write); otherwise that stretch is corrupt.
+//! parses exactly and goes on from there (a linear scan). A record running past
+//! the end of a file without a footer, with no chunk after it, is where the file
+//! was cut short (a run killed mid-write); anywhere else it is corruption. A
+//! file without a footer is always reported cut short.
 //! Channels are taken from the data section, and from the summary section (where
 //! the writer repeats them) when their own record was in a damaged chunk.
 //! Top-level messages (unchunked files) after broken framing are not recovered.
@@ -227,7 +229,7 @@ impl<'a> Cur<'a> {
     /// A map or array of fixed-size entries (`entry` bytes each).
     fn fixed_array(&mut self, entry: u64, what: &str) -> R<()> {
         let b = self.bytes32(what)?;
-        if b.len() as u64 % entry != 0 {
+        if !(b.len() as u64).is_multiple_of(entry) {
             return Err(format!(
                 "{what} is {} bytes, not a whole number of {entry}-byte entries",
                 b.len()
@@ -535,11 +537,11 @@ pub fn read_messages(
             }
         }
     }
-    if at >= data_end && !ended && !out.complete && out.cut_short().is_none() {
+    if !ended && !out.complete && out.cut_short().is_none() {
         out.problem(
             Damage::CutShort,
             bytes.len(),
-            "the file ends after a whole record, without its data end and footer: it was cut short there",
+            "the file ends without its data end and footer: it was cut short",
         );
     }
     out.problems.sort_by_key(|p| p.offset);
@@ -709,27 +711,29 @@ fn decompress(file_len: usize, c: &Chunk<'_>) -> R<Option<Vec<u8>>> {
             c.records.len()
         ));
     }
+    // Most chunks hold no more than 8 times their compressed size: one allocation.
+    let first = c.records.len().saturating_mul(8).max(64 * 1024);
     let r = match c.compression {
         "zstd" => zstd::stream::read::Decoder::with_buffer(c.records)
             .map_err(|e| e.to_string())
-            .and_then(|d| fill(d, size as usize)),
+            .and_then(|d| fill(d, size as usize, first)),
         _ => lz4::Decoder::new(c.records)
             .map_err(|e| e.to_string())
-            .and_then(|d| fill(d, size as usize)),
+            .and_then(|d| fill(d, size as usize, first)),
     };
     r.map(Some)
         .map_err(|e| format!("its {} data does not decompress ({e})", c.compression))
 }
 
 /// Reads exactly `size` bytes from `r` and checks that nothing follows. The
-/// buffer grows with what really comes (doubling from 64 KiB, never past
-/// `size`), so a damaged size costs at most twice the real data.
-fn fill(mut r: impl Read, size: usize) -> Result<Vec<u8>, String> {
+/// buffer grows with what really comes (from `first` bytes, doubling, never past
+/// `size`), so a damaged size costs at most twice the real data (or `first`).
+fn fill(mut r: impl Read, size: usize, first: usize) -> Result<Vec<u8>, String> {
     let mut buf: Vec<u8> = Vec::new();
     let mut n = 0;
     while n < size {
         if n == buf.len() {
-            let to = (buf.len() * 2).max(64 * 1024).min(size);
+            let to = (buf.len() * 2).max(first).min(size);
             buf.resize(to, 0);
         }
         match r.read(&mut buf[n..]) {
