@@ -691,3 +691,39 @@ fn fuzz_smoke_ten_thousand_structured_mutations() {
     );
     assert_alloc_bound();
 }
+
+/// An unchunked file (messages at the top level, as some writers make them) is
+/// read; a damaged message length there is corruption at its offset (the
+/// messages after it are not recovered: resync looks for chunks).
+#[test]
+fn unchunked_files_are_read() {
+    let mut w = mcap::WriteOptions::new()
+        .use_chunks(false)
+        .create(Cursor::new(Vec::new()))
+        .unwrap();
+    let ch = w.add_channel(0, "t", "json", &BTreeMap::new()).unwrap();
+    for i in 0..3 {
+        let header = mcap::records::MessageHeader {
+            channel_id: ch,
+            sequence: i,
+            log_time: i as u64,
+            publish_time: i as u64,
+        };
+        w.write_to_known_channel(&header, b"{}").unwrap();
+    }
+    w.finish().unwrap();
+    let file = w.into_inner().into_inner();
+    let s = Summary::of(&file).unwrap();
+    assert!(s.intact() && s.messages == 3, "{s:?}");
+    let at = records(&file).iter().find(|r| r.1 == 0x05).unwrap().0;
+    let mut copy = file.clone();
+    copy[at + 8] ^= 0x10;
+    let s = Summary::of(&copy).unwrap();
+    assert!(
+        s.corrupt
+            .first()
+            .is_some_and(|c| c.starts_with(&format!("at byte {at}: "))),
+        "{s:?}"
+    );
+    assert!(s.lost.is_none() && s.messages < 3, "{s:?}");
+}
