@@ -34,8 +34,10 @@
 //! increasing: the second pass publishes clock + the last clock of the first pass.
 //!
 //! A file cut short (a run killed mid-write) replays up to its last complete
-//! chunk, with a warning naming what was lost; a file that is not MCAP, or a
-//! channel of a kind jderobot does not know, is a clear error at load.
+//! chunk, with a warning naming what was lost; a corrupt chunk (its CRC, size or
+//! records wrong) is skipped with a warning naming its offset, and the rest
+//! replays (see `crate::mcapfmt::reader`); a file that is not MCAP, or a channel
+//! of a kind jderobot does not know, is a clear error at load.
 //!
 //! # Lock-step (`stepped motors`): deterministic replay
 //! The recording's motors messages cut it into steps: what the robot sensed after
@@ -49,10 +51,12 @@
 //! In `stepped on`, exports `replay.step` ([`StepGate`](crate::mcapfmt::StepGate));
 //! the shell's `step [N]` lets N messages through.
 //!
-//! No system package is needed. The file is read into memory whole.
+//! No system package is needed. The file is read into memory whole (a regular
+//! file of at most `mcapfmt::MAX_FILE_BYTES`).
 
 use std::{
     collections::BTreeMap,
+    ops::ControlFlow,
     path::PathBuf,
     sync::{
         Arc,
@@ -229,6 +233,19 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
         );
     }
     let (summary, bytes) = Summary::read(&settings.file)?;
+    for c in &summary.corrupt {
+        tracing::warn!(
+            "replay: {} is corrupt {c}; that part is skipped, the rest is replayed",
+            settings.file.display()
+        );
+    }
+    if summary.orphans > 0 {
+        tracing::warn!(
+            "replay: {}: {} messages are skipped (their channel was defined in a corrupt chunk)",
+            settings.file.display(),
+            summary.orphans
+        );
+    }
     if let Some(lost) = &summary.lost {
         tracing::warn!(
             "replay: {} was cut short; it replays its {} complete messages ({lost})",
@@ -338,59 +355,52 @@ fn run(
     let mut seen = motors.as_ref().map(|m| m.clock()).unwrap_or(0);
     'passes: loop {
         let t0 = Instant::now();
-        let stream = match mcap::MessageStream::new_with_options(
-            bytes,
-            mcap::read::Options::IgnoreEndMagic.into(),
-        ) {
-            Ok(s) => s,
-            Err(e) => {
-                tracing::error!("replay: {}: {e}", settings.file.display());
-                break;
-            }
-        };
-        for m in stream {
+        // The file was read whole once (the summary): its damage is known and
+        // logged, and the same readable messages come again.
+        let read = mcapfmt::reader::read_messages(bytes, |m| {
             if stop.load(Ordering::Acquire) {
-                return;
+                return ControlFlow::Break(());
             }
-            let Ok(m) = m else { break };
             if m.log_time < from || m.log_time > to {
-                continue;
+                return ControlFlow::Continue(());
             }
             let Some((kind, target)) = targets.get(&m.channel.topic) else {
-                continue;
+                return ControlFlow::Continue(());
             };
             if let (Some(motors), Target::Motors(_)) = (&motors, target) {
                 // A recorded command: the next step waits for the schema's own.
                 while motors.clock() == seen {
                     if stop.load(Ordering::Acquire) {
-                        return;
+                        return ControlFlow::Break(());
                     }
                     std::thread::sleep(Duration::from_millis(1));
                 }
                 seen = motors.clock();
-                continue;
+                return ControlFlow::Continue(());
             }
             if motors.is_some() {
                 // lock-step: no pacing
             } else if let Some(g) = gate {
                 while !g.take(Duration::from_millis(100)) {
                     if stop.load(Ordering::Acquire) {
-                        return;
+                        return ControlFlow::Break(());
                     }
                 }
             } else if let Some(speed) = settings.speed {
                 let due = t0 + Duration::from_secs_f64((m.log_time - from) as f64 / 1e9 / speed);
                 while let Some(wait) = due.checked_duration_since(Instant::now()) {
                     if stop.load(Ordering::Acquire) {
-                        return;
+                        return ControlFlow::Break(());
                     }
                     std::thread::sleep(wait.min(Duration::from_millis(50)));
                 }
             }
-            match mcapfmt::decode_mcap(kind, &m) {
+            match mcapfmt::decode_read(kind, m) {
                 Ok(d) => {
-                    last_clock = last_clock.max(d.clock + offset);
-                    if let Err(e) = target.publish(d.clock + offset, d.time_ns, d.value) {
+                    last_clock = last_clock.max(d.clock.saturating_add(offset));
+                    if let Err(e) =
+                        target.publish(d.clock.saturating_add(offset), d.time_ns, d.value)
+                    {
                         errors += 1;
                         if errors <= 5 {
                             tracing::warn!("replay: {e}");
@@ -406,6 +416,15 @@ fn run(
             }
             if let Some(g) = gate {
                 g.published.fetch_add(1, Ordering::Relaxed);
+            }
+            ControlFlow::Continue(())
+        });
+        match read {
+            Ok(o) if o.stopped => return,
+            Ok(_) => {}
+            Err(e) => {
+                tracing::error!("replay: {}: {e}", settings.file.display());
+                break;
             }
         }
         if !settings.looping {

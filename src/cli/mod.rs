@@ -59,7 +59,7 @@ pub enum Command {
         conf: PathBuf,
     },
     /// Print what an MCAP recording holds: channels, counts, rates, duration, and
-    /// what was lost if the file was cut short.
+    /// what was lost if the file was cut short or is corrupt (with the offsets).
     #[cfg(feature = "_mcap")]
     Info {
         /// The .mcap file.

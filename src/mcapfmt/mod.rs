@@ -31,18 +31,21 @@
 //!
 //! [`Source`] polls a typed interface for new samples without copying them;
 //! [`add_channel`] and [`encode`] write a sample into an MCAP writer,
-//! [`decode_message`] (or [`decode_mcap`]) reads it back; [`Summary`]
-//! reads a file (complete or cut short) for `jderobot info`; [`RecorderStatus`]
+//! [`decode_message`] (or [`decode_read`] for a message of [`reader`], the bounded
+//! reader that replay and `jderobot info` use; [`decode_mcap`] for the `mcap`
+//! crate's) reads it back; [`Summary`] reads a file (complete, cut short or
+//! corrupt: see [`reader`]) for `jderobot info`; [`RecorderStatus`]
 //! and [`StepGate`] are what the recorder and replay export in the name space
 //! (keys `recorder.status` and `replay.step`) for the shell.
 
 mod protobuf;
+pub mod reader;
 pub mod ros2;
 mod status;
 mod summary;
 
 pub use status::{RecorderStatus, StepGate};
-pub use summary::{ChannelSummary, ReadError, Summary};
+pub use summary::{ChannelSummary, MAX_FILE_BYTES, ReadError, Summary};
 
 use std::{
     collections::BTreeMap,
@@ -515,6 +518,20 @@ pub fn decode_mcap(kind: &str, m: &mcap::Message) -> Result<Decoded, FormatError
     )
 }
 
+/// Decodes a message read by [`reader`] ([`decode_message`] with its channel,
+/// sequence and log time).
+pub fn decode_read(kind: &str, m: &reader::Message<'_>) -> Result<Decoded, FormatError> {
+    decode_message(
+        &m.channel.topic,
+        kind,
+        m.channel.schema.as_ref().map_or("", |s| s.name.as_str()),
+        &m.channel.message_encoding,
+        m.sequence,
+        m.log_time,
+        m.data,
+    )
+}
+
 /// The interface kind of a channel: its metadata, or what its schema name says.
 pub fn channel_kind(metadata: &BTreeMap<String, String>, schema: Option<&str>) -> Option<String> {
     if let Some(k) = metadata.get(KIND_KEY) {
@@ -765,6 +782,16 @@ mod tests {
             n += 1;
         }
         assert_eq!(n, cases.len());
+        // The same through jderobot's own reader (what replay uses).
+        let mut back = Vec::new();
+        let o = reader::read_messages(&file, |m| {
+            back.push(decode_read(&m.channel.metadata[KIND_KEY], m).unwrap().value);
+            std::ops::ControlFlow::Continue(())
+        })
+        .unwrap();
+        assert!(o.problems.is_empty() && o.complete, "{o:?}");
+        let want: Vec<Recorded> = cases.iter().map(|c| c.1.clone()).collect();
+        assert_eq!(back, want);
     }
 
     #[test]

@@ -299,8 +299,9 @@ pub fn decode_image(
             format!("image encoding `{encoding}`; jderobot reads bgr8"),
         ));
     }
-    let need = width as usize * height as usize * 3;
-    if pixels.len() != need {
+    // u64 and checked: a damaged width and height must not overflow.
+    let need = (width as u64 * height as u64).saturating_mul(3);
+    if pixels.len() as u64 != need {
         return Err(bad(
             topic,
             format!(

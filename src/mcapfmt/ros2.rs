@@ -276,7 +276,9 @@ pub fn decode(
             let _be = r.u8()?;
             let _step = r.u32()?;
             let n = r.u32()? as usize;
-            if enc != "bgr8" || n != width as usize * height as usize * 3 {
+            // u64 and checked: a damaged width and height must not overflow.
+            let need = (width as u64 * height as u64).checked_mul(3);
+            if enc != "bgr8" || need != Some(n as u64) {
                 return Err(bad(
                     topic,
                     format!("a {width}x{height} `{enc}` image of {n} bytes; jderobot reads bgr8"),

@@ -1,9 +1,10 @@
-//! What a file holds, read message by message (so a file cut short still says
-//! what it has): for `jderobot info` and the replay driver.
+//! What a file holds, read message by message with the bounded reader
+//! ([`read_messages`]), so a file cut short or corrupt still says what it has
+//! and where it is damaged: for `jderobot info`, the replay driver and `check`.
 
-use std::{collections::BTreeMap, fmt::Write as _, path::Path};
+use std::{collections::BTreeMap, fmt::Write as _, io::Read as _, ops::ControlFlow, path::Path};
 
-use super::{channel_kind, interface_name};
+use super::{channel_kind, interface_name, reader::read_messages};
 
 /// One channel of a file.
 #[derive(Clone, Debug, Default)]
@@ -44,6 +45,10 @@ pub struct Summary {
     pub complete: bool,
     /// Why reading stopped early (a file cut short: the rest is lost).
     pub lost: Option<String>,
+    /// The corrupt places (`at byte N: what`), each skipped; the rest was read.
+    pub corrupt: Vec<String>,
+    /// Messages whose channel record is lost (in a corrupt chunk).
+    pub orphans: u64,
 }
 
 /// Errors reading a file.
@@ -53,15 +58,53 @@ pub enum ReadError {
     Io { path: String, error: std::io::Error },
     #[error("{path}: not an MCAP file ({error})")]
     NotMcap { path: String, error: String },
+    #[error(
+        "{path}: {what}; jderobot reads recordings from regular files of at most {max} bytes (it holds them in memory)"
+    )]
+    NotReadable {
+        path: String,
+        what: String,
+        max: u64,
+    },
+}
+
+/// The largest file read (it is held in memory whole).
+pub const MAX_FILE_BYTES: u64 = 16 << 30;
+
+/// Reads a regular file of at most `max` bytes whole (a device or FIFO would
+/// never end, a file growing meanwhile is read up to its length when opened).
+fn read_bounded(path: &Path, max: u64) -> Result<Vec<u8>, ReadError> {
+    let io = |error| ReadError::Io {
+        path: path.display().to_string(),
+        error,
+    };
+    let not = |what: String| ReadError::NotReadable {
+        path: path.display().to_string(),
+        what,
+        max,
+    };
+    let file = std::fs::File::open(path).map_err(io)?;
+    let meta = file.metadata().map_err(io)?;
+    if meta.is_dir() {
+        return Err(not("it is a directory, not a file".into()));
+    }
+    if !meta.is_file() {
+        return Err(not(
+            "it is not a regular file (a device, FIFO or socket)".into()
+        ));
+    }
+    if meta.len() > max {
+        return Err(not(format!("it is {} bytes", meta.len())));
+    }
+    let mut bytes = Vec::with_capacity(meta.len() as usize);
+    file.take(meta.len()).read_to_end(&mut bytes).map_err(io)?;
+    Ok(bytes)
 }
 
 impl Summary {
     /// Reads `path` whole (it is kept in memory) and summarises it.
     pub fn read(path: &Path) -> Result<(Summary, Vec<u8>), ReadError> {
-        let bytes = std::fs::read(path).map_err(|error| ReadError::Io {
-            path: path.display().to_string(),
-            error,
-        })?;
+        let bytes = read_bounded(path, MAX_FILE_BYTES)?;
         let s = Summary::of(&bytes).map_err(|error| ReadError::NotMcap {
             path: path.display().to_string(),
             error,
@@ -70,31 +113,14 @@ impl Summary {
     }
 
     /// Summarises the bytes of a file; an error if they are not MCAP at all.
+    /// Damage is in `lost` (cut short) and `corrupt` (see [`read_messages`]).
     pub fn of(bytes: &[u8]) -> Result<Summary, String> {
-        if !bytes.starts_with(mcap::MAGIC) {
-            return Err("it does not start with the MCAP magic bytes".into());
-        }
-        let complete = bytes.len() >= 2 * mcap::MAGIC.len() && bytes.ends_with(mcap::MAGIC);
-        let stream = mcap::MessageStream::new_with_options(
-            bytes,
-            mcap::read::Options::IgnoreEndMagic.into(),
-        )
-        .map_err(|e| e.to_string())?;
         let mut by_id: BTreeMap<u16, ChannelSummary> = BTreeMap::new();
         let mut s = Summary {
-            profile: profile(bytes),
             bytes: bytes.len() as u64,
-            complete,
             ..Summary::default()
         };
-        for m in stream {
-            let m = match m {
-                Ok(m) => m,
-                Err(e) => {
-                    s.lost = Some(e.to_string());
-                    break;
-                }
-            };
+        let outcome = read_messages(bytes, |m| {
             let c = by_id.entry(m.channel.id).or_insert_with(|| {
                 let schema = m.channel.schema.as_ref().map(|s| s.name.clone());
                 ChannelSummary {
@@ -116,12 +142,24 @@ impl Summary {
             s.messages += 1;
             s.start_ns = s.start_ns.min(m.log_time);
             s.end_ns = s.end_ns.max(m.log_time);
-        }
-        if s.lost.is_none() && !complete {
-            s.lost = Some("the file does not end with the MCAP footer (cut short)".into());
+            ControlFlow::Continue(())
+        })?;
+        s.profile = outcome.profile.clone();
+        s.complete = outcome.complete;
+        s.orphans = outcome.orphans;
+        s.lost = outcome.cut_short().map(|p| p.to_string());
+        s.corrupt = outcome.corrupt().map(|p| p.to_string()).collect();
+        if outcome.more_problems > 0 {
+            s.corrupt
+                .push(format!("and {} more damaged places", outcome.more_problems));
         }
         s.channels = by_id.into_values().collect();
         Ok(s)
+    }
+
+    /// Nothing is damaged: no corruption, not cut short.
+    pub fn intact(&self) -> bool {
+        self.lost.is_none() && self.corrupt.is_empty()
     }
 
     /// Seconds from the first message to the last.
@@ -162,10 +200,28 @@ impl Summary {
                 c.rate()
             );
         }
+        for c in &self.corrupt {
+            let _ = writeln!(o, "corrupt: {c}");
+        }
+        if self.orphans > 0 {
+            let _ = writeln!(
+                o,
+                "{} messages were skipped: their channel was defined in a corrupt chunk",
+                self.orphans
+            );
+        }
+        if !self.corrupt.is_empty() {
+            let _ = writeln!(
+                o,
+                "complete: NO, the file is corrupt in {} places (above), which were skipped; the rest was read",
+                self.corrupt.len()
+            );
+        }
         match &self.lost {
-            None => {
+            None if self.corrupt.is_empty() => {
                 let _ = writeln!(o, "complete: yes");
             }
+            None => {}
             Some(why) => {
                 let _ = writeln!(
                     o,
@@ -175,18 +231,4 @@ impl Summary {
         }
         o
     }
-}
-
-/// The profile string of the header record right after the magic.
-fn profile(bytes: &[u8]) -> String {
-    let m = mcap::MAGIC.len();
-    // opcode (1) + record length (8) + string length (4) + string
-    let Some(len) = bytes.get(m + 9..m + 13) else {
-        return String::new();
-    };
-    let n = u32::from_le_bytes(len.try_into().expect("4")) as usize;
-    bytes
-        .get(m + 13..m + 13 + n)
-        .map(|p| String::from_utf8_lossy(p).into_owned())
-        .unwrap_or_default()
 }
