@@ -254,11 +254,18 @@ mod tests {
 
     #[test]
     fn a_source_logs_once_per_change_of_state() {
-        let from = Source::new("test");
+        let from = Source::new("test").with_quiet(Duration::ZERO);
         assert!(from.refused("bad"), "the first refusal is logged");
         assert!(!from.refused("bad"), "the second is not");
         from.accepted();
         assert!(from.refused("bad"), "after a good value, logged again");
+        // A flapping source: once per quiet time.
+        let flapping = Source::new("test");
+        assert!(flapping.refused("bad"));
+        for _ in 0..10 {
+            flapping.accepted();
+            assert!(!flapping.refused("bad"), "within the quiet time");
+        }
         let m: Interface<Motors> = Interface::new("motors", "t");
         assert_eq!(m.accept(&from, Motors { v: 1.0, w: 0.0 }), Some(1));
         assert!(!from.refusing());
