@@ -59,7 +59,8 @@ pub const RANGES: &[(&str, &str)] = &[
     ),
     (
         "pantiltmotors",
-        "longitude, latitude and the limits in [-360, 360] deg, min <= max; speeds in [-1e4, 1e4] deg/s",
+        "longitude, latitude finite (each driver limits them); the limits in [-360, 360] deg, \
+         min <= max; speeds in [-1e4, 1e4] deg/s",
     ),
     ("zoomencoders", "zoom_position finite"),
     (
@@ -460,9 +461,11 @@ impl InterfaceValue for PtMotors {
     }
     fn validate(&self, name: &str) -> Result<(), String> {
         let (a, s) = (MAX_ANGLE_DEG, MAX_PT_SPEED);
+        // A command beyond the limits is fine (the driver limits it); the limits
+        // are the unit's.
+        finite(name, "longitude", self.longitude)?;
+        finite(name, "latitude", self.latitude)?;
         for (field, v) in [
-            ("longitude", self.longitude),
-            ("latitude", self.latitude),
             ("min_longitude", self.min_longitude),
             ("max_longitude", self.max_longitude),
             ("min_latitude", self.min_latitude),
