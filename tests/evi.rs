@@ -14,7 +14,7 @@ use std::{
     io::{BufRead, BufReader, Write},
     process::{Command, Stdio},
     sync::{Arc, mpsc},
-    time::Duration,
+    time::{Duration, Instant},
 };
 
 use common::{eventually, poll_until, start_conf};
@@ -307,6 +307,59 @@ fn faults_mark_everything_stale_until_the_camera_answers() {
     let cam = Evi::start(&port);
     eventually("back", || pte.stale().is_none());
     assert!(cam.power(), "powered on again");
+    rt.shutdown();
+}
+
+#[test]
+fn a_position_out_of_the_cameras_range_is_refused_not_written() {
+    let dir = tempfile::tempdir().unwrap();
+    let port = dir.path().join("evi");
+    let cam = Evi::start(&port);
+    let rt = start_conf(&conf(&port, "poll 50\nreply_timeout 300\n"));
+    let (pte, ..) = ifaces(&rt);
+    eventually("running", || pte.clock() > 2 && pte.stale().is_none());
+    cam.set_faults(Faults {
+        pantilt: Some((0, 0x7FFF)),
+        ..Faults::default()
+    });
+    eventually("refused", || pte.stale().is_some());
+    let why = pte.stale().unwrap();
+    assert!(
+        why.contains("with tilt 32767 (0x7FFF), out of the EVI-D100's range -400..400"),
+        "{why}"
+    );
+    let tilt = pte.read().tilt_angle;
+    assert!(tilt.abs() <= 25.0, "never written: {tilt} deg");
+    cam.set_faults(Faults::default());
+    eventually("recovered", || pte.stale().is_none());
+    rt.shutdown();
+}
+
+#[test]
+fn after_a_burst_of_garbage_the_camera_is_back_at_its_next_retry() {
+    let dir = tempfile::tempdir().unwrap();
+    let port = dir.path().join("evi");
+    let cam = Evi::start(&port);
+    let rt = start_conf(&conf(&port, "poll 50\nreply_timeout 300\n"));
+    let (pte, ..) = ifaces(&rt);
+    eventually("running", || pte.clock() > 2 && pte.stale().is_none());
+    // 4 KB of noise (a fixed pseudo-random sequence) in one burst.
+    let mut x: u32 = 0x1234_5678;
+    let noise: Vec<u8> = (0..4096)
+        .map(|_| {
+            x ^= x << 13;
+            x ^= x >> 17;
+            x ^= x << 5;
+            (x >> 24) as u8
+        })
+        .collect();
+    cam.state.lock().raw = noise;
+    eventually("the noise is seen", || pte.stale().is_some());
+    // The device is sane again at once: back at the next retry (a second later),
+    // not after the driver has read the burst 16 bytes a second.
+    let t0 = Instant::now();
+    eventually("back", || pte.stale().is_none());
+    eprintln!("back after {:.1} s", t0.elapsed().as_secs_f64());
     rt.shutdown();
 }
 

@@ -593,3 +593,56 @@ fn our_client_against_our_server_with_a_token() {
     );
     srv.shutdown();
 }
+
+#[test]
+fn our_client_drops_an_absurd_pose_from_a_server() {
+    use std::io::{BufRead, BufReader, Read, Write};
+    // A server of its own: it sends an encoders line with x = 1e38, then a good one.
+    let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let port = listener.local_addr().unwrap().port();
+    let server = std::thread::spawn(move || {
+        let (s, _) = listener.accept().unwrap();
+        let mut name = [0u8; 20];
+        (&s).read_exact(&mut name).unwrap();
+        let mut r = BufReader::new(&s);
+        let mut line = String::new();
+        // The subscription to encoders (`11`).
+        while r.read_line(&mut line).unwrap() > 0 && !line.starts_with("11") {
+            line.clear();
+        }
+        (&s).write_all(b"10 1 1e38 0.0 0.00000 1\n10 2 100.0 0.0 0.00000 2\n")
+            .unwrap();
+        std::thread::sleep(Duration::from_millis(500));
+    });
+    let rt = Runtime::new(std::path::Path::new("test.conf"));
+    let h = format!("127.0.0.1 {port}");
+    load(
+        &rt,
+        Kind::Driver,
+        "networkclient",
+        &format!("provides encoders {h}\n"),
+    )
+    .unwrap();
+    let enc = rt.interfaces.get::<Encoders>("encoders").unwrap();
+    let count = Arc::new(Count::default());
+    enc.watch(count.clone());
+    enc.resume();
+    eventually("the good pose", || enc.read().x == 100.0);
+    assert_eq!(
+        count.0.load(std::sync::atomic::Ordering::Acquire),
+        1,
+        "only the good pose was published"
+    );
+    server.join().unwrap();
+    rt.shutdown();
+}
+
+/// Counts the values published on an interface.
+#[derive(Default)]
+struct Count(std::sync::atomic::AtomicUsize);
+
+impl jderobot::interfaces::Notify for Count {
+    fn notify(&self) {
+        self.0.fetch_add(1, std::sync::atomic::Ordering::AcqRel);
+    }
+}

@@ -282,6 +282,29 @@ fn silence_garbage_refusal_and_unplugging_mark_the_head_stale_until_it_answers()
 }
 
 #[test]
+fn a_position_out_of_the_units_range_is_refused_not_written() {
+    let dir = tempfile::tempdir().unwrap();
+    let port = dir.path().join("ptu");
+    let unit = Ptu::start(&port);
+    let rt = start_conf(&conf(&port, "poll 50\nreply_timeout 300\n"));
+    let (enc, _mot) = ifaces(&rt);
+    eventually("running", || enc.clock() > 2 && enc.stale().is_none());
+    unit.set_faults(Faults {
+        pan_position: Some(3_090_000),
+        ..Faults::default()
+    });
+    eventually("refused", || enc.stale().is_some());
+    let why = enc.stale().unwrap();
+    assert!(why.contains("`PP` answered 3090000 steps, out of"), "{why}");
+    let pan = enc.read().pan_angle;
+    assert!(pan.abs() <= 160.0, "never written: {pan} deg");
+    unit.set_faults(Faults::default());
+    eventually("recovered", || enc.stale().is_none());
+    assert!(enc.read().pan_angle.abs() <= 160.0);
+    rt.shutdown();
+}
+
+#[test]
 fn conf_errors_name_the_line() {
     for (text, expect) in [
         (

@@ -936,3 +936,112 @@ fn introrob_vff_reaches_a_target_in_the_emulators_world() {
         "introrob's VFF did not reach (3, -2) m; the robot is at ({x:.2}, {y:.2})"
     );
 }
+
+// ---- values from outside ----
+
+/// The process's log lines (a global subscriber, installed on first use); tests
+/// look for lines naming their own emulator's port.
+fn log_lines() -> Arc<std::sync::Mutex<Vec<u8>>> {
+    static LOG: std::sync::OnceLock<Arc<std::sync::Mutex<Vec<u8>>>> = std::sync::OnceLock::new();
+    LOG.get_or_init(|| {
+        let buf = Arc::new(std::sync::Mutex::new(Vec::new()));
+        struct W(Arc<std::sync::Mutex<Vec<u8>>>);
+        impl Write for W {
+            fn write(&mut self, b: &[u8]) -> std::io::Result<usize> {
+                self.0.lock().unwrap().extend_from_slice(b);
+                Ok(b.len())
+            }
+            fn flush(&mut self) -> std::io::Result<()> {
+                Ok(())
+            }
+        }
+        let b = buf.clone();
+        let _ = tracing_subscriber::fmt()
+            .with_max_level(tracing::Level::INFO)
+            .with_ansi(false)
+            .with_writer(move || W(b.clone()))
+            .try_init();
+        buf
+    })
+    .clone()
+}
+
+fn log_text() -> String {
+    String::from_utf8_lossy(&log_lines().lock().unwrap()).into_owned()
+}
+
+#[test]
+fn position2d_with_nan_or_inf_is_dropped_and_the_last_good_pose_stays() {
+    let emu = Emulator::start();
+    let rt = start(emu.port, "provides encoders\nprovides laser 180 1\n");
+    let enc: Arc<Interface<Encoders>> = rt.interfaces.get("encoders").unwrap();
+    let laser: Arc<Interface<Laser>> = rt.interfaces.get("laser").unwrap();
+    rt.run("encoders").unwrap();
+    rt.run("laser").unwrap();
+    eventually("data", || enc.clock() > 0 && laser.clock() > 0);
+    type Spoil = fn(&mut player_emulator::World);
+    let spoils: [(&str, Spoil); 3] = [
+        ("x NaN", |w| w.x = f64::NAN),
+        ("y inf", |w| w.y = f64::INFINITY),
+        ("a NaN", |w| w.a = f64::NAN),
+    ];
+    for (what, spoil) in spoils {
+        spoil(&mut emu.world());
+        // Rounds of data after the change (the laser comes in the same rounds).
+        let c = laser.clock();
+        eventually(&format!("{what}: rounds after it"), || {
+            laser.clock() > c + 3
+        });
+        let e = enc.read();
+        assert!(
+            e.x.is_finite() && e.y.is_finite() && e.theta.is_finite(),
+            "{what}: the pose stays finite: {e:?}"
+        );
+        drop(e);
+        {
+            let mut w = emu.world();
+            (w.x, w.y, w.a) = (0.5, 0.25, 0.0);
+        }
+        eventually(&format!("{what}: good poses again"), || {
+            (enc.read().x - 500.0).abs() < 1.0
+        });
+    }
+    rt.shutdown();
+}
+
+#[test]
+fn an_unusable_camera_frame_is_said_once_while_it_lasts() {
+    let _ = log_lines();
+    let emu = Emulator::start();
+    let rt = start(emu.port, "provides varcolorA\n");
+    let var: Arc<Interface<Image>> = rt.interfaces.get("varcolorA").unwrap();
+    rt.run("varcolorA").unwrap();
+    eventually("frames", || var.clock() > 0);
+    let accepted = emu.shared.accepted.load(Ordering::Acquire);
+    // Frames out of range (9000 pixels wide) between good ones, as a fuzzer or a
+    // failing camera sends them.
+    let lines = || {
+        log_text()
+            .lines()
+            .filter(|l| l.contains("WARN") && l.contains("9000x60"))
+            .count()
+    };
+    for k in 0..5 {
+        emu.shared.camera.lock().unwrap().0 = 9000;
+        if k == 0 {
+            eventually("the line", || lines() > 0);
+        } else {
+            std::thread::sleep(Duration::from_millis(60));
+        }
+        let c = var.clock();
+        emu.shared.camera.lock().unwrap().0 = 80;
+        eventually("a good frame", || var.clock() > c);
+    }
+    assert_eq!(lines(), 1, "one line for the bad frames:\n{}", log_text());
+    assert_eq!(
+        emu.shared.accepted.load(Ordering::Acquire),
+        accepted,
+        "the connection stays"
+    );
+    rt.shutdown();
+}

@@ -12,7 +12,7 @@ use std::{
 };
 
 use common::process::{Proc, free_port, number_after};
-use jderobot::interfaces::{Laser, Motors, PtMotors};
+use jderobot::interfaces::{Encoders, Laser, Motors, Notify, PtMotors};
 use zenoh::Wait;
 
 fn robot_conf(dir: &Path, port: u16, extra: &str) -> std::path::PathBuf {
@@ -185,7 +185,7 @@ fn garbage_on_a_subscribed_key_is_dropped_with_one_line_and_a_good_command_drive
     });
     let log = robot.text();
     assert_eq!(
-        log.matches("zenoh: dropped a sample on `jderobot/pioneer/motors`")
+        log.matches("zenoh: `jderobot/pioneer/motors` (for `motors`): dropped a value")
             .count(),
         1,
         "one line for the garbage:\n{log}"
@@ -332,5 +332,108 @@ fn a_command_written_before_the_robot_came_reaches_it_when_it_does() {
     });
     common::eventually("the robot seen", || ptm.stale().is_none());
     robot.quit();
+    rt.shutdown();
+}
+
+fn floats(v: &[f32]) -> Vec<u8> {
+    v.iter().flat_map(|f| f.to_le_bytes()).collect()
+}
+
+/// Waits until `key` has a subscriber (the other side's).
+fn await_subscriber(session: &zenoh::Session, key: &str) {
+    let publisher = session.declare_publisher(key.to_string()).wait().unwrap();
+    common::eventually(&format!("a subscriber of {key}"), || {
+        publisher.matching_status().wait().unwrap().matching()
+    });
+}
+
+#[test]
+fn nan_and_inf_commands_are_dropped_and_the_last_good_one_stays() {
+    let dir = tempfile::tempdir().unwrap();
+    let port = free_port();
+    let mut robot = Proc::start(&robot_conf(dir.path(), port, ""));
+    robot.ask_until("echo laser", "the simulator", |l| {
+        l.starts_with("laser clock=")
+    });
+    let session = raw_session(port);
+    let (motors, ptmotors) = ("jderobot/pioneer/motors", "jderobot/pioneer/pantiltmotors");
+    await_subscriber(&session, motors);
+    await_subscriber(&session, ptmotors);
+    robot.ask_until("echo motors", "the good command", |l| {
+        session.put(motors, floats(&[250.0, 0.0])).wait().unwrap();
+        l.starts_with("motors clock=") && echo_v(l) == 250.0
+    });
+    session
+        .put(motors, floats(&[f32::NAN, f32::INFINITY]))
+        .wait()
+        .unwrap();
+    let mut pt = [
+        10.0, 5.0, 50.0, 50.0, 159.0, -159.0, 31.0, -47.0, 100.0, 100.0,
+    ];
+    pt[0] = f32::NAN;
+    session.put(ptmotors, floats(&pt)).wait().unwrap();
+    common::eventually("both refusals logged", || {
+        let log = robot.text();
+        log.contains("zenoh: `jderobot/pioneer/motors` (for `motors`): dropped a value")
+            && log.contains(
+                "zenoh: `jderobot/pioneer/pantiltmotors` (for `pantiltmotors`): dropped a value",
+            )
+    });
+    let m = robot.ask_until("echo motors", "motors", |l| l.starts_with("motors clock="));
+    assert!(echo_v(&m) == 250.0, "the last good command stays: {m}");
+    let p = robot.ask_until("echo pantiltmotors", "pantiltmotors", |l| {
+        l.starts_with("pantiltmotors clock=")
+    });
+    assert!(!p.contains("NaN") && !p.contains("inf"), "{p}");
+    robot.quit();
+}
+
+/// Counts the values published on an interface.
+#[derive(Default)]
+struct Count(std::sync::atomic::AtomicUsize);
+
+impl Notify for Count {
+    fn notify(&self) {
+        self.0.fetch_add(1, std::sync::atomic::Ordering::AcqRel);
+    }
+}
+
+#[test]
+fn a_controller_drops_nan_and_absurd_encoders_and_its_clock_only_grows() {
+    let port = free_port();
+    let rt = common::start_conf(&format!(
+        "driver zenoh\nrobot pioneer\nprovides encoders\nlisten tcp/127.0.0.1:{port}\n\
+         scouting off\nend_driver\nload_driver zenoh\n"
+    ));
+    let enc = rt.interfaces.get::<Encoders>("encoders").unwrap();
+    let count = std::sync::Arc::new(Count::default());
+    enc.watch(count.clone());
+    rt.run("encoders").unwrap();
+    let session = raw_session(port);
+    let key = "jderobot/pioneer/encoders";
+    await_subscriber(&session, key);
+    let put = |v: &[f32], clock: u64| {
+        let mut a = clock.to_le_bytes().to_vec();
+        a.extend_from_slice(&0u64.to_le_bytes());
+        session.put(key, floats(v)).attachment(a).wait().unwrap();
+    };
+    let (c, s) = (1f32.cos(), 1f32.sin());
+    put(&[f32::NAN, 0.0, 1.0, c, s], 1);
+    put(&[1e38, 0.0, 1.0, c, s], 2);
+    put(&[1000.0, 2000.0, 1.0, c, s], 3);
+    common::eventually("the good value", || enc.clock() == 3);
+    assert_eq!(enc.read().x, 1000.0);
+    assert_eq!(
+        count.0.load(std::sync::atomic::Ordering::Acquire),
+        1,
+        "only the good value was published"
+    );
+    // A sender's absurd clock does not become the interface's (it would wrap).
+    put(&[1100.0, 2000.0, 1.0, c, s], u64::MAX);
+    common::eventually("the next value", || enc.read().x == 1100.0);
+    assert_eq!(enc.clock(), 4, "the next local clock");
+    put(&[1200.0, 2000.0, 1.0, c, s], 2);
+    common::eventually("a value with an older clock", || enc.read().x == 1200.0);
+    assert_eq!(enc.clock(), 5, "the clock only grows");
     rt.shutdown();
 }

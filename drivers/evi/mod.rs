@@ -36,7 +36,11 @@
 //!   command comes).
 //! - Silence, garbage or a vanished port: reported once naming the port, every
 //!   provided interface marked stale, and the port reopened every second until the
-//!   camera answers (the run goes on).
+//!   camera answers (the run goes on). Each session begins by discarding what waits
+//!   on the line (until 50 ms of quiet), so the rest of a burst of garbage does not
+//!   keep the camera stale after it is sane again.
+//! - Answers out of the EVI-D100's range (pan ±0x08DB, tilt ±0x0190, zoom
+//!   0..0x7000) are refused as a broken line, never written into an interface.
 //!
 //! System packages: none (the `serialport` crate without libudev). Your user needs
 //! access to the port (usually the `dialout` group).
@@ -167,6 +171,25 @@ pub enum LinkError {
         command: String,
         bytes: String,
         camera: u8,
+    },
+    #[error("{port}: the camera answered `{command}` with {got} where {expected} was expected")]
+    Unexpected {
+        port: String,
+        command: String,
+        got: String,
+        expected: String,
+    },
+    #[error(
+        "{port}: the camera answered `{command}` with {what} {value} (0x{hex}), out of the EVI-D100's range {lo}..{hi}; refused"
+    )]
+    OutOfRange {
+        port: String,
+        command: String,
+        what: &'static str,
+        value: i32,
+        hex: String,
+        lo: i32,
+        hi: i32,
     },
     #[error("{port}: the camera answered `{command}` with {error}")]
     Visca {
@@ -308,6 +331,54 @@ impl Link {
         }
     }
 
+    fn unexpected(&self, command: &[u8], got: &Reply, expected: &str) -> LinkError {
+        LinkError::Unexpected {
+            port: self.name.clone(),
+            command: protocol::hex(command),
+            got: got.to_string(),
+            expected: expected.to_string(),
+        }
+    }
+
+    /// `value` answered to `command` if it is in the camera's range of `what`.
+    fn in_range(&self, command: &[u8], what: &'static str, value: i32) -> Result<i32, LinkError> {
+        let (lo, hi) = protocol::unit_range(what);
+        if (lo..=hi).contains(&value) {
+            return Ok(value);
+        }
+        Err(LinkError::OutOfRange {
+            port: self.name.clone(),
+            command: protocol::hex(command),
+            what,
+            value,
+            hex: format!("{:04X}", value as u16),
+            lo,
+            hi,
+        })
+    }
+
+    /// Resynchronises the line: discards whatever is waiting (the rest of a burst
+    /// of garbage, late answers of the previous session) until the line has been
+    /// quiet for 50 ms (1 s at most), so a session starts on a clean line.
+    pub fn flush(&mut self) -> Result<(), LinkError> {
+        let _ = self.port.clear(serialport::ClearBuffer::Input);
+        self.buf.clear();
+        let t0 = Instant::now();
+        let mut quiet_since = Instant::now();
+        let mut b = [0u8; 256];
+        while quiet_since.elapsed() < Duration::from_millis(50)
+            && t0.elapsed() < Duration::from_secs(1)
+        {
+            match self.port.read(&mut b) {
+                Ok(0) => return Err(self.io(std::io::ErrorKind::UnexpectedEof.into())),
+                Ok(_) => quiet_since = Instant::now(),
+                Err(e) if e.kind() == std::io::ErrorKind::TimedOut => {}
+                Err(e) => return Err(self.io(e)),
+            }
+        }
+        Ok(())
+    }
+
     fn silent(&self, command: &[u8]) -> LinkError {
         LinkError::Silent {
             port: self.name.clone(),
@@ -345,7 +416,11 @@ impl Link {
         self.send(p)?;
         match self.reply(p, self.timeout)? {
             Reply::Broadcast(b) if b == expect => Ok(()),
-            other => Err(self.garbage(p, format!("{other:?}"))),
+            other => Err(self.unexpected(
+                p,
+                &other,
+                &format!("the broadcast reply {}", protocol::hex(expect)),
+            )),
         }
     }
 
@@ -365,7 +440,7 @@ impl Link {
                 command: protocol::hex(p),
                 error,
             }),
-            other => Err(self.garbage(p, format!("{other:?}"))),
+            other => Err(self.unexpected(p, &other, "an ACK")),
         }
     }
 
@@ -403,11 +478,11 @@ impl Link {
                 command: protocol::hex(p),
                 error,
             }),
-            other => Err(self.garbage(p, format!("{other:?}"))),
+            other => Err(self.unexpected(p, &other, "an inquiry answer")),
         }
     }
 
-    /// Pan and tilt, device units.
+    /// Pan and tilt, device units (refused outside the camera's range).
     pub fn pantilt(&mut self) -> Result<(i32, i32), LinkError> {
         let q = protocol::pantilt_inquiry(self.addr);
         let a = self.inquiry(&q)?;
@@ -416,24 +491,28 @@ impl Link {
             protocol::from_nibbles(a.get(..4).unwrap_or(&[])),
             protocol::from_nibbles(a.get(4..8).unwrap_or(&[])),
         ) {
-            (8, Some(p), Some(t)) => Ok((p, t)),
+            (8, Some(p), Some(t)) => {
+                Ok((self.in_range(&q, "pan", p)?, self.in_range(&q, "tilt", t)?))
+            }
             _ => Err(self.garbage(&q, protocol::hex(&a))),
         }
     }
 
-    /// Zoom, device units.
+    /// Zoom, device units (refused outside the camera's range).
     pub fn zoom(&mut self) -> Result<i32, LinkError> {
         let q = protocol::zoom_inquiry(self.addr);
         let a = self.inquiry(&q)?;
         match (a.len(), protocol::from_nibbles(&a)) {
-            (4, Some(z)) => Ok(z),
+            (4, Some(z)) => self.in_range(&q, "zoom", z),
             _ => Err(self.garbage(&q, protocol::hex(&a))),
         }
     }
 }
 
-/// Address set, IF_Clear, power on if it is off.
+/// Resynchronises the line ([`Link::flush`]), then address set, IF_Clear, power
+/// on if it is off.
 pub fn init(link: &mut Link) -> Result<(), LinkError> {
+    link.flush()?;
     link.broadcast(&protocol::address_set(), &[0x88, 0x30, 0x02, 0xFF])?;
     link.broadcast(&protocol::if_clear(), &protocol::if_clear())?;
     let q = protocol::power_inquiry(link.addr);

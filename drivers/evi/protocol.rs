@@ -88,6 +88,29 @@ pub enum Reply {
     Broadcast(Vec<u8>),
 }
 
+impl std::fmt::Display for Reply {
+    /// In words, for messages: `a broadcast reply (88 30 02 FF)`.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Reply::Ack(s) => write!(f, "an ACK (socket {s})"),
+            Reply::Completion(s) => write!(f, "a completion (socket {s})"),
+            Reply::Answer(a) => write!(f, "an inquiry answer (data {})", hex(a)),
+            Reply::Error(s, e) => write!(f, "an error, {e} (socket {s})"),
+            Reply::Broadcast(b) => write!(f, "a broadcast reply ({})", hex(b)),
+        }
+    }
+}
+
+/// The EVI-D100's range of a position or zoom answer, device units: pan ±0x08DB,
+/// tilt ±0x0190, zoom 0..0x7000. A value outside it is refused.
+pub fn unit_range(what: &str) -> (i32, i32) {
+    match what {
+        "pan" => (-PAN_UNITS, PAN_UNITS),
+        "tilt" => (-TILT_UNITS, TILT_UNITS),
+        _ => (0, ZOOM_UNITS),
+    }
+}
+
 /// Classifies one packet (with its `FF`) from camera `addr`; None if it is not VISCA.
 pub fn classify(addr: u8, p: &[u8]) -> Option<Reply> {
     if p.len() < 3 || *p.last()? != END || p[..p.len() - 1].contains(&END) {
@@ -274,6 +297,10 @@ mod tests {
             );
         }
         assert_eq!(classify(1, &[0xA0, 0x41, 0xFF]), None);
+        assert_eq!(
+            Reply::Broadcast(vec![0x88, 0x30, 0x02, 0xFF]).to_string(),
+            "a broadcast reply (88 30 02 FF)"
+        );
         assert_eq!(classify(1, b"* ok\xFF"), None);
     }
 }

@@ -64,7 +64,7 @@ use crate::{
     conf::{ComponentConf, ConfLine},
     interfaces::{
         COLOR_HEIGHT, COLOR_WIDTH, Encoders, Image, Interface, Interfaces, Laser, Motors,
-        PtEncoders, PtMotors, Sonars, ZoomEncoders, ZoomMotors, canonical, family,
+        PtEncoders, PtMotors, Sonars, Source, ZoomEncoders, ZoomMotors, canonical, family,
     },
     netwire::{self, Device, LineEvent, LineReader, Message, Request},
     runtime::{Driver, Runtime},
@@ -348,6 +348,10 @@ impl NetClient {
         let mut threads = Vec::new();
         for (r, dev) in devs {
             let link = Link {
+                from: Source::new(format!(
+                    "networkclient: {}:{} (for `{}`)",
+                    r.host, r.port, r.name
+                )),
                 remote: r.clone(),
                 dev,
                 stop: stop.clone(),
@@ -397,6 +401,9 @@ struct Link {
     stop: Arc<AtomicBool>,
     name: [u8; netwire::NAME_LEN],
     depth: u32,
+    /// The server's values, refused (an encoders pose out of range, ...) with one
+    /// log line per change of state.
+    from: Source,
 }
 
 /// How a session ended.
@@ -568,7 +575,7 @@ impl Link {
     fn publish(&self, m: Message) {
         match (&self.dev, m) {
             (Dev::Laser(i), Message::Laser { readings, .. }) => {
-                let _ = i.write(|l| {
+                i.accept_with(&self.from, |l| {
                     l.readings.clear();
                     l.readings.extend_from_slice(&readings);
                     if l.resolution <= 0.0 {
@@ -585,11 +592,14 @@ impl Link {
                 let (s, c) = t0.to_radians().sin_cos();
                 let gx = x0 + c * x - s * y;
                 let gy = y0 + s * x + c * y;
-                let _ = i.publish(Encoders::from_pose(gx, gy, (theta_deg + t0).to_radians()));
+                i.accept(
+                    &self.from,
+                    Encoders::from_pose(gx, gy, (theta_deg + t0).to_radians()),
+                );
             }
             (Dev::Sonars(i), Message::Sonars { us, .. }) => {
                 let n = us.iter().map(|(k, _)| k + 1).max().unwrap_or(0);
-                let _ = i.write(|v| {
+                i.accept_with(&self.from, |v| {
                     v.us.clear();
                     v.us.resize(n, 0.0);
                     for (k, u) in &us {
@@ -598,15 +608,21 @@ impl Link {
                 });
             }
             (Dev::PtEncoders(i), Message::PtEncoders { pan, tilt, .. }) => {
-                let _ = i.publish(PtEncoders {
-                    pan_angle: pan,
-                    tilt_angle: tilt,
-                });
+                i.accept(
+                    &self.from,
+                    PtEncoders {
+                        pan_angle: pan,
+                        tilt_angle: tilt,
+                    },
+                );
             }
             (Dev::ZoomEncoders(i), Message::ZoomEncoders { zoom, .. }) => {
-                let _ = i.publish(ZoomEncoders {
-                    zoom_position: zoom,
-                });
+                i.accept(
+                    &self.from,
+                    ZoomEncoders {
+                        zoom_position: zoom,
+                    },
+                );
             }
             (_, Message::Error(t)) => {
                 tracing::warn!(
@@ -701,7 +717,7 @@ impl Link {
                 iface.set_stale(why);
                 continue;
             }
-            let _ = iface.write(|img| {
+            iface.accept_with(&self.from, |img| {
                 img.width = width;
                 img.height = height;
                 std::mem::swap(&mut img.data, &mut buf);

@@ -25,8 +25,10 @@
 //!   `pantiltmotors`; its speeds start at the init's 2900 steps/s (149.15 deg/s).
 //! - A command goes out only when it changes (`PS`/`TS` before `PP`/`TP`), within a
 //!   millisecond of being set; positions are polled with `PP` and `TP`.
-//! - Every reply is parsed strictly (optional echo, then `*` or `!`). An error reply
-//!   (`!`), silence, garbage (another device, a wrong baud rate) or a vanished port
+//! - Every reply is parsed strictly (optional echo, then `*` or `!`), and numbers are
+//!   checked: limits within a PTU-46's widest range (pan ±180°, tilt ±90°), positions
+//!   within the unit's limits (half a degree of slack). An error reply (`!`), silence,
+//!   garbage (another device, a wrong baud rate), a number out of range or a vanished port
 //!   is reported once, naming the port and what to check; both interfaces are marked
 //!   stale with the reason, and the driver reopens the port every second until the
 //!   unit answers again (then runs the init again). The rest of the run goes on.
@@ -318,6 +320,23 @@ impl Link {
             })
     }
 
+    /// `steps` answered to `q` on `axis` if they lie in `range` (of `what`).
+    pub fn checked(
+        &self,
+        axis: Axis,
+        q: Query,
+        steps: i64,
+        range: (i64, i64),
+        what: &str,
+    ) -> Result<i64, LinkError> {
+        protocol::check_range(&protocol::query(axis, q).0, steps, range, what).map_err(|source| {
+            LinkError::Reply {
+                port: self.name.clone(),
+                source,
+            }
+        })
+    }
+
     /// Asks `q` of `axis`; returns the steps.
     pub fn query(&mut self, axis: Axis, q: Query) -> Result<i64, LinkError> {
         let (cmd, _) = protocol::query(axis, q);
@@ -344,16 +363,26 @@ pub fn init(link: &mut Link) -> Result<Limits, LinkError> {
     for c in protocol::INIT {
         link.command(std::str::from_utf8(c).unwrap_or_default())?;
     }
-    Ok(Limits {
-        pan: (
-            link.query(Axis::Pan, Query::Min)?,
-            link.query(Axis::Pan, Query::Max)?,
-        ),
-        tilt: (
-            link.query(Axis::Tilt, Query::Min)?,
-            link.query(Axis::Tilt, Query::Max)?,
-        ),
-    })
+    let mut limit = |axis: Axis, q: Query| -> Result<i64, LinkError> {
+        let steps = link.query(axis, q)?;
+        let what = format!("a PTU-46's {}", axis.word().to_lowercase());
+        link.checked(axis, q, steps, protocol::device_range(axis), &what)
+    };
+    let pan = (limit(Axis::Pan, Query::Min)?, limit(Axis::Pan, Query::Max)?);
+    let tilt = (
+        limit(Axis::Tilt, Query::Min)?,
+        limit(Axis::Tilt, Query::Max)?,
+    );
+    Ok(Limits { pan, tilt })
+}
+
+/// `limits` widened by [`protocol::POSITION_SLACK`]: where a reported position
+/// may lie.
+fn with_slack(limits: (i64, i64)) -> (i64, i64) {
+    (
+        limits.0.saturating_sub(protocol::POSITION_SLACK),
+        limits.1.saturating_add(protocol::POSITION_SLACK),
+    )
 }
 
 /// What was last sent on an axis (steps, steps/s).
@@ -512,8 +541,24 @@ fn session(sh: &Shared, link: &mut Link) -> Result<(), LinkError> {
             if next_poll < now {
                 next_poll = now + sh.conf.poll;
             }
+            // A position outside the unit's own limits is a broken reply:
+            // refused (the session ends and the line is resynchronised).
             let pan = link.query(Axis::Pan, Query::Position)?;
+            let pan = link.checked(
+                Axis::Pan,
+                Query::Position,
+                pan,
+                with_slack(limits.pan),
+                "the unit's pan limits",
+            )?;
             let tilt = link.query(Axis::Tilt, Query::Position)?;
+            let tilt = link.checked(
+                Axis::Tilt,
+                Query::Position,
+                tilt,
+                with_slack(limits.tilt),
+                "the unit's tilt limits",
+            )?;
             if let Some(e) = &sh.enc {
                 let _ = e.publish(PtEncoders {
                     pan_angle: protocol::steps_to_deg(pan) as f32,

@@ -66,6 +66,48 @@ pub fn speed_command(axis: Axis, steps: i64) -> String {
     format!("{}S{steps}", axis.letter())
 }
 
+/// The widest range of the PTU-46 models, in steps: pan ±180°, tilt ±90° (the
+/// PTU-D46 turns ±159° and tilts +31°/−47°, or −80° on the extended models).
+/// Limits a unit reports outside it are refused.
+pub const PAN_RANGE: (i64, i64) = (-3500, 3500);
+pub const TILT_RANGE: (i64, i64) = (-1750, 1750);
+
+/// Steps a reported position may lie outside the unit's limits (half a degree).
+pub const POSITION_SLACK: i64 = 10;
+
+/// The widest range of `axis`, steps.
+pub fn device_range(axis: Axis) -> (i64, i64) {
+    match axis {
+        Axis::Pan => PAN_RANGE,
+        Axis::Tilt => TILT_RANGE,
+    }
+}
+
+/// `steps` answered to `command` if it lies in `range` (of `what`); a reply out
+/// of it is refused, never written into an interface.
+pub fn check_range(
+    command: &str,
+    steps: i64,
+    range: (i64, i64),
+    what: &str,
+) -> Result<i64, ReplyError> {
+    if (range.0..=range.1).contains(&steps) {
+        Ok(steps)
+    } else {
+        Err(ReplyError::OutOfRange {
+            command: command.to_string(),
+            steps,
+            range: format!(
+                "{what} [{}, {}] steps ([{:.2}, {:.2}] deg)",
+                range.0,
+                range.1,
+                steps_to_deg(range.0),
+                steps_to_deg(range.1)
+            ),
+        })
+    }
+}
+
 /// Why a reply was not what the command asked for.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum ReplyError {
@@ -77,6 +119,15 @@ pub enum ReplyError {
         "unexpected reply `{reply}` to `{command}` (a PTU answers `* ...` or `! ...`; is another device on this port, or the wrong baud rate?)"
     )]
     Garbage { command: String, reply: String },
+    /// A well-formed answer with a number no PTU gives.
+    #[error(
+        "`{command}` answered {steps} steps, out of {range}; refused (a garbled line or another device?)"
+    )]
+    OutOfRange {
+        command: String,
+        steps: i64,
+        range: String,
+    },
 }
 
 /// Printable form of raw bytes (non-ASCII as `\xNN`).
@@ -178,6 +229,20 @@ mod tests {
         assert_eq!(deg_to_steps(30.0), 583);
         assert_eq!(deg_to_steps(-10.0), -194);
         assert!((steps_to_deg(3090) - 158.93).abs() < 0.01);
+    }
+
+    #[test]
+    fn steps_out_of_the_range_are_refused() {
+        assert_eq!(
+            check_range("PP", 3090, PAN_RANGE, "a PTU-46's pan"),
+            Ok(3090)
+        );
+        let e = check_range("PP", 3_090_000, PAN_RANGE, "a PTU-46's pan").unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("`PP` answered 3090000 steps, out of a PTU-46's pan [-3500, 3500]"),
+            "{e}"
+        );
     }
 
     #[test]

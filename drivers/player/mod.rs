@@ -55,7 +55,10 @@
 //! server goes away later, every interface is marked stale, the motors are set to
 //! zero and the driver reconnects with backoff and subscribes again; it logs once
 //! per change. A malformed or oversized message drops the connection, which is
-//! then reopened.
+//! then reopened. A well-formed value an interface refuses (a NaN or an inf, a
+//! number out of its documented range: `interfaces::RANGES`) or a camera frame it
+//! cannot use is dropped, the last good value staying, with one log line per
+//! device and change of state.
 
 pub mod client;
 pub mod conf;
@@ -73,7 +76,7 @@ use std::{
 
 use crate::{
     conf::ComponentConf,
-    interfaces::{Image, Interface, Interfaces, Motors, PtMotors, limit},
+    interfaces::{Image, Interface, Interfaces, Motors, PtMotors, Source, limit},
     runtime::{Driver, Runtime, Worker},
 };
 
@@ -100,7 +103,9 @@ struct Device {
     scratch: Vec<u8>,
     /// The latest camera frame, converted before it is swapped into the interface.
     frame: Image,
-    bad_frame: bool,
+    /// Its values, refused (a NaN, out of range, an unusable frame) with one log
+    /// line per change of state.
+    source: Source,
     blob_clock: u64,
 }
 
@@ -131,15 +136,14 @@ impl Device {
     /// Feeds one DATA message to the sinks.
     fn data(&mut self, h: &Header, p: &[u8]) -> Result<(), XdrError> {
         let interf = self.addr.interf;
-        let addr = self.addr;
         let (ranger, zoom, scratch) = (&self.ranger, &mut self.zoom, &mut self.scratch);
-        let (frame, bad_frame) = (&mut self.frame, &mut self.bad_frame);
+        let (frame, from) = (&mut self.frame, &self.source);
         let blob_clock = &mut self.blob_clock;
         for s in &mut self.sinks {
             match (interf, h.subtype, s) {
                 (interf::POSITION2D, sub::POSITION2D_DATA_STATE, Sink::Encoders(i, o)) => {
                     let p = xdr::decode_position2d(p)?;
-                    let _ = i.publish(sinks::encoders(&p, o));
+                    i.accept(from, sinks::encoders(&p, o));
                 }
                 (
                     interf::LASER,
@@ -152,7 +156,7 @@ impl Device {
                         && info.resolution.is_finite()
                         && info.min_angle.is_finite()
                     {
-                        let _ = i.write(|l| m.fill_f32(&info, ranges, l));
+                        i.accept_with(from, |l| m.fill_f32(&info, ranges, l));
                     }
                 }
                 (interf::RANGER, sub::RANGER_DATA_RANGE, Sink::Laser(i, m)) => {
@@ -162,40 +166,38 @@ impl Device {
                         && cfg.angular_res.is_finite()
                         && cfg.min_angle.is_finite()
                     {
-                        let _ = i.write(|l| m.fill_f64(&cfg, n, raw, l));
+                        i.accept_with(from, |l| m.fill_f64(&cfg, n, raw, l));
                     }
                 }
                 (interf::RANGER, sub::RANGER_DATA_RANGE, Sink::Sonars(i)) => {
                     let (n, raw) = xdr::decode_ranger(p)?;
-                    let _ = i.write(|s| sinks::sonars_f64(n, raw, s));
+                    i.accept_with(from, |s| sinks::sonars_f64(n, raw, s));
                 }
                 (interf::SONAR, sub::SONAR_DATA_RANGES, Sink::Sonars(i)) => {
                     let (n, raw) = xdr::decode_sonar(p)?;
-                    let _ = i.write(|s| sinks::sonars_f32(n, raw, s));
+                    i.accept_with(from, |s| sinks::sonars_f32(n, raw, s));
                 }
                 (interf::BUMPER, sub::BUMPER_DATA_STATE, Sink::Bumpers(i)) => {
                     let raw = xdr::decode_bumpers(p)?;
-                    let _ = i.write(|b| sinks::bumpers(raw, b));
+                    i.accept_with(from, |b| sinks::bumpers(raw, b));
                 }
                 (interf::PTZ, sub::PTZ_DATA_STATE, Sink::PtEncoders(i)) => {
                     let p = xdr::decode_ptz(p)?;
                     *zoom = p.zoom;
-                    let _ = i.publish(sinks::pantilt(&p));
+                    i.accept(from, sinks::pantilt(&p));
                 }
                 (interf::CAMERA, sub::CAMERA_DATA_STATE, Sink::Camera(i, fixed)) => {
                     // A well-formed message whose image we cannot use (an unknown
-                    // format, a broken JPEG) is skipped, said once; the connection stays.
+                    // format, a broken JPEG, out of range) is skipped, said once per
+                    // change of state; the connection stays.
                     let (info, data) = xdr::decode_camera(p)?;
                     match sinks::camera_image(&info, data, *fixed, scratch, frame) {
                         Ok(()) => {
-                            *bad_frame = false;
-                            let _ = i.write(|img| std::mem::swap(img, frame));
+                            i.accept_with(from, |img| std::mem::swap(img, frame));
                         }
-                        Err(e) if !*bad_frame => {
-                            *bad_frame = true;
-                            tracing::warn!("player: {addr}: camera frame skipped: {e}");
+                        Err(e) => {
+                            from.refused(format_args!("camera frame skipped: {e}"));
                         }
-                        Err(_) => {}
                     }
                 }
                 (interf::BLOBFINDER, sub::BLOBFINDER_DATA_BLOBS, Sink::Blobs(b)) => {
@@ -584,7 +586,7 @@ fn bind(pending: Vec<Pending>, list: &[Addr], srv: &str) -> (Vec<Device>, Vec<(P
             ptm_sent: 0,
             scratch: Vec::new(),
             frame: Image::default(),
-            bad_frame: false,
+            source: Source::new(format!("player: {srv} {addr}")),
             blob_clock: 0,
         });
         match p.binding {

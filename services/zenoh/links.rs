@@ -24,7 +24,7 @@ use zenoh::{
 
 use super::wire::{self, Fill, Format, Wire};
 use crate::{
-    interfaces::{AnyInterface, Interface, Motors, Notify, Watch},
+    interfaces::{AnyInterface, Interface, Motors, Notify, Source, Watch},
     mcapfmt,
 };
 
@@ -244,33 +244,19 @@ fn decode<T: Wire>(route: &Route, sample: &ZSample) -> Result<(u64, SystemTime, 
     Ok((clock, time, fill))
 }
 
-/// Publishes a received value into the local interface, with the sender's clock
-/// when it is ahead of the local one (so `ps` shows the robot's clocks and a
-/// gap is a lost sample), else with the next local clock (the sender restarted).
-fn publish_in<T: Wire>(
-    iface: &Interface<T>,
-    clock: u64,
-    time: SystemTime,
-    fill: Fill<T>,
-) -> Result<(), String> {
-    let r = if clock > iface.clock() {
-        iface.write_recorded(clock, time, fill)
-    } else {
-        iface.write(fill)
-    };
-    r.map(|_| ()).map_err(|e| e.to_string())
-}
-
-/// Subscribes `route.key` and publishes what arrives into `iface`. A payload
-/// that is not a value of its kind is dropped with one log line (until a good
-/// one arrives again).
+/// Subscribes `route.key` and publishes what arrives into `iface`, with the
+/// sender's clock when it is ahead of the local one ([`Interface::receive`]: so
+/// `ps` shows the robot's clocks and a gap is a lost sample; the clock never goes
+/// back or wraps). A payload that is not a value of its kind, or a value the
+/// interface refuses (a NaN, an inf, out of range), is dropped with one log line
+/// (until a good one arrives again).
 pub fn inbound<T: Wire>(
     session: &Session,
     iface: Arc<Interface<T>>,
     route: Route,
 ) -> anyhow::Result<Subscriber<()>> {
     let key = route.key.clone();
-    let warned = AtomicBool::new(false);
+    let from = Source::new(format!("zenoh: `{}` (for `{}`)", route.key, iface.name()));
     session
         .declare_subscriber(route.key.clone())
         .allowed_origin(Locality::Remote)
@@ -278,16 +264,13 @@ pub fn inbound<T: Wire>(
             if sample.kind() != SampleKind::Put {
                 return;
             }
-            let result = decode::<T>(&route, &sample)
-                .and_then(|(clock, time, fill)| publish_in(&iface, clock, time, fill));
-            match result {
-                Ok(()) => warned.store(false, Ordering::Relaxed),
-                Err(e) if !warned.swap(true, Ordering::Relaxed) => tracing::warn!(
-                    "zenoh: dropped a sample on `{}` for `{}`: {e} (see docs/zenoh.md for the layout)",
-                    route.key,
-                    iface.name()
-                ),
-                Err(_) => {}
+            match decode::<T>(&route, &sample) {
+                Ok((clock, time, fill)) => {
+                    iface.receive(&from, clock, time, fill);
+                }
+                Err(e) => {
+                    from.refused(format_args!("{e} (see docs/zenoh.md for the layout)"));
+                }
             }
         })
         .wait()

@@ -1,5 +1,6 @@
 //! One named, typed interface: the latest sample behind an atomic pointer, the
-//! writer's recycled buffer, resume/suspend counting, staleness.
+//! writer's recycled buffer, resume/suspend counting, staleness; every write
+//! validated, and a clock that only grows.
 
 use std::{
     any::Any,
@@ -16,9 +17,16 @@ use arc_swap::{ArcSwap, ArcSwapOption, Guard};
 use parking_lot::{Condvar, Mutex};
 
 use super::{
+    source::Source,
     table::InterfaceError,
     values::{InterfaceValue, Motors, PtMotors, limit},
 };
+
+/// The largest clock an interface takes from outside (a recording, a sender's
+/// attachment): 2^53, what a JSON number holds exactly. A clock above it is
+/// absurd (a million values a second for 285 years) and is refused, so a sender
+/// cannot push the clock to where it would wrap.
+pub const MAX_CLOCK: u64 = 1 << 53;
 
 /// One value of an interface.
 #[derive(Debug)]
@@ -76,6 +84,16 @@ impl<T> Writer<T> {
             n as f64 / window
         }
     }
+}
+
+/// Which clock a write takes.
+enum At {
+    /// The next local clock.
+    Next,
+    /// This one, which must be after the current one (a recording).
+    Recorded(u64, SystemTime),
+    /// This one if it is after the current one and not absurd, else the next.
+    Received(u64, SystemTime),
 }
 
 /// One named, typed interface.
@@ -219,7 +237,7 @@ impl<T: InterfaceValue> Interface<T> {
     /// the whole value (a frame, a scan); for a partial update, copy the latest value
     /// (`read().value.clone()`), change it and [`publish`](Self::publish) it.
     pub fn write(&self, fill: impl FnOnce(&mut T)) -> Result<u64, InterfaceError> {
-        self.write_at(None, fill)
+        self.write_at(At::Next, fill)
     }
 
     /// Publishes a recorded value with its recorded clock and wall time (for a
@@ -251,18 +269,19 @@ impl<T: InterfaceValue> Interface<T> {
         time: SystemTime,
         fill: impl FnOnce(&mut T),
     ) -> Result<u64, InterfaceError> {
-        self.write_at(Some((clock, time)), fill)
+        self.write_at(At::Recorded(clock, time), fill)
     }
 
-    fn write_at(
-        &self,
-        at: Option<(u64, SystemTime)>,
-        fill: impl FnOnce(&mut T),
-    ) -> Result<u64, InterfaceError> {
+    fn write_at(&self, at: At, fill: impl FnOnce(&mut T)) -> Result<u64, InterfaceError> {
         let mut w = self.writer.lock();
-        if let Some((clock, _)) = at {
-            self.check_after(clock)?;
-        }
+        let at = match at {
+            At::Next => None,
+            At::Recorded(clock, time) => {
+                self.check_after(clock)?;
+                Some((clock, time))
+            }
+            At::Received(clock, time) => self.check_after(clock).ok().map(|()| (clock, time)),
+        };
         let mut value = w.spare.take().unwrap_or_else(|| self.read().value.clone());
         fill(&mut value);
         if let Err(e) = value.validate(&self.name) {
@@ -281,13 +300,48 @@ impl<T: InterfaceValue> Interface<T> {
         Ok(clock)
     }
 
-    /// A recorded clock must come after the current one (the caller holds the
-    /// writer lock).
+    /// Publishes a value from outside (a device, a network peer): refused with
+    /// one log line per change of state of `from` when it is not valid
+    /// ([`InterfaceValue::validate`]). Returns the clock when it was published.
+    pub fn accept(&self, from: &Source, value: T) -> Option<u64> {
+        from.note(self.publish(value))
+    }
+
+    /// [`write`](Self::write) of a value from outside, checked and logged as
+    /// [`accept`](Self::accept) does.
+    pub fn accept_with(&self, from: &Source, fill: impl FnOnce(&mut T)) -> Option<u64> {
+        from.note(self.write(fill))
+    }
+
+    /// Publishes a value received with its sender's clock: with that clock when
+    /// it is ahead of the local one and not absurd (at most [`MAX_CLOCK`]), so
+    /// `ps` shows the sender's clocks and a gap is a lost value; otherwise with the
+    /// next local clock (the sender restarted, or sent nonsense). The clock only
+    /// grows. An invalid value is refused as [`accept`](Self::accept) does.
+    pub fn receive(
+        &self,
+        from: &Source,
+        clock: u64,
+        time: SystemTime,
+        fill: impl FnOnce(&mut T),
+    ) -> Option<u64> {
+        let r = self.write_at(At::Received(clock, time), fill);
+        from.note(r)
+    }
+
+    /// A recorded clock must come after the current one and be at most
+    /// [`MAX_CLOCK`] (the caller holds the writer lock).
     fn check_after(&self, clock: u64) -> Result<(), InterfaceError> {
         let current = self.clock.load(Ordering::Relaxed);
         if clock <= current {
-            return Err(InterfaceError::Rejected(format!(
+            return Err(InterfaceError::Clock(format!(
                 "{}: recorded clock {clock} is not after the current clock {current}",
+                self.name
+            )));
+        }
+        if clock > MAX_CLOCK {
+            return Err(InterfaceError::Clock(format!(
+                "{}: clock {clock} is absurd (over 2^53); a clock counts values from 1",
                 self.name
             )));
         }
@@ -297,7 +351,7 @@ impl<T: InterfaceValue> Interface<T> {
     /// Swaps in a new sample (the caller holds the writer lock); returns its clock
     /// and the previous sample.
     fn store(&self, w: &mut Writer<T>, value: T) -> (u64, Arc<Sample<T>>) {
-        let clock = self.clock.load(Ordering::Relaxed) + 1;
+        let clock = self.clock.load(Ordering::Relaxed).saturating_add(1);
         self.store_at(w, clock, SystemTime::now(), value)
     }
 

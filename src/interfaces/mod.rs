@@ -26,19 +26,31 @@
 //! never waits for readers; [`Interface::write`] recycles the previous buffer when
 //! no reader still holds it, so a steady stream of frames allocates nothing.
 //!
+//! Every write is checked by the value type's one validation
+//! ([`InterfaceValue::validate`], ranges in [`RANGES`]): numbers finite and within
+//! their documented range, so a NaN, an inf or a 1e38 never reaches a schema. A
+//! driver or transport writes what comes from outside with
+//! [`Interface::accept`] or [`Interface::receive`] (with the sender's clock),
+//! naming a [`Source`]: a refused value is logged once per change of state of
+//! that source. The clock only grows: a sender's clock is taken only when it is
+//! ahead of the local one and at most [`MAX_CLOCK`].
+//!
 //! Resume/suspend reference counting ([`Interface::resume`]) tells a driver whether
 //! anybody uses an interface, so it works only while someone does.
 mod cell;
 mod names;
+mod source;
 mod table;
 mod values;
 
-pub use cell::{AnyInterface, Interface, Notify, Sample, Watch};
+pub use cell::{AnyInterface, Interface, MAX_CLOCK, Notify, Sample, Watch};
 pub use names::{STANDARD_NAMES, canonical, family, interface_name};
+pub use source::Source;
 pub use table::{InUse, InterfaceError, Interfaces};
 pub use values::{
-    Bumpers, COLOR_HEIGHT, COLOR_WIDTH, Encoders, Image, InterfaceValue, Laser, Motors, PtEncoders,
-    PtMotors, Sonars, ZoomEncoders, ZoomMotors, limit,
+    Bumpers, COLOR_HEIGHT, COLOR_WIDTH, Encoders, Image, InterfaceValue, Laser, MAX_ANGLE_DEG,
+    MAX_POSITION_MM, MAX_PT_SPEED, Motors, PtEncoders, PtMotors, RANGES, Sonars, ZoomEncoders,
+    ZoomMotors, limit,
 };
 
 #[cfg(test)]
@@ -143,5 +155,121 @@ mod tests {
         let m = Motors { v: 1.0, w: 0.0 };
         assert_eq!(m.fingerprint(), m.fingerprint());
         assert_ne!(m.fingerprint(), Motors::default().fingerprint());
+    }
+
+    #[test]
+    fn non_finite_and_out_of_range_values_are_refused_by_every_write() {
+        let m: Interface<Motors> = Interface::new("motors", "t");
+        for bad in [
+            Motors {
+                v: f32::NAN,
+                w: 0.0,
+            },
+            Motors {
+                v: 0.0,
+                w: f32::INFINITY,
+            },
+        ] {
+            let e = m.publish(bad).unwrap_err().to_string();
+            assert!(e.contains("not a finite number"), "{e}");
+        }
+        assert!(m.write(|v| v.v = f32::NEG_INFINITY).is_err());
+        assert!(
+            m.publish_recorded(
+                5,
+                std::time::SystemTime::now(),
+                Motors {
+                    v: f32::NAN,
+                    w: 0.0
+                }
+            )
+            .is_err()
+        );
+        assert_eq!(m.clock(), 0, "nothing published");
+        let e: Interface<Encoders> = Interface::new("encoders", "t");
+        assert!(e.publish(Encoders::from_pose(f32::NAN, 0.0, 0.0)).is_err());
+        let huge = e
+            .publish(Encoders::from_pose(1e38, 0.0, 0.0))
+            .unwrap_err()
+            .to_string();
+        assert!(huge.contains("out of its range"), "{huge}");
+        e.publish(Encoders::from_pose(12_000.0, -3_000.0, 7.0))
+            .unwrap();
+        let pt: Interface<PtEncoders> = Interface::new("pantiltencoders", "t");
+        assert!(
+            pt.publish(PtEncoders {
+                pan_angle: 158_929.0,
+                tilt_angle: 0.0
+            })
+            .is_err()
+        );
+        let ptm: Interface<PtMotors> = Interface::new("pantiltmotors", "t");
+        assert!(ptm.set_fields(&[("longitude", "NaN")]).is_err());
+        let mut v = PtMotors::default();
+        v.latitude_speed = f32::NAN;
+        assert!(ptm.publish(v).is_err());
+        let l: Interface<Laser> = Interface::new("laser", "t");
+        assert!(
+            l.publish(Laser {
+                readings: vec![100, -5],
+                resolution: 1.0
+            })
+            .is_err()
+        );
+        let s: Interface<Sonars> = Interface::new("sonars", "t");
+        assert!(s.publish(Sonars { us: vec![f32::NAN] }).is_err());
+        let z: Interface<ZoomEncoders> = Interface::new("zoomencoders", "t");
+        assert!(
+            z.publish(ZoomEncoders {
+                zoom_position: f32::INFINITY
+            })
+            .is_err()
+        );
+    }
+
+    #[test]
+    fn a_received_clock_never_wraps_or_regresses_the_interface_clock() {
+        let now = std::time::SystemTime::now;
+        let from = Source::new("test");
+        let m: Interface<Motors> = Interface::new("motors", "t");
+        assert_eq!(m.receive(&from, 10, now(), |v| v.v = 1.0), Some(10));
+        // Behind: the next local clock.
+        assert_eq!(m.receive(&from, 3, now(), |v| v.v = 2.0), Some(11));
+        // Absurd: refused as a recorded clock, ignored as a received one.
+        assert!(m.write_recorded(u64::MAX, now(), |v| v.v = 3.0).is_err());
+        assert!(
+            m.publish_recorded(MAX_CLOCK + 1, now(), Motors::default())
+                .is_err()
+        );
+        assert_eq!(m.receive(&from, u64::MAX, now(), |v| v.v = 4.0), Some(12));
+        assert_eq!(m.publish(Motors::default()).unwrap(), 13);
+        assert_eq!(m.clock(), 13);
+        // An invalid value is refused and the clock stays.
+        assert_eq!(m.receive(&from, 20, now(), |v| v.v = f32::NAN), None);
+        assert_eq!(m.clock(), 13);
+        assert!(from.refusing());
+        assert_eq!(m.receive(&from, 20, now(), |v| v.v = 5.0), Some(20));
+        assert!(!from.refusing());
+    }
+
+    #[test]
+    fn a_source_logs_once_per_change_of_state() {
+        let from = Source::new("test").with_quiet(Duration::ZERO);
+        assert!(from.refused("bad"), "the first refusal is logged");
+        assert!(!from.refused("bad"), "the second is not");
+        from.accepted();
+        assert!(from.refused("bad"), "after a good value, logged again");
+        // A flapping source: once per quiet time.
+        let flapping = Source::new("test");
+        assert!(flapping.refused("bad"));
+        for _ in 0..10 {
+            flapping.accepted();
+            assert!(!flapping.refused("bad"), "within the quiet time");
+        }
+        let m: Interface<Motors> = Interface::new("motors", "t");
+        assert_eq!(m.accept(&from, Motors { v: 1.0, w: 0.0 }), Some(1));
+        assert!(!from.refusing());
+        assert_eq!(m.accept_with(&from, |v| v.w = f32::NAN), None);
+        assert!(from.refusing());
     }
 }

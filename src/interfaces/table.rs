@@ -26,6 +26,9 @@ pub enum InterfaceError {
     /// A value that does not fit its interface (a colorA image not 320x240, ...).
     #[error("{0}")]
     Rejected(String),
+    /// A recorded or received clock that is not after the current one, or absurd.
+    #[error("{0}")]
+    Clock(String),
     /// A `set NAME FIELD=VALUE` that names no field or gives no valid value.
     #[error("{0}")]
     Field(String),

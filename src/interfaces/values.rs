@@ -23,9 +23,79 @@ pub trait InterfaceValue: Clone + Default + Send + Sync + 'static {
     fn fingerprint(&self) -> u64 {
         fold_bytes(self.describe().as_bytes())
     }
-    /// Checks a value before it is published on interface `name`.
+    /// Checks a value before it is published on interface `name`: every number
+    /// finite and within the documented range of its field (see [`RANGES`]). The
+    /// one check every writer passes through ([`Interface::publish`],
+    /// [`Interface::write`] and the recorded and received variants), so a
+    /// driver, a transport, the shell and a schema refuse the same values.
+    ///
+    /// [`Interface::publish`]: super::Interface::publish
+    /// [`Interface::write`]: super::Interface::write
     fn validate(&self, _name: &str) -> Result<(), String> {
         Ok(())
+    }
+}
+
+/// The documented ranges that [`InterfaceValue::validate`] checks, per kind and
+/// field (every number must also be finite).
+pub const RANGES: &[(&str, &str)] = &[
+    (
+        "image",
+        "data is width x height x 3 bytes; colorA..D are 320x240",
+    ),
+    ("laser", "readings >= 0 mm; resolution >= 0 readings/deg"),
+    ("sonars", "us >= 0 mm"),
+    (
+        "encoders",
+        "|x|, |y| <= 1e9 mm (1000 km); |theta| <= 2π rad; cos, sin in [-1, 1]",
+    ),
+    (
+        "motors",
+        "v, w finite (each driver limits them to its robot's maxima)",
+    ),
+    (
+        "pantiltencoders",
+        "pan_angle, tilt_angle in [-360, 360] deg",
+    ),
+    (
+        "pantiltmotors",
+        "longitude, latitude finite (each driver limits them); the limits in [-360, 360] deg, \
+         min <= max; speeds in [-1e4, 1e4] deg/s",
+    ),
+    ("zoomencoders", "zoom_position finite"),
+    (
+        "zoommotors",
+        "zoom, zoom_speed and the limits finite, min_zoom <= max_zoom",
+    ),
+    ("bumpers", "any bytes"),
+];
+
+/// The largest |x|, |y| an `encoders` value may hold, mm (1000 km: beyond it an
+/// f32 in mm is a value no odometry gives).
+pub const MAX_POSITION_MM: f32 = 1e9;
+/// The largest |angle| of a pan-tilt value, degrees.
+pub const MAX_ANGLE_DEG: f32 = 360.0;
+/// The largest |speed| of a pan-tilt command, deg/s.
+pub const MAX_PT_SPEED: f32 = 1e4;
+
+/// `field` of interface `name` is finite.
+fn finite(name: &str, field: &str, v: f32) -> Result<(), String> {
+    if v.is_finite() {
+        Ok(())
+    } else {
+        Err(format!("{name}: {field}={v} is not a finite number"))
+    }
+}
+
+/// `field` of interface `name` is finite and in [lo, hi] (in `unit`).
+fn within(name: &str, field: &str, v: f32, lo: f32, hi: f32, unit: &str) -> Result<(), String> {
+    finite(name, field, v)?;
+    if (lo..=hi).contains(&v) {
+        Ok(())
+    } else {
+        Err(format!(
+            "{name}: {field}={v} {unit} is out of its range [{lo}, {hi}] {unit}"
+        ))
     }
 }
 
@@ -166,6 +236,20 @@ impl InterfaceValue for Laser {
         s.push(']');
         s
     }
+    fn validate(&self, name: &str) -> Result<(), String> {
+        within(
+            name,
+            "resolution",
+            self.resolution,
+            0.0,
+            f32::MAX,
+            "readings/deg",
+        )?;
+        if let Some((i, r)) = self.readings.iter().enumerate().find(|(_, r)| **r < 0) {
+            return Err(format!("{name}: reading {i} is {r} mm; a range is >= 0 mm"));
+        }
+        Ok(())
+    }
 }
 
 /// Sonar ranges in mm, one per sonar (Pioneer ring order).
@@ -179,6 +263,12 @@ impl InterfaceValue for Sonars {
     fn describe(&self) -> String {
         let v: Vec<String> = self.us.iter().map(|u| format!("{u:.0}")).collect();
         format!("number={} us(mm)=[{}]", self.us.len(), v.join(" "))
+    }
+    fn validate(&self, name: &str) -> Result<(), String> {
+        for (i, u) in self.us.iter().enumerate() {
+            within(name, &format!("us[{i}]"), *u, 0.0, f32::MAX, "mm")?;
+        }
+        Ok(())
     }
 }
 
@@ -233,6 +323,16 @@ impl InterfaceValue for Encoders {
             self.sin
         )
     }
+    fn validate(&self, name: &str) -> Result<(), String> {
+        let m = MAX_POSITION_MM;
+        within(name, "x", self.x, -m, m, "mm")?;
+        within(name, "y", self.y, -m, m, "mm")?;
+        // A little slack for rounding to f32.
+        let tau = std::f32::consts::TAU + 1e-3;
+        within(name, "theta", self.theta, -tau, tau, "rad")?;
+        within(name, "cos", self.cos, -1.001, 1.001, "")?;
+        within(name, "sin", self.sin, -1.001, 1.001, "")
+    }
 }
 
 /// Base velocity command: `v` mm/s forward, `w` deg/s counter-clockwise.
@@ -270,6 +370,10 @@ impl InterfaceValue for Motors {
     fn describe(&self) -> String {
         format!("v={:.1} mm/s w={:.2} deg/s", self.v, self.w)
     }
+    fn validate(&self, name: &str) -> Result<(), String> {
+        finite(name, "v (mm/s)", self.v)?;
+        finite(name, "w (deg/s)", self.w)
+    }
     fn set_field(&mut self, field: &str, value: &str) -> Result<(), String> {
         match field {
             "v" => set_f32(field, value, &mut self.v),
@@ -295,6 +399,11 @@ impl InterfaceValue for PtEncoders {
             "pan_angle={:.2} deg tilt_angle={:.2} deg",
             self.pan_angle, self.tilt_angle
         )
+    }
+    fn validate(&self, name: &str) -> Result<(), String> {
+        let a = MAX_ANGLE_DEG;
+        within(name, "pan_angle", self.pan_angle, -a, a, "deg")?;
+        within(name, "tilt_angle", self.tilt_angle, -a, a, "deg")
     }
 }
 
@@ -350,6 +459,40 @@ impl InterfaceValue for PtMotors {
             self.max_latitude_speed
         )
     }
+    fn validate(&self, name: &str) -> Result<(), String> {
+        let (a, s) = (MAX_ANGLE_DEG, MAX_PT_SPEED);
+        // A command beyond the limits is fine (the driver limits it); the limits
+        // are the unit's.
+        finite(name, "longitude", self.longitude)?;
+        finite(name, "latitude", self.latitude)?;
+        for (field, v) in [
+            ("min_longitude", self.min_longitude),
+            ("max_longitude", self.max_longitude),
+            ("min_latitude", self.min_latitude),
+            ("max_latitude", self.max_latitude),
+        ] {
+            within(name, field, v, -a, a, "deg")?;
+        }
+        for (field, v) in [
+            ("longitude_speed", self.longitude_speed),
+            ("latitude_speed", self.latitude_speed),
+            ("max_longitude_speed", self.max_longitude_speed),
+            ("max_latitude_speed", self.max_latitude_speed),
+        ] {
+            within(name, field, v, -s, s, "deg/s")?;
+        }
+        for (axis, lo, hi) in [
+            ("longitude", self.min_longitude, self.max_longitude),
+            ("latitude", self.min_latitude, self.max_latitude),
+        ] {
+            if lo > hi {
+                return Err(format!(
+                    "{name}: min_{axis}={lo} deg is above max_{axis}={hi} deg"
+                ));
+            }
+        }
+        Ok(())
+    }
     fn set_field(&mut self, field: &str, value: &str) -> Result<(), String> {
         match field {
             "longitude" => set_f32(field, value, &mut self.longitude),
@@ -374,6 +517,9 @@ impl InterfaceValue for ZoomEncoders {
     const KIND: &'static str = "zoomencoders";
     fn describe(&self) -> String {
         format!("zoom_position={:.2}", self.zoom_position)
+    }
+    fn validate(&self, name: &str) -> Result<(), String> {
+        finite(name, "zoom_position", self.zoom_position)
     }
 }
 
@@ -408,6 +554,24 @@ impl InterfaceValue for ZoomMotors {
             "zoom={:.2} zoom_speed={:.2} limits: zoom [{:.2}, {:.2}] speed <= {:.2}",
             self.zoom, self.zoom_speed, self.min_zoom, self.max_zoom, self.max_zoom_speed
         )
+    }
+    fn validate(&self, name: &str) -> Result<(), String> {
+        for (field, v) in [
+            ("zoom", self.zoom),
+            ("zoom_speed", self.zoom_speed),
+            ("min_zoom", self.min_zoom),
+            ("max_zoom", self.max_zoom),
+            ("max_zoom_speed", self.max_zoom_speed),
+        ] {
+            finite(name, field, v)?;
+        }
+        if self.min_zoom > self.max_zoom {
+            return Err(format!(
+                "{name}: min_zoom={} is above max_zoom={}",
+                self.min_zoom, self.max_zoom
+            ));
+        }
+        Ok(())
     }
     fn set_field(&mut self, field: &str, value: &str) -> Result<(), String> {
         match field {

@@ -116,6 +116,8 @@ pub struct Faults {
     pub silent: bool,
     pub garbage: bool,
     pub refuse: bool,
+    /// The answer to the pan position query (`PP`), whatever the position.
+    pub pan_position: Option<i64>,
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -380,6 +382,10 @@ fn serve(pty: Pty, state: &Mutex<State>, stop: &AtomicBool) {
                     GPS.to_string()
                 } else if f.refuse {
                     "! Illegal Command".to_string()
+                } else if let Some(p) = f.pan_position
+                    && tok.eq_ignore_ascii_case(b"PP")
+                {
+                    format!("* Current Pan position is {p}")
                 } else {
                     st.answer(&tok)
                 };

@@ -55,6 +55,8 @@ pub struct Faults {
     pub syntax: bool,
     /// Both sockets taken by something else: every command gets buffer full.
     pub full: bool,
+    /// The pan-tilt inquiry answers these device units, whatever the position.
+    pub pantilt: Option<(i32, i32)>,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -78,6 +80,8 @@ pub struct State {
     /// When the latest bytes arrived.
     pub last_rx: Option<Instant>,
     pub faults: Faults,
+    /// Bytes to write on the line once, as they are (a burst of noise).
+    pub raw: Vec<u8>,
 }
 
 impl State {
@@ -96,6 +100,7 @@ impl State {
             received: Vec::new(),
             last_rx: None,
             faults: Faults::default(),
+            raw: Vec::new(),
         }
     }
 
@@ -190,9 +195,13 @@ impl State {
                 out.extend_from_slice(&[0x90, 0x50, if self.power { 0x02 } else { 0x03 }, 0xFF])
             }
             [0x81, 0x09, 0x06, 0x12, 0xFF] => {
+                let (pan, tilt) = match self.faults.pantilt {
+                    Some((p, t)) => (p as f64, t as f64),
+                    None => (self.pan, self.tilt),
+                };
                 out.extend_from_slice(&[0x90, 0x50]);
-                out.extend_from_slice(&Self::nib(self.pan));
-                out.extend_from_slice(&Self::nib(self.tilt));
+                out.extend_from_slice(&Self::nib(pan));
+                out.extend_from_slice(&Self::nib(tilt));
                 out.push(0xFF);
             }
             [0x81, 0x09, 0x04, 0x47, 0xFF] => {
@@ -293,6 +302,7 @@ impl Evi {
                 if s.faults.silent {
                     out.clear();
                 }
+                out.append(&mut s.raw);
                 drop(s);
                 if !out.is_empty() {
                     write_fd(&pty.master, &out);
