@@ -221,10 +221,11 @@ def main():
         inputs.append((os.path.splitext(f)[0], setup(img)))
 
     # The executable cargo reports (the target dir may be shared, with other trees
-    # linking their own build to the same examples/vision_compare name).
+    # linking their own build to the same examples/vision_compare name). The example
+    # needs only the calibrador feature (its solver); the library's vision code has none.
     built = subprocess.check_output(
-        ["cargo", "build", "--release", "--example", "vision_compare",
-         "--message-format=json-render-diagnostics"], cwd=ROOT
+        ["cargo", "build", "--release", "--no-default-features", "--features", "calibrador",
+         "--example", "vision_compare", "--message-format=json-render-diagnostics"], cwd=ROOT
     ).decode()
     exe = None
     for line in built.splitlines():
