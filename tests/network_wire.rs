@@ -317,11 +317,11 @@ fn conf_errors_name_the_line() {
         "provides laser host port\n",
     )
     .unwrap_err();
-    assert!(e.contains("TCP port"), "{e}");
+    assert!(e.contains("between 1 and 65535"), "{e}");
     let e = load(&rt, Kind::Driver, "networkclient", "provides laser h 1 2\n").unwrap_err();
     assert!(e.contains("HOST PORT only"), "{e}");
     let e = load(&rt, Kind::Driver, "networkclient", "initial_position 1 2\n").unwrap_err();
-    assert!(e.contains("initial_position X_MM Y_MM THETA_DEG"), "{e}");
+    assert!(e.contains("usage: initial_position X Y THETA"), "{e}");
 }
 
 fn robot43() -> Robot43 {

@@ -554,11 +554,8 @@ fn conf_errors_name_the_line() {
             "expected a Player interface",
         ),
         ("initial_position 1 2", "takes 3 to 4 arguments"),
-        ("datamode fast", "push or pull"),
-        (
-            "frobnicate 1",
-            "I don't know what to do with `frobnicate 1`",
-        ),
+        ("datamode fast", "one of push, pull"),
+        ("frobnicate 1", "takes no `frobnicate` line"),
         ("provides encoders\nprovides encoders", "already provided"),
     ] {
         let e = start_err(emu.port, body);

@@ -61,7 +61,10 @@ use std::{
 use anyhow::Context as _;
 
 use crate::{
-    conf::{ComponentConf, ConfLine},
+    conf::{
+        ComponentConf, ConfLine,
+        settings::{MOTORS_TIMEOUT, Setting, float, int, interface, word},
+    },
     interfaces::{
         COLOR_HEIGHT, COLOR_WIDTH, Encoders, Image, Interface, Interfaces, Laser, Motors,
         PtEncoders, PtMotors, Sonars, Source, ZoomEncoders, ZoomMotors, canonical, family,
@@ -96,7 +99,43 @@ pub struct ClientConf {
 const USAGE: &str = "provides colorA..D HOST PORT NETID, provides varcolorA..D HOST PORT NETID [W H], \
 provides laser|sonars|encoders|motors|pantiltencoders|pantiltmotors|zoomencoders|zoommotors HOST PORT";
 
-const EXPECTED: &str = "provides, initial_position, token, motors_timeout or depth";
+/// The driver's lines, declared once (`jderobot help networkclient`).
+const LINES: &[Setting] = &[
+    Setting::new(
+        "provides",
+        USAGE,
+        &[
+            interface("NAME"),
+            word("HOST"),
+            int("PORT", "", 1, 65_535),
+            int("NETID", "", 0, u32::MAX as i64).optional(),
+            int("W", "px", 1, 8192),
+            int("H", "px", 1, 8192),
+        ],
+    )
+    .repeats(),
+    Setting::new(
+        "initial_position",
+        "the odometry offset added to the remote encoders",
+        &[
+            float("X", "mm", -1e9, 1e9),
+            float("Y", "mm", -1e9, 1e9),
+            float("THETA", "deg", -36_000.0, 36_000.0),
+        ],
+    ),
+    Setting::new(
+        "token",
+        "the server's secret (its `token` line)",
+        &[word("SECRET")],
+    ),
+    MOTORS_TIMEOUT,
+    Setting::new(
+        "depth",
+        "image requests in flight per image",
+        &[int("N", "", 1, 16)],
+    )
+    .default("2"),
+];
 
 fn err(l: &ConfLine, m: impl Into<String>) -> anyhow::Error {
     l.error(m).into()
@@ -104,6 +143,7 @@ fn err(l: &ConfLine, m: impl Into<String>) -> anyhow::Error {
 
 impl ClientConf {
     pub fn parse(conf: &ComponentConf) -> anyhow::Result<ClientConf> {
+        conf.check(LINES)?;
         let mut c = ClientConf {
             remotes: Vec::new(),
             initial: (0.0, 0.0, 0.0),
@@ -218,8 +258,7 @@ impl ClientConf {
                     }
                     c.depth = d;
                 }
-                "motors_timeout" => {}
-                _ => return Err(conf.unknown(l, EXPECTED).into()),
+                _ => {} // motors_timeout above; the rest refused by the declaration
             }
         }
         if c.remotes.is_empty() {
@@ -863,5 +902,6 @@ crate::register_driver!(
     Driver,
     "networkclient",
     "a robot's interfaces served by networkserver (4.3 wire) on another machine",
-    create
+    create,
+    lines = LINES
 );

@@ -2,7 +2,10 @@
 
 use std::time::Duration;
 
-use crate::conf::{ComponentConf, ConfLine};
+use crate::conf::{
+    ComponentConf, ConfLine,
+    settings::{MOTORS_TIMEOUT, Setting, choice, float, int, rest, word},
+};
 use crate::interfaces::interface_name;
 
 use super::xdr::{Addr, interf};
@@ -77,8 +80,64 @@ impl PlayerConf {
     }
 }
 
-pub const EXPECTED: &str = "hostname H port P, initial_position X Y THETA [ROBOT], provides ..., \
-motors_timeout MS, timeout MS, datamode push|pull, cycle MS";
+/// The driver's lines, declared once (`jderobot help player`); `provides` lines take
+/// several forms and are read below.
+pub const LINES: &[Setting] = &[
+    Setting::new(
+        "hostname",
+        "the Player server (`hostname H port P`)",
+        &[
+            word("HOST"),
+            choice("port", &["port"]).optional(),
+            int("PORT", "", 1, 65_535),
+        ],
+    ),
+    Setting::new(
+        "port",
+        "the Player server's TCP port (`port P hostname H` too)",
+        &[
+            int("PORT", "", 1, 65_535),
+            choice("hostname", &["hostname"]).optional(),
+            word("HOST"),
+        ],
+    ),
+    Setting::new(
+        "initial_position",
+        "the odometry offset of a robot (the one with no suffix unless ROBOT)",
+        &[
+            float("X", "mm", -1e9, 1e9),
+            float("Y", "mm", -1e9, 1e9),
+            float("THETA", "deg", -36_000.0, 36_000.0),
+            word("ROBOT").optional(),
+        ],
+    )
+    .repeats(),
+    Setting::new(
+        "provides",
+        USAGE_PROVIDES,
+        &[word("INTERFACE"), rest("ARGS").optional()],
+    )
+    .repeats(),
+    MOTORS_TIMEOUT,
+    Setting::new(
+        "timeout",
+        "how long the server may stay silent before the session counts as lost",
+        &[int("MS", "ms", 50, 60_000)],
+    )
+    .default("2000"),
+    Setting::new(
+        "datamode",
+        "push: the server sends data as it comes; pull: on request each cycle",
+        &[choice("MODE", &["push", "pull"])],
+    )
+    .default("push"),
+    Setting::new(
+        "cycle",
+        "the command cycle (4.3's PLAYER_COMMAND_CYCLE)",
+        &[int("MS", "ms", 5, 10_000)],
+    )
+    .default("75"),
+];
 
 pub const USAGE_PROVIDES: &str = "provides encoders|motors|sonars|bumpers|pantiltencoders|pantiltmotors|\
 colorA..D|varcolorA..D|blobs [index I] [device INTERF[:I]] [ROBOT], provides laser N R [index I] \
@@ -125,6 +184,7 @@ fn robot_name(l: &ConfLine, w: &str) -> anyhow::Result<String> {
 
 impl PlayerConf {
     pub fn parse(conf: &ComponentConf) -> anyhow::Result<PlayerConf> {
+        conf.check(LINES)?;
         let mut host = "localhost".to_string();
         let mut port: u16 = 6665;
         let mut offsets = Vec::new();
@@ -177,13 +237,11 @@ impl PlayerConf {
                 "motors_timeout" => {}
                 "timeout" => {
                     l.expect_args(1, 1, "timeout MS")?;
-                    let ms: u64 = l.arg(0, "milliseconds")?;
-                    timeout = Duration::from_millis(ms.clamp(50, 60_000));
+                    timeout = l.millis(0, "milliseconds", 50..=60_000)?;
                 }
                 "cycle" => {
                     l.expect_args(1, 1, "cycle MS")?;
-                    let ms: u64 = l.arg(0, "milliseconds")?;
-                    cycle = Duration::from_millis(ms.clamp(5, 10_000));
+                    cycle = l.millis(0, "milliseconds", 5..=10_000)?;
                 }
                 "datamode" => {
                     l.expect_args(1, 1, "datamode push|pull")?;
@@ -206,7 +264,7 @@ impl PlayerConf {
                     }
                     wants.push(w);
                 }
-                _ => return Err(conf.unknown(l, EXPECTED).into()),
+                _ => {} // refused by the declaration
             }
         }
         Ok(PlayerConf {

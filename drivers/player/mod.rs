@@ -747,5 +747,6 @@ crate::register_driver!(
     Driver,
     "player",
     "a robot or Stage through a Player 3 server (TCP): encoders, motors, laser, sonars, bumpers, pan-tilt, cameras, blobs",
-    create
+    create,
+    lines = conf::LINES
 );
