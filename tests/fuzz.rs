@@ -147,7 +147,7 @@ fn mutate(rng: &mut Rng, seed: &[u8], corpus: &[Vec<u8>], text: bool) -> Vec<u8>
                 };
                 b[i..i + 4].copy_from_slice(&bytes);
             }
-            7 | 8 | 9 => {
+            7..=9 => {
                 let s = String::from_utf8_lossy(&b).into_owned();
                 let mut words: Vec<String> = s.split(' ').map(String::from).collect();
                 if words.is_empty() {

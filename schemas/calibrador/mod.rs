@@ -205,11 +205,14 @@ const LINES: &[Setting] = &[
     ),
 ];
 
+/// A `point X Y Z [U V]` line.
+type PointLine = (f64, f64, f64, Option<f64>, Option<f64>);
+
 /// The values of [`LINES`].
 #[derive(serde::Deserialize)]
 struct Lines {
     image: String,
-    point: Vec<(f64, f64, f64, Option<f64>, Option<f64>)>,
+    point: Vec<PointLine>,
     pattern: Vec<PathBuf>,
     camera_out: Option<PathBuf>,
 }

@@ -211,14 +211,10 @@ pub const fn provides(usage: &'static str) -> Setting {
 
 /// Says a range in words.
 fn range_words(min: f64, max: f64) -> String {
+    // The extremes of a type mean "no bound".
     let n = |x: f64| {
-        if x == f64::MAX || x == i64::MAX as f64 {
-            None
-        } else if x == f64::MIN || x == i64::MIN as f64 {
-            None
-        } else {
-            Some(x)
-        }
+        let unbounded = [f64::MAX, f64::MIN, i64::MAX as f64, i64::MIN as f64];
+        (!unbounded.contains(&x)).then_some(x)
     };
     match (n(min), n(max)) {
         (Some(a), Some(b)) => format!("between {a} and {b}"),
@@ -361,8 +357,7 @@ fn check_line(s: &Setting, line: &ConfLine, component: &str) -> Result<Vec<Value
 
 /// The checked values of every declared line: given or default.
 struct Parsed<'a> {
-    /// (setting, where, values of each occurrence).
-    entries: Vec<(&'a Setting, Option<Location>, Vec<Vec<Value>>)>,
+    entries: Vec<Entry<'a>>,
 }
 
 /// Checks every line of `conf` against `decl`: all problems, in file order.
@@ -568,6 +563,8 @@ impl<'de> de::Deserializer<'de> for Lines<'_, '_> {
     }
 }
 
+/// A declared line, where it was (None: its default), and the values of each
+/// occurrence.
 type Entry<'a> = (&'a Setting, Option<Location>, Vec<Vec<Value>>);
 
 struct LineMap<'p, 'a> {

@@ -205,8 +205,10 @@ mod tests {
         );
         let ptm: Interface<PtMotors> = Interface::new("pantiltmotors", "t");
         assert!(ptm.set_fields(&[("longitude", "NaN")]).is_err());
-        let mut v = PtMotors::default();
-        v.latitude_speed = f32::NAN;
+        let v = PtMotors {
+            latitude_speed: f32::NAN,
+            ..Default::default()
+        };
         assert!(ptm.publish(v).is_err());
         let l: Interface<Laser> = Interface::new("laser", "t");
         assert!(
