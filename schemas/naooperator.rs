@@ -39,7 +39,7 @@ use crate::{
     },
     interfaces::{Image, Interface, PtEncoders, PtMotors},
     operator::{self, Commands, Operator},
-    runtime::{Context, Runtime, Schema},
+    runtime::{Runtime, Schema},
 };
 
 /// naooperator's lines, declared once (`jderobot help naooperator`).
@@ -102,36 +102,6 @@ pub struct Devices {
     pub camera: Option<Arc<Interface<Image>>>,
 }
 
-pub struct NaoOperator {
-    pub commands: Arc<Commands>,
-    operator: Operator,
-    children: Vec<String>,
-    cycle: Duration,
-    #[cfg(feature = "gui")]
-    panel: Option<Box<dyn crate::runtime::Panel>>,
-}
-
-impl Schema for NaoOperator {
-    fn cycle(&self) -> Duration {
-        self.cycle
-    }
-    fn on_run(&mut self, ctx: &Context) -> anyhow::Result<()> {
-        ctx.run_children(&self.children, None)?;
-        self.operator.on_run();
-        Ok(())
-    }
-    fn iteration(&mut self, _ctx: &Context) -> anyhow::Result<()> {
-        self.operator.iteration()
-    }
-    fn on_stop(&mut self, _ctx: &Context) {
-        self.operator.on_stop();
-    }
-    #[cfg(feature = "gui")]
-    fn panel(&mut self) -> Option<Box<dyn crate::runtime::Panel>> {
-        self.panel.take()
-    }
-}
-
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>> {
     let lines: Lines = conf.settings(LINES)?;
     // An interface the conf names, if it is not `none` and something provides it.
@@ -167,17 +137,19 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
         lines.walk,
         lines.head,
     ));
-    Ok(Box::new(NaoOperator {
-        #[cfg(feature = "gui")]
-        panel: Some(Box::new(panel::NaoPanel::new(
-            commands.clone(),
-            dev.clone(),
-        ))),
-        operator: Operator::new(commands.clone(), dev.motors.clone(), dev.ptmotors.clone()),
-        commands,
-        children: names.into_iter().flatten().collect(),
-        cycle: Duration::from_millis(lines.cycle),
-    }))
+    #[cfg_attr(not(feature = "gui"), allow(unused_mut))]
+    let mut schema = Operator::new(
+        commands.clone(),
+        dev.motors.clone(),
+        dev.ptmotors.clone(),
+        names.into_iter().flatten().collect(),
+        Duration::from_millis(lines.cycle),
+    );
+    #[cfg(feature = "gui")]
+    {
+        schema.panel = Some(Box::new(panel::NaoPanel::new(commands, dev)));
+    }
+    Ok(Box::new(schema))
 }
 
 crate::register_schema!(

@@ -5,7 +5,7 @@
 //! them: the base to `motors` every cycle (so it never goes stale), the head to
 //! `pantiltmotors` when it changes, and zero to `motors` on stop.
 
-use std::sync::Arc;
+use std::{sync::Arc, time::Duration};
 
 use parking_lot::Mutex;
 
@@ -13,6 +13,7 @@ use crate::{
     conf::settings::{Setting, float},
     interfaces::{Interface, Motors, PtMotors},
     namespace::Namespace,
+    runtime::{Context, Schema},
 };
 
 /// The joystick's maximum speed, `max_v V`.
@@ -105,11 +106,18 @@ impl Commands {
     }
 }
 
-/// Writes the commands to the robot: what an operator schema's iteration does.
+/// An operator schema: it writes the commands to the robot (the base every
+/// iteration, the head when it changed, zero on stop), runs the interfaces it
+/// uses as its children, and hands out its panel.
 pub struct Operator {
     pub commands: Arc<Commands>,
     pub motors: Arc<Interface<Motors>>,
     pub head: Option<Arc<Interface<PtMotors>>>,
+    /// The interfaces it uses, run as its children.
+    pub children: Vec<String>,
+    pub cycle: Duration,
+    #[cfg(feature = "gui")]
+    pub panel: Option<Box<dyn crate::runtime::Panel>>,
     last_head: Option<[f32; 2]>,
 }
 
@@ -118,20 +126,33 @@ impl Operator {
         commands: Arc<Commands>,
         motors: Arc<Interface<Motors>>,
         head: Option<Arc<Interface<PtMotors>>>,
+        children: Vec<String>,
+        cycle: Duration,
     ) -> Operator {
         Operator {
             commands,
             motors,
             head,
+            children,
+            cycle,
+            #[cfg(feature = "gui")]
+            panel: None,
             last_head: None,
         }
     }
-    /// On run: the head is written again at the next iteration.
-    pub fn on_run(&mut self) {
-        self.last_head = None;
+}
+
+impl Schema for Operator {
+    fn cycle(&self) -> Duration {
+        self.cycle
     }
-    /// The base every time, the head when it changed.
-    pub fn iteration(&mut self) -> anyhow::Result<()> {
+    fn on_run(&mut self, ctx: &Context) -> anyhow::Result<()> {
+        ctx.run_children(&self.children, None)?;
+        // The head is written again at the next iteration.
+        self.last_head = None;
+        Ok(())
+    }
+    fn iteration(&mut self, _ctx: &Context) -> anyhow::Result<()> {
         let base = *self.commands.base.lock();
         self.motors.publish(base).map_err(anyhow::Error::msg)?;
         let head = *self.commands.head.lock();
@@ -143,8 +164,11 @@ impl Operator {
         }
         Ok(())
     }
-    /// On stop: the base stops.
-    pub fn on_stop(&mut self) {
+    fn on_stop(&mut self, _ctx: &Context) {
         let _ = self.motors.publish(Motors::default());
+    }
+    #[cfg(feature = "gui")]
+    fn panel(&mut self) -> Option<Box<dyn crate::runtime::Panel>> {
+        self.panel.take()
     }
 }

@@ -601,19 +601,6 @@ impl Device for Camera {
     }
 }
 
-/// The running driver: one supervised camera each.
-pub struct Firewire {
-    cameras: Vec<Supervisor>,
-}
-
-impl Driver for Firewire {
-    fn terminate(&mut self) {
-        for c in &mut self.cameras {
-            c.stop();
-        }
-    }
-}
-
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>> {
     if conf.name == "firewire22" {
         tracing::info!("firewire22: the same driver as firewire (libdc1394 2.x)");
@@ -657,7 +644,7 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
             },
         )?);
     }
-    Ok(Box::new(Firewire { cameras }))
+    Ok(Box::new(cameras))
 }
 
 crate::register_driver!(

@@ -582,19 +582,6 @@ impl Device for Capture {
     }
 }
 
-/// The running driver: one capture thread per camera.
-pub struct Gige {
-    cameras: Vec<Supervisor>,
-}
-
-impl Driver for Gige {
-    fn terminate(&mut self) {
-        for c in &mut self.cameras {
-            c.stop();
-        }
-    }
-}
-
 /// What `check` found wrong.
 #[derive(Debug, PartialEq)]
 pub enum CheckError {
@@ -661,7 +648,7 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
             },
         )?);
     }
-    Ok(Box::new(Gige { cameras }))
+    Ok(Box::new(cameras))
 }
 
 crate::register_driver!(

@@ -63,7 +63,7 @@ use anyhow::Context as _;
 use crate::{
     conf::{
         ComponentConf, ConfLine,
-        settings::{MOTORS_TIMEOUT, Setting, float, int, interface, word},
+        settings::{self, MOTORS_TIMEOUT, Setting, int, interface, word},
     },
     interfaces::{
         COLOR_HEIGHT, COLOR_WIDTH, Encoders, Image, Interface, Interfaces, Laser, Motors,
@@ -114,15 +114,7 @@ const LINES: &[Setting] = &[
         ],
     )
     .repeats(),
-    Setting::new(
-        "initial_position",
-        "the odometry offset added to the remote encoders",
-        &[
-            float("X", "mm", -1e9, 1e9),
-            float("Y", "mm", -1e9, 1e9),
-            float("THETA", "deg", -36_000.0, 36_000.0),
-        ],
-    ),
+    settings::INITIAL_POSITION.help("the odometry offset added to the remote encoders"),
     Setting::new(
         "token",
         "the server's secret (its `token` line)",

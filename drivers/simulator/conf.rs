@@ -105,15 +105,7 @@ pub const LINES: &[Setting] = &[
         ],
     )
     .repeats(),
-    Setting::new(
-        "initial_position",
-        "the first robot's pose",
-        &[
-            float("X", "mm", -1e7, 1e7),
-            float("Y", "mm", -1e7, 1e7),
-            float("THETA", "deg", -36_000.0, 36_000.0),
-        ],
-    ),
+    settings::INITIAL_POSITION.help("the first robot's pose"),
     settings::provides(USAGE_PROVIDES),
     MOTORS_TIMEOUT,
     Setting::new(

@@ -494,19 +494,6 @@ impl Drop for Stream {
     }
 }
 
-/// The running driver: one capture thread per device.
-pub struct V4l2 {
-    devices: Vec<Supervisor>,
-}
-
-impl Driver for V4l2 {
-    fn terminate(&mut self) {
-        for d in &mut self.devices {
-            d.stop();
-        }
-    }
-}
-
 fn start(conf: &ComponentConf, rt: &Runtime, v4l1: bool) -> anyhow::Result<Box<dyn Driver>> {
     let devs = parse(conf, v4l1)?;
     let mut absent = Vec::new();
@@ -552,7 +539,7 @@ fn start(conf: &ComponentConf, rt: &Runtime, v4l1: bool) -> anyhow::Result<Box<d
             },
         )?);
     }
-    Ok(Box::new(V4l2 { devices }))
+    Ok(Box::new(devices))
 }
 
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>> {

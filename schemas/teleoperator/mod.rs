@@ -45,7 +45,7 @@ use crate::{
     },
     interfaces::{Encoders, Image, Interface, Laser, Motors, PtEncoders, PtMotors},
     operator::{self, Commands, Operator},
-    runtime::{Context, Runtime, Schema},
+    runtime::{Runtime, Schema},
     world::{self, World},
 };
 
@@ -122,37 +122,6 @@ pub struct Devices {
     pub camera: Option<Arc<Interface<Image>>>,
 }
 
-/// The schema.
-pub struct Teleoperator {
-    pub commands: Arc<Commands>,
-    operator: Operator,
-    children: Vec<String>,
-    cycle: Duration,
-    #[cfg(feature = "gui")]
-    panel: Option<Box<dyn crate::runtime::Panel>>,
-}
-
-impl Schema for Teleoperator {
-    fn cycle(&self) -> Duration {
-        self.cycle
-    }
-    fn on_run(&mut self, ctx: &Context) -> anyhow::Result<()> {
-        ctx.run_children(&self.children, None)?;
-        self.operator.on_run();
-        Ok(())
-    }
-    fn iteration(&mut self, _ctx: &Context) -> anyhow::Result<()> {
-        self.operator.iteration()
-    }
-    fn on_stop(&mut self, _ctx: &Context) {
-        self.operator.on_stop();
-    }
-    #[cfg(feature = "gui")]
-    fn panel(&mut self) -> Option<Box<dyn crate::runtime::Panel>> {
-        self.panel.take()
-    }
-}
-
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>> {
     let lines: Lines = conf.settings(LINES)?;
     let world = match lines.world.as_deref() {
@@ -213,18 +182,19 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
         )));
     #[cfg(not(feature = "gui"))]
     let _ = world;
-    Ok(Box::new(Teleoperator {
-        operator: Operator::new(
-            commands.clone(),
-            dev.motors.clone(),
-            dev.pantilt_motors.clone(),
-        ),
-        commands,
-        children: names.into_iter().flatten().collect(),
-        cycle: Duration::from_millis(lines.cycle),
-        #[cfg(feature = "gui")]
-        panel,
-    }))
+    #[cfg_attr(not(feature = "gui"), allow(unused_mut))]
+    let mut schema = Operator::new(
+        commands.clone(),
+        dev.motors.clone(),
+        dev.pantilt_motors.clone(),
+        names.into_iter().flatten().collect(),
+        Duration::from_millis(lines.cycle),
+    );
+    #[cfg(feature = "gui")]
+    {
+        schema.panel = panel;
+    }
+    Ok(Box::new(schema))
 }
 
 crate::register_schema!(

@@ -202,6 +202,17 @@ pub const MOTORS_TIMEOUT: Setting = Setting::new(
 )
 .default("500");
 
+/// `initial_position X Y THETA`: a robot's starting pose or odometry offset.
+pub const INITIAL_POSITION: Setting = Setting::new(
+    "initial_position",
+    "the robot's starting pose (the odometry offset of a remote one)",
+    &[
+        float("X", "mm", -1e9, 1e9),
+        float("Y", "mm", -1e9, 1e9),
+        float("THETA", "deg", -36_000.0, 36_000.0),
+    ],
+);
+
 /// `provides INTERFACE ...`, any number of them, in the forms `usage` says (a
 /// driver whose provides lines take several forms reads their words itself).
 pub const fn provides(usage: &'static str) -> Setting {

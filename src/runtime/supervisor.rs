@@ -14,13 +14,12 @@ use std::{
         Arc,
         atomic::{AtomicBool, Ordering},
     },
-    thread::JoinHandle,
     time::{Duration, Instant},
 };
 
 use crate::interfaces::AnyInterface;
 
-use super::Driver;
+use super::{Driver, Worker};
 
 /// A device as the supervisor sees it.
 pub trait Device: Send + 'static {
@@ -73,34 +72,24 @@ pub struct Supervision {
     pub absent: Option<String>,
 }
 
-/// A supervised device: its thread runs until [`Supervisor::stop`] (or terminate,
-/// or drop).
-pub struct Supervisor {
-    stop: Arc<AtomicBool>,
-    thread: Option<JoinHandle<()>>,
-}
+/// A supervised device: its thread (a [`Worker`]) runs until [`Supervisor::stop`]
+/// (or terminate, or drop).
+pub struct Supervisor(Worker);
 
 impl Supervisor {
     /// Starts supervising `device` on its own thread.
     pub fn start<D: Device>(how: Supervision, device: D) -> anyhow::Result<Supervisor> {
         let stop = Arc::new(AtomicBool::new(false));
         let s = stop.clone();
-        let thread = std::thread::Builder::new()
-            .name(how.name.chars().take(15).collect())
-            .spawn(move || run(how, device, &s))
-            .map_err(|e| anyhow::anyhow!("cannot start a thread: {e}"))?;
-        Ok(Supervisor {
-            stop,
-            thread: Some(thread),
-        })
+        let name: String = how.name.chars().take(15).collect();
+        Ok(Supervisor(Worker::start(&name, stop, move || {
+            run(how, device, &s)
+        })?))
     }
 
     /// Asks the thread to stop and waits for it.
     pub fn stop(&mut self) {
-        self.stop.store(true, Ordering::Release);
-        if let Some(t) = self.thread.take() {
-            let _ = t.join();
-        }
+        self.0.stop();
     }
 }
 
@@ -110,9 +99,12 @@ impl Driver for Supervisor {
     }
 }
 
-impl Drop for Supervisor {
-    fn drop(&mut self) {
-        self.stop();
+/// A driver with several devices (one per camera) is its supervisors.
+impl Driver for Vec<Supervisor> {
+    fn terminate(&mut self) {
+        for s in self {
+            s.stop();
+        }
     }
 }
 
