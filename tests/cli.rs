@@ -4,25 +4,18 @@
 use std::{
     io::Write,
     path::Path,
-    process::{Command, Output, Stdio},
+    process::{Command, Output},
     thread,
     time::Duration,
 };
+
+mod common;
 
 const BIN: &str = env!("CARGO_BIN_EXE_jderobot");
 
 /// Runs the binary with `args`, feeding `input` on stdin after `delay`.
 fn run_with_input(args: &[&str], input: impl AsRef<[u8]>, delay: Duration) -> Output {
-    let mut child = Command::new(BIN)
-        .args(args)
-        .env("RUST_LOG", "warn")
-        .env_remove("DISPLAY")
-        .env_remove("WAYLAND_DISPLAY")
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("spawn jderobot");
+    let mut child = common::jderobot(args).spawn().expect("spawn jderobot");
     let mut stdin = child.stdin.take().unwrap();
     let input = input.as_ref().to_vec();
     let feeder = thread::spawn(move || {

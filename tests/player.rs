@@ -11,7 +11,7 @@ mod player_emulator;
 use std::{
     io::{BufRead, BufReader, Write},
     path::{Path, PathBuf},
-    process::{Command, Stdio},
+    process::Command,
     sync::{Arc, atomic::Ordering},
     time::{Duration, Instant},
 };
@@ -680,15 +680,7 @@ struct Bin {
 
 impl Bin {
     fn start(conf: &Path) -> Bin {
-        let mut child = Command::new(env!("CARGO_BIN_EXE_jderobot"))
-            .arg("--headless")
-            .arg(conf)
-            .env("RUST_LOG", "warn")
-            .env_remove("DISPLAY")
-            .env_remove("WAYLAND_DISPLAY")
-            .stdin(Stdio::piped())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
+        let mut child = common::jderobot([Path::new("--headless"), conf])
             .spawn()
             .expect("start jderobot");
         let out = child.stdout.take().unwrap();

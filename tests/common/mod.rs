@@ -13,6 +13,24 @@ use std::{
 
 use jderobot::{Conf, Runtime, State};
 
+/// The `jderobot` binary with `args`, as every test runs it: warnings only in
+/// the log, no display (headless), standard streams piped.
+pub fn jderobot<I, S>(args: I) -> Command
+where
+    I: IntoIterator<Item = S>,
+    S: AsRef<std::ffi::OsStr>,
+{
+    let mut c = Command::new(env!("CARGO_BIN_EXE_jderobot"));
+    c.args(args)
+        .env("RUST_LOG", "warn")
+        .env_remove("DISPLAY")
+        .env_remove("WAYLAND_DISPLAY")
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped());
+    c
+}
+
 /// The crate's root, where `assets/` and `examples/` are.
 pub fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))

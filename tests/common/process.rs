@@ -4,7 +4,7 @@
 use std::{
     io::{BufRead, BufReader, Write},
     path::Path,
-    process::{Child, Command, Stdio},
+    process::Child,
     sync::{Arc, Mutex},
     time::Duration,
 };
@@ -17,15 +17,7 @@ pub struct Proc {
 
 impl Proc {
     pub fn start(conf: &Path) -> Proc {
-        let mut child = Command::new(env!("CARGO_BIN_EXE_jderobot"))
-            .arg("--headless")
-            .arg(conf)
-            .env("RUST_LOG", "warn")
-            .env_remove("DISPLAY")
-            .env_remove("WAYLAND_DISPLAY")
-            .stdin(Stdio::piped())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
+        let mut child = super::jderobot([Path::new("--headless"), conf])
             .spawn()
             .expect("start jderobot");
         let out = Arc::new(Mutex::new(String::new()));
