@@ -75,7 +75,7 @@ provides colorA..D image|video|videofile PATH [loop] [unpaced]";
 
 /// What a `provides` line reads.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Kind {
+pub enum Input {
     Image,
     Video,
     VideoFile,
@@ -85,7 +85,7 @@ pub enum Kind {
 #[derive(Clone, Debug, PartialEq)]
 pub struct Source {
     pub interface: String,
-    pub kind: Kind,
+    pub kind: Input,
     pub path: PathBuf,
     /// W x H, or None for autosize.
     pub size: Option<(u32, u32)>,
@@ -122,9 +122,9 @@ pub fn parse(conf: &ComponentConf) -> anyhow::Result<Vec<(Source, ConfLine)>> {
                 .into());
         }
         let kind = match a[1].as_str() {
-            "image" => Kind::Image,
-            "video" => Kind::Video,
-            "videofile" => Kind::VideoFile,
+            "image" => Input::Image,
+            "video" => Input::Video,
+            "videofile" => Input::VideoFile,
             other => {
                 return Err(l
                     .error(format!(
@@ -173,7 +173,7 @@ pub fn parse(conf: &ComponentConf) -> anyhow::Result<Vec<(Source, ConfLine)>> {
         if out.iter().any(|(s, _)| s.interface == iface) {
             return Err(l.error(format!("`{iface}` is provided twice")).into());
         }
-        let path = if kind == Kind::Video && a[2].starts_with("/dev/") {
+        let path = if kind == Input::Video && a[2].starts_with("/dev/") {
             PathBuf::from(&a[2])
         } else {
             conf.resolve(&a[2])
@@ -324,7 +324,7 @@ impl RawBgr {
         let ffmpeg = require_program("ffmpeg", "ffmpeg")?;
         let mut cmd = Command::new(ffmpeg);
         cmd.args(["-nostdin", "-hide_banner", "-loglevel", "error"]);
-        if src.kind == Kind::Video {
+        if src.kind == Input::Video {
             cmd.args(["-f", "v4l2"]);
         }
         cmd.arg("-i").arg(&src.path);
@@ -412,7 +412,7 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
     for (src, line) in sources {
         let at = |e: MediaError| line.error(e.to_string());
         match src.kind {
-            Kind::Image => {
+            Input::Image => {
                 let fit = match src.size {
                     Some((w, h)) => Fit::Scale(w, h),
                     None => Fit::Auto,
@@ -430,9 +430,9 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
                     first: Some(img),
                 });
             }
-            Kind::Video | Kind::VideoFile => {
+            Input::Video | Input::VideoFile => {
                 require_program("ffmpeg", "ffmpeg").map_err(at)?;
-                let device = src.kind == Kind::Video;
+                let device = src.kind == Input::Video;
                 if !src.path.exists() {
                     return Err(line
                         .error(format!(

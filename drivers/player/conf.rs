@@ -12,7 +12,7 @@ use super::xdr::{Addr, interf};
 
 /// What a `provides` line asks for.
 #[derive(Clone, Debug, PartialEq)]
-pub enum Kind {
+pub enum Provided {
     Encoders,
     Motors,
     /// N readings at R readings per degree.
@@ -29,7 +29,7 @@ pub enum Kind {
 /// One `provides` line.
 #[derive(Clone, Debug)]
 pub struct Want {
-    pub kind: Kind,
+    pub kind: Provided,
     /// The interface (or name-space) name, with the robot suffix.
     pub name: String,
     pub robot: Option<String>,
@@ -346,7 +346,7 @@ fn parse_provides(l: &ConfLine) -> anyhow::Result<Want> {
     }
     let kind = match what {
         "laser" => match numbers.as_slice() {
-            [] => Kind::Laser(180, 1.0),
+            [] => Provided::Laser(180, 1.0),
             [n, r] => {
                 let n = n
                     .parse::<usize>()
@@ -361,7 +361,7 @@ fn parse_provides(l: &ConfLine) -> anyhow::Result<Want> {
                 let r = r.parse::<f64>().ok().filter(|r| *r > 0.0 && r.is_finite()).ok_or_else(|| {
                     err(l, format!("`provides laser`: `{r}` is not a positive resolution (readings/deg)"))
                 })?;
-                Kind::Laser(n, r)
+                Provided::Laser(n, r)
             }
             _ => {
                 return Err(err(
@@ -383,15 +383,15 @@ fn parse_provides(l: &ConfLine) -> anyhow::Result<Want> {
                 ));
             }
             match other {
-                "encoders" | "jde_robot" => Kind::Encoders,
-                "motors" => Kind::Motors,
-                "sonars" | "us" => Kind::Sonars,
-                "bumpers" => Kind::Bumpers,
-                "pantiltencoders" | "ptencoders" => Kind::PanTiltEncoders,
-                "pantiltmotors" | "ptmotors" => Kind::PanTiltMotors,
-                "colorA" | "colorB" | "colorC" | "colorD" => Kind::Camera(true),
-                "varcolorA" | "varcolorB" | "varcolorC" | "varcolorD" => Kind::Camera(false),
-                "blobs" => Kind::Blobs,
+                "encoders" | "jde_robot" => Provided::Encoders,
+                "motors" => Provided::Motors,
+                "sonars" | "us" => Provided::Sonars,
+                "bumpers" => Provided::Bumpers,
+                "pantiltencoders" | "ptencoders" => Provided::PanTiltEncoders,
+                "pantiltmotors" | "ptmotors" => Provided::PanTiltMotors,
+                "colorA" | "colorB" | "colorC" | "colorD" => Provided::Camera(true),
+                "varcolorA" | "varcolorB" | "varcolorC" | "varcolorD" => Provided::Camera(false),
+                "blobs" => Provided::Blobs,
                 _ => {
                     return Err(err(
                         l,
@@ -408,7 +408,7 @@ fn parse_provides(l: &ConfLine) -> anyhow::Result<Want> {
         w => w,
     };
     let name = match kind {
-        Kind::Blobs => match &robot {
+        Provided::Blobs => match &robot {
             Some(r) => format!("blobs.{r}"),
             None => "blobs".into(),
         },
@@ -479,12 +479,12 @@ pub fn choose(w: &Want, devices: &[Addr], server: &str) -> anyhow::Result<Addr> 
         }
     };
     match w.kind {
-        Kind::Encoders | Kind::Motors => one(interf::POSITION2D),
-        Kind::Bumpers => one(interf::BUMPER),
-        Kind::PanTiltEncoders | Kind::PanTiltMotors => one(interf::PTZ),
-        Kind::Camera(_) => one(interf::CAMERA),
-        Kind::Blobs => one(interf::BLOBFINDER),
-        Kind::Sonars => {
+        Provided::Encoders | Provided::Motors => one(interf::POSITION2D),
+        Provided::Bumpers => one(interf::BUMPER),
+        Provided::PanTiltEncoders | Provided::PanTiltMotors => one(interf::PTZ),
+        Provided::Camera(_) => one(interf::CAMERA),
+        Provided::Blobs => one(interf::BLOBFINDER),
+        Provided::Sonars => {
             let s = Addr::new(interf::SONAR, idx);
             let r = Addr::new(interf::RANGER, idx);
             if has(s) {
@@ -495,7 +495,7 @@ pub fn choose(w: &Want, devices: &[Addr], server: &str) -> anyhow::Result<Addr> 
                 Err(missing(format!("sonar:{idx} or ranger:{idx}")))
             }
         }
-        Kind::Laser(..) => {
+        Provided::Laser(..) => {
             let l = Addr::new(interf::LASER, idx);
             if has(l) {
                 return Ok(l);

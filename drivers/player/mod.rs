@@ -81,7 +81,7 @@ use crate::{
 };
 
 use client::{Conn, ConnError, Reply};
-pub use conf::{DataMode, Kind, Offset, PlayerConf};
+pub use conf::{DataMode, Offset, PlayerConf, Provided};
 pub use sinks::{Blob, BlobFrame, LaserMap, LiveBlobs, Sink};
 use xdr::{Addr, Header, XdrError, interf, msg, player, sub};
 
@@ -636,7 +636,7 @@ impl PlayerDriver {
         for w in &pc.wants {
             let off = pc.offset(&w.robot);
             let binding = match &w.kind {
-                Kind::Encoders => Binding::Sink(Sink::Encoders(
+                Provided::Encoders => Binding::Sink(Sink::Encoders(
                     ifaces.provide_value(
                         &w.name,
                         provider,
@@ -644,22 +644,24 @@ impl PlayerDriver {
                     )?,
                     off,
                 )),
-                Kind::Motors => {
+                Provided::Motors => {
                     let m = ifaces.provide::<Motors>(&w.name, provider)?;
                     motors_all.push(m.clone());
                     Binding::Motors(m)
                 }
-                Kind::Laser(n, r) => Binding::Sink(Sink::Laser(
+                Provided::Laser(n, r) => Binding::Sink(Sink::Laser(
                     ifaces.provide(&w.name, provider)?,
                     LaserMap::new(*n, *r),
                 )),
-                Kind::Sonars => Binding::Sink(Sink::Sonars(ifaces.provide(&w.name, provider)?)),
-                Kind::Bumpers => Binding::Sink(Sink::Bumpers(ifaces.provide(&w.name, provider)?)),
-                Kind::PanTiltEncoders => {
+                Provided::Sonars => Binding::Sink(Sink::Sonars(ifaces.provide(&w.name, provider)?)),
+                Provided::Bumpers => {
+                    Binding::Sink(Sink::Bumpers(ifaces.provide(&w.name, provider)?))
+                }
+                Provided::PanTiltEncoders => {
                     Binding::Sink(Sink::PtEncoders(ifaces.provide(&w.name, provider)?))
                 }
-                Kind::PanTiltMotors => Binding::PtMotors(ifaces.provide(&w.name, provider)?),
-                Kind::Camera(fixed) => {
+                Provided::PanTiltMotors => Binding::PtMotors(ifaces.provide(&w.name, provider)?),
+                Provided::Camera(fixed) => {
                     let init = if *fixed {
                         Image::new(320, 240)
                     } else {
@@ -670,7 +672,7 @@ impl PlayerDriver {
                         *fixed,
                     ))
                 }
-                Kind::Blobs => {
+                Provided::Blobs => {
                     let b = names.export(
                         provider,
                         &w.name,
