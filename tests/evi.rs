@@ -372,7 +372,7 @@ fn conf_errors_name_the_line() {
         ),
         (
             "driver evi\nserial /dev/null\nprovides colorA\nend_driver\nload_driver evi\n",
-            "not `colorA`",
+            "INTERFACE (argument 1) is `colorA`, expected one of pantiltencoders, pantiltmotors, zoomencoders, zoommotors",
         ),
         (
             "driver evi\nserial /dev/null\ncamera 9\nprovides zoommotors\nend_driver\nload_driver evi\n",

@@ -313,7 +313,7 @@ fn conf_errors_name_the_line() {
         ),
         (
             "driver pantilt\nserial /dev/null\nprovides laser\nend_driver\nload_driver pantilt\n",
-            "not `laser`",
+            "INTERFACE (argument 1) is `laser`, expected one of pantiltencoders, pantiltmotors",
         ),
         (
             "driver pantilt\nserial /dev/null\nbaud x\nprovides pantiltencoders\nend_driver\nload_driver pantilt\n",
@@ -321,7 +321,7 @@ fn conf_errors_name_the_line() {
         ),
         (
             "driver pantilt\nserial /dev/null\npoll 0\nprovides pantiltencoders\nend_driver\nload_driver pantilt\n",
-            "period in ms",
+            "test.conf:3: `poll`: MS (argument 1) is `0`, expected a whole number between 10 and 10000 ms",
         ),
     ] {
         let conf = jderobot::Conf::parse(text, std::path::Path::new("test.conf")).unwrap();

@@ -57,8 +57,11 @@ use std::{
 };
 
 use crate::{
-    conf::ComponentConf,
-    interfaces::{Interface, PtEncoders, PtMotors, ZoomEncoders, ZoomMotors, limit},
+    conf::{
+        ComponentConf,
+        settings::{Setting, choice, int, word},
+    },
+    interfaces::{Interface, PtEncoders, PtMotors, ZoomEncoders, ZoomMotors, canonical, limit},
     runtime::{Driver, Runtime, Worker},
 };
 use protocol::{Reply, ViscaError};
@@ -76,70 +79,81 @@ pub struct EviConf {
     pub zoommotors: bool,
 }
 
+/// The lines `evi` takes (`jderobot help evi` prints them).
+const LINES: &[Setting] = &[
+    Setting::new(
+        "serial",
+        "the serial port the camera is on (required; 9600 baud, 8N1), e.g. /dev/ttyUSB0",
+        &[word("DEVICE")],
+    ),
+    Setting::new(
+        "camera",
+        "the camera's VISCA address (after an address set, the first camera is 1)",
+        &[int("ADDRESS", "", 1, 7)],
+    )
+    .default("1"),
+    Setting::new(
+        "poll",
+        "the time between position inquiries",
+        &[int("MS", "ms", 10, 10_000)],
+    )
+    .default("100"),
+    Setting::new(
+        "reply_timeout",
+        "how long an answer may take before the camera counts as silent",
+        &[int("MS", "ms", 10, 60_000)],
+    )
+    .default("1000"),
+    Setting::new(
+        "provides",
+        "an interface it provides: pantiltencoders, pantiltmotors, zoomencoders, zoommotors (4.3's ptencoders, ptmotors, zencoders, zmotors)",
+        &[choice(
+            "INTERFACE",
+            &[
+                "pantiltencoders",
+                "pantiltmotors",
+                "zoomencoders",
+                "zoommotors",
+                "ptencoders",
+                "ptmotors",
+                "zencoders",
+                "zmotors",
+            ],
+        )],
+    )
+    .repeats(),
+];
+
+/// The values of [`LINES`].
+#[derive(serde::Deserialize)]
+struct Lines {
+    serial: Option<String>,
+    camera: u8,
+    poll: u64,
+    reply_timeout: u64,
+    provides: Vec<String>,
+}
+
 impl EviConf {
     pub fn parse(conf: &ComponentConf) -> anyhow::Result<EviConf> {
-        let mut c = EviConf {
-            serial: String::new(),
-            camera: 1,
-            poll: Duration::from_millis(100),
-            reply_timeout: Duration::from_millis(1000),
-            pantiltencoders: false,
-            pantiltmotors: false,
-            zoomencoders: false,
-            zoommotors: false,
+        let lines: Lines = conf.settings(LINES)?;
+        let provides: Vec<String> = lines.provides.iter().map(|p| canonical(p)).collect();
+        let has = |name: &str| provides.iter().any(|p| p == name);
+        let c = EviConf {
+            serial: lines.serial.ok_or_else(|| {
+                anyhow::anyhow!(
+                    "{}: driver evi needs a `serial DEVICE` line (e.g. `serial /dev/ttyUSB0`)",
+                    conf.file.display()
+                )
+            })?,
+            camera: lines.camera,
+            poll: Duration::from_millis(lines.poll),
+            reply_timeout: Duration::from_millis(lines.reply_timeout),
+            pantiltencoders: has("pantiltencoders"),
+            pantiltmotors: has("pantiltmotors"),
+            zoomencoders: has("zoomencoders"),
+            zoommotors: has("zoommotors"),
         };
-        let mut serial = None;
-        for l in &conf.lines {
-            match l.keyword() {
-                "serial" => {
-                    l.expect_args(1, 1, "serial DEVICE")?;
-                    serial = Some(l.args()[0].clone());
-                }
-                "camera" => {
-                    l.expect_args(1, 1, "camera ADDRESS")?;
-                    c.camera = l.number(0, "a VISCA address", 1..=7)?;
-                }
-                "poll" => {
-                    l.expect_args(1, 1, "poll MS")?;
-                    c.poll = l.millis(0, "a period in ms", 10..=10_000)?;
-                }
-                "reply_timeout" => {
-                    l.expect_args(1, 1, "reply_timeout MS")?;
-                    c.reply_timeout = l.millis(0, "a timeout in ms", 10..=60_000)?;
-                }
-                "provides" => {
-                    l.expect_args(
-                        1,
-                        1,
-                        "provides pantiltencoders|pantiltmotors|zoomencoders|zoommotors",
-                    )?;
-                    match l.interface(0)?.as_str() {
-                        "pantiltencoders" => c.pantiltencoders = true,
-                        "pantiltmotors" => c.pantiltmotors = true,
-                        "zoomencoders" => c.zoomencoders = true,
-                        "zoommotors" => c.zoommotors = true,
-                        other => {
-                            return Err(l
-                                .error(format!(
-                                    "evi provides pantiltencoders, pantiltmotors, zoomencoders and zoommotors, not `{other}`"
-                                ))
-                                .into());
-                        }
-                    }
-                }
-                _ => {
-                    return Err(conf
-                        .unknown(l, "serial, camera, poll, reply_timeout or provides")
-                        .into());
-                }
-            }
-        }
-        c.serial = serial.ok_or_else(|| {
-            anyhow::anyhow!(
-                "{}: driver evi needs a `serial DEVICE` line (e.g. `serial /dev/ttyUSB0`)",
-                conf.file.display()
-            )
-        })?;
         if !(c.pantiltencoders || c.pantiltmotors || c.zoomencoders || c.zoommotors) {
             anyhow::bail!(
                 "{}: driver evi provides nothing; add `provides pantiltencoders`, `pantiltmotors`, `zoomencoders` or `zoommotors`",
@@ -814,5 +828,6 @@ crate::register_driver!(
     Driver,
     "evi",
     "Sony EVI-D100 pan-tilt-zoom camera over VISCA: pantiltencoders, pantiltmotors, zoomencoders, zoommotors",
-    create
+    create,
+    lines = LINES
 );

@@ -48,8 +48,11 @@ use std::{
 };
 
 use crate::{
-    conf::ComponentConf,
-    interfaces::{Interface, PtEncoders, PtMotors, limit},
+    conf::{
+        ComponentConf,
+        settings::{Setting, choice, int, word},
+    },
+    interfaces::{Interface, PtEncoders, PtMotors, canonical, limit},
     runtime::{Driver, Runtime, Worker},
 };
 use protocol::{Axis, ENCOD_TO_DEG, Query, ReplyError};
@@ -65,63 +68,71 @@ pub struct PtuConf {
     pub motors: bool,
 }
 
+/// The lines `pantilt` takes (`jderobot help pantilt` prints them).
+const LINES: &[Setting] = &[
+    Setting::new(
+        "serial",
+        "the serial port the unit is on (required), e.g. /dev/ttyUSB0",
+        &[word("DEVICE")],
+    ),
+    Setting::new(
+        "baud",
+        "the line speed (the unit's default is 9600)",
+        &[int("RATE", "baud", 300, 115_200)],
+    )
+    .default("9600"),
+    Setting::new(
+        "poll",
+        "the time between position queries (4.3: 300)",
+        &[int("MS", "ms", 10, 10_000)],
+    )
+    .default("300"),
+    Setting::new(
+        "reply_timeout",
+        "how long a reply may take before the unit counts as silent",
+        &[int("MS", "ms", 10, 60_000)],
+    )
+    .default("1000"),
+    Setting::new(
+        "provides",
+        "an interface it provides: pantiltencoders and/or pantiltmotors (4.3's ptencoders, ptmotors)",
+        &[choice(
+            "INTERFACE",
+            &["pantiltencoders", "pantiltmotors", "ptencoders", "ptmotors"],
+        )],
+    )
+    .repeats(),
+];
+
+/// The values of [`LINES`].
+#[derive(serde::Deserialize)]
+struct Lines {
+    serial: Option<String>,
+    baud: u32,
+    poll: u64,
+    reply_timeout: u64,
+    provides: Vec<String>,
+}
+
 impl PtuConf {
     /// Parses the driver's lines (errors name file:line).
     pub fn parse(conf: &ComponentConf) -> anyhow::Result<PtuConf> {
-        let mut c = PtuConf {
-            serial: String::new(),
-            baud: 9600,
-            poll: Duration::from_millis(300),
-            reply_timeout: Duration::from_millis(1000),
-            encoders: false,
-            motors: false,
+        let lines: Lines = conf.settings(LINES)?;
+        let provides: Vec<String> = lines.provides.iter().map(|p| canonical(p)).collect();
+        let has = |name: &str| provides.iter().any(|p| p == name);
+        let c = PtuConf {
+            serial: lines.serial.ok_or_else(|| {
+                anyhow::anyhow!(
+                    "{}: driver pantilt needs a `serial DEVICE` line (e.g. `serial /dev/ttyUSB0`)",
+                    conf.file.display()
+                )
+            })?,
+            baud: lines.baud,
+            poll: Duration::from_millis(lines.poll),
+            reply_timeout: Duration::from_millis(lines.reply_timeout),
+            encoders: has("pantiltencoders"),
+            motors: has("pantiltmotors"),
         };
-        let mut serial = None;
-        for l in &conf.lines {
-            match l.keyword() {
-                "serial" => {
-                    l.expect_args(1, 1, "serial DEVICE")?;
-                    serial = Some(l.args()[0].clone());
-                }
-                "baud" => {
-                    l.expect_args(1, 1, "baud RATE")?;
-                    c.baud = l.number(0, "a baud rate", 300..=115_200)?;
-                }
-                "poll" => {
-                    l.expect_args(1, 1, "poll MS")?;
-                    c.poll = l.millis(0, "a period in ms", 10..=10_000)?;
-                }
-                "reply_timeout" => {
-                    l.expect_args(1, 1, "reply_timeout MS")?;
-                    c.reply_timeout = l.millis(0, "a timeout in ms", 10..=60_000)?;
-                }
-                "provides" => {
-                    l.expect_args(1, 1, "provides pantiltencoders|pantiltmotors")?;
-                    match l.interface(0)?.as_str() {
-                        "pantiltencoders" => c.encoders = true,
-                        "pantiltmotors" => c.motors = true,
-                        other => {
-                            return Err(l
-                                .error(format!(
-                                    "pantilt provides pantiltencoders and pantiltmotors, not `{other}`"
-                                ))
-                                .into());
-                        }
-                    }
-                }
-                _ => {
-                    return Err(conf
-                        .unknown(l, "serial, baud, poll, reply_timeout or provides")
-                        .into());
-                }
-            }
-        }
-        c.serial = serial.ok_or_else(|| {
-            anyhow::anyhow!(
-                "{}: driver pantilt needs a `serial DEVICE` line (e.g. `serial /dev/ttyUSB0`)",
-                conf.file.display()
-            )
-        })?;
         if !c.encoders && !c.motors {
             anyhow::bail!(
                 "{}: driver pantilt provides nothing; add `provides pantiltencoders` and/or `provides pantiltmotors`",
@@ -634,5 +645,6 @@ crate::register_driver!(
     Driver,
     "pantilt",
     "Directed Perception pan-tilt unit on a serial line: pantiltencoders, pantiltmotors",
-    create
+    create,
+    lines = LINES
 );
