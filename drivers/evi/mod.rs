@@ -59,20 +59,20 @@ use std::{
 use crate::{
     conf::{
         ComponentConf,
-        settings::{Setting, choice, int, word},
+        settings::{Setting, choice, int},
     },
-    interfaces::{Interface, PtEncoders, PtMotors, ZoomEncoders, ZoomMotors, canonical, limit},
+    interfaces::{Interface, PtEncoders, PtMotors, ZoomEncoders, ZoomMotors, limit},
     runtime::{Driver, Runtime, Worker},
+    serialhead::{HeadConf, POLL, REPLY_TIMEOUT, SERIAL, open_port},
 };
 use protocol::{Reply, ViscaError};
 
 /// The driver's settings.
 #[derive(Clone, Debug)]
 pub struct EviConf {
-    pub serial: String,
+    /// `serial`, `poll`, `reply_timeout`, `provides`.
+    pub head: HeadConf,
     pub camera: u8,
-    pub poll: Duration,
-    pub reply_timeout: Duration,
     pub pantiltencoders: bool,
     pub pantiltmotors: bool,
     pub zoomencoders: bool,
@@ -81,29 +81,15 @@ pub struct EviConf {
 
 /// The lines `evi` takes (`jderobot help evi` prints them).
 const LINES: &[Setting] = &[
-    Setting::new(
-        "serial",
-        "the serial port the camera is on (required; 9600 baud, 8N1), e.g. /dev/ttyUSB0",
-        &[word("DEVICE")],
-    ),
+    SERIAL,
     Setting::new(
         "camera",
         "the camera's VISCA address (after an address set, the first camera is 1)",
         &[int("ADDRESS", "", 1, 7)],
     )
     .default("1"),
-    Setting::new(
-        "poll",
-        "the time between position inquiries",
-        &[int("MS", "ms", 10, 10_000)],
-    )
-    .default("100"),
-    Setting::new(
-        "reply_timeout",
-        "how long an answer may take before the camera counts as silent",
-        &[int("MS", "ms", 10, 60_000)],
-    )
-    .default("1000"),
+    POLL.default("100"),
+    REPLY_TIMEOUT,
     Setting::new(
         "provides",
         "an interface it provides: pantiltencoders, pantiltmotors, zoomencoders, zoommotors (4.3's ptencoders, ptmotors, zencoders, zmotors)",
@@ -137,29 +123,27 @@ struct Lines {
 impl EviConf {
     pub fn parse(conf: &ComponentConf) -> anyhow::Result<EviConf> {
         let lines: Lines = conf.settings(LINES)?;
-        let provides: Vec<String> = lines.provides.iter().map(|p| canonical(p)).collect();
-        let has = |name: &str| provides.iter().any(|p| p == name);
+        let head = HeadConf::new(
+            conf,
+            lines.serial,
+            lines.poll,
+            lines.reply_timeout,
+            &lines.provides,
+            &[
+                "pantiltencoders",
+                "pantiltmotors",
+                "zoomencoders",
+                "zoommotors",
+            ],
+        )?;
         let c = EviConf {
-            serial: lines.serial.ok_or_else(|| {
-                anyhow::anyhow!(
-                    "{}: driver evi needs a `serial DEVICE` line (e.g. `serial /dev/ttyUSB0`)",
-                    conf.file.display()
-                )
-            })?,
             camera: lines.camera,
-            poll: Duration::from_millis(lines.poll),
-            reply_timeout: Duration::from_millis(lines.reply_timeout),
-            pantiltencoders: has("pantiltencoders"),
-            pantiltmotors: has("pantiltmotors"),
-            zoomencoders: has("zoomencoders"),
-            zoommotors: has("zoommotors"),
+            pantiltencoders: head.provides("pantiltencoders"),
+            pantiltmotors: head.provides("pantiltmotors"),
+            zoomencoders: head.provides("zoomencoders"),
+            zoommotors: head.provides("zoommotors"),
+            head,
         };
-        if !(c.pantiltencoders || c.pantiltmotors || c.zoomencoders || c.zoommotors) {
-            anyhow::bail!(
-                "{}: driver evi provides nothing; add `provides pantiltencoders`, `pantiltmotors`, `zoomencoders` or `zoommotors`",
-                conf.file.display()
-            );
-        }
         Ok(c)
     }
 }
@@ -213,44 +197,6 @@ pub enum LinkError {
     },
     #[error("{port}: the port failed ({what}); was the camera unplugged?")]
     Io { port: String, what: String },
-}
-
-/// Opens `path` as a serial port at 9600 baud, with errors that say what to check.
-pub fn open_port(path: &str) -> Result<Box<dyn serialport::SerialPort>, LinkError> {
-    let open_err = |what: String| LinkError::Open {
-        port: path.to_string(),
-        what,
-    };
-    match std::fs::metadata(path) {
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
-            return Err(open_err(
-                "does not exist (is the camera's VISCA cable plugged in? `ls /dev/ttyUSB* /dev/ttyS*` lists the ports)".into(),
-            ));
-        }
-        Err(e) => return Err(open_err(format!("cannot be read: {e}"))),
-        Ok(m) if m.is_file() || m.is_dir() => {
-            return Err(open_err(
-                "is not a serial device (a regular file or directory); check the `serial` line"
-                    .into(),
-            ));
-        }
-        Ok(_) => {}
-    }
-    serialport::new(path, 9600)
-        .timeout(Duration::from_millis(5))
-        .open()
-        .map_err(|e| {
-            let what = match e.kind() {
-                serialport::ErrorKind::Io(std::io::ErrorKind::PermissionDenied) => format!(
-                    "permission denied ({e}); add your user to the group that owns it (`ls -l {path}`, usually `dialout`)"
-                ),
-                serialport::ErrorKind::NoDevice => {
-                    format!("no device ({e}); is the camera plugged in?")
-                }
-                _ => format!("cannot be opened as a serial port: {e}"),
-            };
-            open_err(what)
-        })
 }
 
 /// The longest VISCA packet is 16 bytes.
@@ -697,9 +643,9 @@ fn session(sh: &Shared, link: &mut Link) -> Result<(), LinkError> {
         }
         let now = Instant::now();
         if now >= next_poll {
-            next_poll += sh.conf.poll;
+            next_poll += sh.conf.head.poll;
             if next_poll < now {
-                next_poll = now + sh.conf.poll;
+                next_poll = now + sh.conf.head.poll;
             }
             here = link.pantilt()?;
             if let Some(e) = &sh.pte {
@@ -731,13 +677,18 @@ fn session(sh: &Shared, link: &mut Link) -> Result<(), LinkError> {
 }
 
 fn run(sh: Shared) {
-    let port = sh.conf.serial.clone();
+    let port = sh.conf.head.serial.clone();
     let mut last_error: Option<String> = None;
     while !sh.stopping() {
-        let result = open_port(&port).and_then(|p| {
-            let mut link = Link::new(p, &port, sh.conf.camera, sh.conf.reply_timeout);
-            session(&sh, &mut link)
-        });
+        let result = open_port(&port, 9600, "the camera (its VISCA cable)")
+            .map_err(|what| LinkError::Open {
+                port: port.clone(),
+                what,
+            })
+            .and_then(|p| {
+                let mut link = Link::new(p, &port, sh.conf.camera, sh.conf.head.reply_timeout);
+                session(&sh, &mut link)
+            });
         match result {
             Ok(()) => return,
             Err(e) => {

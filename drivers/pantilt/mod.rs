@@ -50,49 +50,35 @@ use std::{
 use crate::{
     conf::{
         ComponentConf,
-        settings::{Setting, choice, int, word},
+        settings::{Setting, choice, int},
     },
-    interfaces::{Interface, PtEncoders, PtMotors, canonical, limit},
+    interfaces::{Interface, PtEncoders, PtMotors, limit},
     runtime::{Driver, Runtime, Worker},
+    serialhead::{HeadConf, POLL, REPLY_TIMEOUT, SERIAL, open_port},
 };
 use protocol::{Axis, ENCOD_TO_DEG, Query, ReplyError};
 
 /// The driver's settings.
 #[derive(Clone, Debug)]
 pub struct PtuConf {
-    pub serial: String,
+    /// `serial`, `poll`, `reply_timeout`, `provides`.
+    pub head: HeadConf,
     pub baud: u32,
-    pub poll: Duration,
-    pub reply_timeout: Duration,
     pub encoders: bool,
     pub motors: bool,
 }
 
 /// The lines `pantilt` takes (`jderobot help pantilt` prints them).
 const LINES: &[Setting] = &[
-    Setting::new(
-        "serial",
-        "the serial port the unit is on (required), e.g. /dev/ttyUSB0",
-        &[word("DEVICE")],
-    ),
+    SERIAL,
     Setting::new(
         "baud",
         "the line speed (the unit's default is 9600)",
         &[int("RATE", "baud", 300, 115_200)],
     )
     .default("9600"),
-    Setting::new(
-        "poll",
-        "the time between position queries (4.3: 300)",
-        &[int("MS", "ms", 10, 10_000)],
-    )
-    .default("300"),
-    Setting::new(
-        "reply_timeout",
-        "how long a reply may take before the unit counts as silent",
-        &[int("MS", "ms", 10, 60_000)],
-    )
-    .default("1000"),
+    POLL.default("300"),
+    REPLY_TIMEOUT,
     Setting::new(
         "provides",
         "an interface it provides: pantiltencoders and/or pantiltmotors (4.3's ptencoders, ptmotors)",
@@ -118,27 +104,20 @@ impl PtuConf {
     /// Parses the driver's lines (errors name file:line).
     pub fn parse(conf: &ComponentConf) -> anyhow::Result<PtuConf> {
         let lines: Lines = conf.settings(LINES)?;
-        let provides: Vec<String> = lines.provides.iter().map(|p| canonical(p)).collect();
-        let has = |name: &str| provides.iter().any(|p| p == name);
+        let head = HeadConf::new(
+            conf,
+            lines.serial,
+            lines.poll,
+            lines.reply_timeout,
+            &lines.provides,
+            &["pantiltencoders", "pantiltmotors"],
+        )?;
         let c = PtuConf {
-            serial: lines.serial.ok_or_else(|| {
-                anyhow::anyhow!(
-                    "{}: driver pantilt needs a `serial DEVICE` line (e.g. `serial /dev/ttyUSB0`)",
-                    conf.file.display()
-                )
-            })?,
             baud: lines.baud,
-            poll: Duration::from_millis(lines.poll),
-            reply_timeout: Duration::from_millis(lines.reply_timeout),
-            encoders: has("pantiltencoders"),
-            motors: has("pantiltmotors"),
+            encoders: head.provides("pantiltencoders"),
+            motors: head.provides("pantiltmotors"),
+            head,
         };
-        if !c.encoders && !c.motors {
-            anyhow::bail!(
-                "{}: driver pantilt provides nothing; add `provides pantiltencoders` and/or `provides pantiltmotors`",
-                conf.file.display()
-            );
-        }
         Ok(c)
     }
 }
@@ -165,44 +144,6 @@ pub enum LinkError {
     },
     #[error("{port}: the port failed ({what}); was the unit unplugged?")]
     Io { port: String, what: String },
-}
-
-/// Opens `path` as a serial port, with errors that say what to check.
-pub fn open_port(path: &str, baud: u32) -> Result<Box<dyn serialport::SerialPort>, LinkError> {
-    let open_err = |what: String| LinkError::Open {
-        port: path.to_string(),
-        what,
-    };
-    match std::fs::metadata(path) {
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
-            return Err(open_err(
-                "does not exist (is the unit plugged in? `ls /dev/ttyUSB* /dev/ttyS*` lists the ports)".into(),
-            ));
-        }
-        Err(e) => return Err(open_err(format!("cannot be read: {e}"))),
-        Ok(m) if m.is_file() || m.is_dir() => {
-            return Err(open_err(
-                "is not a serial device (a regular file or directory); check the `serial` line"
-                    .into(),
-            ));
-        }
-        Ok(_) => {}
-    }
-    serialport::new(path, baud)
-        .timeout(Duration::from_millis(5))
-        .open()
-        .map_err(|e| {
-            let what = match e.kind() {
-                serialport::ErrorKind::Io(std::io::ErrorKind::PermissionDenied) => format!(
-                    "permission denied ({e}); add your user to the group that owns it (`ls -l {path}`, usually `dialout`)"
-                ),
-                serialport::ErrorKind::NoDevice => {
-                    format!("no device ({e}); is the unit plugged in?")
-                }
-                _ => format!("cannot be opened as a serial port: {e}"),
-            };
-            open_err(what)
-        })
 }
 
 /// A line-oriented link to the unit.
@@ -548,9 +489,9 @@ fn session(sh: &Shared, link: &mut Link) -> Result<(), LinkError> {
         let now = Instant::now();
         if now >= next_poll {
             // Absolute deadlines: the period does not drift with the reply time.
-            next_poll += sh.conf.poll;
+            next_poll += sh.conf.head.poll;
             if next_poll < now {
-                next_poll = now + sh.conf.poll;
+                next_poll = now + sh.conf.head.poll;
             }
             // A position outside the unit's own limits is a broken reply:
             // refused (the session ends and the line is resynchronised).
@@ -585,13 +526,18 @@ fn session(sh: &Shared, link: &mut Link) -> Result<(), LinkError> {
 
 /// The driver thread: open, run a session, report and retry.
 fn run(sh: Shared) {
-    let port = sh.conf.serial.clone();
+    let port = sh.conf.head.serial.clone();
     let mut last_error: Option<String> = None;
     while !sh.stopping() {
-        let result = open_port(&port, sh.conf.baud).and_then(|p| {
-            let mut link = Link::new(p, &port, sh.conf.baud, sh.conf.reply_timeout);
-            session(&sh, &mut link)
-        });
+        let result = open_port(&port, sh.conf.baud, "the unit")
+            .map_err(|what| LinkError::Open {
+                port: port.clone(),
+                what,
+            })
+            .and_then(|p| {
+                let mut link = Link::new(p, &port, sh.conf.baud, sh.conf.head.reply_timeout);
+                session(&sh, &mut link)
+            });
         match result {
             Ok(()) => return,
             Err(e) => {
