@@ -32,6 +32,9 @@
 //!   is reported once, naming the port and what to check; both interfaces are marked
 //!   stale with the reason, and the driver reopens the port every second until the
 //!   unit answers again (then runs the init again). The rest of the run goes on.
+//!   The unit is a [`Device`] under [`Supervisor`], which owns the thread, the
+//!   retries, the stale marking and the log line per change; its shared lines and
+//!   its port come from [`crate::serialhead`].
 //!
 //! System packages: none (the `serialport` crate without libudev). Your user needs
 //! access to the port (usually the `dialout` group).
@@ -40,10 +43,7 @@ pub mod protocol;
 
 use std::{
     io::{Read, Write},
-    sync::{
-        Arc,
-        atomic::{AtomicBool, Ordering},
-    },
+    sync::Arc,
     time::{Duration, Instant},
 };
 
@@ -52,8 +52,8 @@ use crate::{
         ComponentConf,
         settings::{Setting, choice, int},
     },
-    interfaces::{Interface, PtEncoders, PtMotors, limit},
-    runtime::{Driver, Runtime, Worker},
+    interfaces::{AnyInterface, Interface, PtEncoders, PtMotors, limit},
+    runtime::{Backoff, Device, Driver, Runtime, Supervision, Supervisor},
     serialhead::{HeadConf, POLL, REPLY_TIMEOUT, SERIAL, open_port},
 };
 use protocol::{Axis, ENCOD_TO_DEG, Query, ReplyError};
@@ -301,6 +301,10 @@ impl Link {
     }
 }
 
+/// How often a port that cannot be opened, or a unit that does not answer, is
+/// tried again.
+const RETRY: Duration = Duration::from_secs(1);
+
 /// The unit's limits in steps.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Limits {
@@ -391,116 +395,109 @@ fn initial_motors() -> PtMotors {
     }
 }
 
-struct Shared {
+/// The unit as the supervisor sees it.
+struct Ptu {
     conf: PtuConf,
-    provider: String,
     enc: Option<Arc<Interface<PtEncoders>>>,
     mot: Option<Arc<Interface<PtMotors>>>,
-    stop: Arc<AtomicBool>,
 }
 
-impl Shared {
-    fn stale(&self, why: &str) {
-        if let Some(e) = &self.enc {
-            e.set_stale(why);
-        }
+/// One session with the unit: its link, its limits, what was sent.
+struct Session {
+    link: Link,
+    limits: Limits,
+    sent: [Sent; 2],
+    seen_clock: Option<u64>,
+    cmds: Vec<String>,
+    next_poll: Instant,
+}
+
+impl Ptu {
+    /// Opens the port and runs the init; publishes the unit's limits.
+    fn open_session(&mut self) -> Result<Session, LinkError> {
+        let port = &self.conf.head.serial;
+        let p = open_port(port, self.conf.baud, "the unit").map_err(|what| LinkError::Open {
+            port: port.clone(),
+            what,
+        })?;
+        let mut link = Link::new(p, port, self.conf.baud, self.conf.head.reply_timeout);
+        let limits = init(&mut link)?;
         if let Some(m) = &self.mot {
-            m.set_stale(why);
+            // A copy of the latest command with the unit's limits (not `write`, whose
+            // recycled buffer may hold an older command).
+            let mut v = m.read().value;
+            (v.min_longitude, v.max_longitude) = (
+                protocol::steps_to_deg(limits.pan.0) as f32,
+                protocol::steps_to_deg(limits.pan.1) as f32,
+            );
+            (v.min_latitude, v.max_latitude) = (
+                protocol::steps_to_deg(limits.tilt.0) as f32,
+                protocol::steps_to_deg(limits.tilt.1) as f32,
+            );
+            v.max_longitude_speed = protocol::MAX_SPEED;
+            v.max_latitude_speed = protocol::MAX_SPEED;
+            let _ = m.publish(v);
         }
+        // What the init sequence left on the unit.
+        let home = Sent {
+            position: Some(0),
+            speed: Some(protocol::INIT_SPEED_STEPS),
+        };
+        Ok(Session {
+            link,
+            limits,
+            sent: [home, home],
+            seen_clock: None,
+            cmds: Vec::new(),
+            next_poll: Instant::now(),
+        })
     }
-    fn stopping(&self) -> bool {
-        self.stop.load(Ordering::Acquire)
-    }
-    /// Sleeps up to `d`, waking early on stop.
-    fn sleep(&self, d: Duration) {
-        let t0 = Instant::now();
-        while !self.stopping() && t0.elapsed() < d {
-            std::thread::sleep(Duration::from_millis(20).min(d));
-        }
-    }
-}
 
-/// One session with the unit: init, then poll and command until an error.
-fn session(sh: &Shared, link: &mut Link) -> Result<(), LinkError> {
-    let limits = init(link)?;
-    let pan_lim = (
-        protocol::steps_to_deg(limits.pan.0) as f32,
-        protocol::steps_to_deg(limits.pan.1) as f32,
-    );
-    let tilt_lim = (
-        protocol::steps_to_deg(limits.tilt.0) as f32,
-        protocol::steps_to_deg(limits.tilt.1) as f32,
-    );
-    if let Some(m) = &sh.mot {
-        // A copy of the latest command with the unit's limits (not `write`, whose
-        // recycled buffer may hold an older command).
-        let mut v = m.read().value;
-        (v.min_longitude, v.max_longitude) = pan_lim;
-        (v.min_latitude, v.max_latitude) = tilt_lim;
-        v.max_longitude_speed = protocol::MAX_SPEED;
-        v.max_latitude_speed = protocol::MAX_SPEED;
-        let _ = m.publish(v);
-    }
-    // What the init sequence left on the unit.
-    let mut sent = [
-        Sent {
-            position: Some(0),
-            speed: Some(protocol::INIT_SPEED_STEPS),
-        },
-        Sent {
-            position: Some(0),
-            speed: Some(protocol::INIT_SPEED_STEPS),
-        },
-    ];
-    let mut seen_clock = None;
-    let mut cmds = Vec::new();
-    let mut next_poll = Instant::now();
-    loop {
-        if sh.stopping() {
-            return Ok(());
-        }
-        if let Some(m) = &sh.mot {
+    /// Sends what changed, polls when due.
+    fn serve(&mut self, s: &mut Session) -> Result<(), LinkError> {
+        if let Some(m) = &self.mot {
             let c = m.clock();
-            if seen_clock != Some(c) {
-                seen_clock = Some(c);
+            if s.seen_clock != Some(c) {
+                s.seen_clock = Some(c);
                 let v = m.read().value;
-                cmds.clear();
+                s.cmds.clear();
                 axis_commands(
                     Axis::Pan,
                     v.longitude,
                     v.longitude_speed,
-                    limits.pan,
-                    &mut sent[0],
-                    &mut cmds,
+                    s.limits.pan,
+                    &mut s.sent[0],
+                    &mut s.cmds,
                 );
                 axis_commands(
                     Axis::Tilt,
                     v.latitude,
                     v.latitude_speed,
-                    limits.tilt,
-                    &mut sent[1],
-                    &mut cmds,
+                    s.limits.tilt,
+                    &mut s.sent[1],
+                    &mut s.cmds,
                 );
-                for c in &cmds {
-                    link.command(c)?;
+                for c in &s.cmds {
+                    s.link.command(c)?;
                 }
             }
         }
         let now = Instant::now();
-        if now >= next_poll {
+        if now >= s.next_poll {
             // Absolute deadlines: the period does not drift with the reply time.
-            next_poll += sh.conf.head.poll;
-            if next_poll < now {
-                next_poll = now + sh.conf.head.poll;
+            s.next_poll += self.conf.head.poll;
+            if s.next_poll < now {
+                s.next_poll = now + self.conf.head.poll;
             }
             // A position outside the unit's own limits is a broken reply:
             // refused (the session ends and the line is resynchronised).
+            let link = &mut s.link;
             let pan = link.query(Axis::Pan, Query::Position)?;
             let pan = link.checked(
                 Axis::Pan,
                 Query::Position,
                 pan,
-                with_slack(limits.pan),
+                with_slack(s.limits.pan),
                 "the unit's pan limits",
             )?;
             let tilt = link.query(Axis::Tilt, Query::Position)?;
@@ -508,10 +505,10 @@ fn session(sh: &Shared, link: &mut Link) -> Result<(), LinkError> {
                 Axis::Tilt,
                 Query::Position,
                 tilt,
-                with_slack(limits.tilt),
+                with_slack(s.limits.tilt),
                 "the unit's tilt limits",
             )?;
-            if let Some(e) = &sh.enc {
+            if let Some(e) = &self.enc {
                 let _ = e.publish(PtEncoders {
                     pan_angle: protocol::steps_to_deg(pan) as f32,
                     tilt_angle: protocol::steps_to_deg(tilt) as f32,
@@ -519,44 +516,25 @@ fn session(sh: &Shared, link: &mut Link) -> Result<(), LinkError> {
             }
         }
         // Commands go out within half a millisecond; polls on time.
-        let wait = next_poll.saturating_duration_since(Instant::now());
+        let wait = s.next_poll.saturating_duration_since(Instant::now());
         std::thread::sleep(wait.min(Duration::from_micros(500)));
+        Ok(())
     }
 }
 
-/// The driver thread: open, run a session, report and retry.
-fn run(sh: Shared) {
-    let port = sh.conf.head.serial.clone();
-    let mut last_error: Option<String> = None;
-    while !sh.stopping() {
-        let result = open_port(&port, sh.conf.baud, "the unit")
-            .map_err(|what| LinkError::Open {
-                port: port.clone(),
-                what,
-            })
-            .and_then(|p| {
-                let mut link = Link::new(p, &port, sh.conf.baud, sh.conf.head.reply_timeout);
-                session(&sh, &mut link)
-            });
-        match result {
-            Ok(()) => return,
-            Err(e) => {
-                let why = format!("{}: {e}", sh.provider);
-                if last_error.as_deref() != Some(why.as_str()) {
-                    crate::output::println(format!("{why}; retrying every second"));
-                    tracing::warn!("{why}");
-                    last_error = Some(why.clone());
-                }
-                sh.stale(&why);
-                sh.sleep(Duration::from_secs(1));
-            }
-        }
+impl Device for Ptu {
+    type Session = Session;
+    fn open(&mut self) -> Result<Session, String> {
+        self.open_session().map_err(|e| e.to_string())
+    }
+    fn step(&mut self, s: &mut Session) -> Result<(), String> {
+        self.serve(s).map_err(|e| e.to_string())
     }
 }
 
-/// Provides the interfaces and starts the thread (which opens the port: a port that
-/// cannot be opened is reported and retried, the rest of the run goes on).
-pub fn start(conf: PtuConf, rt: &Runtime, provider: &str) -> anyhow::Result<Worker> {
+/// Provides the interfaces and starts supervising the unit (a port that cannot be
+/// opened is reported and retried every second; the rest of the run goes on).
+pub fn start(conf: PtuConf, rt: &Runtime, provider: &str) -> anyhow::Result<Supervisor> {
     let enc = conf
         .encoders
         .then(|| {
@@ -571,15 +549,23 @@ pub fn start(conf: PtuConf, rt: &Runtime, provider: &str) -> anyhow::Result<Work
                 .provide_value("pantiltmotors", provider, initial_motors())
         })
         .transpose()?;
-    let stop = Arc::new(AtomicBool::new(false));
-    let sh = Shared {
-        conf,
-        provider: provider.to_string(),
-        enc,
-        mot,
-        stop: stop.clone(),
-    };
-    Worker::start("pantilt", stop, move || run(sh))
+    let mut interfaces: Vec<Arc<dyn AnyInterface>> = Vec::new();
+    if let Some(e) = &enc {
+        interfaces.push(e.clone());
+    }
+    if let Some(m) = &mot {
+        interfaces.push(m.clone());
+    }
+    Supervisor::start(
+        Supervision {
+            name: provider.to_string(),
+            interfaces,
+            on_demand: false,
+            backoff: Backoff::fixed(RETRY),
+            absent: None,
+        },
+        Ptu { conf, enc, mot },
+    )
 }
 
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>> {
