@@ -391,6 +391,50 @@ fn conf_errors_name_the_line() {
     }
 }
 
+/// `jderobot help evi` prints its declared lines; `jderobot check` names every
+/// value out of range at its line, with the range, before any port is opened.
+#[test]
+fn help_prints_the_lines_and_check_names_every_range() {
+    let bin = env!("CARGO_BIN_EXE_jderobot");
+    let out = std::process::Command::new(bin)
+        .args(["help", "evi"])
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    for line in [
+        "serial DEVICE",
+        "camera ADDRESS",
+        "poll MS",
+        "reply_timeout MS",
+        "provides INTERFACE",
+        "default: 100",
+    ] {
+        assert!(text.contains(line), "{line}: {text}");
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("t.conf");
+    std::fs::write(
+        &file,
+        "driver evi\nserial /nonexistent/tty\npoll 0\ncamera 9\nprovides zoommotors\nend_driver\nload_driver evi\n",
+    )
+    .unwrap();
+    let out = std::process::Command::new(bin)
+        .arg("check")
+        .arg(&file)
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("t.conf:3: `poll`: MS (argument 1) is `0`, expected a whole number between 10 and 10000 ms"),
+        "{err}"
+    );
+    assert!(
+        err.contains("t.conf:4: `camera`: ADDRESS (argument 1) is `9`, expected a whole number between 1 and 7"),
+        "{err}"
+    );
+}
+
 /// Not a test: an emulated EVI-D100 to try `examples/evi.conf` without a camera.
 /// `EVI_PATH=/tmp/evi cargo test --features full --test evi -- --ignored --nocapture emulator`
 /// then `serial /tmp/evi` in the conf; it runs for `EVI_SECONDS` (default 600).

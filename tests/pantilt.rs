@@ -336,6 +336,50 @@ fn conf_errors_name_the_line() {
     }
 }
 
+/// `jderobot help pantilt` prints its declared lines; `jderobot check` names every
+/// value out of range at its line, with the range, before any port is opened.
+#[test]
+fn help_prints_the_lines_and_check_names_every_range() {
+    let bin = env!("CARGO_BIN_EXE_jderobot");
+    let out = std::process::Command::new(bin)
+        .args(["help", "pantilt"])
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    for line in [
+        "serial DEVICE",
+        "baud RATE",
+        "poll MS",
+        "reply_timeout MS",
+        "provides INTERFACE",
+        "default: 300",
+    ] {
+        assert!(text.contains(line), "{line}: {text}");
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("t.conf");
+    std::fs::write(
+        &file,
+        "driver pantilt\nserial /nonexistent/tty\npoll 0\nbaud 9\nprovides pantiltencoders\nend_driver\nload_driver pantilt\n",
+    )
+    .unwrap();
+    let out = std::process::Command::new(bin)
+        .arg("check")
+        .arg(&file)
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("t.conf:3: `poll`: MS (argument 1) is `0`, expected a whole number between 10 and 10000 ms"),
+        "{err}"
+    );
+    assert!(
+        err.contains("t.conf:4: `baud`: RATE (argument 1) is `9`, expected a whole number between 300 and 115200 baud"),
+        "{err}"
+    );
+}
+
 /// Not a test: an emulated PTU to try `examples/pantilt.conf` without a unit.
 /// `PTU_PATH=/tmp/ptu cargo test --features full --test pantilt -- --ignored --nocapture emulator`
 /// then `serial /tmp/ptu` in the conf; it runs for `PTU_SECONDS` (default 600).
