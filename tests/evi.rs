@@ -195,9 +195,15 @@ fn zoom_speed_tables_stop_buffer_full_and_not_executable() {
     );
     let pan = i16::from_be_bytes([stop[6] << 4 | stop[7], stop[8] << 4 | stop[9]]);
     assert!(pan < 0 && pan > -2267, "stopped on the way: {pan}");
+    // The head comes to rest on the way (where it was when the stop went out), not
+    // at the old target; no fixed window decides it on a loaded machine.
+    eventually("the head at rest", || {
+        let here = cam.position().0;
+        std::thread::sleep(Duration::from_millis(100));
+        cam.position().0 == here
+    });
     let here = cam.position().0;
-    std::thread::sleep(Duration::from_millis(300));
-    assert!((cam.position().0 - here).abs() <= 40, "stopped");
+    assert!(here < 0 && here > -2267, "stopped on the way: {here}");
     // Buffer full (0x03): the command is sent again until a socket frees.
     cam.set_faults(Faults {
         full: true,
