@@ -11,23 +11,49 @@
 //!
 //! This schema, `wanderer`, reads the laser and drives the robot: forward when the
 //! way ahead is clear, turning away from the nearer side when it is not.
+//!
+//! Its lines are declared once ([`LINES`]): `jderobot check` validates them and
+//! `cargo run --example own_schema -- help wanderer` prints them, with their units,
+//! ranges and defaults. A value out of range is an error at its file:line.
 
 use std::time::Duration;
 
 use jderobot::{
     Context, Runtime, Schema,
-    conf::ComponentConf,
+    conf::{
+        ComponentConf,
+        settings::{CYCLE, Setting, float},
+    },
     interfaces::{Laser, Motors},
 };
+
+/// The lines `wanderer` takes: key, arguments (type, unit, range), default, help.
+const LINES: &[Setting] = &[
+    Setting::new(
+        "clearance",
+        "the closest an obstacle ahead may be before the robot turns",
+        &[float("MM", "mm", 1.0, 10_000.0)],
+    )
+    .default("700"),
+    CYCLE.default("100"),
+];
+
+/// The values of [`LINES`]: one field per line.
+#[derive(serde::Deserialize)]
+struct Lines {
+    clearance: f32,
+    cycle: u64,
+}
 
 struct Wanderer {
     /// Closest allowed obstacle ahead, mm.
     clearance: f32,
+    cycle: Duration,
 }
 
 impl Schema for Wanderer {
     fn cycle(&self) -> Duration {
-        Duration::from_millis(100)
+        self.cycle
     }
 
     fn on_run(&mut self, ctx: &Context) -> anyhow::Result<()> {
@@ -68,20 +94,19 @@ impl Schema for Wanderer {
 }
 
 fn create(conf: &ComponentConf, _rt: &Runtime) -> anyhow::Result<Box<dyn Schema>> {
-    for l in &conf.lines {
-        if l.keyword() != "clearance" {
-            return Err(conf.unknown(l, "`clearance MM`").into());
-        }
-    }
-    let clearance = conf.value_or("clearance", "millimetres", 700.0f32)?;
-    Ok(Box::new(Wanderer { clearance }))
+    let lines: Lines = conf.settings(LINES)?;
+    Ok(Box::new(Wanderer {
+        clearance: lines.clearance,
+        cycle: Duration::from_millis(lines.cycle),
+    }))
 }
 
 jderobot::register_schema!(
     "wanderer",
     "example of a user's own schema: wanders, turning away from obstacles",
     create,
-    ""
+    "",
+    lines = LINES
 );
 
 fn main() -> std::process::ExitCode {

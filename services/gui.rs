@@ -31,7 +31,10 @@ fn create(conf: &ComponentConf, _rt: &Runtime) -> anyhow::Result<Box<dyn Driver>
 }
 
 fn alias(_conf: &ComponentConf, name: &str) -> anyhow::Result<Box<dyn Driver>> {
-    // 4.3's GUI services had no settings that mean anything here: their lines are ignored.
+    // 4.3's GUI services had no settings that mean anything here: their lines are
+    // ignored. They declare none (no `lines =`): neither the manual nor
+    // reference/jde43-behaviour.md says which lines 4.3 accepted, so `check` does not
+    // refuse a 4.3 conf's lines for them.
     eprintln!("{name}: replaced by the egui window (service gui)");
     Ok(Box::new(GuiService))
 }

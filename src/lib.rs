@@ -32,6 +32,8 @@ pub mod output;
 pub mod progeo;
 pub mod registry;
 pub mod runtime;
+#[cfg(feature = "_serialhead")]
+pub mod serialhead;
 pub mod shell;
 pub mod vision;
 #[cfg(feature = "gui")]

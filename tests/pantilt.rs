@@ -313,7 +313,7 @@ fn conf_errors_name_the_line() {
         ),
         (
             "driver pantilt\nserial /dev/null\nprovides laser\nend_driver\nload_driver pantilt\n",
-            "not `laser`",
+            "INTERFACE (argument 1) is `laser`, expected one of pantiltencoders, pantiltmotors",
         ),
         (
             "driver pantilt\nserial /dev/null\nbaud x\nprovides pantiltencoders\nend_driver\nload_driver pantilt\n",
@@ -321,7 +321,7 @@ fn conf_errors_name_the_line() {
         ),
         (
             "driver pantilt\nserial /dev/null\npoll 0\nprovides pantiltencoders\nend_driver\nload_driver pantilt\n",
-            "period in ms",
+            "test.conf:3: `poll`: MS (argument 1) is `0`, expected a whole number between 10 and 10000 ms",
         ),
     ] {
         let conf = jderobot::Conf::parse(text, std::path::Path::new("test.conf")).unwrap();
@@ -334,6 +334,50 @@ fn conf_errors_name_the_line() {
         };
         assert!(err.contains(expect), "{err}");
     }
+}
+
+/// `jderobot help pantilt` prints its declared lines; `jderobot check` names every
+/// value out of range at its line, with the range, before any port is opened.
+#[test]
+fn help_prints_the_lines_and_check_names_every_range() {
+    let bin = env!("CARGO_BIN_EXE_jderobot");
+    let out = std::process::Command::new(bin)
+        .args(["help", "pantilt"])
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    for line in [
+        "serial DEVICE",
+        "baud RATE",
+        "poll MS",
+        "reply_timeout MS",
+        "provides INTERFACE",
+        "default: 300",
+    ] {
+        assert!(text.contains(line), "{line}: {text}");
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("t.conf");
+    std::fs::write(
+        &file,
+        "driver pantilt\nserial /nonexistent/tty\npoll 0\nbaud 9\nprovides pantiltencoders\nend_driver\nload_driver pantilt\n",
+    )
+    .unwrap();
+    let out = std::process::Command::new(bin)
+        .arg("check")
+        .arg(&file)
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("t.conf:3: `poll`: MS (argument 1) is `0`, expected a whole number between 10 and 10000 ms"),
+        "{err}"
+    );
+    assert!(
+        err.contains("t.conf:4: `baud`: RATE (argument 1) is `9`, expected a whole number between 300 and 115200 baud"),
+        "{err}"
+    );
 }
 
 /// Not a test: an emulated PTU to try `examples/pantilt.conf` without a unit.

@@ -38,7 +38,9 @@
 //!   provided interface marked stale, and the port reopened every second until the
 //!   camera answers (the run goes on). Each session begins by discarding what waits
 //!   on the line (until 50 ms of quiet), so the rest of a burst of garbage does not
-//!   keep the camera stale after it is sane again.
+//!   keep the camera stale after it is sane again. The camera is a [`Device`]
+//!   under [`Supervisor`] (the thread, the retries, the stale marking, one log line
+//!   per change); its shared lines and its port come from [`crate::serialhead`].
 //! - Answers out of the EVI-D100's range (pan ±0x08DB, tilt ±0x0190, zoom
 //!   0..0x7000) are refused as a broken line, never written into an interface.
 //!
@@ -49,103 +51,98 @@ pub mod protocol;
 
 use std::{
     io::{Read, Write},
-    sync::{
-        Arc,
-        atomic::{AtomicBool, Ordering},
-    },
+    sync::Arc,
     time::{Duration, Instant},
 };
 
 use crate::{
-    conf::ComponentConf,
-    interfaces::{Interface, PtEncoders, PtMotors, ZoomEncoders, ZoomMotors, limit},
-    runtime::{Driver, Runtime, Worker},
+    conf::{
+        ComponentConf,
+        settings::{Setting, choice, int},
+    },
+    interfaces::{AnyInterface, Interface, PtEncoders, PtMotors, ZoomEncoders, ZoomMotors, limit},
+    runtime::{Backoff, Device, Driver, Runtime, Supervision, Supervisor},
+    serialhead::{HeadConf, POLL, REPLY_TIMEOUT, SERIAL, open_port},
 };
 use protocol::{Reply, ViscaError};
 
 /// The driver's settings.
 #[derive(Clone, Debug)]
 pub struct EviConf {
-    pub serial: String,
+    /// `serial`, `poll`, `reply_timeout`, `provides`.
+    pub head: HeadConf,
     pub camera: u8,
-    pub poll: Duration,
-    pub reply_timeout: Duration,
     pub pantiltencoders: bool,
     pub pantiltmotors: bool,
     pub zoomencoders: bool,
     pub zoommotors: bool,
 }
 
+/// The lines `evi` takes (`jderobot help evi` prints them).
+const LINES: &[Setting] = &[
+    SERIAL,
+    Setting::new(
+        "camera",
+        "the camera's VISCA address (after an address set, the first camera is 1)",
+        &[int("ADDRESS", "", 1, 7)],
+    )
+    .default("1"),
+    POLL.default("100"),
+    REPLY_TIMEOUT,
+    Setting::new(
+        "provides",
+        "an interface it provides: pantiltencoders, pantiltmotors, zoomencoders, zoommotors (4.3's ptencoders, ptmotors, zencoders, zmotors)",
+        &[choice(
+            "INTERFACE",
+            &[
+                "pantiltencoders",
+                "pantiltmotors",
+                "zoomencoders",
+                "zoommotors",
+                "ptencoders",
+                "ptmotors",
+                "zencoders",
+                "zmotors",
+            ],
+        )],
+    )
+    .repeats(),
+];
+
+/// The values of [`LINES`].
+#[derive(serde::Deserialize)]
+struct Lines {
+    serial: Option<String>,
+    camera: u8,
+    poll: u64,
+    reply_timeout: u64,
+    provides: Vec<String>,
+}
+
 impl EviConf {
     pub fn parse(conf: &ComponentConf) -> anyhow::Result<EviConf> {
-        let mut c = EviConf {
-            serial: String::new(),
-            camera: 1,
-            poll: Duration::from_millis(100),
-            reply_timeout: Duration::from_millis(1000),
-            pantiltencoders: false,
-            pantiltmotors: false,
-            zoomencoders: false,
-            zoommotors: false,
+        let lines: Lines = conf.settings(LINES)?;
+        let head = HeadConf::new(
+            conf,
+            lines.serial,
+            lines.poll,
+            lines.reply_timeout,
+            &lines.provides,
+            &[
+                "pantiltencoders",
+                "pantiltmotors",
+                "zoomencoders",
+                "zoommotors",
+            ],
+        )?;
+        let c = EviConf {
+            camera: lines.camera,
+            pantiltencoders: head.provides("pantiltencoders"),
+            pantiltmotors: head.provides("pantiltmotors"),
+            zoomencoders: head.provides("zoomencoders"),
+            zoommotors: head.provides("zoommotors"),
+            head,
         };
-        let mut serial = None;
-        for l in &conf.lines {
-            match l.keyword() {
-                "serial" => {
-                    l.expect_args(1, 1, "serial DEVICE")?;
-                    serial = Some(l.args()[0].clone());
-                }
-                "camera" => {
-                    l.expect_args(1, 1, "camera ADDRESS")?;
-                    c.camera = l.number(0, "a VISCA address", 1..=7)?;
-                }
-                "poll" => {
-                    l.expect_args(1, 1, "poll MS")?;
-                    c.poll = l.millis(0, "a period in ms", 10..=10_000)?;
-                }
-                "reply_timeout" => {
-                    l.expect_args(1, 1, "reply_timeout MS")?;
-                    c.reply_timeout = l.millis(0, "a timeout in ms", 10..=60_000)?;
-                }
-                "provides" => {
-                    l.expect_args(
-                        1,
-                        1,
-                        "provides pantiltencoders|pantiltmotors|zoomencoders|zoommotors",
-                    )?;
-                    match l.interface(0)?.as_str() {
-                        "pantiltencoders" => c.pantiltencoders = true,
-                        "pantiltmotors" => c.pantiltmotors = true,
-                        "zoomencoders" => c.zoomencoders = true,
-                        "zoommotors" => c.zoommotors = true,
-                        other => {
-                            return Err(l
-                                .error(format!(
-                                    "evi provides pantiltencoders, pantiltmotors, zoomencoders and zoommotors, not `{other}`"
-                                ))
-                                .into());
-                        }
-                    }
-                }
-                _ => {
-                    return Err(conf
-                        .unknown(l, "serial, camera, poll, reply_timeout or provides")
-                        .into());
-                }
-            }
-        }
-        c.serial = serial.ok_or_else(|| {
-            anyhow::anyhow!(
-                "{}: driver evi needs a `serial DEVICE` line (e.g. `serial /dev/ttyUSB0`)",
-                conf.file.display()
-            )
-        })?;
-        if !(c.pantiltencoders || c.pantiltmotors || c.zoomencoders || c.zoommotors) {
-            anyhow::bail!(
-                "{}: driver evi provides nothing; add `provides pantiltencoders`, `pantiltmotors`, `zoomencoders` or `zoommotors`",
-                conf.file.display()
-            );
-        }
         Ok(c)
     }
 }
@@ -199,44 +196,6 @@ pub enum LinkError {
     },
     #[error("{port}: the port failed ({what}); was the camera unplugged?")]
     Io { port: String, what: String },
-}
-
-/// Opens `path` as a serial port at 9600 baud, with errors that say what to check.
-pub fn open_port(path: &str) -> Result<Box<dyn serialport::SerialPort>, LinkError> {
-    let open_err = |what: String| LinkError::Open {
-        port: path.to_string(),
-        what,
-    };
-    match std::fs::metadata(path) {
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
-            return Err(open_err(
-                "does not exist (is the camera's VISCA cable plugged in? `ls /dev/ttyUSB* /dev/ttyS*` lists the ports)".into(),
-            ));
-        }
-        Err(e) => return Err(open_err(format!("cannot be read: {e}"))),
-        Ok(m) if m.is_file() || m.is_dir() => {
-            return Err(open_err(
-                "is not a serial device (a regular file or directory); check the `serial` line"
-                    .into(),
-            ));
-        }
-        Ok(_) => {}
-    }
-    serialport::new(path, 9600)
-        .timeout(Duration::from_millis(5))
-        .open()
-        .map_err(|e| {
-            let what = match e.kind() {
-                serialport::ErrorKind::Io(std::io::ErrorKind::PermissionDenied) => format!(
-                    "permission denied ({e}); add your user to the group that owns it (`ls -l {path}`, usually `dialout`)"
-                ),
-                serialport::ErrorKind::NoDevice => {
-                    format!("no device ({e}); is the camera plugged in?")
-                }
-                _ => format!("cannot be opened as a serial port: {e}"),
-            };
-            open_err(what)
-        })
 }
 
 /// The longest VISCA packet is 16 bytes.
@@ -549,40 +508,27 @@ pub fn pantilt_target(m: &PtMotors, here: (i32, i32)) -> (u8, u8, i32, i32) {
     (pm, tm, pan, tilt)
 }
 
-struct Shared {
+/// The camera as the supervisor sees it.
+struct Evi {
     conf: EviConf,
     provider: String,
     pte: Option<Arc<Interface<PtEncoders>>>,
     ptm: Option<Arc<Interface<PtMotors>>>,
     ze: Option<Arc<Interface<ZoomEncoders>>>,
     zm: Option<Arc<Interface<ZoomMotors>>>,
-    stop: Arc<AtomicBool>,
+    /// The open session (kept here, not in the supervisor's hands, so that a stop
+    /// can power the camera off as 4.3 did; a lost session is dropped first).
+    session: Option<EviSession>,
 }
 
-impl Shared {
-    fn stale(&self, why: &str) {
-        if let Some(i) = &self.pte {
-            i.set_stale(why);
-        }
-        if let Some(i) = &self.ptm {
-            i.set_stale(why);
-        }
-        if let Some(i) = &self.ze {
-            i.set_stale(why);
-        }
-        if let Some(i) = &self.zm {
-            i.set_stale(why);
-        }
-    }
-    fn stopping(&self) -> bool {
-        self.stop.load(Ordering::Acquire)
-    }
-    fn sleep(&self, d: Duration) {
-        let t0 = Instant::now();
-        while !self.stopping() && t0.elapsed() < d {
-            std::thread::sleep(Duration::from_millis(20).min(d));
-        }
-    }
+/// One session with the camera.
+struct EviSession {
+    link: Link,
+    /// Where the head was last seen (VISCA units).
+    here: (i32, i32),
+    pt: Pending<(u8, u8, i32, i32)>,
+    zoom: Pending<i32>,
+    next_poll: Instant,
 }
 
 /// What was last sent for a command interface, and the interface clock it answered.
@@ -596,7 +542,7 @@ struct Pending<K> {
 /// `refused` (an interface to mark stale). Returns whether it went out (or was
 /// refused for good).
 fn try_command<T: crate::interfaces::InterfaceValue>(
-    sh: &Shared,
+    provider: &str,
     link: &mut Link,
     p: &[u8],
     refused: Option<&Interface<T>>,
@@ -613,7 +559,7 @@ fn try_command<T: crate::interfaces::InterfaceValue>(
                 ..
             },
         ) => {
-            let why = format!("{}: {e}", sh.provider);
+            let why = format!("{provider}: {e}");
             crate::output::println(why.clone());
             if let Some(i) = refused {
                 i.set_stale(why);
@@ -624,40 +570,69 @@ fn try_command<T: crate::interfaces::InterfaceValue>(
     }
 }
 
-fn session(sh: &Shared, link: &mut Link) -> Result<(), LinkError> {
-    init(link)?;
-    let addr = link.addr;
-    let mut here = link.pantilt()?;
-    let mut pt: Pending<(u8, u8, i32, i32)> = Pending::default();
-    let mut zoom: Pending<i32> = Pending::default();
-    // The head is where it is: the initial command (clock 0) asks nothing of it.
-    if let Some(m) = &sh.ptm {
-        let mut v = m.read().value;
-        if m.clock() == 0 {
-            v.longitude = protocol::units_to_deg(here.0, protocol::PAN_LIMIT, protocol::PAN_UNITS);
-            v.latitude = protocol::units_to_deg(here.1, protocol::TILT_LIMIT, protocol::TILT_UNITS);
+impl Evi {
+    /// Opens the port, runs the init and reads where the head and the zoom are.
+    fn open_session(&mut self) -> Result<EviSession, LinkError> {
+        let port = &self.conf.head.serial;
+        let p = open_port(port, 9600, "the camera (its VISCA cable)").map_err(|what| {
+            LinkError::Open {
+                port: port.clone(),
+                what,
+            }
+        })?;
+        let mut owned = Link::new(p, port, self.conf.camera, self.conf.head.reply_timeout);
+        let link = &mut owned;
+        init(link)?;
+        let here = link.pantilt()?;
+        let mut pt: Pending<(u8, u8, i32, i32)> = Pending::default();
+        let mut zoom: Pending<i32> = Pending::default();
+        // The head is where it is: the initial command (clock 0) asks nothing of it.
+        if let Some(m) = &self.ptm {
+            let mut v = m.read().value;
+            if m.clock() == 0 {
+                v.longitude =
+                    protocol::units_to_deg(here.0, protocol::PAN_LIMIT, protocol::PAN_UNITS);
+                v.latitude =
+                    protocol::units_to_deg(here.1, protocol::TILT_LIMIT, protocol::TILT_UNITS);
+            }
+            let _ = m.publish(v);
+            pt.clock = Some(m.clock());
         }
-        let _ = m.publish(v);
-        pt.clock = Some(m.clock());
-    }
-    if let Some(z) = &sh.zm {
-        let mut v = z.read().value;
-        if z.clock() == 0 {
-            v.zoom = protocol::units_to_zoom(link.zoom()?);
+        if let Some(z) = &self.zm {
+            let mut v = z.read().value;
+            if z.clock() == 0 {
+                v.zoom = protocol::units_to_zoom(link.zoom()?);
+            }
+            let _ = z.publish(v);
+            zoom.clock = Some(z.clock());
         }
-        let _ = z.publish(v);
-        zoom.clock = Some(z.clock());
+        Ok(EviSession {
+            link: owned,
+            here,
+            pt,
+            zoom,
+            next_poll: Instant::now(),
+        })
     }
-    let mut next_poll = Instant::now();
-    while !sh.stopping() {
-        if let Some(m) = &sh.ptm {
+
+    /// Sends what changed (each command waits for its ACK), polls when due.
+    fn serve(&mut self, s: &mut EviSession) -> Result<(), LinkError> {
+        let EviSession {
+            link,
+            here,
+            pt,
+            zoom,
+            next_poll,
+        } = s;
+        let addr = link.addr;
+        if let Some(m) = &self.ptm {
             let c = m.clock();
             if pt.clock != Some(c) {
-                let target = pantilt_target(&m.read().value, here);
+                let target = pantilt_target(&m.read().value, *here);
                 if pt.sent != Some(target) {
                     let p =
                         protocol::pantilt_absolute(addr, target.0, target.1, target.2, target.3);
-                    if try_command(sh, link, &p, Some(m.as_ref()))? {
+                    if try_command(&self.provider, link, &p, Some(m.as_ref()))? {
                         pt.sent = Some(target);
                         pt.clock = Some(c);
                     }
@@ -666,13 +641,13 @@ fn session(sh: &Shared, link: &mut Link) -> Result<(), LinkError> {
                 }
             }
         }
-        if let Some(z) = &sh.zm {
+        if let Some(z) = &self.zm {
             let c = z.clock();
             if zoom.clock != Some(c) {
                 let units = protocol::zoom_to_units(z.read().zoom);
                 if zoom.sent != Some(units) {
                     let p = protocol::zoom_direct(addr, units);
-                    if try_command(sh, link, &p, Some(z.as_ref()))? {
+                    if try_command(&self.provider, link, &p, Some(z.as_ref()))? {
                         zoom.sent = Some(units);
                         zoom.clock = Some(c);
                     }
@@ -682,13 +657,13 @@ fn session(sh: &Shared, link: &mut Link) -> Result<(), LinkError> {
             }
         }
         let now = Instant::now();
-        if now >= next_poll {
-            next_poll += sh.conf.poll;
-            if next_poll < now {
-                next_poll = now + sh.conf.poll;
+        if now >= *next_poll {
+            *next_poll += self.conf.head.poll;
+            if *next_poll < now {
+                *next_poll = now + self.conf.head.poll;
             }
-            here = link.pantilt()?;
-            if let Some(e) = &sh.pte {
+            *here = link.pantilt()?;
+            if let Some(e) = &self.pte {
                 let _ = e.publish(PtEncoders {
                     pan_angle: protocol::units_to_deg(
                         here.0,
@@ -702,7 +677,7 @@ fn session(sh: &Shared, link: &mut Link) -> Result<(), LinkError> {
                     ),
                 });
             }
-            if let Some(e) = &sh.ze {
+            if let Some(e) = &self.ze {
                 let z = link.zoom()?;
                 let _ = e.publish(ZoomEncoders {
                     zoom_position: protocol::units_to_zoom(z),
@@ -711,34 +686,33 @@ fn session(sh: &Shared, link: &mut Link) -> Result<(), LinkError> {
         }
         let wait = next_poll.saturating_duration_since(Instant::now());
         std::thread::sleep(wait.min(Duration::from_micros(500)));
+        Ok(())
     }
-    // Terminate: power off, as 4.3.
-    link.command_done(&protocol::power(addr, false), Duration::from_secs(2))
 }
 
-fn run(sh: Shared) {
-    let port = sh.conf.serial.clone();
-    let mut last_error: Option<String> = None;
-    while !sh.stopping() {
-        let result = open_port(&port).and_then(|p| {
-            let mut link = Link::new(p, &port, sh.conf.camera, sh.conf.reply_timeout);
-            session(&sh, &mut link)
-        });
-        match result {
-            Ok(()) => return,
-            Err(e) => {
-                let why = format!("{}: {e}", sh.provider);
-                if sh.stopping() {
-                    tracing::warn!("{why}");
-                    return;
-                }
-                if last_error.as_deref() != Some(why.as_str()) {
-                    crate::output::println(format!("{why}; retrying every second"));
-                    tracing::warn!("{why}");
-                    last_error = Some(why.clone());
-                }
-                sh.stale(&why);
-                sh.sleep(Duration::from_secs(1));
+impl Device for Evi {
+    type Session = ();
+    fn open(&mut self) -> Result<(), String> {
+        self.session = Some(self.open_session().map_err(|e| e.to_string())?);
+        Ok(())
+    }
+    fn step(&mut self, _: &mut ()) -> Result<(), String> {
+        let Some(mut s) = self.session.take() else {
+            return Err("no session".into());
+        };
+        self.serve(&mut s).map_err(|e| e.to_string())?;
+        self.session = Some(s);
+        Ok(())
+    }
+    /// On a stop with the camera answering: power off, as 4.3 did.
+    fn on_loss(&mut self) {
+        if let Some(mut s) = self.session.take() {
+            let addr = s.link.addr;
+            if let Err(e) = s
+                .link
+                .command_done(&protocol::power(addr, false), Duration::from_secs(2))
+            {
+                tracing::warn!("{}: {e}", self.provider);
             }
         }
     }
@@ -762,7 +736,7 @@ fn initial_pantilt() -> PtMotors {
 
 /// Provides the interfaces and starts the thread (a port that cannot be opened is
 /// reported and retried; the rest of the run goes on).
-pub fn start(conf: EviConf, rt: &Runtime, provider: &str) -> anyhow::Result<Worker> {
+pub fn start(conf: EviConf, rt: &Runtime, provider: &str) -> anyhow::Result<Supervisor> {
     let ifs = &rt.interfaces;
     let pte = conf
         .pantiltencoders
@@ -792,17 +766,32 @@ pub fn start(conf: EviConf, rt: &Runtime, provider: &str) -> anyhow::Result<Work
             )
         })
         .transpose()?;
-    let stop = Arc::new(AtomicBool::new(false));
-    let sh = Shared {
-        conf,
-        provider: provider.to_string(),
-        pte,
-        ptm,
-        ze,
-        zm,
-        stop: stop.clone(),
-    };
-    Worker::start("evi", stop, move || run(sh))
+    let mut interfaces: Vec<Arc<dyn AnyInterface>> = Vec::new();
+    let all = [
+        pte.clone().map(|i| i as Arc<dyn AnyInterface>),
+        ptm.clone().map(|i| i as Arc<dyn AnyInterface>),
+        ze.clone().map(|i| i as Arc<dyn AnyInterface>),
+        zm.clone().map(|i| i as Arc<dyn AnyInterface>),
+    ];
+    interfaces.extend(all.into_iter().flatten());
+    Supervisor::start(
+        Supervision {
+            name: provider.to_string(),
+            interfaces,
+            on_demand: false,
+            backoff: Backoff::fixed(Duration::from_secs(1)),
+            absent: None,
+        },
+        Evi {
+            conf,
+            provider: provider.to_string(),
+            pte,
+            ptm,
+            ze,
+            zm,
+            session: None,
+        },
+    )
 }
 
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>> {
@@ -814,5 +803,6 @@ crate::register_driver!(
     Driver,
     "evi",
     "Sony EVI-D100 pan-tilt-zoom camera over VISCA: pantiltencoders, pantiltmotors, zoomencoders, zoommotors",
-    create
+    create,
+    lines = LINES
 );

@@ -32,6 +32,9 @@
 //!   is reported once, naming the port and what to check; both interfaces are marked
 //!   stale with the reason, and the driver reopens the port every second until the
 //!   unit answers again (then runs the init again). The rest of the run goes on.
+//!   The unit is a [`Device`] under [`Supervisor`], which owns the thread, the
+//!   retries, the stale marking and the log line per change; its shared lines and
+//!   its port come from [`crate::serialhead`].
 //!
 //! System packages: none (the `serialport` crate without libudev). Your user needs
 //! access to the port (usually the `dialout` group).
@@ -40,94 +43,81 @@ pub mod protocol;
 
 use std::{
     io::{Read, Write},
-    sync::{
-        Arc,
-        atomic::{AtomicBool, Ordering},
-    },
+    sync::Arc,
     time::{Duration, Instant},
 };
 
 use crate::{
-    conf::ComponentConf,
-    interfaces::{Interface, PtEncoders, PtMotors, limit},
-    runtime::{Driver, Runtime, Worker},
+    conf::{
+        ComponentConf,
+        settings::{Setting, choice, int},
+    },
+    interfaces::{AnyInterface, Interface, PtEncoders, PtMotors, limit},
+    runtime::{Backoff, Device, Driver, Runtime, Supervision, Supervisor},
+    serialhead::{HeadConf, POLL, REPLY_TIMEOUT, SERIAL, open_port},
 };
 use protocol::{Axis, ENCOD_TO_DEG, Query, ReplyError};
 
 /// The driver's settings.
 #[derive(Clone, Debug)]
 pub struct PtuConf {
-    pub serial: String,
+    /// `serial`, `poll`, `reply_timeout`, `provides`.
+    pub head: HeadConf,
     pub baud: u32,
-    pub poll: Duration,
-    pub reply_timeout: Duration,
     pub encoders: bool,
     pub motors: bool,
+}
+
+/// The lines `pantilt` takes (`jderobot help pantilt` prints them).
+const LINES: &[Setting] = &[
+    SERIAL,
+    Setting::new(
+        "baud",
+        "the line speed (the unit's default is 9600)",
+        &[int("RATE", "baud", 300, 115_200)],
+    )
+    .default("9600"),
+    POLL.default("300"),
+    REPLY_TIMEOUT,
+    Setting::new(
+        "provides",
+        "an interface it provides: pantiltencoders and/or pantiltmotors (4.3's ptencoders, ptmotors)",
+        &[choice(
+            "INTERFACE",
+            &["pantiltencoders", "pantiltmotors", "ptencoders", "ptmotors"],
+        )],
+    )
+    .repeats(),
+];
+
+/// The values of [`LINES`].
+#[derive(serde::Deserialize)]
+struct Lines {
+    serial: Option<String>,
+    baud: u32,
+    poll: u64,
+    reply_timeout: u64,
+    provides: Vec<String>,
 }
 
 impl PtuConf {
     /// Parses the driver's lines (errors name file:line).
     pub fn parse(conf: &ComponentConf) -> anyhow::Result<PtuConf> {
-        let mut c = PtuConf {
-            serial: String::new(),
-            baud: 9600,
-            poll: Duration::from_millis(300),
-            reply_timeout: Duration::from_millis(1000),
-            encoders: false,
-            motors: false,
+        let lines: Lines = conf.settings(LINES)?;
+        let head = HeadConf::new(
+            conf,
+            lines.serial,
+            lines.poll,
+            lines.reply_timeout,
+            &lines.provides,
+            &["pantiltencoders", "pantiltmotors"],
+        )?;
+        let c = PtuConf {
+            baud: lines.baud,
+            encoders: head.provides("pantiltencoders"),
+            motors: head.provides("pantiltmotors"),
+            head,
         };
-        let mut serial = None;
-        for l in &conf.lines {
-            match l.keyword() {
-                "serial" => {
-                    l.expect_args(1, 1, "serial DEVICE")?;
-                    serial = Some(l.args()[0].clone());
-                }
-                "baud" => {
-                    l.expect_args(1, 1, "baud RATE")?;
-                    c.baud = l.number(0, "a baud rate", 300..=115_200)?;
-                }
-                "poll" => {
-                    l.expect_args(1, 1, "poll MS")?;
-                    c.poll = l.millis(0, "a period in ms", 10..=10_000)?;
-                }
-                "reply_timeout" => {
-                    l.expect_args(1, 1, "reply_timeout MS")?;
-                    c.reply_timeout = l.millis(0, "a timeout in ms", 10..=60_000)?;
-                }
-                "provides" => {
-                    l.expect_args(1, 1, "provides pantiltencoders|pantiltmotors")?;
-                    match l.interface(0)?.as_str() {
-                        "pantiltencoders" => c.encoders = true,
-                        "pantiltmotors" => c.motors = true,
-                        other => {
-                            return Err(l
-                                .error(format!(
-                                    "pantilt provides pantiltencoders and pantiltmotors, not `{other}`"
-                                ))
-                                .into());
-                        }
-                    }
-                }
-                _ => {
-                    return Err(conf
-                        .unknown(l, "serial, baud, poll, reply_timeout or provides")
-                        .into());
-                }
-            }
-        }
-        c.serial = serial.ok_or_else(|| {
-            anyhow::anyhow!(
-                "{}: driver pantilt needs a `serial DEVICE` line (e.g. `serial /dev/ttyUSB0`)",
-                conf.file.display()
-            )
-        })?;
-        if !c.encoders && !c.motors {
-            anyhow::bail!(
-                "{}: driver pantilt provides nothing; add `provides pantiltencoders` and/or `provides pantiltmotors`",
-                conf.file.display()
-            );
-        }
         Ok(c)
     }
 }
@@ -154,44 +144,6 @@ pub enum LinkError {
     },
     #[error("{port}: the port failed ({what}); was the unit unplugged?")]
     Io { port: String, what: String },
-}
-
-/// Opens `path` as a serial port, with errors that say what to check.
-pub fn open_port(path: &str, baud: u32) -> Result<Box<dyn serialport::SerialPort>, LinkError> {
-    let open_err = |what: String| LinkError::Open {
-        port: path.to_string(),
-        what,
-    };
-    match std::fs::metadata(path) {
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
-            return Err(open_err(
-                "does not exist (is the unit plugged in? `ls /dev/ttyUSB* /dev/ttyS*` lists the ports)".into(),
-            ));
-        }
-        Err(e) => return Err(open_err(format!("cannot be read: {e}"))),
-        Ok(m) if m.is_file() || m.is_dir() => {
-            return Err(open_err(
-                "is not a serial device (a regular file or directory); check the `serial` line"
-                    .into(),
-            ));
-        }
-        Ok(_) => {}
-    }
-    serialport::new(path, baud)
-        .timeout(Duration::from_millis(5))
-        .open()
-        .map_err(|e| {
-            let what = match e.kind() {
-                serialport::ErrorKind::Io(std::io::ErrorKind::PermissionDenied) => format!(
-                    "permission denied ({e}); add your user to the group that owns it (`ls -l {path}`, usually `dialout`)"
-                ),
-                serialport::ErrorKind::NoDevice => {
-                    format!("no device ({e}); is the unit plugged in?")
-                }
-                _ => format!("cannot be opened as a serial port: {e}"),
-            };
-            open_err(what)
-        })
 }
 
 /// A line-oriented link to the unit.
@@ -349,6 +301,10 @@ impl Link {
     }
 }
 
+/// How often a port that cannot be opened, or a unit that does not answer, is
+/// tried again.
+const RETRY: Duration = Duration::from_secs(1);
+
 /// The unit's limits in steps.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Limits {
@@ -439,116 +395,109 @@ fn initial_motors() -> PtMotors {
     }
 }
 
-struct Shared {
+/// The unit as the supervisor sees it.
+struct Ptu {
     conf: PtuConf,
-    provider: String,
     enc: Option<Arc<Interface<PtEncoders>>>,
     mot: Option<Arc<Interface<PtMotors>>>,
-    stop: Arc<AtomicBool>,
 }
 
-impl Shared {
-    fn stale(&self, why: &str) {
-        if let Some(e) = &self.enc {
-            e.set_stale(why);
-        }
+/// One session with the unit: its link, its limits, what was sent.
+struct Session {
+    link: Link,
+    limits: Limits,
+    sent: [Sent; 2],
+    seen_clock: Option<u64>,
+    cmds: Vec<String>,
+    next_poll: Instant,
+}
+
+impl Ptu {
+    /// Opens the port and runs the init; publishes the unit's limits.
+    fn open_session(&mut self) -> Result<Session, LinkError> {
+        let port = &self.conf.head.serial;
+        let p = open_port(port, self.conf.baud, "the unit").map_err(|what| LinkError::Open {
+            port: port.clone(),
+            what,
+        })?;
+        let mut link = Link::new(p, port, self.conf.baud, self.conf.head.reply_timeout);
+        let limits = init(&mut link)?;
         if let Some(m) = &self.mot {
-            m.set_stale(why);
+            // A copy of the latest command with the unit's limits (not `write`, whose
+            // recycled buffer may hold an older command).
+            let mut v = m.read().value;
+            (v.min_longitude, v.max_longitude) = (
+                protocol::steps_to_deg(limits.pan.0) as f32,
+                protocol::steps_to_deg(limits.pan.1) as f32,
+            );
+            (v.min_latitude, v.max_latitude) = (
+                protocol::steps_to_deg(limits.tilt.0) as f32,
+                protocol::steps_to_deg(limits.tilt.1) as f32,
+            );
+            v.max_longitude_speed = protocol::MAX_SPEED;
+            v.max_latitude_speed = protocol::MAX_SPEED;
+            let _ = m.publish(v);
         }
+        // What the init sequence left on the unit.
+        let home = Sent {
+            position: Some(0),
+            speed: Some(protocol::INIT_SPEED_STEPS),
+        };
+        Ok(Session {
+            link,
+            limits,
+            sent: [home, home],
+            seen_clock: None,
+            cmds: Vec::new(),
+            next_poll: Instant::now(),
+        })
     }
-    fn stopping(&self) -> bool {
-        self.stop.load(Ordering::Acquire)
-    }
-    /// Sleeps up to `d`, waking early on stop.
-    fn sleep(&self, d: Duration) {
-        let t0 = Instant::now();
-        while !self.stopping() && t0.elapsed() < d {
-            std::thread::sleep(Duration::from_millis(20).min(d));
-        }
-    }
-}
 
-/// One session with the unit: init, then poll and command until an error.
-fn session(sh: &Shared, link: &mut Link) -> Result<(), LinkError> {
-    let limits = init(link)?;
-    let pan_lim = (
-        protocol::steps_to_deg(limits.pan.0) as f32,
-        protocol::steps_to_deg(limits.pan.1) as f32,
-    );
-    let tilt_lim = (
-        protocol::steps_to_deg(limits.tilt.0) as f32,
-        protocol::steps_to_deg(limits.tilt.1) as f32,
-    );
-    if let Some(m) = &sh.mot {
-        // A copy of the latest command with the unit's limits (not `write`, whose
-        // recycled buffer may hold an older command).
-        let mut v = m.read().value;
-        (v.min_longitude, v.max_longitude) = pan_lim;
-        (v.min_latitude, v.max_latitude) = tilt_lim;
-        v.max_longitude_speed = protocol::MAX_SPEED;
-        v.max_latitude_speed = protocol::MAX_SPEED;
-        let _ = m.publish(v);
-    }
-    // What the init sequence left on the unit.
-    let mut sent = [
-        Sent {
-            position: Some(0),
-            speed: Some(protocol::INIT_SPEED_STEPS),
-        },
-        Sent {
-            position: Some(0),
-            speed: Some(protocol::INIT_SPEED_STEPS),
-        },
-    ];
-    let mut seen_clock = None;
-    let mut cmds = Vec::new();
-    let mut next_poll = Instant::now();
-    loop {
-        if sh.stopping() {
-            return Ok(());
-        }
-        if let Some(m) = &sh.mot {
+    /// Sends what changed, polls when due.
+    fn serve(&mut self, s: &mut Session) -> Result<(), LinkError> {
+        if let Some(m) = &self.mot {
             let c = m.clock();
-            if seen_clock != Some(c) {
-                seen_clock = Some(c);
+            if s.seen_clock != Some(c) {
+                s.seen_clock = Some(c);
                 let v = m.read().value;
-                cmds.clear();
+                s.cmds.clear();
                 axis_commands(
                     Axis::Pan,
                     v.longitude,
                     v.longitude_speed,
-                    limits.pan,
-                    &mut sent[0],
-                    &mut cmds,
+                    s.limits.pan,
+                    &mut s.sent[0],
+                    &mut s.cmds,
                 );
                 axis_commands(
                     Axis::Tilt,
                     v.latitude,
                     v.latitude_speed,
-                    limits.tilt,
-                    &mut sent[1],
-                    &mut cmds,
+                    s.limits.tilt,
+                    &mut s.sent[1],
+                    &mut s.cmds,
                 );
-                for c in &cmds {
-                    link.command(c)?;
+                for c in &s.cmds {
+                    s.link.command(c)?;
                 }
             }
         }
         let now = Instant::now();
-        if now >= next_poll {
+        if now >= s.next_poll {
             // Absolute deadlines: the period does not drift with the reply time.
-            next_poll += sh.conf.poll;
-            if next_poll < now {
-                next_poll = now + sh.conf.poll;
+            s.next_poll += self.conf.head.poll;
+            if s.next_poll < now {
+                s.next_poll = now + self.conf.head.poll;
             }
             // A position outside the unit's own limits is a broken reply:
             // refused (the session ends and the line is resynchronised).
+            let link = &mut s.link;
             let pan = link.query(Axis::Pan, Query::Position)?;
             let pan = link.checked(
                 Axis::Pan,
                 Query::Position,
                 pan,
-                with_slack(limits.pan),
+                with_slack(s.limits.pan),
                 "the unit's pan limits",
             )?;
             let tilt = link.query(Axis::Tilt, Query::Position)?;
@@ -556,10 +505,10 @@ fn session(sh: &Shared, link: &mut Link) -> Result<(), LinkError> {
                 Axis::Tilt,
                 Query::Position,
                 tilt,
-                with_slack(limits.tilt),
+                with_slack(s.limits.tilt),
                 "the unit's tilt limits",
             )?;
-            if let Some(e) = &sh.enc {
+            if let Some(e) = &self.enc {
                 let _ = e.publish(PtEncoders {
                     pan_angle: protocol::steps_to_deg(pan) as f32,
                     tilt_angle: protocol::steps_to_deg(tilt) as f32,
@@ -567,39 +516,25 @@ fn session(sh: &Shared, link: &mut Link) -> Result<(), LinkError> {
             }
         }
         // Commands go out within half a millisecond; polls on time.
-        let wait = next_poll.saturating_duration_since(Instant::now());
+        let wait = s.next_poll.saturating_duration_since(Instant::now());
         std::thread::sleep(wait.min(Duration::from_micros(500)));
+        Ok(())
     }
 }
 
-/// The driver thread: open, run a session, report and retry.
-fn run(sh: Shared) {
-    let port = sh.conf.serial.clone();
-    let mut last_error: Option<String> = None;
-    while !sh.stopping() {
-        let result = open_port(&port, sh.conf.baud).and_then(|p| {
-            let mut link = Link::new(p, &port, sh.conf.baud, sh.conf.reply_timeout);
-            session(&sh, &mut link)
-        });
-        match result {
-            Ok(()) => return,
-            Err(e) => {
-                let why = format!("{}: {e}", sh.provider);
-                if last_error.as_deref() != Some(why.as_str()) {
-                    crate::output::println(format!("{why}; retrying every second"));
-                    tracing::warn!("{why}");
-                    last_error = Some(why.clone());
-                }
-                sh.stale(&why);
-                sh.sleep(Duration::from_secs(1));
-            }
-        }
+impl Device for Ptu {
+    type Session = Session;
+    fn open(&mut self) -> Result<Session, String> {
+        self.open_session().map_err(|e| e.to_string())
+    }
+    fn step(&mut self, s: &mut Session) -> Result<(), String> {
+        self.serve(s).map_err(|e| e.to_string())
     }
 }
 
-/// Provides the interfaces and starts the thread (which opens the port: a port that
-/// cannot be opened is reported and retried, the rest of the run goes on).
-pub fn start(conf: PtuConf, rt: &Runtime, provider: &str) -> anyhow::Result<Worker> {
+/// Provides the interfaces and starts supervising the unit (a port that cannot be
+/// opened is reported and retried every second; the rest of the run goes on).
+pub fn start(conf: PtuConf, rt: &Runtime, provider: &str) -> anyhow::Result<Supervisor> {
     let enc = conf
         .encoders
         .then(|| {
@@ -614,15 +549,23 @@ pub fn start(conf: PtuConf, rt: &Runtime, provider: &str) -> anyhow::Result<Work
                 .provide_value("pantiltmotors", provider, initial_motors())
         })
         .transpose()?;
-    let stop = Arc::new(AtomicBool::new(false));
-    let sh = Shared {
-        conf,
-        provider: provider.to_string(),
-        enc,
-        mot,
-        stop: stop.clone(),
-    };
-    Worker::start("pantilt", stop, move || run(sh))
+    let mut interfaces: Vec<Arc<dyn AnyInterface>> = Vec::new();
+    if let Some(e) = &enc {
+        interfaces.push(e.clone());
+    }
+    if let Some(m) = &mot {
+        interfaces.push(m.clone());
+    }
+    Supervisor::start(
+        Supervision {
+            name: provider.to_string(),
+            interfaces,
+            on_demand: false,
+            backoff: Backoff::fixed(RETRY),
+            absent: None,
+        },
+        Ptu { conf, enc, mot },
+    )
 }
 
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>> {
@@ -634,5 +577,6 @@ crate::register_driver!(
     Driver,
     "pantilt",
     "Directed Perception pan-tilt unit on a serial line: pantiltencoders, pantiltmotors",
-    create
+    create,
+    lines = LINES
 );

@@ -68,7 +68,10 @@ use std::{
 use anyhow::{Context as _, bail};
 
 use crate::{
-    conf::ComponentConf,
+    conf::{
+        ComponentConf,
+        settings::{Setting, float, on_off, path, rest, word},
+    },
     interfaces::{
         Bumpers, Encoders, Image, Interface, Laser, Motors, PtEncoders, PtMotors, Sonars,
     },
@@ -151,64 +154,86 @@ struct Settings {
     lockstep: bool,
 }
 
+/// The lines `replay` takes (`jderobot help replay` prints them).
+const LINES: &[Setting] = &[
+    Setting::new(
+        "file",
+        "the MCAP recording to replay (required)",
+        &[path("PATH.mcap")],
+    ),
+    Setting::new(
+        "provides",
+        "the channels to provide (recorded names, robot suffixes included); none: every channel of the file",
+        &[rest("NAME")],
+    )
+    .repeats(),
+    Setting::new(
+        "speed",
+        "the replay speed: 1 = as recorded, N = N times faster (0.001 to 1000), max = as fast as possible",
+        &[word("FACTOR|max")],
+    )
+    .default("1"),
+    Setting::new("loop", "start again at the end", &[on_off("SWITCH")]).default("off"),
+    Setting::new(
+        "start",
+        "where to begin, after the recording's first message",
+        &[float("SECONDS", "s", 0.0, f64::MAX)],
+    )
+    .default("0"),
+    Setting::new(
+        "end",
+        "where to stop, after the recording's first message (default: the end)",
+        &[float("SECONDS", "s", 0.0, f64::MAX)],
+    ),
+    Setting::new(
+        "stepped",
+        "on: publish only when the shell says `step [N]`; motors: lock-step with the controller",
+        &[word("on|off|motors")],
+    )
+    .default("off"),
+];
+
+/// The values of [`LINES`].
+#[derive(serde::Deserialize)]
+struct Lines {
+    file: Option<String>,
+    provides: Vec<Vec<String>>,
+    speed: String,
+    r#loop: bool,
+    start: f64,
+    end: Option<f64>,
+    stepped: String,
+}
+
 fn parse(conf: &ComponentConf) -> Result<Settings, crate::conf::ConfError> {
+    let lines: Lines = conf.settings(LINES)?;
     let mut s = Settings {
         file: PathBuf::new(),
-        provides: Vec::new(),
+        provides: lines.provides.into_iter().flatten().collect(),
         speed: Some(1.0),
-        looping: false,
-        start: 0.0,
-        end: None,
+        looping: lines.r#loop,
+        start: lines.start,
+        end: lines.end,
         stepped: false,
         lockstep: false,
     };
-    let mut file = None;
-    for line in &conf.lines {
-        match line.keyword() {
-            "file" => {
-                line.expect_args(1, 1, "file PATH.mcap")?;
-                file = Some(line.existing_file(0, "an MCAP file")?);
-            }
-            "provides" => {
-                line.expect_args(1, usize::MAX, "provides NAME...")?;
-                for i in 0..line.args().len() {
-                    // Any channel name (recorded names may carry a robot suffix).
-                    s.provides.push(line.word(i, "a channel name")?.to_string());
-                }
-            }
-            "speed" => {
-                line.expect_args(1, 1, "speed N | speed max")?;
-                s.speed = if line.args()[0] == "max" {
-                    None
-                } else {
-                    Some(line.number::<f64>(0, "a speed factor or `max`", 0.001..=1000.0)?)
-                };
-            }
-            "loop" => {
-                line.expect_args(1, 1, "loop on|off")?;
-                s.looping = line.on_off(0, "on or off")?;
-            }
-            "start" => {
-                line.expect_args(1, 1, "start SECONDS")?;
-                s.start = line.number::<f64>(0, "seconds", 0.0..)?;
-            }
-            "end" => {
-                line.expect_args(1, 1, "end SECONDS")?;
-                s.end = Some(line.number::<f64>(0, "seconds", 0.0..)?);
-            }
-            "stepped" => {
-                line.expect_args(1, 1, "stepped on|off|motors")?;
-                if line.args()[0] == "motors" {
-                    s.lockstep = true;
-                } else {
-                    s.stepped = line.on_off(0, "on, off or motors")?;
-                }
-            }
-            _ => {
-                return Err(
-                    conf.unknown(line, "file, provides, speed, loop, start, end or stepped")
-                );
-            }
+    if lines.file.is_some()
+        && let Some(line) = conf.line("file")
+    {
+        s.file = line.existing_file(0, "an MCAP file")?;
+    }
+    if let Some(line) = conf.line("speed") {
+        s.speed = if lines.speed == "max" {
+            None
+        } else {
+            Some(line.number::<f64>(0, "a speed factor or `max`", 0.001..=1000.0)?)
+        };
+    }
+    if let Some(line) = conf.line("stepped") {
+        if lines.stepped == "motors" {
+            s.lockstep = true;
+        } else {
+            s.stepped = line.on_off(0, "on, off or motors")?;
         }
     }
     if let (Some(e), st) = (s.end, s.start)
@@ -216,9 +241,6 @@ fn parse(conf: &ComponentConf) -> Result<Settings, crate::conf::ConfError> {
     {
         let line = conf.line("end").expect("end was read");
         return Err(line.error(format!("`end {e}` must be after `start {st}`")));
-    }
-    if let Some(f) = file {
-        s.file = f;
     }
     Ok(s)
 }
@@ -442,5 +464,6 @@ crate::register_driver!(
     Driver,
     "replay",
     "provides the interfaces recorded in an MCAP file, with their recorded clocks (speed, loop, start/end, stepped)",
-    create
+    create,
+    lines = LINES
 );

@@ -67,8 +67,13 @@ use std::{
 
 use zenoh::{Session, Wait, key_expr::KeyExpr, pubsub::Subscriber};
 
+use serde::de::IgnoredAny;
+
 use crate::{
-    conf::{ComponentConf, ConfError, ConfLine},
+    conf::{
+        ComponentConf, ConfError, ConfLine,
+        settings::{Setting, choice, int, word},
+    },
     interfaces::{self, AnyInterface, Interface, Interfaces, Watch},
     runtime::{Driver, Runtime},
 };
@@ -130,103 +135,147 @@ fn key(l: &ConfLine, i: usize) -> Result<String, ConfError> {
     }
 }
 
-fn kind_word(l: &ConfLine, i: usize) -> Result<String, ConfError> {
-    Ok(l.choice(i, "the interface kind", wire::KINDS)?.to_string())
+/// The lines `zenoh` takes (`jderobot help zenoh` prints them), its session's
+/// included ([`session::LINES`]).
+const LINES: &[Setting] = &[
+    Setting::new(
+        "robot",
+        "the robot's name in default keys (jderobot/<robot>/laser)",
+        &[word("NAME")],
+    )
+    .default("robot"),
+    Setting::new(
+        "publishes",
+        "a local interface to put on Zenoh (on jderobot/<robot>/NAME, or on KEY); `publishes all`: every local interface of a kind that travels",
+        &[word("NAME"), word("KEY").optional()],
+    )
+    .repeats(),
+    Setting::new(
+        "provides",
+        "a remote interface to provide here (robot <robot>'s, or the one on KEY; a non-standard NAME says its KIND); `provides all ROBOT`: every interface robot ROBOT serves",
+        &[word("NAME"), word("KEY").optional(), choice("KIND", wire::KINDS).optional()],
+    )
+    .repeats(),
+    Setting::new(
+        "format",
+        "jderobot: the layouts of docs/zenoh.md; ros2: CDR on rmw_zenoh keys (laser, images, encoders, motors)",
+        &[choice("FORMAT", &["jderobot", "ros2"])],
+    )
+    .default("jderobot"),
+    Setting::new(
+        "domain",
+        "the ROS 2 domain id of `format ros2` keys",
+        &[int("ID", "", 0, 232)],
+    )
+    .default("0"),
+    Setting::new(
+        "images",
+        "how images travel: raw BGR, or JPEG of QUALITY (default 80)",
+        &[choice("ENCODING", &["raw", "jpeg"]), int("QUALITY", "", 1, 100).optional()],
+    )
+    .default("raw"),
+    Setting::new(
+        "discover",
+        "how long `provides all` waits for the robot to answer",
+        &[int("MS", "ms", 0, 600_000)],
+    )
+    .default("3000"),
+    session::MODE,
+    session::LISTEN,
+    session::CONNECT,
+    session::SCOUTING,
+    session::CONFIG,
+];
+
+/// The values of [`LINES`] (the session's are read by [`SessionConf::parse`]).
+#[derive(serde::Deserialize)]
+struct Lines {
+    robot: String,
+    publishes: Vec<(String, Option<String>)>,
+    provides: Vec<(String, Option<String>, Option<String>)>,
+    format: String,
+    domain: u32,
+    images: (String, Option<u8>),
+    discover: u64,
+    mode: IgnoredAny,
+    listen: IgnoredAny,
+    connect: IgnoredAny,
+    scouting: IgnoredAny,
+    config: Option<IgnoredAny>,
 }
 
 /// Reads the conf (every error names file:line and the fix).
 pub fn parse(conf: &ComponentConf) -> Result<Settings, ConfError> {
+    let lines: Lines = conf.settings(LINES)?;
+    let _ = (
+        lines.mode,
+        lines.listen,
+        lines.connect,
+        lines.scouting,
+        lines.config,
+    );
     let robot = match conf.line("robot") {
-        Some(l) => {
-            l.expect_args(1, 1, "robot NAME")?;
-            chunk(l, 0, "the robot name")?.to_string()
+        Some(l) => chunk(l, 0, "the robot name")?.to_string(),
+        None => lines.robot,
+    };
+    let images = conf.line("images");
+    let jpeg = match lines.images {
+        (e, Some(q)) if e == "jpeg" => Some(q),
+        (e, None) if e == "jpeg" => Some(80),
+        (_, None) => None,
+        (_, Some(_)) => {
+            let l = images.expect("a quality comes from a line");
+            return Err(l.error(
+                "`images raw` takes no quality; usage: images raw | images jpeg [QUALITY]",
+            ));
         }
-        None => "robot".into(),
     };
     let mut s = Settings {
         robot: robot.clone(),
         publishes: Vec::new(),
         provides: Vec::new(),
-        format: Format::Jderobot,
-        domain: 0,
-        jpeg: None,
+        format: if lines.format == "ros2" {
+            Format::Ros2
+        } else {
+            Format::Jderobot
+        },
+        domain: lines.domain,
+        jpeg,
         session: SessionConf::parse(conf)?,
-        discover: Duration::from_millis(3000),
+        discover: Duration::from_millis(lines.discover),
     };
-    for l in &conf.lines {
-        match l.keyword() {
-            "publishes" => {
-                l.expect_args(1, 2, USAGE_PUBLISHES)?;
-                s.publishes.push(if l.args()[0] == "all" {
-                    l.expect_args(1, 1, USAGE_PUBLISHES)?;
-                    Which::All
-                } else {
-                    Which::One {
-                        name: interfaces::canonical(l.word(0, "an interface name")?),
-                        key: (l.args().len() > 1).then(|| key(l, 1)).transpose()?,
-                        kind: None,
-                    }
-                });
+    for (l, (name, k)) in conf.lines_with("publishes").zip(lines.publishes) {
+        s.publishes.push(if name == "all" {
+            if k.is_some() {
+                l.expect_args(1, 1, USAGE_PUBLISHES)?;
             }
-            "provides" => {
-                l.expect_args(1, 3, USAGE_PROVIDES)?;
-                if l.args()[0] == "all" {
-                    l.expect_args(2, 2, USAGE_PROVIDES)?;
-                    s.provides
-                        .push((Which::All, chunk(l, 1, "the robot name")?.into()));
-                } else {
-                    let name = interfaces::canonical(l.word(0, "an interface name")?);
-                    let kind = match l.args().len() {
-                        3 => Some(kind_word(l, 2)?),
-                        _ => None,
-                    };
-                    if kind.is_none() && interfaces::family(&name).is_none() {
-                        return Err(l.error(format!(
-                            "`provides {name}`: `{name}` is not a standard interface name, so \
-                             say its kind: provides {name} KEY KIND (KIND: image, laser, encoders, ...)"
-                        )));
-                    }
-                    let key = (l.args().len() > 1).then(|| key(l, 1)).transpose()?;
-                    s.provides
-                        .push((Which::One { name, key, kind }, robot.clone()));
-                }
+            Which::All
+        } else {
+            Which::One {
+                name: interfaces::canonical(&name),
+                key: k.is_some().then(|| key(l, 1)).transpose()?,
+                kind: None,
             }
-            "format" => {
-                l.expect_args(1, 1, "format jderobot|ros2")?;
-                s.format = match l.choice(0, "the format", &["jderobot", "ros2"])? {
-                    "ros2" => Format::Ros2,
-                    _ => Format::Jderobot,
-                };
+        });
+    }
+    for (l, (name, k, kind)) in conf.lines_with("provides").zip(lines.provides) {
+        if name == "all" {
+            if k.is_none() || kind.is_some() {
+                l.expect_args(2, 2, USAGE_PROVIDES)?;
             }
-            "domain" => {
-                l.expect_args(1, 1, "domain 0..232")?;
-                s.domain = l.number(0, "the ROS 2 domain id", 0..=232)?;
+            s.provides
+                .push((Which::All, chunk(l, 1, "the robot name")?.into()));
+        } else {
+            let name = interfaces::canonical(&name);
+            if kind.is_none() && interfaces::family(&name).is_none() {
+                return Err(l.error(format!(
+                    "`provides {name}`: `{name}` is not a standard interface name, so \
+                     say its kind: provides {name} KEY KIND (KIND: image, laser, encoders, ...)"
+                )));
             }
-            "images" => {
-                l.expect_args(1, 2, "images raw | images jpeg [QUALITY]")?;
-                s.jpeg = match l.choice(0, "the image encoding", &["raw", "jpeg"])? {
-                    "jpeg" if l.args().len() == 2 => {
-                        Some(l.number(1, "the JPEG quality", 1..=100)?)
-                    }
-                    "jpeg" => Some(80),
-                    _ => {
-                        l.expect_args(1, 1, "images raw")?;
-                        None
-                    }
-                };
-            }
-            "discover" => {
-                l.expect_args(1, 1, "discover MILLISECONDS")?;
-                s.discover = l.millis(0, "the discovery wait", 0..=600_000)?;
-            }
-            "robot" | "mode" | "listen" | "connect" | "scouting" | "config" => {}
-            _ => {
-                return Err(conf.unknown(
-                    l,
-                    "robot, publishes, provides, format, domain, images, mode, listen, connect, \
-                     scouting, config, discover",
-                ));
-            }
+            let key = k.is_some().then(|| key(l, 1)).transpose()?;
+            s.provides
+                .push((Which::One { name, key, kind }, robot.clone()));
         }
     }
     Ok(s)
@@ -505,7 +554,8 @@ crate::register_driver!(
     Service,
     "zenoh",
     "publishes interfaces on Zenoh and provides remote ones (Python and ROS 2 can join)",
-    create
+    create,
+    lines = LINES
 );
 
 #[cfg(test)]
@@ -554,12 +604,21 @@ mod tests {
             ("provides laser2 lab/front\n", "say its kind"),
             ("publishes laser lab/*\n", "wildcard"),
             ("robot a/b\n", "cannot be a key chunk"),
-            ("images jpeg 200\n", "JPEG quality"),
+            (
+                "images jpeg 200\n",
+                "QUALITY (argument 2) is `200`, expected a whole number between 1 and 100",
+            ),
             ("format dds\n", "jderobot, ros2"),
             ("provides all\n", "provides all ROBOT"),
             ("provides laser a b laser\n", "provides NAME [KEY [KIND]]"),
-            ("provides laser2 a/b wheel\n", "interface kind"),
-            ("colour red\n", "expected robot, publishes"),
+            (
+                "provides laser2 a/b wheel\n",
+                "KIND (argument 3) is `wheel`, expected one of image",
+            ),
+            (
+                "colour red\n",
+                "takes no `colour` line; its lines: robot, publishes",
+            ),
         ] {
             let e = parse_text(text).unwrap_err();
             assert!(e.contains(want) && e.contains(':'), "{text:?}: {e}");

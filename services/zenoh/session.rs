@@ -5,7 +5,10 @@ use std::path::PathBuf;
 
 use zenoh::{Config, Wait};
 
-use crate::conf::{ComponentConf, ConfError};
+use crate::conf::{
+    ComponentConf, ConfError,
+    settings::{Setting, choice, path, rest},
+};
 
 /// How multicast scouting finds peers (`scouting` line).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -16,6 +19,54 @@ pub enum Scouting {
     Lan,
     /// None: peers are only those of `connect`/`listen` lines (and their gossip).
     Off,
+}
+
+/// `mode`: what the session is.
+pub const MODE: Setting = Setting::new(
+    "mode",
+    "peer: talks to peers directly; client: through a router (needs `connect`); router: routes for others",
+    &[choice("MODE", &["peer", "client", "router"])],
+)
+.default("peer");
+/// `listen`: endpoints to listen on.
+pub const LISTEN: Setting = Setting::new(
+    "listen",
+    "endpoints it listens on, e.g. tcp/0.0.0.0:7447 (default tcp/127.0.0.1:0: loopback, any port)",
+    &[rest("ENDPOINT")],
+)
+.repeats();
+/// `connect`: endpoints to connect to.
+pub const CONNECT: Setting = Setting::new(
+    "connect",
+    "endpoints it connects to, e.g. tcp/10.0.0.2:7447",
+    &[rest("ENDPOINT")],
+)
+.repeats();
+/// `scouting`: multicast discovery of peers.
+pub const SCOUTING: Setting = Setting::new(
+    "scouting",
+    "multicast discovery of peers: on loopback only, on the whole LAN, or off",
+    &[choice("WHERE", &["loopback", "lan", "off"])],
+)
+.default("loopback");
+/// `config`: a Zenoh config file.
+pub const CONFIG: Setting = Setting::new(
+    "config",
+    "a Zenoh config file (ACL, TLS, timeouts), applied before these lines",
+    &[path("FILE.json5")],
+);
+/// The session lines, as [`SessionConf::parse`] reads them.
+pub const LINES: &[Setting] = &[MODE, LISTEN, CONNECT, SCOUTING, CONFIG];
+
+/// The values of [`LINES`].
+#[derive(serde::Deserialize)]
+struct Lines {
+    mode: String,
+    listen: Vec<Vec<String>>,
+    connect: Vec<Vec<String>>,
+    scouting: String,
+    #[allow(dead_code)] // read through `existing_file`, which checks it
+    config: Option<String>,
 }
 
 /// The session lines.
@@ -29,50 +80,43 @@ pub struct SessionConf {
 }
 
 impl SessionConf {
-    /// Reads `mode`, `listen`, `connect`, `scouting`, `config` (later lines of a
-    /// single-valued key override earlier ones; listen/connect repeat).
+    /// Reads `mode`, `listen`, `connect`, `scouting`, `config` ([`LINES`]; later
+    /// lines of a single-valued key override earlier ones; listen/connect repeat).
+    /// Other lines of `conf` are left to the component.
     pub fn parse(conf: &ComponentConf) -> Result<SessionConf, ConfError> {
-        let mode = match conf.line("mode") {
-            Some(l) => {
-                l.expect_args(1, 1, "mode peer|client|router")?;
-                l.choice(0, "the session mode", &["peer", "client", "router"])?
-            }
-            None => "peer",
+        let only = ComponentConf {
+            lines: conf
+                .lines
+                .iter()
+                .filter(|l| LINES.iter().any(|s| s.key == l.keyword()))
+                .cloned()
+                .collect(),
+            ..conf.clone()
         };
-        let endpoints = |key: &str| -> Result<Vec<String>, ConfError> {
-            let mut v = Vec::new();
-            for l in conf.lines_with(key) {
-                l.expect_args(
-                    1,
-                    usize::MAX,
-                    &format!("{key} ENDPOINT... (e.g. tcp/127.0.0.1:7447)"),
-                )?;
-                for w in l.args() {
+        let lines: Lines = only.settings(LINES)?;
+        let mode = match lines.mode.as_str() {
+            "client" => "client",
+            "router" => "router",
+            _ => "peer",
+        };
+        let endpoints = |key: &str, words: Vec<Vec<String>>| -> Result<Vec<String>, ConfError> {
+            for (l, ws) in conf.lines_with(key).zip(&words) {
+                for w in ws {
                     check_endpoint(w).map_err(|e| l.error(format!("`{key}`: {e}")))?;
-                    v.push(w.clone());
                 }
             }
-            Ok(v)
+            Ok(words.into_iter().flatten().collect())
         };
-        let scouting = match conf.line("scouting") {
-            Some(l) => {
-                l.expect_args(1, 1, "scouting loopback|lan|off")?;
-                match l.choice(0, "scouting", &["loopback", "lan", "off"])? {
-                    "loopback" => Scouting::Loopback,
-                    "lan" => Scouting::Lan,
-                    _ => Scouting::Off,
-                }
-            }
-            None => Scouting::Loopback,
+        let scouting = match lines.scouting.as_str() {
+            "lan" => Scouting::Lan,
+            "off" => Scouting::Off,
+            _ => Scouting::Loopback,
         };
         let config = match conf.line("config") {
-            Some(l) => {
-                l.expect_args(1, 1, "config FILE.json5")?;
-                Some(l.existing_file(0, "the Zenoh config file")?)
-            }
+            Some(l) => Some(l.existing_file(0, "the Zenoh config file")?),
             None => None,
         };
-        if mode == "client" && conf.lines_with("connect").next().is_none() && config.is_none() {
+        if mode == "client" && lines.connect.is_empty() && config.is_none() {
             let l = conf.line("mode").expect("mode line read above");
             return Err(
                 l.error("`mode client` needs a router to connect to: add `connect tcp/HOST:7447`")
@@ -80,8 +124,8 @@ impl SessionConf {
         }
         Ok(SessionConf {
             mode,
-            listen: endpoints("listen")?,
-            connect: endpoints("connect")?,
+            listen: endpoints("listen", lines.listen)?,
+            connect: endpoints("connect", lines.connect)?,
             scouting,
             config,
         })

@@ -1,0 +1,171 @@
+//! The serial-head core: what the drivers of heads on a serial line (`pantilt`, a
+//! PTU-46; `evi`, an EVI-D100) share.
+//!
+//! - Their shared lines, declared once: [`SERIAL`], [`POLL`] (each head gives its
+//!   own default), [`REPLY_TIMEOUT`], and the reading of `serial` and `provides`
+//!   with their errors ([`HeadConf::new`]).
+//! - [`open_port`]: the one place a serial port is opened, with errors that say
+//!   what to check (a missing device, a file that is not a tty, permissions).
+//!
+//! Each driver keeps its protocol, its link and its session; the supervisor
+//! ([`crate::runtime::Supervisor`]) owns their threads, retries and stale marking.
+
+use std::time::Duration;
+
+use crate::{
+    conf::{
+        ComponentConf,
+        settings::{Setting, int, word},
+    },
+    interfaces::canonical,
+};
+
+/// `serial DEVICE`: the port the head is on (required).
+pub const SERIAL: Setting = Setting::new(
+    "serial",
+    "the serial port the head is on (required), e.g. /dev/ttyUSB0",
+    &[word("DEVICE")],
+);
+/// `poll MS`: the time between position queries (give the head's default).
+pub const POLL: Setting = Setting::new(
+    "poll",
+    "the time between position queries",
+    &[int("MS", "ms", 10, 10_000)],
+);
+/// `reply_timeout MS`: how long an answer may take.
+pub const REPLY_TIMEOUT: Setting = Setting::new(
+    "reply_timeout",
+    "how long an answer may take before the head counts as silent",
+    &[int("MS", "ms", 10, 60_000)],
+)
+.default("1000");
+
+/// The shared lines of a head, read and checked.
+#[derive(Clone, Debug)]
+pub struct HeadConf {
+    pub serial: String,
+    pub poll: Duration,
+    pub reply_timeout: Duration,
+    /// The provided interfaces, canonical names (4.3's aliases resolved).
+    pub provides: Vec<String>,
+}
+
+impl HeadConf {
+    /// From the values of the shared lines (`serial` absent: `None`; `provides`
+    /// as written). `offered` names what the head can provide, for the error
+    /// when it provides nothing.
+    pub fn new(
+        conf: &ComponentConf,
+        serial: Option<String>,
+        poll: u64,
+        reply_timeout: u64,
+        provides: &[String],
+        offered: &[&str],
+    ) -> anyhow::Result<HeadConf> {
+        let serial = serial.ok_or_else(|| {
+            anyhow::anyhow!(
+                "{}: driver {} needs a `serial DEVICE` line (e.g. `serial /dev/ttyUSB0`)",
+                conf.file.display(),
+                conf.name
+            )
+        })?;
+        if provides.is_empty() {
+            anyhow::bail!(
+                "{}: driver {} provides nothing; add one or more of `provides {}`",
+                conf.file.display(),
+                conf.name,
+                offered.join("`, `provides ")
+            );
+        }
+        Ok(HeadConf {
+            serial,
+            poll: Duration::from_millis(poll),
+            reply_timeout: Duration::from_millis(reply_timeout),
+            provides: provides.iter().map(|p| canonical(p)).collect(),
+        })
+    }
+
+    /// Whether `name` (canonical) is provided.
+    pub fn provides(&self, name: &str) -> bool {
+        self.provides.iter().any(|p| p == name)
+    }
+}
+
+/// Opens `path` as a serial port at `baud` (reads time out after 5 ms), or says
+/// what is wrong and what to check; `device` names what should be on it ("the
+/// unit").
+pub fn open_port(
+    path: &str,
+    baud: u32,
+    device: &str,
+) -> Result<Box<dyn serialport::SerialPort>, String> {
+    match std::fs::metadata(path) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            return Err(format!(
+                "does not exist (is {device} plugged in? `ls /dev/ttyUSB* /dev/ttyS*` lists the ports)"
+            ));
+        }
+        Err(e) => return Err(format!("cannot be read: {e}")),
+        Ok(m) if m.is_file() || m.is_dir() => {
+            return Err(
+                "is not a serial device (a regular file or directory); check the `serial` line"
+                    .into(),
+            );
+        }
+        Ok(_) => {}
+    }
+    serialport::new(path, baud)
+        .timeout(Duration::from_millis(5))
+        .open()
+        .map_err(|e| match e.kind() {
+            serialport::ErrorKind::Io(std::io::ErrorKind::PermissionDenied) => format!(
+                "permission denied ({e}); add your user to the group that owns it (`ls -l {path}`, usually `dialout`)"
+            ),
+            serialport::ErrorKind::NoDevice => {
+                format!("no device ({e}); is {device} plugged in?")
+            }
+            _ => format!("cannot be opened as a serial port: {e}"),
+        })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::conf::Kind;
+
+    #[test]
+    fn open_port_says_what_the_path_is() {
+        let e = open_port("/nonexistent/tty", 9600, "the unit")
+            .err()
+            .unwrap();
+        assert!(e.contains("does not exist (is the unit plugged in?"), "{e}");
+        let e = open_port("/", 9600, "the unit").err().unwrap();
+        assert!(e.contains("not a serial device"), "{e}");
+    }
+
+    #[test]
+    fn serial_and_provides_are_required() {
+        let conf = ComponentConf::from_text(Kind::Driver, "head", "").unwrap();
+        let e = HeadConf::new(&conf, None, 100, 1000, &["ptmotors".into()], &["a"]);
+        assert!(
+            e.unwrap_err()
+                .to_string()
+                .contains("needs a `serial DEVICE`")
+        );
+        let e = HeadConf::new(&conf, Some("/dev/x".into()), 100, 1000, &[], &["a", "b"]);
+        let e = e.unwrap_err().to_string();
+        assert!(
+            e.contains("add one or more of `provides a`, `provides b`"),
+            "{e}"
+        );
+        let c = HeadConf::new(
+            &conf,
+            Some("/dev/x".into()),
+            100,
+            1000,
+            &["ptmotors".into()],
+            &[],
+        );
+        assert!(c.unwrap().provides("pantiltmotors"));
+    }
+}
