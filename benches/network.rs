@@ -142,19 +142,28 @@ fn link() -> Link {
 
 /// Frames per second through server and client. The producer acts as a camera
 /// that always has the next frame ready: as soon as the server takes the latest
-/// frame (holds it to send it), it fills the next one (a full copy, as a camera
-/// driver writes every pixel of every frame).
-fn net_fps(l: &Link) -> f64 {
+/// frame (holds it to send it), it writes the next one. Like the raw copy's
+/// sender, it produces no pixels (it marks one byte): what is measured is the
+/// link. `Interface::write` hands it the buffer of a frame the server has sent,
+/// so no frame is copied on the way (until 2026-11-25 a write after a frame the
+/// server still held copied the latest 900 KB frame).
+/// Returns (frames/s, the producer's CPU µs per frame delivered).
+fn net_fps(l: &Link) -> (f64, f64) {
     let stop = AtomicBool::new(false);
+    let counting = AtomicBool::new(false);
     thread::scope(|sc| {
-        sc.spawn(|| {
+        let producer = sc.spawn(|| {
             let (src, stats) = (&l.src, l.server.stats());
+            let mut cpu0 = None;
             let mut k = 0u8;
             let _ = src.write(|i| i.data[0] = 255);
             let mut cur = src.snapshot();
             let mut sent = stats.frames.load(Ordering::Relaxed);
             let mut at = Instant::now();
             while !stop.load(Ordering::Relaxed) {
+                if cpu0.is_none() && counting.load(Ordering::Relaxed) {
+                    cpu0 = Some(thread_cpu());
+                }
                 // Taken: held by the slot, `cur` and the server; or the server
                 // finished a frame (maybe this one) and wants a newer one.
                 let done = stats.frames.load(Ordering::Relaxed);
@@ -170,8 +179,10 @@ fn net_fps(l: &Link) -> f64 {
                     thread::sleep(Duration::from_micros(30));
                 }
             }
+            thread_cpu() - cpu0.unwrap_or_else(thread_cpu)
         });
         thread::sleep(Duration::from_millis(300));
+        counting.store(true, Ordering::Relaxed);
         let c0 = l.dst.clock();
         let t0 = Instant::now();
         let (mut last, mut since, mut gap) = (c0, Instant::now(), Duration::ZERO);
@@ -183,16 +194,27 @@ fn net_fps(l: &Link) -> f64 {
             }
             gap = gap.max(since.elapsed());
         }
-        let fps = (l.dst.clock() - c0) as f64 / t0.elapsed().as_secs_f64();
+        let frames = (l.dst.clock() - c0) as f64;
+        let fps = frames / t0.elapsed().as_secs_f64();
         stop.store(true, Ordering::Relaxed);
+        let cpu = producer.join().unwrap_or(0.0);
         if gap > Duration::from_millis(100) {
             println!(
                 "    (no frame for {:.0} ms in this round)",
                 gap.as_secs_f64() * 1e3
             );
         }
-        fps
+        (fps, cpu * 1e6 / frames.max(1.0))
     })
+}
+
+/// CPU seconds of the calling thread (`/proc/thread-self/schedstat`).
+fn thread_cpu() -> f64 {
+    std::fs::read_to_string("/proc/thread-self/schedstat")
+        .ok()
+        .and_then(|s| s.split(' ').next()?.parse::<f64>().ok())
+        .unwrap_or(0.0)
+        / 1e9
 }
 
 /// Latencies (ms) of `n` frames published at 100 Hz.
@@ -326,10 +348,10 @@ fn main() {
     let mut l = link();
     // Warm up the link.
     net_fps(&l);
-    let (mut raw, mut net, mut ratio) = (Vec::new(), Vec::new(), Vec::new());
+    let (mut raw, mut net, mut ratio, mut prod) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     for r in 0..ROUNDS {
         // Alternate the order so neither side always runs on a warmer machine.
-        let (a, b) = if r % 2 == 0 {
+        let (a, (b, p)) = if r % 2 == 0 {
             let a = raw_fps();
             (a, net_fps(&l))
         } else {
@@ -337,13 +359,18 @@ fn main() {
             (raw_fps(), b)
         };
         println!(
-            "  round {r}: raw TCP {a:.0} frames/s, server->client interface {b:.0} frames/s ({:.0} %)",
+            "  round {r}: raw TCP {a:.0} frames/s, server->client interface {b:.0} frames/s ({:.0} %), producer {p:.1} µs CPU a frame",
             b / a * 100.0
         );
         raw.push(a);
         net.push(b);
         ratio.push(b / a);
+        prod.push(p);
     }
+    println!(
+        "producer (the camera's stand-in) CPU: median {:.1} µs a frame delivered",
+        median(&mut prod)
+    );
     println!(
         "frames/s: raw TCP copy median {:.0}, networkserver->networkclient median {:.0}: {:.0} % of raw (goal >= 80 %)",
         median(&mut raw),

@@ -116,6 +116,32 @@ fn write_recycles_the_buffer_no_reader_holds() {
     assert_eq!(iface.read().value.data[0], 6);
 }
 
+/// A reader (a network writer sending a frame) holds the latest sample while the
+/// next one is written, then lets it go: the write after that gets the held
+/// buffer back (its stale pixels) instead of a copy of the latest frame.
+#[test]
+fn write_takes_back_a_buffer_its_reader_let_go() {
+    let iface: Interface<Image> = Interface::with_value("varcolorB", "t", Image::new(64, 48));
+    iface.write(|i| i.data.fill(1)).unwrap();
+    let sending = iface.snapshot();
+    iface.write(|i| i.data.fill(2)).unwrap();
+    drop(sending);
+    let mut got = 0;
+    iface
+        .write(|i| {
+            got = i.data[0];
+            i.data.fill(3)
+        })
+        .unwrap();
+    assert_eq!(got, 1, "the buffer of frame 1, not a copy of frame 2");
+    // One still held is neither taken nor overwritten.
+    let kept = iface.snapshot();
+    iface.write(|i| i.data.fill(4)).unwrap();
+    iface.write(|i| i.data.fill(5)).unwrap();
+    assert_eq!(kept.value.data[0], 3);
+    assert_eq!(iface.read().value.data[0], 5);
+}
+
 #[test]
 fn resume_suspend_reference_counting() {
     let iface: Arc<Interface<Encoders>> = Arc::new(Interface::new("encoders", "t"));

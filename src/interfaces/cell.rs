@@ -50,6 +50,11 @@ impl<T> std::ops::Deref for Sample<T> {
 /// What writers share: a recycled buffer and recent publish times (for the rate).
 struct Writer<T> {
     spare: Option<T>,
+    /// The sample replaced last while a reader still held it (a frame a network
+    /// writer was sending): the next write takes its buffer back if the reader has
+    /// let it go by then, so a writer that outruns a reader does not copy the
+    /// latest value every time. At most one is kept.
+    held: Option<Arc<Sample<T>>>,
     recent: VecDeque<Instant>,
     first: Option<Instant>,
 }
@@ -191,6 +196,7 @@ impl<T: InterfaceValue> Interface<T> {
             }),
             writer: Mutex::new(Writer {
                 spare: None,
+                held: None,
                 recent: VecDeque::new(),
                 first: None,
             }),
@@ -232,8 +238,10 @@ impl<T: InterfaceValue> Interface<T> {
     }
 
     /// Fills a recycled value in place and publishes it. `fill` gets the buffer of
-    /// an *older* sample that no reader holds any more (or a copy of the latest
-    /// value), so steady streams of large values allocate nothing. `fill` must set
+    /// an *older* sample that no reader holds any more (also one a reader held
+    /// when it was replaced and has let go since), or a copy of the latest value
+    /// when every older one is still held; so steady streams of large values
+    /// allocate and copy nothing. `fill` must set
     /// the whole value (a frame, a scan); for a partial update, copy the latest value
     /// (`read().value.clone()`), change it and [`publish`](Self::publish) it.
     pub fn write(&self, fill: impl FnOnce(&mut T)) -> Result<u64, InterfaceError> {
@@ -282,7 +290,17 @@ impl<T: InterfaceValue> Interface<T> {
             }
             At::Received(clock, time) => self.check_after(clock).ok().map(|()| (clock, time)),
         };
-        let mut value = w.spare.take().unwrap_or_else(|| self.read().value.clone());
+        let mut value = match w.spare.take() {
+            Some(v) => v,
+            None => match w.held.take().map(Arc::try_unwrap) {
+                Some(Ok(s)) => s.value,
+                Some(Err(still)) => {
+                    w.held = Some(still);
+                    self.read().value.clone()
+                }
+                None => self.read().value.clone(),
+            },
+        };
         fill(&mut value);
         if let Err(e) = value.validate(&self.name) {
             w.spare = Some(value);
@@ -292,8 +310,9 @@ impl<T: InterfaceValue> Interface<T> {
             Some((clock, time)) => self.store_at(&mut w, clock, time, value),
             None => self.store(&mut w, value),
         };
-        if let Some(s) = Arc::into_inner(old) {
-            w.spare = Some(s.value);
+        match Arc::try_unwrap(old) {
+            Ok(s) => w.spare = Some(s.value),
+            Err(old) => w.held = Some(old),
         }
         drop(w);
         self.tell_watchers();

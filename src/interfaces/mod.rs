@@ -24,7 +24,8 @@
 //! pointer load: no copy of an image, no lock held while the reader works on it. A
 //! write ([`Interface::publish`], [`Interface::write`]) swaps in a new sample and
 //! never waits for readers; [`Interface::write`] recycles the previous buffer when
-//! no reader still holds it, so a steady stream of frames allocates nothing.
+//! no reader still holds it (or once the reader that held it lets go), so a steady
+//! stream of frames allocates and copies nothing.
 //!
 //! Every write is checked by the value type's one validation
 //! ([`InterfaceValue::validate`], ranges in [`RANGES`]): numbers finite and within

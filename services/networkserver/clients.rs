@@ -1,0 +1,295 @@
+//! The accept loop, the table of connections, admission (the 20-byte name within
+//! `timeout`, the token, eviction of an unnamed connection when the table is full)
+//! and each connection's life from its name to its last suspend.
+
+use std::{
+    collections::VecDeque,
+    io::{self, Write},
+    net::{Shutdown, SocketAddr, TcpListener, TcpStream},
+    sync::{
+        Arc,
+        atomic::{AtomicBool, Ordering},
+    },
+    time::{Duration, Instant},
+};
+
+use parking_lot::{Condvar, Mutex};
+
+use crate::{
+    interfaces::{Motors, Notify},
+    netwire,
+};
+
+use super::{
+    Shared,
+    frames::FrameWake,
+    serve::{Client, ClientState, Resumed, reader, writer},
+};
+
+/// A connection in the server's table.
+pub(super) struct Conn {
+    pub(super) id: u64,
+    pub(super) stream: TcpStream,
+    since: Instant,
+    slot: Arc<Slot>,
+}
+
+/// What the accept loop and a connection's thread share.
+#[derive(Default)]
+struct Slot {
+    /// It sent its 20-byte name (and the token, if one is set).
+    named: AtomicBool,
+    /// The accept loop closed it to make room for a new connection.
+    evicted: AtomicBool,
+}
+
+/// How long a connection may have been waiting for its name before a new
+/// connection may evict it from a full table (so a burst of connections does
+/// not evict good clients that have not been read yet).
+pub(super) const EVICT_AFTER: Duration = Duration::from_millis(250);
+
+/// How often the accept loop looks at the stop flag while no one connects.
+const ACCEPT_TICK_MS: i32 = 100;
+
+/// Waits until the listener has a connection or ACCEPT_TICK_MS pass.
+fn wait_readable(listener: &TcpListener) {
+    use std::os::fd::AsRawFd;
+    let mut p = libc::pollfd {
+        fd: listener.as_raw_fd(),
+        events: libc::POLLIN,
+        revents: 0,
+    };
+    // SAFETY: one valid pollfd for the duration of the call. An error (EINTR)
+    // only means the caller looks at the stop flag and the listener again.
+    unsafe { libc::poll(&mut p, 1, ACCEPT_TICK_MS) };
+}
+
+/// With the table full, closes the connection that has waited longest for its
+/// name (at least EVICT_AFTER), so a client that knows the token still gets in
+/// while strangers hold connections open. True if one was closed.
+fn evict_unnamed(sh: &Shared) -> bool {
+    let clients = sh.clients.lock();
+    let oldest = clients
+        .iter()
+        .filter(|c| {
+            !c.slot.named.load(Ordering::Acquire)
+                && !c.slot.evicted.load(Ordering::Acquire)
+                && c.since.elapsed() >= EVICT_AFTER
+        })
+        .min_by_key(|c| c.since);
+    match oldest {
+        Some(c) => {
+            c.slot.evicted.store(true, Ordering::Release);
+            let _ = c.stream.shutdown(Shutdown::Both);
+            true
+        }
+        None => false,
+    }
+}
+
+pub(super) fn accept_loop(listener: TcpListener, sh: Arc<Shared>) {
+    let mut next_id = 0u64;
+    loop {
+        if sh.stop.load(Ordering::Acquire) {
+            return;
+        }
+        let (stream, peer) = match listener.accept() {
+            Ok(x) => x,
+            Err(e) if e.kind() == io::ErrorKind::WouldBlock => {
+                wait_readable(&listener);
+                continue;
+            }
+            Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
+            Err(e) => {
+                tracing::warn!("networkserver: accept failed: {e}");
+                std::thread::sleep(Duration::from_millis(50));
+                continue;
+            }
+        };
+        if sh.stop.load(Ordering::Acquire) {
+            return;
+        }
+        if let Err(e) = stream.set_nonblocking(false) {
+            tracing::warn!("networkserver: cannot set up the connection from {peer}: {e}");
+            continue;
+        }
+        sh.threads.lock().retain(|t| !t.is_finished());
+        sh.stats.accepted.fetch_add(1, Ordering::Relaxed);
+        let n = sh.stats.clients.load(Ordering::Acquire);
+        if n >= sh.conf.max_clients && !evict_unnamed(&sh) {
+            sh.stats.dropped.fetch_add(1, Ordering::Relaxed);
+            tracing::warn!(
+                "networkserver: refused {peer}: {n} clients already connected (max_clients {})",
+                sh.conf.max_clients
+            );
+            let mut out = Vec::new();
+            netwire::write_error(
+                &mut out,
+                &format!("too many clients (max {})", sh.conf.max_clients),
+            );
+            let mut s = stream;
+            let _ = s.set_write_timeout(Some(Duration::from_millis(100)));
+            let _ = s.write_all(&out);
+            continue;
+        }
+        next_id += 1;
+        let id = next_id;
+        let Ok(reg) = stream.try_clone() else {
+            continue;
+        };
+        let slot = Arc::new(Slot::default());
+        sh.clients.lock().push(Conn {
+            id,
+            stream: reg,
+            since: Instant::now(),
+            slot: slot.clone(),
+        });
+        sh.stats.clients.fetch_add(1, Ordering::AcqRel);
+        let sh2 = sh.clone();
+        let t = std::thread::Builder::new()
+            .name(format!("nsrv-r{id}"))
+            .spawn(move || {
+                client(stream, peer, id, &slot, &sh2);
+                sh2.stats.clients.fetch_sub(1, Ordering::AcqRel);
+            });
+        match t {
+            Ok(t) => sh.threads.lock().push(t),
+            Err(e) => {
+                sh.clients.lock().retain(|c| c.id != id);
+                sh.stats.clients.fetch_sub(1, Ordering::AcqRel);
+                tracing::warn!("networkserver: cannot start a thread for {peer}: {e}");
+            }
+        }
+    }
+}
+
+fn client(stream: TcpStream, peer: SocketAddr, id: u64, slot: &Slot, sh: &Arc<Shared>) {
+    let conf = &sh.conf;
+    let _ = stream.set_nodelay(true);
+    let finish = |why: String, bad: bool| {
+        sh.clients.lock().retain(|c| c.id != id);
+        if bad {
+            sh.stats.dropped.fetch_add(1, Ordering::Relaxed);
+            tracing::warn!("networkserver: client {peer} disconnected: {why}");
+        } else {
+            tracing::info!("networkserver: client {peer} left: {why}");
+        }
+    };
+    // The 20-byte name, within `timeout` in all (not per read: a byte every
+    // few seconds must not hold the connection for minutes).
+    let mut name = [0u8; netwire::NAME_LEN];
+    let _ = stream.set_write_timeout(Some(conf.timeout));
+    if let Err(e) = read_name(&stream, &mut name, conf.timeout) {
+        let why = if slot.evicted.load(Ordering::Acquire) {
+            format!(
+                "closed to make room: {} connections, and it had sent no name after {} ms",
+                conf.max_clients,
+                EVICT_AFTER.as_millis()
+            )
+        } else if netwire::is_timeout(&e) {
+            format!(
+                "sent no 20-byte name within {} ms",
+                conf.timeout.as_millis()
+            )
+        } else {
+            format!("closed before sending its name ({e})")
+        };
+        return finish(why, true);
+    }
+    let (cname, token) = netwire::split_name(&name);
+    if let Some(t) = &conf.token
+        && !netwire::same_secret(t.as_bytes(), token)
+    {
+        let mut out = Vec::new();
+        netwire::write_error(&mut out, "refused: wrong or missing token");
+        let _ = (&stream).write_all(&out);
+        let _ = stream.shutdown(Shutdown::Both);
+        return finish(
+            format!("client `{cname}` refused: wrong or missing token"),
+            true,
+        );
+    }
+    if sh.stop.load(Ordering::Acquire) {
+        return finish("server stopping".into(), false);
+    }
+    slot.named.store(true, Ordering::Release);
+    if slot.evicted.load(Ordering::Acquire) {
+        return finish("closed to make room before its name was read".into(), true);
+    }
+    tracing::info!("networkserver: new client {cname} from {peer}");
+    let Ok(wstream) = stream.try_clone() else {
+        return finish("cannot clone the socket".into(), true);
+    };
+    let cl = Arc::new(Client {
+        st: Mutex::new(ClientState {
+            closed: false,
+            why: None,
+            subs: [false; 5],
+            images: vec![0; sh.sources.images.len()],
+            replies: VecDeque::new(),
+        }),
+        cv: Condvar::new(),
+        stream: wstream,
+        waiting_frame: AtomicBool::new(false),
+    });
+    let writer = {
+        let cl = cl.clone();
+        let sh = sh.clone();
+        std::thread::Builder::new()
+            .name(format!("nsrv-w{id}"))
+            .spawn(move || writer(&cl, &sh))
+    };
+    let writer = match writer {
+        Ok(w) => w,
+        Err(e) => return finish(format!("cannot start its writer thread: {e}"), true),
+    };
+    let wake: Arc<dyn Notify> = Arc::new(FrameWake(Arc::downgrade(&cl)));
+    for (_, img) in &sh.sources.images {
+        img.watch(wake.clone());
+    }
+    let mut resumed = Resumed {
+        images: vec![false; sh.sources.images.len()],
+        ..Default::default()
+    };
+    let mut drove = false;
+    reader(&stream, &cl, sh, &mut resumed, &mut drove);
+    cl.close("reader ended", false);
+    let _ = writer.join();
+    for (_, img) in &sh.sources.images {
+        img.unwatch(&*wake);
+    }
+    for i in resumed.subs.iter().flatten() {
+        i.suspend();
+    }
+    for (k, on) in resumed.images.iter().enumerate() {
+        if *on {
+            sh.sources.images[k].1.suspend();
+        }
+    }
+    if drove && let Some(m) = &sh.sources.motors {
+        let _ = m.publish(Motors::default());
+    }
+    let (why, bad) = cl.st.lock().why.clone().unwrap_or(("closed".into(), false));
+    finish(why, bad);
+}
+
+/// Reads exactly `name.len()` bytes within `limit` in all.
+fn read_name(stream: &TcpStream, name: &mut [u8], limit: Duration) -> io::Result<()> {
+    let deadline = Instant::now() + limit;
+    let mut got = 0;
+    let mut r = stream;
+    while got < name.len() {
+        let left = deadline.saturating_duration_since(Instant::now());
+        if left.is_zero() {
+            return Err(io::ErrorKind::TimedOut.into());
+        }
+        stream.set_read_timeout(Some(left))?;
+        match io::Read::read(&mut r, &mut name[got..]) {
+            Ok(0) => return Err(io::ErrorKind::UnexpectedEof.into()),
+            Ok(n) => got += n,
+            Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
+            Err(e) => return Err(e),
+        }
+    }
+    Ok(())
+}

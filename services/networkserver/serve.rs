@@ -1,0 +1,458 @@
+//! A client's two threads: the reader (requests, with the partial-line and idle
+//! rules) and the writer (replies, image frames, pushes paced every 33 ms).
+
+use std::{
+    collections::VecDeque,
+    io::{self, Write},
+    net::{Shutdown, TcpStream},
+    sync::{
+        Arc,
+        atomic::{AtomicBool, Ordering, fence},
+    },
+    time::{Duration, Instant},
+};
+
+use parking_lot::{Condvar, Mutex};
+
+use crate::{
+    interfaces::AnyInterface,
+    netwire::{self, Device, LineEvent, LineReader, Request},
+};
+
+use super::{Shared, Sources, frames};
+
+/// What a client's reader and writer share.
+pub(super) struct ClientState {
+    pub(super) closed: bool,
+    /// Why the connection ends (the first reason wins) and whether it was the
+    /// client's fault.
+    pub(super) why: Option<(String, bool)>,
+    pub(super) subs: [bool; 5],
+    /// Outstanding image requests per served image (index in `Sources::images`).
+    pub(super) images: Vec<u32>,
+    pub(super) replies: VecDeque<Vec<u8>>,
+}
+
+pub(super) struct Client {
+    pub(super) st: Mutex<ClientState>,
+    pub(super) cv: Condvar,
+    pub(super) stream: TcpStream,
+    /// The writer sleeps waiting for a frame (so a new frame must wake it).
+    pub(super) waiting_frame: AtomicBool,
+}
+
+impl Client {
+    pub(super) fn close(&self, why: impl Into<String>, bad: bool) {
+        let mut st = self.st.lock();
+        if st.why.is_none() {
+            st.why = Some((why.into(), bad));
+        }
+        st.closed = true;
+        drop(st);
+        self.cv.notify_all();
+        let _ = self.stream.shutdown(Shutdown::Both);
+    }
+}
+
+/// Interfaces a client resumed, to suspend when it leaves.
+#[derive(Default)]
+pub(super) struct Resumed {
+    pub(super) subs: [Option<Arc<dyn AnyInterface>>; 5],
+    pub(super) images: Vec<bool>,
+}
+
+pub(super) fn reader(
+    stream: &TcpStream,
+    cl: &Client,
+    sh: &Shared,
+    resumed: &mut Resumed,
+    drove: &mut bool,
+) {
+    let conf = &sh.conf;
+    let tick = Duration::from_millis(100).min(conf.timeout);
+    let _ = stream.set_read_timeout(Some(tick));
+    let mut lr = LineReader::new(conf.max_line);
+    let mut r = stream;
+    let mut partial_since: Option<Instant> = None;
+    let mut last_line = Instant::now();
+    // It sent a motors, pan-tilt or zoom command: a controller, which may send
+    // nothing while the command stands (4.3's pan-tilt client sends on change).
+    let mut commanded = false;
+    loop {
+        if cl.st.lock().closed || sh.stop.load(Ordering::Acquire) {
+            return;
+        }
+        match lr.read_line(&mut r) {
+            Ok(LineEvent::Line(line)) => {
+                partial_since = None;
+                last_line = Instant::now();
+                match Request::parse(line) {
+                    Ok(req) => {
+                        commanded |= matches!(
+                            req,
+                            Request::DriveSpeed { .. }
+                                | Request::SteerSpeed { .. }
+                                | Request::PtPosition { .. }
+                                | Request::ZoomPosition { .. }
+                        );
+                        if let Err((why, bad)) = handle(req, cl, sh, resumed, drove) {
+                            cl.close(why, bad);
+                            return;
+                        }
+                    }
+                    Err(e) => {
+                        let shown: String = String::from_utf8_lossy(&line[..line.len().min(40)])
+                            .chars()
+                            .map(|c| {
+                                if c.is_ascii_graphic() || c == ' ' {
+                                    c
+                                } else {
+                                    '?'
+                                }
+                            })
+                            .collect();
+                        cl.close(format!("sent a bad line `{shown}`: {e}"), true);
+                        return;
+                    }
+                }
+            }
+            Ok(LineEvent::Closed) => {
+                cl.close("closed the connection", false);
+                return;
+            }
+            Err(e) if netwire::is_timeout(&e) => {
+                if lr.pending() > 0 {
+                    let t0 = *partial_since.get_or_insert_with(Instant::now);
+                    if t0.elapsed() >= conf.timeout {
+                        cl.close(
+                            format!(
+                                "sent a partial line and no newline for {} ms",
+                                conf.timeout.as_millis()
+                            ),
+                            true,
+                        );
+                        return;
+                    }
+                }
+                if !conf.idle_timeout.is_zero()
+                    && !commanded
+                    && last_line.elapsed() >= conf.idle_timeout
+                {
+                    let st = cl.st.lock();
+                    let busy = st.subs.iter().any(|s| *s)
+                        || st.images.iter().any(|n| *n > 0)
+                        || !st.replies.is_empty();
+                    drop(st);
+                    if !busy {
+                        cl.close(
+                            format!(
+                                "idle for {} ms with no subscription (idle_timeout)",
+                                conf.idle_timeout.as_millis()
+                            ),
+                            false,
+                        );
+                        return;
+                    }
+                }
+            }
+            Err(e) if e.kind() == io::ErrorKind::InvalidData => {
+                cl.close(format!("sent a {e}"), true);
+                return;
+            }
+            Err(e) => {
+                cl.close(format!("connection error: {e}"), false);
+                return;
+            }
+        }
+    }
+}
+
+/// Carries out one request; Err((why, bad)) ends the connection.
+fn handle(
+    req: Request,
+    cl: &Client,
+    sh: &Shared,
+    resumed: &mut Resumed,
+    drove: &mut bool,
+) -> Result<(), (String, bool)> {
+    let src = &sh.sources;
+    let reply = |bytes: Vec<u8>| -> Result<(), (String, bool)> {
+        let mut st = cl.st.lock();
+        let queued = st.replies.len() + st.images.iter().sum::<u32>() as usize;
+        if queued >= sh.conf.max_queue {
+            return Err((
+                format!(
+                    "more than {} requests waiting (it does not read what it asks for)",
+                    sh.conf.max_queue
+                ),
+                true,
+            ));
+        }
+        st.replies.push_back(bytes);
+        drop(st);
+        cl.cv.notify_all();
+        Ok(())
+    };
+    let error = |text: String| {
+        let mut out = Vec::new();
+        netwire::write_error(&mut out, &text);
+        reply(out)
+    };
+    match req {
+        Request::Goodbye | Request::GoodbyeImages => {
+            return Err(("said goodbye".into(), false));
+        }
+        Request::Subscribe(d) | Request::Unsubscribe(d) => {
+            let on = matches!(req, Request::Subscribe(_));
+            let Some(iface) = src.device(d) else {
+                return error(format!("{} is not served", d.interface()));
+            };
+            let slot = &mut resumed.subs[d.index()];
+            if on && slot.is_none() {
+                iface.resume();
+                *slot = Some(iface);
+            } else if !on && let Some(i) = slot.take() {
+                i.suspend();
+            }
+            cl.st.lock().subs[d.index()] = on;
+            cl.cv.notify_all();
+        }
+        Request::ImageQuery(netid) => {
+            let Some(k) = src.images.iter().position(|(id, _)| *id == netid) else {
+                return error(format!("no image has network id {netid}"));
+            };
+            if !resumed.images[k] {
+                src.images[k].1.resume();
+                resumed.images[k] = true;
+            }
+            let mut st = cl.st.lock();
+            let queued = st.replies.len() + st.images.iter().sum::<u32>() as usize;
+            if queued >= sh.conf.max_queue {
+                return Err((
+                    format!(
+                        "more than {} requests waiting (it does not read what it asks for)",
+                        sh.conf.max_queue
+                    ),
+                    true,
+                ));
+            }
+            st.images[k] += 1;
+            drop(st);
+            cl.cv.notify_all();
+        }
+        Request::DriveSpeed { v, .. } | Request::SteerSpeed { w: v, .. } => {
+            let Some(m) = &src.motors else {
+                return error("motors are not served".into());
+            };
+            let mut cmd = m.read().value;
+            if matches!(req, Request::DriveSpeed { .. }) {
+                cmd.v = v;
+            } else {
+                cmd.w = v;
+            }
+            let _ = m.publish(cmd);
+            *drove = true;
+        }
+        Request::PtPosition {
+            pan,
+            tilt,
+            pan_speed,
+            tilt_speed,
+        } => {
+            let Some(p) = &src.ptm else {
+                return error("pantiltmotors are not served".into());
+            };
+            let mut c = p.read().value;
+            c.longitude = pan;
+            c.latitude = tilt;
+            c.longitude_speed = pan_speed;
+            c.latitude_speed = tilt_speed;
+            let _ = p.publish(c);
+        }
+        Request::PtLimitsQuery => {
+            let Some(p) = &src.ptm else {
+                // 4.3's text, typo included.
+                return error("Error importing 'ptmotors' varialbes".into());
+            };
+            let c = p.read().value;
+            let mut out = Vec::new();
+            netwire::write_pt_limits(
+                &mut out,
+                [
+                    c.max_longitude,
+                    c.max_latitude,
+                    c.min_longitude,
+                    c.min_latitude,
+                    c.max_longitude_speed,
+                    c.max_latitude_speed,
+                ],
+            );
+            return reply(out);
+        }
+        Request::ZoomPosition { zoom, speed } => {
+            // 4.3 gated this on the pan-tilt motors; it needs the zoom motors.
+            let Some(z) = &src.zm else {
+                return error("zoommotors are not served".into());
+            };
+            let mut c = z.read().value;
+            c.zoom = zoom;
+            c.zoom_speed = speed;
+            let _ = z.publish(c);
+        }
+        Request::ZoomLimitsQuery => {
+            let Some(z) = &src.zm else {
+                return error("zoommotors are not served".into());
+            };
+            let c = z.read().value;
+            let mut out = Vec::new();
+            netwire::write_zoom_limits(&mut out, [c.max_zoom, c.min_zoom, c.max_zoom_speed]);
+            return reply(out);
+        }
+        Request::Unhandled(c) => {
+            return error(format!("message {c} is not handled by this server"));
+        }
+    }
+    Ok(())
+}
+
+pub(super) fn writer(cl: &Client, sh: &Shared) {
+    let period = Duration::from_millis(netwire::PUSH_PERIOD_MS);
+    let mut next_push = Instant::now() + period;
+    let mut last_push = [0u64; 5];
+    let mut last_img = vec![0u64; sh.sources.images.len()];
+    let mut out: Vec<u8> = Vec::with_capacity(8192);
+    let mut w = &cl.stream;
+    loop {
+        let mut st = cl.st.lock();
+        if st.closed {
+            return;
+        }
+        if let Some(r) = st.replies.pop_front() {
+            drop(st);
+            if let Err(e) = w.write_all(&r) {
+                return write_failed(cl, sh, e);
+            }
+            continue;
+        }
+        let ready = (0..st.images.len())
+            .find(|&k| st.images[k] > 0 && sh.sources.images[k].1.clock() != last_img[k]);
+        if let Some(k) = ready {
+            st.images[k] -= 1;
+            drop(st);
+            let (netid, iface) = &sh.sources.images[k];
+            if let Err(e) = frames::send(&mut w, &mut out, *netid, iface, &mut last_img[k]) {
+                return write_failed(cl, sh, e);
+            }
+            sh.stats.frames.fetch_add(1, Ordering::Relaxed);
+            continue;
+        }
+        let now = Instant::now();
+        if now >= next_push {
+            let subs = st.subs;
+            drop(st);
+            let deadline = next_push;
+            next_push += period;
+            if next_push <= now {
+                next_push = now + period;
+            }
+            if !subs.iter().any(|s| *s) {
+                continue;
+            }
+            out.clear();
+            push(&sh.sources, subs, &mut last_push, &mut out, sh.epoch);
+            if !out.is_empty()
+                && let Err(e) = w.write_all(&out)
+            {
+                return write_failed(cl, sh, e);
+            }
+            sh.stats
+                .record_lateness(Instant::now().saturating_duration_since(deadline));
+            continue;
+        }
+        // Until a new frame of a served image (FrameWake), a request, or the next
+        // push. The flag, set before a last look at the clocks, tells FrameWake to
+        // wake this thread; a frame published before the flag shows is seen by
+        // that look (the SeqCst fences pair with FrameWake's).
+        let wants_frame = st.images.iter().any(|n| *n > 0);
+        cl.waiting_frame.store(wants_frame, Ordering::Relaxed);
+        fence(Ordering::SeqCst);
+        let arrived = (0..st.images.len())
+            .any(|k| st.images[k] > 0 && sh.sources.images[k].1.clock() != last_img[k]);
+        if !arrived {
+            cl.cv.wait_until(&mut st, next_push);
+        }
+        cl.waiting_frame.store(false, Ordering::Relaxed);
+    }
+}
+
+pub(super) fn write_failed(cl: &Client, sh: &Shared, e: io::Error) {
+    if netwire::is_timeout(&e) {
+        cl.close(
+            format!(
+                "does not read what it is sent (a write waited {} ms)",
+                sh.conf.timeout.as_millis()
+            ),
+            true,
+        );
+    } else {
+        cl.close(format!("connection error: {e}"), false);
+    }
+}
+
+/// Appends the push of every subscribed device whose value changed.
+fn push(src: &Sources, subs: [bool; 5], last: &mut [u64; 5], out: &mut Vec<u8>, epoch: Instant) {
+    for d in Device::ALL {
+        let k = d.index();
+        if !subs[k] {
+            continue;
+        }
+        match d {
+            Device::Laser => {
+                if let Some(i) = &src.laser {
+                    let s = i.read();
+                    if s.clock != last[k] {
+                        last[k] = s.clock;
+                        netwire::write_laser(out, s.clock, &s.readings);
+                    }
+                }
+            }
+            Device::Encoders => {
+                if let Some(i) = &src.encoders {
+                    let s = i.read();
+                    if s.clock != last[k] {
+                        last[k] = s.clock;
+                        let us = s.stamp.saturating_duration_since(epoch).as_micros() as u64;
+                        netwire::write_encoders(out, s.clock, s.x, s.y, s.theta.to_degrees(), us);
+                    }
+                }
+            }
+            Device::Sonars => {
+                if let Some(i) = &src.sonars {
+                    let s = i.read();
+                    if s.clock != last[k] {
+                        last[k] = s.clock;
+                        netwire::write_sonars(out, s.clock, &s.us);
+                    }
+                }
+            }
+            Device::PtEncoders => {
+                if let Some(i) = &src.pte {
+                    let s = i.read();
+                    if s.clock != last[k] {
+                        last[k] = s.clock;
+                        netwire::write_pt_encoders(out, s.clock, s.pan_angle, s.tilt_angle);
+                    }
+                }
+            }
+            Device::ZoomEncoders => {
+                if let Some(i) = &src.ze {
+                    let s = i.read();
+                    if s.clock != last[k] {
+                        last[k] = s.clock;
+                        netwire::write_zoom_encoders(out, s.clock, s.zoom_position);
+                    }
+                }
+            }
+        }
+    }
+}
