@@ -40,6 +40,9 @@
 //! encodes and writes it; when the queue is full the sample is dropped and counted.
 //! Chunks are closed at least once a second, so a run killed mid-write loses at
 //! most the last second.
+//! Each closed chunk leaves its index (about 0.25 KB) in memory for the file's
+//! summary until the file closes: about 1 MB per hour of one file, which `split`
+//! bounds (see `docs/recording.md`, "Memory"; `scripts/soak.sh` measures it).
 //!
 //! Recording starts 0.3 s after the recorder is loaded (so that `jderobot check`,
 //! which builds and shuts down every component at once, leaves no file behind);
