@@ -57,8 +57,9 @@ use crate::{
     colorspaces::{HsvRange, Lookup, hsv_mask},
     conf::{
         ComponentConf,
-        settings::{Arg, CYCLE, Setting, choice, float, int, interface},
+        settings::{CYCLE, Setting, choice, float, int, interface},
     },
+    imagesource,
     interfaces::{Image, Interface, InterfaceValue, PtEncoders, PtMotors},
     runtime::{Context, Runtime, Schema},
 };
@@ -330,13 +331,6 @@ impl Schema for FollowBall {
     }
 }
 
-/// A hue in the seed's units (radians).
-const HUE: &[Arg] = &[float("H", "rad", 0.0, std::f64::consts::TAU)];
-/// A saturation, 0..1.
-const SATURATION: &[Arg] = &[float("S", "", 0.0, 1.0)];
-/// A value, 0..255.
-const VALUE: &[Arg] = &[float("V", "", 0.0, 255.0)];
-
 /// followball's lines, declared once (`jderobot help followball`).
 const LINES: &[Setting] = &[
     Setting::new(
@@ -357,17 +351,13 @@ const LINES: &[Setting] = &[
         &[interface("INTERFACE")],
     )
     .default("pantiltmotors"),
-    Setting::new(
-        "hmin",
-        "the ball's hue range starts here (wraps through 0 when hmin > hmax)",
-        HUE,
-    )
-    .default("6.0"),
-    Setting::new("hmax", "the ball's hue range ends here", HUE).default("0.35"),
-    Setting::new("smin", "the least saturation of the ball", SATURATION).default("0.5"),
-    Setting::new("smax", "the most saturation of the ball", SATURATION).default("1"),
-    Setting::new("vmin", "the least value of the ball", VALUE).default("60"),
-    Setting::new("vmax", "the most value of the ball", VALUE).default("255"),
+    // The ball's colour: the HSV range lines the tuners share.
+    imagesource::HMIN.default("6.0"),
+    imagesource::HMAX.default("0.35"),
+    imagesource::SMIN.default("0.5"),
+    imagesource::SMAX.default("1"),
+    imagesource::VMIN.default("60"),
+    imagesource::VMAX.default("255"),
     Setting::new(
         "deadband",
         "no motion while the ball is this close to the centre (at 320 columns)",

@@ -401,12 +401,7 @@ fn conf_errors_name_the_line() {
 /// value out of range at its line, with the range, before any port is opened.
 #[test]
 fn help_prints_the_lines_and_check_names_every_range() {
-    let bin = env!("CARGO_BIN_EXE_jderobot");
-    let out = std::process::Command::new(bin)
-        .args(["help", "evi"])
-        .output()
-        .unwrap();
-    let text = String::from_utf8_lossy(&out.stdout);
+    let text = common::help("evi");
     for line in [
         "serial DEVICE",
         "camera ADDRESS",
@@ -418,19 +413,12 @@ fn help_prints_the_lines_and_check_names_every_range() {
         assert!(text.contains(line), "{line}: {text}");
     }
     let dir = tempfile::tempdir().unwrap();
-    let file = dir.path().join("t.conf");
-    std::fs::write(
-        &file,
+    let (ok, err) = common::check_text(
+        dir.path(),
+        "t.conf",
         "driver evi\nserial /nonexistent/tty\npoll 0\ncamera 9\nprovides zoommotors\nend_driver\nload_driver evi\n",
-    )
-    .unwrap();
-    let out = std::process::Command::new(bin)
-        .arg("check")
-        .arg(&file)
-        .output()
-        .unwrap();
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
+    );
+    assert!(!ok);
     assert!(
         err.contains("t.conf:3: `poll`: MS (argument 1) is `0`, expected a whole number between 10 and 10000 ms"),
         "{err}"

@@ -340,12 +340,7 @@ fn conf_errors_name_the_line() {
 /// value out of range at its line, with the range, before any port is opened.
 #[test]
 fn help_prints_the_lines_and_check_names_every_range() {
-    let bin = env!("CARGO_BIN_EXE_jderobot");
-    let out = std::process::Command::new(bin)
-        .args(["help", "pantilt"])
-        .output()
-        .unwrap();
-    let text = String::from_utf8_lossy(&out.stdout);
+    let text = common::help("pantilt");
     for line in [
         "serial DEVICE",
         "baud RATE",
@@ -357,19 +352,12 @@ fn help_prints_the_lines_and_check_names_every_range() {
         assert!(text.contains(line), "{line}: {text}");
     }
     let dir = tempfile::tempdir().unwrap();
-    let file = dir.path().join("t.conf");
-    std::fs::write(
-        &file,
+    let (ok, err) = common::check_text(
+        dir.path(),
+        "t.conf",
         "driver pantilt\nserial /nonexistent/tty\npoll 0\nbaud 9\nprovides pantiltencoders\nend_driver\nload_driver pantilt\n",
-    )
-    .unwrap();
-    let out = std::process::Command::new(bin)
-        .arg("check")
-        .arg(&file)
-        .output()
-        .unwrap();
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
+    );
+    assert!(!ok);
     assert!(
         err.contains("t.conf:3: `poll`: MS (argument 1) is `0`, expected a whole number between 10 and 10000 ms"),
         "{err}"

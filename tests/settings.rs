@@ -3,7 +3,7 @@
 //! range or choices), `jderobot help NAME` prints every line it accepts, and the
 //! inputs that were accepted silently before (issue 28, C2) are refused.
 
-use std::process::Command;
+mod common;
 
 use jderobot::{
     conf::{
@@ -12,8 +12,6 @@ use jderobot::{
     },
     loader, registry,
 };
-
-const BIN: &str = env!("CARGO_BIN_EXE_jderobot");
 
 /// A word that `ty` refuses, if there is one.
 fn bad_word(ty: &ArgType) -> Option<String> {
@@ -109,12 +107,7 @@ fn help_prints_every_line_a_component_accepts() {
     let declared = declared();
     assert!(declared.len() >= 6, "{} declared", declared.len());
     for (entry, decl) in declared {
-        let out = Command::new(BIN)
-            .args(["help", entry.name])
-            .output()
-            .unwrap();
-        assert!(out.status.success(), "help {}", entry.name);
-        let text = String::from_utf8_lossy(&out.stdout);
+        let text = common::help(entry.name);
         assert!(text.contains(entry.summary), "{text}");
         for s in decl {
             assert!(text.contains(&s.usage()), "help {}: {text}", entry.name);
@@ -133,16 +126,12 @@ fn help_prints_every_line_a_component_accepts() {
             );
         }
     }
-    let out = Command::new(BIN)
-        .args(["help", "naooperator"])
-        .output()
-        .unwrap();
-    let text = String::from_utf8_lossy(&out.stdout);
+    let text = common::help("naooperator");
     assert!(
         text.contains("head LONGITUDE LATITUDE") && text.contains("in deg"),
         "{text}"
     );
-    let out = Command::new(BIN).args(["help", "nosuch"]).output().unwrap();
+    let out = common::jderobot(["help", "nosuch"]).output().unwrap();
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("no component called `nosuch`"));
 }
@@ -178,11 +167,10 @@ fn values_accepted_silently_before_are_refused() {
         ),
     ];
     for (i, (text, want)) in cases.iter().enumerate() {
-        let file = dir.path().join(format!("c{i}.conf"));
-        std::fs::write(&file, text).unwrap();
-        let out = Command::new(BIN).arg("check").arg(&file).output().unwrap();
-        let err = String::from_utf8_lossy(&out.stderr);
-        assert!(!out.status.success(), "accepted: {text}");
+        let name = format!("c{i}.conf");
+        let (ok, err) = common::check_text(dir.path(), &name, text);
+        assert!(!ok, "accepted: {text}");
+        let file = dir.path().join(name);
         assert!(
             err.contains(&format!("{}{want}", file.display())),
             "{text}: {err}"

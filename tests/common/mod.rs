@@ -31,6 +31,29 @@ where
     c
 }
 
+/// `jderobot help NAME`'s standard output (it must succeed).
+pub fn help(name: &str) -> String {
+    let out = jderobot(["help", name])
+        .output()
+        .expect("run jderobot help");
+    assert!(out.status.success(), "jderobot help {name} failed");
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+/// `jderobot check` of a conf holding `text` (written as `dir/name`): whether it
+/// passed, and its standard error.
+pub fn check_text(dir: &Path, name: &str, text: &str) -> (bool, String) {
+    let file = dir.join(name);
+    std::fs::write(&file, text).expect("write the conf");
+    let out = jderobot([Path::new("check"), &file])
+        .output()
+        .expect("run jderobot check");
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
 /// The crate's root, where `assets/` and `examples/` are.
 pub fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
