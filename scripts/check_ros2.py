@@ -2,11 +2,11 @@
 """Opens a jderobot `profile ros2` recording with the `rosbags` package (PyPI) as a
 rosbag2 and decodes its messages with rosbags' own ROS 2 type store (not the
 file's schemas): sensor_msgs/msg/LaserScan, sensor_msgs/msg/Image,
-nav_msgs/msg/Odometry, geometry_msgs/msg/Twist.
+sensor_msgs/msg/Imu, nav_msgs/msg/Odometry, geometry_msgs/msg/Twist.
 
 Prints one JSON line: {"connections": {topic: [msgtype, count]},
 "laser0": [mm...], "image0": {"width", "height", "encoding", "sum"},
-"odom0": [x_mm, y_mm]}; exits 1 with a message on a problem.
+"odom0": [x_mm, y_mm], "imu0": {"qz", "qw", "wz", "az"}}; exits 1 with a message on a problem.
 
 Usage: check_ros2.py FILE.mcap  (venv of .ci/run: target/py-venv, pip: rosbags)
 """
@@ -37,6 +37,10 @@ def main():
                     sys.exit(1)
                 out["image0"] = {"width": msg.width, "height": msg.height,
                                  "encoding": msg.encoding, "sum": int(msg.data.sum())}
+            elif conn.msgtype == "sensor_msgs/msg/Imu" and "imu0" not in out:
+                o = msg.orientation
+                out["imu0"] = {"qz": o.z, "qw": o.w, "wz": msg.angular_velocity.z,
+                               "az": msg.linear_acceleration.z}
             elif conn.msgtype == "nav_msgs/msg/Odometry" and "odom0" not in out:
                 p = msg.pose.pose.position
                 out["odom0"] = [p.x * 1000, p.y * 1000]

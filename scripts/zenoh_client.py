@@ -1,5 +1,5 @@
 """A Python program on a jderobot robot over Zenoh, written from docs/zenoh.md only
-(no jderobot code): it reads the laser, an image and the odometry, decodes them by
+(no jderobot code): it reads the laser, an image, the odometry and the imu, decodes them by
 the documented byte layouts, and drives `motors` until the robot has moved.
 
     python scripts/zenoh_client.py jderobot PORT ROBOT   # the jderobot format
@@ -81,7 +81,11 @@ if mode == "jderobot":
         x, y, theta, c, s = struct.unpack("<5f", b)
         return {"x": x, "y": y, "theta": theta}
 
-    DECODE = {"laser": laser, "colorA": image, "encoders": encoders}
+    def imu(b):
+        qx, qy, qz, qw, wx, wy, wz, ax, ay, az = struct.unpack("<10f", b)
+        return {"qz": qz, "qw": qw, "wz": wz, "az": az}
+
+    DECODE = {"laser": laser, "colorA": image, "encoders": encoders, "imu": imu}
     keys = {n: f"jderobot/{robot}/{n}" for n in DECODE}
 
     def motors(seq, v_mm_s, w_deg_s):
@@ -120,12 +124,18 @@ else:
         p = m.pose.pose.position
         return {"x": float(p.x) * 1000, "y": float(p.y) * 1000, "frame": m.header.frame_id}
 
+    def imu(b):
+        m = ts.deserialize_cdr(b, "sensor_msgs/msg/Imu")
+        return {"qz": float(m.orientation.z), "qw": float(m.orientation.w),
+                "wz": float(m.angular_velocity.z), "az": float(m.linear_acceleration.z)}
+
     TYPES = {
         "laser": "sensor_msgs/msg/LaserScan",
         "colorA": "sensor_msgs/msg/Image",
         "encoders": "nav_msgs/msg/Odometry",
+        "imu": "sensor_msgs/msg/Imu",
     }
-    DECODE = {"laser": laser, "colorA": image, "encoders": encoders}
+    DECODE = {"laser": laser, "colorA": image, "encoders": encoders, "imu": imu}
     keys = {n: ros_key(n, t) for n, t in TYPES.items()}
     Twist = ts.types["geometry_msgs/msg/Twist"]
     Vector3 = ts.types["geometry_msgs/msg/Vector3"]
@@ -176,6 +186,7 @@ def main():
             "laser_first_mm": list(latest["laser"][0].get("mm", ())[:3]),
             "image": latest["colorA"][0],
             "image_encoding": latest["colorA"][2],
+            "imu": latest["imu"][0],
             "attachment_len": len(latest["laser"][1]),
             "errors": errors,
         }

@@ -21,7 +21,12 @@
 //! | `1024 ZOOM SPEED` | zoom command | | |
 //! | `1022` | zoom limits query | `1023 MAXZOOM MINZOOM MAXZOOMSPEED` | |
 //! | `0` / `1000` | goodbye (robot / images) | `1027 TEXT` | error |
+//! | `2001` / `2002` | (un)subscribe imu (jderobot) | `2003 CLOCK QX QY QZ QW WX WY WZ AX AY AZ` (rad/s, m/s²) | push |
 //!
+//! The imu messages are jderobot's extension: 4.3 had no IMU. Their codes are
+//! outside 4.3's range (a 4.3 server answers them with nothing, a 4.3 client never
+//! sends them), and their numbers are written in Rust's shortest round-trip form,
+//! so an f32 arrives exactly.
 //! Subscribed devices are pushed every 33 ms when their value changed.
 //!
 //! **Token.** 4.3's name is `jdec` and NUL bytes. With a shared secret, the name
@@ -71,6 +76,10 @@ pub mod code {
     pub const SUBSCRIBE_ZOOM_ENCODERS: u32 = 1025;
     pub const UNSUBSCRIBE_ZOOM_ENCODERS: u32 = 1026;
     pub const ERROR: u32 = 1027;
+    /// jderobot's extension: the imu device (4.3 had none).
+    pub const SUBSCRIBE_IMU: u32 = 2001;
+    pub const UNSUBSCRIBE_IMU: u32 = 2002;
+    pub const IMU: u32 = 2003;
     /// Codes 4.3 declared but never handled (ir, bumpers, battery, sensed speeds,
     /// limp, replay, other image formats, pan-tilt relative/reset/origin/halt).
     pub const UNHANDLED: &[u32] = &[
@@ -87,16 +96,19 @@ pub enum Device {
     Sonars,
     PtEncoders,
     ZoomEncoders,
+    Imu,
 }
 
 impl Device {
-    pub const ALL: [Device; 5] = [
+    pub const ALL: [Device; Device::COUNT] = [
         Device::Laser,
         Device::Encoders,
         Device::Sonars,
         Device::PtEncoders,
         Device::ZoomEncoders,
+        Device::Imu,
     ];
+    pub const COUNT: usize = 6;
     /// Index in [`Device::ALL`].
     pub fn index(self) -> usize {
         self as usize
@@ -121,6 +133,7 @@ impl Device {
                 code::UNSUBSCRIBE_ZOOM_ENCODERS,
                 code::ZOOM_ENCODERS,
             ),
+            Device::Imu => (code::SUBSCRIBE_IMU, code::UNSUBSCRIBE_IMU, code::IMU),
         }
     }
     /// The interface family name.
@@ -131,6 +144,7 @@ impl Device {
             Device::Sonars => "sonars",
             Device::PtEncoders => "pantiltencoders",
             Device::ZoomEncoders => "zoomencoders",
+            Device::Imu => "imu",
         }
     }
 }
@@ -376,6 +390,11 @@ pub enum Message {
     PtEncoders { clock: u64, pan: f32, tilt: f32 },
     /// `1021 CLOCK ZOOM`.
     ZoomEncoders { clock: u64, zoom: f32 },
+    /// `2003 CLOCK QX QY QZ QW WX WY WZ AX AY AZ` (jderobot's): the [`Imu`] fields
+    /// in order.
+    ///
+    /// [`Imu`]: crate::interfaces::Imu
+    Imu { clock: u64, fields: [f32; 10] },
     /// `1005 MAXLON MAXLAT MINLON MINLAT MAXLONSPEED MAXLATSPEED`.
     PtLimits([f32; 6]),
     /// `1023 MAXZOOM MINZOOM MAXZOOMSPEED`.
@@ -472,6 +491,17 @@ impl Message {
                     zoom: real(c, &f, 1)?,
                 }
             }
+            IMU => {
+                count(c, &f, 11)?;
+                let mut fields = [0.0; 10];
+                for (i, x) in fields.iter_mut().enumerate() {
+                    *x = real(c, &f, i + 1)?;
+                }
+                Message::Imu {
+                    clock: num(c, &f, 0, "a clock")?,
+                    fields,
+                }
+            }
             PANTILT_LIMITS => {
                 count(c, &f, 6)?;
                 let mut v = [0.0; 6];
@@ -547,6 +577,18 @@ pub fn write_pt_encoders(out: &mut Vec<u8>, clock: u64, pan: f32, tilt: f32) {
 /// Appends `1021 CLOCK ZOOM\n` (`%1.1f`).
 pub fn write_zoom_encoders(out: &mut Vec<u8>, clock: u64, zoom: f32) {
     let _ = writeln!(Adapter(out), "{} {clock} {zoom:.1}", code::ZOOM_ENCODERS);
+}
+
+/// Appends `2003 CLOCK QX QY QZ QW WX WY WZ AX AY AZ\n`, each number in its
+/// shortest round-trip form.
+pub fn write_imu(out: &mut Vec<u8>, clock: u64, fields: [f32; 10]) {
+    let mut s = String::with_capacity(128);
+    let _ = write!(s, "{} {clock}", code::IMU);
+    for v in fields {
+        let _ = write!(s, " {v}");
+    }
+    s.push('\n');
+    out.extend_from_slice(s.as_bytes());
 }
 
 /// Appends `1005 ..\n` (`%.2f` × 6): max_longitude, max_latitude, min_longitude,
@@ -836,6 +878,37 @@ mod tests {
             assert!(Request::parse(bad).is_err(), "{bad:?}");
         }
         assert_eq!(Request::parse(b"5").unwrap(), Request::Unhandled(5));
+    }
+
+    #[test]
+    fn the_imu_extension_round_trips_exactly() {
+        let fields = [
+            0.0, 0.0, 0.38268343, 0.9238795, 0.0, 0.0, 0.25, 0.1, -0.2, 9.81,
+        ];
+        let mut out = Vec::new();
+        write_imu(&mut out, 12, fields);
+        let text = String::from_utf8(out).unwrap();
+        assert_eq!(
+            text,
+            "2003 12 0 0 0.38268343 0.9238795 0 0 0.25 0.1 -0.2 9.81\n"
+        );
+        assert_eq!(
+            Message::parse(text.trim_end().as_bytes()).unwrap(),
+            Message::Imu { clock: 12, fields }
+        );
+        assert!(
+            Message::parse(b"2003 12 0 0 0 1 0 0 0 0 0").is_err(),
+            "a field short"
+        );
+        assert!(Message::parse(b"2003 12 0 0 0 1 0 0 0 0 0 nan").is_err());
+        assert_eq!(
+            Request::parse(b"2001").unwrap(),
+            Request::Subscribe(Device::Imu)
+        );
+        assert_eq!(
+            Request::parse(b"2002").unwrap(),
+            Request::Unsubscribe(Device::Imu)
+        );
     }
 
     #[test]

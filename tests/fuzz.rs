@@ -270,6 +270,8 @@ fn targets() -> Vec<Target> {
                 "1027 too many clients\n",
                 "1004 4 1000 1000 1000 1000\n",
                 "1005 90 0 10 0\n",
+                "2003 12 0 0 0.38268343 0.9238795 0 0 0.25 0.1 -0.2 9.81\n",
+                "2001\n",
             ]
             .iter()
             .map(|s| s.as_bytes().to_vec())
@@ -439,7 +441,8 @@ fn driver_targets(p: &Path) -> Vec<Target> {
         run: |b| {
             use jderobot::{
                 interfaces::{
-                    Bumpers, Encoders, Image, Laser, Motors, PtEncoders, PtMotors, Sonars,
+                    Bumpers, Encoders, Image, Imu, KINDS, Laser, Motors, PtEncoders, PtMotors,
+                    Sonars, ZoomEncoders, ZoomMotors,
                 },
                 services::zenoh::wire::{self, Wire},
             };
@@ -453,8 +456,11 @@ fn driver_targets(p: &Path) -> Vec<Target> {
             let _ = Motors::take(b);
             let _ = PtEncoders::take(b);
             let _ = PtMotors::take(b);
-            for kind in ["laser", "encoders", "motors", "colorA", "sonars"] {
-                let _ = jderobot::mcapfmt::ros2::decode("t", kind, b, 0, 0);
+            let _ = ZoomEncoders::take(b);
+            let _ = ZoomMotors::take(b);
+            let _ = Imu::take(b);
+            for kind in KINDS.iter().chain(&["colorA"]) {
+                let _ = jderobot::mcapfmt::decode_message("t", kind, "", "cdr", 0, 0, b);
             }
         },
     });
@@ -464,13 +470,14 @@ fn driver_targets(p: &Path) -> Vec<Target> {
         seeds: vec![
             br#"{"timestamp":{"sec":1,"nsec":2},"v":100,"w":-20}"#.to_vec(),
             br#"{"timestamp":{"sec":1,"nsec":2},"pose":{"position":{"x":1,"y":2,"z":0}}}"#.to_vec(),
+            br#"{"timestamp":{"sec":1,"nsec":2},"clock":3,"jderobot":{"qx":0,"qy":0,"qz":0,"qw":1,"wx":0.5,"wy":0,"wz":0,"ax":0,"ay":0,"az":9.8}}"#.to_vec(),
             vec![0, 1, 0, 0, 1, 0, 0, 0, 2, 0, 0, 0],
         ],
         text: false,
         run: |b| {
-            for kind in ["motors", "encoders", "laser", "sonars", "colorA"] {
+            for kind in jderobot::interfaces::KINDS.iter().chain(&["colorA"]) {
                 let _ = jderobot::mcapfmt::decode("t", kind, b);
-                let _ = jderobot::mcapfmt::ros2::decode("t", kind, b, 0, 0);
+                let _ = jderobot::mcapfmt::decode_message("t", kind, "", "cdr", 0, 0, b);
             }
             let _ = jderobot::mcapfmt::decompress("jpeg", b);
         },

@@ -18,7 +18,7 @@ use jde43_server::{Robot43, Server43};
 use jderobot::{
     ComponentConf, Kind, Runtime,
     interfaces::{
-        Encoders, Image, Laser, Motors, PtEncoders, PtMotors, Sonars, ZoomEncoders, ZoomMotors,
+        Encoders, Image, Imu, Laser, Motors, PtEncoders, PtMotors, Sonars, ZoomEncoders, ZoomMotors,
     },
     registry,
 };
@@ -45,9 +45,11 @@ fn served(extra: &str) -> (Arc<Runtime>, SocketAddr) {
     i.provide::<PtMotors>("pantiltmotors", "robot").unwrap();
     i.provide::<ZoomEncoders>("zoomencoders", "robot").unwrap();
     i.provide::<ZoomMotors>("zoommotors", "robot").unwrap();
+    i.provide::<Imu>("imu", "robot").unwrap();
     let text = format!(
         "socket 0\nserves colorA 0\nserves varcolorB 1\nserves laser\nserves encoders\nserves sonars\n\
-         serves motors\nserves ptencoders\nserves ptmotors\nserves zencoders\nserves zmotors\n{extra}"
+         serves motors\nserves ptencoders\nserves ptmotors\nserves zencoders\nserves zmotors\n\
+         serves imu\n{extra}"
     );
     load(&rt, Kind::Service, "networkserver", &text).unwrap();
     let addr = *rt
@@ -96,7 +98,22 @@ fn publish_all(rt: &Runtime, k: u8) {
         .unwrap()
         .publish(ZoomEncoders { zoom_position: 2.5 })
         .unwrap();
+    i.get::<Imu>("imu").unwrap().publish(IMU).unwrap();
 }
+
+/// A turning, accelerating IMU (heading 45°).
+const IMU: Imu = Imu {
+    qx: 0.0,
+    qy: 0.0,
+    qz: 0.38268343,
+    qw: 0.9238795,
+    wx: 0.0,
+    wy: 0.0,
+    wz: 0.25,
+    ax: 0.1,
+    ay: -0.2,
+    az: 9.81,
+};
 
 #[test]
 fn a_4_3_client_gets_every_message_kind_from_our_server() {
@@ -131,7 +148,7 @@ fn a_4_3_client_gets_every_message_kind_from_our_server() {
 
     // Subscriptions: pushes in 4.3's formats.
     let mut robot = Client43::connect(addr, None);
-    for s in ["27", "11", "2", "1001", "1025"] {
+    for s in ["27", "11", "2", "1001", "1025", "2001"] {
         robot.send(s);
     }
     let laser = robot.expect("26");
@@ -149,6 +166,23 @@ fn a_4_3_client_gets_every_message_kind_from_our_server() {
     assert_eq!(&pt[2..], ["10.2", "-5.0"]);
     let z = robot.expect("1021");
     assert_eq!(&z[2..], ["2.5"]);
+    // jderobot's imu extension: every field, exactly (shortest round-trip form).
+    let imu = robot.expect("2003");
+    assert_eq!(
+        &imu[2..],
+        [
+            "0",
+            "0",
+            "0.38268343",
+            "0.9238795",
+            "0",
+            "0",
+            "0.25",
+            "0.1",
+            "-0.2",
+            "9.81"
+        ]
+    );
 
     // Commands.
     robot.send("22 150.0 0.0");
@@ -548,7 +582,8 @@ fn our_client_against_our_server_with_a_token() {
         Kind::Driver,
         "networkclient",
         &format!(
-            "token s3cret\nprovides varcolorB {h} 1\nprovides laser {h}\nprovides motors {h}\n"
+            "token s3cret\nprovides varcolorB {h} 1\nprovides laser {h}\nprovides motors {h}\n\
+             provides imu {h}\n"
         ),
     )
     .unwrap();
@@ -571,6 +606,11 @@ fn our_client_against_our_server_with_a_token() {
     let laser = good.interfaces.get::<Laser>("laser").unwrap();
     eventually("laser through our client", || {
         laser.read().readings.len() == 180
+    });
+    let imu = good.interfaces.get::<Imu>("imu").unwrap();
+    imu.resume();
+    eventually("the imu, exactly, through our client", || {
+        imu.read().value == IMU
     });
     good.interfaces
         .get::<Motors>("motors")

@@ -27,7 +27,7 @@ fn python() -> Option<PathBuf> {
 fn write_recorder_conf(conf: &Path, lines: &str) {
     let text = format!(
         "driver simulator\nworld {}\nprovides encoders\nprovides motors\nprovides laser\n\
-         provides sonars\nprovides colorA\nend_driver\n\
+         provides sonars\nprovides colorA\nprovides imu\nend_driver\n\
          service recorder\n{lines}end_service\n\
          load_driver simulator\nload_service recorder\n",
         world_path("simple.world")
@@ -163,6 +163,9 @@ fn rosbags_opens_the_ros2_profile_and_the_replay_reads_it_back() {
         "{v}"
     );
     assert_eq!(v["image0"]["encoding"], "bgr8");
+    assert_eq!(v["connections"]["/imu"][0], "sensor_msgs/msg/Imu", "{v}");
+    let az = v["imu0"]["az"].as_f64().unwrap();
+    assert!((az - 9.80665).abs() < 1e-5, "gravity in m/s²: {v}");
 
     // jderobot's replay reads the same file: the first laser and image agree.
     let (summary, bytes) = mcapfmt::Summary::read(&file).unwrap();

@@ -650,3 +650,31 @@ fn the_example_conf_runs() {
     drop(frame);
     rt.shutdown();
 }
+
+#[test]
+fn the_imu_reads_heading_turn_rate_and_accelerations_in_si_units() {
+    let mut sim = Sim::new(room(), 1);
+    let r = sim.add_robot("r", RobotModel::default(), 2000.0, 2000.0, 90.0);
+    let at_rest = sim.imu(r);
+    let half = 45f32.to_radians();
+    assert!((at_rest.qz - half.sin()).abs() < 1e-6 && (at_rest.qw - half.cos()).abs() < 1e-6);
+    assert_eq!((at_rest.ax, at_rest.ay, at_rest.wz), (0.0, 0.0, 0.0));
+    assert_eq!(at_rest.az, 9.80665, "gravity, as an accelerometer reads it");
+    // Speeding up (300 mm/s² is the model's limit): a forward acceleration.
+    sim.set_motors(r, Motors { v: 500.0, w: 0.0 });
+    sim.step(DT);
+    assert!((sim.imu(r).ax - 0.3).abs() < 1e-4, "{:?}", sim.imu(r));
+    // A steady turn of 20 deg/s at 200 mm/s: ω in rad/s, centripetal v·ω to the left.
+    let mut sim = Sim::new(room(), 1);
+    let r = sim.add_robot("r", snappy(), 2000.0, 2000.0, 0.0);
+    sim.set_motors(r, Motors { v: 200.0, w: 20.0 });
+    run(&mut sim, 1.0);
+    let imu = sim.imu(r);
+    let w = 20f32.to_radians();
+    assert!((imu.wz - w).abs() < 1e-5, "{imu:?}");
+    assert!((imu.ay - 0.2 * w).abs() < 1e-5, "{imu:?}");
+    assert!(imu.ax.abs() < 1e-6, "{imu:?}");
+    // The heading: 20° after one second, from the true pose (no odometry noise).
+    let (_, _, yaw) = imu.euler();
+    assert!((yaw.to_degrees() - 20.0).abs() < 0.01, "{yaw}");
+}

@@ -12,7 +12,7 @@ use std::{
 };
 
 use common::process::{Proc, free_port, number_after};
-use jderobot::interfaces::{Encoders, Laser, Motors, Notify, PtMotors};
+use jderobot::interfaces::{Encoders, Imu, Laser, Motors, Notify, PtMotors};
 use zenoh::Wait;
 
 fn robot_conf(dir: &Path, port: u16, extra: &str) -> std::path::PathBuf {
@@ -23,7 +23,7 @@ fn robot_conf(dir: &Path, port: u16, extra: &str) -> std::path::PathBuf {
         format!(
             "driver simulator\nworld {world}\nrobot robot1 1000 1000 90\nprovides encoders\n\
              provides motors\nprovides laser 180 1\nprovides sonars\nprovides colorA\n\
-             provides pantiltencoders\nprovides pantiltmotors\nend_driver\n\
+             provides pantiltencoders\nprovides pantiltmotors\nprovides imu\nend_driver\n\
              service zenoh\nrobot pioneer\npublishes all\nlisten tcp/127.0.0.1:{port}\n\
              scouting off\n{extra}end_service\n\
              load_driver simulator\nload_service zenoh\n"
@@ -257,6 +257,7 @@ fn provides_all_takes_what_the_robot_serves_and_says_what_to_do_without_it() {
         [
             "colorA",
             "encoders",
+            "imu",
             "laser",
             "motors",
             "pantiltencoders",
@@ -267,6 +268,7 @@ fn provides_all_takes_what_the_robot_serves_and_says_what_to_do_without_it() {
     let enc = rt.interfaces.get_any("encoders").unwrap();
     enc.resume();
     common::eventually("encoders", || enc.clock() > 0 && enc.stale().is_none());
+    assert_heading_90(&rt.interfaces.get::<Imu>("imu").unwrap());
     rt.shutdown();
     robot.quit();
 
@@ -287,6 +289,34 @@ fn provides_all_takes_what_the_robot_serves_and_says_what_to_do_without_it() {
         e.contains("robot `pioneer`") && e.contains("provides NAME"),
         "{e}"
     );
+}
+
+/// The simulated robot1 (heading 90°, standing) as its imu reads it.
+fn assert_heading_90(imu: &jderobot::interfaces::Interface<Imu>) {
+    imu.resume();
+    common::eventually("imu", || imu.clock() > 0);
+    let v = imu.read();
+    let half = std::f32::consts::FRAC_PI_4;
+    assert!(
+        (v.qz - half.sin()).abs() < 1e-3 && (v.qw - half.cos()).abs() < 1e-3,
+        "{v:?}"
+    );
+    assert!((v.az - 9.80665).abs() < 1e-4 && v.wz == 0.0, "{v:?}");
+}
+
+#[test]
+fn imu_travels_as_a_ros2_sensor_msgs_imu_too() {
+    let dir = tempfile::tempdir().unwrap();
+    let port = free_port();
+    let mut robot = Proc::start(&robot_conf(dir.path(), port, "format ros2\n"));
+    robot.ask_until("echo imu", "the simulator", |l| l.starts_with("imu clock="));
+    let rt = common::start_conf(&format!(
+        "driver zenoh\nrobot pioneer\nprovides imu\nformat ros2\nconnect tcp/127.0.0.1:{port}\n\
+         scouting off\nend_driver\nload_driver zenoh\n"
+    ));
+    assert_heading_90(&rt.interfaces.get::<Imu>("imu").unwrap());
+    rt.shutdown();
+    robot.quit();
 }
 
 #[test]

@@ -1,5 +1,5 @@
 //! Python on the other end: `scripts/zenoh_client.py` (the `eclipse-zenoh` package
-//! from PyPI, and `rosbags` for CDR) reads laser, an image and odometry from a
+//! from PyPI, and `rosbags` for CDR) reads laser, an image, odometry and the imu from a
 //! simulated robot served by the `zenoh` service, decodes them from the layouts of
 //! docs/zenoh.md (or as ROS 2 messages with `format ros2`), and drives `motors`
 //! until the robot moved. Runs in the venv that .ci/run makes (target/py-venv);
@@ -26,8 +26,8 @@ fn python_drives(mode: &str, extra: &str) -> Option<serde_json::Value> {
         &conf,
         format!(
             "driver simulator\nworld {}\nrobot robot1 1000 1000 90\nprovides encoders\n\
-             provides motors\nprovides laser 180 1\nprovides sonars\nprovides colorA\nend_driver\n\
-             service zenoh\nrobot pioneer\npublishes all\nlisten tcp/127.0.0.1:{port}\n\
+             provides motors\nprovides laser 180 1\nprovides sonars\nprovides colorA\nprovides imu\n\
+             end_driver\nservice zenoh\nrobot pioneer\npublishes all\nlisten tcp/127.0.0.1:{port}\n\
              scouting off\n{extra}end_service\nload_driver simulator\nload_service zenoh\n",
             common::world_path("simple.world")
         ),
@@ -59,7 +59,11 @@ fn python_drives(mode: &str, extra: &str) -> Option<serde_json::Value> {
     // The robot moved, as its own process sees it.
     robot.expect_moved(&start, 100.0);
     robot.quit();
-    Some(serde_json::from_str(stdout.lines().last().unwrap()).unwrap())
+    let v: serde_json::Value = serde_json::from_str(stdout.lines().last().unwrap()).unwrap();
+    // The imu, in either format: gravity up, in m/s².
+    let az = v["imu"]["az"].as_f64().unwrap();
+    assert!((az - 9.80665).abs() < 1e-5, "imu: {v}");
+    Some(v)
 }
 
 #[test]

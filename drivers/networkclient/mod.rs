@@ -12,7 +12,7 @@
 //! provides varcolorB robot.local 3001 2     # NETID alone: any size
 //! provides laser robot.local 3001           # laser, sonars, encoders, motors,
 //! provides encoders robot.local 3001        #   pantiltencoders, pantiltmotors,
-//! provides motors robot.local 3001          #   zoomencoders, zoommotors
+//! provides motors robot.local 3001          #   zoomencoders, zoommotors, imu (jderobot)
 //! initial_position 1000 1000 90             # X Y mm, THETA deg: where the remote odometry's
 //!                                           #   origin is in this side's world (default 0 0 0)
 //! token s3cret                              # the server's token, if it has one
@@ -66,7 +66,7 @@ use crate::{
         settings::{self, MOTORS_TIMEOUT, Setting, int, interface, word},
     },
     interfaces::{
-        COLOR_HEIGHT, COLOR_WIDTH, Encoders, Image, Interface, Interfaces, Laser, Motors,
+        COLOR_HEIGHT, COLOR_WIDTH, Encoders, Image, Imu, Interface, Interfaces, Laser, Motors,
         PtEncoders, PtMotors, Sonars, Source, ZoomEncoders, ZoomMotors, canonical, family,
     },
     netwire::{self, Device, LineEvent, LineReader, Message, Request},
@@ -272,6 +272,7 @@ enum Dev {
     Sonars(Arc<Interface<Sonars>>),
     PtEncoders(Arc<Interface<PtEncoders>>),
     ZoomEncoders(Arc<Interface<ZoomEncoders>>),
+    Imu(Arc<Interface<Imu>>),
     Motors(Arc<Interface<Motors>>, Duration),
     PtMotors(Arc<Interface<PtMotors>>),
     ZoomMotors(Arc<Interface<ZoomMotors>>),
@@ -286,6 +287,7 @@ impl Dev {
             Dev::Sonars(i) => i.set_stale(why),
             Dev::PtEncoders(i) => i.set_stale(why),
             Dev::ZoomEncoders(i) => i.set_stale(why),
+            Dev::Imu(i) => i.set_stale(why),
             Dev::Motors(i, _) => {
                 let _ = i.publish(Motors::default());
                 i.set_stale(why);
@@ -304,6 +306,7 @@ impl Dev {
             Dev::Sonars(i) => i.users() > 0,
             Dev::PtEncoders(i) => i.users() > 0,
             Dev::ZoomEncoders(i) => i.users() > 0,
+            Dev::Imu(i) => i.users() > 0,
             _ => true,
         }
     }
@@ -316,6 +319,7 @@ impl Dev {
             Dev::Sonars(i) => i.wait_used(t),
             Dev::PtEncoders(i) => i.wait_used(t),
             Dev::ZoomEncoders(i) => i.wait_used(t),
+            Dev::Imu(i) => i.wait_used(t),
             _ => true,
         }
     }
@@ -327,6 +331,7 @@ impl Dev {
             Dev::Sonars(_) => Device::Sonars,
             Dev::PtEncoders(_) => Device::PtEncoders,
             Dev::ZoomEncoders(_) => Device::ZoomEncoders,
+            Dev::Imu(_) => Device::Imu,
             _ => return None,
         })
     }
@@ -369,6 +374,7 @@ impl NetClient {
                 "sonars" => Dev::Sonars(ifaces.provide(&r.name, provider)?),
                 "pantiltencoders" => Dev::PtEncoders(ifaces.provide(&r.name, provider)?),
                 "zoomencoders" => Dev::ZoomEncoders(ifaces.provide(&r.name, provider)?),
+                "imu" => Dev::Imu(ifaces.provide(&r.name, provider)?),
                 "motors" => Dev::Motors(ifaces.provide(&r.name, provider)?, cc.motors_timeout),
                 "pantiltmotors" => Dev::PtMotors(ifaces.provide(&r.name, provider)?),
                 "zoommotors" => Dev::ZoomMotors(ifaces.provide(&r.name, provider)?),
@@ -654,6 +660,9 @@ impl Link {
                         zoom_position: zoom,
                     },
                 );
+            }
+            (Dev::Imu(i), Message::Imu { fields, .. }) => {
+                i.accept(&self.from, Imu::from_fields(fields));
             }
             (_, Message::Error(t)) => {
                 tracing::warn!(

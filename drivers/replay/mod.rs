@@ -72,72 +72,9 @@ use crate::{
         ComponentConf,
         settings::{Setting, float, on_off, path, rest, word},
     },
-    interfaces::{
-        Bumpers, Encoders, Image, Interface, Laser, Motors, PtEncoders, PtMotors, Sonars,
-    },
-    mcapfmt::{self, Recorded, StepGate, Summary},
+    mcapfmt::{self, Source, StepGate, Summary},
     runtime::{Driver, Runtime, Worker},
 };
-
-/// A provided interface, typed.
-enum Target {
-    Image(Arc<Interface<Image>>),
-    Laser(Arc<Interface<Laser>>),
-    Encoders(Arc<Interface<Encoders>>),
-    Sonars(Arc<Interface<Sonars>>),
-    Bumpers(Arc<Interface<Bumpers>>),
-    PtEncoders(Arc<Interface<PtEncoders>>),
-    /// Actuators: provided, never published.
-    Motors(#[allow(dead_code)] Arc<Interface<Motors>>),
-    PtMotors(#[allow(dead_code)] Arc<Interface<PtMotors>>),
-}
-
-impl Target {
-    fn provide(rt: &Runtime, name: &str, kind: &str, provider: &str) -> anyhow::Result<Target> {
-        let i = &rt.interfaces;
-        Ok(match kind {
-            "image" => Target::Image(i.provide(name, provider)?),
-            "laser" => Target::Laser(i.provide(name, provider)?),
-            "encoders" => Target::Encoders(i.provide(name, provider)?),
-            "sonars" => Target::Sonars(i.provide(name, provider)?),
-            "bumpers" => Target::Bumpers(i.provide(name, provider)?),
-            "pantiltencoders" => Target::PtEncoders(i.provide(name, provider)?),
-            "motors" => Target::Motors(i.provide(name, provider)?),
-            "pantiltmotors" => Target::PtMotors(i.provide(name, provider)?),
-            other => {
-                bail!("replay: channel `{name}` holds `{other}`, not an interface jderobot knows")
-            }
-        })
-    }
-
-    /// Publishes a decoded value with its clock (shifted by `offset` in a loop).
-    fn publish(&self, clock: u64, time_ns: u64, value: Recorded) -> Result<(), String> {
-        let t = mcapfmt::from_nanos(time_ns);
-        let r = match (self, value) {
-            (Target::Image(i), Recorded::Image(v)) => i.publish_recorded(clock, t, v),
-            (Target::Laser(i), Recorded::Laser(v)) => i.publish_recorded(clock, t, v),
-            (Target::Encoders(i), Recorded::Encoders(v)) => i.publish_recorded(clock, t, v),
-            (Target::Sonars(i), Recorded::Sonars(v)) => i.publish_recorded(clock, t, v),
-            (Target::Bumpers(i), Recorded::Bumpers(v)) => i.publish_recorded(clock, t, v),
-            (Target::PtEncoders(i), Recorded::PtEncoders(v)) => i.publish_recorded(clock, t, v),
-            (Target::Motors(_) | Target::PtMotors(_), _) => return Ok(()),
-            _ => return Err("the message's kind differs from the channel's".into()),
-        };
-        r.map(|_| ()).map_err(|e| e.to_string())
-    }
-
-    fn set_stale(&self, why: &str) {
-        match self {
-            Target::Image(i) => i.set_stale(why),
-            Target::Laser(i) => i.set_stale(why),
-            Target::Encoders(i) => i.set_stale(why),
-            Target::Sonars(i) => i.set_stale(why),
-            Target::Bumpers(i) => i.set_stale(why),
-            Target::PtEncoders(i) => i.set_stale(why),
-            Target::Motors(_) | Target::PtMotors(_) => {}
-        }
-    }
-}
 
 /// The replay's settings.
 #[derive(Clone, Debug)]
@@ -280,7 +217,7 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
     } else {
         settings.provides.clone()
     };
-    let mut targets: BTreeMap<String, (String, Target)> = BTreeMap::new();
+    let mut targets: BTreeMap<String, (String, Source)> = BTreeMap::new();
     for name in &wanted {
         let Some(c) = summary
             .channels
@@ -315,7 +252,8 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
                 c.schema
             );
         }
-        let target = Target::provide(rt, &c.name, &kind, &conf.name)?;
+        let target = Source::provide(&rt.interfaces, &c.name, &kind, &conf.name)
+            .map_err(|e| anyhow::anyhow!("replay: channel `{}`: {e}", c.name))?;
         targets.insert(c.topic.clone(), (kind, target));
     }
     if settings.lockstep && !targets.values().any(|(kind, _)| kind == "motors") {
@@ -356,7 +294,7 @@ fn run(
     bytes: &[u8],
     summary: &Summary,
     settings: &Settings,
-    targets: &BTreeMap<String, (String, Target)>,
+    targets: &BTreeMap<String, (String, Source)>,
     gate: Option<&StepGate>,
     stop: &AtomicBool,
 ) {
@@ -371,7 +309,7 @@ fn run(
     let mut errors = 0u32;
     // Lock-step: the motors interface and the clock of the last command seen.
     let motors = targets.values().find_map(|(_, t)| match t {
-        Target::Motors(m) if settings.lockstep => Some(m.clone()),
+        Source::Motors(m) if settings.lockstep => Some(m.clone()),
         _ => None,
     });
     let mut seen = motors.as_ref().map(|m| m.clock()).unwrap_or(0);
@@ -389,7 +327,7 @@ fn run(
             let Some((kind, target)) = targets.get(&m.channel.topic) else {
                 return ControlFlow::Continue(());
             };
-            if let (Some(motors), Target::Motors(_)) = (&motors, target) {
+            if let (Some(motors), Source::Motors(_)) = (&motors, target) {
                 // A recorded command: the next step waits for the schema's own.
                 while motors.clock() == seen {
                     if stop.load(Ordering::Acquire) {
@@ -420,9 +358,11 @@ fn run(
             match mcapfmt::decode_read(kind, m) {
                 Ok(d) => {
                     last_clock = last_clock.max(d.clock.saturating_add(offset));
-                    if let Err(e) =
-                        target.publish(d.clock.saturating_add(offset), d.time_ns, d.value)
-                    {
+                    let (clock, time) = (
+                        d.clock.saturating_add(offset),
+                        mcapfmt::from_nanos(d.time_ns),
+                    );
+                    if let Err(e) = target.publish_recorded(clock, time, d.value) {
                         errors += 1;
                         if errors <= 5 {
                             tracing::warn!("replay: {e}");
@@ -456,7 +396,9 @@ fn run(
     }
     let why = format!("replay: end of {}", settings.file.display());
     for (_, t) in targets.values() {
-        t.set_stale(&why);
+        if !t.any().is_actuator() {
+            t.any().set_stale(&why);
+        }
     }
 }
 

@@ -40,6 +40,7 @@ pub struct Periods {
     pub bumpers: f64,
     pub camera: f64,
     pub pantiltencoders: f64,
+    pub imu: f64,
 }
 
 impl Default for Periods {
@@ -51,6 +52,7 @@ impl Default for Periods {
             bumpers: 0.05,
             camera: 0.1,
             pantiltencoders: 0.05,
+            imu: 0.02,
         }
     }
 }
@@ -65,6 +67,7 @@ pub struct Provides {
     pub bumpers: Option<String>,
     pub pantiltencoders: Option<String>,
     pub pantiltmotors: Option<String>,
+    pub imu: Option<String>,
     /// (interface name, columns, rows).
     pub cameras: Vec<(String, u32, u32)>,
 }
@@ -141,6 +144,7 @@ pub const LINES: &[Setting] = &[
                     "bumpers",
                     "camera",
                     "pantiltencoders",
+                    "imu",
                 ],
             ),
             float("MS", "ms", 0.001, 60_000.0),
@@ -192,7 +196,7 @@ pub const LINES: &[Setting] = &[
     ),
 ];
 
-const USAGE_PROVIDES: &str = "provides encoders|motors|sonars|bumpers|pantiltencoders|pantiltmotors|colorA..D [ROBOT], \
+const USAGE_PROVIDES: &str = "provides encoders|motors|sonars|bumpers|pantiltencoders|pantiltmotors|imu|colorA..D [ROBOT], \
 provides laser [N RESOLUTION] [ROBOT], provides varcolorA..D [W H] [ROBOT]";
 
 /// Numbers above zero.
@@ -291,7 +295,7 @@ fn settings(conf: &ComponentConf) -> Result<Settings, ConfError> {
                 l.expect_args(
                     2,
                     2,
-                    "period encoders|laser|sonars|bumpers|camera|pantiltencoders MS",
+                    "period encoders|laser|sonars|bumpers|camera|pantiltencoders|imu MS",
                 )?;
                 let sensor = l.choice(
                     0,
@@ -303,6 +307,7 @@ fn settings(conf: &ComponentConf) -> Result<Settings, ConfError> {
                         "bumpers",
                         "camera",
                         "pantiltencoders",
+                        "imu",
                     ],
                 )?;
                 let v = l.number(1, "a period in ms", POSITIVE)? / 1000.0;
@@ -313,6 +318,7 @@ fn settings(conf: &ComponentConf) -> Result<Settings, ConfError> {
                     "sonars" => &mut p.sonars,
                     "bumpers" => &mut p.bumpers,
                     "camera" => &mut p.camera,
+                    "imu" => &mut p.imu,
                     _ => &mut p.pantiltencoders,
                 } = v;
             }
@@ -409,7 +415,8 @@ fn provides(
         ))
     };
     match kind.as_str() {
-        "encoders" | "motors" | "sonars" | "bumpers" | "pantiltencoders" | "pantiltmotors" => {
+        "encoders" | "motors" | "sonars" | "bumpers" | "pantiltencoders" | "pantiltmotors"
+        | "imu" => {
             if extra != 0 {
                 return Err(takes("no arguments besides a robot name"));
             }
@@ -419,6 +426,7 @@ fn provides(
                 "sonars" => &mut p.sonars,
                 "bumpers" => &mut p.bumpers,
                 "pantiltencoders" => &mut p.pantiltencoders,
+                "imu" => &mut p.imu,
                 _ => &mut p.pantiltmotors,
             } = Some(name.clone());
         }

@@ -13,8 +13,8 @@ use std::{
 
 use crate::{
     interfaces::{
-        Bumpers, Encoders, Image, Interface, InterfaceValue, Interfaces, Laser, Motors, PtEncoders,
-        PtMotors, Sonars,
+        Bumpers, Encoders, Image, Imu, Interface, InterfaceValue, Interfaces, Laser, Motors,
+        PtEncoders, PtMotors, Sonars,
     },
     runtime::{Driver, Worker},
     world::LiveBalls,
@@ -34,6 +34,7 @@ struct RobotInterfaces {
     bumpers: Option<Arc<Interface<Bumpers>>>,
     pantilt_encoders: Option<Arc<Interface<PtEncoders>>>,
     pantilt_motors: Option<Arc<Interface<PtMotors>>>,
+    imu: Option<Arc<Interface<Imu>>>,
     cameras: Vec<(Arc<Interface<Image>>, u32, u32, Renderer)>,
 }
 
@@ -97,6 +98,11 @@ impl SimDriver {
                     .as_ref()
                     .map(|n| ifaces.provide_value(n, provider, pt_limits))
                     .transpose()?,
+                imu: p
+                    .imu
+                    .as_ref()
+                    .map(|n| ifaces.provide(n, provider))
+                    .transpose()?,
                 cameras: p
                     .cameras
                     .iter()
@@ -143,6 +149,7 @@ struct NextPublish {
     bumpers: f64,
     camera: f64,
     pantilt_encoders: f64,
+    imu: f64,
 }
 
 /// Whether a sensor is due at `now`; if so, moves its `next` time one `period` on
@@ -166,6 +173,7 @@ fn publish(simulation: &mut Simulation, out: &mut Outputs, next: &mut NextPublis
     let t = simulation.sim.time;
     let p = simulation.periods;
     let always = simulation.publish_always;
+    let imu = is_due(&mut next.imu, t, p.imu);
     let (enc, las, son, bum, cam, pt) = (
         is_due(&mut next.encoders, t, p.encoders),
         is_due(&mut next.laser, t, p.laser),
@@ -184,6 +192,9 @@ fn publish(simulation: &mut Simulation, out: &mut Outputs, next: &mut NextPublis
         }
         if pt && let Some(i) = &r.pantilt_encoders {
             let _ = i.publish(sim.pantilt_encoders(k));
+        }
+        if imu && let Some(i) = &r.imu {
+            let _ = i.publish(sim.imu(k));
         }
         if bum && let Some(i) = &r.bumpers {
             let _ = i.write(|b| sim.bumpers(k, b));

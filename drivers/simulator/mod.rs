@@ -19,6 +19,7 @@
 //! | `varcolorA..D` | the same camera at any size (`provides varcolorA W H`) |
 //! | `pantiltencoders` | pan_angle, tilt_angle deg (pan counter-clockwise, tilt up) |
 //! | `pantiltmotors` | longitude, latitude deg; longitude_speed, latitude_speed deg/s (0 = the unit's maximum); limits of the Directed Perception PTU: pan ±159.13, tilt −46..+30, 205.89 deg/s |
+//! | `imu` | the true heading as a quaternion about z (no odometry drift), turn rate rad/s, and an accelerometer's reading m/s²: forward dv/dt, centripetal v·ω to the left, gravity 9.81 up; 50 Hz |
 //!
 //! The camera sits on the pan-tilt unit at the Pioneer camera position (190, 0) mm,
 //! 500 mm above the floor, 65° horizontal field of view; it uses progeo's pinhole
@@ -32,7 +33,7 @@
 //!                                    # interfaces have plain names, the others' get a .NAME suffix
 //! initial_position 1000 1000 90      # the seed's player line: the first robot's pose
 //! provides encoders                  # encoders, motors, sonars, bumpers, pantiltencoders,
-//! provides motors                    #   pantiltmotors, colorA..D [ROBOT]
+//! provides motors                    #   pantiltmotors, imu, colorA..D [ROBOT]
 //! provides laser 180 1               # laser [N RESOLUTION] [ROBOT]
 //! provides varcolorA 640 480         # varcolorA..D [W H] [ROBOT]
 //! provides laser robot2              # robot2's laser: interface laser.robot2
@@ -42,7 +43,7 @@
 //! seed 1                             # noise seed
 //! step 10                            # physics step, ms
 //! period laser 100                   # publishing period (ms) of encoders, laser, sonars,
-//!                                    #   bumpers, camera, pantiltencoders
+//!                                    #   bumpers, camera, pantiltencoders, imu
 //! noise odometry 0.02 0.01           # odometry: σ of distance and turn, as fractions
 //! noise laser 10                     # σ, mm (also: noise sonars MM); no noise by default
 //! accel 300 100                      # mm/s², deg/s² (a Pioneer's defaults)

@@ -2,7 +2,7 @@
 //! pan-tilt unit), rolling balls and collisions, advanced by [`Sim::step`]. A plain
 //! struct with no threads, deterministic for a given seed.
 
-use crate::interfaces::{Encoders, Motors, PtEncoders, PtMotors};
+use crate::interfaces::{Encoders, Imu, Motors, PtEncoders, PtMotors};
 
 use crate::world::{Ball, Point2, Segment, World, closest_on_segment};
 
@@ -166,6 +166,8 @@ pub struct Robot {
     /// Current speeds: mm/s, deg/s.
     pub v: f64,
     pub w: f64,
+    /// Forward acceleration in the last step, mm/s².
+    pub accel: f64,
     /// The command being followed.
     pub cmd: Motors,
     pub pan: f64,
@@ -234,6 +236,7 @@ impl Sim {
                 latitude_speed: 0.0,
                 ..model.pantilt
             },
+            accel: 0.0,
             stalled: false,
             bumpers: [0; NUM_BUMPERS],
             odometer: 0.0,
@@ -258,6 +261,27 @@ impl Sim {
     }
 
     /// Robot `i`'s odometry, in the seed's encoders layout.
+    /// Robot `i`'s IMU, in SI units: its true heading (an IMU does not drift
+    /// with the wheels, unlike odometry), its turn rate, and what an
+    /// accelerometer on it reads: the forward acceleration, the centripetal v·ω
+    /// to the left, and gravity (up, the ground pushing back).
+    pub fn imu(&self, i: usize) -> Imu {
+        let Some(r) = self.robots.get(i) else {
+            return Imu::default();
+        };
+        let half = r.pose.theta / 2.0;
+        let w = r.w.to_radians();
+        Imu {
+            qz: half.sin() as f32,
+            qw: half.cos() as f32,
+            wz: w as f32,
+            ax: (r.accel / 1000.0) as f32,
+            ay: (r.v / 1000.0 * w) as f32,
+            az: 9.80665,
+            ..Imu::default()
+        }
+    }
+
     pub fn encoders(&self, i: usize) -> Encoders {
         let o = self.robots.get(i).map(|r| r.odom).unwrap_or_default();
         Encoders::from_pose(o.x as f32, o.y as f32, o.theta as f32)
@@ -381,7 +405,9 @@ impl Sim {
             theta: pose.theta.rem_euclid(std::f64::consts::TAU),
             ..pose
         };
-        r.v = if contact.is_some() { 0.0 } else { v };
+        let new_v = if contact.is_some() { 0.0 } else { v };
+        r.accel = (new_v - r.v) / dt;
+        r.v = new_v;
         r.w = w;
         r.stalled = contact.is_some();
         r.odometer += ds.abs();

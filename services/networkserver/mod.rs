@@ -12,7 +12,8 @@
 //! serves colorA 0          # an image and its network id (colorA..D, varcolorA..D any size)
 //! serves laser             # laser, sonars, encoders, motors, pantiltencoders,
 //! serves encoders          #   pantiltmotors, zoomencoders, zoommotors (4.3 names
-//! serves motors            #   ptencoders, ptmotors, zencoders, zmotors too)
+//! serves motors            #   ptencoders, ptmotors, zencoders, zmotors too), imu
+//!                          #   (jderobot's extension of the wire)
 //! max_clients 128          # connections at once (more are refused with a 1027 line)
 //! max_line 1024            # bytes in a request line
 //! max_queue 32             # image requests + replies waiting per client
@@ -30,7 +31,8 @@
 //! nothing provides is an error naming the line). A subscription or an image
 //! request resumes the interface for that client (so a simulator renders only while
 //! someone watches); `22`/`23` set `motors` v (mm/s) and w (deg/s); `1006` sets the
-//! pan-tilt command (deg, deg/s); `1024` the zoom. When a client that drove the
+//! pan-tilt command (deg, deg/s); `1024` the zoom; `2001` subscribes to the imu
+//! (jderobot's extension, see [`crate::netwire`]). When a client that drove the
 //! motors goes away, the motors are set to zero.
 //!
 //! # Differences from 4.3 (the wire is unchanged)
@@ -104,8 +106,8 @@ use parking_lot::Mutex;
 use crate::{
     conf::ComponentConf,
     interfaces::{
-        AnyInterface, Encoders, Image, Interface, Interfaces, Laser, Motors, PtEncoders, PtMotors,
-        Sonars, ZoomEncoders, ZoomMotors, family,
+        AnyInterface, Encoders, Image, Imu, Interface, Interfaces, Laser, Motors, PtEncoders,
+        PtMotors, Sonars, ZoomEncoders, ZoomMotors, family,
     },
     netwire::Device,
     runtime::{Driver, Runtime},
@@ -128,6 +130,7 @@ pub struct Sources {
     pub ptm: Option<Arc<Interface<PtMotors>>>,
     pub ze: Option<Arc<Interface<ZoomEncoders>>>,
     pub zm: Option<Arc<Interface<ZoomMotors>>>,
+    pub imu: Option<Arc<Interface<Imu>>>,
 }
 
 impl Sources {
@@ -155,6 +158,7 @@ impl Sources {
                 "pantiltmotors" => s.ptm = Some(ifaces.get(name).with_context(ctx)?),
                 "zoomencoders" => s.ze = Some(ifaces.get(name).with_context(ctx)?),
                 "zoommotors" => s.zm = Some(ifaces.get(name).with_context(ctx)?),
+                "imu" => s.imu = Some(ifaces.get(name).with_context(ctx)?),
                 other => anyhow::bail!("networkserver: cannot serve a {other} interface"),
             }
         }
@@ -168,6 +172,7 @@ impl Sources {
             Device::Sonars => self.sonars.clone().map(|i| i as Arc<dyn AnyInterface>),
             Device::PtEncoders => self.pte.clone().map(|i| i as Arc<dyn AnyInterface>),
             Device::ZoomEncoders => self.ze.clone().map(|i| i as Arc<dyn AnyInterface>),
+            Device::Imu => self.imu.clone().map(|i| i as Arc<dyn AnyInterface>),
         }
     }
 }

@@ -27,7 +27,7 @@ pub(super) struct ClientState {
     /// Why the connection ends (the first reason wins) and whether it was the
     /// client's fault.
     pub(super) why: Option<(String, bool)>,
-    pub(super) subs: [bool; 5],
+    pub(super) subs: [bool; Device::COUNT],
     /// Outstanding image requests per served image (index in `Sources::images`).
     pub(super) images: Vec<u32>,
     pub(super) replies: VecDeque<Vec<u8>>,
@@ -57,7 +57,7 @@ impl Client {
 /// Interfaces a client resumed, to suspend when it leaves.
 #[derive(Default)]
 pub(super) struct Resumed {
-    pub(super) subs: [Option<Arc<dyn AnyInterface>>; 5],
+    pub(super) subs: [Option<Arc<dyn AnyInterface>>; Device::COUNT],
     pub(super) images: Vec<bool>,
 }
 
@@ -318,7 +318,7 @@ fn handle(
 pub(super) fn writer(cl: &Client, sh: &Shared) {
     let period = Duration::from_millis(netwire::PUSH_PERIOD_MS);
     let mut next_push = Instant::now() + period;
-    let mut last_push = [0u64; 5];
+    let mut last_push = [0u64; Device::COUNT];
     let mut last_img = vec![0u64; sh.sources.images.len()];
     let mut out: Vec<u8> = Vec::with_capacity(8192);
     let mut w = &cl.stream;
@@ -400,7 +400,13 @@ pub(super) fn write_failed(cl: &Client, sh: &Shared, e: io::Error) {
 }
 
 /// Appends the push of every subscribed device whose value changed.
-fn push(src: &Sources, subs: [bool; 5], last: &mut [u64; 5], out: &mut Vec<u8>, epoch: Instant) {
+fn push(
+    src: &Sources,
+    subs: [bool; Device::COUNT],
+    last: &mut [u64; Device::COUNT],
+    out: &mut Vec<u8>,
+    epoch: Instant,
+) {
     for d in Device::ALL {
         let k = d.index();
         if !subs[k] {
@@ -450,6 +456,15 @@ fn push(src: &Sources, subs: [bool; 5], last: &mut [u64; 5], out: &mut Vec<u8>, 
                     if s.clock != last[k] {
                         last[k] = s.clock;
                         netwire::write_zoom_encoders(out, s.clock, s.zoom_position);
+                    }
+                }
+            }
+            Device::Imu => {
+                if let Some(i) = &src.imu {
+                    let s = i.read();
+                    if s.clock != last[k] {
+                        last[k] = s.clock;
+                        netwire::write_imu(out, s.clock, s.fields());
                     }
                 }
             }

@@ -22,7 +22,7 @@
 //! images raw                       # raw: foxglove.RawImage bgr8 (default); jpeg [QUALITY]:
 //!                                  #   foxglove.CompressedImage (quality 1..100, default 90)
 //! profile foxglove                 # foxglove (default): Foxglove schemas (protobuf, JSON); ros2: rosbag2
-//!                                  #   (CDR: LaserScan, Image, Odometry, Twist; other kinds skipped)
+//!                                  #   (CDR: LaserScan, Image, Odometry, Twist, Imu; other kinds skipped)
 //! queue 64                         # messages waiting for the disk at most; more are dropped
 //! start on                         # on (default): record from the start; off: wait for `record start`
 //! end_service
@@ -458,13 +458,15 @@ fn write_one(
         Some(c) => c,
         None => {
             let kind = snap.kind();
-            let c = mcapfmt::add_channel(&mut o.writer, name, kind, profile)?.unwrap_or_else(|| {
-                // Not in the profile: never written (said once, at the first sample).
-                tracing::warn!(
-                    "recorder: profile ros2 carries laser, image, encoders and motors; `{name}` ({kind}) is not recorded"
-                );
-                u16::MAX
-            });
+            let c =
+                mcapfmt::add_channel(&mut o.writer, name, kind, profile)?.unwrap_or_else(|| {
+                    // Not in the profile: never written (said once, at the first sample).
+                    tracing::warn!(
+                        "recorder: profile ros2 carries {}; `{name}` ({kind}) is not recorded",
+                        mcapfmt::ros2::kinds().join(", ")
+                    );
+                    u16::MAX
+                });
             o.channels[*i] = Some(c);
             c
         }

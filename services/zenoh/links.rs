@@ -107,26 +107,23 @@ impl<T: Wire> Outbound for Out<T> {
             return;
         }
         state.0 = s.clock;
-        let ros2 = (self.route.format == Format::Ros2)
-            .then(|| T::ros2(&s))
-            .flatten();
-        let (payload, encoding, attachment): (ZBytes, Encoding, Vec<u8>) = if let Some(snap) = ros2
-        {
-            let mut cdr = Vec::new();
-            mcapfmt::ros2::encode(self.iface.name(), &snap, &mut cdr);
-            let a = wire::rmw_attachment(s.clock, s.time, &self.gid);
-            (cdr.into(), Encoding::ZENOH_BYTES, a.to_vec())
-        } else {
-            let a = wire::attachment(s.clock, s.time).to_vec();
-            match self.route.jpeg.and_then(|q| s.value.to_jpeg(q)) {
-                Some(jpeg) => (jpeg.into(), Encoding::IMAGE_JPEG, a),
-                None => (
-                    T::payload(&s),
-                    Encoding::ZENOH_BYTES.with_schema(wire::encoding(T::KIND)),
-                    a,
-                ),
-            }
-        };
+        let (payload, encoding, attachment): (ZBytes, Encoding, Vec<u8>) =
+            if self.route.ros2(T::KIND) {
+                let mut cdr = Vec::new();
+                mcapfmt::ros2::encode(self.iface.name(), &s, &mut cdr);
+                let a = wire::rmw_attachment(s.clock, s.time, &self.gid);
+                (cdr.into(), Encoding::ZENOH_BYTES, a.to_vec())
+            } else {
+                let a = wire::attachment(s.clock, s.time).to_vec();
+                match self.route.jpeg.and_then(|q| s.value.to_jpeg(q)) {
+                    Some(jpeg) => (jpeg.into(), Encoding::IMAGE_JPEG, a),
+                    None => (
+                        T::payload(&s),
+                        Encoding::ZENOH_BYTES.with_schema(wire::encoding(T::KIND)),
+                        a,
+                    ),
+                }
+            };
         let put = self
             .publisher
             .put(payload)
@@ -222,12 +219,11 @@ fn decode<T: Wire>(route: &Route, sample: &ZSample) -> Result<(u64, SystemTime, 
             .and_then(|a| wire::read_rmw_attachment(&a.to_bytes()))
             .unwrap_or((0, SystemTime::now()));
         let payload = sample.payload().to_bytes();
-        let d = mcapfmt::ros2::decode(&route.key, T::KIND, &payload, clock, mcapfmt::nanos(time))
+        let (time_ns, v) = mcapfmt::ros2::decode::<T>(&route.key, &payload, mcapfmt::nanos(time))
             .map_err(|e| e.to_string())?;
-        let v = T::from_ros2(d.value).ok_or("a ROS message of another type")?;
         return Ok((
             clock,
-            mcapfmt::from_nanos(d.time_ns),
+            mcapfmt::from_nanos(time_ns),
             Box::new(move |d: &mut T| *d = v),
         ));
     }

@@ -69,6 +69,7 @@ use zenoh::{Session, Wait, key_expr::KeyExpr, pubsub::Subscriber};
 
 use serde::de::IgnoredAny;
 
+use crate::interfaces::by_kind;
 use crate::{
     conf::{
         ComponentConf, ConfError, ConfLine,
@@ -79,7 +80,7 @@ use crate::{
 };
 use links::{Keep, Outbound, Route};
 pub use session::{Scouting, SessionConf};
-use wire::{Format, Wire, by_kind};
+use wire::{Format, Wire};
 
 /// What to publish or provide: one interface, or all.
 #[derive(Clone, Debug, PartialEq)]

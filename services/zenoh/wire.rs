@@ -10,12 +10,13 @@ use std::{
 
 use zenoh::bytes::ZBytes;
 
+pub use crate::interfaces::KINDS;
 use crate::{
     interfaces::{
-        Bumpers, Encoders, Image, InterfaceValue, Laser, Motors, PtEncoders, PtMotors, Sample,
-        Sonars, ZoomEncoders, ZoomMotors,
+        Bumpers, Encoders, Image, Imu, Laser, Motors, PtEncoders, PtMotors, Sample, Sonars,
+        ZoomEncoders, ZoomMotors,
     },
-    mcapfmt::{self, Recorded, Snapshot},
+    mcapfmt::{self, ros2::Ros2},
 };
 
 /// How values are written on the wire (`format` line).
@@ -23,7 +24,7 @@ use crate::{
 pub enum Format {
     /// The layouts of `docs/zenoh.md`, on `jderobot/<robot>/<interface>`.
     Jderobot,
-    /// CDR (sensor_msgs/LaserScan, Image, nav_msgs/Odometry, geometry_msgs/Twist)
+    /// CDR (sensor_msgs/LaserScan, Image, Imu, nav_msgs/Odometry, geometry_msgs/Twist)
     /// on rmw_zenoh's keys; kinds without a ROS message stay in `Jderobot`.
     Ros2,
 }
@@ -73,28 +74,10 @@ pub fn read_rmw_attachment(a: &[u8]) -> Option<(u64, SystemTime)> {
 }
 
 /// The ROS 2 type of a kind in the `ros2` format: (DDS type name as rmw_zenoh
-/// writes it in keys, RIHS01 type hash of ROS 2 Jazzy). The hashes are checked
-/// against `rosbags`' own computation in `tests/zenoh_python.rs`.
+/// writes it in keys, RIHS01 type hash of ROS 2 Jazzy), from the kind's
+/// [`Ros2`] message.
 pub fn ros2_type(kind: &str) -> Option<(&'static str, &'static str)> {
-    Some(match kind {
-        "laser" => (
-            "sensor_msgs::msg::dds_::LaserScan_",
-            "RIHS01_64c191398013af96509d518dac71d5164f9382553fce5c1f8cca5be7924bd828",
-        ),
-        "image" => (
-            "sensor_msgs::msg::dds_::Image_",
-            "RIHS01_d31d41a9a4c4bc8eae9be757b0beed306564f7526c88ea6a4588fb9582527d47",
-        ),
-        "encoders" => (
-            "nav_msgs::msg::dds_::Odometry_",
-            "RIHS01_3cc97dc7fb7502f8714462c526d369e35b603cfc34d946e3f2eda2766dfec6e0",
-        ),
-        "motors" => (
-            "geometry_msgs::msg::dds_::Twist_",
-            "RIHS01_9c45bf16fe0983d80e3cfe750d6835843d265a9a6c46bd2e609fcddde6fb8d2a",
-        ),
-        _ => return None,
-    })
+    mcapfmt::ros2::message(kind).map(|m| (m.dds, m.hash))
 }
 
 /// The default key of interface `name` of robot `robot`: `jderobot/<robot>/<name>`
@@ -114,22 +97,8 @@ pub type WireError = String;
 /// What a received payload does to the interface's recycled value.
 pub type Fill<T> = Box<dyn FnOnce(&mut T)>;
 
-/// The interface kinds that travel (every kind of `crate::interfaces`).
-pub const KINDS: &[&str] = &[
-    "image",
-    "laser",
-    "sonars",
-    "encoders",
-    "motors",
-    "pantiltencoders",
-    "pantiltmotors",
-    "zoomencoders",
-    "zoommotors",
-    "bumpers",
-];
-
 /// A value that travels on Zenoh.
-pub trait Wire: InterfaceValue + Sized {
+pub trait Wire: Ros2 + Sized {
     /// Appends the `jderobot` layout of the value.
     fn put(&self, out: &mut Vec<u8>);
     /// Reads the `jderobot` layout (the whole payload).
@@ -144,14 +113,6 @@ pub trait Wire: InterfaceValue + Sized {
     fn fill_from(z: &ZBytes) -> Result<Fill<Self>, WireError> {
         let v = Self::take(&z.to_bytes())?;
         Ok(Box::new(move |d: &mut Self| *d = v))
-    }
-    /// The sample as a message of the `ros2` format, for the kinds that have one.
-    fn ros2(_s: &Arc<Sample<Self>>) -> Option<Snapshot> {
-        None
-    }
-    /// A value decoded from the `ros2` format.
-    fn from_ros2(_r: Recorded) -> Option<Self> {
-        None
     }
     /// JPEG bytes of the value (images, `images jpeg`); `None` for other kinds.
     fn to_jpeg(&self, _quality: u8) -> Option<Vec<u8>> {
@@ -222,26 +183,8 @@ macro_rules! floats {
                 r.end()?;
                 Ok(v)
             }
-            floats!(@ros2 $t);
         }
     };
-    (@ros2 Encoders) => {
-        fn ros2(s: &Arc<Sample<Self>>) -> Option<Snapshot> {
-            Some(Snapshot::Encoders(s.clone()))
-        }
-        fn from_ros2(r: Recorded) -> Option<Self> {
-            match r { Recorded::Encoders(v) => Some(v), _ => None }
-        }
-    };
-    (@ros2 Motors) => {
-        fn ros2(s: &Arc<Sample<Self>>) -> Option<Snapshot> {
-            Some(Snapshot::Motors(s.clone()))
-        }
-        fn from_ros2(r: Recorded) -> Option<Self> {
-            match r { Recorded::Motors(v) => Some(v), _ => None }
-        }
-    };
-    (@ros2 $t:ident) => {};
 }
 
 floats!(Encoders: x, y, theta, cos, sin);
@@ -251,6 +194,7 @@ floats!(PtMotors: longitude, latitude, longitude_speed, latitude_speed, max_long
     min_longitude, max_latitude, min_latitude, max_longitude_speed, max_latitude_speed);
 floats!(ZoomEncoders: zoom_position);
 floats!(ZoomMotors: zoom, zoom_speed, max_zoom, min_zoom, max_zoom_speed);
+floats!(Imu: qx, qy, qz, qw, wx, wy, wz, ax, ay, az);
 
 /// The width and height at the start of an image payload; the size they give
 /// must fit in memory.
@@ -343,15 +287,6 @@ impl Wire for Image {
             data,
         })
     }
-    fn ros2(s: &Arc<Sample<Self>>) -> Option<Snapshot> {
-        Some(Snapshot::Image(s.clone()))
-    }
-    fn from_ros2(r: Recorded) -> Option<Self> {
-        match r {
-            Recorded::Image(v) => Some(v),
-            _ => None,
-        }
-    }
     fn to_jpeg(&self, quality: u8) -> Option<Vec<u8>> {
         mcapfmt::jpeg(self, quality)
     }
@@ -387,15 +322,6 @@ impl Wire for Laser {
             resolution,
         })
     }
-    fn ros2(s: &Arc<Sample<Self>>) -> Option<Snapshot> {
-        Some(Snapshot::Laser(s.clone()))
-    }
-    fn from_ros2(r: Recorded) -> Option<Self> {
-        match r {
-            Recorded::Laser(v) => Some(v),
-            _ => None,
-        }
-    }
 }
 
 impl Wire for Sonars {
@@ -429,27 +355,6 @@ impl Wire for Bumpers {
         })
     }
 }
-
-/// Calls `$f::<T>($args)` with `T` the value type of interface kind `$kind`, or
-/// evaluates `$other` for a kind that does not travel.
-macro_rules! by_kind {
-    ($kind:expr, $f:ident ( $($arg:expr),* ), $other:expr) => {
-        match $kind {
-            "image" => $f::<$crate::interfaces::Image>($($arg),*),
-            "laser" => $f::<$crate::interfaces::Laser>($($arg),*),
-            "sonars" => $f::<$crate::interfaces::Sonars>($($arg),*),
-            "encoders" => $f::<$crate::interfaces::Encoders>($($arg),*),
-            "motors" => $f::<$crate::interfaces::Motors>($($arg),*),
-            "pantiltencoders" => $f::<$crate::interfaces::PtEncoders>($($arg),*),
-            "pantiltmotors" => $f::<$crate::interfaces::PtMotors>($($arg),*),
-            "zoomencoders" => $f::<$crate::interfaces::ZoomEncoders>($($arg),*),
-            "zoommotors" => $f::<$crate::interfaces::ZoomMotors>($($arg),*),
-            "bumpers" => $f::<$crate::interfaces::Bumpers>($($arg),*),
-            _ => $other,
-        }
-    };
-}
-pub(crate) use by_kind;
 
 #[cfg(test)]
 mod tests {
@@ -494,24 +399,21 @@ mod tests {
             longitude: 10.0,
             ..PtMotors::default()
         });
-    }
-
-    fn has_ros2<T: Wire>() -> bool {
-        T::ros2(&Arc::new(Sample {
-            clock: 1,
-            stamp: std::time::Instant::now(),
-            time: SystemTime::now(),
-            value: T::default(),
-        }))
-        .is_some()
+        round_trip(Imu {
+            wz: 0.5,
+            az: 9.81,
+            ..Imu::default()
+        });
     }
 
     #[test]
-    fn every_kind_with_a_ros_type_encodes_as_ros2() {
-        for &kind in KINDS {
-            let ros = by_kind!(kind, has_ros2(), unreachable!());
-            assert_eq!(ros, ros2_type(kind).is_some(), "{kind}");
-        }
+    fn the_kinds_with_a_ros_type_are_the_documented_ones() {
+        let ros: Vec<&str> = KINDS
+            .iter()
+            .copied()
+            .filter(|k| ros2_type(k).is_some())
+            .collect();
+        assert_eq!(ros, ["image", "laser", "encoders", "motors", "imu"]);
     }
 
     #[test]

@@ -14,6 +14,10 @@
 //! | `zoomencoders` | [`ZoomEncoders`] | `zoom_position` |
 //! | `zoommotors` | [`ZoomMotors`] | `zoom`, `zoom_speed`; limits |
 //! | `bumpers` | [`Bumpers`] | one byte per bumper, 1 = pressed |
+//! | `imu` | [`Imu`] | orientation `qx qy qz qw` (unit quaternion), angular velocity `wx wy wz` rad/s, linear acceleration `ax ay az` m/s² |
+//!
+//! The kinds and their value types are listed once, in [`KINDS`] (`kinds.rs`);
+//! code that handles any kind dispatches through it ([`by_kind!`]).
 //!
 //! 4.3's export names `ptencoders`, `ptmotors`, `zencoders`, `zmotors` are accepted
 //! as aliases. A driver serving several robots names them with a suffix
@@ -39,19 +43,22 @@
 //! Resume/suspend reference counting ([`Interface::resume`]) tells a driver whether
 //! anybody uses an interface, so it works only while someone does.
 mod cell;
+mod kinds;
 mod names;
 mod source;
 mod table;
 mod values;
 
 pub use cell::{AnyInterface, Interface, MAX_CLOCK, Notify, Sample, Watch};
+pub use kinds::KINDS;
+pub(crate) use kinds::{by_kind, by_kind_match, for_each_kind};
 pub use names::{STANDARD_NAMES, canonical, family, interface_name};
 pub use source::Source;
 pub use table::{InUse, InterfaceError, Interfaces};
 pub use values::{
-    Bumpers, COLOR_HEIGHT, COLOR_WIDTH, Encoders, Image, InterfaceValue, Laser, MAX_ANGLE_DEG,
-    MAX_POSITION_MM, MAX_PT_SPEED, Motors, PtEncoders, PtMotors, RANGES, Sonars, ZoomEncoders,
-    ZoomMotors, limit,
+    Bumpers, COLOR_HEIGHT, COLOR_WIDTH, Encoders, Image, Imu, InterfaceValue, Laser,
+    MAX_ACCELERATION, MAX_ANGLE_DEG, MAX_ANGULAR_VELOCITY, MAX_POSITION_MM, MAX_PT_SPEED, Motors,
+    PtEncoders, PtMotors, RANGES, Sonars, ZoomEncoders, ZoomMotors, limit,
 };
 
 #[cfg(test)]

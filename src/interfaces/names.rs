@@ -2,7 +2,7 @@
 //! types), 4.3's aliases and robot suffixes.
 
 use super::values::{
-    Bumpers, Encoders, Image, InterfaceValue, Laser, Motors, PtEncoders, PtMotors, Sonars,
+    Bumpers, Encoders, Image, Imu, InterfaceValue, Laser, Motors, PtEncoders, PtMotors, Sonars,
     ZoomEncoders, ZoomMotors,
 };
 
@@ -25,6 +25,7 @@ pub const STANDARD: &[(&str, &str)] = &[
     ("zoomencoders", ZoomEncoders::KIND),
     ("zoommotors", ZoomMotors::KIND),
     ("bumpers", Bumpers::KIND),
+    ("imu", Imu::KIND),
 ];
 
 /// The standard interface names, for help texts and error messages.

@@ -68,6 +68,11 @@ pub const RANGES: &[(&str, &str)] = &[
         "zoom, zoom_speed and the limits finite, min_zoom <= max_zoom",
     ),
     ("bumpers", "any bytes"),
+    (
+        "imu",
+        "qx, qy, qz, qw a unit quaternion (length 1 ± 0.01); |wx|, |wy|, |wz| <= 1e3 rad/s; \
+         |ax|, |ay|, |az| <= 1e4 m/s²",
+    ),
 ];
 
 /// The largest |x|, |y| an `encoders` value may hold, mm (1000 km: beyond it an
@@ -109,7 +114,7 @@ fn set_f32(field: &str, value: &str, target: &mut f32) -> Result<(), String> {
 }
 
 /// A BGR image, rows top to bottom, no padding: `data[(row*width+col)*3]` is blue.
-#[derive(Clone, Default, PartialEq, Eq)]
+#[derive(Clone, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct Image {
     pub width: u32,
     pub height: u32,
@@ -212,7 +217,7 @@ impl InterfaceValue for Image {
 
 /// Laser ranges in mm, counter-clockwise from the robot's right; with 180 readings
 /// at 1 per degree, index 90 is straight ahead (reading i is at −90 + i/resolution deg).
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Laser {
     pub readings: Vec<i32>,
     /// Readings per degree.
@@ -253,7 +258,7 @@ impl InterfaceValue for Laser {
 }
 
 /// Sonar ranges in mm, one per sonar (Pioneer ring order).
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Sonars {
     pub us: Vec<f32>,
 }
@@ -273,7 +278,7 @@ impl InterfaceValue for Sonars {
 }
 
 /// Robot pose from odometry: the seed's `robot[5]` = x, y (mm), θ (rad, (0, 2π]), cos θ, sin θ.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Encoders {
     pub x: f32,
     pub y: f32,
@@ -336,7 +341,7 @@ impl InterfaceValue for Encoders {
 }
 
 /// Base velocity command: `v` mm/s forward, `w` deg/s counter-clockwise.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Motors {
     pub v: f32,
     pub w: f32,
@@ -386,7 +391,7 @@ impl InterfaceValue for Motors {
 }
 
 /// Pan-tilt angles in degrees.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PtEncoders {
     pub pan_angle: f32,
     pub tilt_angle: f32,
@@ -408,7 +413,7 @@ impl InterfaceValue for PtEncoders {
 }
 
 /// Pan-tilt command (deg, deg/s) and the unit's limits (read-only).
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PtMotors {
     pub longitude: f32,
     pub latitude: f32,
@@ -508,7 +513,7 @@ impl InterfaceValue for PtMotors {
 }
 
 /// Zoom position.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ZoomEncoders {
     pub zoom_position: f32,
 }
@@ -524,7 +529,7 @@ impl InterfaceValue for ZoomEncoders {
 }
 
 /// Zoom command and limits (read-only).
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ZoomMotors {
     pub zoom: f32,
     pub zoom_speed: f32,
@@ -585,7 +590,7 @@ impl InterfaceValue for ZoomMotors {
 }
 
 /// Bumpers: one byte per bumper, 1 = pressed.
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Bumpers {
     pub bumpers: Vec<u8>,
 }
@@ -594,5 +599,133 @@ impl InterfaceValue for Bumpers {
     const KIND: &'static str = "bumpers";
     fn describe(&self) -> String {
         format!("number={} bumpers={:?}", self.bumpers.len(), self.bumpers)
+    }
+}
+
+/// An inertial measurement unit, in SI units as Gazebo, NAOqi and ROS give them:
+/// orientation a unit quaternion (x, y, z, w) of the body in the world frame,
+/// angular velocity in rad/s and linear acceleration in m/s² (gravity included,
+/// as an accelerometer reads it), both about and along the body's x (forward), y
+/// (left) and z (up) axes.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Imu {
+    pub qx: f32,
+    pub qy: f32,
+    pub qz: f32,
+    pub qw: f32,
+    /// rad/s
+    pub wx: f32,
+    pub wy: f32,
+    pub wz: f32,
+    /// m/s²
+    pub ax: f32,
+    pub ay: f32,
+    pub az: f32,
+}
+
+/// The largest |angular velocity| an `imu` value may hold, rad/s (beyond any gyro).
+pub const MAX_ANGULAR_VELOCITY: f32 = 1e3;
+/// The largest |linear acceleration| an `imu` value may hold, m/s² (1000 g).
+pub const MAX_ACCELERATION: f32 = 1e4;
+
+impl Default for Imu {
+    /// At rest and level: the identity orientation, no rotation, no acceleration.
+    fn default() -> Self {
+        Imu {
+            qx: 0.0,
+            qy: 0.0,
+            qz: 0.0,
+            qw: 1.0,
+            wx: 0.0,
+            wy: 0.0,
+            wz: 0.0,
+            ax: 0.0,
+            ay: 0.0,
+            az: 0.0,
+        }
+    }
+}
+
+impl Imu {
+    /// The fields in order: qx qy qz qw wx wy wz ax ay az.
+    pub fn fields(&self) -> [f32; 10] {
+        [
+            self.qx, self.qy, self.qz, self.qw, self.wx, self.wy, self.wz, self.ax, self.ay,
+            self.az,
+        ]
+    }
+    /// From the fields in the order of [`fields`](Self::fields).
+    pub fn from_fields(f: [f32; 10]) -> Imu {
+        let [qx, qy, qz, qw, wx, wy, wz, ax, ay, az] = f;
+        Imu {
+            qx,
+            qy,
+            qz,
+            qw,
+            wx,
+            wy,
+            wz,
+            ax,
+            ay,
+            az,
+        }
+    }
+    /// Roll, pitch and yaw (rad, about x, y, z) of the orientation.
+    pub fn euler(&self) -> (f32, f32, f32) {
+        let (x, y, z, w) = (self.qx, self.qy, self.qz, self.qw);
+        let roll = (2.0 * (w * x + y * z)).atan2(1.0 - 2.0 * (x * x + y * y));
+        let pitch = (2.0 * (w * y - z * x)).clamp(-1.0, 1.0).asin();
+        let yaw = (2.0 * (w * z + x * y)).atan2(1.0 - 2.0 * (y * y + z * z));
+        (roll, pitch, yaw)
+    }
+}
+
+impl InterfaceValue for Imu {
+    const KIND: &'static str = "imu";
+    fn describe(&self) -> String {
+        let (r, p, y) = self.euler();
+        format!(
+            "roll={:.2} pitch={:.2} yaw={:.2} deg q=({:.4} {:.4} {:.4} {:.4}) \
+             w=({:.3} {:.3} {:.3}) rad/s a=({:.3} {:.3} {:.3}) m/s²",
+            r.to_degrees(),
+            p.to_degrees(),
+            y.to_degrees(),
+            self.qx,
+            self.qy,
+            self.qz,
+            self.qw,
+            self.wx,
+            self.wy,
+            self.wz,
+            self.ax,
+            self.ay,
+            self.az
+        )
+    }
+    fn validate(&self, name: &str) -> Result<(), String> {
+        for (field, v) in [
+            ("qx", self.qx),
+            ("qy", self.qy),
+            ("qz", self.qz),
+            ("qw", self.qw),
+        ] {
+            finite(name, field, v)?;
+        }
+        let norm =
+            (self.qx * self.qx + self.qy * self.qy + self.qz * self.qz + self.qw * self.qw).sqrt();
+        if (norm - 1.0).abs() > 0.01 {
+            return Err(format!(
+                "{name}: the orientation quaternion has length {norm}; it must be a unit quaternion"
+            ));
+        }
+        let w = MAX_ANGULAR_VELOCITY;
+        for (field, v) in [("wx", self.wx), ("wy", self.wy), ("wz", self.wz)] {
+            within(name, field, v, -w, w, "rad/s")?;
+        }
+        let a = MAX_ACCELERATION;
+        for (field, v) in [("ax", self.ax), ("ay", self.ay), ("az", self.az)] {
+            within(name, field, v, -a, a, "m/s²")?;
+        }
+        Ok(())
     }
 }

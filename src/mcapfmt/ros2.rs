@@ -1,70 +1,86 @@
-//! The `ros2` profile: rosbag2-compatible MCAP (ros2msg schemas, CDR messages)
-//! for laser (`sensor_msgs/msg/LaserScan`), images (`sensor_msgs/msg/Image`),
-//! encoders (`nav_msgs/msg/Odometry`) and motors (`geometry_msgs/msg/Twist`).
-//! ROS messages have no place for the interface's clock: it is the MCAP message's
+//! The `ros2` profile: rosbag2-compatible MCAP (ros2msg schemas, CDR messages),
+//! and the CDR of zenoh's `ros2` format. A kind with a ROS 2 message implements
+//! [`Ros2`] with it: laser (`sensor_msgs/msg/LaserScan`), images
+//! (`sensor_msgs/msg/Image`), encoders (`nav_msgs/msg/Odometry`), motors
+//! (`geometry_msgs/msg/Twist`) and imu (`sensor_msgs/msg/Imu`); the other kinds
+//! keep the trait's defaults (no message: the profile leaves them out). ROS
+//! messages have no place for the interface's clock: it is the MCAP message's
 //! `sequence` (mod 2³²).
 
 use std::time::SystemTime;
 
-use super::{Decoded, FormatError, Recorded, Snapshot, bad, nanos};
-use crate::interfaces::{Encoders, Image, Laser, Motors};
+use super::{FormatError, bad, nanos};
+use crate::interfaces::{
+    Bumpers, Encoders, Image, Imu, InterfaceValue, KINDS, Laser, Motors, PtEncoders, PtMotors,
+    Sample, Sonars, ZoomEncoders, ZoomMotors, by_kind,
+};
 
 const SEP: &str =
     "================================================================================\n";
 const TIME: &str = "MSG: builtin_interfaces/Time\nint32 sec\nuint32 nanosec\n";
 const HEADER: &str = "MSG: std_msgs/Header\nbuiltin_interfaces/Time stamp\nstring frame_id\n";
 const VECTOR3: &str = "MSG: geometry_msgs/Vector3\nfloat64 x\nfloat64 y\nfloat64 z\n";
+const QUATERNION: &str =
+    "MSG: geometry_msgs/Quaternion\nfloat64 x\nfloat64 y\nfloat64 z\nfloat64 w\n";
+
+/// A ROS 2 message type.
+pub struct Message {
+    /// The type name (`sensor_msgs/msg/Imu`), as rosbag2 writes it in schemas.
+    pub name: &'static str,
+    /// The DDS type name as rmw_zenoh writes it in keys.
+    pub dds: &'static str,
+    /// The RIHS01 type hash of ROS 2 Jazzy (checked against rosbags' own
+    /// computation in `tests/zenoh_python.rs` and this module's tests).
+    pub hash: &'static str,
+    /// The ros2msg definition with its dependencies.
+    pub definition: fn() -> String,
+}
+
+/// A kind's ROS 2 message. Every kind of the table implements it; a kind
+/// without a ROS message keeps the defaults.
+pub trait Ros2: InterfaceValue {
+    const MESSAGE: Option<&'static Message> = None;
+    /// Writes the value as the message (after the encapsulation header).
+    fn to_cdr(&self, _name: &str, _time: SystemTime, _w: &mut Writer) {}
+    /// Reads the message: (wall time ns, value); `log_time` for a message
+    /// without a header.
+    fn from_cdr(r: &mut Reader, _log_time: u64) -> Result<(u64, Self), FormatError> {
+        Err(FormatError::Kind {
+            topic: r.topic.into(),
+            kind: Self::KIND.into(),
+        })
+    }
+}
+
+/// The ROS 2 message of interface kind `kind`, if it has one.
+pub fn message(kind: &str) -> Option<&'static Message> {
+    fn of<T: Ros2>() -> Option<&'static Message> {
+        T::MESSAGE
+    }
+    by_kind!(kind, of(), None)
+}
 
 /// The ROS 2 type and its ros2msg definition (with dependencies) for a kind, or
 /// `None` for kinds the profile does not carry.
 pub fn schema(kind: &str) -> Option<(&'static str, String)> {
-    Some(match kind {
-        "laser" => (
-            "sensor_msgs/msg/LaserScan",
-            format!(
-                "std_msgs/Header header\nfloat32 angle_min\nfloat32 angle_max\nfloat32 angle_increment\n\
-                 float32 time_increment\nfloat32 scan_time\nfloat32 range_min\nfloat32 range_max\n\
-                 float32[] ranges\nfloat32[] intensities\n{SEP}{HEADER}{SEP}{TIME}"
-            ),
-        ),
-        "image" => (
-            "sensor_msgs/msg/Image",
-            format!(
-                "std_msgs/Header header\nuint32 height\nuint32 width\nstring encoding\nuint8 is_bigendian\n\
-                 uint32 step\nuint8[] data\n{SEP}{HEADER}{SEP}{TIME}"
-            ),
-        ),
-        "encoders" => (
-            "nav_msgs/msg/Odometry",
-            format!(
-                "std_msgs/Header header\nstring child_frame_id\ngeometry_msgs/PoseWithCovariance pose\n\
-                 geometry_msgs/TwistWithCovariance twist\n{SEP}{HEADER}{SEP}{TIME}\
-                 {SEP}MSG: geometry_msgs/PoseWithCovariance\ngeometry_msgs/Pose pose\nfloat64[36] covariance\n\
-                 {SEP}MSG: geometry_msgs/Pose\ngeometry_msgs/Point position\ngeometry_msgs/Quaternion orientation\n\
-                 {SEP}MSG: geometry_msgs/Point\nfloat64 x\nfloat64 y\nfloat64 z\n\
-                 {SEP}MSG: geometry_msgs/Quaternion\nfloat64 x\nfloat64 y\nfloat64 z\nfloat64 w\n\
-                 {SEP}MSG: geometry_msgs/TwistWithCovariance\ngeometry_msgs/Twist twist\nfloat64[36] covariance\n\
-                 {SEP}MSG: geometry_msgs/Twist\ngeometry_msgs/Vector3 linear\ngeometry_msgs/Vector3 angular\n\
-                 {SEP}{VECTOR3}"
-            ),
-        ),
-        "motors" => (
-            "geometry_msgs/msg/Twist",
-            format!("geometry_msgs/Vector3 linear\ngeometry_msgs/Vector3 angular\n{SEP}{VECTOR3}"),
-        ),
-        _ => return None,
-    })
+    message(kind).map(|m| (m.name, (m.definition)()))
+}
+
+/// The kinds with a ROS 2 message (what the profile carries).
+pub fn kinds() -> Vec<&'static str> {
+    KINDS
+        .iter()
+        .copied()
+        .filter(|k| message(k).is_some())
+        .collect()
 }
 
 /// The interface kind of a ROS 2 type this profile reads.
 pub fn kind_of(schema: &str) -> Option<&'static str> {
-    Some(match schema {
-        "sensor_msgs/msg/LaserScan" => "laser",
-        "sensor_msgs/msg/Image" => "image",
-        "nav_msgs/msg/Odometry" => "encoders",
-        "geometry_msgs/msg/Twist" => "motors",
-        _ => return None,
-    })
+    KINDS
+        .iter()
+        .find(|k| message(k).is_some_and(|m| m.name == schema))
+        .copied()
 }
 
 /// A ROS topic for an interface name: `laser.robot2` → `/laser/robot2`.
@@ -73,7 +89,7 @@ pub fn topic(name: &str) -> String {
 }
 
 /// Little-endian CDR with its 4-byte encapsulation header.
-struct Writer<'a>(&'a mut Vec<u8>);
+pub struct Writer<'a>(&'a mut Vec<u8>);
 
 impl Writer<'_> {
     fn align(&mut self, n: usize) {
@@ -113,73 +129,8 @@ impl Writer<'_> {
     }
 }
 
-/// Encodes a sample as CDR into `out`; false for kinds the profile does not carry.
-pub fn encode(name: &str, snap: &Snapshot, out: &mut Vec<u8>) -> bool {
-    out.clear();
-    out.extend_from_slice(&[0, 1, 0, 0]);
-    let mut w = Writer(out);
-    match snap {
-        Snapshot::Laser(l) => {
-            w.header(l.time, name);
-            let res = if l.resolution > 0.0 {
-                l.resolution
-            } else {
-                1.0
-            };
-            let inc = (1.0 / res as f64).to_radians();
-            let min = -std::f64::consts::FRAC_PI_2;
-            w.f32(min as f32);
-            w.f32((min + inc * (l.readings.len().max(1) - 1) as f64) as f32);
-            w.f32(inc as f32);
-            w.f32(0.0);
-            w.f32(0.0);
-            w.f32(0.0);
-            w.f32(8.0);
-            w.u32(l.readings.len() as u32);
-            for r in &l.readings {
-                w.f32(*r as f32 / 1000.0);
-            }
-            w.u32(0);
-        }
-        Snapshot::Image(i) => {
-            w.header(i.time, name);
-            w.u32(i.height);
-            w.u32(i.width);
-            w.string("bgr8");
-            w.u8(0);
-            w.u32(i.width * 3);
-            w.u32(i.data.len() as u32);
-            w.0.extend_from_slice(&i.data);
-        }
-        Snapshot::Encoders(e) => {
-            w.header(e.time, "odom");
-            w.string("base_link");
-            w.f64(e.x as f64 / 1000.0);
-            w.f64(e.y as f64 / 1000.0);
-            w.f64(0.0);
-            let half = e.theta as f64 / 2.0;
-            w.f64(0.0);
-            w.f64(0.0);
-            w.f64(half.sin());
-            w.f64(half.cos());
-            for _ in 0..36 + 6 + 36 {
-                w.f64(0.0);
-            }
-        }
-        Snapshot::Motors(m) => {
-            w.f64(m.v as f64 / 1000.0);
-            w.f64(0.0);
-            w.f64(0.0);
-            w.f64(0.0);
-            w.f64(0.0);
-            w.f64((m.w as f64).to_radians());
-        }
-        _ => return false,
-    }
-    true
-}
-
-struct Reader<'a> {
+/// Reads little-endian CDR after the encapsulation header; every read checks the length.
+pub struct Reader<'a> {
     data: &'a [u8],
     at: usize,
     topic: &'a str,
@@ -225,122 +176,351 @@ impl Reader<'_> {
     }
 }
 
-/// Decodes a CDR message of interface kind `kind`; `clock` is the MCAP sequence
-/// and `log_time` the time for messages without a header (Twist).
-pub fn decode(
-    topic: &str,
-    kind: &str,
-    data: &[u8],
-    clock: u64,
-    log_time: u64,
-) -> Result<Decoded, FormatError> {
+/// Encodes a sample as CDR into `out` (cleared first); false for kinds without
+/// a ROS message.
+pub fn encode<T: Ros2>(name: &str, s: &Sample<T>, out: &mut Vec<u8>) -> bool {
+    if T::MESSAGE.is_none() {
+        return false;
+    }
+    out.clear();
+    out.extend_from_slice(&[0, 1, 0, 0]);
+    s.value.to_cdr(name, s.time, &mut Writer(out));
+    true
+}
+
+/// Decodes a CDR message of a `T` interface on `topic`: (wall time ns, value);
+/// `log_time` is the time of messages without a header (Twist).
+pub fn decode<T: Ros2>(topic: &str, data: &[u8], log_time: u64) -> Result<(u64, T), FormatError> {
+    if T::MESSAGE.is_none() {
+        return Err(FormatError::Kind {
+            topic: topic.into(),
+            kind: T::KIND.into(),
+        });
+    }
     if data.len() < 4 || data[..2] != [0, 1] {
         return Err(bad(topic, "not little-endian CDR (encapsulation 0x0001)"));
     }
-    let mut r = Reader { data, at: 4, topic };
-    let (time_ns, value) = match kind {
-        "laser" => {
-            let t = r.header()?;
-            let _min = r.f32()?;
-            let _max = r.f32()?;
-            let inc = r.f32()?;
-            for _ in 0..4 {
-                r.f32()?;
-            }
-            let n = r.u32()? as usize;
-            if n > data.len() / 4 {
-                return Err(bad(topic, "a LaserScan with more ranges than bytes"));
-            }
-            let mut readings = Vec::with_capacity(n);
-            for _ in 0..n {
-                readings.push((r.f32()? as f64 * 1000.0).round() as i32);
-            }
-            let resolution = if inc > 0.0 {
-                ((1.0 / (inc as f64).to_degrees()) as f32 * 1000.0).round() / 1000.0
-            } else {
-                1.0
-            };
-            (
-                t,
-                Recorded::Laser(Laser {
-                    readings,
-                    resolution,
-                }),
-            )
+    T::from_cdr(&mut Reader { data, at: 4, topic }, log_time)
+}
+
+const LASER_SCAN: Message = Message {
+    name: "sensor_msgs/msg/LaserScan",
+    dds: "sensor_msgs::msg::dds_::LaserScan_",
+    hash: "RIHS01_64c191398013af96509d518dac71d5164f9382553fce5c1f8cca5be7924bd828",
+    definition: || {
+        format!(
+            "std_msgs/Header header\nfloat32 angle_min\nfloat32 angle_max\nfloat32 angle_increment\n\
+             float32 time_increment\nfloat32 scan_time\nfloat32 range_min\nfloat32 range_max\n\
+             float32[] ranges\nfloat32[] intensities\n{SEP}{HEADER}{SEP}{TIME}"
+        )
+    },
+};
+
+impl Ros2 for Laser {
+    const MESSAGE: Option<&'static Message> = Some(&LASER_SCAN);
+    fn to_cdr(&self, name: &str, time: SystemTime, w: &mut Writer) {
+        w.header(time, name);
+        let res = if self.resolution > 0.0 {
+            self.resolution
+        } else {
+            1.0
+        };
+        let inc = (1.0 / res as f64).to_radians();
+        let min = -std::f64::consts::FRAC_PI_2;
+        w.f32(min as f32);
+        w.f32((min + inc * (self.readings.len().max(1) - 1) as f64) as f32);
+        w.f32(inc as f32);
+        w.f32(0.0);
+        w.f32(0.0);
+        w.f32(0.0);
+        w.f32(8.0);
+        w.u32(self.readings.len() as u32);
+        for r in &self.readings {
+            w.f32(*r as f32 / 1000.0);
         }
-        "image" => {
-            let t = r.header()?;
-            let height = r.u32()?;
-            let width = r.u32()?;
-            let enc = r.string()?;
-            let _be = r.u8()?;
-            let _step = r.u32()?;
-            let n = r.u32()? as usize;
-            // u64 and checked: a damaged width and height must not overflow.
-            let need = (width as u64 * height as u64).checked_mul(3);
-            if enc != "bgr8" || need != Some(n as u64) {
-                return Err(bad(
-                    topic,
-                    format!("a {width}x{height} `{enc}` image of {n} bytes; jderobot reads bgr8"),
-                ));
-            }
-            let bytes = r.take(n, 1)?.to_vec();
-            (
-                t,
-                Recorded::Image(Image {
-                    width,
-                    height,
-                    data: bytes,
-                }),
-            )
+        w.u32(0);
+    }
+    fn from_cdr(r: &mut Reader, _log_time: u64) -> Result<(u64, Self), FormatError> {
+        let t = r.header()?;
+        let _min = r.f32()?;
+        let _max = r.f32()?;
+        let inc = r.f32()?;
+        for _ in 0..4 {
+            r.f32()?;
         }
-        "encoders" => {
-            let t = r.header()?;
-            let _child = r.string()?;
-            let x = r.f64()?;
-            let y = r.f64()?;
-            let _z = r.f64()?;
-            let (_qx, _qy, qz, qw) = (r.f64()?, r.f64()?, r.f64()?, r.f64()?);
-            let mut theta = 2.0 * qz.atan2(qw);
-            while theta <= 0.0 {
-                theta += std::f64::consts::TAU;
-            }
-            while theta > std::f64::consts::TAU {
-                theta -= std::f64::consts::TAU;
-            }
-            let e = Encoders {
+        let n = r.u32()? as usize;
+        if n > r.data.len() / 4 {
+            return Err(bad(r.topic, "a LaserScan with more ranges than bytes"));
+        }
+        let mut readings = Vec::with_capacity(n);
+        for _ in 0..n {
+            readings.push((r.f32()? as f64 * 1000.0).round() as i32);
+        }
+        let resolution = if inc > 0.0 {
+            ((1.0 / (inc as f64).to_degrees()) as f32 * 1000.0).round() / 1000.0
+        } else {
+            1.0
+        };
+        Ok((
+            t,
+            Laser {
+                readings,
+                resolution,
+            },
+        ))
+    }
+}
+
+const IMAGE: Message = Message {
+    name: "sensor_msgs/msg/Image",
+    dds: "sensor_msgs::msg::dds_::Image_",
+    hash: "RIHS01_d31d41a9a4c4bc8eae9be757b0beed306564f7526c88ea6a4588fb9582527d47",
+    definition: || {
+        format!(
+            "std_msgs/Header header\nuint32 height\nuint32 width\nstring encoding\nuint8 is_bigendian\n\
+             uint32 step\nuint8[] data\n{SEP}{HEADER}{SEP}{TIME}"
+        )
+    },
+};
+
+impl Ros2 for Image {
+    const MESSAGE: Option<&'static Message> = Some(&IMAGE);
+    fn to_cdr(&self, name: &str, time: SystemTime, w: &mut Writer) {
+        w.header(time, name);
+        w.u32(self.height);
+        w.u32(self.width);
+        w.string("bgr8");
+        w.u8(0);
+        w.u32(self.width * 3);
+        w.u32(self.data.len() as u32);
+        w.0.extend_from_slice(&self.data);
+    }
+    fn from_cdr(r: &mut Reader, _log_time: u64) -> Result<(u64, Self), FormatError> {
+        let t = r.header()?;
+        let height = r.u32()?;
+        let width = r.u32()?;
+        let enc = r.string()?;
+        let _be = r.u8()?;
+        let _step = r.u32()?;
+        let n = r.u32()? as usize;
+        // u64 and checked: a damaged width and height must not overflow.
+        let need = (width as u64 * height as u64).checked_mul(3);
+        if enc != "bgr8" || need != Some(n as u64) {
+            return Err(bad(
+                r.topic,
+                format!("a {width}x{height} `{enc}` image of {n} bytes; jderobot reads bgr8"),
+            ));
+        }
+        let data = r.take(n, 1)?.to_vec();
+        Ok((
+            t,
+            Image {
+                width,
+                height,
+                data,
+            },
+        ))
+    }
+}
+
+const ODOMETRY: Message = Message {
+    name: "nav_msgs/msg/Odometry",
+    dds: "nav_msgs::msg::dds_::Odometry_",
+    hash: "RIHS01_3cc97dc7fb7502f8714462c526d369e35b603cfc34d946e3f2eda2766dfec6e0",
+    definition: || {
+        format!(
+            "std_msgs/Header header\nstring child_frame_id\ngeometry_msgs/PoseWithCovariance pose\n\
+             geometry_msgs/TwistWithCovariance twist\n{SEP}{HEADER}{SEP}{TIME}\
+             {SEP}MSG: geometry_msgs/PoseWithCovariance\ngeometry_msgs/Pose pose\nfloat64[36] covariance\n\
+             {SEP}MSG: geometry_msgs/Pose\ngeometry_msgs/Point position\ngeometry_msgs/Quaternion orientation\n\
+             {SEP}MSG: geometry_msgs/Point\nfloat64 x\nfloat64 y\nfloat64 z\n\
+             {SEP}{QUATERNION}\
+             {SEP}MSG: geometry_msgs/TwistWithCovariance\ngeometry_msgs/Twist twist\nfloat64[36] covariance\n\
+             {SEP}MSG: geometry_msgs/Twist\ngeometry_msgs/Vector3 linear\ngeometry_msgs/Vector3 angular\n\
+             {SEP}{VECTOR3}"
+        )
+    },
+};
+
+impl Ros2 for Encoders {
+    const MESSAGE: Option<&'static Message> = Some(&ODOMETRY);
+    fn to_cdr(&self, _name: &str, time: SystemTime, w: &mut Writer) {
+        w.header(time, "odom");
+        w.string("base_link");
+        w.f64(self.x as f64 / 1000.0);
+        w.f64(self.y as f64 / 1000.0);
+        w.f64(0.0);
+        let half = self.theta as f64 / 2.0;
+        w.f64(0.0);
+        w.f64(0.0);
+        w.f64(half.sin());
+        w.f64(half.cos());
+        for _ in 0..36 + 6 + 36 {
+            w.f64(0.0);
+        }
+    }
+    fn from_cdr(r: &mut Reader, _log_time: u64) -> Result<(u64, Self), FormatError> {
+        let t = r.header()?;
+        let _child = r.string()?;
+        let x = r.f64()?;
+        let y = r.f64()?;
+        let _z = r.f64()?;
+        let (_qx, _qy, qz, qw) = (r.f64()?, r.f64()?, r.f64()?, r.f64()?);
+        let mut theta = 2.0 * qz.atan2(qw);
+        while theta <= 0.0 {
+            theta += std::f64::consts::TAU;
+        }
+        while theta > std::f64::consts::TAU {
+            theta -= std::f64::consts::TAU;
+        }
+        Ok((
+            t,
+            Encoders {
                 x: (x * 1000.0) as f32,
                 y: (y * 1000.0) as f32,
                 theta: theta as f32,
                 cos: theta.cos() as f32,
                 sin: theta.sin() as f32,
-            };
-            (t, Recorded::Encoders(e))
+            },
+        ))
+    }
+}
+
+const TWIST: Message = Message {
+    name: "geometry_msgs/msg/Twist",
+    dds: "geometry_msgs::msg::dds_::Twist_",
+    hash: "RIHS01_9c45bf16fe0983d80e3cfe750d6835843d265a9a6c46bd2e609fcddde6fb8d2a",
+    definition: || {
+        format!("geometry_msgs/Vector3 linear\ngeometry_msgs/Vector3 angular\n{SEP}{VECTOR3}")
+    },
+};
+
+impl Ros2 for Motors {
+    const MESSAGE: Option<&'static Message> = Some(&TWIST);
+    fn to_cdr(&self, _name: &str, _time: SystemTime, w: &mut Writer) {
+        w.f64(self.v as f64 / 1000.0);
+        w.f64(0.0);
+        w.f64(0.0);
+        w.f64(0.0);
+        w.f64(0.0);
+        w.f64((self.w as f64).to_radians());
+    }
+    fn from_cdr(r: &mut Reader, log_time: u64) -> Result<(u64, Self), FormatError> {
+        let vx = r.f64()?;
+        for _ in 0..4 {
+            r.f64()?;
         }
-        "motors" => {
-            let vx = r.f64()?;
-            for _ in 0..4 {
+        let wz = r.f64()?;
+        Ok((
+            log_time,
+            Motors {
+                v: (vx * 1000.0) as f32,
+                w: wz.to_degrees() as f32,
+            },
+        ))
+    }
+}
+
+const IMU: Message = Message {
+    name: "sensor_msgs/msg/Imu",
+    dds: "sensor_msgs::msg::dds_::Imu_",
+    hash: "RIHS01_7d9a00ff131080897a5ec7e26e315954b8eae3353c3f995c55faf71574000b5b",
+    definition: || {
+        format!(
+            "std_msgs/Header header\ngeometry_msgs/Quaternion orientation\nfloat64[9] orientation_covariance\n\
+             geometry_msgs/Vector3 angular_velocity\nfloat64[9] angular_velocity_covariance\n\
+             geometry_msgs/Vector3 linear_acceleration\nfloat64[9] linear_acceleration_covariance\n\
+             {SEP}{HEADER}{SEP}{TIME}{SEP}{QUATERNION}{SEP}{VECTOR3}"
+        )
+    },
+};
+
+/// sensor_msgs/Imu in the same SI units as [`Imu`]; the covariances are written
+/// as zeros ("unknown", in ROS's convention) and ignored when read.
+impl Ros2 for Imu {
+    const MESSAGE: Option<&'static Message> = Some(&IMU);
+    fn to_cdr(&self, name: &str, time: SystemTime, w: &mut Writer) {
+        w.header(time, name);
+        let f = self.fields();
+        for g in [&f[..4], &f[4..7], &f[7..]] {
+            for v in g {
+                w.f64(*v as f64);
+            }
+            for _ in 0..9 {
+                w.f64(0.0);
+            }
+        }
+    }
+    fn from_cdr(r: &mut Reader, _log_time: u64) -> Result<(u64, Self), FormatError> {
+        let t = r.header()?;
+        let mut v = [0f32; 10];
+        for (i, n) in [(0, 4), (4, 3), (7, 3)] {
+            for x in &mut v[i..i + n] {
+                *x = r.f64()? as f32;
+            }
+            for _ in 0..9 {
                 r.f64()?;
             }
-            let wz = r.f64()?;
-            (
-                log_time,
-                Recorded::Motors(Motors {
-                    v: (vx * 1000.0) as f32,
-                    w: wz.to_degrees() as f32,
-                }),
-            )
         }
-        other => {
-            return Err(FormatError::Kind {
-                topic: topic.into(),
-                kind: other.into(),
-            });
+        Ok((t, Imu::from_fields(v)))
+    }
+}
+
+/// The kinds without a ROS 2 message.
+impl Ros2 for Sonars {}
+impl Ros2 for Bumpers {}
+impl Ros2 for PtEncoders {}
+impl Ros2 for PtMotors {}
+impl Ros2 for ZoomEncoders {}
+impl Ros2 for ZoomMotors {}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn imu_round_trips_and_a_kind_without_a_message_is_refused() {
+        let imu = Imu {
+            qx: 0.0,
+            qy: 0.0,
+            qz: 0.5f32.sin(),
+            qw: 0.5f32.cos(),
+            wx: 0.25,
+            wy: -0.5,
+            wz: 1.0,
+            ax: 0.1,
+            ay: 0.2,
+            az: 9.81,
+        };
+        let s = Sample {
+            clock: 3,
+            stamp: std::time::Instant::now(),
+            time: super::super::from_nanos(1_700_000_000_000_000_007),
+            value: imu,
+        };
+        let mut b = Vec::new();
+        assert!(encode("imu", &s, &mut b));
+        // Header (4 + 4 + 4 + "imu\0" = 16 bytes after the encapsulation), then
+        // 10 values and 27 covariances, 8-aligned.
+        assert_eq!(b.len(), 4 + 16 + 37 * 8);
+        assert_eq!(
+            decode::<Imu>("imu", &b, 0).unwrap(),
+            (1_700_000_000_000_000_007, imu)
+        );
+        for n in 0..b.len() {
+            assert!(decode::<Imu>("imu", &b[..n], 0).is_err());
         }
-    };
-    Ok(Decoded {
-        clock,
-        time_ns,
-        value,
-    })
+        assert!(!encode(
+            "sonars",
+            &Sample {
+                clock: 1,
+                stamp: s.stamp,
+                time: s.time,
+                value: Sonars::default()
+            },
+            &mut b
+        ));
+        assert_eq!(kind_of("sensor_msgs/msg/Imu"), Some("imu"));
+        assert_eq!(schema("bumpers"), None);
+    }
 }
