@@ -668,6 +668,11 @@ fn our_client_drops_an_absurd_pose_from_a_server() {
     enc.watch(count.clone());
     enc.resume();
     eventually("the good pose", || enc.read().x == 100.0);
+    // Watchers are told right after the value is stored: wait for the notice.
+    eventually("the good pose's notice", || {
+        count.0.load(std::sync::atomic::Ordering::Acquire) >= 1
+    });
+    std::thread::sleep(Duration::from_millis(50));
     assert_eq!(
         count.0.load(std::sync::atomic::Ordering::Acquire),
         1,

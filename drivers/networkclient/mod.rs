@@ -32,9 +32,10 @@
 //! | `pantiltencoders`, `zoomencoders` | deg; zoom position |
 //! | `pantiltmotors`, `zoommotors` | commands sent on change; limits asked (`1004`, `1022`) on connect |
 //!
-//! Sensors and images are subscribed/requested only while someone uses the
-//! interface. When a server goes away the driver reconnects with backoff (0.1 s
-//! doubling to 5 s), marks each interface stale with the reason meanwhile (`ps`,
+//! Each device's connection is a [`Supervisor`]'s: sensors and images connect
+//! and are subscribed/requested only while someone uses the interface (then
+//! unsubscribed, the connection kept); commands connect at once. When a server
+//! goes away the driver reconnects with backoff (0.1 s doubling to 5 s), marks each interface stale with the reason meanwhile (`ps`,
 //! `echo` and mastergui show it), publishes zero on `motors`, and subscribes again
 //! when the server is back. An image of an unexpected size is an error naming both
 //! sizes (logged once; the interface is stale) and the connection goes on.
@@ -54,11 +55,8 @@ use std::{
         Arc,
         atomic::{AtomicBool, Ordering},
     },
-    thread::JoinHandle,
     time::{Duration, Instant},
 };
-
-use anyhow::Context as _;
 
 use crate::{
     conf::{
@@ -66,11 +64,12 @@ use crate::{
         settings::{self, MOTORS_TIMEOUT, Setting, int, interface, word},
     },
     interfaces::{
-        COLOR_HEIGHT, COLOR_WIDTH, Encoders, Image, Imu, Interface, Interfaces, Laser, Motors,
-        PtEncoders, PtMotors, Sonars, Source, ZoomEncoders, ZoomMotors, canonical, family,
+        AnyInterface, COLOR_HEIGHT, COLOR_WIDTH, Encoders, Image, Imu, Interface, Interfaces,
+        Laser, Motors, PtEncoders, PtMotors, Sonars, Source, ZoomEncoders, ZoomMotors, canonical,
+        family,
     },
     netwire::{self, Device, LineEvent, LineReader, Message, Request},
-    runtime::{Driver, Runtime},
+    runtime::{self, Backoff, Driver, Runtime, Supervision, Supervisor},
 };
 
 /// One `provides` line.
@@ -279,51 +278,23 @@ enum Dev {
 }
 
 impl Dev {
-    fn set_stale(&self, why: &str) {
+    /// The local interface.
+    fn interface(&self) -> Arc<dyn AnyInterface> {
         match self {
-            Dev::Image(i, ..) => i.set_stale(why),
-            Dev::Laser(i) => i.set_stale(why),
-            Dev::Encoders(i, _) => i.set_stale(why),
-            Dev::Sonars(i) => i.set_stale(why),
-            Dev::PtEncoders(i) => i.set_stale(why),
-            Dev::ZoomEncoders(i) => i.set_stale(why),
-            Dev::Imu(i) => i.set_stale(why),
-            Dev::Motors(i, _) => {
-                let _ = i.publish(Motors::default());
-                i.set_stale(why);
-            }
-            Dev::PtMotors(i) => i.set_stale(why),
-            Dev::ZoomMotors(i) => i.set_stale(why),
+            Dev::Image(i, ..) => i.clone(),
+            Dev::Laser(i) => i.clone(),
+            Dev::Encoders(i, _) => i.clone(),
+            Dev::Sonars(i) => i.clone(),
+            Dev::PtEncoders(i) => i.clone(),
+            Dev::ZoomEncoders(i) => i.clone(),
+            Dev::Imu(i) => i.clone(),
+            Dev::Motors(i, _) => i.clone(),
+            Dev::PtMotors(i) => i.clone(),
+            Dev::ZoomMotors(i) => i.clone(),
         }
     }
 
-    /// Whether anybody uses it (actuators always count as used).
-    fn used(&self) -> bool {
-        match self {
-            Dev::Image(i, ..) => i.users() > 0,
-            Dev::Laser(i) => i.users() > 0,
-            Dev::Encoders(i, _) => i.users() > 0,
-            Dev::Sonars(i) => i.users() > 0,
-            Dev::PtEncoders(i) => i.users() > 0,
-            Dev::ZoomEncoders(i) => i.users() > 0,
-            Dev::Imu(i) => i.users() > 0,
-            _ => true,
-        }
-    }
-
-    fn wait_used(&self, t: Duration) -> bool {
-        match self {
-            Dev::Image(i, ..) => i.wait_used(t),
-            Dev::Laser(i) => i.wait_used(t),
-            Dev::Encoders(i, _) => i.wait_used(t),
-            Dev::Sonars(i) => i.wait_used(t),
-            Dev::PtEncoders(i) => i.wait_used(t),
-            Dev::ZoomEncoders(i) => i.wait_used(t),
-            Dev::Imu(i) => i.wait_used(t),
-            _ => true,
-        }
-    }
-
+    /// The pushed device of a sensor.
     fn device(&self) -> Option<Device> {
         Some(match self {
             Dev::Laser(_) => Device::Laser,
@@ -337,14 +308,17 @@ impl Dev {
     }
 }
 
-/// The running driver: one thread per device connection.
+/// The running driver: one supervised connection per device.
 pub struct NetClient {
+    /// Seen by a connection in the middle of a frame, so a stop never waits for one.
     stop: Arc<AtomicBool>,
-    threads: Vec<JoinHandle<()>>,
+    links: Vec<Supervisor>,
 }
 
 impl NetClient {
-    /// Provides the interfaces of `cc` on `ifaces` and starts one connection thread each.
+    /// Provides the interfaces of `cc` on `ifaces` and starts one supervised
+    /// connection each: sensors and images connect while somebody uses them,
+    /// commands always.
     pub fn start(cc: ClientConf, ifaces: &Interfaces, provider: &str) -> anyhow::Result<NetClient> {
         let name = netwire::client_name(cc.token.as_deref()).map_err(anyhow::Error::msg)?;
         let stop = Arc::new(AtomicBool::new(false));
@@ -382,33 +356,37 @@ impl NetClient {
             };
             devs.push((r.clone(), dev));
         }
-        let mut threads = Vec::new();
+        let mut links = Vec::new();
         for (r, dev) in devs {
+            let how = Supervision {
+                name: format!("networkclient {}@{}:{}", r.name, r.host, r.port),
+                interfaces: vec![dev.interface()],
+                on_demand: !dev.interface().is_actuator(),
+                backoff: Backoff {
+                    first: Duration::from_millis(100),
+                    max: Duration::from_secs(5),
+                },
+                absent: None,
+            };
             let link = Link {
                 from: Source::new(format!(
                     "networkclient: {}:{} (for `{}`)",
                     r.host, r.port, r.name
                 )),
-                remote: r.clone(),
+                remote: r,
                 dev,
                 stop: stop.clone(),
                 name,
                 depth: cc.depth,
             };
-            let t = std::thread::Builder::new()
-                .name(format!("ncli-{}", r.name))
-                .spawn(move || link.run())
-                .context("networkclient: cannot start a thread")?;
-            threads.push(t);
+            links.push(Supervisor::start(how, link)?);
         }
-        Ok(NetClient { stop, threads })
+        Ok(NetClient { stop, links })
     }
 
     pub fn stop(&mut self) {
         self.stop.store(true, Ordering::Release);
-        for t in self.threads.drain(..) {
-            let _ = t.join();
-        }
+        self.links.terminate();
     }
 }
 
@@ -424,14 +402,16 @@ impl Drop for NetClient {
     }
 }
 
-/// How often a connection thread checks for stop, use and motor commands.
+/// How often a command connection checks for a new command.
 const TICK: Duration = Duration::from_millis(10);
+/// How long a sensor or image connection waits for a line before looking again.
+const SENSOR_TICK: Duration = Duration::from_millis(50);
 /// The longest line the client accepts (a laser push of 4096 readings fits).
 const MAX_LINE: usize = 64 * 1024;
 /// The largest frame accepted, in bytes (a bigger announced size ends the connection).
 const MAX_FRAME: usize = 256 << 20;
 
-/// One device's connection.
+/// One device's connection, as its [`Supervisor`] opens and serves it.
 struct Link {
     remote: Remote,
     dev: Dev,
@@ -443,83 +423,165 @@ struct Link {
     from: Source,
 }
 
-/// How a session ended.
-enum End {
-    Stopped,
-    Lost(String),
+/// An open connection and what its side of the protocol keeps between steps.
+struct Session {
+    stream: TcpStream,
+    lines: LineReader,
+    state: State,
+}
+
+enum State {
+    /// A pushed sensor: whether it is subscribed.
+    Sensor { subscribed: bool },
+    /// Image requests in flight, the frame buffer, the wrong size last reported.
+    Image {
+        inflight: u32,
+        buf: Vec<u8>,
+        reported: Option<(u32, u32)>,
+    },
+    /// When the last command was sent, and the command's clock then.
+    Motors { last_sent: Instant, last_clock: u64 },
+    /// Pan-tilt or zoom commands: the clock of the last one sent.
+    Command { last_clock: u64 },
+}
+
+impl runtime::Device for Link {
+    type Session = Session;
+
+    fn open(&mut self) -> Result<Session, String> {
+        let stream = self.connect().map_err(|e| {
+            format!(
+                "networkclient: cannot connect to {} for {} ({e})",
+                self.where_(),
+                self.remote.name
+            )
+        })?;
+        let command = self.dev.interface().is_actuator();
+        let _ = stream.set_read_timeout(Some(if command { TICK } else { SENSOR_TICK }));
+        let state = match &self.dev {
+            Dev::Image(..) => State::Image {
+                inflight: 0,
+                buf: Vec::new(),
+                reported: None,
+            },
+            Dev::Motors(..) => State::Motors {
+                last_sent: Instant::now() - Duration::from_secs(1),
+                last_clock: u64::MAX,
+            },
+            Dev::PtMotors(_) | Dev::ZoomMotors(_) => {
+                let query = if matches!(self.dev, Dev::PtMotors(_)) {
+                    Request::PtLimitsQuery
+                } else {
+                    Request::ZoomLimitsQuery
+                };
+                self.send(&stream, &[query]).map_err(|e| self.lost(e))?;
+                State::Command {
+                    last_clock: u64::MAX,
+                }
+            }
+            _ => State::Sensor { subscribed: false },
+        };
+        Ok(Session {
+            stream,
+            lines: LineReader::new(MAX_LINE),
+            state,
+        })
+    }
+
+    fn step(&mut self, s: &mut Session) -> Result<(), String> {
+        let Session {
+            stream,
+            lines,
+            state,
+        } = s;
+        let r = match (&self.dev, state) {
+            (
+                Dev::Image(i, netid, size),
+                State::Image {
+                    inflight,
+                    buf,
+                    reported,
+                },
+            ) => self.image_step(stream, lines, i, *netid, *size, inflight, buf, reported),
+            (
+                Dev::Motors(m, timeout),
+                State::Motors {
+                    last_sent,
+                    last_clock,
+                },
+            ) => self.motors_step(stream, lines, m, *timeout, last_sent, last_clock),
+            (Dev::PtMotors(p), State::Command { last_clock }) => {
+                self.ptmotors_step(stream, lines, p, last_clock)
+            }
+            (Dev::ZoomMotors(z), State::Command { last_clock }) => {
+                self.zoommotors_step(stream, lines, z, last_clock)
+            }
+            (_, State::Sensor { subscribed }) => self.sensor_step(stream, lines, subscribed),
+            _ => Err("internal: a session of another kind".into()),
+        };
+        r.map_err(|e| self.lost(e))
+    }
+
+    /// Nobody uses the sensor any more: unsubscribe, and keep the connection.
+    fn idle(&mut self, s: &mut Session) -> bool {
+        if let (Some(d), State::Sensor { subscribed }) = (self.dev.device(), &mut s.state)
+            && *subscribed
+        {
+            *subscribed = false;
+            return self.send(&s.stream, &[Request::Unsubscribe(d)]).is_ok();
+        }
+        true
+    }
+
+    /// The connection is gone: a motors command counts as zero here too.
+    fn on_loss(&mut self) {
+        if let Dev::Motors(m, _) = &self.dev {
+            let _ = m.publish(Motors::default());
+        }
+    }
+
+    /// The driver stops: stop what moves on the server, and say goodbye.
+    fn close(&mut self, s: Session) {
+        let farewell: Vec<Request> = match &self.dev {
+            Dev::Image(..) => vec![Request::GoodbyeImages],
+            Dev::Motors(..) => vec![
+                Request::DriveSpeed { v: 0.0, ac: 0.0 },
+                Request::SteerSpeed { w: 0.0, ac: 0.0 },
+                Request::Goodbye,
+            ],
+            Dev::PtMotors(p) => vec![pt_command(&p.read().value), Request::Goodbye],
+            Dev::ZoomMotors(_) => vec![Request::Goodbye],
+            sensor => match sensor.device() {
+                Some(d) => vec![Request::Unsubscribe(d), Request::Goodbye],
+                None => vec![Request::Goodbye],
+            },
+        };
+        let _ = self.send(&s.stream, &farewell);
+    }
+}
+
+/// A pan-tilt command as 4.3's `1006` line.
+fn pt_command(c: &PtMotors) -> Request {
+    Request::PtPosition {
+        pan: c.longitude,
+        tilt: c.latitude,
+        pan_speed: c.longitude_speed,
+        tilt_speed: c.latitude_speed,
+    }
 }
 
 impl Link {
-    fn stopping(&self) -> bool {
-        self.stop.load(Ordering::Acquire)
-    }
-
     fn where_(&self) -> String {
         format!("{}:{}", self.remote.host, self.remote.port)
     }
 
-    fn sleep(&self, d: Duration) {
-        let t0 = Instant::now();
-        while !self.stopping() && t0.elapsed() < d {
-            std::thread::sleep(TICK.min(d));
-        }
-    }
-
-    fn run(self) {
-        let mut backoff = Duration::from_millis(100);
-        let mut said: Option<String> = None;
-        while !self.stopping() {
-            if !self.dev.wait_used(Duration::from_millis(100)) {
-                continue;
-            }
-            let stream = match self.connect() {
-                Ok(s) => s,
-                Err(e) => {
-                    let why = format!(
-                        "networkclient: cannot connect to {} for {} ({e}); retrying in {:.1} s",
-                        self.where_(),
-                        self.remote.name,
-                        backoff.as_secs_f64()
-                    );
-                    self.dev.set_stale(&why);
-                    let short: String = why.split(" (").next().unwrap_or("").to_string();
-                    if said.as_deref() != Some(short.as_str()) {
-                        tracing::warn!("{why}");
-                        said = Some(short);
-                    }
-                    self.sleep(backoff);
-                    backoff = (backoff * 2).min(Duration::from_secs(5));
-                    continue;
-                }
-            };
-            if said.take().is_some() {
-                tracing::warn!(
-                    "networkclient: {} connected again to {}",
-                    self.remote.name,
-                    self.where_()
-                );
-            }
-            let t0 = Instant::now();
-            match self.session(&stream) {
-                End::Stopped => return,
-                End::Lost(why) => {
-                    let why = format!(
-                        "networkclient: {} for {}: {why}; reconnecting",
-                        self.where_(),
-                        self.remote.name
-                    );
-                    tracing::warn!("{why}");
-                    said = Some(String::new());
-                    self.dev.set_stale(&why);
-                    let _ = stream.shutdown(std::net::Shutdown::Both);
-                    if t0.elapsed() > Duration::from_secs(2) {
-                        backoff = Duration::from_millis(100);
-                    }
-                    self.sleep(backoff);
-                    backoff = (backoff * 2).min(Duration::from_secs(5));
-                }
-            }
-        }
+    /// The reason a session was lost, for the stale mark and the log.
+    fn lost(&self, why: String) -> String {
+        format!(
+            "networkclient: {} for {}: {why}; reconnecting",
+            self.where_(),
+            self.remote.name
+        )
     }
 
     fn connect(&self) -> io::Result<TcpStream> {
@@ -541,20 +603,6 @@ impl Link {
         Err(last)
     }
 
-    fn session(&self, s: &TcpStream) -> End {
-        let r = match &self.dev {
-            Dev::Image(i, netid, size) => self.image_session(s, i, *netid, *size),
-            Dev::Motors(m, timeout) => self.motors_session(s, m, *timeout),
-            Dev::PtMotors(p) => self.ptmotors_session(s, p),
-            Dev::ZoomMotors(z) => self.zoommotors_session(s, z),
-            _ => self.sensor_session(s),
-        };
-        match r {
-            Ok(()) => End::Stopped,
-            Err(e) => End::Lost(e),
-        }
-    }
-
     fn send(&self, mut s: &TcpStream, reqs: &[Request]) -> Result<(), String> {
         let mut out = Vec::new();
         for r in reqs {
@@ -563,7 +611,8 @@ impl Link {
         s.write_all(&out).map_err(|e| format!("cannot send: {e}"))
     }
 
-    /// Reads lines until one arrives, a tick passes (None) or the connection ends.
+    /// Reads a line if one arrives within the read timeout (the step's tick);
+    /// an error when the connection ends.
     fn next_line<'a>(
         &self,
         lr: &'a mut LineReader,
@@ -577,36 +626,23 @@ impl Link {
         }
     }
 
-    fn sensor_session(&self, s: &TcpStream) -> Result<(), String> {
+    /// (Un)subscribes as the interface is used, and publishes what arrives.
+    fn sensor_step(
+        &self,
+        s: &TcpStream,
+        lr: &mut LineReader,
+        subscribed: &mut bool,
+    ) -> Result<(), String> {
         let dev = self.dev.device().expect("a sensor");
-        let _ = s.set_read_timeout(Some(Duration::from_millis(50)));
-        let mut lr = LineReader::new(MAX_LINE);
-        let mut subscribed = false;
-        loop {
-            if self.stopping() {
-                let _ = self.send(s, &[Request::Unsubscribe(dev), Request::Goodbye]);
-                return Ok(());
-            }
-            let used = self.dev.used();
-            if used != subscribed {
-                let r = if used {
-                    Request::Subscribe(dev)
-                } else {
-                    Request::Unsubscribe(dev)
-                };
-                self.send(s, &[r])?;
-                subscribed = used;
-            }
-            let Some(line) = self.next_line(&mut lr, s)? else {
-                continue;
-            };
-            match Message::parse(line) {
-                Ok(m) => self.publish(m),
-                Err(e) => {
-                    return Err(format!("the server sent a bad line: {e}"));
-                }
-            }
+        if !*subscribed {
+            self.send(s, &[Request::Subscribe(dev)])?;
+            *subscribed = true;
         }
+        if let Some(line) = self.next_line(lr, s)? {
+            let m = Message::parse(line).map_err(|e| format!("the server sent a bad line: {e}"))?;
+            self.publish(m);
+        }
+        Ok(())
     }
 
     fn publish(&self, m: Message) {
@@ -675,222 +711,198 @@ impl Link {
         }
     }
 
-    fn image_session(
+    /// Keeps `depth` image requests in flight and publishes the next frame.
+    #[allow(clippy::too_many_arguments)]
+    fn image_step(
         &self,
         s: &TcpStream,
+        lr: &mut LineReader,
         iface: &Interface<Image>,
         netid: u32,
         size: Option<(u32, u32)>,
+        inflight: &mut u32,
+        buf: &mut Vec<u8>,
+        reported: &mut Option<(u32, u32)>,
     ) -> Result<(), String> {
-        let _ = s.set_read_timeout(Some(Duration::from_millis(50)));
-        let mut lr = LineReader::new(MAX_LINE);
-        let mut inflight = 0u32;
-        let mut buf: Vec<u8> = Vec::new();
-        let mut reported: Option<(u32, u32)> = None;
-        let mut stalled_since: Option<Instant> = None;
-        loop {
-            if self.stopping() {
-                let _ = self.send(s, &[Request::GoodbyeImages]);
+        if *inflight < self.depth {
+            let n = self.depth - *inflight;
+            self.send(s, &vec![Request::ImageQuery(netid); n as usize])?;
+            *inflight += n;
+        }
+        let Some(line) = self.next_line(lr, s)? else {
+            return Ok(());
+        };
+        let m = Message::parse(line).map_err(|e| format!("the server sent a bad line: {e}"))?;
+        let (width, height) = match m {
+            Message::Image {
+                netid: id,
+                width,
+                height,
+                depth,
+                ..
+            } => {
+                if id != netid || depth != 3 {
+                    return Err(format!(
+                        "the server sent image {id} with depth {depth}; asked for image {netid}, depth 3"
+                    ));
+                }
+                (width, height)
+            }
+            other => {
+                self.publish(other);
                 return Ok(());
             }
-            if iface.users() > 0 && inflight < self.depth {
-                let n = self.depth - inflight;
-                self.send(s, &vec![Request::ImageQuery(netid); n as usize])?;
-                inflight += n;
-            }
-            let Some(line) = self.next_line(&mut lr, s)? else {
-                continue;
-            };
-            let m = Message::parse(line).map_err(|e| format!("the server sent a bad line: {e}"))?;
-            let (width, height) = match m {
-                Message::Image {
-                    netid: id,
-                    width,
-                    height,
-                    depth,
-                    ..
-                } => {
-                    if id != netid || depth != 3 {
-                        return Err(format!(
-                            "the server sent image {id} with depth {depth}; asked for image {netid}, depth 3"
-                        ));
-                    }
-                    (width, height)
-                }
-                other => {
-                    self.publish(other);
-                    continue;
-                }
-            };
-            inflight = inflight.saturating_sub(1);
-            let bytes = width as usize * height as usize * 3;
-            if bytes > MAX_FRAME {
-                return Err(format!(
-                    "the server announced a {width}x{height} frame ({bytes} bytes), over the {MAX_FRAME}-byte limit"
-                ));
-            }
-            buf.resize(bytes, 0);
-            let stop = &self.stop;
-            lr.read_exact(&mut &*s, &mut buf, || {
-                let t0 = *stalled_since.get_or_insert_with(Instant::now);
-                !stop.load(Ordering::Acquire) && t0.elapsed() < Duration::from_secs(10)
-            })
-            .map_err(|e| format!("while reading a {width}x{height} frame: {e}"))?;
-            stalled_since = None;
-            if let Some((w, h)) = size
-                && (w, h) != (width, height)
-            {
-                let why = format!(
-                    "networkclient: {} sends {width}x{height} images for {}, which is {w}x{h} here; frames dropped{}",
-                    self.where_(),
-                    self.remote.name,
-                    if self.remote.name.starts_with("color") {
-                        " (use a varcolor interface for other sizes)"
-                    } else {
-                        ""
-                    }
-                );
-                if reported != Some((width, height)) {
-                    tracing::error!("{why}");
-                    reported = Some((width, height));
-                }
-                iface.set_stale(why);
-                continue;
-            }
-            iface.accept_with(&self.from, |img| {
-                img.width = width;
-                img.height = height;
-                std::mem::swap(&mut img.data, &mut buf);
-            });
+        };
+        *inflight = inflight.saturating_sub(1);
+        let bytes = width as usize * height as usize * 3;
+        if bytes > MAX_FRAME {
+            return Err(format!(
+                "the server announced a {width}x{height} frame ({bytes} bytes), over the {MAX_FRAME}-byte limit"
+            ));
         }
+        buf.resize(bytes, 0);
+        let stop = &self.stop;
+        let mut stalled_since: Option<Instant> = None;
+        lr.read_exact(&mut &*s, buf, || {
+            let t0 = *stalled_since.get_or_insert_with(Instant::now);
+            !stop.load(Ordering::Acquire) && t0.elapsed() < Duration::from_secs(10)
+        })
+        .map_err(|e| format!("while reading a {width}x{height} frame: {e}"))?;
+        if let Some((w, h)) = size
+            && (w, h) != (width, height)
+        {
+            let why = format!(
+                "networkclient: {} sends {width}x{height} images for {}, which is {w}x{h} here; frames dropped{}",
+                self.where_(),
+                self.remote.name,
+                if self.remote.name.starts_with("color") {
+                    " (use a varcolor interface for other sizes)"
+                } else {
+                    ""
+                }
+            );
+            if *reported != Some((width, height)) {
+                tracing::error!("{why}");
+                *reported = Some((width, height));
+            }
+            iface.set_stale(why);
+            return Ok(());
+        }
+        iface.accept_with(&self.from, |img| {
+            img.width = width;
+            img.height = height;
+            std::mem::swap(&mut img.data, buf);
+        });
+        Ok(())
     }
 
-    fn motors_session(
+    /// Sends the command when it changes, and every 100 ms (a stale one as zero).
+    fn motors_step(
         &self,
         s: &TcpStream,
+        lr: &mut LineReader,
         m: &Interface<Motors>,
         timeout: Duration,
+        last_sent: &mut Instant,
+        last_clock: &mut u64,
     ) -> Result<(), String> {
-        let _ = s.set_read_timeout(Some(TICK));
-        let mut lr = LineReader::new(MAX_LINE);
-        let mut last_sent = Instant::now() - Duration::from_secs(1);
-        let mut last_clock = u64::MAX;
-        loop {
-            if self.stopping() {
-                let zero = [
-                    Request::DriveSpeed { v: 0.0, ac: 0.0 },
-                    Request::SteerSpeed { w: 0.0, ac: 0.0 },
-                    Request::Goodbye,
-                ];
-                let _ = self.send(s, &zero);
-                return Ok(());
+        let clock = m.clock();
+        if clock != *last_clock || last_sent.elapsed() >= Duration::from_millis(100) {
+            let c = m.command(timeout);
+            self.send(
+                s,
+                &[
+                    Request::DriveSpeed { v: c.v, ac: 0.0 },
+                    Request::SteerSpeed { w: c.w, ac: 0.0 },
+                ],
+            )?;
+            *last_clock = clock;
+            *last_sent = Instant::now();
+        }
+        // The read doubles as the tick's sleep and notices a closed server.
+        if let Some(line) = self.next_line(lr, s)?
+            && let Ok(msg) = Message::parse(line)
+        {
+            self.publish(msg);
+        }
+        Ok(())
+    }
+
+    /// Sends the pan-tilt command when it changes; takes the limits the server
+    /// answers.
+    fn ptmotors_step(
+        &self,
+        s: &TcpStream,
+        lr: &mut LineReader,
+        p: &Interface<PtMotors>,
+        last_clock: &mut u64,
+    ) -> Result<(), String> {
+        let clock = p.clock();
+        if clock != *last_clock {
+            if clock > 0 {
+                self.send(s, &[pt_command(&p.read().value)])?;
             }
-            let clock = m.clock();
-            if clock != last_clock || last_sent.elapsed() >= Duration::from_millis(100) {
-                let c = m.command(timeout);
+            *last_clock = clock;
+        }
+        if let Some(line) = self.next_line(lr, s)? {
+            match Message::parse(line) {
+                Ok(Message::PtLimits(v)) => {
+                    let mut c = p.read().value;
+                    c.max_longitude = v[0];
+                    c.max_latitude = v[1];
+                    c.min_longitude = v[2];
+                    c.min_latitude = v[3];
+                    c.max_longitude_speed = v[4];
+                    c.max_latitude_speed = v[5];
+                    if let Ok(k) = p.publish(c) {
+                        *last_clock = k;
+                    }
+                }
+                Ok(m) => self.publish(m),
+                Err(e) => return Err(format!("the server sent a bad line: {e}")),
+            }
+        }
+        Ok(())
+    }
+
+    /// Sends the zoom command when it changes; takes the limits the server answers.
+    fn zoommotors_step(
+        &self,
+        s: &TcpStream,
+        lr: &mut LineReader,
+        z: &Interface<ZoomMotors>,
+        last_clock: &mut u64,
+    ) -> Result<(), String> {
+        let clock = z.clock();
+        if clock != *last_clock {
+            if clock > 0 {
+                let c = z.read().value;
                 self.send(
                     s,
-                    &[
-                        Request::DriveSpeed { v: c.v, ac: 0.0 },
-                        Request::SteerSpeed { w: c.w, ac: 0.0 },
-                    ],
+                    &[Request::ZoomPosition {
+                        zoom: c.zoom,
+                        speed: c.zoom_speed,
+                    }],
                 )?;
-                last_clock = clock;
-                last_sent = Instant::now();
             }
-            // The read doubles as the tick's sleep and notices a closed server.
-            if let Some(line) = self.next_line(&mut lr, s)?
-                && let Ok(msg) = Message::parse(line)
-            {
-                self.publish(msg);
-            }
+            *last_clock = clock;
         }
-    }
-
-    fn ptmotors_session(&self, s: &TcpStream, p: &Interface<PtMotors>) -> Result<(), String> {
-        let _ = s.set_read_timeout(Some(TICK));
-        let mut lr = LineReader::new(MAX_LINE);
-        self.send(s, &[Request::PtLimitsQuery])?;
-        let mut last_clock = u64::MAX;
-        let cmd = |c: &PtMotors| Request::PtPosition {
-            pan: c.longitude,
-            tilt: c.latitude,
-            pan_speed: c.longitude_speed,
-            tilt_speed: c.latitude_speed,
-        };
-        loop {
-            if self.stopping() {
-                let _ = self.send(s, &[cmd(&p.read().value), Request::Goodbye]);
-                return Ok(());
-            }
-            let clock = p.clock();
-            if clock != last_clock {
-                if clock > 0 {
-                    self.send(s, &[cmd(&p.read().value)])?;
-                }
-                last_clock = clock;
-            }
-            if let Some(line) = self.next_line(&mut lr, s)? {
-                match Message::parse(line) {
-                    Ok(Message::PtLimits(v)) => {
-                        let mut c = p.read().value;
-                        c.max_longitude = v[0];
-                        c.max_latitude = v[1];
-                        c.min_longitude = v[2];
-                        c.min_latitude = v[3];
-                        c.max_longitude_speed = v[4];
-                        c.max_latitude_speed = v[5];
-                        if let Ok(k) = p.publish(c) {
-                            last_clock = k;
-                        }
+        if let Some(line) = self.next_line(lr, s)? {
+            match Message::parse(line) {
+                Ok(Message::ZoomLimits(v)) => {
+                    let mut c = z.read().value;
+                    c.max_zoom = v[0];
+                    c.min_zoom = v[1];
+                    c.max_zoom_speed = v[2];
+                    if let Ok(k) = z.publish(c) {
+                        *last_clock = k;
                     }
-                    Ok(m) => self.publish(m),
-                    Err(e) => return Err(format!("the server sent a bad line: {e}")),
                 }
+                Ok(m) => self.publish(m),
+                Err(e) => return Err(format!("the server sent a bad line: {e}")),
             }
         }
-    }
-
-    fn zoommotors_session(&self, s: &TcpStream, z: &Interface<ZoomMotors>) -> Result<(), String> {
-        let _ = s.set_read_timeout(Some(TICK));
-        let mut lr = LineReader::new(MAX_LINE);
-        self.send(s, &[Request::ZoomLimitsQuery])?;
-        let mut last_clock = u64::MAX;
-        loop {
-            if self.stopping() {
-                let _ = self.send(s, &[Request::Goodbye]);
-                return Ok(());
-            }
-            let clock = z.clock();
-            if clock != last_clock {
-                if clock > 0 {
-                    let c = z.read().value;
-                    self.send(
-                        s,
-                        &[Request::ZoomPosition {
-                            zoom: c.zoom,
-                            speed: c.zoom_speed,
-                        }],
-                    )?;
-                }
-                last_clock = clock;
-            }
-            if let Some(line) = self.next_line(&mut lr, s)? {
-                match Message::parse(line) {
-                    Ok(Message::ZoomLimits(v)) => {
-                        let mut c = z.read().value;
-                        c.max_zoom = v[0];
-                        c.min_zoom = v[1];
-                        c.max_zoom_speed = v[2];
-                        if let Ok(k) = z.publish(c) {
-                            last_clock = k;
-                        }
-                    }
-                    Ok(m) => self.publish(m),
-                    Err(e) => return Err(format!("the server sent a bad line: {e}")),
-                }
-            }
-        }
+        Ok(())
     }
 }
 

@@ -37,8 +37,12 @@ pub trait Device: Send + 'static {
     fn idle(&mut self, _session: &mut Self::Session) -> bool {
         false
     }
-    /// The session was lost, or the driver stops: zero what moves.
+    /// The session was lost, or the driver stops: zero what moves. Runs before
+    /// the interfaces are marked stale, so a zero published here keeps the reason.
     fn on_loss(&mut self) {}
+    /// The driver stops (or the device went idle and was not kept) with a session
+    /// open: say goodbye to the device. By default the session is just dropped.
+    fn close(&mut self, _session: Self::Session) {}
 }
 
 /// Waits between attempts to open: `first`, doubling up to `max`.
@@ -159,10 +163,12 @@ fn run<D: Device>(how: Supervision, mut device: D, stop: &AtomicBool) {
         wait = how.backoff.first;
         let lost = loop {
             if stop.load(Ordering::Acquire) {
+                device.close(session);
                 break None;
             }
             if !used() {
                 if !device.idle(&mut session) {
+                    device.close(session);
                     break Some(None);
                 }
                 while !used() && nap(stop, Duration::from_millis(50)) {}
@@ -177,8 +183,8 @@ fn run<D: Device>(how: Supervision, mut device: D, stop: &AtomicBool) {
             Some(None) => {}
             Some(Some(why)) => {
                 tracing::warn!("{}: lost: {why}", how.name);
-                stale(&why);
                 device.on_loss();
+                stale(&why);
                 down = Some(why);
                 nap(stop, wait);
             }
