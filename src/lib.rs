@@ -35,6 +35,7 @@ pub mod runtime;
 #[cfg(feature = "_serialhead")]
 pub mod serialhead;
 pub mod shell;
+pub mod supervisor;
 pub mod vision;
 #[cfg(feature = "gui")]
 pub mod widgets;

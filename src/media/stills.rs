@@ -13,12 +13,14 @@ use std::{
         Arc,
         atomic::{AtomicBool, Ordering},
     },
-    thread::JoinHandle,
     time::{Duration, SystemTime},
 };
 
 use super::{MediaError, still};
-use crate::interfaces::{Image, Interface};
+use crate::{
+    interfaces::{Image, Interface},
+    supervisor::Worker,
+};
 
 /// How an image file's size maps onto the interface's size.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -59,10 +61,7 @@ pub struct StillSpec {
 }
 
 /// A running still-image worker.
-pub struct Stills {
-    stop: Arc<AtomicBool>,
-    thread: Option<JoinHandle<()>>,
-}
+pub struct Stills(Worker);
 
 const TICK: Duration = Duration::from_millis(100);
 
@@ -106,7 +105,7 @@ impl Entry {
 
 impl Stills {
     /// Starts the worker for `specs`; `name` names its thread.
-    pub fn start(name: &str, specs: Vec<StillSpec>) -> std::io::Result<Stills> {
+    pub fn start(name: &str, specs: Vec<StillSpec>) -> anyhow::Result<Stills> {
         let stop = Arc::new(AtomicBool::new(false));
         let s = stop.clone();
         let mut entries: Vec<Entry> = specs
@@ -118,45 +117,31 @@ impl Stills {
                 error: None,
             })
             .collect();
-        let thread = std::thread::Builder::new()
-            .name(name.to_string())
-            .spawn(move || {
-                while !s.load(Ordering::Acquire) {
-                    for e in &mut entries {
-                        let used = e.spec.iface.users() > 0;
-                        if used && !e.used {
-                            let reload = e.spec.first.is_none();
-                            e.publish(reload);
-                        } else if used && mtime(&e.spec.path) != e.mtime {
-                            e.publish(true);
-                        }
-                        e.used = used;
+        let worker = Worker::start(name, stop, move || {
+            while !s.load(Ordering::Acquire) {
+                for e in &mut entries {
+                    let used = e.spec.iface.users() > 0;
+                    if used && !e.used {
+                        let reload = e.spec.first.is_none();
+                        e.publish(reload);
+                    } else if used && mtime(&e.spec.path) != e.mtime {
+                        e.publish(true);
                     }
-                    // Sleep on the first interface, so a resume of it is served at once.
-                    match entries.first() {
-                        Some(e) if !e.used => {
-                            e.spec.iface.wait_used(TICK);
-                        }
-                        _ => std::thread::sleep(TICK),
-                    }
+                    e.used = used;
                 }
-            })?;
-        Ok(Stills {
-            stop,
-            thread: Some(thread),
-        })
+                // Sleep on the first interface, so a resume of it is served at once.
+                match entries.first() {
+                    Some(e) if !e.used => {
+                        e.spec.iface.wait_used(TICK);
+                    }
+                    _ => std::thread::sleep(TICK),
+                }
+            }
+        })?;
+        Ok(Stills(worker))
     }
 
     pub fn stop(&mut self) {
-        self.stop.store(true, Ordering::Release);
-        if let Some(t) = self.thread.take() {
-            let _ = t.join();
-        }
-    }
-}
-
-impl Drop for Stills {
-    fn drop(&mut self) {
-        self.stop();
+        self.0.stop();
     }
 }

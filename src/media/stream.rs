@@ -22,12 +22,14 @@ use std::{
         Arc,
         atomic::{AtomicBool, Ordering},
     },
-    thread::JoinHandle,
     time::Duration,
 };
 
 use super::{MediaError, child::Killer, pace::Pacer};
-use crate::interfaces::{Image, Interface};
+use crate::{
+    interfaces::{Image, Interface},
+    supervisor::Worker,
+};
 
 /// A source of frames (one child process run, or one device session).
 pub trait Frames: Send {
@@ -60,9 +62,9 @@ pub struct StreamSpec {
 
 /// A running stream worker.
 pub struct Stream {
-    stop: Arc<AtomicBool>,
+    worker: Worker,
     killer: Killer,
-    thread: Option<JoinHandle<()>>,
+    stop: Arc<AtomicBool>,
 }
 
 const RETRY: Duration = Duration::from_secs(2);
@@ -70,27 +72,27 @@ const POLL: Duration = Duration::from_millis(200);
 
 impl Stream {
     /// Starts the worker thread for `iface`.
-    pub fn start(spec: StreamSpec, iface: Arc<Interface<Image>>) -> std::io::Result<Stream> {
+    pub fn start(spec: StreamSpec, iface: Arc<Interface<Image>>) -> anyhow::Result<Stream> {
         let stop = Arc::new(AtomicBool::new(false));
         let killer = Killer::default();
         let (s, k) = (stop.clone(), killer.clone());
-        let thread = std::thread::Builder::new()
-            .name(format!("stream {}", iface.name()))
-            .spawn(move || Worker::new(spec, iface, s, k).run())?;
+        let name = format!("stream {}", iface.name());
+        let worker = Worker::start(&name, stop.clone(), move || {
+            Runner::new(spec, iface, s, k).run()
+        })?;
         Ok(Stream {
-            stop,
+            worker,
             killer,
-            thread: Some(thread),
+            stop,
         })
     }
 
-    /// Stops the worker: kills its child and joins the thread.
+    /// Stops the worker: says stop, kills its child (so a blocked read ends
+    /// and nothing restarts it) and joins the thread.
     pub fn stop(&mut self) {
         self.stop.store(true, Ordering::Release);
         self.killer.kill_now();
-        if let Some(t) = self.thread.take() {
-            let _ = t.join();
-        }
+        self.worker.stop();
     }
 }
 
@@ -100,7 +102,8 @@ impl Drop for Stream {
     }
 }
 
-struct Worker {
+/// The stream's thread: runs the source, restarts it, publishes its frames.
+struct Runner {
     spec: StreamSpec,
     iface: Arc<Interface<Image>>,
     stop: Arc<AtomicBool>,
@@ -117,14 +120,14 @@ enum Outcome {
     Failed(MediaError),
 }
 
-impl Worker {
+impl Runner {
     fn new(
         spec: StreamSpec,
         iface: Arc<Interface<Image>>,
         stop: Arc<AtomicBool>,
         killer: Killer,
     ) -> Self {
-        Worker {
+        Runner {
             spec,
             iface,
             stop,

@@ -41,7 +41,6 @@ pub mod pacer;
 mod panel;
 mod schema;
 mod slot;
-mod supervisor;
 
 use std::{
     path::{Path, PathBuf},
@@ -53,15 +52,15 @@ use std::{
 
 use parking_lot::{Condvar, Mutex, RwLock};
 
+pub use crate::supervisor::{Backoff, Device, Supervision, Supervisor, Worker};
 pub use arbitration::{Arbitration, BrotherGroup, Father};
 pub use context::Context;
-pub use driver::{Driver, Worker};
+pub use driver::Driver;
 pub use error::RuntimeError;
 #[cfg(feature = "gui")]
 pub use panel::Panel;
 pub use schema::{Schema, State};
 pub use slot::{SchemaSlot, SchemaStatus};
-pub use supervisor::{Backoff, Device, Supervision, Supervisor};
 
 use crate::{
     conf::{ConfError, ConfLine, Kind},

@@ -1,5 +1,8 @@
-//! Device supervision: one piece owns a device's thread and its life, so a driver
-//! supplies only how to open its device and how to serve one step of it.
+//! Threads and device supervision, for every driver and the media sources: a
+//! [`Worker`] owns a thread and its stop flag; a [`Supervisor`] owns a device's
+//! thread and its life, so a driver supplies only how to open its device and how
+//! to serve one step of it. (Both are `runtime::Driver`s; they live here, below
+//! the runtime, so `media` uses them too.)
 //!
 //! The supervisor's thread opens the device (only while somebody uses one of its
 //! interfaces, for an on-demand device), serves it step by step until it is lost,
@@ -14,12 +17,11 @@ use std::{
         Arc,
         atomic::{AtomicBool, Ordering},
     },
+    thread::JoinHandle,
     time::{Duration, Instant},
 };
 
 use crate::interfaces::AnyInterface;
-
-use super::{Driver, Worker};
 
 /// A device as the supervisor sees it.
 pub trait Device: Send + 'static {
@@ -43,6 +45,46 @@ pub trait Device: Send + 'static {
     /// The driver stops (or the device went idle and was not kept) with a session
     /// open: say goodbye to the device. By default the session is just dropped.
     fn close(&mut self, _session: Self::Session) {}
+}
+
+/// A driver's worker thread. The thread polls its stop flag; [`Worker::stop`] (or
+/// terminating or dropping the worker) sets it and waits for the thread to end. A
+/// driver with nothing else to do at terminate is just its `Worker`.
+pub struct Worker {
+    stop: Arc<AtomicBool>,
+    thread: Option<JoinHandle<()>>,
+}
+
+impl Worker {
+    /// Starts `body` on a thread called `name`; `stop` is the flag it polls.
+    pub fn start(
+        name: &str,
+        stop: Arc<AtomicBool>,
+        body: impl FnOnce() + Send + 'static,
+    ) -> anyhow::Result<Worker> {
+        let thread = std::thread::Builder::new()
+            .name(name.into())
+            .spawn(body)
+            .map_err(|e| anyhow::anyhow!("cannot start the {name} thread: {e}"))?;
+        Ok(Worker {
+            stop,
+            thread: Some(thread),
+        })
+    }
+
+    /// Asks the thread to stop and waits for it.
+    pub fn stop(&mut self) {
+        self.stop.store(true, Ordering::Release);
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+impl Drop for Worker {
+    fn drop(&mut self) {
+        self.stop();
+    }
 }
 
 /// Waits between attempts to open: `first`, doubling up to `max`.
@@ -94,21 +136,6 @@ impl Supervisor {
     /// Asks the thread to stop and waits for it.
     pub fn stop(&mut self) {
         self.0.stop();
-    }
-}
-
-impl Driver for Supervisor {
-    fn terminate(&mut self) {
-        self.stop();
-    }
-}
-
-/// A driver with several devices (one per camera) is its supervisors.
-impl Driver for Vec<Supervisor> {
-    fn terminate(&mut self) {
-        for s in self {
-            s.stop();
-        }
     }
 }
 
