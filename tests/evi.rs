@@ -385,14 +385,7 @@ fn conf_errors_name_the_line() {
             "test.conf:3",
         ),
     ] {
-        let conf = jderobot::Conf::parse(text, std::path::Path::new("test.conf")).unwrap();
-        let err = match jderobot::loader::start(&conf) {
-            Ok(rt) => {
-                rt.shutdown();
-                panic!("accepted: {text}");
-            }
-            Err(e) => format!("{e:#}"),
-        };
+        let err = common::start_error(text);
         assert!(err.contains(expect), "{err}");
     }
 }
@@ -401,31 +394,23 @@ fn conf_errors_name_the_line() {
 /// value out of range at its line, with the range, before any port is opened.
 #[test]
 fn help_prints_the_lines_and_check_names_every_range() {
-    let text = common::help("evi");
-    for line in [
-        "serial DEVICE",
-        "camera ADDRESS",
-        "poll MS",
-        "reply_timeout MS",
-        "provides INTERFACE",
-        "default: 100",
-    ] {
-        assert!(text.contains(line), "{line}: {text}");
-    }
-    let dir = tempfile::tempdir().unwrap();
-    let (ok, err) = common::check_text(
-        dir.path(),
-        "t.conf",
+    common::assert_help_names(
+        "evi",
+        &[
+            "serial DEVICE",
+            "camera ADDRESS",
+            "poll MS",
+            "reply_timeout MS",
+            "provides INTERFACE",
+            "default: 100",
+        ],
+    );
+    common::assert_check_names(
         "driver evi\nserial /nonexistent/tty\npoll 0\ncamera 9\nprovides zoommotors\nend_driver\nload_driver evi\n",
-    );
-    assert!(!ok);
-    assert!(
-        err.contains("t.conf:3: `poll`: MS (argument 1) is `0`, expected a whole number between 10 and 10000 ms"),
-        "{err}"
-    );
-    assert!(
-        err.contains("t.conf:4: `camera`: ADDRESS (argument 1) is `9`, expected a whole number between 1 and 7"),
-        "{err}"
+        &[
+            "t.conf:3: `poll`: MS (argument 1) is `0`, expected a whole number between 10 and 10000 ms",
+            "t.conf:4: `camera`: ADDRESS (argument 1) is `9`, expected a whole number between 1 and 7",
+        ],
     );
 }
 
@@ -435,13 +420,10 @@ fn help_prints_the_lines_and_check_names_every_range() {
 #[test]
 #[ignore = "an emulator for trying the example by hand"]
 fn emulator() {
-    let path = std::env::var("EVI_PATH").unwrap_or_else(|_| "/tmp/evi".into());
-    let secs: u64 = std::env::var("EVI_SECONDS")
-        .ok()
-        .and_then(|s| s.parse().ok())
-        .unwrap_or(600);
-    let _ = std::fs::remove_file(&path);
-    let _cam = Evi::start(std::path::Path::new(&path));
-    println!("emulated EVI-D100 at {path} for {secs} s");
-    std::thread::sleep(Duration::from_secs(secs));
+    common::emulate_by_hand(
+        "an EVI-D100",
+        ("EVI_PATH", "/tmp/evi"),
+        "EVI_SECONDS",
+        Evi::start,
+    );
 }

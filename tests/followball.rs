@@ -137,14 +137,7 @@ fn conf_errors_name_the_line() {
              provides laser\nend_driver\nschema followball\n{body}end_schema\n\
              load_driver simulator\nload_schema followball\n"
         );
-        let conf = jderobot::Conf::parse(&text, std::path::Path::new("test.conf")).unwrap();
-        let err = match jderobot::loader::start(&conf) {
-            Ok(rt) => {
-                rt.shutdown();
-                panic!("accepted: {body}");
-            }
-            Err(e) => format!("{e:#}"),
-        };
+        let err = common::start_error(&text);
         assert!(err.contains(expect), "{body}: {err}");
     }
 }

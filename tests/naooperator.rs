@@ -85,14 +85,7 @@ fn needs_motors_and_names_the_line() {
         ("max_v 0\n", "max_v"),
         ("dance\n", "takes no `dance` line"),
     ] {
-        let conf = jderobot::Conf::parse(&conf(body), std::path::Path::new("test.conf")).unwrap();
-        let err = match jderobot::loader::start(&conf) {
-            Ok(rt) => {
-                rt.shutdown();
-                panic!("accepted: {body}");
-            }
-            Err(e) => format!("{e:#}"),
-        };
+        let err = common::start_error(&conf(body));
         assert!(err.contains(expect), "{body}: {err}");
     }
 }

@@ -305,57 +305,50 @@ fn a_token_in_the_name_is_required_when_configured() {
 #[test]
 fn conf_errors_name_the_line() {
     let rt = Runtime::new(std::path::Path::new("test.conf"));
-    let e = load(
-        &rt,
-        Kind::Service,
-        "networkserver",
-        "socket 0\nserves laser\n",
-    )
-    .unwrap_err();
-    assert!(
-        e.contains("serves laser") && e.contains("before networkserver"),
-        "{e}"
+    let (server, client) = (
+        (Kind::Service, "networkserver"),
+        (Kind::Driver, "networkclient"),
     );
-    let e = load(&rt, Kind::Service, "networkserver", "serves laser\n").unwrap_err();
-    assert!(e.contains("socket PORT"), "{e}");
-    let e = load(
-        &rt,
-        Kind::Service,
-        "networkserver",
-        "socket 0\nserves colorA\n",
-    )
-    .unwrap_err();
-    assert!(e.contains("<inline>:2") && e.contains("network id"), "{e}");
-    let e = load(
-        &rt,
-        Kind::Service,
-        "networkserver",
-        "socket 0\nbind nowhere\n",
-    )
-    .unwrap_err();
-    assert!(e.contains("<inline>:2") && e.contains("IP address"), "{e}");
-    let e = load(&rt, Kind::Service, "networkserver", "socket 0\ntoken a b\n").unwrap_err();
-    assert!(e.contains("token SECRET"), "{e}");
-    let e = load(
-        &rt,
-        Kind::Driver,
-        "networkclient",
-        "provides colorA host 3001\n",
-    )
-    .unwrap_err();
-    assert!(e.contains("<inline>:1") && e.contains("NETID"), "{e}");
-    let e = load(
-        &rt,
-        Kind::Driver,
-        "networkclient",
-        "provides laser host port\n",
-    )
-    .unwrap_err();
-    assert!(e.contains("between 1 and 65535"), "{e}");
-    let e = load(&rt, Kind::Driver, "networkclient", "provides laser h 1 2\n").unwrap_err();
-    assert!(e.contains("HOST PORT only"), "{e}");
-    let e = load(&rt, Kind::Driver, "networkclient", "initial_position 1 2\n").unwrap_err();
-    assert!(e.contains("usage: initial_position X Y THETA"), "{e}");
+    // (component, its lines, what the error must say)
+    let cases = [
+        (
+            server,
+            "socket 0\nserves laser\n",
+            &["serves laser", "before networkserver"][..],
+        ),
+        (server, "serves laser\n", &["socket PORT"]),
+        (
+            server,
+            "socket 0\nserves colorA\n",
+            &["<inline>:2", "network id"],
+        ),
+        (
+            server,
+            "socket 0\nbind nowhere\n",
+            &["<inline>:2", "IP address"],
+        ),
+        (server, "socket 0\ntoken a b\n", &["token SECRET"]),
+        (
+            client,
+            "provides colorA host 3001\n",
+            &["<inline>:1", "NETID"],
+        ),
+        (
+            client,
+            "provides laser host port\n",
+            &["between 1 and 65535"],
+        ),
+        (client, "provides laser h 1 2\n", &["HOST PORT only"]),
+        (
+            client,
+            "initial_position 1 2\n",
+            &["usage: initial_position X Y THETA"],
+        ),
+    ];
+    for ((kind, name), lines, says) in cases {
+        let e = load(&rt, kind, name, lines).unwrap_err();
+        assert!(says.iter().all(|s| e.contains(s)), "{name} {lines:?}: {e}");
+    }
 }
 
 fn robot43() -> Robot43 {

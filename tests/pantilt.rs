@@ -324,14 +324,7 @@ fn conf_errors_name_the_line() {
             "test.conf:3: `poll`: MS (argument 1) is `0`, expected a whole number between 10 and 10000 ms",
         ),
     ] {
-        let conf = jderobot::Conf::parse(text, std::path::Path::new("test.conf")).unwrap();
-        let err = match jderobot::loader::start(&conf) {
-            Ok(rt) => {
-                rt.shutdown();
-                panic!("accepted: {text}");
-            }
-            Err(e) => format!("{e:#}"),
-        };
+        let err = common::start_error(text);
         assert!(err.contains(expect), "{err}");
     }
 }
@@ -340,31 +333,23 @@ fn conf_errors_name_the_line() {
 /// value out of range at its line, with the range, before any port is opened.
 #[test]
 fn help_prints_the_lines_and_check_names_every_range() {
-    let text = common::help("pantilt");
-    for line in [
-        "serial DEVICE",
-        "baud RATE",
-        "poll MS",
-        "reply_timeout MS",
-        "provides INTERFACE",
-        "default: 300",
-    ] {
-        assert!(text.contains(line), "{line}: {text}");
-    }
-    let dir = tempfile::tempdir().unwrap();
-    let (ok, err) = common::check_text(
-        dir.path(),
-        "t.conf",
+    common::assert_help_names(
+        "pantilt",
+        &[
+            "serial DEVICE",
+            "baud RATE",
+            "poll MS",
+            "reply_timeout MS",
+            "provides INTERFACE",
+            "default: 300",
+        ],
+    );
+    common::assert_check_names(
         "driver pantilt\nserial /nonexistent/tty\npoll 0\nbaud 9\nprovides pantiltencoders\nend_driver\nload_driver pantilt\n",
-    );
-    assert!(!ok);
-    assert!(
-        err.contains("t.conf:3: `poll`: MS (argument 1) is `0`, expected a whole number between 10 and 10000 ms"),
-        "{err}"
-    );
-    assert!(
-        err.contains("t.conf:4: `baud`: RATE (argument 1) is `9`, expected a whole number between 300 and 115200 baud"),
-        "{err}"
+        &[
+            "t.conf:3: `poll`: MS (argument 1) is `0`, expected a whole number between 10 and 10000 ms",
+            "t.conf:4: `baud`: RATE (argument 1) is `9`, expected a whole number between 300 and 115200 baud",
+        ],
     );
 }
 
@@ -374,13 +359,5 @@ fn help_prints_the_lines_and_check_names_every_range() {
 #[test]
 #[ignore = "an emulator for trying the example by hand"]
 fn emulator() {
-    let path = std::env::var("PTU_PATH").unwrap_or_else(|_| "/tmp/ptu".into());
-    let secs: u64 = std::env::var("PTU_SECONDS")
-        .ok()
-        .and_then(|s| s.parse().ok())
-        .unwrap_or(600);
-    let _ = std::fs::remove_file(&path);
-    let _unit = Ptu::start(std::path::Path::new(&path));
-    println!("emulated PTU at {path} for {secs} s");
-    std::thread::sleep(Duration::from_secs(secs));
+    common::emulate_by_hand("PTU", ("PTU_PATH", "/tmp/ptu"), "PTU_SECONDS", Ptu::start);
 }

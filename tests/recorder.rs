@@ -224,6 +224,27 @@ fn a_recording_killed_with_sigkill_replays_what_it_wrote() {
     );
 }
 
+/// Writes an MCAP file of one message: its schema (name, encoding, data), its
+/// channel (topic, message encoding, metadata) and the message's bytes.
+fn one_message_file(
+    path: &Path,
+    (schema, schema_encoding, schema_data): (&str, &str, &[u8]),
+    (topic, encoding, metadata): (&str, &str, BTreeMap<String, String>),
+    data: &[u8],
+) {
+    let mut w = mcap::Writer::new(std::fs::File::create(path).unwrap()).unwrap();
+    let s = w.add_schema(schema, schema_encoding, schema_data).unwrap();
+    let c = w.add_channel(s, topic, encoding, &metadata).unwrap();
+    let header = mcap::records::MessageHeader {
+        channel_id: c,
+        sequence: 1,
+        log_time: 1,
+        publish_time: 1,
+    };
+    w.write_to_known_channel(&header, data).unwrap();
+    w.finish().unwrap();
+}
+
 #[test]
 fn info_and_replay_refuse_foreign_files_clearly() {
     let dir = tempfile::tempdir().unwrap();
@@ -238,22 +259,12 @@ fn info_and_replay_refuse_foreign_files_clearly() {
 
     // A real MCAP file whose channel jderobot did not write.
     let foreign = dir.path().join("foreign.mcap");
-    {
-        let mut w = mcap::Writer::new(std::fs::File::create(&foreign).unwrap()).unwrap();
-        let s = w.add_schema("pkg/Thing", "ros2msg", b"int32 x").unwrap();
-        let c = w.add_channel(s, "/thing", "cdr", &BTreeMap::new()).unwrap();
-        w.write_to_known_channel(
-            &mcap::records::MessageHeader {
-                channel_id: c,
-                sequence: 1,
-                log_time: 1,
-                publish_time: 1,
-            },
-            &[0, 1, 0, 0, 7, 0, 0, 0],
-        )
-        .unwrap();
-        w.finish().unwrap();
-    }
+    one_message_file(
+        &foreign,
+        ("pkg/Thing", "ros2msg", b"int32 x"),
+        ("/thing", "cdr", BTreeMap::new()),
+        &[0, 1, 0, 0, 7, 0, 0, 0],
+    );
     let out = Command::new(BIN)
         .arg("info")
         .arg(&foreign)
@@ -280,25 +291,16 @@ fn info_and_replay_refuse_foreign_files_clearly() {
 
     // A recording of before images were protobuf (JSON foxglove.RawImage, base64).
     let old = dir.path().join("old.mcap");
-    {
-        let mut w = mcap::Writer::new(std::fs::File::create(&old).unwrap()).unwrap();
-        let s = w
-            .add_schema("foxglove.RawImage", "jsonschema", b"{}")
-            .unwrap();
-        let meta = BTreeMap::from([("jderobot.kind".to_string(), "image".to_string())]);
-        let c = w.add_channel(s, "colorA", "json", &meta).unwrap();
-        w.write_to_known_channel(
-            &mcap::records::MessageHeader {
-                channel_id: c,
-                sequence: 1,
-                log_time: 1,
-                publish_time: 1,
-            },
-            br#"{"timestamp":{"sec":0,"nsec":1},"clock":1,"width":1,"height":1,"encoding":"bgr8","step":3,"data":"AAAA"}"#,
-        )
-        .unwrap();
-        w.finish().unwrap();
-    }
+    one_message_file(
+        &old,
+        ("foxglove.RawImage", "jsonschema", b"{}"),
+        (
+            "colorA",
+            "json",
+            BTreeMap::from([("jderobot.kind".to_string(), "image".to_string())]),
+        ),
+        br#"{"timestamp":{"sec":0,"nsec":1},"clock":1,"width":1,"height":1,"encoding":"bgr8","step":3,"data":"AAAA"}"#,
+    );
     let conf = write(
         dir.path(),
         "o.conf",

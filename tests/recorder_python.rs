@@ -14,7 +14,10 @@ use std::{
 };
 
 use common::{root, world_path};
-use jderobot::mcapfmt::{self, Recorded};
+use jderobot::{
+    interfaces::{Image, Laser},
+    mcapfmt::{self, Recorded},
+};
 
 const BIN: &str = env!("CARGO_BIN_EXE_jderobot");
 
@@ -33,6 +36,32 @@ fn write_recorder_conf(conf: &Path, lines: &str) {
         world_path("simple.world")
     );
     std::fs::write(conf, text).unwrap();
+}
+
+/// The first laser scan and image jderobot reads in a file's `bytes`; the laser
+/// must equal the one Python read (`v["laser0"]`, mm).
+fn first_laser_and_image(bytes: &[u8], v: &serde_json::Value) -> (Laser, Image) {
+    let mut laser = None;
+    let mut image = None;
+    for m in mcap::MessageStream::new(bytes).unwrap() {
+        let m = m.unwrap();
+        let kind = mcapfmt::channel_kind(&m.channel.metadata, None).unwrap();
+        match mcapfmt::decode_mcap(&kind, &m).unwrap().value {
+            Recorded::Laser(l) if laser.is_none() => laser = Some(l),
+            Recorded::Image(i) if image.is_none() => image = Some(i),
+            _ => {}
+        }
+    }
+    let laser = laser.expect("a laser message");
+    let py_laser: Vec<i64> = v["laser0"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_i64().unwrap())
+        .collect();
+    let ours: Vec<i64> = laser.readings.iter().map(|&r| r as i64).collect();
+    assert_eq!(py_laser, ours, "the laser as Python and jderobot read it");
+    (laser, image.expect("an image message"))
 }
 
 /// Runs `jderobot --headless --no-shell --for SECS CONF`; it must succeed.
@@ -89,35 +118,13 @@ fn python_mcap_reads_the_recording_by_the_documented_schemas() {
                 c.topic
             );
         }
-        let mut laser = None;
-        let mut image = None;
-        for m in mcap::MessageStream::new(&bytes).unwrap() {
-            let m = m.unwrap();
-            let kind = mcapfmt::channel_kind(&m.channel.metadata, None).unwrap();
-            match mcapfmt::decode_mcap(&kind, &m).unwrap().value {
-                Recorded::Laser(l) if laser.is_none() => laser = Some(l),
-                Recorded::Image(i) if image.is_none() => image = Some(i),
-                _ => {}
-            }
-        }
-        let laser = laser.expect("a laser message");
-        let py_laser: Vec<i64> = v["laser0"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|x| x.as_i64().unwrap())
-            .collect();
-        assert_eq!(
-            py_laser,
-            laser.readings.iter().map(|&r| r as i64).collect::<Vec<_>>()
-        );
+        let (laser, image) = first_laser_and_image(&bytes, &v);
         let py_res = v["resolution0"].as_f64().unwrap();
         assert!(
             (py_res - laser.resolution as f64).abs() < 1e-6,
             "resolution: Python {py_res}, jderobot {}",
             laser.resolution
         );
-        let image = image.expect("an image message");
         let sum: u64 = image.data.iter().map(|&b| b as u64).sum();
         assert_eq!(v["image0"]["width"].as_u64(), Some(image.width as u64));
         assert_eq!(v["image0"]["sum"].as_u64(), Some(sum));
@@ -170,30 +177,7 @@ fn rosbags_opens_the_ros2_profile_and_the_replay_reads_it_back() {
     // jderobot's replay reads the same file: the first laser and image agree.
     let (summary, bytes) = mcapfmt::Summary::read(&file).unwrap();
     assert_eq!(summary.profile, "ros2");
-    let mut laser = None;
-    let mut image = None;
-    for m in mcap::MessageStream::new(&bytes).unwrap() {
-        let m = m.unwrap();
-        let kind = mcapfmt::channel_kind(&m.channel.metadata, None).unwrap();
-        let d = mcapfmt::decode_mcap(&kind, &m).unwrap();
-        match d.value {
-            Recorded::Laser(l) if laser.is_none() => laser = Some(l),
-            Recorded::Image(i) if image.is_none() => image = Some(i),
-            _ => {}
-        }
-    }
-    let laser = laser.unwrap();
-    let py_laser: Vec<i64> = v["laser0"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|x| x.as_i64().unwrap())
-        .collect();
-    assert_eq!(
-        py_laser,
-        laser.readings.iter().map(|&r| r as i64).collect::<Vec<_>>()
-    );
-    let image = image.unwrap();
+    let (_, image) = first_laser_and_image(&bytes, &v);
     let sum: u64 = image.data.iter().map(|&b| b as u64).sum();
     assert_eq!(v["image0"]["sum"].as_u64(), Some(sum));
 

@@ -15,7 +15,7 @@ use std::{
 use parking_lot::{Condvar, Mutex};
 
 use crate::{
-    interfaces::AnyInterface,
+    interfaces::{AnyInterface, Interface, InterfaceValue, Sample},
     netwire::{self, Device, LineEvent, LineReader, Request},
 };
 
@@ -407,65 +407,53 @@ fn push(
     out: &mut Vec<u8>,
     epoch: Instant,
 ) {
+    /// The sample of `iface`, if it is newer than the last one pushed.
+    fn fresh<T: InterfaceValue>(
+        iface: &Option<Arc<Interface<T>>>,
+        last: &mut u64,
+    ) -> Option<Arc<Sample<T>>> {
+        let s = iface.as_ref()?.snapshot();
+        (s.clock != *last).then(|| {
+            *last = s.clock;
+            s
+        })
+    }
     for d in Device::ALL {
         let k = d.index();
         if !subs[k] {
             continue;
         }
+        let last = &mut last[k];
         match d {
             Device::Laser => {
-                if let Some(i) = &src.laser {
-                    let s = i.read();
-                    if s.clock != last[k] {
-                        last[k] = s.clock;
-                        netwire::write_laser(out, s.clock, &s.readings);
-                    }
+                if let Some(s) = fresh(&src.laser, last) {
+                    netwire::write_laser(out, s.clock, &s.readings);
                 }
             }
             Device::Encoders => {
-                if let Some(i) = &src.encoders {
-                    let s = i.read();
-                    if s.clock != last[k] {
-                        last[k] = s.clock;
-                        let us = s.stamp.saturating_duration_since(epoch).as_micros() as u64;
-                        netwire::write_encoders(out, s.clock, s.x, s.y, s.theta.to_degrees(), us);
-                    }
+                if let Some(s) = fresh(&src.encoders, last) {
+                    let us = s.stamp.saturating_duration_since(epoch).as_micros() as u64;
+                    netwire::write_encoders(out, s.clock, s.x, s.y, s.theta.to_degrees(), us);
                 }
             }
             Device::Sonars => {
-                if let Some(i) = &src.sonars {
-                    let s = i.read();
-                    if s.clock != last[k] {
-                        last[k] = s.clock;
-                        netwire::write_sonars(out, s.clock, &s.us);
-                    }
+                if let Some(s) = fresh(&src.sonars, last) {
+                    netwire::write_sonars(out, s.clock, &s.us);
                 }
             }
             Device::PtEncoders => {
-                if let Some(i) = &src.pte {
-                    let s = i.read();
-                    if s.clock != last[k] {
-                        last[k] = s.clock;
-                        netwire::write_pt_encoders(out, s.clock, s.pan_angle, s.tilt_angle);
-                    }
+                if let Some(s) = fresh(&src.pte, last) {
+                    netwire::write_pt_encoders(out, s.clock, s.pan_angle, s.tilt_angle);
                 }
             }
             Device::ZoomEncoders => {
-                if let Some(i) = &src.ze {
-                    let s = i.read();
-                    if s.clock != last[k] {
-                        last[k] = s.clock;
-                        netwire::write_zoom_encoders(out, s.clock, s.zoom_position);
-                    }
+                if let Some(s) = fresh(&src.ze, last) {
+                    netwire::write_zoom_encoders(out, s.clock, s.zoom_position);
                 }
             }
             Device::Imu => {
-                if let Some(i) = &src.imu {
-                    let s = i.read();
-                    if s.clock != last[k] {
-                        last[k] = s.clock;
-                        netwire::write_imu(out, s.clock, s.fields());
-                    }
+                if let Some(s) = fresh(&src.imu, last) {
+                    netwire::write_imu(out, s.clock, s.fields());
                 }
             }
         }

@@ -184,6 +184,14 @@ macro_rules! kind_enums {
         }
 
         impl Recorded {
+            /// The value as a sample of clock `clock` taken at `time`.
+            #[cfg(test)]
+            fn sample(self, clock: u64, time: SystemTime) -> Snapshot {
+                let stamp = std::time::Instant::now();
+                match self {
+                    $(Recorded::$t(value) => Snapshot::$t(Arc::new(Sample { clock, stamp, time, value })),)*
+                }
+            }
             /// The interface kind (`AnyInterface::kind`).
             pub fn kind(&self) -> &'static str {
                 match self { $(Recorded::$t(_) => $k,)* }
@@ -582,126 +590,49 @@ mod tests {
 
     #[test]
     fn values_round_trip_exactly() {
-        let cases = vec![
-            (
-                Snapshot::Laser(sample(
-                    3,
-                    Laser {
-                        readings: vec![1, 8000, 123, -1],
-                        resolution: 1.0,
-                    },
-                )),
-                Recorded::Laser(Laser {
-                    readings: vec![1, 8000, 123, -1],
-                    resolution: 1.0,
-                }),
-                "laser",
-            ),
-            (
-                Snapshot::Encoders(sample(
-                    4,
-                    Encoders {
-                        x: 1000.25,
-                        y: -3.1,
-                        theta: 5.5,
-                        cos: 0.1,
-                        sin: 0.3,
-                    },
-                )),
-                Recorded::Encoders(Encoders {
-                    x: 1000.25,
-                    y: -3.1,
-                    theta: 5.5,
-                    cos: 0.1,
-                    sin: 0.3,
-                }),
-                "encoders",
-            ),
-            (
-                Snapshot::Sonars(sample(
-                    5,
-                    Sonars {
-                        us: vec![0.1, 5000.0, 333.3],
-                    },
-                )),
-                Recorded::Sonars(Sonars {
-                    us: vec![0.1, 5000.0, 333.3],
-                }),
-                "sonars",
-            ),
-            (
-                Snapshot::Image(sample(
-                    6,
-                    Image {
-                        width: 2,
-                        height: 1,
-                        data: vec![1, 2, 3, 250, 251, 252],
-                    },
-                )),
-                Recorded::Image(Image {
-                    width: 2,
-                    height: 1,
-                    data: vec![1, 2, 3, 250, 251, 252],
-                }),
-                "image",
-            ),
-            (
-                Snapshot::Imu(sample(
-                    7,
-                    Imu {
-                        wz: 0.1,
-                        az: 9.81,
-                        ..Imu::default()
-                    },
-                )),
-                Recorded::Imu(Imu {
-                    wz: 0.1,
-                    az: 9.81,
-                    ..Imu::default()
-                }),
-                "imu",
-            ),
-            (
-                Snapshot::PtMotors(sample(
-                    8,
-                    PtMotors {
-                        longitude: 0.3,
-                        ..PtMotors::default()
-                    },
-                )),
-                Recorded::PtMotors(PtMotors {
-                    longitude: 0.3,
-                    ..PtMotors::default()
-                }),
-                "pantiltmotors",
-            ),
-            (
-                Snapshot::ZoomMotors(sample(
-                    9,
-                    ZoomMotors {
-                        zoom: 1.7,
-                        ..ZoomMotors::default()
-                    },
-                )),
-                Recorded::ZoomMotors(ZoomMotors {
-                    zoom: 1.7,
-                    ..ZoomMotors::default()
-                }),
-                "zoommotors",
-            ),
-            (
-                Snapshot::Bumpers(sample(
-                    10,
-                    Bumpers {
-                        bumpers: vec![0, 1, 1],
-                    },
-                )),
-                Recorded::Bumpers(Bumpers {
-                    bumpers: vec![0, 1, 1],
-                }),
-                "bumpers",
-            ),
+        let values = vec![
+            Recorded::Laser(Laser {
+                readings: vec![1, 8000, 123, -1],
+                resolution: 1.0,
+            }),
+            Recorded::Encoders(Encoders {
+                x: 1000.25,
+                y: -3.1,
+                theta: 5.5,
+                cos: 0.1,
+                sin: 0.3,
+            }),
+            Recorded::Sonars(Sonars {
+                us: vec![0.1, 5000.0, 333.3],
+            }),
+            Recorded::Image(Image {
+                width: 2,
+                height: 1,
+                data: vec![1, 2, 3, 250, 251, 252],
+            }),
+            Recorded::Imu(Imu {
+                wz: 0.1,
+                az: 9.81,
+                ..Imu::default()
+            }),
+            Recorded::PtMotors(PtMotors {
+                longitude: 0.3,
+                ..PtMotors::default()
+            }),
+            Recorded::ZoomMotors(ZoomMotors {
+                zoom: 1.7,
+                ..ZoomMotors::default()
+            }),
+            Recorded::Bumpers(Bumpers {
+                bumpers: vec![0, 1, 1],
+            }),
         ];
+        let time = from_nanos(1_700_000_000_123_456_789);
+        let cases: Vec<(Snapshot, Recorded, &str)> = values
+            .into_iter()
+            .zip(3..)
+            .map(|(v, clock)| (v.clone().sample(clock, time), v.clone(), v.kind()))
+            .collect();
         // Written into an MCAP file as the recorder does, read back as the replay does.
         let profile = Profile::Foxglove { jpeg: None };
         let mut w = write_options(None, profile)

@@ -54,6 +54,61 @@ pub fn check_text(dir: &Path, name: &str, text: &str) -> (bool, String) {
     )
 }
 
+/// `jderobot help NAME` names each of `lines`.
+#[allow(dead_code)]
+pub fn assert_help_names(name: &str, lines: &[&str]) {
+    let text = help(name);
+    for line in lines {
+        assert!(text.contains(line), "{line}: {text}");
+    }
+}
+
+/// `jderobot check` of a conf holding `text` fails, and names each of `errors`.
+#[allow(dead_code)]
+pub fn assert_check_names(text: &str, errors: &[&str]) {
+    let dir = tempfile::tempdir().unwrap();
+    let (ok, err) = check_text(dir.path(), "t.conf", text);
+    assert!(!ok, "check passed: {text}");
+    for e in errors {
+        assert!(err.contains(e), "{e}: {err}");
+    }
+}
+
+/// Starting a runtime from conf text (as if read from `test.conf`) must fail:
+/// the error, with its causes.
+#[allow(dead_code)]
+pub fn start_error(text: &str) -> String {
+    let conf = Conf::parse(text, Path::new("test.conf")).unwrap_or_else(|e| panic!("{e}"));
+    match jderobot::loader::start(&conf) {
+        Ok(rt) => {
+            rt.shutdown();
+            panic!("accepted: {text}");
+        }
+        Err(e) => format!("{e:#}"),
+    }
+}
+
+/// Not a test: runs an emulated device (`start` at the path in env var
+/// `path_var`, default `default`) for a person to try an example against, for
+/// `secs_var` seconds (default 600).
+#[allow(dead_code)]
+pub fn emulate_by_hand<T>(
+    what: &str,
+    (path_var, default): (&str, &str),
+    secs_var: &str,
+    start: impl FnOnce(&Path) -> T,
+) {
+    let path = std::env::var(path_var).unwrap_or_else(|_| default.into());
+    let secs: u64 = std::env::var(secs_var)
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(600);
+    let _ = std::fs::remove_file(&path);
+    let _device = start(Path::new(&path));
+    println!("emulated {what} at {path} for {secs} s");
+    std::thread::sleep(Duration::from_secs(secs));
+}
+
 /// The crate's root, where `assets/` and `examples/` are.
 pub fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
