@@ -118,6 +118,37 @@ pub struct Supervision {
     pub absent: Option<String>,
 }
 
+impl Supervision {
+    /// A camera (or any on-demand device of one interface), retried every
+    /// `retry` while used. `absent` is why it was not there at load, if it was
+    /// not: said once, at its conf line `at` (`AT: driver DRIVER: WHY; IFACE
+    /// stays stale until UNTIL (tried every N s while used)`), and its interface
+    /// is stale with the reason until it appears.
+    pub fn camera(
+        name: String,
+        iface: Arc<dyn AnyInterface>,
+        retry: Duration,
+        absent: Option<(&str, &str, String, &str)>,
+    ) -> Supervision {
+        let absent = absent.map(|(at, driver, why, until)| {
+            crate::output::println(format!(
+                "{at}: driver {driver}: {why}; {} stays stale until {until} (tried every {} s while used)",
+                iface.name(),
+                retry.as_secs()
+            ));
+            iface.set_stale(&why);
+            why
+        });
+        Supervision {
+            name,
+            interfaces: vec![iface],
+            on_demand: true,
+            backoff: Backoff::fixed(retry),
+            absent,
+        }
+    }
+}
+
 /// A supervised device: its thread (a [`Worker`]) runs until [`Supervisor::stop`]
 /// (or terminate, or drop).
 pub struct Supervisor(Worker);

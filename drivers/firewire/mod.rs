@@ -54,7 +54,7 @@ use crate::{
         settings::{self, Setting},
     },
     interfaces::{COLOR_HEIGHT, COLOR_WIDTH, Image, Interface},
-    runtime::{Backoff, Device, Driver, Runtime, Supervision, Supervisor},
+    runtime::{Device, Driver, Runtime, Supervision, Supervisor},
     vision::pixfmt::{self, Bayer, Yuv422Order, YuvMatrix},
 };
 
@@ -613,29 +613,16 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
                 .provide_value(&c.iface, &conf.name, Image::new(c.width, c.height))?;
         // An absent camera (or bus) is not fatal: the interface is stale with the
         // reason until the camera appears, and the capture thread keeps trying.
-        let absent = match probe(c.cam) {
-            Ok(_) => String::new(),
-            Err(e) => {
-                crate::output::println(format!(
-                    "{}: driver {}: {e}; {} stays stale until camera {} appears (tried every {} s while used)",
-                    c.at,
-                    conf.name,
-                    c.iface,
-                    c.cam,
-                    RETRY.as_secs()
-                ));
-                iface.set_stale(e.clone());
-                e
-            }
-        };
+        let absent = probe(c.cam).err();
+        let until = format!("camera {} appears", c.cam);
+        let how = Supervision::camera(
+            format!("firewire camera {}", c.cam),
+            iface.clone(),
+            RETRY,
+            absent.map(|why| (c.at.as_str(), conf.name.as_str(), why, until.as_str())),
+        );
         cameras.push(Supervisor::start(
-            Supervision {
-                name: format!("firewire camera {}", c.cam),
-                interfaces: vec![iface.clone()],
-                on_demand: true,
-                backoff: Backoff::fixed(RETRY),
-                absent: (!absent.is_empty()).then_some(absent),
-            },
+            how,
             Camera {
                 c,
                 iface,

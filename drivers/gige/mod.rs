@@ -53,7 +53,7 @@ use crate::{
         settings::{self, Setting as Line},
     },
     interfaces::{COLOR_HEIGHT, COLOR_WIDTH, Image, Interface},
-    runtime::{Backoff, Device, Driver, Runtime, Supervision, Supervisor},
+    runtime::{Device, Driver, Runtime, Supervision, Supervisor},
     vision::pixfmt::{self, Bayer, Yuv422Order, YuvMatrix},
 };
 
@@ -609,9 +609,9 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
                 if c.iface.starts_with("color") && (w, h) != (COLOR_WIDTH, COLOR_HEIGHT) {
                     anyhow::bail!("{}: {} needs 320x240, camera gives {w}x{h}", c.at, c.iface);
                 }
-                found.push(((w, h), String::new()));
+                found.push(((w, h), None));
             }
-            Err(CheckError::Absent(e)) => found.push((c.size.unwrap_or((0, 0)), e)),
+            Err(CheckError::Absent(e)) => found.push((c.size.unwrap_or((0, 0)), Some(e))),
             Err(CheckError::Unusable(e)) => anyhow::bail!("{}: driver {}: {e}", c.at, conf.name),
         }
     }
@@ -620,25 +620,14 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
         let iface = rt
             .interfaces
             .provide_value(&c.iface, &conf.name, Image::new(w, h))?;
-        if !absent.is_empty() {
-            // Not there (yet): a message and a stale interface; the thread keeps trying.
-            crate::output::println(format!(
-                "{}: driver {}: {absent}; {} stays stale until the camera answers (tried every {} s while used)",
-                c.at,
-                conf.name,
-                c.iface,
-                RETRY.as_secs()
-            ));
-            iface.set_stale(absent.clone());
-        }
+        let how = Supervision::camera(
+            format!("gige camera `{}`", c.camera),
+            iface.clone(),
+            RETRY,
+            absent.map(|why| (c.at.as_str(), conf.name.as_str(), why, "the camera answers")),
+        );
         cameras.push(Supervisor::start(
-            Supervision {
-                name: format!("gige camera `{}`", c.camera),
-                interfaces: vec![iface.clone()],
-                on_demand: true,
-                backoff: Backoff::fixed(RETRY),
-                absent: (!absent.is_empty()).then_some(absent),
-            },
+            how,
             Capture {
                 c,
                 iface,

@@ -55,7 +55,7 @@ use crate::{
         settings::{self, Setting},
     },
     interfaces::{COLOR_HEIGHT, COLOR_WIDTH, Image, Interface},
-    runtime::{Backoff, Device as Supervised, Driver, Runtime, Supervision, Supervisor},
+    runtime::{Device as Supervised, Driver, Runtime, Supervision, Supervisor},
     vision::pixfmt::{self, Bayer, Yuv422Order, YuvMatrix},
 };
 
@@ -499,8 +499,8 @@ fn start(conf: &ComponentConf, rt: &Runtime, v4l1: bool) -> anyhow::Result<Box<d
     let mut absent = Vec::new();
     for d in &devs {
         match check(d) {
-            Ok(()) => absent.push(String::new()),
-            Err(CheckError::Absent(e)) => absent.push(e),
+            Ok(()) => absent.push(None),
+            Err(CheckError::Absent(e)) => absent.push(Some(e)),
             Err(CheckError::Unusable(e)) => {
                 anyhow::bail!("{}: driver {}: {e}", d.at, conf.name)
             }
@@ -511,25 +511,14 @@ fn start(conf: &ComponentConf, rt: &Runtime, v4l1: bool) -> anyhow::Result<Box<d
         let iface =
             rt.interfaces
                 .provide_value(&d.iface, &conf.name, Image::new(d.width, d.height))?;
-        if !absent.is_empty() {
-            // Not there (yet): a message and a stale interface; the thread keeps trying.
-            crate::output::println(format!(
-                "{}: driver {}: {absent}; {} stays stale until the device appears (tried every {} s while used)",
-                d.at,
-                conf.name,
-                d.iface,
-                RETRY.as_secs()
-            ));
-            iface.set_stale(absent.clone());
-        }
+        let how = Supervision::camera(
+            format!("video4linux2 {}", d.device.display()),
+            iface.clone(),
+            RETRY,
+            absent.map(|why| (d.at.as_str(), conf.name.as_str(), why, "the device appears")),
+        );
         devices.push(Supervisor::start(
-            Supervision {
-                name: format!("video4linux2 {}", d.device.display()),
-                interfaces: vec![iface.clone()],
-                on_demand: true,
-                backoff: Backoff::fixed(RETRY),
-                absent: (!absent.is_empty()).then_some(absent),
-            },
+            how,
             Grabber {
                 c: d,
                 iface,
