@@ -88,9 +88,9 @@ pub mod code {
     ];
 }
 
-/// A device that is pushed to subscribers.
+/// A feed: a device whose values are pushed to its subscribers (4.3 calls it a device).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum Device {
+pub enum Feed {
     Laser,
     Encoders,
     Sonars,
@@ -99,52 +99,52 @@ pub enum Device {
     Imu,
 }
 
-impl Device {
-    pub const ALL: [Device; Device::COUNT] = [
-        Device::Laser,
-        Device::Encoders,
-        Device::Sonars,
-        Device::PtEncoders,
-        Device::ZoomEncoders,
-        Device::Imu,
+impl Feed {
+    pub const ALL: [Feed; Feed::COUNT] = [
+        Feed::Laser,
+        Feed::Encoders,
+        Feed::Sonars,
+        Feed::PtEncoders,
+        Feed::ZoomEncoders,
+        Feed::Imu,
     ];
     pub const COUNT: usize = 6;
-    /// Index in [`Device::ALL`].
+    /// Index in [`Feed::ALL`].
     pub fn index(self) -> usize {
         self as usize
     }
     /// (subscribe, unsubscribe, push) codes.
     pub fn codes(self) -> (u32, u32, u32) {
         match self {
-            Device::Laser => (code::SUBSCRIBE_LASER, code::UNSUBSCRIBE_LASER, code::LASER),
-            Device::Encoders => (
+            Feed::Laser => (code::SUBSCRIBE_LASER, code::UNSUBSCRIBE_LASER, code::LASER),
+            Feed::Encoders => (
                 code::SUBSCRIBE_ENCODERS,
                 code::UNSUBSCRIBE_ENCODERS,
                 code::ENCODERS,
             ),
-            Device::Sonars => (code::SUBSCRIBE_US, code::UNSUBSCRIBE_US, code::SONARS),
-            Device::PtEncoders => (
+            Feed::Sonars => (code::SUBSCRIBE_US, code::UNSUBSCRIBE_US, code::SONARS),
+            Feed::PtEncoders => (
                 code::SUBSCRIBE_PANTILT_ENCODERS,
                 code::UNSUBSCRIBE_PANTILT_ENCODERS,
                 code::PANTILT_ENCODERS,
             ),
-            Device::ZoomEncoders => (
+            Feed::ZoomEncoders => (
                 code::SUBSCRIBE_ZOOM_ENCODERS,
                 code::UNSUBSCRIBE_ZOOM_ENCODERS,
                 code::ZOOM_ENCODERS,
             ),
-            Device::Imu => (code::SUBSCRIBE_IMU, code::UNSUBSCRIBE_IMU, code::IMU),
+            Feed::Imu => (code::SUBSCRIBE_IMU, code::UNSUBSCRIBE_IMU, code::IMU),
         }
     }
     /// The interface family name.
     pub fn interface(self) -> &'static str {
         match self {
-            Device::Laser => "laser",
-            Device::Encoders => "encoders",
-            Device::Sonars => "sonars",
-            Device::PtEncoders => "pantiltencoders",
-            Device::ZoomEncoders => "zoomencoders",
-            Device::Imu => "imu",
+            Feed::Laser => "laser",
+            Feed::Encoders => "encoders",
+            Feed::Sonars => "sonars",
+            Feed::PtEncoders => "pantiltencoders",
+            Feed::ZoomEncoders => "zoomencoders",
+            Feed::Imu => "imu",
         }
     }
 }
@@ -184,8 +184,8 @@ pub enum Request {
     Goodbye,
     /// `1000`: the image connection ends.
     GoodbyeImages,
-    Subscribe(Device),
-    Unsubscribe(Device),
+    Subscribe(Feed),
+    Unsubscribe(Feed),
     /// `22 V AC`: mm/s (AC, an acceleration, is ignored as in 4.3).
     DriveSpeed {
         v: f32,
@@ -279,7 +279,7 @@ impl Request {
     pub fn parse(line: &[u8]) -> Result<Request, WireError> {
         use code::*;
         let (c, f) = split(line)?;
-        let dev = Device::ALL
+        let dev = Feed::ALL
             .iter()
             .find(|d| d.codes().0 == c || d.codes().1 == c);
         if let Some(&d) = dev {
@@ -846,8 +846,8 @@ mod tests {
         let reqs = [
             (Request::Goodbye, "0\n"),
             (Request::GoodbyeImages, "1000\n"),
-            (Request::Subscribe(Device::Laser), "27\n"),
-            (Request::Unsubscribe(Device::Sonars), "3\n"),
+            (Request::Subscribe(Feed::Laser), "27\n"),
+            (Request::Unsubscribe(Feed::Sonars), "3\n"),
             (Request::DriveSpeed { v: 150.0, ac: 0.0 }, "22 150.0 0.0\n"),
             (Request::SteerSpeed { w: -12.5, ac: 0.0 }, "23 -12.5 0.0\n"),
             (Request::ImageQuery(2), "1019 2\n"),
@@ -903,11 +903,11 @@ mod tests {
         assert!(Message::parse(b"2003 12 0 0 0 1 0 0 0 0 0 nan").is_err());
         assert_eq!(
             Request::parse(b"2001").unwrap(),
-            Request::Subscribe(Device::Imu)
+            Request::Subscribe(Feed::Imu)
         );
         assert_eq!(
             Request::parse(b"2002").unwrap(),
-            Request::Unsubscribe(Device::Imu)
+            Request::Unsubscribe(Feed::Imu)
         );
     }
 

@@ -68,7 +68,7 @@ use crate::{
         Laser, Motors, PtEncoders, PtMotors, Sonars, Source, ZoomEncoders, ZoomMotors, canonical,
         family,
     },
-    netwire::{self, Device, LineEvent, LineReader, Message, Request},
+    netwire::{self, Feed, LineEvent, LineReader, Message, Request},
     runtime::{self, Backoff, Driver, Runtime, Supervision, Supervisor},
 };
 
@@ -294,15 +294,15 @@ impl Dev {
         }
     }
 
-    /// The pushed device of a sensor.
-    fn device(&self) -> Option<Device> {
+    /// The pushed feed of a sensor.
+    fn feed(&self) -> Option<Feed> {
         Some(match self {
-            Dev::Laser(_) => Device::Laser,
-            Dev::Encoders(..) => Device::Encoders,
-            Dev::Sonars(_) => Device::Sonars,
-            Dev::PtEncoders(_) => Device::PtEncoders,
-            Dev::ZoomEncoders(_) => Device::ZoomEncoders,
-            Dev::Imu(_) => Device::Imu,
+            Dev::Laser(_) => Feed::Laser,
+            Dev::Encoders(..) => Feed::Encoders,
+            Dev::Sonars(_) => Feed::Sonars,
+            Dev::PtEncoders(_) => Feed::PtEncoders,
+            Dev::ZoomEncoders(_) => Feed::ZoomEncoders,
+            Dev::Imu(_) => Feed::Imu,
             _ => return None,
         })
     }
@@ -524,7 +524,7 @@ impl runtime::Device for Link {
 
     /// Nobody uses the sensor any more: unsubscribe, and keep the connection.
     fn idle(&mut self, s: &mut Session) -> bool {
-        if let (Some(d), State::Sensor { subscribed }) = (self.dev.device(), &mut s.state)
+        if let (Some(d), State::Sensor { subscribed }) = (self.dev.feed(), &mut s.state)
             && *subscribed
         {
             *subscribed = false;
@@ -551,7 +551,7 @@ impl runtime::Device for Link {
             ],
             Dev::PtMotors(p) => vec![pt_command(&p.read().value), Request::Goodbye],
             Dev::ZoomMotors(_) => vec![Request::Goodbye],
-            sensor => match sensor.device() {
+            sensor => match sensor.feed() {
                 Some(d) => vec![Request::Unsubscribe(d), Request::Goodbye],
                 None => vec![Request::Goodbye],
             },
@@ -633,7 +633,7 @@ impl Link {
         lr: &mut LineReader,
         subscribed: &mut bool,
     ) -> Result<(), String> {
-        let dev = self.dev.device().expect("a sensor");
+        let dev = self.dev.feed().expect("a sensor");
         if !*subscribed {
             self.send(s, &[Request::Subscribe(dev)])?;
             *subscribed = true;

@@ -55,7 +55,7 @@ use crate::{
         settings::{self, Setting},
     },
     interfaces::{COLOR_HEIGHT, COLOR_WIDTH, Image, Interface},
-    runtime::{Device as Supervised, Driver, Runtime, Supervision, Supervisor},
+    runtime::{self, Driver, Runtime, Supervision, Supervisor},
     vision::pixfmt::{self, Bayer, Yuv422Order, YuvMatrix},
 };
 
@@ -416,7 +416,7 @@ struct Grabber {
     last: Instant,
 }
 
-impl Supervised for Grabber {
+impl runtime::Device for Grabber {
     type Session = Stream;
     fn open(&mut self) -> Result<Stream, String> {
         let c = &self.c;

@@ -17,7 +17,7 @@ use parking_lot::{Condvar, Mutex};
 
 use crate::{
     interfaces::{Motors, Notify},
-    netwire::{self, Device},
+    netwire::{self, Feed},
 };
 
 use super::{
@@ -224,7 +224,7 @@ fn client(stream: TcpStream, peer: SocketAddr, id: u64, slot: &Slot, sh: &Arc<Sh
         st: Mutex::new(ClientState {
             closed: false,
             why: None,
-            subs: [false; Device::COUNT],
+            subs: [false; Feed::COUNT],
             images: vec![0; sh.sources.images.len()],
             replies: VecDeque::new(),
         }),

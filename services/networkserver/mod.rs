@@ -109,7 +109,7 @@ use crate::{
         AnyInterface, Encoders, Image, Imu, Interface, Interfaces, Laser, Motors, PtEncoders,
         PtMotors, Sonars, ZoomEncoders, ZoomMotors, family,
     },
-    netwire::Device,
+    netwire::Feed,
     runtime::{Driver, Runtime},
 };
 
@@ -165,14 +165,14 @@ impl Sources {
         Ok(s)
     }
 
-    fn device(&self, d: Device) -> Option<Arc<dyn AnyInterface>> {
+    fn feed(&self, d: Feed) -> Option<Arc<dyn AnyInterface>> {
         match d {
-            Device::Laser => self.laser.clone().map(|i| i as Arc<dyn AnyInterface>),
-            Device::Encoders => self.encoders.clone().map(|i| i as Arc<dyn AnyInterface>),
-            Device::Sonars => self.sonars.clone().map(|i| i as Arc<dyn AnyInterface>),
-            Device::PtEncoders => self.pte.clone().map(|i| i as Arc<dyn AnyInterface>),
-            Device::ZoomEncoders => self.ze.clone().map(|i| i as Arc<dyn AnyInterface>),
-            Device::Imu => self.imu.clone().map(|i| i as Arc<dyn AnyInterface>),
+            Feed::Laser => self.laser.clone().map(|i| i as Arc<dyn AnyInterface>),
+            Feed::Encoders => self.encoders.clone().map(|i| i as Arc<dyn AnyInterface>),
+            Feed::Sonars => self.sonars.clone().map(|i| i as Arc<dyn AnyInterface>),
+            Feed::PtEncoders => self.pte.clone().map(|i| i as Arc<dyn AnyInterface>),
+            Feed::ZoomEncoders => self.ze.clone().map(|i| i as Arc<dyn AnyInterface>),
+            Feed::Imu => self.imu.clone().map(|i| i as Arc<dyn AnyInterface>),
         }
     }
 }

@@ -16,7 +16,7 @@ use parking_lot::{Condvar, Mutex};
 
 use crate::{
     interfaces::{AnyInterface, Interface, InterfaceValue, Sample},
-    netwire::{self, Device, LineEvent, LineReader, Request},
+    netwire::{self, Feed, LineEvent, LineReader, Request},
 };
 
 use super::{Shared, Sources, frames};
@@ -27,7 +27,7 @@ pub(super) struct ClientState {
     /// Why the connection ends (the first reason wins) and whether it was the
     /// client's fault.
     pub(super) why: Option<(String, bool)>,
-    pub(super) subs: [bool; Device::COUNT],
+    pub(super) subs: [bool; Feed::COUNT],
     /// Outstanding image requests per served image (index in `Sources::images`).
     pub(super) images: Vec<u32>,
     pub(super) replies: VecDeque<Vec<u8>>,
@@ -57,7 +57,7 @@ impl Client {
 /// Interfaces a client resumed, to suspend when it leaves.
 #[derive(Default)]
 pub(super) struct Resumed {
-    pub(super) subs: [Option<Arc<dyn AnyInterface>>; Device::COUNT],
+    pub(super) subs: [Option<Arc<dyn AnyInterface>>; Feed::COUNT],
     pub(super) images: Vec<bool>,
 }
 
@@ -204,7 +204,7 @@ fn handle(
         }
         Request::Subscribe(d) | Request::Unsubscribe(d) => {
             let on = matches!(req, Request::Subscribe(_));
-            let Some(iface) = src.device(d) else {
+            let Some(iface) = src.feed(d) else {
                 return error(format!("{} is not served", d.interface()));
             };
             let slot = &mut resumed.subs[d.index()];
@@ -318,7 +318,7 @@ fn handle(
 pub(super) fn writer(cl: &Client, sh: &Shared) {
     let period = Duration::from_millis(netwire::PUSH_PERIOD_MS);
     let mut next_push = Instant::now() + period;
-    let mut last_push = [0u64; Device::COUNT];
+    let mut last_push = [0u64; Feed::COUNT];
     let mut last_img = vec![0u64; sh.sources.images.len()];
     let mut out: Vec<u8> = Vec::with_capacity(8192);
     let mut w = &cl.stream;
@@ -402,8 +402,8 @@ pub(super) fn write_failed(cl: &Client, sh: &Shared, e: io::Error) {
 /// Appends the push of every subscribed device whose value changed.
 fn push(
     src: &Sources,
-    subs: [bool; Device::COUNT],
-    last: &mut [u64; Device::COUNT],
+    subs: [bool; Feed::COUNT],
+    last: &mut [u64; Feed::COUNT],
     out: &mut Vec<u8>,
     epoch: Instant,
 ) {
@@ -418,40 +418,40 @@ fn push(
             s
         })
     }
-    for d in Device::ALL {
+    for d in Feed::ALL {
         let k = d.index();
         if !subs[k] {
             continue;
         }
         let last = &mut last[k];
         match d {
-            Device::Laser => {
+            Feed::Laser => {
                 if let Some(s) = fresh(&src.laser, last) {
                     netwire::write_laser(out, s.clock, &s.readings);
                 }
             }
-            Device::Encoders => {
+            Feed::Encoders => {
                 if let Some(s) = fresh(&src.encoders, last) {
                     let us = s.stamp.saturating_duration_since(epoch).as_micros() as u64;
                     netwire::write_encoders(out, s.clock, s.x, s.y, s.theta.to_degrees(), us);
                 }
             }
-            Device::Sonars => {
+            Feed::Sonars => {
                 if let Some(s) = fresh(&src.sonars, last) {
                     netwire::write_sonars(out, s.clock, &s.us);
                 }
             }
-            Device::PtEncoders => {
+            Feed::PtEncoders => {
                 if let Some(s) = fresh(&src.pte, last) {
                     netwire::write_pt_encoders(out, s.clock, s.pan_angle, s.tilt_angle);
                 }
             }
-            Device::ZoomEncoders => {
+            Feed::ZoomEncoders => {
                 if let Some(s) = fresh(&src.ze, last) {
                     netwire::write_zoom_encoders(out, s.clock, s.zoom_position);
                 }
             }
-            Device::Imu => {
+            Feed::Imu => {
                 if let Some(s) = fresh(&src.imu, last) {
                     netwire::write_imu(out, s.clock, s.fields());
                 }
