@@ -53,8 +53,9 @@
 //! trying, then binds the lines once the server answers (so `jderobot check` and a
 //! run without the server still work, as for the other device drivers). If the
 //! server goes away later, every interface is marked stale, the motors are set to
-//! zero and the driver reconnects with backoff and subscribes again; it logs once
-//! per change. A malformed or oversized message drops the connection, which is
+//! zero and the driver reconnects with backoff and subscribes again; it says so
+//! once per change. The connection is a [`Supervisor`]'s session (open, step,
+//! on loss, close), as every device driver's is. A malformed or oversized message drops the connection, which is
 //! then reopened. A well-formed value an interface refuses (a NaN or an inf, a
 //! number out of its documented range: `interfaces::RANGES`) or a camera frame it
 //! cannot use is dropped, the last good value staying, with one log line per
@@ -67,17 +68,14 @@ pub mod xdr;
 
 use std::{
     collections::BTreeMap,
-    sync::{
-        Arc,
-        atomic::{AtomicBool, Ordering},
-    },
+    sync::Arc,
     time::{Duration, Instant},
 };
 
 use crate::{
     conf::ComponentConf,
     interfaces::{Image, Interface, Interfaces, Motors, PtMotors, Source, limit},
-    runtime::{Driver, Runtime, Worker},
+    runtime::{self, Backoff, Driver, Runtime, Supervision, Supervisor},
 };
 
 use client::{Conn, ConnError, Reply};
@@ -230,7 +228,6 @@ struct Session {
     pending: Vec<Pending>,
     /// Lines the server has no device for (said once, left stale).
     unbound: Vec<Pending>,
-    stop: Arc<AtomicBool>,
 }
 
 fn server(pc: &PlayerConf) -> String {
@@ -341,74 +338,105 @@ impl Session {
         }
         Ok(())
     }
+}
 
-    /// Works on one connection until it fails or the driver stops.
-    fn serve(&mut self, c: &mut Conn, up: &mut dyn FnMut()) -> Result<(), ConnError> {
-        self.bind_pending(c)?;
-        if self.pc.mode == DataMode::Pull {
-            let devices = &mut self.devices;
-            c.request(
-                Addr::PLAYER,
-                player::REQ_DATAMODE,
-                &xdr::datamode_req(player::DATAMODE_PULL),
-                self.pc.timeout,
-                &mut |h, p| dispatch(devices, h, p),
-            )?;
+/// The server as the [`Supervisor`] sees it: open = connect, bind the lines,
+/// subscribe what is used; a step = commands, a pull, what arrives. On the shell
+/// it says once per change of state that the server was lost (every interface
+/// stale with the reason, the motors zero) and that it is back (once the devices
+/// are subscribed again); the Supervisor logs each change and retries what
+/// fails in between (no server, a refused subscription), 100 ms doubling to 2 s.
+struct Link {
+    session: Session,
+    srv: String,
+    /// The connection made at start, if the server was there.
+    first: Option<Conn>,
+    /// Since when the server is lost (said), if it is.
+    lost_since: Option<Instant>,
+    /// Why the last session ended, for `on_loss`.
+    lost: Option<String>,
+}
+
+/// An open connection and what its loop keeps between steps.
+struct Live {
+    conn: Conn,
+    next_cmd: Instant,
+    awaiting_synch: bool,
+    last_pull: Instant,
+    silent_since: Instant,
+}
+
+impl runtime::Device for Link {
+    type Session = Live;
+
+    fn open(&mut self) -> Result<Live, String> {
+        let pc = &self.session.pc;
+        let mut conn = match self.first.take() {
+            Some(c) => c,
+            None => Conn::open(&pc.host, pc.port, pc.timeout)
+                .map_err(|e| format!("cannot reach the Player server at {}: {e}", self.srv))?,
+        };
+        if let Err(e) = self.begin(&mut conn) {
+            // Connected but not served (a refused subscription): a loss like any.
+            conn.close();
+            self.lost = Some(format!(
+                "player: lost the Player server at {}: {e}; reconnecting",
+                self.srv
+            ));
+            runtime::Device::on_loss(self);
+            return Err(e.to_string());
         }
-        let mut next_cmd = Instant::now();
-        let mut awaiting_synch = false;
-        let mut last_pull = Instant::now() - Duration::from_secs(1);
-        let mut silent_since = Instant::now();
-        let mut first = true;
-        while !self.stop.load(Ordering::Acquire) {
-            self.sync_subscriptions(c)?;
-            if first {
-                first = false;
-                up();
-            }
-            let now = Instant::now();
-            if now >= next_cmd {
-                self.commands(c)?;
-                next_cmd += self.pc.cycle;
-                if next_cmd < now {
-                    next_cmd = now + self.pc.cycle;
-                }
-            }
-            let any = self.devices.iter().any(|d| d.subscribed);
-            if self.pc.mode == DataMode::Pull
-                && any
-                && (!awaiting_synch || last_pull.elapsed() > self.pc.timeout)
-                && last_pull.elapsed() >= Duration::from_millis(10)
-            {
-                c.send(Addr::PLAYER, msg::REQ, player::REQ_DATA, &[])?;
-                awaiting_synch = true;
-                last_pull = Instant::now();
-            }
-            let wait = next_cmd
-                .saturating_duration_since(Instant::now())
-                .min(Duration::from_millis(20));
-            let devices = &mut self.devices;
-            let mut synch = false;
-            let n = c.poll(wait, &mut |h, p| {
-                if h.addr == Addr::PLAYER && h.mtype == msg::SYNCH {
-                    synch = true;
-                }
-                dispatch(devices, h, p)
-            })?;
-            if synch {
-                awaiting_synch = false;
-            }
-            if n > 0 || !any {
-                silent_since = Instant::now();
-            } else if silent_since.elapsed() > self.pc.timeout {
-                return Err(ConnError::Protocol(format!(
-                    "no data for {:.1} s while subscribed",
-                    silent_since.elapsed().as_secs_f64()
-                )));
-            }
+        if let Some(t) = self.lost_since.take() {
+            let m = format!(
+                "player: reconnected to the Player server at {} after {:.1} s; subscribed again",
+                self.srv,
+                t.elapsed().as_secs_f64()
+            );
+            crate::output::println(m);
         }
-        // Stopping: motors to zero, unsubscribe, close.
-        for d in &mut self.devices {
+        let now = Instant::now();
+        Ok(Live {
+            conn,
+            next_cmd: now,
+            awaiting_synch: false,
+            last_pull: now - Duration::from_secs(1),
+            silent_since: now,
+        })
+    }
+
+    fn step(&mut self, live: &mut Live) -> Result<(), String> {
+        self.session.step(live).map_err(|e| {
+            live.conn.close();
+            self.lost = Some(format!(
+                "player: lost the Player server at {}: {e}; reconnecting",
+                self.srv
+            ));
+            e.to_string()
+        })
+    }
+
+    /// The session ended: nothing is subscribed, the motors are zero, and every
+    /// interface is stale with the reason (said once per loss).
+    fn on_loss(&mut self) {
+        for d in &mut self.session.devices {
+            d.subscribed = false;
+        }
+        let Some(why) = self.lost.take() else {
+            return;
+        };
+        for d in &self.session.devices {
+            d.set_stale(&why);
+        }
+        if self.lost_since.is_none() {
+            crate::output::println(why);
+            self.lost_since = Some(Instant::now());
+        }
+    }
+
+    /// The driver stops: motors to zero, unsubscribe, close.
+    fn close(&mut self, mut live: Live) {
+        let c = &mut live.conn;
+        for d in &mut self.session.devices {
             if d.motors.is_some() {
                 let z = xdr::cmd_vel(0.0, 0.0, 0.0, true);
                 let _ = c.send(d.addr, msg::CMD, sub::POSITION2D_CMD_VEL, &z);
@@ -423,93 +451,90 @@ impl Session {
                 d.subscribed = false;
             }
         }
-        Ok(())
+        live.conn.finish();
     }
+}
 
-    /// Sleeps `d`, or less if the driver stops.
-    fn pause(&self, d: Duration) {
-        let until = Instant::now() + d;
-        while Instant::now() < until && !self.stop.load(Ordering::Acquire) {
-            std::thread::sleep(Duration::from_millis(10));
+impl Link {
+    /// A new connection: binds the lines still waiting, sets the data mode and
+    /// subscribes what is used.
+    fn begin(&mut self, c: &mut Conn) -> Result<(), ConnError> {
+        let s = &mut self.session;
+        s.bind_pending(c)?;
+        if s.pc.mode == DataMode::Pull {
+            let devices = &mut s.devices;
+            c.request(
+                Addr::PLAYER,
+                player::REQ_DATAMODE,
+                &xdr::datamode_req(player::DATAMODE_PULL),
+                s.pc.timeout,
+                &mut |h, p| dispatch(devices, h, p),
+            )?;
         }
+        s.sync_subscriptions(c)
     }
+}
 
-    /// The driver thread: serve, and on failure mark stale, reconnect, resubscribe.
-    /// It logs once per change of state: a loss (with its reason) and the
-    /// reconnection after it, once the devices are subscribed again; attempts
-    /// that fail before that (no server, a refused subscription) are not logged,
-    /// and the backoff (100 ms doubling to 2 s) restarts only after a session
-    /// that lasted 5 s.
-    fn run(mut self, first: Option<Conn>) {
-        let srv = server(&self.pc);
-        let mut announced_down = first.is_none();
-        let mut lost_since = first.is_none().then(Instant::now);
-        let mut conn = first;
-        let mut backoff = Duration::from_millis(100);
-        while !self.stop.load(Ordering::Acquire) {
-            let Some(mut c) = conn.take() else {
-                match Conn::open(&self.pc.host, self.pc.port, self.pc.timeout) {
-                    Ok(c) => conn = Some(c),
-                    Err(_) => {
-                        self.pause(backoff);
-                        backoff = (backoff * 2).min(Duration::from_secs(2));
-                    }
-                }
-                continue;
-            };
-            let began = Instant::now();
-            let result = self.serve(&mut c, &mut || {
-                if announced_down {
-                    announced_down = false;
-                    let down = lost_since.take().map(|t| t.elapsed().as_secs_f64()).unwrap_or(0.0);
-                    let m = format!(
-                        "player: reconnected to the Player server at {srv} after {down:.1} s; subscribed again"
-                    );
-                    tracing::warn!("{m}");
-                    crate::output::println(m);
-                }
-            });
-            match result {
-                Ok(()) => {
-                    c.finish();
-                    break;
-                }
-                Err(e) => {
-                    c.close();
-                    let why = format!("player: lost the Player server at {srv}: {e}; reconnecting");
-                    if began.elapsed() > Duration::from_secs(5) {
-                        backoff = Duration::from_millis(100);
-                    } else {
-                        // A session that failed at once (a refused subscription, a
-                        // garbled stream): wait before the next attempt.
-                        self.pause(backoff);
-                        backoff = (backoff * 2).min(Duration::from_secs(2));
-                    }
-                    if !announced_down {
-                        tracing::warn!("{why}");
-                        crate::output::println(why.clone());
-                        announced_down = true;
-                        lost_since = Some(Instant::now());
-                    }
-                    for d in &mut self.devices {
-                        d.subscribed = false;
-                        d.set_stale(&why);
-                    }
-                }
+impl Session {
+    /// One turn of a connection's loop: (un)subscribe as use changed, send the
+    /// commands when due, pull (in pull mode), and take what arrives within 20 ms.
+    fn step(&mut self, live: &mut Live) -> Result<(), ConnError> {
+        let c = &mut live.conn;
+        self.sync_subscriptions(c)?;
+        let now = Instant::now();
+        if now >= live.next_cmd {
+            self.commands(c)?;
+            live.next_cmd += self.pc.cycle;
+            if live.next_cmd < now {
+                live.next_cmd = now + self.pc.cycle;
             }
         }
+        let any = self.devices.iter().any(|d| d.subscribed);
+        if self.pc.mode == DataMode::Pull
+            && any
+            && (!live.awaiting_synch || live.last_pull.elapsed() > self.pc.timeout)
+            && live.last_pull.elapsed() >= Duration::from_millis(10)
+        {
+            c.send(Addr::PLAYER, msg::REQ, player::REQ_DATA, &[])?;
+            live.awaiting_synch = true;
+            live.last_pull = Instant::now();
+        }
+        let wait = live
+            .next_cmd
+            .saturating_duration_since(Instant::now())
+            .min(Duration::from_millis(20));
+        let devices = &mut self.devices;
+        let mut synch = false;
+        let n = c.poll(wait, &mut |h, p| {
+            if h.addr == Addr::PLAYER && h.mtype == msg::SYNCH {
+                synch = true;
+            }
+            dispatch(devices, h, p)
+        })?;
+        if synch {
+            live.awaiting_synch = false;
+        }
+        if n > 0 || !any {
+            live.silent_since = Instant::now();
+        } else if live.silent_since.elapsed() > self.pc.timeout {
+            return Err(ConnError::Protocol(format!(
+                "no data for {:.1} s while subscribed",
+                live.silent_since.elapsed().as_secs_f64()
+            )));
+        }
+        Ok(())
     }
 }
 
 /// The running driver.
 pub struct PlayerDriver {
-    worker: Worker,
+    link: Supervisor,
     motors: Vec<Arc<Interface<Motors>>>,
 }
 
 impl Driver for PlayerDriver {
     fn terminate(&mut self) {
-        self.worker.stop();
+        self.link.stop();
         for m in &self.motors {
             let _ = m.publish(Motors::default());
         }
@@ -720,16 +745,33 @@ impl PlayerDriver {
                 (None, Vec::new(), pending)
             }
         };
-        let stop = Arc::new(AtomicBool::new(false));
-        let session = Session {
-            pc,
-            devices,
-            pending,
-            unbound: Vec::new(),
-            stop: stop.clone(),
+        let lost_since = conn.is_none().then(Instant::now);
+        let link = Link {
+            session: Session {
+                pc,
+                devices,
+                pending,
+                unbound: Vec::new(),
+            },
+            srv,
+            first: conn,
+            lost_since,
+            lost: None,
+        };
+        // The Link marks its interfaces stale itself (the loss's reason stays
+        // while it retries), so the Supervisor is given none.
+        let how = Supervision {
+            name: "player".into(),
+            interfaces: Vec::new(),
+            on_demand: false,
+            backoff: Backoff {
+                first: Duration::from_millis(100),
+                max: Duration::from_secs(2),
+            },
+            absent: None,
         };
         Ok(PlayerDriver {
-            worker: Worker::start("player", stop, move || session.run(conn))?,
+            link: Supervisor::start(how, link)?,
             motors: motors_all,
         })
     }
