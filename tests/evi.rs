@@ -12,6 +12,7 @@ mod visca;
 
 use std::{
     io::{BufRead, BufReader, Write},
+    path::Path,
     process::{Command, Stdio},
     sync::{Arc, mpsc},
     time::{Duration, Instant},
@@ -128,6 +129,17 @@ type Ifaces = (
     Arc<Interface<ZoomEncoders>>,
     Arc<Interface<ZoomMotors>>,
 );
+
+/// The emulated camera at `dir/evi` and a runtime polling it every 50 ms,
+/// once it runs.
+fn running(dir: &Path) -> (std::path::PathBuf, Evi, Arc<jderobot::Runtime>) {
+    let port = dir.join("evi");
+    let cam = Evi::start(&port);
+    let rt = start_conf(&conf(&port, "poll 50\nreply_timeout 300\n"));
+    let pte: Arc<Interface<PtEncoders>> = rt.interfaces.get("pantiltencoders").unwrap();
+    eventually("running", || pte.clock() > 2 && pte.stale().is_none());
+    (port, cam, rt)
+}
 
 fn ifaces(rt: &jderobot::Runtime) -> Ifaces {
     (
@@ -319,11 +331,8 @@ fn faults_mark_everything_stale_until_the_camera_answers() {
 #[test]
 fn a_position_out_of_the_cameras_range_is_refused_not_written() {
     let dir = tempfile::tempdir().unwrap();
-    let port = dir.path().join("evi");
-    let cam = Evi::start(&port);
-    let rt = start_conf(&conf(&port, "poll 50\nreply_timeout 300\n"));
+    let (_, cam, rt) = running(dir.path());
     let (pte, ..) = ifaces(&rt);
-    eventually("running", || pte.clock() > 2 && pte.stale().is_none());
     cam.set_faults(Faults {
         pantilt: Some((0, 0x7FFF)),
         ..Faults::default()
@@ -344,11 +353,8 @@ fn a_position_out_of_the_cameras_range_is_refused_not_written() {
 #[test]
 fn after_a_burst_of_garbage_the_camera_is_back_at_its_next_retry() {
     let dir = tempfile::tempdir().unwrap();
-    let port = dir.path().join("evi");
-    let cam = Evi::start(&port);
-    let rt = start_conf(&conf(&port, "poll 50\nreply_timeout 300\n"));
+    let (_, cam, rt) = running(dir.path());
     let (pte, ..) = ifaces(&rt);
-    eventually("running", || pte.clock() > 2 && pte.stale().is_none());
     // 4 KB of noise (a fixed pseudo-random sequence) in one burst.
     let mut x: u32 = 0x1234_5678;
     let noise: Vec<u8> = (0..4096)

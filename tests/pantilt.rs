@@ -11,6 +11,7 @@ mod ptu;
 
 use std::{
     io::{BufRead, BufReader, Write},
+    path::Path,
     process::{Command, Stdio},
     sync::{Arc, mpsc},
     time::Duration,
@@ -126,6 +127,17 @@ fn set(m: &Interface<PtMotors>, f: impl FnOnce(&mut PtMotors)) {
     m.publish(v).unwrap();
 }
 
+/// The emulated unit at `dir/ptu` and a runtime polling it every 50 ms,
+/// once it runs.
+fn running(dir: &Path) -> (std::path::PathBuf, Ptu, Arc<jderobot::Runtime>) {
+    let port = dir.join("ptu");
+    let unit = Ptu::start(&port);
+    let rt = start_conf(&conf(&port, "poll 50\nreply_timeout 300\n"));
+    let enc: Arc<Interface<PtEncoders>> = rt.interfaces.get("pantiltencoders").unwrap();
+    eventually("running", || enc.clock() > 2 && enc.stale().is_none());
+    (port, unit, rt)
+}
+
 fn ifaces(rt: &jderobot::Runtime) -> (Arc<Interface<PtEncoders>>, Arc<Interface<PtMotors>>) {
     (
         rt.interfaces.get("pantiltencoders").unwrap(),
@@ -224,11 +236,8 @@ fn missing_port_and_a_file_are_clear_errors_and_the_run_goes_on() {
 #[test]
 fn silence_garbage_refusal_and_unplugging_mark_the_head_stale_until_it_answers() {
     let dir = tempfile::tempdir().unwrap();
-    let port = dir.path().join("ptu");
-    let unit = Ptu::start(&port);
-    let rt = start_conf(&conf(&port, "poll 50\nreply_timeout 300\n"));
+    let (port, unit, rt) = running(dir.path());
     let (enc, mot) = ifaces(&rt);
-    eventually("running", || enc.clock() > 2 && enc.stale().is_none());
     let name = port.display().to_string();
     for (faults, expect) in [
         (
@@ -284,11 +293,8 @@ fn silence_garbage_refusal_and_unplugging_mark_the_head_stale_until_it_answers()
 #[test]
 fn a_position_out_of_the_units_range_is_refused_not_written() {
     let dir = tempfile::tempdir().unwrap();
-    let port = dir.path().join("ptu");
-    let unit = Ptu::start(&port);
-    let rt = start_conf(&conf(&port, "poll 50\nreply_timeout 300\n"));
+    let (_, unit, rt) = running(dir.path());
     let (enc, _mot) = ifaces(&rt);
-    eventually("running", || enc.clock() > 2 && enc.stale().is_none());
     unit.set_faults(Faults {
         pan_position: Some(3_090_000),
         ..Faults::default()

@@ -33,6 +33,15 @@ fn robot_conf(dir: &Path, port: u16, extra: &str) -> std::path::PathBuf {
     conf
 }
 
+/// The robot process (`robot_conf`), once its simulator publishes.
+fn robot(dir: &Path, port: u16, extra: &str) -> Proc {
+    let mut robot = Proc::start(&robot_conf(dir, port, extra));
+    robot.ask_until("echo laser", "the simulator", |l| {
+        l.starts_with("laser clock=")
+    });
+    robot
+}
+
 fn echo_v(line: &str) -> f64 {
     number_after(line, " v=")
 }
@@ -153,10 +162,7 @@ fn a_killed_robot_is_stale_within_a_second_and_comes_back_by_itself() {
 fn garbage_on_a_subscribed_key_is_dropped_with_one_line_and_a_good_command_drives() {
     let dir = tempfile::tempdir().unwrap();
     let port = free_port();
-    let mut robot = Proc::start(&robot_conf(dir.path(), port, ""));
-    robot.ask_until("echo laser", "the simulator", |l| {
-        l.starts_with("laser clock=")
-    });
+    let mut robot = robot(dir.path(), port, "");
     let session = raw_session(port);
     let key = "jderobot/pioneer/motors";
     common::eventually("the robot's motors subscriber", || {
@@ -207,10 +213,7 @@ fn a_zenoh_config_file_passes_access_control_through() {
              policies: [{ rules: ["no-motors"], subjects: ["loopback"] }] } }"#,
     )
     .unwrap();
-    let mut robot = Proc::start(&robot_conf(dir.path(), port, "config acl.json5\n"));
-    robot.ask_until("echo laser", "the simulator", |l| {
-        l.starts_with("laser clock=")
-    });
+    let mut robot = robot(dir.path(), port, "config acl.json5\n");
     let session = raw_session(port);
     // Data still flows out...
     let laser = session
@@ -242,10 +245,7 @@ fn a_zenoh_config_file_passes_access_control_through() {
 fn provides_all_takes_what_the_robot_serves_and_says_what_to_do_without_it() {
     let dir = tempfile::tempdir().unwrap();
     let port = free_port();
-    let mut robot = Proc::start(&robot_conf(dir.path(), port, ""));
-    robot.ask_until("echo laser", "the simulator", |l| {
-        l.starts_with("laser clock=")
-    });
+    let robot = robot(dir.path(), port, "");
     let rt = common::start_conf(&format!(
         "driver zenoh\nprovides all pioneer\nconnect tcp/127.0.0.1:{port}\nscouting off\n\
          end_driver\nload_driver zenoh\n"
@@ -381,10 +381,7 @@ fn await_subscriber(session: &zenoh::Session, key: &str) {
 fn nan_and_inf_commands_are_dropped_and_the_last_good_one_stays() {
     let dir = tempfile::tempdir().unwrap();
     let port = free_port();
-    let mut robot = Proc::start(&robot_conf(dir.path(), port, ""));
-    robot.ask_until("echo laser", "the simulator", |l| {
-        l.starts_with("laser clock=")
-    });
+    let mut robot = robot(dir.path(), port, "");
     let session = raw_session(port);
     let (motors, ptmotors) = ("jderobot/pioneer/motors", "jderobot/pioneer/pantiltmotors");
     await_subscriber(&session, motors);
