@@ -47,6 +47,7 @@ use crate::{
     interfaces::Image,
     progeo::{HPoint2D, HPoint3D, PinholeCamera, World},
     runtime::{Runtime, Schema},
+    vision::draw_line,
 };
 
 /// The state shared by the schema, its panel and the name space.
@@ -134,24 +135,6 @@ pub fn projected_lines(
             ((pc * sx, pr * sy), (qc * sx, qr * sy))
         })
         .collect()
-}
-
-fn draw_line(img: &mut Image, a: (f64, f64), b: (f64, f64), bgr: [u8; 3]) {
-    let (w, h) = (img.width as f64, img.height as f64);
-    let n = ((b.0 - a.0).abs().max((b.1 - a.1).abs()).ceil() as usize).min(100_000);
-    for k in 0..=n {
-        let t = if n == 0 { 0.0 } else { k as f64 / n as f64 };
-        let (x, y) = (
-            (a.0 + (b.0 - a.0) * t).round(),
-            (a.1 + (b.1 - a.1) * t).round(),
-        );
-        if x >= 0.0 && y >= 0.0 && x < w && y < h {
-            let i = (y as usize * img.width as usize + x as usize) * 3;
-            if let Some(p) = img.data.get_mut(i..i + 3) {
-                p.copy_from_slice(&bgr);
-            }
-        }
-    }
 }
 
 /// The image with the world in red and the optical centre as a green cross,

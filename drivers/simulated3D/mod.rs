@@ -44,6 +44,7 @@ use crate::{
     interfaces::{COLOR_HEIGHT, COLOR_WIDTH, Image, Interface},
     progeo::{PinholeCamera, World},
     runtime::{Driver, Runtime, Worker},
+    vision::draw_line,
 };
 
 const USAGE: &str = "worldfile FILE, provides colorA..D|varcolorA..D CAMERA_FILE";
@@ -64,42 +65,7 @@ pub fn render(world: &World, cam: &PinholeCamera, img: &mut Image) {
         if let Some((ga, gb)) = cam.displayline(pa, pb) {
             let (c0, r0) = cam.optical_to_graphic(ga);
             let (c1, r1) = cam.optical_to_graphic(gb);
-            draw_line(img, c0, r0, c1, r1, [0, 0, 0]);
-        }
-    }
-}
-
-/// A line from (column, row) `(x0, y0)` to `(x1, y1)`, clipped to the image
-/// (Bresenham on the rounded ends, as 4.3's line drawer).
-pub fn draw_line(img: &mut Image, x0: f64, y0: f64, x1: f64, y1: f64, bgr: [u8; 3]) {
-    if ![x0, y0, x1, y1]
-        .iter()
-        .all(|v| v.is_finite() && v.abs() < 1e6)
-    {
-        return;
-    }
-    let (mut x, mut y) = (x0.round() as i64, y0.round() as i64);
-    let (xe, ye) = (x1.round() as i64, y1.round() as i64);
-    let (dx, dy) = ((xe - x).abs(), -(ye - y).abs());
-    let (sx, sy) = (if x < xe { 1 } else { -1 }, if y < ye { 1 } else { -1 });
-    let mut err = dx + dy;
-    let (w, h) = (img.width as i64, img.height as i64);
-    loop {
-        if (0..w).contains(&x) && (0..h).contains(&y) {
-            let i = ((y * w + x) * 3) as usize;
-            img.data[i..i + 3].copy_from_slice(&bgr);
-        }
-        if x == xe && y == ye {
-            break;
-        }
-        let e2 = 2 * err;
-        if e2 >= dy {
-            err += dy;
-            x += sx;
-        }
-        if e2 <= dx {
-            err += dx;
-            y += sy;
+            draw_line(img, (c0, r0), (c1, r1), [0, 0, 0]);
         }
     }
 }

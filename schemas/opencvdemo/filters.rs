@@ -90,33 +90,10 @@ pub struct Pipeline {
     prev: Option<GrayImage>,
 }
 
-/// Draws a line (Bresenham) in colour `bgr`, clipped to the image.
+/// Draws a line in colour `bgr` between pixel positions, clipped to the image
+/// ([`vision::draw_line`](crate::vision::draw_line)).
 pub fn draw_line(img: &mut Image, (x0, y0): (i32, i32), (x1, y1): (i32, i32), bgr: [u8; 3]) {
-    let (w, h) = (img.width as i32, img.height as i32);
-    let (dx, dy) = ((x1 - x0).abs(), -(y1 - y0).abs());
-    let (sx, sy) = (if x0 < x1 { 1 } else { -1 }, if y0 < y1 { 1 } else { -1 });
-    let (mut x, mut y, mut err) = (x0, y0, dx + dy);
-    // Bounded: at most |dx| + |dy| + 1 steps.
-    for _ in 0..=(dx - dy) {
-        if (0..w).contains(&x) && (0..h).contains(&y) {
-            let i = (y as usize * w as usize + x as usize) * 3;
-            if let Some(p) = img.data.get_mut(i..i + 3) {
-                p.copy_from_slice(&bgr);
-            }
-        }
-        if x == x1 && y == y1 {
-            break;
-        }
-        let e2 = 2 * err;
-        if e2 >= dy {
-            err += dy;
-            x += sx;
-        }
-        if e2 <= dx {
-            err += dx;
-            y += sy;
-        }
-    }
+    crate::vision::draw_line(img, (x0 as f64, y0 as f64), (x1 as f64, y1 as f64), bgr);
 }
 
 /// The end points of the polar line (ρ, θ) extended 2000 px each way (OpenCV's

@@ -42,6 +42,7 @@
 //! multiply-adds, exact integers); their `unsafe` is the loads and stores.
 
 mod convolve;
+mod draw;
 mod flow;
 mod homography;
 mod hough;
@@ -49,6 +50,7 @@ pub mod pixfmt;
 mod sobel;
 
 pub use convolve::{Kernel, KernelError, convolve};
+pub use draw::draw_line;
 pub use flow::{LkParams, TrackedPoint, optical_flow_pyr_lk};
 pub use homography::{find_homography, warp_perspective};
 pub use hough::{PolarLine, Segment, hough_lines, hough_lines_p};
