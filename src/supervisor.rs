@@ -200,6 +200,7 @@ fn run<D: Device>(how: Supervision, mut device: D, stop: &AtomicBool) {
         }
         let mut session = match device.open() {
             Ok(s) => s,
+            Err(_) if stop.load(Ordering::Acquire) => break,
             Err(why) => {
                 if down.as_deref() != Some(&why) {
                     tracing::warn!(
@@ -233,6 +234,11 @@ fn run<D: Device>(how: Supervision, mut device: D, stop: &AtomicBool) {
                 continue;
             }
             if let Err(why) = device.step(&mut session) {
+                // A failure the stop caused (a killed child) is no loss.
+                if stop.load(Ordering::Acquire) {
+                    device.close(session);
+                    break None;
+                }
                 break Some(Some(why));
             }
         };

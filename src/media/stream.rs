@@ -16,6 +16,9 @@
 //!   is picked up again.
 //! - [`Stream::stop`] kills the child (even one blocked on a stalled source) and
 //!   joins the thread promptly.
+//!
+//! The thread is a [`Supervisor`]'s: the source is a [`Device`] whose session is
+//! one run of it (open = start the child or the device, a step = one frame).
 
 use std::{
     sync::{
@@ -28,7 +31,7 @@ use std::{
 use super::{MediaError, child::Killer, pace::Pacer};
 use crate::{
     interfaces::{Image, Interface},
-    supervisor::Worker,
+    supervisor::{Backoff, Device, Supervision, Supervisor},
 };
 
 /// A source of frames (one child process run, or one device session).
@@ -60,39 +63,50 @@ pub struct StreamSpec {
     pub pause: bool,
 }
 
-/// A running stream worker.
+/// A running stream: its supervised source.
 pub struct Stream {
-    worker: Worker,
+    source: Supervisor,
     killer: Killer,
     stop: Arc<AtomicBool>,
 }
 
+/// How long a failed source waits before it is opened again.
 const RETRY: Duration = Duration::from_secs(2);
-const POLL: Duration = Duration::from_millis(200);
+/// How long a step waits at the end of a video that does not repeat.
+const ENDED: Duration = Duration::from_millis(50);
 
 impl Stream {
-    /// Starts the worker thread for `iface`.
+    /// Starts feeding `iface` from `spec`'s source.
     pub fn start(spec: StreamSpec, iface: Arc<Interface<Image>>) -> anyhow::Result<Stream> {
         let stop = Arc::new(AtomicBool::new(false));
         let killer = Killer::default();
-        let (s, k) = (stop.clone(), killer.clone());
-        let name = format!("stream {}", iface.name());
-        let worker = Worker::start(&name, stop.clone(), move || {
-            Runner::new(spec, iface, s, k).run()
-        })?;
+        let how = Supervision {
+            name: format!("{} ({})", spec.label, iface.name()),
+            interfaces: vec![iface.clone()],
+            on_demand: true,
+            backoff: Backoff::fixed(RETRY),
+            absent: None,
+        };
+        let source = Source {
+            spec,
+            iface,
+            stop: stop.clone(),
+            killer: killer.clone(),
+            pacer: Pacer::new(None),
+        };
         Ok(Stream {
-            worker,
+            source: Supervisor::start(how, source)?,
             killer,
             stop,
         })
     }
 
-    /// Stops the worker: says stop, kills its child (so a blocked read ends
+    /// Stops the stream: says stop, kills its child (so a blocked read ends
     /// and nothing restarts it) and joins the thread.
     pub fn stop(&mut self) {
         self.stop.store(true, Ordering::Release);
         self.killer.kill_now();
-        self.worker.stop();
+        self.source.stop();
     }
 }
 
@@ -102,158 +116,102 @@ impl Drop for Stream {
     }
 }
 
-/// The stream's thread: runs the source, restarts it, publishes its frames.
-struct Runner {
+/// The source as its [`Supervisor`] runs it: open = start a run of the source,
+/// a step = one frame, paced.
+struct Source {
     spec: StreamSpec,
     iface: Arc<Interface<Image>>,
     stop: Arc<AtomicBool>,
     killer: Killer,
-    last_error: Option<String>,
+    pacer: Pacer,
 }
 
-/// How a run of the source ended.
-enum Outcome {
-    Stop,
-    /// Closed because nobody uses the interface.
-    Unused,
-    End,
-    Failed(MediaError),
+/// One run of the source.
+struct Run {
+    /// None after the end of a video that does not repeat: nothing more until
+    /// the interface is used again.
+    frames: Option<Box<dyn Frames>>,
+    /// Frames read in this run.
+    count: u64,
 }
 
-impl Runner {
-    fn new(
-        spec: StreamSpec,
-        iface: Arc<Interface<Image>>,
-        stop: Arc<AtomicBool>,
-        killer: Killer,
-    ) -> Self {
-        Runner {
-            spec,
-            iface,
-            stop,
-            killer,
-            last_error: None,
-        }
-    }
-
-    fn stopped(&self) -> bool {
+impl Source {
+    fn stopping(&self) -> bool {
         self.stop.load(Ordering::Acquire)
     }
 
-    /// Marks the interface stale and logs the reason (once while it repeats).
-    fn report(&mut self, why: String) {
-        if self.last_error.as_ref() != Some(&why) {
-            tracing::error!("{}: {why}", self.iface.name());
+    /// A new run of the source, paced at its rate.
+    fn start_run(&mut self) -> Result<Run, String> {
+        let frames = (self.spec.open)(&self.killer).map_err(|e| e.to_string())?;
+        let rate = if self.spec.pace { frames.rate() } else { None };
+        if self.pacer.period() != Pacer::new(rate).period() {
+            self.pacer = Pacer::new(rate);
         }
-        self.iface.set_stale(why.clone());
-        self.last_error = Some(why);
+        self.pacer.reset();
+        Ok(Run {
+            frames: Some(frames),
+            count: 0,
+        })
     }
 
-    /// Sleeps `d` in short slices; false if stopped or the interface became unused.
-    fn pause_for(&self, d: Duration) -> bool {
-        let t0 = std::time::Instant::now();
-        while t0.elapsed() < d {
-            if self.stopped() || self.iface.users() == 0 {
-                return false;
-            }
-            std::thread::sleep(Duration::from_millis(50));
+    /// The end of a run: an error if the source failed or gave no frame; else
+    /// again (`repeat`), or the interface stale until it is used again.
+    fn end_of_run(&mut self, run: &mut Run) -> Result<(), String> {
+        if let Some(f) = run.frames.take() {
+            f.finish().map_err(|e| e.to_string())?;
         }
-        true
+        if run.count == 0 {
+            return Err(format!(
+                "{}: no frames (not a video it can play?)",
+                self.spec.label
+            ));
+        }
+        if self.spec.repeat {
+            *run = self.start_run()?;
+        } else {
+            self.iface.set_stale(format!(
+                "{}: end of the video (repeat off; stop and run again to replay)",
+                self.spec.label
+            ));
+        }
+        Ok(())
+    }
+}
+
+impl Device for Source {
+    type Session = Run;
+
+    fn open(&mut self) -> Result<Run, String> {
+        self.start_run()
     }
 
-    fn run(mut self) {
-        let mut pacer = Pacer::new(None);
-        while !self.stopped() {
-            if !self.iface.wait_used(POLL) {
-                pacer.reset();
-                continue;
+    fn step(&mut self, run: &mut Run) -> Result<(), String> {
+        let Some(frames) = &mut run.frames else {
+            std::thread::sleep(ENDED);
+            return Ok(());
+        };
+        let r = match frames.read() {
+            Ok(true) => {
+                run.count += 1;
+                let stop = self.stop.clone();
+                self.pacer.wait(|| stop.load(Ordering::Acquire));
+                self.iface
+                    .write(|img| frames.fill(img))
+                    .map(|_| ())
+                    .map_err(|e| e.to_string())
             }
-            let mut frames = match (self.spec.open)(&self.killer) {
-                Ok(f) => f,
-                Err(e) => {
-                    if self.stopped() {
-                        break;
-                    }
-                    self.report(e.to_string());
-                    self.pause_for(RETRY);
-                    continue;
-                }
-            };
-            let rate = if self.spec.pace { frames.rate() } else { None };
-            if pacer.period() != Pacer::new(rate).period() {
-                pacer = Pacer::new(rate);
-            }
-            let mut count = 0u64;
-            let outcome = loop {
-                if self.stopped() {
-                    break Outcome::Stop;
-                }
-                if self.iface.users() == 0 {
-                    if !self.spec.pause {
-                        break Outcome::Unused;
-                    }
-                    while !self.stopped() && !self.iface.wait_used(POLL) {}
-                    pacer.reset();
-                    continue;
-                }
-                match frames.read() {
-                    Ok(true) => {
-                        count += 1;
-                        let stop = self.stop.clone();
-                        pacer.wait(|| stop.load(Ordering::Acquire));
-                        if let Err(e) = self.iface.write(|img| frames.fill(img)) {
-                            break Outcome::Failed(MediaError::Child(e.to_string()));
-                        }
-                        self.last_error = None;
-                    }
-                    Ok(false) => break Outcome::End,
-                    Err(e) => break Outcome::Failed(e),
-                }
-            };
-            match outcome {
-                Outcome::Stop => break,
-                Outcome::Unused => {
-                    pacer.reset();
-                }
-                Outcome::End => {
-                    let ended = frames.finish();
-                    if self.stopped() {
-                        break;
-                    }
-                    match ended {
-                        Err(e) => {
-                            self.report(e.to_string());
-                            self.pause_for(RETRY);
-                        }
-                        Ok(()) if count == 0 => {
-                            let why = format!(
-                                "{}: no frames (not a video it can play?)",
-                                self.spec.label
-                            );
-                            self.report(why);
-                            self.pause_for(RETRY);
-                        }
-                        Ok(()) if self.spec.repeat => {}
-                        Ok(()) => {
-                            self.iface.set_stale(format!(
-                                "{}: end of the video (repeat off; stop and run again to replay)",
-                                self.spec.label
-                            ));
-                            while self.pause_for(POLL) {}
-                            pacer.reset();
-                        }
-                    }
-                }
-                Outcome::Failed(e) => {
-                    drop(frames);
-                    if self.stopped() {
-                        break;
-                    }
-                    self.report(e.to_string());
-                    self.pause_for(RETRY);
-                    pacer.reset();
-                }
-            }
-        }
+            Ok(false) => self.end_of_run(run),
+            Err(e) => Err(e.to_string()),
+        };
+        // A run killed because the stream stops is no failure.
+        if self.stopping() { Ok(()) } else { r }
+    }
+
+    /// Unused: a file source stays open, paused (its child blocks on the full
+    /// pipe and keeps its place); a live one, or a video at its end, is closed
+    /// and opened again on the next use.
+    fn idle(&mut self, run: &mut Run) -> bool {
+        self.pacer.reset();
+        self.spec.pause && run.frames.is_some()
     }
 }
