@@ -12,6 +12,8 @@
 
 mod common;
 
+use common::Rng;
+
 use std::path::Path;
 
 use jderobot::{
@@ -53,20 +55,6 @@ const JUNK: &[&str] = &[
     "1,2",
     "",
 ];
-
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 << 13;
-        self.0 ^= self.0 >> 7;
-        self.0 ^= self.0 << 17;
-        self.0
-    }
-    fn below(&mut self, n: usize) -> usize {
-        (self.next() % n.max(1) as u64) as usize
-    }
-}
 
 /// A random mutation of `text`: one to four edits of its tokens and lines.
 fn mutate(text: &str, rng: &mut Rng) -> String {
@@ -124,7 +112,7 @@ fn read(path: &str) -> String {
 
 /// Runs `check` on `cases` mutations of each file; reports how many parsed.
 fn fuzz(files: &[&str], cases: usize, seed: u64, mut check: impl FnMut(&str, &Path) -> bool) {
-    let mut rng = Rng(seed);
+    let mut rng = Rng::new(seed);
     for file in files {
         let text = read(file);
         let path = Path::new(file);
@@ -302,7 +290,7 @@ fn shell_command_lines() {
     let conf = Conf::parse(&text, Path::new("test.conf")).unwrap();
     let mut shell = Shell::new(rt.clone(), conf);
     let cwd = std::env::current_dir().unwrap();
-    let mut rng = Rng(7);
+    let mut rng = Rng::new(7);
     let (mut out, mut err) = (Vec::new(), Vec::new());
     for n in 0..300 {
         let m = mutate(script, &mut rng);

@@ -23,15 +23,7 @@ use jderobot::{
 
 /// A deterministic pseudo-random frame of `n` bytes covering all byte values.
 fn noise(n: usize, seed: u32) -> Vec<u8> {
-    let mut s = seed.wrapping_mul(2_654_435_761).max(1);
-    (0..n)
-        .map(|_| {
-            s ^= s << 13;
-            s ^= s >> 17;
-            s ^= s << 5;
-            (s >> 11) as u8
-        })
-        .collect()
+    common::Rng::new(seed as u64).bytes(n)
 }
 
 fn rgb_to_bgr_inplace(v: &mut [u8]) {

@@ -16,6 +16,9 @@
 //! counts). `FUZZ_SEED` changes the random sequence; `FUZZ_TARGET` picks targets
 //! whose name contains it.
 
+mod common;
+
+use common::Rng;
 use std::{
     alloc::{GlobalAlloc, Layout, System},
     panic::{AssertUnwindSafe, catch_unwind},
@@ -61,24 +64,6 @@ fn note(size: usize) {
 
 #[global_allocator]
 static ALLOC: Counting = Counting;
-
-/// xorshift64*: small, fast, reproducible.
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
-    }
-    fn below(&mut self, n: usize) -> usize {
-        if n == 0 {
-            0
-        } else {
-            (self.next() % n as u64) as usize
-        }
-    }
-}
 
 /// Words that break number parsers and length checks.
 const NASTY: &[&str] = &[
@@ -495,7 +480,7 @@ struct Found {
 }
 
 fn fuzz(target: &Target, seed: u64, inputs: u64, seconds: Option<f64>) -> Found {
-    let mut rng = Rng(seed ^ 0x9E37_79B9_7F4A_7C15 ^ (target.name.len() as u64) << 32);
+    let mut rng = Rng::new(seed ^ (target.name.len() as u64) << 32);
     let mut found = Found::default();
     let started = Instant::now();
     let busy = Arc::new(AtomicU64::new(0));

@@ -7,6 +7,8 @@
 
 mod common;
 
+use common::Rng;
+
 use std::{
     io::{ErrorKind, Read, Write},
     net::{SocketAddr, TcpStream},
@@ -29,20 +31,6 @@ fn rss_kib() -> u64 {
     let s = std::fs::read_to_string("/proc/self/statm").unwrap();
     let pages: u64 = s.split(' ').nth(1).unwrap().parse().unwrap();
     pages * 4
-}
-
-/// A small deterministic generator (xorshift).
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 << 13;
-        self.0 ^= self.0 >> 7;
-        self.0 ^= self.0 << 17;
-        self.0
-    }
-    fn below(&mut self, n: usize) -> usize {
-        (self.next() % n as u64) as usize
-    }
 }
 
 const CORPUS: &[&str] = &[
@@ -243,7 +231,7 @@ fn bad_clients_are_dropped_alone_and_memory_stays_bounded() {
 
     // 10,000 mutated and random lines, each followed by a probe (1022) so we know
     // whether the server went on or dropped us.
-    let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
+    let mut rng = Rng::new(0x9e37_79b9_7f4a_7c15);
     let mut s = connect(addr);
     let (mut answered, mut dropped) = (0, 0);
     for _ in 0..10_000 {

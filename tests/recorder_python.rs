@@ -93,18 +93,7 @@ fn python_mcap_reads_the_recording_by_the_documented_schemas() {
         dir.path().join("p.mcap"),
         root().join("assets/recordings/simple.mcap"),
     ] {
-        let out = Command::new(&py)
-            .arg(root().join("scripts/check_mcap.py"))
-            .arg(&file)
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "{}: {}",
-            file.display(),
-            String::from_utf8_lossy(&out.stderr)
-        );
-        let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        let v = common::python_json(&py, "check_mcap.py", &file);
         if v.get("jpeg0").is_some() {
             continue;
         }
@@ -146,17 +135,7 @@ fn rosbags_opens_the_ros2_profile_and_the_replay_reads_it_back() {
     write_recorder_conf(&conf, "file ros.mcap\nprofile ros2\n");
     run_for(&conf, 3);
     let file = dir.path().join("ros.mcap");
-    let out = Command::new(&py)
-        .arg(root().join("scripts/check_ros2.py"))
-        .arg(&file)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let v = common::python_json(&py, "check_ros2.py", &file);
     assert_eq!(
         v["connections"]["/laser"][0], "sensor_msgs/msg/LaserScan",
         "{v}"

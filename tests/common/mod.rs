@@ -109,6 +109,36 @@ pub fn emulate_by_hand<T>(
     std::thread::sleep(Duration::from_secs(secs));
 }
 
+/// A small, fast, reproducible generator (xorshift64*) for random test inputs.
+#[allow(dead_code)]
+pub struct Rng(u64);
+
+#[allow(dead_code)]
+impl Rng {
+    /// The sequence of `seed` (any value; 0 too).
+    pub fn new(seed: u64) -> Rng {
+        Rng(seed ^ 0x9E37_79B9_7F4A_7C15 | 1)
+    }
+    pub fn next(&mut self) -> u64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
+    }
+    /// A number in 0..n (0 when n is 0).
+    pub fn below(&mut self, n: usize) -> usize {
+        if n == 0 {
+            0
+        } else {
+            (self.next() % n as u64) as usize
+        }
+    }
+    /// `n` bytes covering every value.
+    pub fn bytes(&mut self, n: usize) -> Vec<u8> {
+        (0..n).map(|_| (self.next() >> 56) as u8).collect()
+    }
+}
+
 /// The crate's root, where `assets/` and `examples/` are.
 pub fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -241,6 +271,24 @@ pub fn quit(mut child: std::process::Child, commands: &str) -> Option<std::proce
 /// The test venv's python (`target/py-venv`, which .ci/run makes, or
 /// `$JDEROBOT_PYTHON`) if it imports `modules` (`"mcap, rosbags"`); otherwise
 /// None after a note, so the test skips, but it FAILS under `CI`.
+/// Runs `scripts/SCRIPT FILE` with the venv's `py`; it must succeed. Its JSON line.
+#[cfg(feature = "_mcap")]
+#[allow(dead_code)]
+pub fn python_json(py: &Path, script: &str, file: &Path) -> serde_json::Value {
+    let out = Command::new(py)
+        .arg(root().join("scripts").join(script))
+        .arg(file)
+        .output()
+        .expect("run python");
+    assert!(
+        out.status.success(),
+        "{script} {}: {}",
+        file.display(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).expect("a JSON line")
+}
+
 pub fn python_with(modules: &str) -> Option<PathBuf> {
     let py = std::env::var_os("JDEROBOT_PYTHON")
         .map(PathBuf::from)
