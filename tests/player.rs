@@ -175,9 +175,9 @@ fn golden_blobfinder_and_sonar_payloads() {
     let b = blobs[0];
     assert_eq!((b.color, b.area, b.x, b.y), (0xff0000, 420, 39, 30));
     assert_eq!((b.left, b.right, b.top, b.bottom), (29, 50, 20, 40));
-    assert!((b.range - 1.687).abs() < 1e-3);
-    let f = sinks::blob_frame(1, w, h, &blobs);
-    assert!((f.blobs[0].range - 1687.0).abs() < 1.0);
+    assert!((b.range - 1687.0).abs() < 1.0, "1.687 m, in mm");
+    let f = sinks::blob_frame(1, w, h, blobs);
+    assert_eq!(f.blobs[0], b);
     // ranger:0 (sonar) RANGE: 16, 16, 1.436 m, 5.0 m, ...
     let mut p = hex("00000010 00000010 3ff6f823e2928f7f 4014000000000000");
     p.resize(8 + 16 * 8, 0);

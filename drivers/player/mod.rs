@@ -201,7 +201,7 @@ impl Device {
                 (interf::BLOBFINDER, sub::BLOBFINDER_DATA_BLOBS, Sink::Blobs(b)) => {
                     let (w, hh, blobs) = xdr::decode_blobs(p)?;
                     *blob_clock += 1;
-                    b.store(Arc::new(sinks::blob_frame(*blob_clock, w, hh, &blobs)));
+                    b.store(Arc::new(sinks::blob_frame(*blob_clock, w, hh, blobs)));
                 }
                 _ => {}
             }

@@ -257,26 +257,12 @@ pub fn camera_image(
 }
 
 /// A blobfinder frame in our units (range mm).
-pub fn blob_frame(clock: u64, w: u32, h: u32, blobs: &[xdr::BlobWire]) -> BlobFrame {
+pub fn blob_frame(clock: u64, w: u32, h: u32, blobs: Vec<Blob>) -> BlobFrame {
     BlobFrame {
         clock,
         width: w,
         height: h,
-        blobs: blobs
-            .iter()
-            .map(|b| Blob {
-                id: b.id,
-                color: b.color & 0xff_ffff,
-                area: b.area,
-                x: b.x,
-                y: b.y,
-                left: b.left,
-                right: b.right,
-                top: b.top,
-                bottom: b.bottom,
-                range: b.range * 1000.0,
-            })
-            .collect(),
+        blobs,
     }
 }
 

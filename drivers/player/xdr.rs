@@ -9,6 +9,8 @@
 
 use std::fmt;
 
+use crate::blobs::Blob;
+
 /// `PLAYER_IDENT_STRLEN`: the banner the server sends first.
 pub const BANNER_LEN: usize = 32;
 /// `PLAYERXDR_MSGHDR_SIZE`.
@@ -618,32 +620,18 @@ pub fn decode_camera(p: &[u8]) -> Result<(CameraInfo, &[u8]), XdrError> {
     Ok((info, r.bytes(n)?))
 }
 
-/// One blob of `player_blobfinder_data_t` (pixels; range m).
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct BlobWire {
-    pub id: u32,
-    pub color: u32,
-    pub area: u32,
-    pub x: u32,
-    pub y: u32,
-    pub left: u32,
-    pub right: u32,
-    pub top: u32,
-    pub bottom: u32,
-    pub range: f32,
-}
-
-/// `player_blobfinder_data_t`: image width, height and the blobs.
-pub fn decode_blobs(p: &[u8]) -> Result<(u32, u32, Vec<BlobWire>), XdrError> {
+/// `player_blobfinder_data_t`: image width, height and the blobs (the range,
+/// sent in m, in mm; the colour 0xRRGGBB).
+pub fn decode_blobs(p: &[u8]) -> Result<(u32, u32, Vec<Blob>), XdrError> {
     let mut r = Reader::new(p);
     let w = r.u32()?;
     let h = r.u32()?;
     let n = r.count("blobs", 40)?;
     let mut v = Vec::with_capacity(n);
     for _ in 0..n {
-        v.push(BlobWire {
+        v.push(Blob {
             id: r.u32()?,
-            color: r.u32()?,
+            color: r.u32()? & 0xff_ffff,
             area: r.u32()?,
             x: r.u32()?,
             y: r.u32()?,
@@ -651,7 +639,7 @@ pub fn decode_blobs(p: &[u8]) -> Result<(u32, u32, Vec<BlobWire>), XdrError> {
             right: r.u32()?,
             top: r.u32()?,
             bottom: r.u32()?,
-            range: r.f32()?,
+            range: r.f32()? * 1000.0,
         });
     }
     Ok((w, h, v))
