@@ -244,15 +244,20 @@ fn throughput_ref() -> f64 {
             .unwrap()
     };
     let child = spawn("pub-ref", port);
+    let fps = rate(&count);
+    stop(child);
+    s.close().wait().unwrap();
+    fps
+}
+
+/// Counts per second of `count` over 2 s, after 1.5 s of warm-up.
+fn rate(count: &AtomicU64) -> f64 {
     std::thread::sleep(Duration::from_millis(1500));
     let c0 = count.load(Ordering::Relaxed);
     let t0 = Instant::now();
     std::thread::sleep(Duration::from_secs(2));
     let n = count.load(Ordering::Relaxed) - c0;
-    let fps = n as f64 / t0.elapsed().as_secs_f64();
-    stop(child);
-    s.close().wait().unwrap();
-    fps
+    n as f64 / t0.elapsed().as_secs_f64()
 }
 
 fn throughput_ours() -> f64 {
@@ -285,12 +290,7 @@ fn throughput_ours() -> f64 {
             }
         })
     };
-    std::thread::sleep(Duration::from_millis(1500));
-    let c0 = count.load(Ordering::Relaxed);
-    let t0 = Instant::now();
-    std::thread::sleep(Duration::from_secs(2));
-    let n = count.load(Ordering::Relaxed) - c0;
-    let fps = n as f64 / t0.elapsed().as_secs_f64();
+    let fps = rate(&count);
     stop(child);
     stop_flag.store(true, Ordering::Relaxed);
     counter.join().unwrap();

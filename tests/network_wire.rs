@@ -368,16 +368,19 @@ fn client_conf(port: u16, extra: &str) -> String {
     )
 }
 
+/// What the client provides that is read (images and pushed sensors).
+const READ: [&str; 7] = [
+    "colorA",
+    "varcolorA",
+    "laser",
+    "encoders",
+    "sonars",
+    "pantiltencoders",
+    "zoomencoders",
+];
+
 fn use_all(rt: &Runtime) {
-    for n in [
-        "colorA",
-        "varcolorA",
-        "laser",
-        "encoders",
-        "sonars",
-        "pantiltencoders",
-        "zoomencoders",
-    ] {
+    for n in READ {
         rt.interfaces.get_any(n).unwrap().resume();
     }
 }
@@ -408,17 +411,7 @@ fn our_client_against_a_4_3_server() {
         assert_eq!(n, b"jdec\0\0\0\0\0\0\0\0\0\0\0\0\0\0\0\0");
     }
     eventually("frames and pushes arrive", || {
-        [
-            "colorA",
-            "varcolorA",
-            "laser",
-            "encoders",
-            "sonars",
-            "pantiltencoders",
-            "zoomencoders",
-        ]
-        .iter()
-        .all(|n| i.get_any(n).unwrap().clock() > 2)
+        READ.iter().all(|n| i.get_any(n).unwrap().clock() > 2)
     });
     let a = i.get::<Image>("colorA").unwrap().snapshot();
     assert_eq!((a.width, a.height), (320, 240));
