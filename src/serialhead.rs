@@ -23,9 +23,10 @@ use crate::{
 /// `serial DEVICE`: the port the head is on (required).
 pub const SERIAL: Setting = Setting::new(
     "serial",
-    "the serial port the head is on (required), e.g. /dev/ttyUSB0",
+    "the serial port the head is on, e.g. /dev/ttyUSB0",
     &[word("DEVICE")],
-);
+)
+.required();
 /// `poll MS`: the time between position queries (give the head's default).
 pub const POLL: Setting = Setting::new(
     "poll",
@@ -56,19 +57,12 @@ impl HeadConf {
     /// when it provides nothing.
     pub fn new(
         conf: &ComponentConf,
-        serial: Option<String>,
+        serial: String,
         poll: u64,
         reply_timeout: u64,
         provides: &[String],
         offered: &[&str],
     ) -> anyhow::Result<HeadConf> {
-        let serial = serial.ok_or_else(|| {
-            anyhow::anyhow!(
-                "{}: driver {} needs a `serial DEVICE` line (e.g. `serial /dev/ttyUSB0`)",
-                conf.file.display(),
-                conf.name
-            )
-        })?;
         if provides.is_empty() {
             anyhow::bail!(
                 "{}: driver {} provides nothing; add one or more of `provides {}`",
@@ -146,26 +140,18 @@ mod tests {
     #[test]
     fn serial_and_provides_are_required() {
         let conf = ComponentConf::from_text(Kind::Driver, "head", "").unwrap();
-        let e = HeadConf::new(&conf, None, 100, 1000, &["ptmotors".into()], &["a"]);
+        let e = conf.check(&[SERIAL]).unwrap_err().to_string();
         assert!(
-            e.unwrap_err()
-                .to_string()
-                .contains("needs a `serial DEVICE`")
+            e.contains("has no `serial` line") && e.contains("serial DEVICE"),
+            "{e}"
         );
-        let e = HeadConf::new(&conf, Some("/dev/x".into()), 100, 1000, &[], &["a", "b"]);
+        let e = HeadConf::new(&conf, "/dev/x".into(), 100, 1000, &[], &["a", "b"]);
         let e = e.unwrap_err().to_string();
         assert!(
             e.contains("add one or more of `provides a`, `provides b`"),
             "{e}"
         );
-        let c = HeadConf::new(
-            &conf,
-            Some("/dev/x".into()),
-            100,
-            1000,
-            &["ptmotors".into()],
-            &[],
-        );
+        let c = HeadConf::new(&conf, "/dev/x".into(), 100, 1000, &["ptmotors".into()], &[]);
         assert!(c.unwrap().provides("pantiltmotors"));
     }
 }

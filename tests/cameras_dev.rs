@@ -168,7 +168,7 @@ fn conf_lines_are_checked() {
             "autofocus_on or autofocus_off",
         ),
         ("provides laser 0\n", "colorA..D or varcolorA..D"),
-        ("bayer 0 RGBG\n", "not a Bayer pattern"),
+        ("provides colorA 0\nbayer 0 RGBG\n", "not a Bayer pattern"),
         ("framerate 30\n", "takes no `framerate` line"),
         ("", "no `provides` line"),
     ] {

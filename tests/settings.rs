@@ -94,6 +94,7 @@ fn every_declared_line_refuses_a_bad_value_at_its_line() {
         let p = problems(&kind, entry.name, "no_such_line 1");
         assert!(
             p.iter().any(|e| e.starts_with("t.conf:2: ")
+                && e.contains("`no_such_line`")
                 && e.contains(&format!("jderobot help {}", entry.name))),
             "{}: {p:?}",
             entry.name
@@ -119,8 +120,10 @@ fn help_prints_every_line_a_component_accepts() {
             let words: Vec<String> = s.args.iter().map(|a| good_word(&a.ty)).collect();
             let line = format!("{} {}", s.key, words.join(" "));
             let p = problems(&entry.kind.to_string(), entry.name, &line);
+            // (A line the component needs and the test left out is another matter.)
             assert!(
-                p.iter().all(|e| !e.starts_with("t.conf:2: ")),
+                p.iter()
+                    .all(|e| !e.starts_with("t.conf:2: ") || e.contains(", and needs one: ")),
                 "{} `{line}`: {p:?}",
                 entry.name
             );
@@ -176,4 +179,26 @@ fn values_accepted_silently_before_are_refused() {
             "{text}: {err}"
         );
     }
+}
+
+/// A line a component needs (a serial port, a `provides`) is named when absent,
+/// with its usage and where to read more.
+#[test]
+fn every_required_line_is_named_when_absent() {
+    let mut tried = 0;
+    for (entry, decl) in declared() {
+        for s in decl.iter().filter(|s| s.required) {
+            let p = problems(&entry.kind.to_string(), entry.name, "# nothing");
+            assert!(
+                p.iter()
+                    .any(|e| e.contains(&format!("has no `{}` line", s.key))
+                        && e.contains(&s.usage())
+                        && e.contains(&format!("jderobot help {}", entry.name))),
+                "{}: {p:?}",
+                entry.name
+            );
+            tried += 1;
+        }
+    }
+    assert!(tried >= 10, "only {tried} required lines");
 }

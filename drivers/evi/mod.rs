@@ -112,7 +112,7 @@ const LINES: &[Setting] = &[
 /// The values of [`LINES`].
 #[derive(serde::Deserialize)]
 struct Lines {
-    serial: Option<String>,
+    serial: String,
     camera: u8,
     poll: u64,
     reply_timeout: u64,

@@ -82,7 +82,7 @@ pub struct CamConf {
 
 /// The driver's lines, declared once (`jderobot help firewire`).
 const LINES: &[Setting] = &[
-    settings::provides(USAGE),
+    settings::provides(USAGE).required(),
     Setting::new(
         "bayer",
         "camera CAM sends a Bayer mosaic in this pattern (decoded to BGR)",
@@ -120,13 +120,6 @@ pub fn parse(conf: &ComponentConf) -> anyhow::Result<Vec<CamConf>> {
         for c in cams.iter_mut().filter(|c| c.cam == cam) {
             c.bayer = Some(p);
         }
-    }
-    if cams.is_empty() {
-        anyhow::bail!(
-            "driver {}: no `provides` line in {}; usage: {USAGE}",
-            conf.name,
-            conf.file.display()
-        );
     }
     Ok(cams)
 }

@@ -110,7 +110,7 @@ fn setting(l: &ConfLine, what: &str) -> anyhow::Result<(String, Setting)> {
 
 /// The driver's lines, declared once (`jderobot help gige`).
 const LINES: &[Line] = &[
-    settings::provides(USAGE),
+    settings::provides(USAGE).required(),
     Line::new(
         "exposure",
         "a camera's exposure time, or auto",
@@ -181,13 +181,6 @@ pub fn parse(conf: &ComponentConf) -> anyhow::Result<Vec<GigeConf>> {
         c.exposure = exposure.get(&c.camera).copied();
         c.gain = gain.get(&c.camera).copied();
         c.framerate = rate.get(&c.camera).copied();
-    }
-    if cams.is_empty() {
-        anyhow::bail!(
-            "driver {}: no `provides` line in {}; usage: {USAGE}",
-            conf.name,
-            conf.file.display()
-        );
     }
     Ok(cams)
 }

@@ -71,7 +71,7 @@ pub fn size(l: &ConfLine, i: usize) -> Result<(u32, u32), crate::conf::ConfError
 }
 
 /// The driver's lines, declared once (`jderobot help imagefile`).
-const LINES: &[Setting] = &[settings::provides(USAGE)];
+const LINES: &[Setting] = &[settings::provides(USAGE).required()];
 
 /// Parses the driver's lines.
 pub fn parse(conf: &ComponentConf) -> anyhow::Result<Vec<(Source, ConfLine)>> {
@@ -116,12 +116,6 @@ pub fn parse(conf: &ComponentConf) -> anyhow::Result<Vec<(Source, ConfLine)>> {
             },
             l.clone(),
         ));
-    }
-    if out.is_empty() {
-        anyhow::bail!(
-            "imagefile `{}`: no `provides` line; usage: {USAGE}",
-            conf.file.display()
-        );
     }
     Ok(out)
 }

@@ -118,7 +118,7 @@ fn file_or_url(conf: &ComponentConf, s: &str) -> String {
 }
 
 /// The driver's lines, declared once (`jderobot help mplayer`).
-const LINES: &[Setting] = &[settings::provides(USAGE)];
+const LINES: &[Setting] = &[settings::provides(USAGE).required()];
 
 /// Parses the driver's lines.
 pub fn parse(conf: &ComponentConf) -> anyhow::Result<Vec<(Source, ConfLine)>> {
@@ -197,9 +197,6 @@ pub fn parse(conf: &ComponentConf) -> anyhow::Result<Vec<(Source, ConfLine)>> {
             return Err(l.error(format!("`{iface}` is provided twice")).into());
         }
         out.push((src, l.clone()));
-    }
-    if out.is_empty() {
-        anyhow::bail!("mplayer: no `provides` line; usage: {USAGE}");
     }
     Ok(out)
 }

@@ -112,7 +112,8 @@ const LINES: &[Setting] = &[
             int("H", "px", 1, 8192),
         ],
     )
-    .repeats(),
+    .repeats()
+    .required(),
     settings::INITIAL_POSITION.help("the odometry offset added to the remote encoders"),
     Setting::new(
         "token",
@@ -251,12 +252,6 @@ impl ClientConf {
                 }
                 _ => {} // motors_timeout above; the rest refused by the declaration
             }
-        }
-        if c.remotes.is_empty() {
-            return Err(anyhow::anyhow!(
-                "{}: networkclient has no `provides` line; usage: {USAGE}",
-                conf.file.display()
-            ));
         }
         Ok(c)
     }

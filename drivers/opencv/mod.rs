@@ -104,7 +104,7 @@ fn dim(l: &ConfLine, i: usize, what: &str) -> anyhow::Result<u32> {
 }
 
 /// The driver's lines, declared once (`jderobot help opencv`).
-const LINES: &[Setting] = &[settings::provides(USAGE)];
+const LINES: &[Setting] = &[settings::provides(USAGE).required()];
 
 /// Parses the driver's lines.
 pub fn parse(conf: &ComponentConf) -> anyhow::Result<Vec<(Source, ConfLine)>> {
@@ -189,9 +189,6 @@ pub fn parse(conf: &ComponentConf) -> anyhow::Result<Vec<(Source, ConfLine)>> {
             },
             l.clone(),
         ));
-    }
-    if out.is_empty() {
-        anyhow::bail!("opencv: no `provides` line; usage: {USAGE}");
     }
     Ok(out)
 }

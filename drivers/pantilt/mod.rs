@@ -93,7 +93,7 @@ const LINES: &[Setting] = &[
 /// The values of [`LINES`].
 #[derive(serde::Deserialize)]
 struct Lines {
-    serial: Option<String>,
+    serial: String,
     baud: u32,
     poll: u64,
     reply_timeout: u64,

@@ -47,8 +47,6 @@ use crate::{
     vision::draw_line,
 };
 
-const USAGE: &str = "worldfile FILE, provides colorA..D|varcolorA..D CAMERA_FILE";
-
 /// The render period, as 4.3 (33 ms).
 pub const PERIOD: Duration = Duration::from_millis(33);
 
@@ -83,7 +81,8 @@ const LINES: &[Setting] = &[
         "worldfile",
         "the world it renders (a world file)",
         &[settings::path("FILE")],
-    ),
+    )
+    .required(),
     Setting::new(
         "provides",
         "a camera: an image interface and its camera file (progeo's format)",
@@ -92,7 +91,8 @@ const LINES: &[Setting] = &[
             settings::path("CAMERA_FILE"),
         ],
     )
-    .repeats(),
+    .repeats()
+    .required(),
 ];
 
 /// Parses the driver's lines and reads the world and camera files.
@@ -143,11 +143,9 @@ pub fn parse(conf: &ComponentConf) -> anyhow::Result<Sim3dConf> {
             _ => {} // refused by the declaration
         }
     }
-    let world =
-        world.ok_or_else(|| anyhow::anyhow!("simulated3D: no `worldfile` line; usage: {USAGE}"))?;
-    if cameras.is_empty() {
-        anyhow::bail!("simulated3D: no `provides` line; usage: {USAGE}");
-    }
+    let Some(world) = world else {
+        anyhow::bail!("simulated3D: no `worldfile` line"); // refused by the declaration
+    };
     Ok(Sim3dConf { world, cameras })
 }
 

@@ -75,9 +75,9 @@ pub struct DevConf {
 }
 
 /// The driver's lines, declared once (`jderobot help video4linux2`).
-const LINES: &[Setting] = &[settings::provides(USAGE)];
+const LINES: &[Setting] = &[settings::provides(USAGE).required()];
 /// 4.3's video4linux lines.
-const LINES_V4L1: &[Setting] = &[settings::provides(USAGE_V4L1)];
+const LINES_V4L1: &[Setting] = &[settings::provides(USAGE_V4L1).required()];
 
 /// Parses the driver's lines; `v4l1` accepts 4.3's video4linux lines (no INPUT).
 pub fn parse(conf: &ComponentConf, v4l1: bool) -> anyhow::Result<Vec<DevConf>> {
@@ -85,14 +85,6 @@ pub fn parse(conf: &ComponentConf, v4l1: bool) -> anyhow::Result<Vec<DevConf>> {
     let mut out = Vec::new();
     for l in &conf.lines {
         out.push(parse_provides(conf, l, v4l1)?);
-    }
-    if out.is_empty() {
-        anyhow::bail!(
-            "driver {}: no `provides` line in {}; usage: {}",
-            conf.name,
-            conf.file.display(),
-            if v4l1 { USAGE_V4L1 } else { USAGE }
-        );
     }
     Ok(out)
 }

@@ -134,6 +134,8 @@ pub struct Setting {
     /// The line may appear several times (read as a `Vec`); otherwise the last one
     /// counts, as in 4.3.
     pub repeats: bool,
+    /// The component cannot do without it (a serial port, a `provides` line).
+    pub required: bool,
 }
 
 impl Setting {
@@ -144,6 +146,7 @@ impl Setting {
             default: None,
             help,
             repeats: false,
+            required: false,
         }
     }
     /// The value when the line is absent, written as in a conf (`"0 0"`).
@@ -154,6 +157,11 @@ impl Setting {
     /// The line may appear several times; the field is a `Vec` of every one.
     pub const fn repeats(mut self) -> Setting {
         self.repeats = true;
+        self
+    }
+    /// The component needs the line: its absence is an error naming it.
+    pub const fn required(mut self) -> Setting {
+        self.required = true;
         self
     }
     /// The same line with another key (for components that take a shared line
@@ -381,6 +389,8 @@ pub fn check(conf: &ComponentConf, decl: &[Setting]) -> Vec<ConfError> {
 
 fn parse<'a>(conf: &ComponentConf, decl: &'a [Setting]) -> Result<Parsed<'a>, Vec<ConfError>> {
     let mut errors = Vec::new();
+    // Required lines that are absent: said after the errors of the lines present.
+    let mut missing = Vec::new();
     let mut entries = Vec::new();
     for l in &conf.lines {
         if !decl.iter().any(|s| s.key == l.keyword()) {
@@ -421,6 +431,20 @@ fn parse<'a>(conf: &ComponentConf, decl: &'a [Setting]) -> Result<Parsed<'a>, Ve
                 Err(e) => errors.push(e),
             }
         }
+        if chosen.is_empty() && s.required {
+            missing.push(ConfError {
+                at: conf_location(conf),
+                message: format!(
+                    "{} {} has no `{}` line, and needs one: `{}` ({}); see `jderobot help {}`",
+                    conf.kind,
+                    conf.name,
+                    s.key,
+                    s.usage(),
+                    s.help,
+                    conf.name
+                ),
+            });
+        }
         if chosen.is_empty()
             && let Some(d) = s.default
         {
@@ -444,6 +468,7 @@ fn parse<'a>(conf: &ComponentConf, decl: &'a [Setting]) -> Result<Parsed<'a>, Ve
         entries.push((s, at, values));
     }
     errors.sort_by_key(|e| e.at.line);
+    errors.append(&mut missing);
     if errors.is_empty() {
         Ok(Parsed { entries })
     } else {
@@ -799,14 +824,20 @@ pub fn help_text(
     let _ = writeln!(out, "\nLines ({kind} {name} ... end_{kind}):");
     for s in decl {
         let _ = write!(out, "  {:<32}", s.usage());
-        match (s.default, s.repeats) {
-            (Some(d), _) => {
+        match (s.default, s.repeats, s.required) {
+            (Some(d), ..) => {
                 let _ = writeln!(out, " default: {d}");
             }
-            (None, true) => {
+            (None, true, true) => {
+                let _ = writeln!(out, " (one or more)");
+            }
+            (None, true, false) => {
                 let _ = writeln!(out, " (any number of these)");
             }
-            (None, false) => {
+            (None, false, true) => {
+                let _ = writeln!(out, " (required)");
+            }
+            (None, false, false) => {
                 let _ = writeln!(out, " (optional)");
             }
         }
