@@ -829,16 +829,7 @@ fn the_binary_reports_a_missing_server_and_a_lost_one() {
         1,
         "one error: {err}"
     );
-    let out = Command::new(env!("CARGO_BIN_EXE_jderobot"))
-        .arg("check")
-        .arg(&conf)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    common::jderobot_ok([Path::new("check"), &conf]);
 
     let emu = Emulator::start();
     let conf = example_conf(dir.path(), emu.port, |t| t.replace("run introrob\n", ""));

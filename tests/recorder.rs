@@ -10,11 +10,11 @@ mod common;
 use std::{
     collections::BTreeMap,
     path::{Path, PathBuf},
-    process::{Command, Output, Stdio},
+    process::{Command, Stdio},
     time::{Duration, Instant},
 };
 
-use common::world_path;
+use common::{run_for, world_path};
 use jderobot::mcapfmt::{self, Decoded, Recorded, Summary};
 
 const BIN: &str = env!("CARGO_BIN_EXE_jderobot");
@@ -27,23 +27,6 @@ fn write(dir: &Path, name: &str, body: &str) -> PathBuf {
     let p = dir.join(name);
     std::fs::write(&p, body).unwrap();
     p
-}
-
-fn run_for(conf: &Path, secs: f64) -> Output {
-    let out = Command::new(BIN)
-        .args(["--headless", "--no-shell", "--for", &secs.to_string()])
-        .arg(conf)
-        .current_dir(conf.parent().unwrap())
-        .stdin(Stdio::null())
-        .output()
-        .expect("run jderobot");
-    assert!(
-        out.status.success(),
-        "jderobot {} failed: {}",
-        conf.display(),
-        text(&out.stderr)
-    );
-    out
 }
 
 /// The simulator with every sensor and a recorder. The imu publishes at 20 Hz

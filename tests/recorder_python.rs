@@ -8,18 +8,13 @@
 
 mod common;
 
-use std::{
-    path::{Path, PathBuf},
-    process::Command,
-};
+use std::path::{Path, PathBuf};
 
 use common::{root, world_path};
 use jderobot::{
     interfaces::{Image, Laser},
     mcapfmt::{self, Recorded},
 };
-
-const BIN: &str = env!("CARGO_BIN_EXE_jderobot");
 
 /// The venv's python, with the packages the check needs, or None (skip; CI fails).
 fn python() -> Option<PathBuf> {
@@ -64,30 +59,16 @@ fn first_laser_and_image(bytes: &[u8], v: &serde_json::Value) -> (Laser, Image) 
     (laser, image.expect("an image message"))
 }
 
-/// Runs `jderobot --headless --no-shell --for SECS CONF`; it must succeed.
-fn run_for(conf: &Path, secs: u32) {
-    let out = Command::new(BIN)
-        .args(["--headless", "--no-shell", "--for", &secs.to_string()])
-        .arg(conf)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-}
-
 #[test]
 fn python_mcap_reads_the_recording_by_the_documented_schemas() {
     let Some(py) = python() else { return };
     let dir = tempfile::tempdir().unwrap();
     let conf = dir.path().join("r.conf");
     write_recorder_conf(&conf, "file p.mcap\ncompression lz4\n");
-    run_for(&conf, 3);
+    common::run_for(&conf, 3.0);
     // The same with JPEG images (foxglove.CompressedImage).
     write_recorder_conf(&conf, "file j.mcap\nimages jpeg 80\ncompression lz4\n");
-    run_for(&conf, 2);
+    common::run_for(&conf, 2.0);
     for file in [
         dir.path().join("j.mcap"),
         dir.path().join("p.mcap"),
@@ -133,7 +114,7 @@ fn rosbags_opens_the_ros2_profile_and_the_replay_reads_it_back() {
     let dir = tempfile::tempdir().unwrap();
     let conf = dir.path().join("r.conf");
     write_recorder_conf(&conf, "file ros.mcap\nprofile ros2\n");
-    run_for(&conf, 3);
+    common::run_for(&conf, 3.0);
     let file = dir.path().join("ros.mcap");
     let v = common::python_json(&py, "check_ros2.py", &file);
     assert_eq!(
@@ -169,7 +150,7 @@ fn rosbags_opens_the_ros2_profile_and_the_replay_reads_it_back() {
          load_driver replay\nload_service recorder\n",
     )
     .unwrap();
-    run_for(&replay, 3);
+    common::run_for(&replay, 3.0);
     let (back, _) = mcapfmt::Summary::read(&dir.path().join("back.mcap")).unwrap();
     let names: Vec<&str> = back.channels.iter().map(|c| c.topic.as_str()).collect();
     assert!(

@@ -31,6 +31,47 @@ where
     c
 }
 
+/// Runs `jderobot ARGS` to its end with standard input closed; it must succeed.
+#[allow(dead_code)]
+pub fn jderobot_ok<I, S>(args: I) -> std::process::Output
+where
+    I: IntoIterator<Item = S>,
+    S: AsRef<std::ffi::OsStr>,
+{
+    let mut c = jderobot(args);
+    let out = c.stdin(Stdio::null()).output().expect("run jderobot");
+    assert!(
+        out.status.success(),
+        "{c:?} failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
+/// `jderobot --headless --no-shell --for SECS CONF` in the conf's folder; it must
+/// succeed.
+#[allow(dead_code)]
+pub fn run_for(conf: &Path, secs: f64) -> std::process::Output {
+    let secs = secs.to_string();
+    let args = ["--headless", "--no-shell", "--for", &secs];
+    let mut c = jderobot(
+        args.iter()
+            .map(|a| std::ffi::OsStr::new(a))
+            .chain([conf.as_os_str()]),
+    );
+    if let Some(dir) = conf.parent() {
+        c.current_dir(dir);
+    }
+    let out = c.stdin(Stdio::null()).output().expect("run jderobot");
+    assert!(
+        out.status.success(),
+        "jderobot {} failed: {}",
+        conf.display(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
 /// `jderobot help NAME`'s standard output (it must succeed).
 pub fn help(name: &str) -> String {
     let out = jderobot(["help", name])
