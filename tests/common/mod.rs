@@ -56,7 +56,7 @@ pub fn run_for(conf: &Path, secs: f64) -> std::process::Output {
     let args = ["--headless", "--no-shell", "--for", &secs];
     let mut c = jderobot(
         args.iter()
-            .map(|a| std::ffi::OsStr::new(a))
+            .map(std::ffi::OsStr::new)
             .chain([conf.as_os_str()]),
     );
     if let Some(dir) = conf.parent() {
