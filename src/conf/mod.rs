@@ -65,9 +65,15 @@ pub struct Location {
     pub line: usize,
 }
 
+/// `file:line`, or the file alone for what is about no line of it (a line that
+/// is absent, line 0).
 impl fmt::Display for Location {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{}:{}", self.file.display(), self.line)
+        if self.line == 0 {
+            write!(f, "{}", self.file.display())
+        } else {
+            write!(f, "{}:{}", self.file.display(), self.line)
+        }
     }
 }
 
