@@ -57,7 +57,7 @@ use crate::{
     colorspaces::{HsvRange, Lookup, hsv_mask},
     conf::{
         ComponentConf,
-        settings::{CYCLE, Setting, choice, float, int, interface},
+        settings::{self, CYCLE, Setting, choice, float, int},
     },
     imagesource,
     interfaces::{Image, Interface, InterfaceValue, PtEncoders, PtMotors},
@@ -333,24 +333,13 @@ impl Schema for FollowBall {
 
 /// followball's lines, declared once (`jderobot help followball`).
 const LINES: &[Setting] = &[
-    Setting::new(
+    settings::uses(
         "image",
+        "colorA",
         "the camera image it filters (colorA..D, varcolorA..D)",
-        &[interface("INTERFACE")],
-    )
-    .default("colorA"),
-    Setting::new(
-        "pantiltencoders",
-        "the head's angles",
-        &[interface("INTERFACE")],
-    )
-    .default("pantiltencoders"),
-    Setting::new(
-        "pantiltmotors",
-        "the head it drives",
-        &[interface("INTERFACE")],
-    )
-    .default("pantiltmotors"),
+    ),
+    settings::uses("pantiltencoders", "pantiltencoders", "the head's angles"),
+    settings::uses("pantiltmotors", "pantiltmotors", "the head it drives"),
     // The ball's colour: the HSV range lines the tuners share.
     imagesource::HMIN.default("6.0"),
     imagesource::HMAX.default("0.35"),

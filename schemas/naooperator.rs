@@ -35,7 +35,7 @@ use std::{sync::Arc, time::Duration};
 use crate::{
     conf::{
         ComponentConf,
-        settings::{CYCLE, Setting, interface},
+        settings::{self, CYCLE, Setting},
     },
     interfaces::{Image, Interface, PtEncoders, PtMotors},
     operator::{self, Commands, Operator},
@@ -53,30 +53,22 @@ const LINES: &[Setting] = &[
     operator::MAX_V,
     operator::MAX_W,
     CYCLE.default("100"),
-    Setting::new(
-        "motors",
-        "the interface it walks the robot with",
-        &[interface("INTERFACE")],
-    )
-    .default("motors"),
-    Setting::new(
+    settings::uses("motors", "motors", "the interface it walks the robot with"),
+    settings::uses(
+        "pantiltmotors",
         "pantiltmotors",
         "the head it points (none: no head)",
-        &[interface("INTERFACE")],
-    )
-    .default("pantiltmotors"),
-    Setting::new(
+    ),
+    settings::uses(
+        "pantiltencoders",
         "pantiltencoders",
         "the head angles it shows (none: none)",
-        &[interface("INTERFACE")],
-    )
-    .default("pantiltencoders"),
-    Setting::new(
+    ),
+    settings::uses(
         "camera",
+        "varcolorA",
         "the image it shows (4.3.1 used varcolorX; none: none)",
-        &[interface("INTERFACE")],
-    )
-    .default("varcolorA"),
+    ),
 ];
 
 /// The values of [`LINES`].

@@ -23,19 +23,18 @@ use parking_lot::Mutex;
 use crate::{
     conf::{
         ComponentConf,
-        settings::{Arg, Setting, float, interface, on_off},
+        settings::{self, Arg, Setting, float, interface, on_off},
     },
     interfaces::{Image, InUse, Interface, InterfaceError, Interfaces, Sample},
     runtime::{Context, Schema},
 };
 
 /// `image INTERFACE`: the image a schema works on.
-pub const IMAGE: Setting = Setting::new(
+pub const IMAGE: Setting = settings::uses(
     "image",
+    "colorA",
     "the image it works on: colorA..D or varcolorA..D",
-    &[interface("INTERFACE")],
-)
-.default("colorA");
+);
 /// `output INTERFACE`: a new image interface the result is published on.
 pub const OUTPUT: Setting = Setting::new(
     "output",

@@ -7,7 +7,7 @@ use std::{sync::Arc, time::Duration};
 use crate::{
     conf::{
         ComponentConf, ConfError,
-        settings::{CYCLE, Setting, choice, float, interface, word},
+        settings::{self, CYCLE, Setting, choice, float, word},
     },
     interfaces::Motors,
     operator,
@@ -88,32 +88,12 @@ pub const LINES: &[Setting] = &[
         "the map for gpp and the panel: a world file, or none (default: the exported world.map)",
         &[word("FILE|none")],
     ),
-    Setting::new(
-        "laser",
-        "the laser it avoids obstacles with",
-        &[interface("INTERFACE")],
-    )
-    .default("laser"),
-    Setting::new("encoders", "the robot's pose", &[interface("INTERFACE")]).default("encoders"),
-    Setting::new("motors", "the base it drives", &[interface("INTERFACE")]).default("motors"),
-    Setting::new(
-        "sonars",
-        "sonars it shows (none: none)",
-        &[interface("INTERFACE")],
-    )
-    .default("sonars"),
-    Setting::new(
-        "bumpers",
-        "bumpers it reacts to (none: none)",
-        &[interface("INTERFACE")],
-    )
-    .default("bumpers"),
-    Setting::new(
-        "camera",
-        "the image it shows (none: none)",
-        &[interface("INTERFACE")],
-    )
-    .default("colorA"),
+    settings::uses("laser", "laser", "the laser it avoids obstacles with"),
+    settings::uses("encoders", "encoders", "the robot's pose"),
+    settings::uses("motors", "motors", "the base it drives"),
+    settings::uses("sonars", "sonars", "sonars it shows (none: none)"),
+    settings::uses("bumpers", "bumpers", "bumpers it reacts to (none: none)"),
+    settings::uses("camera", "colorA", "the image it shows (none: none)"),
 ];
 
 /// The behaviours' names (with 4.3's synonyms).

@@ -41,7 +41,7 @@ use std::{sync::Arc, time::Duration};
 use crate::{
     conf::{
         ComponentConf,
-        settings::{CYCLE, Setting, interface, word},
+        settings::{self, CYCLE, Setting, word},
     },
     interfaces::{Encoders, Image, Interface, Laser, Motors, PtEncoders, PtMotors},
     operator::{self, Commands, Operator},
@@ -61,37 +61,24 @@ const LINES: &[Setting] = &[
         &[word("FILE|none")],
     ),
     CYCLE.default("100"),
-    Setting::new("motors", "the base it drives", &[interface("INTERFACE")]).default("motors"),
-    Setting::new(
+    settings::uses("motors", "motors", "the base it drives"),
+    settings::uses(
+        "encoders",
         "encoders",
         "the robot's pose in the 3D canvas (none: none)",
-        &[interface("INTERFACE")],
-    )
-    .default("encoders"),
-    Setting::new(
-        "laser",
-        "the laser in the 3D canvas (none: none)",
-        &[interface("INTERFACE")],
-    )
-    .default("laser"),
-    Setting::new(
+    ),
+    settings::uses("laser", "laser", "the laser in the 3D canvas (none: none)"),
+    settings::uses(
+        "pantiltmotors",
         "pantiltmotors",
         "the pan-tilt unit it points (none: none)",
-        &[interface("INTERFACE")],
-    )
-    .default("pantiltmotors"),
-    Setting::new(
+    ),
+    settings::uses(
+        "pantiltencoders",
         "pantiltencoders",
         "the pan-tilt angles it shows (none: none)",
-        &[interface("INTERFACE")],
-    )
-    .default("pantiltencoders"),
-    Setting::new(
-        "camera",
-        "the image it shows (none: none)",
-        &[interface("INTERFACE")],
-    )
-    .default("colorA"),
+    ),
+    settings::uses("camera", "colorA", "the image it shows (none: none)"),
 ];
 
 /// The values of [`LINES`].

@@ -228,6 +228,14 @@ pub const fn provides(usage: &'static str) -> Setting {
     Setting::new("provides", usage, ARGS).repeats()
 }
 
+/// `KEY INTERFACE`: an interface the component uses in a role (`motors motors`,
+/// `camera varcolorA`), `default` when absent; schemas take `none` for "do
+/// without" where they can (the help says so).
+pub const fn uses(key: &'static str, default: &'static str, help: &'static str) -> Setting {
+    const ARGS: &[Arg] = &[interface("INTERFACE")];
+    Setting::new(key, help, ARGS).default(default)
+}
+
 /// Says a range in words.
 fn range_words(min: f64, max: f64) -> String {
     // The extremes of a type mean "no bound".
