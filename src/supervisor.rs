@@ -118,26 +118,38 @@ pub struct Supervision {
     pub absent: Option<String>,
 }
 
+/// A device not there at load: where its conf line is, the driver, why, and
+/// what ends the wait (`the camera answers`).
+pub struct Absent<'a> {
+    pub at: &'a str,
+    pub driver: &'a str,
+    pub why: String,
+    pub until: &'a str,
+}
+
 impl Supervision {
     /// A camera (or any on-demand device of one interface), retried every
-    /// `retry` while used. `absent` is why it was not there at load, if it was
-    /// not: said once, at its conf line `at` (`AT: driver DRIVER: WHY; IFACE
-    /// stays stale until UNTIL (tried every N s while used)`), and its interface
-    /// is stale with the reason until it appears.
+    /// `retry` while used. When it was `absent` at load, that is said once
+    /// (`AT: driver DRIVER: WHY; IFACE stays stale until UNTIL (tried every N s
+    /// while used)`) and its interface is stale with the reason until it appears.
     pub fn camera(
         name: String,
         iface: Arc<dyn AnyInterface>,
         retry: Duration,
-        absent: Option<(&str, &str, String, &str)>,
+        absent: Option<Absent>,
     ) -> Supervision {
-        let absent = absent.map(|(at, driver, why, until)| {
+        let absent = absent.map(|a| {
             crate::output::println(format!(
-                "{at}: driver {driver}: {why}; {} stays stale until {until} (tried every {} s while used)",
+                "{}: driver {}: {}; {} stays stale until {} (tried every {} s while used)",
+                a.at,
+                a.driver,
+                a.why,
                 iface.name(),
+                a.until,
                 retry.as_secs()
             ));
-            iface.set_stale(&why);
-            why
+            iface.set_stale(&a.why);
+            a.why
         });
         Supervision {
             name,

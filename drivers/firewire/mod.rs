@@ -55,6 +55,7 @@ use crate::{
     },
     interfaces::{COLOR_HEIGHT, COLOR_WIDTH, Image, Interface},
     runtime::{Device, Driver, Runtime, Supervision, Supervisor},
+    supervisor::Absent,
     vision::pixfmt::{self, Bayer, Yuv422Order, YuvMatrix},
 };
 
@@ -612,7 +613,12 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
             format!("firewire camera {}", c.cam),
             iface.clone(),
             RETRY,
-            absent.map(|why| (c.at.as_str(), conf.name.as_str(), why, until.as_str())),
+            absent.map(|why| Absent {
+                at: &c.at,
+                driver: &conf.name,
+                why,
+                until: &until,
+            }),
         );
         cameras.push(Supervisor::start(
             how,

@@ -54,6 +54,7 @@ use crate::{
     },
     interfaces::{COLOR_HEIGHT, COLOR_WIDTH, Image, Interface},
     runtime::{Device, Driver, Runtime, Supervision, Supervisor},
+    supervisor::Absent,
     vision::pixfmt::{self, Bayer, Yuv422Order, YuvMatrix},
 };
 
@@ -617,7 +618,12 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
             format!("gige camera `{}`", c.camera),
             iface.clone(),
             RETRY,
-            absent.map(|why| (c.at.as_str(), conf.name.as_str(), why, "the camera answers")),
+            absent.map(|why| Absent {
+                at: &c.at,
+                driver: &conf.name,
+                why,
+                until: "the camera answers",
+            }),
         );
         cameras.push(Supervisor::start(
             how,

@@ -56,6 +56,7 @@ use crate::{
     },
     interfaces::{COLOR_HEIGHT, COLOR_WIDTH, Image, Interface},
     runtime::{self, Driver, Runtime, Supervision, Supervisor},
+    supervisor::Absent,
     vision::pixfmt::{self, Bayer, Yuv422Order, YuvMatrix},
 };
 
@@ -507,7 +508,12 @@ fn start(conf: &ComponentConf, rt: &Runtime, v4l1: bool) -> anyhow::Result<Box<d
             format!("video4linux2 {}", d.device.display()),
             iface.clone(),
             RETRY,
-            absent.map(|why| (d.at.as_str(), conf.name.as_str(), why, "the device appears")),
+            absent.map(|why| Absent {
+                at: &d.at,
+                driver: &conf.name,
+                why,
+                until: "the device appears",
+            }),
         );
         devices.push(Supervisor::start(
             how,
