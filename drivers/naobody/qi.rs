@@ -171,7 +171,7 @@ pub fn read_message(r: &mut impl Read) -> Result<Message, QiError> {
         .read_to_end(&mut payload)
         .map_err(QiError::io)?;
     if payload.len() != size {
-        return Err(QiError::Io(format!(
+        return Err(QiError::Garbage(format!(
             "the connection was closed {} bytes into a {size}-byte payload",
             payload.len()
         )));
@@ -1071,7 +1071,8 @@ impl Session {
         let info = match self.call(&sd, "service", &[Value::str(name)]) {
             Ok(v) => v,
             Err(QiError::Remote(e))
-                if e.contains("not found") || e.contains("No such") || e.contains("no such") =>
+                // libqi: "Cannot find service 'NAME' in index".
+                if e.contains("Cannot find service") || e.contains("not found") =>
             {
                 return Ok(None);
             }
