@@ -98,8 +98,8 @@ const LINES: &[Setting] = &[
     Setting::new("port", "NAOqi's port", &[int("PORT", "", 1, 65_535)]).default("9559"),
     Setting::new(
         "fps",
-        "camera frames per second (NAOqi's cameras give at most 30; more polls faster)",
-        &[int("N", "frames/s", 1, 1000)],
+        "camera frames per second (NAOqi's cameras give at most 30; above that it polls faster, for peers that serve every call)",
+        &[int("N", "frames/s", 1, 10_000)],
     )
     .default("15"),
     Setting::new(
@@ -599,6 +599,10 @@ impl Body {
         } else {
             (None, None)
         };
+        // The robot is back: a command now reaches it.
+        if let Some(m) = &self.motors {
+            m.clear_stale();
+        }
         let mut s = BodySession {
             qi,
             motion,
