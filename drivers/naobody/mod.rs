@@ -663,10 +663,6 @@ impl Body {
             None => true,
         };
         if asleep && m.method("wakeUp", 0).is_some() {
-            tracing::info!(
-                "{}: waking the robot up (ALMotion.wakeUp) before it moves",
-                self.conf.url()
-            );
             crate::output::println(format!(
                 "naobody: waking the robot up (ALMotion.wakeUp) at {} before it moves",
                 self.conf.url()

@@ -884,11 +884,16 @@ impl Conn {
             ..Header::default()
         };
         write_message(&mut self.stream, h, payload).map_err(|e| self.timed(e))?;
+        let t0 = std::time::Instant::now();
         loop {
             let m = read_message(&mut self.stream).map_err(|e| self.timed(e))?;
             let h = m.header;
             if h.id != id || !matches!(h.ty, ty::REPLY | ty::ERROR | ty::CANCELED) {
-                // An answer to an earlier call, an event, a capability message.
+                // An answer to an earlier call, an event, a capability message;
+                // a stream of them does not hold the call past its timeout.
+                if t0.elapsed() > self.timeout {
+                    return Err(QiError::Timeout(self.timeout.as_millis()));
+                }
                 continue;
             }
             return match h.ty {
