@@ -416,6 +416,37 @@ fn without_move_the_walk_uses_move_toward() {
     rt.shutdown();
 }
 
+#[test]
+fn services_of_another_process_are_reached_at_their_own_endpoint() {
+    let Some(py) = python() else { return };
+    let main = Peer::start(
+        &py,
+        free_port(),
+        &["--without", "ALMemory.", "--without", "ALVideoDevice."],
+    );
+    let sd = format!("tcp://127.0.0.1:{}", main.port);
+    let other = Peer::start(&py, free_port(), &["--join", &sd, "--without", "ALMotion."]);
+    let rt = start_conf(&naobody(
+        main.port,
+        "provides encoders
+provides sonars
+provides varcolorA 0 160 120
+",
+    ));
+    let (enc, us) = (
+        rt.interfaces.get::<Encoders>("encoders").unwrap(),
+        rt.interfaces.get::<Sonars>("sonars").unwrap(),
+    );
+    let cam = rt.interfaces.get::<Image>("varcolorA").unwrap();
+    cam.resume();
+    eventually(
+        "odometry from one process, sonars and frames from the other",
+        || enc.clock() > 0 && us.clock() > 0 && cam.clock() > 0,
+    );
+    assert!(other.text().contains("SUBSCRIBE jderobot_varcolorA"));
+    rt.shutdown();
+}
+
 /// A server that is not NAOqi: garbage, or a header promising a huge payload.
 fn bad_server(reply: &'static [u8]) -> (u16, Arc<AtomicUsize>) {
     let l = TcpListener::bind("127.0.0.1:0").unwrap();

@@ -1110,9 +1110,19 @@ impl Session {
     /// The connection that reaches a service's endpoints: the ServiceDirectory's
     /// own when it is among them, else the first tcp endpoint that answers.
     fn conn_for(&mut self, name: &str, endpoints: &[String]) -> Result<usize, QiError> {
-        let tcp: Vec<(String, u16)> = endpoints.iter().filter_map(|e| parse_url(e).ok()).collect();
+        let mut tcp: Vec<(String, u16)> =
+            endpoints.iter().filter_map(|e| parse_url(e).ok()).collect();
+        // The address the ServiceDirectory's connection reached (a robot lists its
+        // endpoints by IP address, the conf may name it `nao.local`).
+        let sd_ip = self.conns[0].stream.peer_addr().ok().map(|a| a.ip());
+        let is_sd_ip = |h: &str| {
+            h.parse::<std::net::IpAddr>()
+                .ok()
+                .is_some_and(|ip| Some(ip) == sd_ip)
+        };
         let same = |h: &str, p: u16| {
-            p == self.port && (h == self.host || (is_local(h) && is_local(&self.host)))
+            p == self.port
+                && (h == self.host || is_sd_ip(h) || (is_local(h) && is_local(&self.host)))
         };
         if tcp.is_empty() || tcp.iter().any(|(h, p)| same(h, *p)) {
             // No tcp endpoint at all (only `qi:` ones): the service lives in the
@@ -1134,6 +1144,11 @@ impl Session {
                 return Ok(i);
             }
         }
+        // The robot's own address first, loopback only when the robot is this machine.
+        tcp.retain(|(h, _)| {
+            !is_local(h) || is_local(&self.host) || sd_ip.is_some_and(|ip| ip.is_loopback())
+        });
+        tcp.sort_by_key(|(h, _)| !(h == &self.host || is_sd_ip(h)));
         let mut last = None;
         for (h, p) in tcp {
             match Conn::connect(&h, p, self.timeout) {

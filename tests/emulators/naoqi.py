@@ -10,6 +10,8 @@ requested fraction of the joint's speed, and serves a synthetic camera at the
 subscribed resolution, colour space and rate.
 
     naoqi.py --url tcp://127.0.0.1:PORT [--without ALMotion.move] [--bench]
+    naoqi.py --url tcp://127.0.0.1:PORT2 --join tcp://127.0.0.1:PORT --without ALMotion.
+                                          # services of another process of the robot
     naoqi.py --client tcp://127.0.0.1:PORT --camera 320x240 --seconds 3   # benchmark client
 
 Prints `READY <endpoint>` once listening; with --trace, one line per walk
@@ -305,7 +307,13 @@ def serve(args):
         svc, _, meth = w.partition(".")
         gone.setdefault(svc, set()).add(meth)
     s = qi.Session()
-    s.listenStandalone(args.url)
+    if args.join:
+        # Another process of the same robot: its services register with the
+        # ServiceDirectory at --join and are served from their own endpoint.
+        s.connect(args.join)
+        s.listen(args.url)
+    else:
+        s.listenStandalone(args.url)
     services = {
         "ALMotion": lambda c: c(),
         "ALVideoDevice": lambda c: c(args.bench),
@@ -365,6 +373,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--url", default="tcp://127.0.0.1:9559")
     ap.add_argument("--without", action="append", default=[], help="SERVICE.METHOD (or SERVICE.) to leave out")
+    ap.add_argument("--join", help="register the services with this ServiceDirectory")
     ap.add_argument("--bench", action="store_true", help="a new frame on every getImageRemote")
     ap.add_argument("--trace", action="store_true")
     ap.add_argument("--client")
