@@ -93,6 +93,7 @@ fn naobody(port: u16, lines: &str) -> String {
     )
 }
 
+#[cfg(feature = "naooperator")]
 #[test]
 fn naooperator_drives_the_nao_from_the_shell() {
     let Some(py) = python() else { return };
@@ -493,6 +494,7 @@ fn garbage_on_the_socket_is_dropped_and_the_driver_reconnects() {
     }
 }
 
+#[cfg(all(feature = "introrob", feature = "simulator"))]
 #[test]
 fn introrob_in_teleop_mode_drives_the_nao() {
     let Some(py) = python() else { return };
