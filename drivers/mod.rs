@@ -11,6 +11,8 @@ pub mod gige;
 pub mod imagefile;
 #[cfg(feature = "mplayer")]
 pub mod mplayer;
+#[cfg(feature = "naobody")]
+pub mod naobody;
 #[cfg(feature = "networkclient")]
 pub mod networkclient;
 #[cfg(feature = "opencv")]

@@ -3,11 +3,10 @@
 //! (`pantiltmotors`, watched through `pantiltencoders`) and the camera image, in one
 //! panel (a joystick, a head positioner, the image).
 //!
-//! 4.3.1 drove the Nao through NAOqi (its `naobody` driver). NAOqi is Aldebaran's
-//! proprietary middleware and is out of reach here, so there is no Nao driver:
-//! naooperator works against any driver that provides these interfaces (the
-//! simulator, player, networkclient ...), and a Nao bridge would only need to
-//! provide them.
+//! 4.3.1 drove the Nao through NAOqi with its `naobody` driver, and so does this
+//! one (`drivers/naobody`, `examples/naobody.conf`, docs/nao.md); naooperator
+//! works against any driver that provides these interfaces (naobody, the
+//! simulator, player, networkclient ...).
 //!
 //! Headless it holds the commanded values (from the conf or the name space) and
 //! writes them every iteration: the walk to `motors` (so it never goes stale) and

@@ -449,6 +449,84 @@ fn driver_targets(p: &Path) -> Vec<Target> {
             }
         },
     });
+    #[cfg(feature = "naobody")]
+    t.push(Target {
+        name: "qi",
+        seeds: {
+            use jderobot::drivers::naobody::qi::{self, Header, Sig, Value};
+            // Whole messages (header and payload) as NAOqi sends them: a capability
+            // map, a frame from getImageRemote, a ServiceInfo, an error.
+            let msg = |ty: u8, v: Value, sig: &str| {
+                let mut p = Vec::new();
+                qi::encode(&v, &Sig::parse(sig).unwrap(), &mut p).unwrap();
+                let h = Header {
+                    id: 1,
+                    size: p.len() as u32,
+                    ty,
+                    service: 1,
+                    object: 1,
+                    action: 100,
+                    ..Header::default()
+                };
+                let mut b = h.encode().to_vec();
+                b.extend_from_slice(&p);
+                b
+            };
+            vec![
+                msg(
+                    2,
+                    Value::Map(vec![(Value::str("__qi_auth_state"), Value::UInt(3))]),
+                    "{sm}",
+                ),
+                msg(
+                    2,
+                    Value::List(vec![
+                        Value::Int(2),
+                        Value::Int(1),
+                        Value::Int(3),
+                        Value::Int(13),
+                        Value::Int(0),
+                        Value::Int(0),
+                        Value::Raw(vec![1, 2, 3, 4, 5, 6]),
+                    ]),
+                    "m",
+                ),
+                msg(
+                    2,
+                    Value::Tuple(vec![
+                        Value::str("ALMotion"),
+                        Value::UInt(2),
+                        Value::str("m"),
+                        Value::UInt(7),
+                        Value::List(vec![Value::str("tcp://127.0.0.1:9559")]),
+                        Value::str("s"),
+                    ]),
+                    "(sIsI[s]s)",
+                ),
+                msg(3, Value::str("Cannot find service 'X' in index"), "m"),
+            ]
+        },
+        text: false,
+        run: |b| {
+            use jderobot::drivers::naobody::qi::{self, Sig};
+            let Ok(m) = qi::read_message(&mut &b[..]) else {
+                return;
+            };
+            for sig in [
+                "m",
+                "{sm}",
+                "(sIsI[s]ss)",
+                qi::METAOBJECT_SIG,
+                "(iiiiiiriffff)",
+                "[f]",
+            ] {
+                if let Ok(v) = qi::decode(&m.payload, &Sig::parse(sig).unwrap()) {
+                    let _ = qi::methods_of(&v);
+                    let _ = jderobot::drivers::naobody::frame(&v);
+                }
+            }
+        },
+    });
     #[cfg(feature = "_mcap")]
     t.push(Target {
         name: "mcap_messages",
