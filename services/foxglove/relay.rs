@@ -427,7 +427,7 @@ async fn relay(
                             if f.data {
                                 o.data -= 1;
                             } else {
-                                o.control -= f.bytes.len();
+                                o.control = o.control.saturating_sub(f.bytes.len());
                             }
                             Some(f)
                         }
