@@ -387,12 +387,13 @@ async fn relay(
                 if o.closed {
                     return Ok(());
                 }
-                if data && o.data >= limits.max_queue {
-                    if let Some(i) = o.frames.iter().position(|f| f.data) {
-                        o.frames.remove(i);
-                        o.data -= 1;
-                        stats.dropped.fetch_add(1, Ordering::Relaxed);
-                    }
+                if data
+                    && o.data >= limits.max_queue
+                    && let Some(i) = o.frames.iter().position(|f| f.data)
+                {
+                    o.frames.remove(i);
+                    o.data -= 1;
+                    stats.dropped.fetch_add(1, Ordering::Relaxed);
                 }
                 if data {
                     o.data += 1;
