@@ -3,10 +3,11 @@
 //! from RFC 6455 and the ws-protocol spec, reads on loopback in both cases.
 //!
 //! 1. 640x480 BGR frames per second to one client. Reference: the SDK alone (a
-//!    `WebSocketServer` and a `Channel<RawImage>` logging the same frame as fast
-//!    as it can; the client connects with `foxglove.sdk.v1`). Ours: the service
-//!    serving an image interface that a producer republishes as fast as it can
-//!    (through the relay, the client with `foxglove.websocket.v1`).
+//!    `WebSocketServer` and a `Channel<RawImage>`; a producer makes a fresh frame
+//!    every 0.1 ms and logs it, its bytes moved into the message; the client
+//!    connects with `foxglove.sdk.v1`). Ours: the same producer publishes into an
+//!    image interface that the service serves (the frame shared with the message,
+//!    no copy; through the relay, the client with `foxglove.websocket.v1`).
 //! 2. Twist → `motors`: a client publishes a Twist on `/cmd_vel`; the time until
 //!    the `motors` interface's clock moves (p50, p99).
 //! 3. CPU of the service's threads (`foxglove`, `foxglove-io`) with 10 clients on
@@ -30,6 +31,7 @@ use std::{
 
 use foxglove::{
     ChannelBuilder, Context, Encode, WebSocketServer,
+    bytes::Bytes,
     schemas::{LaserScan, RawImage},
 };
 use jderobot::{
@@ -211,8 +213,18 @@ fn sdk_fps() -> f64 {
         let stop = stop.clone();
         std::thread::spawn(move || {
             while !stop.load(Ordering::Acquire) {
-                // The same work as the service: one copy of the bytes, encode, log.
-                ch.log(&channels::raw_image("camera", SystemTime::now(), &img));
+                // The same camera as ours (a fresh frame each time), its bytes
+                // handed to the SDK without a copy, encoded and logged.
+                let frame = img.clone();
+                ch.log(&RawImage {
+                    timestamp: None,
+                    frame_id: "camera".into(),
+                    width: frame.width,
+                    height: frame.height,
+                    encoding: "bgr8".into(),
+                    step: frame.width * 3,
+                    data: Bytes::from(frame.data),
+                });
                 std::thread::sleep(Duration::from_micros(100));
             }
         })

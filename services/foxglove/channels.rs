@@ -23,7 +23,7 @@ use ::foxglove::{
 };
 
 use crate::{
-    interfaces::{Encoders, Image, Laser, PtEncoders, Sonars},
+    interfaces::{Encoders, Image, Laser, PtEncoders, Sample, Sonars},
     mcapfmt::{self, Profile, Snapshot, Source},
     world::{Ball, World},
 };
@@ -118,7 +118,7 @@ impl Out {
     /// Logs a sample of the interface `name` (`buf` is scratch).
     pub fn log(&self, name: &str, snap: &Snapshot, buf: &mut Vec<u8>) {
         match (self, snap) {
-            (Out::Raw(c), Snapshot::Image(s)) => c.log(&raw_image(name, s.time, &s.value)),
+            (Out::Raw(c), Snapshot::Image(s)) => c.log(&shared_raw_image(name, s)),
             (Out::Jpeg(c, q), Snapshot::Image(s)) => {
                 if let Some(j) = mcapfmt::jpeg(&s.value, *q) {
                     c.log(&CompressedImage {
@@ -149,6 +149,28 @@ impl Out {
             }
             _ => debug_assert!(false, "a channel of another kind than its interface"),
         }
+    }
+}
+
+/// An image sample's bytes, shared with the interface (no copy).
+struct Pixels(Arc<Sample<Image>>);
+
+impl AsRef<[u8]> for Pixels {
+    fn as_ref(&self) -> &[u8] {
+        &self.0.value.data
+    }
+}
+
+/// A `foxglove.RawImage` (`bgr8`) of an image sample, its bytes shared (not copied).
+pub fn shared_raw_image(frame: &str, s: &Arc<Sample<Image>>) -> RawImage {
+    RawImage {
+        timestamp: stamp(s.time),
+        frame_id: frame.to_string(),
+        width: s.value.width,
+        height: s.value.height,
+        encoding: "bgr8".into(),
+        step: s.value.width * 3,
+        data: Bytes::from_owner(Pixels(s.clone())),
     }
 }
 

@@ -316,9 +316,16 @@ async fn read_payload<R: AsyncRead + Unpin>(
     let have = pending.len().min(len);
     out.extend_from_slice(&pending[..have]);
     pending.drain(..have);
-    let start = out.len();
-    out.resize(start + (len - have), 0);
-    r.read_exact(&mut out[start..]).await?;
+    // Read into spare capacity (no zero-filling of a frame's bytes first).
+    let end = out.len() + (len - have);
+    out.reserve(end - out.len());
+    while out.len() < end {
+        let want = end - out.len();
+        let n = (&mut *r).take(want as u64).read_buf(out).await?;
+        if n == 0 {
+            return Err(std::io::ErrorKind::UnexpectedEof.into());
+        }
+    }
     Ok(())
 }
 
