@@ -353,7 +353,13 @@ struct Outbox {
     /// Bytes of the other frames waiting.
     control: usize,
     closed: bool,
+    /// Written frames' buffers, kept for the next frames (no allocation and no
+    /// fresh pages for each 900 kB image).
+    spare: Vec<Vec<u8>>,
 }
+
+/// Buffers kept per connection for reuse.
+const SPARE: usize = 4;
 
 /// Relays an upgraded connection until either side closes.
 async fn relay(
@@ -382,7 +388,8 @@ async fn relay(
                 else {
                     return Ok::<_, String>(());
                 };
-                let mut frame = Vec::with_capacity(hdr.len() + len as usize);
+                let mut frame = outbox.lock().spare.pop().unwrap_or_default();
+                frame.clear();
                 frame.extend_from_slice(&hdr);
                 read_payload(&mut srd, &mut pending, len as usize, &mut frame)
                     .await
@@ -455,6 +462,10 @@ async fn relay(
                         }
                         if f.data {
                             stats.sent.fetch_add(1, Ordering::Relaxed);
+                        }
+                        let mut o = outbox.lock();
+                        if o.spare.len() < SPARE && f.bytes.capacity() <= 16 << 20 {
+                            o.spare.push(f.bytes);
                         }
                     }
                     None => wake.notified().await,
