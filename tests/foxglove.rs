@@ -414,6 +414,68 @@ fn subprotocols_garbage_and_oversized_messages() {
     rt.shutdown();
 }
 
+#[test]
+fn jpeg_images_and_parameters_set_an_actuator() {
+    let (rt, a) = start("images jpeg 50\n");
+    rt.stop("introrob").unwrap();
+    let mut ws = Ws::connect(a);
+    let adv = ws.until(|j| j["op"] == "advertise");
+    let cam = adv["channels"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|c| c["topic"] == "colorA")
+        .unwrap()
+        .clone();
+    assert_eq!(cam["schemaName"], "foxglove.CompressedImage", "{cam}");
+    let id = cam["id"].as_u64().unwrap();
+    ws.text(&serde_json::json!({"op": "subscribe", "subscriptions": [{"id": 3, "channelId": id}]}));
+    let t0 = Instant::now();
+    let frame = loop {
+        assert!(t0.elapsed() < Duration::from_secs(5), "no JPEG frame");
+        let (op, p) = ws.recv().unwrap();
+        if op == 2 && p[0] == 1 && u32::from_le_bytes(p[1..5].try_into().unwrap()) == 3 {
+            break p;
+        }
+    };
+    // The message carries a JPEG (SOI marker) inside its protobuf.
+    assert!(
+        frame.windows(3).any(|w| w == [0xff, 0xd8, 0xff]),
+        "no JPEG in the message"
+    );
+    // Parameters: set motors.v as `set motors v=...` does; read encoders as `echo` does.
+    ws.text(&serde_json::json!({"op": "setParameters", "id": "s1", "parameters": [{"name": "motors.v", "value": 123.0}]}));
+    let pv = ws.until(|j| j["op"] == "parameterValues" && j["id"] == "s1");
+    assert!(
+        pv["parameters"][0]["value"]
+            .as_str()
+            .unwrap()
+            .contains("v=123.0"),
+        "{pv}"
+    );
+    let m = rt.interfaces.get::<Motors>("motors").unwrap();
+    assert_eq!(m.snapshot().v, 123.0);
+    ws.text(&serde_json::json!({"op": "setParameters", "id": "s2", "parameters": [{"name": "laser.v", "value": 1.0}]}));
+    let pv = ws.until(|j| j["op"] == "parameterValues" && j["id"] == "s2");
+    assert_eq!(
+        pv["parameters"].as_array().map(Vec::len),
+        Some(0),
+        "a sensor is not set: {pv}"
+    );
+    ws.text(
+        &serde_json::json!({"op": "getParameters", "id": "g1", "parameterNames": ["encoders"]}),
+    );
+    let pv = ws.until(|j| j["op"] == "parameterValues" && j["id"] == "g1");
+    assert!(
+        pv["parameters"][0]["value"]
+            .as_str()
+            .unwrap()
+            .contains("theta="),
+        "{pv}"
+    );
+    rt.shutdown();
+}
+
 fn rss_kb() -> u64 {
     std::fs::read_to_string("/proc/self/status")
         .unwrap()

@@ -371,3 +371,75 @@ pub struct Served {
     pub source: Source,
     pub out: Out,
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn close(a: f64, b: f64) -> bool {
+        (a - b).abs() < 1e-9
+    }
+
+    #[test]
+    fn laser_angles_ranges_and_the_sonar_ring() {
+        let t = SystemTime::UNIX_EPOCH;
+        let l = laser_scan(
+            t,
+            &Laser {
+                readings: vec![1000, 2500, 0],
+                resolution: 1.0,
+            },
+        );
+        assert_eq!(l.ranges, vec![1.0, 2.5, 0.0]);
+        assert!(close(l.start_angle, -std::f64::consts::FRAC_PI_2));
+        assert!(close(
+            l.end_angle,
+            -std::f64::consts::FRAC_PI_2 + 2f64.to_radians()
+        ));
+        assert_eq!(l.frame_id, BASE);
+        let s = sonar_scan(t, &Sonars { us: vec![500.0; 4] });
+        assert!(close(s.start_angle, -std::f64::consts::PI));
+        assert!(close(s.end_angle, std::f64::consts::FRAC_PI_2));
+        assert_eq!(s.ranges, vec![0.5; 4]);
+    }
+
+    #[test]
+    fn odometry_and_the_pan_tilt_camera_frames() {
+        let t = SystemTime::UNIX_EPOCH;
+        let (pose, tf) = odometry(
+            t,
+            &Encoders::from_pose(1500.0, -200.0, std::f32::consts::FRAC_PI_2),
+        );
+        let p = pose.pose.unwrap().position.unwrap();
+        assert!(close(p.x, 1.5) && (p.y + 0.2).abs() < 1e-6);
+        let q = tf.rotation.unwrap();
+        // (θ is an f32.)
+        assert!((q.z - std::f64::consts::FRAC_PI_4.sin()).abs() < 1e-6 && (q.w - q.z).abs() < 1e-6);
+        assert_eq!(
+            (tf.parent_frame_id.as_str(), tf.child_frame_id.as_str()),
+            (ODOM, BASE)
+        );
+        // Pan 90 deg alone: a yaw of 90 deg.
+        let c = camera(
+            t,
+            &PtEncoders {
+                pan_angle: 90.0,
+                tilt_angle: 0.0,
+            },
+        );
+        let q = c.rotation.unwrap();
+        assert!(close(q.x, 0.0) && close(q.y, 0.0) && close(q.z, q.w) && q.z > 0.0);
+        // Tilt 30 deg up alone: a pitch of -30 deg about y.
+        let c = camera(
+            t,
+            &PtEncoders {
+                pan_angle: 0.0,
+                tilt_angle: 30.0,
+            },
+        );
+        let q = c.rotation.unwrap();
+        assert!(close(q.y, (-15f64).to_radians().sin()) && close(q.x, 0.0) && close(q.z, 0.0));
+        let n = (q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w).sqrt();
+        assert!(close(n, 1.0));
+    }
+}
