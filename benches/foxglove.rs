@@ -14,7 +14,9 @@
 //!    laser (180 readings) and encoders published at 20 Hz, % of one core.
 //! 4. The recorder's Foxglove encoding: our hand-written protobuf
 //!    (`jderobot::mcapfmt::encode`) against the SDK's `foxglove::schemas` (prost)
-//!    for the same 640x480 image and 180-reading laser samples, encodes per second.
+//!    for the same 640x480 image and 180-reading laser samples, encodes per second;
+//!    and the recorder's writer path raw to disk (benches/recorder.rs's load) with
+//!    each, x real time, alternating rounds.
 //!
 //! Run: `cargo bench --features full --bench foxglove`.
 
@@ -449,6 +451,155 @@ fn recorder_encodings() {
     );
 }
 
+/// One second of the recorder bench's load (benches/recorder.rs): 640x480 BGR at
+/// 30 fps, encoders 20 Hz, laser and sonars 10 Hz.
+fn one_second(t0: SystemTime, second: u64) -> Vec<(&'static str, Snapshot)> {
+    let s = |clock, t, v| {
+        Arc::new(Sample {
+            clock,
+            stamp: Instant::now(),
+            time: t,
+            value: v,
+        })
+    };
+    let mut v = Vec::new();
+    let mut img = frame();
+    img.data[0] = second as u8;
+    for k in 0..60u64 {
+        let t = t0 + Duration::from_secs(second) + Duration::from_millis(k * 1000 / 60);
+        if k.is_multiple_of(2) {
+            v.push((
+                "camera",
+                Snapshot::Image(s(second * 30 + k / 2 + 1, t, img.clone())),
+            ));
+        }
+        if k.is_multiple_of(3) {
+            let e = Encoders::from_pose(k as f32, 2.0, 1.0);
+            v.push((
+                "encoders",
+                Snapshot::Encoders(Arc::new(Sample {
+                    clock: second * 20 + k / 3 + 1,
+                    stamp: Instant::now(),
+                    time: t,
+                    value: e,
+                })),
+            ));
+        }
+        if k.is_multiple_of(6) {
+            let l = Laser {
+                readings: (0..180).map(|i| 1000 + i * 7 + k as i32).collect(),
+                resolution: 1.0,
+            };
+            v.push((
+                "laser",
+                Snapshot::Laser(Arc::new(Sample {
+                    clock: second * 10 + k / 6 + 1,
+                    stamp: Instant::now(),
+                    time: t,
+                    value: l,
+                })),
+            ));
+        }
+    }
+    v
+}
+
+/// The recorder's writer path to a file, images and laser encoded by ours
+/// (`mcapfmt::encode`, `assets/foxglove/*.fdset`) or by the SDK's schemas (their
+/// own descriptors); the rest JSON either way.
+fn write_load(path: &Path, sdk: bool, load: &[Vec<(&str, Snapshot)>]) {
+    let profile = Profile::Foxglove { jpeg: None };
+    let mut w = mcapfmt::write_options(None, profile)
+        .create(std::fs::File::create(path).unwrap())
+        .unwrap();
+    let mut ids = std::collections::HashMap::new();
+    let mut buf = Vec::new();
+    for sec in load {
+        for (name, snap) in sec {
+            let id = *ids.entry(*name).or_insert_with(|| {
+                let schema = match snap {
+                    Snapshot::Image(_) if sdk => RawImage::get_schema(),
+                    Snapshot::Laser(_) if sdk => LaserScan::get_schema(),
+                    _ => None,
+                };
+                match schema {
+                    Some(sc) => {
+                        let sid = w.add_schema(&sc.name, &sc.encoding, &sc.data).unwrap();
+                        w.add_channel(sid, name, "protobuf", &Default::default())
+                            .unwrap()
+                    }
+                    None => mcapfmt::add_channel(&mut w, name, snap.kind(), profile)
+                        .unwrap()
+                        .unwrap(),
+                }
+            });
+            buf.clear();
+            match snap {
+                Snapshot::Image(s) if sdk => channels::shared_raw_image(name, s)
+                    .encode(&mut buf)
+                    .unwrap(),
+                Snapshot::Laser(s) if sdk => channels::laser_scan(s.time, &s.value)
+                    .encode(&mut buf)
+                    .unwrap(),
+                _ => {
+                    mcapfmt::encode(profile, name, snap, &mut buf);
+                }
+            }
+            let t = mcapfmt::nanos(snap.time());
+            w.write_to_known_channel(
+                &mcap::records::MessageHeader {
+                    channel_id: id,
+                    sequence: snap.clock() as u32,
+                    log_time: t,
+                    publish_time: t,
+                },
+                &buf,
+            )
+            .unwrap();
+        }
+    }
+    w.finish().unwrap();
+}
+
+fn recorder_write() {
+    let dir = tempfile::tempdir().unwrap();
+    let shm = tempfile::tempdir_in("/dev/shm").ok();
+    let targets: Vec<(&str, std::path::PathBuf)> =
+        std::iter::once(("disk", dir.path().join("w.mcap")))
+            .chain(shm.as_ref().map(|d| ("memory", d.path().join("w.mcap"))))
+            .collect();
+    let secs = 5u64;
+    let t0 = SystemTime::now();
+    let load: Vec<_> = (0..secs).map(|s| one_second(t0, s)).collect();
+    for (to, file) in &targets {
+        let (mut ours, mut sdk, mut ratio) = (vec![], vec![], vec![]);
+        for r in 0..ROUNDS {
+            let run = |use_sdk| {
+                let t = Instant::now();
+                write_load(file, use_sdk, &load);
+                secs as f64 / t.elapsed().as_secs_f64()
+            };
+            let (o, s) = if r % 2 == 0 {
+                let o = run(false);
+                (o, run(true))
+            } else {
+                let s = run(true);
+                (run(false), s)
+            };
+            ours.push(o);
+            sdk.push(s);
+            ratio.push(s / o);
+        }
+        let _ = std::fs::remove_file(file);
+        println!(
+            "recorder, raw to {to} (640x480 30 fps + laser + encoders), x real time: ours {:.1}, SDK schemas {:.1}; SDK/ours median {:.2}",
+            median(&mut ours),
+            median(&mut sdk),
+            median(&mut ratio)
+        );
+    }
+}
+
 fn main() {
     if std::env::args().any(|a| a == "--list") {
         return;
@@ -502,5 +653,6 @@ fn main() {
         median(&mut cpu)
     );
     recorder_encodings();
+    recorder_write();
     drop(server);
 }
