@@ -4,6 +4,8 @@
 #[cfg(feature = "gui")]
 pub mod gui;
 
+#[cfg(feature = "foxglove")]
+pub mod foxglove;
 #[cfg(feature = "networkserver")]
 pub mod networkserver;
 #[cfg(feature = "recorder")]

@@ -630,6 +630,13 @@ pub fn ps(rt: &Runtime, out: &mut dyn Write) {
     {
         w(out, format!("recorder: {}", status.line()));
     }
+    #[cfg(feature = "foxglove")]
+    if let Ok(status) = rt
+        .names
+        .import::<crate::services::foxglove::Status>("foxglove", "status")
+    {
+        w(out, format!("foxglove: {}", status.line()));
+    }
 }
 
 fn echo_line(i: &dyn AnyInterface) -> String {

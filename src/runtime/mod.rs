@@ -107,7 +107,9 @@ impl Runtime {
         &self.conf_file
     }
 
-    fn arc(&self) -> Arc<Runtime> {
+    /// The shared handle of this runtime (for a component whose callbacks outlive
+    /// its `create`, such as the foxglove service's WebSocket services).
+    pub fn arc(&self) -> Arc<Runtime> {
         self.me.upgrade().expect("runtime alive")
     }
 

@@ -1,0 +1,658 @@
+//! The `foxglove` service against the Foxglove SDK's own server, in one run
+//! (harness = false; medians of alternating rounds). One client, written here
+//! from RFC 6455 and the ws-protocol spec, reads on loopback in both cases.
+//!
+//! 1. 640x480 BGR frames per second to one client. Reference: the SDK alone (a
+//!    `WebSocketServer` and a `Channel<RawImage>`; a producer makes a fresh frame
+//!    every 0.1 ms and logs it, its bytes moved into the message; the client
+//!    connects with `foxglove.sdk.v1`). Ours: the same producer publishes into an
+//!    image interface that the service serves (the frame shared with the message,
+//!    no copy; through the relay, the client with `foxglove.websocket.v1`).
+//! 2. Twist → `motors`: a client publishes a Twist on `/cmd_vel`; the time until
+//!    the `motors` interface's clock moves (p50, p99).
+//! 3. CPU of the service's threads (`foxglove`, `foxglove-io`) with 10 clients on
+//!    laser (180 readings) and encoders published at 20 Hz, % of one core.
+//! 4. The recorder's Foxglove encoding: our hand-written protobuf
+//!    (`jderobot::mcapfmt::encode`) against the SDK's `foxglove::schemas` (prost)
+//!    for the same 640x480 image and 180-reading laser samples, encodes per second;
+//!    and the recorder's writer path raw to disk (benches/recorder.rs's load) with
+//!    each, x real time, alternating rounds.
+//!
+//! Run: `cargo bench --features full --bench foxglove`.
+
+use std::{
+    io::{Read, Write},
+    net::{SocketAddr, TcpStream},
+    path::Path,
+    sync::{
+        Arc,
+        atomic::{AtomicBool, Ordering},
+    },
+    time::{Duration, Instant, SystemTime},
+};
+
+use foxglove::{
+    ChannelBuilder, Context, Encode, WebSocketServer,
+    bytes::Bytes,
+    schemas::{LaserScan, RawImage},
+};
+use jderobot::{
+    Runtime,
+    interfaces::{Encoders, Image, Interface, Laser, Motors, Sample},
+    mcapfmt::{self, Profile, Snapshot},
+    services::foxglove::{Settings, channels, relay::Limits, start},
+};
+
+const W: u32 = 640;
+const H: u32 = 480;
+const ROUNDS: usize = 5;
+const SECS: f64 = 2.0;
+
+fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(|a, b| a.partial_cmp(b).unwrap());
+    v[v.len() / 2]
+}
+
+fn percentile(v: &mut [f64], p: f64) -> f64 {
+    v.sort_by(|a, b| a.partial_cmp(b).unwrap());
+    v[((v.len() - 1) as f64 * p).round() as usize]
+}
+
+/// A minimal WebSocket client (RFC 6455) speaking the Foxglove protocol.
+struct Ws {
+    s: TcpStream,
+    buf: Vec<u8>,
+    at: usize,
+}
+
+impl Ws {
+    fn connect(a: SocketAddr, protocol: &str) -> Ws {
+        let mut s = TcpStream::connect(a).unwrap();
+        s.set_nodelay(true).unwrap();
+        write!(
+            s,
+            "GET / HTTP/1.1\r\nHost: {a}\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n\
+             Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\
+             Sec-WebSocket-Protocol: {protocol}\r\n\r\n"
+        )
+        .unwrap();
+        let mut head = Vec::new();
+        let mut b = [0u8; 1];
+        while !head.ends_with(b"\r\n\r\n") {
+            s.read_exact(&mut b).unwrap();
+            head.push(b[0]);
+        }
+        assert!(
+            head.starts_with(b"HTTP/1.1 101"),
+            "{}",
+            String::from_utf8_lossy(&head)
+        );
+        Ws {
+            s,
+            buf: Vec::new(),
+            at: 0,
+        }
+    }
+
+    fn send(&mut self, op: u8, payload: &[u8]) {
+        let mask = [7u8, 1, 3, 5];
+        let mut f = vec![0x80 | op];
+        match payload.len() {
+            n if n < 126 => f.push(0x80 | n as u8),
+            n => {
+                f.push(0x80 | 126);
+                f.extend_from_slice(&(n as u16).to_be_bytes());
+            }
+        }
+        f.extend_from_slice(&mask);
+        f.extend(payload.iter().enumerate().map(|(i, b)| b ^ mask[i % 4]));
+        self.s.write_all(&f).unwrap();
+    }
+
+    fn fill(&mut self, n: usize) {
+        if self.at > 0 && self.buf.len() - self.at < n {
+            self.buf.drain(..self.at);
+            self.at = 0;
+        }
+        let mut chunk = [0u8; 256 * 1024];
+        while self.buf.len() - self.at < n {
+            let k = self.s.read(&mut chunk).unwrap();
+            assert!(k > 0, "closed");
+            self.buf.extend_from_slice(&chunk[..k]);
+        }
+    }
+
+    /// The next frame's opcode and payload (valid until the next call).
+    fn recv(&mut self) -> (u8, &[u8]) {
+        self.fill(2);
+        let b = &self.buf[self.at..];
+        let op = b[0] & 0x0f;
+        let (len, hl) = match b[1] & 0x7f {
+            126 => {
+                self.fill(4);
+                let b = &self.buf[self.at..];
+                (u16::from_be_bytes([b[2], b[3]]) as usize, 4)
+            }
+            127 => {
+                self.fill(10);
+                let b = &self.buf[self.at..];
+                (
+                    u64::from_be_bytes(b[2..10].try_into().unwrap()) as usize,
+                    10,
+                )
+            }
+            n => (n as usize, 2),
+        };
+        self.fill(hl + len);
+        let start = self.at + hl;
+        self.at = start + len;
+        (op, &self.buf[start..start + len])
+    }
+
+    fn subscribe_all(&mut self, topics: &[&str]) {
+        let mut left: Vec<&str> = topics.to_vec();
+        let mut n = 0;
+        while !left.is_empty() {
+            let (op, p) = self.recv();
+            if op != 1 {
+                continue;
+            }
+            let j: serde_json::Value = serde_json::from_slice(p).unwrap();
+            if j["op"] != "advertise" {
+                continue;
+            }
+            let mut subs = Vec::new();
+            for c in j["channels"].as_array().unwrap() {
+                let t = c["topic"].as_str().unwrap();
+                if let Some(i) = left.iter().position(|x| *x == t) {
+                    left.remove(i);
+                    n += 1;
+                    subs.push(serde_json::json!({"id": n, "channelId": c["id"]}));
+                }
+            }
+            let m = serde_json::json!({"op": "subscribe", "subscriptions": subs});
+            self.send(1, m.to_string().as_bytes());
+        }
+    }
+
+    /// Message-data frames received within `secs`.
+    fn count_for(&mut self, secs: f64) -> f64 {
+        let t0 = Instant::now();
+        let mut n = 0u64;
+        while t0.elapsed().as_secs_f64() < secs {
+            let (op, p) = self.recv();
+            if op == 2 && p.first() == Some(&1) {
+                n += 1;
+            }
+        }
+        n as f64 / t0.elapsed().as_secs_f64()
+    }
+}
+
+fn frame() -> Image {
+    let mut img = Image::new(W, H);
+    for (i, b) in img.data.iter_mut().enumerate() {
+        *b = (i % 251) as u8;
+    }
+    img
+}
+
+/// The SDK alone: frames/s to one client.
+fn sdk_fps() -> f64 {
+    let ctx = Context::new();
+    let server = WebSocketServer::new()
+        .context(&ctx)
+        .bind("127.0.0.1", 0)
+        .start_blocking()
+        .unwrap();
+    let a: SocketAddr = format!("127.0.0.1:{}", server.port()).parse().unwrap();
+    let ch = ChannelBuilder::new("camera")
+        .context(&ctx)
+        .build::<RawImage>();
+    let img = frame();
+    let stop = Arc::new(AtomicBool::new(false));
+    let producer = {
+        let stop = stop.clone();
+        std::thread::spawn(move || {
+            while !stop.load(Ordering::Acquire) {
+                // The same camera as ours (a fresh frame each time), its bytes
+                // handed to the SDK without a copy, encoded and logged.
+                let frame = img.clone();
+                ch.log(&RawImage {
+                    timestamp: None,
+                    frame_id: "camera".into(),
+                    width: frame.width,
+                    height: frame.height,
+                    encoding: "bgr8".into(),
+                    step: frame.width * 3,
+                    data: Bytes::from(frame.data),
+                });
+                std::thread::sleep(Duration::from_micros(100));
+            }
+        })
+    };
+    let mut ws = Ws::connect(a, "foxglove.sdk.v1");
+    ws.subscribe_all(&["camera"]);
+    ws.count_for(0.3);
+    let fps = ws.count_for(SECS);
+    stop.store(true, Ordering::Release);
+    producer.join().unwrap();
+    drop(ws);
+    server.stop().wait_blocking();
+    fps
+}
+
+fn settings(serves: &[&str]) -> Settings {
+    Settings {
+        bind: "127.0.0.1".parse().unwrap(),
+        port: 0,
+        serves: serves.iter().map(|s| s.to_string()).collect(),
+        jpeg: None,
+        world: false,
+        limits: Limits {
+            max_queue: 16,
+            max_message: 65536,
+        },
+    }
+}
+
+/// The service: frames/s of an image interface to one client.
+fn ours_fps(rt: &Runtime, a: SocketAddr, cam: &Arc<Interface<Image>>) -> f64 {
+    let stop = Arc::new(AtomicBool::new(false));
+    let producer = {
+        let stop = stop.clone();
+        let cam = cam.clone();
+        let img = frame();
+        std::thread::spawn(move || {
+            while !stop.load(Ordering::Acquire) {
+                cam.publish(img.clone()).unwrap();
+                std::thread::sleep(Duration::from_micros(100));
+            }
+        })
+    };
+    let mut ws = Ws::connect(a, "foxglove.websocket.v1");
+    ws.subscribe_all(&["varcolorA"]);
+    ws.count_for(0.3);
+    let fps = ws.count_for(SECS);
+    stop.store(true, Ordering::Release);
+    producer.join().unwrap();
+    let _ = rt;
+    fps
+}
+
+fn twist_latency(a: SocketAddr, motors: &Arc<Interface<Motors>>) -> (f64, f64) {
+    let mut ws = Ws::connect(a, "foxglove.websocket.v1");
+    let adv = serde_json::json!({"op": "advertise", "channels": [
+        {"id": 1, "topic": "/cmd_vel", "encoding": "json", "schemaName": "geometry_msgs/msg/Twist"}]});
+    ws.send(1, adv.to_string().as_bytes());
+    std::thread::sleep(Duration::from_millis(200));
+    let mut lat = Vec::new();
+    for i in 0..400 {
+        let before = motors.clock();
+        let body = format!(
+            r#"{{"linear":{{"x":{}}},"angular":{{"z":0.1}}}}"#,
+            0.1 + i as f64 * 1e-4
+        );
+        let mut msg = vec![1u8, 1, 0, 0, 0];
+        msg.extend_from_slice(body.as_bytes());
+        let t0 = Instant::now();
+        ws.send(2, &msg);
+        while motors.clock() == before {
+            std::hint::spin_loop();
+            assert!(t0.elapsed() < Duration::from_secs(2), "no motors write");
+        }
+        lat.push(t0.elapsed().as_secs_f64() * 1e3);
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    (percentile(&mut lat, 0.5), percentile(&mut lat, 0.99))
+}
+
+/// utime + stime (s) of this process's threads whose name starts with `prefix`.
+fn threads_cpu(prefix: &str) -> f64 {
+    let tick = unsafe { libc::sysconf(libc::_SC_CLK_TCK) } as f64;
+    let mut total = 0.0;
+    for t in std::fs::read_dir("/proc/self/task").unwrap().flatten() {
+        let Ok(stat) = std::fs::read_to_string(t.path().join("stat")) else {
+            continue;
+        };
+        let (Some(open), Some(close)) = (stat.find('('), stat.rfind(')')) else {
+            continue;
+        };
+        if !stat[open + 1..close].starts_with(prefix) {
+            continue;
+        }
+        let f: Vec<&str> = stat[close + 2..].split_whitespace().collect();
+        total += (f[11].parse::<f64>().unwrap() + f[12].parse::<f64>().unwrap()) / tick;
+    }
+    total
+}
+
+fn cpu_ten_clients(
+    a: SocketAddr,
+    laser: &Arc<Interface<Laser>>,
+    enc: &Arc<Interface<Encoders>>,
+) -> f64 {
+    let stop = Arc::new(AtomicBool::new(false));
+    let producer = {
+        let (stop, laser, enc) = (stop.clone(), laser.clone(), enc.clone());
+        std::thread::spawn(move || {
+            let mut k = 0.0f32;
+            while !stop.load(Ordering::Acquire) {
+                k += 1.0;
+                laser
+                    .publish(Laser {
+                        readings: (0..180)
+                            .map(|i| 1000 + ((i as f32 + k) % 50.0) as i32)
+                            .collect(),
+                        resolution: 1.0,
+                    })
+                    .unwrap();
+                enc.publish(Encoders::from_pose(k, 2.0 * k, 0.01 * k))
+                    .unwrap();
+                std::thread::sleep(Duration::from_millis(50));
+            }
+        })
+    };
+    let readers: Vec<_> = (0..10)
+        .map(|_| {
+            let stop = stop.clone();
+            std::thread::spawn(move || {
+                let mut ws = Ws::connect(a, "foxglove.websocket.v1");
+                ws.subscribe_all(&["laser", "encoders", "/tf"]);
+                ws.s.set_read_timeout(Some(Duration::from_millis(200)))
+                    .unwrap();
+                let mut n = 0u64;
+                while !stop.load(Ordering::Acquire) {
+                    let mut b = [0u8; 65536];
+                    match ws.s.read(&mut b) {
+                        Ok(0) => break,
+                        Ok(k) => n += k as u64,
+                        Err(_) => {}
+                    }
+                }
+                n
+            })
+        })
+        .collect();
+    std::thread::sleep(Duration::from_millis(500));
+    let (c0, t0) = (threads_cpu("foxglove"), Instant::now());
+    std::thread::sleep(Duration::from_secs(5));
+    let pct = (threads_cpu("foxglove") - c0) / t0.elapsed().as_secs_f64() * 100.0;
+    stop.store(true, Ordering::Release);
+    producer.join().unwrap();
+    let bytes: u64 = readers.into_iter().map(|r| r.join().unwrap()).sum();
+    assert!(bytes > 0, "the clients read nothing");
+    pct
+}
+
+/// Encodes per second of `f` over ~0.5 s.
+fn rate(mut f: impl FnMut()) -> f64 {
+    let t0 = Instant::now();
+    let mut n = 0u64;
+    while t0.elapsed() < Duration::from_millis(500) {
+        f();
+        n += 1;
+    }
+    n as f64 / t0.elapsed().as_secs_f64()
+}
+
+fn recorder_encodings() {
+    let sample = |value| Sample {
+        clock: 1,
+        stamp: Instant::now(),
+        time: SystemTime::now(),
+        value,
+    };
+    let img = Arc::new(sample(frame()));
+    let laser = Laser {
+        readings: (0..180).map(|i| 1000 + i).collect(),
+        resolution: 1.0,
+    };
+    let ls = Arc::new(Sample {
+        clock: 1,
+        stamp: Instant::now(),
+        time: SystemTime::now(),
+        value: laser,
+    });
+    let (mut ours_i, mut sdk_i, mut ours_l, mut sdk_l) = (vec![], vec![], vec![], vec![]);
+    let mut buf = Vec::new();
+    let mut out = Vec::new();
+    for _ in 0..ROUNDS {
+        let snap = Snapshot::Image(img.clone());
+        ours_i.push(rate(|| {
+            mcapfmt::encode(Profile::Foxglove { jpeg: None }, "colorA", &snap, &mut buf);
+        }));
+        sdk_i.push(rate(|| {
+            out.clear();
+            channels::raw_image("colorA", img.time, &img.value)
+                .encode(&mut out)
+                .unwrap();
+        }));
+        let snap = Snapshot::Laser(ls.clone());
+        ours_l.push(rate(|| {
+            mcapfmt::encode(Profile::Foxglove { jpeg: None }, "laser", &snap, &mut buf);
+        }));
+        sdk_l.push(rate(|| {
+            out.clear();
+            let m: LaserScan = channels::laser_scan(ls.time, &ls.value);
+            m.encode(&mut out).unwrap();
+        }));
+    }
+    let (oi, si, ol, sl) = (
+        median(&mut ours_i),
+        median(&mut sdk_i),
+        median(&mut ours_l),
+        median(&mut sdk_l),
+    );
+    println!(
+        "recorder encoding, 640x480 RawImage: ours {oi:.0}/s, SDK schemas {si:.0}/s (SDK/ours {:.2}); 180-reading LaserScan: ours {ol:.0}/s, SDK {sl:.0}/s ({:.2})",
+        si / oi,
+        sl / ol
+    );
+}
+
+/// One second of the recorder bench's load (benches/recorder.rs): 640x480 BGR at
+/// 30 fps, encoders 20 Hz, laser and sonars 10 Hz.
+fn one_second(t0: SystemTime, second: u64) -> Vec<(&'static str, Snapshot)> {
+    let s = |clock, t, v| {
+        Arc::new(Sample {
+            clock,
+            stamp: Instant::now(),
+            time: t,
+            value: v,
+        })
+    };
+    let mut v = Vec::new();
+    let mut img = frame();
+    img.data[0] = second as u8;
+    for k in 0..60u64 {
+        let t = t0 + Duration::from_secs(second) + Duration::from_millis(k * 1000 / 60);
+        if k.is_multiple_of(2) {
+            v.push((
+                "camera",
+                Snapshot::Image(s(second * 30 + k / 2 + 1, t, img.clone())),
+            ));
+        }
+        if k.is_multiple_of(3) {
+            let e = Encoders::from_pose(k as f32, 2.0, 1.0);
+            v.push((
+                "encoders",
+                Snapshot::Encoders(Arc::new(Sample {
+                    clock: second * 20 + k / 3 + 1,
+                    stamp: Instant::now(),
+                    time: t,
+                    value: e,
+                })),
+            ));
+        }
+        if k.is_multiple_of(6) {
+            let l = Laser {
+                readings: (0..180).map(|i| 1000 + i * 7 + k as i32).collect(),
+                resolution: 1.0,
+            };
+            v.push((
+                "laser",
+                Snapshot::Laser(Arc::new(Sample {
+                    clock: second * 10 + k / 6 + 1,
+                    stamp: Instant::now(),
+                    time: t,
+                    value: l,
+                })),
+            ));
+        }
+    }
+    v
+}
+
+/// The recorder's writer path to a file, images and laser encoded by ours
+/// (`mcapfmt::encode`, `assets/foxglove/*.fdset`) or by the SDK's schemas (their
+/// own descriptors); the rest JSON either way.
+fn write_load(path: &Path, sdk: bool, load: &[Vec<(&str, Snapshot)>]) {
+    let profile = Profile::Foxglove { jpeg: None };
+    let mut w = mcapfmt::write_options(None, profile)
+        .create(std::fs::File::create(path).unwrap())
+        .unwrap();
+    let mut ids = std::collections::HashMap::new();
+    let mut buf = Vec::new();
+    for sec in load {
+        for (name, snap) in sec {
+            let id = *ids.entry(*name).or_insert_with(|| {
+                let schema = match snap {
+                    Snapshot::Image(_) if sdk => RawImage::get_schema(),
+                    Snapshot::Laser(_) if sdk => LaserScan::get_schema(),
+                    _ => None,
+                };
+                match schema {
+                    Some(sc) => {
+                        let sid = w.add_schema(&sc.name, &sc.encoding, &sc.data).unwrap();
+                        w.add_channel(sid, name, "protobuf", &Default::default())
+                            .unwrap()
+                    }
+                    None => mcapfmt::add_channel(&mut w, name, snap.kind(), profile)
+                        .unwrap()
+                        .unwrap(),
+                }
+            });
+            buf.clear();
+            match snap {
+                Snapshot::Image(s) if sdk => channels::shared_raw_image(name, s)
+                    .encode(&mut buf)
+                    .unwrap(),
+                Snapshot::Laser(s) if sdk => channels::laser_scan(s.time, &s.value)
+                    .encode(&mut buf)
+                    .unwrap(),
+                _ => {
+                    mcapfmt::encode(profile, name, snap, &mut buf);
+                }
+            }
+            let t = mcapfmt::nanos(snap.time());
+            w.write_to_known_channel(
+                &mcap::records::MessageHeader {
+                    channel_id: id,
+                    sequence: snap.clock() as u32,
+                    log_time: t,
+                    publish_time: t,
+                },
+                &buf,
+            )
+            .unwrap();
+        }
+    }
+    w.finish().unwrap();
+}
+
+fn recorder_write() {
+    let dir = tempfile::tempdir().unwrap();
+    let shm = tempfile::tempdir_in("/dev/shm").ok();
+    let targets: Vec<(&str, std::path::PathBuf)> =
+        std::iter::once(("disk", dir.path().join("w.mcap")))
+            .chain(shm.as_ref().map(|d| ("memory", d.path().join("w.mcap"))))
+            .collect();
+    let secs = 5u64;
+    let t0 = SystemTime::now();
+    let load: Vec<_> = (0..secs).map(|s| one_second(t0, s)).collect();
+    for (to, file) in &targets {
+        let (mut ours, mut sdk, mut ratio) = (vec![], vec![], vec![]);
+        for r in 0..ROUNDS {
+            let run = |use_sdk| {
+                let t = Instant::now();
+                write_load(file, use_sdk, &load);
+                secs as f64 / t.elapsed().as_secs_f64()
+            };
+            let (o, s) = if r % 2 == 0 {
+                let o = run(false);
+                (o, run(true))
+            } else {
+                let s = run(true);
+                (run(false), s)
+            };
+            ours.push(o);
+            sdk.push(s);
+            ratio.push(s / o);
+        }
+        let _ = std::fs::remove_file(file);
+        println!(
+            "recorder, raw to {to} (640x480 30 fps + laser + encoders), x real time: ours {:.1}, SDK schemas {:.1}; SDK/ours median {:.2}",
+            median(&mut ours),
+            median(&mut sdk),
+            median(&mut ratio)
+        );
+    }
+}
+
+fn main() {
+    if std::env::args().any(|a| a == "--list") {
+        return;
+    }
+    let rt = Runtime::new(Path::new("bench.conf"));
+    let cam = rt
+        .interfaces
+        .provide::<Image>("varcolorA", "bench")
+        .unwrap();
+    let motors = rt.interfaces.provide::<Motors>("motors", "bench").unwrap();
+    let laser = rt.interfaces.provide::<Laser>("laser", "bench").unwrap();
+    let enc = rt
+        .interfaces
+        .provide::<Encoders>("encoders", "bench")
+        .unwrap();
+    let server = start(
+        &settings(&["varcolorA", "motors", "laser", "encoders"]),
+        &rt,
+    )
+    .unwrap();
+    let a = server.local_addr();
+    println!("foxglove service vs the Foxglove SDK's own server, loopback, {W}x{H} BGR RawImage");
+    let (mut sdk, mut ours, mut ratio) = (vec![], vec![], vec![]);
+    for r in 0..ROUNDS {
+        let (s, o) = if r % 2 == 0 {
+            let s = sdk_fps();
+            (s, ours_fps(&rt, a, &cam))
+        } else {
+            let o = ours_fps(&rt, a, &cam);
+            (sdk_fps(), o)
+        };
+        println!(
+            "  round {r}: SDK alone {s:.0} frames/s, jderobot {o:.0} frames/s ({:.0} %)",
+            o / s * 100.0
+        );
+        sdk.push(s);
+        ours.push(o);
+        ratio.push(o / s);
+    }
+    println!(
+        "frames/s to one client: median SDK {:.0}, jderobot {:.0}; ratio median {:.0} % (goal >= 90 %)",
+        median(&mut sdk),
+        median(&mut ours),
+        median(&mut ratio) * 100.0
+    );
+    let (p50, p99) = twist_latency(a, &motors);
+    println!("Twist -> motors: p50 {p50:.3} ms, p99 {p99:.3} ms (goal p50 <= 1 ms)");
+    let mut cpu: Vec<f64> = (0..3).map(|_| cpu_ten_clients(a, &laser, &enc)).collect();
+    println!(
+        "CPU of the service's threads, 10 clients on laser + encoders (+/tf) at 20 Hz: median {:.1} % of one core",
+        median(&mut cpu)
+    );
+    recorder_encodings();
+    recorder_write();
+    drop(server);
+}
