@@ -62,6 +62,10 @@ type Row = (&'static str, f64, f64);
 
 impl eframe::App for App {
     fn ui(&mut self, ui: &mut egui::Ui, _frame: &mut eframe::Frame) {
+        if self.phase >= self.phases.len() {
+            ui.ctx().send_viewport_cmd(egui::ViewportCommand::Close);
+            return;
+        }
         // Keep the robot turning (the command goes stale after motors_timeout).
         let _ = self.motors.write(|m| {
             m.v = 0.0;
@@ -240,6 +244,7 @@ fn main() {
          with opengldemo and opengl_viewer shown {with:.1} % ({:+.1} points)",
         with - without
     );
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 fn tempfile_dir() -> PathBuf {

@@ -722,8 +722,9 @@ impl Panel for ViewerPanel {
             ));
         });
         ui.horizontal(|ui| {
-            ui.label("view fovy");
-            ui.add(egui::Slider::new(&mut self.view.fovy_deg, 5.0..=150.0).suffix(" deg"));
+            let l = ui.label("view fovy");
+            ui.add(egui::Slider::new(&mut self.view.fovy_deg, 5.0..=150.0).suffix(" deg"))
+                .labelled_by(l.id);
         });
         // The window repaints when an interface changes (the GUI host watches
         // them) and on input: nothing to ask for here.

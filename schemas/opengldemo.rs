@@ -414,11 +414,13 @@ impl Panel for DemoPanel {
         }
         ui.horizontal(|ui| {
             ui.checkbox(&mut v.rotate, "rotate");
+            let l = ui.label("speed");
             ui.add(
                 egui::DragValue::new(&mut v.rotate_speed)
                     .range(-360.0..=360.0)
                     .suffix(" deg/s"),
-            );
+            )
+            .labelled_by(l.id);
             if ui.button("home").clicked() {
                 v.camera = self.home;
             }
@@ -431,14 +433,17 @@ impl Panel for DemoPanel {
         let r = CAMERA_RANGE;
         egui::Grid::new("opengldemo_camera").show(ui, |ui| {
             for (k, name) in ["xcam", "ycam", "zcam"].into_iter().enumerate() {
-                ui.label(name);
-                ui.add(egui::Slider::new(&mut v.camera.position[k], -r..=r).suffix(" mm"));
-                ui.label(["foax", "foay", "foaz"][k]);
-                ui.add(egui::Slider::new(&mut v.camera.foa[k], -r..=r).suffix(" mm"));
+                let l = ui.label(name);
+                ui.add(egui::Slider::new(&mut v.camera.position[k], -r..=r).suffix(" mm"))
+                    .labelled_by(l.id);
+                let l = ui.label(["foax", "foay", "foaz"][k]);
+                ui.add(egui::Slider::new(&mut v.camera.foa[k], -r..=r).suffix(" mm"))
+                    .labelled_by(l.id);
                 ui.end_row();
             }
-            ui.label("fovy");
-            ui.add(egui::Slider::new(&mut v.camera.fovy_deg, 5.0..=150.0).suffix(" deg"));
+            let l = ui.label("fovy");
+            ui.add(egui::Slider::new(&mut v.camera.fovy_deg, 5.0..=150.0).suffix(" deg"))
+                .labelled_by(l.id);
             ui.end_row();
         });
         if v != before {

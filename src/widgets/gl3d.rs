@@ -701,3 +701,74 @@ pub fn canvas_size(ui: &Ui) -> egui::Vec2 {
     let h = (w * 0.75).min(visible).max(120.0);
     egui::vec2(w, h.round())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cam() -> LookAtCamera {
+        LookAtCamera {
+            position: [4000.0, 0.0, 3000.0],
+            foa: [1000.0, 500.0, 0.0],
+            fovy_deg: 45.0,
+        }
+    }
+
+    #[test]
+    fn orbiting_keeps_the_focus_distance_and_height() {
+        let c = cam();
+        let (r, az, el) = c.spherical();
+        let o = c.orbited(90.0);
+        let (r2, az2, el2) = o.spherical();
+        assert!((r - r2).abs() < 1e-6 && (el - el2).abs() < 1e-9);
+        assert!(((az2 - az).rem_euclid(std::f64::consts::TAU) - 90f64.to_radians()).abs() < 1e-9);
+        assert_eq!(o.foa, c.foa);
+        assert!((o.position[2] - 3000.0).abs() < 1e-6);
+        // Four quarter turns come back.
+        let back = o.orbited(90.0).orbited(90.0).orbited(90.0);
+        for k in 0..3 {
+            assert!((back.position[k] - c.position[k]).abs() < 1e-6);
+        }
+    }
+
+    #[test]
+    fn drag_and_zoom() {
+        let c = cam();
+        let (r, _, el) = c.spherical();
+        let d = c.dragged(egui::vec2(0.0, 40.0));
+        assert!(d.spherical().2 > el, "dragging down raises the camera");
+        let z = c.zoomed(200.0);
+        assert!((z.spherical().0 - r / std::f64::consts::E).abs() < 1e-6);
+        let far = c.zoomed(-1.0e6);
+        assert!((far.spherical().0 - LOOK_DISTANCE_RANGE.1).abs() < 1e-6);
+        // Never past the pole.
+        let top = c.dragged(egui::vec2(0.0, 10_000.0));
+        assert!(top.spherical().2 <= 89f64.to_radians() + 1e-9);
+    }
+
+    #[test]
+    fn the_progeo_camera_uses_the_opengl_mapping() {
+        let p = cam().progeo(640, 480);
+        assert_eq!((p.columns, p.rows, p.u0, p.v0), (640, 480, 240.0, 320.0));
+        let f = crate::progeo::focal_from_fov(480.0, 45f64.to_radians());
+        assert!((p.fdistx - f).abs() < 1e-9 && (p.fdisty - f).abs() < 1e-9);
+        // The focus of attention projects to the optical centre.
+        let q = p.project(crate::progeo::HPoint3D::point(1000.0, 500.0, 0.0));
+        assert!((q.x - 240.0).abs() < 1e-6 && (q.y - 320.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn meshes_keep_their_ids_and_builders_split_lines_from_triangles() {
+        let mut b = MeshBuilder::default();
+        b.cuboid([0.0; 3], [1.0; 3], [1.0, 0.0, 0.0], Some([0.0; 3]));
+        let (l, t) = b.build();
+        let (l, t) = (l.unwrap(), t.unwrap());
+        assert_eq!(l.vertices.len(), 24);
+        assert_eq!(t.vertices.len(), 36);
+        assert_ne!(l.id(), t.id());
+        // The top face is lit more than the sides: shading stays within 0.65..1.
+        for v in &t.vertices {
+            assert!(v.color[0] >= 0.65 - 1e-6 && v.color[0] <= 1.0 + 1e-6);
+        }
+    }
+}
