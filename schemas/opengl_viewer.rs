@@ -60,7 +60,7 @@ use crate::{
         ComponentConf,
         settings::{self, CYCLE, Setting, float, on_off, path, word},
     },
-    interfaces::{Encoders, Interface, Laser, PtEncoders, Sonars},
+    interfaces::{Encoders, Interface, InterfaceValue, Laser, PtEncoders, Sonars},
     progeo::{GlCamera, HPoint2D, PinholeCamera},
     runtime::{Context, Panel, Runtime, Schema},
     widgets::{
@@ -575,7 +575,8 @@ const SONAR_HEIGHT: f32 = 180.0;
 /// The panel's cached sensor meshes and what they were built from.
 #[derive(Default)]
 struct Dynamic {
-    key: (u64, u64, u64, u64),
+    clocks: (u64, u64, u64, u64),
+    prints: (u64, u64, u64, u64),
     draws: Vec<Draw>,
 }
 
@@ -658,19 +659,49 @@ impl Panel for ViewerPanel {
             .map(|e| e.read().value)
             .unwrap_or_default();
         let pt = self.dev.pantilt.as_ref().map(|p| p.read().value);
-        // The sensors' meshes are rebuilt only when a value changed.
+        // The sensors' meshes are rebuilt only when a value changed (a clock that
+        // moved with the same value keeps them, so an unchanged scene is not drawn
+        // again: see gl3d's offscreen picture).
         let clock = |c: Option<u64>| c.unwrap_or(0);
-        let key = (
+        let clocks = (
             clock(self.dev.encoders.as_ref().map(|i| i.clock())),
             clock(self.dev.laser.as_ref().map(|i| i.clock())),
             clock(self.dev.sonars.as_ref().map(|i| i.clock())),
             clock(self.dev.pantilt.as_ref().map(|i| i.clock())),
         );
-        if self.dynamic.as_ref().is_none_or(|d| d.key != key) {
-            self.dynamic = Some(Dynamic {
-                key,
-                draws: self.sensors(&pose, pt),
-            });
+        if self.dynamic.as_ref().is_none_or(|d| d.clocks != clocks) {
+            let print = |v: Option<u64>| v.unwrap_or(0);
+            let prints = (
+                print(
+                    self.dev
+                        .encoders
+                        .as_ref()
+                        .map(|i| i.read().value.fingerprint()),
+                ),
+                print(
+                    self.dev
+                        .laser
+                        .as_ref()
+                        .map(|i| i.read().value.fingerprint()),
+                ),
+                print(
+                    self.dev
+                        .sonars
+                        .as_ref()
+                        .map(|i| i.read().value.fingerprint()),
+                ),
+                print(pt.map(|p| p.fingerprint())),
+            );
+            match self.dynamic.as_mut() {
+                Some(d) if d.prints == prints => d.clocks = clocks,
+                _ => {
+                    self.dynamic = Some(Dynamic {
+                        clocks,
+                        prints,
+                        draws: self.sensors(&pose, pt),
+                    })
+                }
+            }
         }
         let here = [pose.x as f64, pose.y as f64];
         if self.follow

@@ -15,6 +15,11 @@
 //!   only its rectangle (colour and depth, scissored), enables depth testing, and
 //!   restores what it changed (depth test off, blending on, scissor back to egui's
 //!   clip, no vertex array bound); egui's painter resets the rest after it.
+//! - Each view keeps its last picture offscreen (a framebuffer with colour and a
+//!   24-bit depth buffer): a frame whose camera, meshes and model matrices are
+//!   those of the last one (a heartbeat repaint while nothing moves) only copies
+//!   it to the window (`glBlitFramebuffer`) instead of drawing the scene again.
+//!   Without framebuffer objects it draws every frame directly.
 //! - The window must have a depth buffer: the GUI host asks for 24 bits
 //!   ([`crate::gui::run_window`]).
 //!
@@ -246,6 +251,18 @@ struct Gpu {
     program: glow::Program,
     u_mvp: Option<glow::UniformLocation>,
     meshes: HashMap<u64, GpuMesh>,
+    /// The last picture, offscreen (see [`Gpu::draw`]).
+    cache: Option<Cache>,
+    cache_failed: bool,
+}
+
+/// An offscreen picture and the [`frame_key`] it was drawn for.
+struct Cache {
+    fbo: glow::Framebuffer,
+    color: glow::Renderbuffer,
+    depth: glow::Renderbuffer,
+    size: (i32, i32),
+    key: Option<u64>,
 }
 
 /// GPU state shared with the paint callback (created on the first paint, where
@@ -373,6 +390,8 @@ impl Gpu {
                 program,
                 u_mvp,
                 meshes: HashMap::new(),
+                cache: None,
+                cache_failed: false,
             })
         }
     }
@@ -448,8 +467,68 @@ impl Gpu {
             if x1 <= x0 || y1 <= y0 {
                 return (0, 0);
             }
+            let size = (vp.width_px, vp.height_px);
+            let key = frame_key(frame, size);
+            let target = gl.get_parameter_framebuffer(glow::DRAW_FRAMEBUFFER_BINDING);
+            let mut drawn = (0, 0);
+            // Draw into the cached picture when the frame changed, then copy it to
+            // the window: an unchanged scene (a heartbeat frame) costs one copy.
+            if self.ensure_cache(gl, size) {
+                let cache = self.cache.as_ref().expect("cache");
+                let (fbo, fresh) = (cache.fbo, cache.key != Some(key));
+                if fresh {
+                    gl.bind_framebuffer(glow::FRAMEBUFFER, Some(fbo));
+                    gl.viewport(0, 0, size.0, size.1);
+                    gl.disable(glow::SCISSOR_TEST);
+                    drawn = self.render(gl, frame);
+                    if let Some(c) = self.cache.as_mut() {
+                        c.key = Some(key);
+                    }
+                }
+                gl.bind_framebuffer(glow::READ_FRAMEBUFFER, Some(fbo));
+                gl.bind_framebuffer(glow::DRAW_FRAMEBUFFER, target);
+                gl.enable(glow::SCISSOR_TEST);
+                gl.scissor(x0, y0, x1 - x0, y1 - y0);
+                gl.blit_framebuffer(
+                    0,
+                    0,
+                    size.0,
+                    size.1,
+                    vp.left_px,
+                    vp.from_bottom_px,
+                    vp.left_px + size.0,
+                    vp.from_bottom_px + size.1,
+                    glow::COLOR_BUFFER_BIT,
+                    glow::NEAREST,
+                );
+                gl.bind_framebuffer(glow::FRAMEBUFFER, target);
+                gl.viewport(vp.left_px, vp.from_bottom_px, size.0, size.1);
+            } else {
+                gl.enable(glow::SCISSOR_TEST);
+                gl.scissor(x0, y0, x1 - x0, y1 - y0);
+                drawn = self.render(gl, frame);
+            }
+            // Restore what egui expects (its painter resets program, viewport and
+            // blending function after the callback).
+            gl.bind_vertex_array(None);
+            gl.use_program(None);
+            gl.disable(glow::DEPTH_TEST);
+            gl.enable(glow::BLEND);
             gl.enable(glow::SCISSOR_TEST);
-            gl.scissor(x0, y0, x1 - x0, y1 - y0);
+            gl.scissor(
+                clip.left_px,
+                clip.from_bottom_px,
+                clip.width_px,
+                clip.height_px,
+            );
+            drawn
+        }
+    }
+
+    /// Clears the bound framebuffer's viewport (and scissor) and draws `frame`
+    /// with depth testing; (meshes, vertices) drawn.
+    unsafe fn render(&self, gl: &glow::Context, frame: &Frame3D) -> (usize, usize) {
+        unsafe {
             let [r, g, b] = frame.clear;
             gl.clear_color(r, g, b, 1.0);
             gl.depth_mask(true);
@@ -474,21 +553,105 @@ impl Gpu {
                 meshes += 1;
                 vertices += m.count as usize;
             }
-            // Restore what egui expects (its painter resets program, viewport and
-            // blending function after the callback).
             gl.bind_vertex_array(None);
-            gl.use_program(None);
-            gl.disable(glow::DEPTH_TEST);
-            gl.enable(glow::BLEND);
-            gl.scissor(
-                clip.left_px,
-                clip.from_bottom_px,
-                clip.width_px,
-                clip.height_px,
-            );
             (meshes, vertices)
         }
     }
+
+    /// An offscreen framebuffer (colour and 24-bit depth) of `size` pixels;
+    /// false if the context cannot make one (then frames are drawn directly).
+    unsafe fn ensure_cache(&mut self, gl: &glow::Context, size: (i32, i32)) -> bool {
+        unsafe {
+            if self.cache_failed {
+                return false;
+            }
+            if self.cache.as_ref().is_some_and(|c| c.size == size) {
+                return true;
+            }
+            if let Some(c) = self.cache.take() {
+                gl.delete_framebuffer(c.fbo);
+                gl.delete_renderbuffer(c.color);
+                gl.delete_renderbuffer(c.depth);
+            }
+            let made = (|| -> Result<Cache, String> {
+                let fbo = gl.create_framebuffer()?;
+                let color = gl.create_renderbuffer()?;
+                let depth = gl.create_renderbuffer()?;
+                gl.bind_renderbuffer(glow::RENDERBUFFER, Some(color));
+                gl.renderbuffer_storage(glow::RENDERBUFFER, glow::RGBA8, size.0, size.1);
+                gl.bind_renderbuffer(glow::RENDERBUFFER, Some(depth));
+                gl.renderbuffer_storage(
+                    glow::RENDERBUFFER,
+                    glow::DEPTH_COMPONENT24,
+                    size.0,
+                    size.1,
+                );
+                gl.bind_renderbuffer(glow::RENDERBUFFER, None);
+                let previous = gl.get_parameter_framebuffer(glow::FRAMEBUFFER_BINDING);
+                gl.bind_framebuffer(glow::FRAMEBUFFER, Some(fbo));
+                gl.framebuffer_renderbuffer(
+                    glow::FRAMEBUFFER,
+                    glow::COLOR_ATTACHMENT0,
+                    glow::RENDERBUFFER,
+                    Some(color),
+                );
+                gl.framebuffer_renderbuffer(
+                    glow::FRAMEBUFFER,
+                    glow::DEPTH_ATTACHMENT,
+                    glow::RENDERBUFFER,
+                    Some(depth),
+                );
+                let status = gl.check_framebuffer_status(glow::FRAMEBUFFER);
+                gl.bind_framebuffer(glow::FRAMEBUFFER, previous);
+                if status != glow::FRAMEBUFFER_COMPLETE {
+                    gl.delete_framebuffer(fbo);
+                    gl.delete_renderbuffer(color);
+                    gl.delete_renderbuffer(depth);
+                    return Err(format!("framebuffer incomplete (0x{status:x})"));
+                }
+                Ok(Cache {
+                    fbo,
+                    color,
+                    depth,
+                    size,
+                    key: None,
+                })
+            })();
+            match made {
+                Ok(c) => {
+                    self.cache = Some(c);
+                    true
+                }
+                Err(e) => {
+                    tracing::warn!("gl3d: no offscreen framebuffer ({e}); drawing every frame");
+                    self.cache_failed = true;
+                    false
+                }
+            }
+        }
+    }
+}
+
+/// A hash of everything a frame's picture depends on (camera, clipping,
+/// background, meshes and their model matrices, viewport size).
+fn frame_key(frame: &Frame3D, size: (i32, i32)) -> u64 {
+    use std::hash::{Hash, Hasher};
+    let mut h = std::collections::hash_map::DefaultHasher::new();
+    size.hash(&mut h);
+    let m = frame.camera.gl_projection(frame.near, frame.far) * frame.camera.gl_view();
+    for v in m.iter() {
+        v.to_bits().hash(&mut h);
+    }
+    for c in frame.clear {
+        c.to_bits().hash(&mut h);
+    }
+    for d in &frame.draws {
+        d.mesh.id.hash(&mut h);
+        for v in d.model.iter() {
+            v.to_bits().hash(&mut h);
+        }
+    }
+    h.finish()
 }
 
 /// A camera placed by its position and focus of attention (4.3's xcam, ycam, zcam
