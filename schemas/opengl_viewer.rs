@@ -44,7 +44,7 @@
 //! drivers publish): encoders (x, y mm, theta rad), laser (mm, 1 reading per
 //! 1/resolution degree from -90°), sonars (mm, the Pioneer ring), pantiltencoders
 //! (deg); each is skipped when nothing provides it.
-//! System packages: none beyond the GUI's (OpenGL 2.1 or ES 2, e.g. Mesa).
+//! System packages: none beyond the GUI's (OpenGL 3.0 or ES 3.0, e.g. Mesa).
 
 use std::{
     io::BufRead,

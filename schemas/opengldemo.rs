@@ -30,7 +30,7 @@
 //! Interfaces: none. Name space, component `opengldemo` (the schema's name): `view`
 //! (`parking_lot::Mutex<DemoView>`: the camera and the rotate toggle, shared by the
 //! schema, its panel and anyone else).
-//! System packages: none beyond the GUI's (OpenGL 2.1 or ES 2, e.g. Mesa).
+//! System packages: none beyond the GUI's (OpenGL 3.0 or ES 3.0, e.g. Mesa).
 
 use std::{
     sync::Arc,
@@ -52,6 +52,9 @@ use crate::{
     },
     world::{self, World},
 };
+
+/// While rotating, the next frame in this long (the GUI host's ~30 fps pacing).
+const REPAINT: Duration = Duration::from_millis(33);
 
 /// A position or focus coordinate's slider range, mm.
 pub const CAMERA_RANGE: f64 = 60_000.0;
@@ -459,7 +462,7 @@ impl Panel for DemoPanel {
         let generation = self.view.lock().generation;
         // Repaint while the camera orbits, or once after a change; nothing when idle.
         if v.rotate || self.drawn != Some(generation) {
-            ui.ctx().request_repaint_after(crate::gui::FRAME_PERIOD);
+            ui.ctx().request_repaint_after(REPAINT);
         }
         self.drawn = Some(generation);
     }
