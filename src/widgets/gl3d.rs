@@ -273,6 +273,19 @@ struct Shared {
     stats: GlStats,
 }
 
+/// GPU state of views that were dropped (a schema unloaded): there is no GL
+/// context at drop time, so the next paint of any view frees it (the window has
+/// one context).
+static ORPHANS: Mutex<Vec<Gpu>> = Mutex::new(Vec::new());
+
+impl Drop for Shared {
+    fn drop(&mut self) {
+        if let Some(Ok(gpu)) = self.gpu.take() {
+            ORPHANS.lock().push(gpu);
+        }
+    }
+}
+
 /// A real OpenGL 3D view (see the module doc). Cheap to keep per panel.
 #[derive(Default, Clone)]
 pub struct Gl3dView {
@@ -296,6 +309,10 @@ impl Gl3dView {
         let cb = egui_glow::CallbackFn::new(move |info, painter| {
             let t = Instant::now();
             let gl = painter.gl();
+            for gpu in ORPHANS.lock().drain(..) {
+                // SAFETY: on the GL thread, with the context these were made in.
+                unsafe { gpu.free(gl) };
+            }
             let mut s = shared.lock();
             if s.gpu.is_none() {
                 // SAFETY: called on the GL thread with the painter's current context.
@@ -393,6 +410,22 @@ impl Gpu {
                 cache: None,
                 cache_failed: false,
             })
+        }
+    }
+
+    /// Deletes every GL object this holds.
+    unsafe fn free(self, gl: &glow::Context) {
+        unsafe {
+            for m in self.meshes.values() {
+                gl.delete_vertex_array(m.vao);
+                gl.delete_buffer(m.vbo);
+            }
+            if let Some(c) = &self.cache {
+                gl.delete_framebuffer(c.fbo);
+                gl.delete_renderbuffer(c.color);
+                gl.delete_renderbuffer(c.depth);
+            }
+            gl.delete_program(self.program);
         }
     }
 
