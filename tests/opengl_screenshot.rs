@@ -57,6 +57,13 @@ fn bbox(s: &Shot, c: [u8; 3]) -> Option<(usize, usize, usize, usize)> {
     b
 }
 
+/// The tests share one X display and read the whole screen: one window at a time.
+static SCREEN: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+fn screen() -> std::sync::MutexGuard<'static, ()> {
+    SCREEN.lock().unwrap_or_else(|e| e.into_inner())
+}
+
 fn tmp(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(name)
 }
@@ -109,6 +116,7 @@ fn opengldemo_draws_the_world_where_progeo_projects_it() {
     if !can_screenshot("opengl_screenshot", &["import"]) {
         return;
     }
+    let _screen = screen();
     let conf = tmp("opengl_demo.conf");
     std::fs::write(&conf, demo_conf(false)).unwrap();
     let png = tmp("opengl_demo.png");
@@ -185,6 +193,7 @@ fn opengldemo_rotate_changes_the_picture() {
     if !can_screenshot("opengl_screenshot", &["import"]) {
         return;
     }
+    let _screen = screen();
     let conf = tmp("opengl_rotate.conf");
     std::fs::write(&conf, demo_conf(true)).unwrap();
     let (png1, png2) = (tmp("opengl_rotate_1.png"), tmp("opengl_rotate_2.png"));
@@ -242,6 +251,7 @@ fn opengl_viewer_shows_the_robot_moving_with_its_encoders() {
     if !can_screenshot("opengl_screenshot", &["import"]) {
         return;
     }
+    let _screen = screen();
     // simple.world's room and partition without its red ball (red like the body).
     let world = tmp("opengl_viewer.world");
     std::fs::write(
