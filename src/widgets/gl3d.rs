@@ -20,7 +20,8 @@
 //!   those of the last one (a heartbeat repaint while nothing moves) only copies
 //!   it to the window (`glBlitFramebuffer`) instead of drawing the scene again.
 //!   Without framebuffer objects it draws every frame directly.
-//! - The window must have a depth buffer: the GUI host asks for 24 bits
+//! - Without that offscreen framebuffer the view draws into the window, which then
+//!   needs a depth buffer: the GUI host asks for 24 bits
 //!   ([`crate::gui::run_window`]).
 //!
 //! Colours are written as given (no lighting in the shader, no blending), so a
