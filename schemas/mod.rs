@@ -25,6 +25,10 @@ pub mod myschema;
 pub mod naooperator;
 #[cfg(feature = "opencvdemo")]
 pub mod opencvdemo;
+#[cfg(feature = "opengl_viewer")]
+pub mod opengl_viewer;
+#[cfg(feature = "opengldemo")]
+pub mod opengldemo;
 #[cfg(feature = "pingpong")]
 pub mod pingpong;
 #[cfg(feature = "teleoperator")]

@@ -50,6 +50,21 @@
 //! Other lines (e.g. a `schema extrinsics` section header) are ignored, because in
 //! 4.3 the world file is also the extrinsics schema's conf.
 //!
+//! # OpenGL cameras
+//! OpenGL describes a camera's intrinsics by an aperture and an aspect ratio
+//! (`gluPerspective(fovy, aspect, near, far)`), progeo by focal distances and an
+//! optical centre; the extrinsics (position, focus of attention, roll) are the same
+//! in both (`gluLookAt`). [`GlCamera`] is the OpenGL side and converts both ways:
+//! [`GlCamera::to_progeo`] gives `fdistx = rows / (2 tan(fovy/2))`, `fdisty =
+//! fdistx · (columns/rows) / aspect` and the centred optical centre (rows/2,
+//! columns/2), as the manual says for Gazebo (the aperture on the height) and
+//! Webots (on the width: [`GlCamera::from_horizontal_fov`]);
+//! [`GlCamera::from_progeo`] goes back (`fovy = 2 atan(rows / (2 fdistx))`).
+//! [`PinholeCamera::gl_projection`] and [`PinholeCamera::gl_view`] are the
+//! OpenGL matrices that put every 3D point on the pixel [`PinholeCamera::project`]
+//! gives, off-centre optical centres and skew included, so a real OpenGL view and
+//! progeo agree to the pixel.
+//!
 //! Every error names `file:line` and what was expected ([`ProgeoError`]).
 
 pub use crate::files::FileError as ProgeoError;
@@ -142,6 +157,105 @@ pub fn optical_to_graphic(x: f64, y: f64, rows: u32) -> (f64, f64) {
 /// Graphic (column, row from the top) to optical (x, y): `(rows - 1 - row, column)`.
 pub fn graphic_to_optical(column: f64, row: f64, rows: u32) -> (f64, f64) {
     (rows as f64 - 1.0 - row, column)
+}
+
+/// The OpenGL aperture (radians) that gives focal distance `f` (pixels) on an image
+/// side of `size_px` pixels: `2 atan(size / (2 f))` (the inverse of [`focal_from_fov`]).
+pub fn fov_from_focal(size_px: f64, f: f64) -> f64 {
+    2.0 * (size_px / (2.0 * f)).atan()
+}
+
+/// An OpenGL perspective camera: `gluLookAt(position, foa, up)` with `roll` about
+/// the optical axis, and `gluPerspective(fovy, aspect, near, far)`. Lengths in mm,
+/// angles in radians. See the module doc for the mapping to [`PinholeCamera`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GlCamera {
+    /// The camera's position, mm.
+    pub position: [f64; 3],
+    /// The focus of attention (a point on the optical axis), mm.
+    pub foa: [f64; 3],
+    /// Rotation about the optical axis, radians.
+    pub roll: f64,
+    /// Vertical aperture (gluPerspective's `fovy`), radians.
+    pub fovy: f64,
+    /// Width / height of the image (gluPerspective's `aspect`).
+    pub aspect: f64,
+    /// Near and far clipping distances, mm.
+    pub near: f64,
+    pub far: f64,
+}
+
+impl GlCamera {
+    /// A camera whose aperture `fovx` (radians) is on the image width, as Webots
+    /// gives it: `fovy = 2 atan(tan(fovx/2) / aspect)`.
+    pub fn from_horizontal_fov(
+        position: [f64; 3],
+        foa: [f64; 3],
+        fovx: f64,
+        aspect: f64,
+    ) -> GlCamera {
+        GlCamera {
+            position,
+            foa,
+            roll: 0.0,
+            fovy: 2.0 * ((fovx / 2.0).tan() / aspect).atan(),
+            aspect,
+            near: 10.0,
+            far: 1.0e6,
+        }
+    }
+
+    /// The horizontal aperture, radians: `2 atan(aspect tan(fovy/2))`.
+    pub fn fovx(&self) -> f64 {
+        2.0 * (self.aspect * (self.fovy / 2.0).tan()).atan()
+    }
+
+    /// The progeo camera of this OpenGL camera for a `columns` x `rows` image:
+    /// centred optical centre (`u0 = rows/2`, `v0 = columns/2`), `fdistx = rows /
+    /// (2 tan(fovy/2))`, `fdisty = fdistx · (columns/rows) / aspect` (equal when the
+    /// aspect is the image's), no skew.
+    pub fn to_progeo(&self, columns: u32, rows: u32) -> PinholeCamera {
+        let (columns, rows) = (columns.max(1), rows.max(1));
+        let fovy = self.fovy.clamp(1e-6, std::f64::consts::PI - 1e-6);
+        let fx = focal_from_fov(rows as f64, fovy);
+        let aspect = if self.aspect > 0.0 && self.aspect.is_finite() {
+            self.aspect
+        } else {
+            columns as f64 / rows as f64
+        };
+        let fy = fx * (columns as f64 / rows as f64) / aspect;
+        let [x, y, z] = self.position;
+        let [fx_, fy_, fz] = self.foa;
+        let mut c = PinholeCamera::new(
+            HPoint3D::point(x, y, z),
+            HPoint3D::point(fx_, fy_, fz),
+            fx,
+            columns,
+            rows,
+        );
+        c.fdisty = fy;
+        c.roll = self.roll;
+        c.update_camera_matrix();
+        c
+    }
+
+    /// The OpenGL camera of a progeo camera: `fovy = 2 atan(rows / (2 fdistx))`,
+    /// `aspect = (columns / fdisty) / (rows / fdistx)`; its optical centre is taken
+    /// as centred (use [`PinholeCamera::gl_projection`] to keep an off-centre one).
+    pub fn from_progeo(cam: &PinholeCamera, near: f64, far: f64) -> GlCamera {
+        let p = xyz(&cam.position);
+        let f = xyz(&cam.foa);
+        let (rows, columns) = (cam.rows.max(1) as f64, cam.columns.max(1) as f64);
+        GlCamera {
+            position: [p.x, p.y, p.z],
+            foa: [f.x, f.y, f.z],
+            roll: cam.roll,
+            fovy: fov_from_focal(rows, cam.fdistx),
+            aspect: (columns / cam.fdisty) / (rows / cam.fdistx),
+            near,
+            far,
+        }
+    }
 }
 
 /// Focal distance in pixels from an OpenGL aperture: `size / (2 tan(fov / 2))`
@@ -387,6 +501,43 @@ impl PinholeCamera {
     /// [`project`](Self::project) leaves them; `h` is not used).
     pub fn optical_to_graphic(&self, p: HPoint2D) -> (f64, f64) {
         optical_to_graphic(p.x, p.y, self.rows)
+    }
+
+    /// The OpenGL view matrix (world mm to camera): `rt`, whose rows are the image's
+    /// up (optical x), right (optical y) and forward (optical axis) directions.
+    pub fn gl_view(&self) -> Matrix4<f64> {
+        self.rt
+    }
+
+    /// The OpenGL projection matrix (camera coordinates of [`gl_view`](Self::gl_view)
+    /// to clip space) for a `columns` x `rows` viewport, with clipping distances
+    /// `near` and `far` (mm): the pixel centre of optical (x, y) lands at window
+    /// coordinates (y + 0.5, x + 0.5), so OpenGL draws every point on the pixel
+    /// [`project`](Self::project) gives (optical centre, skew and both focal distances
+    /// included).
+    pub fn gl_projection(&self, near: f64, far: f64) -> Matrix4<f64> {
+        let (w, h) = (self.columns.max(1) as f64, self.rows.max(1) as f64);
+        let (n, f) = (near.max(1e-6), far.max(near.max(1e-6) * 1.0001));
+        let a = (f + n) / (f - n);
+        let b = -2.0 * f * n / (f - n);
+        Matrix4::new(
+            0.0,
+            2.0 * self.fdisty / w,
+            (2.0 * self.v0 + 1.0) / w - 1.0,
+            0.0,
+            2.0 * self.fdistx / h,
+            2.0 * self.skew * self.fdisty / h,
+            (2.0 * self.u0 + 1.0) / h - 1.0,
+            0.0,
+            0.0,
+            0.0,
+            a,
+            b,
+            0.0,
+            0.0,
+            1.0,
+            0.0,
+        )
     }
 
     /// Reads a camera file (see the module doc) and updates the matrices.

@@ -3,8 +3,8 @@
 use std::path::Path;
 
 use jderobot::progeo::{
-    GAZEBO_FOV, HPoint2D, HPoint3D, PinholeCamera, ProgeoError, StereoCamera, World,
-    focal_from_fov, graphic_to_optical, optical_to_graphic,
+    GAZEBO_FOV, GlCamera, HPoint2D, HPoint3D, PinholeCamera, ProgeoError, StereoCamera, WEBOTS_FOV,
+    World, focal_from_fov, fov_from_focal, graphic_to_optical, optical_to_graphic,
 };
 
 fn close(a: f64, b: f64, eps: f64) -> bool {
@@ -309,4 +309,104 @@ fn stereo_cameras_are_baseline_apart() {
     let p = HPoint3D::point(0.0, 5000.0, 1000.0);
     let (l, r) = (s.camera1.project(p), s.camera2.project(p));
     assert!(close(l.x, r.x, 1e-9) && (l.y - r.y).abs() > 1.0);
+}
+
+/// The pixel (optical x, y) where OpenGL's matrices put `p`: clip = P · V · p,
+/// window = (ndc + 1) / 2 · size, minus the half pixel of the pixel centre.
+fn gl_pixel(cam: &PinholeCamera, p: [f64; 3]) -> (f64, f64) {
+    let clip = cam.gl_projection(10.0, 1.0e5)
+        * cam.gl_view()
+        * nalgebra::Vector4::new(p[0], p[1], p[2], 1.0);
+    let (xn, yn) = (clip.x / clip.w, clip.y / clip.w);
+    let col = (xn + 1.0) / 2.0 * cam.columns as f64 - 0.5;
+    let row_up = (yn + 1.0) / 2.0 * cam.rows as f64 - 0.5;
+    (row_up, col)
+}
+
+#[test]
+fn opengl_camera_to_progeo_and_back_gazebo() {
+    // The manual's Gazebo camera: 320x240, aperture 60 degrees on the height, so
+    // f = 240 / (2 tan 30°) = 207.846 and the optical centre is (120, 160).
+    let gl = GlCamera {
+        position: [0.0, 0.0, 1000.0],
+        foa: [4000.0, 500.0, 800.0],
+        roll: 0.0,
+        fovy: GAZEBO_FOV,
+        aspect: 320.0 / 240.0,
+        near: 10.0,
+        far: 1.0e5,
+    };
+    let cam = gl.to_progeo(320, 240);
+    assert!(
+        close(cam.fdistx, 207.84609690826525, 1e-9),
+        "{}",
+        cam.fdistx
+    );
+    assert!(
+        close(cam.fdisty, 207.84609690826525, 1e-9),
+        "{}",
+        cam.fdisty
+    );
+    assert_eq!((cam.u0, cam.v0, cam.skew), (120.0, 160.0, 0.0));
+    let back = GlCamera::from_progeo(&cam, 10.0, 1.0e5);
+    assert!(close(back.fovy, GAZEBO_FOV, 1e-12), "{}", back.fovy);
+    assert!(close(back.aspect, 320.0 / 240.0, 1e-12));
+    assert_eq!((back.position, back.foa), (gl.position, gl.foa));
+    // OpenGL's matrices put points on progeo's pixels.
+    for p in [
+        [4000.0, 500.0, 800.0],
+        [3000.0, -900.0, 0.0],
+        [2500.0, 1200.0, 1900.0],
+    ] {
+        let q = cam.project(HPoint3D::point(p[0], p[1], p[2]));
+        assert_eq!(q.h, 1.0);
+        let (x, y) = gl_pixel(&cam, p);
+        assert!(
+            close(x, q.x, 1e-6) && close(y, q.y, 1e-6),
+            "{p:?}: gl ({x}, {y}) progeo ({}, {})",
+            q.x,
+            q.y
+        );
+    }
+}
+
+#[test]
+fn opengl_camera_to_progeo_and_back_webots() {
+    // The manual's Webots camera: 320x240, aperture 45 degrees (0.785398 rad) on
+    // the width, so f = 320 / (2 tan 22.5°) = 386.274.
+    let gl = GlCamera::from_horizontal_fov([0.0; 3], [0.0, 1000.0, 0.0], WEBOTS_FOV, 320.0 / 240.0);
+    assert!(close(gl.fovx(), WEBOTS_FOV, 1e-12));
+    let cam = gl.to_progeo(320, 240);
+    let f = focal_from_fov(320.0, WEBOTS_FOV);
+    assert!(close(f, 386.2741699796952, 1e-9), "{f}");
+    assert!(
+        close(cam.fdistx, f, 1e-9) && close(cam.fdisty, f, 1e-9),
+        "{} {}",
+        cam.fdistx,
+        cam.fdisty
+    );
+    assert_eq!((cam.u0, cam.v0), (120.0, 160.0));
+    assert!(close(fov_from_focal(320.0, cam.fdisty), WEBOTS_FOV, 1e-12));
+    let back = GlCamera::from_progeo(&cam, 10.0, 1.0e5);
+    assert!(close(back.fovx(), WEBOTS_FOV, 1e-12), "{}", back.fovx());
+    assert!(close(back.fovy, gl.fovy, 1e-12));
+    // An off-centre optical centre, unequal focal distances and skew still land on
+    // progeo's pixels.
+    let mut odd = cam.clone();
+    odd.u0 = 131.0;
+    odd.v0 = 149.5;
+    odd.fdisty = 402.0;
+    odd.skew = 0.01;
+    odd.roll = 0.2;
+    odd.update_camera_matrix();
+    for p in [[100.0, 1000.0, 50.0], [-300.0, 2500.0, -200.0]] {
+        let q = odd.project(HPoint3D::point(p[0], p[1], p[2]));
+        let (x, y) = gl_pixel(&odd, p);
+        assert!(
+            close(x, q.x, 1e-6) && close(y, q.y, 1e-6),
+            "{p:?}: gl ({x}, {y}) progeo ({}, {})",
+            q.x,
+            q.y
+        );
+    }
 }

@@ -424,6 +424,8 @@ pub fn run_window(host: GuiHost) -> Result<(), String> {
             .with_title("jderobot")
             .with_app_id("jderobot")
             .with_inner_size([1180.0, 760.0]),
+        // The 3D panels (opengldemo, opengl_viewer) draw with depth testing.
+        depth_buffer: 24,
         ..Default::default()
     };
     eframe::run_native("jderobot", options, Box::new(move |_cc| Ok(Box::new(host))))

@@ -9,6 +9,7 @@
 //! | [`Joystick`] | a v/w pad | drag gives v (mm/s) and w (deg/s) within the maxima; release → 0 |
 //! | [`PanTiltPad`] | a pan/tilt positioner with sliders | drag or slide sets longitude/latitude (deg) within limits |
 //! | [`Wireframe3D`] | 3D segments (mm) seen through a [`progeo`](crate::progeo) camera | drag orbits, scroll zooms |
+//! | [`Gl3dView`] ([`gl3d`]) | line and triangle meshes drawn with real OpenGL (depth tested) through a progeo camera | drag orbits the camera about its focus of attention, scroll zooms ([`gl3d::LookAtCamera`]) |
 //!
 //! Each widget's mathematics lives in small pure functions (pixel picking, joystick
 //! mapping, world↔screen transforms, orbit camera) so it can be tested without a
@@ -18,6 +19,7 @@
 //! Widgets are a library under the components: a schema's panel uses them, and
 //! they know nothing of the GUI host that draws the panels.
 
+pub mod gl3d;
 mod image_view;
 mod joystick;
 mod pantilt;
@@ -26,6 +28,7 @@ mod time_plot;
 mod wireframe;
 mod world_view;
 
+pub use gl3d::Gl3dView;
 pub use image_view::*;
 pub use joystick::*;
 pub use pantilt::*;

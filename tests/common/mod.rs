@@ -350,3 +350,51 @@ pub fn python_with(modules: &str) -> Option<PathBuf> {
     eprintln!("SKIPPED: {note}");
     None
 }
+
+/// A screenshot's RGB pixels, row by row from the top-left.
+pub struct Shot {
+    pub w: usize,
+    pub h: usize,
+    pub px: Vec<[u8; 3]>,
+}
+
+impl Shot {
+    pub fn at(&self, x: usize, y: usize) -> [u8; 3] {
+        self.px[y * self.w + x]
+    }
+}
+
+/// Takes a screenshot of the X root window into `png` (imagemagick's `import`)
+/// and reads it back; None if either fails.
+pub fn screenshot(png: &Path) -> Option<Shot> {
+    let ok = Command::new("import")
+        .args(["-window", "root"])
+        .arg(png)
+        .status()
+        .is_ok_and(|s| s.success());
+    if !ok {
+        return None;
+    }
+    let bytes = std::fs::read(png).ok()?;
+    let mut dec = png::Decoder::new(std::io::Cursor::new(bytes));
+    dec.set_transformations(png::Transformations::EXPAND | png::Transformations::STRIP_16);
+    let mut r = dec.read_info().ok()?;
+    let mut buf = vec![0u8; r.output_buffer_size()?];
+    let info = r.next_frame(&mut buf).ok()?;
+    let (w, h, ch) = (
+        info.width as usize,
+        info.height as usize,
+        info.color_type.samples(),
+    );
+    if ch < 3 {
+        return None;
+    }
+    let mut px = Vec::with_capacity(w * h);
+    for y in 0..h {
+        let row = &buf[y * info.line_size..];
+        for x in 0..w {
+            px.push([row[x * ch], row[x * ch + 1], row[x * ch + 2]]);
+        }
+    }
+    Some(Shot { w, h, px })
+}
