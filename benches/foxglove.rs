@@ -7,7 +7,10 @@
 //!    every 0.1 ms and logs it, its bytes moved into the message; the client
 //!    connects with `foxglove.sdk.v1`). Ours: the same producer publishes into an
 //!    image interface that the service serves (the frame shared with the message,
-//!    no copy; through the relay, the client with `foxglove.websocket.v1`).
+//!    no copy), measured on both of its ports: through the relay (`port`, the
+//!    client with `foxglove.websocket.v1`) and straight from the SDK's server
+//!    (`sdk_port`, the client with `foxglove.sdk.v1`). The three alternate in
+//!    each round, their order rotating.
 //! 2. Twist → `motors`: a client publishes a Twist on `/cmd_vel`; the time until
 //!    the `motors` interface's clock moves (p50, p99).
 //! 3. CPU of the service's threads (`foxglove`, `foxglove-io`) with 10 clients on
@@ -18,7 +21,7 @@
 //!    and the recorder's writer path raw to disk (benches/recorder.rs's load) with
 //!    each, x real time, alternating rounds.
 //!
-//! Run: `cargo bench --features full --bench foxglove`.
+//! Run: `cargo bench --features full --bench foxglove` (`-- frames`: part 1 only).
 
 use std::{
     io::{Read, Write},
@@ -45,7 +48,7 @@ use jderobot::{
 
 const W: u32 = 640;
 const H: u32 = 480;
-const ROUNDS: usize = 5;
+const ROUNDS: usize = 7;
 const SECS: f64 = 2.0;
 
 fn median(v: &mut [f64]) -> f64 {
@@ -246,6 +249,7 @@ fn settings(serves: &[&str]) -> Settings {
     Settings {
         bind: "127.0.0.1".parse().unwrap(),
         port: 0,
+        sdk_port: Some(0),
         serves: serves.iter().map(|s| s.to_string()).collect(),
         jpeg: None,
         world: false,
@@ -257,7 +261,7 @@ fn settings(serves: &[&str]) -> Settings {
 }
 
 /// The service: frames/s of an image interface to one client.
-fn ours_fps(rt: &Runtime, a: SocketAddr, cam: &Arc<Interface<Image>>) -> f64 {
+fn ours_fps(a: SocketAddr, protocol: &str, cam: &Arc<Interface<Image>>) -> f64 {
     let stop = Arc::new(AtomicBool::new(false));
     let producer = {
         let stop = stop.clone();
@@ -270,13 +274,12 @@ fn ours_fps(rt: &Runtime, a: SocketAddr, cam: &Arc<Interface<Image>>) -> f64 {
             }
         })
     };
-    let mut ws = Ws::connect(a, "foxglove.websocket.v1");
+    let mut ws = Ws::connect(a, protocol);
     ws.subscribe_all(&["varcolorA"]);
     ws.count_for(0.3);
     let fps = ws.count_for(SECS);
     stop.store(true, Ordering::Release);
     producer.join().unwrap();
-    let _ = rt;
     fps
 }
 
@@ -621,30 +624,44 @@ fn main() {
     )
     .unwrap();
     let a = server.local_addr();
+    let direct = server.sdk_addr().expect("sdk_port is set");
     println!("foxglove service vs the Foxglove SDK's own server, loopback, {W}x{H} BGR RawImage");
-    let (mut sdk, mut ours, mut ratio) = (vec![], vec![], vec![]);
+    let (mut sdk, mut relay, mut direct_fps) = (vec![], vec![], vec![]);
+    let (mut relay_ratio, mut direct_ratio) = (vec![], vec![]);
     for r in 0..ROUNDS {
-        let (s, o) = if r % 2 == 0 {
-            let s = sdk_fps();
-            (s, ours_fps(&rt, a, &cam))
-        } else {
-            let o = ours_fps(&rt, a, &cam);
-            (sdk_fps(), o)
-        };
+        let mut got = [0.0f64; 3];
+        for k in 0..3 {
+            let which = (r + k) % 3;
+            got[which] = match which {
+                0 => sdk_fps(),
+                1 => ours_fps(a, "foxglove.websocket.v1", &cam),
+                _ => ours_fps(direct, "foxglove.sdk.v1", &cam),
+            };
+        }
+        let [s, o, d] = got;
         println!(
-            "  round {r}: SDK alone {s:.0} frames/s, jderobot {o:.0} frames/s ({:.0} %)",
-            o / s * 100.0
+            "  round {r}: SDK alone {s:.0} frames/s, jderobot relay {o:.0} ({:.0} %), direct {d:.0} ({:.0} %)",
+            o / s * 100.0,
+            d / s * 100.0
         );
         sdk.push(s);
-        ours.push(o);
-        ratio.push(o / s);
+        relay.push(o);
+        direct_fps.push(d);
+        relay_ratio.push(o / s);
+        direct_ratio.push(d / s);
     }
     println!(
-        "frames/s to one client: median SDK {:.0}, jderobot {:.0}; ratio median {:.0} % (goal >= 90 %)",
+        "frames/s to one client: median SDK {:.0}, jderobot relay (port) {:.0}, direct (sdk_port) {:.0}; \
+         ratio medians: relay {:.0} %, direct {:.0} % (goal >= 90 %)",
         median(&mut sdk),
-        median(&mut ours),
-        median(&mut ratio) * 100.0
+        median(&mut relay),
+        median(&mut direct_fps),
+        median(&mut relay_ratio) * 100.0,
+        median(&mut direct_ratio) * 100.0
     );
+    if std::env::args().any(|a| a == "frames") {
+        return;
+    }
     let (p50, p99) = twist_latency(a, &motors);
     println!("Twist -> motors: p50 {p50:.3} ms, p99 {p99:.3} ms (goal p50 <= 1 ms)");
     let mut cpu: Vec<f64> = (0..3).map(|_| cpu_ten_clients(a, &laser, &enc)).collect();

@@ -570,3 +570,73 @@ fn connect_cycles_leave_memory_where_it_was() {
     common::eventually("laser back to its own users", || laser.users() == users0);
     rt.shutdown();
 }
+
+/// A non-loopback address of this machine (the route's source address), if any.
+fn non_loopback_ip() -> Option<std::net::IpAddr> {
+    let u = std::net::UdpSocket::bind("0.0.0.0:0").ok()?;
+    u.connect("10.255.255.254:9").ok()?;
+    let ip = u.local_addr().ok()?.ip();
+    (!ip.is_loopback() && !ip.is_unspecified()).then_some(ip)
+}
+
+#[test]
+fn sdk_port_serves_sdk_clients_straight_from_the_sdk() {
+    let (rt, relay) = start("sdk_port 0\n");
+    rt.stop("introrob").unwrap();
+    let a = *rt
+        .names
+        .import::<SocketAddr>("foxglove", "sdk_address")
+        .expect("with sdk_port, foxglove exports the SDK server's address");
+    assert_ne!(a.port(), relay.port());
+    assert!(a.ip().is_loopback(), "{a}");
+    assert!(ps(&rt).contains(&format!("direct (SDK, foxglove.sdk.v1): ws://{a}")));
+    // The spec's subprotocol, answered by the SDK itself.
+    let (s, head) = handshake(a, Some("foxglove.sdk.v1"));
+    assert!(head.starts_with("HTTP/1.1 101"), "{head}");
+    assert!(
+        head.to_ascii_lowercase()
+            .contains("sec-websocket-protocol: foxglove.sdk.v1"),
+        "{head}"
+    );
+    let mut ws = Ws { s, buf: Vec::new() };
+    let info = ws.until(|j| j["op"] == "serverInfo");
+    assert_eq!(info["name"], "jderobot", "{info}");
+    // Channels listed; a subscription gets frames (and resumes the camera).
+    let id = ws.subscribe("colorA", 7);
+    assert!(id > 0);
+    let t0 = Instant::now();
+    let mut frames = 0;
+    while frames < 3 {
+        assert!(t0.elapsed() < Duration::from_secs(10), "{frames} frame(s)");
+        let (op, p) = ws.recv().expect("a frame");
+        if op == 2 && p[0] == 1 && u32::from_le_bytes(p[1..5].try_into().unwrap()) == 7 {
+            assert!(p.len() > 320 * 240 * 3, "a RawImage of {} bytes", p.len());
+            frames += 1;
+        }
+    }
+    // Teleop the same as through the relay; leaving zeroes the motors.
+    ws.text(&serde_json::json!({"op": "advertise", "channels": [
+        {"id": 1, "topic": "/cmd_vel", "encoding": "json", "schemaName": "geometry_msgs/msg/Twist"}]}));
+    std::thread::sleep(Duration::from_millis(200));
+    let twist = br#"{"linear":{"x":0.3,"y":0,"z":0},"angular":{"x":0,"y":0,"z":0.1}}"#;
+    ws.send(2, &[&[1u8, 1, 0, 0, 0][..], twist].concat());
+    let motors = rt.interfaces.get::<Motors>("motors").unwrap();
+    common::eventually("the Twist drove the motors", || {
+        (motors.snapshot().v - 300.0).abs() < 1e-6
+    });
+    drop(ws);
+    common::eventually("motors zeroed after the direct client left", || {
+        let m = motors.snapshot();
+        m.v == 0.0 && m.w == 0.0
+    });
+    // The default loopback `bind`: the direct port is not reachable from outside it.
+    match non_loopback_ip() {
+        Some(ip) => assert!(
+            TcpStream::connect_timeout(&SocketAddr::new(ip, a.port()), Duration::from_secs(2))
+                .is_err(),
+            "the SDK's port answered on {ip}, beyond loopback"
+        ),
+        None => eprintln!("note: no non-loopback address here; the reachability check is skipped"),
+    }
+    rt.shutdown();
+}

@@ -9,6 +9,8 @@
 //! bind 127.0.0.1        # the address it listens on (default loopback; beyond it
 //!                       #   only when said here, e.g. 0.0.0.0)
 //! port 8765             # the TCP port (default 8765; 0 = any free port)
+//! sdk_port 8766         # off by default: the SDK's own server also listens here, at
+//!                       #   the same `bind`, for `foxglove.sdk.v1` clients (no relay)
 //! serves all            # every interface (the default when no `serves` line), or
 //! serves laser          #   one by one
 //! images raw            # raw (RawImage bgr8, default) | jpeg [QUALITY 1..100, default 80]
@@ -41,6 +43,14 @@
 //! counted in `ps`; the robot and other clients do not wait), and refuses client
 //! messages over `max_message` (close 1009). Garbage JSON gets an error status from
 //! the SDK; a request that is not a WebSocket upgrade gets `400`.
+//!
+//! With `sdk_port N` the SDK's server itself listens on N (same `bind`, same
+//! loopback rule): clients that speak `foxglove.sdk.v1` (the current Foxglove app,
+//! Lichtblick after its PR #819) connect to it without the relay's second loopback
+//! crossing. Gating, teleop, services and parameters are the SDK listener's, so the
+//! same on both ports; the queues and limits there are the SDK's own (1024 message
+//! frames per client, oldest dropped and logged by the SDK, not counted in `ps`; no
+//! `max_message`). `port` keeps the relay for both subprotocols.
 //!
 //! System packages: none (tokio and the SDK are compiled in; no TLS).
 
@@ -86,6 +96,8 @@ use relay::{Limits, RelayStats};
 pub struct Settings {
     pub bind: IpAddr,
     pub port: u16,
+    /// The port where the SDK's server listens itself (no relay), if any.
+    pub sdk_port: Option<u16>,
     /// Interface names; empty: all.
     pub serves: Vec<String>,
     pub jpeg: Option<u8>,
@@ -106,6 +118,12 @@ const LINES: &[Setting] = &[
         &[int("PORT", "", 0, 65_535)],
     )
     .default("8765"),
+    Setting::new(
+        "sdk_port",
+        "also serve `foxglove.sdk.v1` clients straight from the SDK's server on this port, \
+         at the same `bind` (no relay: faster; the SDK's own queues; 0: any free port)",
+        &[int("PORT", "", 0, 65_535)],
+    ),
     Setting::new(
         "serves",
         "an interface to serve as a channel; `serves all` (the default when none): every one",
@@ -142,6 +160,7 @@ const LINES: &[Setting] = &[
 struct Lines {
     bind: String,
     port: u16,
+    sdk_port: Option<u16>,
     serves: Vec<String>,
     images: (String, Option<u8>),
     world: bool,
@@ -175,6 +194,15 @@ pub fn parse(conf: &ComponentConf) -> Result<Settings, ConfError> {
             ));
         }
     };
+    if let Some(p) = lines.sdk_port
+        && p != 0
+        && p == lines.port
+    {
+        let l = conf.line("sdk_port").expect("sdk_port comes from a line");
+        return Err(l.error(format!(
+            "`sdk_port {p}` is the relay's `port` too; give the SDK's server another port (or 0)"
+        )));
+    }
     let mut serves = Vec::new();
     for name in lines.serves {
         if name == "all" {
@@ -190,6 +218,7 @@ pub fn parse(conf: &ComponentConf) -> Result<Settings, ConfError> {
     Ok(Settings {
         bind,
         port: lines.port,
+        sdk_port: lines.sdk_port,
         serves,
         jpeg,
         world: lines.world,
@@ -203,6 +232,8 @@ pub fn parse(conf: &ComponentConf) -> Result<Settings, ConfError> {
 /// What `ps` shows of a running server (exported as `<name>.status`).
 pub struct Status {
     pub addr: SocketAddr,
+    /// Where the SDK's server listens itself (`sdk_port`), if it was asked to.
+    pub direct: Option<SocketAddr>,
     pub relay: Arc<RelayStats>,
     pub counters: Arc<Counters>,
 }
@@ -211,8 +242,12 @@ impl Status {
     /// One line: `ws://127.0.0.1:8765: 2 client(s), 1234 sent, 5 dropped (slow clients), ...`.
     pub fn line(&self) -> String {
         let r = &self.relay;
+        let direct = self
+            .direct
+            .map(|d| format!("; direct (SDK, foxglove.sdk.v1): ws://{d}"))
+            .unwrap_or_default();
         format!(
-            "ws://{}: {} client(s), {} message(s) sent, {} dropped (slow clients), {} command(s), {} refused",
+            "ws://{}: {} client(s), {} message(s) sent, {} dropped (slow clients), {} command(s), {} refused{direct}",
             self.addr,
             r.clients.load(Ordering::Relaxed),
             r.sent.load(Ordering::Relaxed),
@@ -227,6 +262,9 @@ impl Status {
 pub const STATUS_EXPORT: &str = "status";
 /// The name under which the service exports the [`SocketAddr`] users connect to.
 pub const ADDRESS_EXPORT: &str = "address";
+/// The name under which the service exports the SDK server's own [`SocketAddr`]
+/// (only with `sdk_port`).
+pub const SDK_ADDRESS_EXPORT: &str = "sdk_address";
 
 /// The world map's channel and sources.
 struct WorldOut {
@@ -246,12 +284,18 @@ pub struct Foxglove {
     thread: Option<JoinHandle<()>>,
     wanted: Arc<Vec<Wanted>>,
     addr: SocketAddr,
+    direct: Option<SocketAddr>,
 }
 
 impl Foxglove {
     /// The address users connect to.
     pub fn local_addr(&self) -> SocketAddr {
         self.addr
+    }
+
+    /// Where the SDK's server listens itself (with `sdk_port`).
+    pub fn sdk_addr(&self) -> Option<SocketAddr> {
+        self.direct
     }
 
     fn stop(&mut self) {
@@ -395,6 +439,7 @@ pub fn start(s: &Settings, rt: &Runtime) -> anyhow::Result<Foxglove> {
         thread: Some(thread),
         wanted: wanted.clone(),
         addr: SocketAddr::new(s.bind, s.port),
+        direct: None,
     };
 
     // One I/O thread: the relay's frame copies stay on one core's caches (measured:
@@ -414,10 +459,17 @@ pub fn start(s: &Settings, rt: &Runtime) -> anyhow::Result<Foxglove> {
         wake: watch,
         counters: counters.clone(),
     };
+    // Without `sdk_port` the SDK's server is the relay's alone (an ephemeral loopback
+    // port); with it, it listens where clients reach it, at the conf's `bind`.
+    let sdk_host = match (s.sdk_port, s.bind) {
+        (None, _) => Ipv4Addr::LOCALHOST.to_string(),
+        (Some(_), IpAddr::V6(a)) => format!("[{a}]"),
+        (Some(_), IpAddr::V4(a)) => a.to_string(),
+    };
     let server = WebSocketServer::new()
         .name("jderobot")
         .context(&ctx)
-        .bind(Ipv4Addr::LOCALHOST.to_string(), 0)
+        .bind(sdk_host, s.sdk_port.unwrap_or(0))
         .tokio_runtime(runtime.handle())
         .capabilities([
             Capability::ClientPublish,
@@ -431,7 +483,16 @@ pub fn start(s: &Settings, rt: &Runtime) -> anyhow::Result<Foxglove> {
         .message_backlog_size(1024)
         .start_blocking()
         .map_err(|e| anyhow::anyhow!("foxglove: the SDK's server did not start: {e}"))?;
-    let inner = SocketAddr::new(IpAddr::V4(Ipv4Addr::LOCALHOST), server.port());
+    let inner_ip = match s.bind {
+        _ if s.sdk_port.is_none() => IpAddr::V4(Ipv4Addr::LOCALHOST),
+        IpAddr::V4(a) if a.is_unspecified() => IpAddr::V4(Ipv4Addr::LOCALHOST),
+        IpAddr::V6(a) if a.is_unspecified() => IpAddr::V6(std::net::Ipv6Addr::LOCALHOST),
+        a => a,
+    };
+    let inner = SocketAddr::new(inner_ip, server.port());
+    if s.sdk_port.is_some() {
+        me.direct = Some(SocketAddr::new(s.bind, server.port()));
+    }
     me.server = Some(server);
 
     let std_listener = std::net::TcpListener::bind((s.bind, s.port)).with_context(|| {
@@ -460,11 +521,20 @@ pub fn start(s: &Settings, rt: &Runtime) -> anyhow::Result<Foxglove> {
         );
     }
     tracing::info!("foxglove: listening on ws://{addr}");
+    if let Some(d) = me.direct {
+        if !s.bind.is_loopback() {
+            tracing::warn!(
+                "foxglove: the SDK's server listening beyond loopback on {d} (the `bind` line): anyone who reaches it can drive the robot"
+            );
+        }
+        tracing::info!("foxglove: the SDK's server itself on ws://{d} (foxglove.sdk.v1, no relay)");
+    }
     let _ = rt.names.export(
         "foxglove",
         STATUS_EXPORT,
         Status {
             addr,
+            direct: me.direct,
             relay: relay_stats,
             counters,
         },
@@ -537,6 +607,9 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
     let _ = rt
         .names
         .export(&conf.name, ADDRESS_EXPORT, server.local_addr());
+    if let Some(d) = server.sdk_addr() {
+        let _ = rt.names.export(&conf.name, SDK_ADDRESS_EXPORT, d);
+    }
     Ok(Box::new(server))
 }
 
@@ -563,6 +636,8 @@ mod tests {
         let d = parse_text("").unwrap();
         assert_eq!(d.bind, IpAddr::V4(Ipv4Addr::LOCALHOST));
         assert_eq!((d.port, d.jpeg, d.world), (8765, None, true));
+        assert_eq!(d.sdk_port, None);
+        assert_eq!(parse_text("sdk_port 8766\n").unwrap().sdk_port, Some(8766));
         assert!(d.serves.is_empty());
         assert_eq!((d.limits.max_queue, d.limits.max_message), (16, 65536));
         let s = parse_text(
@@ -586,6 +661,8 @@ mod tests {
         for (text, want) in [
             ("bind localhost\n", "is not an IP address"),
             ("port 70000\n", "between 0 and 65535"),
+            ("sdk_port 8765\n", "the relay's `port` too"),
+            ("sdk_port x\n", "sdk_port"),
             ("images raw 50\n", "takes no quality"),
             ("images png\n", "raw, jpeg"),
             ("max_message 10\n", "between 1024"),
