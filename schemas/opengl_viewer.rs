@@ -58,7 +58,7 @@ use nalgebra::{Matrix4, Vector3};
 use crate::{
     conf::{
         ComponentConf,
-        settings::{self, CYCLE, Setting, float, on_off, path, word},
+        settings::{self, CYCLE, Setting, float, on_off, path},
     },
     interfaces::{Encoders, Interface, InterfaceValue, Laser, PtEncoders, Sonars},
     progeo::{GlCamera, HPoint2D, PinholeCamera},
@@ -68,7 +68,6 @@ use crate::{
         gl3d::{self, Draw, Frame3D, LookAtCamera, MeshBuilder},
         laser_points, sonar_angles,
     },
-    world::{self, World},
 };
 
 /// A position or focus coordinate's range, mm.
@@ -128,11 +127,7 @@ const LINES: &[Setting] = &[
         &[float("LENGTH", "mm", 0.0, 100_000.0)],
     )
     .default("1500"),
-    Setting::new(
-        "world",
-        "the world: a world file, or none (default: the exported world.map)",
-        &[word("FILE|none")],
-    ),
+    settings::WORLD,
     settings::uses(
         "encoders",
         "encoders",
@@ -385,16 +380,7 @@ impl Schema for OpenGlViewer {
 
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>> {
     let lines: Lines = conf.settings(LINES)?;
-    let world = match lines.world.as_deref() {
-        None => world::map(&rt.names),
-        Some("none") => None,
-        Some(_) => {
-            let l = conf.line("world").expect("a world line");
-            let file = l.existing_file(0, "the world file")?;
-            let w = World::load(&file).map_err(|e| l.error(format!("world: {e}")))?;
-            Some(Arc::new(w))
-        }
-    };
+    let world = settings::world(conf, lines.world.as_deref(), &rt.names)?;
     let model = match &lines.model {
         None => pioneer_model(),
         Some(_) => {

@@ -43,14 +43,14 @@ use parking_lot::Mutex;
 use crate::{
     conf::{
         ComponentConf,
-        settings::{CYCLE, Setting, float, on_off, word},
+        settings::{self, CYCLE, Setting, float, on_off},
     },
     runtime::{Context, Panel, Runtime, Schema},
     widgets::{
         Gl3dView,
         gl3d::{self, Draw, Frame3D, LookAtCamera, MeshBuilder},
     },
-    world::{self, World},
+    world::World,
 };
 
 /// While rotating, the next frame in this long (the GUI host's ~30 fps pacing).
@@ -91,11 +91,7 @@ const LINES: &[Setting] = &[
         &[float("SPEED", "deg/s", -360.0, 360.0)],
     )
     .default("20"),
-    Setting::new(
-        "world",
-        "the scene: a world file, or none for 4.3's demo scene (default: the exported world.map)",
-        &[word("FILE|none")],
-    ),
+    settings::WORLD,
     CYCLE.default("33"),
 ];
 
@@ -188,16 +184,7 @@ pub fn demo_camera(fovy_deg: f64) -> LookAtCamera {
 
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>> {
     let lines: Lines = conf.settings(LINES)?;
-    let world = match lines.world.as_deref() {
-        None => world::map(&rt.names),
-        Some("none") => None,
-        Some(_) => {
-            let l = conf.line("world").expect("a world line");
-            let file = l.existing_file(0, "the world file")?;
-            let w = World::load(&file).map_err(|e| l.error(format!("world: {e}")))?;
-            Some(Arc::new(w))
-        }
-    };
+    let world = settings::world(conf, lines.world.as_deref(), &rt.names)?;
     let camera = match lines.camera {
         Some((x, y, z, fx, fy, fz)) => {
             if (x, y, z) == (fx, fy, fz) {

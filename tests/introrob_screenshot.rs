@@ -18,38 +18,10 @@ mod common;
 
 use std::{
     path::{Path, PathBuf},
-    process::Command,
     time::{Duration, Instant},
 };
 
 use common::{can_screenshot, quit, spawn_window};
-
-/// RGB pixels of a PNG (None if unreadable).
-fn rgb(png_file: &Path) -> Option<(usize, usize, Vec<[u8; 3]>)> {
-    let bytes = std::fs::read(png_file).ok()?;
-    let mut dec = png::Decoder::new(std::io::Cursor::new(bytes));
-    dec.set_transformations(png::Transformations::EXPAND | png::Transformations::STRIP_16);
-    let mut r = dec.read_info().ok()?;
-    let mut buf = vec![0u8; r.output_buffer_size()?];
-    let info = r.next_frame(&mut buf).ok()?;
-    let (w, h, ch) = (
-        info.width as usize,
-        info.height as usize,
-        info.color_type.samples(),
-    );
-    if ch < 3 {
-        return None;
-    }
-    let mut px = Vec::with_capacity(w * h);
-    for y in 0..h {
-        let row = &buf[y * info.line_size..];
-        for x in 0..w {
-            let p = &row[x * ch..x * ch + 3];
-            px.push([p[0], p[1], p[2]]);
-        }
-    }
-    Some((w, h, px))
-}
 
 /// Pixels within `tol` of `c`: their count and centroid.
 fn find(img: &(usize, usize, Vec<[u8; 3]>), c: [u8; 3], tol: i32) -> (usize, [f32; 2]) {
@@ -75,12 +47,7 @@ const ROBOT: [u8; 3] = [200, 40, 40];
 const LASER: [u8; 3] = [30, 90, 220];
 
 fn shoot(png: &Path) -> Option<(usize, usize, Vec<[u8; 3]>)> {
-    let ok = Command::new("import")
-        .args(["-window", "root"])
-        .arg(png)
-        .status()
-        .is_ok_and(|s| s.success());
-    if ok { rgb(png) } else { None }
+    common::screenshot(png).map(|s| (s.w, s.h, s.px))
 }
 
 #[test]

@@ -41,12 +41,12 @@ use std::{sync::Arc, time::Duration};
 use crate::{
     conf::{
         ComponentConf,
-        settings::{self, CYCLE, Setting, word},
+        settings::{self, CYCLE, Setting},
     },
     interfaces::{Encoders, Image, Interface, Laser, Motors, PtEncoders, PtMotors},
     operator::{self, Commands, Operator},
     runtime::{Runtime, Schema},
-    world::{self, World},
+    world,
 };
 
 /// teleoperator's lines, declared once (`jderobot help teleoperator`).
@@ -55,11 +55,7 @@ const LINES: &[Setting] = &[
     operator::HEAD,
     operator::MAX_V,
     operator::MAX_W,
-    Setting::new(
-        "world",
-        "the walls of the 3D canvas: a world file, or none (default: the exported world.map)",
-        &[word("FILE|none")],
-    ),
+    settings::WORLD,
     CYCLE.default("100"),
     settings::uses("motors", "motors", "the base it drives"),
     settings::uses(
@@ -111,16 +107,7 @@ pub struct Devices {
 
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>> {
     let lines: Lines = conf.settings(LINES)?;
-    let world = match lines.world.as_deref() {
-        None => world::map(&rt.names),
-        Some("none") => None,
-        Some(_) => {
-            let l = conf.line("world").expect("a world line");
-            let file = l.existing_file(0, "the world file")?;
-            let w = World::load(&file).map_err(|e| l.error(format!("world: {e}")))?;
-            Some(Arc::new(w))
-        }
-    };
+    let world = settings::world(conf, lines.world.as_deref(), &rt.names)?;
     // An interface the conf names, if it is not `none` and something provides it.
     let name = |n: &str| (n != "none" && rt.interfaces.contains(n)).then(|| n.to_string());
     let Some(motors_name) = name(&lines.motors) else {

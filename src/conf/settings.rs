@@ -221,6 +221,33 @@ pub const INITIAL_POSITION: Setting = Setting::new(
     ],
 );
 
+/// `world FILE|none`: the world a schema draws: a world file, `none`, or (no
+/// line) the exported `world.map`, whichever driver exports it. [`world`] reads it.
+pub const WORLD: Setting = Setting::new(
+    "world",
+    "the world drawn: a world file, or none (default: the exported world.map)",
+    &[word("FILE|none")],
+);
+
+/// The world a [`WORLD`] line (`value`) names: its file loaded, None for `none`,
+/// and without a line the exported `world.map` (None if no driver exports one).
+pub fn world(
+    conf: &ComponentConf,
+    value: Option<&str>,
+    names: &crate::namespace::Namespace,
+) -> Result<Option<std::sync::Arc<crate::world::World>>, ConfError> {
+    match value {
+        None => Ok(crate::world::map(names)),
+        Some("none") => Ok(None),
+        Some(_) => {
+            let l = conf.line("world").expect("a world line gave the value");
+            let file = l.existing_file(0, "the world file")?;
+            let w = crate::world::World::load(&file).map_err(|e| l.error(format!("world: {e}")))?;
+            Ok(Some(std::sync::Arc::new(w)))
+        }
+    }
+}
+
 /// `provides INTERFACE ...`, any number of them, in the forms `usage` says (a
 /// driver whose provides lines take several forms reads their words itself).
 pub const fn provides(usage: &'static str) -> Setting {

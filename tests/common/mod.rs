@@ -375,6 +375,11 @@ pub fn screenshot(png: &Path) -> Option<Shot> {
     if !ok {
         return None;
     }
+    read_png(png)
+}
+
+/// The RGB pixels of a PNG file; None if it cannot be read.
+pub fn read_png(png: &Path) -> Option<Shot> {
     let bytes = std::fs::read(png).ok()?;
     let mut dec = png::Decoder::new(std::io::Cursor::new(bytes));
     dec.set_transformations(png::Transformations::EXPAND | png::Transformations::STRIP_16);

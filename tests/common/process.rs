@@ -9,6 +9,26 @@ use std::{
     time::Duration,
 };
 
+/// Everything a child writes on its piped stdout and stderr, line by line, as it
+/// comes (a thread per pipe).
+pub fn collect_output(child: &mut Child) -> Arc<Mutex<String>> {
+    let out = Arc::new(Mutex::new(String::new()));
+    for pipe in [
+        Box::new(child.stdout.take().unwrap()) as Box<dyn std::io::Read + Send>,
+        Box::new(child.stderr.take().unwrap()),
+    ] {
+        let out = out.clone();
+        std::thread::spawn(move || {
+            for l in BufReader::new(pipe).lines().map_while(Result::ok) {
+                let mut o = out.lock().unwrap();
+                o.push_str(&l);
+                o.push('\n');
+            }
+        });
+    }
+    out
+}
+
 /// A running `jderobot --headless CONF` whose shell we type into.
 pub struct Proc {
     pub child: Child,
@@ -20,20 +40,7 @@ impl Proc {
         let mut child = super::jderobot([Path::new("--headless"), conf])
             .spawn()
             .expect("start jderobot");
-        let out = Arc::new(Mutex::new(String::new()));
-        for pipe in [
-            Box::new(child.stdout.take().unwrap()) as Box<dyn std::io::Read + Send>,
-            Box::new(child.stderr.take().unwrap()),
-        ] {
-            let out = out.clone();
-            std::thread::spawn(move || {
-                for l in BufReader::new(pipe).lines().map_while(Result::ok) {
-                    let mut o = out.lock().unwrap();
-                    o.push_str(&l);
-                    o.push('\n');
-                }
-            });
-        }
+        let out = collect_output(&mut child);
         Proc { child, out }
     }
 
