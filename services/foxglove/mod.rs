@@ -80,7 +80,7 @@ use parking_lot::Mutex;
 use crate::{
     conf::{
         ComponentConf, ConfError,
-        settings::{Setting, choice, int, on_off, word},
+        settings::{self, Setting, choice, int, on_off, word},
     },
     interfaces::{self, AnyInterface, Watch},
     mcapfmt::Source,
@@ -106,12 +106,7 @@ pub struct Settings {
 }
 
 const LINES: &[Setting] = &[
-    Setting::new(
-        "bind",
-        "the address it listens on (beyond loopback only when said here: 0.0.0.0, ::)",
-        &[word("ADDRESS")],
-    )
-    .default("127.0.0.1"),
+    settings::BIND,
     Setting::new(
         "port",
         "the TCP port (0: any free port)",

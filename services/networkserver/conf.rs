@@ -8,7 +8,7 @@ use std::{
 use crate::{
     conf::{
         ComponentConf, ConfLine,
-        settings::{Setting, int, interface, word},
+        settings::{self, Setting, int, interface, word},
     },
     interfaces::{canonical, family},
     netwire,
@@ -55,12 +55,7 @@ pub(super) const LINES: &[Setting] = &[
         "the TCP port it listens on",
         &[int("PORT", "", 0, 65_535)],
     ),
-    Setting::new(
-        "bind",
-        "the address it listens on (beyond loopback only when said here: 0.0.0.0, ::)",
-        &[word("ADDRESS")],
-    )
-    .default("127.0.0.1"),
+    settings::BIND,
     Setting::new(
         "token",
         "a secret every client must send as its name (`networkclient`'s `token`)",

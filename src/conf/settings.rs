@@ -221,6 +221,14 @@ pub const INITIAL_POSITION: Setting = Setting::new(
     ],
 );
 
+/// `bind ADDRESS`: where a server listens; loopback unless the conf says otherwise.
+pub const BIND: Setting = Setting::new(
+    "bind",
+    "the address it listens on (beyond loopback only when said here: 0.0.0.0, ::)",
+    &[word("ADDRESS")],
+)
+.default("127.0.0.1");
+
 /// `world FILE|none`: the world a schema draws: a world file, `none`, or (no
 /// line) the exported `world.map`, whichever driver exports it. [`world`] reads it.
 pub const WORLD: Setting = Setting::new(
