@@ -29,9 +29,9 @@
 //! provides colorA camera         # an Image topic `/camera` (or with a `camera` part), 320x240
 //! provides varcolorA /world/w/model/r/link/l/sensor/cam/image   # a topic: used as written
 //! partition vm:root              # gz-transport's partition (default: IGN_PARTITION, else
-//!                                #   HOSTNAME:USERNAME, as gz-transport's own default)
+//!                                #   GZ_PARTITION, else HOSTNAME:USERNAME as gz-transport's)
 //! ip 127.0.0.1                   # the address for discovery and data (default: IGN_IP,
-//!                                #   else the one the route to 239.255.0.7 leaves from)
+//!                                #   else GZ_IP, else the route's to 239.255.0.7)
 //! messages auto                  # auto|ignition|gz: the type names we publish (auto: Gazebo's)
 //! motors_timeout 500             # ms: an older motors command counts as zero
 //! cycle 100                      # ms: how often cmd_vel is sent
@@ -100,12 +100,12 @@ pub const LINES: &[Setting] = &[
         .required(),
     Setting::new(
         "partition",
-        "gz-transport's partition (default: IGN_PARTITION, else HOSTNAME:USERNAME)",
+        "gz-transport's partition (default: IGN_PARTITION, else GZ_PARTITION, else HOSTNAME:USERNAME)",
         &[word("NAME")],
     ),
     Setting::new(
         "ip",
-        "the IPv4 address for discovery and data (default: IGN_IP, else the route's)",
+        "the IPv4 address for discovery and data (default: IGN_IP, else GZ_IP, else the route's)",
         &[word("IPV4")],
     ),
     Setting::new(
@@ -256,6 +256,11 @@ fn parse_provides(l: &ConfLine) -> anyhow::Result<Want> {
     })
 }
 
+/// A set, non-empty environment variable.
+fn env(name: &str) -> Option<String> {
+    std::env::var(name).ok().filter(|v| !v.is_empty())
+}
+
 impl GzConf {
     pub fn parse(conf: &ComponentConf) -> anyhow::Result<GzConf> {
         let lines: Lines = conf.settings(LINES)?;
@@ -271,11 +276,8 @@ impl GzConf {
         }
         let partition = lines
             .partition
-            .or_else(|| {
-                std::env::var("IGN_PARTITION")
-                    .ok()
-                    .filter(|p| !p.is_empty())
-            })
+            .or_else(|| env("IGN_PARTITION"))
+            .or_else(|| env("GZ_PARTITION"))
             .unwrap_or_else(node::default_partition);
         if let Some(ip) = &lines.ip
             && ip.parse::<std::net::Ipv4Addr>().is_err()
@@ -302,7 +304,7 @@ impl GzConf {
 /// Where a line's data goes.
 enum Sink {
     Encoders(Arc<Interface<Encoders>>),
-    Laser(Arc<Interface<Laser>>, usize, f64),
+    Laser(Arc<Interface<Laser>>, Resample),
     Camera(Arc<Interface<Image>>, bool),
     Motors(Arc<Interface<Motors>>),
 }
@@ -333,35 +335,74 @@ struct Gz {
     lost: Option<String>,
 }
 
-/// Nearest-ray resampling of a scan into 4.3's laser (N readings at R per degree).
-pub fn fill_laser(s: &pb::Scan, n: usize, per_deg: f64, out: &mut Laser) {
-    let max_mm = if s.range_max.is_finite() && s.range_max > 0.0 {
-        (s.range_max * 1000.0).round().min(i32::MAX as f64) as i32
-    } else {
-        0
-    };
-    let count = s.n();
-    out.readings.clear();
-    for i in 0..n {
-        let deg = -(n as f64) / (2.0 * per_deg) + i as f64 / per_deg;
-        let k = if s.angle_step.abs() > 0.0 && s.angle_step.is_finite() {
-            ((deg.to_radians() - s.angle_min) / s.angle_step).round()
+/// Nearest-ray resampling of scans into 4.3's laser (N readings at R per degree:
+/// reading i at −N/(2R) + i/R deg), the ray of each reading computed once per scan
+/// geometry (as the player driver's LaserMap does).
+#[derive(Clone, Debug)]
+pub struct Resample {
+    pub n: usize,
+    pub per_deg: f64,
+    key: (u64, u64, usize),
+    /// The ray of each reading; `usize::MAX`: outside the scan.
+    table: Vec<usize>,
+}
+
+impl Resample {
+    pub fn new(n: usize, per_deg: f64) -> Resample {
+        Resample {
+            n,
+            per_deg,
+            key: (0, 0, usize::MAX),
+            table: Vec::new(),
+        }
+    }
+
+    fn table(&mut self, min: f64, step: f64, count: usize) -> &[usize] {
+        let key = (min.to_bits(), step.to_bits(), count);
+        if key != self.key {
+            self.key = key;
+            self.table.clear();
+            for i in 0..self.n {
+                let deg = -(self.n as f64) / (2.0 * self.per_deg) + i as f64 / self.per_deg;
+                let k = if step.abs() > 0.0 && step.is_finite() {
+                    ((deg.to_radians() - min) / step).round()
+                } else {
+                    -1.0
+                };
+                self.table.push(if k >= 0.0 && (k as usize) < count {
+                    k as usize
+                } else {
+                    usize::MAX
+                });
+            }
+        }
+        &self.table
+    }
+
+    /// Fills `out` (mm) from scan `s`: no return (inf, NaN) or outside the scan is
+    /// range_max.
+    pub fn fill(&mut self, s: &pb::Scan, out: &mut Laser) {
+        let max_mm = if s.range_max.is_finite() && s.range_max > 0.0 {
+            (s.range_max * 1000.0).round().min(i32::MAX as f64) as i32
         } else {
-            -1.0
+            0
         };
-        let mm = if k >= 0.0 && (k as usize) < count {
-            let r = s.range(k as usize);
+        let per_deg = self.per_deg as f32;
+        let t = self.table(s.angle_min, s.angle_step, s.n());
+        out.readings.clear();
+        out.readings.extend(t.iter().map(|&k| {
+            if k == usize::MAX {
+                return max_mm;
+            }
+            let r = s.range(k);
             if r.is_finite() && r >= 0.0 {
                 (r * 1000.0).round().min(i32::MAX as f64) as i32
             } else {
                 max_mm
             }
-        } else {
-            max_mm
-        };
-        out.readings.push(mm.max(0));
+        }));
+        out.resolution = per_deg;
     }
-    out.resolution = per_deg as f32;
 }
 
 /// An Image message into a BGR image (`fixed`: scaled to 320x240).
@@ -445,15 +486,13 @@ fn feed(lines: &mut [Line], sub: usize, data: &[u8], ty: &str) {
         return;
     };
     let src = &l.source;
-    let r = match &l.sink {
+    let r = match &mut l.sink {
         Sink::Encoders(i) => pb::decode_odometry(data).map(|o| {
             let e = Encoders::from_pose((o.x * 1000.0) as f32, (o.y * 1000.0) as f32, o.yaw as f32);
             src.note(i.write_recorded(i.clock() + 1, sim_time(o.time), |v| *v = e));
         }),
-        Sink::Laser(i, n, r) => pb::decode_scan(data).map(|s| {
-            src.note(i.write_recorded(i.clock() + 1, sim_time(s.time), |l| {
-                fill_laser(&s, *n, *r, l)
-            }));
+        Sink::Laser(i, m) => pb::decode_scan(data).map(|s| {
+            src.note(i.write_recorded(i.clock() + 1, sim_time(s.time), |l| m.fill(&s, l)));
         }),
         Sink::Camera(i, fixed) => pb::decode_image(data).map(|f| {
             let mut err = None;
@@ -564,7 +603,12 @@ impl Gz {
                 (Some(t), Sink::Motors(_)) => format!("{t} (a {msg} subscriber: DiffDrive)"),
                 (Some(t), _) => format!("{t} ({msg})"),
                 (None, _) => format!(
-                    "a {msg} topic named /{n} or with a part `{n}`",
+                    "{} {msg} topic named /{n} or with a part `{n}`",
+                    if msg.starts_with(['A', 'E', 'I', 'O', 'U']) {
+                        "an"
+                    } else {
+                        "a"
+                    },
                     n = l.want.target
                 ),
             };
@@ -579,7 +623,9 @@ impl Gz {
                 ));
                 continue;
             }
-            out.push(what);
+            if !out.contains(&what) {
+                out.push(what);
+            }
         }
         out
     }
@@ -778,7 +824,7 @@ impl GazeboDriver {
                 Kind::Laser(n, r) => {
                     let i = ifaces.provide::<Laser>(&w.iface, provider)?;
                     all.push(i.clone());
-                    Sink::Laser(i, *n, *r)
+                    Sink::Laser(i, Resample::new(*n, *r))
                 }
                 Kind::Camera(fixed) => {
                     let init = if *fixed {
@@ -911,7 +957,7 @@ mod tests {
             time: None,
         };
         let mut l = Laser::default();
-        fill_laser(&s, 180, 1.0, &mut l);
+        Resample::new(180, 1.0).fill(&s, &mut l);
         assert_eq!(l.readings.len(), 180);
         // reading 0 at -90 deg: ray 90.
         assert_eq!(l.readings[0], 1090);

@@ -27,6 +27,8 @@ pub const MSG_PORT: u16 = 10317;
 pub const WIRE_VERSION: u64 = 10;
 const HEARTBEAT: Duration = Duration::from_secs(1);
 const SILENCE: Duration = Duration::from_secs(3);
+/// The most processes and topics remembered.
+const MAX_KNOWN: usize = 10_000;
 
 /// A random version-4 UUID as text (gz-transport's process and node ids).
 pub fn uuid() -> String {
@@ -135,17 +137,22 @@ pub struct Node {
     buf: Vec<u8>,
     /// Remote subscribers registered to our topics: (topic, process uuid, type).
     pub subscribers: Vec<(String, String, String)>,
+    /// Connections reopened in a row, by publisher address (reset by data).
+    reopened: HashMap<String, u32>,
 }
 
-/// The address to use: `ip`, else IGN_IP, else the one the route to the group leaves from.
+/// The address to use: `ip`, else IGN_IP (Fortress), else GZ_IP (Garden and later),
+/// else the one the route to the group leaves from.
 pub fn choose_ip(ip: Option<&str>) -> String {
     if let Some(ip) = ip {
         return ip.to_string();
     }
-    if let Ok(ip) = std::env::var("IGN_IP")
-        && !ip.is_empty()
-    {
-        return ip;
+    for var in ["IGN_IP", "GZ_IP"] {
+        if let Ok(ip) = std::env::var(var)
+            && !ip.is_empty()
+        {
+            return ip;
+        }
     }
     UdpSocket::bind("0.0.0.0:0")
         .and_then(|s| {
@@ -195,6 +202,7 @@ impl Node {
             next_heartbeat: now,
             buf: Vec::new(),
             subscribers: Vec::new(),
+            reopened: HashMap::new(),
         })
     }
 
@@ -372,12 +380,44 @@ impl Node {
     }
 
     /// Unbinds the subscriptions of a connection that closed.
+    /// A connection to a publisher closed. If its process still heartbeats (a
+    /// publisher can drop a connection made while it was starting up), it is
+    /// reopened at once, up to three times in a row; otherwise, or when that
+    /// fails, the subscriptions bound to it wait for a new advertisement.
     fn conn_lost(&mut self, peer: &str) {
-        tracing::debug!("gazebo: the connection to {peer} closed");
-        for w in &mut self.wants {
-            if w.bound.as_ref().is_some_and(|b| b.address == peer) {
-                w.bound = None;
+        let bound: Vec<usize> = (0..self.wants.len())
+            .filter(|&i| {
+                self.wants[i]
+                    .bound
+                    .as_ref()
+                    .is_some_and(|b| b.address == peer)
+            })
+            .collect();
+        let alive = bound.first().is_some_and(|&i| {
+            let p = self.wants[i].bound.as_ref().map(|b| b.process_uuid.clone());
+            p.and_then(|p| self.activity.get(&p).copied())
+                .is_some_and(|t| t.elapsed() < HEARTBEAT + HEARTBEAT / 2)
+        });
+        let tries = self.reopened.entry(peer.to_string()).or_insert(0);
+        *tries += 1;
+        if alive
+            && *tries <= 3
+            && let Ok(mut c) = Conn::connect_sub(peer, Duration::from_millis(500))
+        {
+            tracing::debug!("gazebo: {peer} closed our connection; reopened it");
+            let ok = bound.iter().all(|&i| {
+                let t = self.wants[i].topic.clone();
+                c.subscribe(t.as_bytes()).is_ok()
+            });
+            if ok {
+                self.conns.push(c);
+                return;
             }
+        }
+        tracing::debug!("gazebo: the connection to {peer} closed");
+        self.reopened.remove(peer);
+        for i in bound {
+            self.wants[i].bound = None;
         }
         for ps in self.remote.values_mut() {
             ps.retain(|p| p.address != peer);
@@ -395,11 +435,17 @@ impl Node {
         if d.version != WIRE_VERSION || d.process_uuid == self.puuid || d.relay {
             return;
         }
+        // A flood of made-up processes or topics is not kept without bound.
+        if self.activity.len() >= MAX_KNOWN && !self.activity.contains_key(&d.process_uuid) {
+            return;
+        }
         self.activity.insert(d.process_uuid.clone(), Instant::now());
         match d.kind {
             disc::ADVERTISE => {
                 let Some(p) = d.publisher else { return };
-                if !p.topic.starts_with(&self.prefix) {
+                if !p.topic.starts_with(&self.prefix)
+                    || (self.remote.len() >= MAX_KNOWN && !self.remote.contains_key(&p.topic))
+                {
                     return;
                 }
                 let list = self.remote.entry(p.topic.clone()).or_default();
@@ -474,6 +520,7 @@ impl Node {
                 Some(k) => k,
                 None => match Conn::connect_sub(&p.address, Duration::from_millis(500)) {
                     Ok(c) => {
+                        tracing::debug!("gazebo: connected to {} for {}", p.address, p.topic);
                         self.conns.push(c);
                         self.conns.len() - 1
                     }
@@ -551,6 +598,7 @@ impl Node {
         self.publ.serve();
         let mut lost = Vec::new();
         for c in &mut self.conns {
+            let mut got_data = false;
             let open = match c.flush().and_then(|()| c.read_some()) {
                 Ok(open) => open,
                 Err(e) => {
@@ -567,6 +615,7 @@ impl Node {
                             {
                                 let ty = std::str::from_utf8(&m[3]).unwrap_or("");
                                 on_data(i, &m[2], ty);
+                                got_data = true;
                             }
                         }
                     }
@@ -579,8 +628,10 @@ impl Node {
                     }
                 }
             }
+            if got_data {
+                self.reopened.remove(&c.peer);
+            }
             if !open {
-                tracing::debug!("gazebo: {} closed the connection", c.peer);
                 lost.push(c.peer.clone());
             }
         }

@@ -14,6 +14,7 @@
 //   peer sub --topic T --type laser|image --seconds S   (a C++ subscriber for benchmarks:
 //        prints one JSON line: count, rate, p50 latency (wall stamps))
 //   peer echo-twist --topic T --seconds S   (prints each Twist as "twist LX AZ")
+//   peer decode-bench [--rays N]   (C++ protobuf's parse of a LaserScan: median ns)
 #include <ignition/msgs/image.pb.h>
 #include <ignition/msgs/laserscan.pb.h>
 #include <ignition/msgs/odometry.pb.h>
@@ -257,6 +258,38 @@ static int echo_twist(std::map<std::string, std::string> a) {
   return 0;
 }
 
+// Parses a 360-ray LaserScan as gz-transport's subscriber does (ParseFromString),
+// and reads its ranges: the median ns per message over 51 batches.
+static int decode_bench(std::map<std::string, std::string> a) {
+  int n = a.count("rays") ? std::stoi(a["rays"]) : 360;
+  msgs::LaserScan m;
+  stamp(m.mutable_header(), 12.5);
+  m.set_frame("robot1::lidar_link::lidar");
+  m.set_angle_min(-M_PI);
+  m.set_angle_max(M_PI);
+  m.set_angle_step(2 * M_PI / n);
+  m.set_range_min(0.08);
+  m.set_range_max(10);
+  m.set_count(n);
+  for (int k = 0; k < n; ++k) { m.add_ranges(1 + k * 0.001); m.add_intensities(0); }
+  std::string wire;
+  m.SerializeToString(&wire);
+  std::vector<double> per;
+  msgs::LaserScan out;
+  volatile double sink = 0;
+  const int batch = 2000;
+  for (int b = 0; b < 51; ++b) {
+    auto t0 = steady_clock::now();
+    for (int i = 0; i < batch; ++i) {
+      out.ParseFromString(wire);
+      sink = sink + out.ranges(n / 2);
+    }
+    per.push_back(duration<double, std::nano>(steady_clock::now() - t0).count() / batch);
+  }
+  std::printf("{\"ns\": %.1f, \"bytes\": %zu}\n", median(per), wire.size());
+  return 0;
+}
+
 int main(int argc, char **argv) {
   std::signal(SIGTERM, on_signal);
   std::signal(SIGINT, on_signal);
@@ -266,6 +299,7 @@ int main(int argc, char **argv) {
   if (mode == "robot") return robot(a);
   if (mode == "sub") return sub(a);
   if (mode == "echo-twist") return echo_twist(a);
+  if (mode == "decode-bench") return decode_bench(a);
   std::fprintf(stderr, "unknown mode %s\n", mode.c_str());
   return 2;
 }
