@@ -412,6 +412,7 @@ fn driver_targets(p: &Path) -> Vec<Target> {
                 let _ = pb::Discovery::decode(b);
                 let _ = pb::decode_odometry(b);
                 let _ = pb::decode_twist(b);
+                let _ = pb::decode_joints(b);
                 if let Ok(s) = pb::decode_scan(b) {
                     let mut l = jderobot::interfaces::Laser::default();
                     Resample::new(180, 1.0).fill(&s, &mut l);

@@ -18,7 +18,7 @@ use std::{
 };
 
 use common::{eventually, poll_until, root, start_conf};
-use jderobot::interfaces::{Encoders, Image, Laser, Motors};
+use jderobot::interfaces::{Encoders, Image, Laser, Motors, PtEncoders, PtMotors};
 
 /// Skips (or fails under CI) with `note`.
 fn missing(note: &str) -> Option<PathBuf> {
@@ -295,18 +295,73 @@ fn killing_the_peer_marks_stale_and_zeroes_motors_and_a_restart_brings_it_back()
     ));
     let enc = rt.interfaces.get::<Encoders>("encoders").unwrap();
     let motors = rt.interfaces.get::<Motors>("motors").unwrap();
-    motors.publish(Motors { v: 200.0, w: 0.0 }).unwrap();
-    eventually("the robot moves", || enc.read().x > 50.0);
+    // Commanded as a schema does, every 100 ms.
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let pusher = {
+        let (m, stop) = (motors.clone(), stop.clone());
+        std::thread::spawn(move || {
+            while !stop.load(Ordering::SeqCst) {
+                let _ = m.publish(Motors { v: 200.0, w: 0.0 });
+                std::thread::sleep(Duration::from_millis(100));
+            }
+        })
+    };
+    let state = |what: &str| {
+        format!(
+            "{what}: encoders {:?} stale {:?}; motors {:?} stale {:?}",
+            enc.read().value,
+            enc.stale(),
+            motors.read().value,
+            motors.stale()
+        )
+    };
+    assert!(
+        poll_until(20, || enc.read().x > 50.0),
+        "{}",
+        state("the robot did not move")
+    );
     assert!(enc.stale().is_none());
+    stop.store(true, Ordering::SeqCst);
+    pusher.join().unwrap();
     drop(peer);
-    eventually("stale and motors zero", || {
-        enc.stale().is_some() && motors.read().value == Motors::default()
-    });
+    assert!(
+        poll_until(20, || enc.stale().is_some()
+            && motors.read().value == Motors::default()),
+        "{}",
+        state("not stale with motors zero after the kill")
+    );
     let why = enc.stale().unwrap();
     assert!(why.contains("lost Gazebo"), "{why}");
     let _peer = robot(&bin, &part, &args);
     let c = enc.read().clock;
-    eventually("back", || enc.stale().is_none() && enc.read().clock > c + 5);
+    assert!(
+        poll_until(20, || enc.stale().is_none() && enc.read().clock > c + 5),
+        "{}",
+        state("not back after the restart")
+    );
+    rt.shutdown();
+}
+
+#[test]
+fn the_pan_tilt_head_follows_pantiltmotors() {
+    let Some(bin) = peer_bin() else { return };
+    let part = partition();
+    let _peer = robot(&bin, &part, &["--model", "robot1", "--pantilt"]);
+    let rt = start_conf(&format!(
+        "{}provides pantiltencoders robot1\nprovides pantiltmotors robot1\nend_driver\n\
+         load_driver gazebo\n",
+        head(&part, "gazebo")
+    ));
+    let enc = rt.interfaces.get::<PtEncoders>("pantiltencoders").unwrap();
+    let m = rt.interfaces.get::<PtMotors>("pantiltmotors").unwrap();
+    let mut cmd = m.read().value;
+    cmd.longitude = 30.0;
+    cmd.latitude = -10.0;
+    m.publish(cmd).unwrap();
+    eventually("the head at 30, -10 deg", || {
+        let e = enc.read();
+        (e.pan_angle - 30.0).abs() < 0.5 && (e.tilt_angle + 10.0).abs() < 0.5
+    });
     rt.shutdown();
 }
 

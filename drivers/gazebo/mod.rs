@@ -28,6 +28,9 @@
 //! provides encoders robot1       # /model/robot1/odometry (Odometry), DiffDrive's
 //! provides colorA camera         # an Image topic `/camera` (or with a `camera` part), 320x240
 //! provides varcolorA /world/w/model/r/link/l/sensor/cam/image   # a topic: used as written
+//! provides pantiltmotors robot1  # /model/robot1/joint/JOINT/0/cmd_pos (Double): pan and tilt
+//! provides pantiltencoders robot1  # /world/WORLD/model/robot1/joint_state (Model)
+//! joints pan_joint tilt_joint    # the pan-tilt's joints (defaults shown)
 //! partition vm:root              # gz-transport's partition (default: IGN_PARTITION, else
 //!                                #   GZ_PARTITION, else HOSTNAME:USERNAME as gz-transport's)
 //! ip 127.0.0.1                   # the address for discovery and data (default: IGN_IP,
@@ -47,6 +50,8 @@
 //! | `laser` | LaserScan | N (180) readings at R (1) per degree: reading i at −N/(2R) + i/R deg, the nearest ray; no hit or outside the scan: range_max; mm |
 //! | `colorA..D` | Image | RGB, BGR, RGBA, BGRA or L 8-bit → BGR, scaled (nearest) to 320x240 |
 //! | `varcolorA..D` | Image | the same at the camera's size |
+//! | `pantiltencoders` | JointStatePublisher's Model | the joints' axis1 positions rad → deg |
+//! | `pantiltmotors` | JointPositionController's cmd_pos, Double, per joint | longitude, latitude deg (within the interface's limits) → rad, every `cycle` (speeds are the controller's) |
 //!
 //! Gazebo's simulation time (each message's header stamp) is each value's `time`
 //! (seconds since the epoch = seconds of simulation).
@@ -79,7 +84,7 @@ use crate::{
     },
     interfaces::{
         AnyInterface, COLOR_HEIGHT, COLOR_WIDTH, Encoders, Image, Interface, Interfaces, Laser,
-        Motors, Source,
+        Motors, PtEncoders, PtMotors, Source, limit,
     },
     runtime::{self, Backoff, Driver, Runtime, Supervision, Supervisor},
 };
@@ -90,7 +95,7 @@ use node::{Node, both};
 pub const MAX_V: f32 = 1000.0;
 pub const MAX_W: f32 = 180.0;
 
-const USAGE: &str = "provides encoders|motors MODEL, provides laser SENSOR [N R], \
+const USAGE: &str = "provides encoders|motors|pantiltencoders|pantiltmotors MODEL, provides laser SENSOR [N R], \
 provides colorA..D|varcolorA..D SENSOR, or any of them with a /topic instead of the name";
 
 /// The driver's lines (`jderobot help gazebo`).
@@ -117,6 +122,12 @@ pub const LINES: &[Setting] = &[
     MOTORS_TIMEOUT,
     CYCLE.help("how often cmd_vel is sent").default("100"),
     Setting::new(
+        "joints",
+        "the pan-tilt head's joints (JointPositionController's, JointStatePublisher's)",
+        &[word("PAN"), word("TILT")],
+    )
+    .default("pan_joint tilt_joint"),
+    Setting::new(
         "wait",
         "how long a model or sensor may be missing before the topics that exist are listed",
         &[int("MS", "ms", 100, 600_000)],
@@ -133,6 +144,7 @@ struct Lines {
     messages: String,
     motors_timeout: u64,
     cycle: u64,
+    joints: Vec<String>,
     wait: u64,
 }
 
@@ -145,6 +157,8 @@ pub enum Kind {
     Laser(usize, f64),
     /// Fixed at 320x240 (colorA..D)?
     Camera(bool),
+    PtEncoders,
+    PtMotors,
 }
 
 impl Kind {
@@ -155,6 +169,8 @@ impl Kind {
             Kind::Motors => "Twist",
             Kind::Laser(..) => "LaserScan",
             Kind::Camera(_) => "Image",
+            Kind::PtEncoders => "Model",
+            Kind::PtMotors => "Double",
         }
     }
 }
@@ -194,6 +210,8 @@ pub struct GzConf {
     pub motors_timeout: Duration,
     pub cycle: Duration,
     pub wait: Duration,
+    /// The pan and tilt joints.
+    pub joints: (String, String),
 }
 
 fn parse_provides(l: &ConfLine) -> anyhow::Result<Want> {
@@ -207,6 +225,8 @@ fn parse_provides(l: &ConfLine) -> anyhow::Result<Want> {
     let kind = match iface.as_str() {
         "encoders" => Kind::Encoders,
         "motors" => Kind::Motors,
+        "pantiltencoders" => Kind::PtEncoders,
+        "pantiltmotors" => Kind::PtMotors,
         "laser" => {
             if a.len() == 4 {
                 let n: usize = l.number(2, "a number of readings", 1..=3600)?;
@@ -225,12 +245,20 @@ fn parse_provides(l: &ConfLine) -> anyhow::Result<Want> {
         other => {
             return Err(l
                 .error(format!(
-                    "`provides {other}`: the gazebo driver gives encoders, motors, laser, colorA..D \
-                     and varcolorA..D (gz-sim has no sonars or bumpers); usage: {USAGE}"
+                    "`provides {other}`: the gazebo driver gives encoders, motors, laser, colorA..D, \
+                     varcolorA..D, pantiltencoders and pantiltmotors (gz-sim has no sonars or bumpers); usage: {USAGE}"
                 ))
                 .into());
         }
     };
+    if matches!(kind, Kind::PtMotors) && a[1].starts_with('/') {
+        return Err(l
+            .error(format!(
+                "`provides pantiltmotors` takes the model's name (its joints' cmd_pos topics follow \
+                 from it and `joints`), not a topic; usage: {USAGE}"
+            ))
+            .into());
+    }
     let max = if matches!(kind, Kind::Laser(..)) {
         4
     } else {
@@ -297,6 +325,10 @@ impl GzConf {
             motors_timeout: Duration::from_millis(lines.motors_timeout),
             cycle: Duration::from_millis(lines.cycle),
             wait: Duration::from_millis(lines.wait),
+            joints: (
+                lines.joints.first().cloned().unwrap_or_default(),
+                lines.joints.get(1).cloned().unwrap_or_default(),
+            ),
         })
     }
 }
@@ -307,6 +339,17 @@ enum Sink {
     Laser(Arc<Interface<Laser>>, Resample),
     Camera(Arc<Interface<Image>>, bool),
     Motors(Arc<Interface<Motors>>),
+    /// The pan and tilt joints' names.
+    PtEncoders(Arc<Interface<PtEncoders>>, String, String),
+    /// The tilt joint's cmd_pos topic (the pan's is the line's topic).
+    PtMotors(Arc<Interface<PtMotors>>, String),
+}
+
+impl Sink {
+    /// Whether we publish it (a subscriber serves it).
+    fn output(&self) -> bool {
+        matches!(self, Sink::Motors(_) | Sink::PtMotors(..))
+    }
 }
 
 /// One line at run time.
@@ -513,7 +556,26 @@ fn feed(lines: &mut [Line], sub: usize, data: &[u8], ty: &str) {
                 }
             }
         }),
-        Sink::Motors(_) => Ok(()),
+        Sink::PtEncoders(i, pan, tilt) => pb::decode_joints(data).map(|(time, joints)| {
+            let at = |name: &str| {
+                joints
+                    .iter()
+                    .find(|(n, _)| n == name)
+                    .map(|(_, p)| p.to_degrees() as f32)
+            };
+            if let (Some(p), Some(t)) = (at(pan), at(tilt)) {
+                let v = PtEncoders {
+                    pan_angle: p,
+                    tilt_angle: t,
+                };
+                src.note(i.write_recorded(i.clock() + 1, sim_time(time), |x| *x = v));
+            } else {
+                src.refused(format_args!(
+                    "the joint state has no joints `{pan}` and `{tilt}` (set `joints PAN TILT`)"
+                ));
+            }
+        }),
+        Sink::Motors(_) | Sink::PtMotors(..) => Ok(()),
     };
     if let Err(e) = r {
         src.refused(format_args!("a malformed {ty} message: {e}"));
@@ -521,8 +583,9 @@ fn feed(lines: &mut [Line], sub: usize, data: &[u8], ty: &str) {
 }
 
 impl Gz {
-    fn twist_type(&self) -> String {
-        format!("{}.msgs.Twist", self.ns)
+    /// The type name we publish `msg` under (`ignition.msgs.Twist`).
+    fn msg_type(&self, msg: &str) -> String {
+        format!("{}.msgs.{msg}", self.ns)
     }
 
     /// Subscribes the lines whose topic is known or can now be found.
@@ -533,9 +596,15 @@ impl Gz {
                 l.topic = l.want.fixed_topic().or_else(|| {
                     let accept = both(l.want.kind.msg());
                     let name = &l.want.target;
+                    let joint_state = format!("/model/{name}/joint_state");
+                    let pt = matches!(l.want.kind, Kind::PtEncoders);
                     let fits = |(t, tys): &&(String, Vec<String>)| {
                         tys.iter().any(|ty| accept.contains(ty))
-                            && t.split('/').any(|part| part == name)
+                            && if pt {
+                                t.ends_with(&joint_state)
+                            } else {
+                                t.split('/').any(|part| part == name)
+                            }
                     };
                     let exact = format!("/{name}");
                     known
@@ -546,7 +615,7 @@ impl Gz {
                         .map(|(t, _)| t.clone())
                 });
             }
-            if let (Some(t), None, false) = (&l.topic, l.sub, matches!(l.sink, Sink::Motors(_))) {
+            if let (Some(t), None, false) = (&l.topic, l.sub, l.sink.output()) {
                 l.sub = Some(self.node.want(t, both(l.want.kind.msg())));
             }
         }
@@ -574,10 +643,15 @@ impl Gz {
                 }
             }
         }
-        let ty = self.twist_type();
+        let (twist, double) = (self.msg_type("Twist"), self.msg_type("Double"));
         for l in &self.lines {
-            if let (Sink::Motors(_), Some(t)) = (&l.sink, &l.topic) {
-                self.node.advertise(t, &ty);
+            match (&l.sink, &l.topic) {
+                (Sink::Motors(_), Some(t)) => self.node.advertise(t, &twist),
+                (Sink::PtMotors(_, tilt), Some(pan)) => {
+                    self.node.advertise(pan, &double);
+                    self.node.advertise(tilt, &double);
+                }
+                _ => {}
             }
         }
     }
@@ -586,6 +660,10 @@ impl Gz {
     fn served(&self, l: &Line) -> bool {
         match (&l.sink, &l.topic, l.sub) {
             (Sink::Motors(_), Some(t), _) => self.node.has_subscriber(&self.node.qualify(t)),
+            (Sink::PtMotors(_, tilt), Some(pan), _) => {
+                self.node.has_subscriber(&self.node.qualify(pan))
+                    && self.node.has_subscriber(&self.node.qualify(tilt))
+            }
             (_, _, Some(s)) => self.node.wants[s].bound.is_some(),
             _ => false,
         }
@@ -601,6 +679,13 @@ impl Gz {
             let msg = l.want.kind.msg();
             let what = match (&l.topic, &l.sink) {
                 (Some(t), Sink::Motors(_)) => format!("{t} (a {msg} subscriber: DiffDrive)"),
+                (Some(t), Sink::PtMotors(_, tilt)) => {
+                    format!("{t} and {tilt} (Double subscribers: JointPositionController)")
+                }
+                (None, Sink::PtEncoders(..)) => format!(
+                    "a Model topic /world/WORLD/model/{}/joint_state (JointStatePublisher)",
+                    l.want.target
+                ),
                 (Some(t), _) => format!("{t} ({msg})"),
                 (None, _) => format!(
                     "{} {msg} topic named /{n} or with a part `{n}`",
@@ -666,10 +751,25 @@ impl Gz {
         self.node.pump(wait, &mut |s, d, ty| feed(lines, s, d, ty));
     }
 
-    /// Sends each motors command (zero if `zero`).
+    /// Sends each motors command (zero if `zero`), and the pan-tilt's position
+    /// (not when `zero`: the head stays where it is).
     fn commands(&mut self, zero: bool) {
-        let ty = self.twist_type();
+        let ty = self.msg_type("Twist");
+        let double = self.msg_type("Double");
         for k in 0..self.lines.len() {
+            if let (Sink::PtMotors(m, tilt), Some(pan), false) =
+                (&self.lines[k].sink, &self.lines[k].topic, zero)
+            {
+                let c = m.snapshot();
+                let p = limit(c.longitude, c.min_longitude, c.max_longitude);
+                let t = limit(c.latitude, c.min_latitude, c.max_latitude);
+                for (topic, deg) in [(pan.clone(), p), (tilt.clone(), t)] {
+                    pb::encode_double((deg as f64).to_radians(), &mut self.twist);
+                    let fq = self.node.qualify(&topic);
+                    self.node.publish(&fq, &double, &self.twist);
+                }
+                continue;
+            }
             let (Sink::Motors(m), Some(t)) = (&self.lines[k].sink, &self.lines[k].topic) else {
                 continue;
             };
@@ -740,9 +840,14 @@ impl runtime::Device for Gz {
         self.resolve();
         if !self.all_served() {
             let why = format!(
-                "{}: lost Gazebo (no {}); motors zero, waiting for it to come back",
+                "{}: lost Gazebo (no {}: {}); motors zero, waiting for it to come back",
                 self.name,
-                self.missing().join(", ")
+                self.missing().join(", "),
+                if self.node.last_loss.is_empty() {
+                    "a subscriber left"
+                } else {
+                    &self.node.last_loss
+                }
             );
             if self.lost.is_none() {
                 crate::output::println(why.clone());
@@ -826,6 +931,17 @@ impl GazeboDriver {
                     all.push(i.clone());
                     Sink::Laser(i, Resample::new(*n, *r))
                 }
+                Kind::PtEncoders => {
+                    let i = ifaces.provide::<PtEncoders>(&w.iface, provider)?;
+                    all.push(i.clone());
+                    Sink::PtEncoders(i, gc.joints.0.clone(), gc.joints.1.clone())
+                }
+                Kind::PtMotors => {
+                    let i = ifaces.provide::<PtMotors>(&w.iface, provider)?;
+                    all.push(i.clone());
+                    let tilt = format!("/model/{}/joint/{}/0/cmd_pos", w.target, gc.joints.1);
+                    Sink::PtMotors(i, tilt)
+                }
                 Kind::Camera(fixed) => {
                     let init = if *fixed {
                         Image::new(COLOR_WIDTH, COLOR_HEIGHT)
@@ -837,10 +953,12 @@ impl GazeboDriver {
                     Sink::Camera(i, *fixed)
                 }
             };
+            let topic = matches!(w.kind, Kind::PtMotors)
+                .then(|| format!("/model/{}/joint/{}/0/cmd_pos", w.target, gc.joints.0));
             lines.push(Line {
                 want: w.clone(),
                 sink,
-                topic: None,
+                topic,
                 sub: None,
                 source: Source::new(format!("{provider}: {} {}", w.iface, w.target)),
             });

@@ -139,6 +139,8 @@ pub struct Node {
     pub subscribers: Vec<(String, String, String)>,
     /// Connections reopened in a row, by publisher address (reset by data).
     reopened: HashMap<String, u32>,
+    /// Why a bound subscription was last lost.
+    pub last_loss: String,
 }
 
 /// The address to use: `ip`, else IGN_IP (Fortress), else GZ_IP (Garden and later),
@@ -203,6 +205,7 @@ impl Node {
             buf: Vec::new(),
             subscribers: Vec::new(),
             reopened: HashMap::new(),
+            last_loss: String::new(),
         })
     }
 
@@ -361,9 +364,23 @@ impl Node {
         self.next_heartbeat = Instant::now() + HEARTBEAT;
     }
 
+    fn read_discovery(&mut self) {
+        let mut buf = vec![0u8; 65536];
+        while let Ok((len, _)) = self.udp.recv_from(&mut buf) {
+            self.discovery(&buf[..len]);
+        }
+    }
+
     /// A process is gone: its publishers and the subscriptions bound to them.
     fn forget(&mut self, puuid: &str) {
         tracing::debug!("gazebo: process {puuid} is gone");
+        if self
+            .wants
+            .iter()
+            .any(|w| w.bound.as_ref().is_some_and(|b| b.process_uuid == puuid))
+        {
+            self.last_loss = format!("its process {puuid} said goodbye or fell silent for 3 s");
+        }
         self.activity.remove(puuid);
         for ps in self.remote.values_mut() {
             ps.retain(|p| p.process_uuid != puuid);
@@ -382,7 +399,7 @@ impl Node {
     /// Unbinds the subscriptions of a connection that closed.
     /// A connection to a publisher closed. If its process still heartbeats (a
     /// publisher can drop a connection made while it was starting up), it is
-    /// reopened at once, up to three times in a row; otherwise, or when that
+    /// reopened at once, up to 20 times before data flows; otherwise, or when that
     /// fails, the subscriptions bound to it wait for a new advertisement.
     fn conn_lost(&mut self, peer: &str) {
         let bound: Vec<usize> = (0..self.wants.len())
@@ -401,7 +418,7 @@ impl Node {
         let tries = self.reopened.entry(peer.to_string()).or_insert(0);
         *tries += 1;
         if alive
-            && *tries <= 3
+            && *tries <= 20
             && let Ok(mut c) = Conn::connect_sub(peer, Duration::from_millis(500))
         {
             tracing::debug!("gazebo: {peer} closed our connection; reopened it");
@@ -415,6 +432,9 @@ impl Node {
             }
         }
         tracing::debug!("gazebo: the connection to {peer} closed");
+        if !bound.is_empty() {
+            self.last_loss = format!("the connection to {peer} closed");
+        }
         self.reopened.remove(peer);
         for i in bound {
             self.wants[i].bound = None;
@@ -460,6 +480,7 @@ impl Node {
             disc::UNADVERTISE => {
                 let Some(p) = d.publisher else { return };
                 tracing::debug!("gazebo: {} unadvertised", p.topic);
+                self.last_loss = format!("{} was unadvertised", p.topic);
                 if let Some(list) = self.remote.get_mut(&p.topic) {
                     list.retain(|q| {
                         !(q.process_uuid == p.process_uuid && q.node_uuid == p.node_uuid)
@@ -547,6 +568,8 @@ impl Node {
     /// when due.
     pub fn pump(&mut self, timeout: Duration, on_data: &mut dyn FnMut(usize, &[u8], &str)) {
         if Instant::now() >= self.next_heartbeat {
+            // What arrived while we were busy counts before anyone is found silent.
+            self.read_discovery();
             self.heartbeat();
         }
         let wait = timeout.min(
@@ -591,10 +614,7 @@ impl Node {
         if n <= 0 {
             return;
         }
-        let mut buf = [0u8; 65536];
-        while let Ok((len, _)) = self.udp.recv_from(&mut buf) {
-            self.discovery(&buf[..len]);
-        }
+        self.read_discovery();
         self.publ.serve();
         let mut lost = Vec::new();
         for c in &mut self.conns {
@@ -635,6 +655,7 @@ impl Node {
                 lost.push(c.peer.clone());
             }
         }
+        lost.dedup();
         for peer in lost {
             self.conns.retain(|c| c.peer != peer);
             self.conn_lost(&peer);

@@ -360,6 +360,46 @@ pub fn decode_twist(b: &[u8]) -> Result<(f64, f64), PbError> {
     Ok((v, w))
 }
 
+/// A `Double` (JointPositionController's cmd_pos): field 2 data.
+pub fn encode_double(v: f64, out: &mut Vec<u8>) {
+    out.clear();
+    W(out).double(2, v);
+}
+
+/// Joint names and positions (rad).
+pub type Joints = Vec<(String, f64)>;
+
+/// A `Model`'s joints (JointStatePublisher): (name, axis1.position rad), at most 256,
+/// and the header's time. `Model`: 1 header, 6 joint; `Joint`: 2 name, 10 axis1;
+/// `Axis`: 10 position.
+pub fn decode_joints(b: &[u8]) -> Result<(Option<f64>, Joints), PbError> {
+    let (mut time, mut out) = (None, Vec::new());
+    for f in fields(b) {
+        match f? {
+            (1, v) => time = stamp(v.bytes())?,
+            (6, j) if out.len() < 256 => {
+                let (mut name, mut pos) = (String::new(), 0.0);
+                for f in fields(j.bytes()) {
+                    match f? {
+                        (2, v) => name = v.str()?.into(),
+                        (10, a) => {
+                            for f in fields(a.bytes()) {
+                                if let (10, p) = f? {
+                                    pos = p.f64();
+                                }
+                            }
+                        }
+                        _ => {}
+                    }
+                }
+                out.push((name, pos));
+            }
+            _ => {}
+        }
+    }
+    Ok((time, out))
+}
+
 /// A `LaserScan`'s geometry; the ranges stay in the message (packed doubles).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Scan<'a> {

@@ -6,6 +6,9 @@
 //   gpu_lidar:  LaserScan on --lidar TOPIC at 10 Hz: 360 rays over 360 degrees, ray-cast
 //               in a fixed room (walls at x, y = +-5 m, a 1 m box at (2.5, -2.5))
 //   camera:     Image (RGB_INT8) on --camera TOPIC, --width x --height at --fps
+//   --pantilt:  JointPositionController on pan_joint and tilt_joint (subscribes
+//               /model/NAME/joint/JOINT/0/cmd_pos, Double; moves at most 2 rad/s) and
+//               JointStatePublisher (/world/room/model/NAME/joint_state, Model, 50 Hz)
 // Header stamps are the simulation time (seconds since start), or the wall clock with
 // --wallstamp (for latency benchmarks).
 //
@@ -15,7 +18,9 @@
 //        prints one JSON line: count, rate, p50 latency (wall stamps))
 //   peer echo-twist --topic T --seconds S   (prints each Twist as "twist LX AZ")
 //   peer decode-bench [--rays N]   (C++ protobuf's parse of a LaserScan: median ns)
+#include <ignition/msgs/double.pb.h>
 #include <ignition/msgs/image.pb.h>
+#include <ignition/msgs/model.pb.h>
 #include <ignition/msgs/laserscan.pb.h>
 #include <ignition/msgs/odometry.pb.h>
 #include <ignition/msgs/twist.pb.h>
@@ -191,6 +196,46 @@ static int robot(std::map<std::string, std::string> a) {
         m.set_pixel_format_type(msgs::PixelFormatType::RGB_INT8);
         m.set_data(data);
         stamp(m.mutable_header(), simtime());
+        pub.Publish(m);
+      }
+    });
+  }
+  double pan = 0, tilt = 0, pan_cmd = 0, tilt_cmd = 0;
+  std::function<void(const msgs::Double &)> pan_cb = [&](const msgs::Double &m) {
+    std::lock_guard<std::mutex> l(mu);
+    pan_cmd = m.data();
+  };
+  std::function<void(const msgs::Double &)> tilt_cb = [&](const msgs::Double &m) {
+    std::lock_guard<std::mutex> l(mu);
+    tilt_cmd = m.data();
+  };
+  if (a.count("pantilt")) {
+    node.Subscribe("/model/" + model + "/joint/pan_joint/0/cmd_pos", pan_cb);
+    node.Subscribe("/model/" + model + "/joint/tilt_joint/0/cmd_pos", tilt_cb);
+    threads.emplace_back([&]() {
+      auto pub = node.Advertise<msgs::Model>("/world/room/model/" + model + "/joint_state");
+      auto next = steady_clock::now();
+      while (running) {
+        next += milliseconds(20);
+        std::this_thread::sleep_until(next);
+        msgs::Model m;
+        {
+          std::lock_guard<std::mutex> l(mu);
+          auto step = [](double &x, double to) {
+            double d = std::max(-0.04, std::min(0.04, to - x));
+            x += d;
+          };
+          step(pan, pan_cmd);
+          step(tilt, tilt_cmd);
+          m.set_name(model);
+          auto *j = m.add_joint();
+          j->set_name("pan_joint");
+          j->mutable_axis1()->set_position(pan);
+          j = m.add_joint();
+          j->set_name("tilt_joint");
+          j->mutable_axis1()->set_position(tilt);
+          stamp(m.mutable_header(), simtime());
+        }
         pub.Publish(m);
       }
     });
