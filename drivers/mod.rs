@@ -5,6 +5,8 @@
 pub mod evi;
 #[cfg(feature = "firewire")]
 pub mod firewire;
+#[cfg(feature = "gazebo")]
+pub mod gazebo;
 #[cfg(feature = "gige")]
 pub mod gige;
 #[cfg(feature = "imagefile")]

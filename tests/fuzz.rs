@@ -373,6 +373,58 @@ fn driver_targets(p: &Path) -> Vec<Target> {
             },
         });
     }
+    #[cfg(feature = "gazebo")]
+    {
+        use jderobot::drivers::gazebo::{Resample, fill_image, pb};
+        let mut seeds = Vec::new();
+        let mut scan = Vec::new();
+        let mut w = pb::W(&mut scan);
+        w.msg(1, |w| w.msg(1, |w| w.uint(1, 3)));
+        w.double(4, -1.5);
+        w.double(6, 0.01);
+        w.double(8, 10.0);
+        w.uint(9, 4);
+        w.bytes(14, &[0x3f; 32]);
+        seeds.push(scan);
+        let mut img = Vec::new();
+        let mut w = pb::W(&mut img);
+        w.uint(2, 2);
+        w.uint(3, 2);
+        w.uint(4, 6);
+        w.bytes(5, &[7; 12]);
+        w.uint(6, 3);
+        seeds.push(img);
+        let mut d = vec![0, 0];
+        pb::Discovery {
+            version: 10,
+            process_uuid: "p".into(),
+            kind: pb::disc::ADVERTISE,
+            publisher: Some(pb::Publisher::default()),
+            ..Default::default()
+        }
+        .encode(&mut d);
+        seeds.push(d);
+        t.push(Target {
+            name: "gazebo_protobuf",
+            seeds,
+            text: false,
+            run: |b| {
+                let _ = pb::Discovery::decode(b);
+                let _ = pb::decode_odometry(b);
+                let _ = pb::decode_twist(b);
+                let _ = pb::decode_joints(b);
+                if let Ok(s) = pb::decode_scan(b) {
+                    let mut l = jderobot::interfaces::Laser::default();
+                    Resample::new(180, 1.0).fill(&s, &mut l);
+                }
+                if let Ok(f) = pb::decode_image(b) {
+                    let mut i = jderobot::interfaces::Image::default();
+                    let _ = fill_image(&f, true, &mut i);
+                    let _ = fill_image(&f, false, &mut i);
+                }
+            },
+        });
+    }
     #[cfg(feature = "evi")]
     t.push(Target {
         name: "visca",

@@ -1,0 +1,261 @@
+//! gazebo benchmark against gz-transport's own C++ subscriber, in the same run:
+//! the scripted robot `tests/gazebo/peer.cc` (built here with g++ on the real
+//! libignition-transport11) publishes; its C++ `sub` mode and our driver subscribe to
+//! the same topics at the same time. Medians; ratios against the C++ figures.
+//! Run with `cargo bench --features gazebo --bench gazebo` (see docs/benchmarks.md).
+//!
+//! Goals (issue 24): 640x480 frames into `colorA` at ≥ 90 % of the C++ subscriber's
+//! rate; laser latency from publish to interface p50 ≤ 1.2x the C++ subscriber's;
+//! the cost of one LaserScan decode into `laser`.
+
+use std::{
+    hint::black_box,
+    path::{Path, PathBuf},
+    process::{Child, Command, Stdio},
+    sync::Arc,
+    time::{Duration, Instant, SystemTime},
+};
+
+use jderobot::{
+    Conf,
+    drivers::gazebo::{Resample, pb},
+    interfaces::{Image, Laser, Watch},
+};
+
+fn median(mut v: Vec<f64>) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+fn peer() -> Option<PathBuf> {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let bin = root.join("target/gazebo-peer/peer-bench");
+    std::fs::create_dir_all(bin.parent().unwrap()).ok()?;
+    let flags = Command::new("pkg-config")
+        .args([
+            "--cflags",
+            "--libs",
+            "ignition-transport11",
+            "ignition-msgs8",
+        ])
+        .output()
+        .ok()
+        .filter(|o| o.status.success())?;
+    let ok = Command::new("g++")
+        .args(["-O2", "-std=c++17"])
+        .arg(root.join("tests/gazebo/peer.cc"))
+        .args(String::from_utf8_lossy(&flags.stdout).split_whitespace())
+        .arg("-o")
+        .arg(&bin)
+        .status()
+        .ok()?
+        .success();
+    ok.then_some(bin)
+}
+
+struct Proc(Child);
+impl Drop for Proc {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+fn gz(bin: &Path, part: &str) -> Command {
+    let mut c = Command::new(bin);
+    c.env("IGN_IP", "127.0.0.1").env("IGN_PARTITION", part);
+    c
+}
+
+fn json_num(s: &str, key: &str) -> f64 {
+    s.split(&format!("\"{key}\": "))
+        .nth(1)
+        .and_then(|r| r.split([',', '}']).next())
+        .and_then(|v| v.trim().parse().ok())
+        .unwrap_or(f64::NAN)
+}
+
+fn runtime(part: &str, provides: &str) -> Arc<jderobot::runtime::Runtime> {
+    let text = format!(
+        "driver gazebo\npartition {part}\nip 127.0.0.1\n{provides}end_driver\nload_driver gazebo\n"
+    );
+    let conf = Conf::parse(&text, Path::new("bench.conf")).unwrap();
+    jderobot::loader::start(&conf).unwrap()
+}
+
+/// Frames per second into colorA and the C++ subscriber's, at `fps` 640x480 RGB.
+fn camera(bin: &Path, fps: u32, secs: u32) -> (f64, f64) {
+    let part = format!("jdebench{}-cam{fps}", std::process::id());
+    let _robot = Proc(
+        gz(bin, &part)
+            .args([
+                "robot", "--model", "r", "--camera", "/camera", "--width", "640",
+            ])
+            .args(["--height", "480", "--fps", &fps.to_string(), "--wallstamp"])
+            .stdout(Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    let rt = runtime(&part, "provides colorA camera\n");
+    let col = rt.interfaces.get::<Image>("colorA").unwrap();
+    let cpp = gz(bin, &part)
+        .args([
+            "sub",
+            "--topic",
+            "/camera",
+            "--type",
+            "image",
+            "--seconds",
+            &secs.to_string(),
+        ])
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let t = Instant::now();
+    while col.read().clock == 0 && t.elapsed() < Duration::from_secs(10) {
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    let (c0, t0) = (col.read().clock, Instant::now());
+    std::thread::sleep(Duration::from_secs(secs as u64));
+    let ours = (col.read().clock - c0) as f64 / t0.elapsed().as_secs_f64();
+    let out = cpp.wait_with_output().unwrap();
+    rt.shutdown();
+    (
+        ours,
+        json_num(&String::from_utf8_lossy(&out.stdout), "rate"),
+    )
+}
+
+/// Laser latency p50 (ms), publish (wall stamp) to interface, ours and C++'s.
+fn laser(bin: &Path, hz: u32, secs: u32) -> (f64, f64, usize) {
+    let part = format!("jdebench{}-laser", std::process::id());
+    let _robot = Proc(
+        gz(bin, &part)
+            .args([
+                "robot",
+                "--model",
+                "r",
+                "--lidar",
+                "/lidar",
+                "--lidar-hz",
+                &hz.to_string(),
+            ])
+            .arg("--wallstamp")
+            .stdout(Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    let rt = runtime(&part, "provides laser lidar\n");
+    let l = rt.interfaces.get::<Laser>("laser").unwrap();
+    let cpp = gz(bin, &part)
+        .args([
+            "sub",
+            "--topic",
+            "/lidar",
+            "--type",
+            "laser",
+            "--seconds",
+            &secs.to_string(),
+        ])
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let w = Watch::for_current_thread();
+    l.watch(w.clone());
+    let mut lat = Vec::new();
+    let mut seen = 0;
+    let end = Instant::now() + Duration::from_secs(secs as u64 + 1);
+    while Instant::now() < end {
+        if !w.wait(Duration::from_millis(100)) {
+            continue;
+        }
+        let s = l.read();
+        if s.clock != seen {
+            seen = s.clock;
+            if let Ok(d) = SystemTime::now().duration_since(s.time) {
+                lat.push(d.as_secs_f64() * 1e3);
+            }
+        }
+    }
+    let out = cpp.wait_with_output().unwrap();
+    rt.shutdown();
+    let n = lat.len();
+    (
+        median(lat),
+        json_num(&String::from_utf8_lossy(&out.stdout), "p50_ms"),
+        n,
+    )
+}
+
+/// Median ns of one LaserScan (`rays` rays) decoded and resampled into `laser`.
+fn decode(rays: usize) -> f64 {
+    let mut msg = Vec::new();
+    let mut w = pb::W(&mut msg);
+    w.msg(1, |w| w.msg(1, |w| w.uint(1, 12)));
+    w.bytes(2, b"robot1::lidar_link::lidar");
+    w.double(4, -std::f64::consts::PI);
+    w.double(5, std::f64::consts::PI);
+    w.double(6, std::f64::consts::TAU / rays as f64);
+    w.double(7, 0.08);
+    w.double(8, 10.0);
+    w.uint(9, rays as u64);
+    let r: Vec<u8> = (0..rays)
+        .flat_map(|k| (1.0 + k as f64 * 0.001).to_le_bytes())
+        .collect();
+    w.bytes(14, &r);
+    w.bytes(15, &vec![0u8; rays * 8]);
+    let mut out = Laser::default();
+    let mut map = Resample::new(180, 1.0);
+    let mut per = Vec::new();
+    for _ in 0..51 {
+        let t = Instant::now();
+        for _ in 0..2000 {
+            let s = pb::decode_scan(black_box(&msg)).unwrap();
+            map.fill(&s, &mut out);
+            black_box(&out);
+        }
+        per.push(t.elapsed().as_nanos() as f64 / 2000.0);
+    }
+    median(per)
+}
+
+fn main() {
+    tracing_subscriber::fmt()
+        .with_env_filter(tracing_subscriber::EnvFilter::from_default_env())
+        .init();
+    let Some(bin) = peer() else {
+        println!(
+            "SKIPPED: gazebo bench needs g++, pkg-config and libignition-transport-dev (see .ci/run)"
+        );
+        return;
+    };
+    let rays = 360;
+    let ours = decode(rays);
+    let cpp = Command::new(&bin)
+        .args(["decode-bench", "--rays", &rays.to_string()])
+        .output()
+        .unwrap();
+    let cpp = json_num(&String::from_utf8_lossy(&cpp.stdout), "ns");
+    println!(
+        "LaserScan decode ({rays} rays) into laser (180 readings): {ours:.0} ns; \
+         C++ protobuf ParseFromString alone: {cpp:.0} ns (ratio {:.2})",
+        ours / cpp
+    );
+    for fps in [30, 120] {
+        let (ours, cpp) = camera(&bin, fps, 5);
+        println!(
+            "640x480 RGB at {fps}/s offered: colorA {ours:.1} frames/s, C++ subscriber {cpp:.1} \
+             frames/s (ratio {:.2}, goal >= 0.90)",
+            ours / cpp
+        );
+    }
+    let (ours, cpp, n) = laser(&bin, 50, 5);
+    println!(
+        "laser latency publish -> interface, p50 over {n} scans at 50 Hz: {ours:.3} ms; C++ \
+         subscriber {cpp:.3} ms (ratio {:.2}, goal <= 1.2)",
+        ours / cpp
+    );
+}

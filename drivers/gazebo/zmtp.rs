@@ -1,0 +1,355 @@
+//! A minimal ZMTP 3.0 (ZeroMQ's wire, rfc.zeromq.org/spec/23) over TCP with the NULL
+//! mechanism: the two ends gz-transport's topics need, a SUB connection to a
+//! publisher and a PUB listener for subscribers. Non-blocking sockets polled by the
+//! caller; every frame is bounded ([`MAX_FRAME`]), so a peer sending garbage is
+//! dropped with the reason, never allowed to make us allocate without limit.
+
+use std::{
+    io::{self, Read, Write},
+    net::{TcpListener, TcpStream},
+    os::fd::{AsRawFd, RawFd},
+};
+
+/// The largest frame accepted (a 4K RGBA image is 33 MB).
+pub const MAX_FRAME: u64 = 64 << 20;
+/// The most frames of one message (gz-transport sends 4 or 5).
+const MAX_PARTS: usize = 16;
+
+/// Our greeting: signature, version 3.0, NULL mechanism, as-server 0, filler.
+fn greeting() -> [u8; 64] {
+    let mut g = [0u8; 64];
+    g[0] = 0xff;
+    g[9] = 0x7f;
+    g[10] = 3;
+    g[11] = 0;
+    g[12..16].copy_from_slice(b"NULL");
+    g
+}
+
+/// A READY command with `Socket-Type`.
+fn ready(socket_type: &str) -> Vec<u8> {
+    let mut body = vec![5];
+    body.extend_from_slice(b"READY");
+    body.push(11);
+    body.extend_from_slice(b"Socket-Type");
+    body.extend_from_slice(&(socket_type.len() as u32).to_be_bytes());
+    body.extend_from_slice(socket_type.as_bytes());
+    let mut f = vec![0x04, body.len() as u8];
+    f.extend_from_slice(&body);
+    f
+}
+
+/// Appends one frame.
+fn frame(out: &mut Vec<u8>, more: bool, data: &[u8]) {
+    let m = if more { 1 } else { 0 };
+    if data.len() < 256 {
+        out.push(m);
+        out.push(data.len() as u8);
+    } else {
+        out.push(m | 2);
+        out.extend_from_slice(&(data.len() as u64).to_be_bytes());
+    }
+    out.extend_from_slice(data);
+}
+
+/// What one connection read: whole messages (or commands).
+pub enum Item {
+    Message(Vec<Vec<u8>>),
+    Command(Vec<u8>),
+}
+
+/// One ZMTP connection, either end; reading is incremental.
+pub struct Conn {
+    pub stream: TcpStream,
+    /// Received bytes: `inbuf[start..end]` is not parsed yet.
+    inbuf: Vec<u8>,
+    start: usize,
+    end: usize,
+    outbuf: Vec<u8>,
+    greeted: bool,
+    ready: bool,
+    parts: Vec<Vec<u8>>,
+    /// The peer's address (for messages).
+    pub peer: String,
+}
+
+impl Conn {
+    fn new(stream: TcpStream, socket_type: &str, peer: String) -> io::Result<Conn> {
+        stream.set_nodelay(true)?;
+        stream.set_nonblocking(true)?;
+        let mut c = Conn {
+            stream,
+            inbuf: vec![0; 1 << 16],
+            start: 0,
+            end: 0,
+            outbuf: Vec::new(),
+            greeted: false,
+            ready: false,
+            parts: Vec::new(),
+            peer,
+        };
+        c.outbuf.extend_from_slice(&greeting());
+        c.outbuf.extend_from_slice(&ready(socket_type));
+        c.flush()?;
+        Ok(c)
+    }
+
+    /// Connects to `tcp://HOST:PORT` as a SUB socket (the connect waits at most `timeout`).
+    pub fn connect_sub(endpoint: &str, timeout: std::time::Duration) -> io::Result<Conn> {
+        let addr = endpoint.strip_prefix("tcp://").ok_or_else(|| {
+            io::Error::new(
+                io::ErrorKind::InvalidInput,
+                format!("{endpoint}: not a tcp:// endpoint"),
+            )
+        })?;
+        let sa = std::net::ToSocketAddrs::to_socket_addrs(addr)?
+            .next()
+            .ok_or_else(|| io::Error::new(io::ErrorKind::NotFound, addr.to_string()))?;
+        let s = TcpStream::connect_timeout(&sa, timeout)?;
+        Conn::new(s, "SUB", endpoint.into())
+    }
+
+    pub fn fd(&self) -> RawFd {
+        self.stream.as_raw_fd()
+    }
+
+    pub fn wants_write(&self) -> bool {
+        !self.outbuf.is_empty()
+    }
+
+    /// Writes what is queued, as far as the socket takes it.
+    pub fn flush(&mut self) -> io::Result<()> {
+        while !self.outbuf.is_empty() {
+            match self.stream.write(&self.outbuf) {
+                Ok(0) => return Err(io::ErrorKind::WriteZero.into()),
+                Ok(n) => {
+                    self.outbuf.drain(..n);
+                }
+                Err(e) if e.kind() == io::ErrorKind::WouldBlock => return Ok(()),
+                Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
+                Err(e) => return Err(e),
+            }
+        }
+        Ok(())
+    }
+
+    /// Queues a message of several frames. A subscriber that cannot keep up
+    /// (over `cap` bytes queued) loses the message, as ZeroMQ's high-water mark does.
+    pub fn send(&mut self, parts: &[&[u8]], cap: usize) -> io::Result<()> {
+        if !self.ready || self.outbuf.len() > cap {
+            return Ok(());
+        }
+        for (i, p) in parts.iter().enumerate() {
+            frame(&mut self.outbuf, i + 1 < parts.len(), p);
+        }
+        self.flush()
+    }
+
+    /// A SUB's subscription to a topic prefix (ZMTP 3.0: a message `\x01PREFIX`).
+    pub fn subscribe(&mut self, prefix: &[u8]) -> io::Result<()> {
+        let mut m = vec![1];
+        m.extend_from_slice(prefix);
+        frame(&mut self.outbuf, false, &m);
+        self.flush()
+    }
+
+    /// Reads what has arrived; `Ok(false)` when the peer closed.
+    pub fn read_some(&mut self) -> io::Result<bool> {
+        loop {
+            if self.end == self.inbuf.len() {
+                self.compact();
+                if self.end == self.inbuf.len() {
+                    let n = self.inbuf.len() * 2;
+                    self.inbuf.resize(n, 0);
+                }
+            }
+            match self.stream.read(&mut self.inbuf[self.end..]) {
+                Ok(0) => return Ok(false),
+                Ok(n) => self.end += n,
+                Err(e) => {
+                    return match e.kind() {
+                        io::ErrorKind::WouldBlock => Ok(true),
+                        io::ErrorKind::Interrupted => continue,
+                        _ => Err(e),
+                    };
+                }
+            }
+        }
+    }
+
+    /// Moves the unparsed bytes to the front.
+    fn compact(&mut self) {
+        if self.start > 0 {
+            self.inbuf.copy_within(self.start..self.end, 0);
+            self.end -= self.start;
+            self.start = 0;
+        }
+    }
+
+    fn bad(m: String) -> io::Error {
+        io::Error::new(io::ErrorKind::InvalidData, m)
+    }
+
+    /// The next whole message or command read, if any.
+    pub fn next_item(&mut self) -> io::Result<Option<Item>> {
+        loop {
+            if self.start == self.end {
+                (self.start, self.end) = (0, 0);
+            }
+            let buf = &self.inbuf[self.start..self.end];
+            if !self.greeted {
+                if buf.len() < 64 {
+                    return Ok(None);
+                }
+                if buf[0] != 0xff || buf[9] & 1 != 1 {
+                    return Err(Self::bad(format!("{}: not a ZeroMQ peer", self.peer)));
+                }
+                if buf[10] < 3 {
+                    return Err(Self::bad(format!(
+                        "{}: ZMTP {}.x is too old (3.0 or later wanted)",
+                        self.peer, buf[10]
+                    )));
+                }
+                if &buf[12..16] != b"NULL" {
+                    return Err(Self::bad(format!(
+                        "{}: the peer wants a security mechanism (only NULL is spoken; unset IGN_TRANSPORT_USERNAME/PASSWORD)",
+                        self.peer
+                    )));
+                }
+                self.greeted = true;
+                self.start += 64;
+                continue;
+            }
+            if buf.len() < 2 {
+                return Ok(None);
+            }
+            let flags = buf[0];
+            if flags & 0xf8 != 0 {
+                return Err(Self::bad(format!(
+                    "{}: bad frame flags {flags:#x}",
+                    self.peer
+                )));
+            }
+            let (size, head) = if flags & 2 != 0 {
+                if buf.len() < 9 {
+                    return Ok(None);
+                }
+                (u64::from_be_bytes(buf[1..9].try_into().expect("8")), 9)
+            } else {
+                (buf[1] as u64, 2)
+            };
+            if size > MAX_FRAME {
+                return Err(Self::bad(format!(
+                    "{}: a frame of {size} bytes (at most {MAX_FRAME})",
+                    self.peer
+                )));
+            }
+            let size = size as usize;
+            if buf.len() < head + size {
+                // Make room for the whole frame at once.
+                let need = head + size;
+                if self.inbuf.len() - self.start < need {
+                    self.compact();
+                    if self.inbuf.len() < need {
+                        self.inbuf.resize(need.next_power_of_two(), 0);
+                    }
+                }
+                return Ok(None);
+            }
+            let body = buf[head..head + size].to_vec();
+            self.start += head + size;
+            if flags & 4 != 0 {
+                if body.starts_with(b"\x05READY") {
+                    self.ready = true;
+                }
+                return Ok(Some(Item::Command(body)));
+            }
+            self.parts.push(body);
+            if self.parts.len() > MAX_PARTS {
+                return Err(Self::bad(format!(
+                    "{}: a message of more than {MAX_PARTS} frames",
+                    self.peer
+                )));
+            }
+            if flags & 1 == 0 {
+                return Ok(Some(Item::Message(std::mem::take(&mut self.parts))));
+            }
+        }
+    }
+}
+
+/// A PUB socket: a listener and the subscribers connected to it, each with the
+/// prefixes it subscribed to.
+pub struct Pub {
+    pub listener: TcpListener,
+    pub endpoint: String,
+    pub subs: Vec<(Conn, Vec<Vec<u8>>)>,
+}
+
+impl Pub {
+    pub fn bind(ip: &str) -> io::Result<Pub> {
+        let listener = TcpListener::bind((ip, 0))?;
+        listener.set_nonblocking(true)?;
+        let endpoint = format!("tcp://{}", listener.local_addr()?);
+        Ok(Pub {
+            listener,
+            endpoint,
+            subs: Vec::new(),
+        })
+    }
+
+    /// Accepts new subscribers and reads their subscriptions; drops the broken.
+    pub fn serve(&mut self) {
+        while let Ok((s, a)) = self.listener.accept() {
+            if let Ok(c) = Conn::new(s, "PUB", a.to_string()) {
+                self.subs.push((c, Vec::new()));
+            }
+        }
+        self.subs.retain_mut(|(c, prefixes)| {
+            if c.flush().is_err() {
+                return false;
+            }
+            let open = matches!(c.read_some(), Ok(true));
+            loop {
+                match c.next_item() {
+                    Ok(Some(Item::Message(m))) => {
+                        if let Some(f) = m.first() {
+                            match f.first() {
+                                Some(1) => prefixes.push(f[1..].to_vec()),
+                                Some(0) => prefixes.retain(|p| p[..] != f[1..]),
+                                _ => {}
+                            }
+                        }
+                    }
+                    Ok(Some(Item::Command(b))) => {
+                        // ZMTP 3.1's SUBSCRIBE / CANCEL commands.
+                        if let Some(t) = b.strip_prefix(b"\x09SUBSCRIBE") {
+                            prefixes.push(t.to_vec());
+                        } else if let Some(t) = b.strip_prefix(b"\x06CANCEL") {
+                            prefixes.retain(|p| p[..] != *t);
+                        }
+                    }
+                    Ok(None) => return open,
+                    Err(_) => return false,
+                }
+            }
+        });
+    }
+
+    /// Whether some subscriber subscribed to a prefix of `topic`.
+    pub fn has_subscriber(&self, topic: &[u8]) -> bool {
+        self.subs
+            .iter()
+            .any(|(_, ps)| ps.iter().any(|p| topic.starts_with(p)))
+    }
+
+    /// Sends a message whose first frame is `parts[0]` to the subscribers of it.
+    pub fn send(&mut self, parts: &[&[u8]]) {
+        let topic = parts.first().copied().unwrap_or_default();
+        for (c, ps) in &mut self.subs {
+            if ps.iter().any(|p| topic.starts_with(p)) {
+                let _ = c.send(parts, 8 << 20);
+            }
+        }
+    }
+}
