@@ -18,7 +18,7 @@ use std::{
 };
 
 use common::{eventually, poll_until, root, start_conf};
-use jderobot::interfaces::{Encoders, Image, Laser, Motors, PtEncoders, PtMotors};
+use jderobot::interfaces::{Encoders, Image, Imu, Laser, Motors, PtEncoders, PtMotors};
 
 /// Skips (or fails under CI) with `note`.
 fn missing(note: &str) -> Option<PathBuf> {
@@ -361,6 +361,33 @@ fn the_pan_tilt_head_follows_pantiltmotors() {
     eventually("the head at 30, -10 deg", || {
         let e = enc.read();
         (e.pan_angle - 30.0).abs() < 0.5 && (e.tilt_angle + 10.0).abs() < 0.5
+    });
+    rt.shutdown();
+}
+
+#[test]
+fn the_imu_gives_heading_turn_rate_and_gravity_in_si_units() {
+    let Some(bin) = peer_bin() else { return };
+    let part = partition();
+    let _peer = robot(&bin, &part, &["--model", "robot1", "--imu", "/imu"]);
+    let rt = start_conf(&format!(
+        "{}provides imu imu\nprovides motors robot1\nmotors_timeout 60000\nend_driver\n\
+         load_driver gazebo\n",
+        head(&part, "gazebo")
+    ));
+    let imu = rt.interfaces.get::<Imu>("imu").unwrap();
+    let m = rt.interfaces.get::<Motors>("motors").unwrap();
+    eventually("IMU readings at rest: level, gravity up", || {
+        let v = imu.read().value;
+        imu.read().clock > 0 && (v.az - 9.80665).abs() < 1e-3 && v.qw > 0.999
+    });
+    // Turn in place at 30 deg/s: the turn rate in rad/s, the heading grows.
+    let mut cmd = m.read().value;
+    cmd.w = 30.0;
+    m.publish(cmd).unwrap();
+    eventually("the IMU's turn rate at 30 deg/s", || {
+        let v = imu.read().value;
+        (v.wz - 30f32.to_radians()).abs() < 1e-3 && v.euler().2 > 0.1
     });
     rt.shutdown();
 }

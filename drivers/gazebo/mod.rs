@@ -30,6 +30,7 @@
 //! provides varcolorA /world/w/model/r/link/l/sensor/cam/image   # a topic: used as written
 //! provides pantiltmotors robot1  # /model/robot1/joint/JOINT/0/cmd_pos (Double): pan and tilt
 //! provides pantiltencoders robot1  # /world/WORLD/model/robot1/joint_state (Model)
+//! provides imu imu               # an IMU topic `/imu`, or one with an `imu` part (the Imu system's)
 //! joints pan_joint tilt_joint    # the pan-tilt's joints (defaults shown)
 //! partition vm:root              # gz-transport's partition (default: IGN_PARTITION, else
 //!                                #   GZ_PARTITION, else HOSTNAME:USERNAME as gz-transport's)
@@ -52,6 +53,7 @@
 //! | `varcolorA..D` | Image | the same at the camera's size |
 //! | `pantiltencoders` | JointStatePublisher's Model | the joints' axis1 positions rad → deg |
 //! | `pantiltmotors` | JointPositionController's cmd_pos, Double, per joint | longitude, latitude deg (within the interface's limits) → rad, every `cycle` (speeds are the controller's) |
+//! | `imu` | the Imu system's IMU | SI as Gazebo sends them: orientation quaternion qx qy qz qw, angular velocity wx wy wz rad/s, linear acceleration (specific force: +9.8 up at rest) ax ay az m/s² |
 //!
 //! Gazebo's simulation time (each message's header stamp) is each value's `time`
 //! (seconds since the epoch = seconds of simulation).
@@ -83,8 +85,8 @@ use crate::{
         settings::{CYCLE, MOTORS_TIMEOUT, Setting, choice, int, rest, word},
     },
     interfaces::{
-        AnyInterface, COLOR_HEIGHT, COLOR_WIDTH, Encoders, Image, Interface, Interfaces, Laser,
-        Motors, PtEncoders, PtMotors, Source, limit,
+        AnyInterface, COLOR_HEIGHT, COLOR_WIDTH, Encoders, Image, Imu, Interface, Interfaces,
+        Laser, Motors, PtEncoders, PtMotors, Source, limit,
     },
     runtime::{self, Backoff, Driver, Runtime, Supervision, Supervisor},
 };
@@ -95,7 +97,7 @@ use node::{Node, both};
 pub const MAX_V: f32 = 1000.0;
 pub const MAX_W: f32 = 180.0;
 
-const USAGE: &str = "provides encoders|motors|pantiltencoders|pantiltmotors MODEL, provides laser SENSOR [N R], \
+const USAGE: &str = "provides encoders|motors|pantiltencoders|pantiltmotors MODEL, provides laser SENSOR [N R], provides imu SENSOR, \
 provides colorA..D|varcolorA..D SENSOR, or any of them with a /topic instead of the name";
 
 /// The driver's lines (`jderobot help gazebo`).
@@ -159,6 +161,7 @@ pub enum Kind {
     Camera(bool),
     PtEncoders,
     PtMotors,
+    Imu,
 }
 
 impl Kind {
@@ -171,6 +174,7 @@ impl Kind {
             Kind::Camera(_) => "Image",
             Kind::PtEncoders => "Model",
             Kind::PtMotors => "Double",
+            Kind::Imu => "IMU",
         }
     }
 }
@@ -227,6 +231,7 @@ fn parse_provides(l: &ConfLine) -> anyhow::Result<Want> {
         "motors" => Kind::Motors,
         "pantiltencoders" => Kind::PtEncoders,
         "pantiltmotors" => Kind::PtMotors,
+        "imu" => Kind::Imu,
         "laser" => {
             if a.len() == 4 {
                 let n: usize = l.number(2, "a number of readings", 1..=3600)?;
@@ -245,7 +250,7 @@ fn parse_provides(l: &ConfLine) -> anyhow::Result<Want> {
         other => {
             return Err(l
                 .error(format!(
-                    "`provides {other}`: the gazebo driver gives encoders, motors, laser, colorA..D, \
+                    "`provides {other}`: the gazebo driver gives encoders, motors, laser, imu, colorA..D, \
                      varcolorA..D, pantiltencoders and pantiltmotors (gz-sim has no sonars or bumpers); usage: {USAGE}"
                 ))
                 .into());
@@ -343,6 +348,7 @@ enum Sink {
     PtEncoders(Arc<Interface<PtEncoders>>, String, String),
     /// The tilt joint's cmd_pos topic (the pan's is the line's topic).
     PtMotors(Arc<Interface<PtMotors>>, String),
+    Imu(Arc<Interface<Imu>>),
 }
 
 impl Sink {
@@ -574,6 +580,22 @@ fn feed(lines: &mut [Line], sub: usize, data: &[u8], ty: &str) {
                     "the joint state has no joints `{pan}` and `{tilt}` (set `joints PAN TILT`)"
                 ));
             }
+        }),
+        Sink::Imu(i) => pb::decode_imu(data).map(|m| {
+            let f = |x: f64| x as f32;
+            let v = Imu::from_fields([
+                f(m.q[0]),
+                f(m.q[1]),
+                f(m.q[2]),
+                f(m.q[3]),
+                f(m.w[0]),
+                f(m.w[1]),
+                f(m.w[2]),
+                f(m.a[0]),
+                f(m.a[1]),
+                f(m.a[2]),
+            ]);
+            src.note(i.write_recorded(i.clock() + 1, sim_time(m.time), |x| *x = v));
         }),
         Sink::Motors(_) | Sink::PtMotors(..) => Ok(()),
     };
@@ -942,6 +964,11 @@ impl GazeboDriver {
                     let tilt = format!("/model/{}/joint/{}/0/cmd_pos", w.target, gc.joints.1);
                     Sink::PtMotors(i, tilt)
                 }
+                Kind::Imu => {
+                    let i = ifaces.provide::<Imu>(&w.iface, provider)?;
+                    all.push(i.clone());
+                    Sink::Imu(i)
+                }
                 Kind::Camera(fixed) => {
                     let init = if *fixed {
                         Image::new(COLOR_WIDTH, COLOR_HEIGHT)
@@ -1031,7 +1058,7 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
 crate::register_driver!(
     Driver,
     "gazebo",
-    "a robot and cameras in Gazebo (gz-sim) through gz-transport: encoders, motors, laser, colorA..D, varcolorA..D",
+    "a robot and cameras in Gazebo (gz-sim) through gz-transport: encoders, motors, laser, imu, pan-tilt, colorA..D, varcolorA..D",
     create,
     lines = LINES
 );

@@ -339,6 +339,34 @@ pub fn decode_odometry(b: &[u8]) -> Result<Odometry, PbError> {
     Ok(o)
 }
 
+/// An `IMU` (imu.proto): orientation quaternion x y z w, angular velocity (rad/s)
+/// and linear acceleration (m/s²) in the sensor's frame, and the header's time (s).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ImuReading {
+    pub q: [f64; 4],
+    pub w: [f64; 3],
+    pub a: [f64; 3],
+    pub time: Option<f64>,
+}
+
+pub fn decode_imu(b: &[u8]) -> Result<ImuReading, PbError> {
+    let mut m = ImuReading {
+        q: [0.0, 0.0, 0.0, 1.0],
+        ..ImuReading::default()
+    };
+    let xyz = |v: [f64; 4]| [v[0], v[1], v[2]];
+    for f in fields(b) {
+        match f? {
+            (1, v) => m.time = stamp(v.bytes())?,
+            (3, v) => m.q = vec3(v.bytes(), 2)?,
+            (4, v) => m.w = xyz(vec3(v.bytes(), 2)?),
+            (5, v) => m.a = xyz(vec3(v.bytes(), 2)?),
+            _ => {}
+        }
+    }
+    Ok(m)
+}
+
 /// A `Twist` of a planar base: linear x (m/s) and angular z (rad/s).
 pub fn encode_twist(v: f64, w: f64, out: &mut Vec<u8>) {
     out.clear();

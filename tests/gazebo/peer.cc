@@ -9,17 +9,21 @@
 //   --pantilt:  JointPositionController on pan_joint and tilt_joint (subscribes
 //               /model/NAME/joint/JOINT/0/cmd_pos, Double; moves at most 2 rad/s) and
 //               JointStatePublisher (/world/room/model/NAME/joint_state, Model, 50 Hz)
+//   imu:        IMU on --imu TOPIC at 100 Hz: the true heading as a quaternion, the turn
+//               rate (rad/s) and the specific force (m/s^2, +9.80665 up at rest), as the
+//               Imu system reports them
 // Header stamps are the simulation time (seconds since start), or the wall clock with
 // --wallstamp (for latency benchmarks).
 //
 //   peer robot --model NAME [--lidar T] [--camera T] [--width W --height H --fps F]
-//        [--wallstamp] [--lidar-hz H]
+//        [--wallstamp] [--lidar-hz H] [--imu T]
 //   peer sub --topic T --type laser|image --seconds S   (a C++ subscriber for benchmarks:
 //        prints one JSON line: count, rate, p50 latency (wall stamps))
 //   peer echo-twist --topic T --seconds S   (prints each Twist as "twist LX AZ")
 //   peer decode-bench [--rays N]   (C++ protobuf's parse of a LaserScan: median ns)
 #include <ignition/msgs/double.pb.h>
 #include <ignition/msgs/image.pb.h>
+#include <ignition/msgs/imu.pb.h>
 #include <ignition/msgs/model.pb.h>
 #include <ignition/msgs/laserscan.pb.h>
 #include <ignition/msgs/odometry.pb.h>
@@ -164,6 +168,33 @@ static int robot(std::map<std::string, std::string> a) {
           m.add_intensities(0);
         }
         stamp(m.mutable_header(), simtime());
+        pub.Publish(m);
+      }
+    });
+  }
+  if (a.count("imu")) {
+    threads.emplace_back([&]() {
+      auto pub = node.Advertise<msgs::IMU>(a["imu"]);
+      auto next = steady_clock::now();
+      msgs::IMU m;
+      double last_v = 0;
+      while (running) {
+        next += milliseconds(10);
+        std::this_thread::sleep_until(next);
+        {
+          std::lock_guard<std::mutex> l(mu);
+          m.set_entity_name(model + "::base_link::imu");
+          m.mutable_orientation()->set_x(0);
+          m.mutable_orientation()->set_y(0);
+          m.mutable_orientation()->set_z(std::sin(yaw / 2));
+          m.mutable_orientation()->set_w(std::cos(yaw / 2));
+          m.mutable_angular_velocity()->set_z(w);
+          m.mutable_linear_acceleration()->set_x((v - last_v) / 0.01);
+          m.mutable_linear_acceleration()->set_y(v * w);
+          m.mutable_linear_acceleration()->set_z(9.80665);
+          last_v = v;
+          stamp(m.mutable_header(), simtime());
+        }
         pub.Publish(m);
       }
     });
