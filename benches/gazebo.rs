@@ -18,8 +18,8 @@ use std::{
 
 use jderobot::{
     Conf,
-    drivers::gazebo::{Resample, pb},
-    interfaces::{Image, Laser, Watch},
+    drivers::gazebo::{self, pb},
+    interfaces::{Image, Laser, LaserMap, Watch},
 };
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -208,13 +208,13 @@ fn decode(rays: usize) -> f64 {
     w.bytes(14, &r);
     w.bytes(15, &vec![0u8; rays * 8]);
     let mut out = Laser::default();
-    let mut map = Resample::new(180, 1.0);
+    let mut map = LaserMap::new(180, 1.0);
     let mut per = Vec::new();
     for _ in 0..51 {
         let t = Instant::now();
         for _ in 0..2000 {
             let s = pb::decode_scan(black_box(&msg)).unwrap();
-            map.fill(&s, &mut out);
+            gazebo::laser(&mut map, &s, &mut out);
             black_box(&out);
         }
         per.push(t.elapsed().as_nanos() as f64 / 2000.0);

@@ -72,7 +72,9 @@ fn main() {
     let mut map = LaserMap::new(180, 1.0);
     let scan = per_call(20_000, || {
         let (info, ranges) = xdr::decode_scan(black_box(&payload)).unwrap();
-        laser.write(|l| map.fill_f32(&info, ranges, l)).unwrap();
+        laser
+            .write(|l| sinks::laser_f32(&mut map, &info, ranges, l))
+            .unwrap();
     });
     assert_eq!(laser.read().readings[0], 1489);
 

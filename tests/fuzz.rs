@@ -375,7 +375,8 @@ fn driver_targets(p: &Path) -> Vec<Target> {
     }
     #[cfg(feature = "gazebo")]
     {
-        use jderobot::drivers::gazebo::{Resample, fill_image, pb};
+        use jderobot::drivers::gazebo::{fill_image, laser, pb};
+        use jderobot::interfaces::LaserMap;
         let mut seeds = Vec::new();
         let mut scan = Vec::new();
         let mut w = pb::W(&mut scan);
@@ -415,7 +416,7 @@ fn driver_targets(p: &Path) -> Vec<Target> {
                 let _ = pb::decode_joints(b);
                 if let Ok(s) = pb::decode_scan(b) {
                     let mut l = jderobot::interfaces::Laser::default();
-                    Resample::new(180, 1.0).fill(&s, &mut l);
+                    laser(&mut LaserMap::new(180, 1.0), &s, &mut l);
                 }
                 if let Ok(f) = pb::decode_image(b) {
                     let mut i = jderobot::interfaces::Image::default();

@@ -154,14 +154,14 @@ fn golden_laser_scan_decodes_to_mm_at_the_right_angles() {
     );
     assert_eq!(info.resolution, 0.017453292);
     let mut l = Laser::default();
-    LaserMap::new(180, 1.0).fill_f32(&info, ranges, &mut l);
+    sinks::laser_f32(&mut LaserMap::new(180, 1.0), &info, ranges, &mut l);
     assert_eq!(l.readings.len(), 180);
     assert_eq!(l.resolution, 1.0);
     assert_eq!((l.readings[0], l.readings[179]), (1489, 1491));
     assert_eq!(l.readings[46], 8000, "0x41000000 = 8.0 m, no return");
     // Half the resolution: every other sample, the same field of view.
     let mut half = Laser::default();
-    LaserMap::new(90, 0.5).fill_f32(&info, ranges, &mut half);
+    sinks::laser_f32(&mut LaserMap::new(90, 0.5), &info, ranges, &mut half);
     assert_eq!(half.readings.len(), 90);
     assert_eq!(half.readings[0], l.readings[0]);
     assert_eq!(half.readings[45], l.readings[90]);

@@ -86,7 +86,7 @@ use crate::{
     },
     interfaces::{
         AnyInterface, COLOR_HEIGHT, COLOR_WIDTH, Encoders, Image, Imu, Interface, Interfaces,
-        Laser, Motors, PtEncoders, PtMotors, Source, limit,
+        Laser, LaserMap, Motors, PtEncoders, PtMotors, Source, limit,
     },
     runtime::{self, Backoff, Driver, Runtime, Supervision, Supervisor},
 };
@@ -341,7 +341,7 @@ impl GzConf {
 /// Where a line's data goes.
 enum Sink {
     Encoders(Arc<Interface<Encoders>>),
-    Laser(Arc<Interface<Laser>>, Resample),
+    Laser(Arc<Interface<Laser>>, LaserMap),
     Camera(Arc<Interface<Image>>, bool),
     Motors(Arc<Interface<Motors>>),
     /// The pan and tilt joints' names.
@@ -384,74 +384,16 @@ struct Gz {
     lost: Option<String>,
 }
 
-/// Nearest-ray resampling of scans into 4.3's laser (N readings at R per degree:
-/// reading i at −N/(2R) + i/R deg), the ray of each reading computed once per scan
-/// geometry (as the player driver's LaserMap does).
-#[derive(Clone, Debug)]
-pub struct Resample {
-    pub n: usize,
-    pub per_deg: f64,
-    key: (u64, u64, usize),
-    /// The ray of each reading; `usize::MAX`: outside the scan.
-    table: Vec<usize>,
-}
-
-impl Resample {
-    pub fn new(n: usize, per_deg: f64) -> Resample {
-        Resample {
-            n,
-            per_deg,
-            key: (0, 0, usize::MAX),
-            table: Vec::new(),
-        }
-    }
-
-    fn table(&mut self, min: f64, step: f64, count: usize) -> &[usize] {
-        let key = (min.to_bits(), step.to_bits(), count);
-        if key != self.key {
-            self.key = key;
-            self.table.clear();
-            for i in 0..self.n {
-                let deg = -(self.n as f64) / (2.0 * self.per_deg) + i as f64 / self.per_deg;
-                let k = if step.abs() > 0.0 && step.is_finite() {
-                    ((deg.to_radians() - min) / step).round()
-                } else {
-                    -1.0
-                };
-                self.table.push(if k >= 0.0 && (k as usize) < count {
-                    k as usize
-                } else {
-                    usize::MAX
-                });
-            }
-        }
-        &self.table
-    }
-
-    /// Fills `out` (mm) from scan `s`: no return (inf, NaN) or outside the scan is
-    /// range_max.
-    pub fn fill(&mut self, s: &pb::Scan, out: &mut Laser) {
-        let max_mm = if s.range_max.is_finite() && s.range_max > 0.0 {
-            (s.range_max * 1000.0).round().min(i32::MAX as f64) as i32
-        } else {
-            0
-        };
-        let per_deg = self.per_deg as f32;
-        let t = self.table(s.angle_min, s.angle_step, s.n());
-        out.readings.clear();
-        out.readings.extend(t.iter().map(|&k| {
-            if k == usize::MAX {
-                return max_mm;
-            }
-            let r = s.range(k);
-            if r.is_finite() && r >= 0.0 {
-                (r * 1000.0).round().min(i32::MAX as f64) as i32
-            } else {
-                max_mm
-            }
-        }));
-        out.resolution = per_deg;
-    }
+/// Fills `out` (mm, 4.3's N readings at R per degree) from a LaserScan.
+pub fn laser(map: &mut LaserMap, s: &pb::Scan, out: &mut Laser) {
+    map.fill(
+        s.angle_min,
+        s.angle_step,
+        s.n(),
+        s.range_max,
+        |k| s.range(k),
+        out,
+    );
 }
 
 /// An Image message into a BGR image (`fixed`: scaled to 320x240).
@@ -541,7 +483,7 @@ fn feed(lines: &mut [Line], sub: usize, data: &[u8], ty: &str) {
             src.note(i.write_recorded(i.clock() + 1, sim_time(o.time), |v| *v = e));
         }),
         Sink::Laser(i, m) => pb::decode_scan(data).map(|s| {
-            src.note(i.write_recorded(i.clock() + 1, sim_time(s.time), |l| m.fill(&s, l)));
+            src.note(i.write_recorded(i.clock() + 1, sim_time(s.time), |l| laser(m, &s, l)));
         }),
         Sink::Camera(i, fixed) => pb::decode_image(data).map(|f| {
             let mut err = None;
@@ -951,7 +893,7 @@ impl GazeboDriver {
                 Kind::Laser(n, r) => {
                     let i = ifaces.provide::<Laser>(&w.iface, provider)?;
                     all.push(i.clone());
-                    Sink::Laser(i, Resample::new(*n, *r))
+                    Sink::Laser(i, LaserMap::new(*n, *r))
                 }
                 Kind::PtEncoders => {
                     let i = ifaces.provide::<PtEncoders>(&w.iface, provider)?;
@@ -1102,7 +1044,7 @@ mod tests {
             time: None,
         };
         let mut l = Laser::default();
-        Resample::new(180, 1.0).fill(&s, &mut l);
+        laser(&mut LaserMap::new(180, 1.0), &s, &mut l);
         assert_eq!(l.readings.len(), 180);
         // reading 0 at -90 deg: ray 90.
         assert_eq!(l.readings[0], 1090);

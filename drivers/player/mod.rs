@@ -154,7 +154,7 @@ impl Device {
                         && info.resolution.is_finite()
                         && info.min_angle.is_finite()
                     {
-                        i.accept_with(from, |l| m.fill_f32(&info, ranges, l));
+                        i.accept_with(from, |l| sinks::laser_f32(m, &info, ranges, l));
                     }
                 }
                 (interf::RANGER, sub::RANGER_DATA_RANGE, Sink::Laser(i, m)) => {
@@ -164,7 +164,7 @@ impl Device {
                         && cfg.angular_res.is_finite()
                         && cfg.min_angle.is_finite()
                     {
-                        i.accept_with(from, |l| m.fill_f64(&cfg, n, raw, l));
+                        i.accept_with(from, |l| sinks::laser_f64(m, &cfg, n, raw, l));
                     }
                 }
                 (interf::RANGER, sub::RANGER_DATA_RANGE, Sink::Sonars(i)) => {

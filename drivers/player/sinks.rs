@@ -3,6 +3,7 @@
 use std::sync::Arc;
 
 pub use crate::blobs::{Blob, BlobFrame, LiveBlobs};
+pub use crate::interfaces::LaserMap;
 use crate::interfaces::{
     Bumpers, COLOR_HEIGHT, COLOR_WIDTH, Encoders, Image, Interface, Laser, PtEncoders, Sonars,
 };
@@ -10,78 +11,30 @@ use crate::interfaces::{
 use super::conf::Offset;
 use super::xdr::{self, RangerConfig, ScanInfo, XdrError, be_f32, be_f64, camera};
 
-/// Maps a scan's samples to the asked N readings at R per degree, as 4.3 did
-/// (reading i at −N/(2R) + i/R degrees, the nearest sample), cached per geometry.
-#[derive(Clone, Debug)]
-pub struct LaserMap {
-    pub n: usize,
-    pub per_deg: f64,
-    key: (u32, u32, usize),
-    /// Sample index per reading; `usize::MAX` = outside the scan (max range).
-    table: Vec<usize>,
+/// Fills `out` from a laser scan's big-endian float ranges in metres.
+pub fn laser_f32(map: &mut LaserMap, info: &ScanInfo, ranges: &[u8], out: &mut Laser) {
+    let (min, step) = (info.min_angle as f64, info.resolution as f64);
+    let range = |k| be_f32(ranges, k) as f64;
+    map.fill(min, step, info.count, info.max_range as f64, range, out);
 }
 
-impl LaserMap {
-    pub fn new(n: usize, per_deg: f64) -> Self {
-        LaserMap {
-            n,
-            per_deg,
-            key: (0, 0, usize::MAX),
-            table: Vec::new(),
-        }
-    }
-
-    fn table(&mut self, min_angle: f32, resolution: f32, count: usize) -> &[usize] {
-        let key = (min_angle.to_bits(), resolution.to_bits(), count);
-        if key != self.key {
-            self.key = key;
-            self.table.clear();
-            let (min, res) = (min_angle as f64, resolution as f64);
-            for i in 0..self.n {
-                let deg = -(self.n as f64) / (2.0 * self.per_deg) + i as f64 / self.per_deg;
-                let k = (deg.to_radians() - min) / res;
-                let k = k.round();
-                self.table.push(if k >= 0.0 && (k as usize) < count {
-                    k as usize
-                } else {
-                    usize::MAX
-                });
-            }
-        }
-        &self.table
-    }
-
-    /// Fills `out` from big-endian float ranges in metres (a laser scan).
-    pub fn fill_f32(&mut self, info: &ScanInfo, ranges: &[u8], out: &mut Laser) {
-        let max_mm = (info.max_range * 1000.0).round() as i32;
-        let per_deg = self.per_deg as f32;
-        let t = self.table(info.min_angle, info.resolution, info.count);
-        out.readings.clear();
-        out.readings.extend(t.iter().map(|&k| {
-            if k == usize::MAX {
-                max_mm
-            } else {
-                (be_f32(ranges, k) * 1000.0).round() as i32
-            }
-        }));
-        out.resolution = per_deg;
-    }
-
-    /// Fills `out` from big-endian double ranges in metres (a ranger).
-    pub fn fill_f64(&mut self, cfg: &RangerConfig, count: usize, ranges: &[u8], out: &mut Laser) {
-        let max_mm = (cfg.max_range * 1000.0).round() as i32;
-        let per_deg = self.per_deg as f32;
-        let t = self.table(cfg.min_angle as f32, cfg.angular_res as f32, count);
-        out.readings.clear();
-        out.readings.extend(t.iter().map(|&k| {
-            if k == usize::MAX {
-                max_mm
-            } else {
-                (be_f64(ranges, k) * 1000.0).round() as i32
-            }
-        }));
-        out.resolution = per_deg;
-    }
+/// Fills `out` from a ranger's big-endian double ranges in metres.
+pub fn laser_f64(
+    map: &mut LaserMap,
+    cfg: &RangerConfig,
+    count: usize,
+    ranges: &[u8],
+    out: &mut Laser,
+) {
+    let range = |k| be_f64(ranges, k);
+    map.fill(
+        cfg.min_angle,
+        cfg.angular_res,
+        count,
+        cfg.max_range,
+        range,
+        out,
+    );
 }
 
 /// A ranger's geometry when the server does not say: `count` samples over the

@@ -44,6 +44,7 @@
 //! anybody uses an interface, so it works only while someone does.
 mod cell;
 mod kinds;
+mod laser_map;
 mod names;
 mod source;
 mod table;
@@ -52,6 +53,7 @@ mod values;
 pub use cell::{AnyInterface, Interface, MAX_CLOCK, Notify, Sample, Watch};
 pub use kinds::KINDS;
 pub(crate) use kinds::{by_kind, by_kind_match, for_each_kind};
+pub use laser_map::LaserMap;
 pub use names::{STANDARD_NAMES, canonical, family, interface_name};
 pub use source::Source;
 pub use table::{InUse, InterfaceError, Interfaces};
