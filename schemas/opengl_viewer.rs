@@ -70,9 +70,6 @@ use crate::{
     },
 };
 
-/// A position or focus coordinate's range, mm.
-const RANGE: f64 = 60_000.0;
-
 /// opengl_viewer's lines, declared once (`jderobot help opengl_viewer`).
 const LINES: &[Setting] = &[
     Setting::new(
@@ -86,18 +83,7 @@ const LINES: &[Setting] = &[
         &[float("SCALE", "", 1e-4, 1e4)],
     )
     .default("1"),
-    Setting::new(
-        "camera",
-        "the view: position and focus of attention (default: behind the robot)",
-        &[
-            float("XCAM", "mm", -RANGE, RANGE),
-            float("YCAM", "mm", -RANGE, RANGE),
-            float("ZCAM", "mm", -RANGE, RANGE),
-            float("FOAX", "mm", -RANGE, RANGE),
-            float("FOAY", "mm", -RANGE, RANGE),
-            float("FOAZ", "mm", -RANGE, RANGE),
-        ],
-    ),
+    settings::look_at("the view: position and focus of attention (default: behind the robot)"),
     Setting::new(
         "follow",
         "keep the view's focus on the robot",

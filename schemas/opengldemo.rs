@@ -56,23 +56,12 @@ use crate::{
 /// While rotating, the next frame in this long (the GUI host's ~30 fps pacing).
 const REPAINT: Duration = Duration::from_millis(33);
 
-/// A position or focus coordinate's slider range, mm.
-pub const CAMERA_RANGE: f64 = 60_000.0;
+/// A position or focus coordinate's slider range, mm (the `camera` line's).
+pub const CAMERA_RANGE: f64 = settings::VIEW_RANGE;
 
 /// opengldemo's lines, declared once (`jderobot help opengldemo`).
 const LINES: &[Setting] = &[
-    Setting::new(
-        "camera",
-        "the camera: position and focus of attention (default: framing the scene)",
-        &[
-            float("XCAM", "mm", -CAMERA_RANGE, CAMERA_RANGE),
-            float("YCAM", "mm", -CAMERA_RANGE, CAMERA_RANGE),
-            float("ZCAM", "mm", -CAMERA_RANGE, CAMERA_RANGE),
-            float("FOAX", "mm", -CAMERA_RANGE, CAMERA_RANGE),
-            float("FOAY", "mm", -CAMERA_RANGE, CAMERA_RANGE),
-            float("FOAZ", "mm", -CAMERA_RANGE, CAMERA_RANGE),
-        ],
-    ),
+    settings::look_at("the camera: position and focus of attention (default: framing the scene)"),
     Setting::new(
         "fovy",
         "vertical aperture of the camera",

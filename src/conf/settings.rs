@@ -229,6 +229,24 @@ pub const BIND: Setting = Setting::new(
 )
 .default("127.0.0.1");
 
+/// How far a 3D view's camera may be from the origin on each axis (mm).
+pub const VIEW_RANGE: f64 = 60_000.0;
+
+/// `camera XCAM YCAM ZCAM FOAX FOAY FOAZ`: a 3D view's camera, its position and
+/// its focus of attention (mm), as 4.3's OpenGL schemas placed it.
+pub const fn look_at(help: &'static str) -> Setting {
+    const R: f64 = VIEW_RANGE;
+    const ARGS: &[Arg] = &[
+        float("XCAM", "mm", -R, R),
+        float("YCAM", "mm", -R, R),
+        float("ZCAM", "mm", -R, R),
+        float("FOAX", "mm", -R, R),
+        float("FOAY", "mm", -R, R),
+        float("FOAZ", "mm", -R, R),
+    ];
+    Setting::new("camera", help, ARGS)
+}
+
 /// `world FILE|none`: the world a schema draws: a world file, `none`, or (no
 /// line) the exported `world.map`, whichever driver exports it. [`world`] reads it.
 pub const WORLD: Setting = Setting::new(
