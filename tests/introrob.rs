@@ -400,6 +400,34 @@ fn introrob_through_the_runtime_moves_toward_its_target() {
     assert_eq!(status, "stopped");
 }
 
+/// A robot without a laser (a NAO): `laser none`, and VFF still heads for its
+/// target (it sees no laser obstacles).
+#[test]
+fn laser_none_drives_a_robot_without_a_laser() {
+    let dir = tempfile::tempdir().unwrap();
+    let conf = write_conf(
+        dir.path(),
+        "nolaser.conf",
+        "driver simulator\nrobot robot1 1000 1000 0\nprovides encoders\nprovides motors\n\
+         end_driver\nschema introrob\nbehaviour vff\ntarget 3000 1000\nlaser none\n\
+         sonars none\nbumpers none\ncamera none\nend_schema\n\
+         load_driver simulator\nload_schema introrob\nrun introrob\n",
+    );
+    let conf = Conf::load(&conf).expect("conf parses");
+    let rt = jderobot::loader::start(&conf).expect("runtime starts without a laser");
+    let enc = rt.interfaces.get::<Encoders>("encoders").unwrap();
+    let t = Instant::now();
+    while t.elapsed() < Duration::from_secs(20) && enc.read().x < 2000.0 {
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let x = enc.read().x;
+    rt.shutdown();
+    assert!(
+        x >= 2000.0,
+        "the robot did not head for its target: x = {x:.0} mm"
+    );
+}
+
 #[test]
 fn conf_errors_name_file_and_line() {
     let dir = tempfile::tempdir().unwrap();

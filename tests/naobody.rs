@@ -481,18 +481,17 @@ fn garbage_on_the_socket_is_dropped_and_the_driver_reconnects() {
     }
 }
 
-#[cfg(all(feature = "introrob", feature = "simulator"))]
+#[cfg(feature = "introrob")]
 #[test]
 fn introrob_in_teleop_mode_drives_the_nao() {
     let Some(py) = python() else { return };
     let peer = Peer::start(&py, free_port(), &[]);
-    // introrob needs a laser, which a NAO has not: the simulator lends one.
+    // A NAO has no laser: `laser none`.
     let rt = start_conf(
         &(naobody(
             peer.port,
             "provides motors\nprovides encoders\nprovides sonars\nprovides bumpers\n",
-        ) + "driver simulator\nrobot robot1 0 0 0\nprovides laser\nend_driver\nload_driver simulator\n\
-               schema introrob\nbehaviour teleop\nteleop 90 0\ncamera none\nend_schema\n\
+        ) + "schema introrob\nbehaviour teleop\nteleop 90 0\nlaser none\ncamera none\nend_schema\n\
                load_schema introrob\nrun introrob\n"),
     );
     let enc = rt.interfaces.get::<Encoders>("encoders").unwrap();

@@ -27,8 +27,10 @@
 //!                          #   exports its world); `none`: no map
 //! cell 50                  # gpp grid cell, mm (default 50)
 //! cycle 100                # ms (default 100)
-//! laser laser              # interface names (defaults shown); sonars, bumpers
-//! encoders encoders        #   and camera (colorA) may be `none`
+//! laser laser              # interface names (defaults shown); laser, sonars,
+//! encoders encoders        #   bumpers and camera (colorA) may be `none` (`laser
+//!                          #   none`: a robot without one, e.g. a NAO; the
+//!                          #   behaviours then see no laser obstacles)
 //! motors motors
 //! sonars sonars
 //! bumpers bumpers
@@ -165,7 +167,12 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
             ))
         }
     };
-    need(&s.names.laser, "laser")?;
+    // `laser none` (a NAO has none): an empty laser of its own, which no driver
+    // writes; the behaviours see no laser obstacles.
+    let no_laser = s.names.laser == "none";
+    if !no_laser {
+        need(&s.names.laser, "laser")?;
+    }
     need(&s.names.encoders, "encoders")?;
     need(&s.names.motors, "motors")?;
     let opt = |n: &Option<String>| n.clone().filter(|n| rt.interfaces.contains(n));
@@ -175,7 +182,11 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
         opt(&s.names.camera),
     );
     let ifs = &rt.interfaces;
-    let laser = ifs.get::<Laser>(&s.names.laser)?;
+    let laser = if no_laser {
+        Arc::new(Interface::new("none", &conf.name))
+    } else {
+        ifs.get::<Laser>(&s.names.laser)?
+    };
     let encoders = ifs.get::<Encoders>(&s.names.encoders)?;
     let motors = ifs.get::<Motors>(&s.names.motors)?;
     let sonars = sonars_n
@@ -187,12 +198,13 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
         .map(|n| ifs.get::<Bumpers>(n))
         .transpose()?;
     let camera = camera_n.as_ref().map(|n| ifs.get::<Image>(n)).transpose()?;
-    let mut children = vec![
-        s.names.laser.clone(),
-        s.names.encoders.clone(),
-        s.names.motors.clone(),
-    ];
-    children.extend([sonars_n, bumpers_n, camera_n].into_iter().flatten());
+    let mut children = vec![s.names.encoders.clone(), s.names.motors.clone()];
+    let laser_n = (!no_laser).then(|| s.names.laser.clone());
+    children.extend(
+        [laser_n, sonars_n, bumpers_n, camera_n]
+            .into_iter()
+            .flatten(),
+    );
 
     let c = conf.name.as_str();
     let teleop = Motors::limited(s.teleop.v, s.teleop.w, s.max_v, s.max_w);

@@ -88,7 +88,11 @@ pub const LINES: &[Setting] = &[
         "the map for gpp and the panel: a world file, or none (default: the exported world.map)",
         &[word("FILE|none")],
     ),
-    settings::uses("laser", "laser", "the laser it avoids obstacles with"),
+    settings::uses(
+        "laser",
+        "laser",
+        "the laser it avoids obstacles with (none: a robot without one; no laser obstacles)",
+    ),
     settings::uses("encoders", "encoders", "the robot's pose"),
     settings::uses("motors", "motors", "the base it drives"),
     settings::uses("sonars", "sonars", "sonars it shows (none: none)"),
