@@ -13,7 +13,9 @@
 //! 2. Idle CPU: the real binary with its window, nothing moving (robot still,
 //!    rotate off), both 3D schemas loaded and running, their panels shown or
 //!    hidden (mastergui shown in both), % of one core over 8 s after 3 s of
-//!    warm-up, median of 3 runs each.
+//!    warm-up, median of 3 runs each; with introrob and teleoperator compiled in,
+//!    also two of today's 2D panels shown instead (introrob's world view,
+//!    teleoperator's software wireframe), for comparison.
 //!
 //! `xvfb-run -a -s "-screen 0 1280x800x24" cargo bench --features full --bench opengl`
 
@@ -148,7 +150,19 @@ fn cpu_percent(conf: &Path) -> f64 {
     100.0 * (c1 - c0) as f64 / tick / (t1 - t0).as_secs_f64()
 }
 
-fn idle_conf(dir: &Path, panels: bool) -> PathBuf {
+/// Which panels the idle-CPU window shows (besides mastergui).
+#[derive(Clone, Copy, PartialEq)]
+enum Shown {
+    /// None: the reference.
+    Nothing,
+    /// opengldemo and opengl_viewer.
+    Gl,
+    /// Two 2D panels of today, for comparison: introrob's (world view) and
+    /// teleoperator's (its software-drawn 3D wireframe).
+    Flat,
+}
+
+fn idle_conf(dir: &Path, shown: Shown) -> PathBuf {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let mut text = format!(
         "driver simulator\nworld {}\nrobot robot1 0 0 0\nprovides encoders\nprovides motors\n\
@@ -157,16 +171,25 @@ fn idle_conf(dir: &Path, panels: bool) -> PathBuf {
          show mastergui\n",
         root.join("assets/worlds/cave.world").display()
     );
-    // Both runs load and run the 3D schemas (so the simulator computes the same
-    // sensors for them); only the second shows their panels.
+    // Every run loads and runs the 3D schemas (so the simulator computes the same
+    // sensors for them); only the `Gl` run shows their panels.
     text.push_str(
         "schema opengldemo\nrotate off\nend_schema\nschema opengl_viewer\nend_schema\n\
          load_schema opengldemo\nload_schema opengl_viewer\nrun opengldemo\nrun opengl_viewer\n",
     );
-    if panels {
-        text.push_str("show opengldemo\nshow opengl_viewer\n");
+    match shown {
+        Shown::Nothing => {}
+        Shown::Gl => text.push_str("show opengldemo\nshow opengl_viewer\n"),
+        Shown::Flat => text.push_str(
+            "schema introrob\nbehaviour stop\nend_schema\nload_schema introrob\nrun introrob\n\
+             show introrob\nload_schema teleoperator\nshow teleoperator\n",
+        ),
     }
-    let f = dir.join(if panels { "idle_3d.conf" } else { "idle.conf" });
+    let f = dir.join(match shown {
+        Shown::Nothing => "idle.conf",
+        Shown::Gl => "idle_3d.conf",
+        Shown::Flat => "idle_2d.conf",
+    });
     std::fs::write(&f, text).unwrap();
     f
 }
@@ -237,16 +260,23 @@ fn main() {
         );
     }
     let dir = tempfile_dir();
-    let cpu = |panels: bool| {
-        let f = idle_conf(&dir, panels);
+    let cpu = |shown: Shown| {
+        let f = idle_conf(&dir, shown);
         median((0..3).map(|_| cpu_percent(&f)).collect())
     };
-    let (without, with) = (cpu(false), cpu(true));
+    let (without, with) = (cpu(Shown::Nothing), cpu(Shown::Gl));
     println!(
         "Idle CPU (nothing moving), % of one core, median of 3 runs of 8 s: 3D panels hidden {without:.1} %, \
          opengldemo and opengl_viewer shown {with:.1} % ({:+.1} points)",
         with - without
     );
+    if cfg!(all(feature = "introrob", feature = "teleoperator")) {
+        let flat = cpu(Shown::Flat);
+        println!(
+            "  for comparison, two 2D panels of today shown instead (introrob, teleoperator): {flat:.1} % ({:+.1} points)",
+            flat - without
+        );
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }
 
