@@ -8,8 +8,8 @@
 //! interfaces, for an on-demand device), serves it step by step until it is lost,
 //! the driver stops, or nobody uses it any more; on a loss it marks every interface
 //! stale with the reason, runs the driver's `on_loss` (zeroing what moves), and
-//! tries again after a bounded backoff. Each change of state (up, lost, still
-//! unavailable for another reason) is one log line; a reason that repeats is not
+//! tries again after a bounded backoff. Each change of state (lost, still
+//! unavailable for another reason, up again) is one line; a reason that repeats is not
 //! logged again. Waits are interruptible: `terminate` returns within one step.
 
 use std::{
@@ -138,26 +138,42 @@ impl Supervision {
         retry: Duration,
         absent: Option<Absent>,
     ) -> Supervision {
-        let absent = absent.map(|a| {
-            crate::output::println(format!(
-                "{}: driver {}: {}; {} stays stale until {} (tried every {} s while used)",
-                a.at,
-                a.driver,
-                a.why,
-                iface.name(),
-                a.until,
-                retry.as_secs()
-            ));
-            iface.set_stale(&a.why);
-            a.why
-        });
-        Supervision {
+        let how = Supervision {
             name,
-            interfaces: vec![iface],
+            interfaces: vec![iface.clone()],
             on_demand: true,
             backoff: Backoff::fixed(retry),
-            absent,
+            absent: None,
+        };
+        match absent {
+            None => how,
+            Some(a) => {
+                let line = format!(
+                    "{}: driver {}: {}; {} stays stale until {} (tried every {} s while used)",
+                    a.at,
+                    a.driver,
+                    a.why,
+                    iface.name(),
+                    a.until,
+                    retry.as_secs()
+                );
+                how.absent_at_load(a.why, Some(line))
+            }
         }
+    }
+
+    /// The device was absent at load: says `line` (once, if given), marks the
+    /// interfaces stale with `why`, and the supervisor does not log that reason
+    /// again; it says so when the device comes up.
+    pub fn absent_at_load(mut self, why: String, line: Option<String>) -> Supervision {
+        if let Some(line) = line {
+            crate::output::println(line);
+        }
+        for i in &self.interfaces {
+            i.set_stale(&why);
+        }
+        self.absent = Some(why);
+        self
     }
 }
 
@@ -228,8 +244,9 @@ fn run<D: Device>(how: Supervision, mut device: D, stop: &AtomicBool) {
                 continue;
             }
         };
+        // Back after a loss or an absence the user was told of: said as loudly.
         if down.take().is_some() {
-            tracing::info!("{}: up", how.name);
+            crate::output::println(format!("{}: up again", how.name));
         }
         wait = how.backoff.first;
         let lost = loop {

@@ -380,8 +380,6 @@ struct Gz {
     /// The namespace of the type names we publish.
     ns: String,
     name: String,
-    /// Since when Gazebo is lost (said), if it is.
-    lost: Option<String>,
 }
 
 /// Fills `out` (mm, 4.3's N readings at R per degree) from a LaserScan.
@@ -777,12 +775,6 @@ impl runtime::Device for Gz {
         if !self.settle(Duration::from_millis(1000)) {
             return Err(self.reason());
         }
-        if let Some(_why) = self.lost.take() {
-            crate::output::println(format!(
-                "{}: Gazebo is back; interfaces bound again",
-                self.name
-            ));
-        }
         self.next_cmd = Instant::now();
         Ok(())
     }
@@ -813,10 +805,6 @@ impl runtime::Device for Gz {
                     &self.node.last_loss
                 }
             );
-            if self.lost.is_none() {
-                crate::output::println(why.clone());
-            }
-            self.lost = Some(why.clone());
             return Err(why);
         }
         Ok(())
@@ -945,39 +933,31 @@ impl GazeboDriver {
             twist: Vec::new(),
             ns,
             name: provider.to_string(),
-            lost: None,
         };
-        let absent = if gz.settle(Duration::from_millis(1200)) {
+        let mut how = Supervision {
+            name: provider.into(),
+            interfaces: all,
+            on_demand: false,
+            backoff: Backoff::fixed(Duration::from_millis(100)),
+            absent: None,
+        };
+        if gz.settle(Duration::from_millis(1200)) {
             tracing::info!(
                 "{provider}: bound to Gazebo in partition `{}` on {}",
                 gz.gc.partition,
                 gz.node.ip
             );
-            None
         } else {
             let why = gz.reason();
             let at = gz
                 .gc
                 .wants
                 .first()
-                .map(|w| w.at.clone())
+                .map(|w| w.at.as_str())
                 .unwrap_or_default();
-            crate::output::println(format!(
-                "{at}: {why}; the interfaces stay stale until they appear"
-            ));
-            for i in &all {
-                i.set_stale(&why);
-            }
-            gz.lost = Some(why.clone());
-            Some(why)
-        };
-        let how = Supervision {
-            name: provider.into(),
-            interfaces: all,
-            on_demand: false,
-            backoff: Backoff::fixed(Duration::from_millis(100)),
-            absent,
-        };
+            let line = format!("{at}: {why}; the interfaces stay stale until they appear");
+            how = how.absent_at_load(why, Some(line));
+        }
         Ok(GazeboDriver {
             sup: Supervisor::start(how, gz)?,
             motors,

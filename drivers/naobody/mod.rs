@@ -1156,23 +1156,22 @@ pub fn start(conf: NaoConf, rt: &Runtime, provider: &str) -> anyhow::Result<Vec<
             ($($i:ident),*) => { $( if let Some(i) = &$i { interfaces.push(i.clone()); } )* };
         }
         add!(motors, encoders, pte, ptm, sonars, bumpers);
+        let mut how = Supervision {
+            name: format!("{provider} body"),
+            interfaces,
+            on_demand: false,
+            backoff: BACKOFF,
+            absent: None,
+        };
         if let Some(why) = &absent {
-            crate::output::println(format!(
+            let line = format!(
                 "{}: driver {provider}: {why}; its interfaces stay stale until NAOqi answers (tried again every few seconds)",
                 conf.at
-            ));
-            for i in &interfaces {
-                i.set_stale(why);
-            }
+            );
+            how = how.absent_at_load(why.clone(), Some(line));
         }
         sups.push(Supervisor::start(
-            Supervision {
-                name: format!("{provider} body"),
-                interfaces,
-                on_demand: false,
-                backoff: BACKOFF,
-                absent: absent.clone(),
-            },
+            how,
             Body {
                 conf: conf.clone(),
                 motors,
@@ -1202,13 +1201,11 @@ pub fn start(conf: NaoConf, rt: &Runtime, provider: &str) -> anyhow::Result<Vec<
                     until: "NAOqi answers",
                 }),
         );
-        let how = Supervision {
-            absent: how.absent.or_else(|| absent.clone()),
-            ..how
+        // With a body, its line said NAOqi is absent: the camera is only marked.
+        let how = match (&absent, how.absent.is_some()) {
+            (Some(why), false) => how.absent_at_load(why.clone(), None),
+            _ => how,
         };
-        if absent.is_some() {
-            iface.set_stale(absent.as_deref().unwrap_or_default());
-        }
         sups.push(Supervisor::start(
             how,
             Camera {
