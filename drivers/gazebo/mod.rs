@@ -379,6 +379,8 @@ struct Gz {
     twist: Vec<u8>,
     /// The namespace of the type names we publish.
     ns: String,
+    /// The node's [`changes`](Node::changes) at the last [`resolve`](Self::resolve).
+    resolved: Option<u64>,
     name: String,
 }
 
@@ -552,6 +554,12 @@ impl Gz {
 
     /// Subscribes the lines whose topic is known or can now be found.
     fn resolve(&mut self) {
+        // Nothing to look at again while the node's knowledge has not moved.
+        let changes = self.node.changes;
+        if self.resolved == Some(changes) {
+            return;
+        }
+        self.resolved = Some(changes);
         let known = self.node.known();
         for l in &mut self.lines {
             if l.topic.is_none() {
@@ -932,6 +940,7 @@ impl GazeboDriver {
             next_cmd: Instant::now(),
             twist: Vec::new(),
             ns,
+            resolved: None,
             name: provider.to_string(),
         };
         let mut how = Supervision {

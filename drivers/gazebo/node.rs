@@ -129,6 +129,9 @@ pub struct Node {
     publ: Pub,
     /// Remote publishers by topic.
     remote: BTreeMap<String, Vec<Publisher>>,
+    /// Counts changes of what is known and bound (publishers, bindings), so a
+    /// user of [`known`](Self::known) looks again only when it moved.
+    pub changes: u64,
     activity: HashMap<String, Instant>,
     advertised: Vec<(String, String)>,
     pub wants: Vec<Want>,
@@ -197,6 +200,7 @@ impl Node {
             prefix: qualify(partition, "/").trim_end_matches('/').to_string(),
             publ,
             remote: BTreeMap::new(),
+            changes: 0,
             activity: HashMap::new(),
             advertised: Vec::new(),
             wants: Vec::new(),
@@ -373,6 +377,7 @@ impl Node {
 
     /// A process is gone: its publishers and the subscriptions bound to them.
     fn forget(&mut self, puuid: &str) {
+        self.changes += 1;
         tracing::debug!("gazebo: process {puuid} is gone");
         if self
             .wants
@@ -432,6 +437,7 @@ impl Node {
             }
         }
         tracing::debug!("gazebo: the connection to {peer} closed");
+        self.changes += 1;
         if !bound.is_empty() {
             self.last_loss = format!("the connection to {peer} closed");
         }
@@ -463,6 +469,7 @@ impl Node {
         match d.kind {
             disc::ADVERTISE => {
                 let Some(p) = d.publisher else { return };
+                self.changes += 1;
                 if !p.topic.starts_with(&self.prefix)
                     || (self.remote.len() >= MAX_KNOWN && !self.remote.contains_key(&p.topic))
                 {
@@ -479,6 +486,7 @@ impl Node {
             }
             disc::UNADVERTISE => {
                 let Some(p) = d.publisher else { return };
+                self.changes += 1;
                 tracing::debug!("gazebo: {} unadvertised", p.topic);
                 self.last_loss = format!("{} was unadvertised", p.topic);
                 if let Some(list) = self.remote.get_mut(&p.topic) {
@@ -528,6 +536,7 @@ impl Node {
 
     /// Binds the unbound subscriptions of `p`'s topic to it.
     fn bind(&mut self, p: &Publisher) {
+        self.changes += 1;
         for i in 0..self.wants.len() {
             let w = &mut self.wants[i];
             if w.topic != p.topic || w.bound.is_some() {
