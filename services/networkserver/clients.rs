@@ -16,7 +16,7 @@ use std::{
 use parking_lot::{Condvar, Mutex};
 
 use crate::{
-    interfaces::{Motors, Notify},
+    interfaces::{Motors, Notify, Source},
     netwire::{self, Feed},
 };
 
@@ -231,6 +231,7 @@ fn client(stream: TcpStream, peer: SocketAddr, id: u64, slot: &Slot, sh: &Arc<Sh
         cv: Condvar::new(),
         stream: wstream,
         waiting_frame: AtomicBool::new(false),
+        from: Source::new(format!("networkserver: client {cname} from {peer}")),
     });
     let writer = {
         let cl = cl.clone();
