@@ -1,14 +1,30 @@
 //! The accept loop, the table of connections, admission (the 20-byte name within
-//! `timeout`, the token, eviction of an unnamed connection when the table is full)
-//! and each connection's life from its name to its last suspend.
+//! `timeout`, the token, eviction of the longest idle connection when the table
+//! is full or descriptors run out) and each connection's life from its name to
+//! its last suspend.
+//!
+//! **Idle** is judged by what a client sent, never by what it was sent: a
+//! client subscribed to a sensor that does not change is as idle as one that
+//! says nothing. With the table full (or `accept` failing for want of
+//! descriptors) a new connection closes, in this order of preference:
+//! 1. a connection that has not sent its name after [`EVICT_AFTER`];
+//! 2. a named one that sent nothing for [`EVICT_IDLE`] and has no
+//!    subscription, image request or command;
+//! 3. a named one that sent nothing for [`EVICT_IDLE`];
+//!
+//! within a class the one from the address holding the most connections, then
+//! the one silent longest. So a crowd from one host makes room for a client from
+//! another, and a crowd that sends nothing makes room for anyone. A subscriber
+//! that wants to keep its place when the table is full sends a line now and then
+//! (subscribing again is harmless, on 4.3 servers too).
 
 use std::{
     collections::VecDeque,
     io::{self, Write},
-    net::{Shutdown, SocketAddr, TcpListener, TcpStream},
+    net::{IpAddr, Shutdown, SocketAddr, TcpListener, TcpStream},
     sync::{
         Arc,
-        atomic::{AtomicBool, Ordering},
+        atomic::{AtomicBool, AtomicU64, Ordering},
     },
     time::{Duration, Instant},
 };
@@ -31,22 +47,46 @@ pub(super) struct Conn {
     pub(super) id: u64,
     pub(super) stream: TcpStream,
     since: Instant,
+    peer: IpAddr,
     slot: Arc<Slot>,
 }
 
 /// What the accept loop and a connection's thread share.
 #[derive(Default)]
-struct Slot {
+pub(super) struct Slot {
     /// It sent its 20-byte name (and the token, if one is set).
     named: AtomicBool,
     /// The accept loop closed it to make room for a new connection.
     evicted: AtomicBool,
+    /// When it last sent a line (or its name): ms since the server started.
+    heard_ms: AtomicU64,
+    /// It has a subscription or an image request, or sent a command.
+    engaged: AtomicBool,
+}
+
+impl Slot {
+    /// It sent a line now (`engaged`: it is subscribed, asks for images or has
+    /// sent a command).
+    pub(super) fn heard(&self, sh: &Shared, engaged: bool) {
+        self.heard_ms
+            .store(sh.epoch.elapsed().as_millis() as u64, Ordering::Release);
+        self.engaged.store(engaged, Ordering::Release);
+    }
 }
 
 /// How long a connection may have been waiting for its name before a new
 /// connection may evict it from a full table (so a burst of connections does
 /// not evict good clients that have not been read yet).
 pub(super) const EVICT_AFTER: Duration = Duration::from_millis(250);
+
+/// How long a named connection must have sent nothing before a new connection
+/// may evict it from a full table (so a crowd of fresh connections does not
+/// evict each other, nor a client that has just subscribed).
+pub(super) const EVICT_IDLE: Duration = Duration::from_secs(2);
+
+/// The longest pause of the accept loop after `accept` failed for want of
+/// descriptors (it starts at 50 ms and doubles).
+const ACCEPT_BACKOFF_MAX: Duration = Duration::from_secs(1);
 
 /// How often the accept loop looks at the stop flag while no one connects.
 const ACCEPT_TICK_MS: i32 = 100;
@@ -64,31 +104,95 @@ fn wait_readable(listener: &TcpListener) {
     unsafe { libc::poll(&mut p, 1, ACCEPT_TICK_MS) };
 }
 
-/// With the table full, closes the connection that has waited longest for its
-/// name (at least EVICT_AFTER), so a client that knows the token still gets in
-/// while strangers hold connections open. True if one was closed.
-fn evict_unnamed(sh: &Shared) -> bool {
+/// Closes one connection to make room (see the module's doc for which), telling
+/// a named one why with a `1027` line. True if one was closed.
+fn evict_one(sh: &Shared, reason: &str) -> bool {
     let clients = sh.clients.lock();
-    let oldest = clients
+    let now_ms = sh.epoch.elapsed().as_millis() as u64;
+    let mut counts: std::collections::HashMap<IpAddr, usize> = Default::default();
+    for c in clients.iter() {
+        *counts.entry(c.peer).or_default() += 1;
+    }
+    let per_ip = |ip: IpAddr| counts.get(&ip).copied().unwrap_or(0);
+    let victim = clients
         .iter()
-        .filter(|c| {
-            !c.slot.named.load(Ordering::Acquire)
-                && !c.slot.evicted.load(Ordering::Acquire)
-                && c.since.elapsed() >= EVICT_AFTER
+        .filter(|c| !c.slot.evicted.load(Ordering::Acquire))
+        .filter_map(|c| {
+            if !c.slot.named.load(Ordering::Acquire) {
+                let waited = c.since.elapsed();
+                (waited >= EVICT_AFTER).then_some((2u8, per_ip(c.peer), waited, c))
+            } else {
+                let idle = Duration::from_millis(
+                    now_ms.saturating_sub(c.slot.heard_ms.load(Ordering::Acquire)),
+                );
+                let class = if c.slot.engaged.load(Ordering::Acquire) {
+                    0
+                } else {
+                    1
+                };
+                (idle >= EVICT_IDLE).then_some((class, per_ip(c.peer), idle, c))
+            }
         })
-        .min_by_key(|c| c.since);
-    match oldest {
-        Some(c) => {
-            c.slot.evicted.store(true, Ordering::Release);
-            let _ = c.stream.shutdown(Shutdown::Both);
-            true
+        .max_by_key(|(class, n, idle, _)| (*class, *n, *idle));
+    let Some((class, _, idle, c)) = victim else {
+        return false;
+    };
+    c.slot.evicted.store(true, Ordering::Release);
+    if class < 2 {
+        let mut out = Vec::new();
+        netwire::write_error(
+            &mut out,
+            &format!(
+                "closed to make room ({reason}): it had sent nothing for {} ms",
+                idle.as_millis()
+            ),
+        );
+        send_now(&c.stream, &out);
+    }
+    let _ = c.stream.shutdown(Shutdown::Both);
+    true
+}
+
+/// Writes what the socket takes at once (never blocks: the accept loop calls it).
+fn send_now(stream: &TcpStream, bytes: &[u8]) {
+    use std::os::fd::AsRawFd;
+    // SAFETY: a valid socket and buffer for the duration of the call; the flags
+    // make it return at once and never raise SIGPIPE.
+    unsafe {
+        libc::send(
+            stream.as_raw_fd(),
+            bytes.as_ptr().cast(),
+            bytes.len(),
+            libc::MSG_DONTWAIT | libc::MSG_NOSIGNAL,
+        )
+    };
+}
+
+/// Whether an `accept` error means this process is out of descriptors (or the
+/// kernel out of memory for one): a condition that passes when connections close.
+fn out_of_descriptors(e: &io::Error) -> bool {
+    matches!(
+        e.raw_os_error(),
+        Some(libc::EMFILE | libc::ENFILE | libc::ENOBUFS | libc::ENOMEM)
+    )
+}
+
+/// Sleeps `d` in slices of at most ACCEPT_TICK_MS, returning early on stop.
+fn pause(sh: &Shared, d: Duration) {
+    let end = Instant::now() + d;
+    while !sh.stop.load(Ordering::Acquire) {
+        let left = end.saturating_duration_since(Instant::now());
+        if left.is_zero() {
+            return;
         }
-        None => false,
+        std::thread::sleep(left.min(Duration::from_millis(ACCEPT_TICK_MS as u64)));
     }
 }
 
 pub(super) fn accept_loop(listener: TcpListener, sh: Arc<Shared>) {
     let mut next_id = 0u64;
+    // While `accept` fails: the current pause, and whether it was said.
+    let mut backoff: Option<Duration> = None;
     loop {
         if sh.stop.load(Ordering::Acquire) {
             return;
@@ -101,11 +205,34 @@ pub(super) fn accept_loop(listener: TcpListener, sh: Arc<Shared>) {
             }
             Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
             Err(e) => {
-                tracing::warn!("networkserver: accept failed: {e}");
-                std::thread::sleep(Duration::from_millis(50));
+                // Out of descriptors (or a passing error): the loop goes on,
+                // pausing 50 ms doubling to 1 s, one line per episode. A
+                // descriptor is freed by closing the longest idle connection.
+                let pause_for = match backoff {
+                    None => {
+                        tracing::warn!(
+                            "networkserver: accept failed: {e}{}; pausing and trying again",
+                            if out_of_descriptors(&e) {
+                                " (out of file descriptors: closing the longest idle connection)"
+                            } else {
+                                ""
+                            }
+                        );
+                        Duration::from_millis(50)
+                    }
+                    Some(d) => (d * 2).min(ACCEPT_BACKOFF_MAX),
+                };
+                backoff = Some(pause_for);
+                if out_of_descriptors(&e) {
+                    evict_one(&sh, "out of file descriptors");
+                }
+                pause(&sh, pause_for);
                 continue;
             }
         };
+        if backoff.take().is_some() {
+            tracing::info!("networkserver: accepting connections again");
+        }
         if sh.stop.load(Ordering::Acquire) {
             return;
         }
@@ -116,7 +243,9 @@ pub(super) fn accept_loop(listener: TcpListener, sh: Arc<Shared>) {
         sh.threads.lock().retain(|t| !t.is_finished());
         sh.stats.accepted.fetch_add(1, Ordering::Relaxed);
         let n = sh.stats.clients.load(Ordering::Acquire);
-        if n >= sh.conf.max_clients && !evict_unnamed(&sh) {
+        if n >= sh.conf.max_clients
+            && !evict_one(&sh, &format!("max_clients {}", sh.conf.max_clients))
+        {
             sh.stats.dropped.fetch_add(1, Ordering::Relaxed);
             tracing::warn!(
                 "networkserver: refused {peer}: {n} clients already connected (max_clients {})",
@@ -142,6 +271,7 @@ pub(super) fn accept_loop(listener: TcpListener, sh: Arc<Shared>) {
             id,
             stream: reg,
             since: Instant::now(),
+            peer: peer.ip(),
             slot: slot.clone(),
         });
         sh.stats.clients.fetch_add(1, Ordering::AcqRel);
@@ -212,6 +342,7 @@ fn client(stream: TcpStream, peer: SocketAddr, id: u64, slot: &Slot, sh: &Arc<Sh
     if sh.stop.load(Ordering::Acquire) {
         return finish("server stopping".into(), false);
     }
+    slot.heard(sh, false);
     slot.named.store(true, Ordering::Release);
     if slot.evicted.load(Ordering::Acquire) {
         return finish("closed to make room before its name was read".into(), true);
@@ -253,7 +384,7 @@ fn client(stream: TcpStream, peer: SocketAddr, id: u64, slot: &Slot, sh: &Arc<Sh
         ..Default::default()
     };
     let mut drove = false;
-    reader(&stream, &cl, sh, &mut resumed, &mut drove);
+    reader(&stream, &cl, sh, slot, &mut resumed, &mut drove);
     cl.close("reader ended", false);
     let _ = writer.join();
     for (_, img) in &sh.sources.images {
@@ -270,7 +401,16 @@ fn client(stream: TcpStream, peer: SocketAddr, id: u64, slot: &Slot, sh: &Arc<Sh
     if drove && let Some(m) = &sh.sources.motors {
         let _ = m.publish(Motors::default());
     }
-    let (why, bad) = cl.st.lock().why.clone().unwrap_or(("closed".into(), false));
+    let (why, bad) = if slot.evicted.load(Ordering::Acquire) {
+        (
+            "closed to make room for a new connection: the table was full (or descriptors \
+             ran out) and it had sent nothing for longest"
+                .to_string(),
+            false,
+        )
+    } else {
+        cl.st.lock().why.clone().unwrap_or(("closed".into(), false))
+    };
     finish(why, bad);
 }
 

@@ -19,7 +19,7 @@ use crate::{
     netwire::{self, Feed, LineEvent, LineReader, Request},
 };
 
-use super::{Shared, Sources, frames};
+use super::{Shared, Sources, clients::Slot, frames};
 
 /// What a client's reader and writer share.
 pub(super) struct ClientState {
@@ -68,6 +68,7 @@ pub(super) fn reader(
     stream: &TcpStream,
     cl: &Client,
     sh: &Shared,
+    slot: &Slot,
     resumed: &mut Resumed,
     drove: &mut bool,
 ) {
@@ -102,6 +103,11 @@ pub(super) fn reader(
                             cl.close(why, bad);
                             return;
                         }
+                        let engaged = commanded || {
+                            let st = cl.st.lock();
+                            st.subs.iter().any(|s| *s) || st.images.iter().any(|n| *n > 0)
+                        };
+                        slot.heard(sh, engaged);
                     }
                     Err(e) => {
                         let shown: String = String::from_utf8_lossy(&line[..line.len().min(40)])
