@@ -372,9 +372,12 @@ fn the_accept_loop_survives_running_out_of_descriptors() {
         panic!("quit did not end the server");
     }
     let log = out.lock().unwrap().clone();
-    let lines = log.matches("accept failed").count();
+    // Descriptors ran out (at accept, or at the new connection's descriptors),
+    // said once per episode, not once per try.
+    let lines =
+        log.matches("accept failed").count() + log.matches("cannot take a new connection").count();
     assert!(
-        (1..=10).contains(&lines),
-        "{lines} `accept failed` lines (one per episode expected):\n{log}"
+        (1..=3).contains(&lines),
+        "{lines} lines about running out (at most one per 10 s expected):\n{log}"
     );
 }

@@ -177,6 +177,55 @@ fn out_of_descriptors(e: &io::Error) -> bool {
     )
 }
 
+/// While `accept` (or the descriptors a new connection needs) fails: the
+/// current pause, and when the last line about it was said.
+#[derive(Default)]
+struct Failing {
+    pause: Option<Duration>,
+    said: Option<Instant>,
+    unsaid: u64,
+}
+
+/// The least time between two lines about running out of descriptors (an
+/// attacker can make it flap between failing and working many times a second).
+const FAILING_QUIET: Duration = Duration::from_secs(10);
+
+/// After `accept` (or the descriptors a new connection needs) failed: the loop
+/// goes on, pausing 50 ms doubling to 1 s, with one log line per episode (at
+/// most one per FAILING_QUIET); out of descriptors, it frees one by closing the
+/// longest idle connection.
+fn failed(sh: &Shared, e: &io::Error, what: &str, f: &mut Failing) {
+    let pause_for = match f.pause {
+        None => Duration::from_millis(50),
+        Some(d) => (d * 2).min(ACCEPT_BACKOFF_MAX),
+    };
+    if f.pause.is_none() {
+        if f.said.is_none_or(|t| t.elapsed() >= FAILING_QUIET) {
+            tracing::warn!(
+                "networkserver: {what}: {e}{}; pausing and trying again{}",
+                if out_of_descriptors(e) {
+                    " (out of file descriptors: closing the longest idle connection)"
+                } else {
+                    ""
+                },
+                match f.unsaid {
+                    0 => String::new(),
+                    n => format!(" ({n} more times since the last line)"),
+                }
+            );
+            f.said = Some(Instant::now());
+            f.unsaid = 0;
+        } else {
+            f.unsaid += 1;
+        }
+    }
+    f.pause = Some(pause_for);
+    if out_of_descriptors(e) {
+        evict_one(sh, "out of file descriptors");
+    }
+    pause(sh, pause_for);
+}
+
 /// Sleeps `d` in slices of at most ACCEPT_TICK_MS, returning early on stop.
 fn pause(sh: &Shared, d: Duration) {
     let end = Instant::now() + d;
@@ -191,8 +240,7 @@ fn pause(sh: &Shared, d: Duration) {
 
 pub(super) fn accept_loop(listener: TcpListener, sh: Arc<Shared>) {
     let mut next_id = 0u64;
-    // While `accept` fails: the current pause, and whether it was said.
-    let mut backoff: Option<Duration> = None;
+    let mut failing = Failing::default();
     loop {
         if sh.stop.load(Ordering::Acquire) {
             return;
@@ -205,34 +253,11 @@ pub(super) fn accept_loop(listener: TcpListener, sh: Arc<Shared>) {
             }
             Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
             Err(e) => {
-                // Out of descriptors (or a passing error): the loop goes on,
-                // pausing 50 ms doubling to 1 s, one line per episode. A
-                // descriptor is freed by closing the longest idle connection.
-                let pause_for = match backoff {
-                    None => {
-                        tracing::warn!(
-                            "networkserver: accept failed: {e}{}; pausing and trying again",
-                            if out_of_descriptors(&e) {
-                                " (out of file descriptors: closing the longest idle connection)"
-                            } else {
-                                ""
-                            }
-                        );
-                        Duration::from_millis(50)
-                    }
-                    Some(d) => (d * 2).min(ACCEPT_BACKOFF_MAX),
-                };
-                backoff = Some(pause_for);
-                if out_of_descriptors(&e) {
-                    evict_one(&sh, "out of file descriptors");
-                }
-                pause(&sh, pause_for);
+                failed(&sh, &e, "accept failed", &mut failing);
                 continue;
             }
         };
-        if backoff.take().is_some() {
-            tracing::info!("networkserver: accepting connections again");
-        }
+
         if sh.stop.load(Ordering::Acquire) {
             return;
         }
@@ -263,9 +288,17 @@ pub(super) fn accept_loop(listener: TcpListener, sh: Arc<Shared>) {
         }
         next_id += 1;
         let id = next_id;
-        let Ok(reg) = stream.try_clone() else {
-            continue;
+        let reg = match stream.try_clone() {
+            Ok(r) => r,
+            Err(e) => {
+                drop(stream);
+                failed(&sh, &e, "cannot take a new connection", &mut failing);
+                continue;
+            }
         };
+        if failing.pause.take().is_some() && failing.unsaid == 0 {
+            tracing::info!("networkserver: accepting connections again");
+        }
         let slot = Arc::new(Slot::default());
         sh.clients.lock().push(Conn {
             id,
