@@ -444,4 +444,23 @@ mod tests {
         let e = parse("mode boss").unwrap_err().to_string();
         assert!(e.contains("peer, client, router"), "{e}");
     }
+
+    #[test]
+    fn beyond_loopback_needs_mutual_tls_or_insecure() {
+        for text in ["listen tcp/0.0.0.0:7447", "connect tcp/10.0.0.2:7447"] {
+            let e = parse(text).unwrap_err().to_string();
+            assert!(
+                e.contains("beyond loopback") && e.contains("tls CA.pem") && e.contains("insecure"),
+                "{e}"
+            );
+        }
+        // A tls/ endpoint without the `tls` line is not mutual authentication.
+        let e = parse("listen tls/0.0.0.0:7447").unwrap_err().to_string();
+        assert!(e.contains("beyond loopback"), "{e}");
+        assert!(parse("listen tcp/0.0.0.0:7447\ninsecure").is_ok());
+        assert!(parse("listen tcp/127.0.0.1:7447\nconnect tcp/localhost:7447").is_ok());
+        let e = parse("writers operator").unwrap_err().to_string();
+        assert!(e.contains("tls CA.pem"), "{e}");
+    }
+
 }
