@@ -297,7 +297,7 @@ pub fn load_model_text(
         }
     };
     let mut reader = Counting::new(text);
-    let (models, materials) = match tobj::load_obj_buf(&mut reader, &load_options(), &loader) {
+    let (models, materials) = match tobj::load_obj_buf(&mut reader, &load_options(), loader) {
         Ok(r) => r,
         Err(e) => {
             return Err(ModelError {

@@ -462,5 +462,4 @@ mod tests {
         let e = parse("writers operator").unwrap_err().to_string();
         assert!(e.contains("tls CA.pem"), "{e}");
     }
-
 }
