@@ -7,7 +7,10 @@
 //!   (`assets/models/pioneer.obj` and `pioneer.mtl`, GPL-3.0-or-later like the
 //!   project), or any OBJ file a `model` line names (with its MTL materials; a face
 //!   without one is grey). It is loaded with the `tobj` crate; a bad file is an
-//!   error naming the file and the line (found by loading ever longer prefixes).
+//!   error naming the file and the line (counted in the same pass). Model and
+//!   material files go through the one checked open (`crate::files`): regular
+//!   files only (not `/dev/zero`, not a FIFO), a model at most 64 MiB, a material
+//!   library 16 MiB and 64 MiB of them in all.
 //!   Units: the model's, times `model_scale`, in mm, x ahead, y left, z up, the
 //!   origin where the encoders pose is.
 //! - The frustum: the pan-tilt camera is an OpenGL camera (`robot_camera`: where it
@@ -47,7 +50,6 @@
 //! System packages: none beyond the GUI's (OpenGL 3.0 or ES 3.0, e.g. Mesa).
 
 use std::{
-    io::BufRead,
     path::{Path, PathBuf},
     sync::Arc,
     time::Duration,
@@ -60,6 +62,7 @@ use crate::{
         ComponentConf,
         settings::{self, CYCLE, Setting, float, on_off, path},
     },
+    files,
     interfaces::{Encoders, Interface, InterfaceValue, Laser, PtEncoders, Sonars},
     progeo::{GlCamera, HPoint2D, PinholeCamera},
     runtime::{Context, Panel, Runtime, Schema},
@@ -170,35 +173,69 @@ fn load_options() -> tobj::LoadOptions {
     }
 }
 
-/// The first line of `text` at which `parses` (fed ever longer prefixes) fails:
-/// the smallest failing prefix, by bisection.
-fn failing_line(text: &str, parses: impl Fn(&str) -> bool) -> usize {
-    let ends: Vec<usize> = text
-        .char_indices()
-        .filter(|&(_, c)| c == '\n')
-        .map(|(i, _)| i + 1)
-        .chain(std::iter::once(text.len()))
-        .collect();
-    let (mut lo, mut hi) = (0usize, ends.len()); // prefix of lo lines parses; hi fails
-    if parses(&text[..ends[ends.len() - 1]]) {
-        return ends.len();
-    }
-    while hi - lo > 1 {
-        let mid = (lo + hi) / 2;
-        if parses(&text[..ends[mid - 1]]) {
-            lo = mid;
-        } else {
-            hi = mid;
+/// A reader over text that counts the lines the parser has taken: when tobj's
+/// line-by-line parser fails, the line it was on is known in the same pass (the
+/// old search re-parsed ever longer prefixes: a 100 MB OBJ bad on its last line
+/// took over 300 s).
+struct Counting<'a> {
+    text: &'a [u8],
+    at: usize,
+    newlines: usize,
+}
+
+impl<'a> Counting<'a> {
+    fn new(text: &'a str) -> Self {
+        Counting {
+            text: text.as_bytes(),
+            at: 0,
+            newlines: 0,
         }
     }
-    hi
+    /// The 1-based line the parser was on: the last line it took (an error at
+    /// the end of the file, such as a face index beyond the vertices, is
+    /// reported on the last line).
+    fn line(&self) -> usize {
+        let cut_last = self.at == self.text.len() && !self.text.ends_with(b"\n");
+        (self.newlines + usize::from(cut_last)).max(1)
+    }
+}
+
+impl std::io::Read for Counting<'_> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        let n = buf.len().min(self.text.len() - self.at);
+        buf[..n].copy_from_slice(&self.text[self.at..self.at + n]);
+        std::io::BufRead::consume(self, n);
+        Ok(n)
+    }
+}
+
+impl std::io::BufRead for Counting<'_> {
+    fn fill_buf(&mut self) -> std::io::Result<&[u8]> {
+        Ok(&self.text[self.at..])
+    }
+    fn consume(&mut self, amt: usize) {
+        let end = (self.at + amt).min(self.text.len());
+        self.newlines += self.text[self.at..end]
+            .iter()
+            .filter(|b| **b == b'\n')
+            .count();
+        self.at = end;
+    }
 }
 
 type MtlResult = tobj::MTLLoadResult;
 
-fn parse_mtl(text: &str) -> MtlResult {
-    tobj::load_mtl_buf(&mut std::io::Cursor::new(text.as_bytes()))
+/// Parses MTL text; on an error, the line it was found on.
+fn parse_mtl(text: &str) -> (MtlResult, usize) {
+    let mut r = Counting::new(text);
+    let result = tobj::load_mtl_buf(&mut r);
+    (result, r.line())
 }
+
+/// The most bytes of material libraries one model may read in all (each file
+/// is at most `files::MAX_TEXT_BYTES`; an OBJ of many `mtllib` lines must not
+/// read one library thousands of times).
+pub const MAX_MTL_TOTAL_BYTES: u64 = 64 << 20;
 
 /// Loads an OBJ model given as text (`file` names it, and its directory is where
 /// `mtllib` files are read from, unless `mtl` supplies the one material text).
@@ -209,26 +246,42 @@ pub fn load_model_text(
     scale: f32,
 ) -> Result<Vec<Draw>, ModelError> {
     let dir = file.parent().map(Path::to_path_buf).unwrap_or_default();
+    let mtl_bytes = std::cell::Cell::new(0u64);
     let read_mtl = |p: &Path| -> Result<(String, PathBuf), ModelError> {
         let f = dir.join(p);
         match mtl {
             Some(t) => Ok((t.to_string(), f)),
-            None => std::fs::read_to_string(&f)
-                .map(|t| (t, f.clone()))
-                .map_err(|e| ModelError {
+            None => {
+                // The one checked open: a regular file (not /dev/zero, not a
+                // FIFO that would hang `check`), at most MAX_TEXT_BYTES.
+                let t = files::FileError::read(&f).map_err(|e| ModelError {
                     file: f.clone(),
                     line: 0,
-                    message: format!("cannot read the material library: {e}"),
-                }),
+                    message: format!("cannot read the material library: {}", e.reason()),
+                })?;
+                mtl_bytes.set(mtl_bytes.get() + t.len() as u64);
+                if mtl_bytes.get() > MAX_MTL_TOTAL_BYTES {
+                    return Err(ModelError {
+                        file: file.to_path_buf(),
+                        line: 0,
+                        message: format!(
+                            "its material libraries add up to more than {MAX_MTL_TOTAL_BYTES} bytes"
+                        ),
+                    });
+                }
+                Ok((t, f))
+            }
         }
     };
     let mtl_error = std::cell::RefCell::new(None::<ModelError>);
     let loader = |p: &Path| -> MtlResult {
+        if mtl_error.borrow().is_some() {
+            return Err(tobj::LoadError::OpenFileFailed);
+        }
         match read_mtl(p) {
             Ok((t, f)) => {
-                let r = parse_mtl(&t);
+                let (r, line) = parse_mtl(&t);
                 if let Err(e) = &r {
-                    let line = failing_line(&t, |s| parse_mtl(s).is_ok());
                     *mtl_error.borrow_mut() = Some(ModelError {
                         file: f,
                         line,
@@ -243,17 +296,13 @@ pub fn load_model_text(
             }
         }
     };
-    let parse = |s: &str, ml: &dyn Fn(&Path) -> MtlResult| {
-        tobj::load_obj_buf(&mut std::io::Cursor::new(s.as_bytes()), &load_options(), ml)
-    };
-    let (models, materials) = match parse(text, &loader) {
+    let mut reader = Counting::new(text);
+    let (models, materials) = match tobj::load_obj_buf(&mut reader, &load_options(), loader) {
         Ok(r) => r,
         Err(e) => {
-            let quiet = |_: &Path| -> MtlResult { Ok(Default::default()) };
-            let line = failing_line(text, |s| parse(s, &quiet).is_ok());
             return Err(ModelError {
                 file: file.to_path_buf(),
-                line,
+                line: reader.line(),
                 message: format!("bad OBJ: {e}"),
             });
         }
@@ -294,30 +343,19 @@ pub fn load_model_text(
     Ok(b.draws(Matrix4::identity()))
 }
 
-/// Loads an OBJ model file (and the MTL files it names).
+/// Loads an OBJ model file (and the MTL files it names), through the one
+/// checked open: a regular file of at most [`files::MAX_MODEL_BYTES`].
 pub fn load_model(file: &Path, scale: f32) -> Result<Vec<Draw>, ModelError> {
-    let mut text = String::new();
-    let r = std::fs::File::open(file)
-        .map(std::io::BufReader::new)
-        .and_then(|mut f| {
-            let mut buf = Vec::new();
-            loop {
-                let n = f.read_until(b'\n', &mut buf)?;
-                if n == 0 {
-                    break;
-                }
-            }
-            text = String::from_utf8(buf)
-                .map_err(|e| std::io::Error::new(std::io::ErrorKind::InvalidData, e))?;
-            Ok(())
-        });
-    if let Err(e) = r {
-        return Err(ModelError {
-            file: file.to_path_buf(),
-            line: 0,
-            message: format!("cannot read the model: {e}"),
-        });
-    }
+    let bytes = files::read_limited(file, files::MAX_MODEL_BYTES).map_err(|e| ModelError {
+        file: file.to_path_buf(),
+        line: 0,
+        message: format!("cannot read the model: {}", e.reason()),
+    })?;
+    let text = String::from_utf8(bytes).map_err(|e| ModelError {
+        file: file.to_path_buf(),
+        line: 0,
+        message: format!("cannot read the model: not UTF-8 text ({})", e.utf8_error()),
+    })?;
     load_model_text(&text, file, None, scale)
 }
 

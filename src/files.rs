@@ -2,11 +2,14 @@
 //! controllers...): one way to read them and one error type, so every such error
 //! reads `file:line: what was wrong` the same way.
 //!
-//! [`read_limited`] (and [`FileError::read`] for text) is the one reader: it opens
-//! without blocking (a FIFO does not hang it), reads only regular files (a device
-//! such as `/dev/zero` or `/dev/urandom`, a FIFO, a socket or a directory is an
-//! error that says what the path is) and refuses a file larger than a limit before
-//! reading it. [`check_regular`] says the same for a path a conf line names.
+//! [`open_checked`] is the one open of a file a conf names (models, materials,
+//! worlds, images, calibrations, recordings): it looks at the path before opening
+//! it and opens without blocking (a FIFO does not hang it), takes only regular
+//! files (a device such as `/dev/zero` or `/dev/urandom`, a FIFO, a socket or a
+//! directory is an error that says what the path is) and refuses a file larger
+//! than a limit before reading it, every error naming the path.
+//! [`read_limited`] (and [`FileError::read`] for text) reads a whole file
+//! through it. [`check_regular`] says the same for a path a conf line names.
 //! [`shorten`] cuts a word taken from outside (a conf token, a wire line) before
 //! an error message echoes it.
 
@@ -23,6 +26,10 @@ pub const MAX_TEXT_BYTES: u64 = 16 << 20;
 
 /// The largest image file we read (a 67 Mpx binary PPM is 201 MB).
 pub const MAX_IMAGE_BYTES: u64 = 256 << 20;
+
+/// The largest 3D model (OBJ) file we read: a robot's model is a few MB; a
+/// 1 GB OBJ took minutes and GBs of memory to load (issue 38).
+pub const MAX_MODEL_BYTES: u64 = 64 << 20;
 
 /// The most characters of an outside word that an error message echoes.
 pub const ECHO_CHARS: usize = 60;
@@ -97,11 +104,14 @@ fn kind_of(t: std::fs::FileType) -> &'static str {
     }
 }
 
-/// Reads the whole of the regular file `path`, at most `max` bytes. Refuses
-/// anything that is not a regular file (saying what it is; a device is not even
-/// opened) or is larger than `max`; opens without blocking, so a FIFO put in the
-/// file's place cannot hang it.
-pub fn read_limited(path: &Path, max: u64) -> Result<Vec<u8>, FileError> {
+/// Opens the regular file `path` for reading, if it is at most `max` bytes:
+/// the one checked open of every file a conf names. Refuses anything that is not
+/// a regular file (saying what it is; a device is not even opened: the path is
+/// looked at first) or is larger than `max`; opens with `O_NONBLOCK`, so a FIFO
+/// put in the file's place between the look and the open cannot hang it (it is
+/// then refused too). Returns the file and its size; read at most `max` bytes of
+/// it (`take(max)`: a file may grow while read).
+pub fn open_checked(path: &Path, max: u64) -> Result<(File, u64), FileError> {
     let io = |source| FileError::Io {
         file: path.to_path_buf(),
         source,
@@ -135,9 +145,21 @@ pub fn read_limited(path: &Path, max: u64) -> Result<Vec<u8>, FileError> {
             max,
         });
     }
-    let mut bytes = Vec::with_capacity(meta.len() as usize);
+    Ok((f, meta.len()))
+}
+
+/// Reads the whole of the regular file `path`, at most `max` bytes, through
+/// [`open_checked`].
+pub fn read_limited(path: &Path, max: u64) -> Result<Vec<u8>, FileError> {
+    let (f, len) = open_checked(path, max)?;
+    let mut bytes = Vec::with_capacity(len as usize);
     // The file may grow while we read it: never more than `max`.
-    f.take(max + 1).read_to_end(&mut bytes).map_err(io)?;
+    f.take(max + 1)
+        .read_to_end(&mut bytes)
+        .map_err(|source| FileError::Io {
+            file: path.to_path_buf(),
+            source,
+        })?;
     if bytes.len() as u64 > max {
         return Err(FileError::TooBig {
             file: path.to_path_buf(),

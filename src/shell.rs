@@ -508,7 +508,8 @@ fn files(cmd: &str, args: &[&str], out: &mut dyn Write) -> Result<Flow, String> 
             }
         }
         ("view", [file]) => {
-            let text = std::fs::read_to_string(file).map_err(|e| format!("view: {file}: {e}"))?;
+            let text = crate::files::FileError::read(std::path::Path::new(file))
+                .map_err(|e| format!("view: {e}"))?;
             let _ = out.write_all(text.as_bytes());
             if !text.ends_with('\n') {
                 w(out, String::new());

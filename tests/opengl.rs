@@ -149,3 +149,69 @@ fn the_viewer_panel_draws_without_a_gpu() {
     assert!(h.query_by_label("follow the robot").is_some());
     rt.shutdown();
 }
+
+/// Issue 38, finding 9: every file a model names goes through the one checked
+/// open. `mtllib /dev/zero` read 2.1 GB; `mtllib FIFO` hung `check`; an OBJ had
+/// no size limit; a bad last line of a big OBJ was searched for by re-parsing.
+#[test]
+fn model_files_are_regular_bounded_and_a_bad_line_is_found_in_one_pass() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let conf_for = |obj: &std::path::Path| {
+        format!(
+            "schema opengl_viewer\nmodel {}\nend_schema\nload_schema opengl_viewer\n",
+            obj.display()
+        )
+    };
+    // A material library that is a device.
+    let obj = d.join("zero.obj");
+    std::fs::write(
+        &obj,
+        "mtllib /dev/zero\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n",
+    )
+    .unwrap();
+    let e = start_error(&conf_for(&obj));
+    assert!(
+        e.contains("/dev/zero") && e.contains("not a regular file"),
+        "{e}"
+    );
+    // A material library that is a FIFO: `check` ends, naming it.
+    let fifo = d.join("pipe.mtl");
+    let c = std::ffi::CString::new(fifo.to_str().unwrap()).unwrap();
+    // SAFETY: a valid NUL-terminated path.
+    assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o600) }, 0);
+    let obj = d.join("fifo.obj");
+    std::fs::write(
+        &obj,
+        "mtllib pipe.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n",
+    )
+    .unwrap();
+    let conf = d.join("fifo.conf");
+    std::fs::write(&conf, conf_for(&obj)).unwrap();
+    let mut child = common::jderobot([std::path::Path::new("check"), &conf])
+        .spawn()
+        .unwrap();
+    let out = common::process::collect_output(&mut child);
+    assert!(
+        common::poll_until(60, || child.try_wait().ok().flatten().is_some()),
+        "`check` hung on a FIFO named by mtllib"
+    );
+    let text = out.lock().unwrap().clone();
+    assert!(text.contains("pipe.mtl") && text.contains("FIFO"), "{text}");
+    // An OBJ over the size limit (a sparse file: nothing is written or read).
+    let big = d.join("big.obj");
+    let f = std::fs::File::create(&big).unwrap();
+    f.set_len(jderobot::files::MAX_MODEL_BYTES + 1).unwrap();
+    let e = start_error(&conf_for(&big));
+    assert!(e.contains("big.obj") && e.contains("bytes"), "{e}");
+    // 300,000 good lines and a bad last one: the line is named.
+    let mut text = String::from("v 0 0 0\nv 1 0 0\nv 0 1 0\n");
+    for _ in 0..300_000 {
+        text.push_str("f 1 2 3\n");
+    }
+    text.push_str("v 1 x 0\n");
+    let obj = d.join("long.obj");
+    std::fs::write(&obj, &text).unwrap();
+    let e = start_error(&conf_for(&obj));
+    assert!(e.contains("long.obj:300004:"), "{e}");
+}

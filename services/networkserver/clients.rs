@@ -1,14 +1,30 @@
 //! The accept loop, the table of connections, admission (the 20-byte name within
-//! `timeout`, the token, eviction of an unnamed connection when the table is full)
-//! and each connection's life from its name to its last suspend.
+//! `timeout`, the token, eviction of the longest idle connection when the table
+//! is full or descriptors run out) and each connection's life from its name to
+//! its last suspend.
+//!
+//! **Idle** is judged by what a client sent, never by what it was sent: a
+//! client subscribed to a sensor that does not change is as idle as one that
+//! says nothing. With the table full (or `accept` failing for want of
+//! descriptors) a new connection closes, in this order of preference:
+//! 1. a connection that has not sent its name after [`EVICT_AFTER`];
+//! 2. a named one that sent nothing for [`EVICT_IDLE`] and has no
+//!    subscription, image request or command;
+//! 3. a named one that sent nothing for [`EVICT_IDLE`];
+//!
+//! within a class the one from the address holding the most connections, then
+//! the one silent longest. So a crowd from one host makes room for a client from
+//! another, and a crowd that sends nothing makes room for anyone. A subscriber
+//! that wants to keep its place when the table is full sends a line now and then
+//! (subscribing again is harmless, on 4.3 servers too).
 
 use std::{
     collections::VecDeque,
     io::{self, Write},
-    net::{Shutdown, SocketAddr, TcpListener, TcpStream},
+    net::{IpAddr, Shutdown, SocketAddr, TcpListener, TcpStream},
     sync::{
         Arc,
-        atomic::{AtomicBool, Ordering},
+        atomic::{AtomicBool, AtomicU64, Ordering},
     },
     time::{Duration, Instant},
 };
@@ -16,7 +32,7 @@ use std::{
 use parking_lot::{Condvar, Mutex};
 
 use crate::{
-    interfaces::{Motors, Notify},
+    interfaces::{Motors, Notify, Source},
     netwire::{self, Feed},
 };
 
@@ -31,22 +47,46 @@ pub(super) struct Conn {
     pub(super) id: u64,
     pub(super) stream: TcpStream,
     since: Instant,
+    peer: IpAddr,
     slot: Arc<Slot>,
 }
 
 /// What the accept loop and a connection's thread share.
 #[derive(Default)]
-struct Slot {
+pub(super) struct Slot {
     /// It sent its 20-byte name (and the token, if one is set).
     named: AtomicBool,
     /// The accept loop closed it to make room for a new connection.
     evicted: AtomicBool,
+    /// When it last sent a line (or its name): ms since the server started.
+    heard_ms: AtomicU64,
+    /// It has a subscription or an image request, or sent a command.
+    engaged: AtomicBool,
+}
+
+impl Slot {
+    /// It sent a line now (`engaged`: it is subscribed, asks for images or has
+    /// sent a command).
+    pub(super) fn heard(&self, sh: &Shared, engaged: bool) {
+        self.heard_ms
+            .store(sh.epoch.elapsed().as_millis() as u64, Ordering::Release);
+        self.engaged.store(engaged, Ordering::Release);
+    }
 }
 
 /// How long a connection may have been waiting for its name before a new
 /// connection may evict it from a full table (so a burst of connections does
 /// not evict good clients that have not been read yet).
 pub(super) const EVICT_AFTER: Duration = Duration::from_millis(250);
+
+/// How long a named connection must have sent nothing before a new connection
+/// may evict it from a full table (so a crowd of fresh connections does not
+/// evict each other, nor a client that has just subscribed).
+pub(super) const EVICT_IDLE: Duration = Duration::from_secs(2);
+
+/// The longest pause of the accept loop after `accept` failed for want of
+/// descriptors (it starts at 50 ms and doubles).
+const ACCEPT_BACKOFF_MAX: Duration = Duration::from_secs(1);
 
 /// How often the accept loop looks at the stop flag while no one connects.
 const ACCEPT_TICK_MS: i32 = 100;
@@ -64,31 +104,143 @@ fn wait_readable(listener: &TcpListener) {
     unsafe { libc::poll(&mut p, 1, ACCEPT_TICK_MS) };
 }
 
-/// With the table full, closes the connection that has waited longest for its
-/// name (at least EVICT_AFTER), so a client that knows the token still gets in
-/// while strangers hold connections open. True if one was closed.
-fn evict_unnamed(sh: &Shared) -> bool {
+/// Closes one connection to make room (see the module's doc for which), telling
+/// a named one why with a `1027` line. True if one was closed.
+fn evict_one(sh: &Shared, reason: &str) -> bool {
     let clients = sh.clients.lock();
-    let oldest = clients
+    let now_ms = sh.epoch.elapsed().as_millis() as u64;
+    let mut counts: std::collections::HashMap<IpAddr, usize> = Default::default();
+    for c in clients.iter() {
+        *counts.entry(c.peer).or_default() += 1;
+    }
+    let per_ip = |ip: IpAddr| counts.get(&ip).copied().unwrap_or(0);
+    let victim = clients
         .iter()
-        .filter(|c| {
-            !c.slot.named.load(Ordering::Acquire)
-                && !c.slot.evicted.load(Ordering::Acquire)
-                && c.since.elapsed() >= EVICT_AFTER
+        .filter(|c| !c.slot.evicted.load(Ordering::Acquire))
+        .filter_map(|c| {
+            if !c.slot.named.load(Ordering::Acquire) {
+                let waited = c.since.elapsed();
+                (waited >= EVICT_AFTER).then_some((2u8, per_ip(c.peer), waited, c))
+            } else {
+                let idle = Duration::from_millis(
+                    now_ms.saturating_sub(c.slot.heard_ms.load(Ordering::Acquire)),
+                );
+                let class = if c.slot.engaged.load(Ordering::Acquire) {
+                    0
+                } else {
+                    1
+                };
+                (idle >= EVICT_IDLE).then_some((class, per_ip(c.peer), idle, c))
+            }
         })
-        .min_by_key(|c| c.since);
-    match oldest {
-        Some(c) => {
-            c.slot.evicted.store(true, Ordering::Release);
-            let _ = c.stream.shutdown(Shutdown::Both);
-            true
+        .max_by_key(|(class, n, idle, _)| (*class, *n, *idle));
+    let Some((class, _, idle, c)) = victim else {
+        return false;
+    };
+    c.slot.evicted.store(true, Ordering::Release);
+    if class < 2 {
+        let mut out = Vec::new();
+        netwire::write_error(
+            &mut out,
+            &format!(
+                "closed to make room ({reason}): it had sent nothing for {} ms",
+                idle.as_millis()
+            ),
+        );
+        send_now(&c.stream, &out);
+    }
+    let _ = c.stream.shutdown(Shutdown::Both);
+    true
+}
+
+/// Writes what the socket takes at once (never blocks: the accept loop calls it).
+fn send_now(stream: &TcpStream, bytes: &[u8]) {
+    use std::os::fd::AsRawFd;
+    // SAFETY: a valid socket and buffer for the duration of the call; the flags
+    // make it return at once and never raise SIGPIPE.
+    unsafe {
+        libc::send(
+            stream.as_raw_fd(),
+            bytes.as_ptr().cast(),
+            bytes.len(),
+            libc::MSG_DONTWAIT | libc::MSG_NOSIGNAL,
+        )
+    };
+}
+
+/// Whether an `accept` error means this process is out of descriptors (or the
+/// kernel out of memory for one): a condition that passes when connections close.
+fn out_of_descriptors(e: &io::Error) -> bool {
+    matches!(
+        e.raw_os_error(),
+        Some(libc::EMFILE | libc::ENFILE | libc::ENOBUFS | libc::ENOMEM)
+    )
+}
+
+/// While `accept` (or the descriptors a new connection needs) fails: the
+/// current pause, and when the last line about it was said.
+#[derive(Default)]
+struct Failing {
+    pause: Option<Duration>,
+    said: Option<Instant>,
+    unsaid: u64,
+}
+
+/// The least time between two lines about running out of descriptors (an
+/// attacker can make it flap between failing and working many times a second).
+const FAILING_QUIET: Duration = Duration::from_secs(10);
+
+/// After `accept` (or the descriptors a new connection needs) failed: the loop
+/// goes on, pausing 50 ms doubling to 1 s, with one log line per episode (at
+/// most one per FAILING_QUIET); out of descriptors, it frees one by closing the
+/// longest idle connection.
+fn failed(sh: &Shared, e: &io::Error, what: &str, f: &mut Failing) {
+    let pause_for = match f.pause {
+        None => Duration::from_millis(50),
+        Some(d) => (d * 2).min(ACCEPT_BACKOFF_MAX),
+    };
+    if f.pause.is_none() {
+        if f.said.is_none_or(|t| t.elapsed() >= FAILING_QUIET) {
+            tracing::warn!(
+                "networkserver: {what}: {e}{}; pausing and trying again{}",
+                if out_of_descriptors(e) {
+                    " (out of file descriptors: closing the longest idle connection)"
+                } else {
+                    ""
+                },
+                match f.unsaid {
+                    0 => String::new(),
+                    n => format!(" ({n} more times since the last line)"),
+                }
+            );
+            f.said = Some(Instant::now());
+            f.unsaid = 0;
+        } else {
+            f.unsaid += 1;
         }
-        None => false,
+    }
+    f.pause = Some(pause_for);
+    if out_of_descriptors(e) {
+        evict_one(sh, "out of file descriptors");
+    }
+    pause(sh, pause_for);
+}
+
+/// Sleeps `d` in slices of at most ACCEPT_TICK_MS, returning early on stop.
+fn pause(sh: &Shared, d: Duration) {
+    let end = Instant::now() + d;
+    while !sh.stop.load(Ordering::Acquire) {
+        let left = end.saturating_duration_since(Instant::now());
+        if left.is_zero() {
+            return;
+        }
+        std::thread::sleep(left.min(Duration::from_millis(ACCEPT_TICK_MS as u64)));
     }
 }
 
 pub(super) fn accept_loop(listener: TcpListener, sh: Arc<Shared>) {
     let mut next_id = 0u64;
+    let mut failing = Failing::default();
     loop {
         if sh.stop.load(Ordering::Acquire) {
             return;
@@ -101,11 +253,11 @@ pub(super) fn accept_loop(listener: TcpListener, sh: Arc<Shared>) {
             }
             Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
             Err(e) => {
-                tracing::warn!("networkserver: accept failed: {e}");
-                std::thread::sleep(Duration::from_millis(50));
+                failed(&sh, &e, "accept failed", &mut failing);
                 continue;
             }
         };
+
         if sh.stop.load(Ordering::Acquire) {
             return;
         }
@@ -116,7 +268,9 @@ pub(super) fn accept_loop(listener: TcpListener, sh: Arc<Shared>) {
         sh.threads.lock().retain(|t| !t.is_finished());
         sh.stats.accepted.fetch_add(1, Ordering::Relaxed);
         let n = sh.stats.clients.load(Ordering::Acquire);
-        if n >= sh.conf.max_clients && !evict_unnamed(&sh) {
+        if n >= sh.conf.max_clients
+            && !evict_one(&sh, &format!("max_clients {}", sh.conf.max_clients))
+        {
             sh.stats.dropped.fetch_add(1, Ordering::Relaxed);
             tracing::warn!(
                 "networkserver: refused {peer}: {n} clients already connected (max_clients {})",
@@ -134,14 +288,23 @@ pub(super) fn accept_loop(listener: TcpListener, sh: Arc<Shared>) {
         }
         next_id += 1;
         let id = next_id;
-        let Ok(reg) = stream.try_clone() else {
-            continue;
+        let reg = match stream.try_clone() {
+            Ok(r) => r,
+            Err(e) => {
+                drop(stream);
+                failed(&sh, &e, "cannot take a new connection", &mut failing);
+                continue;
+            }
         };
+        if failing.pause.take().is_some() && failing.unsaid == 0 {
+            tracing::info!("networkserver: accepting connections again");
+        }
         let slot = Arc::new(Slot::default());
         sh.clients.lock().push(Conn {
             id,
             stream: reg,
             since: Instant::now(),
+            peer: peer.ip(),
             slot: slot.clone(),
         });
         sh.stats.clients.fetch_add(1, Ordering::AcqRel);
@@ -212,6 +375,7 @@ fn client(stream: TcpStream, peer: SocketAddr, id: u64, slot: &Slot, sh: &Arc<Sh
     if sh.stop.load(Ordering::Acquire) {
         return finish("server stopping".into(), false);
     }
+    slot.heard(sh, false);
     slot.named.store(true, Ordering::Release);
     if slot.evicted.load(Ordering::Acquire) {
         return finish("closed to make room before its name was read".into(), true);
@@ -231,6 +395,7 @@ fn client(stream: TcpStream, peer: SocketAddr, id: u64, slot: &Slot, sh: &Arc<Sh
         cv: Condvar::new(),
         stream: wstream,
         waiting_frame: AtomicBool::new(false),
+        from: Source::new(format!("networkserver: client {cname} from {peer}")),
     });
     let writer = {
         let cl = cl.clone();
@@ -252,7 +417,7 @@ fn client(stream: TcpStream, peer: SocketAddr, id: u64, slot: &Slot, sh: &Arc<Sh
         ..Default::default()
     };
     let mut drove = false;
-    reader(&stream, &cl, sh, &mut resumed, &mut drove);
+    reader(&stream, &cl, sh, slot, &mut resumed, &mut drove);
     cl.close("reader ended", false);
     let _ = writer.join();
     for (_, img) in &sh.sources.images {
@@ -269,7 +434,16 @@ fn client(stream: TcpStream, peer: SocketAddr, id: u64, slot: &Slot, sh: &Arc<Sh
     if drove && let Some(m) = &sh.sources.motors {
         let _ = m.publish(Motors::default());
     }
-    let (why, bad) = cl.st.lock().why.clone().unwrap_or(("closed".into(), false));
+    let (why, bad) = if slot.evicted.load(Ordering::Acquire) {
+        (
+            "closed to make room for a new connection: the table was full (or descriptors \
+             ran out) and it had sent nothing for longest"
+                .to_string(),
+            false,
+        )
+    } else {
+        cl.st.lock().why.clone().unwrap_or(("closed".into(), false))
+    };
     finish(why, bad);
 }
 

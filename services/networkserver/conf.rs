@@ -56,6 +56,7 @@ pub(super) const LINES: &[Setting] = &[
         &[int("PORT", "", 0, 65_535)],
     ),
     settings::BIND,
+    settings::INSECURE,
     Setting::new(
         "token",
         "a secret every client must send as its name (`networkclient`'s `token`)",
@@ -108,6 +109,8 @@ struct Lines {
     socket: Option<u16>,
     bind: String,
     token: Option<String>,
+    #[allow(dead_code)] // read by `settings::guard_listen`
+    insecure: Option<bool>,
     serves: Vec<(String, Option<u32>)>,
     max_clients: usize,
     max_line: usize,
@@ -183,6 +186,14 @@ impl ServerConf {
             };
             c.serves.push((name, netid));
         }
+        settings::guard_listen(
+            conf,
+            "bind",
+            &c.bind.to_string(),
+            c.token.is_some(),
+            "Add a `token SECRET` line (1 to 15 characters) here and the same `token` line to \
+             each networkclient",
+        )?;
         if !socket {
             return Err(anyhow::anyhow!(
                 "{}: networkserver needs a `socket PORT` line in its section",

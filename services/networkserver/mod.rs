@@ -8,7 +8,9 @@
 //! driver networkserver
 //! socket 3001              # TCP port (0 = any free port)
 //! bind 127.0.0.1           # address to listen on (default 127.0.0.1; 0.0.0.0 = every interface)
-//! token s3cret             # optional: refuse clients whose 20-byte name does not carry it
+//! token s3cret             # refuse clients whose 20-byte name does not carry it (needed
+//!                          #   beyond loopback)
+//! insecure                 # beyond loopback with no token: say so (a network you trust)
 //! serves colorA 0          # an image and its network id (colorA..D, varcolorA..D any size)
 //! serves laser             # laser, sonars, encoders, motors, pantiltencoders,
 //! serves encoders          #   pantiltmotors, zoomencoders, zoommotors (4.3 names
@@ -44,9 +46,18 @@
 //!   disconnected alone with one log line; the others and the schemas do not notice.
 //!   The name must arrive within `timeout` in all; an idle client with no
 //!   subscription that has sent no command is closed after `idle_timeout`; with
-//!   the table full, a new connection closes the one that has waited longest
-//!   (over 250 ms) for its name, so a client with the token gets in while
-//!   strangers hold connections.
+//!   the table full, a new connection closes one to make room: one that has
+//!   waited over 250 ms for its name, else the one that has *sent* nothing for
+//!   longest (over 2 s; those with no subscription first, and from the address
+//!   holding the most connections first), which gets a `1027 closed to make
+//!   room` line. So a client with the token gets in while strangers hold
+//!   connections, and a good client gets in while 128 named ones sit on a
+//!   sensor that does not change.
+//! - Beyond loopback it needs `token` (or an `insecure` line): it refuses to
+//!   start otherwise, saying how to add one (`settings::guard_listen`).
+//! - Out of descriptors, `accept` fails (EMFILE): the accept loop closes the
+//!   longest idle connection, pauses (50 ms doubling to 1 s, one log line) and
+//!   goes on; it never ends while the service runs.
 //! - Stopping needs no network: the accept thread polls its nonblocking listener
 //!   with a stop flag (100 ms), where a self-connect would fail with loopback down.
 //! - 4.3 bug fixed: the sonars push carried `laser.number` readings; it carries the

@@ -15,11 +15,11 @@ use std::{
 use parking_lot::{Condvar, Mutex};
 
 use crate::{
-    interfaces::{AnyInterface, Interface, InterfaceValue, Sample},
+    interfaces::{AnyInterface, Interface, InterfaceValue, Sample, Source},
     netwire::{self, Feed, LineEvent, LineReader, Request},
 };
 
-use super::{Shared, Sources, frames};
+use super::{Shared, Sources, clients::Slot, frames};
 
 /// What a client's reader and writer share.
 pub(super) struct ClientState {
@@ -39,6 +39,9 @@ pub(super) struct Client {
     pub(super) stream: TcpStream,
     /// The writer sleeps waiting for a frame (so a new frame must wake it).
     pub(super) waiting_frame: AtomicBool,
+    /// Its commands, refused with one log line per change of state when out of
+    /// their interface's range (`interfaces::RANGES`).
+    pub(super) from: Source,
 }
 
 impl Client {
@@ -65,6 +68,7 @@ pub(super) fn reader(
     stream: &TcpStream,
     cl: &Client,
     sh: &Shared,
+    slot: &Slot,
     resumed: &mut Resumed,
     drove: &mut bool,
 ) {
@@ -99,6 +103,11 @@ pub(super) fn reader(
                             cl.close(why, bad);
                             return;
                         }
+                        let engaged = commanded || {
+                            let st = cl.st.lock();
+                            st.subs.iter().any(|s| *s) || st.images.iter().any(|n| *n > 0)
+                        };
+                        slot.heard(sh, engaged);
                     }
                     Err(e) => {
                         let shown: String = String::from_utf8_lossy(&line[..line.len().min(40)])
@@ -250,8 +259,12 @@ fn handle(
             } else {
                 cmd.w = v;
             }
-            let _ = m.publish(cmd);
             *drove = true;
+            if let Err(e) = m.publish(cmd) {
+                cl.from.refused(&e);
+                return error(format!("refused: {e}"));
+            }
+            cl.from.accepted();
         }
         Request::PtPosition {
             pan,
@@ -267,7 +280,11 @@ fn handle(
             c.latitude = tilt;
             c.longitude_speed = pan_speed;
             c.latitude_speed = tilt_speed;
-            let _ = p.publish(c);
+            if let Err(e) = p.publish(c) {
+                cl.from.refused(&e);
+                return error(format!("refused: {e}"));
+            }
+            cl.from.accepted();
         }
         Request::PtLimitsQuery => {
             let Some(p) = &src.ptm else {
@@ -297,7 +314,11 @@ fn handle(
             let mut c = z.read().value;
             c.zoom = zoom;
             c.zoom_speed = speed;
-            let _ = z.publish(c);
+            if let Err(e) = z.publish(c) {
+                cl.from.refused(&e);
+                return error(format!("refused: {e}"));
+            }
+            cl.from.accepted();
         }
         Request::ZoomLimitsQuery => {
             let Some(z) = &src.zm else {

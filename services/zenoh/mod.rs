@@ -25,6 +25,11 @@
 //! connect tcp/10.0.0.2:7447     # repeatable
 //! scouting loopback             # loopback (default) | lan | off: multicast discovery of peers
 //! config zenoh.json5            # a Zenoh config file (ACL, TLS, timeouts), applied first
+//! tls ca.pem robot.pem robot.key  # TLS with mutual authentication on tls/ endpoints (PEM:
+//!                               #   the CA that signs every peer, this side's cert and key)
+//! writers operator              # only peers whose certificate's CN is listed may put
+//!                               #   values here (actuators); others only read (needs tls)
+//! insecure                      # beyond loopback without TLS: say so (a network you trust)
 //! discover 3000                 # ms that `provides all` waits for the robot (default 3000)
 //! end_service
 //! ```
@@ -49,7 +54,13 @@
 //! restarts gets the pan-tilt command written while it was away). A payload that
 //! is not a value of its kind is dropped with one log line per key.
 //!
-//! System packages: none (Zenoh is compiled in, TCP transport only).
+//! # Beyond loopback
+//! Every `listen` and `connect` endpoint beyond loopback (also those of a
+//! `config` file) must be `tls/` with mutual authentication (a `tls` line), or the
+//! conf must say `insecure`: otherwise the service does not start, and says how
+//! (`settings::guard_listen`, the suite's one rule).
+//!
+//! System packages: none (Zenoh is compiled in, with its TCP and TLS transports).
 
 mod links;
 mod session;
@@ -186,6 +197,9 @@ const LINES: &[Setting] = &[
     session::CONNECT,
     session::SCOUTING,
     session::CONFIG,
+    session::TLS,
+    session::WRITERS,
+    crate::conf::settings::INSECURE,
 ];
 
 /// The values of [`LINES`] (the session's are read by [`SessionConf::parse`]).
@@ -203,6 +217,9 @@ struct Lines {
     connect: IgnoredAny,
     scouting: IgnoredAny,
     config: Option<IgnoredAny>,
+    tls: Option<IgnoredAny>,
+    writers: Option<IgnoredAny>,
+    insecure: Option<IgnoredAny>,
 }
 
 /// Reads the conf (every error names file:line and the fix).
@@ -214,6 +231,9 @@ pub fn parse(conf: &ComponentConf) -> Result<Settings, ConfError> {
         lines.connect,
         lines.scouting,
         lines.config,
+        lines.tls,
+        lines.writers,
+        lines.insecure,
     );
     let robot = match conf.line("robot") {
         Some(l) => chunk(l, 0, "the robot name")?.to_string(),

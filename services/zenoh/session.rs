@@ -7,7 +7,7 @@ use zenoh::{Config, Wait};
 
 use crate::conf::{
     ComponentConf, ConfError,
-    settings::{Setting, choice, path, rest},
+    settings::{self, Setting, choice, path, rest},
 };
 
 /// How multicast scouting finds peers (`scouting` line).
@@ -55,8 +55,31 @@ pub const CONFIG: Setting = Setting::new(
     "a Zenoh config file (ACL, TLS, timeouts), applied before these lines",
     &[path("FILE.json5")],
 );
+/// `tls`: Zenoh's TLS transport with mutual authentication.
+pub const TLS: Setting = Setting::new(
+    "tls",
+    "TLS with mutual authentication for tls/ endpoints: the CA that signs every peer's \
+     certificate, this side's certificate and its private key (PEM files)",
+    &[path("CA.pem"), path("CERT.pem"), path("KEY.pem")],
+);
+/// `writers`: who may write actuators from the network.
+pub const WRITERS: Setting = Setting::new(
+    "writers",
+    "only peers whose TLS certificate has one of these common names may put values here \
+     (motors, pan-tilt, zoom); others may only read (needs `tls`)",
+    &[rest("CN")],
+);
 /// The session lines, as [`SessionConf::parse`] reads them.
-pub const LINES: &[Setting] = &[MODE, LISTEN, CONNECT, SCOUTING, CONFIG];
+pub const LINES: &[Setting] = &[
+    MODE,
+    LISTEN,
+    CONNECT,
+    SCOUTING,
+    CONFIG,
+    TLS,
+    WRITERS,
+    settings::INSECURE,
+];
 
 /// The values of [`LINES`].
 #[derive(serde::Deserialize)]
@@ -67,6 +90,19 @@ struct Lines {
     scouting: String,
     #[allow(dead_code)] // read through `existing_file`, which checks it
     config: Option<String>,
+    #[allow(dead_code)] // read through `existing_file`, which checks them
+    tls: Option<(String, String, String)>,
+    writers: Option<Vec<String>>,
+    #[allow(dead_code)] // read by `settings::guard_listen`
+    insecure: Option<bool>,
+}
+
+/// The PEM files of the `tls` line.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Tls {
+    pub ca: PathBuf,
+    pub cert: PathBuf,
+    pub key: PathBuf,
 }
 
 /// The session lines.
@@ -77,6 +113,11 @@ pub struct SessionConf {
     pub connect: Vec<String>,
     pub scouting: Scouting,
     pub config: Option<PathBuf>,
+    /// TLS with mutual authentication (`tls` line).
+    pub tls: Option<Tls>,
+    /// The certificate common names that may put values here (`writers`); empty:
+    /// no access rule.
+    pub writers: Vec<String>,
 }
 
 impl SessionConf {
@@ -122,22 +163,99 @@ impl SessionConf {
                 l.error("`mode client` needs a router to connect to: add `connect tcp/HOST:7447`")
             );
         }
-        Ok(SessionConf {
+        let tls = match conf.line("tls") {
+            Some(l) => {
+                let pem = |i, what| {
+                    let p = l.existing_file(i, what)?;
+                    crate::files::open_checked(&p, crate::files::MAX_TEXT_BYTES)
+                        .map_err(|e| l.error(format!("`tls`: {e}")))?;
+                    Ok::<_, ConfError>(p)
+                };
+                Some(Tls {
+                    ca: pem(0, "the CA certificate")?,
+                    cert: pem(1, "this side's certificate")?,
+                    key: pem(2, "this side's private key")?,
+                })
+            }
+            None => None,
+        };
+        let writers: Vec<String> = lines.writers.unwrap_or_default();
+        if !writers.is_empty() && tls.is_none() {
+            let l = conf.line("writers").expect("writers came from a line");
+            return Err(l.error(
+                "`writers` names TLS certificates: add a `tls CA.pem CERT.pem KEY.pem` line and \
+                 listen on tls/ endpoints",
+            ));
+        }
+        let s = SessionConf {
             mode,
             listen: endpoints("listen", lines.listen)?,
             connect: endpoints("connect", lines.connect)?,
             scouting,
             config,
-        })
+            tls,
+            writers,
+        };
+        s.guard(conf)?;
+        Ok(s)
+    }
+
+    /// The suite's rule ([`settings::guard_listen`]): every endpoint this session
+    /// listens on or connects to beyond loopback is `tls/` with mutual
+    /// authentication, unless the conf says `insecure`. Endpoints set by a
+    /// `config` file count too.
+    fn guard(&self, conf: &ComponentConf) -> Result<(), ConfError> {
+        let c = self.config().map_err(|e| ConfError {
+            at: crate::conf::Location {
+                file: std::sync::Arc::from(conf.file.as_path()),
+                line: 0,
+            },
+            message: e.to_string(),
+        })?;
+        let mtls = c
+            .get_json("transport/link/tls/enable_mtls")
+            .is_ok_and(|v| v.trim() == "true")
+            && c.get_json("transport/link/tls/root_ca_certificate")
+                .is_ok_and(|v| v.trim() != "null");
+        for key in ["listen", "connect"] {
+            let json = c.get_json(&format!("{key}/endpoints")).unwrap_or_default();
+            let mut all = Vec::new();
+            if let Ok(v) = serde_json::from_str::<serde_json::Value>(&json) {
+                strings(&v, &mut all);
+            }
+            for e in all {
+                let (proto, addr) = e.split_once('/').unwrap_or(("", &e));
+                let hostport = addr.split('#').next().unwrap_or(addr);
+                let host = hostport.rsplit_once(':').map_or(hostport, |(h, _)| h);
+                settings::guard_listen(
+                    conf,
+                    key,
+                    host,
+                    proto == "tls" && mtls,
+                    &format!(
+                        "`{e}` needs Zenoh's TLS with mutual authentication: use a tls/ endpoint \
+                         (`{key} tls/{hostport}`) and a `tls CA.pem CERT.pem KEY.pem` line \
+                         (docs/zenoh.md)"
+                    ),
+                )?;
+            }
+        }
+        Ok(())
     }
 
     /// The Zenoh config: the file's (or Zenoh's defaults), then these lines. With
     /// neither a file nor `listen` lines a peer listens on loopback only.
     pub fn config(&self) -> anyhow::Result<Config> {
         let mut c = match &self.config {
-            Some(p) => Config::from_file(p).map_err(|e| {
-                anyhow::anyhow!("zenoh: the config file {} is not valid: {e}", p.display())
-            })?,
+            // Through the one checked open (a FIFO or /dev/zero named here
+            // does not hang or fill memory), then Zenoh's JSON5 parser.
+            Some(p) => {
+                let text = crate::files::FileError::read(p)
+                    .map_err(|e| anyhow::anyhow!("zenoh: the config file {e}"))?;
+                Config::from_json5(&text).map_err(|e| {
+                    anyhow::anyhow!("zenoh: the config file {} is not valid: {e}", p.display())
+                })?
+            }
             None => Config::default(),
         };
         let set = |c: &mut Config, key: &str, value: String| {
@@ -156,6 +274,19 @@ impl SessionConf {
         }
         if !self.connect.is_empty() {
             set(&mut c, "connect/endpoints", json_list(&self.connect))?;
+        }
+        if let Some(t) = &self.tls {
+            let file = |p: &PathBuf| format!("{:?}", p.display().to_string());
+            let tls = "transport/link/tls";
+            set(&mut c, &format!("{tls}/root_ca_certificate"), file(&t.ca))?;
+            set(&mut c, &format!("{tls}/listen_certificate"), file(&t.cert))?;
+            set(&mut c, &format!("{tls}/listen_private_key"), file(&t.key))?;
+            set(&mut c, &format!("{tls}/connect_certificate"), file(&t.cert))?;
+            set(&mut c, &format!("{tls}/connect_private_key"), file(&t.key))?;
+            set(&mut c, &format!("{tls}/enable_mtls"), "true".into())?;
+        }
+        if !self.writers.is_empty() {
+            set(&mut c, "access_control", acl(&self.writers))?;
         }
         if self.config.is_none() || self.scouting != Scouting::Loopback {
             match self.scouting {
@@ -192,6 +323,49 @@ impl SessionConf {
             )
         })
     }
+}
+
+/// Every string in a JSON value (endpoint lists may be per-mode objects).
+fn strings(v: &serde_json::Value, out: &mut Vec<String>) {
+    match v {
+        serde_json::Value::String(s) => out.push(s.clone()),
+        serde_json::Value::Array(a) => a.iter().for_each(|x| strings(x, out)),
+        serde_json::Value::Object(o) => o.values().for_each(|x| strings(x, out)),
+        _ => {}
+    }
+}
+
+/// Zenoh's access control for `writers`: by default nothing is allowed; every
+/// peer may subscribe, query, reply and hold liveliness tokens, and this side
+/// may put what it publishes; only peers whose certificate's common name is a
+/// writer may put (or delete) values here: the actuators a `publishes` side
+/// subscribes to.
+fn acl(writers: &[String]) -> String {
+    let cns: Vec<String> = writers.iter().map(|w| format!("{w:?}")).collect();
+    format!(
+        r#"{{
+  enabled: true,
+  default_permission: "deny",
+  rules: [
+    {{ id: "look", permission: "allow", flows: ["ingress", "egress"], key_exprs: ["**"],
+       messages: ["declare_subscriber", "query", "declare_queryable", "reply",
+                  "liveliness_token", "declare_liveliness_subscriber", "liveliness_query"] }},
+    {{ id: "send", permission: "allow", flows: ["egress"], key_exprs: ["**"],
+       messages: ["put", "delete"] }},
+    {{ id: "write", permission: "allow", flows: ["ingress"], key_exprs: ["**"],
+       messages: ["put", "delete"] }},
+  ],
+  subjects: [
+    {{ id: "anyone", link_protocols: ["tcp", "tls"] }},
+    {{ id: "writers", cert_common_names: [{}] }},
+  ],
+  policies: [
+    {{ rules: ["look", "send"], subjects: ["anyone"] }},
+    {{ rules: ["look", "send", "write"], subjects: ["writers"] }},
+  ],
+}}"#,
+        cns.join(", ")
+    )
 }
 
 fn list_or_default(v: &[String]) -> String {
@@ -269,5 +443,23 @@ mod tests {
         assert!(e.contains("connect tcp/HOST:7447"), "{e}");
         let e = parse("mode boss").unwrap_err().to_string();
         assert!(e.contains("peer, client, router"), "{e}");
+    }
+
+    #[test]
+    fn beyond_loopback_needs_mutual_tls_or_insecure() {
+        for text in ["listen tcp/0.0.0.0:7447", "connect tcp/10.0.0.2:7447"] {
+            let e = parse(text).unwrap_err().to_string();
+            assert!(
+                e.contains("beyond loopback") && e.contains("tls CA.pem") && e.contains("insecure"),
+                "{e}"
+            );
+        }
+        // A tls/ endpoint without the `tls` line is not mutual authentication.
+        let e = parse("listen tls/0.0.0.0:7447").unwrap_err().to_string();
+        assert!(e.contains("beyond loopback"), "{e}");
+        assert!(parse("listen tcp/0.0.0.0:7447\ninsecure").is_ok());
+        assert!(parse("listen tcp/127.0.0.1:7447\nconnect tcp/localhost:7447").is_ok());
+        let e = parse("writers operator").unwrap_err().to_string();
+        assert!(e.contains("tls CA.pem"), "{e}");
     }
 }

@@ -229,6 +229,101 @@ pub const BIND: Setting = Setting::new(
 )
 .default("127.0.0.1");
 
+/// `insecure`: serve beyond loopback with no secret and no TLS, on purpose (a
+/// network you trust). Every server that can listen beyond loopback declares it,
+/// and [`guard_listen`] reads it.
+pub const INSECURE: Setting = Setting::new(
+    "insecure",
+    "serve beyond loopback with no secret or TLS: anyone on that network may drive the robot",
+    &[],
+);
+
+/// Whether `host` (an IP literal, `[::1]`, `localhost`) is on this machine only:
+/// 127.0.0.0/8, ::1 (also as ::ffff:127.x.y.z) or `localhost`. Anything else
+/// (0.0.0.0, ::, an interface's address, any other name) is beyond loopback.
+pub fn is_loopback_host(host: &str) -> bool {
+    let h = host.trim();
+    let h = h
+        .strip_prefix('[')
+        .and_then(|x| x.strip_suffix(']'))
+        .unwrap_or(h);
+    if h.eq_ignore_ascii_case("localhost") {
+        return true;
+    }
+    match h.parse::<std::net::IpAddr>() {
+        Ok(ip) => ip.to_canonical().is_loopback(),
+        Err(_) => false,
+    }
+}
+
+/// How a listening socket is guarded, as [`guard_listen`] found it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Exposure {
+    /// It listens on loopback only.
+    Loopback,
+    /// Beyond loopback, with a secret or TLS.
+    Secured,
+    /// Beyond loopback with neither, because the conf says `insecure`.
+    Insecure,
+}
+
+/// The one rule of every server in the suite: a socket beyond loopback needs a
+/// secret (a token, TLS) unless the conf says `insecure` ([`INSECURE`]).
+///
+/// `key` is the line that set the address (`bind`, `listen`: the error points at
+/// it), `host` the address it listens on, `secured` whether a secret or TLS
+/// guards it, `add_one` how to add one (`add a `token SECRET` line`). Beyond
+/// loopback with neither a secret nor `insecure` it is an error saying how to add
+/// one; with `insecure` it logs one warning and returns
+/// [`Exposure::Insecure`].
+///
+/// ```
+/// use jderobot::conf::{ComponentConf, Kind, settings::{guard_listen, Exposure}};
+/// let c = ComponentConf::from_text(Kind::Service, "demo", "bind 0.0.0.0\n").unwrap();
+/// let e = guard_listen(&c, "bind", "0.0.0.0", false, "add a `token SECRET` line").unwrap_err();
+/// assert!(e.to_string().contains("token SECRET"), "{e}");
+/// assert_eq!(guard_listen(&c, "bind", "127.0.0.1", false, "").unwrap(), Exposure::Loopback);
+/// assert_eq!(guard_listen(&c, "bind", "0.0.0.0", true, "").unwrap(), Exposure::Secured);
+/// let c = ComponentConf::from_text(Kind::Service, "demo", "bind 0.0.0.0\ninsecure\n").unwrap();
+/// assert_eq!(guard_listen(&c, "bind", "0.0.0.0", false, "").unwrap(), Exposure::Insecure);
+/// ```
+pub fn guard_listen(
+    conf: &ComponentConf,
+    key: &str,
+    host: &str,
+    secured: bool,
+    add_one: &str,
+) -> Result<Exposure, ConfError> {
+    if is_loopback_host(host) {
+        return Ok(Exposure::Loopback);
+    }
+    if secured {
+        return Ok(Exposure::Secured);
+    }
+    if conf.line(INSECURE.key).is_some() {
+        tracing::warn!(
+            "{} {}: listening on {host}, beyond loopback, with no secret (`insecure`): \
+             anyone on that network may drive the robot",
+            conf.kind,
+            conf.name
+        );
+        return Ok(Exposure::Insecure);
+    }
+    let message = format!(
+        "{} {} listens on {host}, beyond loopback, with no secret: anyone on that network \
+         could drive the robot. {add_one}; or listen on loopback (127.0.0.1); or, on a \
+         network you trust, add an `insecure` line to say so",
+        conf.kind, conf.name
+    );
+    Err(match conf.line(key) {
+        Some(l) => l.error(message),
+        None => ConfError {
+            at: conf_location(conf),
+            message,
+        },
+    })
+}
+
 /// How far a 3D view's camera may be from the origin on each axis (mm).
 pub const VIEW_RANGE: f64 = 60_000.0;
 
@@ -1024,5 +1119,43 @@ mod tests {
         }
         assert!(h.contains("V: a number between 1 and 1000, in mm/s"), "{h}");
         assert!(h.contains("default: 0 0"), "{h}");
+    }
+
+    #[test]
+    fn loopback_hosts_and_the_listen_guard() {
+        for h in [
+            "127.0.0.1",
+            "127.5.6.7",
+            "::1",
+            "[::1]",
+            "localhost",
+            "::ffff:127.0.0.1",
+        ] {
+            assert!(is_loopback_host(h), "{h}");
+        }
+        for h in [
+            "0.0.0.0",
+            "::",
+            "10.0.0.2",
+            "robot.lab",
+            "",
+            "[::]",
+            "::ffff:10.0.0.1",
+        ] {
+            assert!(!is_loopback_host(h), "{h}");
+        }
+        let c = ComponentConf::from_text(Kind::Service, "srv", "bind 0.0.0.0\n").unwrap();
+        let e = guard_listen(&c, "bind", "0.0.0.0", false, "add a `token SECRET` line")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains(":1:") && e.contains("token SECRET") && e.contains("insecure"),
+            "{e}"
+        );
+        let c = ComponentConf::from_text(Kind::Service, "srv", "insecure\n").unwrap();
+        assert_eq!(
+            guard_listen(&c, "bind", "10.1.2.3", false, "").unwrap(),
+            Exposure::Insecure
+        );
     }
 }

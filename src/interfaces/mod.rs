@@ -8,7 +8,7 @@
 //! | `laser` | [`Laser`] | `readings` mm (index 0 = right, centre = ahead), `resolution` readings/deg |
 //! | `sonars` | [`Sonars`] | `us` mm, one per sonar |
 //! | `encoders` | [`Encoders`] | `x`, `y` mm, `theta` rad in (0, 2π], `cos`, `sin` (the seed's `robot[5]`) |
-//! | `motors` | [`Motors`] | `v` mm/s, `w` deg/s (counter-clockwise positive) |
+//! | `motors` | [`Motors`] | `v` mm/s, `w` deg/s (counter-clockwise positive); \|v\| <= [`MAX_MOTOR_V`], \|w\| <= [`MAX_MOTOR_W`] |
 //! | `pantiltencoders` | [`PtEncoders`] | `pan_angle`, `tilt_angle` deg |
 //! | `pantiltmotors` | [`PtMotors`] | `longitude`, `latitude` deg; speeds deg/s; limits |
 //! | `zoomencoders` | [`ZoomEncoders`] | `zoom_position` |
@@ -60,8 +60,8 @@ pub use table::{InUse, InterfaceError, Interfaces};
 pub use values::{
     Bumpers, COLOR_HEIGHT, COLOR_WIDTH, Encoders, Image, Imu, InterfaceValue,
     JDE43_LASER_MAX_RANGE, JDE43_LASER_START, Laser, MAX_ACCELERATION, MAX_ANGLE_DEG,
-    MAX_ANGULAR_VELOCITY, MAX_POSITION_MM, MAX_PT_SPEED, Motors, Mount, PtEncoders, PtMotors,
-    RANGES, Sonars, ZoomEncoders, ZoomMotors, limit,
+    MAX_ANGULAR_VELOCITY, MAX_MOTOR_V, MAX_MOTOR_W, MAX_POSITION_MM, MAX_PT_SPEED, Motors, Mount,
+    PtEncoders, PtMotors, RANGES, Sonars, ZoomEncoders, ZoomMotors, limit,
 };
 
 #[cfg(test)]

@@ -83,21 +83,14 @@ fn read_bounded(path: &Path, max: u64) -> Result<Vec<u8>, ReadError> {
         what,
         max,
     };
-    let file = std::fs::File::open(path).map_err(io)?;
-    let meta = file.metadata().map_err(io)?;
-    if meta.is_dir() {
-        return Err(not("it is a directory, not a file".into()));
-    }
-    if !meta.is_file() {
-        return Err(not(
-            "it is not a regular file (a device, FIFO or socket)".into()
-        ));
-    }
-    if meta.len() > max {
-        return Err(not(format!("it is {} bytes", meta.len())));
-    }
-    let mut bytes = Vec::with_capacity(meta.len() as usize);
-    file.take(meta.len()).read_to_end(&mut bytes).map_err(io)?;
+    // The one checked open (crate::files): a FIFO named here does not hang it.
+    let (file, len) = crate::files::open_checked(path, max).map_err(|e| match e {
+        crate::files::FileError::Io { source, .. } => io(source),
+        crate::files::FileError::TooBig { size, .. } => not(format!("it is {size} bytes")),
+        other => not(format!("it {}", other.reason())),
+    })?;
+    let mut bytes = Vec::with_capacity(len as usize);
+    file.take(len).read_to_end(&mut bytes).map_err(io)?;
     Ok(bytes)
 }
 
