@@ -79,8 +79,11 @@ pub struct CamConf {
 }
 
 /// `autofocus_on|autofocus_off`: what a line may say of the camera's focus.
-const AUTOFOCUS: settings::Arg =
-    settings::choice("autofocus_on|autofocus_off", &["autofocus_on", "autofocus_off"]).optional();
+const AUTOFOCUS: settings::Arg = settings::choice(
+    "autofocus_on|autofocus_off",
+    &["autofocus_on", "autofocus_off"],
+)
+.optional();
 
 /// The driver's lines, declared once (`jderobot help firewire`).
 const LINES: &[Setting] = &[

@@ -191,8 +191,11 @@ pub fn parse(conf: &ComponentConf) -> anyhow::Result<Vec<GigeConf>> {
             at: l.at.to_string(),
         });
     }
-    let exposure: HashMap<String, Setting> =
-        lines.exposure.into_iter().map(|(c, v)| (c, v.into())).collect();
+    let exposure: HashMap<String, Setting> = lines
+        .exposure
+        .into_iter()
+        .map(|(c, v)| (c, v.into()))
+        .collect();
     let gain: HashMap<String, Setting> =
         lines.gain.into_iter().map(|(c, v)| (c, v.into())).collect();
     let rate: HashMap<String, f64> = lines.framerate.into_iter().collect();

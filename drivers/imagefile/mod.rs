@@ -61,7 +61,11 @@ const LINES: &[Setting] = &[settings::provides_forms(
         Form::new(
             "color",
             "320x240 from FILE (another size is an error unless `scale`: resized to 320x240)",
-            &[settings::COLOR, path("FILE"), choice("scale", &["scale"]).optional()],
+            &[
+                settings::COLOR,
+                path("FILE"),
+                choice("scale", &["scale"]).optional(),
+            ],
         ),
         Form::new(
             "varcolor",

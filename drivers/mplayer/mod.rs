@@ -146,14 +146,17 @@ pub fn parse(conf: &ComponentConf) -> anyhow::Result<Vec<(Source, ConfLine)>> {
     let lines: Lines = conf.settings(LINES)?;
     let mut out: Vec<(Source, ConfLine)> = Vec::new();
     for (p, l) in lines.provides.into_iter().zip(conf.provides()) {
-        let file = |interface: String, f: &str, (width, height), repeat: &str, unpaced: Option<String>| Source {
-            interface,
-            input: Input::File(file_or_url(conf, f)),
-            width,
-            height,
-            repeat: repeat == "repeat_on",
-            pace: unpaced.is_none(),
-        };
+        let file =
+            |interface: String, f: &str, (width, height), repeat: &str, unpaced: Option<String>| {
+                Source {
+                    interface,
+                    input: Input::File(file_or_url(conf, f)),
+                    width,
+                    height,
+                    repeat: repeat == "repeat_on",
+                    pace: unpaced.is_none(),
+                }
+            };
         let src = match p {
             Provides::V4l(interface, _, device, input) => Source {
                 interface,

@@ -201,13 +201,19 @@ impl ClientConf {
         };
         for (p, l) in lines.provides.into_iter().zip(conf.provides()) {
             let (name, host, port, netid, size) = match p {
-                Provides::Color(n, h, p, id) => (n, h, p, Some(id), Some((COLOR_WIDTH, COLOR_HEIGHT))),
-                Provides::Varcolor(n, h, p, id, Some(w), Some(hh)) => (n, h, p, Some(id), Some((w, hh))),
+                Provides::Color(n, h, p, id) => {
+                    (n, h, p, Some(id), Some((COLOR_WIDTH, COLOR_HEIGHT)))
+                }
+                Provides::Varcolor(n, h, p, id, Some(w), Some(hh)) => {
+                    (n, h, p, Some(id), Some((w, hh)))
+                }
                 Provides::Varcolor(n, h, p, id, ..) => (n, h, p, Some(id), None),
                 Provides::Device(n, h, p) => (canonical(&n), h, p, None, None),
             };
             if c.remotes.iter().any(|x| x.name == name) {
-                return Err(l.error(format!("interface `{name}` is provided twice")).into());
+                return Err(l
+                    .error(format!("interface `{name}` is provided twice"))
+                    .into());
             }
             c.remotes.push(Remote {
                 name,

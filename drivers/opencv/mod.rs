@@ -147,7 +147,7 @@ enum Provides {
     #[serde(rename = "sized")]
     Sized(String, Input, String, u32, u32, Vec<String>),
     #[serde(rename = "autosize")]
-    Autosize(String, Input, String, Option<serde::de::IgnoredAny>, Vec<String>),
+    Autosize(String, Input, String, serde::de::IgnoredAny, Vec<String>),
 }
 
 /// Parses the driver's lines.

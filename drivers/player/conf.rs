@@ -217,7 +217,13 @@ struct Lines {
 }
 
 /// The words after a `provides` line's interface (and a laser's N R).
-type Tail = (Option<String>, Option<u32>, Option<String>, Option<String>, Option<String>);
+type Tail = (
+    Option<String>,
+    Option<u32>,
+    Option<String>,
+    Option<String>,
+    Option<String>,
+);
 
 #[derive(serde::Deserialize)]
 enum Provides {

@@ -112,7 +112,10 @@ struct Lines {
 pub fn parse(conf: &ComponentConf) -> anyhow::Result<Sim3dConf> {
     let lines: Lines = conf.settings(LINES)?;
     let world = World::load(&lines.worldfile).map_err(|e| {
-        let at = conf.line("worldfile").map(|l| l.at.to_string()).unwrap_or_default();
+        let at = conf
+            .line("worldfile")
+            .map(|l| l.at.to_string())
+            .unwrap_or_default();
         anyhow::anyhow!("{at}: world file: {e}")
     })?;
     let mut cameras: Vec<(String, PinholeCamera)> = Vec::new();

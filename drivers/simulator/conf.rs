@@ -196,7 +196,10 @@ pub const LINES: &[Setting] = &[
     Setting::new(
         "period",
         "how often a sensor publishes (simulated time)",
-        &[choice("SENSOR", SENSORS), float("MS", "ms", 0.001, 60_000.0)],
+        &[
+            choice("SENSOR", SENSORS),
+            float("MS", "ms", 0.001, 60_000.0),
+        ],
     )
     .repeats(),
     Setting::forms(
@@ -215,7 +218,10 @@ pub const LINES: &[Setting] = &[
             Form::new(
                 "range",
                 "a range sensor's standard deviation",
-                &[choice("laser|sonars", &["laser", "sonars"]), float("MM", "mm", 0.0, 1e6)],
+                &[
+                    choice("laser|sonars", &["laser", "sonars"]),
+                    float("MM", "mm", 0.0, 1e6),
+                ],
             ),
         ],
     )
@@ -259,6 +265,7 @@ pub const LINES: &[Setting] = &[
 /// The simulator's lines as declared.
 #[derive(serde::Deserialize)]
 struct Lines {
+    #[allow(dead_code)] // its file is read by `world`, which names what it is
     world: Option<std::path::PathBuf>,
     robot: Vec<(String, Option<f64>, Option<f64>, Option<f64>)>,
     initial_position: Option<(f64, f64, f64)>,
@@ -313,13 +320,15 @@ struct Settings {
     publish_always: bool,
 }
 
-/// The world of a `world` line (an empty world without one).
-fn world(conf: &ComponentConf, file: Option<&std::path::Path>) -> Result<World, ConfError> {
-    match (file, conf.line("world")) {
-        (Some(f), Some(l)) => {
-            World::load(f).map_err(|e| l.error(format!("world file: {e}")))
+/// The world of the `world` line (an empty world without one).
+fn world(conf: &ComponentConf) -> Result<World, ConfError> {
+    match conf.line("world") {
+        Some(l) => {
+            // The declaration resolved the path; this says what a non-file is.
+            let f = l.existing_file(0, "the world file")?;
+            World::load(&f).map_err(|e| l.error(format!("world file: {e}")))
         }
-        _ => Ok(World::new()),
+        None => Ok(World::new()),
     }
 }
 
@@ -399,7 +408,7 @@ fn settings(conf: &ComponentConf) -> Result<(Settings, Vec<ProvidesLine>), ConfE
     };
     let (model, noise, periods) = model(&l);
     let s = Settings {
-        world: world(conf, l.world.as_deref())?,
+        world: world(conf)?,
         robots: robots(conf, &l)?,
         model,
         noise,
@@ -455,7 +464,9 @@ fn provides(
             }
             p_robot.laser = Some(name.clone());
         }
-        ProvidesLine::Color(..) => p_robot.cameras.push((name.clone(), COLOR_WIDTH, COLOR_HEIGHT)),
+        ProvidesLine::Color(..) => p_robot
+            .cameras
+            .push((name.clone(), COLOR_WIDTH, COLOR_HEIGHT)),
         ProvidesLine::Varcolor(_, w, h, _) => {
             let (w, h) = w.zip(h).unwrap_or((COLOR_WIDTH, COLOR_HEIGHT));
             p_robot.cameras.push((name.clone(), w, h));

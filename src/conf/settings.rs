@@ -50,7 +50,11 @@ pub enum ArgType {
     Float { min: f64, max: f64 },
     /// A finite number within `[min, max]`, or the word `or` (`auto`, `max`):
     /// read as a [`NumberOr`].
-    FloatOr { min: f64, max: f64, or: &'static str },
+    FloatOr {
+        min: f64,
+        max: f64,
+        or: &'static str,
+    },
     /// One of these words.
     Choice(&'static [&'static str]),
     /// `on` or `off` (also yes/no, true/false, 1/0, 4.3's `NAME_on`/`NAME_off`).
@@ -531,10 +535,9 @@ fn check_word(line: &ConfLine, i: usize, a: &Arg, w: &str) -> Result<Value, Conf
         ArgType::FloatOr { min, max, or } => match w.parse::<f64>() {
             _ if w == or => Ok(Value::Str(w.to_string())),
             Ok(v) if v.is_finite() && v >= min && v <= max => Ok(Value::Float(v)),
-            _ => Err(bad(format!(
-                "{}",
-                ArgType::Float { min, max }
-            ) + &format!("{unit}, or {or}"))),
+            _ => Err(bad(
+                format!("{}", ArgType::Float { min, max }) + &format!("{unit}, or {or}")
+            )),
         },
         ArgType::Choice(c) => {
             if c.contains(&w) {
@@ -622,14 +625,18 @@ fn check_line(s: &Setting, line: &ConfLine, component: &str) -> Result<Checked, 
             "`{} {}`: {component} {} {}, not `{}`; usage: {} (see `jderobot help {component}`)",
             s.key,
             echo(first),
-            if s.key == "provides" { "provides" } else { "takes" },
+            if s.key == "provides" {
+                "provides"
+            } else {
+                "takes"
+            },
             firsts.join(", "),
             echo(first),
             s.usage()
         )));
     }
-    // The first form that fits; else the error of the first one whose words were
-    // wrong rather than too few or too many (the others' usages said with it).
+    // The first form that fits; else the error of the one that fits the most
+    // leading words (the others' usages said with it).
     let mut errors = Vec::new();
     for f in &candidates {
         match check_args(s.key, f.args, &f.usage(s.key), line, component) {
@@ -642,15 +649,27 @@ fn check_line(s: &Setting, line: &ConfLine, component: &str) -> Result<Checked, 
             Err(e) => errors.push(e),
         }
     }
-    let pick = errors
-        .iter()
-        .position(|e| !e.message.contains(" takes "))
+    // The form meant: one that takes as many words as given, then the one whose
+    // arguments fit the most leading words.
+    let fit = |f: &Form| {
+        let words = line.args();
+        (0..words.len())
+            .take_while(|&k| {
+                let a = &f.args[k.min(f.args.len() - 1)];
+                (k < f.args.len() || matches!(a.ty, ArgType::Rest | ArgType::Flags(_)))
+                    && check_word(line, k, a, &words[k]).is_ok()
+            })
+            .count()
+    };
+    let score = |k: usize| (!errors[k].message.contains(" takes "), fit(candidates[k]));
+    let pick = (0..candidates.len())
+        .rev()
+        .max_by_key(|&k| score(k))
         .unwrap_or(0);
     let mut e = errors.swap_remove(pick);
     if candidates.len() > 1 {
         let all: Vec<String> = candidates.iter().map(|f| f.usage(s.key)).collect();
-        e.message
-            .push_str(&format!(" (its forms: {})", all.join(" | ")));
+        e.message.push_str(&format!("; usage: {}", all.join(" | ")));
     }
     Err(e)
 }
@@ -693,6 +712,7 @@ fn check_args(
     // The first error of a group that was skipped: the likely mistake when words
     // are left over.
     let mut skipped: Option<ConfError> = None;
+    let mut skipped_begun = false;
     let mut at = 0; // the next word
     let mut i = 0; // the next argument
     while i < args.len() {
@@ -760,8 +780,17 @@ fn check_args(
                     at += group.len();
                 }
                 Err(e) => {
-                    if skipped.is_none() && words.len() > at && !e.message.contains(" takes ") {
+                    // A group whose first word fits was begun: its error is the
+                    // one to tell; else the first wrong word's.
+                    let begun = words
+                        .get(at)
+                        .is_some_and(|w| check_word(line, at, a, w).is_ok());
+                    if words.len() > at
+                        && (begun || !e.message.contains(" takes "))
+                        && (skipped.is_none() || (begun && !skipped_begun))
+                    {
                         skipped = Some(e);
+                        skipped_begun = begun;
                     }
                     out.extend(group.iter().map(|_| Value::Absent));
                 }
@@ -1048,12 +1077,7 @@ struct Occurrences<'p> {
 impl<'de> de::Deserializer<'de> for Occurrences<'_> {
     type Error = DeError;
     fn deserialize_any<V: Visitor<'de>>(self, visitor: V) -> Result<V::Value, DeError> {
-        visitor.visit_seq(
-            self.values
-                .iter()
-                .map(LineValue::of)
-                .collect::<Seq<_>>(),
-        )
+        visitor.visit_seq(self.values.iter().map(LineValue::of).collect::<Seq<_>>())
     }
     serde::forward_to_deserialize_any! {
         bool i8 i16 i32 i64 i128 u8 u16 u32 u64 u128 f32 f64 char str string
@@ -1116,7 +1140,9 @@ impl<'p> LineValue<'p> {
         for v in self.values {
             match v {
                 Value::Absent => {}
-                Value::List(l) => out.extend(l.iter().map(|w| ValueDe(Some(Value::Str(w.clone()))))),
+                Value::List(l) => {
+                    out.extend(l.iter().map(|w| ValueDe(Some(Value::Str(w.clone())))))
+                }
                 v => out.push(ValueDe(Some(v.clone()))),
             }
         }
@@ -1471,7 +1497,10 @@ mod tests {
             Form::new(
                 "plain",
                 "plain",
-                &[choice("motors|encoders", &["motors", "encoders"]), name("ROBOT").optional()],
+                &[
+                    choice("motors|encoders", &["motors", "encoders"]),
+                    name("ROBOT").optional(),
+                ],
             ),
             Form::new(
                 "laser",
@@ -1518,19 +1547,44 @@ mod tests {
                 Laser(s("laser"), Some(360), Some(0.5), None),
                 Laser(s("laser"), Some(90), Some(2.0), Some(s("r3"))),
                 Video(s("varcolorA"), s("a.avi"), None, None, vec![]),
-                Video(s("varcolorB"), s("b.avi"), Some(64), Some(48), vec![s("unpaced"), s("loop")]),
+                Video(
+                    s("varcolorB"),
+                    s("b.avi"),
+                    Some(64),
+                    Some(48),
+                    vec![s("unpaced"), s("loop")]
+                ),
                 Video(s("varcolorC"), s("c.avi"), None, None, vec![s("loop")]),
             ]
         );
         let cases = [
-            ("provides laser 721 1", "N (argument 2) is `721`, expected a whole number between 1 and 720"),
+            (
+                "provides laser 721 1",
+                "N (argument 2) is `721`, expected a whole number between 1 and 720",
+            ),
             ("provides laser 360 0", "RESOLUTION (argument 3) is `0`"),
-            ("provides laser 360", "ROBOT (argument 2) is `360`, expected a name"),
-            ("provides motors r.2", "ROBOT (argument 2) is `r.2`, expected a name"),
+            (
+                "provides laser 360",
+                "got 2; usage: provides laser [N RESOLUTION] [ROBOT]",
+            ),
+            (
+                "provides laser r.2",
+                "ROBOT (argument 2) is `r.2`, expected a name",
+            ),
+            (
+                "provides motors r.2",
+                "ROBOT (argument 2) is `r.2`, expected a name",
+            ),
             ("provides motors a b", "takes 1 to 2 arguments, got 3"),
-            ("provides sonars", "provides motors|encoders, laser, varcolorA..D, not `sonars`"),
+            (
+                "provides sonars",
+                "provides motors|encoders, laser, varcolorA..D, not `sonars`",
+            ),
             ("provides varcolorA f 0 48", "W (argument 3) is `0`"),
-            ("provides varcolorA f 64 48 again", "OPTIONS (argument 5) is `again`, expected any of loop, unpaced"),
+            (
+                "provides varcolorA f 64 48 again",
+                "OPTIONS (argument 5) is `again`, expected any of loop, unpaced",
+            ),
             ("provides varcolorA f loop loop", "`loop` is given twice"),
         ];
         for (line, want) in cases {
@@ -1542,7 +1596,10 @@ mod tests {
         }
         let h = help_text(Kind::Driver, "demo", "a demo", FORMS, "");
         assert!(h.contains("provides laser [N RESOLUTION] [ROBOT]"), "{h}");
-        assert!(h.contains("provides varcolorA..D FILE [W H] [loop|unpaced]..."), "{h}");
+        assert!(
+            h.contains("provides varcolorA..D FILE [W H] [loop|unpaced]..."),
+            "{h}"
+        );
     }
 
     #[test]
