@@ -394,3 +394,7 @@ fn image_sizes_reach_the_drivers_unchanged() {
         ("pantiltmotors", 65535)
     );
 }
+
+/// Components bring their own shell commands and `ps` lines (a test component here).
+#[path = "declarations/registered.rs"]
+mod registered;

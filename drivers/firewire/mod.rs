@@ -114,7 +114,12 @@ const LINES: &[Setting] = &[
         "camera CAM sends a Bayer mosaic in this pattern (decoded to BGR)",
         &[
             settings::int("CAM", "", 0, 63),
-            settings::choice("PATTERN", &["RGGB", "GBRG", "GRBG", "BGGR"]),
+            settings::choice(
+                "PATTERN",
+                &[
+                    "RGGB", "GBRG", "GRBG", "BGGR", "rggb", "gbrg", "grbg", "bggr",
+                ],
+            ),
         ],
     )
     .repeats(),

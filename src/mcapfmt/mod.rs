@@ -34,9 +34,9 @@
 //! [`decode_message`] (or [`decode_read`] for a message of [`reader`], the bounded
 //! reader that replay and `jderobot info` use; [`decode_mcap`] for the `mcap`
 //! crate's) reads it back; [`Summary`] reads a file (complete, cut short or
-//! corrupt: see [`reader`]) for `jderobot info`; [`RecorderStatus`]
-//! and [`StepGate`] are what the recorder and replay export in the name space
-//! (keys `recorder.status` and `replay.step`) for the shell.
+//! corrupt: see [`reader`]) for `jderobot info`; [`RecorderStatus`] is what
+//! the recorder exports in the name space (`recorder.status`) for its shell
+//! command and mastergui.
 
 mod protobuf;
 pub mod reader;
@@ -44,7 +44,7 @@ pub mod ros2;
 mod status;
 mod summary;
 
-pub use status::{RecorderStatus, StepGate};
+pub use status::RecorderStatus;
 pub use summary::{ChannelSummary, MAX_FILE_BYTES, ReadError, Summary};
 
 use std::{
