@@ -667,7 +667,7 @@ fn check_line(s: &Setting, line: &ConfLine, component: &str) -> Result<Checked, 
         .max_by_key(|&k| score(k))
         .unwrap_or(0);
     let mut e = errors.swap_remove(pick);
-    if candidates.len() > 1 {
+    if candidates.len() > 1 && !e.message.contains("usage:") {
         let all: Vec<String> = candidates.iter().map(|f| f.usage(s.key)).collect();
         e.message.push_str(&format!("; usage: {}", all.join(" | ")));
     }
@@ -799,7 +799,15 @@ fn check_args(
         i = end;
     }
     if at < words.len() {
-        return Err(skipped.unwrap_or_else(arity));
+        return Err(match skipped {
+            Some(mut e) => {
+                if !e.message.contains("usage:") {
+                    e.message.push_str(&format!("; usage: {usage}"));
+                }
+                e
+            }
+            None => arity(),
+        });
     }
     Ok(out)
 }
