@@ -398,3 +398,35 @@ fn image_sizes_reach_the_drivers_unchanged() {
 /// Components bring their own shell commands and `ps` lines (a test component here).
 #[path = "declarations/registered.rs"]
 mod registered;
+
+/// A docs page's `<!-- help NAME -->` block is `jderobot help NAME`, from the
+/// declaration: the documented ranges and defaults are the declared ones.
+#[test]
+fn documented_lines_are_the_declared_ones() {
+    let mut checked = 0;
+    for entry in std::fs::read_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/docs")).unwrap() {
+        let path = entry.unwrap().path();
+        let Ok(text) = std::fs::read_to_string(&path) else {
+            continue;
+        };
+        let mut rest = text.as_str();
+        while let Some(at) = rest.find("<!-- help ") {
+            let after = &rest[at + "<!-- help ".len()..];
+            let name = after.split_whitespace().next().unwrap();
+            let body = after.split_once("```text\n").unwrap().1;
+            let body = body.split_once("```").unwrap().0;
+            assert_eq!(
+                body,
+                common::help(name),
+                "{}: the `help {name}` block differs from `jderobot help {name}`; paste it again",
+                path.display()
+            );
+            checked += 1;
+            rest = &after[name.len()..];
+        }
+    }
+    assert!(
+        checked >= 1,
+        "no docs page shows a component's declared lines"
+    );
+}
