@@ -82,7 +82,9 @@ pub struct Arg {
     pub ty: ArgType,
     /// The unit of a number (`mm/s`, `deg`, `ms`), or "".
     pub unit: &'static str,
-    /// The line may stop before this argument (the ones after it are optional too).
+    /// The line may stop before this argument, or leave it out: it opens a group
+    /// (it and the required arguments after it, to the next optional one) given
+    /// whole or not at all.
     pub optional: bool,
 }
 
@@ -91,7 +93,7 @@ impl Arg {
     pub fn accepts(&self, word: &str) -> bool {
         matches!(self.ty, ArgType::Choice(c) if c.contains(&word))
     }
-    /// This argument and the ones after it may be left out.
+    /// This argument opens an optional group (it and the required ones after it).
     pub const fn optional(mut self) -> Arg {
         self.optional = true;
         self
