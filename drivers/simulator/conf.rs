@@ -267,7 +267,7 @@ pub const LINES: &[Setting] = &[
 struct Lines {
     #[allow(dead_code)] // its file is read by `world`, which names what it is
     world: Option<std::path::PathBuf>,
-    robot: Vec<(String, Option<f64>, Option<f64>, Option<f64>)>,
+    robot: Vec<RobotLine>,
     initial_position: Option<(f64, f64, f64)>,
     provides: Vec<ProvidesLine>,
     #[allow(dead_code)] // read by `conf.motors_timeout()`
@@ -285,6 +285,9 @@ struct Lines {
     camera_fov: Option<f64>,
     publish_always: bool,
 }
+
+/// `robot NAME [X Y THETA]`.
+type RobotLine = (String, Option<f64>, Option<f64>, Option<f64>);
 
 /// A `provides` line in its form: the interface, its arguments, the robot.
 #[derive(serde::Deserialize)]
