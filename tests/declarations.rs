@@ -7,7 +7,7 @@
 //! component unchanged (nothing clamped, nothing raised), and the documented
 //! values are the declared ones.
 
-mod common;
+use crate::common;
 
 use jderobot::{
     conf::{

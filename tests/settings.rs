@@ -2,7 +2,7 @@
 //! are refused, and a required line is named when absent (every declaration is
 //! tried, value by value, in tests/declarations.rs).
 
-mod common;
+use crate::common;
 
 use jderobot::{
     conf::{Conf, settings::Setting},

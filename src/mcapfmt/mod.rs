@@ -38,7 +38,7 @@
 //! the recorder exports in the name space (`recorder.status`) for its shell
 //! command and mastergui.
 
-mod protobuf;
+pub mod protobuf;
 pub mod reader;
 pub mod ros2;
 mod status;
@@ -649,6 +649,7 @@ mod tests {
             Recorded::Laser(Laser {
                 readings: vec![1, 8000, 123, -1],
                 resolution: 1.0,
+                ..Laser::default()
             }),
             Recorded::Encoders(Encoders {
                 x: 1000.25,

@@ -78,13 +78,13 @@ fn recorder_replay_and_foxglove_bring_theirs() {
         "{ps:?}"
     );
     for (component, name) in [("recorder", "record"), ("replay", "step")] {
-        let text = super::common::help(component);
+        let text = crate::common::help(component);
         assert!(
             text.contains("Shell commands it brings:") && text.contains(name),
             "{text}"
         );
     }
-    let out = super::common::jderobot(["help"]).output().unwrap();
+    let out = crate::common::jderobot(["help"]).output().unwrap();
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(
         text.contains("record start|stop|status") && text.contains("(replay)"),
