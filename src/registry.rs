@@ -43,6 +43,90 @@ pub struct Entry {
 
 inventory::collect!(Entry);
 
+/// What a component's shell command does, given the runtime and the words after
+/// the command; `Err` is the one line the shell prints on standard error.
+pub type CommandFn = fn(&Runtime, &[&str], &mut dyn std::io::Write) -> Result<(), String>;
+
+/// A shell command a component brings (the recorder's `record`, replay's `step`),
+/// as it brings its conf lines: the shell runs it and lists it in `help`, and
+/// `jderobot help COMPONENT` prints it. Registered with
+/// [`register_command!`](crate::register_command).
+pub struct ShellCommand {
+    /// The component that brings it (`recorder`).
+    pub component: &'static str,
+    pub name: &'static str,
+    /// Its arguments, as `help` shows them (`start|stop|status`).
+    pub usage: &'static str,
+    /// One line of help.
+    pub help: &'static str,
+    pub run: CommandFn,
+}
+
+inventory::collect!(ShellCommand);
+
+/// A line a component adds to the shell's `ps` (`recorder: recording ...`):
+/// `None` while it has nothing to say (not loaded). Registered with
+/// [`register_ps_line!`](crate::register_ps_line).
+pub struct PsLine {
+    pub component: &'static str,
+    pub line: fn(&Runtime) -> Option<String>,
+}
+
+inventory::collect!(PsLine);
+
+/// Every registered shell command, sorted by name.
+pub fn commands() -> Vec<&'static ShellCommand> {
+    let mut v: Vec<&'static ShellCommand> = inventory::iter::<ShellCommand>.into_iter().collect();
+    v.sort_by_key(|c| (c.name, c.component));
+    v
+}
+
+/// The registered shell command called `name`.
+pub fn command(name: &str) -> Option<&'static ShellCommand> {
+    inventory::iter::<ShellCommand>
+        .into_iter()
+        .find(|c| c.name == name)
+}
+
+/// Every registered `ps` line, sorted by component.
+pub fn ps_lines() -> Vec<&'static PsLine> {
+    let mut v: Vec<&'static PsLine> = inventory::iter::<PsLine>.into_iter().collect();
+    v.sort_by_key(|p| p.component);
+    v
+}
+
+/// Registers a component's shell command:
+/// `register_command!("recorder", "record", "start|stop|status", "one line of help", run_fn)`
+/// with `run_fn: fn(&Runtime, &[&str], &mut dyn Write) -> Result<(), String>`.
+#[macro_export]
+macro_rules! register_command {
+    ($component:literal, $name:literal, $usage:literal, $help:literal, $run:expr) => {
+        $crate::inventory::submit! {
+            $crate::registry::ShellCommand {
+                component: $component,
+                name: $name,
+                usage: $usage,
+                help: $help,
+                run: $run,
+            }
+        }
+    };
+}
+
+/// Registers a component's `ps` line: `register_ps_line!("recorder", line_fn)` with
+/// `line_fn: fn(&Runtime) -> Option<String>` (the shell prints `recorder: LINE`).
+#[macro_export]
+macro_rules! register_ps_line {
+    ($component:literal, $line:expr) => {
+        $crate::inventory::submit! {
+            $crate::registry::PsLine {
+                component: $component,
+                line: $line,
+            }
+        }
+    };
+}
+
 /// Every compiled-in component, sorted by kind then name.
 pub fn components() -> Vec<&'static Entry> {
     let mut v: Vec<&'static Entry> = inventory::iter::<Entry>.into_iter().collect();

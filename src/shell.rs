@@ -98,16 +98,6 @@ const MAIN_COMMANDS: &[CommandDoc] = &[
         "NAME FIELD=VALUE...",
         "Write fields of actuator interface NAME",
     ),
-    (
-        "record",
-        "start|stop|status",
-        "Start or stop the loaded recorder, or print what it wrote",
-    ),
-    (
-        "step",
-        "[N]",
-        "Let a stepped replay publish its next N messages (default 1)",
-    ),
     ("show_license", "", "Show the license"),
     ("exit", "", "Quit using jderobot"),
     ("quit", "", "Quit using jderobot"),
@@ -128,14 +118,24 @@ const SCHEMA_COMMANDS: &[CommandDoc] = &[
     ("exit", "", "Exit schema state"),
 ];
 
-/// Every command of the main state (`zoomed` false) or the schema state.
-fn commands(zoomed: bool) -> impl Iterator<Item = &'static CommandDoc> {
+/// Every command of the main state (`zoomed` false) or the schema state: the
+/// shell's own and, in main state, those the compiled-in components register
+/// ([`registry::ShellCommand`]).
+fn commands(zoomed: bool) -> Vec<CommandDoc> {
     let own = if zoomed {
         SCHEMA_COMMANDS
     } else {
         MAIN_COMMANDS
     };
-    SHARED_COMMANDS.iter().chain(own)
+    let mut v: Vec<CommandDoc> = SHARED_COMMANDS.iter().chain(own).copied().collect();
+    if !zoomed {
+        v.extend(
+            registry::commands()
+                .iter()
+                .map(|c| (c.name, c.usage, c.help)),
+        );
+    }
+    v
 }
 
 /// Aliases of schema-state commands (4.3's older names).
@@ -213,160 +213,83 @@ impl Shell {
         }
     }
 
+    /// A main-state command: the shell's own, a component's, or a schema's name.
     fn main_command(
         &mut self,
         cmd: &str,
         args: &[&str],
         out: &mut dyn Write,
     ) -> Result<Flow, String> {
-        let one = |usage: &str| -> Result<&str, String> {
-            match args {
-                [a] => Ok(*a),
-                [] => Err(format!("{cmd}: Argument required. Usage: {cmd} {usage}")),
-                _ => Err(format!("{cmd}: takes one argument. Usage: {cmd} {usage}")),
-            }
-        };
         let rt = self.rt.clone();
         match cmd {
             "help" | "?" => help(false, args, out),
             "cd" | "dir" | "pwd" | "view" => files(cmd, args, out),
-            "ls" => {
-                for s in rt.schema_names() {
-                    w(out, s);
-                }
-                for (d, k) in rt.drivers() {
-                    w(out, format!("{d} ({k})"));
-                }
-                for i in rt.interfaces.all() {
-                    w(
-                        out,
-                        format!("{} ({} interface of {})", i.name(), i.kind(), i.provider()),
-                    );
-                }
-                Ok(Flow::Continue)
-            }
-            "load_driver" | "load_service" | "load_schema" | "load" => {
-                let kind = match cmd {
-                    "load_driver" => Some(Kind::Driver),
-                    "load_service" => Some(Kind::Service),
-                    "load_schema" => Some(Kind::Schema),
-                    _ => None,
-                };
-                let (name, file) = match args {
-                    [n] => (*n, None),
-                    [n, f] => (*n, Some(PathBuf::from(f))),
-                    _ => {
-                        return Err(format!(
-                            "{cmd} command accepts 1 or 2 args only: {cmd} NAME [CONF]"
-                        ));
-                    }
-                };
-                loader::load(&rt, &self.conf, kind, name, file.as_deref())
-                    .map_err(|e| format!("{cmd}: {e}"))?;
-                w(out, format!("{name} loaded"));
-                Ok(Flow::Continue)
-            }
+            "ls" => ls(&rt, out),
+            "load_driver" | "load_service" | "load_schema" | "load" => self.load(cmd, args, out),
             "ps" => {
                 ps(&rt, out);
                 Ok(Flow::Continue)
             }
-            "record" => record(&rt, args, out),
-            "step" => step(&rt, args, out),
-            "run" => rt
-                .run(one("NAME")?)
-                .map(|_| Flow::Continue)
-                .map_err(|e| format!("run: {e}")),
-            "stop" => rt
-                .stop(one("NAME")?)
-                .map(|_| Flow::Continue)
-                .map_err(|e| format!("stop: {e}")),
-            "show" => rt
-                .show(one("NAME")?)
-                .map(|_| Flow::Continue)
-                .map_err(|e| format!("show: {e}")),
-            "hide" => rt
-                .hide(one("NAME")?)
-                .map(|_| Flow::Continue)
-                .map_err(|e| format!("hide: {e}")),
-            "zoom" => {
-                let name = one("NAME")?;
-                if rt.schema(name).is_none() {
-                    return Err(format!(
-                        "zoom: `{name}` is not a loaded schema; loaded: {}",
-                        rt.schema_names().join(", ")
-                    ));
-                }
-                self.zoomed = Some(name.to_string());
-                Ok(Flow::Continue)
-            }
-            "echo" => {
-                let (name, n) = match args {
-                    [n] => (*n, None),
-                    [n, c] => (
-                        *n,
-                        Some(
-                            c.parse::<u64>()
-                                .map_err(|_| format!("echo: count `{c}` is not a whole number"))?,
-                        ),
-                    ),
-                    _ => return Err("echo: Usage: echo NAME [N]".into()),
-                };
-                let iface = rt
-                    .interfaces
-                    .get_any(name)
-                    .map_err(|e| format!("echo: {e}"))?;
-                echo(&*iface, n, out)
-            }
-            "set" => {
-                let [name, fields @ ..] = args else {
-                    return Err("set: Usage: set NAME FIELD=VALUE ...".into());
-                };
-                if fields.is_empty() {
-                    return Err(format!("set: no FIELD=VALUE given for `{name}`"));
-                }
-                let iface = rt
-                    .interfaces
-                    .get_any(name)
-                    .map_err(|e| format!("set: {e}"))?;
-                if !iface.is_actuator() {
-                    return Err(format!(
-                        "set: `{name}` is a {} sensor interface; only actuators (motors, \
-                         pantiltmotors, zoommotors) can be set",
-                        iface.kind()
-                    ));
-                }
-                let pairs: Vec<(&str, &str)> = fields
-                    .iter()
-                    .map(|f| {
-                        f.split_once('=')
-                            .ok_or_else(|| format!("set: `{f}` is not FIELD=VALUE"))
-                    })
-                    .collect::<Result<_, _>>()?;
-                iface.set_fields(&pairs).map_err(|e| format!("set: {e}"))?;
-                w(
-                    out,
-                    format!(
-                        "{} clock={} {}",
-                        iface.name(),
-                        iface.clock(),
-                        iface.describe()
-                    ),
-                );
-                Ok(Flow::Continue)
-            }
+            "run" | "stop" | "show" | "hide" => switch(&rt, cmd, one(cmd, args, "NAME")?),
+            "zoom" => self.zoom(one(cmd, args, "NAME")?),
+            "echo" => echo_command(&rt, args, out),
+            "set" => set(&rt, args, out),
             "show_license" => {
                 w(out, LICENSE.to_string());
                 Ok(Flow::Continue)
             }
             "exit" | "quit" => Ok(Flow::Quit),
-            name if rt.schema(name).is_some() && args.is_empty() => rt
-                .run(name)
-                .map(|_| Flow::Continue)
-                .map_err(|e| format!("run: {e}")),
-            other => Err(format!(
-                "{other}: No such command for jderobot. Type `help' for the list of commands."
-            )),
+            other => self.other(other, args, out),
         }
+    }
+
+    /// A component's command ([`registry::ShellCommand`]), or a schema's name
+    /// (which runs it, as in 4.3).
+    fn other(&self, cmd: &str, args: &[&str], out: &mut dyn Write) -> Result<Flow, String> {
+        if let Some(c) = registry::command(cmd) {
+            return (c.run)(&self.rt, args, out).map(|_| Flow::Continue);
+        }
+        if self.rt.schema(cmd).is_some() && args.is_empty() {
+            return switch(&self.rt, "run", cmd);
+        }
+        Err(format!(
+            "{cmd}: No such command for jderobot. Type `help' for the list of commands."
+        ))
+    }
+
+    /// `load_driver|load_service|load_schema|load NAME [CONF]`.
+    fn load(&self, cmd: &str, args: &[&str], out: &mut dyn Write) -> Result<Flow, String> {
+        let kind = match cmd {
+            "load_driver" => Some(Kind::Driver),
+            "load_service" => Some(Kind::Service),
+            "load_schema" => Some(Kind::Schema),
+            _ => None,
+        };
+        let (name, file) = match args {
+            [n] => (*n, None),
+            [n, f] => (*n, Some(PathBuf::from(f))),
+            _ => {
+                return Err(format!(
+                    "{cmd} command accepts 1 or 2 args only: {cmd} NAME [CONF]"
+                ));
+            }
+        };
+        loader::load(&self.rt, &self.conf, kind, name, file.as_deref())
+            .map_err(|e| format!("{cmd}: {e}"))?;
+        w(out, format!("{name} loaded"));
+        Ok(Flow::Continue)
+    }
+
+    /// `zoom NAME`: schema state.
+    fn zoom(&mut self, name: &str) -> Result<Flow, String> {
+        if self.rt.schema(name).is_none() {
+            return Err(format!(
+                "zoom: `{name}` is not a loaded schema; loaded: {}",
+                self.rt.schema_names().join(", ")
+            ));
+        }
+        self.zoomed = Some(name.to_string());
+        Ok(Flow::Continue)
     }
 
     fn schema_command(
@@ -419,7 +342,7 @@ impl Shell {
 fn candidates(rt: &Runtime, zoomed: bool, before: &[&str]) -> Vec<String> {
     {
         if before.is_empty() {
-            let mut v: Vec<String> = commands(zoomed).map(|c| c.0.to_string()).collect();
+            let mut v: Vec<String> = commands(zoomed).iter().map(|c| c.0.to_string()).collect();
             if !zoomed {
                 v.extend(rt.schema_names());
             }
@@ -458,18 +381,20 @@ fn w(out: &mut dyn Write, line: String) {
 }
 
 fn help(zoomed: bool, args: &[&str], out: &mut dyn Write) -> Result<Flow, String> {
-    let matching: Vec<_> = commands(zoomed)
+    let all = commands(zoomed);
+    let matching: Vec<&CommandDoc> = all
+        .iter()
         .filter(|c| args.is_empty() || args.contains(&c.0))
         .collect();
     if matching.is_empty() {
-        let names: Vec<&str> = commands(zoomed).map(|c| c.0).collect();
+        let names: Vec<&str> = all.iter().map(|c| c.0).collect();
         return Err(format!(
             "No commands match `{}'.  Possibilities are: {}",
             args.join(" "),
             names.join(" ")
         ));
     }
-    for (name, usage, doc) in matching {
+    for &&(name, usage, doc) in &matching {
         w(out, format!("{:<28}{doc}.", format!("{name} {usage}")));
     }
     Ok(Flow::Continue)
@@ -521,84 +446,101 @@ fn files(cmd: &str, args: &[&str], out: &mut dyn Write) -> Result<Flow, String> 
     Ok(Flow::Continue)
 }
 
-/// `record start|stop|status`: talks to the loaded recorder through the name
-/// space (`recorder.status`).
-fn record(rt: &Runtime, args: &[&str], out: &mut dyn Write) -> Result<Flow, String> {
-    #[cfg(feature = "_mcap")]
-    {
-        let status = rt
-            .names
-            .import::<crate::mcapfmt::RecorderStatus>("recorder", "status")
-            .map_err(|_| "record: no recorder is loaded (load_service recorder)".to_string())?;
-        match args {
-            ["start"] => {
-                status.want.store(true, Ordering::Release);
-                w(out, "recording".into());
-            }
-            ["stop"] => {
-                status.want.store(false, Ordering::Release);
-                // The writer closes the file within 0.1 s.
-                let t0 = Instant::now();
-                while status.recording.load(Ordering::Acquire)
-                    && t0.elapsed() < Duration::from_secs(5)
-                {
-                    std::thread::sleep(Duration::from_millis(10));
-                }
-                w(out, status.line());
-            }
-            ["status"] | [] => w(out, status.line()),
-            _ => return Err("record: Usage: record start|stop|status".into()),
-        }
-        Ok(Flow::Continue)
-    }
-    #[cfg(not(feature = "_mcap"))]
-    {
-        let _ = (rt, args, out);
-        Err("record: this binary has no recorder (cargo feature `recorder`)".into())
+/// The one argument of `cmd`.
+fn one<'a>(cmd: &str, args: &[&'a str], usage: &str) -> Result<&'a str, String> {
+    match args {
+        [a] => Ok(*a),
+        [] => Err(format!("{cmd}: Argument required. Usage: {cmd} {usage}")),
+        _ => Err(format!("{cmd}: takes one argument. Usage: {cmd} {usage}")),
     }
 }
 
-/// `step [N]`: lets a stepped replay (`replay.step`) publish N more messages.
-fn step(rt: &Runtime, args: &[&str], out: &mut dyn Write) -> Result<Flow, String> {
-    #[cfg(feature = "_mcap")]
-    {
-        let n = match args {
-            [] => 1,
-            [n] => n
-                .parse::<u64>()
-                .ok()
-                .filter(|n| (1..=1_000_000).contains(n))
-                .ok_or_else(|| format!("step: `{n}` is not a count from 1 to 1000000"))?,
-            _ => return Err("step: Usage: step [N]".into()),
-        };
-        let gate = rt
-            .names
-            .import::<crate::mcapfmt::StepGate>("replay", "step")
-            .map_err(|_| {
-                "step: no stepped replay is loaded (driver replay with `stepped on`)".to_string()
-            })?;
-        let before = gate.published.load(Ordering::Acquire);
-        gate.step(n);
-        let t0 = Instant::now();
-        while gate.published.load(Ordering::Acquire) < before + n
-            && t0.elapsed() < Duration::from_secs(2)
-        {
-            std::thread::sleep(Duration::from_millis(2));
-        }
+/// `ls`: schemas, drivers and services, interfaces.
+fn ls(rt: &Runtime, out: &mut dyn Write) -> Result<Flow, String> {
+    for s in rt.schema_names() {
+        w(out, s);
+    }
+    for (d, k) in rt.drivers() {
+        w(out, format!("{d} ({k})"));
+    }
+    for i in rt.interfaces.all() {
         w(
             out,
-            format!(
-                "replay: {} messages published",
-                gate.published.load(Ordering::Acquire)
-            ),
+            format!("{} ({} interface of {})", i.name(), i.kind(), i.provider()),
         );
-        Ok(Flow::Continue)
     }
-    #[cfg(not(feature = "_mcap"))]
-    {
-        let _ = (rt, args, out);
-        Err("step: this binary has no replay (cargo feature `replay`)".into())
+    Ok(Flow::Continue)
+}
+
+/// `run|stop|show|hide NAME`.
+fn switch(rt: &Runtime, cmd: &str, name: &str) -> Result<Flow, String> {
+    match cmd {
+        "run" => rt.run(name),
+        "stop" => rt.stop(name),
+        "show" => rt.show(name),
+        _ => rt.hide(name),
     }
+    .map(|_| Flow::Continue)
+    .map_err(|e| format!("{cmd}: {e}"))
+}
+
+/// `echo NAME [N]`.
+fn echo_command(rt: &Runtime, args: &[&str], out: &mut dyn Write) -> Result<Flow, String> {
+    let (name, n) = match args {
+        [n] => (*n, None),
+        [n, c] => (
+            *n,
+            Some(
+                c.parse::<u64>()
+                    .map_err(|_| format!("echo: count `{c}` is not a whole number"))?,
+            ),
+        ),
+        _ => return Err("echo: Usage: echo NAME [N]".into()),
+    };
+    let iface = rt
+        .interfaces
+        .get_any(name)
+        .map_err(|e| format!("echo: {e}"))?;
+    echo(&*iface, n, out)
+}
+
+/// `set NAME FIELD=VALUE ...`: writes an actuator's fields.
+fn set(rt: &Runtime, args: &[&str], out: &mut dyn Write) -> Result<Flow, String> {
+    let [name, fields @ ..] = args else {
+        return Err("set: Usage: set NAME FIELD=VALUE ...".into());
+    };
+    if fields.is_empty() {
+        return Err(format!("set: no FIELD=VALUE given for `{name}`"));
+    }
+    let iface = rt
+        .interfaces
+        .get_any(name)
+        .map_err(|e| format!("set: {e}"))?;
+    if !iface.is_actuator() {
+        return Err(format!(
+            "set: `{name}` is a {} sensor interface; only actuators (motors, \
+             pantiltmotors, zoommotors) can be set",
+            iface.kind()
+        ));
+    }
+    let pairs: Vec<(&str, &str)> = fields
+        .iter()
+        .map(|f| {
+            f.split_once('=')
+                .ok_or_else(|| format!("set: `{f}` is not FIELD=VALUE"))
+        })
+        .collect::<Result<_, _>>()?;
+    iface.set_fields(&pairs).map_err(|e| format!("set: {e}"))?;
+    w(
+        out,
+        format!(
+            "{} clock={} {}",
+            iface.name(),
+            iface.clock(),
+            iface.describe()
+        ),
+    );
+    Ok(Flow::Continue)
 }
 
 /// Prints `ps`: every schema (4.3's line plus jitter) and every interface.
@@ -624,19 +566,10 @@ pub fn ps(rt: &Runtime, out: &mut dyn Write) {
         }
         w(out, line);
     }
-    #[cfg(feature = "_mcap")]
-    if let Ok(status) = rt
-        .names
-        .import::<crate::mcapfmt::RecorderStatus>("recorder", "status")
-    {
-        w(out, format!("recorder: {}", status.line()));
-    }
-    #[cfg(feature = "foxglove")]
-    if let Ok(status) = rt
-        .names
-        .import::<crate::services::foxglove::Status>("foxglove", "status")
-    {
-        w(out, format!("foxglove: {}", status.line()));
+    for p in registry::ps_lines() {
+        if let Some(line) = (p.line)(rt) {
+            w(out, format!("{}: {line}", p.component));
+        }
     }
 }
 

@@ -161,14 +161,17 @@ fn conf_lines_are_checked() {
     );
     assert_eq!((c[0].bayer, c[1].bayer), (None, Some(Bayer::Gbrg)));
     for (bad, says) in [
-        ("provides colorA zero\n", "camera number"),
+        ("provides colorA zero\n", "CAM (argument 2) is `zero`"),
         ("provides varcolorA 0 640\n", "usage"),
         (
             "provides colorA 0 autofocus_maybe\n",
-            "autofocus_on or autofocus_off",
+            "expected one of autofocus_on, autofocus_off",
         ),
-        ("provides laser 0\n", "colorA..D or varcolorA..D"),
-        ("provides colorA 0\nbayer 0 RGBG\n", "not a Bayer pattern"),
+        ("provides laser 0\n", "colorA..D, varcolorA..D, not `laser`"),
+        (
+            "provides colorA 0\nbayer 0 RGBG\n",
+            "expected one of RGGB, GBRG",
+        ),
         ("framerate 30\n", "takes no `framerate` line"),
         ("", "no `provides` line"),
     ] {

@@ -34,16 +34,19 @@ fn conf_lines_are_checked() {
     assert_eq!(c[1].gain, Some(Setting::Auto));
     assert_eq!(c[2].size, None);
     for (bad, says) in [
-        ("provides varcolorA Fake_1 640\n", "pixel format `640`"),
+        (
+            "provides varcolorA Fake_1 640\n",
+            "got 3; usage: provides varcolorA..D CAMERA_ID [W H]",
+        ),
         (
             "provides varcolorA Fake_1 640 480 Mono12p\n",
-            "pixel format `Mono12p`",
+            "PIXEL_FORMAT (argument 5) is `Mono12p`",
         ),
-        ("provides varcolorA Fake_1 0 480\n", "out of range"),
-        ("provides sonars Fake_1\n", "colorA..D or varcolorA..D"),
+        ("provides varcolorA Fake_1 0 480\n", "between 1 and 16384"),
+        ("provides sonars Fake_1\n", "not `sonars`"),
         (
             "provides varcolorA Fake_1\nexposure Fake_1 -3\n",
-            "not a valid",
+            "is `-3`, expected a number between 0",
         ),
         (
             "provides varcolorA Fake_1\ngain other 3\n",

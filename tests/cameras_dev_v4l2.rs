@@ -45,24 +45,28 @@ fn conf_lines_of_both_names() {
         (
             "video4linux2",
             "provides varcolorA /dev/video0 x 640 480\n",
-            "input number",
+            "INPUT (argument 3) is `x`",
         ),
         (
             "video4linux2",
             "provides varcolorA /dev/video0 0 0 480\n",
-            "out of range",
+            "between 1 and 8192",
         ),
         (
             "video4linux2",
             "provides laser /dev/video0 0\n",
-            "colorA..D or varcolorA..D",
+            "not `laser`",
         ),
         (
             "video4linux2",
             "device /dev/video0\n",
             "takes no `device` line",
         ),
-        ("video4linux", "provides colorA\n", "needs a device"),
+        (
+            "video4linux",
+            "provides colorA\n",
+            "usage: provides colorA..D DEV [INPUT]",
+        ),
         ("video4linux2", "", "no `provides` line"),
     ] {
         let e = parse(name, bad).unwrap_err().to_string();

@@ -237,7 +237,7 @@ fn imagefile_bad_files_are_clear_errors() {
         ),
         (
             "provides varcolorA big.ppm 0 10",
-            &["test.conf:2", "0x10"][..],
+            &["test.conf:2", "W (argument 3) is `0`"][..],
         ),
         (
             "provides colorA big.ppm 640 480",
@@ -779,7 +779,11 @@ fn mplayer_conf_errors_name_the_line() {
     let cases = [
         (
             "provides colorA clip.avi",
-            &["test.conf:2", "too short", "repeat_on|off"][..],
+            &[
+                "test.conf:2",
+                "takes 3 to 4 arguments",
+                "repeat_on|repeat_off",
+            ][..],
         ),
         (
             "provides colorA clip.avi repeat_maybe",
@@ -787,7 +791,7 @@ fn mplayer_conf_errors_name_the_line() {
         ),
         (
             "provides varcolorA clip.avi repeat_on",
-            &["test.conf:2", "FILE W H"][..],
+            &["test.conf:2", "FILE|URL W H"][..],
         ),
         (
             "provides varcolorA clip.avi 640 x repeat_on",
@@ -795,7 +799,7 @@ fn mplayer_conf_errors_name_the_line() {
         ),
         (
             "provides varcolorA clip.avi 1 480 repeat_on",
-            &["test.conf:2", "1x480"][..],
+            &["test.conf:2", "W (argument 3) is `1`"][..],
         ),
         (
             "provides colorA v4l /dev/video0 hdmi",

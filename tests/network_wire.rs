@@ -339,7 +339,11 @@ fn conf_errors_name_the_line() {
             "provides laser host port\n",
             &["between 1 and 65535"],
         ),
-        (client, "provides laser h 1 2\n", &["HOST PORT only"]),
+        (
+            client,
+            "provides laser h 1 2\n",
+            &["usage: provides INTERFACE HOST PORT"],
+        ),
         (
             client,
             "initial_position 1 2\n",

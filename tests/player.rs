@@ -545,10 +545,13 @@ fn a_missing_device_names_it_and_the_servers_list() {
 fn conf_errors_name_the_line() {
     let emu = Emulator::start();
     for (body, want) in [
-        ("provides laser 180", "takes N R"),
-        ("provides laser 0 1", "1..720"),
-        ("provides wheels", "does not provide `wheels`"),
-        ("provides encoders index x", "needs a device index"),
+        ("provides laser 180", "usage: provides laser [N R]"),
+        ("provides laser 0 1", "between 1 and 720"),
+        ("provides wheels", "not `wheels`"),
+        (
+            "provides encoders index x",
+            "I (argument 3) is `x`, expected a whole number",
+        ),
         (
             "provides laser 180 1 device tank:1",
             "expected a Player interface",

@@ -1,43 +1,13 @@
-//! Declared settings: every component that declares its lines is checked from its
-//! declaration (one bad value per line, each an error at file:line naming the
-//! range or choices), `jderobot help NAME` prints every line it accepts, and the
-//! inputs that were accepted silently before (issue 28, C2) are refused.
+//! Declared settings: the inputs that were accepted silently before (issue 28, C2)
+//! are refused, and a required line is named when absent (every declaration is
+//! tried, value by value, in tests/declarations.rs).
 
 use crate::common;
 
 use jderobot::{
-    conf::{
-        Conf,
-        settings::{ArgType, Setting},
-    },
+    conf::{Conf, settings::Setting},
     loader, registry,
 };
-
-/// A word that `ty` refuses, if there is one.
-fn bad_word(ty: &ArgType) -> Option<String> {
-    Some(match ty {
-        ArgType::Int { max, .. } if *max < i64::MAX => (max + 1).to_string(),
-        ArgType::Int { .. } => "x".into(),
-        ArgType::Float { max, .. } if *max < f64::MAX => format!("{}", max * 2.0 + 1.0),
-        ArgType::Float { .. } => "nan".into(),
-        ArgType::Choice(_) => "no_such_choice".into(),
-        ArgType::OnOff => "maybe".into(),
-        ArgType::Interface => "lazer".into(),
-        ArgType::Path | ArgType::Word | ArgType::Rest => return None,
-    })
-}
-
-/// A word that `ty` accepts.
-fn good_word(ty: &ArgType) -> String {
-    match ty {
-        ArgType::Int { min, max } => (*min.max(&0).min(max)).to_string(),
-        ArgType::Float { min, max } => format!("{}", min.max(0.0).min(*max)),
-        ArgType::Choice(c) => c[0].to_string(),
-        ArgType::OnOff => "on".into(),
-        ArgType::Interface => "none".into(),
-        ArgType::Path | ArgType::Word | ArgType::Rest => "word".into(),
-    }
-}
 
 /// `check` of a conf with `component`'s section holding `line` (at line 2).
 fn problems(kind: &str, name: &str, line: &str) -> Vec<String> {
@@ -56,79 +26,10 @@ fn declared() -> Vec<(&'static registry::Entry, &'static [Setting])> {
         .collect()
 }
 
+/// `jderobot help` of a component with units, and of one that does not exist
+/// (every component's help is tried in tests/declarations.rs).
 #[test]
-fn every_declared_line_refuses_a_bad_value_at_its_line() {
-    let mut tried = 0;
-    for (entry, decl) in declared() {
-        let kind = entry.kind.to_string();
-        for s in decl {
-            for (i, a) in s.args.iter().enumerate() {
-                let Some(bad) = bad_word(&a.ty) else { continue };
-                let mut words: Vec<String> = s.args.iter().map(|a| good_word(&a.ty)).collect();
-                words[i] = bad.clone();
-                let line = format!("{} {}", s.key, words.join(" "));
-                let p = problems(&kind, entry.name, &line);
-                assert!(
-                    p.iter().any(|e| e.starts_with("t.conf:2: ")
-                        && e.contains(&format!("is `{bad}`"))
-                        && e.contains("expected")),
-                    "{} `{line}`: {p:?}",
-                    entry.name
-                );
-                tried += 1;
-            }
-            // Too many words.
-            if !s.args.iter().any(|a| matches!(a.ty, ArgType::Rest)) {
-                let mut words: Vec<String> = s.args.iter().map(|a| good_word(&a.ty)).collect();
-                words.push("extra".into());
-                let line = format!("{} {}", s.key, words.join(" "));
-                let p = problems(&kind, entry.name, &line);
-                assert!(
-                    p.iter()
-                        .any(|e| e.starts_with("t.conf:2: ") && e.contains("usage: ")),
-                    "{} `{line}`: {p:?}",
-                    entry.name
-                );
-            }
-        }
-        let p = problems(&kind, entry.name, "no_such_line 1");
-        assert!(
-            p.iter().any(|e| e.starts_with("t.conf:2: ")
-                && e.contains("`no_such_line`")
-                && e.contains(&format!("jderobot help {}", entry.name))),
-            "{}: {p:?}",
-            entry.name
-        );
-    }
-    assert!(tried > 20, "only {tried} bad values tried");
-}
-
-#[test]
-fn help_prints_every_line_a_component_accepts() {
-    let declared = declared();
-    assert!(declared.len() >= 6, "{} declared", declared.len());
-    for (entry, decl) in declared {
-        let text = common::help(entry.name);
-        assert!(text.contains(entry.summary), "{text}");
-        for s in decl {
-            assert!(text.contains(&s.usage()), "help {}: {text}", entry.name);
-            assert!(text.contains(s.help), "help {}: {text}", entry.name);
-            if let Some(d) = s.default {
-                assert!(text.contains(&format!("default: {d}")), "{text}");
-            }
-            // Each line with its good values is accepted: help tells the truth.
-            let words: Vec<String> = s.args.iter().map(|a| good_word(&a.ty)).collect();
-            let line = format!("{} {}", s.key, words.join(" "));
-            let p = problems(&entry.kind.to_string(), entry.name, &line);
-            // (A line the component needs and the test left out is another matter.)
-            assert!(
-                p.iter()
-                    .all(|e| !e.starts_with("t.conf:2: ") || e.contains(", and needs one: ")),
-                "{} `{line}`: {p:?}",
-                entry.name
-            );
-        }
-    }
+fn help_names_units_and_unknown_components() {
     let text = common::help("naooperator");
     assert!(
         text.contains("head LONGITUDE LATITUDE") && text.contains("in deg"),

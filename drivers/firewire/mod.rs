@@ -50,8 +50,8 @@ use std::{
 
 use crate::{
     conf::{
-        ComponentConf, ConfLine,
-        settings::{self, Setting},
+        ComponentConf,
+        settings::{self, Form, Setting},
     },
     interfaces::{COLOR_HEIGHT, COLOR_WIDTH, Image, Interface},
     runtime::{Device, Driver, Runtime, Supervision, Supervisor},
@@ -60,9 +60,6 @@ use crate::{
 };
 
 use ffi::*;
-
-const USAGE: &str = "provides varcolorA..D CAM W H [autofocus_on|autofocus_off] or \
-provides colorA..D CAM [autofocus_on|autofocus_off]";
 
 /// One camera to capture from, parsed from a `provides` line.
 #[derive(Clone, Debug, PartialEq)]
@@ -81,89 +78,94 @@ pub struct CamConf {
     pub at: String,
 }
 
+/// `autofocus_on|autofocus_off`: what a line may say of the camera's focus.
+const AUTOFOCUS: settings::Arg = settings::choice(
+    "autofocus_on|autofocus_off",
+    &["autofocus_on", "autofocus_off"],
+)
+.optional();
+
 /// The driver's lines, declared once (`jderobot help firewire`).
 const LINES: &[Setting] = &[
-    settings::provides(USAGE).required(),
+    settings::provides_forms(
+        "an image interface and the camera it comes from (CAM: 0, 1, ... in the bus's order)",
+        &[
+            Form::new(
+                "color",
+                "320x240 from camera CAM",
+                &[settings::COLOR, settings::int("CAM", "", 0, 63), AUTOFOCUS],
+            ),
+            Form::new(
+                "varcolor",
+                "W x H from camera CAM (a size it has an IIDC mode for)",
+                &[
+                    settings::VARCOLOR,
+                    settings::int("CAM", "", 0, 63),
+                    settings::pixels("W", 8192),
+                    settings::pixels("H", 8192),
+                    AUTOFOCUS,
+                ],
+            ),
+        ],
+    )
+    .required(),
     Setting::new(
         "bayer",
         "camera CAM sends a Bayer mosaic in this pattern (decoded to BGR)",
         &[
             settings::int("CAM", "", 0, 63),
-            settings::word("RGGB|GBRG|GRBG|BGGR"),
+            settings::choice(
+                "PATTERN",
+                &[
+                    "RGGB", "GBRG", "GRBG", "BGGR", "rggb", "gbrg", "grbg", "bggr",
+                ],
+            ),
         ],
     )
     .repeats(),
 ];
 
+#[derive(serde::Deserialize)]
+struct Lines {
+    provides: Vec<Provides>,
+    bayer: Vec<(u32, String)>,
+}
+
+#[derive(serde::Deserialize)]
+enum Provides {
+    #[serde(rename = "color")]
+    Color(String, u32, Option<String>),
+    #[serde(rename = "varcolor")]
+    Varcolor(String, u32, u32, u32, Option<String>),
+}
+
 /// Parses the driver's lines.
 pub fn parse(conf: &ComponentConf) -> anyhow::Result<Vec<CamConf>> {
-    conf.check(LINES)?;
+    let lines: Lines = conf.settings(LINES)?;
     let mut cams: Vec<CamConf> = Vec::new();
-    let mut bayers: Vec<(u32, Bayer)> = Vec::new();
-    for l in &conf.lines {
-        match l.keyword() {
-            "provides" => cams.push(parse_provides(l)?),
-            "bayer" => {
-                l.expect_args(2, 2, "bayer CAM RGGB|GBRG|GRBG|BGGR")?;
-                let cam: u32 = l.arg(0, "a camera number (0, 1, ...)")?;
-                let p = Bayer::parse(&l.args()[1]).ok_or_else(|| {
-                    l.error(format!(
-                        "`bayer`: `{}` is not a Bayer pattern; expected RGGB, GBRG, GRBG or BGGR",
-                        l.args()[1]
-                    ))
-                })?;
-                bayers.push((cam, p));
-            }
-            _ => {} // refused by the declaration
-        }
+    for (p, l) in lines.provides.into_iter().zip(conf.provides()) {
+        let (iface, cam, (width, height), focus) = match p {
+            Provides::Color(i, c, f) => (i, c, (COLOR_WIDTH, COLOR_HEIGHT), f),
+            Provides::Varcolor(i, c, w, h, f) => (i, c, (w, h), f),
+        };
+        cams.push(CamConf {
+            iface,
+            cam,
+            width,
+            height,
+            autofocus: focus.map(|f| f == "autofocus_on"),
+            bayer: None,
+            at: l.at.to_string(),
+        });
     }
-    for (cam, p) in bayers {
+    for (cam, p) in lines.bayer {
+        // The declaration lists only the patterns `Bayer::parse` reads.
+        let Some(p) = Bayer::parse(&p) else { continue };
         for c in cams.iter_mut().filter(|c| c.cam == cam) {
             c.bayer = Some(p);
         }
     }
     Ok(cams)
-}
-
-fn parse_provides(l: &ConfLine) -> anyhow::Result<CamConf> {
-    let image = l.image_interface(0, "firewire", USAGE)?;
-    let (name, var) = (image.name, !image.fixed_size);
-    let cam: u32 = l.arg(1, "a camera number (0, 1, ...)")?;
-    let (width, height, rest) = if var {
-        l.expect_args(4, 5, USAGE)?;
-        let w: u32 = l.arg(2, "a width in pixels")?;
-        let h: u32 = l.arg(3, "a height in pixels")?;
-        if w == 0 || h == 0 || w > 8192 || h > 8192 {
-            return Err(l
-                .error(format!("size {w}x{h} is out of range (1..8192)"))
-                .into());
-        }
-        (w, h, 4)
-    } else {
-        l.expect_args(2, 3, USAGE)?;
-        (COLOR_WIDTH, COLOR_HEIGHT, 2)
-    };
-    let autofocus = match l.args().get(rest).map(String::as_str) {
-        None => None,
-        Some("autofocus_on") => Some(true),
-        Some("autofocus_off") => Some(false),
-        Some(o) => {
-            return Err(l
-                .error(format!(
-                    "`{o}`: expected autofocus_on or autofocus_off; usage: {USAGE}"
-                ))
-                .into());
-        }
-    };
-    Ok(CamConf {
-        iface: name.clone(),
-        cam,
-        width,
-        height,
-        autofocus,
-        bayer: None,
-        at: l.at.to_string(),
-    })
 }
 
 /// A libdc1394 context (`dc1394_new`), freed on drop.

@@ -82,7 +82,9 @@ use std::{
 use crate::{
     conf::{
         ComponentConf, ConfLine,
-        settings::{CYCLE, MOTORS_TIMEOUT, Setting, choice, int, rest, word},
+        settings::{
+            COLOR, CYCLE, Form, MOTORS_TIMEOUT, Setting, VARCOLOR, choice, float, int, word,
+        },
     },
     interfaces::{
         AnyInterface, COLOR_HEIGHT, COLOR_WIDTH, Encoders, Image, Imu, Interface, Interfaces,
@@ -102,9 +104,49 @@ provides colorA..D|varcolorA..D SENSOR, or any of them with a /topic instead of 
 
 /// The driver's lines (`jderobot help gazebo`).
 pub const LINES: &[Setting] = &[
-    Setting::new("provides", USAGE, &[word("INTERFACE"), rest("ARGS")])
-        .repeats()
-        .required(),
+    Setting::forms(
+        "provides",
+        USAGE,
+        &[
+            Form::new(
+                "device",
+                "a model's odometry, cmd_vel or pan-tilt joints, or an IMU sensor",
+                &[
+                    choice(
+                        "INTERFACE",
+                        &[
+                            "encoders",
+                            "motors",
+                            "pantiltencoders",
+                            "pantiltmotors",
+                            "imu",
+                            "ptencoders",
+                            "ptmotors",
+                        ],
+                    ),
+                    word("MODEL|SENSOR|/TOPIC"),
+                ],
+            ),
+            Form::new(
+                "laser",
+                "a lidar sensor's scan: N readings at R per degree (default 180 at 1)",
+                &[
+                    choice("laser", &["laser"]),
+                    word("SENSOR|/TOPIC"),
+                    int("N", "", 1, 3600).optional(),
+                    float("R", "readings/deg", 0.01, 100.0),
+                ],
+            ),
+            Form::new("color", "a camera sensor at 320x240", &[COLOR, word("SENSOR|/TOPIC")]),
+            Form::new(
+                "varcolor",
+                "a camera sensor at its own size",
+                &[VARCOLOR, word("SENSOR|/TOPIC")],
+            ),
+        ],
+    )
+    .repeats()
+    .required(),
     Setting::new(
         "partition",
         "gz-transport's partition (default: IGN_PARTITION, else GZ_PARTITION, else HOSTNAME:USERNAME)",

@@ -49,8 +49,8 @@ use std::{
 
 use crate::{
     conf::{
-        ComponentConf, ConfLine,
-        settings::{self, Setting as Line},
+        ComponentConf,
+        settings::{self, Form, NumberOr, Setting as Line},
     },
     interfaces::{COLOR_HEIGHT, COLOR_WIDTH, Image, Interface},
     runtime::{Device, Driver, Runtime, Supervision, Supervisor},
@@ -65,9 +65,6 @@ unsafe extern "C" {
     fn arv_get_n_devices() -> u32;
     fn arv_get_device_id(index: u32) -> *const c_char;
 }
-
-const USAGE: &str = "provides varcolorA..D CAMERA_ID [W H] [PIXEL_FORMAT] or \
-provides colorA..D CAMERA_ID [PIXEL_FORMAT]";
 
 /// Exposure or gain: a value or the camera's automatic mode.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -92,39 +89,49 @@ pub struct GigeConf {
     pub at: String,
 }
 
-fn setting(l: &ConfLine, what: &str) -> anyhow::Result<(String, Setting)> {
-    l.expect_args(2, 2, &format!("{} CAMERA_ID {what}|auto", l.keyword()))?;
-    let cam = l.args()[0].clone();
-    let v = if l.args()[1] == "auto" {
-        Setting::Auto
-    } else {
-        let v: f64 = l.arg(1, &format!("{what} or auto"))?;
-        if !v.is_finite() || v < 0.0 {
-            return Err(l
-                .error(format!("`{}`: {v} is not a valid {what}", l.keyword()))
-                .into());
-        }
-        Setting::Value(v)
-    };
-    Ok((cam, v))
-}
+/// `PIXEL_FORMAT`: a GenICam name the driver converts.
+const PIXEL_FORMAT: settings::Arg = settings::choice("PIXEL_FORMAT", FORMAT_NAMES).optional();
 
 /// The driver's lines, declared once (`jderobot help gige`).
 const LINES: &[Line] = &[
-    settings::provides(USAGE).required(),
+    settings::provides_forms(
+        "an image interface and its camera (an Aravis id, an IP address, or Fake_1)",
+        &[
+            Form::new(
+                "color",
+                "320x240 from CAMERA_ID",
+                &[settings::COLOR, settings::word("CAMERA_ID"), PIXEL_FORMAT],
+            ),
+            Form::new(
+                "varcolor",
+                "W x H from CAMERA_ID (without W H: the camera's current region)",
+                &[
+                    settings::VARCOLOR,
+                    settings::word("CAMERA_ID"),
+                    settings::pixels("W", 16384).optional(),
+                    settings::pixels("H", 16384),
+                    PIXEL_FORMAT,
+                ],
+            ),
+        ],
+    )
+    .required(),
     Line::new(
         "exposure",
         "a camera's exposure time, or auto",
         &[
             settings::word("CAMERA_ID"),
-            settings::word("MICROSECONDS|auto"),
+            settings::float_or("MICROSECONDS", "µs", 0.0, 1e9, "auto"),
         ],
     )
     .repeats(),
     Line::new(
         "gain",
         "a camera's gain, or auto",
-        &[settings::word("CAMERA_ID"), settings::word("DB|auto")],
+        &[
+            settings::word("CAMERA_ID"),
+            settings::float_or("DB", "dB", 0.0, 1000.0, "auto"),
+        ],
     )
     .repeats(),
     Line::new(
@@ -138,37 +145,60 @@ const LINES: &[Line] = &[
     .repeats(),
 ];
 
-/// Parses the driver's lines.
-pub fn parse(conf: &ComponentConf) -> anyhow::Result<Vec<GigeConf>> {
-    conf.check(LINES)?;
-    let mut cams: Vec<GigeConf> = Vec::new();
-    let mut exposure = HashMap::new();
-    let mut gain = HashMap::new();
-    let mut rate = HashMap::new();
-    for l in &conf.lines {
-        match l.keyword() {
-            "provides" => cams.push(parse_provides(l)?),
-            "exposure" => {
-                let (c, v) = setting(l, "microseconds")?;
-                exposure.insert(c, v);
-            }
-            "gain" => {
-                let (c, v) = setting(l, "dB")?;
-                gain.insert(c, v);
-            }
-            "framerate" => {
-                l.expect_args(2, 2, "framerate CAMERA_ID FPS")?;
-                let f: f64 = l.arg(1, "frames per second")?;
-                if !(f > 0.0 && f.is_finite()) {
-                    return Err(l
-                        .error("`framerate`: expected a positive number of frames per second")
-                        .into());
-                }
-                rate.insert(l.args()[0].clone(), f);
-            }
-            _ => {} // refused by the declaration
+#[derive(serde::Deserialize)]
+struct Lines {
+    provides: Vec<Provides>,
+    exposure: Vec<(String, NumberOr)>,
+    gain: Vec<(String, NumberOr)>,
+    framerate: Vec<(String, f64)>,
+}
+
+#[derive(serde::Deserialize)]
+enum Provides {
+    #[serde(rename = "color")]
+    Color(String, String, Option<String>),
+    #[serde(rename = "varcolor")]
+    Varcolor(String, String, Option<u32>, Option<u32>, Option<String>),
+}
+
+impl From<NumberOr> for Setting {
+    fn from(v: NumberOr) -> Setting {
+        match v {
+            NumberOr::Number(v) => Setting::Value(v),
+            NumberOr::Word => Setting::Auto,
         }
     }
+}
+
+/// Parses the driver's lines.
+pub fn parse(conf: &ComponentConf) -> anyhow::Result<Vec<GigeConf>> {
+    let lines: Lines = conf.settings(LINES)?;
+    let mut cams: Vec<GigeConf> = Vec::new();
+    for (p, l) in lines.provides.into_iter().zip(conf.provides()) {
+        let (iface, camera, size, pixel_format) = match p {
+            Provides::Color(i, c, f) => (i, c, Some((COLOR_WIDTH, COLOR_HEIGHT)), f),
+            Provides::Varcolor(i, c, Some(w), Some(h), f) => (i, c, Some((w, h)), f),
+            Provides::Varcolor(i, c, _, _, f) => (i, c, None, f),
+        };
+        cams.push(GigeConf {
+            iface,
+            camera,
+            size,
+            pixel_format,
+            exposure: None,
+            gain: None,
+            framerate: None,
+            at: l.at.to_string(),
+        });
+    }
+    let exposure: HashMap<String, Setting> = lines
+        .exposure
+        .into_iter()
+        .map(|(c, v)| (c, v.into()))
+        .collect();
+    let gain: HashMap<String, Setting> =
+        lines.gain.into_iter().map(|(c, v)| (c, v.into())).collect();
+    let rate: HashMap<String, f64> = lines.framerate.into_iter().collect();
     for known in exposure.keys().chain(gain.keys()).chain(rate.keys()) {
         if !cams.iter().any(|c| &c.camera == known) {
             anyhow::bail!(
@@ -184,62 +214,6 @@ pub fn parse(conf: &ComponentConf) -> anyhow::Result<Vec<GigeConf>> {
         c.framerate = rate.get(&c.camera).copied();
     }
     Ok(cams)
-}
-
-fn parse_provides(l: &ConfLine) -> anyhow::Result<GigeConf> {
-    let image = l.image_interface(0, "gige", USAGE)?;
-    let (name, var) = (image.name, !image.fixed_size);
-    let camera: String = l.arg(1, "a camera id")?;
-    let n = l.args().len();
-    let (size, fmt_at) = match (var, n) {
-        (false, 2) => (Some((COLOR_WIDTH, COLOR_HEIGHT)), None),
-        (false, 3) => (Some((COLOR_WIDTH, COLOR_HEIGHT)), Some(2)),
-        (true, 2) => (None, None),
-        (true, 3) => (None, Some(2)),
-        (true, 4) | (true, 5) => {
-            let w: u32 = l.arg(2, "a width in pixels")?;
-            let h: u32 = l.arg(3, "a height in pixels")?;
-            if w == 0 || h == 0 || w > 16384 || h > 16384 {
-                return Err(l
-                    .error(format!("size {w}x{h} is out of range (1..16384)"))
-                    .into());
-            }
-            (Some((w, h)), (n == 5).then_some(4))
-        }
-        _ => {
-            return Err(l
-                .error(format!(
-                    "`provides {name}` has {} argument(s) after the interface; usage: {USAGE}",
-                    n - 1
-                ))
-                .into());
-        }
-    };
-    let pixel_format = match fmt_at {
-        Some(i) => {
-            let f = l.args()[i].clone();
-            if format_of(&f).is_none() {
-                return Err(l
-                    .error(format!(
-                        "pixel format `{f}` is not one this driver converts; expected {}",
-                        FORMAT_NAMES.join(", ")
-                    ))
-                    .into());
-            }
-            Some(f)
-        }
-        None => None,
-    };
-    Ok(GigeConf {
-        iface: name.clone(),
-        camera,
-        size,
-        pixel_format,
-        exposure: None,
-        gain: None,
-        framerate: None,
-        at: l.at.to_string(),
-    })
 }
 
 /// GenICam names the driver converts, in order of preference.

@@ -36,7 +36,7 @@ use anyhow::Context as _;
 use crate::{
     conf::{
         ComponentConf, ConfLine,
-        settings::{self, Setting},
+        settings::{self, Form, Setting, choice, path, pixels},
     },
     interfaces::{COLOR_HEIGHT, COLOR_WIDTH, Image, Interface},
     media::{
@@ -46,8 +46,6 @@ use crate::{
     runtime::{Driver, Runtime},
 };
 
-const USAGE: &str = "provides colorA..D FILE [scale], provides varcolorA..D FILE [W H]";
-
 /// One `provides` line, parsed.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Source {
@@ -56,62 +54,73 @@ pub struct Source {
     pub fit: Fit,
 }
 
-/// Parses a `W H` pair of image dimensions (1..=16384 each).
-pub fn size(l: &ConfLine, i: usize) -> Result<(u32, u32), crate::conf::ConfError> {
-    let w: u32 = l.arg(i, "a width W in pixels")?;
-    let h: u32 = l.arg(i + 1, "a height H in pixels")?;
-    if !(1..=16384).contains(&w) || !(1..=16384).contains(&h) || (w as u64 * h as u64) > MAX_PIXELS
-    {
-        return Err(l.error(format!(
-            "`{}`: {w}x{h} is not an image size (1..16384 pixels each)",
-            l.keyword()
-        )));
-    }
-    Ok((w, h))
+/// The driver's lines, declared once (`jderobot help imagefile`).
+const LINES: &[Setting] = &[settings::provides_forms(
+    "an image interface and its file",
+    &[
+        Form::new(
+            "color",
+            "320x240 from FILE (another size is an error unless `scale`: resized to 320x240)",
+            &[
+                settings::COLOR,
+                path("FILE"),
+                choice("scale", &["scale"]).optional(),
+            ],
+        ),
+        Form::new(
+            "varcolor",
+            "FILE at its own size, or scaled to W x H",
+            &[
+                settings::VARCOLOR,
+                path("FILE"),
+                pixels("W", 16384).optional(),
+                pixels("H", 16384),
+            ],
+        ),
+    ],
+)
+.required()];
+
+#[derive(serde::Deserialize)]
+struct Lines {
+    provides: Vec<Provides>,
 }
 
-/// The driver's lines, declared once (`jderobot help imagefile`).
-const LINES: &[Setting] = &[settings::provides(USAGE).required()];
+#[derive(serde::Deserialize)]
+enum Provides {
+    #[serde(rename = "color")]
+    Color(String, std::path::PathBuf, Option<String>),
+    #[serde(rename = "varcolor")]
+    Varcolor(String, std::path::PathBuf, Option<u32>, Option<u32>),
+}
 
 /// Parses the driver's lines.
 pub fn parse(conf: &ComponentConf) -> anyhow::Result<Vec<(Source, ConfLine)>> {
-    conf.check(LINES)?;
+    let lines: Lines = conf.settings(LINES)?;
     let mut out: Vec<(Source, ConfLine)> = Vec::new();
-    for l in &conf.lines {
-        let image = l.image_interface(0, "imagefile", USAGE)?;
-        let (iface, color) = (image.name.as_str(), image.fixed_size);
-        let fit = if color {
-            l.expect_args(2, 3, &format!("provides {iface} FILE [scale]"))?;
-            match l.args().get(2).map(String::as_str) {
-                None => Fit::Exact(COLOR_WIDTH, COLOR_HEIGHT),
-                Some("scale") => Fit::Scale(COLOR_WIDTH, COLOR_HEIGHT),
-                Some(w) => {
+    for (p, l) in lines.provides.into_iter().zip(conf.provides()) {
+        let (interface, path, fit) = match p {
+            Provides::Color(i, path, None) => (i, path, Fit::Exact(COLOR_WIDTH, COLOR_HEIGHT)),
+            Provides::Color(i, path, Some(_)) => (i, path, Fit::Scale(COLOR_WIDTH, COLOR_HEIGHT)),
+            Provides::Varcolor(i, path, Some(w), Some(h)) => {
+                if w as u64 * h as u64 > MAX_PIXELS {
                     return Err(l
-                        .error(format!("`provides {iface}`: `{w}` is not `scale`; colorA..D are 320x240 (use varcolor for other sizes)"))
+                        .error(format!(
+                            "`provides {i}`: {w}x{h} is too large (at most {MAX_PIXELS} pixels)"
+                        ))
                         .into());
                 }
+                (i, path, Fit::Scale(w, h))
             }
-        } else {
-            if l.args().len() != 2 && l.args().len() != 4 {
-                l.expect_args(2, 4, &format!("provides {iface} FILE [W H]"))?;
-                return Err(l
-                    .error(format!("`provides {iface}` takes FILE and an optional size W H; usage: provides {iface} FILE [W H]"))
-                    .into());
-            }
-            if l.args().len() == 4 {
-                let (w, h) = size(l, 2)?;
-                Fit::Scale(w, h)
-            } else {
-                Fit::Auto
-            }
+            Provides::Varcolor(i, path, ..) => (i, path, Fit::Auto),
         };
-        if out.iter().any(|(s, _)| s.interface == iface) {
-            return Err(l.error(format!("`{iface}` is provided twice")).into());
+        if out.iter().any(|(s, _)| s.interface == interface) {
+            return Err(l.error(format!("`{interface}` is provided twice")).into());
         }
         out.push((
             Source {
-                interface: iface.to_string(),
-                path: conf.resolve(&l.args()[1]),
+                interface,
+                path,
                 fit,
             },
             l.clone(),

@@ -45,7 +45,7 @@ use anyhow::Context as _;
 use crate::{
     conf::{
         ComponentConf, ConfLine,
-        settings::{self, Setting},
+        settings::{self, Form, Setting, choice, int, word},
     },
     interfaces::{COLOR_HEIGHT, COLOR_WIDTH, Image, Interface},
     media::{
@@ -57,9 +57,6 @@ use crate::{
     },
     runtime::{Driver, Runtime},
 };
-
-const USAGE: &str = "provides colorA..D FILE|URL repeat_on|off [unpaced], \
-provides colorA..D v4l DEV cam|tv|composite|s-video, provides varcolorA..D FILE|URL W H repeat_on|off [unpaced]";
 
 /// Where the video comes from.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -81,34 +78,6 @@ pub struct Source {
     pub pace: bool,
 }
 
-fn repeat(l: &ConfLine, word: Option<&String>) -> anyhow::Result<bool> {
-    match word.map(String::as_str) {
-        Some("repeat_on") => Ok(true),
-        Some("repeat_off") => Ok(false),
-        Some(w) => Err(l
-            .error(format!(
-                "`{w}` is not repeat_on or repeat_off; usage: {USAGE}"
-            ))
-            .into()),
-        None => Err(l
-            .error(format!("missing repeat_on|repeat_off; usage: {USAGE}"))
-            .into()),
-    }
-}
-
-fn unpaced(l: &ConfLine, rest: &[String]) -> anyhow::Result<bool> {
-    match rest {
-        [] => Ok(true),
-        [w] if w == "unpaced" => Ok(false),
-        _ => Err(l
-            .error(format!(
-                "`{}` is not understood here; expected `unpaced` or nothing; usage: {USAGE}",
-                rest.join(" ")
-            ))
-            .into()),
-    }
-}
-
 fn file_or_url(conf: &ComponentConf, s: &str) -> String {
     if is_url(s) {
         s.to_string()
@@ -117,84 +86,100 @@ fn file_or_url(conf: &ComponentConf, s: &str) -> String {
     }
 }
 
+/// `repeat_on|repeat_off`: start again at the end of the file, or stop there.
+const REPEAT: settings::Arg = choice("repeat_on|repeat_off", &["repeat_on", "repeat_off"]);
+/// `unpaced`: as fast as it decodes.
+const UNPACED: settings::Arg = choice("unpaced", &["unpaced"]).optional();
+
 /// The driver's lines, declared once (`jderobot help mplayer`).
-const LINES: &[Setting] = &[settings::provides(USAGE).required()];
+const LINES: &[Setting] = &[settings::provides_forms(
+    "an image interface and the video it shows",
+    &[
+        Form::new(
+            "v4l",
+            "320x240 from a V4L2 device's input",
+            &[
+                settings::COLOR,
+                choice("v4l", &["v4l"]),
+                word("DEV"),
+                choice("INPUT", &["cam", "tv", "composite", "s-video"]),
+            ],
+        ),
+        Form::new(
+            "color",
+            "a file or URL at 320x240",
+            &[settings::COLOR, word("FILE|URL"), REPEAT, UNPACED],
+        ),
+        Form::new(
+            "varcolor",
+            "a file or URL at W x H",
+            &[
+                settings::VARCOLOR,
+                word("FILE|URL"),
+                int("W", "px", 2, 8192),
+                int("H", "px", 2, 8192),
+                REPEAT,
+                UNPACED,
+            ],
+        ),
+    ],
+)
+.required()];
+
+#[derive(serde::Deserialize)]
+struct Lines {
+    provides: Vec<Provides>,
+}
+
+#[derive(serde::Deserialize)]
+enum Provides {
+    #[serde(rename = "v4l")]
+    V4l(String, serde::de::IgnoredAny, String, String),
+    #[serde(rename = "color")]
+    Color(String, String, String, Option<String>),
+    #[serde(rename = "varcolor")]
+    Varcolor(String, String, u32, u32, String, Option<String>),
+}
 
 /// Parses the driver's lines.
 pub fn parse(conf: &ComponentConf) -> anyhow::Result<Vec<(Source, ConfLine)>> {
-    conf.check(LINES)?;
+    let lines: Lines = conf.settings(LINES)?;
     let mut out: Vec<(Source, ConfLine)> = Vec::new();
-    for l in &conf.lines {
-        let a = l.args();
-        let image = l.image_interface(0, "mplayer", USAGE)?;
-        let (iface, color) = (image.name.as_str(), image.fixed_size);
-        if a.len() < 3 {
-            return Err(l
-                .error(format!("`provides {iface}` is too short; usage: {USAGE}"))
-                .into());
-        }
-        let src = if color && a[1] == "v4l" {
-            l.expect_args(4, 4, "provides colorX v4l DEV cam|tv|composite|s-video")?;
-            let input = match a[3].as_str() {
-                "cam" | "tv" => 0,
-                "composite" => 1,
-                "s-video" => 2,
-                other => {
-                    return Err(l
-                        .error(format!(
-                            "`{other}` is not a v4l input; expected cam, tv, composite or s-video"
-                        ))
-                        .into());
+    for (p, l) in lines.provides.into_iter().zip(conf.provides()) {
+        let file =
+            |interface: String, f: &str, (width, height), repeat: &str, unpaced: Option<String>| {
+                Source {
+                    interface,
+                    input: Input::File(file_or_url(conf, f)),
+                    width,
+                    height,
+                    repeat: repeat == "repeat_on",
+                    pace: unpaced.is_none(),
                 }
             };
-            Source {
-                interface: iface.into(),
+        let src = match p {
+            Provides::V4l(interface, _, device, input) => Source {
+                interface,
                 input: Input::V4l {
-                    device: a[2].clone(),
-                    input,
+                    device,
+                    input: match input.as_str() {
+                        "composite" => 1,
+                        "s-video" => 2,
+                        _ => 0, // cam, tv
+                    },
                 },
                 width: COLOR_WIDTH,
                 height: COLOR_HEIGHT,
                 repeat: false,
                 pace: false,
-            }
-        } else if color {
-            Source {
-                interface: iface.into(),
-                input: Input::File(file_or_url(conf, &a[1])),
-                width: COLOR_WIDTH,
-                height: COLOR_HEIGHT,
-                repeat: repeat(l, a.get(2))?,
-                pace: unpaced(l, &a[3..])?,
-            }
-        } else {
-            if a.len() < 5 {
-                return Err(l
-                    .error(format!(
-                        "`provides {iface}` needs FILE W H repeat_on|off; usage: {USAGE}"
-                    ))
-                    .into());
-            }
-            let w: u32 = l.arg(2, "a width W in pixels")?;
-            let h: u32 = l.arg(3, "a height H in pixels")?;
-            if !(2..=8192).contains(&w) || !(2..=8192).contains(&h) {
-                return Err(l
-                    .error(format!(
-                        "`provides {iface}`: {w}x{h} is not a size in 2..8192 pixels"
-                    ))
-                    .into());
-            }
-            Source {
-                interface: iface.into(),
-                input: Input::File(file_or_url(conf, &a[1])),
-                width: w,
-                height: h,
-                repeat: repeat(l, a.get(4))?,
-                pace: unpaced(l, &a[5..])?,
-            }
+            },
+            Provides::Color(i, f, r, u) => file(i, &f, (COLOR_WIDTH, COLOR_HEIGHT), &r, u),
+            Provides::Varcolor(i, f, w, h, r, u) => file(i, &f, (w, h), &r, u),
         };
-        if out.iter().any(|(s, _)| s.interface == iface) {
-            return Err(l.error(format!("`{iface}` is provided twice")).into());
+        if out.iter().any(|(s, _)| s.interface == src.interface) {
+            return Err(l
+                .error(format!("`{}` is provided twice", src.interface))
+                .into());
         }
         out.push((src, l.clone()));
     }

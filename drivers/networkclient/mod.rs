@@ -60,8 +60,8 @@ use std::{
 
 use crate::{
     conf::{
-        ComponentConf, ConfLine,
-        settings::{self, MOTORS_TIMEOUT, Setting, int, interface, word},
+        ComponentConf,
+        settings::{self, Form, MOTORS_TIMEOUT, Setting, choice, int, word},
     },
     interfaces::{
         AnyInterface, COLOR_HEIGHT, COLOR_WIDTH, Encoders, Image, Imu, Interface, Interfaces,
@@ -95,24 +95,61 @@ pub struct ClientConf {
     pub depth: u32,
 }
 
-const USAGE: &str = "provides colorA..D HOST PORT NETID, provides varcolorA..D HOST PORT NETID [W H], \
-provides laser|sonars|encoders|motors|pantiltencoders|pantiltmotors|zoomencoders|zoommotors HOST PORT";
+const HOST: settings::Arg = word("HOST");
+const PORT: settings::Arg = int("PORT", "", 1, 65_535);
+const NETID: settings::Arg = int("NETID", "", 0, u32::MAX as i64);
 
 /// The driver's lines, declared once (`jderobot help networkclient`).
 const LINES: &[Setting] = &[
-    Setting::new(
-        "provides",
-        USAGE,
+    settings::provides_forms(
+        "a remote interface: the server's HOST and PORT (and an image's network id)",
         &[
-            interface("NAME"),
-            word("HOST"),
-            int("PORT", "", 1, 65_535),
-            int("NETID", "", 0, u32::MAX as i64).optional(),
-            int("W", "px", 1, 8192),
-            int("H", "px", 1, 8192),
+            Form::new(
+                "color",
+                "a 320x240 image, the server's image NETID",
+                &[settings::COLOR, HOST, PORT, NETID],
+            ),
+            Form::new(
+                "varcolor",
+                "an image of any size (exactly W x H when given), the server's image NETID",
+                &[
+                    settings::VARCOLOR,
+                    HOST,
+                    PORT,
+                    NETID,
+                    int("W", "px", 1, 8192).optional(),
+                    int("H", "px", 1, 8192),
+                ],
+            ),
+            Form::new(
+                "device",
+                "a device (4.3's wire has no bumpers message)",
+                &[
+                    choice(
+                        "INTERFACE",
+                        &[
+                            "laser",
+                            "sonars",
+                            "encoders",
+                            "motors",
+                            "pantiltencoders",
+                            "pantiltmotors",
+                            "zoomencoders",
+                            "zoommotors",
+                            "imu",
+                            "us",
+                            "ptencoders",
+                            "ptmotors",
+                            "zencoders",
+                            "zmotors",
+                        ],
+                    ),
+                    HOST,
+                    PORT,
+                ],
+            ),
         ],
     )
-    .repeats()
     .required(),
     settings::INITIAL_POSITION.help("the odometry offset added to the remote encoders"),
     Setting::new(
@@ -129,129 +166,62 @@ const LINES: &[Setting] = &[
     .default("2"),
 ];
 
-fn err(l: &ConfLine, m: impl Into<String>) -> anyhow::Error {
-    l.error(m).into()
+#[derive(serde::Deserialize)]
+struct Lines {
+    provides: Vec<Provides>,
+    initial_position: Option<(f32, f32, f32)>,
+    token: Option<String>,
+    #[allow(dead_code)] // read by `conf.motors_timeout()`
+    motors_timeout: u64,
+    depth: u32,
+}
+
+#[derive(serde::Deserialize)]
+enum Provides {
+    #[serde(rename = "color")]
+    Color(String, String, u16, u32),
+    #[serde(rename = "varcolor")]
+    Varcolor(String, String, u16, u32, Option<u32>, Option<u32>),
+    #[serde(rename = "device")]
+    Device(String, String, u16),
 }
 
 impl ClientConf {
     pub fn parse(conf: &ComponentConf) -> anyhow::Result<ClientConf> {
-        conf.check(LINES)?;
+        let lines: Lines = conf.settings(LINES)?;
+        if let (Some(t), Some(l)) = (&lines.token, conf.line("token")) {
+            netwire::check_token(t).map_err(|e| l.error(format!("`token`: {e}")))?;
+        }
         let mut c = ClientConf {
             remotes: Vec::new(),
-            initial: (0.0, 0.0, 0.0),
-            token: None,
+            initial: lines.initial_position.unwrap_or_default(),
+            token: lines.token,
             motors_timeout: conf.motors_timeout()?,
-            depth: 2,
+            depth: lines.depth,
         };
-        for l in &conf.lines {
-            match l.keyword() {
-                "provides" => {
-                    let a = l.args();
-                    if a.len() < 3 {
-                        return Err(err(
-                            l,
-                            format!("`provides` needs NAME HOST PORT; usage: {USAGE}"),
-                        ));
-                    }
-                    let name = canonical(&a[0]);
-                    let fam = family(&name).ok_or_else(|| {
-                        err(
-                            l,
-                            format!("`provides {}`: not an interface; usage: {USAGE}", a[0]),
-                        )
-                    })?;
-                    if fam == "bumpers" {
-                        return Err(err(
-                            l,
-                            "4.3's wire has no bumpers message; bumpers cannot be provided",
-                        ));
-                    }
-                    let port: u16 = l.arg(2, "a TCP port 1..65535")?;
-                    let mut r = Remote {
-                        name: name.clone(),
-                        host: a[1].clone(),
-                        port,
-                        netid: None,
-                        size: None,
-                    };
-                    if fam == "image" {
-                        let var = name.starts_with("varcolor");
-                        match (a.len(), var) {
-                            (4, _) => {}
-                            (6, true) => {
-                                let dim = |i: usize| -> anyhow::Result<u32> {
-                                    let v: u32 = l.arg(i, "a size in pixels 1..8192")?;
-                                    if !(1..=8192).contains(&v) {
-                                        return Err(err(
-                                            l,
-                                            format!(
-                                                "`provides {name}`: size {v} is out of 1..8192"
-                                            ),
-                                        ));
-                                    }
-                                    Ok(v)
-                                };
-                                r.size = Some((dim(4)?, dim(5)?));
-                            }
-                            _ => {
-                                return Err(err(
-                                    l,
-                                    format!(
-                                        "`provides {name}` takes HOST PORT NETID{}; usage: {USAGE}",
-                                        if var { " [W H]" } else { "" }
-                                    ),
-                                ));
-                            }
-                        }
-                        r.netid = Some(l.arg(3, "a network id (0, 1, 2 ...)")?);
-                        if !var {
-                            r.size = Some((COLOR_WIDTH, COLOR_HEIGHT));
-                        }
-                    } else if a.len() != 3 {
-                        return Err(err(
-                            l,
-                            format!("`provides {name}` takes HOST PORT only; usage: {USAGE}"),
-                        ));
-                    }
-                    if c.remotes.iter().any(|x| x.name == name) {
-                        return Err(err(l, format!("interface `{name}` is provided twice")));
-                    }
-                    c.remotes.push(r);
+        for (p, l) in lines.provides.into_iter().zip(conf.provides()) {
+            let (name, host, port, netid, size) = match p {
+                Provides::Color(n, h, p, id) => {
+                    (n, h, p, Some(id), Some((COLOR_WIDTH, COLOR_HEIGHT)))
                 }
-                "initial_position" => {
-                    l.expect_args(3, 3, "initial_position X_MM Y_MM THETA_DEG")?;
-                    let f = |i: usize, what: &str| -> anyhow::Result<f32> {
-                        let v: f32 = l.arg(i, what)?;
-                        if !v.is_finite() {
-                            return Err(err(
-                                l,
-                                format!("`initial_position`: {what} must be finite"),
-                            ));
-                        }
-                        Ok(v)
-                    };
-                    c.initial = (
-                        f(0, "X in mm")?,
-                        f(1, "Y in mm")?,
-                        f(2, "THETA in degrees")?,
-                    );
+                Provides::Varcolor(n, h, p, id, Some(w), Some(hh)) => {
+                    (n, h, p, Some(id), Some((w, hh)))
                 }
-                "token" => {
-                    l.expect_args(1, 1, "token SECRET")?;
-                    netwire::check_token(&l.args()[0])
-                        .map_err(|e| err(l, format!("`token`: {e}")))?;
-                    c.token = Some(l.args()[0].clone());
-                }
-                "depth" => {
-                    l.expect_args(1, 1, "depth N")?;
-                    let d: u32 = l.arg(0, "a number of requests 1..16")?;
-                    if !(1..=16).contains(&d) {
-                        return Err(err(l, format!("`depth`: {d} is out of 1..16")));
-                    }
-                    c.depth = d;
-                }
-                _ => {} // motors_timeout above; the rest refused by the declaration
+                Provides::Varcolor(n, h, p, id, ..) => (n, h, p, Some(id), None),
+                Provides::Device(n, h, p) => (canonical(&n), h, p, None, None),
+            };
+            if c.remotes.iter().any(|x| x.name == name) {
+                return Err(l
+                    .error(format!("interface `{name}` is provided twice"))
+                    .into());
             }
+            c.remotes.push(Remote {
+                name,
+                host,
+                port,
+                netid,
+                size,
+            });
         }
         Ok(c)
     }

@@ -56,7 +56,7 @@ use anyhow::Context as _;
 use crate::{
     conf::{
         ComponentConf, ConfLine,
-        settings::{self, Setting},
+        settings::{self, Form, Setting, choice, flags, pixels, word},
     },
     interfaces::{COLOR_HEIGHT, COLOR_WIDTH, Image, Interface},
     media::{
@@ -70,11 +70,12 @@ use crate::{
     runtime::{Driver, Runtime},
 };
 
-const USAGE: &str = "provides varcolorA..D image|video|videofile PATH [W H|autosize] [loop] [unpaced], \
-provides colorA..D image|video|videofile PATH [loop] [unpaced]";
+/// The sources a `provides` line names.
+const SOURCES: settings::Arg = choice("image|video|videofile", &["image", "video", "videofile"]);
 
 /// What a `provides` line reads.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
 pub enum Input {
     Image,
     Video,
@@ -93,99 +94,97 @@ pub struct Source {
     pub pace: bool,
 }
 
-fn dim(l: &ConfLine, i: usize, what: &str) -> anyhow::Result<u32> {
-    let v: u32 = l.arg(i, what)?;
-    if !(1..=16384).contains(&v) {
-        return Err(l
-            .error(format!("`provides`: {what} {v} is out of range 1..16384"))
-            .into());
-    }
-    Ok(v)
+/// The driver's lines, declared once (`jderobot help opencv`).
+const LINES: &[Setting] = &[settings::provides_forms(
+    "an image interface and its source: a still image, a V4L2 device or a video file",
+    &[
+        Form::new(
+            "color",
+            "320x240 from PATH; `loop`: start a file again at its end; `unpaced`: as fast as it decodes",
+            &[
+                settings::COLOR,
+                SOURCES,
+                word("PATH"),
+                flags("OPTIONS", &["loop", "unpaced"]),
+            ],
+        ),
+        Form::new(
+            "sized",
+            "PATH scaled to W x H",
+            &[
+                settings::VARCOLOR,
+                SOURCES,
+                word("PATH"),
+                pixels("W", 16384),
+                pixels("H", 16384),
+                flags("OPTIONS", &["loop", "unpaced"]),
+            ],
+        ),
+        Form::new(
+            "autosize",
+            "PATH at its own size (`autosize`, or no size)",
+            &[
+                settings::VARCOLOR,
+                SOURCES,
+                word("PATH"),
+                choice("autosize", &["autosize"]).optional(),
+                flags("OPTIONS", &["loop", "unpaced"]),
+            ],
+        ),
+    ],
+)
+.required()];
+
+#[derive(serde::Deserialize)]
+struct Lines {
+    provides: Vec<Provides>,
 }
 
-/// The driver's lines, declared once (`jderobot help opencv`).
-const LINES: &[Setting] = &[settings::provides(USAGE).required()];
+#[derive(serde::Deserialize)]
+enum Provides {
+    #[serde(rename = "color")]
+    Color(String, Input, String, Vec<String>),
+    #[serde(rename = "sized")]
+    Sized(String, Input, String, u32, u32, Vec<String>),
+    #[serde(rename = "autosize")]
+    Autosize(String, Input, String, serde::de::IgnoredAny, Vec<String>),
+}
 
 /// Parses the driver's lines.
 pub fn parse(conf: &ComponentConf) -> anyhow::Result<Vec<(Source, ConfLine)>> {
-    conf.check(LINES)?;
+    let lines: Lines = conf.settings(LINES)?;
     let mut out: Vec<(Source, ConfLine)> = Vec::new();
-    for l in &conf.lines {
-        let a = l.args();
-        let image = l.image_interface(0, "opencv", USAGE)?;
-        let (iface, color, var) = (image.name.as_str(), image.fixed_size, !image.fixed_size);
-        if a.len() < 3 {
-            return Err(l
-                .error(format!(
-                    "`provides {iface}` needs a source and a path; usage: {USAGE}"
-                ))
-                .into());
-        }
-        let kind = match a[1].as_str() {
-            "image" => Input::Image,
-            "video" => Input::Video,
-            "videofile" => Input::VideoFile,
-            other => {
-                return Err(l
-                    .error(format!(
-                        "`provides {iface}`: source `{other}` is not image, video or videofile"
-                    ))
-                    .into());
-            }
-        };
-        let mut i = 3;
-        let mut size = if color {
-            Some((COLOR_WIDTH, COLOR_HEIGHT))
-        } else {
-            None
-        };
-        if var {
-            match a.get(3).map(String::as_str) {
-                Some("autosize") => i = 4,
-                Some(w) if w.parse::<u32>().is_ok() => {
-                    let (w, h) = (dim(l, 3, "width W")?, dim(l, 4, "height H")?);
-                    if w as u64 * h as u64 > MAX_PIXELS {
-                        return Err(l
-                            .error(format!("`provides {iface}`: {w}x{h} is too large (at most {MAX_PIXELS} pixels)"))
-                            .into());
-                    }
-                    size = Some((w, h));
-                    i = 5;
-                }
-                _ => {}
-            }
-        }
-        let (mut repeat, mut pace) = (false, true);
-        for w in &a[i.min(a.len())..] {
-            match w.as_str() {
-                "loop" => repeat = true,
-                "unpaced" => pace = false,
-                other => {
+    for (p, l) in lines.provides.into_iter().zip(conf.provides()) {
+        let (iface, kind, path, size, options) = match p {
+            Provides::Color(i, k, p, o) => (i, k, p, Some((COLOR_WIDTH, COLOR_HEIGHT)), o),
+            Provides::Sized(i, k, p, w, h, o) => {
+                if w as u64 * h as u64 > MAX_PIXELS {
                     return Err(l
                         .error(format!(
-                            "`provides {iface}`: `{other}` is not understood here; expected {}`loop` or `unpaced`",
-                            if var && i == 3 { "W H, `autosize`, " } else { "" }
+                            "`provides {i}`: {w}x{h} is too large (at most {MAX_PIXELS} pixels)"
                         ))
                         .into());
                 }
+                (i, k, p, Some((w, h)), o)
             }
-        }
+            Provides::Autosize(i, k, p, _, o) => (i, k, p, None, o),
+        };
         if out.iter().any(|(s, _)| s.interface == iface) {
             return Err(l.error(format!("`{iface}` is provided twice")).into());
         }
-        let path = if kind == Input::Video && a[2].starts_with("/dev/") {
-            PathBuf::from(&a[2])
+        let path = if kind == Input::Video && path.starts_with("/dev/") {
+            PathBuf::from(&path)
         } else {
-            conf.resolve(&a[2])
+            conf.resolve(&path)
         };
         out.push((
             Source {
-                interface: iface.to_string(),
+                interface: iface,
                 kind,
                 path,
                 size,
-                repeat,
-                pace,
+                repeat: options.iter().any(|o| o == "loop"),
+                pace: !options.iter().any(|o| o == "unpaced"),
             },
             l.clone(),
         ));

@@ -4,7 +4,7 @@ use std::time::Duration;
 
 use crate::conf::{
     ComponentConf, ConfLine,
-    settings::{MOTORS_TIMEOUT, Setting, choice, float, int, rest, word},
+    settings::{Form, MOTORS_TIMEOUT, Setting, choice, float, int, name, word},
 };
 use crate::interfaces::interface_name;
 
@@ -80,8 +80,33 @@ impl PlayerConf {
     }
 }
 
-/// The driver's lines, declared once (`jderobot help player`); `provides` lines take
-/// several forms and are read below.
+/// The Player interfaces a `device` word may name (`laser`, `ranger:1`).
+const DEVICES: &[&str] = &[
+    "position2d",
+    "laser",
+    "ranger",
+    "sonar",
+    "bumper",
+    "ptz",
+    "camera",
+    "blobfinder",
+];
+
+/// `[index I] [device INTERF[:I]] [ROBOT]`: what every `provides` form ends with.
+macro_rules! provides_tail {
+    ($($head:expr),* $(,)?) => {
+        &[
+            $($head,)*
+            choice("index", &["index"]).optional(),
+            int("I", "", 0, u32::MAX as i64),
+            choice("device", &["device"]).optional(),
+            word("INTERF[:I]"),
+            name("ROBOT").optional(),
+        ]
+    };
+}
+
+/// The driver's lines, declared once (`jderobot help player`).
 pub const LINES: &[Setting] = &[
     Setting::new(
         "hostname",
@@ -108,14 +133,53 @@ pub const LINES: &[Setting] = &[
             float("X", "mm", -1e9, 1e9),
             float("Y", "mm", -1e9, 1e9),
             float("THETA", "deg", -36_000.0, 36_000.0),
-            word("ROBOT").optional(),
+            name("ROBOT").optional(),
         ],
     )
     .repeats(),
-    Setting::new(
+    Setting::forms(
         "provides",
-        USAGE_PROVIDES,
-        &[word("INTERFACE"), rest("ARGS").optional()],
+        "an interface and the Player device it comes from: `index I` (the device index, default 0), \
+         `device INTERF[:I]` (a Player interface named explicitly), ROBOT (the interface's suffix)",
+        &[
+            Form::new(
+                "laser",
+                "N readings at R readings/deg (default 180 1), from laser:I or a ranger",
+                provides_tail![
+                    choice("laser", &["laser"]),
+                    int("N", "", 1, 720).optional(),
+                    float("R", "readings/deg", 0.01, 100.0),
+                ],
+            ),
+            Form::new(
+                "device",
+                "from position2d (encoders, motors), sonar or ranger, bumper, ptz, camera, blobfinder",
+                provides_tail![choice(
+                    "INTERFACE",
+                    &[
+                        "encoders",
+                        "jde_robot",
+                        "motors",
+                        "sonars",
+                        "us",
+                        "bumpers",
+                        "pantiltencoders",
+                        "ptencoders",
+                        "pantiltmotors",
+                        "ptmotors",
+                        "colorA",
+                        "colorB",
+                        "colorC",
+                        "colorD",
+                        "varcolorA",
+                        "varcolorB",
+                        "varcolorC",
+                        "varcolorD",
+                        "blobs",
+                    ],
+                )],
+            ),
+        ],
     )
     .repeats(),
     MOTORS_TIMEOUT,
@@ -139,12 +203,146 @@ pub const LINES: &[Setting] = &[
     .default("75"),
 ];
 
-pub const USAGE_PROVIDES: &str = "provides encoders|motors|sonars|bumpers|pantiltencoders|pantiltmotors|\
-colorA..D|varcolorA..D|blobs [index I] [device INTERF[:I]] [ROBOT], provides laser N R [index I] \
-[device laser|ranger[:I]] [ROBOT]";
+#[derive(serde::Deserialize)]
+struct Lines {
+    hostname: Option<(String, Option<String>, Option<u16>)>,
+    port: Option<(u16, Option<String>, Option<String>)>,
+    initial_position: Vec<(f64, f64, f64, Option<String>)>,
+    provides: Vec<Provides>,
+    #[allow(dead_code)] // read by `conf.motors_timeout()`
+    motors_timeout: u64,
+    timeout: u64,
+    datamode: String,
+    cycle: u64,
+}
+
+/// The words after a `provides` line's interface (and a laser's N R).
+type Tail = (
+    Option<String>,
+    Option<u32>,
+    Option<String>,
+    Option<String>,
+    Option<String>,
+);
+
+#[derive(serde::Deserialize)]
+enum Provides {
+    #[serde(rename = "laser")]
+    Laser(
+        String,
+        Option<usize>,
+        Option<f64>,
+        Option<String>,
+        Option<u32>,
+        Option<String>,
+        Option<String>,
+        Option<String>,
+    ),
+    #[serde(rename = "device")]
+    Device(
+        String,
+        Option<String>,
+        Option<u32>,
+        Option<String>,
+        Option<String>,
+        Option<String>,
+    ),
+}
+
+impl PlayerConf {
+    pub fn parse(conf: &ComponentConf) -> anyhow::Result<PlayerConf> {
+        let lines: Lines = conf.settings(LINES)?;
+        // `hostname H [port P]` and `port P [hostname H]`: the last of each counts.
+        let mut host = "localhost".to_string();
+        let mut port: u16 = 6665;
+        let order = |k: &str| conf.lines_with(k).last().map(|l| l.at.line);
+        let (h_at, p_at) = (order("hostname"), order("port"));
+        let from_host = |port: &mut u16, host: &mut String| {
+            if let Some((h, _, p)) = &lines.hostname {
+                *host = h.clone();
+                if let Some(p) = p {
+                    *port = *p;
+                }
+            }
+        };
+        let from_port = |port: &mut u16, host: &mut String| {
+            if let Some((p, _, h)) = &lines.port {
+                *port = *p;
+                if let Some(h) = h {
+                    *host = h.clone();
+                }
+            }
+        };
+        if h_at <= p_at {
+            from_host(&mut port, &mut host);
+            from_port(&mut port, &mut host);
+        } else {
+            from_port(&mut port, &mut host);
+            from_host(&mut port, &mut host);
+        }
+        let offsets = lines
+            .initial_position
+            .into_iter()
+            .map(|(x, y, theta_deg, robot)| (robot, Offset { x, y, theta_deg }))
+            .collect();
+        let mut wants: Vec<Want> = Vec::new();
+        for (p, l) in lines.provides.into_iter().zip(conf.provides()) {
+            let w = want(p, l)?;
+            if let Some(o) = wants.iter().find(|o| o.name == w.name) {
+                return Err(err(
+                    l,
+                    format!(
+                        "`{}` is already provided at line {}",
+                        w.name, o.line.at.line
+                    ),
+                ));
+            }
+            wants.push(w);
+        }
+        Ok(PlayerConf {
+            host,
+            port,
+            offsets,
+            wants,
+            motors_timeout: conf.motors_timeout()?,
+            timeout: Duration::from_millis(lines.timeout),
+            mode: if lines.datamode == "pull" {
+                DataMode::Pull
+            } else {
+                DataMode::Push
+            },
+            cycle: Duration::from_millis(lines.cycle),
+        })
+    }
+}
 
 fn err(l: &ConfLine, m: impl Into<String>) -> anyhow::Error {
     l.error(m).into()
+}
+
+/// A `device INTERF[:I]` word: the Player interface's code and its index.
+fn device(l: &ConfLine, d: &str) -> anyhow::Result<(u32, Option<u32>)> {
+    let (name, idx) = match d.split_once(':') {
+        Some((n, k)) => (n, Some(k)),
+        None => (d, None),
+    };
+    let code = interf_code(name).ok_or_else(|| {
+        err(
+            l,
+            format!(
+                "`device {d}`: expected a Player interface ({}) with an optional :INDEX",
+                DEVICES.join(", ")
+            ),
+        )
+    })?;
+    let idx = match idx {
+        Some(k) => Some(
+            k.parse::<u32>()
+                .map_err(|_| err(l, format!("`device {d}`: `{k}` is not a device index")))?,
+        ),
+        None => None,
+    };
+    Ok((code, idx))
 }
 
 fn interf_code(name: &str) -> Option<u32> {
@@ -161,249 +359,34 @@ fn interf_code(name: &str) -> Option<u32> {
     })
 }
 
-fn finite(l: &ConfLine, i: usize, what: &str) -> anyhow::Result<f64> {
-    let v: f64 = l.arg(i, what)?;
-    if !v.is_finite() {
-        return Err(err(
-            l,
-            format!("`{}`: {what} must be a finite number", l.keyword()),
-        ));
-    }
-    Ok(v)
-}
-
-fn robot_name(l: &ConfLine, w: &str) -> anyhow::Result<String> {
-    if w.parse::<f64>().is_ok() || w.contains('.') || w.contains(':') {
-        return Err(err(
-            l,
-            format!("`{w}` is not a robot name (a word without dots); usage: {USAGE_PROVIDES}"),
-        ));
-    }
-    Ok(w.to_string())
-}
-
-impl PlayerConf {
-    pub fn parse(conf: &ComponentConf) -> anyhow::Result<PlayerConf> {
-        conf.check(LINES)?;
-        let mut host = "localhost".to_string();
-        let mut port: u16 = 6665;
-        let mut offsets = Vec::new();
-        let mut wants: Vec<Want> = Vec::new();
-        let mut timeout = Duration::from_millis(2000);
-        let mut mode = DataMode::Push;
-        let mut cycle = Duration::from_millis(75);
-        for l in &conf.lines {
-            match l.keyword() {
-                "hostname" | "port" => {
-                    // `hostname H port P` (either part alone too).
-                    let w = &l.words;
-                    let mut i = 0;
-                    while i < w.len() {
-                        match (w[i].as_str(), w.get(i + 1)) {
-                            ("hostname", Some(h)) => host = h.clone(),
-                            ("port", Some(p)) => {
-                                port = p.parse().ok().filter(|p| *p > 0).ok_or_else(|| {
-                                    err(l, format!("`port {p}`: expected a TCP port 1..65535"))
-                                })?
-                            }
-                            _ => {
-                                return Err(err(
-                                    l,
-                                    format!(
-                                        "`{}`: expected `hostname H port P` (e.g. `hostname localhost port 6665`)",
-                                        w.join(" ")
-                                    ),
-                                ));
-                            }
-                        }
-                        i += 2;
-                    }
-                }
-                "initial_position" => {
-                    l.expect_args(3, 4, "initial_position X_MM Y_MM THETA_DEG [ROBOT]")?;
-                    let robot = match l.args().get(3) {
-                        Some(r) => Some(robot_name(l, r)?),
-                        None => None,
-                    };
-                    offsets.push((
-                        robot,
-                        Offset {
-                            x: finite(l, 0, "X in mm")?,
-                            y: finite(l, 1, "Y in mm")?,
-                            theta_deg: finite(l, 2, "THETA in degrees")?,
-                        },
-                    ));
-                }
-                "motors_timeout" => {}
-                "timeout" => {
-                    l.expect_args(1, 1, "timeout MS")?;
-                    timeout = l.millis(0, "milliseconds", 50..=60_000)?;
-                }
-                "cycle" => {
-                    l.expect_args(1, 1, "cycle MS")?;
-                    cycle = l.millis(0, "milliseconds", 5..=10_000)?;
-                }
-                "datamode" => {
-                    l.expect_args(1, 1, "datamode push|pull")?;
-                    mode = match l.args()[0].as_str() {
-                        "push" => DataMode::Push,
-                        "pull" => DataMode::Pull,
-                        o => return Err(err(l, format!("`datamode {o}`: expected push or pull"))),
-                    };
-                }
-                "provides" => {
-                    let w = parse_provides(l)?;
-                    if let Some(o) = wants.iter().find(|o| o.name == w.name) {
-                        return Err(err(
-                            l,
-                            format!(
-                                "`{}` is already provided at line {}",
-                                w.name, o.line.at.line
-                            ),
-                        ));
-                    }
-                    wants.push(w);
-                }
-                _ => {} // refused by the declaration
-            }
-        }
-        Ok(PlayerConf {
-            host,
-            port,
-            offsets,
-            wants,
-            motors_timeout: conf.motors_timeout()?,
-            timeout,
-            mode,
-            cycle,
-        })
-    }
-}
-
-fn parse_provides(l: &ConfLine) -> anyhow::Result<Want> {
-    l.expect_args(1, 12, USAGE_PROVIDES)?;
-    let what = l.args()[0].as_str();
-    let rest: Vec<&str> = l.args()[1..].iter().map(String::as_str).collect();
-    let mut index = None;
-    let mut device = None;
-    let mut robot = None;
-    let mut numbers: Vec<&str> = Vec::new();
-    let mut i = 0;
-    while i < rest.len() {
-        match rest[i] {
-            "index" => {
-                let v = rest
-                    .get(i + 1)
-                    .and_then(|s| s.parse::<u32>().ok())
-                    .ok_or_else(|| {
-                        err(
-                            l,
-                            format!("`provides {what}`: `index` needs a device index (0, 1, ...)"),
-                        )
-                    })?;
-                index = Some(v);
-                i += 2;
-            }
-            "device" => {
-                let d = rest.get(i + 1).copied().unwrap_or("");
-                let (name, idx) = match d.split_once(':') {
-                    Some((n, k)) => (n, Some(k)),
-                    None => (d, None),
-                };
-                let code = interf_code(name).ok_or_else(|| {
-                    err(
-                        l,
-                        format!(
-                            "`device {d}`: expected a Player interface (position2d, laser, ranger, sonar, \
-                             bumper, ptz, camera, blobfinder) with an optional :INDEX"
-                        ),
-                    )
-                })?;
-                let idx = match idx {
-                    Some(k) => Some(k.parse::<u32>().map_err(|_| {
-                        err(l, format!("`device {d}`: `{k}` is not a device index"))
-                    })?),
-                    None => None,
-                };
-                device = Some((code, idx));
-                i += 2;
-            }
-            w if w.parse::<f64>().is_ok() => {
-                numbers.push(w);
-                i += 1;
-            }
-            w => {
-                if robot.is_some() {
-                    return Err(err(
-                        l,
-                        format!("`provides {what}`: unexpected `{w}`; usage: {USAGE_PROVIDES}"),
-                    ));
-                }
-                robot = Some(robot_name(l, w)?);
-                i += 1;
-            }
-        }
-    }
-    let kind = match what {
-        "laser" => match numbers.as_slice() {
-            [] => Provided::Laser(180, 1.0),
-            [n, r] => {
-                let n = n
-                    .parse::<usize>()
-                    .ok()
-                    .filter(|n| (1..=720).contains(n))
-                    .ok_or_else(|| {
-                        err(
-                            l,
-                            format!("`provides laser`: `{n}` is not a number of readings 1..720"),
-                        )
-                    })?;
-                let r = r.parse::<f64>().ok().filter(|r| *r > 0.0 && r.is_finite()).ok_or_else(|| {
-                    err(l, format!("`provides laser`: `{r}` is not a positive resolution (readings/deg)"))
-                })?;
-                Provided::Laser(n, r)
-            }
-            _ => {
-                return Err(err(
-                    l,
-                    format!(
-                        "`provides laser` takes N R (e.g. `provides laser 180 1`); usage: {USAGE_PROVIDES}"
-                    ),
-                ));
-            }
-        },
-        other => {
-            if !numbers.is_empty() {
-                return Err(err(
-                    l,
-                    format!(
-                        "`provides {other}`: unexpected `{}`; usage: {USAGE_PROVIDES}",
-                        numbers.join(" ")
-                    ),
-                ));
-            }
-            match other {
+/// One `provides` line, as declared, into what the driver asks the server for.
+fn want(p: Provides, l: &ConfLine) -> anyhow::Result<Want> {
+    let (what, kind, tail): (String, Provided, Tail) = match p {
+        Provides::Laser(w, n, r, a, b, c, d, e) => (
+            w,
+            Provided::Laser(n.unwrap_or(180), r.unwrap_or(1.0)),
+            (a, b, c, d, e),
+        ),
+        Provides::Device(w, a, b, c, d, e) => {
+            let kind = match w.as_str() {
                 "encoders" | "jde_robot" => Provided::Encoders,
                 "motors" => Provided::Motors,
                 "sonars" | "us" => Provided::Sonars,
                 "bumpers" => Provided::Bumpers,
                 "pantiltencoders" | "ptencoders" => Provided::PanTiltEncoders,
                 "pantiltmotors" | "ptmotors" => Provided::PanTiltMotors,
-                "colorA" | "colorB" | "colorC" | "colorD" => Provided::Camera(true),
-                "varcolorA" | "varcolorB" | "varcolorC" | "varcolorD" => Provided::Camera(false),
                 "blobs" => Provided::Blobs,
-                _ => {
-                    return Err(err(
-                        l,
-                        format!(
-                            "the player driver does not provide `{other}`; usage: {USAGE_PROVIDES}"
-                        ),
-                    ));
-                }
-            }
+                c => Provided::Camera(c.starts_with("color")),
+            };
+            (w, kind, (a, b, c, d, e))
         }
     };
-    let base = match what {
+    let (_, index, _, device_word, robot) = tail;
+    let device = match device_word {
+        Some(d) => Some(device(l, &d)?),
+        None => None,
+    };
+    let base = match what.as_str() {
         "jde_robot" => "encoders",
         w => w,
     };

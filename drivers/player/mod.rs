@@ -19,12 +19,13 @@
 //! provides laser 180 1 index 1        # any line: `index I` (device index), `device ranger:1`
 //!                                     #   (the Player device, explicitly), a robot suffix:
 //! provides encoders index 1 robot2    #   interface encoders.robot2 from position2d:1
-//! motors_timeout 500                  # ms: an older motors command counts as zero
-//! timeout 2000                        # ms: request replies, and silence before reconnecting
-//! datamode push                       # push (the server's default) or pull
-//! cycle 75                            # ms: the command cycle (4.3's PLAYER_COMMAND_CYCLE)
+//! datamode pull                       # push (the server's default) or pull
 //! end_driver
 //! ```
+//!
+//! Every line, with its arguments, ranges and defaults (`motors_timeout`,
+//! `timeout`, `cycle`...), is declared once in [`conf::LINES`]: `jderobot help
+//! player` prints it and `docs/player.md` shows that text.
 //!
 //! # Interfaces (units of the seed)
 //! | interface | Player device | conversion |

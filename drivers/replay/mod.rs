@@ -48,8 +48,8 @@
 //! simulator with `stepped MS`) and gives the same commands.
 //!
 //! # Name space
-//! In `stepped on`, exports `replay.step` ([`StepGate`](crate::mcapfmt::StepGate));
-//! the shell's `step [N]` lets N messages through.
+//! In `stepped on`, exports `replay.step` ([`StepGate`]); the shell's `step [N]`,
+//! a command this driver registers, lets N messages through.
 //!
 //! No system package is needed. The file is read into memory whole (a regular
 //! file of at most `mcapfmt::MAX_FILE_BYTES`).
@@ -72,7 +72,7 @@ use crate::{
         ComponentConf,
         settings::{Setting, float, on_off, path, rest, word},
     },
-    mcapfmt::{self, Source, StepGate, Summary},
+    mcapfmt::{self, Source, Summary},
     runtime::{Driver, Runtime, Worker},
 };
 
@@ -401,6 +401,77 @@ fn run(
         }
     }
 }
+
+/// The replay's step gate in `stepped` mode, exported as `replay.step`: the shell's
+/// `step [N]` lets N more messages through.
+#[derive(Default)]
+pub struct StepGate {
+    permits: parking_lot::Mutex<u64>,
+    cv: parking_lot::Condvar,
+    /// Messages published so far.
+    pub published: std::sync::atomic::AtomicU64,
+}
+
+impl StepGate {
+    /// Lets `n` more messages through.
+    pub fn step(&self, n: u64) {
+        *self.permits.lock() += n;
+        self.cv.notify_all();
+    }
+
+    /// Takes one permit, waiting up to `timeout`; false if none came.
+    pub fn take(&self, timeout: Duration) -> bool {
+        let mut p = self.permits.lock();
+        if *p == 0 {
+            self.cv.wait_for(&mut p, timeout);
+        }
+        if *p > 0 {
+            *p -= 1;
+            true
+        } else {
+            false
+        }
+    }
+}
+
+/// The shell's `step [N]`: lets a stepped replay publish N more messages.
+fn step(rt: &Runtime, args: &[&str], out: &mut dyn std::io::Write) -> Result<(), String> {
+    use std::sync::atomic::Ordering;
+    let n = match args {
+        [] => 1,
+        [n] => n
+            .parse::<u64>()
+            .ok()
+            .filter(|n| (1..=1_000_000).contains(n))
+            .ok_or_else(|| format!("step: `{n}` is not a count from 1 to 1000000"))?,
+        _ => return Err("step: Usage: step [N]".into()),
+    };
+    let gate = rt.names.import::<StepGate>("replay", "step").map_err(|_| {
+        "step: no stepped replay is loaded (driver replay with `stepped on`)".to_string()
+    })?;
+    let before = gate.published.load(Ordering::Acquire);
+    gate.step(n);
+    let t0 = std::time::Instant::now();
+    while gate.published.load(Ordering::Acquire) < before + n
+        && t0.elapsed() < Duration::from_secs(2)
+    {
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    writeln!(
+        out,
+        "replay: {} messages published",
+        gate.published.load(Ordering::Acquire)
+    )
+    .map_err(|e| format!("step: {e}"))
+}
+
+crate::register_command!(
+    "replay",
+    "step",
+    "[N]",
+    "Let a stepped replay publish its next N messages (default 1)",
+    step
+);
 
 crate::register_driver!(
     Driver,

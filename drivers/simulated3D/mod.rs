@@ -29,6 +29,7 @@
 //! plane are drawn clipped (4.3.0 left them out; 4.3.1 drew them).
 
 use std::{
+    path::PathBuf,
     sync::{
         Arc,
         atomic::{AtomicBool, Ordering},
@@ -39,7 +40,7 @@ use std::{
 use crate::{
     conf::{
         ComponentConf,
-        settings::{self, Setting},
+        settings::{self, Form, Setting},
     },
     interfaces::{COLOR_HEIGHT, COLOR_WIDTH, Image, Interface},
     progeo::{PinholeCamera, World},
@@ -83,69 +84,66 @@ const LINES: &[Setting] = &[
         &[settings::path("FILE")],
     )
     .required(),
-    Setting::new(
-        "provides",
+    settings::provides_forms(
         "a camera: an image interface and its camera file (progeo's format)",
         &[
-            settings::interface("INTERFACE"),
-            settings::path("CAMERA_FILE"),
+            Form::new(
+                "color",
+                "a 320x240 camera (its file must say so)",
+                &[settings::COLOR, settings::path("CAMERA_FILE")],
+            ),
+            Form::new(
+                "varcolor",
+                "a camera of the file's columns x rows",
+                &[settings::VARCOLOR, settings::path("CAMERA_FILE")],
+            ),
         ],
     )
-    .repeats()
     .required(),
 ];
 
+#[derive(serde::Deserialize)]
+struct Lines {
+    worldfile: PathBuf,
+    provides: Vec<(String, PathBuf)>,
+}
+
 /// Parses the driver's lines and reads the world and camera files.
 pub fn parse(conf: &ComponentConf) -> anyhow::Result<Sim3dConf> {
-    conf.check(LINES)?;
-    let mut world = None;
+    let lines: Lines = conf.settings(LINES)?;
+    let world = World::load(&lines.worldfile).map_err(|e| {
+        let at = conf
+            .line("worldfile")
+            .map(|l| l.at.to_string())
+            .unwrap_or_default();
+        anyhow::anyhow!("{at}: world file: {e}")
+    })?;
     let mut cameras: Vec<(String, PinholeCamera)> = Vec::new();
-    for l in &conf.lines {
-        match l.keyword() {
-            "worldfile" => {
-                l.expect_args(1, 1, "worldfile FILE")?;
-                let path = conf.resolve(&l.args()[0]);
-                world = Some(World::load(&path).map_err(|e| l.error(format!("world file: {e}")))?);
-            }
-            "provides" => {
-                l.expect_args(2, 2, "provides colorA..D|varcolorA..D CAMERA_FILE")?;
-                let image = l.image_interface(
-                    0,
-                    "simulated3D",
-                    "provides colorA..D|varcolorA..D CAMERA_FILE",
-                )?;
-                let (iface, color) = (image.name.as_str(), image.fixed_size);
-                let path = conf.resolve(&l.args()[1]);
-                let cam =
-                    PinholeCamera::load(&path).map_err(|e| l.error(format!("camera file: {e}")))?;
-                let (c, r) = (cam.columns, cam.rows);
-                if !(1..=8192).contains(&c) || !(1..=8192).contains(&r) {
-                    return Err(l
-                        .error(format!(
-                            "{}: columns {c} rows {r} is not an image size (1..8192)",
-                            path.display()
-                        ))
-                        .into());
-                }
-                if color && (c, r) != (COLOR_WIDTH, COLOR_HEIGHT) {
-                    return Err(l
-                        .error(format!(
-                            "{}: the camera is {c}x{r}, but {iface} is {COLOR_WIDTH}x{COLOR_HEIGHT}; use a varcolor interface",
-                            path.display()
-                        ))
-                        .into());
-                }
-                if cameras.iter().any(|(n, _)| n == iface) {
-                    return Err(l.error(format!("`{iface}` is provided twice")).into());
-                }
-                cameras.push((iface.to_string(), cam));
-            }
-            _ => {} // refused by the declaration
+    for ((iface, path), l) in lines.provides.into_iter().zip(conf.provides()) {
+        let color = settings::COLOR.accepts(&iface);
+        let cam = PinholeCamera::load(&path).map_err(|e| l.error(format!("camera file: {e}")))?;
+        let (c, r) = (cam.columns, cam.rows);
+        if !(1..=8192).contains(&c) || !(1..=8192).contains(&r) {
+            return Err(l
+                .error(format!(
+                    "{}: columns {c} rows {r} is not an image size (1..8192)",
+                    path.display()
+                ))
+                .into());
         }
+        if color && (c, r) != (COLOR_WIDTH, COLOR_HEIGHT) {
+            return Err(l
+                .error(format!(
+                    "{}: the camera is {c}x{r}, but {iface} is {COLOR_WIDTH}x{COLOR_HEIGHT}; use a varcolor interface",
+                    path.display()
+                ))
+                .into());
+        }
+        if cameras.iter().any(|(n, _)| *n == iface) {
+            return Err(l.error(format!("`{iface}` is provided twice")).into());
+        }
+        cameras.push((iface, cam));
     }
-    let Some(world) = world else {
-        anyhow::bail!("simulated3D: no `worldfile` line"); // refused by the declaration
-    };
     Ok(Sim3dConf { world, cameras })
 }
 

@@ -44,7 +44,8 @@ impl Sim {
             position[1] + 1000.0 * el.cos() * az.sin(),
             position[2] + 1000.0 * el.sin(),
         ];
-        let fov = m.camera_fov.clamp(1.0, 170.0).to_radians();
+        // The conf's declaration bounds it (0.001..169.999 deg); used as given.
+        let fov = m.camera_fov.to_radians();
         PinholeCamera::new(
             HPoint3D::point(position[0], position[1], position[2]),
             HPoint3D::point(foa[0], foa[1], foa[2]),

@@ -1,18 +1,18 @@
 //! The simulator's conf lines (see the [module doc](super) and `docs/simulator.md`)
 //! turned into a [`Simulation`] ready to run: the [`Sim`] with its world and robots,
-//! what each robot provides, the clock and the publishing periods. Every argument
-//! is read with the conf vocabulary of [`ConfLine`], so every error names
-//! `file:line`, the argument and what would be right.
+//! what each robot provides, the clock and the publishing periods. Every line is
+//! read through its declaration ([`LINES`]) and nowhere else, so every error
+//! names `file:line`, the argument and its range, and no value is clamped.
 
-use std::{
-    ops::Bound::{Excluded, Unbounded},
-    time::Duration,
-};
+use std::time::Duration;
 
 use crate::{
     conf::{
         ComponentConf, ConfError, ConfLine,
-        settings::{self, MOTORS_TIMEOUT, Setting, choice, float, int, on_off, path, word},
+        settings::{
+            self, Form, MOTORS_TIMEOUT, NumberOr, Setting, choice, float, float_or, int, name,
+            on_off, path, pixels,
+        },
     },
     interfaces::{COLOR_HEIGHT, COLOR_WIDTH, interface_name},
     world::{World, closest_on_segment},
@@ -89,8 +89,19 @@ pub struct Simulation {
     pub publish_always: bool,
 }
 
-/// The simulator's lines, declared once (`jderobot help simulator`). Their values
-/// are read below, in file order (robots, then what each provides).
+/// The sensors a `period` line names.
+const SENSORS: &[&str] = &[
+    "encoders",
+    "laser",
+    "sonars",
+    "bumpers",
+    "camera",
+    "pantiltencoders",
+    "imu",
+];
+
+/// The simulator's lines, declared once (`jderobot help simulator`) and read
+/// into [`Lines`]; nothing else reads them.
 pub const LINES: &[Setting] = &[
     Setting::new(
         "world",
@@ -101,7 +112,7 @@ pub const LINES: &[Setting] = &[
         "robot",
         "a robot; its pose (mm, mm, deg) or the world's next start",
         &[
-            word("NAME"),
+            name("NAME"),
             float("X", "mm", -1e7, 1e7).optional(),
             float("Y", "mm", -1e7, 1e7),
             float("THETA", "deg", -36_000.0, 36_000.0),
@@ -109,13 +120,62 @@ pub const LINES: &[Setting] = &[
     )
     .repeats(),
     settings::INITIAL_POSITION.help("the first robot's pose"),
-    settings::provides(USAGE_PROVIDES),
+    settings::provides_forms(
+        "what a robot provides (ROBOT: a `robot` line's name; default the first robot)",
+        &[
+            Form::new(
+                "device",
+                "the robot's device",
+                &[
+                    choice(
+                        "INTERFACE",
+                        &[
+                            "encoders",
+                            "motors",
+                            "sonars",
+                            "bumpers",
+                            "pantiltencoders",
+                            "pantiltmotors",
+                            "imu",
+                        ],
+                    ),
+                    name("ROBOT").optional(),
+                ],
+            ),
+            Form::new(
+                "laser",
+                "its laser: N readings at RESOLUTION readings/deg (default: 180 at 1)",
+                &[
+                    choice("laser", &["laser"]),
+                    int("N", "", 1, 720).optional(),
+                    float("RESOLUTION", "readings/deg", 0.01, 100.0),
+                    name("ROBOT").optional(),
+                ],
+            ),
+            Form::new(
+                "color",
+                "its pan-tilt camera at 320x240",
+                &[settings::COLOR, name("ROBOT").optional()],
+            ),
+            Form::new(
+                "varcolor",
+                "its pan-tilt camera at W x H (default 320x240)",
+                &[
+                    settings::VARCOLOR,
+                    pixels("W", 4096).optional(),
+                    pixels("H", 4096),
+                    name("ROBOT").optional(),
+                ],
+            ),
+        ],
+    ),
     MOTORS_TIMEOUT,
     Setting::new(
         "speed",
-        "simulated seconds per wall second (1 = real time), or max",
-        &[word("N|max")],
-    ),
+        "simulated seconds per wall second (1 = real time), or max: as fast as it can",
+        &[float_or("N", "", 0.001, 1e6, "max")],
+    )
+    .default("1"),
     Setting::new(
         "stepped",
         "advance this much simulated time per new command on the first robot's motors",
@@ -125,39 +185,44 @@ pub const LINES: &[Setting] = &[
         "seed",
         "the noise's random seed",
         &[int("N", "", 0, i64::MAX)],
-    ),
+    )
+    .default("1"),
     Setting::new(
         "step",
         "the physics step",
         &[float("MS", "ms", 0.001, 100.0)],
-    ),
+    )
+    .default("10"),
     Setting::new(
         "period",
         "how often a sensor publishes (simulated time)",
         &[
-            choice(
-                "SENSOR",
-                &[
-                    "encoders",
-                    "laser",
-                    "sonars",
-                    "bumpers",
-                    "camera",
-                    "pantiltencoders",
-                    "imu",
-                ],
-            ),
+            choice("SENSOR", SENSORS),
             float("MS", "ms", 0.001, 60_000.0),
         ],
     )
     .repeats(),
-    Setting::new(
+    Setting::forms(
         "noise",
-        "sensor noise: odometry DISTANCE_FRACTION ANGLE_FRACTION, laser MM or sonars MM",
+        "sensor noise",
         &[
-            choice("SENSOR", &["odometry", "laser", "sonars"]),
-            float("A", "", 0.0, 1e6),
-            float("B", "", 0.0, 1e6).optional(),
+            Form::new(
+                "odometry",
+                "odometry's error: a fraction of each distance and of each turn",
+                &[
+                    choice("odometry", &["odometry"]),
+                    float("DISTANCE_FRACTION", "", 0.0, 1e6),
+                    float("ANGLE_FRACTION", "", 0.0, 1e6),
+                ],
+            ),
+            Form::new(
+                "range",
+                "a range sensor's standard deviation",
+                &[
+                    choice("laser|sonars", &["laser", "sonars"]),
+                    float("MM", "mm", 0.0, 1e6),
+                ],
+            ),
         ],
     )
     .repeats(),
@@ -193,22 +258,56 @@ pub const LINES: &[Setting] = &[
         "publish_always",
         "publish sensors even while nobody uses them",
         &[on_off("SWITCH")],
-    ),
+    )
+    .default("off"),
 ];
 
-const USAGE_PROVIDES: &str = "provides encoders|motors|sonars|bumpers|pantiltencoders|pantiltmotors|imu|colorA..D [ROBOT], \
-provides laser [N RESOLUTION] [ROBOT], provides varcolorA..D [W H] [ROBOT]";
+/// The simulator's lines as declared.
+#[derive(serde::Deserialize)]
+struct Lines {
+    #[allow(dead_code)] // its file is read by `world`, which names what it is
+    world: Option<std::path::PathBuf>,
+    robot: Vec<RobotLine>,
+    initial_position: Option<(f64, f64, f64)>,
+    provides: Vec<ProvidesLine>,
+    #[allow(dead_code)] // read by `conf.motors_timeout()`
+    motors_timeout: u64,
+    speed: NumberOr,
+    stepped: Option<f64>,
+    seed: u64,
+    step: f64,
+    period: Vec<(String, f64)>,
+    noise: Vec<NoiseLine>,
+    accel: Option<(f64, f64)>,
+    radius: Option<f64>,
+    laser_range: Option<f64>,
+    camera_height: Option<f64>,
+    camera_fov: Option<f64>,
+    publish_always: bool,
+}
 
-/// Numbers above zero.
-const POSITIVE: (std::ops::Bound<f64>, std::ops::Bound<f64>) = (Excluded(0.0), Unbounded);
+/// `robot NAME [X Y THETA]`.
+type RobotLine = (String, Option<f64>, Option<f64>, Option<f64>);
 
-/// A robot's pose from arguments `i..i+3`: X Y mm, THETA degrees.
-fn pose(l: &ConfLine, i: usize) -> Result<Pose, ConfError> {
-    Ok(Pose::new(
-        l.number(i, "X in mm", ..)?,
-        l.number(i + 1, "Y in mm", ..)?,
-        l.number(i + 2, "THETA in degrees", ..)?,
-    ))
+/// A `provides` line in its form: the interface, its arguments, the robot.
+#[derive(serde::Deserialize)]
+enum ProvidesLine {
+    #[serde(rename = "device")]
+    Device(String, Option<String>),
+    #[serde(rename = "laser")]
+    Laser(String, Option<usize>, Option<f64>, Option<String>),
+    #[serde(rename = "color")]
+    Color(String, Option<String>),
+    #[serde(rename = "varcolor")]
+    Varcolor(String, Option<u32>, Option<u32>, Option<String>),
+}
+
+#[derive(serde::Deserialize)]
+enum NoiseLine {
+    #[serde(rename = "odometry")]
+    Odometry(serde::de::IgnoredAny, f64, f64),
+    #[serde(rename = "range")]
+    Range(String, f64),
 }
 
 /// The lines that are not `provides`: the world, the robots, the clock, the model.
@@ -224,245 +323,156 @@ struct Settings {
     publish_always: bool,
 }
 
-fn settings(conf: &ComponentConf) -> Result<Settings, ConfError> {
-    conf.check(LINES)?;
-    let mut s = Settings {
-        world: World::new(),
-        robots: Vec::new(),
-        model: RobotModel::default(),
-        noise: Noise::default(),
-        seed: 1,
-        clock: Clock::Speed(1.0),
-        step: 0.01,
-        periods: Periods::default(),
-        publish_always: false,
-    };
-    let mut initial: Option<Pose> = None;
-    for l in &conf.lines {
-        match l.keyword() {
-            "world" => {
-                l.expect_args(1, 1, "world FILE")?;
-                let path = l.existing_file(0, "the world file")?;
-                s.world = World::load(&path).map_err(|e| l.error(format!("world file: {e}")))?;
-            }
-            "robot" => {
-                if l.args().len() != 1 {
-                    l.expect_args(4, 4, "robot NAME X_MM Y_MM THETA_DEG")?;
-                }
-                let name = l.word(0, "a robot name")?.to_string();
-                if name.parse::<f64>().is_ok() || name.contains('.') {
-                    return Err(l.error(format!(
-                        "`robot`: `{name}` is not a valid robot name (a word without dots)"
-                    )));
-                }
-                if s.robots.iter().any(|r| r.0 == name) {
-                    return Err(l.error(format!("robot `{name}` is declared twice")));
-                }
-                let at = if l.args().len() == 4 {
-                    Some(pose(l, 1)?)
-                } else {
-                    None
-                };
-                s.robots.push((name, at));
-            }
-            "initial_position" => {
-                l.expect_args(3, 3, "initial_position X_MM Y_MM THETA_DEG")?;
-                initial = Some(pose(l, 0)?);
-            }
-            "provides" | "motors_timeout" => {}
-            "speed" => {
-                l.expect_args(1, 1, "speed N|max")?;
-                s.clock = if l.args()[0] == "max" {
-                    Clock::Max
-                } else {
-                    Clock::Speed(l.number(0, "a speed factor (or max)", POSITIVE)?)
-                };
-            }
-            "stepped" => {
-                l.expect_args(1, 1, "stepped MS")?;
-                s.clock =
-                    Clock::Stepped(l.number(0, "milliseconds per command", POSITIVE)? / 1000.0);
-            }
-            "seed" => {
-                l.expect_args(1, 1, "seed N")?;
-                s.seed = l.number(0, "an integer seed", ..)?;
-            }
-            "step" => {
-                l.expect_args(1, 1, "step MS")?;
-                s.step = l.number(0, "the physics step in ms", 0.001..=100.0)? / 1000.0;
-            }
-            "period" => {
-                l.expect_args(
-                    2,
-                    2,
-                    "period encoders|laser|sonars|bumpers|camera|pantiltencoders|imu MS",
-                )?;
-                let sensor = l.choice(
-                    0,
-                    "the sensor",
-                    &[
-                        "encoders",
-                        "laser",
-                        "sonars",
-                        "bumpers",
-                        "camera",
-                        "pantiltencoders",
-                        "imu",
-                    ],
-                )?;
-                let v = l.number(1, "a period in ms", POSITIVE)? / 1000.0;
-                let p = &mut s.periods;
-                *match sensor {
-                    "encoders" => &mut p.encoders,
-                    "laser" => &mut p.laser,
-                    "sonars" => &mut p.sonars,
-                    "bumpers" => &mut p.bumpers,
-                    "camera" => &mut p.camera,
-                    "imu" => &mut p.imu,
-                    _ => &mut p.pantiltencoders,
-                } = v;
-            }
-            "noise" => match l.choice(0, "the noisy sensor", &["odometry", "laser", "sonars"])? {
-                "odometry" => {
-                    l.expect_args(3, 3, "noise odometry DISTANCE_FRACTION ANGLE_FRACTION")?;
-                    s.noise.odometry_distance = l.number(1, "a fraction of the distance", 0.0..)?;
-                    s.noise.odometry_angle = l.number(2, "a fraction of the angle", 0.0..)?;
-                }
-                "laser" => {
-                    l.expect_args(2, 2, "noise laser MM")?;
-                    s.noise.laser = l.number(1, "a standard deviation in mm", 0.0..)?;
-                }
-                _ => {
-                    l.expect_args(2, 2, "noise sonars MM")?;
-                    s.noise.sonars = l.number(1, "a standard deviation in mm", 0.0..)?;
-                }
-            },
-            "accel" => {
-                l.expect_args(2, 2, "accel MM_S2 DEG_S2")?;
-                s.model.accel_v = l.number(0, "a linear acceleration in mm/s²", POSITIVE)?;
-                s.model.accel_w = l.number(1, "an angular acceleration in deg/s²", POSITIVE)?;
-            }
-            "radius" => {
-                l.expect_args(1, 1, "radius MM")?;
-                s.model.radius = l.number(0, "a radius in mm", POSITIVE)?;
-            }
-            "laser_range" => {
-                l.expect_args(1, 1, "laser_range MM")?;
-                s.model.laser_range = l.number(0, "a range in mm", POSITIVE)?;
-            }
-            "camera_height" => {
-                l.expect_args(1, 1, "camera_height MM")?;
-                s.model.camera_height = l.number(0, "a height in mm", POSITIVE)?;
-            }
-            "camera_fov" => {
-                l.expect_args(1, 1, "camera_fov DEG")?;
-                s.model.camera_fov = l.number(
-                    0,
-                    "a field of view in degrees",
-                    (Excluded(0.0), Excluded(170.0)),
-                )?;
-            }
-            "publish_always" => {
-                l.expect_args(1, 1, "publish_always on|off")?;
-                s.publish_always = l.on_off(0, "publish_always")?;
-            }
-            _ => {} // refused by the declaration
+/// The world of the `world` line (an empty world without one).
+fn world(conf: &ComponentConf) -> Result<World, ConfError> {
+    match conf.line("world") {
+        Some(l) => {
+            // The declaration resolved the path; this says what a non-file is.
+            let f = l.existing_file(0, "the world file")?;
+            World::load(&f).map_err(|e| l.error(format!("world file: {e}")))
         }
+        None => Ok(World::new()),
     }
-    if s.robots.is_empty() {
-        s.robots.push(("robot1".into(), initial));
-    } else if let Some(p) = initial {
-        s.robots[0].1 = Some(p);
-    }
-    Ok(s)
 }
 
-/// Reads one `provides` line into the robots' [`Provides`] (and their laser
+/// The robots of the `robot` lines (one `robot1` without any), each named once.
+fn robots(conf: &ComponentConf, l: &Lines) -> Result<Vec<(String, Option<Pose>)>, ConfError> {
+    let mut robots: Vec<(String, Option<Pose>)> = Vec::new();
+    for ((name, x, y, theta), line) in l.robot.iter().zip(conf.lines_with("robot")) {
+        if robots.iter().any(|r| r.0 == *name) {
+            return Err(line.error(format!("robot `{name}` is declared twice")));
+        }
+        let at = match (x, y, theta) {
+            (Some(x), Some(y), Some(t)) => Some(Pose::new(*x, *y, *t)),
+            _ => None,
+        };
+        robots.push((name.clone(), at));
+    }
+    let initial = l.initial_position.map(|(x, y, t)| Pose::new(x, y, t));
+    if robots.is_empty() {
+        robots.push(("robot1".into(), initial));
+    } else if let Some(p) = initial {
+        robots[0].1 = Some(p);
+    }
+    Ok(robots)
+}
+
+/// The robot model, noise and periods the lines set (each value as declared).
+fn model(l: &Lines) -> (RobotModel, Noise, Periods) {
+    let mut model = RobotModel::default();
+    if let Some((v, w)) = l.accel {
+        (model.accel_v, model.accel_w) = (v, w);
+    }
+    let set = |field: &mut f64, v: Option<f64>| {
+        if let Some(v) = v {
+            *field = v;
+        }
+    };
+    set(&mut model.radius, l.radius);
+    set(&mut model.laser_range, l.laser_range);
+    set(&mut model.camera_height, l.camera_height);
+    set(&mut model.camera_fov, l.camera_fov);
+    let mut noise = Noise::default();
+    for n in &l.noise {
+        match n {
+            NoiseLine::Odometry(_, d, a) => {
+                (noise.odometry_distance, noise.odometry_angle) = (*d, *a)
+            }
+            NoiseLine::Range(s, mm) if s == "laser" => noise.laser = *mm,
+            NoiseLine::Range(_, mm) => noise.sonars = *mm,
+        }
+    }
+    let mut periods = Periods::default();
+    for (sensor, ms) in &l.period {
+        let p = &mut periods;
+        *match sensor.as_str() {
+            "encoders" => &mut p.encoders,
+            "laser" => &mut p.laser,
+            "sonars" => &mut p.sonars,
+            "bumpers" => &mut p.bumpers,
+            "camera" => &mut p.camera,
+            "imu" => &mut p.imu,
+            _ => &mut p.pantiltencoders,
+        } = ms / 1000.0;
+    }
+    (model, noise, periods)
+}
+
+/// Reads the lines (every one through its declaration) into [`Settings`] and the
+/// `provides` lines.
+fn settings(conf: &ComponentConf) -> Result<(Settings, Vec<ProvidesLine>), ConfError> {
+    let l: Lines = conf.settings(LINES)?;
+    // `speed` and `stepped`: the later line counts.
+    let at = |k: &str| conf.lines_with(k).last().map(|l| l.at.line);
+    let clock = match (l.stepped, l.speed) {
+        (Some(ms), _) if at("stepped") > at("speed") => Clock::Stepped(ms / 1000.0),
+        (_, NumberOr::Word) => Clock::Max,
+        (_, NumberOr::Number(n)) => Clock::Speed(n),
+    };
+    let (model, noise, periods) = model(&l);
+    let s = Settings {
+        world: world(conf)?,
+        robots: robots(conf, &l)?,
+        model,
+        noise,
+        seed: l.seed,
+        clock,
+        step: l.step / 1000.0,
+        periods,
+        publish_always: l.publish_always,
+    };
+    Ok((s, l.provides))
+}
+
+/// Puts one `provides` line into the robots' [`Provides`] (and their laser
 /// model); returns the interface's name.
 fn provides(
+    p: ProvidesLine,
     l: &ConfLine,
     names: &[String],
     sim: &mut Sim,
     provides: &mut [Provides],
 ) -> Result<String, ConfError> {
-    if l.args().is_empty() {
-        return Err(l.error(format!(
-            "`provides` needs an interface; usage: {USAGE_PROVIDES}"
-        )));
-    }
-    let kind = l.interface(0)?;
-    // Arguments after the interface; a trailing word that is not a number names
-    // the robot.
-    let mut extra = l.args().len() - 1;
-    let robot = match l.args().last().filter(|_| extra > 0) {
-        Some(w) if w.parse::<f64>().is_err() => {
-            let k = names.iter().position(|n| n == w).ok_or_else(|| {
-                l.error(format!(
-                    "`provides {kind}`: no robot called `{w}`; robots: {}",
-                    names.join(", ")
-                ))
-            })?;
-            extra -= 1;
-            k
-        }
-        _ => 0,
+    let (kind, robot) = match &p {
+        ProvidesLine::Device(k, r) | ProvidesLine::Color(k, r) => (k.clone(), r.clone()),
+        ProvidesLine::Laser(k, .., r) | ProvidesLine::Varcolor(k, .., r) => (k.clone(), r.clone()),
+    };
+    let robot = match robot {
+        Some(w) => names.iter().position(|n| *n == w).ok_or_else(|| {
+            l.error(format!(
+                "`provides {kind}`: no robot called `{w}`; robots: {}",
+                names.join(", ")
+            ))
+        })?,
+        None => 0,
     };
     let name = interface_name(&kind, (robot > 0).then(|| names[robot].as_str()));
-    let p = &mut provides[robot];
-    let takes = |usage: &str| {
-        l.error(format!(
-            "`provides {kind}` takes {usage}; usage: {USAGE_PROVIDES}"
-        ))
-    };
-    match kind.as_str() {
-        "encoders" | "motors" | "sonars" | "bumpers" | "pantiltencoders" | "pantiltmotors"
-        | "imu" => {
-            if extra != 0 {
-                return Err(takes("no arguments besides a robot name"));
-            }
+    let p_robot = &mut provides[robot];
+    match p {
+        ProvidesLine::Device(..) => {
             *match kind.as_str() {
-                "encoders" => &mut p.encoders,
-                "motors" => &mut p.motors,
-                "sonars" => &mut p.sonars,
-                "bumpers" => &mut p.bumpers,
-                "pantiltencoders" => &mut p.pantiltencoders,
-                "imu" => &mut p.imu,
-                _ => &mut p.pantiltmotors,
+                "encoders" => &mut p_robot.encoders,
+                "motors" => &mut p_robot.motors,
+                "sonars" => &mut p_robot.sonars,
+                "bumpers" => &mut p_robot.bumpers,
+                "pantiltencoders" => &mut p_robot.pantiltencoders,
+                "imu" => &mut p_robot.imu,
+                _ => &mut p_robot.pantiltmotors,
             } = Some(name.clone());
         }
-        "laser" => {
-            match extra {
-                0 => {}
-                2 => {
-                    let m = &mut sim.robots[robot].model;
-                    m.laser_count = l.number(1, "a number of readings", 1..=720)?;
-                    m.laser_resolution = l.number(2, "a resolution (readings/deg)", POSITIVE)?;
-                }
-                _ => return Err(takes("[N RESOLUTION] [ROBOT]")),
+        ProvidesLine::Laser(_, n, r, _) => {
+            if let (Some(n), Some(r)) = (n, r) {
+                let m = &mut sim.robots[robot].model;
+                (m.laser_count, m.laser_resolution) = (n, r);
             }
-            p.laser = Some(name.clone());
+            p_robot.laser = Some(name.clone());
         }
-        "colorA" | "colorB" | "colorC" | "colorD" => {
-            if extra != 0 {
-                return Err(takes("no arguments besides a robot name"));
-            }
-            p.cameras.push((name.clone(), COLOR_WIDTH, COLOR_HEIGHT));
-        }
-        "varcolorA" | "varcolorB" | "varcolorC" | "varcolorD" => {
-            let (w, h) = match extra {
-                0 => (COLOR_WIDTH, COLOR_HEIGHT),
-                2 => (
-                    l.number(1, "W in pixels", 1..=4096)?,
-                    l.number(2, "H in pixels", 1..=4096)?,
-                ),
-                _ => return Err(takes("[W H] [ROBOT]")),
-            };
-            p.cameras.push((name.clone(), w, h));
-        }
-        _ => {
-            return Err(l.error(format!(
-                "the simulator does not provide `{kind}`; usage: {USAGE_PROVIDES}"
-            )));
+        ProvidesLine::Color(..) => p_robot
+            .cameras
+            .push((name.clone(), COLOR_WIDTH, COLOR_HEIGHT)),
+        ProvidesLine::Varcolor(_, w, h, _) => {
+            let (w, h) = w.zip(h).unwrap_or((COLOR_WIDTH, COLOR_HEIGHT));
+            p_robot.cameras.push((name.clone(), w, h));
         }
     }
     Ok(name)
@@ -471,7 +481,7 @@ fn provides(
 impl Simulation {
     /// Parses the driver's conf lines (every error names file:line).
     pub fn parse(conf: &ComponentConf) -> Result<Simulation, ConfError> {
-        let s = settings(conf)?;
+        let (s, lines) = settings(conf)?;
         let motors_timeout = conf.motors_timeout()?;
         let mut sim = Sim::new(s.world, s.seed);
         sim.noise = s.noise;
@@ -488,8 +498,8 @@ impl Simulation {
         let names: Vec<String> = s.robots.iter().map(|r| r.0.clone()).collect();
         let mut provided = vec![Provides::default(); names.len()];
         let mut taken: Vec<String> = Vec::new();
-        for l in conf.provides() {
-            let name = provides(l, &names, &mut sim, &mut provided)?;
+        for (p, l) in lines.into_iter().zip(conf.provides()) {
+            let name = provides(p, l, &names, &mut sim, &mut provided)?;
             if taken.contains(&name) {
                 return Err(l.error(format!("interface `{name}` is provided twice")));
             }

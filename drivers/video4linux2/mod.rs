@@ -51,17 +51,14 @@ use v4l::{
 
 use crate::{
     conf::{
-        ComponentConf, ConfLine,
-        settings::{self, Setting},
+        ComponentConf,
+        settings::{self, Form, Setting, int, path, pixels},
     },
     interfaces::{COLOR_HEIGHT, COLOR_WIDTH, Image, Interface},
     runtime::{self, Driver, Runtime, Supervision, Supervisor},
     supervisor::Absent,
     vision::pixfmt::{self, Bayer, Yuv422Order, YuvMatrix},
 };
-
-const USAGE: &str = "provides colorA..D DEV INPUT or provides varcolorA..D DEV INPUT W H";
-const USAGE_V4L1: &str = "provides colorA..D DEV [INPUT] or provides varcolorA..D DEV [INPUT] W H";
 
 /// One device to capture from, parsed from a `provides` line.
 #[derive(Clone, Debug, PartialEq)]
@@ -75,67 +72,80 @@ pub struct DevConf {
     pub at: String,
 }
 
+const INPUT: settings::Arg = int("INPUT", "", 0, 255);
+const W: settings::Arg = pixels("W", 8192);
+const H: settings::Arg = pixels("H", 8192);
+const COLOR_FORM: Form = Form::new(
+    "color",
+    "320x240 from input INPUT (0 for most cameras) of device DEV",
+    &[settings::COLOR, path("DEV"), INPUT],
+);
+const VARCOLOR_INPUT: Form = Form::new(
+    "varcolor_input",
+    "W x H from input INPUT of device DEV",
+    &[settings::VARCOLOR, path("DEV"), INPUT, W, H],
+);
+
 /// The driver's lines, declared once (`jderobot help video4linux2`).
-const LINES: &[Setting] = &[settings::provides(USAGE).required()];
-/// 4.3's video4linux lines.
-const LINES_V4L1: &[Setting] = &[settings::provides(USAGE_V4L1).required()];
+const LINES: &[Setting] = &[settings::provides_forms(
+    "an image interface and the V4L2 device it comes from",
+    &[COLOR_FORM, VARCOLOR_INPUT],
+)
+.required()];
+/// 4.3's video4linux lines (INPUT may be left out: input 0).
+const LINES_V4L1: &[Setting] = &[settings::provides_forms(
+    "an image interface and the V4L2 device it comes from",
+    &[
+        Form::new(
+            "color",
+            "320x240 from device DEV (input INPUT, default 0)",
+            &[settings::COLOR, path("DEV"), INPUT.optional()],
+        ),
+        Form::new(
+            "varcolor",
+            "W x H from input 0 of device DEV",
+            &[settings::VARCOLOR, path("DEV"), W, H],
+        ),
+        VARCOLOR_INPUT,
+    ],
+)
+.required()];
+
+#[derive(serde::Deserialize)]
+struct Lines {
+    provides: Vec<Provides>,
+}
+
+#[derive(serde::Deserialize)]
+enum Provides {
+    #[serde(rename = "color")]
+    Color(String, PathBuf, Option<u32>),
+    #[serde(rename = "varcolor")]
+    Varcolor(String, PathBuf, u32, u32),
+    #[serde(rename = "varcolor_input")]
+    VarcolorInput(String, PathBuf, u32, u32, u32),
+}
 
 /// Parses the driver's lines; `v4l1` accepts 4.3's video4linux lines (no INPUT).
 pub fn parse(conf: &ComponentConf, v4l1: bool) -> anyhow::Result<Vec<DevConf>> {
-    conf.check(if v4l1 { LINES_V4L1 } else { LINES })?;
+    let lines: Lines = conf.settings(if v4l1 { LINES_V4L1 } else { LINES })?;
     let mut out = Vec::new();
-    for l in &conf.lines {
-        out.push(parse_provides(conf, l, v4l1)?);
+    for (p, l) in lines.provides.into_iter().zip(conf.provides()) {
+        let (iface, device, input, (width, height)) = match p {
+            Provides::Color(i, d, input) => (i, d, input.unwrap_or(0), (COLOR_WIDTH, COLOR_HEIGHT)),
+            Provides::Varcolor(i, d, w, h) => (i, d, 0, (w, h)),
+            Provides::VarcolorInput(i, d, input, w, h) => (i, d, input, (w, h)),
+        };
+        out.push(DevConf {
+            iface,
+            device,
+            input,
+            width,
+            height,
+            at: l.at.to_string(),
+        });
     }
     Ok(out)
-}
-
-fn parse_provides(conf: &ComponentConf, l: &ConfLine, v4l1: bool) -> anyhow::Result<DevConf> {
-    let usage = if v4l1 { USAGE_V4L1 } else { USAGE };
-    let image = l.image_interface(0, &conf.name, usage)?;
-    let (name, var) = (image.name, !image.fixed_size);
-    let n = l.args().len();
-    let device: String = l.arg(1, "a device (/dev/videoN)")?;
-    // Where INPUT and W H are, given the number of words.
-    let (input_at, size_at) = match (var, v4l1, n) {
-        (false, _, 3) => (Some(2), None),
-        (false, true, 2) => (None, None),
-        (true, _, 5) => (Some(2), Some(3)),
-        (true, true, 4) => (None, Some(2)),
-        _ => {
-            return Err(l
-                .error(format!(
-                    "`provides {name}` has {} argument(s) after the interface; usage: {usage}",
-                    n - 1
-                ))
-                .into());
-        }
-    };
-    let input = match input_at {
-        Some(i) => l.arg(i, "an input number (0 for most cameras)")?,
-        None => 0,
-    };
-    let (width, height) = match size_at {
-        Some(i) => {
-            let w: u32 = l.arg(i, "a width in pixels")?;
-            let h: u32 = l.arg(i + 1, "a height in pixels")?;
-            if w == 0 || h == 0 || w > 8192 || h > 8192 {
-                return Err(l
-                    .error(format!("size {w}x{h} is out of range (1..8192)"))
-                    .into());
-            }
-            (w, h)
-        }
-        None => (COLOR_WIDTH, COLOR_HEIGHT),
-    };
-    Ok(DevConf {
-        iface: name.clone(),
-        device: conf.resolve(&device),
-        input,
-        width,
-        height,
-        at: l.at.to_string(),
-    })
 }
 
 /// The formats the driver can convert, in order of preference.

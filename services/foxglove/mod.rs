@@ -255,6 +255,14 @@ impl Status {
 
 /// The name under which the service exports its [`Status`].
 pub const STATUS_EXPORT: &str = "status";
+
+// Its `ps` line: `foxglove: ws://...: N client(s), ...`.
+crate::register_ps_line!("foxglove", |rt| {
+    rt.names
+        .import::<Status>("foxglove", STATUS_EXPORT)
+        .ok()
+        .map(|s| s.line())
+});
 /// The name under which the service exports the [`SocketAddr`] users connect to.
 pub const ADDRESS_EXPORT: &str = "address";
 /// The name under which the service exports the SDK server's own [`SocketAddr`]

@@ -581,6 +581,51 @@ impl Driver for Recorder {
     }
 }
 
+/// The shell's `record start|stop|status`: through the loaded recorder's
+/// `recorder.status`.
+fn record(rt: &Runtime, args: &[&str], out: &mut dyn std::io::Write) -> Result<(), String> {
+    use std::sync::atomic::Ordering;
+    let status = rt
+        .names
+        .import::<RecorderStatus>("recorder", "status")
+        .map_err(|_| "record: no recorder is loaded (load_service recorder)".to_string())?;
+    let line = match args {
+        ["start"] => {
+            status.want.store(true, Ordering::Release);
+            "recording".to_string()
+        }
+        ["stop"] => {
+            status.want.store(false, Ordering::Release);
+            // The writer closes the file within 0.1 s.
+            let t0 = std::time::Instant::now();
+            while status.recording.load(Ordering::Acquire)
+                && t0.elapsed() < std::time::Duration::from_secs(5)
+            {
+                std::thread::sleep(std::time::Duration::from_millis(10));
+            }
+            status.line()
+        }
+        ["status"] | [] => status.line(),
+        _ => return Err("record: Usage: record start|stop|status".into()),
+    };
+    writeln!(out, "{line}").map_err(|e| format!("record: {e}"))
+}
+
+crate::register_command!(
+    "recorder",
+    "record",
+    "start|stop|status",
+    "Start or stop the loaded recorder, or print what it wrote",
+    record
+);
+
+crate::register_ps_line!("recorder", |rt| {
+    rt.names
+        .import::<RecorderStatus>("recorder", "status")
+        .ok()
+        .map(|s| s.line())
+});
+
 crate::register_driver!(
     Service,
     "recorder",

@@ -631,7 +631,7 @@ mod tests {
             ),
             ("format dds\n", "jderobot, ros2"),
             ("provides all\n", "provides all ROBOT"),
-            ("provides laser a b laser\n", "provides NAME [KEY [KIND]]"),
+            ("provides laser a b laser\n", "provides NAME [KEY] [KIND]"),
             (
                 "provides laser2 a/b wheel\n",
                 "KIND (argument 3) is `wheel`, expected one of image",

@@ -262,7 +262,11 @@ impl SessionConf {
             c.insert_json5(key, &value)
                 .map_err(|e| anyhow::anyhow!("zenoh: cannot set {key} to {value}: {e}"))
         };
-        set(&mut c, "mode", format!("{:?}", self.mode))?;
+        set(
+            &mut c,
+            "mode",
+            serde_json::Value::from(self.mode).to_string(),
+        )?;
         if !self.listen.is_empty() {
             set(&mut c, "listen/endpoints", json_list(&self.listen))?;
         } else if self.config.is_none() && self.mode != "client" {
@@ -376,9 +380,9 @@ fn list_or_default(v: &[String]) -> String {
     }
 }
 
+/// A list of strings as JSON (serde's escaping, which JSON5 reads).
 fn json_list(v: &[String]) -> String {
-    let items: Vec<String> = v.iter().map(|s| format!("{s:?}")).collect();
-    format!("[{}]", items.join(","))
+    serde_json::to_string(v).unwrap_or_else(|_| "[]".into())
 }
 
 /// An endpoint: `PROTOCOL/HOST:PORT`. TCP is checked here; other transports are

@@ -86,6 +86,7 @@ pub fn main() -> ExitCode {
         Some(Command::Help { name: None }) => {
             use clap::CommandFactory;
             let _ = Cli::command().print_long_help();
+            print!("{}", shell_commands(None));
             ExitCode::SUCCESS
         }
         Some(Command::Help { name: Some(name) }) => help(&name),
@@ -117,6 +118,35 @@ fn list() {
     }
 }
 
+/// The shell commands the components bring (of `component` only, if given),
+/// from their registration: what the shell's `help` lists too.
+fn shell_commands(component: Option<&str>) -> String {
+    let cmds: Vec<_> = registry::commands()
+        .into_iter()
+        .filter(|c| component.is_none_or(|n| c.component == n))
+        .collect();
+    if cmds.is_empty() {
+        return String::new();
+    }
+    let mut out = String::from("\nShell commands it brings:\n");
+    if component.is_none() {
+        out = String::from("\nShell commands the components bring:\n");
+    }
+    for c in cmds {
+        let from = if component.is_none() {
+            format!(" ({})", c.component)
+        } else {
+            String::new()
+        };
+        out.push_str(&format!(
+            "  {:<28}{}.{from}\n",
+            format!("{} {}", c.name, c.usage),
+            c.help
+        ));
+    }
+    out
+}
+
 /// `jderobot help NAME`: the component's lines from its declaration.
 fn help(name: &str) -> ExitCode {
     let entry = match registry::lookup(None, name) {
@@ -138,6 +168,7 @@ Its lines are not declared yet; its module documentation lists them.",
             entry.kind, entry.name, entry.summary
         ),
     }
+    print!("{}", shell_commands(Some(entry.name)));
     ExitCode::SUCCESS
 }
 

@@ -48,6 +48,13 @@ pub enum ArgType {
     Int { min: i64, max: i64 },
     /// A finite number within `[min, max]`.
     Float { min: f64, max: f64 },
+    /// A finite number within `[min, max]`, or the word `or` (`auto`, `max`):
+    /// read as a [`NumberOr`].
+    FloatOr {
+        min: f64,
+        max: f64,
+        or: &'static str,
+    },
     /// One of these words.
     Choice(&'static [&'static str]),
     /// `on` or `off` (also yes/no, true/false, 1/0, 4.3's `NAME_on`/`NAME_off`).
@@ -60,6 +67,12 @@ pub enum ArgType {
     Word,
     /// Every remaining word (must be last; at least one unless the argument is optional).
     Rest,
+    /// A name (a robot's, a camera's): a word that is not a number, without dots
+    /// or colons (a name becomes an interface suffix: `laser.robot2`).
+    Name,
+    /// Every remaining word, each one of these and each at most once, in any order
+    /// (must be last; none is fine). Read as a `Vec`.
+    Flags(&'static [&'static str]),
 }
 
 /// One argument of a declared line.
@@ -69,12 +82,18 @@ pub struct Arg {
     pub ty: ArgType,
     /// The unit of a number (`mm/s`, `deg`, `ms`), or "".
     pub unit: &'static str,
-    /// The line may stop before this argument (the ones after it are optional too).
+    /// The line may stop before this argument, or leave it out: it opens a group
+    /// (it and the required arguments after it, to the next optional one) given
+    /// whole or not at all.
     pub optional: bool,
 }
 
 impl Arg {
-    /// This argument and the ones after it may be left out.
+    /// Whether `word` is one of a [`choice`]'s words (a form's first word).
+    pub fn accepts(&self, word: &str) -> bool {
+        matches!(self.ty, ArgType::Choice(c) if c.contains(&word))
+    }
+    /// This argument opens an optional group (it and the required ones after it).
     pub const fn optional(mut self) -> Arg {
         self.optional = true;
         self
@@ -92,6 +111,47 @@ const fn arg(name: &'static str, ty: ArgType, unit: &'static str) -> Arg {
 /// A finite number in `[min, max]`, in `unit`.
 pub const fn float(name: &'static str, unit: &'static str, min: f64, max: f64) -> Arg {
     arg(name, ArgType::Float { min, max }, unit)
+}
+/// A finite number in `[min, max]`, in `unit`, or the word `or`.
+pub const fn float_or(
+    name: &'static str,
+    unit: &'static str,
+    min: f64,
+    max: f64,
+    or: &'static str,
+) -> Arg {
+    arg(name, ArgType::FloatOr { min, max, or }, unit)
+}
+/// What a [`float_or`] argument gives: its number, or its word.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum NumberOr {
+    Number(f64),
+    Word,
+}
+
+impl<'de> serde::Deserialize<'de> for NumberOr {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct V;
+        impl Visitor<'_> for V {
+            type Value = NumberOr;
+            fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+                f.write_str("a number or its word")
+            }
+            fn visit_f64<E>(self, v: f64) -> Result<NumberOr, E> {
+                Ok(NumberOr::Number(v))
+            }
+            fn visit_i64<E>(self, v: i64) -> Result<NumberOr, E> {
+                Ok(NumberOr::Number(v as f64))
+            }
+            fn visit_str<E>(self, _: &str) -> Result<NumberOr, E> {
+                Ok(NumberOr::Word)
+            }
+            fn visit_string<E>(self, _: String) -> Result<NumberOr, E> {
+                Ok(NumberOr::Word)
+            }
+        }
+        d.deserialize_any(V)
+    }
 }
 /// A whole number in `[min, max]`, in `unit`.
 pub const fn int(name: &'static str, unit: &'static str, min: i64, max: i64) -> Arg {
@@ -121,6 +181,52 @@ pub const fn word(name: &'static str) -> Arg {
 pub const fn rest(name: &'static str) -> Arg {
     arg(name, ArgType::Rest, "")
 }
+/// A name: a word that is not a number, without dots or colons.
+pub const fn name(name: &'static str) -> Arg {
+    arg(name, ArgType::Name, "")
+}
+/// Any of these words, each at most once, in any order, to the end of the line.
+pub const fn flags(name: &'static str, words: &'static [&'static str]) -> Arg {
+    arg(name, ArgType::Flags(words), "")
+}
+/// A size in pixels, 1..=`max`.
+pub const fn pixels(name: &'static str, max: i64) -> Arg {
+    arg(name, ArgType::Int { min: 1, max }, "px")
+}
+
+/// The fixed-size image interfaces (320x240), as a `provides` form's first word.
+pub const COLOR: Arg = choice("colorA..D", &["colorA", "colorB", "colorC", "colorD"]);
+/// The image interfaces of any size, as a `provides` form's first word.
+pub const VARCOLOR: Arg = choice(
+    "varcolorA..D",
+    &["varcolorA", "varcolorB", "varcolorC", "varcolorD"],
+);
+
+/// One form of a line whose first word chooses the rest: a `provides` line, whose
+/// interface decides what follows it (`provides laser N RESOLUTION`, `provides
+/// varcolorA FILE W H`). A line is read in the first form it fits; a struct reads
+/// such lines as an enum whose variants are the forms' names (each variant gets
+/// every word of the line, the first included, an absent optional one as `None`).
+#[derive(Clone, Copy, Debug)]
+pub struct Form {
+    /// The enum variant that receives it.
+    pub name: &'static str,
+    /// What it gives, for `help`.
+    pub help: &'static str,
+    /// Its arguments, the first word included (a [`choice`] of the words that
+    /// choose this form).
+    pub args: &'static [Arg],
+}
+
+impl Form {
+    pub const fn new(name: &'static str, help: &'static str, args: &'static [Arg]) -> Form {
+        Form { name, help, args }
+    }
+    /// The usage: `KEY ARG1 ARG2 [ARG3]`.
+    pub fn usage(&self, key: &str) -> String {
+        usage(key, self.args)
+    }
+}
 
 /// One line a component takes: `KEY ARG...`.
 #[derive(Clone, Copy, Debug)]
@@ -136,6 +242,9 @@ pub struct Setting {
     pub repeats: bool,
     /// The component cannot do without it (a serial port, a `provides` line).
     pub required: bool,
+    /// The forms of a line whose first word chooses the rest (`args` is then
+    /// empty): see [`Form`].
+    pub forms: &'static [Form],
 }
 
 impl Setting {
@@ -147,7 +256,14 @@ impl Setting {
             help,
             repeats: false,
             required: false,
+            forms: &[],
         }
+    }
+    /// A line in several forms, its first word choosing which ([`Form`]).
+    pub const fn forms(key: &'static str, help: &'static str, forms: &'static [Form]) -> Setting {
+        let mut s = Setting::new(key, help, &[]);
+        s.forms = forms;
+        s
     }
     /// The value when the line is absent, written as in a conf (`"0 0"`).
     pub const fn default(mut self, words: &'static str) -> Setting {
@@ -175,25 +291,51 @@ impl Setting {
         self.help = help;
         self
     }
-    /// The usage: `KEY ARG1 ARG2 [ARG3]`.
+    /// The usage: `KEY ARG1 ARG2 [ARG3]` (its forms' usages, for a line in forms).
     pub fn usage(&self) -> String {
-        let mut s = self.key.to_string();
-        let mut open = 0;
-        for a in self.args {
-            if a.optional {
-                s.push_str(" [");
-                open += 1;
-            } else {
-                s.push(' ');
+        if self.forms.is_empty() {
+            usage(self.key, self.args)
+        } else {
+            let u: Vec<String> = self.forms.iter().map(|f| f.usage(self.key)).collect();
+            u.join(" | ")
+        }
+    }
+}
+
+/// `KEY ARG1 ARG2 [ARG3 ARG4] [ARG5]`: an optional argument opens a group that
+/// runs to the next optional one.
+fn usage(key: &str, args: &[Arg]) -> String {
+    let mut s = key.to_string();
+    let mut open = false;
+    for a in args {
+        let flags = matches!(a.ty, ArgType::Flags(_));
+        if (a.optional || flags) && open {
+            s.push(']');
+            open = false;
+        }
+        if a.optional || flags {
+            s.push_str(" [");
+            open = true;
+        } else {
+            s.push(' ');
+        }
+        match a.ty {
+            ArgType::Flags(w) => {
+                s.push_str(&w.join("|"));
+                s.push_str("]...");
+                open = false;
             }
-            s.push_str(a.name);
-            if matches!(a.ty, ArgType::Rest) {
+            ArgType::Rest => {
+                s.push_str(a.name);
                 s.push_str("...");
             }
+            _ => s.push_str(a.name),
         }
-        s.push_str(&"]".repeat(open));
-        s
     }
+    if open {
+        s.push(']');
+    }
+    s
 }
 
 /// `cycle MS`: a schema's or driver's period, shared by every component that has one.
@@ -376,6 +518,12 @@ pub const fn provides(usage: &'static str) -> Setting {
     Setting::new("provides", usage, ARGS).repeats()
 }
 
+/// `provides INTERFACE ...`, any number of them, each in one of `forms` (the
+/// interface, a form's first argument, chooses which).
+pub const fn provides_forms(help: &'static str, forms: &'static [Form]) -> Setting {
+    Setting::forms("provides", help, forms).repeats()
+}
+
 /// `KEY INTERFACE`: an interface the component uses in a role (`motors motors`,
 /// `camera varcolorA`), `default` when absent; schemas take `none` for "do
 /// without" where they can (the help says so).
@@ -410,12 +558,19 @@ impl fmt::Display for ArgType {
                 )
             }
             ArgType::Float { min, max } => write!(f, "a number {}", range_words(*min, *max)),
+            ArgType::FloatOr { min, max, or } => {
+                write!(f, "a number {}, or {or}", range_words(*min, *max))
+            }
             ArgType::Choice(c) => write!(f, "one of {}", c.join(", ")),
             ArgType::OnOff => f.write_str("on or off"),
             ArgType::Interface => f.write_str("an interface name or none"),
             ArgType::Path => f.write_str("a file (relative to the conf file)"),
             ArgType::Word => f.write_str("a word"),
             ArgType::Rest => f.write_str("one or more words"),
+            ArgType::Name => {
+                f.write_str("a name (a word that is not a number, without dots or colons)")
+            }
+            ArgType::Flags(w) => write!(f, "any of {}, each at most once", w.join(", ")),
         }
     }
 }
@@ -443,6 +598,10 @@ enum Value {
     Float(f64),
     Bool(bool),
     Str(String),
+    /// The words of a [`ArgType::Flags`] argument.
+    List(Vec<String>),
+    /// An optional argument left out.
+    Absent,
 }
 
 /// Checks one word against its declared type.
@@ -469,6 +628,13 @@ fn check_word(line: &ConfLine, i: usize, a: &Arg, w: &str) -> Result<Value, Conf
         ArgType::Float { min, max } => match w.parse::<f64>() {
             Ok(v) if v.is_finite() && v >= min && v <= max => Ok(Value::Float(v)),
             _ => Err(bad(format!("{}{unit}", a.ty))),
+        },
+        ArgType::FloatOr { min, max, or } => match w.parse::<f64>() {
+            _ if w == or => Ok(Value::Str(w.to_string())),
+            Ok(v) if v.is_finite() && v >= min && v <= max => Ok(Value::Float(v)),
+            _ => Err(bad(
+                format!("{}", ArgType::Float { min, max }) + &format!("{unit}, or {or}")
+            )),
         },
         ArgType::Choice(c) => {
             if c.contains(&w) {
@@ -500,32 +666,245 @@ fn check_word(line: &ConfLine, i: usize, a: &Arg, w: &str) -> Result<Value, Conf
         }
         ArgType::Path => Ok(Value::Str(line.path(i, a.name)?.display().to_string())),
         ArgType::Word | ArgType::Rest => Ok(Value::Str(w.to_string())),
+        ArgType::Name => {
+            if w.parse::<f64>().is_ok() || w.contains(['.', ':']) {
+                Err(bad(a.ty.to_string()))
+            } else {
+                Ok(Value::Str(w.to_string()))
+            }
+        }
+        ArgType::Flags(set) => {
+            if set.contains(&w) {
+                Ok(Value::Str(w.to_string()))
+            } else {
+                Err(bad(a.ty.to_string()))
+            }
+        }
     }
 }
 
-/// Checks a line's arguments against its declaration.
-fn check_line(s: &Setting, line: &ConfLine, component: &str) -> Result<Vec<Value>, ConfError> {
-    let args = line.args();
-    let required = s.args.iter().take_while(|a| !a.optional).count();
-    let rest = s.args.last().is_some_and(|a| matches!(a.ty, ArgType::Rest));
-    let max = if rest { usize::MAX } else { s.args.len() };
-    if args.len() < required || args.len() > max {
-        let n = args.len();
+/// One checked line: the form it is in (a line in forms) and its values, one per
+/// declared argument ([`Value::Absent`] for an optional one left out; a `Rest`
+/// argument gives one per word).
+#[derive(Clone, Debug)]
+struct Checked {
+    form: Option<&'static str>,
+    values: Vec<Value>,
+}
+
+/// Checks a line's arguments against its declaration (against the forms its
+/// first word may be in, for a line in forms).
+fn check_line(s: &Setting, line: &ConfLine, component: &str) -> Result<Checked, ConfError> {
+    if s.forms.is_empty() {
+        let values = check_args(s.key, s.args, &s.usage(), line, component)?;
+        return Ok(Checked { form: None, values });
+    }
+    let first = line.args().first().map(String::as_str).unwrap_or("");
+    let candidates: Vec<&Form> = s
+        .forms
+        .iter()
+        .filter(|f| {
+            f.args
+                .first()
+                .is_some_and(|a| check_word(line, 0, a, first).is_ok())
+        })
+        .collect();
+    if candidates.is_empty() {
+        let mut firsts: Vec<String> = Vec::new();
+        for f in s.forms {
+            if let Some(a) = f.args.first()
+                && !firsts.contains(&a.name.to_string())
+            {
+                firsts.push(a.name.to_string());
+            }
+        }
         return Err(line.error(format!(
-            "`{}` takes {}, got {n}; usage: {} (see `jderobot help {component}`)",
+            "`{} {}`: {component} {} {}, not `{}`; usage: {} (see `jderobot help {component}`)",
             s.key,
+            echo(first),
+            if s.key == "provides" {
+                "provides"
+            } else {
+                "takes"
+            },
+            firsts.join(", "),
+            echo(first),
+            s.usage()
+        )));
+    }
+    // The first form that fits; else the error of the one that fits the most
+    // leading words (the others' usages said with it).
+    let mut errors = Vec::new();
+    for f in &candidates {
+        match check_args(s.key, f.args, &f.usage(s.key), line, component) {
+            Ok(values) => {
+                return Ok(Checked {
+                    form: Some(f.name),
+                    values,
+                });
+            }
+            Err(e) => errors.push(e),
+        }
+    }
+    // The form meant: one that takes as many words as given, then the one whose
+    // arguments fit the most leading words.
+    let fit = |f: &Form| {
+        let words = line.args();
+        (0..words.len())
+            .take_while(|&k| {
+                let a = &f.args[k.min(f.args.len() - 1)];
+                (k < f.args.len() || matches!(a.ty, ArgType::Rest | ArgType::Flags(_)))
+                    && check_word(line, k, a, &words[k]).is_ok()
+            })
+            .count()
+    };
+    let score = |k: usize| (!errors[k].message.contains(" takes "), fit(candidates[k]));
+    let pick = (0..candidates.len())
+        .rev()
+        .max_by_key(|&k| score(k))
+        .unwrap_or(0);
+    let mut e = errors.swap_remove(pick);
+    if candidates.len() > 1 && !e.message.contains("usage:") {
+        let all: Vec<String> = candidates.iter().map(|f| f.usage(s.key)).collect();
+        e.message.push_str(&format!("; usage: {}", all.join(" | ")));
+    }
+    Err(e)
+}
+
+/// Checks a line's words against `args`: the required ones first, then each
+/// optional group (an optional argument and the required ones after it) taken
+/// when its words fit and skipped otherwise, then a trailing `Rest` or `Flags`.
+fn check_args(
+    key: &str,
+    args: &[Arg],
+    usage: &str,
+    line: &ConfLine,
+    component: &str,
+) -> Result<Vec<Value>, ConfError> {
+    let words = line.args();
+    let required = args
+        .iter()
+        .take_while(|a| !a.optional && !matches!(a.ty, ArgType::Flags(_)))
+        .count();
+    let open_end = args
+        .last()
+        .is_some_and(|a| matches!(a.ty, ArgType::Rest | ArgType::Flags(_)));
+    let fixed: usize = args
+        .iter()
+        .filter(|a| !matches!(a.ty, ArgType::Rest | ArgType::Flags(_)))
+        .count();
+    let max = if open_end { usize::MAX } else { fixed };
+    let arity = || {
+        let n = words.len();
+        line.error(format!(
+            "`{key}` takes {}, got {n}; usage: {usage} (see `jderobot help {component}`)",
             match (required, max) {
                 (a, b) if a == b => format!("{a} argument(s)"),
                 (a, usize::MAX) => format!("at least {a} argument(s)"),
                 (a, b) => format!("{a} to {b} arguments"),
             },
-            s.usage()
-        )));
-    }
+        ))
+    };
     let mut out = Vec::with_capacity(args.len());
-    for (i, w) in args.iter().enumerate() {
-        let a = &s.args[i.min(s.args.len() - 1)];
-        out.push(check_word(line, i, a, w)?);
+    // The first error of a group that was skipped: the likely mistake when words
+    // are left over.
+    let mut skipped: Option<ConfError> = None;
+    let mut skipped_begun = false;
+    let mut at = 0; // the next word
+    let mut i = 0; // the next argument
+    while i < args.len() {
+        let a = &args[i];
+        match a.ty {
+            ArgType::Rest => {
+                if words.len() <= at && !a.optional {
+                    return Err(arity());
+                }
+                for (k, w) in words.iter().enumerate().skip(at) {
+                    out.push(check_word(line, k, a, w)?);
+                }
+                at = words.len();
+                i += 1;
+                continue;
+            }
+            ArgType::Flags(_) => {
+                let mut list: Vec<String> = Vec::new();
+                for (k, w) in words.iter().enumerate().skip(at) {
+                    if let Err(e) = check_word(line, k, a, w) {
+                        return Err(skipped.unwrap_or(e));
+                    }
+                    if list.contains(w) {
+                        return Err(line.error(format!(
+                            "`{key}`: `{}` is given twice; usage: {usage}",
+                            echo(w)
+                        )));
+                    }
+                    list.push(w.clone());
+                }
+                out.push(Value::List(list));
+                at = words.len();
+                i += 1;
+                continue;
+            }
+            _ => {}
+        }
+        // A group: this argument and the required ones after it.
+        let end = args[i + 1..]
+            .iter()
+            .position(|b| b.optional || matches!(b.ty, ArgType::Rest | ArgType::Flags(_)))
+            .map_or(args.len(), |p| i + 1 + p);
+        let group = &args[i..end];
+        if !a.optional {
+            if words.len() < at + group.len() {
+                return Err(arity());
+            }
+            for (k, b) in group.iter().enumerate() {
+                out.push(check_word(line, at + k, b, &words[at + k])?);
+            }
+            at += group.len();
+        } else {
+            let fits = if words.len() >= at + group.len() {
+                group
+                    .iter()
+                    .enumerate()
+                    .map(|(k, b)| check_word(line, at + k, b, &words[at + k]))
+                    .collect::<Result<Vec<Value>, ConfError>>()
+            } else {
+                Err(arity())
+            };
+            match fits {
+                Ok(v) => {
+                    out.extend(v);
+                    at += group.len();
+                }
+                Err(e) => {
+                    // A group whose first word fits was begun: its error is the
+                    // one to tell; else the first wrong word's.
+                    let begun = words
+                        .get(at)
+                        .is_some_and(|w| check_word(line, at, a, w).is_ok());
+                    if words.len() > at
+                        && (begun || !e.message.contains(" takes "))
+                        && (skipped.is_none() || (begun && !skipped_begun))
+                    {
+                        skipped = Some(e);
+                        skipped_begun = begun;
+                    }
+                    out.extend(group.iter().map(|_| Value::Absent));
+                }
+            }
+        }
+        i = end;
+    }
+    if at < words.len() {
+        return Err(match skipped {
+            Some(mut e) => {
+                if !e.message.contains("usage:") {
+                    e.message.push_str(&format!("; usage: {usage}"));
+                }
+                e
+            }
+            None => arity(),
+        });
     }
     Ok(out)
 }
@@ -757,7 +1136,7 @@ impl<'de> de::Deserializer<'de> for Lines<'_, '_> {
 
 /// A declared line, where it was (None: its default), and the values of each
 /// occurrence.
-type Entry<'a> = (&'a Setting, Option<Location>, Vec<Vec<Value>>);
+type Entry<'a> = (&'a Setting, Option<Location>, Vec<Checked>);
 
 struct LineMap<'p, 'a> {
     entries: Vec<&'p Entry<'a>>,
@@ -789,7 +1168,7 @@ impl<'de> MapAccess<'de> for LineMap<'_, '_> {
         if s.repeats {
             seed.deserialize(Occurrences { values }).map_err(relocate)
         } else {
-            seed.deserialize(LineValue { values: &values[0] })
+            seed.deserialize(LineValue::of(&values[0]))
                 .map_err(relocate)
         }
     }
@@ -797,18 +1176,13 @@ impl<'de> MapAccess<'de> for LineMap<'_, '_> {
 
 /// Every occurrence of a repeated line: a sequence of lines.
 struct Occurrences<'p> {
-    values: &'p [Vec<Value>],
+    values: &'p [Checked],
 }
 
 impl<'de> de::Deserializer<'de> for Occurrences<'_> {
     type Error = DeError;
     fn deserialize_any<V: Visitor<'de>>(self, visitor: V) -> Result<V::Value, DeError> {
-        visitor.visit_seq(
-            self.values
-                .iter()
-                .map(|v| LineValue { values: v })
-                .collect::<Seq<_>>(),
-        )
+        visitor.visit_seq(self.values.iter().map(LineValue::of).collect::<Seq<_>>())
     }
     serde::forward_to_deserialize_any! {
         bool i8 i16 i32 i64 i128 u8 u16 u32 u64 u128 f32 f64 char str string
@@ -847,15 +1221,74 @@ impl<'de, D: de::Deserializer<'de, Error = DeError>> SeqAccess<'de> for Seq<D> {
 /// `bool` true for a line of no words.
 struct LineValue<'p> {
     values: &'p [Value],
+    /// The form the line is in, for a line in forms: an enum's variant.
+    form: Option<&'static str>,
 }
 
-impl LineValue<'_> {
+impl<'p> LineValue<'p> {
+    fn of(c: &'p Checked) -> LineValue<'p> {
+        LineValue {
+            values: &c.values,
+            form: c.form,
+        }
+    }
     /// The values as elements, padded with missing ones up to `len` (trailing
     /// optional arguments read as `None`).
     fn elements(&self, len: usize) -> Seq<ValueDe> {
-        let given = self.values.iter().cloned().map(|v| ValueDe(Some(v)));
+        let given = self.values.iter().map(ValueDe::of);
         let missing = (self.values.len()..len).map(|_| ValueDe(None));
         given.chain(missing).collect()
+    }
+    /// The words given, as a sequence (absent ones left out, flags spread).
+    fn words(&self) -> Seq<ValueDe> {
+        let mut out = Vec::new();
+        for v in self.values {
+            match v {
+                Value::Absent => {}
+                Value::List(l) => {
+                    out.extend(l.iter().map(|w| ValueDe(Some(Value::Str(w.clone())))))
+                }
+                v => out.push(ValueDe(Some(v.clone()))),
+            }
+        }
+        out.into_iter().collect()
+    }
+}
+
+/// A line in forms read as an enum: the form is the variant, every word its
+/// content.
+struct FormAccess<'p>(LineValue<'p>);
+
+impl<'de> de::EnumAccess<'de> for FormAccess<'_> {
+    type Error = DeError;
+    type Variant = Self;
+    fn variant_seed<V: DeserializeSeed<'de>>(self, seed: V) -> Result<(V::Value, Self), DeError> {
+        let name = self.0.form.unwrap_or_default();
+        let v = seed.deserialize(de::value::StrDeserializer::<DeError>::new(name))?;
+        Ok((v, self))
+    }
+}
+
+impl<'de> de::VariantAccess<'de> for FormAccess<'_> {
+    type Error = DeError;
+    fn unit_variant(self) -> Result<(), DeError> {
+        Ok(())
+    }
+    fn newtype_variant_seed<T: DeserializeSeed<'de>>(self, seed: T) -> Result<T::Value, DeError> {
+        seed.deserialize(LineValue {
+            values: self.0.values,
+            form: None,
+        })
+    }
+    fn tuple_variant<V: Visitor<'de>>(self, len: usize, visitor: V) -> Result<V::Value, DeError> {
+        visitor.visit_seq(self.0.elements(len))
+    }
+    fn struct_variant<V: Visitor<'de>>(
+        self,
+        fields: &'static [&'static str],
+        visitor: V,
+    ) -> Result<V::Value, DeError> {
+        visitor.visit_seq(self.0.elements(fields.len()))
     }
 }
 
@@ -863,7 +1296,7 @@ impl<'de> de::Deserializer<'de> for LineValue<'_> {
     type Error = DeError;
     fn deserialize_any<V: Visitor<'de>>(self, visitor: V) -> Result<V::Value, DeError> {
         match self.values {
-            [one] => ValueDe(Some(one.clone())).deserialize_any(visitor),
+            [one] => ValueDe::of(one).deserialize_any(visitor),
             [] => visitor.visit_bool(true),
             _ => visitor.visit_seq(self.elements(0)),
         }
@@ -881,13 +1314,16 @@ impl<'de> de::Deserializer<'de> for LineValue<'_> {
         variants: &'static [&'static str],
         visitor: V,
     ) -> Result<V::Value, DeError> {
+        if self.form.is_some() {
+            return visitor.visit_enum(FormAccess(self));
+        }
         match self.values {
-            [one] => ValueDe(Some(one.clone())).deserialize_enum(name, variants, visitor),
+            [one] => ValueDe::of(one).deserialize_enum(name, variants, visitor),
             _ => Err(de::Error::custom("an enum reads one word")),
         }
     }
     fn deserialize_seq<V: Visitor<'de>>(self, visitor: V) -> Result<V::Value, DeError> {
-        visitor.visit_seq(self.elements(0))
+        visitor.visit_seq(self.words())
     }
     fn deserialize_tuple<V: Visitor<'de>>(
         self,
@@ -898,7 +1334,12 @@ impl<'de> de::Deserializer<'de> for LineValue<'_> {
     }
     fn deserialize_string<V: Visitor<'de>>(self, visitor: V) -> Result<V::Value, DeError> {
         // A `Rest` argument read as one string: its words joined by spaces.
-        let words: Vec<String> = self.values.iter().map(Value::to_string).collect();
+        let words: Vec<String> = self
+            .values
+            .iter()
+            .filter(|v| !matches!(v, Value::Absent))
+            .map(Value::to_string)
+            .collect();
         visitor.visit_string(words.join(" "))
     }
     fn deserialize_str<V: Visitor<'de>>(self, visitor: V) -> Result<V::Value, DeError> {
@@ -918,6 +1359,8 @@ impl fmt::Display for Value {
             Value::Int(i) => write!(f, "{i}"),
             Value::Float(x) => write!(f, "{x}"),
             Value::Bool(b) => f.write_str(if *b { "on" } else { "off" }),
+            Value::List(l) => f.write_str(&l.join(" ")),
+            Value::Absent => Ok(()),
         }
     }
 }
@@ -925,6 +1368,15 @@ impl fmt::Display for Value {
 /// One argument's value (`None`: an optional argument left out). serde's number
 /// visitors convert between the integer and float widths, checking the fit.
 struct ValueDe(Option<Value>);
+
+impl ValueDe {
+    fn of(v: &Value) -> ValueDe {
+        ValueDe(match v {
+            Value::Absent => None,
+            v => Some(v.clone()),
+        })
+    }
+}
 
 impl<'de> de::Deserializer<'de> for ValueDe {
     type Error = DeError;
@@ -934,7 +1386,12 @@ impl<'de> de::Deserializer<'de> for ValueDe {
             Some(Value::Float(f)) => visitor.visit_f64(f),
             Some(Value::Bool(b)) => visitor.visit_bool(b),
             Some(Value::Str(s)) => visitor.visit_string(s),
-            None => visitor.visit_none(),
+            Some(Value::List(l)) => visitor.visit_seq(
+                l.into_iter()
+                    .map(|w| ValueDe(Some(Value::Str(w))))
+                    .collect::<Seq<_>>(),
+            ),
+            Some(Value::Absent) | None => visitor.visit_none(),
         }
     }
     fn deserialize_option<V: Visitor<'de>>(self, visitor: V) -> Result<V::Value, DeError> {
@@ -979,7 +1436,12 @@ pub fn help_text(
     }
     let _ = writeln!(out, "\nLines ({kind} {name} ... end_{kind}):");
     for s in decl {
-        let _ = write!(out, "  {:<32}", s.usage());
+        let head = if s.forms.is_empty() {
+            s.usage()
+        } else {
+            format!("{} ...", s.key)
+        };
+        let _ = write!(out, "  {head:<32}");
         match (s.default, s.repeats, s.required) {
             (Some(d), ..) => {
                 let _ = writeln!(out, " default: {d}");
@@ -998,16 +1460,26 @@ pub fn help_text(
             }
         }
         let _ = writeln!(out, "      {}", s.help);
-        for a in s.args {
-            let unit = if a.unit.is_empty() {
-                String::new()
-            } else {
-                format!(", in {}", a.unit)
-            };
-            let _ = writeln!(out, "      {}: {}{unit}", a.name, a.ty);
+        help_args(&mut out, s.args, "      ");
+        for f in s.forms {
+            let _ = writeln!(out, "    {}", f.usage(s.key));
+            let _ = writeln!(out, "        {}", f.help);
+            help_args(&mut out, f.args, "        ");
         }
     }
     out
+}
+
+/// Each argument's line in `help`: its name, type, range and unit.
+fn help_args(out: &mut String, args: &[Arg], indent: &str) {
+    for a in args {
+        let unit = if a.unit.is_empty() {
+            String::new()
+        } else {
+            format!(", in {}", a.unit)
+        };
+        let _ = writeln!(out, "{indent}{}: {}{unit}", a.name, a.ty);
+    }
 }
 
 #[cfg(test)]
@@ -1109,6 +1581,130 @@ mod tests {
     fn check_reports_every_problem() {
         let e = check(&conf("max_v 0\nwalk x 0\nmode q\n"), DEMO);
         assert_eq!(e.len(), 3, "{e:?}");
+    }
+
+    #[derive(serde::Deserialize, Debug, PartialEq)]
+    enum Provides {
+        #[serde(rename = "plain")]
+        Plain(String, Option<String>),
+        #[serde(rename = "laser")]
+        Laser(String, Option<u32>, Option<f64>, Option<String>),
+        #[serde(rename = "video")]
+        Video(String, String, Option<u32>, Option<u32>, Vec<String>),
+    }
+    #[derive(serde::Deserialize, Debug)]
+    struct Forms {
+        provides: Vec<Provides>,
+    }
+    const FORMS: &[Setting] = &[provides_forms(
+        "what it gives",
+        &[
+            Form::new(
+                "plain",
+                "plain",
+                &[
+                    choice("motors|encoders", &["motors", "encoders"]),
+                    name("ROBOT").optional(),
+                ],
+            ),
+            Form::new(
+                "laser",
+                "a scan",
+                &[
+                    choice("laser", &["laser"]),
+                    int("N", "", 1, 720).optional(),
+                    float("RESOLUTION", "readings/deg", 0.01, 100.0),
+                    name("ROBOT").optional(),
+                ],
+            ),
+            Form::new(
+                "video",
+                "frames",
+                &[
+                    VARCOLOR,
+                    word("FILE"),
+                    pixels("W", 4096).optional(),
+                    pixels("H", 4096),
+                    flags("OPTIONS", &["loop", "unpaced"]),
+                ],
+            ),
+        ],
+    )];
+
+    #[test]
+    fn forms_choose_their_arguments_by_the_first_word() {
+        let f: Forms = conf(
+            "provides motors\nprovides encoders r2\nprovides laser\nprovides laser r2\n\
+             provides laser 360 0.5\nprovides laser 90 2 r3\nprovides varcolorA a.avi\n\
+             provides varcolorB b.avi 64 48 unpaced loop\nprovides varcolorC c.avi loop\n",
+        )
+        .settings(FORMS)
+        .unwrap();
+        use Provides::*;
+        let s = |x: &str| x.to_string();
+        assert_eq!(
+            f.provides,
+            vec![
+                Plain(s("motors"), None),
+                Plain(s("encoders"), Some(s("r2"))),
+                Laser(s("laser"), None, None, None),
+                Laser(s("laser"), None, None, Some(s("r2"))),
+                Laser(s("laser"), Some(360), Some(0.5), None),
+                Laser(s("laser"), Some(90), Some(2.0), Some(s("r3"))),
+                Video(s("varcolorA"), s("a.avi"), None, None, vec![]),
+                Video(
+                    s("varcolorB"),
+                    s("b.avi"),
+                    Some(64),
+                    Some(48),
+                    vec![s("unpaced"), s("loop")]
+                ),
+                Video(s("varcolorC"), s("c.avi"), None, None, vec![s("loop")]),
+            ]
+        );
+        let cases = [
+            (
+                "provides laser 721 1",
+                "N (argument 2) is `721`, expected a whole number between 1 and 720",
+            ),
+            ("provides laser 360 0", "RESOLUTION (argument 3) is `0`"),
+            (
+                "provides laser 360",
+                "got 2; usage: provides laser [N RESOLUTION] [ROBOT]",
+            ),
+            (
+                "provides laser r.2",
+                "ROBOT (argument 2) is `r.2`, expected a name",
+            ),
+            (
+                "provides motors r.2",
+                "ROBOT (argument 2) is `r.2`, expected a name",
+            ),
+            ("provides motors a b", "takes 1 to 2 arguments, got 3"),
+            (
+                "provides sonars",
+                "provides motors|encoders, laser, varcolorA..D, not `sonars`",
+            ),
+            ("provides varcolorA f 0 48", "W (argument 3) is `0`"),
+            (
+                "provides varcolorA f 64 48 again",
+                "OPTIONS (argument 5) is `again`, expected any of loop, unpaced",
+            ),
+            ("provides varcolorA f loop loop", "`loop` is given twice"),
+        ];
+        for (line, want) in cases {
+            let e = conf(&format!("{line}\n"))
+                .settings::<Forms>(FORMS)
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains(want), "{line}: {e}");
+        }
+        let h = help_text(Kind::Driver, "demo", "a demo", FORMS, "");
+        assert!(h.contains("provides laser [N RESOLUTION] [ROBOT]"), "{h}");
+        assert!(
+            h.contains("provides varcolorA..D FILE [W H] [loop|unpaced]..."),
+            "{h}"
+        );
     }
 
     #[test]

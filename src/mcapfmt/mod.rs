@@ -34,9 +34,9 @@
 //! [`decode_message`] (or [`decode_read`] for a message of [`reader`], the bounded
 //! reader that replay and `jderobot info` use; [`decode_mcap`] for the `mcap`
 //! crate's) reads it back; [`Summary`] reads a file (complete, cut short or
-//! corrupt: see [`reader`]) for `jderobot info`; [`RecorderStatus`]
-//! and [`StepGate`] are what the recorder and replay export in the name space
-//! (keys `recorder.status` and `replay.step`) for the shell.
+//! corrupt: see [`reader`]) for `jderobot info`; [`RecorderStatus`] is what
+//! the recorder exports in the name space (`recorder.status`) for its shell
+//! command and mastergui.
 
 pub mod protobuf;
 pub mod reader;
@@ -44,12 +44,11 @@ pub mod ros2;
 mod status;
 mod summary;
 
-pub use status::{RecorderStatus, StepGate};
+pub use status::RecorderStatus;
 pub use summary::{ChannelSummary, MAX_FILE_BYTES, ReadError, Summary};
 
 use std::{
     collections::BTreeMap,
-    fmt::Write as _,
     sync::Arc,
     time::{Duration, SystemTime, UNIX_EPOCH},
 };
@@ -116,14 +115,17 @@ macro_rules! kind_enums {
             pub fn kind(&self) -> &'static str {
                 match self { $(Snapshot::$t(_) => $k,)* }
             }
-            /// Appends the value as JSON: its fields in its units.
-            fn value_json(&self, out: &mut Vec<u8>) {
-                let r = match self { $(Snapshot::$t(s) => serde_json::to_writer(&mut *out, &s.value),)* };
-                debug_assert!(r.is_ok(), "a value always serializes");
-            }
+
             /// Encodes the sample as its ROS 2 message (CDR); false for a kind without one.
             fn ros2(&self, name: &str, out: &mut Vec<u8>) -> bool {
                 match self { $(Snapshot::$t(s) => ros2::encode(name, &**s, out),)* }
+            }
+        }
+
+        /// A sample serializes as its value: its fields in its units.
+        impl serde::Serialize for Snapshot {
+            fn serialize<S: serde::Serializer>(&self, ser: S) -> Result<S::Ok, S::Error> {
+                match self { $(Snapshot::$t(s) => s.value.serialize(ser),)* }
             }
         }
 
@@ -303,25 +305,35 @@ pub fn encode(profile: Profile, name: &str, snap: &Snapshot, out: &mut Vec<u8>) 
 /// The JSON schema (name, schema text) of an interface kind written as JSON:
 /// `foxglove.PoseInFrame` for encoders, `jderobot.KIND` for the rest.
 pub fn json_schema(kind: &str) -> (String, String) {
-    let ts = r#""timestamp":{"type":"object","title":"time","properties":{"sec":{"type":"integer","minimum":0},"nsec":{"type":"integer","minimum":0,"maximum":999999999}}},"clock":{"type":"integer","description":"the interface's clock: the sample's number"}"#;
-    let vec3 = r#"{"type":"object","properties":{"x":{"type":"number"},"y":{"type":"number"},"z":{"type":"number"}}}"#;
-    let quat = r#"{"type":"object","properties":{"x":{"type":"number"},"y":{"type":"number"},"z":{"type":"number"},"w":{"type":"number"}}}"#;
-    let pose =
-        format!(r#"{{"type":"object","properties":{{"position":{vec3},"orientation":{quat}}}}}"#);
-    match kind {
+    use serde_json::json;
+    let number = json!({"type": "number"});
+    let vec3 = json!({"type": "object", "properties": {"x": number, "y": number, "z": number}});
+    let quat = json!({"type": "object",
+        "properties": {"x": number, "y": number, "z": number, "w": number}});
+    let timestamp = json!({"type": "object", "title": "time", "properties": {
+        "sec": {"type": "integer", "minimum": 0},
+        "nsec": {"type": "integer", "minimum": 0, "maximum": 999_999_999}}});
+    let clock =
+        json!({"type": "integer", "description": "the interface's clock: the sample's number"});
+    let (name, description, mut properties) = match kind {
         "encoders" => (
-            "foxglove.PoseInFrame".into(),
-            format!(
-                r#"{{"title":"foxglove.PoseInFrame","description":"Odometry (jderobot encoders: x, y mm, theta rad in jderobot)","type":"object","properties":{{{ts},"frame_id":{{"type":"string"}},"pose":{pose},"jderobot":{{"type":"object"}}}}}}"#
-            ),
+            "foxglove.PoseInFrame".to_string(),
+            "Odometry (jderobot encoders: x, y mm, theta rad in jderobot)".to_string(),
+            json!({"frame_id": {"type": "string"},
+                "pose": {"type": "object", "properties": {"position": vec3, "orientation": quat}}}),
         ),
         other => (
             format!("jderobot.{other}"),
-            format!(
-                r#"{{"title":"jderobot.{other}","description":"a jderobot {other} interface value in its units (see src/interfaces)","type":"object","properties":{{{ts},"jderobot":{{"type":"object"}}}}}}"#
-            ),
+            format!("a jderobot {other} interface value in its units (see src/interfaces)"),
+            json!({}),
         ),
-    }
+    };
+    properties["timestamp"] = timestamp;
+    properties["clock"] = clock;
+    properties["jderobot"] = json!({"type": "object"});
+    let schema = json!({"title": name, "description": description, "type": "object",
+        "properties": properties});
+    (name, schema.to_string())
 }
 
 /// How the recorder writes MCAP: chunks of 4 MiB (closed at least every second by
@@ -343,32 +355,75 @@ pub fn write_options(
 /// Encodes a sample of a JSON channel (encoders and the kinds without a Foxglove
 /// schema) into `out`, cleared first: the timestamp, the clock, (for encoders)
 /// Foxglove's pose, and `jderobot`, the value's fields in its units.
+/// The JSON message of a sample: its time and clock, for encoders Foxglove's
+/// `PoseInFrame` (m, quaternion), and the value itself under `jderobot`.
+#[derive(serde::Serialize)]
+struct Envelope<'a> {
+    timestamp: Time,
+    clock: u64,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    frame_id: Option<&'static str>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pose: Option<Pose>,
+    jderobot: &'a Snapshot,
+}
+
+#[derive(serde::Serialize)]
+struct Time {
+    sec: u64,
+    nsec: u64,
+}
+
+#[derive(serde::Serialize)]
+struct Pose {
+    position: Xyzw,
+    orientation: Xyzw,
+}
+
+#[derive(serde::Serialize)]
+struct Xyzw {
+    x: f64,
+    y: f64,
+    z: f64,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    w: Option<f64>,
+}
+
 fn encode_json(snap: &Snapshot, out: &mut Vec<u8>) {
     out.clear();
     let ns = nanos(snap.time());
-    let mut s = String::with_capacity(256);
-    let _ = write!(
-        s,
-        r#"{{"timestamp":{{"sec":{},"nsec":{}}},"clock":{}"#,
-        ns / 1_000_000_000,
-        ns % 1_000_000_000,
-        snap.clock()
-    );
-    if let Snapshot::Encoders(e) = snap {
-        let half = e.theta as f64 / 2.0;
-        let _ = write!(
-            s,
-            r#","frame_id":"odom","pose":{{"position":{{"x":{},"y":{},"z":0}},"orientation":{{"x":0,"y":0,"z":{},"w":{}}}}}"#,
-            e.x as f64 / 1000.0,
-            e.y as f64 / 1000.0,
-            half.sin(),
-            half.cos(),
-        );
-    }
-    s.push_str(r#","jderobot":"#);
-    out.extend_from_slice(s.as_bytes());
-    snap.value_json(out);
-    out.push(b'}');
+    let pose = match snap {
+        Snapshot::Encoders(e) => {
+            let half = e.theta as f64 / 2.0;
+            Some(Pose {
+                position: Xyzw {
+                    x: e.x as f64 / 1000.0,
+                    y: e.y as f64 / 1000.0,
+                    z: 0.0,
+                    w: None,
+                },
+                orientation: Xyzw {
+                    x: 0.0,
+                    y: 0.0,
+                    z: half.sin(),
+                    w: Some(half.cos()),
+                },
+            })
+        }
+        _ => None,
+    };
+    let envelope = Envelope {
+        timestamp: Time {
+            sec: ns / 1_000_000_000,
+            nsec: ns % 1_000_000_000,
+        },
+        clock: snap.clock(),
+        frame_id: pose.as_ref().map(|_| "odom"),
+        pose,
+        jderobot: snap,
+    };
+    let r = serde_json::to_writer(&mut *out, &envelope);
+    debug_assert!(r.is_ok(), "a sample always serializes");
 }
 
 /// Encodes an image sample as a `foxglove.CompressedImage` JPEG message (quality

@@ -1,12 +1,13 @@
-//! What the recorder and replay export in the name space for the shell.
+//! What the recorder exports in the name space (`recorder.status`), read by its
+//! shell command and `ps` line and by mastergui's recorder row.
 
 use std::{
     path::PathBuf,
     sync::atomic::{AtomicBool, AtomicU64, Ordering},
-    time::{Duration, Instant},
+    time::Instant,
 };
 
-use parking_lot::{Condvar, Mutex};
+use parking_lot::Mutex;
 
 /// The recorder's state, exported as `recorder.status` (shown by `ps` and
 /// `record status`; `record start|stop` set `want`).
@@ -53,37 +54,5 @@ impl RecorderStatus {
             s.push_str(&format!(", ERROR: {e}"));
         }
         s
-    }
-}
-
-/// The replay's step gate in `stepped` mode, exported as `replay.step`: the shell's
-/// `step [N]` lets N more messages through.
-#[derive(Default)]
-pub struct StepGate {
-    permits: Mutex<u64>,
-    cv: Condvar,
-    /// Messages published so far.
-    pub published: AtomicU64,
-}
-
-impl StepGate {
-    /// Lets `n` more messages through.
-    pub fn step(&self, n: u64) {
-        *self.permits.lock() += n;
-        self.cv.notify_all();
-    }
-
-    /// Takes one permit, waiting up to `timeout`; false if none came.
-    pub fn take(&self, timeout: Duration) -> bool {
-        let mut p = self.permits.lock();
-        if *p == 0 {
-            self.cv.wait_for(&mut p, timeout);
-        }
-        if *p > 0 {
-            *p -= 1;
-            true
-        } else {
-            false
-        }
     }
 }

@@ -12,6 +12,8 @@ mod bad_input;
 mod cli;
 #[path = "../conf.rs"]
 mod conf;
+#[path = "../declarations.rs"]
+mod declarations;
 #[path = "../fuzz.rs"]
 mod fuzz;
 #[path = "../interfaces.rs"]
