@@ -28,8 +28,6 @@
 //! Headless it filters each new frame and exports, component `colortuner`, `state`
 //! ([`ColorTuner`]: space, ranges, result). System packages: none.
 
-use std::sync::Arc;
-
 use crate::{
     colorspaces::{
         Background, ColourFilter, HsvRange, Lookup, RgbRange, YuvRange, filter, hsv_table, mask,
@@ -358,6 +356,7 @@ pub mod panel {
     use super::*;
     use crate::widgets::{ImageView, label_response};
     use egui::{Color32, Rect, Sense, Stroke, pos2, vec2};
+    use std::sync::Arc;
 
     pub struct ColorTunerPanel {
         state: Arc<ColorTuner>,

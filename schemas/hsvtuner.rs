@@ -31,8 +31,6 @@
 //! `state` ([`Tuner`]: the ranges, the toggle, the image in use, the pixels that
 //! passed, the colour histogram). System packages: none.
 
-use std::sync::Arc;
-
 use crate::{
     colorspaces::{HsvRange, Lookup, hsv_mask, hsv_table},
     conf::{
@@ -223,6 +221,7 @@ pub mod panel {
     use super::*;
     use crate::{colorspaces::Hsv, colorspaces::hsv2rgb_u8, output, widgets::ImageView};
     use egui::{Color32, Pos2, Sense, Shape, Stroke, pos2, vec2};
+    use std::sync::Arc;
 
     pub struct TunerPanel {
         state: Arc<Tuner>,

@@ -37,7 +37,7 @@ use crate::{
         settings::{self, CYCLE, Setting},
     },
     interfaces::{Image, Interface, PtEncoders, PtMotors},
-    operator::{self, CommandLines, Commands, Operator},
+    operator::{self, CommandLines, Operator},
     runtime::{Runtime, Schema},
 };
 
@@ -156,7 +156,8 @@ mod panel {
         widgets::ImageView,
     };
 
-    use super::{Commands, Devices};
+    use super::Devices;
+    use crate::operator::Commands;
 
     pub struct NaoPanel {
         dev: Devices,

@@ -8,7 +8,8 @@
 //! [`FrameSchema`] over their own [`Work`] (what they do with a frame), on a
 //! [`Source`] that the tuners' panels switch (the others' is fixed). hsvtuner and
 //! colortuner share more: their state is a [`ColourTuner`] over their ranges
-//! ([`RangeFilter`]). calibrador and image_viewer take a fixed [`image`].
+//! ([`RangeFilter`]), made with [`ColourTuner::schema`] and edited by their panels
+//! through `ColourTuner::edit`. calibrador and image_viewer take a fixed [`image`].
 
 use std::{
     sync::{

@@ -4,6 +4,11 @@
 //! scripts set them, the lines that declare them, and the iteration that writes
 //! them: the base to `motors` every cycle (so it never goes stale), the head to
 //! `pantiltmotors` when it changes, and zero to `motors` on stop.
+//!
+//! Building one: [`interface_names`] resolves the interfaces its lines name (motors
+//! required), [`Operator::from_lines`] makes the shared commands and the schema;
+//! with the GUI, [`controls`] draws what both panels show (the joystick and its
+//! STOP, the head positioner, the camera image).
 
 use std::{sync::Arc, time::Duration};
 

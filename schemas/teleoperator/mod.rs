@@ -44,7 +44,7 @@ use crate::{
         settings::{self, CYCLE, Setting},
     },
     interfaces::{Encoders, Image, Interface, Laser, Motors, PtEncoders, PtMotors},
-    operator::{self, CommandLines, Commands, Operator},
+    operator::{self, CommandLines, Operator},
     runtime::{Runtime, Schema},
     world,
 };

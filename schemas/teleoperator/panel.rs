@@ -13,7 +13,8 @@ use crate::{
     world::{Ball, LiveBalls, World},
 };
 
-use super::{Commands, Devices};
+use super::Devices;
+use crate::operator::Commands;
 
 /// Robot radius and body height in the 3D view, mm.
 const RADIUS: f64 = 250.0;
