@@ -28,8 +28,6 @@
 //! Headless it filters each new frame and exports, component `colortuner`, `state`
 //! ([`ColorTuner`]: space, ranges, result). System packages: none.
 
-use std::sync::Arc;
-
 use crate::{
     colorspaces::{
         Background, ColourFilter, HsvRange, Lookup, RgbRange, YuvRange, filter, hsv_table, mask,
@@ -321,8 +319,6 @@ struct Lines {
 
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>> {
     let l: Lines = conf.settings(LINES)?;
-    let (source, output) =
-        imagesource::Source::open(conf, &rt.interfaces, &l.image, l.output.as_deref())?;
     let r = Ranges {
         space: Space::ALL
             .into_iter()
@@ -332,13 +328,18 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
         rgb: l.rgb,
         yuv: l.yuv,
     };
-    let state = Arc::new(ColorTuner::new(r, l.toblack, source));
-    rt.names
-        .export_arc(&conf.name, "state", state.clone())
-        .map_err(anyhow::Error::msg)?;
-    let schema = imagesource::FrameSchema::new(state.clone(), output, l.cycle);
+    let lines = imagesource::TunerLines {
+        image: &l.image,
+        output: l.output.as_deref(),
+        toblack: l.toblack,
+        cycle: l.cycle,
+    };
+    let schema = ColorTuner::schema(conf, rt, lines, r)?;
     #[cfg(feature = "gui")]
-    let schema = schema.with_panel(panel::ColorTunerPanel::new(state, l.threshold));
+    let schema = {
+        let state = schema.work.clone();
+        schema.with_panel(panel::ColorTunerPanel::new(state, l.threshold))
+    };
     Ok(Box::new(schema))
 }
 
@@ -355,6 +356,7 @@ pub mod panel {
     use super::*;
     use crate::widgets::{ImageView, label_response};
     use egui::{Color32, Rect, Sense, Stroke, pos2, vec2};
+    use std::sync::Arc;
 
     pub struct ColorTunerPanel {
         state: Arc<ColorTuner>,
@@ -459,56 +461,55 @@ pub mod panel {
 
     impl crate::runtime::Panel for ColorTunerPanel {
         fn ui(&mut self, ui: &mut egui::Ui, rt: &Runtime) {
-            let mut r = *self.state.ranges.lock();
-            let before = r;
-            let res = self.state.result.lock().clone();
-            ui.horizontal(|ui| {
-                self.state.source.picker(ui, "colortuner source");
-                for s in Space::ALL {
-                    ui.radio_value(&mut r.space, s, s.name());
-                }
-                self.state.toblack_checkbox(ui);
-                ui.label(format!("passed {} px", res.passed));
-            });
-            ui.horizontal_top(|ui| {
-                ui.vertical(|ui| {
-                    ui.set_max_width(230.0);
-                    let ch = r.space.channels();
-                    let c = r.current_mut();
-                    for (k, (name, lo, hi)) in ch.iter().enumerate() {
-                        ui.add(
-                            egui::Slider::new(&mut c[2 * k], *lo..=*hi).text(format!("{name} min")),
-                        );
-                        ui.add(
-                            egui::Slider::new(&mut c[2 * k + 1], *lo..=*hi)
-                                .text(format!("{name} max")),
-                        );
+            let state = self.state.clone();
+            state.edit(|r, res| {
+                ui.horizontal(|ui| {
+                    self.state.source.picker(ui, "colortuner source");
+                    for s in Space::ALL {
+                        ui.radio_value(&mut r.space, s, s.name());
                     }
-                    let t = &mut self.threshold;
-                    ui.add(egui::Slider::new(t, 1..=500).text("threshold"));
-                    // The plane of the space the result was computed in.
-                    if res.hist.len() == PLANE * PLANE {
-                        plane(ui, &mut r, &res.hist, *t);
-                    }
+                    self.state.toblack_checkbox(ui);
+                    ui.label(format!("passed {} px", res.passed));
                 });
-                ui.vertical(|ui| {
-                    let shown = self.view.show(ui, &res.image, res.clock);
-                    if let Some(pk) = shown.pick {
-                        // The colour under the click in the source (not the filtered view).
-                        let s = self.state.source.name.lock().clone();
-                        if let Ok(src) = rt.interfaces.get::<Image>(&s) {
-                            let v = src.snapshot();
-                            let i = (pk.y as usize * v.value.width as usize + pk.x as usize) * 3;
-                            if let Some(&[b, g, rr]) = v.value.data.get(i..i + 3) {
-                                r.pick([b, g, rr]);
+                ui.horizontal_top(|ui| {
+                    ui.vertical(|ui| {
+                        ui.set_max_width(230.0);
+                        let ch = r.space.channels();
+                        let c = r.current_mut();
+                        for (k, (name, lo, hi)) in ch.iter().enumerate() {
+                            ui.add(
+                                egui::Slider::new(&mut c[2 * k], *lo..=*hi)
+                                    .text(format!("{name} min")),
+                            );
+                            ui.add(
+                                egui::Slider::new(&mut c[2 * k + 1], *lo..=*hi)
+                                    .text(format!("{name} max")),
+                            );
+                        }
+                        let t = &mut self.threshold;
+                        ui.add(egui::Slider::new(t, 1..=500).text("threshold"));
+                        // The plane of the space the result was computed in.
+                        if res.hist.len() == PLANE * PLANE {
+                            plane(ui, r, &res.hist, *t);
+                        }
+                    });
+                    ui.vertical(|ui| {
+                        let shown = self.view.show(ui, &res.image, res.clock);
+                        if let Some(pk) = shown.pick {
+                            // The colour under the click in the source (not the filtered view).
+                            let s = self.state.source.name.lock().clone();
+                            if let Ok(src) = rt.interfaces.get::<Image>(&s) {
+                                let v = src.snapshot();
+                                let i =
+                                    (pk.y as usize * v.value.width as usize + pk.x as usize) * 3;
+                                if let Some(&[b, g, rr]) = v.value.data.get(i..i + 3) {
+                                    r.pick([b, g, rr]);
+                                }
                             }
                         }
-                    }
+                    });
                 });
             });
-            if r != before {
-                *self.state.ranges.lock() = r;
-            }
         }
     }
 }

@@ -31,8 +31,6 @@
 //! `state` ([`Tuner`]: the ranges, the toggle, the image in use, the pixels that
 //! passed, the colour histogram). System packages: none.
 
-use std::sync::Arc;
-
 use crate::{
     colorspaces::{HsvRange, Lookup, hsv_mask, hsv_table},
     conf::{
@@ -160,8 +158,6 @@ struct Lines {
 
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>> {
     let l: Lines = conf.settings(LINES)?;
-    let (source, output) =
-        imagesource::Source::open(conf, &rt.interfaces, &l.image, l.output.as_deref())?;
     let r = HsvRadians {
         hmin: l.hmin,
         hmax: l.hmax,
@@ -170,13 +166,18 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
         vmin: l.vmin,
         vmax: l.vmax,
     };
-    let state = Arc::new(Tuner::new(r, l.toblack, source));
-    rt.names
-        .export_arc(&conf.name, "state", state.clone())
-        .map_err(anyhow::Error::msg)?;
-    let schema = imagesource::FrameSchema::new(state.clone(), output, l.cycle);
+    let lines = imagesource::TunerLines {
+        image: &l.image,
+        output: l.output.as_deref(),
+        toblack: l.toblack,
+        cycle: l.cycle,
+    };
+    let schema = Tuner::schema(conf, rt, lines, r)?;
     #[cfg(feature = "gui")]
-    let schema = schema.with_panel(panel::TunerPanel::new(state));
+    let schema = {
+        let state = schema.work.clone();
+        schema.with_panel(panel::TunerPanel::new(state))
+    };
     Ok(Box::new(schema))
 }
 
@@ -220,6 +221,7 @@ pub mod panel {
     use super::*;
     use crate::{colorspaces::Hsv, colorspaces::hsv2rgb_u8, output, widgets::ImageView};
     use egui::{Color32, Pos2, Sense, Shape, Stroke, pos2, vec2};
+    use std::sync::Arc;
 
     pub struct TunerPanel {
         state: Arc<Tuner>,
@@ -309,47 +311,44 @@ pub mod panel {
 
     impl crate::runtime::Panel for TunerPanel {
         fn ui(&mut self, ui: &mut egui::Ui, _rt: &Runtime) {
-            let mut r = *self.state.ranges.lock();
-            let before = r;
-            let res = self.state.result.lock().clone();
-            ui.horizontal(|ui| {
-                self.state.source.picker(ui, "hsvtuner source");
-                self.state.toblack_checkbox(ui);
-                let total = (res.image.width * res.image.height).max(1) as f32;
-                ui.label(format!(
-                    "passed {} px ({:.1} %)",
-                    res.passed,
-                    res.passed as f32 * 100.0 / total
-                ));
-            });
-            ui.horizontal_top(|ui| {
-                ui.vertical(|ui| {
-                    ui.set_max_width(230.0);
-                    ui.add(egui::Slider::new(&mut r.hmin, 0.0..=TAU).text("Hmin rad"));
-                    ui.add(egui::Slider::new(&mut r.hmax, 0.0..=TAU).text("Hmax rad"));
-                    ui.add(egui::Slider::new(&mut r.smin, 0.0..=1.0).text("Smin"));
-                    ui.add(egui::Slider::new(&mut r.smax, 0.0..=1.0).text("Smax"));
-                    ui.add(egui::Slider::new(&mut r.vmin, 0.0..=255.0).text("Vmin"));
-                    ui.add(egui::Slider::new(&mut r.vmax, 0.0..=255.0).text("Vmax"));
-                    self.cheese(ui, &mut r, &res.hist);
-                    ui.horizontal(|ui| {
-                        if ui.button("Print").clicked() {
-                            for line in r.conf_lines().lines() {
-                                output::println(line);
+            let state = self.state.clone();
+            state.edit(|r, res| {
+                ui.horizontal(|ui| {
+                    self.state.source.picker(ui, "hsvtuner source");
+                    self.state.toblack_checkbox(ui);
+                    let total = (res.image.width * res.image.height).max(1) as f32;
+                    ui.label(format!(
+                        "passed {} px ({:.1} %)",
+                        res.passed,
+                        res.passed as f32 * 100.0 / total
+                    ));
+                });
+                ui.horizontal_top(|ui| {
+                    ui.vertical(|ui| {
+                        ui.set_max_width(230.0);
+                        ui.add(egui::Slider::new(&mut r.hmin, 0.0..=TAU).text("Hmin rad"));
+                        ui.add(egui::Slider::new(&mut r.hmax, 0.0..=TAU).text("Hmax rad"));
+                        ui.add(egui::Slider::new(&mut r.smin, 0.0..=1.0).text("Smin"));
+                        ui.add(egui::Slider::new(&mut r.smax, 0.0..=1.0).text("Smax"));
+                        ui.add(egui::Slider::new(&mut r.vmin, 0.0..=255.0).text("Vmin"));
+                        ui.add(egui::Slider::new(&mut r.vmax, 0.0..=255.0).text("Vmax"));
+                        self.cheese(ui, r, &res.hist);
+                        ui.horizontal(|ui| {
+                            if ui.button("Print").clicked() {
+                                for line in r.conf_lines().lines() {
+                                    output::println(line);
+                                }
                             }
-                        }
-                        if ui.button("Copy").clicked() {
-                            ui.ctx().copy_text(r.conf_lines());
-                        }
+                            if ui.button("Copy").clicked() {
+                                ui.ctx().copy_text(r.conf_lines());
+                            }
+                        });
+                    });
+                    ui.vertical(|ui| {
+                        self.view.show(ui, &res.image, res.clock);
                     });
                 });
-                ui.vertical(|ui| {
-                    self.view.show(ui, &res.image, res.clock);
-                });
             });
-            if r != before {
-                *self.state.ranges.lock() = r;
-            }
         }
     }
 }

@@ -29,7 +29,7 @@
 //! Name space, component `naooperator`: `walk` (`Mutex<Motors>`) and `head`
 //! (`Mutex<[f32; 2]>`, longitude and latitude in degrees).
 
-use std::{sync::Arc, time::Duration};
+use std::sync::Arc;
 
 use crate::{
     conf::{
@@ -37,7 +37,7 @@ use crate::{
         settings::{self, CYCLE, Setting},
     },
     interfaces::{Image, Interface, PtEncoders, PtMotors},
-    operator::{self, Commands, Operator},
+    operator::{self, CommandLines, Operator},
     runtime::{Runtime, Schema},
 };
 
@@ -94,50 +94,42 @@ pub struct Devices {
 }
 
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>> {
-    let lines: Lines = conf.settings(LINES)?;
-    // An interface the conf names, if it is not `none` and something provides it.
-    let name = |n: &str| (n != "none" && rt.interfaces.contains(n)).then(|| n.to_string());
-    let Some(motors) = name(&lines.motors) else {
-        anyhow::bail!(
-            "{}: naooperator needs a motors interface (`{}` is not provided); load a driver \
-             that provides it (the simulator, player, networkclient ...) before naooperator",
-            conf.line("motors")
-                .map(|l| l.at.to_string())
-                .unwrap_or_else(|| conf.file.display().to_string()),
-            lines.motors
-        );
-    };
+    let l: Lines = conf.settings(LINES)?;
+    let names = operator::interface_names(
+        conf,
+        rt,
+        &l.motors,
+        &[&l.pantiltmotors, &l.pantiltencoders, &l.camera],
+        "the simulator, player, networkclient ...",
+    )?;
     let ifs = &rt.interfaces;
-    let names = [
-        Some(motors),
-        name(&lines.pantiltmotors),
-        name(&lines.pantiltencoders),
-        name(&lines.camera),
-    ];
+    let get = |i: usize| names[i].as_deref();
     let dev = Devices {
-        motors: ifs.get(names[0].as_deref().unwrap_or_default())?,
-        ptmotors: names[1].as_deref().map(|n| ifs.get(n)).transpose()?,
-        ptencoders: names[2].as_deref().map(|n| ifs.get(n)).transpose()?,
-        camera: names[3].as_deref().map(|n| ifs.get(n)).transpose()?,
+        motors: ifs.get(get(0).unwrap_or_default())?,
+        ptmotors: get(1).map(|n| ifs.get(n)).transpose()?,
+        ptencoders: get(2).map(|n| ifs.get(n)).transpose()?,
+        camera: get(3).map(|n| ifs.get(n)).transpose()?,
     };
-    let commands = Arc::new(Commands::shared(
-        &rt.names,
-        &conf.name,
-        ("walk", "head"),
-        (lines.max_v, lines.max_w),
-        lines.walk,
-        lines.head,
-    ));
+    let lines = CommandLines {
+        keys: ("walk", "head"),
+        max: (l.max_v, l.max_w),
+        base: l.walk,
+        head: l.head,
+        cycle: l.cycle,
+    };
+    let children = names.into_iter().flatten().collect();
     #[cfg_attr(not(feature = "gui"), allow(unused_mut))]
-    let mut schema = Operator::new(
-        commands.clone(),
+    let mut schema = Operator::from_lines(
+        rt,
+        conf,
+        lines,
         dev.motors.clone(),
         dev.ptmotors.clone(),
-        names.into_iter().flatten().collect(),
-        Duration::from_millis(lines.cycle),
+        children,
     );
     #[cfg(feature = "gui")]
     {
+        let commands = schema.commands.clone();
         schema.panel = Some(Box::new(panel::NaoPanel::new(commands, dev)));
     }
     Ok(Box::new(schema))
@@ -159,34 +151,26 @@ mod panel {
     use egui::vec2;
 
     use crate::{
+        operator::controls::{self, Controls},
         runtime::{Panel, Runtime},
-        widgets::{ImageView, Joystick, PanTiltLimits, PanTiltPad},
+        widgets::ImageView,
     };
 
-    use super::{Commands, Devices};
+    use super::Devices;
+    use crate::operator::Commands;
 
     pub struct NaoPanel {
-        commands: Arc<Commands>,
         dev: Devices,
-        joystick: Joystick,
-        pad: Option<PanTiltPad>,
+        controls: Controls,
         image: ImageView,
     }
 
     impl NaoPanel {
         pub fn new(commands: Arc<Commands>, dev: Devices) -> Self {
-            let pad = dev.ptmotors.as_ref().map(|m| {
-                let mut p =
-                    PanTiltPad::new("naooperator head", PanTiltLimits::from(&m.read().value));
-                let h = *commands.head.lock();
-                (p.longitude, p.latitude) = (h[0], h[1]);
-                p
-            });
+            let labels = ("naooperator walk", "naooperator head");
             NaoPanel {
-                joystick: Joystick::new("naooperator walk", commands.max_v, commands.max_w),
-                commands,
+                controls: Controls::new(commands, labels, dev.ptmotors.as_deref()),
                 dev,
-                pad,
                 image: ImageView::new("naooperator camera"),
             }
         }
@@ -205,40 +189,14 @@ mod panel {
                 .map(|p| p.read().value)
                 .map(|p| (p.pan_angle, p.tilt_angle));
             ui.horizontal(|ui| {
-                let m = self.dev.motors.read().value;
-                ui.label(format!("walk v {:.0} mm/s  w {:.1} deg/s", m.v, m.w));
-                if ui.button("STOP").clicked() {
-                    self.commands.set_base(0.0, 0.0);
-                    self.joystick.v = 0.0;
-                    self.joystick.w = 0.0;
-                }
+                self.controls.speeds_and_stop(ui, "walk ", &self.dev.motors);
             });
             ui.horizontal_top(|ui| {
-                ui.vertical(|ui| {
-                    ui.label("walk");
-                    if self.joystick.show(ui, 140.0).changed() {
-                        self.commands.set_base(self.joystick.v, self.joystick.w);
-                    }
-                    if let Some(pad) = &mut self.pad {
-                        ui.label("head");
-                        if pad.show(ui, vec2(140.0, 90.0), head).changed() {
-                            self.commands.set_head(pad.longitude, pad.latitude);
-                        }
-                    }
-                });
+                ui.vertical(|ui| self.controls.show(ui, ("walk", "head"), head));
                 ui.vertical(|ui| {
                     ui.label("camera");
                     match &self.dev.camera {
-                        Some(c) => {
-                            let s = c.snapshot();
-                            ui.allocate_ui(vec2(320.0, 240.0), |ui| {
-                                if s.clock > 0 {
-                                    self.image.show_sample(ui, &s);
-                                } else {
-                                    ui.small("(no image yet)");
-                                }
-                            });
-                        }
+                        Some(c) => controls::camera(ui, &mut self.image, c, vec2(320.0, 240.0)),
                         None => {
                             ui.small("(no camera interface)");
                         }

@@ -8,7 +8,8 @@
 //! [`FrameSchema`] over their own [`Work`] (what they do with a frame), on a
 //! [`Source`] that the tuners' panels switch (the others' is fixed). hsvtuner and
 //! colortuner share more: their state is a [`ColourTuner`] over their ranges
-//! ([`RangeFilter`]). calibrador and image_viewer take a fixed [`image`].
+//! ([`RangeFilter`]), made with [`ColourTuner::schema`] and edited by their panels
+//! through `ColourTuner::edit`. calibrador and image_viewer take a fixed [`image`].
 
 use std::{
     sync::{
@@ -382,6 +383,31 @@ impl<R: RangeFilter> ColourTuner<R> {
             result: Mutex::new(Filtered::default()),
         }
     }
+
+    /// A tuner's schema from its lines: the `image` and `output` made real, the
+    /// state exported as `state` of `conf`'s component (the panel, if any, takes
+    /// the schema's `work`).
+    pub fn schema(
+        conf: &ComponentConf,
+        rt: &crate::runtime::Runtime,
+        lines: TunerLines<'_>,
+        ranges: R,
+    ) -> anyhow::Result<FrameSchema<Arc<Self>>> {
+        let (source, output) = Source::open(conf, &rt.interfaces, lines.image, lines.output)?;
+        let state = Arc::new(Self::new(ranges, lines.toblack, source));
+        rt.names
+            .export_arc(&conf.name, "state", state.clone())
+            .map_err(anyhow::Error::msg)?;
+        Ok(FrameSchema::new(state, output, lines.cycle))
+    }
+}
+
+/// The lines every colour tuner has: `image`, `output`, `toblack`, `cycle`.
+pub struct TunerLines<'a> {
+    pub image: &'a str,
+    pub output: Option<&'a str>,
+    pub toblack: bool,
+    pub cycle: u64,
 }
 
 #[cfg(feature = "gui")]
@@ -391,6 +417,21 @@ impl<R> ColourTuner<R> {
         let mut black = self.toblack.load(Ordering::Relaxed);
         if ui.checkbox(&mut black, "toblack").changed() {
             self.toblack.store(black, Ordering::Relaxed);
+        }
+    }
+
+    /// A panel frame: `ui` edits a copy of the ranges beside the last result, and
+    /// the ranges are stored back when it changed them.
+    pub fn edit(&self, ui: impl FnOnce(&mut R, &Filtered))
+    where
+        R: Copy + PartialEq,
+    {
+        let mut r = *self.ranges.lock();
+        let before = r;
+        let res = self.result.lock().clone();
+        ui(&mut r, &res);
+        if r != before {
+            *self.ranges.lock() = r;
         }
     }
 }

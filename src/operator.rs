@@ -4,16 +4,24 @@
 //! scripts set them, the lines that declare them, and the iteration that writes
 //! them: the base to `motors` every cycle (so it never goes stale), the head to
 //! `pantiltmotors` when it changes, and zero to `motors` on stop.
+//!
+//! Building one: [`interface_names`] resolves the interfaces its lines name (motors
+//! required), [`Operator::from_lines`] makes the shared commands and the schema;
+//! with the GUI, [`controls`] draws what both panels show (the joystick and its
+//! STOP, the head positioner, the camera image).
 
 use std::{sync::Arc, time::Duration};
 
 use parking_lot::Mutex;
 
 use crate::{
-    conf::settings::{Setting, float},
+    conf::{
+        ComponentConf,
+        settings::{Setting, float},
+    },
     interfaces::{Interface, Motors, PtMotors},
     namespace::Namespace,
-    runtime::{Context, Schema},
+    runtime::{Context, Runtime, Schema},
 };
 
 /// The joystick's maximum speed, `max_v V`.
@@ -121,7 +129,68 @@ pub struct Operator {
     last_head: Option<[f32; 2]>,
 }
 
+/// The interfaces an operator uses, by the names its lines give (in `lines`
+/// order, `motors` first). Motors is required: `none` or a name nothing provides
+/// is an error at its line, `hint` saying what to load. The others are `None` when
+/// `none` or not provided.
+pub fn interface_names(
+    conf: &ComponentConf,
+    rt: &Runtime,
+    motors: &str,
+    others: &[&str],
+    hint: &str,
+) -> anyhow::Result<Vec<Option<String>>> {
+    let name = |n: &str| (n != "none" && rt.interfaces.contains(n)).then(|| n.to_string());
+    if name(motors).is_none() {
+        anyhow::bail!(
+            "{}: {} needs a motors interface (`{motors}` is not provided); load a driver \
+             that provides it ({hint}) before {}",
+            conf.line("motors")
+                .map(|l| l.at.to_string())
+                .unwrap_or_else(|| conf.file.display().to_string()),
+            conf.name,
+            conf.name,
+        );
+    }
+    Ok(std::iter::once(motors)
+        .chain(others.iter().copied())
+        .map(name)
+        .collect())
+}
+
+/// The lines that make an operator's commands: the name-space keys of the base and
+/// the head, the maxima, the initial base and head commands, the cycle (ms).
+pub struct CommandLines {
+    pub keys: (&'static str, &'static str),
+    pub max: (f32, f32),
+    pub base: (f32, f32),
+    pub head: (f32, f32),
+    pub cycle: u64,
+}
+
 impl Operator {
+    /// An operator of `conf`'s component with its commands shared through the name
+    /// space, writing to `motors` and `head`, running `children`.
+    pub fn from_lines(
+        rt: &Runtime,
+        conf: &ComponentConf,
+        lines: CommandLines,
+        motors: Arc<Interface<Motors>>,
+        head: Option<Arc<Interface<PtMotors>>>,
+        children: Vec<String>,
+    ) -> Operator {
+        let commands = Arc::new(Commands::shared(
+            &rt.names, &conf.name, lines.keys, lines.max, lines.base, lines.head,
+        ));
+        Operator::new(
+            commands,
+            motors,
+            head,
+            children,
+            Duration::from_millis(lines.cycle),
+        )
+    }
+
     pub fn new(
         commands: Arc<Commands>,
         motors: Arc<Interface<Motors>>,
@@ -170,5 +239,105 @@ impl Schema for Operator {
     #[cfg(feature = "gui")]
     fn panel(&mut self) -> Option<Box<dyn crate::runtime::Panel>> {
         self.panel.take()
+    }
+}
+
+/// What both operators' panels show: the base joystick with its STOP, the head
+/// positioner, the camera image.
+#[cfg(feature = "gui")]
+pub mod controls {
+    use std::sync::Arc;
+
+    use egui::vec2;
+
+    use crate::{
+        interfaces::{Image, Interface, Motors, PtMotors},
+        widgets::{ImageView, Joystick, PanTiltLimits, PanTiltPad},
+    };
+
+    use super::Commands;
+
+    /// The joystick (the base) and, with a head, its positioner.
+    pub struct Controls {
+        pub commands: Arc<Commands>,
+        pub joystick: Joystick,
+        pub pad: Option<PanTiltPad>,
+    }
+
+    impl Controls {
+        /// `labels`: the joystick's and the positioner's; the positioner starts at
+        /// the head command, within the limits `head` publishes.
+        pub fn new(
+            commands: Arc<Commands>,
+            (joystick, pad): (&str, &str),
+            head: Option<&Interface<PtMotors>>,
+        ) -> Controls {
+            let pad = head.map(|m| {
+                let mut p = PanTiltPad::new(pad, PanTiltLimits::from(&m.read().value));
+                let h = *commands.head.lock();
+                (p.longitude, p.latitude) = (h[0], h[1]);
+                p
+            });
+            Controls {
+                joystick: Joystick::new(joystick, commands.max_v, commands.max_w),
+                commands,
+                pad,
+            }
+        }
+
+        /// The base's speeds (`what` names it) and the STOP button, which zeroes
+        /// the base command and the joystick.
+        pub fn speeds_and_stop(
+            &mut self,
+            ui: &mut egui::Ui,
+            what: &str,
+            motors: &Interface<Motors>,
+        ) {
+            let m = motors.read().value;
+            ui.label(format!("{what}v {:.0} mm/s  w {:.1} deg/s", m.v, m.w));
+            if ui.button("STOP").clicked() {
+                self.commands.set_base(0.0, 0.0);
+                self.joystick.v = 0.0;
+                self.joystick.w = 0.0;
+            }
+        }
+
+        /// The joystick under `base` and the positioner under `head` (showing the
+        /// head's angles `actual`), each setting its command when moved.
+        pub fn show(
+            &mut self,
+            ui: &mut egui::Ui,
+            (base, head): (&str, &str),
+            actual: Option<(f32, f32)>,
+        ) {
+            ui.label(base);
+            if self.joystick.show(ui, 140.0).changed() {
+                self.commands.set_base(self.joystick.v, self.joystick.w);
+            }
+            if let Some(pad) = &mut self.pad {
+                ui.label(head);
+                if pad.show(ui, vec2(140.0, 90.0), actual).changed() {
+                    self.commands.set_head(pad.longitude, pad.latitude);
+                }
+            }
+        }
+    }
+
+    /// The latest image of `camera` in `view`, `size` points ("(no image yet)"
+    /// before the first).
+    pub fn camera(
+        ui: &mut egui::Ui,
+        view: &mut ImageView,
+        camera: &Interface<Image>,
+        size: egui::Vec2,
+    ) {
+        let s = camera.snapshot();
+        ui.allocate_ui(size, |ui| {
+            if s.clock > 0 {
+                view.show_sample(ui, &s);
+            } else {
+                ui.small("(no image yet)");
+            }
+        });
     }
 }

@@ -5,19 +5,26 @@
 //!   own default), [`REPLY_TIMEOUT`], and the reading of `serial` and `provides`
 //!   with their errors ([`HeadConf::new`]).
 //! - [`open_port`]: the one place a serial port is opened, with errors that say
-//!   what to check (a missing device, a file that is not a tty, permissions).
+//!   what to check (a missing device, a file that is not a tty, permissions);
+//!   [`read_some`], the one way a head's link reads it.
+//! - [`PollClock`], the position polls' schedule, and [`supervise`], a head under
+//!   the supervisor (retried every second).
 //!
 //! Each driver keeps its protocol, its link and its session; the supervisor
 //! ([`crate::runtime::Supervisor`]) owns their threads, retries and stale marking.
 
-use std::time::Duration;
+use std::{
+    sync::Arc,
+    time::{Duration, Instant},
+};
 
 use crate::{
     conf::{
         ComponentConf,
         settings::{Setting, int, word},
     },
-    interfaces::canonical,
+    interfaces::{AnyInterface, canonical},
+    runtime::{Backoff, Device, Supervision, Supervisor},
 };
 
 /// `serial DEVICE`: the port the head is on (required).
@@ -83,6 +90,32 @@ impl HeadConf {
     pub fn provides(&self, name: &str) -> bool {
         self.provides.iter().any(|p| p == name)
     }
+
+    /// Opens the `serial` port at `baud`; `device` names what should be on it.
+    pub fn open(
+        &self,
+        baud: u32,
+        device: &str,
+    ) -> Result<Box<dyn serialport::SerialPort>, PortError> {
+        open_port(&self.serial, baud, device).map_err(|what| PortError::Open {
+            port: self.serial.clone(),
+            what,
+        })
+    }
+}
+
+/// A head's port that could not be opened, or failed in use.
+#[derive(Debug, thiserror::Error)]
+pub enum PortError {
+    #[error("{port}: {what}")]
+    Open { port: String, what: String },
+    /// `device` names what is on the port ("the unit").
+    #[error("{port}: the port failed ({what}); was {device} unplugged?")]
+    Io {
+        port: String,
+        what: String,
+        device: &'static str,
+    },
 }
 
 /// Opens `path` as a serial port at `baud` (reads time out after 5 ms), or says
@@ -120,6 +153,78 @@ pub fn open_port(
             }
             _ => format!("cannot be opened as a serial port: {e}"),
         })
+}
+
+/// Reads what has arrived on `port` into `buf`: `Some(bytes)`, or `None` when
+/// nothing came within the port's timeout; a port that ends (unplugged) is an
+/// `UnexpectedEof` error.
+pub fn read_some(
+    port: &mut dyn serialport::SerialPort,
+    buf: &mut [u8],
+) -> std::io::Result<Option<usize>> {
+    match port.read(buf) {
+        Ok(0) => Err(std::io::ErrorKind::UnexpectedEof.into()),
+        Ok(n) => Ok(Some(n)),
+        Err(e) if e.kind() == std::io::ErrorKind::TimedOut => Ok(None),
+        Err(e) => Err(e),
+    }
+}
+
+/// When a head's position is polled: every `period` on absolute deadlines (the
+/// period does not drift with the reply time; a late poll does not bunch up).
+pub struct PollClock {
+    next: Instant,
+    period: Duration,
+}
+
+impl PollClock {
+    /// A poll is due at once.
+    pub fn new(period: Duration) -> PollClock {
+        PollClock {
+            next: Instant::now(),
+            period,
+        }
+    }
+
+    /// Whether a poll is due (then the next one is scheduled).
+    pub fn due(&mut self) -> bool {
+        let now = Instant::now();
+        if now < self.next {
+            return false;
+        }
+        self.next += self.period;
+        if self.next < now {
+            self.next = now + self.period;
+        }
+        true
+    }
+
+    /// Sleeps until the next poll, half a millisecond at most: commands go out
+    /// within that of being set, polls on time.
+    pub fn pause(&self) {
+        let wait = self.next.saturating_duration_since(Instant::now());
+        std::thread::sleep(wait.min(Duration::from_micros(500)));
+    }
+}
+
+/// Starts supervising `head` as `provider` with its `interfaces` (those provided):
+/// a port that cannot be opened, or a head that does not answer, is tried again
+/// every second; the rest of the run goes on.
+pub fn supervise<D: Device>(
+    provider: &str,
+    interfaces: impl IntoIterator<Item = Option<Arc<dyn AnyInterface>>>,
+    head: D,
+) -> anyhow::Result<Supervisor> {
+    Supervisor::start(
+        Supervision {
+            name: provider.to_string(),
+            interfaces: interfaces.into_iter().flatten().collect(),
+            on_demand: false,
+            backoff: Backoff::fixed(Duration::from_secs(1)),
+            absent: None,
+        },
+        head,
+    )
 }
 
 #[cfg(test)]

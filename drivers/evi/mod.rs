@@ -61,8 +61,8 @@ use crate::{
         settings::{Setting, choice, int},
     },
     interfaces::{AnyInterface, Interface, PtEncoders, PtMotors, ZoomEncoders, ZoomMotors, limit},
-    runtime::{Backoff, Device, Driver, Runtime, Supervision, Supervisor},
-    serialhead::{HeadConf, POLL, REPLY_TIMEOUT, SERIAL, open_port},
+    runtime::{Device, Driver, Runtime, Supervisor},
+    serialhead::{self, HeadConf, POLL, PollClock, PortError, REPLY_TIMEOUT, SERIAL, read_some},
 };
 use protocol::{Reply, ViscaError};
 
@@ -72,10 +72,6 @@ pub struct EviConf {
     /// `serial`, `poll`, `reply_timeout`, `provides`.
     pub head: HeadConf,
     pub camera: u8,
-    pub pantiltencoders: bool,
-    pub pantiltmotors: bool,
-    pub zoomencoders: bool,
-    pub zoommotors: bool,
 }
 
 /// The lines `evi` takes (`jderobot help evi` prints them).
@@ -121,37 +117,33 @@ struct Lines {
 
 impl EviConf {
     pub fn parse(conf: &ComponentConf) -> anyhow::Result<EviConf> {
-        let lines: Lines = conf.settings(LINES)?;
+        let offered = [
+            "pantiltencoders",
+            "pantiltmotors",
+            "zoomencoders",
+            "zoommotors",
+        ];
+        let l: Lines = conf.settings(LINES)?;
         let head = HeadConf::new(
             conf,
-            lines.serial,
-            lines.poll,
-            lines.reply_timeout,
-            &lines.provides,
-            &[
-                "pantiltencoders",
-                "pantiltmotors",
-                "zoomencoders",
-                "zoommotors",
-            ],
+            l.serial,
+            l.poll,
+            l.reply_timeout,
+            &l.provides,
+            &offered,
         )?;
-        let c = EviConf {
-            camera: lines.camera,
-            pantiltencoders: head.provides("pantiltencoders"),
-            pantiltmotors: head.provides("pantiltmotors"),
-            zoomencoders: head.provides("zoomencoders"),
-            zoommotors: head.provides("zoommotors"),
+        Ok(EviConf {
             head,
-        };
-        Ok(c)
+            camera: l.camera,
+        })
     }
 }
 
 /// Why the link to the camera failed.
 #[derive(Debug, thiserror::Error)]
 pub enum LinkError {
-    #[error("{port}: {what}")]
-    Open { port: String, what: String },
+    #[error(transparent)]
+    Port(#[from] PortError),
     #[error(
         "{port}: no answer to `{command}` in {ms} ms (is the EVI powered (its standby lamp), on this port, at 9600 baud?)"
     )]
@@ -194,8 +186,6 @@ pub enum LinkError {
         command: String,
         error: ViscaError,
     },
-    #[error("{port}: the port failed ({what}); was the camera unplugged?")]
-    Io { port: String, what: String },
 }
 
 /// The longest VISCA packet is 16 bytes.
@@ -230,10 +220,11 @@ impl Link {
     }
 
     fn io(&self, e: std::io::Error) -> LinkError {
-        LinkError::Io {
+        LinkError::Port(PortError::Io {
             port: self.name.clone(),
             what: e.to_string(),
-        }
+            device: "the camera",
+        })
     }
 
     pub fn send(&mut self, p: &[u8]) -> Result<(), LinkError> {
@@ -272,11 +263,8 @@ impl Link {
             if t0.elapsed() > timeout {
                 return Ok(None);
             }
-            match self.port.read(&mut b) {
-                Ok(0) => return Err(self.io(std::io::ErrorKind::UnexpectedEof.into())),
-                Ok(n) => self.buf.extend_from_slice(&b[..n]),
-                Err(e) if e.kind() == std::io::ErrorKind::TimedOut => {}
-                Err(e) => return Err(self.io(e)),
+            if let Some(n) = read_some(self.port.as_mut(), &mut b).map_err(|e| self.io(e))? {
+                self.buf.extend_from_slice(&b[..n]);
             }
         }
     }
@@ -328,11 +316,11 @@ impl Link {
         while quiet_since.elapsed() < Duration::from_millis(50)
             && t0.elapsed() < Duration::from_secs(1)
         {
-            match self.port.read(&mut b) {
-                Ok(0) => return Err(self.io(std::io::ErrorKind::UnexpectedEof.into())),
-                Ok(_) => quiet_since = Instant::now(),
-                Err(e) if e.kind() == std::io::ErrorKind::TimedOut => {}
-                Err(e) => return Err(self.io(e)),
+            if read_some(self.port.as_mut(), &mut b)
+                .map_err(|e| self.io(e))?
+                .is_some()
+            {
+                quiet_since = Instant::now();
             }
         }
         Ok(())
@@ -528,7 +516,7 @@ struct EviSession {
     here: (i32, i32),
     pt: Pending<(u8, u8, i32, i32)>,
     zoom: Pending<i32>,
-    next_poll: Instant,
+    poll: PollClock,
 }
 
 /// What was last sent for a command interface, and the interface clock it answered.
@@ -573,14 +561,9 @@ fn try_command<T: crate::interfaces::InterfaceValue>(
 impl Evi {
     /// Opens the port, runs the init and reads where the head and the zoom are.
     fn open_session(&mut self) -> Result<EviSession, LinkError> {
-        let port = &self.conf.head.serial;
-        let p = open_port(port, 9600, "the camera (its VISCA cable)").map_err(|what| {
-            LinkError::Open {
-                port: port.clone(),
-                what,
-            }
-        })?;
-        let mut owned = Link::new(p, port, self.conf.camera, self.conf.head.reply_timeout);
+        let head = &self.conf.head;
+        let p = head.open(9600, "the camera (its VISCA cable)")?;
+        let mut owned = Link::new(p, &head.serial, self.conf.camera, head.reply_timeout);
         let link = &mut owned;
         init(link)?;
         let here = link.pantilt()?;
@@ -611,7 +594,7 @@ impl Evi {
             here,
             pt,
             zoom,
-            next_poll: Instant::now(),
+            poll: PollClock::new(self.conf.head.poll),
         })
     }
 
@@ -622,7 +605,7 @@ impl Evi {
             here,
             pt,
             zoom,
-            next_poll,
+            poll,
         } = s;
         let addr = link.addr;
         if let Some(m) = &self.ptm {
@@ -656,12 +639,7 @@ impl Evi {
                 }
             }
         }
-        let now = Instant::now();
-        if now >= *next_poll {
-            *next_poll += self.conf.head.poll;
-            if *next_poll < now {
-                *next_poll = now + self.conf.head.poll;
-            }
+        if poll.due() {
             *here = link.pantilt()?;
             if let Some(e) = &self.pte {
                 let _ = e.publish(PtEncoders {
@@ -684,8 +662,7 @@ impl Evi {
                 });
             }
         }
-        let wait = next_poll.saturating_duration_since(Instant::now());
-        std::thread::sleep(wait.min(Duration::from_micros(500)));
+        poll.pause();
         Ok(())
     }
 }
@@ -738,20 +715,20 @@ fn initial_pantilt() -> PtMotors {
 /// reported and retried; the rest of the run goes on).
 pub fn start(conf: EviConf, rt: &Runtime, provider: &str) -> anyhow::Result<Supervisor> {
     let ifs = &rt.interfaces;
-    let pte = conf
-        .pantiltencoders
+    let pte = (conf.head)
+        .provides("pantiltencoders")
         .then(|| ifs.provide::<PtEncoders>("pantiltencoders", provider))
         .transpose()?;
-    let ptm = conf
-        .pantiltmotors
+    let ptm = (conf.head)
+        .provides("pantiltmotors")
         .then(|| ifs.provide_value("pantiltmotors", provider, initial_pantilt()))
         .transpose()?;
-    let ze = conf
-        .zoomencoders
+    let ze = (conf.head)
+        .provides("zoomencoders")
         .then(|| ifs.provide::<ZoomEncoders>("zoomencoders", provider))
         .transpose()?;
-    let zm = conf
-        .zoommotors
+    let zm = (conf.head)
+        .provides("zoommotors")
         .then(|| {
             ifs.provide_value(
                 "zoommotors",
@@ -766,22 +743,15 @@ pub fn start(conf: EviConf, rt: &Runtime, provider: &str) -> anyhow::Result<Supe
             )
         })
         .transpose()?;
-    let mut interfaces: Vec<Arc<dyn AnyInterface>> = Vec::new();
-    let all = [
+    let interfaces = [
         pte.clone().map(|i| i as Arc<dyn AnyInterface>),
         ptm.clone().map(|i| i as Arc<dyn AnyInterface>),
         ze.clone().map(|i| i as Arc<dyn AnyInterface>),
         zm.clone().map(|i| i as Arc<dyn AnyInterface>),
     ];
-    interfaces.extend(all.into_iter().flatten());
-    Supervisor::start(
-        Supervision {
-            name: provider.to_string(),
-            interfaces,
-            on_demand: false,
-            backoff: Backoff::fixed(Duration::from_secs(1)),
-            absent: None,
-        },
+    serialhead::supervise(
+        provider,
+        interfaces,
         Evi {
             conf,
             provider: provider.to_string(),

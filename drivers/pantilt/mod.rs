@@ -42,7 +42,7 @@
 pub mod protocol;
 
 use std::{
-    io::{Read, Write},
+    io::Write,
     sync::Arc,
     time::{Duration, Instant},
 };
@@ -53,8 +53,8 @@ use crate::{
         settings::{Setting, choice, int},
     },
     interfaces::{AnyInterface, Interface, PtEncoders, PtMotors, limit},
-    runtime::{Backoff, Device, Driver, Runtime, Supervision, Supervisor},
-    serialhead::{HeadConf, POLL, REPLY_TIMEOUT, SERIAL, open_port},
+    runtime::{Device, Driver, Runtime, Supervisor},
+    serialhead::{self, HeadConf, POLL, PollClock, PortError, REPLY_TIMEOUT, SERIAL, read_some},
 };
 use protocol::{Axis, ENCOD_TO_DEG, Query, ReplyError};
 
@@ -64,8 +64,6 @@ pub struct PtuConf {
     /// `serial`, `poll`, `reply_timeout`, `provides`.
     pub head: HeadConf,
     pub baud: u32,
-    pub encoders: bool,
-    pub motors: bool,
 }
 
 /// The lines `pantilt` takes (`jderobot help pantilt` prints them).
@@ -103,30 +101,25 @@ struct Lines {
 impl PtuConf {
     /// Parses the driver's lines (errors name file:line).
     pub fn parse(conf: &ComponentConf) -> anyhow::Result<PtuConf> {
-        let lines: Lines = conf.settings(LINES)?;
+        let l: Lines = conf.settings(LINES)?;
+        let offered = ["pantiltencoders", "pantiltmotors"];
         let head = HeadConf::new(
             conf,
-            lines.serial,
-            lines.poll,
-            lines.reply_timeout,
-            &lines.provides,
-            &["pantiltencoders", "pantiltmotors"],
+            l.serial,
+            l.poll,
+            l.reply_timeout,
+            &l.provides,
+            &offered,
         )?;
-        let c = PtuConf {
-            baud: lines.baud,
-            encoders: head.provides("pantiltencoders"),
-            motors: head.provides("pantiltmotors"),
-            head,
-        };
-        Ok(c)
+        Ok(PtuConf { head, baud: l.baud })
     }
 }
 
 /// Why the link to the unit failed.
 #[derive(Debug, thiserror::Error)]
 pub enum LinkError {
-    #[error("{port}: {what}")]
-    Open { port: String, what: String },
+    #[error(transparent)]
+    Port(#[from] PortError),
     #[error(
         "{port}: no reply to `{command}` in {ms} ms (is the PTU powered, on this port, at {baud} baud?)"
     )]
@@ -142,8 +135,6 @@ pub enum LinkError {
         #[source]
         source: ReplyError,
     },
-    #[error("{port}: the port failed ({what}); was the unit unplugged?")]
-    Io { port: String, what: String },
 }
 
 /// A line-oriented link to the unit.
@@ -175,10 +166,11 @@ impl Link {
     }
 
     fn io(&self, e: std::io::Error) -> LinkError {
-        LinkError::Io {
+        LinkError::Port(PortError::Io {
             port: self.name.clone(),
             what: e.to_string(),
-        }
+            device: "the unit",
+        })
     }
 
     /// Writes `cmd` and its `\n`.
@@ -195,12 +187,7 @@ impl Link {
         let t0 = Instant::now();
         let mut b = [0u8; 256];
         while t0.elapsed() < wait {
-            match self.port.read(&mut b) {
-                Ok(0) => return Err(self.io(std::io::ErrorKind::UnexpectedEof.into())),
-                Ok(_) => {}
-                Err(e) if e.kind() == std::io::ErrorKind::TimedOut => {}
-                Err(e) => return Err(self.io(e)),
-            }
+            read_some(self.port.as_mut(), &mut b).map_err(|e| self.io(e))?;
         }
         self.buf.clear();
         Ok(())
@@ -240,11 +227,8 @@ impl Link {
                     baud: self.baud,
                 });
             }
-            match self.port.read(&mut b) {
-                Ok(0) => return Err(self.io(std::io::ErrorKind::UnexpectedEof.into())),
-                Ok(n) => self.buf.extend_from_slice(&b[..n]),
-                Err(e) if e.kind() == std::io::ErrorKind::TimedOut => {}
-                Err(e) => return Err(self.io(e)),
+            if let Some(n) = read_some(self.port.as_mut(), &mut b).map_err(|e| self.io(e))? {
+                self.buf.extend_from_slice(&b[..n]);
             }
         }
     }
@@ -289,6 +273,14 @@ impl Link {
         })
     }
 
+    /// The position of `axis` in steps, refused outside the unit's `limits` (with
+    /// [`protocol::POSITION_SLACK`]).
+    pub fn position(&mut self, axis: Axis, limits: (i64, i64)) -> Result<i64, LinkError> {
+        let steps = self.query(axis, Query::Position)?;
+        let what = format!("the unit's {} limits", axis.word().to_lowercase());
+        self.checked(axis, Query::Position, steps, with_slack(limits), &what)
+    }
+
     /// Asks `q` of `axis`; returns the steps.
     pub fn query(&mut self, axis: Axis, q: Query) -> Result<i64, LinkError> {
         let (cmd, _) = protocol::query(axis, q);
@@ -300,10 +292,6 @@ impl Link {
         })
     }
 }
-
-/// How often a port that cannot be opened, or a unit that does not answer, is
-/// tried again.
-const RETRY: Duration = Duration::from_secs(1);
 
 /// The unit's limits in steps.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -409,18 +397,15 @@ struct Session {
     sent: [Sent; 2],
     seen_clock: Option<u64>,
     cmds: Vec<String>,
-    next_poll: Instant,
+    poll: PollClock,
 }
 
 impl Ptu {
     /// Opens the port and runs the init; publishes the unit's limits.
     fn open_session(&mut self) -> Result<Session, LinkError> {
-        let port = &self.conf.head.serial;
-        let p = open_port(port, self.conf.baud, "the unit").map_err(|what| LinkError::Open {
-            port: port.clone(),
-            what,
-        })?;
-        let mut link = Link::new(p, port, self.conf.baud, self.conf.head.reply_timeout);
+        let head = &self.conf.head;
+        let p = head.open(self.conf.baud, "the unit")?;
+        let mut link = Link::new(p, &head.serial, self.conf.baud, head.reply_timeout);
         let limits = init(&mut link)?;
         if let Some(m) = &self.mot {
             // A copy of the latest command with the unit's limits (not `write`, whose
@@ -449,7 +434,7 @@ impl Ptu {
             sent: [home, home],
             seen_clock: None,
             cmds: Vec::new(),
-            next_poll: Instant::now(),
+            poll: PollClock::new(self.conf.head.poll),
         })
     }
 
@@ -482,32 +467,11 @@ impl Ptu {
                 }
             }
         }
-        let now = Instant::now();
-        if now >= s.next_poll {
-            // Absolute deadlines: the period does not drift with the reply time.
-            s.next_poll += self.conf.head.poll;
-            if s.next_poll < now {
-                s.next_poll = now + self.conf.head.poll;
-            }
+        if s.poll.due() {
             // A position outside the unit's own limits is a broken reply:
             // refused (the session ends and the line is resynchronised).
-            let link = &mut s.link;
-            let pan = link.query(Axis::Pan, Query::Position)?;
-            let pan = link.checked(
-                Axis::Pan,
-                Query::Position,
-                pan,
-                with_slack(s.limits.pan),
-                "the unit's pan limits",
-            )?;
-            let tilt = link.query(Axis::Tilt, Query::Position)?;
-            let tilt = link.checked(
-                Axis::Tilt,
-                Query::Position,
-                tilt,
-                with_slack(s.limits.tilt),
-                "the unit's tilt limits",
-            )?;
+            let pan = s.link.position(Axis::Pan, s.limits.pan)?;
+            let tilt = s.link.position(Axis::Tilt, s.limits.tilt)?;
             if let Some(e) = &self.enc {
                 let _ = e.publish(PtEncoders {
                     pan_angle: protocol::steps_to_deg(pan) as f32,
@@ -515,9 +479,7 @@ impl Ptu {
                 });
             }
         }
-        // Commands go out within half a millisecond; polls on time.
-        let wait = s.next_poll.saturating_duration_since(Instant::now());
-        std::thread::sleep(wait.min(Duration::from_micros(500)));
+        s.poll.pause();
         Ok(())
     }
 }
@@ -535,37 +497,25 @@ impl Device for Ptu {
 /// Provides the interfaces and starts supervising the unit (a port that cannot be
 /// opened is reported and retried every second; the rest of the run goes on).
 pub fn start(conf: PtuConf, rt: &Runtime, provider: &str) -> anyhow::Result<Supervisor> {
-    let enc = conf
-        .encoders
+    let enc = (conf.head)
+        .provides("pantiltencoders")
         .then(|| {
             rt.interfaces
                 .provide::<PtEncoders>("pantiltencoders", provider)
         })
         .transpose()?;
-    let mot = conf
-        .motors
+    let mot = (conf.head)
+        .provides("pantiltmotors")
         .then(|| {
             rt.interfaces
                 .provide_value("pantiltmotors", provider, initial_motors())
         })
         .transpose()?;
-    let mut interfaces: Vec<Arc<dyn AnyInterface>> = Vec::new();
-    if let Some(e) = &enc {
-        interfaces.push(e.clone());
-    }
-    if let Some(m) = &mot {
-        interfaces.push(m.clone());
-    }
-    Supervisor::start(
-        Supervision {
-            name: provider.to_string(),
-            interfaces,
-            on_demand: false,
-            backoff: Backoff::fixed(RETRY),
-            absent: None,
-        },
-        Ptu { conf, enc, mot },
-    )
+    let interfaces = [
+        enc.clone().map(|i| i as Arc<dyn AnyInterface>),
+        mot.clone().map(|i| i as Arc<dyn AnyInterface>),
+    ];
+    serialhead::supervise(provider, interfaces, Ptu { conf, enc, mot })
 }
 
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>> {

@@ -36,7 +36,7 @@
 #[cfg(feature = "gui")]
 pub mod panel;
 
-use std::{sync::Arc, time::Duration};
+use std::sync::Arc;
 
 use crate::{
     conf::{
@@ -44,7 +44,7 @@ use crate::{
         settings::{self, CYCLE, Setting},
     },
     interfaces::{Encoders, Image, Interface, Laser, Motors, PtEncoders, PtMotors},
-    operator::{self, Commands, Operator},
+    operator::{self, CommandLines, Operator},
     runtime::{Runtime, Schema},
     world,
 };
@@ -108,27 +108,20 @@ pub struct Devices {
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>> {
     let lines: Lines = conf.settings(LINES)?;
     let world = settings::world(conf, lines.world.as_deref(), &rt.names)?;
-    // An interface the conf names, if it is not `none` and something provides it.
-    let name = |n: &str| (n != "none" && rt.interfaces.contains(n)).then(|| n.to_string());
-    let Some(motors_name) = name(&lines.motors) else {
-        anyhow::bail!(
-            "{}: teleoperator needs a motors interface (`{}` is not provided); load a driver \
-             that provides it (e.g. the simulator with `provides motors`) before teleoperator",
-            conf.line("motors")
-                .map(|l| l.at.to_string())
-                .unwrap_or_else(|| conf.file.display().to_string()),
-            lines.motors
-        );
-    };
+    let names = operator::interface_names(
+        conf,
+        rt,
+        &lines.motors,
+        &[
+            &lines.encoders,
+            &lines.laser,
+            &lines.pantiltmotors,
+            &lines.pantiltencoders,
+            &lines.camera,
+        ],
+        "e.g. the simulator with `provides motors`",
+    )?;
     let ifs = &rt.interfaces;
-    let names = [
-        Some(motors_name),
-        name(&lines.encoders),
-        name(&lines.laser),
-        name(&lines.pantiltmotors),
-        name(&lines.pantiltencoders),
-        name(&lines.camera),
-    ];
     let get = |i: usize| names[i].as_deref();
     let dev = Devices {
         motors: ifs.get(get(0).unwrap_or_default())?,
@@ -138,36 +131,34 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
         pantilt_encoders: get(4).map(|n| ifs.get(n)).transpose()?,
         camera: get(5).map(|n| ifs.get(n)).transpose()?,
     };
-    let commands = Arc::new(Commands::shared(
-        &rt.names,
-        &conf.name,
-        ("base", "pantilt"),
-        (lines.max_v, lines.max_w),
-        lines.base,
-        lines.pantilt,
-    ));
-    #[cfg(feature = "gui")]
-    let panel: Option<Box<dyn crate::runtime::Panel>> =
-        Some(Box::new(panel::TeleoperatorPanel::new(
-            commands.clone(),
-            dev.clone(),
-            world,
-            world::balls(&rt.names),
-        )));
-    #[cfg(not(feature = "gui"))]
-    let _ = world;
+    let commands = CommandLines {
+        keys: ("base", "pantilt"),
+        max: (lines.max_v, lines.max_w),
+        base: lines.base,
+        head: lines.pantilt,
+        cycle: lines.cycle,
+    };
+    let children = names.into_iter().flatten().collect();
     #[cfg_attr(not(feature = "gui"), allow(unused_mut))]
-    let mut schema = Operator::new(
-        commands.clone(),
+    let mut schema = Operator::from_lines(
+        rt,
+        conf,
+        commands,
         dev.motors.clone(),
         dev.pantilt_motors.clone(),
-        names.into_iter().flatten().collect(),
-        Duration::from_millis(lines.cycle),
+        children,
     );
     #[cfg(feature = "gui")]
     {
-        schema.panel = panel;
+        schema.panel = Some(Box::new(panel::TeleoperatorPanel::new(
+            schema.commands.clone(),
+            dev,
+            world,
+            world::balls(&rt.names),
+        )));
     }
+    #[cfg(not(feature = "gui"))]
+    let _ = world;
     Ok(Box::new(schema))
 }
 

@@ -7,15 +7,14 @@ use egui::{Color32, vec2};
 
 use crate::{
     interfaces::{Encoders, Laser},
+    operator::controls::{self, Controls},
     runtime::{Panel, Runtime},
-    widgets::{
-        ImageView, Joystick, OrbitCamera, PanTiltLimits, PanTiltPad, Segment3D, Wireframe3D,
-        laser_to_world, relative_to_world,
-    },
+    widgets::{ImageView, OrbitCamera, Segment3D, Wireframe3D, laser_to_world, relative_to_world},
     world::{Ball, LiveBalls, World},
 };
 
-use super::{Commands, Devices};
+use super::Devices;
+use crate::operator::Commands;
 
 /// Robot radius and body height in the 3D view, mm.
 const RADIUS: f64 = 250.0;
@@ -116,14 +115,12 @@ pub fn ball_segments(balls: &[Ball]) -> Vec<Segment3D> {
 
 /// The panel.
 pub struct TeleoperatorPanel {
-    commands: Arc<Commands>,
     dev: Devices,
     walls: Vec<Segment3D>,
     /// The balls (`world.balls`), drawn as spheres.
     balls: Option<Arc<LiveBalls>>,
     canvas: Wireframe3D,
-    joystick: Joystick,
-    pad: Option<PanTiltPad>,
+    controls: Controls,
     image: ImageView,
     follow: bool,
     show_laser: bool,
@@ -142,22 +139,14 @@ impl TeleoperatorPanel {
             elevation_deg: 40.0,
             ..OrbitCamera::default()
         };
-        let pad = dev.pantilt_motors.as_ref().map(|m| {
-            let limits = PanTiltLimits::from(&m.read().value);
-            let mut p = PanTiltPad::new("teleoperator pantilt", limits);
-            let c = *commands.head.lock();
-            (p.longitude, p.latitude) = (c[0], c[1]);
-            p
-        });
-        let joystick = Joystick::new("teleoperator joystick", commands.max_v, commands.max_w);
+        let labels = ("teleoperator joystick", "teleoperator pantilt");
+        let controls = Controls::new(commands, labels, dev.pantilt_motors.as_deref());
         TeleoperatorPanel {
-            commands,
             dev,
             walls,
             balls,
             canvas: Wireframe3D::new("teleoperator 3d", orbit),
-            joystick,
-            pad,
+            controls,
             image: ImageView::new("teleoperator camera"),
             follow: true,
             show_laser: true,
@@ -193,42 +182,18 @@ impl Panel for TeleoperatorPanel {
         ui.horizontal(|ui| {
             ui.checkbox(&mut self.follow, "follow the robot");
             ui.checkbox(&mut self.show_laser, "laser");
-            let m = self.dev.motors.read().value;
-            ui.label(format!("v {:.0} mm/s  w {:.1} deg/s", m.v, m.w));
-            if ui.button("STOP").clicked() {
-                self.commands.set_base(0.0, 0.0);
-            }
+            self.controls.speeds_and_stop(ui, "", &self.dev.motors);
         });
         ui.horizontal_top(|ui| {
             ui.vertical(|ui| {
                 self.canvas.show(ui, vec2(480.0, 340.0), &segs);
                 ui.small("drag: orbit · wheel: zoom");
             });
-            ui.vertical(|ui| {
-                ui.label("base");
-                let r = self.joystick.show(ui, 140.0);
-                if r.changed() {
-                    self.commands.set_base(self.joystick.v, self.joystick.w);
-                }
-                if let Some(pad) = &mut self.pad {
-                    ui.label("pan-tilt");
-                    let r = pad.show(ui, vec2(140.0, 90.0), pt);
-                    if r.changed() {
-                        self.commands.set_head(pad.longitude, pad.latitude);
-                    }
-                }
-            });
+            ui.vertical(|ui| self.controls.show(ui, ("base", "pan-tilt"), pt));
             if let Some(c) = &self.dev.camera {
                 ui.vertical(|ui| {
                     ui.label("camera");
-                    let s = c.snapshot();
-                    ui.allocate_ui(vec2(240.0, 180.0), |ui| {
-                        if s.clock > 0 {
-                            self.image.show_sample(ui, &s);
-                        } else {
-                            ui.small("(no image yet)");
-                        }
-                    });
+                    controls::camera(ui, &mut self.image, c, vec2(240.0, 180.0));
                 });
             }
         });

@@ -162,16 +162,13 @@ fn bilinear_row<T: Copy + Into<i32>, const SHIFT: u32>(
     }
 }
 
+/// A template's rows (or one row): samples `iv` (1/32 levels), derivatives `ix`,
+/// `iy`.
+type Tmpl<'a> = (&'a [i32], &'a [i32], &'a [i32]);
+
 /// (Σ diff·ix, Σ diff·iy, Σ |diff|) of one window row.
 #[inline(always)]
-fn mismatch_row(
-    r0: &[u8],
-    r1: &[u8],
-    wt: [i32; 4],
-    iv: &[i32],
-    ix: &[i32],
-    iy: &[i32],
-) -> (i32, i32, i32) {
+fn mismatch_row(r0: &[u8], r1: &[u8], wt: [i32; 4], (iv, ix, iy): Tmpl) -> (i32, i32, i32) {
     let n = iv.len();
     let (a, b) = (&r0[..n + 1], &r1[..n + 1]);
     let (ix, iy) = (&ix[..n], &iy[..n]);
@@ -198,14 +195,7 @@ fn padded(win: usize) -> usize {
 /// (Σ diff·ix, Σ diff·iy) of one padded template row: as [`mismatch_row`] over
 /// `ix.len()` (a multiple of 8) lanes, whose lanes past the window add 0.
 #[inline(always)]
-fn gradient_row(
-    r0: &[u8],
-    r1: &[u8],
-    wt: [i32; 4],
-    iv: &[i32],
-    ix: &[i32],
-    iy: &[i32],
-) -> (i32, i32) {
+fn gradient_row(r0: &[u8], r1: &[u8], wt: [i32; 4], (iv, ix, iy): Tmpl) -> (i32, i32) {
     let n = ix.len();
     let (a, b) = (&r0[..n + 1], &r1[..n + 1]);
     let (mut s1, mut s2) = ([0i32; 8], [0i32; 8]);
@@ -243,14 +233,7 @@ fn gradient_row(
 /// Exact integer arithmetic, so the same sums.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-fn gradient_row_avx2(
-    r0: &[u8],
-    r1: &[u8],
-    wt: [i32; 4],
-    iv: &[i32],
-    ix: &[i32],
-    iy: &[i32],
-) -> (i32, i32) {
+fn gradient_row_avx2(r0: &[u8], r1: &[u8], wt: [i32; 4], (iv, ix, iy): Tmpl) -> (i32, i32) {
     use std::arch::x86_64::*;
     let n = ix.len();
     assert!(n.is_multiple_of(8) && r0.len() > n && r1.len() > n && iv.len() >= n && iy.len() >= n);
@@ -286,18 +269,27 @@ fn gradient_row_avx2(
 
 type DerivRows<'a> = (&'a [i16], &'a [i16], &'a [i16], &'a [i16]);
 
+/// What a template row is made of: the first image's two rows `i0`, `i1`
+/// and their derivatives' (from the window row's offset on), the weights, the
+/// window's side.
+#[derive(Clone, Copy)]
+struct TemplateSource<'a> {
+    i0: &'a [u8],
+    i1: &'a [u8],
+    d: DerivRows<'a>,
+    wt: [i32; 4],
+    win: usize,
+}
+
+/// A template row being written: `iv`, `ix`, `iy`.
+type TmplMut<'a> = (&'a mut [i32], &'a mut [i32], &'a mut [i32]);
+
 /// One template row: samples `iv` (1/32 levels) and derivatives `ix`, `iy` of the
 /// first `win` lanes (the padding lanes are left 0), and that row's
 /// (Σ ix², Σ ix·iy, Σ iy²).
 #[inline(always)]
-fn template_row(
-    i0: &[u8],
-    i1: &[u8],
-    d: DerivRows,
-    wt: [i32; 4],
-    win: usize,
-    (iv, ix, iy): (&mut [i32], &mut [i32], &mut [i32]),
-) -> (i64, i64, i64) {
+fn template_row(src: TemplateSource, (iv, ix, iy): TmplMut) -> (i64, i64, i64) {
+    let TemplateSource { i0, i1, d, wt, win } = src;
     bilinear_row::<_, 9>(i0, i1, wt, &mut iv[..win]);
     bilinear_row::<_, 14>(d.0, d.1, wt, &mut ix[..win]);
     bilinear_row::<_, 14>(d.2, d.3, wt, &mut iy[..win]);
@@ -314,15 +306,9 @@ fn template_row(
 /// (|derivative| <= 4080 fits in i16; 4080·2¹⁴ fits in i32), so the same values.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-fn template_row_avx2(
-    i0: &[u8],
-    i1: &[u8],
-    d: DerivRows,
-    wt: [i32; 4],
-    win: usize,
-    (iv, ix, iy): (&mut [i32], &mut [i32], &mut [i32]),
-) -> (i64, i64, i64) {
+fn template_row_avx2(src: TemplateSource, (iv, ix, iy): TmplMut) -> (i64, i64, i64) {
     use std::arch::x86_64::*;
+    let TemplateSource { i0, i1, d, wt, win } = src;
     let n = ix.len();
     assert!(n.is_multiple_of(8) && win <= n && iv.len() >= n && iy.len() >= n);
     assert!(i0.len() > n && i1.len() > n && d.0.len() > n && d.1.len() > n);
@@ -388,36 +374,95 @@ fn template_row_avx2(
     (sum(&out[0]), sum(&out[1]), sum(&out[2]))
 }
 
-/// (Σ diff·ix, Σ diff·iy) over the window at `p` (the iteration's right-hand side).
-#[inline(always)]
-fn gradient_window(
-    lj: &Level,
+/// A window of side `win` on a level padded by `pad`, at the whole pixel `p`
+/// (top-left, unpadded) with the bilinear weights `wt` of the point's fraction.
+#[derive(Clone, Copy)]
+struct Window {
     p: (i32, i32),
     wt: [i32; 4],
     win: usize,
     pad: usize,
-    tmpl: (&[i32], &[i32], &[i32]),
-    avx2: bool,
-) -> (i64, i64) {
-    let (iv, ix, iy) = tmpl;
-    let wp = padded(win);
+}
+
+impl Window {
+    /// The window whose top-left corner is the point `at` (pixels).
+    #[inline(always)]
+    fn at(at: (f32, f32), win: usize, pad: usize) -> Window {
+        let p = (at.0.floor() as i32, at.1.floor() as i32);
+        let wt = weights(at.0 - p.0 as f32, at.1 - p.1 as f32);
+        Window { p, wt, win, pad }
+    }
+    /// Where its row `y` starts in `l`'s (padded) buffers.
+    #[inline(always)]
+    fn row(&self, l: &Level, y: usize) -> usize {
+        let pad = self.pad as i32;
+        (self.p.1 + pad + y as i32) as usize * l.stride + (self.p.0 + pad) as usize
+    }
+}
+
+/// The template over the window `w` of the first image's level `li` (written to
+/// `iv`, `ix`, `iy`, [`padded`] rows) and its (Σ ix², Σ ix·iy, Σ iy²).
+#[inline(always)]
+fn template_window(li: &Level, w: Window, (iv, ix, iy): TmplMut, avx2: bool) -> (i64, i64, i64) {
+    let (mut a11, mut a12, mut a22) = (0i64, 0i64, 0i64);
+    let wp = padded(w.win);
+    for y in 0..w.win {
+        let o = w.row(li, y);
+        let r = y * wp..(y + 1) * wp;
+        let src = TemplateSource {
+            i0: &li.img[o..],
+            i1: &li.img[o + li.stride..],
+            d: (
+                &li.dx[o..],
+                &li.dx[o + li.stride..],
+                &li.dy[o..],
+                &li.dy[o + li.stride..],
+            ),
+            wt: w.wt,
+            win: w.win,
+        };
+        let t = (&mut iv[r.clone()], &mut ix[r.clone()], &mut iy[r]);
+        #[cfg(target_arch = "x86_64")]
+        let sums = if avx2 {
+            // SAFETY: the caller checked that the CPU has AVX2.
+            unsafe { template_row_avx2(src, t) }
+        } else {
+            template_row(src, t)
+        };
+        #[cfg(not(target_arch = "x86_64"))]
+        let sums = {
+            let _ = avx2;
+            template_row(src, t)
+        };
+        a11 += sums.0;
+        a12 += sums.1;
+        a22 += sums.2;
+    }
+    (a11, a12, a22)
+}
+
+/// (Σ diff·ix, Σ diff·iy) over the window `w` of `lj` (the iteration's right-hand
+/// side).
+#[inline(always)]
+fn gradient_window(lj: &Level, w: Window, (iv, ix, iy): Tmpl, avx2: bool) -> (i64, i64) {
+    let wp = padded(w.win);
     let (mut b1, mut b2) = (0i64, 0i64);
-    for y in 0..win {
-        let o = (p.1 + pad as i32 + y as i32) as usize * lj.stride + (p.0 + pad as i32) as usize;
+    for y in 0..w.win {
+        let o = w.row(lj, y);
         let r = y * wp..(y + 1) * wp;
         let (r0, r1) = (&lj.img[o..], &lj.img[o + lj.stride..]);
-        let (iv, ix, iy) = (&iv[r.clone()], &ix[r.clone()], &iy[r]);
+        let t = (&iv[r.clone()], &ix[r.clone()], &iy[r]);
         #[cfg(target_arch = "x86_64")]
         let (s1, s2) = if avx2 {
             // SAFETY: the caller checked that the CPU has AVX2.
-            unsafe { gradient_row_avx2(r0, r1, wt, iv, ix, iy) }
+            unsafe { gradient_row_avx2(r0, r1, w.wt, t) }
         } else {
-            gradient_row(r0, r1, wt, iv, ix, iy)
+            gradient_row(r0, r1, w.wt, t)
         };
         #[cfg(not(target_arch = "x86_64"))]
         let (s1, s2) = {
             let _ = avx2;
-            gradient_row(r0, r1, wt, iv, ix, iy)
+            gradient_row(r0, r1, w.wt, t)
         };
         b1 += s1 as i64;
         b2 += s2 as i64;
@@ -425,30 +470,16 @@ fn gradient_window(
     (b1, b2)
 }
 
-/// (Σ diff·ix, Σ diff·iy, Σ |diff|) over the window at `p` (top-left, unpadded) of `lj`.
+/// (Σ diff·ix, Σ diff·iy, Σ |diff|) over the window `w` of `lj`.
 #[inline(always)]
-fn mismatch_window(
-    lj: &Level,
-    p: (i32, i32),
-    wt: [i32; 4],
-    win: usize,
-    pad: usize,
-    tmpl: (&[i32], &[i32], &[i32]),
-) -> (i64, i64, i64) {
-    let (iv, ix, iy) = tmpl;
-    let wp = padded(win);
+fn mismatch_window(lj: &Level, w: Window, (iv, ix, iy): Tmpl) -> (i64, i64, i64) {
+    let wp = padded(w.win);
     let (mut b1, mut b2, mut e) = (0i64, 0i64, 0i64);
-    for y in 0..win {
-        let o = (p.1 + pad as i32 + y as i32) as usize * lj.stride + (p.0 + pad as i32) as usize;
-        let r = y * wp..y * wp + win;
-        let (s1, s2, s3) = mismatch_row(
-            &lj.img[o..],
-            &lj.img[o + lj.stride..],
-            wt,
-            &iv[r.clone()],
-            &ix[r.clone()],
-            &iy[r],
-        );
+    for y in 0..w.win {
+        let o = w.row(lj, y);
+        let r = y * wp..y * wp + w.win;
+        let t = (&iv[r.clone()], &ix[r.clone()], &iy[r]);
+        let (s1, s2, s3) = mismatch_row(&lj.img[o..], &lj.img[o + lj.stride..], w.wt, t);
         b1 += s1 as i64;
         b2 += s2 as i64;
         e += s3 as i64;
@@ -543,34 +574,14 @@ multiversion! {
                 (next_pt.0 * 2.0, next_pt.1 * 2.0)
             };
             prev_pt = (prev_pt.0 - half, prev_pt.1 - half);
-            let ip = (prev_pt.0.floor() as i32, prev_pt.1.floor() as i32);
-            if !inside(ip, li) {
-                if lvl == 0 {
-                    res.found = false;
-                }
+            let w = Window::at(prev_pt, win, pad);
+            // Lost at the finest level only; a coarser level is skipped.
+            let lose = lvl == 0;
+            if !inside(w.p, li) {
+                res.found &= !lose;
                 continue;
             }
-            let wt = weights(prev_pt.0 - ip.0 as f32, prev_pt.1 - ip.1 as f32);
-            let (mut a11, mut a12, mut a22) = (0i64, 0i64, 0i64);
-            for y in 0..win {
-                let o = (ip.1 + pad as i32 + y as i32) as usize * li.stride + (ip.0 + pad as i32) as usize;
-                let r = y * padded(win)..(y + 1) * padded(win);
-                let (i0, i1) = (&li.img[o..], &li.img[o + li.stride..]);
-                let d = (&li.dx[o..], &li.dx[o + li.stride..], &li.dy[o..], &li.dy[o + li.stride..]);
-                let t = (&mut iv[r.clone()], &mut ix[r.clone()], &mut iy[r]);
-                #[cfg(target_arch = "x86_64")]
-                let sums = if avx2 {
-                    // SAFETY: the CPU has AVX2 (checked above).
-                    unsafe { template_row_avx2(i0, i1, d, wt, win, t) }
-                } else {
-                    template_row(i0, i1, d, wt, win, t)
-                };
-                #[cfg(not(target_arch = "x86_64"))]
-                let sums = template_row(i0, i1, d, wt, win, t);
-                a11 += sums.0;
-                a12 += sums.1;
-                a22 += sums.2;
-            }
+            let (a11, a12, a22) = template_window(li, w, (&mut iv, &mut ix, &mut iy), avx2);
             let (a11, a12, a22) = (
                 a11 as f32 * FLT_SCALE,
                 a12 as f32 * FLT_SCALE,
@@ -580,9 +591,7 @@ multiversion! {
             let min_eig = (a22 + a11 - ((a11 - a22) * (a11 - a22) + 4.0 * a12 * a12).sqrt())
                 / (2.0 * area as f32);
             if min_eig < params.min_eig_threshold || d < f32::EPSILON {
-                if lvl == 0 {
-                    res.found = false;
-                }
+                res.found &= !lose;
                 continue;
             }
             let d = 1.0 / d;
@@ -590,17 +599,14 @@ multiversion! {
             let mut prev_delta = (0f32, 0f32);
             let mut result = next_pt;
             for j in 0..params.max_iter.min(100) {
-                let inp = (next_pt.0.floor() as i32, next_pt.1.floor() as i32);
-                if !inside(inp, lj) {
-                    if lvl == 0 {
-                        res.found = false;
-                    }
+                let w = Window::at(next_pt, win, pad);
+                if !inside(w.p, lj) {
+                    res.found &= !lose;
                     break;
                 }
-                let wt = weights(next_pt.0 - inp.0 as f32, next_pt.1 - inp.1 as f32);
                 // A plain fn, not a closure: closures do not inherit the AVX2 target
                 // feature of `track`, and this is the hot loop.
-                let (b1, b2) = gradient_window(lj, inp, wt, win, pad, (&iv, &ix, &iy), avx2);
+                let (b1, b2) = gradient_window(lj, w, (&iv, &ix, &iy), avx2);
                 let (b1, b2) = (b1 as f32 * FLT_SCALE, b2 as f32 * FLT_SCALE);
                 let delta = ((a12 * b2 - a22 * b1) * d, (a12 * b1 - a11 * b2) * d);
                 next_pt = (next_pt.0 + delta.0, next_pt.1 + delta.1);
@@ -619,12 +625,11 @@ multiversion! {
             }
             next_pt = (result.0 + half, result.1 + half);
             if lvl == 0 && res.found {
-                let p = (result.0.floor() as i32, result.1.floor() as i32);
-                if !inside(p, lj) {
+                let w = Window::at(result, win, pad);
+                if !inside(w.p, lj) {
                     res.found = false;
                 } else {
-                    let wt = weights(result.0 - p.0 as f32, result.1 - p.1 as f32);
-                    let (_, _, e) = mismatch_window(lj, p, wt, win, pad, (&iv, &ix, &iy));
+                    let (_, _, e) = mismatch_window(lj, w, (&iv, &ix, &iy));
                     res.error = e as f32 / (32 * area) as f32;
                 }
             }
@@ -671,18 +676,20 @@ mod tests {
                 let mut t1 = [vec![0i32; n], vec![0i32; n], vec![0i32; n]];
                 let mut t2 = t1.clone();
                 let [v1, x1, y1] = &mut t1;
-                let s1 = template_row(&img[0], &img[1], d, wt, win, (v1, x1, y1));
+                let (i0, i1) = (&img[0][..], &img[1][..]);
+                let src = TemplateSource { i0, i1, d, wt, win };
+                let s1 = template_row(src, (v1, x1, y1));
                 let [v2, x2, y2] = &mut t2;
                 // SAFETY: AVX2 checked above.
-                let s2 = unsafe { template_row_avx2(&img[0], &img[1], d, wt, win, (v2, x2, y2)) };
+                let s2 = unsafe { template_row_avx2(src, (v2, x2, y2)) };
                 assert_eq!((s1, &t1), (s2, &t2), "win {win}");
                 let next: Vec<Vec<u8>> = (0..2)
                     .map(|_| (0..=n).map(|_| rnd() as u8).collect())
                     .collect();
-                let g1 = gradient_row(&next[0], &next[1], wt, &t1[0], &t1[1], &t1[2]);
+                let t = (&t1[0][..], &t1[1][..], &t1[2][..]);
+                let g1 = gradient_row(&next[0], &next[1], wt, t);
                 // SAFETY: AVX2 checked above.
-                let g2 =
-                    unsafe { gradient_row_avx2(&next[0], &next[1], wt, &t1[0], &t1[1], &t1[2]) };
+                let g2 = unsafe { gradient_row_avx2(&next[0], &next[1], wt, t) };
                 assert_eq!(g1, g2, "win {win}");
             }
         }

@@ -66,185 +66,251 @@ impl World {
     /// Parses world file text; `file` names it in errors and anchors relative paths.
     pub fn parse(text: &str, file: &Path) -> Result<World, WorldError> {
         let mut w = World::new();
-        let mut wall_height = 1000.0;
-        let mut wall_color: Rgb = [225, 215, 185];
+        let mut pen = WallPen::default();
         for (n, raw) in text.lines().enumerate() {
             let content = raw.split('#').next().unwrap_or("");
             let words: Vec<&str> = content.split_whitespace().collect();
-            let Some(&key) = words.first() else { continue };
-            let err = |message: String| WorldError {
-                file: file.to_path_buf(),
+            let Some((&key, args)) = words.split_first() else {
+                continue;
+            };
+            let st = Statement {
+                file,
                 line: n + 1,
-                message,
+                key,
+                args,
             };
-            let args = &words[1..];
-            let num = |i: usize, what: &str| -> Result<f64, WorldError> {
-                let word = args
-                    .get(i)
-                    .ok_or_else(|| err(format!("`{key}` needs {what} as argument {}", i + 1)))?;
-                word.parse::<f64>()
-                    .ok()
-                    .filter(|v| v.is_finite())
-                    .ok_or_else(|| {
-                        err(format!(
-                            "`{key}`: argument {} is `{word}`, expected {what}",
-                            i + 1
-                        ))
-                    })
-            };
-            let count = |min: usize, max: usize, usage: &str| -> Result<(), WorldError> {
-                if args.len() < min || args.len() > max {
-                    return Err(err(format!(
-                        "`{key}` takes {} arguments, got {}; usage: {usage}",
-                        if min == max {
-                            min.to_string()
-                        } else {
-                            format!("{min} to {max}")
-                        },
-                        args.len()
-                    )));
-                }
-                Ok(())
-            };
-            let color = |i: usize| parse_color(args.get(i).copied().unwrap_or("")).map_err(&err);
-            let positive = |v: f64, what: &str| -> Result<f64, WorldError> {
-                if v > 0.0 {
-                    Ok(v)
-                } else {
-                    Err(err(format!("`{key}`: {what} must be > 0, got {v}")))
-                }
-            };
-            match key {
-                "wall_height" => {
-                    count(1, 1, "wall_height MM")?;
-                    wall_height = positive(num(0, "a height in mm")?, "the height")?;
-                }
-                "wall_color" => {
-                    count(1, 1, "wall_color COLOR")?;
-                    wall_color = color(0)?;
-                }
-                "floor_color" => {
-                    count(1, 1, "floor_color COLOR")?;
-                    w.floor_color = color(0)?;
-                }
-                "sky_color" => {
-                    count(1, 1, "sky_color COLOR")?;
-                    w.sky_color = color(0)?;
-                }
-                "floor_tile" => {
-                    count(1, 1, "floor_tile MM (0 = plain floor)")?;
-                    let t = num(0, "a tile size in mm")?;
-                    if t < 0.0 {
-                        return Err(err(format!("`floor_tile` must be >= 0, got {t}")));
-                    }
-                    w.tile = t;
-                }
-                "wall" => {
-                    count(4, 4, "wall X1 Y1 X2 Y2")?;
-                    let a = [num(0, "X1 in mm")?, num(1, "Y1 in mm")?];
-                    let b = [num(2, "X2 in mm")?, num(3, "Y2 in mm")?];
-                    if a == b {
-                        return Err(err("`wall`: both ends are the same point".into()));
-                    }
-                    w.add_wall(a, b, wall_height, wall_color);
-                }
-                "room" => {
-                    count(4, 4, "room X1 Y1 X2 Y2")?;
-                    let (x1, y1, x2, y2) = (
-                        num(0, "X1 in mm")?,
-                        num(1, "Y1 in mm")?,
-                        num(2, "X2 in mm")?,
-                        num(3, "Y2 in mm")?,
-                    );
-                    if x1 == x2 || y1 == y2 {
-                        return Err(err("`room`: the rectangle has no area".into()));
-                    }
-                    w.add_room(
-                        [x1.min(x2), y1.min(y2)],
-                        [x1.max(x2), y1.max(y2)],
-                        wall_height,
-                        wall_color,
-                    );
-                }
-                "floorplan" => {
-                    if args.len() != 2 && args.len() != 4 {
-                        return Err(err(format!(
-                            "`floorplan` takes 2 or 4 arguments, got {}; usage: floorplan FILE.png PIXEL_MM [X0 Y0]",
-                            args.len()
-                        )));
-                    }
-                    let pixel = positive(num(1, "the pixel size in mm")?, "the pixel size")?;
-                    let origin = if args.len() == 4 {
-                        [num(2, "X0 in mm")?, num(3, "Y0 in mm")?]
-                    } else {
-                        [0.0, 0.0]
-                    };
-                    let path = Path::new(args[0]);
-                    let path = if path.is_absolute() {
-                        path.to_path_buf()
-                    } else {
-                        file.parent()
-                            .map(|d| d.join(path))
-                            .unwrap_or_else(|| path.to_path_buf())
-                    };
-                    w.add_floorplan(&path, pixel, origin, wall_height, wall_color)
-                        .map_err(|e| err(format!("floorplan {}: {e}", path.display())))?;
-                }
-                "box" => {
-                    count(6, 7, "box X Y SIZE_X SIZE_Y HEIGHT COLOR [THETA_DEG]")?;
-                    let b = BoxObstacle {
-                        center: [num(0, "X in mm")?, num(1, "Y in mm")?],
-                        size: [
-                            positive(num(2, "SIZE_X in mm")?, "SIZE_X")?,
-                            positive(num(3, "SIZE_Y in mm")?, "SIZE_Y")?,
-                        ],
-                        height: positive(num(4, "HEIGHT in mm")?, "HEIGHT")?,
-                        color: color(5)?,
-                        theta: if args.len() > 6 {
-                            num(6, "THETA in degrees")?.to_radians()
-                        } else {
-                            0.0
-                        },
-                    };
-                    w.add_box(b);
-                }
-                "ball" => {
-                    count(4, 5, "ball X Y RADIUS COLOR [FRICTION_MM_S2]")?;
-                    let friction = if args.len() > 4 {
-                        num(4, "a rolling deceleration in mm/s²")?
-                    } else {
-                        300.0
-                    };
-                    if friction < 0.0 {
-                        return Err(err(format!(
-                            "`ball`: friction must be >= 0, got {friction}"
-                        )));
-                    }
-                    w.add_ball(BallSpec {
-                        pos: [num(0, "X in mm")?, num(1, "Y in mm")?],
-                        radius: positive(num(2, "RADIUS in mm")?, "RADIUS")?,
-                        color: color(3)?,
-                        friction,
-                    });
-                }
-                "start" => {
-                    count(3, 3, "start X Y THETA_DEG")?;
-                    w.starts.push(StartPose {
-                        x: num(0, "X in mm")?,
-                        y: num(1, "Y in mm")?,
-                        theta: num(2, "THETA in degrees")?,
-                    });
-                }
-                other => {
-                    return Err(err(format!(
-                        "unknown keyword `{other}`; expected one of wall, room, floorplan, box, ball, start, \
-                         wall_height, wall_color, floor_color, sky_color, floor_tile"
-                    )));
-                }
+            if !(st.looks(&mut w, &mut pen)? || st.walls(&mut w, &pen)? || st.things(&mut w)?) {
+                return Err(st.err(format!(
+                    "unknown keyword `{key}`; expected one of wall, room, floorplan, box, ball, start, \
+                     wall_height, wall_color, floor_color, sky_color, floor_tile"
+                )));
             }
         }
         w.finish();
         Ok(w)
+    }
+}
+
+/// The height and colour of the walls that follow (`wall_height`, `wall_color`).
+struct WallPen {
+    height: f64,
+    color: Rgb,
+}
+
+impl Default for WallPen {
+    fn default() -> Self {
+        WallPen {
+            height: 1000.0,
+            color: [225, 215, 185],
+        }
+    }
+}
+
+/// One statement of a world file: its keyword and arguments, where it stands.
+struct Statement<'a> {
+    file: &'a Path,
+    line: usize,
+    key: &'a str,
+    args: &'a [&'a str],
+}
+
+impl Statement<'_> {
+    fn err(&self, message: String) -> WorldError {
+        WorldError {
+            file: self.file.to_path_buf(),
+            line: self.line,
+            message,
+        }
+    }
+
+    /// Argument `i` (from 0) as a finite number; `what` says what it should be.
+    fn num(&self, i: usize, what: &str) -> Result<f64, WorldError> {
+        let key = self.key;
+        let word = self
+            .args
+            .get(i)
+            .ok_or_else(|| self.err(format!("`{key}` needs {what} as argument {}", i + 1)))?;
+        word.parse::<f64>()
+            .ok()
+            .filter(|v| v.is_finite())
+            .ok_or_else(|| {
+                self.err(format!(
+                    "`{key}`: argument {} is `{word}`, expected {what}",
+                    i + 1
+                ))
+            })
+    }
+
+    /// Whether there are `min` to `max` arguments (`usage` shows the statement).
+    fn count(&self, min: usize, max: usize, usage: &str) -> Result<(), WorldError> {
+        let n = self.args.len();
+        if n < min || n > max {
+            let takes = if min == max {
+                min.to_string()
+            } else {
+                format!("{min} to {max}")
+            };
+            return Err(self.err(format!(
+                "`{}` takes {takes} arguments, got {n}; usage: {usage}",
+                self.key
+            )));
+        }
+        Ok(())
+    }
+
+    /// Argument `i` as a colour ([`parse_color`]).
+    fn color(&self, i: usize) -> Result<Rgb, WorldError> {
+        parse_color(self.args.get(i).copied().unwrap_or("")).map_err(|e| self.err(e))
+    }
+
+    /// `v` if it is > 0 (`what` names it in the error).
+    fn positive(&self, v: f64, what: &str) -> Result<f64, WorldError> {
+        if v > 0.0 {
+            Ok(v)
+        } else {
+            Err(self.err(format!("`{}`: {what} must be > 0, got {v}", self.key)))
+        }
+    }
+
+    /// The looks: wall height and colour, floor, sky, tiles. False: not one of
+    /// these.
+    fn looks(&self, w: &mut World, pen: &mut WallPen) -> Result<bool, WorldError> {
+        match self.key {
+            "wall_height" => {
+                self.count(1, 1, "wall_height MM")?;
+                pen.height = self.positive(self.num(0, "a height in mm")?, "the height")?;
+            }
+            "wall_color" => {
+                self.count(1, 1, "wall_color COLOR")?;
+                pen.color = self.color(0)?;
+            }
+            "floor_color" => {
+                self.count(1, 1, "floor_color COLOR")?;
+                w.floor_color = self.color(0)?;
+            }
+            "sky_color" => {
+                self.count(1, 1, "sky_color COLOR")?;
+                w.sky_color = self.color(0)?;
+            }
+            "floor_tile" => {
+                self.count(1, 1, "floor_tile MM (0 = plain floor)")?;
+                let t = self.num(0, "a tile size in mm")?;
+                if t < 0.0 {
+                    return Err(self.err(format!("`floor_tile` must be >= 0, got {t}")));
+                }
+                w.tile = t;
+            }
+            _ => return Ok(false),
+        }
+        Ok(true)
+    }
+
+    /// The walls: `wall`, `room`, `floorplan`, drawn with `pen`. False: not one of
+    /// these.
+    fn walls(&self, w: &mut World, pen: &WallPen) -> Result<bool, WorldError> {
+        match self.key {
+            "wall" => {
+                self.count(4, 4, "wall X1 Y1 X2 Y2")?;
+                let a = [self.num(0, "X1 in mm")?, self.num(1, "Y1 in mm")?];
+                let b = [self.num(2, "X2 in mm")?, self.num(3, "Y2 in mm")?];
+                if a == b {
+                    return Err(self.err("`wall`: both ends are the same point".into()));
+                }
+                w.add_wall(a, b, pen.height, pen.color);
+            }
+            "room" => {
+                self.count(4, 4, "room X1 Y1 X2 Y2")?;
+                let (x1, y1) = (self.num(0, "X1 in mm")?, self.num(1, "Y1 in mm")?);
+                let (x2, y2) = (self.num(2, "X2 in mm")?, self.num(3, "Y2 in mm")?);
+                if x1 == x2 || y1 == y2 {
+                    return Err(self.err("`room`: the rectangle has no area".into()));
+                }
+                let (lo, hi) = ([x1.min(x2), y1.min(y2)], [x1.max(x2), y1.max(y2)]);
+                w.add_room(lo, hi, pen.height, pen.color);
+            }
+            "floorplan" => self.floorplan(w, pen)?,
+            _ => return Ok(false),
+        }
+        Ok(true)
+    }
+
+    /// `floorplan FILE.png PIXEL_MM [X0 Y0]` (FILE relative to the world file).
+    fn floorplan(&self, w: &mut World, pen: &WallPen) -> Result<(), WorldError> {
+        let args = self.args;
+        if args.len() != 2 && args.len() != 4 {
+            return Err(self.err(format!(
+                "`floorplan` takes 2 or 4 arguments, got {}; usage: floorplan FILE.png PIXEL_MM [X0 Y0]",
+                args.len()
+            )));
+        }
+        let pixel = self.positive(self.num(1, "the pixel size in mm")?, "the pixel size")?;
+        let origin = if args.len() == 4 {
+            [self.num(2, "X0 in mm")?, self.num(3, "Y0 in mm")?]
+        } else {
+            [0.0, 0.0]
+        };
+        let path = Path::new(args[0]);
+        let path = if path.is_absolute() {
+            path.to_path_buf()
+        } else {
+            (self.file.parent())
+                .map(|d| d.join(path))
+                .unwrap_or_else(|| path.to_path_buf())
+        };
+        w.add_floorplan(&path, pixel, origin, pen.height, pen.color)
+            .map_err(|e| self.err(format!("floorplan {}: {e}", path.display())))
+    }
+
+    /// The things in the world: `box`, `ball`, `start`. False: not one of these.
+    fn things(&self, w: &mut World) -> Result<bool, WorldError> {
+        let args = self.args;
+        match self.key {
+            "box" => {
+                self.count(6, 7, "box X Y SIZE_X SIZE_Y HEIGHT COLOR [THETA_DEG]")?;
+                let b = BoxObstacle {
+                    center: [self.num(0, "X in mm")?, self.num(1, "Y in mm")?],
+                    size: [
+                        self.positive(self.num(2, "SIZE_X in mm")?, "SIZE_X")?,
+                        self.positive(self.num(3, "SIZE_Y in mm")?, "SIZE_Y")?,
+                    ],
+                    height: self.positive(self.num(4, "HEIGHT in mm")?, "HEIGHT")?,
+                    color: self.color(5)?,
+                    theta: if args.len() > 6 {
+                        self.num(6, "THETA in degrees")?.to_radians()
+                    } else {
+                        0.0
+                    },
+                };
+                w.add_box(b);
+            }
+            "ball" => {
+                self.count(4, 5, "ball X Y RADIUS COLOR [FRICTION_MM_S2]")?;
+                let friction = if args.len() > 4 {
+                    self.num(4, "a rolling deceleration in mm/s²")?
+                } else {
+                    300.0
+                };
+                if friction < 0.0 {
+                    return Err(self.err(format!("`ball`: friction must be >= 0, got {friction}")));
+                }
+                w.add_ball(BallSpec {
+                    pos: [self.num(0, "X in mm")?, self.num(1, "Y in mm")?],
+                    radius: self.positive(self.num(2, "RADIUS in mm")?, "RADIUS")?,
+                    color: self.color(3)?,
+                    friction,
+                });
+            }
+            "start" => {
+                self.count(3, 3, "start X Y THETA_DEG")?;
+                w.starts.push(StartPose {
+                    x: self.num(0, "X in mm")?,
+                    y: self.num(1, "Y in mm")?,
+                    theta: self.num(2, "THETA in degrees")?,
+                });
+            }
+            _ => return Ok(false),
+        }
+        Ok(true)
     }
 }
 
