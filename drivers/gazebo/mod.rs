@@ -562,7 +562,11 @@ fn feed(lines: &mut [Line], sub: usize, data: &[u8], ty: &str) {
     };
     let src = &l.source;
     let msg = l.want.kind.msg();
-    if ty.strip_prefix("ignition.msgs.").or_else(|| ty.strip_prefix("gz.msgs.")) != Some(msg) {
+    if ty
+        .strip_prefix("ignition.msgs.")
+        .or_else(|| ty.strip_prefix("gz.msgs."))
+        != Some(msg)
+    {
         let ty: String = ty.chars().take(80).collect();
         src.refused(format_args!(
             "a message of type `{ty}` on a topic of {msg}: refused"

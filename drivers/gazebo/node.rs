@@ -535,9 +535,7 @@ impl Node {
         f.until = Instant::now() + f.wait;
         if !f.said {
             f.said = true;
-            tracing::warn!(
-                "gazebo: {why}; trying another publisher ({addr} again after a while)"
-            );
+            tracing::warn!("gazebo: {why}; trying another publisher ({addr} again after a while)");
         }
     }
 
@@ -985,7 +983,10 @@ impl Node {
                         Ok(Some(_)) => {}
                         Ok(None) => break,
                         Err(e) => {
-                            lost.push((c.peer.clone(), Some(format!("dropped the publisher at {}: {e}", c.peer))));
+                            lost.push((
+                                c.peer.clone(),
+                                Some(format!("dropped the publisher at {}: {e}", c.peer)),
+                            ));
                             break;
                         }
                     }

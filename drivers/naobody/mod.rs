@@ -467,11 +467,7 @@ fn joint(v: &Value) -> Option<Joint> {
         speed: f(2)?,
     };
     let tau = std::f32::consts::TAU;
-    (j.min <= j.max
-        && j.min >= -tau
-        && j.max <= tau
-        && j.speed > 0.0
-        && j.speed <= 100.0)
+    (j.min <= j.max && j.min >= -tau && j.max <= tau && j.speed > 0.0 && j.speed <= 100.0)
         .then_some(j)
 }
 
@@ -803,9 +799,12 @@ impl Body {
             let got = numbers_or_bools(&v, keys.len());
             let mut at = 0;
             if let Some(i) = &self.sonars {
-                let sonar = got
-                    .as_ref()
-                    .map(|n| (n[..2].to_vec(), n[..2].iter().all(|m| (0.0..=MAX_SONAR_M).contains(m))));
+                let sonar = got.as_ref().map(|n| {
+                    (
+                        n[..2].to_vec(),
+                        n[..2].iter().all(|m| (0.0..=MAX_SONAR_M).contains(m)),
+                    )
+                });
                 match sonar {
                     Some((n, false)) => {
                         self.source.refused(format_args!(
