@@ -1166,6 +1166,26 @@ mod tests {
     }
 
     #[test]
+    fn absurd_scans_are_refused() {
+        let ok = scan_bytes(&[1.0, f64::INFINITY, 2.0]);
+        let s = |range_max: f64, ranges: &[u8]| {
+            check_scan(&pb::Scan {
+                angle_min: -1.0,
+                angle_step: 0.01,
+                range_max,
+                count: ranges.len() / 8,
+                ranges,
+                time: None,
+            })
+        };
+        assert!(s(10.0, &ok).is_ok());
+        assert!(s(1e300, &ok).unwrap_err().contains("range_max"));
+        assert!(s(10.0, &[]).unwrap_err().contains("empty"));
+        let huge = scan_bytes(&[1.0, 1e300]);
+        assert!(s(10.0, &huge).unwrap_err().contains("range 1"));
+    }
+
+    #[test]
     fn an_rgb_frame_becomes_bgr_and_scales_to_colora() {
         let data: Vec<u8> = (0..640 * 480).flat_map(|_| [10u8, 20, 30]).collect();
         let f = pb::Frame {

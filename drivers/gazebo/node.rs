@@ -57,6 +57,8 @@ pub const MAX_DISCOVERY_PER_PUMP: usize = 64;
 pub const DATA_SILENCE: Duration = Duration::from_secs(3);
 /// The longest wait before a failed address is tried again.
 const MAX_BACKOFF: Duration = Duration::from_secs(30);
+/// The most topics remembered per process (beyond: a process gone costs a look at all).
+const MAX_TOPICS_OF: usize = 64;
 /// The most failed addresses remembered.
 const MAX_FAILED: usize = 256;
 
@@ -174,6 +176,9 @@ pub struct Node {
     publ: Pub,
     /// Remote publishers by topic, oldest first.
     remote: BTreeMap<String, Vec<Publisher>>,
+    /// The topics each process advertised (at most [`MAX_TOPICS_OF`]; None: more,
+    /// look at every topic), so a process gone costs its own topics, not all.
+    topics_of: HashMap<String, Option<HashSet<String>>>,
     /// Counts changes of what is known and bound (publishers, bindings), so a
     /// user of [`known`](Self::known) looks again only when it moved.
     pub changes: u64,
@@ -254,6 +259,7 @@ impl Node {
             prefix: qualify(partition, "/").trim_end_matches('/').to_string(),
             publ,
             remote: BTreeMap::new(),
+            topics_of: HashMap::new(),
             changes: 0,
             activity: HashMap::new(),
             advertised: Vec::new(),
@@ -553,10 +559,25 @@ impl Node {
         }
         self.changes += 1;
         tracing::debug!("gazebo: process {puuid} is gone");
-        for ps in self.remote.values_mut() {
-            ps.retain(|p| p.process_uuid != puuid);
+        match self.topics_of.remove(puuid) {
+            Some(Some(topics)) => {
+                for t in topics {
+                    if let Some(ps) = self.remote.get_mut(&t) {
+                        ps.retain(|p| p.process_uuid != puuid);
+                        if ps.is_empty() {
+                            self.remote.remove(&t);
+                        }
+                    }
+                }
+            }
+            Some(None) => {
+                for ps in self.remote.values_mut() {
+                    ps.retain(|p| p.process_uuid != puuid);
+                }
+                self.remote.retain(|_, ps| !ps.is_empty());
+            }
+            None => {}
         }
-        self.remote.retain(|_, ps| !ps.is_empty());
         self.subscribers.retain(|s| s.1 != puuid);
         let mut addrs = Vec::new();
         for i in 0..self.wants.len() {
@@ -686,6 +707,17 @@ impl Node {
             _ => {}
         }
         list.push(p.clone());
+        let entry = self
+            .topics_of
+            .entry(p.process_uuid.clone())
+            .or_insert_with(|| Some(HashSet::new()));
+        if let Some(set) = entry {
+            if set.len() < MAX_TOPICS_OF {
+                set.insert(p.topic.clone());
+            } else if !set.contains(&p.topic) {
+                *entry = None;
+            }
+        }
         if full {
             let topic = p.topic.clone();
             self.cap_hit(format!("publishers {topic}"), || {

@@ -1351,6 +1351,36 @@ mod tests {
     }
 
     #[test]
+    fn absurd_replies_are_refused_and_shown_short() {
+        // Booleans are not a pose; ALMemory's booleans are bumpers.
+        let b = Value::List(vec![
+            Value::Bool(true),
+            Value::Bool(false),
+            Value::Bool(true),
+        ]);
+        assert_eq!(numbers(&b, 3), None);
+        assert_eq!(numbers_or_bools(&b, 3), Some(vec![1.0, 0.0, 1.0]));
+        // getLimits of ±1e30 rad is refused; a NAO's are taken.
+        let limits = |lo: f64, hi: f64, v: f64| {
+            Value::List(vec![Value::List(vec![
+                Value::Double(lo),
+                Value::Double(hi),
+                Value::Double(v),
+                Value::Double(1.5),
+            ])])
+        };
+        assert!(joint(&limits(-1e30, 1e30, 8.0)).is_none());
+        assert!(joint(&limits(-2.0857, 2.0857, 1e9)).is_none());
+        assert!(joint(&limits(-2.0857, 2.0857, 8.26797)).is_some());
+        // A 30 MB value is shown by its first characters, at once.
+        let huge = Value::Raw(vec![7; 30 << 20]);
+        let t = std::time::Instant::now();
+        let s = short(&huge);
+        assert!(s.chars().count() <= qi::SHOW + 1 && s.ends_with('…'), "{s}");
+        assert!(t.elapsed() < Duration::from_secs(1));
+    }
+
+    #[test]
     fn frames_are_checked_and_decoded() {
         let reply = |w: i64, h: i64, l: i64, cs: i64, data: Vec<u8>| {
             Value::List(vec![
