@@ -234,7 +234,7 @@ impl Conn {
             if self.start == self.end {
                 (self.start, self.end) = (0, 0);
                 // A big message passed: give its memory back.
-                if self.inbuf.len() > 1 << 20 {
+                if self.inbuf.len() > 8 << 20 {
                     self.inbuf = vec![0; 1 << 16];
                 }
             }
