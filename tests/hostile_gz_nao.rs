@@ -695,17 +695,17 @@ fn gz_absurd_values_are_refused_and_never_reach_an_interface() {
         let bad: Vec<(String, Vec<u8>, &str)> = vec![
             (
                 l2.clone(),
-                scan(-3.14, step, 10.0, &huge),
+                scan(-std::f64::consts::PI, step, 10.0, &huge),
                 "ignition.msgs.LaserScan",
             ),
             (
                 l2.clone(),
-                scan(-3.14, step, 1e300, &rays),
+                scan(-std::f64::consts::PI, step, 1e300, &rays),
                 "ignition.msgs.LaserScan",
             ),
             (
                 l2.clone(),
-                scan(-3.14, step, 10.0, &[]),
+                scan(-std::f64::consts::PI, step, 10.0, &[]),
                 "ignition.msgs.LaserScan",
             ),
             (l2.clone(), odometry(1.0, 2.0), "ignition.msgs.Odometry"),
@@ -729,7 +729,7 @@ fn gz_absurd_values_are_refused_and_never_reach_an_interface() {
             let good = [
                 (
                     l2.clone(),
-                    scan(-3.14, step, 10.0, &rays),
+                    scan(-std::f64::consts::PI, step, 10.0, &rays),
                     "ignition.msgs.LaserScan",
                 ),
                 (o2.clone(), odometry(1.5, 0.5), "ignition.msgs.Odometry"),
