@@ -417,6 +417,11 @@ fn driver_targets(p: &Path) -> Vec<Target> {
                 if let Ok(s) = pb::decode_scan(b) {
                     let mut l = jderobot::interfaces::Laser::default();
                     laser(&mut LaserMap::new(180, 1.0), &s, &mut l);
+                    // What the driver checks before a scan reaches `laser`.
+                    if jderobot::drivers::gazebo::check_scan(&s).is_ok() {
+                        use jderobot::interfaces::InterfaceValue;
+                        assert!(l.validate("laser").is_ok(), "a checked scan is in range");
+                    }
                 }
                 if let Ok(f) = pb::decode_image(b) {
                     let mut i = jderobot::interfaces::Image::default();

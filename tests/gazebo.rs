@@ -28,7 +28,7 @@ fn missing(note: &str) -> Option<PathBuf> {
 }
 
 /// The peer, compiled into target/gazebo-peer when its source is newer.
-fn peer_bin() -> Option<PathBuf> {
+pub(crate) fn peer_bin() -> Option<PathBuf> {
     let src = root().join("tests/gazebo/peer.cc");
     let dir = root().join("target/gazebo-peer");
     let bin = dir.join("peer");
@@ -89,7 +89,7 @@ fn topic_tool() -> Option<PathBuf> {
 }
 
 /// A partition of this test alone.
-fn partition() -> String {
+pub(crate) fn partition() -> String {
     static N: AtomicUsize = AtomicUsize::new(0);
     format!(
         "jdetest{}-{}",
@@ -99,7 +99,7 @@ fn partition() -> String {
 }
 
 /// A child process killed when dropped.
-struct Proc(Child);
+pub(crate) struct Proc(pub(crate) Child);
 
 impl Drop for Proc {
     fn drop(&mut self) {
@@ -108,7 +108,7 @@ impl Drop for Proc {
     }
 }
 
-fn gz(cmd: &Path, part: &str) -> Command {
+pub(crate) fn gz(cmd: &Path, part: &str) -> Command {
     let mut c = Command::new(cmd);
     c.env("IGN_IP", "127.0.0.1")
         .env("IGN_PARTITION", part)
@@ -117,7 +117,7 @@ fn gz(cmd: &Path, part: &str) -> Command {
 }
 
 /// Starts the scripted robot and waits for it to say it is ready.
-fn robot(bin: &Path, part: &str, args: &[&str]) -> Proc {
+pub(crate) fn robot(bin: &Path, part: &str, args: &[&str]) -> Proc {
     let mut c = gz(bin, part);
     c.arg("robot").args(args).stdout(Stdio::piped());
     let mut child = c.spawn().expect("start the peer");
@@ -129,7 +129,7 @@ fn robot(bin: &Path, part: &str, args: &[&str]) -> Proc {
     Proc(child)
 }
 
-fn head(part: &str, name: &str) -> String {
+pub(crate) fn head(part: &str, name: &str) -> String {
     format!("driver {name}\npartition {part}\nip 127.0.0.1\n")
 }
 

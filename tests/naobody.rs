@@ -23,14 +23,14 @@ use common::{eventually, poll_until, process::free_port, start_conf};
 use jderobot::interfaces::{Bumpers, Encoders, Image, Motors, PtEncoders, PtMotors, Sonars};
 
 /// The NAOqi stand-in, killed when dropped.
-struct Peer {
+pub(crate) struct Peer {
     child: Child,
     out: Arc<Mutex<String>>,
-    port: u16,
+    pub(crate) port: u16,
 }
 
 impl Peer {
-    fn start(py: &Path, port: u16, extra: &[&str]) -> Peer {
+    pub(crate) fn start(py: &Path, port: u16, extra: &[&str]) -> Peer {
         let mut child = Command::new(py)
             .arg(common::root().join("tests/emulators/naoqi.py"))
             .args(["--url", &format!("tcp://127.0.0.1:{port}"), "--trace"])
@@ -50,11 +50,11 @@ impl Peer {
         p
     }
 
-    fn text(&self) -> String {
+    pub(crate) fn text(&self) -> String {
         self.out.lock().unwrap().clone()
     }
 
-    fn count(&self, what: &str) -> usize {
+    pub(crate) fn count(&self, what: &str) -> usize {
         self.text().lines().filter(|l| l.starts_with(what)).count()
     }
 
@@ -70,11 +70,11 @@ impl Drop for Peer {
     }
 }
 
-fn python() -> Option<PathBuf> {
+pub(crate) fn python() -> Option<PathBuf> {
     common::python_with("qi")
 }
 
-fn naobody(port: u16, lines: &str) -> String {
+pub(crate) fn naobody(port: u16, lines: &str) -> String {
     format!(
         "driver naobody\nurl tcp://127.0.0.1:{port}\npoll 50\n{lines}end_driver\nload_driver naobody\n"
     )

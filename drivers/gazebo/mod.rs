@@ -406,6 +406,13 @@ struct Line {
     sink: Sink,
     /// The topic, once known.
     topic: Option<String>,
+    /// Whether the topic was found by searching (not fixed by the line): it is
+    /// searched again when its publisher leaves or fails.
+    searched: bool,
+    /// Topics found that failed (left, silent, bad), tried last; and the
+    /// subscription's failures counted so far.
+    failed: Vec<String>,
+    failures: u64,
     /// Its subscription in the node (inputs).
     sub: Option<usize>,
     source: Source,
@@ -426,6 +433,73 @@ struct Gz {
     name: String,
 }
 
+/// The topic a line that names a model or sensor reads: of the right type, named
+/// `/NAME` (first) or with a part `NAME` (a joint state: `.../model/NAME/joint_state`),
+/// not one of `avoid`.
+fn search(want: &Want, known: &[(String, Vec<String>)], avoid: &[String]) -> Option<String> {
+    let accept = both(want.kind.msg());
+    let name = &want.target;
+    let joint_state = format!("/model/{name}/joint_state");
+    let pt = matches!(want.kind, Kind::PtEncoders);
+    let fits = |(t, tys): &&(String, Vec<String>)| {
+        !avoid.contains(t)
+            && tys.iter().any(|ty| accept.contains(ty))
+            && if pt {
+                t.ends_with(&joint_state)
+            } else {
+                t.split('/').any(|part| part == name)
+            }
+    };
+    let exact = format!("/{name}");
+    known
+        .iter()
+        .filter(fits)
+        .find(|(t, _)| *t == exact)
+        .or_else(|| known.iter().find(fits))
+        .map(|(t, _)| t.clone())
+}
+
+/// The farthest range a scan may say, m (1 km: beyond any lidar).
+pub const MAX_RANGE_M: f64 = 1000.0;
+/// The most rays a scan may have.
+pub const MAX_RAYS: usize = 1 << 20;
+
+/// Checks a LaserScan before it reaches the interface: rays there are, a finite
+/// geometry, range_max and every finite range within 0..[`MAX_RANGE_M`] (no
+/// return is inf or NaN, as Gazebo sends it).
+pub fn check_scan(s: &pb::Scan) -> Result<(), String> {
+    let n = s.n();
+    if n == 0 {
+        return Err("an empty scan (no ranges)".into());
+    }
+    if n > MAX_RAYS {
+        return Err(format!("a scan of {n} rays (at most {MAX_RAYS})"));
+    }
+    let tau = std::f64::consts::TAU;
+    if !s.angle_min.is_finite() || s.angle_min.abs() > 2.0 * tau {
+        return Err(format!("angle_min {} rad", s.angle_min));
+    }
+    if !s.angle_step.is_finite() || s.angle_step == 0.0 || s.angle_step.abs() > tau {
+        return Err(format!("angle_step {} rad", s.angle_step));
+    }
+    if !(s.range_max.is_finite() && s.range_max > 0.0 && s.range_max <= MAX_RANGE_M) {
+        return Err(format!(
+            "range_max {} m (a lidar's is in (0, {MAX_RANGE_M}] m)",
+            s.range_max
+        ));
+    }
+    if let Some(k) = (0..n).find(|&k| {
+        let r = s.range(k);
+        r.is_finite() && !(0.0..=MAX_RANGE_M).contains(&r)
+    }) {
+        return Err(format!(
+            "range {k} is {} m (ranges are in [0, {MAX_RANGE_M}] m, or inf for no return)",
+            s.range(k)
+        ));
+    }
+    Ok(())
+}
+
 /// Fills `out` (mm, 4.3's N readings at R per degree) from a LaserScan.
 pub fn laser(map: &mut LaserMap, s: &pb::Scan, out: &mut Laser) {
     map.fill(
@@ -438,8 +512,8 @@ pub fn laser(map: &mut LaserMap, s: &pb::Scan, out: &mut Laser) {
     );
 }
 
-/// An Image message into a BGR image (`fixed`: scaled to 320x240).
-pub fn fill_image(f: &pb::Frame, fixed: bool, out: &mut Image) -> Result<(), String> {
+/// Checks an Image message's layout: (width, height, bytes per pixel, row step).
+pub fn image_layout(f: &pb::Frame) -> Result<(usize, usize, usize, usize), String> {
     let bpp = match f.format {
         pb::pixel::L_INT8 => 1,
         pb::pixel::RGB_INT8 | pb::pixel::BGR_INT8 => 3,
@@ -465,6 +539,13 @@ pub fn fill_image(f: &pb::Frame, fixed: bool, out: &mut Image) -> Result<(), Str
             f.data.len()
         ));
     }
+    Ok((w, h, bpp, step))
+}
+
+/// An Image message into a BGR image (`fixed`: scaled to 320x240); a bad
+/// layout is an error and leaves `out` as it was.
+pub fn fill_image(f: &pb::Frame, fixed: bool, out: &mut Image) -> Result<(), String> {
+    let (w, h, bpp, step) = image_layout(f)?;
     let (ow, oh) = if fixed {
         (COLOR_WIDTH as usize, COLOR_HEIGHT as usize)
     } else {
@@ -514,37 +595,55 @@ fn sim_time(t: Option<f64>) -> SystemTime {
 }
 
 /// Feeds one message of subscription `sub` to its line.
+/// Feeds one message of subscription `sub` to its line. Its type-name frame
+/// must be the line's message (Odometry bytes on the lidar topic are refused),
+/// and a value out of range is refused with a line, never reaching the interface.
 fn feed(lines: &mut [Line], sub: usize, data: &[u8], ty: &str) {
     let Some(l) = lines.iter_mut().find(|l| l.sub == Some(sub)) else {
         return;
     };
     let src = &l.source;
+    let msg = l.want.kind.msg();
+    if ty
+        .strip_prefix("ignition.msgs.")
+        .or_else(|| ty.strip_prefix("gz.msgs."))
+        != Some(msg)
+    {
+        let ty: String = ty.chars().take(80).collect();
+        src.refused(format_args!(
+            "a message of type `{ty}` on a topic of {msg}: refused"
+        ));
+        return;
+    }
     let r = match &mut l.sink {
         Sink::Encoders(i) => pb::decode_odometry(data).map(|o| {
+            if !(o.x.abs() <= 1e6 && o.y.abs() <= 1e6 && o.yaw.is_finite()) {
+                src.refused(format_args!(
+                    "odometry at ({}, {}) m, yaw {} rad: beyond 1000 km or not finite",
+                    o.x, o.y, o.yaw
+                ));
+                return;
+            }
             let e = Encoders::from_pose((o.x * 1000.0) as f32, (o.y * 1000.0) as f32, o.yaw as f32);
             src.note(i.write_recorded(i.clock() + 1, sim_time(o.time), |v| *v = e));
         }),
         Sink::Laser(i, m) => pb::decode_scan(data).map(|s| {
+            if let Err(e) = check_scan(&s) {
+                src.refused(format_args!("scan refused: {e}"));
+                return;
+            }
             src.note(i.write_recorded(i.clock() + 1, sim_time(s.time), |l| laser(m, &s, l)));
         }),
         Sink::Camera(i, fixed) => pb::decode_image(data).map(|f| {
-            let mut err = None;
-            let r = i.write_recorded(i.clock() + 1, sim_time(f.time), |img| {
-                if let Err(e) = fill_image(&f, *fixed, img) {
-                    err = Some(e);
-                    // Refused below by the size check: keep the last good frame.
-                    img.data.clear();
-                    img.width = 1;
-                }
-            });
-            match err {
-                Some(e) => {
-                    src.refused(format_args!("camera frame skipped: {e}"));
-                }
-                None => {
-                    src.note(r);
-                }
+            // Checked first: a refused frame never touches the interface.
+            if let Err(e) = image_layout(&f) {
+                src.refused(format_args!("camera frame refused: {e}"));
+                return;
             }
+            let r = i.write_recorded(i.clock() + 1, sim_time(f.time), |img| {
+                let _ = fill_image(&f, *fixed, img);
+            });
+            src.note(r);
         }),
         Sink::PtEncoders(i, pan, tilt) => pb::decode_joints(data).map(|(time, joints)| {
             let at = |name: &str| {
@@ -605,27 +704,42 @@ impl Gz {
         let known = self.node.known();
         for l in &mut self.lines {
             if l.topic.is_none() {
-                l.topic = l.want.fixed_topic().or_else(|| {
-                    let accept = both(l.want.kind.msg());
-                    let name = &l.want.target;
-                    let joint_state = format!("/model/{name}/joint_state");
-                    let pt = matches!(l.want.kind, Kind::PtEncoders);
-                    let fits = |(t, tys): &&(String, Vec<String>)| {
-                        tys.iter().any(|ty| accept.contains(ty))
-                            && if pt {
-                                t.ends_with(&joint_state)
-                            } else {
-                                t.split('/').any(|part| part == name)
-                            }
-                    };
-                    let exact = format!("/{name}");
-                    known
-                        .iter()
-                        .filter(fits)
-                        .find(|(t, _)| *t == exact)
-                        .or_else(|| known.iter().find(fits))
-                        .map(|(t, _)| t.clone())
-                });
+                l.topic = l.want.fixed_topic();
+                if l.topic.is_none() {
+                    l.topic = search(&l.want, &known, &[]);
+                    l.searched = l.topic.is_some();
+                }
+            } else if let (true, Some(s), Some(t)) = (l.searched, l.sub, l.topic.clone()) {
+                // Searched again when the chosen topic's publisher left or failed (a
+                // decoy advertised before Gazebo), preferring topics not failed yet.
+                let w = &self.node.wants[s];
+                if w.bound.is_none() {
+                    let gone = !known.iter().any(|(k, _)| *k == t);
+                    if w.failures > l.failures || gone {
+                        l.failures = w.failures;
+                        if l.failed.len() >= 16 {
+                            l.failed.remove(0);
+                        }
+                        if !l.failed.contains(&t) {
+                            l.failed.push(t.clone());
+                        }
+                        if let Some(n) = search(&l.want, &known, &l.failed)
+                            .or_else(|| search(&l.want, &known, &[]))
+                            && n != t
+                        {
+                            tracing::info!(
+                                "{}: {t} left or failed; {} now reads {n}",
+                                self.name,
+                                l.want.iface
+                            );
+                            self.node.retopic(s, &n);
+                            l.failures = self.node.wants[s].failures;
+                            l.topic = Some(n);
+                        }
+                    }
+                } else if w.got_data {
+                    l.failed.clear();
+                }
             }
             if let (Some(t), None, false) = (&l.topic, l.sub, l.sink.output()) {
                 l.sub = Some(self.node.want(t, both(l.want.kind.msg())));
@@ -826,6 +940,13 @@ impl runtime::Device for Gz {
             return Err(self.reason());
         }
         self.next_cmd = Instant::now();
+        // Back: a command reaches DiffDrive again (the driver never publishes
+        // motors, so nothing else would clear its stale mark).
+        for l in &self.lines {
+            if let Sink::Motors(m) = &l.sink {
+                m.clear_stale();
+            }
+        }
         Ok(())
     }
 
@@ -966,6 +1087,9 @@ impl GazeboDriver {
                 want: w.clone(),
                 sink,
                 topic,
+                searched: false,
+                failed: Vec::new(),
+                failures: 0,
                 sub: None,
                 source: Source::new(format!("{provider}: {} {}", w.iface, w.target)),
             });
@@ -1081,6 +1205,26 @@ mod tests {
         assert_eq!(l.readings[0], 1090);
         // reading 90 (ahead): ray 180, no hit: range_max.
         assert_eq!(l.readings[90], 10_000);
+    }
+
+    #[test]
+    fn absurd_scans_are_refused() {
+        let ok = scan_bytes(&[1.0, f64::INFINITY, 2.0]);
+        let s = |range_max: f64, ranges: &[u8]| {
+            check_scan(&pb::Scan {
+                angle_min: -1.0,
+                angle_step: 0.01,
+                range_max,
+                count: ranges.len() / 8,
+                ranges,
+                time: None,
+            })
+        };
+        assert!(s(10.0, &ok).is_ok());
+        assert!(s(1e300, &ok).unwrap_err().contains("range_max"));
+        assert!(s(10.0, &[]).unwrap_err().contains("empty"));
+        let huge = scan_bytes(&[1.0, 1e300]);
+        assert!(s(10.0, &huge).unwrap_err().contains("range 1"));
     }
 
     #[test]

@@ -492,14 +492,19 @@ pub mod pixel {
     pub const BGR_INT8: u64 = 8;
 }
 
+/// An image dimension: a uint32 in gz-msgs (a larger varint is refused, not truncated).
+fn dim(v: Val, what: &str) -> Result<u32, PbError> {
+    u32::try_from(v.u64()).map_err(|_| bad(format!("Image.{what} is {}", v.u64())))
+}
+
 pub fn decode_image(b: &[u8]) -> Result<Frame<'_>, PbError> {
     let mut i = Frame::default();
     for f in fields(b) {
         match f? {
             (1, v) => i.time = stamp(v.bytes())?,
-            (2, v) => i.width = v.u64() as u32,
-            (3, v) => i.height = v.u64() as u32,
-            (4, v) => i.step = v.u64() as u32,
+            (2, v) => i.width = dim(v, "width")?,
+            (3, v) => i.height = dim(v, "height")?,
+            (4, v) => i.step = dim(v, "step")?,
             (5, v) => i.data = v.bytes(),
             (6, v) => i.format = v.u64(),
             _ => {}

@@ -1,8 +1,12 @@
 //! A minimal ZMTP 3.0 (ZeroMQ's wire, rfc.zeromq.org/spec/23) over TCP with the NULL
 //! mechanism: the two ends gz-transport's topics need, a SUB connection to a
 //! publisher and a PUB listener for subscribers. Non-blocking sockets polled by the
-//! caller; every frame is bounded ([`MAX_FRAME`]), so a peer sending garbage is
-//! dropped with the reason, never allowed to make us allocate without limit.
+//! caller; every message is bounded as a whole ([`MAX_MESSAGE`]: all its frames
+//! together) and the buffer grows only with bytes that arrived, so a peer sending
+//! garbage is dropped with the reason, never allowed to make us allocate without
+//! limit. Connects are non-blocking to IP literals only (no name resolution: a
+//! gz-transport node advertises its IP address), and a connection not greeted
+//! within [`GREETING_TIME`] is given up.
 
 use std::{
     io::{self, Read, Write},
@@ -10,8 +14,13 @@ use std::{
     os::fd::{AsRawFd, RawFd},
 };
 
-/// The largest frame accepted (a 4K RGBA image is 33 MB).
-pub const MAX_FRAME: u64 = 64 << 20;
+/// The largest message accepted, all its frames together (a 4K RGBA image is 33 MB).
+pub const MAX_MESSAGE: u64 = 64 << 20;
+/// How long a connection may take to connect and greet.
+pub const GREETING_TIME: std::time::Duration = std::time::Duration::from_secs(2);
+/// The most subscribers our PUB socket keeps, and topic prefixes per subscriber.
+pub const MAX_SUBS: usize = 64;
+const MAX_PREFIXES: usize = 32;
 /// The most frames of one message (gz-transport sends 4 or 5).
 const MAX_PARTS: usize = 16;
 
@@ -69,6 +78,10 @@ pub struct Conn {
     greeted: bool,
     ready: bool,
     parts: Vec<Vec<u8>>,
+    /// The bytes of `parts` so far (the message's size is capped as a whole).
+    parts_bytes: u64,
+    /// Until when the peer may take to connect and greet (None: greeted).
+    pub greet_by: Option<std::time::Instant>,
     /// The peer's address (for messages).
     pub peer: String,
 }
@@ -86,6 +99,8 @@ impl Conn {
             greeted: false,
             ready: false,
             parts: Vec::new(),
+            parts_bytes: 0,
+            greet_by: Some(std::time::Instant::now() + GREETING_TIME),
             peer,
         };
         c.outbuf.extend_from_slice(&greeting());
@@ -94,19 +109,30 @@ impl Conn {
         Ok(c)
     }
 
-    /// Connects to `tcp://HOST:PORT` as a SUB socket (the connect waits at most `timeout`).
-    pub fn connect_sub(endpoint: &str, timeout: std::time::Duration) -> io::Result<Conn> {
-        let addr = endpoint.strip_prefix("tcp://").ok_or_else(|| {
-            io::Error::new(
-                io::ErrorKind::InvalidInput,
-                format!("{endpoint}: not a tcp:// endpoint"),
-            )
-        })?;
-        let sa = std::net::ToSocketAddrs::to_socket_addrs(addr)?
-            .next()
-            .ok_or_else(|| io::Error::new(io::ErrorKind::NotFound, addr.to_string()))?;
-        let s = TcpStream::connect_timeout(&sa, timeout)?;
-        Conn::new(s, "SUB", endpoint.into())
+    /// Starts connecting to `tcp://IP:PORT` as a SUB socket, without waiting: the
+    /// caller's poll sees it connect (or fail), and [`GREETING_TIME`] bounds it.
+    /// Only IP literals: no name is resolved (that could block for seconds).
+    pub fn connect_sub(endpoint: &str) -> io::Result<Conn> {
+        let sa = endpoint_addr(endpoint)?;
+        let s = socket2::Socket::new(
+            socket2::Domain::for_address(sa),
+            socket2::Type::STREAM,
+            Some(socket2::Protocol::TCP),
+        )?;
+        s.set_nonblocking(true)?;
+        match s.connect(&sa.into()) {
+            Ok(()) => {}
+            Err(e)
+                if e.raw_os_error() == Some(libc::EINPROGRESS)
+                    || e.kind() == io::ErrorKind::WouldBlock => {}
+            Err(e) => return Err(e),
+        }
+        Conn::new(s.into(), "SUB", endpoint.into())
+    }
+
+    /// Whether the peer has not connected and greeted in time.
+    pub fn greeting_late(&self, now: std::time::Instant) -> bool {
+        self.greet_by.is_some_and(|t| now > t)
     }
 
     pub fn fd(&self) -> RawFd {
@@ -125,7 +151,13 @@ impl Conn {
                 Ok(n) => {
                     self.outbuf.drain(..n);
                 }
-                Err(e) if e.kind() == io::ErrorKind::WouldBlock => return Ok(()),
+                // Still connecting (a non-blocking connect): written once it is.
+                Err(e)
+                    if e.kind() == io::ErrorKind::WouldBlock
+                        || e.kind() == io::ErrorKind::NotConnected =>
+                {
+                    return Ok(());
+                }
                 Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
                 Err(e) => return Err(e),
             }
@@ -159,7 +191,13 @@ impl Conn {
             if self.end == self.inbuf.len() {
                 self.compact();
                 if self.end == self.inbuf.len() {
-                    let n = self.inbuf.len() * 2;
+                    // Room for one whole message and its frame heads, no more: the
+                    // rest waits in the socket until next_item took what is here.
+                    let most = MAX_MESSAGE as usize + (1 << 20);
+                    if self.inbuf.len() >= most {
+                        return Ok(true);
+                    }
+                    let n = (self.inbuf.len() * 2).min(most);
                     self.inbuf.resize(n, 0);
                 }
             }
@@ -168,7 +206,7 @@ impl Conn {
                 Ok(n) => self.end += n,
                 Err(e) => {
                     return match e.kind() {
-                        io::ErrorKind::WouldBlock => Ok(true),
+                        io::ErrorKind::WouldBlock | io::ErrorKind::NotConnected => Ok(true),
                         io::ErrorKind::Interrupted => continue,
                         _ => Err(e),
                     };
@@ -195,6 +233,10 @@ impl Conn {
         loop {
             if self.start == self.end {
                 (self.start, self.end) = (0, 0);
+                // A big message passed: give its memory back.
+                if self.inbuf.len() > 8 << 20 {
+                    self.inbuf = vec![0; 1 << 16];
+                }
             }
             let buf = &self.inbuf[self.start..self.end];
             if !self.greeted {
@@ -217,6 +259,7 @@ impl Conn {
                     )));
                 }
                 self.greeted = true;
+                self.greet_by = None;
                 self.start += 64;
                 continue;
             }
@@ -238,22 +281,18 @@ impl Conn {
             } else {
                 (buf[1] as u64, 2)
             };
-            if size > MAX_FRAME {
+            // The whole message is capped, not each frame: unfinished MORE frames
+            // count together.
+            let total = self.parts_bytes.saturating_add(size);
+            if total > MAX_MESSAGE {
                 return Err(Self::bad(format!(
-                    "{}: a frame of {size} bytes (at most {MAX_FRAME})",
+                    "{}: a message of {total} bytes or more (at most {MAX_MESSAGE})",
                     self.peer
                 )));
             }
             let size = size as usize;
             if buf.len() < head + size {
-                // Make room for the whole frame at once.
-                let need = head + size;
-                if self.inbuf.len() - self.start < need {
-                    self.compact();
-                    if self.inbuf.len() < need {
-                        self.inbuf.resize(need.next_power_of_two(), 0);
-                    }
-                }
+                // The buffer grows as the bytes arrive (read_some), never ahead of them.
                 return Ok(None);
             }
             let body = buf[head..head + size].to_vec();
@@ -264,6 +303,7 @@ impl Conn {
                 }
                 return Ok(Some(Item::Command(body)));
             }
+            self.parts_bytes += body.len() as u64;
             self.parts.push(body);
             if self.parts.len() > MAX_PARTS {
                 return Err(Self::bad(format!(
@@ -272,10 +312,24 @@ impl Conn {
                 )));
             }
             if flags & 1 == 0 {
+                self.parts_bytes = 0;
                 return Ok(Some(Item::Message(std::mem::take(&mut self.parts))));
             }
         }
     }
+}
+
+/// `tcp://IP:PORT` as an address: an IP literal (v4 or `[v6]`), never a name.
+pub fn endpoint_addr(endpoint: &str) -> io::Result<std::net::SocketAddr> {
+    let invalid = |m: String| io::Error::new(io::ErrorKind::InvalidInput, m);
+    let addr = endpoint
+        .strip_prefix("tcp://")
+        .ok_or_else(|| invalid(format!("{endpoint}: not a tcp:// endpoint")))?;
+    addr.parse().map_err(|_| {
+        invalid(format!(
+            "{endpoint}: not an IP address and port (names are not resolved)"
+        ))
+    })
 }
 
 /// A PUB socket: a listener and the subscribers connected to it, each with the
@@ -284,6 +338,8 @@ pub struct Pub {
     pub listener: TcpListener,
     pub endpoint: String,
     pub subs: Vec<(Conn, Vec<Vec<u8>>)>,
+    /// The cap was said (again once it has room).
+    full_said: bool,
 }
 
 impl Pub {
@@ -295,18 +351,47 @@ impl Pub {
             listener,
             endpoint,
             subs: Vec::new(),
+            full_said: false,
         })
     }
 
     /// Accepts new subscribers and reads their subscriptions; drops the broken.
+    /// At most [`MAX_SUBS`]: when full, the oldest one that subscribed to nothing
+    /// makes room, else the newcomer is refused (one line each time it fills).
     pub fn serve(&mut self) {
+        let mut accepted = 0;
         while let Ok((s, a)) = self.listener.accept() {
+            accepted += 1;
+            if self.subs.len() >= MAX_SUBS {
+                match self.subs.iter().position(|(_, ps)| ps.is_empty()) {
+                    Some(k) => {
+                        self.subs.remove(k);
+                    }
+                    None => {
+                        if !self.full_said {
+                            self.full_said = true;
+                            tracing::warn!(
+                                "gazebo: {MAX_SUBS} subscribers are connected to our topics; refusing {a} and more"
+                            );
+                        }
+                        continue;
+                    }
+                }
+            }
             if let Ok(c) = Conn::new(s, "PUB", a.to_string()) {
                 self.subs.push((c, Vec::new()));
             }
+            // A connect flood does not hold the thread: the rest wait for the next call.
+            if accepted >= 16 {
+                break;
+            }
         }
+        if self.subs.len() < MAX_SUBS / 2 {
+            self.full_said = false;
+        }
+        let now = std::time::Instant::now();
         self.subs.retain_mut(|(c, prefixes)| {
-            if c.flush().is_err() {
+            if c.flush().is_err() || c.greeting_late(now) {
                 return false;
             }
             let open = matches!(c.read_some(), Ok(true));
@@ -315,7 +400,9 @@ impl Pub {
                     Ok(Some(Item::Message(m))) => {
                         if let Some(f) = m.first() {
                             match f.first() {
-                                Some(1) => prefixes.push(f[1..].to_vec()),
+                                Some(1) if prefixes.len() < MAX_PREFIXES => {
+                                    prefixes.push(f[1..].to_vec())
+                                }
                                 Some(0) => prefixes.retain(|p| p[..] != f[1..]),
                                 _ => {}
                             }
@@ -324,7 +411,9 @@ impl Pub {
                     Ok(Some(Item::Command(b))) => {
                         // ZMTP 3.1's SUBSCRIBE / CANCEL commands.
                         if let Some(t) = b.strip_prefix(b"\x09SUBSCRIBE") {
-                            prefixes.push(t.to_vec());
+                            if prefixes.len() < MAX_PREFIXES {
+                                prefixes.push(t.to_vec());
+                            }
                         } else if let Some(t) = b.strip_prefix(b"\x06CANCEL") {
                             prefixes.retain(|p| p[..] != *t);
                         }

@@ -453,21 +453,22 @@ pub struct Joint {
     pub speed: f32,
 }
 
-/// Reads `getLimits(name)`'s `[[min, max, maxVelocity, maxTorque]]`.
+/// The range a head joint's limits must be in: angles within ±2π rad, the
+/// speed in (0, 100] rad/s (a NAO's head: ±2.09 rad, 8.27 rad/s).
+const JOINT_RANGE: &str = "min <= max within ±2π rad, maxVelocity in (0, 100] rad/s";
+
+/// Reads `getLimits(name)`'s `[[min, max, maxVelocity, maxTorque]]`, in range.
 fn joint(v: &Value) -> Option<Joint> {
     let row = v.items()?.first()?.items()?;
-    let f = |i: usize| {
-        row.get(i)?
-            .as_f64()
-            .map(|x| x as f32)
-            .filter(|x| x.is_finite())
-    };
+    let f = |i: usize| number(row.get(i)?).map(|x| x as f32);
     let j = Joint {
         min: f(0)?,
         max: f(1)?,
         speed: f(2)?,
     };
-    (j.min <= j.max && j.speed > 0.0).then_some(j)
+    let tau = std::f32::consts::TAU;
+    (j.min <= j.max && j.min >= -tau && j.max <= tau && j.speed > 0.0 && j.speed <= 100.0)
+        .then_some(j)
 }
 
 /// How the walk is commanded.
@@ -629,7 +630,11 @@ impl Body {
                         s.qi.call(&m, "getLimits", &[Value::str(name)])
                             .map_err(|e| format!("{url}: {e}"))?;
                     joint(&v).ok_or_else(|| {
-                        format!("{url}: ALMotion.getLimits(\"{name}\") gave {v:?}, not [[min, max, maxVelocity, maxTorque]]")
+                        format!(
+                            "{url}: ALMotion.getLimits(\"{name}\") gave {}, not [[min, max, maxVelocity, maxTorque]] \
+                             with {JOINT_RANGE}: refused",
+                            short(&v)
+                        )
                     })
                 };
                 let (yaw, pitch) = (get(HEAD[0])?, get(HEAD[1])?);
@@ -791,15 +796,26 @@ impl Body {
             }
             let list = Value::List(keys.iter().map(|k| Value::str(k)).collect());
             let v = s.qi.call(&mem, "getListData", &[list])?;
-            let got = numbers(&v, keys.len());
+            let got = numbers_or_bools(&v, keys.len());
             let mut at = 0;
             if let Some(i) = &self.sonars {
-                match &got {
-                    Some(n) => {
+                let sonar = got.as_ref().map(|n| {
+                    (
+                        n[..2].to_vec(),
+                        n[..2].iter().all(|m| (0.0..=MAX_SONAR_M).contains(m)),
+                    )
+                });
+                match sonar {
+                    Some((n, false)) => {
+                        self.source.refused(format_args!(
+                            "ALMemory's sonars say {n:?} m; a sonar reads 0..{MAX_SONAR_M} m: refused"
+                        ));
+                    }
+                    Some((n, true)) => {
                         i.accept(
                             &self.source,
                             Sonars {
-                                us: n[..2].iter().map(|m| (*m * 1000.0) as f32).collect(),
+                                us: n.iter().map(|m| (*m * 1000.0) as f32).collect(),
                             },
                         );
                     }
@@ -832,26 +848,47 @@ impl Body {
     }
 }
 
-/// `n` finite numbers from a list.
+/// The farthest a sonar reading may be, m (a NAO's reads 0.25..2.55 m, 5 m for nothing).
+const MAX_SONAR_M: f64 = 10.0;
+
+/// A finite number (an int or a float; a boolean is not a number here).
+fn number(v: &Value) -> Option<f64> {
+    match v {
+        Value::Int(_) | Value::UInt(_) | Value::Float(_) | Value::Double(_) => {
+            v.as_f64().filter(|f| f.is_finite())
+        }
+        _ => None,
+    }
+}
+
+/// `n` finite numbers from a list (booleans are not taken as a pose).
 fn numbers(v: &Value, n: usize) -> Option<Vec<f64>> {
+    let items = v.items()?;
+    if items.len() != n {
+        return None;
+    }
+    items.iter().map(number).collect()
+}
+
+/// `n` finite numbers or booleans (as 0 and 1) from a list: ALMemory's values.
+fn numbers_or_bools(v: &Value, n: usize) -> Option<Vec<f64>> {
     let items = v.items()?;
     if items.len() != n {
         return None;
     }
     items
         .iter()
-        .map(|x| x.as_f64().filter(|f| f.is_finite()))
+        .map(|x| match x {
+            Value::Bool(b) => Some(*b as u8 as f64),
+            _ => number(x),
+        })
         .collect()
 }
 
-/// A value as a short text for a message.
+/// A value as a short text for a message: formatting stops at [`qi::SHOW`]
+/// characters, so a huge bad reply costs no more than a small one.
 fn short(v: &Value) -> String {
-    let s = format!("{v:?}");
-    if s.len() > 80 {
-        format!("{}…", &s[..s.floor_char_boundary(80)])
-    } else {
-        s
-    }
+    qi::show(v)
 }
 
 impl Device for Body {
@@ -1311,6 +1348,36 @@ mod tests {
         let [(y, fy), (p, fp)] = head_targets(&m, yaw, pitch);
         assert_eq!((y, fy), (2.0, 1.0));
         assert!((p + 10f32.to_radians()).abs() < 1e-6 && (fp - 0.5).abs() < 1e-6);
+    }
+
+    #[test]
+    fn absurd_replies_are_refused_and_shown_short() {
+        // Booleans are not a pose; ALMemory's booleans are bumpers.
+        let b = Value::List(vec![
+            Value::Bool(true),
+            Value::Bool(false),
+            Value::Bool(true),
+        ]);
+        assert_eq!(numbers(&b, 3), None);
+        assert_eq!(numbers_or_bools(&b, 3), Some(vec![1.0, 0.0, 1.0]));
+        // getLimits of ±1e30 rad is refused; a NAO's are taken.
+        let limits = |lo: f64, hi: f64, v: f64| {
+            Value::List(vec![Value::List(vec![
+                Value::Double(lo),
+                Value::Double(hi),
+                Value::Double(v),
+                Value::Double(1.5),
+            ])])
+        };
+        assert!(joint(&limits(-1e30, 1e30, 8.0)).is_none());
+        assert!(joint(&limits(-2.0857, 2.0857, 1e9)).is_none());
+        assert!(joint(&limits(-2.0857, 2.0857, 8.26797)).is_some());
+        // A 30 MB value is shown by its first characters, at once.
+        let huge = Value::Raw(vec![7; 30 << 20]);
+        let t = std::time::Instant::now();
+        let s = short(&huge);
+        assert!(s.chars().count() <= qi::SHOW + 1 && s.ends_with('…'), "{s}");
+        assert!(t.elapsed() < Duration::from_secs(1));
     }
 
     #[test]

@@ -21,13 +21,17 @@
 //! Defensive: every length is checked against what is left of the message and a
 //! limit ([`MAX_PAYLOAD`], [`MAX_SIGNATURE`], [`MAX_DEPTH`], [`MAX_VALUES`]);
 //! garbage is an error (the caller drops the connection and reconnects), never a
-//! panic or an allocation bigger than the bytes that actually arrived.
+//! panic or an allocation bigger than the bytes that actually arrived. A call has
+//! one deadline for the whole of it (a reply trickled a byte at a time times out
+//! like a missing one); a service's endpoints are tried [`MAX_ENDPOINTS`] at most,
+//! IP literals (or the conf's host) only, within one call's time; and a bad value
+//! is shown in an error by its first [`SHOW`] characters, never formatted whole.
 
 use std::{
     fmt,
     io::{Read, Write},
     net::{TcpStream, ToSocketAddrs},
-    time::Duration,
+    time::{Duration, Instant},
 };
 
 /// The magic cookie every header starts with (sent big-endian: 42 DE AD 42).
@@ -42,6 +46,51 @@ pub const MAX_SIGNATURE: usize = 4096;
 pub const MAX_DEPTH: u32 = 32;
 /// The most values one message may decode into.
 pub const MAX_VALUES: usize = 1 << 18;
+/// The most endpoints of one service tried.
+pub const MAX_ENDPOINTS: usize = 4;
+/// The most characters of a value shown in a message.
+pub const SHOW: usize = 120;
+
+/// A string of at most `max` bytes that formatting stops writing into when full.
+struct Capped {
+    s: String,
+    max: usize,
+}
+
+impl fmt::Write for Capped {
+    fn write_str(&mut self, t: &str) -> fmt::Result {
+        let room = self.max - self.s.len();
+        if t.len() <= room {
+            self.s.push_str(t);
+            Ok(())
+        } else {
+            self.s.push_str(&t[..t.floor_char_boundary(room)]);
+            Err(fmt::Error)
+        }
+    }
+}
+
+/// `x` formatted (Debug) to at most [`SHOW`] characters, with `…` when cut: the
+/// formatting stops there, so a 30 MB value costs no more than a short one.
+pub fn show(x: &impl fmt::Debug) -> String {
+    let mut c = Capped {
+        s: String::new(),
+        max: SHOW,
+    };
+    if fmt::write(&mut c, format_args!("{x:?}")).is_err() {
+        c.s.push('…');
+    }
+    c.s
+}
+
+/// A text of at most [`SHOW`] characters, with `…` when cut.
+pub fn show_text(t: &str) -> String {
+    if t.len() <= SHOW {
+        t.to_string()
+    } else {
+        format!("{}…", &t[..t.floor_char_boundary(SHOW)])
+    }
+}
 
 /// Message types (libqi `Message::Type`).
 pub mod ty {
@@ -800,14 +849,24 @@ pub struct Conn {
 impl Conn {
     /// Connects to `host:port` within `timeout` and authenticates.
     pub fn connect(host: &str, port: u16, timeout: Duration) -> Result<Conn, QiError> {
+        Conn::connect_by(host, port, timeout, Instant::now() + timeout)
+    }
+
+    /// Connects and authenticates by `end` (each call then waits `timeout`).
+    fn connect_by(host: &str, port: u16, timeout: Duration, end: Instant) -> Result<Conn, QiError> {
         let endpoint = format!("{host}:{port}");
         let addrs: Vec<_> = (host, port)
             .to_socket_addrs()
             .map_err(|e| QiError::Io(format!("cannot resolve {host}: {e}")))?
+            .take(MAX_ENDPOINTS)
             .collect();
         let mut last = QiError::Io(format!("{host} has no address"));
         for a in addrs {
-            match TcpStream::connect_timeout(&a, timeout) {
+            let left = end.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                return Err(QiError::Timeout(timeout.as_millis()));
+            }
+            match TcpStream::connect_timeout(&a, left) {
                 Ok(stream) => {
                     let _ = stream.set_nodelay(true);
                     stream
@@ -817,10 +876,11 @@ impl Conn {
                     let mut c = Conn {
                         stream,
                         next_id: 0,
-                        timeout,
+                        timeout: left,
                         endpoint: endpoint.clone(),
                     };
                     c.authenticate()?;
+                    c.set_timeout(timeout);
                     return Ok(c);
                 }
                 Err(e) => last = QiError::io(e),
@@ -850,7 +910,8 @@ impl Conn {
                             .into(),
                     )),
                     _ => Err(QiError::Garbage(format!(
-                        "the authentication reply has no `__qi_auth_state` 3 ({v:?})"
+                        "the authentication reply has no `__qi_auth_state` 3 ({})",
+                        show(&v)
                     ))),
                 }
             }
@@ -883,15 +944,25 @@ impl Conn {
             action,
             ..Header::default()
         };
-        write_message(&mut self.stream, h, payload).map_err(|e| self.timed(e))?;
-        let t0 = std::time::Instant::now();
+        // One deadline for the whole call: writing, and reading whatever comes
+        // until the reply (a reply trickled byte by byte does not extend it).
+        let mut io = Timed {
+            stream: &self.stream,
+            end: Instant::now() + self.timeout,
+        };
+        let r = write_message(&mut io, h, payload);
+        r.map_err(|e| self.timed(e))?;
         loop {
-            let m = read_message(&mut self.stream).map_err(|e| self.timed(e))?;
+            let mut io = Timed {
+                stream: &self.stream,
+                end: io.end,
+            };
+            let m = read_message(&mut io).map_err(|e| self.timed(e))?;
             let h = m.header;
             if h.id != id || !matches!(h.ty, ty::REPLY | ty::ERROR | ty::CANCELED) {
                 // An answer to an earlier call, an event, a capability message;
-                // a stream of them does not hold the call past its timeout.
-                if t0.elapsed() > self.timeout {
+                // a stream of them does not hold the call past its deadline.
+                if Instant::now() > io.end {
                     return Err(QiError::Timeout(self.timeout.as_millis()));
                 }
                 continue;
@@ -900,9 +971,10 @@ impl Conn {
                 ty::REPLY => Ok((h.flags, m.payload)),
                 ty::ERROR => {
                     let v = decode(&m.payload, &Sig::Dynamic)?;
-                    Err(QiError::Remote(
-                        v.text().unwrap_or_else(|| format!("{v:?}")),
-                    ))
+                    Err(QiError::Remote(match v.bytes() {
+                        Some(b) => show_text(&String::from_utf8_lossy(&b[..b.len().min(SHOW * 4)])),
+                        None => show(&v),
+                    }))
                 }
                 _ => Err(QiError::Remote("the call was cancelled".into())),
             };
@@ -919,12 +991,53 @@ impl Conn {
     fn timed(&self, e: QiError) -> QiError {
         match &e {
             QiError::Io(s)
-                if s.contains("timed out") || s.contains("Resource temporarily unavailable") =>
+                if s.contains("timed out")
+                    || s.contains("Resource temporarily unavailable")
+                    || s.contains(DEADLINE) =>
             {
                 QiError::Timeout(self.timeout.as_millis())
             }
             _ => e,
         }
+    }
+}
+
+const DEADLINE: &str = "the call's deadline passed";
+
+/// A stream with one deadline: each read or write waits at most what is left of it.
+struct Timed<'a> {
+    stream: &'a TcpStream,
+    end: Instant,
+}
+
+impl Timed<'_> {
+    fn left(&self) -> std::io::Result<Duration> {
+        let left = self.end.saturating_duration_since(Instant::now());
+        if left.is_zero() {
+            return Err(std::io::Error::new(std::io::ErrorKind::TimedOut, DEADLINE));
+        }
+        Ok(left)
+    }
+}
+
+impl Read for Timed<'_> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        let left = self.left()?;
+        self.stream.set_read_timeout(Some(left))?;
+        let mut s = self.stream;
+        s.read(buf)
+    }
+}
+
+impl Write for Timed<'_> {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        let left = self.left()?;
+        self.stream.set_write_timeout(Some(left))?;
+        let mut s = self.stream;
+        s.write(buf)
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        Ok(())
     }
 }
 
@@ -1144,23 +1257,34 @@ impl Session {
                 return Ok(i);
             }
         }
-        // The robot's own address first, loopback only when the robot is this machine.
+        // The robot's own address first, loopback only when the robot is this
+        // machine; IP literals only (or the conf's own host name: no name a peer
+        // sends is resolved); at most MAX_ENDPOINTS, all within one call's time.
         tcp.retain(|(h, _)| {
-            !is_local(h) || is_local(&self.host) || sd_ip.is_some_and(|ip| ip.is_loopback())
+            (!is_local(h) || is_local(&self.host) || sd_ip.is_some_and(|ip| ip.is_loopback()))
+                && (h.parse::<std::net::IpAddr>().is_ok() || *h == self.host)
         });
         tcp.sort_by_key(|(h, _)| !(h == &self.host || is_sd_ip(h)));
+        let listed = tcp.len();
+        tcp.truncate(MAX_ENDPOINTS);
+        let end = Instant::now() + self.timeout;
         let mut last = None;
         for (h, p) in tcp {
-            match Conn::connect(&h, p, self.timeout) {
+            match Conn::connect_by(&h, p, self.timeout, end) {
                 Ok(c) => {
                     self.conns.push(c);
                     return Ok(self.conns.len() - 1);
                 }
                 Err(e) => last = Some(format!("{h}:{p}: {e}")),
             }
+            if Instant::now() >= end {
+                break;
+            }
         }
         Err(QiError::Io(format!(
-            "service {name}: none of its endpoints answers ({})",
+            "service {name}: none of its endpoints answers within {} ms ({listed} listed, the first \
+             {MAX_ENDPOINTS} at most tried; {})",
+            self.timeout.as_millis(),
             last.unwrap_or_default()
         )))
     }

@@ -48,7 +48,7 @@ pub const RANGES: &[(&str, &str)] = &[
         "readings >= 0 mm; resolution >= 0 readings/deg; start in [-360, 360] deg; \
          0 <= min_range <= max_range <= 1e6 mm; mount |x|, |y| <= 1e5 mm, yaw in [-360, 360] deg",
     ),
-    ("sonars", "us >= 0 mm"),
+    ("sonars", "us in [0, 1e6] mm"),
     (
         "encoders",
         "|x|, |y| <= 1e9 mm (1000 km); |theta| <= 2π rad; cos, sin in [-1, 1]",
@@ -451,7 +451,7 @@ impl InterfaceValue for Sonars {
     }
     fn validate(&self, name: &str) -> Result<(), String> {
         for (i, u) in self.us.iter().enumerate() {
-            within(name, &format!("us[{i}]"), *u, 0.0, f32::MAX, "mm")?;
+            within(name, &format!("us[{i}]"), *u, 0.0, MAX_RANGE_MM, "mm")?;
         }
         Ok(())
     }

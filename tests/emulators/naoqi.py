@@ -302,6 +302,9 @@ def without(cls, methods):
 def serve(args):
     global TRACE
     TRACE = args.trace
+    if args.absurd:
+        MEMORY["Device/SubDeviceList/US/Left/Sensor/Value"] = 1e35
+        LIMITS["HeadYaw"] = [-1e30, 1e30, 8.26797, 1.547]
     gone = {}
     for w in args.without:
         svc, _, meth = w.partition(".")
@@ -376,6 +379,8 @@ def main():
     ap.add_argument("--join", help="register the services with this ServiceDirectory")
     ap.add_argument("--bench", action="store_true", help="a new frame on every getImageRemote")
     ap.add_argument("--trace", action="store_true")
+    ap.add_argument("--absurd", action="store_true",
+                    help="a hostile robot: a sonar of 1e35 m, HeadYaw limits of +-1e30 rad")
     ap.add_argument("--client")
     ap.add_argument("--camera")
     ap.add_argument("--colorspace", type=int, default=K_BGR)

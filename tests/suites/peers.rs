@@ -8,6 +8,8 @@ mod common;
 
 #[path = "../gazebo.rs"]
 mod gazebo;
+#[path = "../hostile_gz_nao.rs"]
+mod hostile_gz_nao;
 #[path = "../naobody.rs"]
 mod naobody;
 #[path = "../player.rs"]
