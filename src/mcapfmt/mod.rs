@@ -38,7 +38,7 @@
 //! and [`StepGate`] are what the recorder and replay export in the name space
 //! (keys `recorder.status` and `replay.step`) for the shell.
 
-mod protobuf;
+pub mod protobuf;
 pub mod reader;
 pub mod ros2;
 mod status;
