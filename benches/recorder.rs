@@ -84,6 +84,7 @@ fn one_second(t0: SystemTime, second: u64) -> Vec<(&'static str, Snapshot)> {
             let l = Laser {
                 readings: (0..180).map(|i| 1000 + i * 7 + k as i32).collect(),
                 resolution: 1.0,
+                ..Laser::default()
             };
             v.push((
                 "laser",
@@ -259,6 +260,7 @@ fn main() {
                     .publish(Laser {
                         readings: vec![1000 + k as i32; 180],
                         resolution: 1.0,
+                        ..Laser::default()
                     })
                     .unwrap();
                 son.publish(Sonars {

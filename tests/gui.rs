@@ -105,6 +105,7 @@ fn mastergui_lists_drivers_services_and_their_interfaces() {
         .publish(Laser {
             readings: vec![1000; 180],
             resolution: 1.0,
+            ..Laser::default()
         })
         .expect("publish");
     laser.resume();

@@ -75,6 +75,7 @@ fn publish_all(rt: &Runtime, k: u8) {
         .publish(Laser {
             readings: (0..180).map(|r| 500 + r).collect(),
             resolution: 1.0,
+            ..Laser::default()
         })
         .unwrap();
     i.get::<Encoders>("encoders")

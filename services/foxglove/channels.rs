@@ -429,14 +429,21 @@ mod tests {
     #[test]
     fn laser_angles_ranges_and_the_sonar_ring() {
         let t = SystemTime::UNIX_EPOCH;
+        // A 90° scan turned to start at -45°: the angles come from the value.
         let l = Laser {
             readings: vec![1000, 2500, 0],
             resolution: 1.0,
+            start: -45.0,
+            ..Laser::default()
         };
         let mut buf = Vec::new();
         protobuf::laser_scan(BASE, 0, &l, &mut buf);
-        let (_, back) = protobuf::decode_laser("laser", &buf, 0).unwrap();
-        assert_eq!(back, mcapfmt::Recorded::Laser(l));
+        let Ok((_, mcapfmt::Recorded::Laser(back))) = protobuf::decode_laser("laser", &buf, 0)
+        else {
+            panic!("not a laser");
+        };
+        assert_eq!(back.readings, l.readings);
+        assert!((back.start + 45.0).abs() < 1e-4 && (back.resolution - 1.0).abs() < 1e-4);
         let s = sonar_scan(t, &Sonars { us: vec![500.0; 4] });
         assert!(close(s.start_angle, -std::f64::consts::PI));
         assert!(close(s.end_angle, std::f64::consts::FRAC_PI_2));

@@ -594,6 +594,7 @@ mod tests {
             Recorded::Laser(Laser {
                 readings: vec![1, 8000, 123, -1],
                 resolution: 1.0,
+                ..Laser::default()
             }),
             Recorded::Encoders(Encoders {
                 x: 1000.25,
