@@ -565,12 +565,10 @@ fn write_load(path: &Path, sdk: bool, load: &[Vec<(&str, Snapshot)>]) {
             });
             buf.clear();
             match snap {
-                Snapshot::Image(s) if sdk => sdk_raw_image(name, &s.value)
-                    .encode(&mut buf)
-                    .unwrap(),
-                Snapshot::Laser(s) if sdk => sdk_laser_scan(&s.value)
-                    .encode(&mut buf)
-                    .unwrap(),
+                Snapshot::Image(s) if sdk => {
+                    sdk_raw_image(name, &s.value).encode(&mut buf).unwrap()
+                }
+                Snapshot::Laser(s) if sdk => sdk_laser_scan(&s.value).encode(&mut buf).unwrap(),
                 _ => {
                     mcapfmt::encode(profile, name, snap, &mut buf);
                 }

@@ -25,8 +25,8 @@ use ::foxglove::{
 
 use crate::{
     interfaces::{
-        Bumpers, Encoders, Image, Imu, InterfaceValue, Laser, Motors, PtEncoders, PtMotors,
-        Sample, Sonars, ZoomEncoders, ZoomMotors, for_each_kind,
+        Bumpers, Encoders, Image, Imu, InterfaceValue, Laser, Motors, PtEncoders, PtMotors, Sample,
+        Sonars, ZoomEncoders, ZoomMotors, for_each_kind,
     },
     mcapfmt::{self, Profile, Snapshot, Source, protobuf},
     world::{Ball, World},
@@ -111,7 +111,13 @@ pub trait Serve: InterfaceValue {
     }
     /// Encodes a sample (`snap` is the same sample, as the recorder takes it) into
     /// `buf`: false when there is nothing to send.
-    fn message(name: &str, snap: &Snapshot, s: &Sample<Self>, opts: Opts, buf: &mut Vec<u8>) -> bool {
+    fn message(
+        name: &str,
+        snap: &Snapshot,
+        s: &Sample<Self>,
+        opts: Opts,
+        buf: &mut Vec<u8>,
+    ) -> bool {
         let _ = s;
         mcapfmt::encode(opts.profile(), name, snap, buf)
     }
@@ -138,9 +144,16 @@ impl Serve for Laser {
         protobuf_schema("foxglove.LaserScan", protobuf::LASER_SCAN)
     }
     fn message(_: &str, _: &Snapshot, s: &Sample<Self>, _: Opts, buf: &mut Vec<u8>) -> bool {
-        protobuf::laser_scan(BASE, mcapfmt::nanos(s.time), &s.value, buf);
+        laser_message(mcapfmt::nanos(s.time), &s.value, buf);
         true
     }
+}
+
+/// The `foxglove.LaserScan` the service sends for a laser value (time `ns`): the
+/// recorder's encoder ([`protobuf::laser_scan`]) in frame `base_link`, so its angles
+/// and mount are the value's.
+pub fn laser_message(ns: u64, l: &Laser, buf: &mut Vec<u8>) {
+    protobuf::laser_scan(BASE, ns, l, buf);
 }
 
 fn encode_sdk<T: Encode>(m: &T, buf: &mut Vec<u8>) -> bool {
@@ -191,7 +204,11 @@ pub struct Out {
     opts: Opts,
 }
 
-fn channel_of<T: Serve>(ctx: &Arc<Context>, name: &str, opts: Opts) -> anyhow::Result<Arc<RawChannel>> {
+fn channel_of<T: Serve>(
+    ctx: &Arc<Context>,
+    name: &str,
+    opts: Opts,
+) -> anyhow::Result<Arc<RawChannel>> {
     let ChannelSchema { schema, encoding } = T::schema(opts);
     ChannelBuilder::new(name)
         .context(ctx)

@@ -287,11 +287,7 @@ pub fn services(rt: &Arc<Runtime>) -> Vec<Service> {
                 )
                 .with_response(
                     "json",
-                    Schema::new(
-                        "jderobot.ControlResult",
-                        "jsonschema",
-                        control_response(),
-                    ),
+                    Schema::new("jderobot.ControlResult", "jsonschema", control_response()),
                 );
             Service::builder(op, schema).blocking_handler_fn(move |req| {
                 let name = control_name(req.payload())?;

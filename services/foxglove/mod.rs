@@ -238,7 +238,9 @@ pub fn parse(conf: &ComponentConf) -> Result<Settings, ConfError> {
         serves.clear();
     }
     if !bind.is_loopback() && lines.token.is_none() && !lines.insecure {
-        let l = conf.line("bind").expect("a non-loopback bind comes from a line");
+        let l = conf
+            .line("bind")
+            .expect("a non-loopback bind comes from a line");
         return Err(l.error(format!(
             "`bind {bind}` listens beyond loopback, where anyone on the network could drive the \
              robot: add `token SECRET` (clients connect to ws://HOST:PORT/?token=SECRET; put it \
@@ -445,7 +447,13 @@ fn plan(s: &Settings, rt: &Runtime, ctx: &Arc<Context>) -> anyhow::Result<Plan> 
         if i.is_actuator() {
             p.actuators.insert(i.name().to_string(), i.clone());
         }
-        let out = Out::new(ctx, i.name(), i.kind(), channels::Opts { jpeg: s.jpeg }, &tf)?;
+        let out = Out::new(
+            ctx,
+            i.name(),
+            i.kind(),
+            channels::Opts { jpeg: s.jpeg },
+            &tf,
+        )?;
         for id in out.channel_ids() {
             p.by_channel.entry(id).or_default().push(p.served.len());
         }

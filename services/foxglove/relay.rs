@@ -201,7 +201,10 @@ impl Door {
                 >= self.limits.max_clients
         };
         if over {
-            self.evict_idle(&format!("{} connections (`max_clients`)", self.limits.max_clients));
+            self.evict_idle(&format!(
+                "{} connections (`max_clients`)",
+                self.limits.max_clients
+            ));
         }
         let c = Arc::new(Conn {
             last: AtomicU64::new(self.now()),
@@ -221,7 +224,7 @@ impl Door {
     /// again, once, with a log line.
     async fn reach_sdk(&self) -> Result<TcpStream, String> {
         let at = *self.inner.lock();
-        match TcpStream::connect(at).await {
+        match connect_bounded(at).await {
             Ok(s) => return Ok(s),
             Err(e) if e.kind() != std::io::ErrorKind::ConnectionRefused => {
                 return Err(format!("cannot reach the SDK's server at {at}: {e}"));
@@ -242,7 +245,7 @@ impl Door {
             }
         }
         let at = *self.inner.lock();
-        TcpStream::connect(at)
+        connect_bounded(at)
             .await
             .map_err(|e| format!("cannot reach the SDK's server at {at}: {e}"))
     }
@@ -250,6 +253,23 @@ impl Door {
     fn touch(&self, c: &Conn) {
         c.last.store(self.now(), Ordering::Relaxed);
     }
+}
+
+/// The kernel buffers on the door's side of each connection (asked for; Linux
+/// doubles them): what a client that stops reading holds there, besides the pipe,
+/// before the SDK's backlog starts dropping its oldest frames.
+pub const SOCKET_BUFFER: u32 = 1 << 20;
+
+/// A connection to the SDK's server with a bounded receive buffer (set before the
+/// handshake, so the window is sized by it).
+async fn connect_bounded(at: SocketAddr) -> std::io::Result<TcpStream> {
+    let s = if at.is_ipv4() {
+        tokio::net::TcpSocket::new_v4()?
+    } else {
+        tokio::net::TcpSocket::new_v6()?
+    };
+    s.set_recv_buffer_size(SOCKET_BUFFER)?;
+    s.connect(at).await
 }
 
 /// Accepts on `listener` and relays each connection to the SDK's server, for ever
@@ -307,6 +327,56 @@ async fn read_head<R: AsyncRead + Unpin>(r: &mut R) -> Result<(Vec<u8>, Vec<u8>)
     }
 }
 
+/// Reads exactly an HTTP head from `s` (peeking for its end), so that the frames
+/// after it start at the socket's next byte: (head, nothing).
+async fn read_head_exact(s: &TcpStream) -> Result<(Vec<u8>, Vec<u8>), String> {
+    let mut buf = vec![0u8; MAX_HEAD];
+    loop {
+        s.readable().await.map_err(|e| e.to_string())?;
+        let got = s.try_io(Interest::READABLE, || {
+            // SAFETY: recv into our buffer, peeking (the bytes stay queued).
+            let n = unsafe {
+                libc::recv(
+                    s.as_raw_fd(),
+                    buf.as_mut_ptr().cast(),
+                    buf.len(),
+                    libc::MSG_PEEK | libc::MSG_DONTWAIT,
+                )
+            };
+            if n < 0 {
+                Err(std::io::Error::last_os_error())
+            } else {
+                Ok(n as usize)
+            }
+        });
+        let n = match got {
+            Ok(0) => return Err("the SDK's server closed before its HTTP head".into()),
+            Ok(n) => n,
+            Err(e) if would_block(&e) => continue,
+            Err(e) => return Err(e.to_string()),
+        };
+        if let Some(end) = find(&buf[..n], b"\r\n\r\n") {
+            let mut head = vec![0u8; end + 4];
+            let mut at = 0;
+            while at < head.len() {
+                s.readable().await.map_err(|e| e.to_string())?;
+                match s.try_read(&mut head[at..]) {
+                    Ok(0) => return Err("the SDK's server closed in its HTTP head".into()),
+                    Ok(k) => at += k,
+                    Err(e) if would_block(&e) => {}
+                    Err(e) => return Err(e.to_string()),
+                }
+            }
+            return Ok((head, Vec::new()));
+        }
+        if n >= MAX_HEAD {
+            return Err(format!("the SDK's HTTP head is over {MAX_HEAD} bytes"));
+        }
+        // The head's end has not come yet (it comes in one piece in practice).
+        tokio::time::sleep(Duration::from_millis(1)).await;
+    }
+}
+
 fn find(hay: &[u8], needle: &[u8]) -> Option<usize> {
     hay.windows(needle.len()).position(|w| w == needle)
 }
@@ -349,7 +419,8 @@ fn percent_decode(s: &str) -> String {
     while i < b.len() {
         if b[i] == b'%'
             && i + 2 < b.len() + 0
-            && let Ok(v) = u8::from_str_radix(std::str::from_utf8(&b[i + 1..i + 3]).unwrap_or(""), 16)
+            && let Ok(v) =
+                u8::from_str_radix(std::str::from_utf8(&b[i + 1..i + 3]).unwrap_or(""), 16)
         {
             out.push(v);
             i += 3;
@@ -415,6 +486,17 @@ async fn refuse(client: &mut TcpStream, status: &str, why: &str) {
 
 async fn connection(mut client: TcpStream, door: &Door, conn: &Conn) -> Result<(), String> {
     let _ = client.set_nodelay(true);
+    let size = SOCKET_BUFFER as libc::c_int;
+    // SAFETY: setsockopt on a socket we hold open, with an int we own.
+    unsafe {
+        libc::setsockopt(
+            client.as_raw_fd(),
+            libc::SOL_SOCKET,
+            libc::SO_SNDBUF,
+            (&size as *const libc::c_int).cast(),
+            std::mem::size_of::<libc::c_int>() as libc::socklen_t,
+        )
+    };
     let (head, early) = match tokio::time::timeout(HEAD_TIMEOUT, read_head(&mut client)).await {
         Ok(Ok(h)) => h,
         Ok(Err(why)) => {
@@ -453,9 +535,13 @@ async fn connection(mut client: TcpStream, door: &Door, conn: &Conn) -> Result<(
         .await
         .map_err(|e| e.to_string())?;
     let (reply, server_early) =
-        match tokio::time::timeout(HEAD_TIMEOUT, read_head(&mut server)).await {
+        match tokio::time::timeout(HEAD_TIMEOUT, read_head_exact(&server)).await {
             Ok(r) => r?,
-            Err(_) => return Err(format!("the SDK's server did not answer within {HEAD_TIMEOUT:?}")),
+            Err(_) => {
+                return Err(format!(
+                    "the SDK's server did not answer within {HEAD_TIMEOUT:?}"
+                ));
+            }
         };
     let reply = String::from_utf8_lossy(&reply).into_owned();
     let upgraded = reply.starts_with("HTTP/1.1 101");
@@ -781,6 +867,29 @@ async fn write_all(s: &TcpStream, mut b: &[u8]) -> Result<(), String> {
     Ok(())
 }
 
+/// Sends a close frame, then reads and drops what the client still sends until it
+/// closes too (RFC 6455 §7.1.1): closing with unread bytes would reset the
+/// connection and lose the close frame on the way.
+async fn lingering_close(client: &TcpStream, code: u16, why: &str) {
+    if write_all(client, &close_frame(code, why)).await.is_err() {
+        return;
+    }
+    // SAFETY: shutdown of writes on a socket we hold open.
+    unsafe { libc::shutdown(client.as_raw_fd(), libc::SHUT_WR) };
+    let mut b = vec![0u8; 16 * 1024];
+    loop {
+        if client.readable().await.is_err() {
+            return;
+        }
+        match client.try_read(&mut b) {
+            Ok(0) => return,
+            Ok(_) => {}
+            Err(e) if would_block(&e) => {}
+            Err(_) => return,
+        }
+    }
+}
+
 /// Peeks the next frame's header (and its first payload byte): (frame length,
 /// a message-data frame), None at the end of the stream.
 async fn peek_frame(server: &TcpStream) -> std::io::Result<Option<(usize, bool)>> {
@@ -833,12 +942,10 @@ async fn server_to_client(
     let (sfd, cfd) = (server.as_raw_fd(), client.as_raw_fd());
     loop {
         // At a frame boundary: a close the client side asked for goes now.
-        if let Some((code, why)) = close.lock().take() {
-            let _ = tokio::time::timeout(
-                Duration::from_secs(1),
-                write_all(client, &close_frame(code, &why)),
-            )
-            .await;
+        let asked = close.lock().take();
+
+        if let Some((code, why)) = asked {
+            let _ = tokio::time::timeout(CLOSE_GRACE, lingering_close(client, code, &why)).await;
             return Err(format!("closed with {code}: {why}"));
         }
         let next = tokio::select! {
@@ -914,7 +1021,8 @@ async fn server_to_client(
                     r.map_err(|e| e.to_string())?;
                 }
                 Err(_) if closing_by.is_some() => {
-                    let (code, why) = close.lock().take().unwrap_or_default();
+                    let asked = close.lock().take();
+                    let (code, why) = asked.unwrap_or_default();
                     return Err(format!("closed ({code}: {why}) in the middle of a frame"));
                 }
                 Err(_) => {
@@ -1015,7 +1123,9 @@ mod tests {
         // A ping flood.
         let mut p = ClientFrames::new(1000);
         let ping = frame(true, 9, 4);
-        let flood: Vec<u8> = (0..=MAX_CONTROL_PER_SEC).flat_map(|_| ping.clone()).collect();
+        let flood: Vec<u8> = (0..=MAX_CONTROL_PER_SEC)
+            .flat_map(|_| ping.clone())
+            .collect();
         let e = p.feed(&flood, t).unwrap_err();
         assert_eq!(e.1.0, 1008);
         assert_eq!(e.0, ping.len() * MAX_CONTROL_PER_SEC as usize);
@@ -1034,6 +1144,8 @@ mod tests {
         let h = "GET / HTTP/1.1\r\nauthorization: Bearer abc\r\n\r\n";
         assert_eq!(presented_token(h).as_deref(), Some("abc"));
         assert_eq!(presented_token("GET / HTTP/1.1\r\n\r\n"), None);
-        assert!(same_secret("abc", "abc") && !same_secret("abc", "abd") && !same_secret("ab", "abc"));
+        assert!(
+            same_secret("abc", "abc") && !same_secret("abc", "abd") && !same_secret("ab", "abc")
+        );
     }
 }
