@@ -55,7 +55,8 @@ pub const RANGES: &[(&str, &str)] = &[
     ),
     (
         "motors",
-        "v, w finite (each driver limits them to its robot's maxima)",
+        "|v| <= 10000 mm/s (10 m/s); |w| <= 3600 deg/s (10 turns/s); each driver limits them \
+         further to its robot's maxima",
     ),
     (
         "pantiltencoders",
@@ -82,6 +83,13 @@ pub const RANGES: &[(&str, &str)] = &[
 /// The largest |x|, |y| an `encoders` value may hold, mm (1000 km: beyond it an
 /// f32 in mm is a value no odometry gives).
 pub const MAX_POSITION_MM: f32 = 1e9;
+/// The largest |v| a `motors` command may hold, mm/s: 10 m/s, several times the
+/// fastest base any driver here drives (a Pioneer 1.2 m/s, a NAO 0.1 m/s, Gazebo's
+/// DiffDrive what the world says), so a real command always fits and a 1e30 from a
+/// peer never reaches a driver that might not limit it.
+pub const MAX_MOTOR_V: f32 = 10_000.0;
+/// The largest |w| a `motors` command may hold, deg/s: 10 turns a second.
+pub const MAX_MOTOR_W: f32 = 3_600.0;
 /// The largest |angle| of a pan-tilt value, degrees.
 pub const MAX_ANGLE_DEG: f32 = 360.0;
 /// The largest |speed| of a pan-tilt command, deg/s.
@@ -548,8 +556,8 @@ impl InterfaceValue for Motors {
         format!("v={:.1} mm/s w={:.2} deg/s", self.v, self.w)
     }
     fn validate(&self, name: &str) -> Result<(), String> {
-        finite(name, "v (mm/s)", self.v)?;
-        finite(name, "w (deg/s)", self.w)
+        within(name, "v", self.v, -MAX_MOTOR_V, MAX_MOTOR_V, "mm/s")?;
+        within(name, "w", self.w, -MAX_MOTOR_W, MAX_MOTOR_W, "deg/s")
     }
     fn set_field(&mut self, field: &str, value: &str) -> Result<(), String> {
         match field {
