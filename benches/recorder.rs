@@ -13,6 +13,9 @@
 //!
 //! Run: `cargo bench --features full --bench recorder`.
 
+mod common;
+use common::median;
+
 use std::{
     path::{Path, PathBuf},
     sync::{Arc, atomic::Ordering},
@@ -26,11 +29,6 @@ use jderobot::{
     loader,
     mcapfmt::{self, Profile, RecorderStatus, Snapshot},
 };
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(|a, b| a.partial_cmp(b).unwrap());
-    v[v.len() / 2]
-}
 
 fn sample<T>(clock: u64, t: SystemTime, value: T) -> Arc<Sample<T>> {
     Arc::new(Sample {

@@ -5,7 +5,7 @@
 //! messages, a client that stops reading, and 100 connect/disconnect cycles.
 #![cfg(all(feature = "foxglove", feature = "simulator", feature = "introrob"))]
 
-mod common;
+use crate::common;
 
 use std::{
     io::{Read, Write},
@@ -763,10 +763,16 @@ fn open_fds() -> u64 {
 fn the_door_and_the_sdk_keep_accepting_after_running_out_of_descriptors() {
     // In a child process of its own: it lowers the limit of open files.
     if std::env::var_os("JDEROBOT_FOXGLOVE_FD_CHILD").is_none() {
+        // This test's name as the harness knows it (a module of a suite, or alone).
+        let me = "the_door_and_the_sdk_keep_accepting_after_running_out_of_descriptors";
+        let name = match module_path!().split_once("::") {
+            Some((_, m)) => format!("{m}::{me}"),
+            None => me.to_string(),
+        };
         let out = Command::new(std::env::current_exe().unwrap())
             .args([
                 "--exact",
-                "the_door_and_the_sdk_keep_accepting_after_running_out_of_descriptors",
+                name.as_str(),
                 "--nocapture",
                 "--test-threads",
                 "1",

@@ -2,7 +2,7 @@
 //! change the runtime's state, and each widget's interaction gives the right values.
 #![cfg(all(feature = "gui", feature = "mastergui", feature = "myschema"))]
 
-mod common;
+use crate::common;
 
 use common::{eventually, panel_harness, state};
 use std::{path::Path, sync::Arc};

@@ -5,7 +5,7 @@
 //! bounded and nothing panics.
 #![cfg(feature = "networkserver")]
 
-mod common;
+use crate::common;
 
 use common::Rng;
 

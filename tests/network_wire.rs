@@ -4,7 +4,7 @@
 //! message kind of reference §4.
 #![cfg(all(feature = "networkserver", feature = "networkclient"))]
 
-mod common;
+use crate::common;
 #[path = "emulators/jde43_client.rs"]
 mod jde43_client;
 #[path = "emulators/jde43_server.rs"]
