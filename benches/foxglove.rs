@@ -43,7 +43,7 @@ use jderobot::{
     Runtime,
     interfaces::{Encoders, Image, Interface, Laser, Motors, Sample},
     mcapfmt::{self, Profile, Snapshot},
-    services::foxglove::{Settings, channels, relay::Limits, start},
+    services::foxglove::{Settings, relay::Limits, start},
 };
 
 const W: u32 = 640;
@@ -253,10 +253,8 @@ fn settings(serves: &[&str]) -> Settings {
         serves: serves.iter().map(|s| s.to_string()).collect(),
         jpeg: None,
         world: false,
-        limits: Limits {
-            max_queue: 16,
-            max_message: 65536,
-        },
+        limits: Limits::default(),
+        insecure: false,
     }
 }
 
@@ -390,6 +388,32 @@ fn cpu_ten_clients(
 }
 
 /// Encodes per second of `f` over ~0.5 s.
+/// The SDK's own `RawImage` of an image (the reference encoding: prost).
+fn sdk_raw_image(frame: &str, img: &Image) -> RawImage {
+    RawImage {
+        timestamp: None,
+        frame_id: frame.into(),
+        width: img.width,
+        height: img.height,
+        encoding: "bgr8".into(),
+        step: img.width * 3,
+        data: Bytes::copy_from_slice(&img.data),
+    }
+}
+
+/// The SDK's own `LaserScan` of a laser (the reference encoding: prost).
+fn sdk_laser_scan(l: &Laser) -> LaserScan {
+    LaserScan {
+        timestamp: None,
+        frame_id: "base_link".into(),
+        pose: None,
+        start_angle: -std::f64::consts::FRAC_PI_2,
+        end_angle: std::f64::consts::FRAC_PI_2,
+        ranges: l.readings.iter().map(|r| *r as f64 / 1000.0).collect(),
+        intensities: Vec::new(),
+    }
+}
+
 fn rate(mut f: impl FnMut()) -> f64 {
     let t0 = Instant::now();
     let mut n = 0u64;
@@ -429,7 +453,7 @@ fn recorder_encodings() {
         }));
         sdk_i.push(rate(|| {
             out.clear();
-            channels::raw_image("colorA", img.time, &img.value)
+            sdk_raw_image("colorA", &img.value)
                 .encode(&mut out)
                 .unwrap();
         }));
@@ -439,7 +463,7 @@ fn recorder_encodings() {
         }));
         sdk_l.push(rate(|| {
             out.clear();
-            let m: LaserScan = channels::laser_scan(ls.time, &ls.value);
+            let m: LaserScan = sdk_laser_scan(&ls.value);
             m.encode(&mut out).unwrap();
         }));
     }
@@ -541,12 +565,10 @@ fn write_load(path: &Path, sdk: bool, load: &[Vec<(&str, Snapshot)>]) {
             });
             buf.clear();
             match snap {
-                Snapshot::Image(s) if sdk => channels::shared_raw_image(name, s)
-                    .encode(&mut buf)
-                    .unwrap(),
-                Snapshot::Laser(s) if sdk => channels::laser_scan(s.time, &s.value)
-                    .encode(&mut buf)
-                    .unwrap(),
+                Snapshot::Image(s) if sdk => {
+                    sdk_raw_image(name, &s.value).encode(&mut buf).unwrap()
+                }
+                Snapshot::Laser(s) if sdk => sdk_laser_scan(&s.value).encode(&mut buf).unwrap(),
                 _ => {
                     mcapfmt::encode(profile, name, snap, &mut buf);
                 }

@@ -213,6 +213,11 @@ struct Ws {
 }
 
 fn handshake(a: SocketAddr, protocol: Option<&str>) -> (TcpStream, String) {
+    handshake_at(a, "/", protocol)
+}
+
+/// The upgrade request (RFC 6455 §4.1) for `path` (where a token may ride).
+fn handshake_at(a: SocketAddr, path: &str, protocol: Option<&str>) -> (TcpStream, String) {
     let mut s = TcpStream::connect(a).unwrap();
     s.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
     let proto = protocol
@@ -220,7 +225,7 @@ fn handshake(a: SocketAddr, protocol: Option<&str>) -> (TcpStream, String) {
         .unwrap_or_default();
     write!(
         s,
-        "GET / HTTP/1.1\r\nHost: {a}\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n\
+        "GET {path} HTTP/1.1\r\nHost: {a}\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n\
          Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n{proto}\r\n"
     )
     .unwrap();
@@ -486,49 +491,70 @@ fn rss_kb() -> u64 {
         .unwrap_or(0)
 }
 
+/// The log times (ns) of the message-data frames of subscription `sub` read
+/// within `secs` (ws-protocol spec: Message Data is opcode 0x01, subscription id
+/// u32, log time u64, little endian).
+fn frame_times(ws: &mut Ws, sub: u32, secs: f64) -> Vec<u64> {
+    let t0 = Instant::now();
+    let mut times = Vec::new();
+    ws.s.set_read_timeout(Some(Duration::from_millis(500)))
+        .unwrap();
+    while t0.elapsed().as_secs_f64() < secs {
+        let Some((op, p)) = ws.recv() else { break };
+        if op == 2 && p[0] == 1 && u32::from_le_bytes(p[1..5].try_into().unwrap()) == sub {
+            times.push(u64::from_le_bytes(p[5..13].try_into().unwrap()));
+        }
+    }
+    times
+}
+
+fn max_gap_s(times: &[u64]) -> f64 {
+    times
+        .windows(2)
+        .map(|w| w[1].saturating_sub(w[0]) as f64 / 1e9)
+        .fold(0.0, f64::max)
+}
+
 #[test]
 fn a_client_that_stops_reading_loses_only_its_own_frames() {
     let (rt, a) = start("max_queue 4\nserves colorA\nserves encoders\nserves motors\n");
     rt.stop("introrob").unwrap();
-    // The slow client subscribes to the camera and never reads again.
+    // The slow client subscribes to the camera and stops reading for 8 s (longer
+    // than the kernel's buffers on the way take at the camera's rate).
     let mut slow = Ws::connect(a);
     slow.subscribe("colorA", 1);
-    slow.s.set_read_timeout(None).unwrap();
     // A fast one reads the camera meanwhile.
     let mut fast = Ws::connect(a);
     fast.subscribe("colorA", 7);
     let enc = rt.interfaces.get::<Encoders>("encoders").unwrap();
     let clock0 = enc.clock();
-    let dropped = || -> u64 {
-        let p = ps(&rt);
-        let line = p
-            .lines()
-            .find(|l| l.starts_with("foxglove:"))
-            .unwrap()
-            .to_string();
-        line.split(", ")
-            .find(|f| f.contains("dropped"))
-            .and_then(|f| f.split_whitespace().next())
-            .and_then(|n| n.parse().ok())
-            .unwrap()
-    };
-    // The fast client reads until the slow one's queue has overflowed for a while
-    // (its kernel buffers take a few frames first), 20 s at most.
-    let t0 = Instant::now();
-    let mut frames = 0;
-    while (dropped() < 5 || t0.elapsed() < Duration::from_secs(2))
-        && t0.elapsed() < Duration::from_secs(20)
-    {
-        let (op, p) = fast.recv().expect("frames keep coming");
-        if op == 2 && p[0] == 1 {
-            frames += 1;
-        }
-    }
-    let secs = t0.elapsed().as_secs_f64();
-    assert!(dropped() >= 5, "dropped for the slow client: {}", ps(&rt));
+    let rss0 = rss_kb();
+    let secs = 8.0;
+    let fast_times = frame_times(&mut fast, 7, secs);
+    let rss1 = rss_kb();
     assert!(
-        frames as f64 > 4.0 * secs,
-        "the fast client got {frames} frames in {secs:.1} s"
+        fast_times.len() as f64 > 4.0 * secs,
+        "the fast client got {} frames in {secs:.1} s",
+        fast_times.len()
+    );
+    assert!(
+        max_gap_s(&fast_times) < 1.0,
+        "the fast client lost frames: a gap of {:.2} s",
+        max_gap_s(&fast_times)
+    );
+    // The slow one now reads: what waited in the buffers, then a jump over the
+    // frames its backlog dropped (only its own), then live frames.
+    let slow_times = frame_times(&mut slow, 1, 1.5);
+    assert!(
+        max_gap_s(&slow_times) > 1.0,
+        "the slow client's frames show no loss ({} frames, widest gap {:.2} s)",
+        slow_times.len(),
+        max_gap_s(&slow_times)
+    );
+    // Its memory is bounded: the backlog (4 frames of 230 kB), a pipe and sockets.
+    assert!(
+        rss1 < rss0 + 64 * 1024,
+        "RSS {rss0} kB -> {rss1} kB with a client that does not read"
     );
     // The robot's own clocks went on (the simulator at its rate).
     assert!(
@@ -537,7 +563,6 @@ fn a_client_that_stops_reading_loses_only_its_own_frames() {
         clock0,
         enc.clock()
     );
-    drop(slow);
     rt.shutdown();
 }
 
@@ -580,7 +605,7 @@ fn non_loopback_ip() -> Option<std::net::IpAddr> {
 }
 
 #[test]
-fn sdk_port_serves_sdk_clients_straight_from_the_sdk() {
+fn sdk_port_is_a_second_door_to_the_same_server() {
     let (rt, relay) = start("sdk_port 0\n");
     rt.stop("introrob").unwrap();
     let a = *rt
@@ -589,8 +614,12 @@ fn sdk_port_serves_sdk_clients_straight_from_the_sdk() {
         .expect("with sdk_port, foxglove exports the SDK server's address");
     assert_ne!(a.port(), relay.port());
     assert!(a.ip().is_loopback(), "{a}");
-    assert!(ps(&rt).contains(&format!("direct (SDK, foxglove.sdk.v1): ws://{a}")));
-    // The spec's subprotocol, answered by the SDK itself.
+    assert!(
+        ps(&rt).contains(&format!("also ws://{a} (sdk_port)")),
+        "{}",
+        ps(&rt)
+    );
+    // The spec's subprotocol, answered by the SDK.
     let (s, head) = handshake(a, Some("foxglove.sdk.v1"));
     assert!(head.starts_with("HTTP/1.1 101"), "{head}");
     assert!(
@@ -639,4 +668,303 @@ fn sdk_port_serves_sdk_clients_straight_from_the_sdk() {
         None => eprintln!("note: no non-loopback address here; the reachability check is skipped"),
     }
     rt.shutdown();
+}
+
+// ---- Hostile peers (issue 38): caps, bounds in time and memory, absurd values, tokens.
+
+/// Advertises `/cmd_vel` (client publish, ws-protocol spec "Client Advertise").
+fn advertise_twist(ws: &mut Ws) {
+    ws.text(&serde_json::json!({"op": "advertise", "channels": [
+        {"id": 1, "topic": "/cmd_vel", "encoding": "json", "schemaName": "geometry_msgs/msg/Twist"}]}));
+    std::thread::sleep(Duration::from_millis(200));
+}
+
+/// Publishes a Twist of linear.x `x` m/s on the advertised `/cmd_vel`.
+fn twist(ws: &mut Ws, x: f64) {
+    let body = serde_json::json!({"linear": {"x": x, "y": 0, "z": 0}, "angular": {"x": 0, "y": 0, "z": 0}});
+    ws.send(
+        2,
+        &[&[1u8, 1, 0, 0, 0][..], body.to_string().as_bytes()].concat(),
+    );
+}
+
+/// The robot's `motors_timeout` plus one cycle of its driver: how soon a stop must land.
+const STOP_WITHIN: Duration = Duration::from_millis(500 + 100);
+
+/// A good client drives and then stops the robot: the time the stop took to reach `motors`.
+fn drive_then_stop(a: SocketAddr, rt: &Runtime) -> Duration {
+    let motors = rt.interfaces.get::<Motors>("motors").unwrap();
+    let mut ws = Ws::connect(a);
+    ws.until(|j| j["op"] == "serverInfo");
+    advertise_twist(&mut ws);
+    twist(&mut ws, 0.25);
+    common::eventually("the Twist drove the motors", || {
+        (motors.snapshot().v - 250.0).abs() < 1e-3
+    });
+    let t0 = Instant::now();
+    twist(&mut ws, 0.0);
+    while motors.snapshot().v != 0.0 {
+        assert!(
+            t0.elapsed() < Duration::from_secs(10),
+            "the stop never came"
+        );
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    t0.elapsed()
+}
+
+#[test]
+fn idle_clients_cannot_lock_out_a_good_one() {
+    let (rt, a) = start("max_clients 8\n");
+    rt.stop("introrob").unwrap();
+    // Strangers: 20 TCP connections that say nothing, 10 WebSocket clients that
+    // upgrade and then idle.
+    let mut idle: Vec<TcpStream> = (0..20).map(|_| TcpStream::connect(a).unwrap()).collect();
+    for _ in 0..10 {
+        idle.push(handshake(a, Some("foxglove.sdk.v1")).0);
+    }
+    std::thread::sleep(Duration::from_millis(300));
+    // A good client still gets in, drives, and its stop lands in time.
+    let took = drive_then_stop(a, &rt);
+    assert!(took <= STOP_WITHIN, "the stop took {took:?}");
+    assert!(
+        !ps(&rt).contains(" 0 evicted"),
+        "the cap closed idle ones: {}",
+        ps(&rt)
+    );
+    // Of the strangers, at most the cap's worth are still open.
+    let still_open = |s: &mut TcpStream| {
+        s.set_read_timeout(Some(Duration::from_millis(50))).unwrap();
+        let mut b = [0u8; 4096];
+        loop {
+            match s.read(&mut b) {
+                Ok(0) => return false,
+                Ok(_) => continue,
+                Err(e) => return e.kind() == std::io::ErrorKind::WouldBlock,
+            }
+        }
+    };
+    let open = idle.iter_mut().map(still_open).filter(|o| *o).count();
+    assert!(
+        open <= 8,
+        "{open} idle connections still open over a cap of 8"
+    );
+    rt.shutdown();
+}
+
+/// Open descriptors of this process.
+fn open_fds() -> u64 {
+    std::fs::read_dir("/proc/self/fd")
+        .map(|d| d.count() as u64)
+        .unwrap_or(0)
+}
+
+#[test]
+fn the_door_and_the_sdk_keep_accepting_after_running_out_of_descriptors() {
+    // In a child process of its own: it lowers the limit of open files.
+    if std::env::var_os("JDEROBOT_FOXGLOVE_FD_CHILD").is_none() {
+        // This test's name as the harness knows it (a module of a suite, or alone).
+        let me = "the_door_and_the_sdk_keep_accepting_after_running_out_of_descriptors";
+        let name = match module_path!().split_once("::") {
+            Some((_, m)) => format!("{m}::{me}"),
+            None => me.to_string(),
+        };
+        let out = Command::new(std::env::current_exe().unwrap())
+            .args([
+                "--exact",
+                name.as_str(),
+                "--nocapture",
+                "--test-threads",
+                "1",
+            ])
+            .env("JDEROBOT_FOXGLOVE_FD_CHILD", "1")
+            .output()
+            .unwrap();
+        let text = String::from_utf8_lossy(&out.stdout).into_owned()
+            + &String::from_utf8_lossy(&out.stderr);
+        assert!(out.status.success(), "the child failed:\n{text}");
+        assert!(text.contains("1 passed"), "{text}");
+        return;
+    }
+    let (rt, a) = start("max_clients 4096\n");
+    rt.stop("introrob").unwrap();
+    std::thread::sleep(Duration::from_millis(300));
+    let limit = |n: u64| {
+        let l = libc::rlimit {
+            rlim_cur: n,
+            rlim_max: n.max(20000),
+        };
+        // SAFETY: setrlimit with a struct we own.
+        unsafe { libc::setrlimit(libc::RLIMIT_NOFILE, &l) };
+    };
+    let mut hard = libc::rlimit {
+        rlim_cur: 0,
+        rlim_max: 0,
+    };
+    // SAFETY: getrlimit into a struct we own.
+    unsafe { libc::getrlimit(libc::RLIMIT_NOFILE, &mut hard) };
+    limit(open_fds() + 60);
+    // Upgraded clients until the process runs out: each takes four descriptors
+    // (ours, the door's, the door's to the SDK, the SDK's).
+    let mut strangers = Vec::new();
+    for _ in 0..200 {
+        match TcpStream::connect(a) {
+            Ok(mut s) => {
+                s.set_read_timeout(Some(Duration::from_secs(2))).unwrap();
+                let _ = write!(
+                    s,
+                    "GET / HTTP/1.1\r\nHost: x\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n\
+                     Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\
+                     Sec-WebSocket-Protocol: foxglove.sdk.v1\r\n\r\n"
+                );
+                strangers.push(s);
+            }
+            Err(_) => break,
+        }
+    }
+    std::thread::sleep(Duration::from_secs(1));
+    drop(strangers);
+    limit(hard.rlim_cur.max(1024));
+    std::thread::sleep(Duration::from_millis(500));
+    // A good client gets in on the same port and drives the robot.
+    let took = drive_then_stop(a, &rt);
+    assert!(took <= STOP_WITHIN, "the stop took {took:?}");
+    rt.shutdown();
+}
+
+#[test]
+fn unfinished_messages_and_ping_floods_are_bounded_in_time_and_memory() {
+    let (rt, a) = start("max_message 65536\n");
+    rt.stop("introrob").unwrap();
+    let rss0 = rss_kb();
+    // 10 clients each start a fragmented message (a 60 kB first fragment, RFC 6455
+    // §5.4: FIN clear) and never finish it.
+    let mut stuck: Vec<Ws> = (0..10)
+        .map(|_| {
+            let mut ws = Ws::connect(a);
+            let mut f = vec![0x02u8, 0x80 | 126];
+            f.extend_from_slice(&60_000u16.to_be_bytes());
+            f.extend_from_slice(&[0, 0, 0, 0]);
+            f.extend(std::iter::repeat_n(0u8, 60_000));
+            ws.s.write_all(&f).unwrap();
+            ws
+        })
+        .collect();
+    // 4 clients flood pings (§5.5.2) without reading.
+    let stop = Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let flooders: Vec<_> = (0..4)
+        .map(|_| {
+            let mut ws = Ws::connect(a);
+            let stop = stop.clone();
+            std::thread::spawn(move || {
+                let ping = [0x89u8, 0x80 | 4, 0, 0, 0, 0, 1, 2, 3, 4];
+                let burst: Vec<u8> = ping
+                    .iter()
+                    .copied()
+                    .cycle()
+                    .take(ping.len() * 100)
+                    .collect();
+                let mut sent = 0u64;
+                while !stop.load(std::sync::atomic::Ordering::Relaxed) {
+                    if ws.s.write_all(&burst).is_err() {
+                        return (sent, true);
+                    }
+                    sent += 100;
+                }
+                (sent, false)
+            })
+        })
+        .collect();
+    // Meanwhile a good client's stop lands in time.
+    let took = drive_then_stop(a, &rt);
+    assert!(
+        took <= STOP_WITHIN,
+        "the stop took {took:?} during the attack"
+    );
+    // The flooders are closed (1008), each after at most a second's worth of pings.
+    std::thread::sleep(Duration::from_secs(2));
+    stop.store(true, std::sync::atomic::Ordering::Relaxed);
+    for f in flooders {
+        let (sent, closed) = f.join().unwrap();
+        assert!(closed, "a ping flood of {sent} pings was not closed");
+    }
+    // The unfinished messages are closed (1008) within 10 s and a little.
+    let t0 = Instant::now();
+    for ws in &mut stuck {
+        ws.s.set_read_timeout(Some(Duration::from_secs(15)))
+            .unwrap();
+        let mut code = None;
+        while let Some((op, p)) = ws.recv() {
+            if op == 8 {
+                code = Some(u16::from_be_bytes([p[0], p[1]]));
+                break;
+            }
+        }
+        assert_eq!(code, Some(1008), "an unfinished message was not closed");
+    }
+    assert!(t0.elapsed() < Duration::from_secs(13), "{:?}", t0.elapsed());
+    let rss1 = rss_kb();
+    assert!(
+        rss1 < rss0 + 48 * 1024,
+        "RSS {rss0} kB -> {rss1} kB during the attack"
+    );
+    rt.shutdown();
+}
+
+#[test]
+fn absurd_motor_values_are_refused_on_every_path() {
+    let (rt, a) = start("");
+    rt.stop("introrob").unwrap();
+    let motors = rt.interfaces.get::<Motors>("motors").unwrap();
+    let mut ws = Ws::connect(a);
+    advertise_twist(&mut ws);
+    twist(&mut ws, 0.2);
+    common::eventually("a sane Twist drives", || {
+        (motors.snapshot().v - 200.0).abs() < 1e-3
+    });
+    // A Twist of 1e30 m/s, and a jderobot value of ±3.4e38: told, motors untouched.
+    twist(&mut ws, 1e30);
+    ws.until(|j| {
+        j["op"] == "status" && j["level"] == 2 && j["message"].as_str().unwrap().contains("motors")
+    });
+    ws.text(&serde_json::json!({"op": "advertise", "channels": [
+        {"id": 2, "topic": "motors", "encoding": "json", "schemaName": "jderobot.motors"}]}));
+    std::thread::sleep(Duration::from_millis(200));
+    let v = br#"{"v":-3.4e38,"w":3.4e38}"#;
+    ws.send(2, &[&[1u8, 2, 0, 0, 0][..], v].concat());
+    ws.until(|j| {
+        j["op"] == "status" && j["level"] == 2 && j["message"].as_str().unwrap().contains("motors")
+    });
+    // The parameter path.
+    ws.text(&serde_json::json!({"op": "setParameters", "id": "p", "parameters": [{"name": "motors.v", "value": 1e38}]}));
+    let pv = ws.until(|j| j["op"] == "parameterValues" && j["id"] == "p");
+    assert_eq!(pv["parameters"].as_array().map(Vec::len), Some(0), "{pv}");
+    let m = motors.snapshot();
+    assert!(
+        (m.v - 200.0).abs() < 1e-3 && m.w == 0.0,
+        "motors {m:?} after absurd commands"
+    );
+    rt.shutdown();
+}
+
+#[test]
+fn a_token_is_asked_for_and_a_bind_beyond_loopback_needs_one() {
+    let (rt, a) = start("token s3cret\nsdk_port 0\n");
+    let (_s, head) = handshake_at(a, "/", Some("foxglove.sdk.v1"));
+    assert!(head.starts_with("HTTP/1.1 401"), "{head}");
+    let (_s, head) = handshake_at(a, "/?token=wrong", Some("foxglove.sdk.v1"));
+    assert!(head.starts_with("HTTP/1.1 401"), "{head}");
+    let (_s, head) = handshake_at(a, "/?token=s3cret", Some("foxglove.websocket.v1"));
+    assert!(head.starts_with("HTTP/1.1 101"), "{head}");
+    // The second port asks for it too.
+    let b = *rt
+        .names
+        .import::<SocketAddr>("foxglove", "sdk_address")
+        .unwrap();
+    let (_s, head) = handshake_at(b, "/", Some("foxglove.sdk.v1"));
+    assert!(head.starts_with("HTTP/1.1 401"), "{head}");
+    rt.shutdown();
+    // Beyond loopback without a token: the service does not start, and says how.
+    let e = common::start_error(&conf("bind 0.0.0.0\n"));
+    assert!(e.contains("token SECRET") && e.contains("insecure"), "{e}");
 }

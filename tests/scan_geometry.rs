@@ -197,16 +197,22 @@ fn check_encoders(what: &str, l: &Laser) {
     assert_eq!(back.mount, l.mount, "{what}: recorder mount");
     #[cfg(feature = "foxglove")]
     {
-        let f = jderobot::services::foxglove::channels::laser_scan(std::time::UNIX_EPOCH, l);
+        let mut f = Vec::new();
+        jderobot::services::foxglove::channels::laser_message(1, l, &mut f);
+        let Ok((_, Recorded::Laser(f))) = protobuf::decode_laser("laser", &f, 0) else {
+            panic!("{what}: foxglove's is not a LaserScan")
+        };
         assert!(
-            (f.start_angle - start).abs() < 1e-6,
+            ((f.start as f64).to_radians() - start).abs() < 1e-5,
             "{what}: foxglove start"
         );
         if l.readings.len() > 1 {
-            assert!((f.end_angle - end).abs() < 1e-6, "{what}: foxglove end");
+            assert!(
+                ((f.end() as f64).to_radians() - end).abs() < 1e-5,
+                "{what}: foxglove end"
+            );
         }
-        let pos = f.pose.and_then(|p| p.position).expect("a pose");
-        assert!((pos.x * 1000.0 - l.mount.x as f64).abs() < 1e-6, "{what}");
+        assert_eq!(f.mount, l.mount, "{what}: foxglove mount");
     }
     #[cfg(not(feature = "foxglove"))]
     let _ = (start, end);

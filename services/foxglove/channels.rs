@@ -1,30 +1,34 @@
-//! Interfaces as Foxglove channels: each served interface's value in a Foxglove
-//! schema (the SDK's `foxglove::schemas`, protobuf), or as JSON with a JSON schema.
+//! Interfaces as Foxglove channels. Each kind's channel and message come from its
+//! [`Serve`] impl (one per kind of the table `interfaces::kinds`; a kind without
+//! one fails to compile), and where the recorder has the format, from the
+//! recorder's encoders (`mcapfmt`): the same bytes live and in a recording.
 //!
 //! | kind | topic | schema |
 //! |---|---|---|
-//! | image | NAME | `foxglove.RawImage` (`bgr8`), or `foxglove.CompressedImage` (`jpeg`) with `images jpeg Q` |
-//! | laser | NAME | `foxglove.LaserScan`: ranges m, −90° first, frame `base_link` |
+//! | image | NAME | `foxglove.RawImage` (`bgr8`), or `foxglove.CompressedImage` (`jpeg`) with `images jpeg Q` (`mcapfmt::protobuf`) |
+//! | laser | NAME | `foxglove.LaserScan` (`mcapfmt::protobuf::laser_scan`): ranges m, angles from the laser value, frame `base_link` |
 //! | sonars | NAME | `foxglove.LaserScan`: sonar i at −180° + 360°·i/n (the ring drawn evenly), frame `base_link` |
 //! | encoders | NAME, and `/tf` | `foxglove.PoseInFrame` (frame `odom`, m, quaternion), and `foxglove.FrameTransform` odom → base_link |
 //! | pantiltencoders | NAME, and `/tf` | JSON, and `foxglove.FrameTransform` base_link → camera (pan = yaw, tilt = pitch) |
 //! | world map | `world` | `foxglove.SceneUpdate`: walls and boxes as cubes, balls as spheres (frame `odom`, m) |
-//! | others | NAME | JSON (`jderobot.KIND` JSON schema; the value under `jderobot` in its units) |
+//! | others | NAME | JSON (the recorder's: `jderobot.KIND` JSON schema; the value under `jderobot` in its units) |
 
 use std::{sync::Arc, time::SystemTime};
 
 use ::foxglove::{
-    Channel, ChannelBuilder, Context, RawChannel, Schema,
-    bytes::Bytes,
+    Channel, ChannelBuilder, Context, Encode, RawChannel, Schema,
     schemas::{
-        Color, CompressedImage, CubePrimitive, FrameTransform, LaserScan, Pose, PoseInFrame,
-        Quaternion, RawImage, SceneEntity, SceneUpdate, SpherePrimitive, Timestamp, Vector3,
+        Color, CubePrimitive, FrameTransform, LaserScan, Pose, PoseInFrame, Quaternion,
+        SceneEntity, SceneUpdate, SpherePrimitive, Timestamp, Vector3,
     },
 };
 
 use crate::{
-    interfaces::{Encoders, Image, Laser, PtEncoders, Sample, Sonars},
-    mcapfmt::{self, Profile, Snapshot, Source},
+    interfaces::{
+        Bumpers, Encoders, Image, Imu, InterfaceValue, Laser, Motors, PtEncoders, PtMotors, Sample,
+        Sonars, ZoomEncoders, ZoomMotors, for_each_kind,
+    },
+    mcapfmt::{self, Profile, Snapshot, Source, protobuf},
     world::{Ball, World},
 };
 
@@ -60,27 +64,188 @@ fn v3(x: f64, y: f64, z: f64) -> Option<Vector3> {
     Some(Vector3 { x, y, z })
 }
 
-/// How one interface is sent.
-pub enum Out {
-    Raw(Channel<RawImage>),
-    Jpeg(Channel<CompressedImage>, u8),
-    Scan(Channel<LaserScan>),
-    Sonars(Channel<LaserScan>),
-    Odometry(Channel<PoseInFrame>, Arc<Channel<FrameTransform>>),
-    PanTilt(Arc<RawChannel>, Arc<Channel<FrameTransform>>),
-    Json(Arc<RawChannel>),
+/// How the service's options shape a channel.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Opts {
+    /// Images as JPEG of this quality, else raw.
+    pub jpeg: Option<u8>,
 }
 
-fn json_channel(ctx: &Arc<Context>, name: &str, kind: &str) -> anyhow::Result<Arc<RawChannel>> {
-    let (schema_name, text) = mcapfmt::json_schema(kind);
+impl Opts {
+    fn profile(&self) -> Profile {
+        Profile::Foxglove { jpeg: self.jpeg }
+    }
+}
+
+/// A channel's schema and message encoding.
+pub struct ChannelSchema {
+    pub schema: Schema,
+    pub encoding: String,
+}
+
+fn protobuf_schema(name: &str, fdset: &'static [u8]) -> ChannelSchema {
+    ChannelSchema {
+        schema: Schema::new(name, "protobuf", fdset),
+        encoding: "protobuf".into(),
+    }
+}
+
+fn sdk_schema<T: Encode>() -> ChannelSchema {
+    ChannelSchema {
+        schema: T::get_schema().expect("the SDK's schemas carry their schema"),
+        encoding: T::get_message_encoding(),
+    }
+}
+
+/// How one interface kind is served. One impl per kind of the table; the defaults
+/// are the recorder's JSON channel and message.
+pub trait Serve: InterfaceValue {
+    /// The kind's channel schema.
+    fn schema(opts: Opts) -> ChannelSchema {
+        let _ = opts;
+        let (name, text) = mcapfmt::json_schema(Self::KIND);
+        ChannelSchema {
+            schema: Schema::new(name, "jsonschema", text.into_bytes()),
+            encoding: "json".into(),
+        }
+    }
+    /// Encodes a sample (`snap` is the same sample, as the recorder takes it) into
+    /// `buf`: false when there is nothing to send.
+    fn message(
+        name: &str,
+        snap: &Snapshot,
+        s: &Sample<Self>,
+        opts: Opts,
+        buf: &mut Vec<u8>,
+    ) -> bool {
+        let _ = s;
+        mcapfmt::encode(opts.profile(), name, snap, buf)
+    }
+    /// The transform the sample gives on `/tf`, for kinds that move a frame.
+    fn transform(s: &Sample<Self>) -> Option<FrameTransform> {
+        let _ = s;
+        None
+    }
+    /// Whether the kind sends on `/tf` (its subscribers want the interface too).
+    const TF: bool = false;
+}
+
+impl Serve for Image {
+    fn schema(opts: Opts) -> ChannelSchema {
+        match opts.jpeg {
+            None => protobuf_schema("foxglove.RawImage", protobuf::RAW_IMAGE),
+            Some(_) => protobuf_schema("foxglove.CompressedImage", protobuf::COMPRESSED_IMAGE),
+        }
+    }
+}
+
+impl Serve for Laser {
+    fn schema(_: Opts) -> ChannelSchema {
+        protobuf_schema("foxglove.LaserScan", protobuf::LASER_SCAN)
+    }
+    fn message(_: &str, _: &Snapshot, s: &Sample<Self>, _: Opts, buf: &mut Vec<u8>) -> bool {
+        laser_message(mcapfmt::nanos(s.time), &s.value, buf);
+        true
+    }
+}
+
+/// The `foxglove.LaserScan` the service sends for a laser value (time `ns`): the
+/// recorder's encoder ([`protobuf::laser_scan`]) in frame `base_link`, so its angles
+/// and mount are the value's.
+pub fn laser_message(ns: u64, l: &Laser, buf: &mut Vec<u8>) {
+    protobuf::laser_scan(BASE, ns, l, buf);
+}
+
+fn encode_sdk<T: Encode>(m: &T, buf: &mut Vec<u8>) -> bool {
+    buf.clear();
+    m.encode(buf).is_ok()
+}
+
+impl Serve for Sonars {
+    fn schema(_: Opts) -> ChannelSchema {
+        sdk_schema::<LaserScan>()
+    }
+    fn message(_: &str, _: &Snapshot, s: &Sample<Self>, _: Opts, buf: &mut Vec<u8>) -> bool {
+        encode_sdk(&sonar_scan(s.time, &s.value), buf)
+    }
+}
+
+impl Serve for Encoders {
+    fn schema(_: Opts) -> ChannelSchema {
+        sdk_schema::<PoseInFrame>()
+    }
+    fn message(_: &str, _: &Snapshot, s: &Sample<Self>, _: Opts, buf: &mut Vec<u8>) -> bool {
+        encode_sdk(&odometry(s.time, &s.value).0, buf)
+    }
+    fn transform(s: &Sample<Self>) -> Option<FrameTransform> {
+        Some(odometry(s.time, &s.value).1)
+    }
+    const TF: bool = true;
+}
+
+impl Serve for PtEncoders {
+    fn transform(s: &Sample<Self>) -> Option<FrameTransform> {
+        Some(camera(s.time, &s.value))
+    }
+    const TF: bool = true;
+}
+
+impl Serve for Motors {}
+impl Serve for PtMotors {}
+impl Serve for ZoomEncoders {}
+impl Serve for ZoomMotors {}
+impl Serve for Bumpers {}
+impl Serve for Imu {}
+
+/// How one interface is sent: its channel, and `/tf` for kinds that move a frame.
+pub struct Out {
+    channel: Arc<RawChannel>,
+    tf: Option<Arc<Channel<FrameTransform>>>,
+    opts: Opts,
+}
+
+fn channel_of<T: Serve>(
+    ctx: &Arc<Context>,
+    name: &str,
+    opts: Opts,
+) -> anyhow::Result<Arc<RawChannel>> {
+    let ChannelSchema { schema, encoding } = T::schema(opts);
     ChannelBuilder::new(name)
         .context(ctx)
-        .message_encoding("json")
-        .schema(Schema::new(schema_name, "jsonschema", text.into_bytes()))
-        .add_metadata("jderobot.kind", kind)
+        .message_encoding(encoding)
+        .schema(schema)
+        .add_metadata(mcapfmt::KIND_KEY, T::KIND)
         .build_raw()
         .map_err(|e| anyhow::anyhow!("foxglove: cannot make channel `{name}`: {e}"))
 }
+
+/// The per-kind dispatch, from the table of kinds.
+macro_rules! serve_kinds {
+    (; $(($t:ident, $k:literal)),*) => {
+        fn channel_of_kind(ctx: &Arc<Context>, name: &str, kind: &str, opts: Opts) -> anyhow::Result<(Arc<RawChannel>, bool)> {
+            match kind {
+                $($k => Ok((channel_of::<$t>(ctx, name, opts)?, <$t as Serve>::TF)),)*
+                other => anyhow::bail!("foxglove: `{name}` is of kind `{other}`, which no table row names"),
+            }
+        }
+
+        fn log_kind(out: &Out, name: &str, snap: &Snapshot, buf: &mut Vec<u8>) {
+            match snap {
+                $(Snapshot::$t(s) => {
+                    if let Some(tf) = &out.tf
+                        && let Some(t) = <$t as Serve>::transform(s)
+                    {
+                        tf.log(&t);
+                    }
+                    if <$t as Serve>::message(name, snap, s, out.opts, buf) {
+                        out.channel.log(buf);
+                    }
+                })*
+            }
+        }
+    };
+}
+for_each_kind!(serve_kinds! {});
 
 impl Out {
     /// The channel(s) of interface `name` of kind `kind`.
@@ -88,127 +253,27 @@ impl Out {
         ctx: &Arc<Context>,
         name: &str,
         kind: &str,
-        jpeg: Option<u8>,
+        opts: Opts,
         tf: &Arc<Channel<FrameTransform>>,
     ) -> anyhow::Result<Out> {
-        let b = || ChannelBuilder::new(name).context(ctx);
-        Ok(match (kind, jpeg) {
-            ("image", None) => Out::Raw(b().build()),
-            ("image", Some(q)) => Out::Jpeg(b().build(), q),
-            ("laser", _) => Out::Scan(b().build()),
-            ("sonars", _) => Out::Sonars(b().build()),
-            ("encoders", _) => Out::Odometry(b().build(), tf.clone()),
-            ("pantiltencoders", _) => Out::PanTilt(json_channel(ctx, name, kind)?, tf.clone()),
-            _ => Out::Json(json_channel(ctx, name, kind)?),
+        let (channel, moves) = channel_of_kind(ctx, name, kind, opts)?;
+        Ok(Out {
+            channel,
+            tf: moves.then(|| tf.clone()),
+            opts,
         })
     }
 
     /// The ids of the channels whose subscribers want this interface.
     pub fn channel_ids(&self) -> Vec<::foxglove::ChannelId> {
-        match self {
-            Out::Raw(c) => vec![c.id()],
-            Out::Jpeg(c, _) => vec![c.id()],
-            Out::Scan(c) | Out::Sonars(c) => vec![c.id()],
-            Out::Odometry(c, tf) => vec![c.id(), tf.id()],
-            Out::PanTilt(c, tf) => vec![c.id(), tf.id()],
-            Out::Json(c) => vec![c.id()],
-        }
+        let mut ids = vec![self.channel.id()];
+        ids.extend(self.tf.as_ref().map(|t| t.id()));
+        ids
     }
 
     /// Logs a sample of the interface `name` (`buf` is scratch).
     pub fn log(&self, name: &str, snap: &Snapshot, buf: &mut Vec<u8>) {
-        match (self, snap) {
-            (Out::Raw(c), Snapshot::Image(s)) => c.log(&shared_raw_image(name, s)),
-            (Out::Jpeg(c, q), Snapshot::Image(s)) => {
-                if let Some(j) = mcapfmt::jpeg(&s.value, *q) {
-                    c.log(&CompressedImage {
-                        timestamp: stamp(s.time),
-                        frame_id: name.to_string(),
-                        data: Bytes::from(j),
-                        format: "jpeg".into(),
-                    });
-                }
-            }
-            (Out::Scan(c), Snapshot::Laser(s)) => c.log(&laser_scan(s.time, &s.value)),
-            (Out::Sonars(c), Snapshot::Sonars(s)) => c.log(&sonar_scan(s.time, &s.value)),
-            (Out::Odometry(c, tf), Snapshot::Encoders(s)) => {
-                let (pose, t) = odometry(s.time, &s.value);
-                c.log(&pose);
-                tf.log(&t);
-            }
-            (Out::PanTilt(c, tf), Snapshot::PtEncoders(s)) => {
-                tf.log(&camera(s.time, &s.value));
-                if mcapfmt::encode(Profile::Foxglove { jpeg: None }, name, snap, buf) {
-                    c.log(buf);
-                }
-            }
-            (Out::Json(c), _) => {
-                if mcapfmt::encode(Profile::Foxglove { jpeg: None }, name, snap, buf) {
-                    c.log(buf);
-                }
-            }
-            _ => debug_assert!(false, "a channel of another kind than its interface"),
-        }
-    }
-}
-
-/// An image sample's bytes, shared with the interface (no copy).
-struct Pixels(Arc<Sample<Image>>);
-
-impl AsRef<[u8]> for Pixels {
-    fn as_ref(&self) -> &[u8] {
-        &self.0.value.data
-    }
-}
-
-/// A `foxglove.RawImage` (`bgr8`) of an image sample, its bytes shared (not copied).
-pub fn shared_raw_image(frame: &str, s: &Arc<Sample<Image>>) -> RawImage {
-    RawImage {
-        timestamp: stamp(s.time),
-        frame_id: frame.to_string(),
-        width: s.value.width,
-        height: s.value.height,
-        encoding: "bgr8".into(),
-        step: s.value.width * 3,
-        data: Bytes::from_owner(Pixels(s.clone())),
-    }
-}
-
-/// A `foxglove.RawImage` (`bgr8`) of `img` (one copy of its bytes).
-pub fn raw_image(frame: &str, t: SystemTime, img: &Image) -> RawImage {
-    RawImage {
-        timestamp: stamp(t),
-        frame_id: frame.to_string(),
-        width: img.width,
-        height: img.height,
-        encoding: "bgr8".into(),
-        step: img.width * 3,
-        data: Bytes::copy_from_slice(&img.data),
-    }
-}
-
-/// A `foxglove.LaserScan` of jderobot's laser: ranges m, reading i at
-/// start + i/resolution deg, the pose the laser's mount (the recorder's layout,
-/// `mcapfmt::protobuf`).
-pub fn laser_scan(t: SystemTime, l: &Laser) -> LaserScan {
-    let start = (l.start as f64).to_radians();
-    let steps = l.readings.len().saturating_sub(1).max(1) as f64;
-    let end = if l.resolution > 0.0 && l.resolution.is_finite() {
-        start + (steps / l.resolution as f64).to_radians()
-    } else {
-        start
-    };
-    LaserScan {
-        timestamp: stamp(t),
-        frame_id: BASE.into(),
-        pose: Some(Pose {
-            position: v3(l.mount.x as f64 / 1000.0, l.mount.y as f64 / 1000.0, 0.0),
-            orientation: Some(yaw((l.mount.yaw as f64).to_radians())),
-        }),
-        start_angle: start,
-        end_angle: end,
-        ranges: l.readings.iter().map(|r| *r as f64 / 1000.0).collect(),
-        intensities: Vec::new(),
+        log_kind(self, name, snap, buf);
     }
 }
 
@@ -381,21 +446,21 @@ mod tests {
     #[test]
     fn laser_angles_ranges_and_the_sonar_ring() {
         let t = SystemTime::UNIX_EPOCH;
-        let l = laser_scan(
-            t,
-            &Laser {
-                readings: vec![1000, 2500, 0],
-                resolution: 1.0,
-                ..Laser::default()
-            },
-        );
-        assert_eq!(l.ranges, vec![1.0, 2.5, 0.0]);
-        assert!(close(l.start_angle, -std::f64::consts::FRAC_PI_2));
-        assert!(close(
-            l.end_angle,
-            -std::f64::consts::FRAC_PI_2 + 2f64.to_radians()
-        ));
-        assert_eq!(l.frame_id, BASE);
+        // A 90° scan turned to start at -45°: the angles come from the value.
+        let l = Laser {
+            readings: vec![1000, 2500, 0],
+            resolution: 1.0,
+            start: -45.0,
+            ..Laser::default()
+        };
+        let mut buf = Vec::new();
+        protobuf::laser_scan(BASE, 0, &l, &mut buf);
+        let Ok((_, mcapfmt::Recorded::Laser(back))) = protobuf::decode_laser("laser", &buf, 0)
+        else {
+            panic!("not a laser");
+        };
+        assert_eq!(back.readings, l.readings);
+        assert!((back.start + 45.0).abs() < 1e-4 && (back.resolution - 1.0).abs() < 1e-4);
         let s = sonar_scan(t, &Sonars { us: vec![500.0; 4] });
         assert!(close(s.start_angle, -std::f64::consts::PI));
         assert!(close(s.end_angle, std::f64::consts::FRAC_PI_2));

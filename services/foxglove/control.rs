@@ -230,8 +230,31 @@ impl ServerListener for Listener {
     }
 }
 
-const CONTROL_REQUEST: &str = r#"{"title":"jderobot.Control","type":"object","properties":{"name":{"type":"string","description":"a schema's name (or an interface's, for run/stop)"}},"required":["name"]}"#;
-const CONTROL_RESPONSE: &str = r#"{"title":"jderobot.ControlResult","type":"object","properties":{"ok":{"type":"boolean"},"message":{"type":"string"}}}"#;
+/// The JSON schema of a control request: `{"name": "introrob"}`.
+fn control_request() -> Vec<u8> {
+    serde_json::json!({
+        "title": "jderobot.Control",
+        "type": "object",
+        "properties": {"name": {
+            "type": "string",
+            "description": "a schema's name (or an interface's, for run/stop)"
+        }},
+        "required": ["name"]
+    })
+    .to_string()
+    .into_bytes()
+}
+
+/// The JSON schema of a control result: `{"ok": true, "message": "stop introrob"}`.
+fn control_response() -> Vec<u8> {
+    serde_json::json!({
+        "title": "jderobot.ControlResult",
+        "type": "object",
+        "properties": {"ok": {"type": "boolean"}, "message": {"type": "string"}}
+    })
+    .to_string()
+    .into_bytes()
+}
 
 /// The name a control request names: `{"name": "introrob"}`, or the bare name.
 pub fn control_name(payload: &[u8]) -> Result<String, String> {
@@ -260,15 +283,11 @@ pub fn services(rt: &Arc<Runtime>) -> Vec<Service> {
             let schema = ServiceSchema::new("jderobot.Control")
                 .with_request(
                     "json",
-                    Schema::new("jderobot.Control", "jsonschema", CONTROL_REQUEST.as_bytes()),
+                    Schema::new("jderobot.Control", "jsonschema", control_request()),
                 )
                 .with_response(
                     "json",
-                    Schema::new(
-                        "jderobot.ControlResult",
-                        "jsonschema",
-                        CONTROL_RESPONSE.as_bytes(),
-                    ),
+                    Schema::new("jderobot.ControlResult", "jsonschema", control_response()),
                 );
             Service::builder(op, schema).blocking_handler_fn(move |req| {
                 let name = control_name(req.payload())?;

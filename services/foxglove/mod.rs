@@ -7,16 +7,18 @@
 //! ```text
 //! service foxglove
 //! bind 127.0.0.1        # the address it listens on (default loopback; beyond it
-//!                       #   only when said here, e.g. 0.0.0.0)
+//!                       #   only with `token` or `insecure`, e.g. 0.0.0.0)
 //! port 8765             # the TCP port (default 8765; 0 = any free port)
-//! sdk_port 8766         # off by default: the SDK's own server also listens here, at
-//!                       #   the same `bind`, for `foxglove.sdk.v1` clients (no relay)
+//! sdk_port 8766         # off by default: a second port, the same server
 //! serves all            # every interface (the default when no `serves` line), or
 //! serves laser          #   one by one
 //! images raw            # raw (RawImage bgr8, default) | jpeg [QUALITY 1..100, default 80]
 //! world on              # the world map (name-space `world.map`, `world.balls`) as a SceneUpdate
 //! max_queue 16          # message frames waiting per client; a slow client loses the oldest
-//! max_message 65536     # bytes: a longer client message closes its connection
+//! max_message 65536     # bytes: a longer client message closes its connection (1009)
+//! max_clients 64        # connections at once; when full the longest idle one is closed
+//! token SECRET          # off by default: clients connect to ws://HOST:8765/?token=SECRET
+//! insecure              # off by default: beyond loopback without a token, on purpose
 //! end_service
 //! ```
 //!
@@ -28,31 +30,34 @@
 //! watched). Clients may publish (capability `clientPublish`, encoding `json`): a
 //! Twist (`geometry_msgs/msg/Twist` shape, linear m/s, angular rad/s; the Teleop
 //! panel's message) on `/cmd_vel` or on the motors' name drives `motors` (mm/s,
-//! deg/s); a jderobot value on a served actuator's name writes it. When a client
-//! that drove the motors leaves (or unadvertises), the motors are set to zero.
-//! Services `run`, `stop`, `show`, `hide` (`{"name": "introrob"}`) do what the
-//! shell's commands do; parameters are the interfaces as `echo` prints them, and
-//! setting `motors.v` (or `motors` = `"v=100 w=5"`) does what `set` does.
+//! deg/s; a value beyond the `motors` interface's range is refused and told); a
+//! jderobot value on a served actuator's name writes it. When a client that drove
+//! the motors leaves (or unadvertises), the motors are set to zero. Services `run`,
+//! `stop`, `show`, `hide` (`{"name": "introrob"}`) do what the shell's commands do;
+//! parameters are the interfaces as `echo` prints them, and setting `motors.v` (or
+//! `motors` = `"v=100 w=5"`) does what `set` does.
 //!
-//! # Subprotocols and the relay
+//! # Subprotocols, the front door and its limits
 //! The SDK's server accepts `foxglove.sdk.v1`/`v1.1` only; `@foxglove/ws-protocol`
-//! 0.8.0 and Lichtblick offer `foxglove.websocket.v1` only. The port users connect
-//! to is a thin relay ([`relay`]) in front of the SDK's server (on an ephemeral
-//! loopback port): it renames the subprotocol for legacy clients, keeps a bounded
-//! queue per client (a client that stops reading loses its oldest message frames,
-//! counted in `ps`; the robot and other clients do not wait), and refuses client
-//! messages over `max_message` (close 1009). Garbage JSON gets an error status from
-//! the SDK; a request that is not a WebSocket upgrade gets `400`.
+//! 0.8.0 and Lichtblick offer `foxglove.websocket.v1` only. Both ports (`port`, and
+//! `sdk_port` when set) are a front door ([`relay`]) to the SDK's server on an
+//! ephemeral loopback port: it renames the subprotocol in the handshake for legacy
+//! clients, then splices the bytes in the kernel (server → client) and checks the
+//! client's frame headers (client → server). A client that stops reading loses its
+//! own oldest message frames in the SDK's backlog (`max_queue`), and is closed after
+//! taking nothing for 15 s; client messages over `max_message`, unfinished for 10 s,
+//! or over 100 pings a second close the connection (1009, 1008). Garbage JSON gets
+//! an error status from the SDK; a request that is not a WebSocket upgrade gets
+//! `400`, a missing or wrong token `401`. At most `max_clients` connections at once
+//! (both ports): a new one closes the longest idle; running out of descriptors
+//! does the same, and the door keeps accepting.
 //!
-//! With `sdk_port N` the SDK's server itself listens on N (same `bind`, same
-//! loopback rule): clients that speak `foxglove.sdk.v1` (the current Foxglove app,
-//! Lichtblick after its PR #819) connect to it without the relay's second loopback
-//! crossing. Gating, teleop, services and parameters are the SDK listener's, so the
-//! same on both ports; the queues and limits there are the SDK's own (1024 message
-//! frames per client, oldest dropped and logged by the SDK, not counted in `ps`; no
-//! `max_message`). `port` keeps the relay for both subprotocols.
+//! Beyond loopback the service refuses to start without `token SECRET` (or an
+//! `insecure` line saying so on purpose). The token travels in the URL: on a
+//! network you do not trust, put the port behind a TLS proxy (wss://); this build
+//! has no TLS of its own.
 //!
-//! System packages: none (tokio and the SDK are compiled in; no TLS).
+//! System packages: none (tokio and the SDK are compiled in).
 
 pub mod channels;
 pub mod control;
@@ -103,6 +108,8 @@ pub struct Settings {
     pub jpeg: Option<u8>,
     pub world: bool,
     pub limits: Limits,
+    /// Beyond loopback without a token, said on purpose (`insecure`).
+    pub insecure: bool,
 }
 
 const LINES: &[Setting] = &[
@@ -149,6 +156,22 @@ const LINES: &[Setting] = &[
         &[int("BYTES", "bytes", 1024, 16 << 20)],
     )
     .default("65536"),
+    Setting::new(
+        "max_clients",
+        "connections at once over both ports; when full, the one idle longest is closed to admit a new one",
+        &[int("N", "", 1, 4096)],
+    )
+    .default("64"),
+    Setting::new(
+        "token",
+        "a secret clients must present (ws://HOST:PORT/?token=SECRET, or `Authorization: Bearer SECRET`)",
+        &[word("SECRET")],
+    ),
+    Setting::new(
+        "insecure",
+        "listen beyond loopback without a token (anyone on the network may drive the robot)",
+        &[],
+    ),
 ];
 
 #[derive(serde::Deserialize)]
@@ -161,6 +184,10 @@ struct Lines {
     world: bool,
     max_queue: usize,
     max_message: usize,
+    max_clients: usize,
+    token: Option<String>,
+    #[serde(default)]
+    insecure: bool,
 }
 
 /// Reads the conf (every error names file:line and the fix).
@@ -210,6 +237,17 @@ pub fn parse(conf: &ComponentConf) -> Result<Settings, ConfError> {
     if serves.iter().any(|s| s == "all") {
         serves.clear();
     }
+    if !bind.is_loopback() && lines.token.is_none() && !lines.insecure {
+        let l = conf
+            .line("bind")
+            .expect("a non-loopback bind comes from a line");
+        return Err(l.error(format!(
+            "`bind {bind}` listens beyond loopback, where anyone on the network could drive the \
+             robot: add `token SECRET` (clients connect to ws://HOST:PORT/?token=SECRET; put it \
+             behind a TLS proxy for wss:// — this build has no TLS of its own), or say \
+             `insecure` to accept anyone"
+        )));
+    }
     Ok(Settings {
         bind,
         port: lines.port,
@@ -220,33 +258,36 @@ pub fn parse(conf: &ComponentConf) -> Result<Settings, ConfError> {
         limits: Limits {
             max_queue: lines.max_queue,
             max_message: lines.max_message,
+            max_clients: lines.max_clients,
+            token: lines.token,
         },
+        insecure: lines.insecure,
     })
 }
 
 /// What `ps` shows of a running server (exported as `<name>.status`).
 pub struct Status {
     pub addr: SocketAddr,
-    /// Where the SDK's server listens itself (`sdk_port`), if it was asked to.
+    /// The second port (`sdk_port`), if it was asked for.
     pub direct: Option<SocketAddr>,
     pub relay: Arc<RelayStats>,
     pub counters: Arc<Counters>,
 }
 
 impl Status {
-    /// One line: `ws://127.0.0.1:8765: 2 client(s), 1234 sent, 5 dropped (slow clients), ...`.
+    /// One line: `ws://127.0.0.1:8765: 2 client(s), 1234 message(s) sent, 0 evicted, ...`.
     pub fn line(&self) -> String {
         let r = &self.relay;
         let direct = self
             .direct
-            .map(|d| format!("; direct (SDK, foxglove.sdk.v1): ws://{d}"))
+            .map(|d| format!("; also ws://{d} (sdk_port)"))
             .unwrap_or_default();
         format!(
-            "ws://{}: {} client(s), {} message(s) sent, {} dropped (slow clients), {} command(s), {} refused{direct}",
+            "ws://{}: {} client(s), {} message(s) sent, {} evicted (max_clients), {} command(s), {} refused{direct}",
             self.addr,
             r.clients.load(Ordering::Relaxed),
             r.sent.load(Ordering::Relaxed),
-            r.dropped.load(Ordering::Relaxed),
+            r.evicted.load(Ordering::Relaxed),
             self.counters.commands.load(Ordering::Relaxed),
             self.counters.refused.load(Ordering::Relaxed) + r.refused.load(Ordering::Relaxed),
         )
@@ -269,6 +310,25 @@ pub const ADDRESS_EXPORT: &str = "address";
 /// (only with `sdk_port`).
 pub const SDK_ADDRESS_EXPORT: &str = "sdk_address";
 
+/// Threads of the server's tokio runtime (the SDK's writers and the front door).
+const IO_THREADS: usize = 2;
+
+/// Raises the soft limit of open files to the hard one, so idle clients meet the
+/// connection cap (`max_clients`) long before the process runs out of descriptors.
+fn raise_fd_limit() {
+    let mut l = libc::rlimit {
+        rlim_cur: 0,
+        rlim_max: 0,
+    };
+    // SAFETY: getrlimit/setrlimit on a struct we own.
+    unsafe {
+        if libc::getrlimit(libc::RLIMIT_NOFILE, &mut l) == 0 && l.rlim_cur < l.rlim_max {
+            l.rlim_cur = l.rlim_max;
+            let _ = libc::setrlimit(libc::RLIMIT_NOFILE, &l);
+        }
+    }
+}
+
 /// The world map's channel and sources.
 struct WorldOut {
     channel: ::foxglove::Channel<SceneUpdate>,
@@ -281,7 +341,8 @@ pub struct Foxglove {
     /// The SDK's context of the channels (the server and channels hold it weakly).
     _ctx: Arc<Context>,
     runtime: Option<tokio::runtime::Runtime>,
-    server: Option<WebSocketServerHandle>,
+    /// The SDK's server (replaced when it has to be started again).
+    server: Arc<Mutex<Option<WebSocketServerHandle>>>,
     stop: Arc<AtomicBool>,
     watch: Arc<Watch>,
     thread: Option<JoinHandle<()>>,
@@ -307,7 +368,8 @@ impl Foxglove {
         if let Some(t) = self.thread.take() {
             let _ = t.join();
         }
-        if let Some(s) = self.server.take() {
+        let server = self.server.lock().take();
+        if let Some(s) = server {
             let h = s.stop();
             if let Some(rt) = &self.runtime {
                 let _ = rt.block_on(async {
@@ -361,58 +423,112 @@ fn served_interfaces(s: &Settings, rt: &Runtime) -> anyhow::Result<Vec<Arc<dyn A
         .collect()
 }
 
-/// Starts the server with settings `s` on the interfaces of `rt`.
-pub fn start(s: &Settings, rt: &Runtime) -> anyhow::Result<Foxglove> {
-    let ifaces = served_interfaces(s, rt)?;
-    let ctx = Context::new();
+/// The channels of the served interfaces and of the world map: what the
+/// publishing thread sends and what the listener gates.
+struct Plan {
+    served: Vec<Served>,
+    world: Option<WorldOut>,
+    wanted: Vec<Wanted>,
+    /// Channel id → the entries of `wanted` it gates.
+    by_channel: HashMap<::foxglove::ChannelId, Vec<usize>>,
+    actuators: HashMap<String, Arc<dyn AnyInterface>>,
+}
+
+/// Step 1 of [`start`]: a channel (and `/tf`) per served interface, and the world's.
+fn plan(s: &Settings, rt: &Runtime, ctx: &Arc<Context>) -> anyhow::Result<Plan> {
     let tf = Arc::new(
         ChannelBuilder::new(channels::TF)
-            .context(&ctx)
+            .context(ctx)
             .build::<FrameTransform>(),
     );
-    let mut served = Vec::new();
-    let mut wanted = Vec::new();
-    let mut by_channel: HashMap<::foxglove::ChannelId, Vec<usize>> = HashMap::new();
-    let mut actuators = HashMap::new();
-    for i in ifaces {
+    let mut p = Plan {
+        served: Vec::new(),
+        world: None,
+        wanted: Vec::new(),
+        by_channel: HashMap::new(),
+        actuators: HashMap::new(),
+    };
+    for i in served_interfaces(s, rt)? {
         let Some(source) = Source::find(&rt.interfaces, i.name()) else {
             continue;
         };
         if i.is_actuator() {
-            actuators.insert(i.name().to_string(), i.clone());
+            p.actuators.insert(i.name().to_string(), i.clone());
         }
-        let out = Out::new(&ctx, i.name(), i.kind(), s.jpeg, &tf)?;
+        let out = Out::new(
+            ctx,
+            i.name(),
+            i.kind(),
+            channels::Opts { jpeg: s.jpeg },
+            &tf,
+        )?;
         for id in out.channel_ids() {
-            by_channel.entry(id).or_default().push(served.len());
+            p.by_channel.entry(id).or_default().push(p.served.len());
         }
-        wanted.push(Wanted::new(Some(i.clone())));
-        served.push(Served {
+        p.wanted.push(Wanted::new(Some(i.clone())));
+        p.served.push(Served {
             name: i.name().to_string(),
             source,
             out,
         });
     }
-    let world = if s.world {
+    if s.world {
         let map = world::map(&rt.names);
         let balls = world::balls(&rt.names);
-        (map.is_some() || balls.is_some()).then(|| {
+        if map.is_some() || balls.is_some() {
             let channel = ChannelBuilder::new(channels::WORLD)
-                .context(&ctx)
+                .context(ctx)
                 .build::<SceneUpdate>();
-            by_channel
+            p.by_channel
                 .entry(channel.id())
                 .or_default()
-                .push(wanted.len());
-            wanted.push(Wanted::new(None));
-            WorldOut {
+                .push(p.wanted.len());
+            p.wanted.push(Wanted::new(None));
+            p.world = Some(WorldOut {
                 channel,
                 map,
                 balls,
-            }
-        })
-    } else {
-        None
-    };
+            });
+        }
+    }
+    Ok(p)
+}
+
+/// Step 3 of [`start`]: the door on `port` (and `sdk_port`): their addresses.
+fn listen(
+    s: &Settings,
+    runtime: &tokio::runtime::Runtime,
+    door: &Arc<relay::Door>,
+) -> anyhow::Result<Vec<SocketAddr>> {
+    let mut addrs = Vec::new();
+    for port in std::iter::once(s.port).chain(s.sdk_port) {
+        let std_listener = std::net::TcpListener::bind((s.bind, port)).with_context(|| {
+            format!(
+                "foxglove: cannot listen on {}:{port} (is another program using the port? `port 0` takes any free one)",
+                s.bind
+            )
+        })?;
+        std_listener.set_nonblocking(true)?;
+        addrs.push(std_listener.local_addr()?);
+        let listener = {
+            let _g = runtime.enter();
+            tokio::net::TcpListener::from_std(std_listener)?
+        };
+        runtime.spawn(relay::accept_loop(listener, door.clone()));
+    }
+    Ok(addrs)
+}
+
+/// Starts the server with settings `s` on the interfaces of `rt`.
+pub fn start(s: &Settings, rt: &Runtime) -> anyhow::Result<Foxglove> {
+    let ctx = Context::new();
+    let Plan {
+        served,
+        world,
+        wanted,
+        by_channel,
+        actuators,
+    } = plan(s, rt, &ctx)?;
     let wanted = Arc::new(wanted);
     let counters = Arc::new(Counters::default());
     let relay_stats = Arc::new(RelayStats::default());
@@ -436,7 +552,7 @@ pub fn start(s: &Settings, rt: &Runtime) -> anyhow::Result<Foxglove> {
     let mut me = Foxglove {
         _ctx: ctx.clone(),
         runtime: None,
-        server: None,
+        server: Arc::new(Mutex::new(None)),
         stop,
         watch: watch.clone(),
         thread: Some(thread),
@@ -445,92 +561,51 @@ pub fn start(s: &Settings, rt: &Runtime) -> anyhow::Result<Foxglove> {
         direct: None,
     };
 
-    // One I/O thread: the relay's frame copies stay on one core's caches (measured:
-    // 64 % of the SDK alone's frame rate against 59 % with two, benches/foxglove.rs).
     let runtime = tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(1)
+        .worker_threads(IO_THREADS)
         .thread_name("foxglove-io")
         .enable_all()
         .build()
         .context("foxglove: cannot start its tokio runtime")?;
-    let listener = Listener {
-        by_channel,
-        wanted,
-        actuators,
+    let sdk = Sdk {
+        ctx: ctx.clone(),
+        io: runtime.handle().clone(),
         rt: rt.arc(),
-        drivers: Mutex::new(HashMap::new()),
-        wake: watch,
-        counters: counters.clone(),
+        listener: Arc::new(Listener {
+            by_channel,
+            wanted,
+            actuators,
+            rt: rt.arc(),
+            drivers: Mutex::new(HashMap::new()),
+            wake: watch,
+            counters: counters.clone(),
+        }),
+        backlog: s.limits.max_queue,
+        slot: me.server.clone(),
     };
-    // Without `sdk_port` the SDK's server is the relay's alone (an ephemeral loopback
-    // port); with it, it listens where clients reach it, at the conf's `bind`.
-    let sdk_host = match (s.sdk_port, s.bind) {
-        (None, _) => Ipv4Addr::LOCALHOST.to_string(),
-        (Some(_), IpAddr::V6(a)) => format!("[{a}]"),
-        (Some(_), IpAddr::V4(a)) => a.to_string(),
-    };
-    let server = WebSocketServer::new()
-        .name("jderobot")
-        .context(&ctx)
-        .bind(sdk_host, s.sdk_port.unwrap_or(0))
-        .tokio_runtime(runtime.handle())
-        .capabilities([
-            Capability::ClientPublish,
-            Capability::Services,
-            Capability::Parameters,
-        ])
-        .supported_encodings(["json"])
-        .services(control::services(&rt.arc()))
-        .parameter_handler(Arc::new(Params { rt: rt.arc() }))
-        .listener(Arc::new(listener))
-        .message_backlog_size(1024)
-        .start_blocking()
-        .map_err(|e| anyhow::anyhow!("foxglove: the SDK's server did not start: {e}"))?;
-    let inner_ip = match s.bind {
-        _ if s.sdk_port.is_none() => IpAddr::V4(Ipv4Addr::LOCALHOST),
-        IpAddr::V4(a) if a.is_unspecified() => IpAddr::V4(Ipv4Addr::LOCALHOST),
-        IpAddr::V6(a) if a.is_unspecified() => IpAddr::V6(std::net::Ipv6Addr::LOCALHOST),
-        a => a,
-    };
-    let inner = SocketAddr::new(inner_ip, server.port());
-    if s.sdk_port.is_some() {
-        me.direct = Some(SocketAddr::new(s.bind, server.port()));
-    }
-    me.server = Some(server);
-
-    let std_listener = std::net::TcpListener::bind((s.bind, s.port)).with_context(|| {
-        format!(
-            "foxglove: cannot listen on {}:{} (is another program using the port? `port 0` takes any free one)",
-            s.bind, s.port
-        )
-    })?;
-    std_listener.set_nonblocking(true)?;
-    let addr = std_listener.local_addr()?;
+    let inner = sdk.start()?;
+    raise_fd_limit();
+    let respawn: relay::Respawn = Arc::new(move || sdk.start().map_err(|e| e.to_string()));
+    let door = relay::Door::new(inner, respawn, s.limits.clone(), relay_stats.clone());
+    let addrs = listen(s, &runtime, &door)?;
+    let addr = addrs[0];
     me.addr = addr;
-    let listener = {
-        let _g = runtime.enter();
-        tokio::net::TcpListener::from_std(std_listener)?
-    };
-    runtime.spawn(relay::accept_loop(
-        listener,
-        inner,
-        s.limits,
-        relay_stats.clone(),
-    ));
+    me.direct = addrs.get(1).copied();
     me.runtime = Some(runtime);
     if !s.bind.is_loopback() {
-        tracing::warn!(
-            "foxglove: listening beyond loopback on {addr} (the `bind` line): anyone who reaches it can drive the robot"
-        );
+        if s.insecure {
+            tracing::warn!(
+                "foxglove: listening beyond loopback on {addr} without a token (`insecure`): anyone who reaches it can drive the robot"
+            );
+        } else {
+            tracing::info!(
+                "foxglove: listening beyond loopback on {addr}; clients need the token (ws://HOST:PORT/?token=...)"
+            );
+        }
     }
     tracing::info!("foxglove: listening on ws://{addr}");
     if let Some(d) = me.direct {
-        if !s.bind.is_loopback() {
-            tracing::warn!(
-                "foxglove: the SDK's server listening beyond loopback on {d} (the `bind` line): anyone who reaches it can drive the robot"
-            );
-        }
-        tracing::info!("foxglove: the SDK's server itself on ws://{d} (foxglove.sdk.v1, no relay)");
+        tracing::info!("foxglove: and on ws://{d} (`sdk_port`)");
     }
     let _ = rt.names.export(
         "foxglove",
@@ -543,6 +618,48 @@ pub fn start(s: &Settings, rt: &Runtime) -> anyhow::Result<Foxglove> {
         },
     );
     Ok(me)
+}
+
+/// What starting the SDK's server takes (again, should its accept loop end).
+struct Sdk {
+    ctx: Arc<Context>,
+    io: tokio::runtime::Handle,
+    rt: Arc<Runtime>,
+    listener: Arc<Listener>,
+    backlog: usize,
+    slot: Arc<Mutex<Option<WebSocketServerHandle>>>,
+}
+
+impl Sdk {
+    /// Starts the SDK's server on an ephemeral loopback port that only the front
+    /// door ([`relay`]) reaches (the door caps, authenticates and renames); an
+    /// earlier one is stopped. Its address.
+    fn start(&self) -> anyhow::Result<SocketAddr> {
+        let server = WebSocketServer::new()
+            .name("jderobot")
+            .context(&self.ctx)
+            .bind(Ipv4Addr::LOCALHOST.to_string(), 0)
+            .tokio_runtime(&self.io)
+            .capabilities([
+                Capability::ClientPublish,
+                Capability::Services,
+                Capability::Parameters,
+            ])
+            .supported_encodings(["json"])
+            .services(control::services(&self.rt))
+            .parameter_handler(Arc::new(Params {
+                rt: self.rt.clone(),
+            }))
+            .listener(self.listener.clone())
+            .message_backlog_size(self.backlog)
+            .start_blocking()
+            .map_err(|e| anyhow::anyhow!("foxglove: the SDK's server did not start: {e}"))?;
+        let addr = SocketAddr::new(IpAddr::V4(Ipv4Addr::LOCALHOST), server.port());
+        if let Some(old) = self.slot.lock().replace(server) {
+            drop(old.stop());
+        }
+        Ok(addr)
+    }
 }
 
 /// Sends each wanted interface's new values, and the world, until `stop`.
@@ -644,7 +761,7 @@ mod tests {
         assert!(d.serves.is_empty());
         assert_eq!((d.limits.max_queue, d.limits.max_message), (16, 65536));
         let s = parse_text(
-            "bind 0.0.0.0\nport 0\nserves laser\nserves ptencoders\nimages jpeg 60\nworld off\nmax_queue 4\nmax_message 2048\n",
+            "bind 0.0.0.0\ninsecure\nport 0\nserves laser\nserves ptencoders\nimages jpeg 60\nworld off\nmax_queue 4\nmax_message 2048\n",
         )
         .unwrap();
         assert!(!s.bind.is_loopback());
@@ -670,6 +787,7 @@ mod tests {
             ("images png\n", "raw, jpeg"),
             ("max_message 10\n", "between 1024"),
             ("colour red\n", "takes no `colour` line"),
+            ("bind 0.0.0.0\n", "add `token SECRET`"),
         ] {
             let e = parse_text(text).unwrap_err();
             assert!(e.contains(want) && e.contains(':'), "{text:?}: {e}");

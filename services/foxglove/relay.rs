@@ -1,43 +1,56 @@
-//! The port users connect to: a thin WebSocket relay in front of the SDK's server.
+//! The ports users connect to: a splicing front door to the SDK's server.
 //!
 //! The SDK's server (bound to an ephemeral loopback port) accepts only the
 //! subprotocols `foxglove.sdk.v1` and `foxglove.sdk.v1.1`, while the official npm
 //! client `@foxglove/ws-protocol` 0.8.0 and Lichtblick offer only
 //! `foxglove.websocket.v1` (the same messages under the protocol's older name; the
-//! client checks that the server answers with that exact name). For each connection
-//! the relay
+//! client checks that the server answers with that exact name). The SDK's own
+//! accept loop also ends for good on the first failed `accept` (out of file
+//! descriptors), and it has no connection cap. So every port (`port`, `sdk_port`)
+//! is this front door, which for each connection
 //!
-//! 1. reads the HTTP upgrade request (at most [`MAX_HEAD`] bytes within
-//!    [`HEAD_TIMEOUT`]; anything else is answered `400` and closed);
-//! 2. when the client offers `foxglove.websocket.v1` and no `foxglove.sdk.v1*`,
+//! 1. admits it under the cap `max_clients` (over both ports): when full, the
+//!    connection that has been idle longest (no byte either way) is closed to make
+//!    room, with one log line; a failed `accept` (EMFILE) closes the longest idle
+//!    one too and the loop goes on;
+//! 2. reads the HTTP upgrade request (at most [`MAX_HEAD`] bytes within
+//!    [`HEAD_TIMEOUT`]; anything else is answered `400` and closed), checks the
+//!    `token` when the conf sets one (`?token=` in the URL or `Authorization:
+//!    Bearer`; else `401`);
+//! 3. when the client offers `foxglove.websocket.v1` and no `foxglove.sdk.v1*`,
 //!    asks the SDK for `foxglove.sdk.v1` and answers the client with
 //!    `foxglove.websocket.v1` (the frames that follow are the same protocol);
 //!    offers of `foxglove.sdk.v1*` pass unchanged;
-//! 3. relays frames both ways, frame by frame (RFC 6455 headers are parsed, payloads
-//!    copied):
-//!    - client → server: a frame (or a fragmented message) over `max_message` bytes
-//!      closes the connection with status 1009 ("message too big") and a log line;
-//!    - server → client: frames wait in a bounded queue per client. When a client
-//!      does not read and `max_queue` message-data frames are waiting, the oldest
-//!      message-data frame is dropped and counted (the client's and the service's
-//!      `dropped`, shown by `ps`); control frames (advertise, status, service
-//!      responses) are never dropped, and a client whose queue holds over
-//!      [`MAX_QUEUED_BYTES`] of them is disconnected. The SDK, the robot and the
-//!      other clients never wait for a slow client.
+//! 4. then moves bytes, not messages:
+//!    - server → client: spliced through a pipe in the kernel (`splice(2)`, no copy
+//!      in user space), one RFC 6455 frame at a time (the relay peeks each frame's
+//!      header, so it knows where frames end). A client that stops reading holds
+//!      back only its own socket: the SDK's per-client backlog (`max_queue`
+//!      message frames) then drops that client's oldest messages, and a client
+//!      that takes no byte for [`WRITE_TIMEOUT`] while a frame waits is closed;
+//!    - client → server: copied as read, its frame headers parsed: a message (all
+//!      its fragments) over `max_message` bytes, a message left unfinished for
+//!      [`MESSAGE_TIMEOUT`], or more than [`MAX_CONTROL_PER_SEC`] control frames
+//!      (pings) in a second close the connection with status 1009 (too big) or
+//!      1008 (policy), sent after the frame in flight to the client.
+//!
+//! Memory per connection: one pipe (at most [`PIPE_BYTES`] in the kernel), a
+//! 16 KiB read buffer, the SDK's `max_queue` messages; the SDK never holds more of a
+//! client's unfinished message than `max_message`.
 
 use std::{
-    collections::VecDeque,
     net::SocketAddr,
+    os::fd::{AsRawFd, FromRawFd, OwnedFd, RawFd},
     sync::{
         Arc,
-        atomic::{AtomicU64, AtomicUsize, Ordering},
+        atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering},
     },
-    time::Duration,
+    time::{Duration, Instant},
 };
 
 use parking_lot::Mutex;
 use tokio::{
-    io::{AsyncRead, AsyncReadExt, AsyncWriteExt},
+    io::{AsyncRead, AsyncReadExt, AsyncWriteExt, Interest},
     net::{TcpListener, TcpStream},
     sync::Notify,
 };
@@ -46,59 +59,245 @@ use tokio::{
 pub const MAX_HEAD: usize = 16 * 1024;
 /// How long a client may take to send its upgrade request.
 pub const HEAD_TIMEOUT: Duration = Duration::from_secs(5);
-/// How long one frame's write to a client that reads nothing may take.
-pub const WRITE_TIMEOUT: Duration = Duration::from_secs(30);
-/// Control frames (never dropped) a client may leave unread before it is closed.
-pub const MAX_QUEUED_BYTES: usize = 64 * 1024 * 1024;
+/// How long a client that reads nothing may hold a frame half-sent.
+pub const WRITE_TIMEOUT: Duration = Duration::from_secs(15);
+/// How long a client's message may stay unfinished (fragments, a partial frame).
+pub const MESSAGE_TIMEOUT: Duration = Duration::from_secs(10);
+/// Control frames (ping, pong) a client may send per second.
+pub const MAX_CONTROL_PER_SEC: u32 = 100;
+/// How long a close waits for the frame in flight to the client to end.
+const CLOSE_GRACE: Duration = Duration::from_secs(1);
+/// The kernel pipe each connection splices through (asked for; the kernel may give less).
+pub const PIPE_BYTES: usize = 1 << 20;
 
 /// The protocol's older name, which `@foxglove/ws-protocol` and Lichtblick offer.
 pub const LEGACY: &str = "foxglove.websocket.v1";
 /// The SDK's name of the same protocol.
 pub const SDK: &str = "foxglove.sdk.v1";
 
-/// Counters of the relay (all clients), for `ps` and the benchmark.
+/// Counters of the front door (all clients, both ports), for `ps` and the benchmark.
 #[derive(Default)]
 pub struct RelayStats {
     /// Clients connected now (upgraded).
     pub clients: AtomicUsize,
     /// Connections accepted so far.
     pub accepted: AtomicU64,
-    /// Connections refused or closed for a bad request or an oversized message.
+    /// Connections refused or closed for a bad request, a bad token, an oversized
+    /// or unfinished message or a ping flood.
     pub refused: AtomicU64,
     /// Message-data frames sent to clients.
     pub sent: AtomicU64,
-    /// Message-data frames dropped for slow clients.
-    pub dropped: AtomicU64,
+    /// Connections closed to admit another (the cap, or out of descriptors).
+    pub evicted: AtomicU64,
 }
 
-/// The relay's limits.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+/// The front door's limits.
+#[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Limits {
+    /// Message frames the SDK keeps per client (its backlog).
     pub max_queue: usize,
+    /// The longest message a client may send, bytes.
     pub max_message: usize,
+    /// Connections at once, over both ports.
+    pub max_clients: usize,
+    /// The secret a client must present, if any.
+    pub token: Option<String>,
 }
 
-/// Accepts on `listener` and relays each connection to the SDK's server at `inner`.
-pub async fn accept_loop(
-    listener: TcpListener,
-    inner: SocketAddr,
+impl Default for Limits {
+    fn default() -> Limits {
+        Limits {
+            max_queue: 16,
+            max_message: 65536,
+            max_clients: 64,
+            token: None,
+        }
+    }
+}
+
+/// One open connection, as the cap sees it.
+struct Conn {
+    /// Last byte either way, ms since the door opened.
+    last: AtomicU64,
+    kill: Notify,
+    killed: AtomicBool,
+}
+
+/// Starts the SDK's server again (its address), for when its accept loop ended.
+pub type Respawn = Arc<dyn Fn() -> Result<SocketAddr, String> + Send + Sync>;
+
+/// The open connections over all ports, and the clock of their activity.
+pub struct Door {
+    inner: Mutex<SocketAddr>,
+    respawn: Respawn,
+    /// One restart at a time.
+    respawning: tokio::sync::Mutex<()>,
     limits: Limits,
     stats: Arc<RelayStats>,
-) {
+    conns: Mutex<Vec<Arc<Conn>>>,
+    t0: Instant,
+    /// When the cap was last logged (ms since t0), to log it once a minute.
+    cap_logged: AtomicU64,
+}
+
+impl Door {
+    /// A door in front of the SDK's server at `inner`.
+    pub fn new(
+        inner: SocketAddr,
+        respawn: Respawn,
+        limits: Limits,
+        stats: Arc<RelayStats>,
+    ) -> Arc<Door> {
+        Arc::new(Door {
+            inner: Mutex::new(inner),
+            respawn,
+            respawning: tokio::sync::Mutex::new(()),
+            limits,
+            stats,
+            conns: Mutex::new(Vec::new()),
+            t0: Instant::now(),
+            cap_logged: AtomicU64::new(u64::MAX),
+        })
+    }
+
+    fn now(&self) -> u64 {
+        self.t0.elapsed().as_millis() as u64
+    }
+
+    /// Closes the connection idle longest; false when there is none.
+    fn evict_idle(&self, why: &str) -> bool {
+        let victim = {
+            let conns = self.conns.lock();
+            conns
+                .iter()
+                .filter(|c| !c.killed.load(Ordering::Relaxed))
+                .min_by_key(|c| c.last.load(Ordering::Relaxed))
+                .cloned()
+        };
+        let Some(v) = victim else { return false };
+        v.killed.store(true, Ordering::Relaxed);
+        v.kill.notify_one();
+        self.stats.evicted.fetch_add(1, Ordering::Relaxed);
+        let now = self.now();
+        let logged = self.cap_logged.load(Ordering::Relaxed);
+        if logged == u64::MAX || now.saturating_sub(logged) > 60_000 {
+            self.cap_logged.store(now, Ordering::Relaxed);
+            tracing::warn!(
+                "foxglove: {why}: closing the connection idle longest ({} s) to admit a new one \
+                 (logged once a minute; raise `max_clients` if these are your clients)",
+                now.saturating_sub(v.last.load(Ordering::Relaxed)) / 1000
+            );
+        }
+        true
+    }
+
+    fn admit(&self) -> Arc<Conn> {
+        let over = {
+            let conns = self.conns.lock();
+            conns
+                .iter()
+                .filter(|c| !c.killed.load(Ordering::Relaxed))
+                .count()
+                >= self.limits.max_clients
+        };
+        if over {
+            self.evict_idle(&format!(
+                "{} connections (`max_clients`)",
+                self.limits.max_clients
+            ));
+        }
+        let c = Arc::new(Conn {
+            last: AtomicU64::new(self.now()),
+            kill: Notify::new(),
+            killed: AtomicBool::new(false),
+        });
+        self.conns.lock().push(c.clone());
+        c
+    }
+
+    fn leave(&self, c: &Arc<Conn>) {
+        self.conns.lock().retain(|o| !Arc::ptr_eq(o, c));
+    }
+
+    /// A connection to the SDK's server; when it refuses (its accept loop ended,
+    /// e.g. out of descriptors, which the SDK never recovers from), it is started
+    /// again, once, with a log line.
+    async fn reach_sdk(&self) -> Result<TcpStream, String> {
+        let at = *self.inner.lock();
+        match connect_bounded(at).await {
+            Ok(s) => return Ok(s),
+            Err(e) if e.kind() != std::io::ErrorKind::ConnectionRefused => {
+                return Err(format!("cannot reach the SDK's server at {at}: {e}"));
+            }
+            Err(_) => {}
+        }
+        {
+            let _one = self.respawning.lock().await;
+            if *self.inner.lock() == at {
+                tracing::warn!(
+                    "foxglove: the SDK's server at {at} stopped accepting (out of descriptors?); starting it again"
+                );
+                let respawn = self.respawn.clone();
+                let new = tokio::task::spawn_blocking(move || respawn())
+                    .await
+                    .map_err(|e| e.to_string())??;
+                *self.inner.lock() = new;
+            }
+        }
+        let at = *self.inner.lock();
+        connect_bounded(at)
+            .await
+            .map_err(|e| format!("cannot reach the SDK's server at {at}: {e}"))
+    }
+
+    fn touch(&self, c: &Conn) {
+        c.last.store(self.now(), Ordering::Relaxed);
+    }
+}
+
+/// The kernel buffers on the door's side of each connection (asked for; Linux
+/// doubles them): what a client that stops reading holds there, besides the pipe,
+/// before the SDK's backlog starts dropping its oldest frames.
+pub const SOCKET_BUFFER: u32 = 1 << 20;
+
+/// A connection to the SDK's server with a bounded receive buffer (set before the
+/// handshake, so the window is sized by it).
+async fn connect_bounded(at: SocketAddr) -> std::io::Result<TcpStream> {
+    let s = if at.is_ipv4() {
+        tokio::net::TcpSocket::new_v4()?
+    } else {
+        tokio::net::TcpSocket::new_v6()?
+    };
+    s.set_recv_buffer_size(SOCKET_BUFFER)?;
+    s.connect(at).await
+}
+
+/// Accepts on `listener` and relays each connection to the SDK's server, for ever
+/// (a failed accept, e.g. out of descriptors, frees the longest idle one and goes on).
+pub async fn accept_loop(listener: TcpListener, door: Arc<Door>) {
     loop {
         let (client, peer) = match listener.accept().await {
             Ok(c) => c,
             Err(e) => {
-                tracing::warn!("foxglove: accept failed: {e}");
-                tokio::time::sleep(Duration::from_millis(100)).await;
+                let fds = matches!(e.raw_os_error(), Some(libc::EMFILE | libc::ENFILE));
+                if !(fds && door.evict_idle(&format!("accept failed ({e})"))) {
+                    tracing::warn!("foxglove: accept failed: {e}; trying again");
+                }
+                tokio::time::sleep(Duration::from_millis(50)).await;
                 continue;
             }
         };
-        stats.accepted.fetch_add(1, Ordering::Relaxed);
-        let stats = stats.clone();
+        door.stats.accepted.fetch_add(1, Ordering::Relaxed);
+        let conn = door.admit();
+        let door = door.clone();
         tokio::spawn(async move {
-            if let Err(why) = connection(client, inner, limits, &stats).await {
-                stats.refused.fetch_add(1, Ordering::Relaxed);
+            let r = tokio::select! {
+                r = connection(client, &door, &conn) => r,
+                () = conn.kill.notified() => Err("closed to admit a newer client (max_clients)".into()),
+            };
+            door.leave(&conn);
+            if let Err(why) = r {
+                door.stats.refused.fetch_add(1, Ordering::Relaxed);
                 tracing::info!("foxglove: client {peer}: {why}");
             }
         });
@@ -128,18 +327,119 @@ async fn read_head<R: AsyncRead + Unpin>(r: &mut R) -> Result<(Vec<u8>, Vec<u8>)
     }
 }
 
+/// Reads exactly an HTTP head from `s` (peeking for its end), so that the frames
+/// after it start at the socket's next byte: (head, nothing).
+async fn read_head_exact(s: &TcpStream) -> Result<(Vec<u8>, Vec<u8>), String> {
+    let mut buf = vec![0u8; MAX_HEAD];
+    loop {
+        s.readable().await.map_err(|e| e.to_string())?;
+        let got = s.try_io(Interest::READABLE, || {
+            // SAFETY: recv into our buffer, peeking (the bytes stay queued).
+            let n = unsafe {
+                libc::recv(
+                    s.as_raw_fd(),
+                    buf.as_mut_ptr().cast(),
+                    buf.len(),
+                    libc::MSG_PEEK | libc::MSG_DONTWAIT,
+                )
+            };
+            if n < 0 {
+                Err(std::io::Error::last_os_error())
+            } else {
+                Ok(n as usize)
+            }
+        });
+        let n = match got {
+            Ok(0) => return Err("the SDK's server closed before its HTTP head".into()),
+            Ok(n) => n,
+            Err(e) if would_block(&e) => continue,
+            Err(e) => return Err(e.to_string()),
+        };
+        if let Some(end) = find(&buf[..n], b"\r\n\r\n") {
+            let mut head = vec![0u8; end + 4];
+            let mut at = 0;
+            while at < head.len() {
+                s.readable().await.map_err(|e| e.to_string())?;
+                match s.try_read(&mut head[at..]) {
+                    Ok(0) => return Err("the SDK's server closed in its HTTP head".into()),
+                    Ok(k) => at += k,
+                    Err(e) if would_block(&e) => {}
+                    Err(e) => return Err(e.to_string()),
+                }
+            }
+            return Ok((head, Vec::new()));
+        }
+        if n >= MAX_HEAD {
+            return Err(format!("the SDK's HTTP head is over {MAX_HEAD} bytes"));
+        }
+        // The head's end has not come yet (it comes in one piece in practice).
+        tokio::time::sleep(Duration::from_millis(1)).await;
+    }
+}
+
 fn find(hay: &[u8], needle: &[u8]) -> Option<usize> {
     hay.windows(needle.len()).position(|w| w == needle)
 }
 
-/// The subprotocols a request head offers (every `Sec-WebSocket-Protocol` line).
-pub fn offered(head: &str) -> Vec<String> {
+/// The values of every header line named `name` (case-insensitive), comma-split.
+fn header_values<'a>(head: &'a str, name: &'a str) -> impl Iterator<Item = &'a str> + 'a {
     head.lines()
         .filter_map(|l| l.split_once(':'))
-        .filter(|(k, _)| k.trim().eq_ignore_ascii_case("sec-websocket-protocol"))
-        .flat_map(|(_, v)| v.split(',').map(|p| p.trim().to_string()))
+        .filter(move |(k, _)| k.trim().eq_ignore_ascii_case(name))
+        .map(|(_, v)| v.trim())
+}
+
+/// The subprotocols a request head offers (every `Sec-WebSocket-Protocol` line).
+pub fn offered(head: &str) -> Vec<String> {
+    header_values(head, "sec-websocket-protocol")
+        .flat_map(|v| v.split(',').map(|p| p.trim().to_string()))
         .filter(|p| !p.is_empty())
         .collect()
+}
+
+/// The token a request presents: `?token=` (or `&token=`) in its target, or
+/// `Authorization: Bearer`.
+pub fn presented_token(head: &str) -> Option<String> {
+    let target = head.lines().next()?.split_whitespace().nth(1)?;
+    if let Some((_, q)) = target.split_once('?') {
+        for kv in q.split('&') {
+            if let Some(v) = kv.strip_prefix("token=") {
+                return Some(percent_decode(v));
+            }
+        }
+    }
+    header_values(head, "authorization")
+        .find_map(|v| v.strip_prefix("Bearer ").map(|t| t.trim().to_string()))
+}
+
+fn percent_decode(s: &str) -> String {
+    let b = s.as_bytes();
+    let mut out = Vec::with_capacity(b.len());
+    let mut i = 0;
+    while i < b.len() {
+        if b[i] == b'%'
+            && i + 2 < b.len()
+            && let Ok(v) =
+                u8::from_str_radix(std::str::from_utf8(&b[i + 1..i + 3]).unwrap_or(""), 16)
+        {
+            out.push(v);
+            i += 3;
+        } else {
+            out.push(if b[i] == b'+' { b' ' } else { b[i] });
+            i += 1;
+        }
+    }
+    String::from_utf8_lossy(&out).into_owned()
+}
+
+/// Equal, in a time that does not depend on where they differ.
+fn same_secret(a: &str, b: &str) -> bool {
+    let (a, b) = (a.as_bytes(), b.as_bytes());
+    let mut d = (a.len() != b.len()) as u8;
+    for i in 0..a.len().max(b.len()) {
+        d |= a.get(i).copied().unwrap_or(0) ^ b.get(i).copied().unwrap_or(0);
+    }
+    d == 0
 }
 
 /// The request head to send the SDK, and whether the client speaks the legacy name.
@@ -174,54 +474,75 @@ pub fn replace_protocol(head: &str, protocol: &str) -> String {
     out
 }
 
-async fn refuse(client: &mut TcpStream, why: &str) {
+async fn refuse(client: &mut TcpStream, status: &str, why: &str) {
     let body = format!("{why}\n");
     let reply = format!(
-        "HTTP/1.1 400 Bad Request\r\nContent-Type: text/plain\r\nContent-Length: {}\r\nConnection: close\r\n\r\n{body}",
+        "HTTP/1.1 {status}\r\nContent-Type: text/plain\r\nContent-Length: {}\r\nConnection: close\r\n\r\n{body}",
         body.len()
     );
     let _ = client.write_all(reply.as_bytes()).await;
     let _ = client.shutdown().await;
 }
 
-async fn connection(
-    mut client: TcpStream,
-    inner: SocketAddr,
-    limits: Limits,
-    stats: &RelayStats,
-) -> Result<(), String> {
+async fn connection(mut client: TcpStream, door: &Door, conn: &Conn) -> Result<(), String> {
     let _ = client.set_nodelay(true);
+    let size = SOCKET_BUFFER as libc::c_int;
+    // SAFETY: setsockopt on a socket we hold open, with an int we own.
+    unsafe {
+        libc::setsockopt(
+            client.as_raw_fd(),
+            libc::SOL_SOCKET,
+            libc::SO_SNDBUF,
+            (&size as *const libc::c_int).cast(),
+            std::mem::size_of::<libc::c_int>() as libc::socklen_t,
+        )
+    };
     let (head, early) = match tokio::time::timeout(HEAD_TIMEOUT, read_head(&mut client)).await {
         Ok(Ok(h)) => h,
         Ok(Err(why)) => {
-            refuse(&mut client, &why).await;
+            refuse(&mut client, "400 Bad Request", &why).await;
             return Err(why);
         }
         Err(_) => {
             let why = format!("no HTTP upgrade request within {HEAD_TIMEOUT:?}");
-            refuse(&mut client, &why).await;
+            refuse(&mut client, "400 Bad Request", &why).await;
             return Err(why);
         }
     };
     let Ok(head) = String::from_utf8(head) else {
-        refuse(&mut client, "the HTTP head is not text").await;
+        refuse(&mut client, "400 Bad Request", "the HTTP head is not text").await;
         return Err("sent a head that is not text".into());
     };
     if !head.starts_with("GET ") {
-        refuse(&mut client, "expected a WebSocket upgrade request (GET)").await;
+        let why = "expected a WebSocket upgrade request (GET)";
+        refuse(&mut client, "400 Bad Request", why).await;
         return Err("sent something that is not a WebSocket upgrade request".into());
     }
+    if let Some(want) = &door.limits.token
+        && !presented_token(&head).is_some_and(|t| same_secret(&t, want))
+    {
+        let why = "this server wants its token: ws[s]://HOST:PORT/?token=SECRET \
+                   (or the header `Authorization: Bearer SECRET`)";
+        refuse(&mut client, "401 Unauthorized", why).await;
+        return Err("no token or a wrong one".into());
+    }
+    door.touch(conn);
     let (to_sdk, legacy) = rewrite_request(&head);
-    let mut server = TcpStream::connect(inner)
-        .await
-        .map_err(|e| format!("cannot reach the SDK's server at {inner}: {e}"))?;
+    let mut server = door.reach_sdk().await?;
     let _ = server.set_nodelay(true);
     server
         .write_all(to_sdk.as_bytes())
         .await
         .map_err(|e| e.to_string())?;
-    server.write_all(&early).await.map_err(|e| e.to_string())?;
-    let (reply, server_early) = read_head(&mut server).await?;
+    let (reply, server_early) =
+        match tokio::time::timeout(HEAD_TIMEOUT, read_head_exact(&server)).await {
+            Ok(r) => r?,
+            Err(_) => {
+                return Err(format!(
+                    "the SDK's server did not answer within {HEAD_TIMEOUT:?}"
+                ));
+            }
+        };
     let reply = String::from_utf8_lossy(&reply).into_owned();
     let upgraded = reply.starts_with("HTTP/1.1 101");
     let reply = if legacy && upgraded {
@@ -236,7 +557,7 @@ async fn connection(
     if !upgraded {
         // The SDK refused (e.g. no subprotocol it knows): pass its answer on.
         let mut rest = server_early;
-        let _ = server.read_to_end(&mut rest).await;
+        let _ = tokio::time::timeout(HEAD_TIMEOUT, server.read_to_end(&mut rest)).await;
         let _ = client.write_all(&rest).await;
         let _ = client.shutdown().await;
         return Err(format!(
@@ -245,9 +566,14 @@ async fn connection(
             offered(&head).join(", ")
         ));
     }
-    stats.clients.fetch_add(1, Ordering::Relaxed);
-    let r = relay(client, server, server_early, limits, stats).await;
-    stats.clients.fetch_sub(1, Ordering::Relaxed);
+    // Bytes the SDK sent right after its head (its serverInfo) go first.
+    client
+        .write_all(&server_early)
+        .await
+        .map_err(|e| e.to_string())?;
+    door.stats.clients.fetch_add(1, Ordering::Relaxed);
+    let r = relay(&client, &server, early, door, conn).await;
+    door.stats.clients.fetch_sub(1, Ordering::Relaxed);
     r
 }
 
@@ -284,53 +610,8 @@ pub fn parse_header(b: &[u8]) -> Option<(bool, u8, bool, u64, usize)> {
     Some((fin, opcode, masked, len, at))
 }
 
-/// Reads one whole frame header from `r` into `hdr` (cleared first).
-async fn read_header<R: AsyncRead + Unpin>(
-    r: &mut R,
-    hdr: &mut Vec<u8>,
-    pending: &mut Vec<u8>,
-) -> std::io::Result<Option<(bool, u8, bool, u64)>> {
-    loop {
-        if let Some((fin, op, masked, len, at)) = parse_header(pending) {
-            hdr.clear();
-            hdr.extend_from_slice(&pending[..at]);
-            pending.drain(..at);
-            return Ok(Some((fin, op, masked, len)));
-        }
-        let mut b = [0u8; 14];
-        let n = r.read(&mut b).await?;
-        if n == 0 {
-            return Ok(None);
-        }
-        pending.extend_from_slice(&b[..n]);
-    }
-}
-
-/// Reads `len` payload bytes (some may be in `pending` already) onto `out`.
-async fn read_payload<R: AsyncRead + Unpin>(
-    r: &mut R,
-    pending: &mut Vec<u8>,
-    len: usize,
-    out: &mut Vec<u8>,
-) -> std::io::Result<()> {
-    let have = pending.len().min(len);
-    out.extend_from_slice(&pending[..have]);
-    pending.drain(..have);
-    // Read into spare capacity (no zero-filling of a frame's bytes first).
-    let end = out.len() + (len - have);
-    out.reserve(end - out.len());
-    while out.len() < end {
-        let want = end - out.len();
-        let n = (&mut *r).take(want as u64).read_buf(out).await?;
-        if n == 0 {
-            return Err(std::io::ErrorKind::UnexpectedEof.into());
-        }
-    }
-    Ok(())
-}
-
 /// A close frame from the server side (unmasked) with `code` and `reason`.
-fn close_frame(code: u16, reason: &str) -> Vec<u8> {
+pub fn close_frame(code: u16, reason: &str) -> Vec<u8> {
     let reason = &reason.as_bytes()[..reason.len().min(120)];
     let mut f = vec![0x88, (2 + reason.len()) as u8];
     f.extend_from_slice(&code.to_be_bytes());
@@ -338,217 +619,421 @@ fn close_frame(code: u16, reason: &str) -> Vec<u8> {
     f
 }
 
-/// A frame waiting for its client.
-struct Queued {
-    bytes: Vec<u8>,
-    /// A message-data frame (may be dropped for a slow client).
-    data: bool,
+/// Why the client side must be closed: (status code, reason).
+type Close = (u16, String);
+
+/// What the client → server parser has seen of the byte stream.
+pub struct ClientFrames {
+    max_message: usize,
+    /// Header bytes of the frame being read (up to 14).
+    hdr: Vec<u8>,
+    /// Payload bytes of the current frame still to come.
+    payload: u64,
+    /// Bytes of the message in progress (data frames since its first).
+    message: u64,
+    /// A data message was started and not finished (FIN).
+    open: bool,
+    /// When the message or frame in progress began.
+    since: Option<Instant>,
+    control_window: Instant,
+    controls: u32,
 }
 
-#[derive(Default)]
-struct Outbox {
-    frames: VecDeque<Queued>,
-    /// Message-data frames waiting.
-    data: usize,
-    /// Bytes of the other frames waiting.
-    control: usize,
-    closed: bool,
-    /// Written frames' buffers, kept for the next frames (no allocation and no
-    /// fresh pages for each 900 kB image).
-    spare: Vec<Vec<u8>>,
+impl ClientFrames {
+    pub fn new(max_message: usize) -> ClientFrames {
+        ClientFrames {
+            max_message,
+            hdr: Vec::with_capacity(14),
+            payload: 0,
+            message: 0,
+            open: false,
+            since: None,
+            control_window: Instant::now(),
+            controls: 0,
+        }
+    }
+
+    /// Bytes of `b` that may go to the server; an error is the close to send
+    /// instead of the rest.
+    pub fn feed(&mut self, b: &[u8], now: Instant) -> Result<usize, (usize, Close)> {
+        let mut at = 0;
+        while at < b.len() {
+            if self.payload > 0 {
+                let n = (self.payload.min((b.len() - at) as u64)) as usize;
+                self.payload -= n as u64;
+                at += n;
+                if self.payload == 0 && !self.open {
+                    self.since = None;
+                }
+                continue;
+            }
+            let frame_start = at - self.hdr.len().min(at);
+            self.since.get_or_insert(now);
+            self.hdr.push(b[at]);
+            at += 1;
+            let Some((fin, op, masked, len, hl)) = parse_header(&self.hdr) else {
+                if self.hdr.len() >= 14 {
+                    return Err((frame_start, (1002, "a bad frame header".into())));
+                }
+                continue;
+            };
+            debug_assert_eq!(hl, self.hdr.len());
+            self.hdr.clear();
+            if !masked {
+                // RFC 6455 §5.1: a server closes on an unmasked client frame.
+                return Err((frame_start, (1002, "an unmasked client frame".into())));
+            }
+            if op >= 0x8 {
+                if now.duration_since(self.control_window) >= Duration::from_secs(1) {
+                    self.control_window = now;
+                    self.controls = 0;
+                }
+                self.controls += 1;
+                if self.controls > MAX_CONTROL_PER_SEC {
+                    return Err((
+                        frame_start,
+                        (1008, format!("over {MAX_CONTROL_PER_SEC} pings a second")),
+                    ));
+                }
+            } else {
+                if op != 0 {
+                    self.message = 0;
+                }
+                self.message = self.message.saturating_add(len);
+                if self.message > self.max_message as u64 {
+                    return Err((
+                        frame_start,
+                        (1009, format!("a message over {} bytes", self.max_message)),
+                    ));
+                }
+                self.open = !fin;
+            }
+            self.payload = len;
+            if self.payload == 0 && !self.open {
+                self.since = None;
+            }
+        }
+        Ok(at)
+    }
+
+    /// When the message or frame in progress must be finished, if one is.
+    pub fn deadline(&self) -> Option<Instant> {
+        self.since.map(|t| t + MESSAGE_TIMEOUT)
+    }
 }
 
-/// Buffers kept per connection for reuse.
-const SPARE: usize = 4;
+/// A kernel pipe, both ends non-blocking.
+struct Pipe {
+    r: OwnedFd,
+    w: OwnedFd,
+    cap: usize,
+}
+
+impl Pipe {
+    fn new() -> std::io::Result<Pipe> {
+        let mut fds = [0 as RawFd; 2];
+        // SAFETY: pipe2 writes two descriptors into the array we own.
+        if unsafe { libc::pipe2(fds.as_mut_ptr(), libc::O_NONBLOCK | libc::O_CLOEXEC) } != 0 {
+            return Err(std::io::Error::last_os_error());
+        }
+        // SAFETY: both are fresh descriptors nobody else owns.
+        let (r, w) = unsafe { (OwnedFd::from_raw_fd(fds[0]), OwnedFd::from_raw_fd(fds[1])) };
+        // SAFETY: fcntl on our own descriptor; failure leaves the default size.
+        let got = unsafe { libc::fcntl(w.as_raw_fd(), libc::F_SETPIPE_SZ, PIPE_BYTES as i32) };
+        let cap = if got > 0 { got as usize } else { 64 * 1024 };
+        Ok(Pipe { r, w, cap })
+    }
+}
+
+fn splice(from: RawFd, to: RawFd, len: usize) -> std::io::Result<usize> {
+    // SAFETY: splice between descriptors we hold open; null offsets (streams).
+    let n = unsafe {
+        libc::splice(
+            from,
+            std::ptr::null_mut(),
+            to,
+            std::ptr::null_mut(),
+            len,
+            libc::SPLICE_F_MOVE | libc::SPLICE_F_NONBLOCK,
+        )
+    };
+    if n < 0 {
+        Err(std::io::Error::last_os_error())
+    } else {
+        Ok(n as usize)
+    }
+}
+
+fn would_block(e: &std::io::Error) -> bool {
+    e.kind() == std::io::ErrorKind::WouldBlock
+}
 
 /// Relays an upgraded connection until either side closes.
 async fn relay(
-    client: TcpStream,
-    server: TcpStream,
-    server_early: Vec<u8>,
-    limits: Limits,
-    stats: &RelayStats,
+    client: &TcpStream,
+    server: &TcpStream,
+    early: Vec<u8>,
+    door: &Door,
+    conn: &Conn,
 ) -> Result<(), String> {
-    let (mut crd, mut cwr) = client.into_split();
-    let (mut srd, mut swr) = server.into_split();
-    let outbox = Arc::new(Mutex::new(Outbox::default()));
-    let wake = Arc::new(Notify::new());
-
-    // Server → outbox.
-    let from_server = {
-        let outbox = outbox.clone();
-        let wake = wake.clone();
-        async move {
-            let mut pending = server_early;
-            let mut hdr = Vec::with_capacity(14);
-            loop {
-                let Some((fin, op, _, len)) = read_header(&mut srd, &mut hdr, &mut pending)
-                    .await
-                    .map_err(|e| e.to_string())?
-                else {
-                    return Ok::<_, String>(());
-                };
-                let mut frame = outbox.lock().spare.pop().unwrap_or_default();
-                frame.clear();
-                frame.extend_from_slice(&hdr);
-                read_payload(&mut srd, &mut pending, len as usize, &mut frame)
-                    .await
-                    .map_err(|e| e.to_string())?;
-                // Binary opcode 0x01 is the protocol's Message Data; only whole
-                // (unfragmented) ones are dropped.
-                let data = fin && op == 0x2 && frame.get(hdr.len()) == Some(&0x01);
-                let mut o = outbox.lock();
-                if o.closed {
-                    return Ok(());
-                }
-                if data
-                    && o.data >= limits.max_queue
-                    && let Some(i) = o.frames.iter().position(|f| f.data)
-                {
-                    o.frames.remove(i);
-                    o.data -= 1;
-                    stats.dropped.fetch_add(1, Ordering::Relaxed);
-                }
-                if data {
-                    o.data += 1;
-                } else {
-                    o.control += frame.len();
-                    if o.control > MAX_QUEUED_BYTES {
-                        o.closed = true;
-                        drop(o);
-                        wake.notify_one();
-                        return Err(format!(
-                            "left over {MAX_QUEUED_BYTES} bytes of control messages unread; disconnected"
-                        ));
-                    }
-                }
-                o.frames.push_back(Queued { bytes: frame, data });
-                drop(o);
-                wake.notify_one();
+    let close: Mutex<Option<Close>> = Mutex::new(None);
+    let closing = Notify::new();
+    let up = async {
+        let r = client_to_server(client, server, early, door, conn).await;
+        match r {
+            Err(UpEnd::Close(c)) => {
+                *close.lock() = Some(c);
+                closing.notify_one();
+                std::future::pending::<Result<(), String>>().await
             }
+            Err(UpEnd::Io(e)) => Err(e),
+            Ok(()) => Ok(()),
         }
     };
-
-    // Outbox → client.
-    let to_client = {
-        let outbox = outbox.clone();
-        let wake = wake.clone();
-        async move {
-            loop {
-                let next = {
-                    let mut o = outbox.lock();
-                    match o.frames.pop_front() {
-                        Some(f) => {
-                            if f.data {
-                                o.data -= 1;
-                            } else {
-                                o.control = o.control.saturating_sub(f.bytes.len());
-                            }
-                            Some(f)
-                        }
-                        None if o.closed => return Ok::<_, String>(()),
-                        None => None,
-                    }
-                };
-                match next {
-                    Some(f) => {
-                        match tokio::time::timeout(WRITE_TIMEOUT, cwr.write_all(&f.bytes)).await {
-                            Ok(r) => r.map_err(|e| e.to_string())?,
-                            Err(_) => {
-                                return Err(format!(
-                                    "read nothing for {WRITE_TIMEOUT:?}; disconnected"
-                                ));
-                            }
-                        }
-                        if f.data {
-                            stats.sent.fetch_add(1, Ordering::Relaxed);
-                        }
-                        let mut o = outbox.lock();
-                        if o.spare.len() < SPARE && f.bytes.capacity() <= 16 << 20 {
-                            o.spare.push(f.bytes);
-                        }
-                    }
-                    None => wake.notified().await,
-                }
-            }
-        }
-    };
-
-    // Client → server, with the message size limit.
-    let from_client = {
-        let outbox = outbox.clone();
-        let wake = wake.clone();
-        async move {
-            let mut pending = Vec::new();
-            let mut hdr = Vec::with_capacity(14);
-            let mut message = 0u64;
-            let mut buf = Vec::new();
-            loop {
-                let Some((fin, op, masked, len)) = read_header(&mut crd, &mut hdr, &mut pending)
-                    .await
-                    .map_err(|e| e.to_string())?
-                else {
-                    return Ok::<_, String>(());
-                };
-                if !masked {
-                    let why = "sent an unmasked frame (RFC 6455 5.1)";
-                    outbox.lock().frames.push_back(Queued {
-                        bytes: close_frame(1002, why),
-                        data: false,
-                    });
-                    outbox.lock().closed = true;
-                    wake.notify_one();
-                    return Err(why.into());
-                }
-                if op < 0x8 {
-                    message = if op == 0 { message + len } else { len };
-                }
-                if message > limits.max_message as u64 || len > limits.max_message as u64 {
-                    let why = format!(
-                        "sent a message of over {} bytes (the `max_message` line); disconnected",
-                        limits.max_message
-                    );
-                    {
-                        let mut o = outbox.lock();
-                        o.frames.push_back(Queued {
-                            bytes: close_frame(1009, "message too big"),
-                            data: false,
-                        });
-                        o.closed = true;
-                    }
-                    wake.notify_one();
-                    return Err(why);
-                }
-                if fin && op < 0x8 {
-                    message = 0;
-                }
-                buf.clear();
-                buf.extend_from_slice(&hdr);
-                read_payload(&mut crd, &mut pending, len as usize, &mut buf)
-                    .await
-                    .map_err(|e| e.to_string())?;
-                swr.write_all(&buf).await.map_err(|e| e.to_string())?;
-            }
-        }
-    };
-
-    let readers = async {
-        let r = tokio::select! {
-            r = from_server => r,
-            r = from_client => r,
-        };
-        outbox.lock().closed = true;
-        wake.notify_one();
-        r
-    };
-    tokio::pin!(readers);
-    tokio::pin!(to_client);
+    let down = server_to_client(client, server, door, conn, &close, &closing);
     tokio::select! {
-        r = &mut to_client => r,
-        r = &mut readers => {
-            // Let a close frame queued by a reader go out, briefly.
-            let _ = tokio::time::timeout(Duration::from_secs(1), &mut to_client).await;
-            r
+        r = up => r,
+        r = down => r,
+    }
+}
+
+enum UpEnd {
+    Close(Close),
+    Io(String),
+}
+
+async fn client_to_server(
+    client: &TcpStream,
+    server: &TcpStream,
+    early: Vec<u8>,
+    door: &Door,
+    conn: &Conn,
+) -> Result<(), UpEnd> {
+    let mut frames = ClientFrames::new(door.limits.max_message);
+    let mut buf = vec![0u8; 16 * 1024];
+    let mut pending = early;
+    loop {
+        if !pending.is_empty() {
+            let ok = frames.feed(&pending, Instant::now());
+            let n = match &ok {
+                Ok(n) => *n,
+                Err((n, _)) => *n,
+            };
+            write_all(server, &pending[..n]).await.map_err(UpEnd::Io)?;
+            if let Err((_, c)) = ok {
+                return Err(UpEnd::Close(c));
+            }
+            pending.clear();
+        }
+        let read = async {
+            loop {
+                client.readable().await?;
+                match client.try_read(&mut buf) {
+                    Err(e) if would_block(&e) => continue,
+                    r => return r,
+                }
+            }
+        };
+        let n = match frames.deadline() {
+            Some(d) => match tokio::time::timeout_at(d.into(), read).await {
+                Ok(r) => r,
+                Err(_) => {
+                    return Err(UpEnd::Close((
+                        1008,
+                        format!("a message left unfinished for {MESSAGE_TIMEOUT:?}"),
+                    )));
+                }
+            },
+            None => read.await,
+        }
+        .map_err(|e| UpEnd::Io(e.to_string()))?;
+        if n == 0 {
+            return Ok(());
+        }
+        door.touch(conn);
+        pending.extend_from_slice(&buf[..n]);
+    }
+}
+
+async fn write_all(s: &TcpStream, mut b: &[u8]) -> Result<(), String> {
+    while !b.is_empty() {
+        s.writable().await.map_err(|e| e.to_string())?;
+        match s.try_write(b) {
+            Ok(n) => b = &b[n..],
+            Err(e) if would_block(&e) => {}
+            Err(e) => return Err(e.to_string()),
+        }
+    }
+    Ok(())
+}
+
+/// Sends a close frame, then reads and drops what the client still sends until it
+/// closes too (RFC 6455 §7.1.1): closing with unread bytes would reset the
+/// connection and lose the close frame on the way.
+async fn lingering_close(client: &TcpStream, code: u16, why: &str) {
+    if write_all(client, &close_frame(code, why)).await.is_err() {
+        return;
+    }
+    // SAFETY: shutdown of writes on a socket we hold open.
+    unsafe { libc::shutdown(client.as_raw_fd(), libc::SHUT_WR) };
+    let mut b = vec![0u8; 16 * 1024];
+    loop {
+        if client.readable().await.is_err() {
+            return;
+        }
+        match client.try_read(&mut b) {
+            Ok(0) => return,
+            Ok(_) => {}
+            Err(e) if would_block(&e) => {}
+            Err(_) => return,
+        }
+    }
+}
+
+/// Peeks the next frame's header (and its first payload byte): (frame length,
+/// a message-data frame), None at the end of the stream.
+async fn peek_frame(server: &TcpStream) -> std::io::Result<Option<(usize, bool)>> {
+    let mut b = [0u8; 15];
+    loop {
+        server.readable().await?;
+        let got = server.try_io(Interest::READABLE, || {
+            // SAFETY: recv into our buffer, peeking (the bytes stay queued).
+            let n = unsafe {
+                libc::recv(
+                    server.as_raw_fd(),
+                    b.as_mut_ptr().cast(),
+                    b.len(),
+                    libc::MSG_PEEK | libc::MSG_DONTWAIT,
+                )
+            };
+            if n < 0 {
+                Err(std::io::Error::last_os_error())
+            } else {
+                Ok(n as usize)
+            }
+        });
+        let n = match got {
+            Ok(0) => return Ok(None),
+            Ok(n) => n,
+            Err(e) if would_block(&e) => continue,
+            Err(e) => return Err(e),
+        };
+        if let Some((fin, op, _, len, hl)) = parse_header(&b[..n]) {
+            let data = fin && op == 0x2 && (n > hl && b[hl] == 0x01);
+            let total = (hl as u64).saturating_add(len);
+            return usize::try_from(total)
+                .map(|t| Some((t, data)))
+                .map_err(|_| std::io::Error::other("a frame longer than memory"));
+        }
+        // Part of a header only (rare: the SDK writes a frame at once): wait a little.
+        tokio::time::sleep(Duration::from_millis(1)).await;
+    }
+}
+
+async fn server_to_client(
+    client: &TcpStream,
+    server: &TcpStream,
+    door: &Door,
+    conn: &Conn,
+    close: &Mutex<Option<Close>>,
+    closing: &Notify,
+) -> Result<(), String> {
+    let pipe = Pipe::new().map_err(|e| format!("no pipe: {e}"))?;
+    let (sfd, cfd) = (server.as_raw_fd(), client.as_raw_fd());
+    loop {
+        // At a frame boundary: a close the client side asked for goes now.
+        let asked = close.lock().take();
+
+        if let Some((code, why)) = asked {
+            let _ = tokio::time::timeout(CLOSE_GRACE, lingering_close(client, code, &why)).await;
+            return Err(format!("closed with {code}: {why}"));
+        }
+        let next = tokio::select! {
+            f = peek_frame(server) => f.map_err(|e| e.to_string())?,
+            () = closing.notified() => continue,
+        };
+        let Some((mut left, data)) = next else {
+            return Ok(());
+        };
+        let mut in_pipe = 0usize;
+        let mut stuck_since: Option<Instant> = None;
+        while left > 0 || in_pipe > 0 {
+            let mut moved = false;
+            if left > 0 && in_pipe < pipe.cap {
+                let want = left.min(pipe.cap - in_pipe);
+                // With the pipe empty, "would block" can only mean the socket is
+                // empty (tokio's readiness is cleared); with bytes in the pipe it may
+                // mean a full pipe, so the readiness is left alone and the pipe drained.
+                let got = if in_pipe == 0 {
+                    server.try_io(Interest::READABLE, || splice(sfd, pipe.w.as_raw_fd(), want))
+                } else {
+                    splice(sfd, pipe.w.as_raw_fd(), want)
+                };
+                match got {
+                    Ok(0) => return Ok(()),
+                    Ok(n) => {
+                        left -= n;
+                        in_pipe += n;
+                        moved = true;
+                    }
+                    Err(e) if would_block(&e) => {}
+                    Err(e) => return Err(e.to_string()),
+                }
+            }
+            if in_pipe > 0 {
+                match client.try_io(Interest::WRITABLE, || {
+                    splice(pipe.r.as_raw_fd(), cfd, in_pipe)
+                }) {
+                    Ok(n) => {
+                        in_pipe -= n;
+                        moved = true;
+                        stuck_since = None;
+                        door.touch(conn);
+                    }
+                    Err(e) if would_block(&e) => {
+                        stuck_since.get_or_insert_with(Instant::now);
+                    }
+                    Err(e) => return Err(e.to_string()),
+                }
+            }
+            if moved {
+                continue;
+            }
+            // A close asked for mid-frame waits for the frame's end a second at most.
+            let closing_by = close.lock().is_some().then(|| Instant::now() + CLOSE_GRACE);
+            let stuck_by = *stuck_since.get_or_insert_with(Instant::now) + WRITE_TIMEOUT;
+            let deadline = closing_by.map_or(stuck_by, |c| c.min(stuck_by));
+            let need_out = in_pipe > 0;
+            let wait = async {
+                tokio::select! {
+                    r = async {
+                        if need_out {
+                            client.writable().await
+                        } else {
+                            server.readable().await
+                        }
+                    } => r.map(|_| true),
+                    () = closing.notified(), if closing_by.is_none() => Ok(false),
+                }
+            };
+            match tokio::time::timeout_at(deadline.into(), wait).await {
+                Ok(r) => {
+                    r.map_err(|e| e.to_string())?;
+                }
+                Err(_) if closing_by.is_some() => {
+                    let asked = close.lock().take();
+                    let (code, why) = asked.unwrap_or_default();
+                    return Err(format!("closed ({code}: {why}) in the middle of a frame"));
+                }
+                Err(_) => {
+                    return Err(format!(
+                        "took no byte for {WRITE_TIMEOUT:?} with a frame waiting; disconnected"
+                    ));
+                }
+            }
+        }
+        if data {
+            door.stats.sent.fetch_add(1, Ordering::Relaxed);
         }
     }
 }
@@ -591,5 +1076,76 @@ mod tests {
         assert_eq!(parse_header(&h), Some((false, 2, false, 1 << 33, 10)));
         assert_eq!(parse_header(&[0x82]), None);
         assert_eq!(parse_header(&[0x82, 0x80 | 126, 1]), None);
+    }
+
+    /// A masked client frame (RFC 6455 §5.2) of `op` carrying `len` bytes.
+    fn frame(fin: bool, op: u8, len: usize) -> Vec<u8> {
+        let mut f = vec![(fin as u8) << 7 | op];
+        match len {
+            0..=125 => f.push(0x80 | len as u8),
+            126..=65535 => {
+                f.push(0x80 | 126);
+                f.extend_from_slice(&(len as u16).to_be_bytes());
+            }
+            _ => {
+                f.push(0x80 | 127);
+                f.extend_from_slice(&(len as u64).to_be_bytes());
+            }
+        }
+        f.extend_from_slice(&[1, 2, 3, 4]);
+        f.extend(std::iter::repeat_n(0u8, len));
+        f
+    }
+
+    #[test]
+    fn client_messages_are_bounded_across_fragments_and_in_time() {
+        let t = Instant::now();
+        let mut p = ClientFrames::new(1000);
+        let ok = frame(true, 2, 900);
+        assert_eq!(p.feed(&ok, t), Ok(ok.len()));
+        assert_eq!(p.deadline(), None);
+        // Fragments of 600 + 600: the second one crosses the limit; what went before passes.
+        let a = frame(false, 2, 600);
+        let b = frame(true, 0, 600);
+        let both = [a.clone(), b].concat();
+        let e = p.feed(&both, t).unwrap_err();
+        assert_eq!((e.0, e.1.0), (a.len(), 1009));
+        // A frame split byte by byte keeps its start time as the deadline.
+        let mut p = ClientFrames::new(1000);
+        let f = frame(true, 1, 300);
+        assert_eq!(p.feed(&f[..5], t), Ok(5));
+        assert_eq!(p.deadline(), Some(t + MESSAGE_TIMEOUT));
+        assert_eq!(p.feed(&f[5..], t + Duration::from_secs(1)), Ok(f.len() - 5));
+        assert_eq!(p.deadline(), None);
+        // An unfinished fragmented message keeps a deadline between its frames.
+        assert!(p.feed(&frame(false, 2, 10), t).is_ok());
+        assert!(p.deadline().is_some());
+        // A ping flood.
+        let mut p = ClientFrames::new(1000);
+        let ping = frame(true, 9, 4);
+        let flood: Vec<u8> = (0..=MAX_CONTROL_PER_SEC)
+            .flat_map(|_| ping.clone())
+            .collect();
+        let e = p.feed(&flood, t).unwrap_err();
+        assert_eq!(e.1.0, 1008);
+        assert_eq!(e.0, ping.len() * MAX_CONTROL_PER_SEC as usize);
+        // A header announcing 2^63 bytes.
+        let mut p = ClientFrames::new(1000);
+        let mut h = vec![0x82, 0x80 | 127];
+        h.extend_from_slice(&(1u64 << 63).to_be_bytes());
+        h.extend_from_slice(&[0; 4]);
+        assert_eq!(p.feed(&h, t).unwrap_err().1.0, 1009);
+    }
+
+    #[test]
+    fn tokens_from_the_url_or_the_header() {
+        let h = "GET /?a=1&token=s%20e+c HTTP/1.1\r\nHost: x\r\n\r\n";
+        assert_eq!(presented_token(h).as_deref(), Some("s e c"));
+        let h = "GET / HTTP/1.1\r\nauthorization: Bearer abc\r\n\r\n";
+        assert_eq!(presented_token(h).as_deref(), Some("abc"));
+        assert_eq!(presented_token("GET / HTTP/1.1\r\n\r\n"), None);
+        assert!(
+            same_secret("abc", "abc") && !same_secret("abc", "abd") && !same_secret("ab", "abc")
+        );
     }
 }
