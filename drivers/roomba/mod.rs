@@ -130,13 +130,26 @@ impl RoombaConf {
     }
 }
 
-/// The driver's status line (battery, OI mode), as `ps` would show it.
+/// The driver's status line (battery, OI mode, frames refused), as `ps` would show it.
 #[derive(Default)]
-pub struct Status(pub parking_lot::Mutex<String>);
+pub struct Status {
+    battery: parking_lot::Mutex<String>,
+    /// Frames refused since start, and the last reason.
+    refused: parking_lot::Mutex<(u64, Option<String>)>,
+}
 
 impl Status {
     pub fn line(&self) -> String {
-        self.0.lock().clone()
+        let mut s = self.battery.lock().clone();
+        let r = self.refused.lock();
+        if let (n @ 1.., Some(why)) = (r.0, &r.1) {
+            s.push_str(&format!("; {n} stream frame(s) refused (last: {why})"));
+        }
+        s
+    }
+    /// The last refusal's reason (port and what was expected).
+    pub fn last_refused(&self) -> Option<String> {
+        self.refused.lock().1.clone()
     }
 }
 
@@ -219,6 +232,11 @@ impl Roomba {
     }
 
     fn trouble(&self, s: &mut Session, e: &FrameError) {
+        {
+            let mut r = self.status.refused.lock();
+            r.0 += 1;
+            r.1 = Some(self.port_err(e));
+        }
         if s.trouble.is_none() {
             let why = self.port_err(e);
             tracing::warn!("{why}; resynchronising on the next frame");
@@ -263,7 +281,7 @@ impl Roomba {
                 ""
             }
         );
-        let mut st = self.status.0.lock();
+        let mut st = self.status.battery.lock();
         if *st != line {
             *st = line;
         }

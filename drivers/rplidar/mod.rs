@@ -93,6 +93,9 @@ struct Lines {
     max_range: i32,
     mount: (f64, f64, f64),
     reply_timeout: u64,
+    /// Read below (its forms: `laser`, `laser N R`).
+    #[allow(dead_code)]
+    provides: serde::de::IgnoredAny,
 }
 
 /// The driver's settings.
