@@ -451,3 +451,23 @@ fn introrob_vff_drives_the_create2_and_its_rplidar_to_the_target() {
     );
     assert!(!touched, "touched a wall");
 }
+
+/// Not a test: a Create 2 at `$CREATE2_PATH` (default /tmp/create2) and an A1 at
+/// `$RPLIDAR_PATH` (default /tmp/rplidar) in one 5 m x 3.5 m room, for
+/// `$SERIAL_SECONDS` s (default 600), to try the examples against:
+/// `cargo test --features full --test robots -- --ignored --nocapture serial_robots::emulator`.
+#[test]
+#[ignore]
+fn emulator() {
+    let room = room::Room::new(5000.0, 3500.0, 800.0, 800.0, 0.0);
+    let lidar_path = std::env::var("RPLIDAR_PATH").unwrap_or_else(|_| "/tmp/rplidar".into());
+    let _ = std::fs::remove_file(&lidar_path);
+    let _lidar = rplidar::Lidar::start(Path::new(&lidar_path), room.clone());
+    println!("emulated RPLIDAR A1 at {lidar_path}");
+    common::emulate_by_hand(
+        "Create 2",
+        ("CREATE2_PATH", "/tmp/create2"),
+        "SERIAL_SECONDS",
+        |p| create2::Create2::start(p, room.clone()),
+    );
+}

@@ -79,7 +79,9 @@ const LINES: &[Setting] = &[
     )
     .default("safe"),
     MOTORS_TIMEOUT,
-    REPLY_TIMEOUT,
+    REPLY_TIMEOUT.help(
+        "how long without a good stream frame (at 15 ms each) before the robot counts as lost",
+    ),
     Setting::new(
         "provides",
         "an interface it provides: motors, encoders, bumpers, sonars (the light bumper)",

@@ -82,7 +82,8 @@ const LINES: &[Setting] = &[
         ],
     )
     .default("0 0 0"),
-    REPLY_TIMEOUT,
+    REPLY_TIMEOUT
+        .help("how long an answer, or a good scan node, may take before the lidar counts as lost"),
     settings::provides(USAGE),
 ];
 
