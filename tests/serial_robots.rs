@@ -471,3 +471,30 @@ fn emulator() {
         |p| create2::Create2::start(p, room.clone()),
     );
 }
+
+#[test]
+fn conf_errors_name_the_line_and_the_range() {
+    let e = common::start_error(
+        "driver rplidar\nserial /tmp/x\nprovides laser 720 1\nend_driver\nload_driver rplidar\n",
+    );
+    assert!(
+        e.contains("test.conf:3") && e.contains("spans 720.0°"),
+        "{e}"
+    );
+    let e = common::start_error(
+        "driver rplidar\nserial /tmp/x\nprovides sonars\nend_driver\nload_driver rplidar\n",
+    );
+    assert!(e.contains("only a laser"), "{e}");
+    let e = common::start_error("driver rplidar\nserial /tmp/x\nend_driver\nload_driver rplidar\n");
+    assert!(e.contains("provides nothing"), "{e}");
+    let e = common::start_error(
+        "driver roomba\nserial /tmp/x\nmode turbo\nprovides motors\nend_driver\nload_driver roomba\n",
+    );
+    assert!(e.contains("test.conf:3") && e.contains("safe, full"), "{e}");
+    let e = common::start_error(
+        "driver roomba\nserial /tmp/x\nbaud 230400\nprovides motors\nend_driver\nload_driver roomba\n",
+    );
+    assert!(e.contains("between 1200 and 115200"), "{e}");
+    let e = common::start_error("driver roomba\nprovides motors\nend_driver\nload_driver roomba\n");
+    assert!(e.contains("no `serial` line"), "{e}");
+}
