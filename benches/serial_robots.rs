@@ -14,8 +14,6 @@
 
 #[path = "../tests/emulators/create2.rs"]
 mod create2;
-#[path = "../tests/emulators/ptu.rs"]
-mod ptu;
 #[path = "../tests/emulators/room.rs"]
 mod room;
 #[path = "../tests/emulators/rplidar.rs"]

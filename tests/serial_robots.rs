@@ -10,10 +10,6 @@
 use crate::common;
 #[path = "emulators/create2.rs"]
 mod create2;
-// The pty helpers of the PTU emulator (open_pty, read_fd, write_fd), loaded again here.
-#[allow(clippy::duplicate_mod)]
-#[path = "emulators/ptu.rs"]
-mod ptu;
 #[path = "emulators/room.rs"]
 mod room;
 #[path = "emulators/rplidar.rs"]

@@ -39,8 +39,8 @@ use std::{
 
 use parking_lot::Mutex;
 
-use super::ptu::{open_pty, read_fd, write_fd};
 use super::room::{ROBOT_RADIUS, Shared, wrap};
+use super::room::{open_pty, read_fd, write_fd};
 
 pub const WHEEL_BASE: f64 = 235.0;
 pub const COUNTS_PER_MM: f64 = 508.8 / (std::f64::consts::PI * 72.0);
@@ -301,7 +301,7 @@ fn frame(st: &State, room: &Shared) -> Vec<u8> {
     f
 }
 
-fn serve(pty: super::ptu::Pty, state: &Mutex<State>, room: &Shared, stop: &AtomicBool) {
+fn serve(pty: super::room::Pty, state: &Mutex<State>, room: &Shared, stop: &AtomicBool) {
     let mut buf = [0u8; 256];
     let mut pending: Vec<u8> = Vec::new();
     let mut last = Instant::now();

@@ -36,8 +36,8 @@ use std::{
 
 use parking_lot::Mutex;
 
-use super::ptu::{open_pty, read_fd, write_fd};
 use super::room::Shared;
+use super::room::{open_pty, read_fd, write_fd};
 
 pub const RATE_HZ: f64 = 5.5;
 pub const SAMPLES: f64 = 360.5;
@@ -132,7 +132,7 @@ pub fn node(start: bool, angle_deg: f64, mm: f64) -> [u8; 5] {
     ]
 }
 
-fn serve(pty: super::ptu::Pty, state: &Mutex<State>, room: &Shared, stop: &AtomicBool) {
+fn serve(pty: super::room::Pty, state: &Mutex<State>, room: &Shared, stop: &AtomicBool) {
     let mut buf = [0u8; 256];
     let mut pending: Vec<u8> = Vec::new();
     // The sample clock: sample k of the scan at k / (RATE_HZ · SAMPLES) s.
