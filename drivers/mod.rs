@@ -25,6 +25,10 @@ pub mod pantilt;
 pub mod player;
 #[cfg(feature = "replay")]
 pub mod replay;
+#[cfg(feature = "roomba")]
+pub mod roomba;
+#[cfg(feature = "rplidar")]
+pub mod rplidar;
 #[cfg(feature = "simulated3D")]
 #[path = "simulated3D/mod.rs"]
 pub mod simulated3d;

@@ -1,4 +1,4 @@
-//! Test binary `robots`: the simulator and the schemas that drive it (introrob, teleoperator, followball, naooperator), scan geometry, the serial heads on ptys.
+//! Test binary `robots`: the simulator and the schemas that drive it (introrob, teleoperator, followball, naooperator), scan geometry, the serial heads and serial robots on ptys.
 //!
 //! One binary per area so the suite links a few times, not once per file
 //! (docs/benchmarks.md, CI); each module is one of the files beside it.
@@ -20,6 +20,8 @@ mod pantilt;
 mod replay_introrob;
 #[path = "../scan_geometry.rs"]
 mod scan_geometry;
+#[path = "../serial_robots.rs"]
+mod serial_robots;
 #[path = "../simulator.rs"]
 mod simulator;
 #[path = "../teleoperator.rs"]
