@@ -89,6 +89,11 @@ const MAIN_COMMANDS: &[CommandDoc] = &[
     ("hide", "NAME", "Hide the GUI panel of schema NAME"),
     ("zoom", "NAME", "Change to schema state of NAME"),
     (
+        "reload",
+        "NAME",
+        "Build schema NAME again from its conf (a python schema reads its program again)",
+    ),
+    (
         "echo",
         "NAME [N]",
         "Print interface NAME's value, or its next N values",
@@ -288,6 +293,15 @@ impl Shell {
                 .hide(one("NAME")?)
                 .map(|_| Flow::Continue)
                 .map_err(|e| format!("hide: {e}")),
+            "reload" => {
+                let name = args.first().ok_or("reload: which schema? `reload NAME`")?;
+                loader::reinit(&rt, name, None)
+                    .map(|_| {
+                        w(out, format!("{name} reloaded"));
+                        Flow::Continue
+                    })
+                    .map_err(|e| format!("reload: {e}"))
+            }
             "zoom" => {
                 let name = one("NAME")?;
                 if rt.schema(name).is_none() {

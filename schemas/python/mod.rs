@@ -148,7 +148,7 @@ pub struct PythonSchema {
     watch: bool,
     mtime: Option<SystemTime>,
     checked: Instant,
-    /// Sensors resumed while running (the camera is resumed on first use).
+    /// The sensors resumed while running.
     children: Vec<String>,
     watchdog: Option<Watchdog>,
     #[cfg(feature = "gui")]
@@ -226,11 +226,18 @@ impl PythonSchema {
             r.encoders.as_ref().is_none_or(|e| e.clock() > 0)
                 && r.laser.as_ref().is_none_or(|l| l.clock() > 0)
                 && r.bumpers.as_ref().is_none_or(|b| b.clock() > 0)
+                && r.camera.as_ref().is_none_or(|c| c.clock() > 0)
         };
+        let mut nudged = Instant::now();
         while !have(&self.robot)
             && t.elapsed() < Duration::from_secs(2)
             && !self.shared.reload.load(Ordering::Acquire)
         {
+            // A (zero) command lets a lock-stepped simulator step to its sensors.
+            if nudged.elapsed() >= Duration::from_millis(20) {
+                self.robot.zero();
+                nudged = Instant::now();
+            }
             std::thread::sleep(Duration::from_millis(2));
         }
     }
@@ -247,6 +254,7 @@ impl Schema for PythonSchema {
         // Each run starts the program afresh (the file as it is now).
         self.load().map_err(anyhow::Error::msg)?;
         self.set_phase(Phase::Init);
+        self.robot.zero();
         self.wait_for_sensors();
         Ok(())
     }
@@ -316,13 +324,8 @@ impl Schema for PythonSchema {
     }
 
     fn on_stop(&mut self, ctx: &Context) {
-        self.robot.zero();
-        if self.robot.camera_resumed.swap(false, Ordering::AcqRel)
-            && let Some(c) = &self.robot.camera
-        {
-            c.suspend();
-        }
         let _ = ctx;
+        self.robot.zero();
         self.set_phase(Phase::Init);
     }
 
@@ -418,7 +421,7 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
         .map(|n| ifs.get::<Image>(&n))
         .transpose()?;
     let mut children = Vec::new();
-    for n in [&lines.encoders, &lines.laser, &lines.bumpers] {
+    for n in [&lines.encoders, &lines.laser, &lines.bumpers, &lines.camera] {
         if let Some(n) = pick(n) {
             children.push(n);
         }
@@ -437,7 +440,6 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
             ("camera", lines.camera.clone()),
         ],
         command: Default::default(),
-        camera_resumed: AtomicBool::new(false),
     });
     let shared = shared(rt, &conf.name);
     // A re-init (the shell's `init`, `reload`) replaces a running program: ask the

@@ -43,18 +43,18 @@ impl Panel for PythonPanel {
         let file = self.shared.file.lock().display().to_string();
         ui.horizontal(|ui| {
             if ui
-                .add_enabled(!running, egui::Button::new("▶ Play"))
+                .add_enabled(!running, egui::Button::new("Play"))
                 .clicked()
             {
                 let _ = rt.run(&name);
             }
             if ui
-                .add_enabled(running, egui::Button::new("■ Stop"))
+                .add_enabled(running, egui::Button::new("Stop"))
                 .clicked()
             {
                 let _ = rt.stop(&name);
             }
-            if ui.button("⟳ Reload").clicked() {
+            if ui.button("Reload").clicked() {
                 if running {
                     self.shared.reload.store(true, Ordering::Release);
                 } else if let Ok(text) = std::fs::read_to_string(&file) {

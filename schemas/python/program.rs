@@ -194,7 +194,6 @@ pub struct Robot {
     pub names: Vec<(&'static str, String)>,
     /// v mm/s, w deg/s, and whether a program has set them since the last publish.
     pub command: Mutex<(f32, f32, bool)>,
-    pub camera_resumed: AtomicBool,
 }
 
 impl Robot {
@@ -481,26 +480,12 @@ impl Hal {
     /// The camera's image: a numpy uint8 array H x W x 3, BGR (one copy of the bytes).
     #[pyo3(name = "getImage")]
     fn get_image<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
-        let (cam, first) = with_current("HAL.getImage", |c| {
-            let cam = c
-                .robot
+        let cam = with_current("HAL.getImage", |c| {
+            c.robot
                 .camera
                 .clone()
-                .ok_or_else(|| c.robot.missing("camera", "getImage"))?;
-            let first = !c.robot.camera_resumed.swap(true, Ordering::AcqRel);
-            Ok((cam, first))
+                .ok_or_else(|| c.robot.missing("camera", "getImage"))
         })?;
-        if first {
-            // The camera renders only while used: wait for its first frame.
-            cam.resume();
-            let since = cam.clock();
-            py.detach(|| {
-                let t = Instant::now();
-                while cam.clock() == since && t.elapsed() < Duration::from_secs(2) {
-                    std::thread::sleep(Duration::from_millis(2));
-                }
-            });
-        }
         let frame = cam.snapshot();
         let img = &frame.value;
         let data = PyByteArray::new(py, &img.data);
@@ -819,7 +804,7 @@ fn is_stop(py: Python<'_>, e: &PyErr) -> bool {
 
 fn describe(py: Python<'_>, e: &PyErr, path: &str) -> Failure {
     let r = runner(py).and_then(|r| r.getattr("describe"));
-    match r.and_then(|f| f.call1((e.value(py), path))).and_then(|t| {
+    match r.and_then(|f| f.call1((e.value(py), e.traceback(py), path))).and_then(|t| {
         let (text, line, summary): (String, usize, String) = t.extract()?;
         Ok((text, line, summary))
     }) {

@@ -69,9 +69,10 @@ def syntax_error(e, path):
     return f"{e.filename or path}:{line}: {e.msg}", line
 
 
-def describe(e, path):
+def describe(e, tb, path):
     """(traceback text, the program's line where it happened or 0, one-line summary)."""
-    tb = e.__traceback__
+    if tb is None:
+        tb = e.__traceback__
     text = "".join(traceback.format_exception(type(e), e, tb))
     line = 0
     for frame in traceback.extract_tb(tb):
