@@ -107,7 +107,10 @@ fn vacuum_solution_bounces_off_walls_and_sweeps_the_room() {
     });
     let text = console(&shared(&rt, "python"));
     assert_eq!(state(&rt, "python"), State::Winner, "console:\n{text}");
-    assert!(bumps >= 3, "it bumped {bumps} times in 90 s; console:\n{text}");
+    assert!(
+        bumps >= 3,
+        "it bumped {bumps} times in 90 s; console:\n{text}"
+    );
     assert!(
         cells.len() >= 6,
         "it visited {} of the room's 24 square metres: {cells:?}",
@@ -117,7 +120,11 @@ fn vacuum_solution_bounces_off_walls_and_sweeps_the_room() {
     for w in track.windows(200).step_by(50) {
         let (a, b) = (w[0], w[w.len() - 1]);
         let moved = w.iter().any(|p| (p.0 - a.0).hypot(p.1 - a.1) > 300.0);
-        assert!(moved, "stuck near ({:.0}, {:.0}) .. ({:.0}, {:.0})", a.0, a.1, b.0, b.1);
+        assert!(
+            moved,
+            "stuck near ({:.0}, {:.0}) .. ({:.0}, {:.0})",
+            a.0, a.1, b.0, b.1
+        );
     }
     assert!(text.contains("bump on the"), "{text}");
     rt.shutdown();
@@ -156,7 +163,12 @@ fn avoid_solution_wanders_without_touching_anything() {
 fn followball_solution_turns_to_the_ball_and_approaches_it() {
     // The ball is at (4500, 1200); the robot starts 1.7 m away, the ball behind it
     // on its right (-147°).
-    let rt = academy(&exercise("followball_solution.py"), (3600, 2600, 90), "", "");
+    let rt = academy(
+        &exercise("followball_solution.py"),
+        (3600, 2600, 90),
+        "",
+        "",
+    );
     let balls = jderobot::world::balls(&rt.names).expect("the simulator exports its balls");
     let ball = || {
         let b = balls.load();
@@ -165,7 +177,10 @@ fn followball_solution_turns_to_the_ball_and_approaches_it() {
     let bearing = |e: &Encoders| {
         let (bx, by) = ball();
         let a = (by - e.y).atan2(bx - e.x) - e.theta;
-        (a.sin().atan2(a.cos()).to_degrees(), (bx - e.x).hypot(by - e.y))
+        (
+            a.sin().atan2(a.cos()).to_degrees(),
+            (bx - e.x).hypot(by - e.y),
+        )
     };
     let enc = rt.interfaces.get::<Encoders>("encoders").unwrap();
     let (b0, d0) = bearing(&enc.read().value);
@@ -175,12 +190,22 @@ fn followball_solution_turns_to_the_ball_and_approaches_it() {
     run_sim(&rt, 40.0, |e| last = bearing(e));
     let s = shared(&rt, "python");
     assert_eq!(state(&rt, "python"), State::Winner, "{}", console(&s));
-    assert!(last.0.abs() < 10.0, "the ball is {:.1}° off the heading; console:\n{}", last.0, console(&s));
-    assert!(last.1 < d0 - 500.0, "it came from {d0:.0} mm only to {:.0} mm", last.1);
-    // GUI.showImage showed the mask in the panel.
+    assert!(
+        last.0.abs() < 10.0,
+        "the ball is {:.1}° off the heading; console:\n{}",
+        last.0,
+        console(&s)
+    );
+    assert!(
+        last.1 < d0 - 500.0,
+        "it came from {d0:.0} mm only to {:.0} mm",
+        last.1
+    );
+    // GUI.showImage showed its mask (grey, as BGR) in the panel every iteration.
     let img = s.image.lock().clone().expect("an image shown");
     assert_eq!((img.width, img.height), (320, 240));
-    assert!(img.data.iter().any(|&p| p == 255), "the mask shows the ball");
+    assert!(img.data.iter().all(|&p| p == 0 || p == 255));
+    assert!(s.images.load(std::sync::atomic::Ordering::Acquire) > 100);
     rt.shutdown();
 }
 
@@ -286,7 +311,11 @@ fn stop_stuck(body: &str) -> Duration {
         s.in_python.load(std::sync::atomic::Ordering::Acquire) && *s.phase.lock() == "loop"
     });
     std::thread::sleep(Duration::from_millis(200));
-    assert_eq!(motors(&rt).v, 300.0, "the init's command reached the motors");
+    assert_eq!(
+        motors(&rt).v,
+        300.0,
+        "the init's command reached the motors"
+    );
     let t = Instant::now();
     rt.stop("python").unwrap();
     assert!(poll_until(5, || {
@@ -331,14 +360,19 @@ fn saving_the_file_reloads_it() {
     drop(f);
     eventually("version 2 runs", || console(&s).contains("version 2"));
     eventually("v = 200", || motors(&rt).v == 200.0);
-    assert!(s.source.lock().contains("version 2"), "the panel shows the new text");
+    assert!(
+        s.source.lock().contains("version 2"),
+        "the panel shows the new text"
+    );
     // A syntax error on save: the program stops with FILE:LINE, motors zero.
     let mut f = std::fs::File::create(&prog).unwrap();
     f.write_all(b"while True:\n    HAL.setV(0.2\n").unwrap();
     f.set_modified(std::time::SystemTime::now() + Duration::from_secs(2))
         .unwrap();
     drop(f);
-    eventually("the bad save stops it", || state(&rt, "python") == State::Slept);
+    eventually("the bad save stops it", || {
+        state(&rt, "python") == State::Slept
+    });
     let err = rt.schema_status("python").unwrap().last_error.unwrap();
     assert!(err.contains(&format!("{}:2:", prog.display())), "{err}");
     assert_eq!(motors(&rt).v, 0.0);
@@ -381,7 +415,10 @@ fn a_missing_interface_is_a_python_error_naming_the_conf_line() {
     eventually("the program fails", || state(&rt, "python") == State::Slept);
     let err = rt.schema_status("python").unwrap().last_error.unwrap();
     assert!(
-        err.contains(&format!("{}:3: RuntimeError: HAL.getLaserData: this robot has no laser", prog.display())),
+        err.contains(&format!(
+            "{}:3: RuntimeError: HAL.getLaserData: this robot has no laser",
+            prog.display()
+        )),
         "{err}"
     );
     assert!(console(&shared(&rt, "python")).contains("Pose3d: x=1.000 y=1.000"));
@@ -447,7 +484,10 @@ fn a_venv_line_adds_its_packages() {
         "python{}",
         String::from_utf8(
             std::process::Command::new("/usr/bin/python3")
-                .args(["-c", "import sys; print(f'{sys.version_info[0]}.{sys.version_info[1]}')"])
+                .args([
+                    "-c",
+                    "import sys; print(f'{sys.version_info[0]}.{sys.version_info[1]}')"
+                ])
                 .output()
                 .unwrap()
                 .stdout
@@ -519,28 +559,55 @@ fn the_shell_runs_stops_and_reloads_a_program() {
 fn the_panel_shows_the_program_its_error_and_plays_and_stops() {
     use egui_kittest::kittest::Queryable;
     let dir = tempfile::tempdir().unwrap();
-    let (rt, _) = with_other_schema(
+    let (rt, prog) = with_other_schema(
         dir.path(),
         "from HAL import HAL\nprint('panel test')\nwhile True:\n    HAL.setV(1 / 0)\n",
         "",
     );
     let mut h = common::panel_harness(&rt, "python", egui::vec2(700.0, 700.0));
-    h.run();
-    assert!(h.query_by_label_contains("HAL.setV(1 / 0)").is_some() || h.query_by_label_contains("while").is_some());
+    h.run_steps(8);
+    assert!(
+        h.query_by_label_contains("HAL.setV(1 / 0)").is_some()
+            || h.query_by_label_contains("while").is_some()
+    );
     h.get_by_label("Play").click();
-    h.run();
+    h.run_steps(8);
     eventually("it fails", || {
         rt.schema_status("python").unwrap().last_error.is_some()
     });
-    h.run();
-    assert!(h.query_all_by_label_contains("ZeroDivisionError").next().is_some());
+    h.run_steps(8);
+    assert!(
+        h.query_all_by_label_contains("ZeroDivisionError")
+            .next()
+            .is_some()
+    );
     assert!(h.query_all_by_label_contains("panel test").next().is_some());
+    // Fixed in an editor and reloaded from the panel: the error goes, Play runs it.
+    std::fs::write(
+        &prog,
+        "from HAL import HAL\nwhile True:\n    HAL.setV(0.1)\n",
+    )
+    .unwrap();
+    h.get_by_label("Reload").click();
+    h.run_steps(8);
+    assert!(
+        h.query_all_by_label_contains("ZeroDivisionError")
+            .next()
+            .is_none()
+    );
+    assert!(
+        h.query_all_by_label_contains("HAL.setV(0.1)")
+            .next()
+            .is_some()
+    );
     h.get_by_label("Play").click();
-    h.run();
-    eventually("it runs again", || state(&rt, "python") != State::Slept);
-    h.run();
+    h.run_steps(8);
+    eventually("it runs again", || state(&rt, "python") == State::Winner);
+    eventually("v = 100", || motors(&rt).v == 100.0);
+    h.run_steps(8);
+    assert!(h.query_all_by_label_contains("Hz").next().is_some());
     h.get_by_label("Stop").click();
-    h.run();
+    h.run_steps(8);
     eventually("stopped", || state(&rt, "python") == State::Slept);
     rt.shutdown();
 }
@@ -581,6 +648,11 @@ fn the_same_program_drives_a_player_stage_robot() {
     assert!(path > 2.0, "it drove {path:.2} m in 15 s; console:\n{text}");
     assert!(closest > 0.3, "it came within {closest:.2} m of a wall");
     // What reached the server: m/s and rad/s.
-    assert!(emu.world().commands.iter().any(|(v, _, _)| (*v - 0.4).abs() < 1e-6));
+    assert!(
+        emu.world()
+            .commands
+            .iter()
+            .any(|(v, _, _)| (*v - 0.4).abs() < 1e-6)
+    );
     rt.shutdown();
 }

@@ -48,10 +48,7 @@ impl Panel for PythonPanel {
             {
                 let _ = rt.run(&name);
             }
-            if ui
-                .add_enabled(running, egui::Button::new("Stop"))
-                .clicked()
-            {
+            if ui.add_enabled(running, egui::Button::new("Stop")).clicked() {
                 let _ = rt.stop(&name);
             }
             if ui.button("Reload").clicked() {
@@ -60,6 +57,7 @@ impl Panel for PythonPanel {
                 } else if let Ok(text) = std::fs::read_to_string(&file) {
                     *self.shared.source.lock() = Arc::new(text);
                     *self.shared.error.lock() = None;
+                    self.shared.clear_console();
                 }
             }
             let phase = *self.shared.phase.lock();

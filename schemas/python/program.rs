@@ -804,10 +804,12 @@ fn is_stop(py: Python<'_>, e: &PyErr) -> bool {
 
 fn describe(py: Python<'_>, e: &PyErr, path: &str) -> Failure {
     let r = runner(py).and_then(|r| r.getattr("describe"));
-    match r.and_then(|f| f.call1((e.value(py), e.traceback(py), path))).and_then(|t| {
-        let (text, line, summary): (String, usize, String) = t.extract()?;
-        Ok((text, line, summary))
-    }) {
+    match r
+        .and_then(|f| f.call1((e.value(py), e.traceback(py), path)))
+        .and_then(|t| {
+            let (text, line, summary): (String, usize, String) = t.extract()?;
+            Ok((text, line, summary))
+        }) {
         Ok((text, line, summary)) => Failure {
             line,
             summary,
