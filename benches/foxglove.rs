@@ -348,6 +348,7 @@ fn cpu_ten_clients(
                             .map(|i| 1000 + ((i as f32 + k) % 50.0) as i32)
                             .collect(),
                         resolution: 1.0,
+                        ..Laser::default()
                     })
                     .unwrap();
                 enc.publish(Encoders::from_pose(k, 2.0 * k, 0.01 * k))
@@ -410,6 +411,7 @@ fn recorder_encodings() {
     let laser = Laser {
         readings: (0..180).map(|i| 1000 + i).collect(),
         resolution: 1.0,
+        ..Laser::default()
     };
     let ls = Arc::new(Sample {
         clock: 1,
@@ -492,6 +494,7 @@ fn one_second(t0: SystemTime, second: u64) -> Vec<(&'static str, Snapshot)> {
             let l = Laser {
                 readings: (0..180).map(|i| 1000 + i * 7 + k as i32).collect(),
                 resolution: 1.0,
+                ..Laser::default()
             };
             v.push((
                 "laser",

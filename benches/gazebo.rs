@@ -8,6 +8,9 @@
 //! rate; laser latency from publish to interface p50 ≤ 1.2x the C++ subscriber's;
 //! the cost of one LaserScan decode into `laser`.
 
+mod common;
+use common::median;
+
 use std::{
     hint::black_box,
     path::{Path, PathBuf},
@@ -21,14 +24,6 @@ use jderobot::{
     drivers::gazebo::{self, pb},
     interfaces::{Image, Laser, LaserMap, Watch},
 };
-
-fn median(mut v: Vec<f64>) -> f64 {
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
 
 fn peer() -> Option<PathBuf> {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));

@@ -9,6 +9,9 @@
 //!
 //! `xvfb-run -a cargo bench --bench gui_cpu` (needs a display).
 
+mod common;
+use common::{cpu_ticks, median};
+
 use std::{
     path::{Path, PathBuf},
     process::{Command, Stdio},
@@ -18,15 +21,6 @@ use std::{
 const RUNS: usize = 3;
 const WARMUP: Duration = Duration::from_secs(3);
 const WINDOW: Duration = Duration::from_secs(8);
-
-/// User + system CPU time of process `pid`, in clock ticks.
-fn cpu_ticks(pid: u32) -> Option<u64> {
-    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
-    // Fields after the command name (which may hold spaces) start after ") ".
-    let rest = stat.rsplit_once(") ")?.1;
-    let f: Vec<&str> = rest.split_whitespace().collect();
-    Some(f.get(11)?.parse::<u64>().ok()? + f.get(12)?.parse::<u64>().ok()?)
-}
 
 /// % of one core that `bin` uses running `conf` with its window.
 fn cpu_percent(bin: &Path, conf: &str, headless: bool) -> f64 {
@@ -49,11 +43,6 @@ fn cpu_percent(bin: &Path, conf: &str, headless: bool) -> f64 {
     let _ = child.kill();
     let _ = child.wait();
     100.0 * (c1 - c0) as f64 / tick / (t1 - t0).as_secs_f64()
-}
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
 }
 
 fn main() {

@@ -5,6 +5,9 @@
 //!
 //! `cargo bench --bench interfaces` (`JDEROBOT_BENCH_QUICK=1` for a short run).
 
+mod common;
+use common::median;
+
 use std::{
     hint::black_box,
     sync::{
@@ -84,11 +87,6 @@ where
         read_ns: cpu as f64 / ops.max(1) as f64,
         write_ns: wc as f64 / wo.max(1) as f64,
     }
-}
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(|a, b| a.partial_cmp(b).unwrap());
-    v[v.len() / 2]
 }
 
 fn main() {

@@ -11,6 +11,9 @@
 //!
 //! `cargo bench --features full --bench media` (needs ffmpeg and mplayer).
 
+mod common;
+use common::median;
+
 use std::{
     io::Read,
     path::Path,
@@ -24,11 +27,6 @@ use jderobot::{Conf, Interface, Runtime, interfaces::Image};
 const FRAMES: u64 = 300;
 const FPS: f64 = 30.0;
 const REPS: usize = 5;
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(|a, b| a.total_cmp(b));
-    v[v.len() / 2]
-}
 
 fn make_clip(dir: &Path) -> std::path::PathBuf {
     let out = dir.join("bench640.avi");

@@ -15,6 +15,9 @@
 //! Run: `cargo bench --no-default-features --features naobody --bench naobody`
 //! (needs the test venv with `qi`: `target/py-venv`, or `JDEROBOT_PYTHON`).
 
+mod common;
+use common::{free_port, median};
+
 use std::{
     io::{BufRead, BufReader},
     path::{Path, PathBuf},
@@ -35,19 +38,6 @@ const WRITES: usize = 200;
 
 fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(|a, b| a.partial_cmp(b).unwrap());
-    v[v.len() / 2]
-}
-
-fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
 }
 
 fn now() -> f64 {
@@ -202,7 +192,7 @@ fn ours_write(peer: &Peer, port: u16) -> f64 {
         got.iter()
             .zip(&sent)
             .map(|(t1, t0)| (t1 - t0) * 1e3)
-            .collect(),
+            .collect::<Vec<f64>>(),
     )
 }
 
@@ -226,7 +216,7 @@ fn py_write(py: &Path, peer: &Peer, port: u16) -> (f64, f64) {
             got.iter()
                 .zip(&sent)
                 .map(|(t1, t0)| (t1 - t0) * 1e3)
-                .collect(),
+                .collect::<Vec<f64>>(),
         ),
         rtt * 1e3,
     )

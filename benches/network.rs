@@ -12,6 +12,9 @@
 //!
 //! Run: `cargo bench --features full --bench network`.
 
+mod common;
+use common::{median, percentile, threads_cpu};
+
 use std::{
     io::{BufRead, BufReader, Read, Write},
     net::{TcpListener, TcpStream},
@@ -34,17 +37,6 @@ const H: u32 = 480;
 const FRAME: usize = (W * H * 3) as usize;
 const ROUNDS: usize = 9;
 const SECS: f64 = 1.0;
-
-fn median(v: &mut [f64]) -> f64 {
-    v.sort_by(|a, b| a.partial_cmp(b).unwrap());
-    v[v.len() / 2]
-}
-
-fn percentile(v: &mut [f64], p: f64) -> f64 {
-    v.sort_by(|a, b| a.partial_cmp(b).unwrap());
-    let i = ((p / 100.0) * (v.len() - 1) as f64).round() as usize;
-    v[i]
-}
 
 /// Raw TCP: frames (a 1020 header and the pixels) written back to back for `SECS`.
 fn raw_fps() -> f64 {
@@ -246,34 +238,6 @@ fn latencies(l: &Link, n: usize) -> Vec<f64> {
     out
 }
 
-/// CPU seconds of this process's threads whose name starts with `prefix` (from
-/// `/proc/self/task/*/schedstat`, nanoseconds on a CPU: precise, unlike the
-/// 10 ms ticks of `stat`). Threads that ended are not counted.
-fn threads_cpu(prefix: &str) -> f64 {
-    let mut total = 0.0;
-    let Ok(dir) = std::fs::read_dir("/proc/self/task") else {
-        return 0.0;
-    };
-    for t in dir.flatten() {
-        let Ok(comm) = std::fs::read_to_string(t.path().join("comm")) else {
-            continue;
-        };
-        if !comm.starts_with(prefix) {
-            continue;
-        }
-        let Ok(st) = std::fs::read_to_string(t.path().join("schedstat")) else {
-            continue;
-        };
-        total += st
-            .split(' ')
-            .next()
-            .and_then(|n| n.parse::<f64>().ok())
-            .unwrap_or(0.0)
-            / 1e9;
-    }
-    total
-}
-
 /// 100 clients on laser + encoders for `secs`: (p50 ms, p99 ms, pushes, server CPU %).
 fn hundred_clients(secs: f64) -> (f64, f64, u64, f64) {
     let laser = Arc::new(Interface::<Laser>::new("laser", "robot"));
@@ -381,9 +345,9 @@ fn main() {
     println!(
         "frame latency at 100 frames/s ({} frames): p50 {:.3} ms, p90 {:.3} ms, p99 {:.3} ms (goal p50 <= 1 ms)",
         lat.len(),
-        percentile(&mut lat, 50.0),
-        percentile(&mut lat, 90.0),
-        percentile(&mut lat, 99.0)
+        percentile(&mut lat, 0.50),
+        percentile(&mut lat, 0.90),
+        percentile(&mut lat, 0.99)
     );
     l.client.stop();
     l.server.stop();

@@ -19,6 +19,9 @@
 //!
 //! `xvfb-run -a -s "-screen 0 1280x800x24" cargo bench --features full --bench opengl`
 
+mod common;
+use common::{cpu_ticks, median};
+
 use std::{
     path::{Path, PathBuf},
     process::{Command, Stdio},
@@ -30,11 +33,6 @@ use jderobot::{Conf, Runtime, interfaces::Motors};
 
 const WARMUP_FRAMES: usize = 30;
 const FRAMES: usize = 300;
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
 
 fn bench_conf() -> String {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
@@ -119,14 +117,6 @@ impl eframe::App for App {
         });
         ui.ctx().request_repaint();
     }
-}
-
-/// User + system CPU time of process `pid`, in clock ticks.
-fn cpu_ticks(pid: u32) -> Option<u64> {
-    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
-    let rest = stat.rsplit_once(") ")?.1;
-    let f: Vec<&str> = rest.split_whitespace().collect();
-    Some(f.get(11)?.parse::<u64>().ok()? + f.get(12)?.parse::<u64>().ok()?)
 }
 
 fn cpu_percent(conf: &Path) -> f64 {
@@ -262,7 +252,7 @@ fn main() {
     let dir = tempfile_dir();
     let cpu = |shown: Shown| {
         let f = idle_conf(&dir, shown);
-        median((0..3).map(|_| cpu_percent(&f)).collect())
+        median((0..3).map(|_| cpu_percent(&f)).collect::<Vec<f64>>())
     };
     let (without, with) = (cpu(Shown::Nothing), cpu(Shown::Gl));
     println!(

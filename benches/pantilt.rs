@@ -14,6 +14,9 @@ mod ptu;
 #[path = "../tests/emulators/visca.rs"]
 mod visca;
 
+mod common;
+use common::median;
+
 use std::{
     hint::black_box,
     path::Path,
@@ -24,11 +27,6 @@ use jderobot::{
     interfaces::{Image, PtEncoders, PtMotors, ZoomMotors},
     schemas::followball::{Settings, Stop, Tracker, command},
 };
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
 
 /// A floor-like background with a shaded red ball of radius `r` at (cx, cy).
 fn scene(w: u32, h: u32, cx: f32, cy: f32, r: f32) -> Image {

@@ -10,6 +10,9 @@
 #[allow(dead_code, clippy::all)]
 mod player_emulator;
 
+mod common;
+use common::median;
+
 use std::{
     hint::black_box,
     path::Path,
@@ -27,11 +30,6 @@ use jderobot::{
 };
 
 const SCAN_HEX: &str = include_str!("../tests/data/player_scan.hex");
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
 
 /// Median nanoseconds per call of `f` over 51 batches of `n` calls.
 fn per_call(n: usize, mut f: impl FnMut()) -> f64 {

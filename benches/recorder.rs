@@ -13,6 +13,9 @@
 //!
 //! Run: `cargo bench --features full --bench recorder`.
 
+mod common;
+use common::median;
+
 use std::{
     path::{Path, PathBuf},
     sync::{Arc, atomic::Ordering},
@@ -26,11 +29,6 @@ use jderobot::{
     loader,
     mcapfmt::{self, Profile, RecorderStatus, Snapshot},
 };
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(|a, b| a.partial_cmp(b).unwrap());
-    v[v.len() / 2]
-}
 
 fn sample<T>(clock: u64, t: SystemTime, value: T) -> Arc<Sample<T>> {
     Arc::new(Sample {
@@ -84,6 +82,7 @@ fn one_second(t0: SystemTime, second: u64) -> Vec<(&'static str, Snapshot)> {
             let l = Laser {
                 readings: (0..180).map(|i| 1000 + i * 7 + k as i32).collect(),
                 resolution: 1.0,
+                ..Laser::default()
             };
             v.push((
                 "laser",
@@ -259,6 +258,7 @@ fn main() {
                     .publish(Laser {
                         readings: vec![1000 + k as i32; 180],
                         resolution: 1.0,
+                        ..Laser::default()
                     })
                     .unwrap();
                 son.publish(Sonars {

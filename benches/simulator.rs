@@ -5,6 +5,9 @@
 //! Goals (issue 5): one robot ≥ 1000x real time without the camera; a 320x240
 //! camera ≥ 1000 frames/s.
 
+mod common;
+use common::median;
+
 use std::{
     hint::black_box,
     path::{Path, PathBuf},
@@ -19,11 +22,6 @@ use jderobot::{
 
 const DT: f64 = 0.01;
 const REPS: usize = 7;
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
 
 fn world(name: &str) -> World {
     let p: PathBuf =
@@ -49,7 +47,7 @@ fn realtime_factor(world_name: &str, n: usize, camera: bool, sim_seconds: f64) -
             })
             .collect(),
     };
-    let runs = (0..REPS)
+    let runs: Vec<f64> = (0..REPS)
         .map(|_| {
             let mut sim = Sim::new(w.clone(), 1);
             for (k, &(x, y)) in starts.iter().enumerate() {
@@ -94,7 +92,7 @@ fn camera_fps(world_name: &str, x: f64, y: f64, frames: usize) -> f64 {
     sim.add_robot("r", RobotModel::default(), x, y, 0.0);
     let mut img = Image::new(320, 240);
     let mut rend = Renderer::new();
-    let runs = (0..REPS)
+    let runs: Vec<f64> = (0..REPS)
         .map(|_| {
             let t0 = Instant::now();
             for f in 0..frames {

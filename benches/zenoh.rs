@@ -17,6 +17,9 @@
 //!
 //! Run: `cargo bench --features full --bench zenoh`.
 
+mod common;
+use common::{free_port, median, percentile};
+
 use std::{
     io::Read,
     process::{Child, Command, Stdio},
@@ -37,16 +40,6 @@ use zenoh::{Wait, qos::CongestionControl};
 
 const ROUNDS: usize = 5;
 const PINGS: usize = 2000;
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(|a, b| a.partial_cmp(b).unwrap());
-    v[v.len() / 2]
-}
-
-fn percentile(v: &mut [f64], p: f64) -> f64 {
-    v.sort_by(|a, b| a.partial_cmp(b).unwrap());
-    v[((v.len() - 1) as f64 * p).round() as usize]
-}
 
 fn session(listen: Option<u16>, connect: Option<u16>) -> zenoh::Session {
     let mut c = zenoh::Config::default();
@@ -216,14 +209,6 @@ fn stop(mut c: Child) {
     if err.contains("panicked") {
         panic!("the other process failed:\n{err}");
     }
-}
-
-fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
 }
 
 // ---- this process ----

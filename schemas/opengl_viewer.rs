@@ -66,7 +66,7 @@ use crate::{
     widgets::{
         Gl3dView,
         gl3d::{self, Draw, Frame3D, LookAtCamera, MeshBuilder},
-        laser_points, sonar_angles,
+        sonar_angles,
     },
 };
 
@@ -576,11 +576,11 @@ impl ViewerPanel {
         };
         if let Some(l) = &self.dev.laser {
             let laser = l.read().value.clone();
-            let o = local(19.0, 0.0, LASER_HEIGHT);
+            let o = local(laser.mount.x, laser.mount.y, LASER_HEIGHT);
             let mut tri = Vec::new();
-            for (a, r) in laser_points(&laser) {
-                let a = a.to_radians();
-                let p = local(19.0 + r * a.cos(), r * a.sin(), LASER_HEIGHT);
+            for i in 0..laser.readings.len() {
+                let [x, y] = laser.robot_point(i);
+                let p = local(x, y, LASER_HEIGHT);
                 b.line(o, p, LASER);
                 tri.push(p);
             }

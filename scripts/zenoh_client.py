@@ -69,8 +69,9 @@ if mode == "jderobot":
     def laser(b):
         n, res = struct.unpack_from("<If", b)
         readings = struct.unpack_from(f"<{n}i", b, 8)
-        assert len(b) == 8 + 4 * n, "laser size"
-        return {"n": n, "resolution": res, "mm": readings}
+        assert len(b) == 8 + 4 * n + 24, "laser size"
+        start, min_range, max_range, mx, my, myaw = struct.unpack_from("<6f", b, 8 + 4 * n)
+        return {"n": n, "resolution": res, "mm": readings, "start": start, "max_range": max_range}
 
     def image(b):
         w, h = struct.unpack_from("<II", b)

@@ -10,7 +10,7 @@
 //! Deterministic (a fixed xorshift seed), so a failure names a reproducible case.
 #![cfg(feature = "simulator")]
 
-mod common;
+use crate::common;
 
 use common::Rng;
 

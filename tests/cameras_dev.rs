@@ -6,7 +6,7 @@
 //! (BILINEAR), called through the driver's FFI module.
 #![cfg(feature = "firewire")]
 
-mod common;
+use crate::common;
 
 use std::{
     path::Path,

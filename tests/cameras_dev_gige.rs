@@ -4,7 +4,7 @@
 //! `arv-fake-gv-camera-0.8` (Debian `aravis-tools`) by address.
 #![cfg(feature = "gige")]
 
-mod common;
+use crate::common;
 
 use std::{path::Path, sync::Arc, time::Duration};
 

@@ -4,7 +4,7 @@
 //! `ffmpeg` program and checked against ffmpeg's own decoding).
 #![cfg(feature = "video4linux2")]
 
-mod common;
+use crate::common;
 
 use std::{path::Path, process::Command};
 

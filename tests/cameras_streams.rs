@@ -6,7 +6,7 @@
 //! except under `CI`, where it fails.
 #![cfg(all(feature = "imagefile", feature = "opencv", feature = "mplayer"))]
 
-mod common;
+use crate::common;
 
 use std::{
     path::{Path, PathBuf},

@@ -1,7 +1,7 @@
 //! simulated3D: the world's lines drawn where progeo projects them.
 #![cfg(feature = "simulated3D")]
 
-mod common;
+use crate::common;
 
 use std::sync::Arc;
 

@@ -9,7 +9,7 @@ use std::{
     time::Duration,
 };
 
-mod common;
+use crate::common;
 
 const BIN: &str = env!("CARGO_BIN_EXE_jderobot");
 

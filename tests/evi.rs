@@ -4,7 +4,7 @@
 //! (missing port, silence, garbage, unplugging and plugging back).
 #![cfg(feature = "evi")]
 
-mod common;
+use crate::common;
 #[path = "emulators/ptu.rs"]
 mod ptu;
 #[path = "emulators/visca.rs"]

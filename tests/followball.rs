@@ -4,7 +4,7 @@
 //! HSV filter (a plain RGB test of each frame).
 #![cfg(all(feature = "followball", feature = "simulator"))]
 
-mod common;
+use crate::common;
 
 use std::time::{Duration, Instant};
 

@@ -5,7 +5,7 @@
 //! messages, a client that stops reading, and 100 connect/disconnect cycles.
 #![cfg(all(feature = "foxglove", feature = "simulator", feature = "introrob"))]
 
-mod common;
+use crate::common;
 
 use std::{
     io::{Read, Write},

@@ -16,7 +16,7 @@
 //! counts). `FUZZ_SEED` changes the random sequence; `FUZZ_TARGET` picks targets
 //! whose name contains it.
 
-mod common;
+use crate::common;
 
 use common::Rng;
 use std::{

@@ -7,7 +7,7 @@
 //! skips with a note, or fails under `CI`.
 #![cfg(feature = "gazebo")]
 
-mod common;
+use crate::common;
 
 use std::{
     io::{BufRead, BufReader},

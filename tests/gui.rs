@@ -2,7 +2,7 @@
 //! change the runtime's state, and each widget's interaction gives the right values.
 #![cfg(all(feature = "gui", feature = "mastergui", feature = "myschema"))]
 
-mod common;
+use crate::common;
 
 use common::{eventually, panel_harness, state};
 use std::{path::Path, sync::Arc};
@@ -105,6 +105,7 @@ fn mastergui_lists_drivers_services_and_their_interfaces() {
         .publish(Laser {
             readings: vec![1000; 180],
             resolution: 1.0,
+            ..Laser::default()
         })
         .expect("publish");
     laser.resume();

@@ -7,7 +7,7 @@
 //! it says why and passes without checking anything.
 #![cfg(all(feature = "gui", feature = "mastergui"))]
 
-mod common;
+use crate::common;
 
 use std::{
     path::PathBuf,
@@ -29,6 +29,7 @@ fn colours(png: &PathBuf) -> Option<u64> {
 
 #[test]
 fn window_renders_under_x_and_quits_with_the_shell() {
+    let _display = common::x_display();
     if !can_screenshot("gui_screenshot", &["import", "identify"]) {
         return;
     }

@@ -7,7 +7,7 @@
 //! `xdotool`; under `CI` a missing one fails the test.
 #![cfg(all(feature = "gui", feature = "introrob", feature = "simulator"))]
 
-mod common;
+use crate::common;
 
 use std::{
     path::PathBuf,
@@ -69,6 +69,7 @@ fn stays_open(log: &str, stop: impl FnOnce(&Child)) -> (Option<ExitStatus>, Stri
 
 #[test]
 fn end_of_input_keeps_the_window_until_sigterm() {
+    let _display = common::x_display();
     if !can_screenshot("gui_window", &[]) {
         return;
     }
@@ -85,6 +86,7 @@ fn end_of_input_keeps_the_window_until_sigterm() {
 
 #[test]
 fn end_of_input_keeps_the_window_until_it_is_closed() {
+    let _display = common::x_display();
     if !can_screenshot("gui_window", &["xdotool"]) {
         return;
     }

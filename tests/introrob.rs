@@ -13,7 +13,7 @@ use std::{
 use jderobot::{
     conf::Conf,
     drivers::simulator::{RobotModel, Sim},
-    interfaces::{Bumpers, Encoders, Laser, Motors, Sonars},
+    interfaces::{Bumpers, Encoders, Laser, Motors, Mount, Sonars},
     schemas::introrob::{
         Behaviour, Brain, Dashboard, Inputs,
         gpp::{self, GridMap, PlanParams},
@@ -332,8 +332,11 @@ fn absolute_relative_helpers_follow_4_3() {
     }
     let robot = Robot {
         robot: r,
-        laser: vec![1000; 180],
-        laser_resolution: 1.0,
+        laser: Laser {
+            readings: vec![1000; 180],
+            mount: Mount::PIONEER_LASER,
+            ..Laser::default()
+        },
         ..Robot::default()
     };
     assert_eq!(robot.laser_angle(90), 0.0);
@@ -526,10 +529,12 @@ fn garbage_inputs_do_not_panic() {
             Laser {
                 readings: vec![-5, 0, i32::MAX, 100],
                 resolution: 0.0,
+                ..Laser::default()
             },
             Laser {
                 readings: vec![10; 720],
                 resolution: 4.0,
+                ..Laser::default()
             },
         ];
         let poses = [
@@ -577,6 +582,7 @@ fn without_a_map_gpp_says_it_needs_one() {
     let laser = Laser {
         readings: vec![8000; 180],
         resolution: 1.0,
+        ..Laser::default()
     };
     let input = Inputs {
         pose: Encoders::default(),

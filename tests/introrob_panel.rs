@@ -8,7 +8,7 @@
     feature = "simulator"
 ))]
 
-mod common;
+use crate::common;
 
 use common::{panel_harness, start_conf, world_path};
 use std::sync::Arc;

@@ -14,7 +14,7 @@
     feature = "simulator"
 ))]
 
-mod common;
+use crate::common;
 
 use std::{
     path::{Path, PathBuf},
@@ -52,6 +52,7 @@ fn shoot(png: &Path) -> Option<(usize, usize, Vec<[u8; 3]>)> {
 
 #[test]
 fn introrob_panel_shows_the_robot_and_its_laser_moving() {
+    let _display = common::x_display();
     if !can_screenshot("introrob_screenshot", &["import"]) {
         return;
     }

@@ -5,7 +5,7 @@
 //! and fail under `CI`.
 #![cfg(feature = "naobody")]
 
-mod common;
+use crate::common;
 
 use std::{
     io::{Read, Write},

@@ -4,7 +4,7 @@
 //! its panel shows the joystick, the head positioner and the camera.
 #![cfg(all(feature = "naooperator", feature = "simulator"))]
 
-mod common;
+use crate::common;
 
 use common::{eventually, start_conf};
 use std::time::Duration;

@@ -5,7 +5,7 @@
 //! bounded and nothing panics.
 #![cfg(feature = "networkserver")]
 
-mod common;
+use crate::common;
 
 use common::Rng;
 
@@ -167,6 +167,7 @@ fn bad_clients_are_dropped_alone_and_memory_stays_bounded() {
                         .publish(Laser {
                             readings: vec![k; 180],
                             resolution: 1.0,
+                            ..Laser::default()
                         })
                         .unwrap();
                     small.write(|i| i.data[0] = k as u8).unwrap();
@@ -406,6 +407,7 @@ fn laser_server(conf: ServerConf) -> (NetServer, Arc<AtomicBool>, thread::JoinHa
                 let _ = laser.publish(Laser {
                     readings: vec![k; 10],
                     resolution: 1.0,
+                    ..Laser::default()
                 });
                 thread::sleep(Duration::from_millis(20));
             }

@@ -10,7 +10,7 @@
     feature = "introrob"
 ))]
 
-mod common;
+use crate::common;
 
 use common::process::{Proc, free_port, rate};
 

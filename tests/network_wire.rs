@@ -4,7 +4,7 @@
 //! message kind of reference §4.
 #![cfg(all(feature = "networkserver", feature = "networkclient"))]
 
-mod common;
+use crate::common;
 #[path = "emulators/jde43_client.rs"]
 mod jde43_client;
 #[path = "emulators/jde43_server.rs"]
@@ -75,6 +75,7 @@ fn publish_all(rt: &Runtime, k: u8) {
         .publish(Laser {
             readings: (0..180).map(|r| 500 + r).collect(),
             resolution: 1.0,
+            ..Laser::default()
         })
         .unwrap();
     i.get::<Encoders>("encoders")

@@ -8,7 +8,7 @@
     feature = "simulator"
 ))]
 
-mod common;
+use crate::common;
 
 use std::time::Duration;
 

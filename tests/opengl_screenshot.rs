@@ -22,7 +22,7 @@
     feature = "introrob"
 ))]
 
-mod common;
+use crate::common;
 
 use std::{
     path::{Path, PathBuf},
@@ -55,13 +55,6 @@ fn bbox(s: &Shot, c: [u8; 3]) -> Option<(usize, usize, usize, usize)> {
         }
     }
     b
-}
-
-/// The tests share one X display and read the whole screen: one window at a time.
-static SCREEN: std::sync::Mutex<()> = std::sync::Mutex::new(());
-
-fn screen() -> std::sync::MutexGuard<'static, ()> {
-    SCREEN.lock().unwrap_or_else(|e| e.into_inner())
 }
 
 fn tmp(name: &str) -> PathBuf {
@@ -116,7 +109,7 @@ fn opengldemo_draws_the_world_where_progeo_projects_it() {
     if !can_screenshot("opengl_screenshot", &["import"]) {
         return;
     }
-    let _screen = screen();
+    let _screen = common::x_display();
     let conf = tmp("opengl_demo.conf");
     std::fs::write(&conf, demo_conf(false)).unwrap();
     let png = tmp("opengl_demo.png");
@@ -193,7 +186,7 @@ fn opengldemo_rotate_changes_the_picture() {
     if !can_screenshot("opengl_screenshot", &["import"]) {
         return;
     }
-    let _screen = screen();
+    let _screen = common::x_display();
     let conf = tmp("opengl_rotate.conf");
     std::fs::write(&conf, demo_conf(true)).unwrap();
     let (png1, png2) = (tmp("opengl_rotate_1.png"), tmp("opengl_rotate_2.png"));
@@ -251,7 +244,7 @@ fn opengl_viewer_shows_the_robot_moving_with_its_encoders() {
     if !can_screenshot("opengl_screenshot", &["import"]) {
         return;
     }
-    let _screen = screen();
+    let _screen = common::x_display();
     // simple.world's room and partition without its red ball (red like the body).
     let world = tmp("opengl_viewer.world");
     std::fs::write(

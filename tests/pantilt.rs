@@ -5,7 +5,7 @@
 //! silence, garbage, `!` replies, unplugging and plugging back).
 #![cfg(feature = "pantilt")]
 
-mod common;
+use crate::common;
 #[path = "emulators/ptu.rs"]
 mod ptu;
 

@@ -4,7 +4,7 @@
 //! real binary with examples/player.conf.
 #![cfg(feature = "player")]
 
-mod common;
+use crate::common;
 #[path = "emulators/player.rs"]
 mod player_emulator;
 

@@ -5,7 +5,7 @@
 //! No test depends on timing beyond generous bounds.
 #![cfg(all(feature = "recorder", feature = "replay", feature = "simulator"))]
 
-mod common;
+use crate::common;
 
 use std::{
     collections::BTreeMap,

@@ -6,7 +6,7 @@
 //! Without that venv the test skips with a note, but FAILS under `CI`.
 #![cfg(all(feature = "recorder", feature = "simulator"))]
 
-mod common;
+use crate::common;
 
 use std::path::{Path, PathBuf};
 

@@ -3,7 +3,7 @@
 //! motors written during a replay move nothing.
 #![cfg(all(feature = "recorder", feature = "replay"))]
 
-mod common;
+use crate::common;
 
 use std::{
     io::Write,

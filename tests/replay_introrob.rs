@@ -9,7 +9,7 @@
     feature = "introrob"
 ))]
 
-mod common;
+use crate::common;
 
 use std::{path::Path, process::Command};
 

@@ -1,7 +1,7 @@
 //! The schema runtime through its public API: states, hierarchy, arbitration,
 //! panic isolation, cronos. Waits are bounded polls on state, never timing asserts.
 
-mod common;
+use crate::common;
 
 use common::{eventually, state};
 use std::{

@@ -3,7 +3,7 @@
 //! range or choices), `jderobot help NAME` prints every line it accepts, and the
 //! inputs that were accepted silently before (issue 28, C2) are refused.
 
-mod common;
+use crate::common;
 
 use jderobot::{
     conf::{

@@ -3,7 +3,7 @@
 //! timing: driver tests poll for a state with a generous bound.
 #![cfg(feature = "simulator")]
 
-mod common;
+use crate::common;
 
 use common::{eventually, root, start_conf, world_path};
 use std::{path::Path, sync::Arc, time::Duration};

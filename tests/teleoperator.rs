@@ -2,7 +2,7 @@
 //! move the simulated robot and its camera; the name space changes them.
 #![cfg(all(feature = "teleoperator", feature = "simulator"))]
 
-mod common;
+use crate::common;
 
 use common::{poll_until, start_conf, world_path};
 use std::{sync::Arc, time::Duration};

@@ -3,7 +3,7 @@
 //! and their panels through egui_kittest (headless: no display, no GPU).
 #![cfg(all(feature = "imagefile", feature = "gui"))]
 
-mod common;
+use crate::common;
 
 use common::{eventually, panel_harness, root, start_conf};
 use std::sync::Arc;

@@ -4,7 +4,7 @@
 //! what a foreign program could (garbage included).
 #![cfg(all(feature = "zenoh", feature = "simulator", feature = "introrob"))]
 
-mod common;
+use crate::common;
 
 use std::{
     path::Path,

@@ -6,7 +6,7 @@
 //! without it the test skips with a note, but FAILS under `CI`.
 #![cfg(all(feature = "zenoh", feature = "simulator"))]
 
-mod common;
+use crate::common;
 
 use std::process::{Command, Stdio};
 

@@ -646,9 +646,10 @@ impl Link {
                 i.accept_with(&self.from, |l| {
                     l.readings.clear();
                     l.readings.extend_from_slice(&readings);
-                    if l.resolution <= 0.0 {
-                        l.resolution = (readings.len() as f32 / 180.0).max(f32::MIN_POSITIVE);
-                    }
+                    // 4.3's wire carries only the readings, of 4.3's laser: 180°
+                    // from −90° (docs/network.md).
+                    l.resolution = (readings.len() as f32 / 180.0).max(f32::MIN_POSITIVE);
+                    l.start = crate::interfaces::JDE43_LASER_START;
                 });
             }
             (

@@ -74,7 +74,7 @@ use std::{
 
 use crate::{
     conf::ComponentConf,
-    interfaces::{Image, Interface, Interfaces, Motors, PtMotors, Source, limit},
+    interfaces::{Image, Interface, Interfaces, Motors, Mount, PtMotors, Source, limit},
     runtime::{self, Backoff, Driver, Runtime, Supervision, Supervisor},
 };
 
@@ -676,7 +676,7 @@ impl PlayerDriver {
                 }
                 Provided::Laser(n, r) => Binding::Sink(Sink::Laser(
                     ifaces.provide(&w.name, provider)?,
-                    LaserMap::new(*n, *r),
+                    LaserMap::new(*n, *r).mounted(Mount::PIONEER_LASER),
                 )),
                 Provided::Sonars => Binding::Sink(Sink::Sonars(ifaces.provide(&w.name, provider)?)),
                 Provided::Bumpers => {

@@ -2,7 +2,7 @@
 //! pan-tilt unit), rolling balls and collisions, advanced by [`Sim::step`]. A plain
 //! struct with no threads, deterministic for a given seed.
 
-use crate::interfaces::{Encoders, Imu, Motors, PtEncoders, PtMotors};
+use crate::interfaces::{Encoders, Imu, Motors, Mount, PtEncoders, PtMotors};
 
 use crate::world::{Ball, Point2, Segment, World, closest_on_segment};
 
@@ -119,7 +119,7 @@ impl Default for RobotModel {
             laser_count: 180,
             laser_resolution: 1.0,
             laser_range: 8000.0,
-            laser_pos: [19.0, 0.0],
+            laser_pos: [Mount::PIONEER_LASER.x as f64, Mount::PIONEER_LASER.y as f64],
             sonars: PIONEER_SONARS.to_vec(),
             sonar_range: 5000.0,
             sonar_aperture: 12.5,

@@ -1,7 +1,7 @@
 //! Range sensors: the laser, the sonar ring and the bumpers. In this 2D world
 //! every obstacle (walls, boxes, balls, other robots) is seen at any height.
 
-use crate::interfaces::{Bumpers, Laser, Sonars};
+use crate::interfaces::{Bumpers, Laser, Mount, Sonars};
 
 use crate::world::{Point2, ray_circle};
 
@@ -27,8 +27,9 @@ impl Sim {
         best
     }
 
-    /// Robot `i`'s laser scan into `out` (mm; reading k at −90 + k/resolution deg,
-    /// counter-clockwise; readings with nothing in range give the maximum range).
+    /// Robot `i`'s laser scan into `out` (mm; N readings at R per degree centred
+    /// on the laser's axis, counter-clockwise, the geometry in the value; readings
+    /// with nothing in range give the maximum range).
     pub fn laser(&mut self, i: usize, out: &mut Laser) {
         let Some(r) = self.robots.get(i) else { return };
         let m = &r.model;
@@ -42,8 +43,17 @@ impl Sim {
         let sigma = self.noise.laser;
         out.readings.resize(n, 0);
         out.resolution = res as f32;
+        out.start = Laser::centred_start(n, res);
+        out.min_range = 0.0;
+        out.max_range = max as f32;
+        out.mount = Mount {
+            x: m.laser_pos[0] as f32,
+            y: m.laser_pos[1] as f32,
+            yaw: 0.0,
+        };
+        let start = out.start as f64;
         for k in 0..n {
-            let a = theta + (-90.0 + k as f64 / res).to_radians();
+            let a = theta + (start + k as f64 / res).to_radians();
             let t = self.cast(i, o, [a.cos(), a.sin()], max);
             let t = (t + self.rng.gauss(sigma)).clamp(0.0, max);
             out.readings[k] = t.round() as i32;

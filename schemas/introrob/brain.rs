@@ -230,9 +230,7 @@ impl Brain {
             Behaviour::YourCode => {
                 let r = &mut self.robot;
                 r.robot = input.pose.robot();
-                r.laser.clear();
-                r.laser.extend_from_slice(&input.laser.readings);
-                r.laser_resolution = input.laser.resolution;
+                r.laser.clone_from(input.laser);
                 r.sonars.clear();
                 if let Some(s) = input.sonars {
                     r.sonars.extend_from_slice(&s.us);

@@ -12,7 +12,7 @@
 //! |---|---|---|
 //! | `v`, `w` | `robot.v`, `robot.w` | mm/s, deg/s |
 //! | `robot[5]` | `robot.robot` (also `robot.x()`, `robot.y()`, `robot.theta()`) | x, y mm; θ rad in (0, 2π]; cos θ; sin θ |
-//! | `laser[180]` | `robot.laser` | mm; reading i at −90 + i deg (index 90 straight ahead) |
+//! | `laser[180]` | `robot.laser.readings` | mm; reading i at `robot.laser_angle(i)` deg (4.3's 180: −90 + i, index 90 straight ahead) |
 //! | `us[16]` | `robot.sonars` | mm, Pioneer ring order |
 //! | `bumpers` | `robot.bumpers` | 1 while touching |
 //! | `imagenRGB` | `robot.image` | 320×240 BGR, when the robot has a camera |
@@ -24,7 +24,7 @@
 //! Keep your own memory between iterations in [`YourState`] (add fields to it).
 //! See docs/introrob.md for a short tutorial.
 
-use crate::interfaces::Image;
+use crate::interfaces::{Image, Laser};
 
 /// A colour for your drawings (RGB).
 pub type Rgb = [u8; 3];
@@ -46,10 +46,9 @@ pub struct Robot {
     pub w: f32,
     /// 4.3's `robot[5]`: x mm, y mm, θ rad in (0, 2π], cos θ, sin θ.
     pub robot: [f32; 5],
-    /// Laser ranges, mm; reading i at −90 + i/`laser_resolution` deg.
-    pub laser: Vec<i32>,
-    /// Laser readings per degree (1 for the usual 180 readings).
-    pub laser_resolution: f32,
+    /// The laser scan with its geometry: `laser.readings[i]` mm at
+    /// `laser.angle(i)` degrees (4.3's 180 readings: −90 + i, index 90 straight ahead).
+    pub laser: Laser,
     /// Sonar ranges, mm (empty when the robot has no sonars).
     pub sonars: Vec<f32>,
     /// Bumpers: 1 while touching (5 front left to right, then 5 rear); empty
@@ -95,24 +94,23 @@ impl Robot {
         self.relativas2absolutas(p)
     }
 
-    /// The angle of laser reading `i`, degrees (0 ahead, positive to the left).
+    /// The angle of laser reading `i` in the robot's frame, degrees (0 ahead,
+    /// positive to the left; the scan's own geometry and mounting).
     pub fn laser_angle(&self, i: usize) -> f32 {
-        -90.0 + i as f32 / self.laser_resolution.max(f32::MIN_POSITIVE)
+        self.laser.robot_angle(i)
     }
-    /// Laser reading `i` as a point in the robot's frame (mm; the laser is 19 mm
-    /// ahead of the robot's centre, as on the Pioneer).
+    /// Laser reading `i` as a point in the robot's frame (mm, from where the laser
+    /// is mounted).
     pub fn laser_point(&self, i: usize) -> Option<[f32; 2]> {
-        let r = *self.laser.get(i)? as f32;
-        let a = self.laser_angle(i).to_radians();
-        Some([LASER_X + r * a.cos(), r * a.sin()])
+        (i < self.laser.readings.len()).then(|| self.laser.robot_point(i))
     }
     /// The shortest laser range (mm) between angles `from_deg` and `to_deg`
     /// (0 ahead, positive to the left), or `None` without readings there.
     pub fn min_laser(&self, from_deg: f32, to_deg: f32) -> Option<f32> {
         let (lo, hi) = (from_deg.min(to_deg), from_deg.max(to_deg));
-        (0..self.laser.len())
+        (0..self.laser.readings.len())
             .filter(|&i| (lo..=hi).contains(&self.laser_angle(i)))
-            .map(|i| self.laser[i] as f32)
+            .map(|i| self.laser.readings[i] as f32)
             .reduce(f32::min)
     }
 
@@ -127,9 +125,6 @@ impl Robot {
         self.drawings.push(Drawing { a, b, color });
     }
 }
-
-/// Where the laser sits on the robot, mm ahead of its centre (R430 libs/pioneer).
-pub const LASER_X: f32 = 19.0;
 
 /// 4.3's formula: x' = x·c + y·s − X·c − Y·s; y' = y·c − x·s + X·s − Y·c, with
 /// (X, Y, c, s) = `robot[0]`, `robot[1]`, `robot[3]`, `robot[4]`.

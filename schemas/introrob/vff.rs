@@ -13,7 +13,7 @@
 
 use crate::interfaces::{Encoders, Laser, Motors, limit};
 
-use super::navigation::{LASER_X, absolute_to_relative};
+use super::navigation::absolute_to_relative;
 
 /// Tuning of the controller (all lengths in mm, speeds in mm/s and deg/s).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -74,16 +74,10 @@ pub struct VffOutput {
     pub arrived: bool,
 }
 
-/// The laser reading `i`'s obstacle in the robot's frame, mm.
+/// The laser reading `i`'s obstacle in the robot's frame, mm (the scan's own
+/// geometry and mounting).
 pub fn laser_point(laser: &Laser, i: usize) -> [f32; 2] {
-    let res = if laser.resolution > 0.0 {
-        laser.resolution
-    } else {
-        1.0
-    };
-    let a = (-90.0 + i as f32 / res).to_radians();
-    let r = laser.readings.get(i).copied().unwrap_or(0).max(0) as f32;
-    [LASER_X + r * a.cos(), r * a.sin()]
+    laser.robot_point(i)
 }
 
 /// Smallest clearance (mm from the robot's edge) of the laser obstacles within
@@ -106,12 +100,8 @@ pub fn forces(pose: &Encoders, laser: &Laser, target: [f32; 2], p: &VffParams) -
     } else {
         [0.0, 0.0]
     };
-    let per_degree = 1.0
-        / if laser.resolution > 0.0 {
-            laser.resolution
-        } else {
-            1.0
-        };
+    // Each reading weighs its angular width, so any resolution gives the same force.
+    let per_degree = laser.step();
     let mut rep = [0.0f32, 0.0];
     let influence = p.influence.max(1.0);
     for i in 0..laser.readings.len() {

@@ -187,13 +187,11 @@ pub fn raw_image(frame: &str, t: SystemTime, img: &Image) -> RawImage {
     }
 }
 
-/// The laser at 19 mm ahead of the robot's centre (as the recorder writes it).
-const LASER_X: f64 = 0.019;
-
 /// A `foxglove.LaserScan` of jderobot's laser: ranges m, reading i at
-/// −90° + i/resolution deg (the recorder's layout, `mcapfmt::protobuf`).
+/// start + i/resolution deg, the pose the laser's mount (the recorder's layout,
+/// `mcapfmt::protobuf`).
 pub fn laser_scan(t: SystemTime, l: &Laser) -> LaserScan {
-    let start = -std::f64::consts::FRAC_PI_2;
+    let start = (l.start as f64).to_radians();
     let steps = l.readings.len().saturating_sub(1).max(1) as f64;
     let end = if l.resolution > 0.0 && l.resolution.is_finite() {
         start + (steps / l.resolution as f64).to_radians()
@@ -204,8 +202,8 @@ pub fn laser_scan(t: SystemTime, l: &Laser) -> LaserScan {
         timestamp: stamp(t),
         frame_id: BASE.into(),
         pose: Some(Pose {
-            position: v3(LASER_X, 0.0, 0.0),
-            orientation: Some(yaw(0.0)),
+            position: v3(l.mount.x as f64 / 1000.0, l.mount.y as f64 / 1000.0, 0.0),
+            orientation: Some(yaw((l.mount.yaw as f64).to_radians())),
         }),
         start_angle: start,
         end_angle: end,
@@ -388,6 +386,7 @@ mod tests {
             &Laser {
                 readings: vec![1000, 2500, 0],
                 resolution: 1.0,
+                ..Laser::default()
             },
         );
         assert_eq!(l.ranges, vec![1.0, 2.5, 0.0]);

@@ -295,6 +295,9 @@ impl Wire for Image {
     }
 }
 
+/// u32 n, f32 resolution, n × i32 mm, then the geometry: f32 start (deg), min_range,
+/// max_range (mm), mount x, y (mm), yaw (deg). A sample without the geometry (an
+/// older peer) reads as 4.3's.
 impl Wire for Laser {
     fn put(&self, out: &mut Vec<u8>) {
         out.extend_from_slice(&(self.readings.len() as u32).to_le_bytes());
@@ -302,27 +305,49 @@ impl Wire for Laser {
         for r in &self.readings {
             out.extend_from_slice(&r.to_le_bytes());
         }
+        for g in self.geometry() {
+            out.extend_from_slice(&g.to_le_bytes());
+        }
     }
     fn take(b: &[u8]) -> Result<Self, WireError> {
         let mut r = Bytes(b);
         let n = r.u32("the reading count")? as usize;
         let resolution = r.f32("resolution")?;
-        if n.checked_mul(4) != Some(r.0.len()) {
-            return Err(format!(
-                "{n} laser readings announced but {} bytes follow",
-                r.0.len()
-            ));
-        }
+        let size = n.checked_mul(4);
+        let geometry = match size {
+            Some(s) if s == r.0.len() => None,
+            Some(s) if s.checked_add(GEOMETRY_BYTES) == Some(r.0.len()) => {
+                Some(r.0.split_off(s..).unwrap_or_default())
+            }
+            _ => {
+                return Err(format!(
+                    "{n} laser readings announced but {} bytes follow",
+                    r.0.len()
+                ));
+            }
+        };
         let readings =
             r.0.chunks_exact(4)
                 .map(|c| i32::from_le_bytes(c.try_into().expect("4")))
                 .collect();
-        Ok(Laser {
+        let mut l = Laser {
             readings,
             resolution,
-        })
+            ..Laser::default()
+        };
+        if let Some(g) = geometry {
+            let f: Vec<f32> = g
+                .chunks_exact(4)
+                .map(|c| f32::from_le_bytes(c.try_into().expect("4")))
+                .collect();
+            l.set_geometry(f.try_into().expect("6 floats"));
+        }
+        Ok(l)
     }
 }
+
+/// The bytes of a laser sample's geometry trailer: 6 f32.
+const GEOMETRY_BYTES: usize = 24;
 
 impl Wire for Sonars {
     fn put(&self, out: &mut Vec<u8>) {
@@ -366,7 +391,14 @@ mod tests {
         assert_eq!(T::take(&b).unwrap(), v);
         // Any cut is an error, never a panic.
         for n in 0..b.len() {
-            assert!(T::take(&b[..n]).is_err() || T::KIND == "bumpers" || T::KIND == "sonars");
+            // A laser without its geometry trailer is an older peer's, and valid.
+            let old_laser = T::KIND == "laser" && n == b.len() - GEOMETRY_BYTES;
+            assert!(
+                T::take(&b[..n]).is_err()
+                    || T::KIND == "bumpers"
+                    || T::KIND == "sonars"
+                    || old_laser
+            );
         }
         b.push(0);
         assert!(T::take(&b).is_err(), "{}: a byte too many", T::KIND);
@@ -382,6 +414,7 @@ mod tests {
         round_trip(Laser {
             readings: vec![1, -2, 30000],
             resolution: 1.0,
+            ..Laser::default()
         });
         round_trip(Sonars { us: vec![1.5, 2.5] });
         round_trip(Bumpers {
@@ -425,9 +458,20 @@ mod tests {
         Laser {
             readings: vec![1000],
             resolution: 1.0,
+            ..Laser::default()
         }
         .put(&mut b);
-        assert_eq!(b, [1, 0, 0, 0, 0, 0, 0x80, 0x3f, 0xe8, 3, 0, 0]);
+        assert_eq!(&b[..12], [1, 0, 0, 0, 0, 0, 0x80, 0x3f, 0xe8, 3, 0, 0]);
+        // The geometry: start −90°, 0 to 8000 mm, mounted at the centre.
+        let floats: Vec<u8> = [-90.0f32, 0.0, 8000.0, 0.0, 0.0, 0.0]
+            .iter()
+            .flat_map(|f| f.to_le_bytes())
+            .collect();
+        assert_eq!(&b[12..], floats);
+        assert_eq!(
+            Laser::take(&b[..12]).unwrap(),
+            Laser::jde43(vec![1000], 1.0)
+        );
         let t = UNIX_EPOCH + Duration::from_nanos(5);
         assert_eq!(read_attachment(&attachment(7, t)), Some((7, t)));
         assert_eq!(

@@ -1,8 +1,9 @@
-//! 4.3's laser from any scan: N readings at R per degree (reading i at
-//! −N/(2R) + i/R degrees), each the nearest ray of the scan, in mm. The player
-//! and gazebo drivers resample their scans through it.
+//! 4.3's laser from any scan: N readings at R per degree centred on the laser's
+//! axis (reading i at −N/(2R) + i/R degrees, the value's `start` saying so), each
+//! the nearest ray of the scan, in mm. The player and gazebo drivers resample their
+//! scans through it; the value carries the geometry, so a 360° scan stays 360°.
 
-use super::Laser;
+use super::{Laser, Mount};
 
 /// Maps a scan's rays to the asked N readings at R per degree, as 4.3 did, with
 /// the ray of each reading cached per scan geometry.
@@ -10,6 +11,8 @@ use super::Laser;
 pub struct LaserMap {
     pub n: usize,
     pub per_deg: f64,
+    /// Where the laser sits on the robot (the driver's knowledge).
+    pub mount: Mount,
     /// The geometry the table is for: first angle, step (bits), ray count.
     key: (u64, u64, usize),
     /// The ray of each reading; `usize::MAX`: outside the scan.
@@ -18,12 +21,24 @@ pub struct LaserMap {
 
 impl LaserMap {
     pub fn new(n: usize, per_deg: f64) -> LaserMap {
+        debug_assert!(per_deg > 0.0, "a declared resolution is positive");
         LaserMap {
             n,
             per_deg,
+            mount: Mount::default(),
             key: (0, 0, usize::MAX),
             table: Vec::new(),
         }
+    }
+
+    /// The map for a laser mounted at `mount` on the robot.
+    pub fn mounted(self, mount: Mount) -> LaserMap {
+        LaserMap { mount, ..self }
+    }
+
+    /// The angle of reading 0, degrees: the N readings centred on the laser's axis.
+    pub fn start(&self) -> f32 {
+        Laser::centred_start(self.n, self.per_deg)
     }
 
     fn table(&mut self, min: f64, step: f64, count: usize) -> &[usize] {
@@ -32,7 +47,7 @@ impl LaserMap {
             self.key = key;
             self.table.clear();
             for i in 0..self.n {
-                let deg = -(self.n as f64) / (2.0 * self.per_deg) + i as f64 / self.per_deg;
+                let deg = self.start() as f64 + i as f64 / self.per_deg;
                 let k = if step.abs() > 0.0 && step.is_finite() {
                     ((deg.to_radians() - min) / step).round()
                 } else {
@@ -49,8 +64,10 @@ impl LaserMap {
     }
 
     /// Fills `out` (mm) from a scan of `count` rays, the first at `min` rad and
-    /// each `step` rad further, ray k being `range(k)` metres. A reading outside
-    /// the scan, or whose ray has no return (inf, NaN, negative), is `max_range`.
+    /// each `step` rad further, ray k being `range(k)` metres, and sets its
+    /// geometry (start, resolution, range limits, the map's mount). A
+    /// reading outside the scan, or whose ray has no return (inf, NaN, negative), is
+    /// `max_range`.
     pub fn fill(
         &mut self,
         min: f64,
@@ -67,6 +84,10 @@ impl LaserMap {
             0
         };
         out.resolution = self.per_deg as f32;
+        out.start = self.start();
+        out.max_range = max_mm as f32;
+        out.min_range = 0.0;
+        out.mount = self.mount;
         let t = self.table(min, step, count);
         out.readings.clear();
         out.readings.extend(t.iter().map(|&k| {

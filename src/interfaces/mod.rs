@@ -58,9 +58,10 @@ pub use names::{STANDARD_NAMES, canonical, family, interface_name};
 pub use source::Source;
 pub use table::{InUse, InterfaceError, Interfaces};
 pub use values::{
-    Bumpers, COLOR_HEIGHT, COLOR_WIDTH, Encoders, Image, Imu, InterfaceValue, Laser,
-    MAX_ACCELERATION, MAX_ANGLE_DEG, MAX_ANGULAR_VELOCITY, MAX_POSITION_MM, MAX_PT_SPEED, Motors,
-    PtEncoders, PtMotors, RANGES, Sonars, ZoomEncoders, ZoomMotors, limit,
+    Bumpers, COLOR_HEIGHT, COLOR_WIDTH, Encoders, Image, Imu, InterfaceValue,
+    JDE43_LASER_MAX_RANGE, JDE43_LASER_START, Laser, MAX_ACCELERATION, MAX_ANGLE_DEG,
+    MAX_ANGULAR_VELOCITY, MAX_POSITION_MM, MAX_PT_SPEED, Motors, Mount, PtEncoders, PtMotors,
+    RANGES, Sonars, ZoomEncoders, ZoomMotors, limit,
 };
 
 #[cfg(test)]
@@ -224,7 +225,8 @@ mod tests {
         assert!(
             l.publish(Laser {
                 readings: vec![100, -5],
-                resolution: 1.0
+                resolution: 1.0,
+                ..Laser::default()
             })
             .is_err()
         );

@@ -43,7 +43,11 @@ pub const RANGES: &[(&str, &str)] = &[
         "image",
         "data is width x height x 3 bytes; colorA..D are 320x240",
     ),
-    ("laser", "readings >= 0 mm; resolution >= 0 readings/deg"),
+    (
+        "laser",
+        "readings >= 0 mm; resolution >= 0 readings/deg; start in [-360, 360] deg; \
+         0 <= min_range <= max_range <= 1e6 mm; mount |x|, |y| <= 1e5 mm, yaw in [-360, 360] deg",
+    ),
     ("sonars", "us >= 0 mm"),
     (
         "encoders",
@@ -215,22 +219,158 @@ impl InterfaceValue for Image {
     }
 }
 
-/// Laser ranges in mm, counter-clockwise from the robot's right; with 180 readings
-/// at 1 per degree, index 90 is straight ahead (reading i is at −90 + i/resolution deg).
-#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+/// A laser scan and its geometry: ranges in mm, reading `i` at
+/// [`angle(i)`](Laser::angle) = `start + i / resolution` degrees, counter-clockwise
+/// from the laser's forward axis (REP 103's convention), the laser mounted on the
+/// robot at [`mount`](Laser::mount). 4.3's laser is the default geometry: 180
+/// readings at 1 per degree from −90°, so index 90 is straight ahead.
+///
+/// The value is the one owner of its geometry: every consumer (VFF, the views,
+/// Foxglove, the recorder, ROS 2, the wires) takes angles from it and never assumes
+/// 4.3's −90°.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Laser {
+    /// Ranges, mm; a reading of `max_range` is "no return".
     pub readings: Vec<i32>,
-    /// Readings per degree.
+    /// Readings per degree (4.3's field): the angle step is `1 / resolution` degrees.
     pub resolution: f32,
+    /// The angle of reading 0, degrees counter-clockwise from the laser's forward axis.
+    pub start: f32,
+    /// The nearest range the laser measures, mm.
+    pub min_range: f32,
+    /// The farthest range the laser measures, mm.
+    pub max_range: f32,
+    /// Where the laser sits on the robot.
+    pub mount: Mount,
+}
+
+/// Where a sensor sits on the robot: `x` mm forward and `y` mm to the left of the
+/// robot's centre, turned `yaw` degrees counter-clockwise (REP 103's base_link).
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Mount {
+    pub x: f32,
+    pub y: f32,
+    pub yaw: f32,
+}
+
+impl Mount {
+    /// A Pioneer's laser: 19 mm ahead of the robot's centre (R430 libs/pioneer),
+    /// the simulator's robot and Player's default.
+    pub const PIONEER_LASER: Mount = Mount {
+        x: 19.0,
+        y: 0.0,
+        yaw: 0.0,
+    };
+}
+
+/// 4.3's laser: reading 0 at −90°.
+pub const JDE43_LASER_START: f32 = -90.0;
+/// 4.3's laser (a SICK LMS): ranges up to 8 m.
+pub const JDE43_LASER_MAX_RANGE: f32 = 8000.0;
+
+impl Default for Laser {
+    fn default() -> Self {
+        Laser {
+            readings: Vec::new(),
+            resolution: 1.0,
+            start: JDE43_LASER_START,
+            min_range: 0.0,
+            max_range: JDE43_LASER_MAX_RANGE,
+            mount: Mount::default(),
+        }
+    }
+}
+
+impl Laser {
+    /// Readings at `resolution` per degree in 4.3's geometry (from −90°, up to 8 m,
+    /// at the robot's centre); set the other fields for any other laser.
+    pub fn jde43(readings: Vec<i32>, resolution: f32) -> Laser {
+        Laser {
+            readings,
+            resolution,
+            ..Laser::default()
+        }
+    }
+
+    /// The start angle (degrees) of `n` readings at `resolution` per degree centred
+    /// on the laser's axis, as drivers declare them (`provides laser N R`): −90° for
+    /// 4.3's 180 at 1 per degree, −180° for 360.
+    pub fn centred_start(n: usize, resolution: f64) -> f32 {
+        (-(n as f64) / (2.0 * resolution)) as f32
+    }
+
+    /// Degrees between two readings (1° for a resolution that is not positive).
+    pub fn step(&self) -> f32 {
+        if self.resolution > 0.0 && self.resolution.is_finite() {
+            1.0 / self.resolution
+        } else {
+            1.0
+        }
+    }
+
+    /// The angle of reading `i`, degrees counter-clockwise from the laser's axis.
+    pub fn angle(&self, i: usize) -> f32 {
+        self.start + i as f32 * self.step()
+    }
+
+    /// The angle of the last reading, degrees (`start` when there is none).
+    pub fn end(&self) -> f32 {
+        self.angle(self.readings.len().saturating_sub(1))
+    }
+
+    /// The angle of reading `i` in the robot's frame, degrees (the mount's yaw added).
+    pub fn robot_angle(&self, i: usize) -> f32 {
+        self.angle(i) + self.mount.yaw
+    }
+
+    /// Reading `i` as a point in the robot's frame, mm.
+    pub fn robot_point(&self, i: usize) -> [f32; 2] {
+        let r = self.readings.get(i).copied().unwrap_or(0) as f32;
+        let a = self.robot_angle(i).to_radians();
+        [self.mount.x + r * a.cos(), self.mount.y + r * a.sin()]
+    }
+
+    /// The reading nearest to `deg` degrees in the laser's frame, if the scan covers it.
+    pub fn index_at(&self, deg: f32) -> Option<usize> {
+        let k = ((deg - self.start) / self.step()).round();
+        (k >= 0.0 && (k as usize) < self.readings.len()).then_some(k as usize)
+    }
+
+    /// The geometry as six numbers (start deg, min_range mm, max_range mm, mount x
+    /// mm, y mm, yaw deg), the order byte layouts carry it in.
+    pub fn geometry(&self) -> [f32; 6] {
+        let m = self.mount;
+        [self.start, self.min_range, self.max_range, m.x, m.y, m.yaw]
+    }
+
+    /// Sets the geometry from [`geometry`](Self::geometry)'s six numbers.
+    pub fn set_geometry(&mut self, g: [f32; 6]) {
+        let [start, min_range, max_range, x, y, yaw] = g;
+        (self.start, self.min_range, self.max_range) = (start, min_range, max_range);
+        self.mount = Mount { x, y, yaw };
+    }
+
+    /// Whether reading `r` (mm) is a return: within the laser's range and below its
+    /// maximum ("no return" is reported as the maximum).
+    pub fn is_return(&self, r: i32) -> bool {
+        let r = r as f32;
+        r >= self.min_range && r < self.max_range
+    }
 }
 
 impl InterfaceValue for Laser {
     const KIND: &'static str = "laser";
     fn describe(&self) -> String {
         let mut s = format!(
-            "number={} resolution={} readings/deg readings(mm)=[",
+            "number={} resolution={} readings/deg start={} deg range=[{}, {}] mm mount=({}, {}) mm {} deg readings(mm)=[",
             self.readings.len(),
-            self.resolution
+            self.resolution,
+            self.start,
+            self.min_range,
+            self.max_range,
+            self.mount.x,
+            self.mount.y,
+            self.mount.yaw
         );
         for (i, r) in self.readings.iter().enumerate() {
             if i > 0 {
@@ -250,12 +390,44 @@ impl InterfaceValue for Laser {
             f32::MAX,
             "readings/deg",
         )?;
+        within(name, "start", self.start, -360.0, 360.0, "deg")?;
+        within(name, "min_range", self.min_range, 0.0, MAX_RANGE_MM, "mm")?;
+        within(
+            name,
+            "max_range",
+            self.max_range,
+            self.min_range,
+            MAX_RANGE_MM,
+            "mm",
+        )?;
+        within(
+            name,
+            "mount.x",
+            self.mount.x,
+            -MAX_MOUNT_MM,
+            MAX_MOUNT_MM,
+            "mm",
+        )?;
+        within(
+            name,
+            "mount.y",
+            self.mount.y,
+            -MAX_MOUNT_MM,
+            MAX_MOUNT_MM,
+            "mm",
+        )?;
+        within(name, "mount.yaw", self.mount.yaw, -360.0, 360.0, "deg")?;
         if let Some((i, r)) = self.readings.iter().enumerate().find(|(_, r)| **r < 0) {
             return Err(format!("{name}: reading {i} is {r} mm; a range is >= 0 mm"));
         }
         Ok(())
     }
 }
+
+/// The farthest range a laser value may carry, mm (1 km: beyond any lidar).
+pub const MAX_RANGE_MM: f32 = 1e6;
+/// The farthest a sensor may be mounted from the robot's centre, mm.
+pub const MAX_MOUNT_MM: f32 = 1e5;
 
 /// Sonar ranges in mm, one per sonar (Pioneer ring order).
 #[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]

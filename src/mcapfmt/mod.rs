@@ -38,7 +38,7 @@
 //! and [`StepGate`] are what the recorder and replay export in the name space
 //! (keys `recorder.status` and `replay.step`) for the shell.
 
-mod protobuf;
+pub mod protobuf;
 pub mod reader;
 pub mod ros2;
 mod status;
@@ -594,6 +594,7 @@ mod tests {
             Recorded::Laser(Laser {
                 readings: vec![1, 8000, 123, -1],
                 resolution: 1.0,
+                ..Laser::default()
             }),
             Recorded::Encoders(Encoders {
                 x: 1000.25,

@@ -14,7 +14,7 @@
 //! | `foxglove.Pose` | 1 position (`Vector3`: 1 x, 2 y, 3 z), 2 orientation (`Quaternion`: 1 x, 2 y, 3 z, 4 w), doubles |
 
 use super::{FormatError, Recorded, bad};
-use crate::interfaces::{Image, Laser};
+use crate::interfaces::{Image, Laser, Mount};
 
 /// `foxglove.RawImage`'s FileDescriptorSet (Foxglove's, see `assets/foxglove`).
 pub const RAW_IMAGE: &[u8] = include_bytes!("../../assets/foxglove/RawImage.fdset");
@@ -22,9 +22,6 @@ pub const RAW_IMAGE: &[u8] = include_bytes!("../../assets/foxglove/RawImage.fdse
 pub const COMPRESSED_IMAGE: &[u8] = include_bytes!("../../assets/foxglove/CompressedImage.fdset");
 /// `foxglove.LaserScan`'s FileDescriptorSet.
 pub const LASER_SCAN: &[u8] = include_bytes!("../../assets/foxglove/LaserScan.fdset");
-
-/// The laser's first reading: −90° (jderobot: reading i is at −90 + i/resolution deg).
-pub const START_ANGLE: f64 = -std::f64::consts::FRAC_PI_2;
 
 const VARINT: u64 = 0;
 const I64: u64 = 1;
@@ -119,25 +116,34 @@ fn steps(n: usize) -> f64 {
 }
 
 /// Encodes a `foxglove.LaserScan` into `out`: ranges in m (the mm readings / 1000,
-/// exact in a double), the laser at x = 0.019 m, `start_angle` −π/2 and `end_angle`
-/// the last reading's angle (−π/2 + (n−1)/resolution deg in rad), from which the
-/// resolution comes back exactly (a resolution ≤ 0 is written as `end_angle` =
-/// `start_angle` and reads back as 0).
+/// exact in a double), the pose the laser's mount on the robot (m, a yaw
+/// quaternion), `start_angle` the scan's first angle and `end_angle` its last
+/// (start + (n−1)/resolution deg, in rad), from which the resolution comes back
+/// exactly (a resolution ≤ 0 is written as `end_angle` = `start_angle` and reads
+/// back as 0). The one LaserScan encoder: the recorder, replay and Foxglove use it.
 pub fn laser_scan(frame_id: &str, ns: u64, l: &Laser, out: &mut Vec<u8>) {
     out.clear();
     let mut w = Writer(out);
     w.timestamp(1, ns);
     w.bytes(2, frame_id.as_bytes());
+    let half_yaw = (l.mount.yaw as f64).to_radians() / 2.0;
     w.message(3, |w| {
-        w.message(1, |w| w.double(1, 0.019));
-        w.message(2, |w| w.double(4, 1.0));
+        w.message(1, |w| {
+            w.double(1, l.mount.x as f64 / 1000.0);
+            w.double(2, l.mount.y as f64 / 1000.0);
+        });
+        w.message(2, |w| {
+            w.double(3, half_yaw.sin());
+            w.double(4, half_yaw.cos());
+        });
     });
+    let start = (l.start as f64).to_radians();
     let end = if l.resolution > 0.0 && l.resolution.is_finite() {
-        START_ANGLE + (steps(l.readings.len()) / l.resolution as f64).to_radians()
+        start + (steps(l.readings.len()) / l.resolution as f64).to_radians()
     } else {
-        START_ANGLE
+        start
     };
-    w.double(4, START_ANGLE);
+    w.double(4, start);
     w.double(5, end);
     if !l.readings.is_empty() {
         w.tag(6, LEN);
@@ -329,10 +335,12 @@ pub fn decode_laser(
 ) -> Result<(u64, Recorded), FormatError> {
     let mut time = log_time;
     let (mut start, mut end) = (0.0f64, 0.0f64);
+    let mut mount = Mount::default();
     let mut readings = Vec::new();
     for f in Fields::new(topic, data) {
         match f? {
             (1, Value::Len(b)) => time = timestamp(topic, b)?,
+            (3, Value::Len(b)) => mount = pose(topic, b)?,
             (4, Value::I64(b)) => start = f64::from_le_bytes(b),
             (5, Value::I64(b)) => end = f64::from_le_bytes(b),
             (6, Value::Len(b)) => {
@@ -359,13 +367,53 @@ pub fn decode_laser(
     } else {
         0.0
     };
+    let max_range = readings.iter().copied().max().unwrap_or(0) as f32;
     Ok((
         time,
         Recorded::Laser(Laser {
             readings,
             resolution,
+            start: start.to_degrees() as f32,
+            // foxglove.LaserScan has no range limits: 4.3's, or beyond the farthest reading.
+            max_range: max_range.max(crate::interfaces::JDE43_LASER_MAX_RANGE),
+            mount,
+            ..Laser::default()
         }),
     ))
+}
+
+/// A `foxglove.Pose` as a mount on the robot: position in mm, the yaw of the
+/// orientation quaternion in degrees.
+fn pose(topic: &str, data: &[u8]) -> Result<Mount, FormatError> {
+    let (mut p, mut q) = ([0.0f64; 3], [0.0, 0.0, 0.0, 1.0f64]);
+    for f in Fields::new(topic, data) {
+        match f? {
+            (1, Value::Len(b)) => doubles(topic, "Vector3", b, &mut p)?,
+            (2, Value::Len(b)) => doubles(topic, "Quaternion", b, &mut q)?,
+            (n @ (1 | 2), _) => return Err(wrong(topic, "Pose", n)),
+            _ => {}
+        }
+    }
+    let yaw = (2.0 * (q[3] * q[2] + q[0] * q[1])).atan2(1.0 - 2.0 * (q[1] * q[1] + q[2] * q[2]));
+    Ok(Mount {
+        x: (p[0] * 1000.0) as f32,
+        y: (p[1] * 1000.0) as f32,
+        yaw: yaw.to_degrees() as f32,
+    })
+}
+
+/// The double fields 1..=N of a message into `out`.
+fn doubles(topic: &str, message: &str, data: &[u8], out: &mut [f64]) -> Result<(), FormatError> {
+    for f in Fields::new(topic, data) {
+        match f? {
+            (n, Value::I64(b)) if (1..=out.len() as u64).contains(&n) => {
+                out[n as usize - 1] = f64::from_le_bytes(b)
+            }
+            (n, _) if (1..=out.len() as u64).contains(&n) => return Err(wrong(topic, message, n)),
+            _ => {}
+        }
+    }
+    Ok(())
 }
 
 /// A range in m as jderobot's whole mm (out-of-range values saturate, NaN is 0).
@@ -409,22 +457,62 @@ mod tests {
             10.0,
             100.0,
         ] {
-            for n in [0usize, 1, 2, 3, 90, 181, 361, 683, 1081] {
+            for (n, start, mount) in [
+                (0usize, -90.0, Mount::default()),
+                (1, -90.0, Mount::PIONEER_LASER),
+                (2, -180.0, Mount::default()),
+                (3, -45.0, Mount::default()),
+                (90, -45.0, Mount::PIONEER_LASER),
+                (181, -90.0, Mount::PIONEER_LASER),
+                (361, -180.0, Mount::default()),
+                (
+                    683,
+                    -120.0,
+                    Mount {
+                        x: 100.0,
+                        y: -50.0,
+                        yaw: 90.0,
+                    },
+                ),
+                (
+                    1081,
+                    -135.0,
+                    Mount {
+                        x: -20.0,
+                        y: 0.0,
+                        yaw: -30.0,
+                    },
+                ),
+            ] {
                 let l = Laser {
                     readings: (0..n as i32)
                         .map(|i| i * 37 - 5 + i32::MAX / 2 * (i % 2))
+                        .map(|r| r.max(0))
                         .collect(),
                     resolution: res,
+                    start,
+                    mount,
+                    ..Laser::default()
                 };
                 laser_scan("laser", 5, &l, &mut out);
                 let (t, back) = decode_laser("laser", &out, 0).unwrap();
                 assert_eq!(t, 5);
-                assert_eq!(back, Recorded::Laser(l), "resolution {res}, {n} readings");
+                let Recorded::Laser(back) = back else {
+                    panic!("not a laser")
+                };
+                let what = format!("resolution {res}, {n} readings");
+                assert_eq!(back.readings, l.readings, "{what}");
+                assert_eq!(back.resolution, l.resolution, "{what}");
+                assert!((back.start - l.start).abs() < 1e-4, "{what}");
+                assert!((back.mount.x - l.mount.x).abs() < 1e-3, "{what}");
+                assert!((back.mount.y - l.mount.y).abs() < 1e-3, "{what}");
+                assert!((back.mount.yaw - l.mount.yaw).abs() < 1e-3, "{what}");
             }
         }
         let l = Laser {
             readings: vec![1, 2],
             resolution: 0.0,
+            ..Laser::default()
         };
         laser_scan("laser", 5, &l, &mut out);
         assert_eq!(

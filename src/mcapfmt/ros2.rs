@@ -218,22 +218,19 @@ const LASER_SCAN: Message = Message {
 
 impl Ros2 for Laser {
     const MESSAGE: Option<&'static Message> = Some(&LASER_SCAN);
+    /// REP 103: counter-clockwise radians and metres, from the value's geometry
+    /// (the mount is the laser frame's transform, not part of the message).
     fn to_cdr(&self, name: &str, time: SystemTime, w: &mut Writer) {
         w.header(time, name);
-        let res = if self.resolution > 0.0 {
-            self.resolution
-        } else {
-            1.0
-        };
-        let inc = (1.0 / res as f64).to_radians();
-        let min = -std::f64::consts::FRAC_PI_2;
+        let inc = (self.step() as f64).to_radians();
+        let min = (self.start as f64).to_radians();
         w.f32(min as f32);
-        w.f32((min + inc * (self.readings.len().max(1) - 1) as f64) as f32);
+        w.f32((min + inc * self.readings.len().saturating_sub(1) as f64) as f32);
         w.f32(inc as f32);
         w.f32(0.0);
         w.f32(0.0);
-        w.f32(0.0);
-        w.f32(8.0);
+        w.f32(self.min_range / 1000.0);
+        w.f32(self.max_range / 1000.0);
         w.u32(self.readings.len() as u32);
         for r in &self.readings {
             w.f32(*r as f32 / 1000.0);
@@ -242,12 +239,13 @@ impl Ros2 for Laser {
     }
     fn from_cdr(r: &mut Reader, _log_time: u64) -> Result<(u64, Self), FormatError> {
         let t = r.header()?;
-        let _min = r.f32()?;
+        let min = r.f32()?;
         let _max = r.f32()?;
         let inc = r.f32()?;
-        for _ in 0..4 {
-            r.f32()?;
-        }
+        let _time_increment = r.f32()?;
+        let _scan_time = r.f32()?;
+        let range_min = r.f32()?;
+        let range_max = r.f32()?;
         let n = r.u32()? as usize;
         if n > r.data.len() / 4 {
             return Err(bad(r.topic, "a LaserScan with more ranges than bytes"));
@@ -261,11 +259,16 @@ impl Ros2 for Laser {
         } else {
             1.0
         };
+        let deg = |rad: f32| ((rad as f64).to_degrees() * 1000.0).round() as f32 / 1000.0;
         Ok((
             t,
             Laser {
                 readings,
                 resolution,
+                start: deg(min),
+                min_range: range_min * 1000.0,
+                max_range: range_max * 1000.0,
+                ..Laser::default()
             },
         ))
     }

@@ -15,19 +15,14 @@ pub fn polar_to_screen(center: Pos2, px_per_mm: f32, angle_deg: f32, range_mm: f
     )
 }
 
-/// Laser readings as (angle from straight ahead in degrees, range mm): reading i is
-/// at −90 + i/resolution degrees.
+/// Laser readings as (angle from the robot's heading in degrees, range mm), the
+/// angles from the scan's own geometry and mounting yaw.
 pub fn laser_points(laser: &Laser) -> Vec<(f32, f32)> {
-    let res = if laser.resolution > 0.0 {
-        laser.resolution
-    } else {
-        1.0
-    };
     laser
         .readings
         .iter()
         .enumerate()
-        .map(|(i, &r)| (-90.0 + i as f32 / res, r as f32))
+        .map(|(i, &r)| (laser.robot_angle(i), r as f32))
         .collect()
 }
 

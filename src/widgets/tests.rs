@@ -65,6 +65,7 @@ fn polar_ahead_is_up_and_left_is_left() {
     let laser = Laser {
         readings: vec![1000; 361],
         resolution: 2.0,
+        ..Laser::default()
     };
     let pts = laser_points(&laser);
     assert_eq!(pts[0].0, -90.0);
@@ -115,6 +116,7 @@ fn relative_and_absolute_coordinates_are_inverse() {
     let laser = Laser {
         readings: vec![800; 181],
         resolution: 1.0,
+        ..Laser::default()
     };
     let hits = laser_to_world(&pose, &laser);
     assert!(close(hits[90][0], 1000.0, 1e-2) && close(hits[90][1], 2800.0, 1e-2));

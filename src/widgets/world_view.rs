@@ -57,14 +57,11 @@ pub fn world_to_relative(pose: &Encoders, p: [f32; 2]) -> [f32; 2] {
     [dx * c + dy * s, dy * c - dx * s]
 }
 
-/// Laser hits in world coordinates (mm) for a robot at `pose`.
+/// Laser hits in world coordinates (mm) for a robot at `pose`, from where the
+/// laser is mounted.
 pub fn laser_to_world(pose: &Encoders, laser: &Laser) -> Vec<[f32; 2]> {
-    laser_points(laser)
-        .into_iter()
-        .map(|(a, r)| {
-            let a = a.to_radians();
-            relative_to_world(pose, [r * a.cos(), r * a.sin()])
-        })
+    (0..laser.readings.len())
+        .map(|i| relative_to_world(pose, laser.robot_point(i)))
         .collect()
 }
 

@@ -403,3 +403,10 @@ pub fn read_png(png: &Path) -> Option<Shot> {
     }
     Some(Shot { w, h, px })
 }
+
+/// The window tests share one X display and read the whole screen: one real
+/// window at a time in a test binary (hold this while the window is open).
+pub fn x_display() -> std::sync::MutexGuard<'static, ()> {
+    static DISPLAY: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    DISPLAY.lock().unwrap_or_else(|e| e.into_inner())
+}

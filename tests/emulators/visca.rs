@@ -38,7 +38,7 @@ use std::{
 
 use parking_lot::Mutex;
 
-use crate::ptu::{open_pty, read_fd, write_fd};
+use super::ptu::{open_pty, read_fd, write_fd};
 
 /// Pan speeds, deg/s, of modes 1..24 (EVI-D100 specification).
 const SPEEDS: [f64; 24] = [

@@ -1,0 +1,66 @@
+//! Helpers the benchmarks share (each bench `mod common;`): medians and
+//! percentiles of rounds, a free loopback port, CPU time of a process or of this
+//! process's threads. One home, so every bench computes its figures the same way.
+#![allow(dead_code)]
+
+/// The median of `v` (the upper one of an even count; NaN when empty).
+pub fn median(v: impl AsRef<[f64]>) -> f64 {
+    percentile(v, 0.5)
+}
+
+/// The `p` quantile of `v`, `p` in [0, 1], nearest rank (NaN when empty).
+pub fn percentile(v: impl AsRef<[f64]>, p: f64) -> f64 {
+    let mut v = v.as_ref().to_vec();
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(f64::total_cmp);
+    if p == 0.5 {
+        return v[v.len() / 2];
+    }
+    v[((v.len() - 1) as f64 * p.clamp(0.0, 1.0)).round() as usize]
+}
+
+/// A TCP port on 127.0.0.1 that was free a moment ago.
+pub fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .map(|a| a.port())
+        .expect("a free loopback port")
+}
+
+/// CPU time (user + system) of process `pid`, in clock ticks (`/proc/PID/stat`).
+pub fn cpu_ticks(pid: u32) -> Option<u64> {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
+    // Fields after the command name (which may hold spaces) start after ") ".
+    let rest = stat.rsplit_once(") ")?.1;
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    Some(f.get(11)?.parse::<u64>().ok()? + f.get(12)?.parse::<u64>().ok()?)
+}
+
+/// CPU seconds run so far by this process's threads whose name starts with
+/// `prefix` (`/proc/self/task/*/schedstat`, nanosecond resolution).
+pub fn threads_cpu(prefix: &str) -> f64 {
+    let Ok(dir) = std::fs::read_dir("/proc/self/task") else {
+        return 0.0;
+    };
+    let mut total = 0.0;
+    for t in dir.flatten() {
+        let Ok(comm) = std::fs::read_to_string(t.path().join("comm")) else {
+            continue;
+        };
+        if !comm.starts_with(prefix) {
+            continue;
+        }
+        let Ok(st) = std::fs::read_to_string(t.path().join("schedstat")) else {
+            continue;
+        };
+        total += st
+            .split(' ')
+            .next()
+            .and_then(|n| n.parse::<f64>().ok())
+            .unwrap_or(0.0)
+            / 1e9;
+    }
+    total
+}

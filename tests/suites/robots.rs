@@ -1,0 +1,26 @@
+//! Test binary `robots`: the simulator and the schemas that drive it (introrob, teleoperator, followball, naooperator), scan geometry, the serial heads on ptys.
+//!
+//! One binary per area so the suite links a few times, not once per file
+//! (docs/benchmarks.md, CI); each module is one of the files beside it.
+
+#[path = "../common/mod.rs"]
+mod common;
+
+#[path = "../evi.rs"]
+mod evi;
+#[path = "../followball.rs"]
+mod followball;
+#[path = "../introrob.rs"]
+mod introrob;
+#[path = "../naooperator.rs"]
+mod naooperator;
+#[path = "../pantilt.rs"]
+mod pantilt;
+#[path = "../replay_introrob.rs"]
+mod replay_introrob;
+#[path = "../scan_geometry.rs"]
+mod scan_geometry;
+#[path = "../simulator.rs"]
+mod simulator;
+#[path = "../teleoperator.rs"]
+mod teleoperator;
