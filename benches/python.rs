@@ -8,6 +8,9 @@
 //!
 //! `cargo bench --features full --bench python`
 
+mod common;
+use common::median;
+
 use std::{
     path::Path,
     time::{Duration, Instant},
@@ -117,9 +120,9 @@ fn main() {
     );
     let rt = jderobot::loader::start(&Conf::parse(&text, &dir.join("p.conf")).unwrap()).unwrap();
     jderobot::output::set_sink(Some(Box::new(|_| {})));
-    let mut py_err = Vec::new();
-    let mut rs_err = Vec::new();
-    let mut py_j = Vec::new();
+    let mut py_err: Vec<f64> = Vec::new();
+    let mut rs_err: Vec<f64> = Vec::new();
+    let mut py_j: Vec<f64> = Vec::new();
     for round in 0..7 {
         let names = if round % 2 == 0 {
             ["python", "myschema"]
@@ -152,15 +155,11 @@ fn main() {
         }
     }
     rt.shutdown();
-    let med = |v: &mut Vec<f64>| {
-        v.sort_by(|a, b| a.partial_cmp(b).unwrap());
-        v[v.len() / 2]
-    };
     println!(
         "python: pacing at 20 ms: rate error {:.3} % (Rust schema {:.3} %; goal within 0.5 %), jitter p99 {:.3} ms",
-        med(&mut py_err),
-        med(&mut rs_err),
-        med(&mut py_j)
+        median(&py_err),
+        median(&rs_err),
+        median(&py_j)
     );
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -9,7 +9,7 @@
 //! missing interface, the shell's `run`/`stop`/`reload`, and the panel.
 #![cfg(all(feature = "python", feature = "simulator"))]
 
-mod common;
+use crate::common;
 #[cfg(feature = "player")]
 #[path = "emulators/player.rs"]
 mod player_emulator;

@@ -28,7 +28,7 @@
 //! deg/s) once at the end of each iteration (and before a `time.sleep`);
 //! `getPose3d()` `.x .y` m, `.yaw` rad in (−π, π], `.z .roll .pitch` 0 (from
 //! `encoders`); `getLaserData()` `.values` m (index 0 at `.minAngle`), `.minAngle`,
-//! `.maxAngle` rad, `.minRange`, `.maxRange` m (from `laser`); `getBumperData()`
+//! `.maxAngle` rad, `.minRange`, `.maxRange` m (from `laser`, its own geometry); `getBumperData()`
 //! `.state` 1 while touching, `.bumper` 0 left, 1 centre, 2 right (from `bumpers`);
 //! `getImage()` a numpy uint8 array H×W×3 BGR (from `camera`; one copy of the bytes).
 //! **GUI**: `showImage(img)` shows a grey or BGR array in the panel. `print` goes to
@@ -72,7 +72,7 @@ use crate::{
     runtime::{Context, Runtime, Schema, State},
 };
 
-pub use program::{CONSOLE_LINES, MAX_LASER_RANGE_M, Shared, bumper_side, laser_geometry, shared};
+pub use program::{CONSOLE_LINES, Shared, bumper_side, laser_geometry, shared};
 use program::{Current, Outcome, Program, Robot};
 
 /// python's lines, declared once (`jderobot help python`).

@@ -332,23 +332,18 @@ impl BumperData {
     }
 }
 
-/// The laser's geometry in the Academy's units: (minAngle, maxAngle rad,
-/// minRange, maxRange m). Reading i is at −90° + i/resolution (the `laser`
-/// interface's convention); ranges: 0 and the farthest a reading may be.
+/// The laser's geometry in the Academy's units, from the scan itself: (minAngle,
+/// maxAngle rad, counter-clockwise from the robot's forward axis, the mount's yaw
+/// included; minRange, maxRange m).
 pub fn laser_geometry(l: &Laser) -> (f64, f64, f64, f64) {
-    let res = if l.resolution > 0.0 {
-        l.resolution as f64
-    } else {
-        1.0
-    };
-    let n = l.readings.len().max(1) as f64;
-    let min = (-90.0f64).to_radians();
-    let max = (-90.0 + (n - 1.0) / res).to_radians();
-    (min, max, 0.0, MAX_LASER_RANGE_M)
+    let n = l.readings.len().max(1);
+    (
+        (l.robot_angle(0) as f64).to_radians(),
+        (l.robot_angle(n - 1) as f64).to_radians(),
+        l.min_range as f64 / 1000.0,
+        l.max_range as f64 / 1000.0,
+    )
 }
-
-/// The longest range HAL reports when the interface does not say (m).
-pub const MAX_LASER_RANGE_M: f64 = 8.0;
 
 /// Which side a bumper array's pressed bumper is on: (state, bumper). A Pioneer's
 /// 10 bumpers are 5 front (left to right) then 5 rear; the front ones count (0..2
