@@ -29,6 +29,7 @@ def split(source, path):
     """(init, loop, after, loop_line): code objects; loop and after are None
     without a top-level `while True:`. Raises SyntaxError."""
     tree = ast.parse(source, path)
+    add_program_dir(path)
     body = tree.body
     for i, node in enumerate(body):
         if isinstance(node, ast.While) and _forever(node.test):
@@ -61,6 +62,15 @@ def split(source, path):
         compile(after, path, "exec"),
         node.lineno,
     )
+
+
+def add_program_dir(path):
+    """The program's folder first on sys.path, as `python3 FILE` would put it."""
+    import os
+
+    d = os.path.dirname(os.path.abspath(path))
+    if d not in sys.path:
+        sys.path.insert(0, d)
 
 
 def syntax_error(e, path):
