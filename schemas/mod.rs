@@ -31,5 +31,7 @@ pub mod opengl_viewer;
 pub mod opengldemo;
 #[cfg(feature = "pingpong")]
 pub mod pingpong;
+#[cfg(feature = "python")]
+pub mod python;
 #[cfg(feature = "teleoperator")]
 pub mod teleoperator;

@@ -89,6 +89,11 @@ const MAIN_COMMANDS: &[CommandDoc] = &[
     ("hide", "NAME", "Hide the GUI panel of schema NAME"),
     ("zoom", "NAME", "Change to schema state of NAME"),
     (
+        "reload",
+        "NAME",
+        "Build schema NAME again from its conf (a python schema reads its program again)",
+    ),
+    (
         "echo",
         "NAME [N]",
         "Print interface NAME's value, or its next N values",
@@ -234,6 +239,15 @@ impl Shell {
             "zoom" => self.zoom(one(cmd, args, "NAME")?),
             "echo" => echo_command(&rt, args, out),
             "set" => set(&rt, args, out),
+            "reload" => {
+                let name = one(cmd, args, "NAME")?;
+                loader::reinit(&rt, name, None)
+                    .map(|_| {
+                        w(out, format!("{name} reloaded"));
+                        Flow::Continue
+                    })
+                    .map_err(|e| format!("reload: {e}"))
+            }
             "show_license" => {
                 w(out, LICENSE.to_string());
                 Ok(Flow::Continue)

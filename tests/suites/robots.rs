@@ -16,6 +16,8 @@ mod introrob;
 mod naooperator;
 #[path = "../pantilt.rs"]
 mod pantilt;
+#[path = "../python.rs"]
+mod python;
 #[path = "../replay_introrob.rs"]
 mod replay_introrob;
 #[path = "../scan_geometry.rs"]

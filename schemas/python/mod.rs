@@ -1,0 +1,479 @@
+//! python: runs a student's Python program, written against JdeRobot's Robotics
+//! Academy API (`from HAL import HAL`, `from GUI import GUI`), as a schema, in an
+//! interpreter embedded in the one binary, on whatever driver provides the robot.
+//!
+//! Conf (`file` is required; the other lines show their defaults):
+//! ```text
+//! schema python
+//! file exercises/vacuum.py      # the program, relative to the conf file
+//! cycle 50                      # ms: the loop's period (the Academy's "brain frequency")
+//! venv none                     # a virtual environment's directory (default: $VIRTUAL_ENV)
+//! watch on                      # reload the program when its file changes
+//! motors motors                 # the interfaces HAL reads and writes (`none`: without)
+//! encoders encoders
+//! laser laser
+//! bumpers bumpers
+//! camera colorA
+//! end_schema
+//! ```
+//!
+//! **The program's shape** (the Academy's): the code before the first top-level
+//! `while True:` runs once when the schema runs; the loop's body is one iteration,
+//! run every `cycle` ms by the runtime's pacer. A `break` ends the loop (the code
+//! after it runs once); a program with no such loop runs once. Line numbers in
+//! tracebacks are the program's own.
+//!
+//! **HAL** (the Academy's wheeled-robot API; units converted from the interfaces'):
+//! `setV(v)` m/s and `setW(w)` rad/s (positive turns left) write `motors` (mm/s,
+//! deg/s) once at the end of each iteration (and before a `time.sleep`);
+//! `getPose3d()` `.x .y` m, `.yaw` rad in (−π, π], `.z .roll .pitch` 0 (from
+//! `encoders`); `getLaserData()` `.values` m (index 0 at `.minAngle`), `.minAngle`,
+//! `.maxAngle` rad, `.minRange`, `.maxRange` m (from `laser`, its own geometry); `getBumperData()`
+//! `.state` 1 while touching, `.bumper` 0 left, 1 centre, 2 right (from `bumpers`);
+//! `getImage()` a numpy uint8 array H×W×3 BGR (from `camera`; one copy of the bytes).
+//! **GUI**: `showImage(img)` shows a grey or BGR array in the panel. `print` goes to
+//! the panel's console and to the shell (`python> ...`, bounded: a flood is counted,
+//! not waited for).
+//!
+//! **Faults never take the suite down.** A syntax error stops the load (and
+//! `jderobot check`) with `FILE:LINE: message`; an exception prints its traceback,
+//! marks the line in the panel, stops this schema and zeroes its motors. Stopping
+//! interrupts a running program within a few ms (a watchdog raises
+//! `ProgramStopped` in its thread; `time.sleep` gives up at once), even one stuck in
+//! `while True: pass`, and zeroes the motors. Saving the file reloads it (motors
+//! zeroed in between), as do the panel's Reload button and the shell's `reload python`.
+//!
+//! Interfaces: writes `motors` (mm/s, deg/s); reads `encoders` (mm, rad), `laser`
+//! (mm), `bumpers`, `colorA` (BGR) — each optional (a HAL call without it raises a
+//! Python error naming the conf line). System: Debian `python3-dev` to build,
+//! `python3-numpy` for `getImage`/`showImage`.
+
+#[cfg(feature = "gui")]
+pub mod highlight;
+#[cfg(feature = "gui")]
+mod panel;
+mod program;
+
+use std::{
+    path::PathBuf,
+    sync::{
+        Arc, Weak,
+        atomic::{AtomicBool, Ordering},
+    },
+    time::{Duration, Instant, SystemTime},
+};
+
+use crate::{
+    conf::{
+        ComponentConf,
+        settings::{self, CYCLE, Setting, on_off, word},
+    },
+    interfaces::{Bumpers, Encoders, Image, Laser, Motors},
+    runtime::{Context, Runtime, Schema, State},
+};
+
+pub use program::{CONSOLE_LINES, Shared, bumper_side, laser_geometry, shared};
+use program::{Current, Outcome, Program, Robot};
+
+/// python's lines, declared once (`jderobot help python`).
+const LINES: &[Setting] = &[
+    Setting::new(
+        "file",
+        "the program (Python, the Robotics Academy's HAL and GUI), relative to the conf file",
+        &[settings::path("FILE")],
+    )
+    .required(),
+    CYCLE.default("50"),
+    Setting::new(
+        "venv",
+        "a virtual environment whose packages the program may import (none: only $VIRTUAL_ENV's)",
+        &[word("DIR|none")],
+    )
+    .default("none"),
+    Setting::new(
+        "watch",
+        "reload the program when its file changes",
+        &[on_off("SWITCH")],
+    )
+    .default("on"),
+    settings::uses(
+        "motors",
+        "motors",
+        "the base HAL.setV/setW drive (none: none)",
+    ),
+    settings::uses(
+        "encoders",
+        "encoders",
+        "HAL.getPose3d's odometry (none: none)",
+    ),
+    settings::uses("laser", "laser", "HAL.getLaserData's scan (none: none)"),
+    settings::uses(
+        "bumpers",
+        "bumpers",
+        "HAL.getBumperData's bumpers (none: none)",
+    ),
+    settings::uses("camera", "colorA", "HAL.getImage's camera (none: none)"),
+];
+
+/// The values of [`LINES`].
+#[derive(serde::Deserialize)]
+struct Lines {
+    file: String,
+    cycle: u64,
+    venv: String,
+    watch: bool,
+    motors: String,
+    encoders: String,
+    laser: String,
+    bumpers: String,
+    camera: String,
+}
+
+/// Which piece of the program runs next.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+enum Phase {
+    Init,
+    Loop,
+    Finished,
+}
+
+/// The schema.
+pub struct PythonSchema {
+    shared: Arc<Shared>,
+    robot: Arc<Robot>,
+    path: PathBuf,
+    program: Option<Program>,
+    phase: Phase,
+    cycle: Duration,
+    watch: bool,
+    mtime: Option<SystemTime>,
+    checked: Instant,
+    /// The sensors resumed while running.
+    children: Vec<String>,
+    watchdog: Option<Watchdog>,
+    #[cfg(feature = "gui")]
+    panel: Option<Box<dyn crate::runtime::Panel>>,
+}
+
+/// How often the file's modification time is looked at.
+const WATCH_EVERY: Duration = Duration::from_millis(250);
+/// How often the watchdog looks for a stop while Python runs.
+const WATCHDOG_PERIOD: Duration = Duration::from_millis(5);
+
+fn mtime(p: &std::path::Path) -> Option<SystemTime> {
+    std::fs::metadata(p).and_then(|m| m.modified()).ok()
+}
+
+impl PythonSchema {
+    /// Reads and compiles the program; a failure is `FILE:LINE: message`.
+    fn load(&mut self) -> Result<(), String> {
+        self.mtime = mtime(&self.path);
+        let source = std::fs::read_to_string(&self.path)
+            .map_err(|e| format!("{}: cannot read the program: {e}", self.path.display()))?;
+        *self.shared.source.lock() = Arc::new(source.clone());
+        *self.shared.file.lock() = self.path.clone();
+        let path = self.path.display().to_string();
+        match Program::compile(&path, &source) {
+            Ok(p) => {
+                self.program = Some(p);
+                *self.shared.error.lock() = None;
+                Ok(())
+            }
+            Err(f) => {
+                self.program = None;
+                *self.shared.error.lock() = Some((f.line, f.summary.clone()));
+                Err(f.summary)
+            }
+        }
+    }
+
+    /// Reloads when the file changed or a reload was asked for: motors zeroed, the
+    /// program compiled again and started from its init code.
+    fn reload_if_asked(&mut self) -> Result<(), String> {
+        let asked = self.shared.reload.swap(false, Ordering::AcqRel);
+        let changed = self.watch && self.checked.elapsed() >= WATCH_EVERY && {
+            self.checked = Instant::now();
+            mtime(&self.path) != self.mtime
+        };
+        if !asked && !changed {
+            return Ok(());
+        }
+        self.robot.zero();
+        self.load()?;
+        self.phase = Phase::Init;
+        self.shared.clear_console();
+        self.shared.print(&format!(
+            "-- reloaded {}\n",
+            crate::files::shorten(&self.path.display().to_string())
+        ));
+        Ok(())
+    }
+
+    fn set_phase(&mut self, p: Phase) {
+        self.phase = p;
+        *self.shared.phase.lock() = match p {
+            Phase::Init => "init",
+            Phase::Loop => "loop",
+            Phase::Finished => "finished",
+        };
+    }
+
+    /// Waits (at most 2 s) for the first value of the sensors a program reads at
+    /// once, so its init code never sees an empty scan.
+    fn wait_for_sensors(&self) {
+        let t = Instant::now();
+        let have = |r: &Robot| {
+            r.encoders.as_ref().is_none_or(|e| e.clock() > 0)
+                && r.laser.as_ref().is_none_or(|l| l.clock() > 0)
+                && r.bumpers.as_ref().is_none_or(|b| b.clock() > 0)
+                && r.camera.as_ref().is_none_or(|c| c.clock() > 0)
+        };
+        let mut nudged = Instant::now();
+        while !have(&self.robot)
+            && t.elapsed() < Duration::from_secs(2)
+            && !self.shared.reload.load(Ordering::Acquire)
+        {
+            // A (zero) command lets a lock-stepped simulator step to its sensors.
+            if nudged.elapsed() >= Duration::from_millis(20) {
+                self.robot.zero();
+                nudged = Instant::now();
+            }
+            std::thread::sleep(Duration::from_millis(2));
+        }
+    }
+}
+
+impl Schema for PythonSchema {
+    fn cycle(&self) -> Duration {
+        self.cycle
+    }
+
+    fn on_run(&mut self, ctx: &Context) -> anyhow::Result<()> {
+        ctx.run_children(&self.children, None)?;
+        self.shared.clear_console();
+        // Each run starts the program afresh (the file as it is now).
+        self.load().map_err(anyhow::Error::msg)?;
+        self.set_phase(Phase::Init);
+        self.robot.zero();
+        self.wait_for_sensors();
+        Ok(())
+    }
+
+    fn iteration(&mut self, ctx: &Context) -> anyhow::Result<()> {
+        if self.watchdog.is_none() {
+            self.watchdog = Some(Watchdog::start(
+                ctx.runtime(),
+                self.shared.clone(),
+                self.robot.clone(),
+            ));
+        }
+        self.reload_if_asked().map_err(anyhow::Error::msg)?;
+        let Some(program) = &self.program else {
+            return Ok(());
+        };
+        let which = match self.phase {
+            Phase::Init => 0,
+            Phase::Loop => 1,
+            Phase::Finished => {
+                self.robot.publish_command();
+                return Ok(());
+            }
+        };
+        program::set_current(Some(Current {
+            shared: self.shared.clone(),
+            robot: self.robot.clone(),
+        }));
+        let mut outcome = program.run(which, &self.shared);
+        let mut next = match (which, &outcome) {
+            (0, Outcome::Done) if program.has_loop() => Phase::Loop,
+            (1, Outcome::Done) => Phase::Loop,
+            _ => Phase::Finished,
+        };
+        if which == 1 && matches!(outcome, Outcome::Broke) {
+            outcome = program.run(2, &self.shared);
+            next = Phase::Finished;
+        }
+        program::set_current(None);
+        self.shared.flush();
+        match outcome {
+            Outcome::Done | Outcome::Broke => {
+                self.robot.publish_command();
+                if next == Phase::Finished && self.phase != Phase::Finished {
+                    self.shared.print("-- the program has ended\n");
+                }
+                self.set_phase(next);
+                Ok(())
+            }
+            // The runtime is stopping this schema (or a reload interrupted it).
+            Outcome::Stopped => {
+                self.robot.zero();
+                Ok(())
+            }
+            Outcome::Failed(f) => {
+                self.robot.zero();
+                self.shared.print(&f.text);
+                if !f.text.ends_with('\n') {
+                    self.shared.print("\n");
+                }
+                self.shared.flush();
+                *self.shared.error.lock() = Some((f.line, f.summary.clone()));
+                self.set_phase(Phase::Finished);
+                Err(anyhow::anyhow!(f.summary))
+            }
+        }
+    }
+
+    fn on_stop(&mut self, ctx: &Context) {
+        let _ = ctx;
+        self.robot.zero();
+        self.set_phase(Phase::Init);
+    }
+
+    fn terminate(&mut self) {
+        self.robot.zero();
+        if let Some(w) = self.watchdog.take() {
+            w.stop();
+        }
+    }
+
+    #[cfg(feature = "gui")]
+    fn panel(&mut self) -> Option<Box<dyn crate::runtime::Panel>> {
+        self.panel.take()
+    }
+}
+
+/// A thread that interrupts the schema's Python code when the schema is stopped
+/// (or asked to reload) while the program runs: it zeroes the motors at once and
+/// raises `ProgramStopped` in the program's thread until it gives up.
+struct Watchdog {
+    alive: Arc<AtomicBool>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl Watchdog {
+    fn start(rt: &Arc<Runtime>, shared: Arc<Shared>, robot: Arc<Robot>) -> Watchdog {
+        let alive = Arc::new(AtomicBool::new(true));
+        let a = alive.clone();
+        let rt: Weak<Runtime> = Arc::downgrade(rt);
+        let thread = std::thread::Builder::new()
+            .name(format!("{}-watchdog", shared.name))
+            .spawn(move || {
+                while a.load(Ordering::Acquire) {
+                    std::thread::sleep(WATCHDOG_PERIOD);
+                    if !shared.in_python.load(Ordering::Acquire) {
+                        continue;
+                    }
+                    let Some(rt) = rt.upgrade() else { return };
+                    let stopped = rt
+                        .schema_status(&shared.name)
+                        .is_none_or(|s| s.state == State::Slept);
+                    drop(rt);
+                    if stopped || shared.reload.load(Ordering::Acquire) {
+                        robot.zero();
+                        program::interrupt(&shared);
+                    }
+                }
+            })
+            .ok();
+        Watchdog { alive, thread }
+    }
+
+    fn stop(mut self) {
+        self.alive.store(false, Ordering::Release);
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>> {
+    let lines: Lines = conf.settings(LINES)?;
+    let file_line = conf.line("file").expect("file is required");
+    let path = file_line.existing_file(0, "the program")?;
+    let _ = &lines.file;
+    program::interpreter().map_err(anyhow::Error::msg)?;
+    if lines.venv != "none" {
+        let venv = conf
+            .line("venv")
+            .expect("a venv line gave the value")
+            .path(0, "the virtual environment")?;
+        program::add_venv(&venv).map_err(|e| {
+            conf.line("venv")
+                .expect("a venv line gave the value")
+                .error(format!("venv: {e}"))
+        })?;
+    }
+    let ifs = &rt.interfaces;
+    let pick = |n: &str| (n != "none" && ifs.contains(n)).then(|| n.to_string());
+    let motors = pick(&lines.motors)
+        .map(|n| ifs.get::<Motors>(&n))
+        .transpose()?;
+    let encoders = pick(&lines.encoders)
+        .map(|n| ifs.get::<Encoders>(&n))
+        .transpose()?;
+    let laser = pick(&lines.laser)
+        .map(|n| ifs.get::<Laser>(&n))
+        .transpose()?;
+    let bumpers = pick(&lines.bumpers)
+        .map(|n| ifs.get::<Bumpers>(&n))
+        .transpose()?;
+    let camera = pick(&lines.camera)
+        .map(|n| ifs.get::<Image>(&n))
+        .transpose()?;
+    let mut children = Vec::new();
+    for n in [&lines.encoders, &lines.laser, &lines.bumpers, &lines.camera] {
+        if let Some(n) = pick(n) {
+            children.push(n);
+        }
+    }
+    let robot = Arc::new(Robot {
+        motors,
+        encoders,
+        laser,
+        bumpers,
+        camera,
+        names: vec![
+            ("motors", lines.motors.clone()),
+            ("encoders", lines.encoders.clone()),
+            ("laser", lines.laser.clone()),
+            ("bumpers", lines.bumpers.clone()),
+            ("camera", lines.camera.clone()),
+        ],
+        command: Default::default(),
+    });
+    let shared = shared(rt, &conf.name);
+    // A re-init (the shell's `init`, `reload`) replaces a running program: ask the
+    // old one to give way (its watchdog interrupts it); the new one starts afresh.
+    if shared.loads.fetch_add(1, Ordering::AcqRel) > 0 {
+        shared.reload.store(true, Ordering::Release);
+    }
+    let mut s = PythonSchema {
+        shared: shared.clone(),
+        robot,
+        path,
+        program: None,
+        phase: Phase::Init,
+        cycle: Duration::from_millis(lines.cycle),
+        watch: lines.watch,
+        mtime: None,
+        checked: Instant::now(),
+        children,
+        watchdog: None,
+        #[cfg(feature = "gui")]
+        panel: None,
+    };
+    // A syntax error stops the load (and `jderobot check`): FILE:LINE: message.
+    s.load().map_err(anyhow::Error::msg)?;
+    #[cfg(feature = "gui")]
+    {
+        s.panel = Some(Box::new(panel::PythonPanel::new(shared)));
+    }
+    Ok(Box::new(s))
+}
+
+crate::register_schema!(
+    "python",
+    "runs a Python program written against the Robotics Academy's HAL and GUI",
+    create,
+    lines = LINES
+);

@@ -1,0 +1,129 @@
+//! The python schema's panel, the Academy's editor page in the one window: the
+//! program's text highlighted with its line numbers (the failing line marked),
+//! Play / Stop / Reload, the real loop frequency, the console and the image the
+//! program shows with `GUI.showImage`. It shares state with the schema only through
+//! [`Shared`] (short locks), so drawing never waits on a running program.
+
+use std::sync::{Arc, atomic::Ordering};
+
+use super::{Shared, highlight};
+use crate::{
+    runtime::{Panel, Runtime, State},
+    widgets::ImageView,
+};
+
+/// The panel.
+pub struct PythonPanel {
+    shared: Arc<Shared>,
+    view: ImageView,
+    /// The console's line count when last drawn (scroll to the end on growth).
+    seen: u64,
+}
+
+impl PythonPanel {
+    pub fn new(shared: Arc<Shared>) -> Self {
+        let view = ImageView::new(format!("{} GUI.showImage", shared.name));
+        PythonPanel {
+            shared,
+            view,
+            seen: 0,
+        }
+    }
+}
+
+impl Panel for PythonPanel {
+    fn title(&self) -> Option<String> {
+        Some(format!("{} (Python)", self.shared.name))
+    }
+
+    fn ui(&mut self, ui: &mut egui::Ui, rt: &Runtime) {
+        let name = self.shared.name.clone();
+        let status = rt.schema_status(&name);
+        let running = status.as_ref().is_some_and(|s| s.state != State::Slept);
+        let file = self.shared.file.lock().display().to_string();
+        ui.horizontal(|ui| {
+            if ui
+                .add_enabled(!running, egui::Button::new("Play"))
+                .clicked()
+            {
+                let _ = rt.run(&name);
+            }
+            if ui.add_enabled(running, egui::Button::new("Stop")).clicked() {
+                let _ = rt.stop(&name);
+            }
+            if ui.button("Reload").clicked() {
+                if running {
+                    self.shared.reload.store(true, Ordering::Release);
+                } else if let Ok(text) = std::fs::read_to_string(&file) {
+                    *self.shared.source.lock() = Arc::new(text);
+                    *self.shared.error.lock() = None;
+                    self.shared.clear_console();
+                }
+            }
+            let phase = *self.shared.phase.lock();
+            match &status {
+                Some(s) if running => {
+                    ui.label(format!(
+                        "{} · {:.1} Hz (cycle {} ms) · {phase}",
+                        s.state,
+                        s.timing.ips,
+                        s.cycle.as_millis()
+                    ));
+                }
+                _ => {
+                    ui.label("stopped");
+                }
+            }
+        });
+        ui.label(egui::RichText::new(crate::files::shorten(&file)).weak());
+        let error = self.shared.error.lock().clone();
+        if let Some((_, msg)) = &error {
+            ui.colored_label(egui::Color32::from_rgb(240, 90, 90), msg);
+        }
+        let error_line = error.as_ref().map_or(0, |e| e.0);
+        let source = self.shared.source.lock().clone();
+        let font = egui::TextStyle::Monospace.resolve(ui.style());
+        let avail = ui.available_height();
+        egui::ScrollArea::both()
+            .id_salt("program")
+            .max_height((avail * 0.5).max(120.0))
+            .show(ui, |ui| {
+                ui.horizontal_top(|ui| {
+                    let n = source.lines().count().max(1);
+                    let numbers: String = (1..=n).map(|i| format!("{i:>3}\n")).collect();
+                    ui.label(
+                        egui::RichText::new(numbers.trim_end())
+                            .font(font.clone())
+                            .color(egui::Color32::GRAY),
+                    );
+                    let job = highlight::layout(&source, error_line, font.clone());
+                    ui.label(job);
+                });
+            });
+        ui.separator();
+        ui.label("Console");
+        let (lines, total) = {
+            let c = self.shared.console.lock();
+            (c.lines.iter().cloned().collect::<Vec<_>>(), c.total)
+        };
+        let grew = total != self.seen;
+        self.seen = total;
+        egui::ScrollArea::vertical()
+            .id_salt("console")
+            .max_height(140.0)
+            .stick_to_bottom(true)
+            .show(ui, |ui| {
+                let text = lines.join("\n");
+                ui.label(egui::RichText::new(text).font(font.clone()));
+                if grew {
+                    ui.scroll_to_cursor(Some(egui::Align::BOTTOM));
+                }
+            });
+        let image = self.shared.image.lock().clone();
+        if let Some(img) = image {
+            ui.separator();
+            let clock = self.shared.images.load(Ordering::Acquire);
+            self.view.show(ui, &img, clock);
+        }
+    }
+}
