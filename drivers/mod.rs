@@ -25,6 +25,8 @@ pub mod pantilt;
 pub mod player;
 #[cfg(feature = "replay")]
 pub mod replay;
+#[cfg(feature = "ros2")]
+pub mod ros2;
 #[cfg(feature = "simulated3D")]
 #[path = "simulated3D/mod.rs"]
 pub mod simulated3d;

@@ -38,6 +38,8 @@
 //! and [`StepGate`] are what the recorder and replay export in the name space
 //! (keys `recorder.status` and `replay.step`) for the shell.
 
+#[cfg(feature = "ros2")]
+pub mod dds;
 pub mod protobuf;
 pub mod reader;
 pub mod ros2;
