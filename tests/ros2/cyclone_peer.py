@@ -174,7 +174,8 @@ def listen(dp, secs):
     end = time.time() + secs
     odom_first = None
     while time.time() < end:
-        cmd.write(Twist(Vector3(0.3, 0.0, 0.0), Vector3(0.0, 0.0, 0.2)))
+        if odom_first:  # drive once the starting pose is known
+            cmd.write(Twist(Vector3(0.3, 0.0, 0.0), Vector3(0.0, 0.0, 0.2)))
         for name, r in readers.items():
             for m in r.take(N=10):
                 if name == "scan":
