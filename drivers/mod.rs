@@ -27,6 +27,8 @@ pub mod player;
 pub mod replay;
 #[cfg(feature = "roomba")]
 pub mod roomba;
+#[cfg(feature = "ros2")]
+pub mod ros2;
 #[cfg(feature = "rplidar")]
 pub mod rplidar;
 #[cfg(feature = "simulated3D")]

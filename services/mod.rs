@@ -10,5 +10,7 @@ pub mod foxglove;
 pub mod networkserver;
 #[cfg(feature = "recorder")]
 pub mod recorder;
+#[cfg(feature = "ros2")]
+pub mod ros2;
 #[cfg(feature = "zenoh")]
 pub mod zenoh;

@@ -165,6 +165,14 @@ pub enum LookupError {
 
 /// Looks a component up for a load line (`kind` `None` for `load NAME`).
 pub fn lookup(kind: Option<Kind>, name: &str) -> Result<&'static Entry, LookupError> {
+    // A name may be both a driver and a service (`ros2`): the kind asked picks.
+    if let Some(c) = kind.and_then(|k| {
+        inventory::iter::<Entry>
+            .into_iter()
+            .find(|c| c.name == name && c.kind == k)
+    }) {
+        return Ok(c);
+    }
     if let Some(c) = find(name) {
         return match kind {
             Some(k) if !k.same_family(c.kind) => Err(LookupError::WrongKind {

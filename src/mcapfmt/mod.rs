@@ -38,6 +38,8 @@
 //! the recorder exports in the name space (`recorder.status`) for its shell
 //! command and mastergui.
 
+#[cfg(feature = "ros2")]
+pub mod dds;
 pub mod protobuf;
 pub mod reader;
 pub mod ros2;

@@ -469,6 +469,46 @@ impl Ros2 for Imu {
     }
 }
 
+/// The DDS type name of `tf2_msgs/msg/TFMessage` (`/tf`, `/tf_static`).
+pub const TF_MESSAGE: &str = "tf2_msgs::msg::dds_::TFMessage_";
+
+/// One `geometry_msgs/TransformStamped`: `child` in `parent`, metres and radians
+/// (a planar pose with a height: REP 103).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Transform {
+    pub parent: String,
+    pub child: String,
+    pub x: f64,
+    pub y: f64,
+    pub z: f64,
+    /// Counter-clockwise about z, radians.
+    pub yaw: f64,
+}
+
+/// Encodes `tf2_msgs/msg/TFMessage` (its transforms stamped `time`) as CDR into
+/// `out` (cleared first).
+pub fn encode_tf(time: SystemTime, transforms: &[Transform], out: &mut Vec<u8>) {
+    out.clear();
+    out.extend_from_slice(&[0, 1, 0, 0]);
+    let mut w = Writer(out);
+    w.u32(transforms.len() as u32);
+    for t in transforms {
+        w.header(time, &t.parent);
+        w.string(&t.child);
+        for v in [
+            t.x,
+            t.y,
+            t.z,
+            0.0,
+            0.0,
+            (t.yaw / 2.0).sin(),
+            (t.yaw / 2.0).cos(),
+        ] {
+            w.f64(v);
+        }
+    }
+}
+
 /// The kinds without a ROS 2 message.
 impl Ros2 for Sonars {}
 impl Ros2 for Bumpers {}

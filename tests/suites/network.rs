@@ -14,6 +14,8 @@ mod network_bad_input;
 mod network_processes;
 #[path = "../network_wire.rs"]
 mod network_wire;
+#[path = "../ros2.rs"]
+mod ros2;
 #[path = "../zenoh.rs"]
 mod zenoh;
 #[path = "../zenoh_python.rs"]

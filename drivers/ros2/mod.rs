@@ -1,0 +1,434 @@
+//! Driver `ros2`: drives a ROS 2 robot (a TurtleBot 3/4, a ROS 2 Gazebo world, any
+//! robot whose ROS 2 driver publishes the standard topics) as a ROS 2 node speaking
+//! DDS/RTPS itself (RustDDS and ros2-client, pure Rust: no ROS 2 installation), so
+//! introrob, teleoperator and every schema run on it unchanged. See `docs/ros2.md`;
+//! why these crates: the service `ros2`'s doc.
+//!
+//! # Conf
+//! ```text
+//! driver ros2
+//! insecure on                     # required (DDS here has no authentication; docs/ros2.md)
+//! domain 0                        # ROS_DOMAIN_ID, 0..232 (default 0)
+//! node jderobot_driver            # the node's name (default jderobot_driver)
+//! namespace /                     # namespace of relative topic names (default /)
+//! provides laser /scan            # sensor_msgs/msg/LaserScan, best effort
+//! provides encoders /odom         # nav_msgs/msg/Odometry, reliable
+//! provides motors /cmd_vel        # geometry_msgs/msg/Twist, written reliable
+//! provides imu /imu               # sensor_msgs/msg/Imu, best effort
+//! provides colorA /camera/image_raw   # sensor_msgs/msg/Image (bgr8), best effort
+//! silence 2000                    # ms without a message before the robot counts as lost
+//! motors_timeout 500              # ms: a motors command older than this is sent as zero
+//! end_driver
+//! ```
+//!
+//! # Interfaces (the units of `crate::interfaces`)
+//! `laser` (mm, the scan's own geometry: start, step, range limits), `encoders`
+//! (x, y mm, θ rad), `imu` (SI), `colorA..D`/`varcolorA..D` (BGR; `bgr8` images
+//! only), `motors` (v mm/s, w deg/s → Twist m/s, rad/s, sent every 100 ms and on
+//! each new command).
+//!
+//! Sensor readers are best effort (they match best-effort and reliable writers:
+//! real ROS 2 drivers publish sensor data best effort), the odometry reader is
+//! reliable. The driver is a supervised device: until every topic has a message,
+//! it says once which topics it waits for and its interfaces are stale; when one
+//! falls silent for `silence` ms, they are stale with that reason and `motors`
+//! goes to zero (also at stop). A topic whose publisher declares another type is
+//! named with both types. A message that does not decode, or a value that is not
+//! valid (NaN, infinite, an image whose size disagrees with its data), is refused
+//! with one line and never reaches an interface.
+//!
+//! System packages: none.
+
+use std::{
+    sync::Arc,
+    time::{Duration, Instant, SystemTime},
+};
+
+use ros2_client::{Context, ContextOptions, Node, NodeName, NodeOptions};
+use rustdds::{
+    DomainParticipant, QosPolicies, QosPolicyBuilder, TopicKind,
+    no_key::{DataReader, DataWriter},
+    policy::{Durability, History, Reliability},
+};
+
+use crate::{
+    conf::{
+        ComponentConf,
+        settings::{self, MOTORS_TIMEOUT, Setting, int, on_off, word},
+    },
+    interfaces::{AnyInterface, Encoders, Image, Imu, Interface, Laser, Motors, Source},
+    mcapfmt::{
+        dds::{Cdr, CdrAdapter, dds_topic, ros_topic},
+        ros2::{self, Ros2},
+    },
+    runtime::{Driver, Runtime},
+    supervisor::{Backoff, Supervision, Supervisor},
+};
+
+const LINES: &[Setting] = &[
+    settings::provides("provides laser|encoders|motors|imu|colorA..D|varcolorA..D [TOPIC]"),
+    Setting::new(
+        "insecure",
+        "on: drive although DDS here has no authentication and reaches the LAN (required)",
+        &[on_off("on|off")],
+    )
+    .default("off"),
+    Setting::new("domain", "ROS_DOMAIN_ID", &[int("ID", "", 0, 232)]).default("0"),
+    Setting::new("node", "the ROS 2 node's name", &[word("NAME")]).default("jderobot_driver"),
+    Setting::new(
+        "namespace",
+        "the namespace of relative topic names",
+        &[word("NS")],
+    )
+    .default("/"),
+    Setting::new(
+        "silence",
+        "a topic without a message this long makes the robot lost",
+        &[int("MS", "ms", 100, 600_000)],
+    )
+    .default("2000"),
+    MOTORS_TIMEOUT,
+];
+
+#[derive(serde::Deserialize)]
+struct Lines {
+    provides: Vec<(String, Option<String>)>,
+    insecure: bool,
+    domain: u16,
+    node: String,
+    namespace: String,
+    silence: u64,
+    motors_timeout: u64,
+}
+
+type Reader = DataReader<Cdr, CdrAdapter>;
+
+fn qos(reliable: bool) -> QosPolicies {
+    let b = QosPolicyBuilder::new()
+        .history(History::KeepLast { depth: 5 })
+        .durability(Durability::Volatile);
+    if reliable {
+        b.reliability(Reliability::Reliable {
+            max_blocking_time: rustdds::Duration::from_millis(100),
+        })
+        .build()
+    } else {
+        b.reliability(Reliability::BestEffort).build()
+    }
+}
+
+/// One sensor topic read into one interface.
+struct Input {
+    topic: String,
+    dds_type: &'static str,
+    reader: Reader,
+    source: Source,
+    /// Decodes one message into the interface; false when refused.
+    apply: Box<dyn FnMut(&Source, &[u8]) -> bool + Send>,
+    last: Option<Instant>,
+}
+
+fn input<T: Ros2>(
+    dp: &DomainParticipant,
+    sub: &rustdds::Subscriber,
+    topic: String,
+    reliable: bool,
+    iface: Arc<Interface<T>>,
+) -> anyhow::Result<Input> {
+    let dds_type = T::MESSAGE.map(|m| m.dds).unwrap_or("");
+    let t = dp
+        .create_topic(
+            dds_topic(&topic),
+            dds_type.into(),
+            &qos(reliable),
+            TopicKind::NoKey,
+        )
+        .map_err(|e| anyhow::anyhow!("driver ros2: topic {topic}: {e}"))?;
+    let reader = sub
+        .create_datareader_no_key::<Cdr, CdrAdapter>(&t, Some(qos(reliable)))
+        .map_err(|e| anyhow::anyhow!("driver ros2: a reader of {topic}: {e}"))?;
+    let name = topic.clone();
+    Ok(Input {
+        source: Source::new(format!("ros2: {topic}")),
+        topic,
+        dds_type,
+        reader,
+        apply: Box::new(move |source, data| {
+            let now = crate::mcapfmt::nanos(SystemTime::now());
+            match ros2::decode::<T>(&name, data, now) {
+                Ok((_, v)) => iface.accept(source, v).is_some(),
+                Err(e) => {
+                    source.refused(e);
+                    false
+                }
+            }
+        }),
+        last: None,
+    })
+}
+
+struct Robot {
+    inputs: Vec<Input>,
+    motors: Option<(Arc<Interface<Motors>>, DataWriter<Cdr, CdrAdapter>, String)>,
+    silence: Duration,
+    timeout: Duration,
+    dp: DomainParticipant,
+    _ros: (Context, Node),
+    buf: Vec<u8>,
+}
+
+struct Session {
+    since: Instant,
+    sent: Option<(u64, Instant)>,
+}
+
+impl Robot {
+    fn send_motors(&mut self, m: Motors) {
+        if let Some((iface, w, _)) = &self.motors {
+            let s = crate::interfaces::Sample {
+                clock: 1,
+                stamp: Instant::now(),
+                time: SystemTime::now(),
+                value: m,
+            };
+            let _ = iface;
+            if ros2::encode("", &s, &mut self.buf) {
+                let _ = w.write(Cdr(std::mem::take(&mut self.buf)), None);
+            }
+        }
+    }
+
+    /// A topic whose writers declare another type: both names.
+    fn wrong_type(&self) -> Option<String> {
+        let topics = self.dp.discovered_topics();
+        self.inputs.iter().find_map(|i| {
+            let dds = dds_topic(&i.topic);
+            topics
+                .iter()
+                .find(|t| *t.topic_name() == dds && t.type_name() != i.dds_type)
+                .map(|t| {
+                    format!(
+                        "{} carries {}, the driver reads {}",
+                        i.topic,
+                        t.type_name(),
+                        i.dds_type
+                    )
+                })
+        })
+    }
+}
+
+impl crate::supervisor::Device for Robot {
+    type Session = Session;
+    fn open(&mut self) -> Result<Session, String> {
+        for i in &mut self.inputs {
+            i.last = None;
+        }
+        Ok(Session {
+            since: Instant::now(),
+            sent: None,
+        })
+    }
+
+    fn step(&mut self, s: &mut Session) -> Result<(), String> {
+        std::thread::sleep(Duration::from_millis(2));
+        for i in &mut self.inputs {
+            loop {
+                match i.reader.take_next_sample() {
+                    Ok(Some(sample)) => {
+                        if (i.apply)(&i.source, &sample.value().0) {
+                            i.last = Some(Instant::now());
+                        }
+                    }
+                    Ok(None) => break,
+                    Err(e) => {
+                        i.source.refused(format!("{}: {e}", i.topic));
+                        break;
+                    }
+                }
+            }
+        }
+        // Motors: every new command at once, and again every 100 ms.
+        if let Some((iface, _, _)) = &self.motors {
+            let clock = iface.clock();
+            let cmd = iface.command(self.timeout);
+            let due = match s.sent {
+                None => true,
+                Some((c, t)) => c != clock || t.elapsed() >= Duration::from_millis(100),
+            };
+            if due {
+                s.sent = Some((clock, Instant::now()));
+                self.send_motors(cmd);
+            }
+        }
+        let waiting: Vec<&str> = self
+            .inputs
+            .iter()
+            .filter(|i| i.last.is_none())
+            .map(|i| i.topic.as_str())
+            .collect();
+        if s.since.elapsed() >= self.silence {
+            if let Some(e) = self.wrong_type() {
+                return Err(e);
+            }
+            if !waiting.is_empty() {
+                return Err(format!("waiting for a publisher on {}", waiting.join(", ")));
+            }
+        }
+        if let Some(i) = self
+            .inputs
+            .iter()
+            .find(|i| i.last.is_some_and(|t| t.elapsed() >= self.silence))
+        {
+            return Err(format!(
+                "no message on {} for {} ms",
+                i.topic,
+                self.silence.as_millis()
+            ));
+        }
+        Ok(())
+    }
+
+    fn on_loss(&mut self) {
+        if let Some((iface, _, _)) = &self.motors {
+            let _ = iface.publish(Motors::default());
+        }
+        self.send_motors(Motors::default());
+    }
+}
+
+fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>> {
+    let l: Lines = conf.settings(LINES)?;
+    if !l.insecure {
+        anyhow::bail!(
+            "driver ros2: DDS here has no authentication and RustDDS reaches every \
+             multicast interface (it cannot keep discovery to this host): anyone on the \
+             LAN could read the robot and drive it; DDS Security would be needed. Say \
+             `insecure on` to drive it anyway"
+        );
+    }
+    if l.provides.is_empty() {
+        anyhow::bail!(
+            "driver ros2 has no `provides` line, and needs one: provides laser /scan, \
+             provides encoders /odom, provides motors /cmd_vel, ..."
+        );
+    }
+    let ns = if l.namespace.starts_with('/') {
+        l.namespace.clone()
+    } else {
+        format!("/{}", l.namespace)
+    };
+    let context = Context::with_options(ContextOptions::new().domain_id(l.domain))
+        .map_err(|e| anyhow::anyhow!("driver ros2: DDS domain {}: {e}", l.domain))?;
+    let node = context
+        .new_node(
+            NodeName::new(&ns, &l.node)
+                .map_err(|e| anyhow::anyhow!("driver ros2: node `{}` in `{ns}`: {e:?}", l.node))?,
+            NodeOptions::new(),
+        )
+        .map_err(|e| anyhow::anyhow!("driver ros2: node: {e:?}"))?;
+    let dp = context.domain_participant();
+    let sub = dp
+        .create_subscriber(&qos(true))
+        .map_err(|e| anyhow::anyhow!("driver ros2: {e}"))?;
+    let publ = dp
+        .create_publisher(&qos(true))
+        .map_err(|e| anyhow::anyhow!("driver ros2: {e}"))?;
+    let mut inputs = vec![];
+    let mut motors = None;
+    let mut ifaces: Vec<Arc<dyn AnyInterface>> = vec![];
+    for (name, topic) in &l.provides {
+        let base = name.split('.').next().unwrap_or(name);
+        let default = match base {
+            "laser" => "scan".to_string(),
+            "encoders" => "odom".to_string(),
+            "motors" => "cmd_vel".to_string(),
+            "imu" => "imu".to_string(),
+            _ => format!("{name}/image_raw"),
+        };
+        let topic = ros_topic(&ns, topic.as_deref().unwrap_or(&default));
+        match crate::interfaces::family(base) {
+            Some("laser") => {
+                let i = rt.interfaces.provide::<Laser>(name, &conf.name)?;
+                ifaces.push(i.clone());
+                inputs.push(input(&dp, &sub, topic, false, i)?);
+            }
+            Some("encoders") => {
+                let i = rt.interfaces.provide::<Encoders>(name, &conf.name)?;
+                ifaces.push(i.clone());
+                inputs.push(input(&dp, &sub, topic, true, i)?);
+            }
+            Some("imu") => {
+                let i = rt.interfaces.provide::<Imu>(name, &conf.name)?;
+                ifaces.push(i.clone());
+                inputs.push(input(&dp, &sub, topic, false, i)?);
+            }
+            Some("image") => {
+                let i = rt.interfaces.provide::<Image>(name, &conf.name)?;
+                ifaces.push(i.clone());
+                inputs.push(input(&dp, &sub, topic, false, i)?);
+            }
+            Some("motors") => {
+                let i = rt.interfaces.provide::<Motors>(name, &conf.name)?;
+                ifaces.push(i.clone());
+                let dds_type = Motors::MESSAGE.map(|m| m.dds).unwrap_or("");
+                let t = dp
+                    .create_topic(
+                        dds_topic(&topic),
+                        dds_type.into(),
+                        &qos(true),
+                        TopicKind::NoKey,
+                    )
+                    .map_err(|e| anyhow::anyhow!("driver ros2: topic {topic}: {e}"))?;
+                let w = publ
+                    .create_datawriter_no_key::<Cdr, CdrAdapter>(&t, Some(qos(true)))
+                    .map_err(|e| anyhow::anyhow!("driver ros2: a writer of {topic}: {e}"))?;
+                motors = Some((i, w, topic));
+            }
+            _ => anyhow::bail!(
+                "driver ros2: provides {name}: this driver provides laser, encoders, motors, \
+                 imu and cameras (colorA..D, varcolorA..D)"
+            ),
+        }
+    }
+    let waits: Vec<String> = inputs.iter().map(|i| i.topic.clone()).collect();
+    tracing::info!(
+        "ros2: node {ns}{}{} on domain {} reads {}{}",
+        if ns.ends_with('/') { "" } else { "/" },
+        l.node,
+        l.domain,
+        waits.join(", "),
+        motors
+            .as_ref()
+            .map(|m| format!(", writes {}", m.2))
+            .unwrap_or_default()
+    );
+    let robot = Robot {
+        inputs,
+        motors,
+        silence: Duration::from_millis(l.silence),
+        timeout: Duration::from_millis(l.motors_timeout),
+        dp,
+        _ros: (context, node),
+        buf: Vec::new(),
+    };
+    let how = Supervision {
+        name: "ros2".into(),
+        interfaces: ifaces,
+        on_demand: false,
+        backoff: Backoff {
+            first: Duration::from_millis(100),
+            max: Duration::from_secs(1),
+        },
+        absent: None,
+    };
+    Ok(Box::new(Supervisor::start(how, robot)?))
+}
+
+crate::register_driver!(
+    Driver,
+    "ros2",
+    "a ROS 2 robot over DDS: laser (/scan), encoders (/odom), motors (/cmd_vel), imu, cameras",
+    create,
+    lines = LINES
+);

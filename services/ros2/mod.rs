@@ -1,0 +1,564 @@
+//! Service `ros2`: serves this process's robot to ROS 2, as a ROS 2 node speaking
+//! DDS/RTPS itself (no ROS 2 installation): RViz2, `ros2 topic echo`, rosbag2 and
+//! Nav2 see its topics, and `/cmd_vel` drives its motors. See `docs/ros2.md`.
+//!
+//! # Why RustDDS and ros2-client
+//! Both are pure Rust (no C/C++ toolchain, no system package), maintained (RustDDS
+//! 0.11, ros2-client 0.8, 2025), and interoperate with Fast DDS and Cyclone DDS,
+//! the DDS of ROS 2's Tier-1 middlewares. ros2-client puts the node in the ROS 2
+//! graph (`ros_discovery_info`, so `ros2 node list` shows it); the topics are plain
+//! RustDDS writers and readers of the CDR bytes of `mcapfmt::ros2`, the one
+//! encoder per message that zenoh's `format ros2` and the recorder also use
+//! ([`crate::mcapfmt::dds`]). Their clean debug build adds about a minute
+//! (docs/ros2.md has the measure), so `ros2` is in `full`, not in `default`.
+//!
+//! # Conf
+//! ```text
+//! service ros2
+//! insecure on              # required: DDS here has no authentication (see below)
+//! node jderobot            # the node's name (default jderobot)
+//! namespace /              # the node's namespace and its relative topics' (default /)
+//! domain 0                 # ROS_DOMAIN_ID, 0..232 (default 0)
+//! serves laser             # what is served (default: every interface with a
+//! serves encoders odom     #   ROS 2 message); an optional ROS 2 topic name
+//! frames odom base_link laser camera   # frame ids (these are the defaults)
+//! motors_timeout 500       # ms: /cmd_vel older than this counts as zero
+//! end_service
+//! ```
+//!
+//! # Topics (REP 103 units: m, rad, m/s, rad/s; REP 105 frames)
+//! | interface | topic (default) | type | QoS |
+//! |---|---|---|---|
+//! | laser | `scan` | `sensor_msgs/msg/LaserScan`, the scan's own geometry | best effort, keep last 5 |
+//! | encoders | `odom` | `nav_msgs/msg/Odometry` (odom → base_link) | reliable, keep last 10 |
+//! | encoders | `/tf` | `tf2_msgs/msg/TFMessage` odom → base_link | reliable, keep last 100 |
+//! | laser | `/tf_static` | base_link → laser (the laser's mount) | reliable, transient local, keep last 1 |
+//! | imu | `imu` | `sensor_msgs/msg/Imu` | best effort, keep last 5 |
+//! | colorA..D, varcolorA..D | `NAME/image_raw` | `sensor_msgs/msg/Image` `bgr8` | best effort, keep last 5 |
+//! | motors | `cmd_vel` (read) | `geometry_msgs/msg/Twist` → v mm/s, w deg/s | reliable (a best-effort writer matches too) |
+//!
+//! A Twist that is not a valid motors value (NaN, infinite, out of motors' range)
+//! is refused with one line. Motors are set to zero `motors_timeout` after the
+//! last `/cmd_vel` (so also when its writer leaves), and when the service stops.
+//!
+//! # Security
+//! RustDDS 0.11 speaks on every multicast-capable interface; it cannot keep
+//! discovery to this host as ROS 2's `ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`
+//! does. Anyone on the LAN could then read the robot and drive it: DDS Security
+//! would be needed to prevent it, and it is not set up here. So the service
+//! starts only with `insecure on`, which says so.
+//!
+//! Provides no interface; uses the served ones.
+
+use std::{
+    sync::{
+        Arc,
+        atomic::{AtomicBool, Ordering},
+    },
+    time::{Duration, Instant, SystemTime},
+};
+
+use ros2_client::{Context, ContextOptions, Node, NodeName, NodeOptions};
+use rustdds::{
+    DomainParticipant, Publisher, QosPolicies, QosPolicyBuilder, Subscriber, TopicKind,
+    no_key::{DataReader, DataWriter},
+    policy::{Durability, History, Reliability},
+};
+
+use crate::{
+    conf::{
+        ComponentConf,
+        settings::{MOTORS_TIMEOUT, Setting, int, interface, on_off, word},
+    },
+    interfaces::{Encoders, Image, Imu, Interface, Laser, Motors, Source, Watch},
+    mcapfmt::{
+        dds::{Cdr, CdrAdapter, dds_topic, ros_topic},
+        ros2::{self, Ros2, Transform},
+    },
+    runtime::{Driver, Runtime},
+    supervisor::Worker,
+};
+
+const LINES: &[Setting] = &[
+    Setting::new(
+        "insecure",
+        "on: serve although DDS here has no authentication and reaches the LAN (required)",
+        &[on_off("on|off")],
+    )
+    .default("off"),
+    Setting::new("node", "the ROS 2 node's name", &[word("NAME")]).default("jderobot"),
+    Setting::new(
+        "namespace",
+        "the node's namespace, also its relative topics'",
+        &[word("NS")],
+    )
+    .default("/"),
+    Setting::new("domain", "ROS_DOMAIN_ID", &[int("ID", "", 0, 232)]).default("0"),
+    Setting::new(
+        "serves",
+        "an interface served, on its default topic or TOPIC (default: all with a ROS 2 message)",
+        &[interface("INTERFACE"), word("TOPIC").optional()],
+    )
+    .repeats(),
+    Setting::new(
+        "frames",
+        "frame ids: odometry, robot base, laser, camera",
+        &[word("ODOM"), word("BASE"), word("LASER"), word("CAMERA")],
+    )
+    .default("odom base_link laser camera"),
+    MOTORS_TIMEOUT,
+];
+
+#[derive(serde::Deserialize)]
+struct Lines {
+    insecure: bool,
+    node: String,
+    namespace: String,
+    domain: u16,
+    serves: Vec<(String, Option<String>)>,
+    frames: (String, String, String, String),
+    motors_timeout: u64,
+}
+
+/// The QoS ROS 2 calls sensor data: best effort, keep last 5, volatile.
+pub fn sensor_qos() -> QosPolicies {
+    QosPolicyBuilder::new()
+        .reliability(Reliability::BestEffort)
+        .history(History::KeepLast { depth: 5 })
+        .durability(Durability::Volatile)
+        .build()
+}
+
+/// ROS 2's default QoS: reliable, keep last `depth`, volatile.
+pub fn reliable_qos(depth: i32) -> QosPolicies {
+    QosPolicyBuilder::new()
+        .reliability(Reliability::Reliable {
+            max_blocking_time: rustdds::Duration::from_millis(100),
+        })
+        .history(History::KeepLast { depth })
+        .durability(Durability::Volatile)
+        .build()
+}
+
+/// `/tf_static`'s QoS: reliable, transient local, keep last 1.
+pub fn static_qos() -> QosPolicies {
+    QosPolicyBuilder::new()
+        .reliability(Reliability::Reliable {
+            max_blocking_time: rustdds::Duration::from_millis(100),
+        })
+        .history(History::KeepLast { depth: 1 })
+        .durability(Durability::TransientLocal)
+        .build()
+}
+
+type Writer = DataWriter<Cdr, CdrAdapter>;
+
+fn writer(
+    dp: &DomainParticipant,
+    publisher: &Publisher,
+    topic: &str,
+    dds_type: &str,
+    qos: QosPolicies,
+) -> anyhow::Result<Writer> {
+    let t = dp
+        .create_topic(dds_topic(topic), dds_type.into(), &qos, TopicKind::NoKey)
+        .map_err(|e| anyhow::anyhow!("ros2: topic {topic}: {e}"))?;
+    publisher
+        .create_datawriter_no_key::<Cdr, CdrAdapter>(&t, Some(qos))
+        .map_err(|e| anyhow::anyhow!("ros2: a writer of {topic}: {e}"))
+}
+
+fn dds_name<T: Ros2>() -> &'static str {
+    T::MESSAGE.map(|m| m.dds).unwrap_or("")
+}
+
+/// One served sensor: its interface, its writer, the last clock sent.
+struct Served<T> {
+    iface: Arc<Interface<T>>,
+    topic: String,
+    frame: String,
+    writer: Writer,
+    clock: u64,
+}
+
+impl<T: Ros2> Served<T> {
+    fn send(&mut self, buf: &mut Vec<u8>) -> Option<Arc<crate::interfaces::Sample<T>>> {
+        let s = self.iface.snapshot();
+        if s.clock == self.clock || s.clock == 0 {
+            return None;
+        }
+        self.clock = s.clock;
+        if ros2::encode(&self.frame, &s, buf) {
+            if let Err(e) = self.writer.write(Cdr(std::mem::take(buf)), None) {
+                tracing::debug!("ros2: {}: {e}", self.topic);
+            }
+        }
+        Some(s)
+    }
+}
+
+struct Plan {
+    lasers: Vec<Served<Laser>>,
+    odom: Vec<(Served<Encoders>, Writer)>,
+    imus: Vec<Served<Imu>>,
+    images: Vec<Served<Image>>,
+    cmd: Option<(Arc<Interface<Motors>>, DataReader<Cdr, CdrAdapter>, String)>,
+    tf_static: Option<(Writer, Vec<Transform>)>,
+}
+
+fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>> {
+    let l: Lines = conf.settings(LINES)?;
+    if !l.insecure {
+        anyhow::bail!(
+            "service ros2: DDS here has no authentication and RustDDS reaches every \
+             multicast interface (it cannot keep discovery to this host): anyone on the \
+             LAN could read and drive the robot; DDS Security would be needed. Say \
+             `insecure on` to serve it anyway"
+        );
+    }
+    let ns = if l.namespace.starts_with('/') {
+        l.namespace.clone()
+    } else {
+        format!("/{}", l.namespace)
+    };
+    let context = Context::with_options(ContextOptions::new().domain_id(l.domain))
+        .map_err(|e| anyhow::anyhow!("service ros2: DDS domain {}: {e}", l.domain))?;
+    let node = context
+        .new_node(
+            NodeName::new(&ns, &l.node)
+                .map_err(|e| anyhow::anyhow!("service ros2: node `{}` in `{ns}`: {e:?}", l.node))?,
+            NodeOptions::new(),
+        )
+        .map_err(|e| anyhow::anyhow!("service ros2: node: {e:?}"))?;
+    let dp = context.domain_participant();
+    let publisher = dp
+        .create_publisher(&reliable_qos(10))
+        .map_err(|e| anyhow::anyhow!("service ros2: {e}"))?;
+    let subscriber: Subscriber = dp
+        .create_subscriber(&reliable_qos(10))
+        .map_err(|e| anyhow::anyhow!("service ros2: {e}"))?;
+
+    // What is served: the serves lines, or every interface with a ROS 2 message.
+    let serves: Vec<(String, Option<String>)> = if l.serves.is_empty() {
+        rt.interfaces
+            .all()
+            .iter()
+            .filter(|i| ros2::message(i.kind()).is_some())
+            .map(|i| (i.name().to_string(), None))
+            .collect()
+    } else {
+        l.serves.clone()
+    };
+    let (odom_frame, base_frame, laser_frame, camera_frame) = l.frames.clone();
+    let mut plan = Plan {
+        lasers: vec![],
+        odom: vec![],
+        imus: vec![],
+        images: vec![],
+        cmd: None,
+        tf_static: None,
+    };
+    let mut statics = vec![];
+    for (name, topic) in &serves {
+        let iface = rt
+            .interfaces
+            .get_any(name)
+            .map_err(|e| anyhow::anyhow!("service ros2: serves {name}: {e}"))?;
+        let first = name == iface.kind() || name == "laser";
+        let kind = iface.kind();
+        let default = match kind {
+            "laser" if first => "scan".to_string(),
+            "encoders" => "odom".to_string(),
+            "motors" => "cmd_vel".to_string(),
+            "imu" => "imu".to_string(),
+            "image" => format!("{name}/image_raw"),
+            _ => name.replace('.', "/"),
+        };
+        let topic = ros_topic(&ns, topic.as_deref().unwrap_or(&default));
+        match kind {
+            "laser" => {
+                let iface = rt.interfaces.get::<Laser>(name)?;
+                let m = iface.read().value.mount;
+                let frame = if first {
+                    laser_frame.clone()
+                } else {
+                    name.replace('.', "_")
+                };
+                statics.push(Transform {
+                    parent: base_frame.clone(),
+                    child: frame.clone(),
+                    x: m.x as f64 / 1000.0,
+                    y: m.y as f64 / 1000.0,
+                    z: 0.0,
+                    yaw: (m.yaw as f64).to_radians(),
+                });
+                let w = writer(&dp, &publisher, &topic, dds_name::<Laser>(), sensor_qos())?;
+                plan.lasers.push(Served {
+                    iface,
+                    topic,
+                    frame,
+                    writer: w,
+                    clock: 0,
+                });
+            }
+            "encoders" => {
+                let iface = rt.interfaces.get::<Encoders>(name)?;
+                let w = writer(
+                    &dp,
+                    &publisher,
+                    &topic,
+                    dds_name::<Encoders>(),
+                    reliable_qos(10),
+                )?;
+                let tf = writer(&dp, &publisher, "/tf", ros2::TF_MESSAGE, reliable_qos(100))?;
+                plan.odom.push((
+                    Served {
+                        iface,
+                        topic,
+                        frame: odom_frame.clone(),
+                        writer: w,
+                        clock: 0,
+                    },
+                    tf,
+                ));
+            }
+            "imu" => {
+                let iface = rt.interfaces.get::<Imu>(name)?;
+                let w = writer(&dp, &publisher, &topic, dds_name::<Imu>(), sensor_qos())?;
+                plan.imus.push(Served {
+                    iface,
+                    topic,
+                    frame: base_frame.clone(),
+                    writer: w,
+                    clock: 0,
+                });
+            }
+            "image" => {
+                let iface = rt.interfaces.get::<Image>(name)?;
+                let w = writer(&dp, &publisher, &topic, dds_name::<Image>(), sensor_qos())?;
+                plan.images.push(Served {
+                    iface,
+                    topic,
+                    frame: camera_frame.clone(),
+                    writer: w,
+                    clock: 0,
+                });
+            }
+            "motors" => {
+                let iface = rt.interfaces.get::<Motors>(name)?;
+                let qos = reliable_qos(10);
+                let t = dp
+                    .create_topic(
+                        dds_topic(&topic),
+                        dds_name::<Motors>().into(),
+                        &qos,
+                        TopicKind::NoKey,
+                    )
+                    .map_err(|e| anyhow::anyhow!("service ros2: topic {topic}: {e}"))?;
+                // A best-effort reader matches reliable and best-effort writers.
+                let r = subscriber
+                    .create_datareader_no_key::<Cdr, CdrAdapter>(
+                        &t,
+                        Some(
+                            QosPolicyBuilder::new()
+                                .reliability(Reliability::BestEffort)
+                                .history(History::KeepLast { depth: 10 })
+                                .build(),
+                        ),
+                    )
+                    .map_err(|e| anyhow::anyhow!("service ros2: a reader of {topic}: {e}"))?;
+                plan.cmd = Some((iface, r, topic));
+            }
+            other => anyhow::bail!(
+                "service ros2: serves {name}: a {other} interface has no ROS 2 message here; \
+                 serve laser, encoders, imu, motors or a camera"
+            ),
+        }
+    }
+    if !statics.is_empty() {
+        let w = writer(
+            &dp,
+            &publisher,
+            "/tf_static",
+            ros2::TF_MESSAGE,
+            static_qos(),
+        )?;
+        plan.tf_static = Some((w, statics));
+    }
+    let timeout = Duration::from_millis(l.motors_timeout);
+    let stop = Arc::new(AtomicBool::new(false));
+    let stop2 = stop.clone();
+    let (tx, rx) = std::sync::mpsc::sync_channel(1);
+    let worker = Worker::start("ros2", stop.clone(), move || {
+        let watch = Watch::for_current_thread();
+        let _ = tx.send(watch.clone());
+        serve(plan, watch, timeout, stop2, (context, node, dp));
+    })?;
+    let watch = rx.recv().ok();
+    tracing::info!(
+        "ros2: node {}{}{} on domain {}: {}",
+        ns,
+        if ns.ends_with('/') { "" } else { "/" },
+        l.node,
+        l.domain,
+        serves
+            .iter()
+            .map(|s| s.0.as_str())
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    Ok(Box::new(Ros2Service { worker, watch }))
+}
+
+struct Ros2Service {
+    worker: Worker,
+    watch: Option<Arc<Watch>>,
+}
+
+impl Driver for Ros2Service {
+    fn terminate(&mut self) {
+        if let Some(w) = &self.watch {
+            w.wake();
+        }
+        self.worker.stop();
+    }
+}
+
+/// The thread: sends each new sensor value, applies /cmd_vel.
+fn serve(
+    mut plan: Plan,
+    watch: Arc<Watch>,
+    timeout: Duration,
+    stop: Arc<AtomicBool>,
+    _keep: (Context, Node, DomainParticipant),
+) {
+    let mut users: Vec<Box<dyn FnOnce()>> = vec![];
+    for s in &plan.lasers {
+        s.iface.watch(watch.clone());
+        s.iface.resume();
+        let i = s.iface.clone();
+        let w = watch.clone();
+        users.push(Box::new(move || {
+            i.unwatch(&*w);
+            i.suspend();
+        }));
+    }
+    for (s, _) in &plan.odom {
+        s.iface.watch(watch.clone());
+        s.iface.resume();
+        let i = s.iface.clone();
+        let w = watch.clone();
+        users.push(Box::new(move || {
+            i.unwatch(&*w);
+            i.suspend();
+        }));
+    }
+    for s in &plan.imus {
+        s.iface.watch(watch.clone());
+        s.iface.resume();
+        let i = s.iface.clone();
+        let w = watch.clone();
+        users.push(Box::new(move || {
+            i.unwatch(&*w);
+            i.suspend();
+        }));
+    }
+    for s in &plan.images {
+        s.iface.watch(watch.clone());
+        s.iface.resume();
+        let i = s.iface.clone();
+        let w = watch.clone();
+        users.push(Box::new(move || {
+            i.unwatch(&*w);
+            i.suspend();
+        }));
+    }
+    let mut buf = Vec::new();
+    if let Some((w, tfs)) = &plan.tf_static {
+        ros2::encode_tf(SystemTime::now(), tfs, &mut buf);
+        let _ = w.write(Cdr(std::mem::take(&mut buf)), None);
+    }
+    let source = plan
+        .cmd
+        .as_ref()
+        .map(|(_, _, t)| Source::new(format!("ros2: {t}")));
+    let mut last_cmd: Option<Instant> = None;
+    while !stop.load(Ordering::Acquire) {
+        watch.wait(Duration::from_millis(2));
+        for s in &mut plan.lasers {
+            s.send(&mut buf);
+        }
+        for (s, tf) in &mut plan.odom {
+            if let Some(sample) = s.send(&mut buf) {
+                let e = sample.value;
+                let t = Transform {
+                    parent: s.frame.clone(),
+                    child: "base_link".into(),
+                    x: e.x as f64 / 1000.0,
+                    y: e.y as f64 / 1000.0,
+                    z: 0.0,
+                    yaw: e.theta as f64,
+                };
+                ros2::encode_tf(sample.time, &[t], &mut buf);
+                let _ = tf.write(Cdr(std::mem::take(&mut buf)), None);
+            }
+        }
+        for s in &mut plan.imus {
+            s.send(&mut buf);
+        }
+        for s in &mut plan.images {
+            s.send(&mut buf);
+        }
+        if let (Some((motors, reader, topic)), Some(source)) = (&mut plan.cmd, &source) {
+            loop {
+                match reader.take_next_sample() {
+                    Ok(Some(sample)) => match ros2::decode::<Motors>(topic, &sample.value().0, 0) {
+                        Ok((_, m)) => {
+                            if motors.accept(source, m).is_some() {
+                                last_cmd = Some(Instant::now());
+                            }
+                        }
+                        Err(e) => {
+                            source.refused(e);
+                        }
+                    },
+                    Ok(None) => break,
+                    Err(e) => {
+                        source.refused(format!("{topic}: {e}"));
+                        break;
+                    }
+                }
+            }
+            if last_cmd.is_some_and(|t| t.elapsed() >= timeout) {
+                last_cmd = None;
+                let _ = motors.publish(Motors::default());
+            }
+        }
+    }
+    if let Some((motors, _, _)) = &plan.cmd {
+        if last_cmd.is_some() {
+            let _ = motors.publish(Motors::default());
+        }
+    }
+    users.into_iter().for_each(|f| f());
+}
+
+crate::register_driver!(
+    Service,
+    "ros2",
+    "a ROS 2 node over DDS serving the robot: /scan, /odom, /tf, /imu, images; /cmd_vel drives motors",
+    create,
+    lines = LINES
+);
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn topics_take_the_namespace_and_the_rt_prefix() {
+        assert_eq!(dds_topic(&ros_topic("/", "scan")), "rt/scan");
+        assert_eq!(dds_topic(&ros_topic("/robot1", "scan")), "rt/robot1/scan");
+        assert_eq!(dds_topic(&ros_topic("/robot1", "/tf")), "rt/tf");
+    }
+}

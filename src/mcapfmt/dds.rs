@@ -1,0 +1,94 @@
+//! ROS 2 messages on DDS (RustDDS): the CDR bytes of [`super::ros2`], carried as
+//! they are. A DataWriter or DataReader of [`Cdr`] with [`CdrAdapter`] sends and
+//! receives the one encoder's bytes (the 4-byte encapsulation header is RTPS's
+//! own: RustDDS writes it from `output_encoding`), so the service `ros2`, the
+//! driver `ros2`, zenoh's `format ros2` and the recorder's `profile ros2` share
+//! each message's code.
+
+use bytes::Bytes;
+use rustdds::{
+    RepresentationIdentifier,
+    no_key::{Decode, DefaultDecoder, DeserializerAdapter, SerializerAdapter},
+};
+
+/// A whole little-endian CDR message, its encapsulation header first (what
+/// [`super::ros2::encode`] writes and [`super::ros2::decode`] reads).
+#[derive(Clone, Debug, Default)]
+pub struct Cdr(pub Vec<u8>);
+
+/// The RustDDS adapter of [`Cdr`].
+pub struct CdrAdapter;
+
+/// A message that is not little- or big-endian plain CDR.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct CdrError(String);
+
+impl SerializerAdapter<Cdr> for CdrAdapter {
+    type Error = CdrError;
+    fn output_encoding() -> RepresentationIdentifier {
+        RepresentationIdentifier::CDR_LE
+    }
+    fn to_bytes(value: &Cdr) -> Result<Bytes, CdrError> {
+        match value.0.get(4..) {
+            Some(body) if value.0[..2] == [0, 1] => Ok(Bytes::copy_from_slice(body)),
+            _ => Err(CdrError("not a little-endian CDR message".into())),
+        }
+    }
+}
+
+const ENCODINGS: [RepresentationIdentifier; 1] = [RepresentationIdentifier::CDR_LE];
+
+impl DeserializerAdapter<Cdr> for CdrAdapter {
+    type Error = CdrError;
+    type Decoded = Cdr;
+    fn supported_encodings() -> &'static [RepresentationIdentifier] {
+        &ENCODINGS
+    }
+    fn transform_decoded(decoded: Cdr) -> Cdr {
+        decoded
+    }
+}
+
+/// The decoder: prepends the header the reader of [`super::ros2`] expects.
+#[derive(Clone, Copy)]
+pub struct CdrDecoder;
+
+impl Decode<Cdr> for CdrDecoder {
+    type Error = CdrError;
+    fn decode_bytes(
+        self,
+        input: &[u8],
+        encoding: RepresentationIdentifier,
+    ) -> Result<Cdr, CdrError> {
+        if encoding != RepresentationIdentifier::CDR_LE {
+            return Err(CdrError(format!(
+                "encoding {encoding:?}: jderobot reads little-endian CDR"
+            )));
+        }
+        let mut v = Vec::with_capacity(input.len() + 4);
+        v.extend_from_slice(&[0, 1, 0, 0]);
+        v.extend_from_slice(input);
+        Ok(Cdr(v))
+    }
+}
+
+impl DefaultDecoder<Cdr> for CdrAdapter {
+    type Decoder = CdrDecoder;
+    const DECODER: CdrDecoder = CdrDecoder;
+}
+
+/// The DDS topic of a ROS 2 topic name: `/scan` → `rt/scan`.
+pub fn dds_topic(ros: &str) -> String {
+    format!("rt/{}", ros.trim_start_matches('/'))
+}
+
+/// A ROS 2 topic name under a namespace: (`/robot1`, `scan`) → `/robot1/scan`;
+/// an absolute name (`/tf`) stays as it is.
+pub fn ros_topic(namespace: &str, name: &str) -> String {
+    if name.starts_with('/') {
+        return name.to_string();
+    }
+    let ns = namespace.trim_end_matches('/');
+    format!("{ns}/{name}")
+}

@@ -1,0 +1,271 @@
+"""A ROS 2 peer on Eclipse Cyclone DDS (the `cyclonedds` Python binding), independent
+of jderobot's code: its types are the ROS 2 message definitions of
+ros2/common_interfaces (sensor_msgs/LaserScan, nav_msgs/Odometry, tf2_msgs/TFMessage,
+geometry_msgs/Twist, sensor_msgs/Image, sensor_msgs/Imu) under the DDS names a ROS 2
+node uses (topic `rt/scan`, type `sensor_msgs::msg::dds_::LaserScan_`, ...), written
+in XCDR1 as rmw_cyclonedds does.
+
+    cyclone_peer.py listen DOMAIN SECS   subscribe to a served robot, decode every
+                                         type field by field, drive it on /cmd_vel
+    cyclone_peer.py robot DOMAIN SECS    be a robot: publish /scan and /odom of a
+                                         robot in a 10 m square room, move as /cmd_vel says
+
+Prints one JSON line.
+"""
+import json
+import math
+import sys
+import time
+from dataclasses import dataclass
+
+from cyclonedds.core import Policy, Qos
+from cyclonedds.domain import DomainParticipant
+from cyclonedds.idl import IdlStruct
+from cyclonedds.idl.types import array, float32, float64, int32, sequence, uint8, uint32
+from cyclonedds.pub import DataWriter
+from cyclonedds.sub import DataReader
+from cyclonedds.topic import Topic
+from cyclonedds.util import duration
+
+
+@dataclass
+class Time(IdlStruct, typename="builtin_interfaces::msg::dds_::Time_"):
+    sec: int32
+    nanosec: uint32
+
+
+@dataclass
+class Header(IdlStruct, typename="std_msgs::msg::dds_::Header_"):
+    stamp: Time
+    frame_id: str
+
+
+@dataclass
+class LaserScan(IdlStruct, typename="sensor_msgs::msg::dds_::LaserScan_"):
+    header: Header
+    angle_min: float32
+    angle_max: float32
+    angle_increment: float32
+    time_increment: float32
+    scan_time: float32
+    range_min: float32
+    range_max: float32
+    ranges: sequence[float32]
+    intensities: sequence[float32]
+
+
+@dataclass
+class Vector3(IdlStruct, typename="geometry_msgs::msg::dds_::Vector3_"):
+    x: float64
+    y: float64
+    z: float64
+
+
+@dataclass
+class Point(IdlStruct, typename="geometry_msgs::msg::dds_::Point_"):
+    x: float64
+    y: float64
+    z: float64
+
+
+@dataclass
+class Quaternion(IdlStruct, typename="geometry_msgs::msg::dds_::Quaternion_"):
+    x: float64
+    y: float64
+    z: float64
+    w: float64
+
+
+@dataclass
+class Pose(IdlStruct, typename="geometry_msgs::msg::dds_::Pose_"):
+    position: Point
+    orientation: Quaternion
+
+
+@dataclass
+class PoseWithCovariance(IdlStruct, typename="geometry_msgs::msg::dds_::PoseWithCovariance_"):
+    pose: Pose
+    covariance: array[float64, 36]
+
+
+@dataclass
+class Twist(IdlStruct, typename="geometry_msgs::msg::dds_::Twist_"):
+    linear: Vector3
+    angular: Vector3
+
+
+@dataclass
+class TwistWithCovariance(IdlStruct, typename="geometry_msgs::msg::dds_::TwistWithCovariance_"):
+    twist: Twist
+    covariance: array[float64, 36]
+
+
+@dataclass
+class Odometry(IdlStruct, typename="nav_msgs::msg::dds_::Odometry_"):
+    header: Header
+    child_frame_id: str
+    pose: PoseWithCovariance
+    twist: TwistWithCovariance
+
+
+@dataclass
+class Transform(IdlStruct, typename="geometry_msgs::msg::dds_::Transform_"):
+    translation: Vector3
+    rotation: Quaternion
+
+
+@dataclass
+class TransformStamped(IdlStruct, typename="geometry_msgs::msg::dds_::TransformStamped_"):
+    header: Header
+    child_frame_id: str
+    transform: Transform
+
+
+@dataclass
+class TFMessage(IdlStruct, typename="tf2_msgs::msg::dds_::TFMessage_"):
+    transforms: sequence[TransformStamped]
+
+
+@dataclass
+class Image(IdlStruct, typename="sensor_msgs::msg::dds_::Image_"):
+    header: Header
+    height: uint32
+    width: uint32
+    encoding: str
+    is_bigendian: uint8
+    step: uint32
+    data: sequence[uint8]
+
+
+@dataclass
+class Imu(IdlStruct, typename="sensor_msgs::msg::dds_::Imu_"):
+    header: Header
+    orientation: Quaternion
+    orientation_covariance: array[float64, 9]
+    angular_velocity: Vector3
+    angular_velocity_covariance: array[float64, 9]
+    linear_acceleration: Vector3
+    linear_acceleration_covariance: array[float64, 9]
+
+
+XCDR1 = Policy.DataRepresentation(use_cdrv0_representation=True)
+# rclcpp's defaults: SystemDefaultsQoS / default (reliable, keep last 10, volatile),
+# the sensor data profile (best effort, keep last 5), tf_static (transient local).
+DEFAULT = Qos(Policy.Reliability.Reliable(duration(milliseconds=100)), Policy.History.KeepLast(10),
+              Policy.Durability.Volatile, XCDR1)
+SENSOR = Qos(Policy.Reliability.BestEffort, Policy.History.KeepLast(5), Policy.Durability.Volatile, XCDR1)
+STATIC = Qos(Policy.Reliability.Reliable(duration(milliseconds=100)), Policy.History.KeepLast(1),
+             Policy.Durability.TransientLocal, XCDR1)
+
+
+def yaw(q):
+    return 2.0 * math.atan2(q.z, q.w)
+
+
+def listen(dp, secs):
+    """A ROS 2 subscriber of every type, each with rclcpp's default QoS for it."""
+    readers = {}
+    for name, typ, qos in [("scan", LaserScan, SENSOR), ("odom", Odometry, DEFAULT), ("tf", TFMessage, DEFAULT),
+                           ("tf_static", TFMessage, STATIC), ("colorA/image_raw", Image, SENSOR),
+                           ("imu", Imu, SENSOR)]:
+        readers[name] = DataReader(dp, Topic(dp, "rt/" + name, typ, qos=qos), qos=qos)
+    cmd = DataWriter(dp, Topic(dp, "rt/cmd_vel", Twist, qos=DEFAULT), qos=DEFAULT)
+    got = {}
+    end = time.time() + secs
+    odom_first = None
+    while time.time() < end:
+        if odom_first:  # drive once the starting pose is known
+            cmd.write(Twist(Vector3(0.3, 0.0, 0.0), Vector3(0.0, 0.0, 0.2)))
+        for name, r in readers.items():
+            for m in r.take(N=10):
+                if name == "scan":
+                    got["scan"] = {"frame": m.header.frame_id, "stamp": m.header.stamp.sec, "n": len(m.ranges),
+                                   "angle_min": m.angle_min, "angle_max": m.angle_max,
+                                   "angle_increment": m.angle_increment, "range_min": m.range_min,
+                                   "range_max": m.range_max, "ranges": [m.ranges[0], m.ranges[len(m.ranges) // 2]],
+                                   "intensities": len(m.intensities)}
+                elif name == "odom":
+                    p = m.pose.pose
+                    o = {"frame": m.header.frame_id, "child": m.child_frame_id, "x": p.position.x,
+                         "y": p.position.y, "yaw": yaw(p.orientation)}
+                    odom_first = odom_first or o
+                    got["odom_first"] = odom_first
+                    got["odom"] = o
+                elif name in ("tf", "tf_static"):
+                    t = m.transforms[0]
+                    got[name] = {"parent": t.header.frame_id, "child": t.child_frame_id,
+                                 "x": t.transform.translation.x, "y": t.transform.translation.y,
+                                 "yaw": yaw(t.transform.rotation), "n": len(m.transforms)}
+                elif name == "colorA/image_raw":
+                    got["image"] = {"frame": m.header.frame_id, "width": m.width, "height": m.height,
+                                    "encoding": m.encoding, "step": m.step, "bytes": len(m.data),
+                                    "big": m.is_bigendian}
+                elif name == "imu":
+                    got["imu"] = {"frame": m.header.frame_id, "qw": m.orientation.w,
+                                  "az": m.linear_acceleration.z}
+        want = ["scan", "odom", "tf", "tf_static", "image", "imu"]
+        moved = "odom" in got and math.hypot(got["odom"]["x"] - got["odom_first"]["x"],
+                                             got["odom"]["y"] - got["odom_first"]["y"]) > 0.1
+        if all(k in got for k in want) and moved:
+            break
+        time.sleep(0.05)
+    print(json.dumps(got))
+
+
+def robot(dp, secs):
+    """A robot in a 10 m square room (walls at x, y = +-5 m), starting at the
+    origin facing +x; it moves as /cmd_vel says (unicycle, 20 Hz)."""
+    scan_w = DataWriter(dp, Topic(dp, "rt/scan", LaserScan, qos=SENSOR), qos=SENSOR)
+    odom_w = DataWriter(dp, Topic(dp, "rt/odom", Odometry, qos=DEFAULT), qos=DEFAULT)
+    # A best-effort reader matches a reliable writer too (as a robot's base does).
+    cmd_r = DataReader(dp, Topic(dp, "rt/cmd_vel", Twist, qos=DEFAULT), qos=SENSOR)
+    x = y = th = 0.0
+    v = w = 0.0
+    cmds = 0
+    max_v = 0.0
+    last_cmd = time.time()
+    end = time.time() + secs
+    n = 181
+    inc = math.pi / 180.0
+    zero = [0.0] * 36
+    while time.time() < end:
+        for m in cmd_r.take(N=20):
+            v, w = m.linear.x, m.angular.z
+            cmds += 1
+            max_v = max(max_v, v)
+            last_cmd = time.time()
+        if time.time() - last_cmd > 0.5:
+            v = w = 0.0
+        dt = 0.05
+        x += v * math.cos(th) * dt
+        y += v * math.sin(th) * dt
+        th += w * dt
+        ranges = []
+        for i in range(n):
+            a = th - math.pi / 2 + i * inc
+            c, s = math.cos(a), math.sin(a)
+            d = min((5.0 - x) / c if c > 1e-9 else 1e9, (-5.0 - x) / c if c < -1e-9 else 1e9,
+                    (5.0 - y) / s if s > 1e-9 else 1e9, (-5.0 - y) / s if s < -1e-9 else 1e9)
+            ranges.append(min(d, 8.0))
+        now = time.time()
+        stamp = Time(int(now), int((now % 1) * 1e9))
+        scan_w.write(LaserScan(Header(stamp, "base_scan"), -math.pi / 2, math.pi / 2, inc, 0.0, 0.05, 0.12, 8.0,
+                               ranges, []))
+        q = Quaternion(0.0, 0.0, math.sin(th / 2), math.cos(th / 2))
+        odom_w.write(Odometry(Header(stamp, "odom"), "base_footprint",
+                              PoseWithCovariance(Pose(Point(x, y, 0.0), q), zero),
+                              TwistWithCovariance(Twist(Vector3(v, 0, 0), Vector3(0, 0, w)), zero)))
+        time.sleep(dt)
+        if cmds > 0 and x > 2.0:
+            break
+    print(json.dumps({"x": x, "y": y, "theta": th, "cmds": cmds, "max_v": max_v}))
+
+
+def main():
+    mode, domain, secs = sys.argv[1], int(sys.argv[2]), float(sys.argv[3])
+    dp = DomainParticipant(domain)
+    {"listen": listen, "robot": robot}[mode](dp, secs)
+
+
+if __name__ == "__main__":
+    main()
