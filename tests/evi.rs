@@ -5,8 +5,7 @@
 #![cfg(feature = "evi")]
 
 use crate::common;
-#[path = "emulators/ptu.rs"]
-mod ptu;
+use crate::ptu;
 #[path = "emulators/visca.rs"]
 mod visca;
 

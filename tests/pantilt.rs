@@ -6,8 +6,7 @@
 #![cfg(feature = "pantilt")]
 
 use crate::common;
-#[path = "emulators/ptu.rs"]
-mod ptu;
+use crate::ptu;
 
 use std::{
     io::{BufRead, BufReader, Write},

@@ -124,9 +124,15 @@ struct Input {
     reader: Reader,
     source: Source,
     /// Decodes one message into the interface; false when refused.
-    apply: Box<dyn FnMut(&Source, &[u8]) -> bool + Send>,
+    apply: Decode,
     last: Option<Instant>,
 }
+
+/// Decodes one CDR message into an interface; false when the message is refused.
+type Decode = Box<dyn FnMut(&Source, &[u8]) -> bool + Send>;
+
+/// `motors` and the `/cmd_vel` writer it feeds, with the topic's name.
+type CmdVelOut = (Arc<Interface<Motors>>, DataWriter<Cdr, CdrAdapter>, String);
 
 fn input<T: Ros2>(
     dp: &DomainParticipant,
@@ -169,7 +175,7 @@ fn input<T: Ros2>(
 
 struct Robot {
     inputs: Vec<Input>,
-    motors: Option<(Arc<Interface<Motors>>, DataWriter<Cdr, CdrAdapter>, String)>,
+    motors: Option<CmdVelOut>,
     silence: Duration,
     timeout: Duration,
     dp: DomainParticipant,

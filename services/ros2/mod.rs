@@ -188,10 +188,10 @@ impl<T: Ros2> Served<T> {
             return None;
         }
         self.clock = s.clock;
-        if ros2::encode(&self.frame, &s, buf) {
-            if let Err(e) = self.writer.write(Cdr(std::mem::take(buf)), None) {
-                tracing::debug!("ros2: {}: {e}", self.topic);
-            }
+        if ros2::encode(&self.frame, &s, buf)
+            && let Err(e) = self.writer.write(Cdr(std::mem::take(buf)), None)
+        {
+            tracing::debug!("ros2: {}: {e}", self.topic);
         }
         Some(s)
     }
@@ -202,9 +202,12 @@ struct Plan {
     odom: Vec<(Served<Encoders>, Writer)>,
     imus: Vec<Served<Imu>>,
     images: Vec<Served<Image>>,
-    cmd: Option<(Arc<Interface<Motors>>, DataReader<Cdr, CdrAdapter>, String)>,
+    cmd: Option<CmdVelIn>,
     tf_static: Option<(Writer, Vec<Transform>)>,
 }
+
+/// `motors` and the `/cmd_vel` reader that drives it, with the topic's name.
+type CmdVelIn = (Arc<Interface<Motors>>, DataReader<Cdr, CdrAdapter>, String);
 
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>> {
     let l: Lines = conf.settings(LINES)?;
@@ -535,10 +538,10 @@ fn serve(
             }
         }
     }
-    if let Some((motors, _, _)) = &plan.cmd {
-        if last_cmd.is_some() {
-            let _ = motors.publish(Motors::default());
-        }
+    if let Some((motors, _, _)) = &plan.cmd
+        && last_cmd.is_some()
+    {
+        let _ = motors.publish(Motors::default());
     }
     users.into_iter().for_each(|f| f());
 }

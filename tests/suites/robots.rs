@@ -5,6 +5,10 @@
 
 #[path = "../common/mod.rs"]
 mod common;
+/// The pan-tilt unit's pty emulator, shared by the evi and pantilt tests.
+#[cfg(any(feature = "evi", feature = "pantilt"))]
+#[path = "../emulators/ptu.rs"]
+mod ptu;
 
 #[path = "../evi.rs"]
 mod evi;
