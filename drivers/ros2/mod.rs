@@ -7,7 +7,7 @@
 //! # Conf
 //! ```text
 //! driver ros2
-//! insecure on                     # required (DDS here has no authentication; docs/ros2.md)
+//! insecure                        # required (DDS here has no authentication; docs/ros2.md)
 //! domain 0                        # ROS_DOMAIN_ID, 0..232 (default 0)
 //! node jderobot_driver            # the node's name (default jderobot_driver)
 //! namespace /                     # namespace of relative topic names (default /)
@@ -54,7 +54,7 @@ use rustdds::{
 use crate::{
     conf::{
         ComponentConf,
-        settings::{self, MOTORS_TIMEOUT, Setting, int, on_off, word},
+        settings::{self, MOTORS_TIMEOUT, Setting, int, word},
     },
     interfaces::{AnyInterface, Encoders, Image, Imu, Interface, Laser, Motors, Source},
     mcapfmt::{
@@ -67,12 +67,7 @@ use crate::{
 
 const LINES: &[Setting] = &[
     settings::provides("provides laser|encoders|motors|imu|colorA..D|varcolorA..D [TOPIC]"),
-    Setting::new(
-        "insecure",
-        "on: drive although DDS here has no authentication and reaches the LAN (required)",
-        &[on_off("on|off")],
-    )
-    .default("off"),
+    settings::INSECURE,
     Setting::new("domain", "ROS_DOMAIN_ID", &[int("ID", "", 0, 232)]).default("0"),
     Setting::new("node", "the ROS 2 node's name", &[word("NAME")]).default("jderobot_driver"),
     Setting::new(
@@ -93,6 +88,7 @@ const LINES: &[Setting] = &[
 #[derive(serde::Deserialize)]
 struct Lines {
     provides: Vec<(String, Option<String>)>,
+    #[serde(default)]
     insecure: bool,
     domain: u16,
     node: String,
@@ -309,8 +305,8 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
         anyhow::bail!(
             "driver ros2: DDS here has no authentication and RustDDS reaches every \
              multicast interface (it cannot keep discovery to this host): anyone on the \
-             LAN could read the robot and drive it; DDS Security would be needed. Say \
-             `insecure on` to drive it anyway"
+             LAN could read the robot and drive it; DDS Security would be needed. Add an \
+             `insecure` line to drive it anyway"
         );
     }
     if l.provides.is_empty() {

@@ -167,11 +167,7 @@ const LINES: &[Setting] = &[
         "a secret clients must present (ws://HOST:PORT/?token=SECRET, or `Authorization: Bearer SECRET`)",
         &[word("SECRET")],
     ),
-    Setting::new(
-        "insecure",
-        "listen beyond loopback without a token (anyone on the network may drive the robot)",
-        &[],
-    ),
+    settings::INSECURE,
 ];
 
 #[derive(serde::Deserialize)]
@@ -186,8 +182,9 @@ struct Lines {
     max_message: usize,
     max_clients: usize,
     token: Option<String>,
-    #[serde(default)]
-    insecure: bool,
+    /// `settings::guard_listen` reads the `insecure` line from the conf itself.
+    #[serde(rename = "insecure", default)]
+    _insecure: bool,
 }
 
 /// Reads the conf (every error names file:line and the fix).
@@ -237,17 +234,14 @@ pub fn parse(conf: &ComponentConf) -> Result<Settings, ConfError> {
     if serves.iter().any(|s| s == "all") {
         serves.clear();
     }
-    if !bind.is_loopback() && lines.token.is_none() && !lines.insecure {
-        let l = conf
-            .line("bind")
-            .expect("a non-loopback bind comes from a line");
-        return Err(l.error(format!(
-            "`bind {bind}` listens beyond loopback, where anyone on the network could drive the \
-             robot: add `token SECRET` (clients connect to ws://HOST:PORT/?token=SECRET; put it \
-             behind a TLS proxy for wss:// — this build has no TLS of its own), or say \
-             `insecure` to accept anyone"
-        )));
-    }
+    let exposure = settings::guard_listen(
+        conf,
+        "bind",
+        &bind.to_string(),
+        lines.token.is_some(),
+        "add `token SECRET` (clients connect to ws://HOST:PORT/?token=SECRET; put it behind \
+         a TLS proxy for wss://, this build has no TLS of its own)",
+    )?;
     Ok(Settings {
         bind,
         port: lines.port,
@@ -261,7 +255,7 @@ pub fn parse(conf: &ComponentConf) -> Result<Settings, ConfError> {
             max_clients: lines.max_clients,
             token: lines.token,
         },
-        insecure: lines.insecure,
+        insecure: exposure == settings::Exposure::Insecure,
     })
 }
 
@@ -592,16 +586,11 @@ pub fn start(s: &Settings, rt: &Runtime) -> anyhow::Result<Foxglove> {
     me.addr = addr;
     me.direct = addrs.get(1).copied();
     me.runtime = Some(runtime);
-    if !s.bind.is_loopback() {
-        if s.insecure {
-            tracing::warn!(
-                "foxglove: listening beyond loopback on {addr} without a token (`insecure`): anyone who reaches it can drive the robot"
-            );
-        } else {
-            tracing::info!(
-                "foxglove: listening beyond loopback on {addr}; clients need the token (ws://HOST:PORT/?token=...)"
-            );
-        }
+    // Without a token, `settings::guard_listen` said so when the conf was read.
+    if !s.bind.is_loopback() && !s.insecure {
+        tracing::info!(
+            "foxglove: listening beyond loopback on {addr}; clients need the token (ws://HOST:PORT/?token=...)"
+        );
     }
     tracing::info!("foxglove: listening on ws://{addr}");
     if let Some(d) = me.direct {

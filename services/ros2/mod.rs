@@ -15,7 +15,7 @@
 //! # Conf
 //! ```text
 //! service ros2
-//! insecure on              # required: DDS here has no authentication (see below)
+//! insecure                 # required: DDS here has no authentication (see below)
 //! node jderobot            # the node's name (default jderobot)
 //! namespace /              # the node's namespace and its relative topics' (default /)
 //! domain 0                 # ROS_DOMAIN_ID, 0..232 (default 0)
@@ -46,7 +46,7 @@
 //! discovery to this host as ROS 2's `ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`
 //! does. Anyone on the LAN could then read the robot and drive it: DDS Security
 //! would be needed to prevent it, and it is not set up here. So the service
-//! starts only with `insecure on`, which says so.
+//! starts only with `insecure`, which says so.
 //!
 //! Provides no interface; uses the served ones.
 
@@ -68,7 +68,7 @@ use rustdds::{
 use crate::{
     conf::{
         ComponentConf,
-        settings::{MOTORS_TIMEOUT, Setting, int, interface, on_off, word},
+        settings::{self, MOTORS_TIMEOUT, Setting, int, interface, word},
     },
     interfaces::{Encoders, Image, Imu, Interface, Laser, Motors, Source, Watch},
     mcapfmt::{
@@ -80,12 +80,7 @@ use crate::{
 };
 
 const LINES: &[Setting] = &[
-    Setting::new(
-        "insecure",
-        "on: serve although DDS here has no authentication and reaches the LAN (required)",
-        &[on_off("on|off")],
-    )
-    .default("off"),
+    settings::INSECURE,
     Setting::new("node", "the ROS 2 node's name", &[word("NAME")]).default("jderobot"),
     Setting::new(
         "namespace",
@@ -111,6 +106,7 @@ const LINES: &[Setting] = &[
 
 #[derive(serde::Deserialize)]
 struct Lines {
+    #[serde(default)]
     insecure: bool,
     node: String,
     namespace: String,
@@ -215,8 +211,8 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
         anyhow::bail!(
             "service ros2: DDS here has no authentication and RustDDS reaches every \
              multicast interface (it cannot keep discovery to this host): anyone on the \
-             LAN could read and drive the robot; DDS Security would be needed. Say \
-             `insecure on` to serve it anyway"
+             LAN could read and drive the robot; DDS Security would be needed. Add an \
+             `insecure` line to serve it anyway"
         );
     }
     let ns = if l.namespace.starts_with('/') {

@@ -147,28 +147,37 @@ fn shell_commands(component: Option<&str>) -> String {
     out
 }
 
-/// `jderobot help NAME`: the component's lines from its declaration.
+/// `jderobot help NAME`: the component's lines from its declaration; a name that
+/// is both a driver and a service (`ros2`) prints both.
 fn help(name: &str) -> ExitCode {
-    let entry = match registry::lookup(None, name) {
-        Ok(e) => e,
-        Err(e) => {
+    let entries: Vec<_> = registry::components()
+        .into_iter()
+        .filter(|c| c.name == name)
+        .collect();
+    if entries.is_empty() {
+        if let Err(e) = registry::lookup(None, name) {
             eprintln!("{e}");
-            return ExitCode::FAILURE;
         }
-    };
-    match entry.lines {
-        Some(decl) => print!(
-            "{}",
-            crate::conf::settings::help_text(entry.kind, entry.name, entry.summary, decl, "")
-        ),
-        None => println!(
-            "{} {}: {}
+        return ExitCode::FAILURE;
+    }
+    for (i, entry) in entries.iter().enumerate() {
+        if i > 0 {
+            println!();
+        }
+        match entry.lines {
+            Some(decl) => print!(
+                "{}",
+                crate::conf::settings::help_text(entry.kind, entry.name, entry.summary, decl, "")
+            ),
+            None => println!(
+                "{} {}: {}
 
 Its lines are not declared yet; its module documentation lists them.",
-            entry.kind, entry.name, entry.summary
-        ),
+                entry.kind, entry.name, entry.summary
+            ),
+        }
     }
-    print!("{}", shell_commands(Some(entry.name)));
+    print!("{}", shell_commands(Some(name)));
     ExitCode::SUCCESS
 }
 
