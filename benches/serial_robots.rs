@@ -14,6 +14,8 @@
 
 #[path = "../tests/emulators/create2.rs"]
 mod create2;
+#[path = "../tests/emulators/ptu.rs"]
+mod ptu;
 #[path = "../tests/emulators/room.rs"]
 mod room;
 #[path = "../tests/emulators/rplidar.rs"]

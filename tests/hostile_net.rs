@@ -7,7 +7,7 @@
 //! `27` subscribes to the laser, `26 ...` is its push, `1027 TEXT` an error.
 #![cfg(feature = "networkserver")]
 
-mod common;
+use crate::common;
 
 use std::{
     io::{Read, Write},
@@ -29,12 +29,7 @@ const NAME: &[u8; 20] = b"jdec\0\0\0\0\0\0\0\0\0\0\0\0\0\0\0\0";
 /// case: subscribers get one push and then nothing, so they are never slow).
 fn still_laser_server(conf: ServerConf) -> (NetServer, Arc<Interface<Motors>>) {
     let laser = Arc::new(Interface::<Laser>::new("laser", "robot"));
-    laser
-        .publish(Laser {
-            readings: vec![1000; 10],
-            resolution: 1.0,
-        })
-        .unwrap();
+    laser.publish(Laser::jde43(vec![1000; 10], 1.0)).unwrap();
     let motors = Arc::new(Interface::<Motors>::new("motors", "robot"));
     let sources = Sources {
         laser: Some(laser),
@@ -84,33 +79,9 @@ fn connect_from(from: [u8; 4], to: SocketAddr) -> TcpStream {
     }
 }
 
-/// Says its name (and `then`), and reads until a laser push (true) or a refusal,
-/// a close or 5 s (false).
+/// Says the test's name (and `then`) and reads until a laser push (true) or not.
 fn gets_laser_on(s: &mut TcpStream, then: &[u8]) -> bool {
-    s.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
-    let mut hello = NAME.to_vec();
-    hello.extend_from_slice(then);
-    hello.extend_from_slice(b"27\n");
-    if s.write_all(&hello).is_err() {
-        return false;
-    }
-    let mut got = Vec::new();
-    let mut b = [0u8; 4096];
-    let t0 = Instant::now();
-    while t0.elapsed() < Duration::from_secs(5) {
-        match s.read(&mut b) {
-            Ok(0) | Err(_) => break,
-            Ok(n) => got.extend_from_slice(&b[..n]),
-        }
-        if got.starts_with(b"26 ") {
-            return true;
-        }
-        if got.starts_with(b"1027") && got.contains(&b'\n') {
-            eprintln!("refused: {}", String::from_utf8_lossy(&got).trim());
-            return false;
-        }
-    }
-    false
+    super::network_bad_input::gets_laser_on(s, NAME, then)
 }
 
 /// `n` named clients from `from`, each sending `then` after its name.

@@ -433,11 +433,15 @@ fn laser_server(conf: ServerConf) -> (NetServer, Arc<AtomicBool>, thread::JoinHa
 /// Connects with `name`, subscribes to the laser and says whether a laser push
 /// arrives within 5 s (false on a `1027` refusal or a close).
 fn gets_laser(addr: SocketAddr, name: &[u8]) -> bool {
-    let Ok(mut s) = TcpStream::connect(addr) else {
-        return false;
-    };
+    TcpStream::connect(addr).is_ok_and(|mut s| gets_laser_on(&mut s, name, b""))
+}
+
+/// Says `name` (and `then`), asks for the laser, and reads until a laser push
+/// (true) or a refusal, a close or 5 s (false).
+pub fn gets_laser_on(s: &mut TcpStream, name: &[u8], then: &[u8]) -> bool {
     s.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
     let mut hello = name.to_vec();
+    hello.extend_from_slice(then);
     hello.extend_from_slice(b"27\n");
     if s.write_all(&hello).is_err() {
         return false;

@@ -7,7 +7,7 @@
 //! driving the two to a target.
 #![cfg(all(feature = "roomba", feature = "rplidar"))]
 
-use crate::common;
+use crate::{common, ptu};
 #[path = "emulators/create2.rs"]
 mod create2;
 #[path = "emulators/room.rs"]
@@ -495,4 +495,52 @@ fn conf_errors_name_the_line_and_the_range() {
     assert!(e.contains("between 1200 and 115200"), "{e}");
     let e = common::start_error("driver roomba\nprovides motors\nend_driver\nload_driver roomba\n");
     assert!(e.contains("no `serial` line"), "{e}");
+}
+
+/// The Academy's bump-and-go (`assets/exercises/vacuum_solution.py`) runs unchanged
+/// on the Create 2: it drives to a wall, the bump arrives through the OI stream,
+/// and the program backs off, turns and drives on, several times.
+#[cfg(feature = "python")]
+#[test]
+fn the_academys_bump_and_go_runs_unchanged_on_the_roomba() {
+    let dir = tempfile::tempdir().unwrap();
+    let port = dir.path().join("create2");
+    let room = room::Room::new(4000.0, 3000.0, 3000.0, 1500.0, 0.0);
+    let _emu = create2::Create2::start(&port, room.clone());
+    let program = common::root().join("assets/exercises/vacuum_solution.py");
+    let rt = start_conf(&format!(
+        "{}schema python\nfile {}\ncycle 50\nend_schema\nload_schema python\n",
+        roomba_conf(&port, "reply_timeout 300\n"),
+        program.display()
+    ));
+    rt.run("python").unwrap();
+    let shared = jderobot::schemas::python::shared(&rt, "python");
+    let bumps = || {
+        shared
+            .console
+            .lock()
+            .lines
+            .iter()
+            .filter(|l| l.contains("bump on the"))
+            .count()
+    };
+    let t0 = Instant::now();
+    let mut far = 0.0f64;
+    while t0.elapsed() < Duration::from_secs(40) && bumps() < 3 {
+        let r = room.lock().clone();
+        far = far.max((r.x - 3000.0).hypot(r.y - 1500.0));
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let console = shared
+        .console
+        .lock()
+        .lines
+        .iter()
+        .cloned()
+        .collect::<Vec<_>>()
+        .join("\n");
+    assert!(bumps() >= 3, "fewer than 3 bumps in 40 s:\n{console}");
+    assert!(room.lock().touched, "the emulated robot never met a wall");
+    assert!(far > 500.0, "it moved only {far:.0} mm:\n{console}");
+    rt.shutdown();
 }

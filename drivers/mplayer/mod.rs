@@ -126,10 +126,7 @@ const LINES: &[Setting] = &[settings::provides_forms(
 )
 .required()];
 
-#[derive(serde::Deserialize)]
-struct Lines {
-    provides: Vec<Provides>,
-}
+type Lines = crate::conf::settings::ProvidesOnly<Provides>;
 
 #[derive(serde::Deserialize)]
 enum Provides {

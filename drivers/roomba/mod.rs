@@ -39,7 +39,7 @@
 //!   the command is older than `motors_timeout`, on a loss, and at stop; at stop the
 //!   stream is paused and Start sent, leaving the robot in Passive mode.
 //! - The battery (mV, mA, mAh of mAh) and the OI mode are kept as the driver's
-//!   status line ([`Status`], exported as `NAME.status` in the name space).
+//!   status line ([`Status`], exported as `NAME.status` in the name space, and `ps` prints it).
 //!
 //! System packages: none (the `serialport` crate). Your user needs the port's group
 //! (usually `dialout`).
@@ -457,6 +457,15 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
     let c = RoombaConf::parse(conf)?;
     Ok(Box::new(start(c, rt, &conf.name)?))
 }
+
+// Its `ps` line: `roomba: ...` (the driver's [`Status`]).
+crate::register_ps_line!("roomba", |rt| {
+    rt.names
+        .import::<Status>("roomba", "status")
+        .ok()
+        .map(|s| s.line())
+        .filter(|l| !l.is_empty())
+});
 
 crate::register_driver!(
     Driver,

@@ -32,7 +32,7 @@
 //!   reopens the port every second (a cable pulled and plugged back is found again).
 //! - At stop: STOP and the motor stopped (DTR set).
 //! - Model, firmware, serial number and health are the driver's status line
-//!   ([`Status`], exported as `NAME.status`). Express scans are not used.
+//!   ([`Status`], exported as `NAME.status`, and `ps` prints it). Express scans are not used.
 //!
 //! System packages: none (the `serialport` crate). Your user needs the port's group
 //! (usually `dialout`).
@@ -494,6 +494,15 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
     let c = LidarConf::parse(conf)?;
     Ok(Box::new(start(c, rt, &conf.name)?))
 }
+
+// Its `ps` line: `rplidar: ...` (the driver's [`Status`]).
+crate::register_ps_line!("rplidar", |rt| {
+    rt.names
+        .import::<Status>("rplidar", "status")
+        .ok()
+        .map(|s| s.line())
+        .filter(|l| !l.is_empty())
+});
 
 crate::register_driver!(
     Driver,

@@ -111,10 +111,7 @@ const LINES_V4L1: &[Setting] = &[settings::provides_forms(
 )
 .required()];
 
-#[derive(serde::Deserialize)]
-struct Lines {
-    provides: Vec<Provides>,
-}
+type Lines = crate::conf::settings::ProvidesOnly<Provides>;
 
 #[derive(serde::Deserialize)]
 enum Provides {

@@ -524,6 +524,13 @@ pub const fn provides_forms(help: &'static str, forms: &'static [Form]) -> Setti
     Setting::forms("provides", help, forms).repeats()
 }
 
+/// The lines of a component whose only lines are [`provides_forms`] (the file,
+/// stream and v4l cameras): one `P` (an enum, a variant a form) per line.
+#[derive(serde::Deserialize)]
+pub struct ProvidesOnly<P> {
+    pub provides: Vec<P>,
+}
+
 /// `KEY INTERFACE`: an interface the component uses in a role (`motors motors`,
 /// `camera varcolorA`), `default` when absent; schemas take `none` for "do
 /// without" where they can (the help says so).

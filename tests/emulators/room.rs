@@ -5,12 +5,7 @@
 //! lidar sits at the robot's centre, its forward axis the robot's.
 #![allow(dead_code)]
 
-use std::{
-    os::fd::{AsRawFd, FromRawFd, OwnedFd},
-    path::PathBuf,
-    sync::Arc,
-    time::Duration,
-};
+use std::sync::Arc;
 
 use parking_lot::Mutex;
 
@@ -90,79 +85,5 @@ pub fn wrap(a: f64) -> f64 {
     a
 }
 
-// The pty helpers, as the PTU emulator (tests/emulators/ptu.rs) has them.
-
-/// A pseudo-terminal pair with the slave in raw mode.
-pub struct Pty {
-    pub master: OwnedFd,
-    pub slave: OwnedFd,
-    pub slave_path: PathBuf,
-}
-
-/// Opens a pty pair (raw slave), like a serial cable into the device.
-pub fn open_pty() -> Pty {
-    let (mut m, mut s) = (0, 0);
-    let mut name = [0 as libc::c_char; 128];
-    // SAFETY: openpty writes two fds and a NUL-terminated name into our buffers.
-    let r = unsafe {
-        libc::openpty(
-            &mut m,
-            &mut s,
-            name.as_mut_ptr(),
-            std::ptr::null(),
-            std::ptr::null(),
-        )
-    };
-    assert_eq!(r, 0, "openpty failed: {}", std::io::Error::last_os_error());
-    // SAFETY: openpty returned two open fds that we now own.
-    let (master, slave) = unsafe { (OwnedFd::from_raw_fd(m), OwnedFd::from_raw_fd(s)) };
-    // SAFETY: termios is plain data; tcgetattr/tcsetattr on a valid fd.
-    unsafe {
-        let mut t: libc::termios = std::mem::zeroed();
-        libc::tcgetattr(slave.as_raw_fd(), &mut t);
-        libc::cfmakeraw(&mut t);
-        libc::tcsetattr(slave.as_raw_fd(), libc::TCSANOW, &t);
-    }
-    // SAFETY: `name` is NUL-terminated by openpty.
-    let path = unsafe { std::ffi::CStr::from_ptr(name.as_ptr()) }
-        .to_string_lossy()
-        .into_owned();
-    Pty {
-        master,
-        slave,
-        slave_path: PathBuf::from(path),
-    }
-}
-
-/// Reads what is available on `fd` within `timeout`.
-pub fn read_fd(fd: &OwnedFd, timeout: Duration, buf: &mut [u8]) -> std::io::Result<usize> {
-    let mut p = libc::pollfd {
-        fd: fd.as_raw_fd(),
-        events: libc::POLLIN,
-        revents: 0,
-    };
-    // SAFETY: one valid pollfd.
-    let r = unsafe { libc::poll(&mut p, 1, timeout.as_millis() as i32) };
-    if r <= 0 {
-        return Ok(0);
-    }
-    // SAFETY: reading into a valid buffer of its length.
-    let n = unsafe { libc::read(fd.as_raw_fd(), buf.as_mut_ptr().cast(), buf.len()) };
-    if n < 0 {
-        Err(std::io::Error::last_os_error())
-    } else {
-        Ok(n as usize)
-    }
-}
-
-/// Writes all of `data` to `fd`.
-pub fn write_fd(fd: &OwnedFd, mut data: &[u8]) {
-    while !data.is_empty() {
-        // SAFETY: writing from a valid buffer of its length.
-        let n = unsafe { libc::write(fd.as_raw_fd(), data.as_ptr().cast(), data.len()) };
-        if n <= 0 {
-            return;
-        }
-        data = &data[n as usize..];
-    }
-}
+/// The pty helpers of the PTU emulator (a serial cable into the device).
+pub use super::ptu::{Pty, open_pty, read_fd, write_fd};

@@ -1,4 +1,4 @@
-//! Test binary `network`: serving and reaching robots over the network: 4.3's wire, Zenoh (Rust and Python), Foxglove.
+//! Test binary `network`: serving and reaching robots over the network: 4.3's wire, Zenoh (Rust and Python), Foxglove, ROS 2, and hostile peers against them.
 //!
 //! One binary per area so the suite links a few times, not once per file
 //! (docs/benchmarks.md, CI); each module is one of the files beside it.
@@ -8,6 +8,8 @@ mod common;
 
 #[path = "../foxglove.rs"]
 mod foxglove;
+#[path = "../hostile_net.rs"]
+mod hostile_net;
 #[path = "../network_bad_input.rs"]
 mod network_bad_input;
 #[path = "../network_processes.rs"]

@@ -5,8 +5,13 @@
 
 #[path = "../common/mod.rs"]
 mod common;
-/// The pan-tilt unit's pty emulator, shared by the evi and pantilt tests.
-#[cfg(any(feature = "evi", feature = "pantilt"))]
+/// The pan-tilt unit's emulator and the pty helpers every serial emulator uses.
+#[cfg(any(
+    feature = "evi",
+    feature = "pantilt",
+    feature = "roomba",
+    feature = "rplidar"
+))]
 #[path = "../emulators/ptu.rs"]
 mod ptu;
 
