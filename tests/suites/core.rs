@@ -34,3 +34,25 @@ mod runtime;
 mod settings;
 #[path = "../shell_pty.rs"]
 mod shell_pty;
+
+/// Every `tests/*.rs` is a module of one of these binaries: with `autotests = false`
+/// a file that no suite mounts never compiles, and its tests never run.
+#[test]
+fn every_test_file_is_mounted_by_a_suite() {
+    let tests = common::root().join("tests");
+    let suites: String = std::fs::read_dir(tests.join("suites"))
+        .unwrap()
+        .map(|e| std::fs::read_to_string(e.unwrap().path()).unwrap())
+        .collect();
+    let mut missing = Vec::new();
+    for e in std::fs::read_dir(&tests).unwrap() {
+        let name = e.unwrap().file_name().to_string_lossy().into_owned();
+        if name.ends_with(".rs") && !suites.contains(&format!("\"../{name}\"")) {
+            missing.push(name);
+        }
+    }
+    assert!(
+        missing.is_empty(),
+        "tests/{missing:?}: add `#[path = \"../FILE\"] mod NAME;` to one of tests/suites/*.rs"
+    );
+}
