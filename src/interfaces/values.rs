@@ -6,6 +6,9 @@ use std::fmt::Write as _;
 pub trait InterfaceValue: Clone + Default + Send + Sync + 'static {
     /// The interface family name (`laser`, `motors`, `image`...).
     const KIND: &'static str;
+    /// The documented range of each field, one line, that
+    /// [`validate`](Self::validate) checks (listed together in [`RANGES`]).
+    const RANGE: &'static str;
     /// Whether a schema writes it (motors) rather than a driver.
     const ACTUATOR: bool = false;
     /// The value's fields in their units, one line (for `echo`).
@@ -37,48 +40,17 @@ pub trait InterfaceValue: Clone + Default + Send + Sync + 'static {
 }
 
 /// The documented ranges that [`InterfaceValue::validate`] checks, per kind and
-/// field (every number must also be finite).
-pub const RANGES: &[(&str, &str)] = &[
-    (
-        "image",
-        "data is width x height x 3 bytes; colorA..D are 320x240",
-    ),
-    (
-        "laser",
-        "readings >= 0 mm; resolution >= 0 readings/deg; start in [-360, 360] deg; \
-         0 <= min_range <= max_range <= 1e6 mm; mount |x|, |y| <= 1e5 mm, yaw in [-360, 360] deg",
-    ),
-    ("sonars", "us in [0, 1e6] mm"),
-    (
-        "encoders",
-        "|x|, |y| <= 1e9 mm (1000 km); |theta| <= 2π rad; cos, sin in [-1, 1]",
-    ),
-    (
-        "motors",
-        "|v| <= 10000 mm/s (10 m/s); |w| <= 3600 deg/s (10 turns/s); each driver limits them \
-         further to its robot's maxima",
-    ),
-    (
-        "pantiltencoders",
-        "pan_angle, tilt_angle in [-360, 360] deg",
-    ),
-    (
-        "pantiltmotors",
-        "longitude, latitude finite (each driver limits them); the limits in [-360, 360] deg, \
-         min <= max; speeds in [-1e4, 1e4] deg/s",
-    ),
-    ("zoomencoders", "zoom_position finite"),
-    (
-        "zoommotors",
-        "zoom, zoom_speed and the limits finite, min_zoom <= max_zoom",
-    ),
-    ("bumpers", "any bytes"),
-    (
-        "imu",
-        "qx, qy, qz, qw a unit quaternion (length 1 ± 0.01); |wx|, |wy|, |wz| <= 1e3 rad/s; \
-         |ax|, |ay|, |az| <= 1e4 m/s²",
-    ),
-];
+/// field (every number must also be finite): each kind's [`InterfaceValue::RANGE`],
+/// in the kinds table's order.
+pub const RANGES: &[(&str, &str)] = super::for_each_kind!(kind_ranges! {});
+
+/// `(KIND, RANGE)` of every kind of the table.
+macro_rules! kind_ranges {
+    (; $(($t:ident, $k:literal)),*) => {
+        &[$(($k, <$t as InterfaceValue>::RANGE)),*]
+    };
+}
+use kind_ranges;
 
 /// The largest |x|, |y| an `encoders` value may hold, mm (1000 km: beyond it an
 /// f32 in mm is a value no odometry gives).
@@ -196,6 +168,7 @@ pub fn fold_bytes(bytes: &[u8]) -> u64 {
 
 impl InterfaceValue for Image {
     const KIND: &'static str = "image";
+    const RANGE: &'static str = "data is width x height x 3 bytes; colorA..D are 320x240";
     fn fingerprint(&self) -> u64 {
         fold_bytes(&self.data) ^ ((self.width as u64) << 32 | self.height as u64)
     }
@@ -368,6 +341,8 @@ impl Laser {
 
 impl InterfaceValue for Laser {
     const KIND: &'static str = "laser";
+    const RANGE: &'static str = "readings >= 0 mm; resolution >= 0 readings/deg; start in [-360, 360] deg; \
+         0 <= min_range <= max_range <= 1e6 mm; mount |x|, |y| <= 1e5 mm, yaw in [-360, 360] deg";
     fn describe(&self) -> String {
         let mut s = format!(
             "number={} resolution={} readings/deg start={} deg range=[{}, {}] mm mount=({}, {}) mm {} deg readings(mm)=[",
@@ -445,6 +420,7 @@ pub struct Sonars {
 
 impl InterfaceValue for Sonars {
     const KIND: &'static str = "sonars";
+    const RANGE: &'static str = "us in [0, 1e6] mm";
     fn describe(&self) -> String {
         let v: Vec<String> = self.us.iter().map(|u| format!("{u:.0}")).collect();
         format!("number={} us(mm)=[{}]", self.us.len(), v.join(" "))
@@ -497,6 +473,8 @@ impl Encoders {
 
 impl InterfaceValue for Encoders {
     const KIND: &'static str = "encoders";
+    const RANGE: &'static str =
+        "|x|, |y| <= 1e9 mm (1000 km); |theta| <= 2π rad; cos, sin in [-1, 1]";
     fn describe(&self) -> String {
         format!(
             "x={:.1} mm y={:.1} mm theta={:.4} rad ({:.2} deg) cos={:.4} sin={:.4}",
@@ -551,6 +529,8 @@ pub fn limit(x: f32, lo: f32, hi: f32) -> f32 {
 
 impl InterfaceValue for Motors {
     const KIND: &'static str = "motors";
+    const RANGE: &'static str = "|v| <= 10000 mm/s (10 m/s); |w| <= 3600 deg/s (10 turns/s); each driver limits them \
+         further to its robot's maxima";
     const ACTUATOR: bool = true;
     fn describe(&self) -> String {
         format!("v={:.1} mm/s w={:.2} deg/s", self.v, self.w)
@@ -579,6 +559,7 @@ pub struct PtEncoders {
 
 impl InterfaceValue for PtEncoders {
     const KIND: &'static str = "pantiltencoders";
+    const RANGE: &'static str = "pan_angle, tilt_angle in [-360, 360] deg";
     fn describe(&self) -> String {
         format!(
             "pan_angle={:.2} deg tilt_angle={:.2} deg",
@@ -627,6 +608,8 @@ impl Default for PtMotors {
 
 impl InterfaceValue for PtMotors {
     const KIND: &'static str = "pantiltmotors";
+    const RANGE: &'static str = "longitude, latitude finite (each driver limits them); the limits in [-360, 360] deg, \
+         min <= max; speeds in [-1e4, 1e4] deg/s";
     const ACTUATOR: bool = true;
     fn describe(&self) -> String {
         format!(
@@ -700,6 +683,7 @@ pub struct ZoomEncoders {
 
 impl InterfaceValue for ZoomEncoders {
     const KIND: &'static str = "zoomencoders";
+    const RANGE: &'static str = "zoom_position finite";
     fn describe(&self) -> String {
         format!("zoom_position={:.2}", self.zoom_position)
     }
@@ -733,6 +717,7 @@ impl Default for ZoomMotors {
 
 impl InterfaceValue for ZoomMotors {
     const KIND: &'static str = "zoommotors";
+    const RANGE: &'static str = "zoom, zoom_speed and the limits finite, min_zoom <= max_zoom";
     const ACTUATOR: bool = true;
     fn describe(&self) -> String {
         format!(
@@ -777,6 +762,7 @@ pub struct Bumpers {
 
 impl InterfaceValue for Bumpers {
     const KIND: &'static str = "bumpers";
+    const RANGE: &'static str = "any bytes";
     fn describe(&self) -> String {
         format!("number={} bumpers={:?}", self.bumpers.len(), self.bumpers)
     }
@@ -862,6 +848,8 @@ impl Imu {
 
 impl InterfaceValue for Imu {
     const KIND: &'static str = "imu";
+    const RANGE: &'static str = "qx, qy, qz, qw a unit quaternion (length 1 ± 0.01); |wx|, |wy|, |wz| <= 1e3 rad/s; \
+         |ax|, |ay|, |az| <= 1e4 m/s²";
     fn describe(&self) -> String {
         let (r, p, y) = self.euler();
         format!(
