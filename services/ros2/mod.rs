@@ -193,13 +193,16 @@ impl<T: Ros2> Served<T> {
     }
 }
 
+#[derive(Default)]
 struct Plan {
     lasers: Vec<Served<Laser>>,
     odom: Vec<(Served<Encoders>, Writer)>,
     imus: Vec<Served<Imu>>,
     images: Vec<Served<Image>>,
     cmd: Option<CmdVelIn>,
-    tf_static: Option<(Writer, Vec<Transform>)>,
+    /// `/tf_static`'s writer, and the mounts it sends.
+    tf_static: Option<Writer>,
+    statics: Vec<Transform>,
 }
 
 /// `motors` and the `/cmd_vel` reader that drives it, with the topic's name.
@@ -220,23 +223,7 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
     } else {
         format!("/{}", l.namespace)
     };
-    let context = Context::with_options(ContextOptions::new().domain_id(l.domain))
-        .map_err(|e| anyhow::anyhow!("service ros2: DDS domain {}: {e}", l.domain))?;
-    let node = context
-        .new_node(
-            NodeName::new(&ns, &l.node)
-                .map_err(|e| anyhow::anyhow!("service ros2: node `{}` in `{ns}`: {e:?}", l.node))?,
-            NodeOptions::new(),
-        )
-        .map_err(|e| anyhow::anyhow!("service ros2: node: {e:?}"))?;
-    let dp = context.domain_participant();
-    let publisher = dp
-        .create_publisher(&reliable_qos(10))
-        .map_err(|e| anyhow::anyhow!("service ros2: {e}"))?;
-    let subscriber: Subscriber = dp
-        .create_subscriber(&reliable_qos(10))
-        .map_err(|e| anyhow::anyhow!("service ros2: {e}"))?;
-
+    let d = Dds::join(&l, &ns)?;
     // What is served: the serves lines, or every interface with a ROS 2 message.
     let serves: Vec<(String, Option<String>)> = if l.serves.is_empty() {
         rt.interfaces
@@ -248,150 +235,30 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
     } else {
         l.serves.clone()
     };
-    let (odom_frame, base_frame, laser_frame, camera_frame) = l.frames.clone();
-    let mut plan = Plan {
-        lasers: vec![],
-        odom: vec![],
-        imus: vec![],
-        images: vec![],
-        cmd: None,
-        tf_static: None,
-    };
-    let mut statics = vec![];
+    let frames = Frames::from(&l);
+    let mut plan = Plan::default();
     for (name, topic) in &serves {
-        let iface = rt
-            .interfaces
-            .get_any(name)
-            .map_err(|e| anyhow::anyhow!("service ros2: serves {name}: {e}"))?;
-        let first = name == iface.kind() || name == "laser";
-        let kind = iface.kind();
-        let default = match kind {
-            "laser" if first => "scan".to_string(),
-            "encoders" => "odom".to_string(),
-            "motors" => "cmd_vel".to_string(),
-            "imu" => "imu".to_string(),
-            "image" => format!("{name}/image_raw"),
-            _ => name.replace('.', "/"),
-        };
-        let topic = ros_topic(&ns, topic.as_deref().unwrap_or(&default));
-        match kind {
-            "laser" => {
-                let iface = rt.interfaces.get::<Laser>(name)?;
-                let m = iface.read().value.mount;
-                let frame = if first {
-                    laser_frame.clone()
-                } else {
-                    name.replace('.', "_")
-                };
-                statics.push(Transform {
-                    parent: base_frame.clone(),
-                    child: frame.clone(),
-                    x: m.x as f64 / 1000.0,
-                    y: m.y as f64 / 1000.0,
-                    z: 0.0,
-                    yaw: (m.yaw as f64).to_radians(),
-                });
-                let w = writer(&dp, &publisher, &topic, dds_name::<Laser>(), sensor_qos())?;
-                plan.lasers.push(Served {
-                    iface,
-                    topic,
-                    frame,
-                    writer: w,
-                    clock: 0,
-                });
-            }
-            "encoders" => {
-                let iface = rt.interfaces.get::<Encoders>(name)?;
-                let w = writer(
-                    &dp,
-                    &publisher,
-                    &topic,
-                    dds_name::<Encoders>(),
-                    reliable_qos(10),
-                )?;
-                let tf = writer(&dp, &publisher, "/tf", ros2::TF_MESSAGE, reliable_qos(100))?;
-                plan.odom.push((
-                    Served {
-                        iface,
-                        topic,
-                        frame: odom_frame.clone(),
-                        writer: w,
-                        clock: 0,
-                    },
-                    tf,
-                ));
-            }
-            "imu" => {
-                let iface = rt.interfaces.get::<Imu>(name)?;
-                let w = writer(&dp, &publisher, &topic, dds_name::<Imu>(), sensor_qos())?;
-                plan.imus.push(Served {
-                    iface,
-                    topic,
-                    frame: base_frame.clone(),
-                    writer: w,
-                    clock: 0,
-                });
-            }
-            "image" => {
-                let iface = rt.interfaces.get::<Image>(name)?;
-                let w = writer(&dp, &publisher, &topic, dds_name::<Image>(), sensor_qos())?;
-                plan.images.push(Served {
-                    iface,
-                    topic,
-                    frame: camera_frame.clone(),
-                    writer: w,
-                    clock: 0,
-                });
-            }
-            "motors" => {
-                let iface = rt.interfaces.get::<Motors>(name)?;
-                let qos = reliable_qos(10);
-                let t = dp
-                    .create_topic(
-                        dds_topic(&topic),
-                        dds_name::<Motors>().into(),
-                        &qos,
-                        TopicKind::NoKey,
-                    )
-                    .map_err(|e| anyhow::anyhow!("service ros2: topic {topic}: {e}"))?;
-                // A best-effort reader matches reliable and best-effort writers.
-                let r = subscriber
-                    .create_datareader_no_key::<Cdr, CdrAdapter>(
-                        &t,
-                        Some(
-                            QosPolicyBuilder::new()
-                                .reliability(Reliability::BestEffort)
-                                .history(History::KeepLast { depth: 10 })
-                                .build(),
-                        ),
-                    )
-                    .map_err(|e| anyhow::anyhow!("service ros2: a reader of {topic}: {e}"))?;
-                plan.cmd = Some((iface, r, topic));
-            }
-            other => anyhow::bail!(
-                "service ros2: serves {name}: a {other} interface has no ROS 2 message here; \
-                 serve laser, encoders, imu, motors or a camera"
-            ),
-        }
+        plan.add(rt, &d, &ns, &frames, name, topic.as_deref())?;
     }
-    if !statics.is_empty() {
+    if !plan.statics.is_empty() {
         let w = writer(
-            &dp,
-            &publisher,
+            &d.dp,
+            &d.publisher,
             "/tf_static",
             ros2::TF_MESSAGE,
             static_qos(),
         )?;
-        plan.tf_static = Some((w, statics));
+        plan.tf_static = Some(w);
     }
     let timeout = Duration::from_millis(l.motors_timeout);
     let stop = Arc::new(AtomicBool::new(false));
     let stop2 = stop.clone();
     let (tx, rx) = std::sync::mpsc::sync_channel(1);
+    let keep = (d.context, d.node, d.dp);
     let worker = Worker::start("ros2", stop.clone(), move || {
         let watch = Watch::for_current_thread();
         let _ = tx.send(watch.clone());
-        serve(plan, watch, timeout, stop2, (context, node, dp));
+        serve(plan, watch, timeout, stop2, keep);
     })?;
     let watch = rx.recv().ok();
     tracing::info!(
@@ -407,6 +274,213 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
             .join(", ")
     );
     Ok(Box::new(Ros2Service { worker, watch }))
+}
+
+/// The node in the ROS 2 graph and the DDS entities its topics hang from.
+struct Dds {
+    context: Context,
+    node: Node,
+    dp: DomainParticipant,
+    publisher: Publisher,
+    subscriber: Subscriber,
+}
+
+impl Dds {
+    fn join(l: &Lines, ns: &str) -> anyhow::Result<Dds> {
+        let context = Context::with_options(ContextOptions::new().domain_id(l.domain))
+            .map_err(|e| anyhow::anyhow!("service ros2: DDS domain {}: {e}", l.domain))?;
+        let node = context
+            .new_node(
+                NodeName::new(ns, &l.node).map_err(|e| {
+                    anyhow::anyhow!("service ros2: node `{}` in `{ns}`: {e:?}", l.node)
+                })?,
+                NodeOptions::new(),
+            )
+            .map_err(|e| anyhow::anyhow!("service ros2: node: {e:?}"))?;
+        let dp = context.domain_participant();
+        let publisher = dp
+            .create_publisher(&reliable_qos(10))
+            .map_err(|e| anyhow::anyhow!("service ros2: {e}"))?;
+        let subscriber = dp
+            .create_subscriber(&reliable_qos(10))
+            .map_err(|e| anyhow::anyhow!("service ros2: {e}"))?;
+        Ok(Dds {
+            context,
+            node,
+            dp,
+            publisher,
+            subscriber,
+        })
+    }
+}
+
+/// The frame ids of the `frames` line.
+struct Frames {
+    odom: String,
+    base: String,
+    laser: String,
+    camera: String,
+}
+
+impl From<&Lines> for Frames {
+    fn from(l: &Lines) -> Frames {
+        let (odom, base, laser, camera) = l.frames.clone();
+        Frames {
+            odom,
+            base,
+            laser,
+            camera,
+        }
+    }
+}
+
+impl Plan {
+    /// Adds interface `name` on `topic` (or its kind's usual topic) to what is served.
+    fn add(
+        &mut self,
+        rt: &Runtime,
+        d: &Dds,
+        ns: &str,
+        f: &Frames,
+        name: &str,
+        topic: Option<&str>,
+    ) -> anyhow::Result<()> {
+        let plan = self;
+        let iface = rt
+            .interfaces
+            .get_any(name)
+            .map_err(|e| anyhow::anyhow!("service ros2: serves {name}: {e}"))?;
+        let first = name == iface.kind() || name == "laser";
+        let kind = iface.kind();
+        let default = match kind {
+            "laser" if first => "scan".to_string(),
+            "encoders" => "odom".to_string(),
+            "motors" => "cmd_vel".to_string(),
+            "imu" => "imu".to_string(),
+            "image" => format!("{name}/image_raw"),
+            _ => name.replace('.', "/"),
+        };
+        let topic = ros_topic(ns, topic.unwrap_or(&default));
+        match kind {
+            "laser" => {
+                let iface = rt.interfaces.get::<Laser>(name)?;
+                let m = iface.read().value.mount;
+                let frame = if first {
+                    f.laser.clone()
+                } else {
+                    name.replace('.', "_")
+                };
+                plan.statics.push(Transform {
+                    parent: f.base.clone(),
+                    child: frame.clone(),
+                    x: m.x as f64 / 1000.0,
+                    y: m.y as f64 / 1000.0,
+                    z: 0.0,
+                    yaw: (m.yaw as f64).to_radians(),
+                });
+                let w = writer(
+                    &d.dp,
+                    &d.publisher,
+                    &topic,
+                    dds_name::<Laser>(),
+                    sensor_qos(),
+                )?;
+                plan.lasers.push(Served {
+                    iface,
+                    topic,
+                    frame,
+                    writer: w,
+                    clock: 0,
+                });
+            }
+            "encoders" => {
+                let iface = rt.interfaces.get::<Encoders>(name)?;
+                let w = writer(
+                    &d.dp,
+                    &d.publisher,
+                    &topic,
+                    dds_name::<Encoders>(),
+                    reliable_qos(10),
+                )?;
+                let tf = writer(
+                    &d.dp,
+                    &d.publisher,
+                    "/tf",
+                    ros2::TF_MESSAGE,
+                    reliable_qos(100),
+                )?;
+                plan.odom.push((
+                    Served {
+                        iface,
+                        topic,
+                        frame: f.odom.clone(),
+                        writer: w,
+                        clock: 0,
+                    },
+                    tf,
+                ));
+            }
+            "imu" => {
+                let iface = rt.interfaces.get::<Imu>(name)?;
+                let w = writer(&d.dp, &d.publisher, &topic, dds_name::<Imu>(), sensor_qos())?;
+                plan.imus.push(Served {
+                    iface,
+                    topic,
+                    frame: f.base.clone(),
+                    writer: w,
+                    clock: 0,
+                });
+            }
+            "image" => {
+                let iface = rt.interfaces.get::<Image>(name)?;
+                let w = writer(
+                    &d.dp,
+                    &d.publisher,
+                    &topic,
+                    dds_name::<Image>(),
+                    sensor_qos(),
+                )?;
+                plan.images.push(Served {
+                    iface,
+                    topic,
+                    frame: f.camera.clone(),
+                    writer: w,
+                    clock: 0,
+                });
+            }
+            "motors" => {
+                let iface = rt.interfaces.get::<Motors>(name)?;
+                let qos = reliable_qos(10);
+                let t =
+                    d.dp.create_topic(
+                        dds_topic(&topic),
+                        dds_name::<Motors>().into(),
+                        &qos,
+                        TopicKind::NoKey,
+                    )
+                    .map_err(|e| anyhow::anyhow!("service ros2: topic {topic}: {e}"))?;
+                // A best-effort reader matches reliable and best-effort writers.
+                let r = d
+                    .subscriber
+                    .create_datareader_no_key::<Cdr, CdrAdapter>(
+                        &t,
+                        Some(
+                            QosPolicyBuilder::new()
+                                .reliability(Reliability::BestEffort)
+                                .history(History::KeepLast { depth: 10 })
+                                .build(),
+                        ),
+                    )
+                    .map_err(|e| anyhow::anyhow!("service ros2: a reader of {topic}: {e}"))?;
+                plan.cmd = Some((iface, r, topic));
+            }
+            other => anyhow::bail!(
+                "service ros2: serves {name}: a {other} interface has no ROS 2 message here; \
+             serve laser, encoders, imu, motors or a camera"
+            ),
+        }
+        Ok(())
+    }
 }
 
 struct Ros2Service {
@@ -473,7 +547,8 @@ fn serve(
         }));
     }
     let mut buf = Vec::new();
-    if let Some((w, tfs)) = &plan.tf_static {
+    if let Some(w) = &plan.tf_static {
+        let tfs = &plan.statics;
         ros2::encode_tf(SystemTime::now(), tfs, &mut buf);
         let _ = w.write(Cdr(std::mem::take(&mut buf)), None);
     }
