@@ -70,7 +70,7 @@ use crate::{
         ComponentConf,
         settings::{self, MOTORS_TIMEOUT, Setting, int, interface, word},
     },
-    interfaces::{Encoders, Image, Imu, Interface, Laser, Motors, Source, Watch},
+    interfaces::{Encoders, Image, Imu, Interface, Laser, Motors, Mount, Source, Watch},
     mcapfmt::{
         dds::{Cdr, CdrAdapter, dds_topic, ros_topic},
         ros2::{self, Ros2, Transform},
@@ -314,6 +314,59 @@ impl Dds {
     }
 }
 
+impl Dds {
+    /// `iface` served on `topic` with its kind's ROS 2 type.
+    fn served<T: Ros2>(
+        &self,
+        iface: Arc<Interface<T>>,
+        topic: String,
+        frame: String,
+        qos: QosPolicies,
+    ) -> anyhow::Result<Served<T>> {
+        let writer = writer(&self.dp, &self.publisher, &topic, dds_name::<T>(), qos)?;
+        Ok(Served {
+            iface,
+            topic,
+            frame,
+            writer,
+            clock: 0,
+        })
+    }
+
+    /// The reader of a `geometry_msgs/msg/Twist` topic that drives `motors`.
+    fn cmd_vel_reader(&self, topic: &str) -> anyhow::Result<DataReader<Cdr, CdrAdapter>> {
+        let t = self
+            .dp
+            .create_topic(
+                dds_topic(topic),
+                dds_name::<Motors>().into(),
+                &reliable_qos(10),
+                TopicKind::NoKey,
+            )
+            .map_err(|e| anyhow::anyhow!("service ros2: topic {topic}: {e}"))?;
+        // A best-effort reader matches reliable and best-effort writers.
+        let qos = QosPolicyBuilder::new()
+            .reliability(Reliability::BestEffort)
+            .history(History::KeepLast { depth: 10 })
+            .build();
+        self.subscriber
+            .create_datareader_no_key::<Cdr, CdrAdapter>(&t, Some(qos))
+            .map_err(|e| anyhow::anyhow!("service ros2: a reader of {topic}: {e}"))
+    }
+}
+
+/// The static transform `parent` → `child` of a sensor's mount (mm, deg → m, rad).
+fn mount_transform(parent: &str, child: &str, m: Mount) -> Transform {
+    Transform {
+        parent: parent.to_string(),
+        child: child.to_string(),
+        x: m.x as f64 / 1000.0,
+        y: m.y as f64 / 1000.0,
+        z: 0.0,
+        yaw: (m.yaw as f64).to_radians(),
+    }
+}
+
 /// The frame ids of the `frames` line.
 struct Frames {
     odom: String,
@@ -361,47 +414,21 @@ impl Plan {
             _ => name.replace('.', "/"),
         };
         let topic = ros_topic(ns, topic.unwrap_or(&default));
+        let sensor = sensor_qos();
         match kind {
             "laser" => {
                 let iface = rt.interfaces.get::<Laser>(name)?;
-                let m = iface.read().value.mount;
                 let frame = if first {
                     f.laser.clone()
                 } else {
                     name.replace('.', "_")
                 };
-                plan.statics.push(Transform {
-                    parent: f.base.clone(),
-                    child: frame.clone(),
-                    x: m.x as f64 / 1000.0,
-                    y: m.y as f64 / 1000.0,
-                    z: 0.0,
-                    yaw: (m.yaw as f64).to_radians(),
-                });
-                let w = writer(
-                    &d.dp,
-                    &d.publisher,
-                    &topic,
-                    dds_name::<Laser>(),
-                    sensor_qos(),
-                )?;
-                plan.lasers.push(Served {
-                    iface,
-                    topic,
-                    frame,
-                    writer: w,
-                    clock: 0,
-                });
+                plan.statics
+                    .push(mount_transform(&f.base, &frame, iface.read().value.mount));
+                plan.lasers.push(d.served(iface, topic, frame, sensor)?);
             }
             "encoders" => {
                 let iface = rt.interfaces.get::<Encoders>(name)?;
-                let w = writer(
-                    &d.dp,
-                    &d.publisher,
-                    &topic,
-                    dds_name::<Encoders>(),
-                    reliable_qos(10),
-                )?;
                 let tf = writer(
                     &d.dp,
                     &d.publisher,
@@ -409,74 +436,27 @@ impl Plan {
                     ros2::TF_MESSAGE,
                     reliable_qos(100),
                 )?;
-                plan.odom.push((
-                    Served {
-                        iface,
-                        topic,
-                        frame: f.odom.clone(),
-                        writer: w,
-                        clock: 0,
-                    },
-                    tf,
-                ));
+                let odom = d.served(iface, topic, f.odom.clone(), reliable_qos(10))?;
+                plan.odom.push((odom, tf));
             }
             "imu" => {
                 let iface = rt.interfaces.get::<Imu>(name)?;
-                let w = writer(&d.dp, &d.publisher, &topic, dds_name::<Imu>(), sensor_qos())?;
-                plan.imus.push(Served {
-                    iface,
-                    topic,
-                    frame: f.base.clone(),
-                    writer: w,
-                    clock: 0,
-                });
+                plan.imus
+                    .push(d.served(iface, topic, f.base.clone(), sensor)?);
             }
             "image" => {
                 let iface = rt.interfaces.get::<Image>(name)?;
-                let w = writer(
-                    &d.dp,
-                    &d.publisher,
-                    &topic,
-                    dds_name::<Image>(),
-                    sensor_qos(),
-                )?;
-                plan.images.push(Served {
-                    iface,
-                    topic,
-                    frame: f.camera.clone(),
-                    writer: w,
-                    clock: 0,
-                });
+                plan.images
+                    .push(d.served(iface, topic, f.camera.clone(), sensor)?);
             }
             "motors" => {
                 let iface = rt.interfaces.get::<Motors>(name)?;
-                let qos = reliable_qos(10);
-                let t =
-                    d.dp.create_topic(
-                        dds_topic(&topic),
-                        dds_name::<Motors>().into(),
-                        &qos,
-                        TopicKind::NoKey,
-                    )
-                    .map_err(|e| anyhow::anyhow!("service ros2: topic {topic}: {e}"))?;
-                // A best-effort reader matches reliable and best-effort writers.
-                let r = d
-                    .subscriber
-                    .create_datareader_no_key::<Cdr, CdrAdapter>(
-                        &t,
-                        Some(
-                            QosPolicyBuilder::new()
-                                .reliability(Reliability::BestEffort)
-                                .history(History::KeepLast { depth: 10 })
-                                .build(),
-                        ),
-                    )
-                    .map_err(|e| anyhow::anyhow!("service ros2: a reader of {topic}: {e}"))?;
+                let r = d.cmd_vel_reader(&topic)?;
                 plan.cmd = Some((iface, r, topic));
             }
             other => anyhow::bail!(
                 "service ros2: serves {name}: a {other} interface has no ROS 2 message here; \
-             serve laser, encoders, imu, motors or a camera"
+                 serve laser, encoders, imu, motors or a camera"
             ),
         }
         Ok(())
