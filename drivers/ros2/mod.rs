@@ -44,7 +44,6 @@ use std::{
     time::{Duration, Instant, SystemTime},
 };
 
-use ros2_client::{Context, ContextOptions, Node, NodeName, NodeOptions};
 use rustdds::{
     DomainParticipant, QosPolicies, QosPolicyBuilder, TopicKind,
     no_key::{DataReader, DataWriter},
@@ -58,7 +57,7 @@ use crate::{
     },
     interfaces::{AnyInterface, Encoders, Image, Imu, Interface, Laser, Motors, Source},
     mcapfmt::{
-        dds::{Cdr, CdrAdapter, dds_topic, ros_topic},
+        dds::{Cdr, CdrAdapter, Graph, dds_topic, ros_topic},
         ros2::{self, Ros2},
     },
     runtime::{Driver, Runtime},
@@ -174,8 +173,8 @@ struct Robot {
     motors: Option<CmdVelOut>,
     silence: Duration,
     timeout: Duration,
-    dp: DomainParticipant,
-    _ros: (Context, Node),
+    /// The node; dropping it leaves the graph.
+    graph: Graph,
     buf: Vec<u8>,
 }
 
@@ -202,7 +201,7 @@ impl Robot {
 
     /// A topic whose writers declare another type: both names.
     fn wrong_type(&self) -> Option<String> {
-        let topics = self.dp.discovered_topics();
+        let topics = self.graph.dp.discovered_topics();
         self.inputs.iter().find_map(|i| {
             let dds = dds_topic(&i.topic);
             topics
@@ -315,21 +314,8 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
              provides encoders /odom, provides motors /cmd_vel, ..."
         );
     }
-    let ns = if l.namespace.starts_with('/') {
-        l.namespace.clone()
-    } else {
-        format!("/{}", l.namespace)
-    };
-    let context = Context::with_options(ContextOptions::new().domain_id(l.domain))
-        .map_err(|e| anyhow::anyhow!("driver ros2: DDS domain {}: {e}", l.domain))?;
-    let node = context
-        .new_node(
-            NodeName::new(&ns, &l.node)
-                .map_err(|e| anyhow::anyhow!("driver ros2: node `{}` in `{ns}`: {e:?}", l.node))?,
-            NodeOptions::new(),
-        )
-        .map_err(|e| anyhow::anyhow!("driver ros2: node: {e:?}"))?;
-    let dp = context.domain_participant();
+    let graph = Graph::join("driver ros2", l.domain, &l.namespace, &l.node)?;
+    let (ns, dp) = (graph.ns.clone(), &graph.dp);
     let sub = dp
         .create_subscriber(&qos(true))
         .map_err(|e| anyhow::anyhow!("driver ros2: {e}"))?;
@@ -353,22 +339,22 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
             Some("laser") => {
                 let i = rt.interfaces.provide::<Laser>(name, &conf.name)?;
                 ifaces.push(i.clone());
-                inputs.push(input(&dp, &sub, topic, false, i)?);
+                inputs.push(input(dp, &sub, topic, false, i)?);
             }
             Some("encoders") => {
                 let i = rt.interfaces.provide::<Encoders>(name, &conf.name)?;
                 ifaces.push(i.clone());
-                inputs.push(input(&dp, &sub, topic, true, i)?);
+                inputs.push(input(dp, &sub, topic, true, i)?);
             }
             Some("imu") => {
                 let i = rt.interfaces.provide::<Imu>(name, &conf.name)?;
                 ifaces.push(i.clone());
-                inputs.push(input(&dp, &sub, topic, false, i)?);
+                inputs.push(input(dp, &sub, topic, false, i)?);
             }
             Some("image") => {
                 let i = rt.interfaces.provide::<Image>(name, &conf.name)?;
                 ifaces.push(i.clone());
-                inputs.push(input(&dp, &sub, topic, false, i)?);
+                inputs.push(input(dp, &sub, topic, false, i)?);
             }
             Some("motors") => {
                 let i = rt.interfaces.provide::<Motors>(name, &conf.name)?;
@@ -395,9 +381,8 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
     }
     let waits: Vec<String> = inputs.iter().map(|i| i.topic.clone()).collect();
     tracing::info!(
-        "ros2: node {ns}{}{} on domain {} reads {}{}",
-        if ns.ends_with('/') { "" } else { "/" },
-        l.node,
+        "ros2: node {} on domain {} reads {}{}",
+        graph.full_name(),
         l.domain,
         waits.join(", "),
         motors
@@ -410,8 +395,7 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
         motors,
         silence: Duration::from_millis(l.silence),
         timeout: Duration::from_millis(l.motors_timeout),
-        dp,
-        _ros: (context, node),
+        graph,
         buf: Vec::new(),
     };
     let how = Supervision {

@@ -58,7 +58,6 @@ use std::{
     time::{Duration, Instant, SystemTime},
 };
 
-use ros2_client::{Context, ContextOptions, Node, NodeName, NodeOptions};
 use rustdds::{
     DomainParticipant, Publisher, QosPolicies, QosPolicyBuilder, Subscriber, TopicKind,
     no_key::{DataReader, DataWriter},
@@ -72,7 +71,7 @@ use crate::{
     },
     interfaces::{Encoders, Image, Imu, Interface, Laser, Motors, Mount, Source, Watch},
     mcapfmt::{
-        dds::{Cdr, CdrAdapter, dds_topic, ros_topic},
+        dds::{Cdr, CdrAdapter, Graph, dds_topic, ros_topic},
         ros2::{self, Ros2, Transform},
     },
     runtime::{Driver, Runtime},
@@ -218,12 +217,8 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
              `insecure` line to serve it anyway"
         );
     }
-    let ns = if l.namespace.starts_with('/') {
-        l.namespace.clone()
-    } else {
-        format!("/{}", l.namespace)
-    };
-    let d = Dds::join(&l, &ns)?;
+    let d = Dds::join(&l)?;
+    let ns = d.graph.ns.clone();
     // What is served: the serves lines, or every interface with a ROS 2 message.
     let serves: Vec<(String, Option<String>)> = if l.serves.is_empty() {
         rt.interfaces
@@ -242,7 +237,7 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
     }
     if !plan.statics.is_empty() {
         let w = writer(
-            &d.dp,
+            &d.graph.dp,
             &d.publisher,
             "/tf_static",
             ros2::TF_MESSAGE,
@@ -254,7 +249,8 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
     let stop = Arc::new(AtomicBool::new(false));
     let stop2 = stop.clone();
     let (tx, rx) = std::sync::mpsc::sync_channel(1);
-    let keep = (d.context, d.node, d.dp);
+    let keep_name = d.graph.full_name();
+    let keep = d.graph;
     let worker = Worker::start("ros2", stop.clone(), move || {
         let watch = Watch::for_current_thread();
         let _ = tx.send(watch.clone());
@@ -262,10 +258,8 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
     })?;
     let watch = rx.recv().ok();
     tracing::info!(
-        "ros2: node {}{}{} on domain {}: {}",
-        ns,
-        if ns.ends_with('/') { "" } else { "/" },
-        l.node,
+        "ros2: node {} on domain {}: {}",
+        keep_name,
         l.domain,
         serves
             .iter()
@@ -278,36 +272,24 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
 
 /// The node in the ROS 2 graph and the DDS entities its topics hang from.
 struct Dds {
-    context: Context,
-    node: Node,
-    dp: DomainParticipant,
+    graph: Graph,
     publisher: Publisher,
     subscriber: Subscriber,
 }
 
 impl Dds {
-    fn join(l: &Lines, ns: &str) -> anyhow::Result<Dds> {
-        let context = Context::with_options(ContextOptions::new().domain_id(l.domain))
-            .map_err(|e| anyhow::anyhow!("service ros2: DDS domain {}: {e}", l.domain))?;
-        let node = context
-            .new_node(
-                NodeName::new(ns, &l.node).map_err(|e| {
-                    anyhow::anyhow!("service ros2: node `{}` in `{ns}`: {e:?}", l.node)
-                })?,
-                NodeOptions::new(),
-            )
-            .map_err(|e| anyhow::anyhow!("service ros2: node: {e:?}"))?;
-        let dp = context.domain_participant();
-        let publisher = dp
+    fn join(l: &Lines) -> anyhow::Result<Dds> {
+        let graph = Graph::join("service ros2", l.domain, &l.namespace, &l.node)?;
+        let publisher = graph
+            .dp
             .create_publisher(&reliable_qos(10))
             .map_err(|e| anyhow::anyhow!("service ros2: {e}"))?;
-        let subscriber = dp
+        let subscriber = graph
+            .dp
             .create_subscriber(&reliable_qos(10))
             .map_err(|e| anyhow::anyhow!("service ros2: {e}"))?;
         Ok(Dds {
-            context,
-            node,
-            dp,
+            graph,
             publisher,
             subscriber,
         })
@@ -323,7 +305,13 @@ impl Dds {
         frame: String,
         qos: QosPolicies,
     ) -> anyhow::Result<Served<T>> {
-        let writer = writer(&self.dp, &self.publisher, &topic, dds_name::<T>(), qos)?;
+        let writer = writer(
+            &self.graph.dp,
+            &self.publisher,
+            &topic,
+            dds_name::<T>(),
+            qos,
+        )?;
         Ok(Served {
             iface,
             topic,
@@ -336,6 +324,7 @@ impl Dds {
     /// The reader of a `geometry_msgs/msg/Twist` topic that drives `motors`.
     fn cmd_vel_reader(&self, topic: &str) -> anyhow::Result<DataReader<Cdr, CdrAdapter>> {
         let t = self
+            .graph
             .dp
             .create_topic(
                 dds_topic(topic),
@@ -430,7 +419,7 @@ impl Plan {
             "encoders" => {
                 let iface = rt.interfaces.get::<Encoders>(name)?;
                 let tf = writer(
-                    &d.dp,
+                    &d.graph.dp,
                     &d.publisher,
                     "/tf",
                     ros2::TF_MESSAGE,
@@ -483,7 +472,7 @@ fn serve(
     watch: Arc<Watch>,
     timeout: Duration,
     stop: Arc<AtomicBool>,
-    _keep: (Context, Node, DomainParticipant),
+    _keep: Graph,
 ) {
     let mut users: Vec<Box<dyn FnOnce()>> = vec![];
     for s in &plan.lasers {

@@ -92,3 +92,49 @@ pub fn ros_topic(namespace: &str, name: &str) -> String {
     let ns = namespace.trim_end_matches('/');
     format!("{ns}/{name}")
 }
+
+/// A ROS 2 node in the graph (ros2-client: `ros2 node list` shows it) and its DDS
+/// participant, what the service and the driver `ros2` both start from.
+pub struct Graph {
+    /// The namespace, with its leading `/`.
+    pub ns: String,
+    /// The node's name.
+    pub name: String,
+    pub context: ros2_client::Context,
+    pub node: ros2_client::Node,
+    pub dp: rustdds::DomainParticipant,
+}
+
+impl Graph {
+    /// Joins DDS domain `domain` as node `name` in namespace `ns` (a `/` put in
+    /// front when missing); `who` (`service ros2`) names the component in errors.
+    pub fn join(who: &str, domain: u16, ns: &str, name: &str) -> anyhow::Result<Graph> {
+        use ros2_client::{Context, ContextOptions, NodeName, NodeOptions};
+        let ns = if ns.starts_with('/') {
+            ns.to_string()
+        } else {
+            format!("/{ns}")
+        };
+        let context = Context::with_options(ContextOptions::new().domain_id(domain))
+            .map_err(|e| anyhow::anyhow!("{who}: DDS domain {domain}: {e}"))?;
+        let node_name = NodeName::new(&ns, name)
+            .map_err(|e| anyhow::anyhow!("{who}: node `{name}` in `{ns}`: {e:?}"))?;
+        let node = context
+            .new_node(node_name, NodeOptions::new())
+            .map_err(|e| anyhow::anyhow!("{who}: node: {e:?}"))?;
+        let dp = context.domain_participant();
+        Ok(Graph {
+            ns,
+            name: name.to_string(),
+            context,
+            node,
+            dp,
+        })
+    }
+
+    /// `ns/name` as the log lines say it.
+    pub fn full_name(&self) -> String {
+        let sep = if self.ns.ends_with('/') { "" } else { "/" };
+        format!("{}{sep}{}", self.ns, self.name)
+    }
+}
