@@ -69,7 +69,9 @@ use crate::{
         ComponentConf,
         settings::{self, MOTORS_TIMEOUT, Setting, int, interface, word},
     },
-    interfaces::{Encoders, Image, Imu, Interface, Laser, Motors, Mount, Source, Watch},
+    interfaces::{
+        Encoders, Image, Imu, Interface, InterfaceValue, Laser, Motors, Mount, Source, Watch,
+    },
     mcapfmt::{
         dds::{Cdr, CdrAdapter, Graph, dds_topic, ros_topic},
         ros2::{self, Ros2, Transform},
@@ -199,6 +201,8 @@ struct Plan {
     imus: Vec<Served<Imu>>,
     images: Vec<Served<Image>>,
     cmd: Option<CmdVelIn>,
+    /// The robot's frame (`frames` line), the child of odom on `/tf`.
+    base_frame: String,
     /// `/tf_static`'s writer, and the mounts it sends.
     tf_static: Option<Writer>,
     statics: Vec<Transform>,
@@ -231,7 +235,10 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
         l.serves.clone()
     };
     let frames = Frames::from(&l);
-    let mut plan = Plan::default();
+    let mut plan = Plan {
+        base_frame: frames.base.clone(),
+        ..Plan::default()
+    };
     for (name, topic) in &serves {
         plan.add(rt, &d, &ns, &frames, name, topic.as_deref())?;
     }
@@ -467,6 +474,17 @@ impl Driver for Ros2Service {
 }
 
 /// The thread: sends each new sensor value, applies /cmd_vel.
+/// Watches and resumes a served interface; the returned closure lets it go.
+fn in_use<T: InterfaceValue>(iface: &Arc<Interface<T>>, watch: &Arc<Watch>) -> Box<dyn FnOnce()> {
+    iface.watch(watch.clone());
+    iface.resume();
+    let (i, w) = (iface.clone(), watch.clone());
+    Box::new(move || {
+        i.unwatch(&*w);
+        i.suspend();
+    })
+}
+
 fn serve(
     mut plan: Plan,
     watch: Arc<Watch>,
@@ -475,46 +493,10 @@ fn serve(
     _keep: Graph,
 ) {
     let mut users: Vec<Box<dyn FnOnce()>> = vec![];
-    for s in &plan.lasers {
-        s.iface.watch(watch.clone());
-        s.iface.resume();
-        let i = s.iface.clone();
-        let w = watch.clone();
-        users.push(Box::new(move || {
-            i.unwatch(&*w);
-            i.suspend();
-        }));
-    }
-    for (s, _) in &plan.odom {
-        s.iface.watch(watch.clone());
-        s.iface.resume();
-        let i = s.iface.clone();
-        let w = watch.clone();
-        users.push(Box::new(move || {
-            i.unwatch(&*w);
-            i.suspend();
-        }));
-    }
-    for s in &plan.imus {
-        s.iface.watch(watch.clone());
-        s.iface.resume();
-        let i = s.iface.clone();
-        let w = watch.clone();
-        users.push(Box::new(move || {
-            i.unwatch(&*w);
-            i.suspend();
-        }));
-    }
-    for s in &plan.images {
-        s.iface.watch(watch.clone());
-        s.iface.resume();
-        let i = s.iface.clone();
-        let w = watch.clone();
-        users.push(Box::new(move || {
-            i.unwatch(&*w);
-            i.suspend();
-        }));
-    }
+    users.extend(plan.lasers.iter().map(|s| in_use(&s.iface, &watch)));
+    users.extend(plan.odom.iter().map(|(s, _)| in_use(&s.iface, &watch)));
+    users.extend(plan.imus.iter().map(|s| in_use(&s.iface, &watch)));
+    users.extend(plan.images.iter().map(|s| in_use(&s.iface, &watch)));
     let mut buf = Vec::new();
     if let Some(w) = &plan.tf_static {
         let tfs = &plan.statics;
@@ -536,7 +518,7 @@ fn serve(
                 let e = sample.value;
                 let t = Transform {
                     parent: s.frame.clone(),
-                    child: "base_link".into(),
+                    child: plan.base_frame.clone(),
                     x: e.x as f64 / 1000.0,
                     y: e.y as f64 / 1000.0,
                     z: 0.0,
