@@ -327,28 +327,32 @@ async fn read_head<R: AsyncRead + Unpin>(r: &mut R) -> Result<(Vec<u8>, Vec<u8>)
     }
 }
 
+/// Copies what `s` has queued into `buf` without taking it (`MSG_PEEK`), without
+/// blocking: the bytes stay for the next read or splice.
+fn peek(s: &TcpStream, buf: &mut [u8]) -> std::io::Result<usize> {
+    // SAFETY: recv into a valid buffer of its length, peeking.
+    let n = unsafe {
+        libc::recv(
+            s.as_raw_fd(),
+            buf.as_mut_ptr().cast(),
+            buf.len(),
+            libc::MSG_PEEK | libc::MSG_DONTWAIT,
+        )
+    };
+    if n < 0 {
+        Err(std::io::Error::last_os_error())
+    } else {
+        Ok(n as usize)
+    }
+}
+
 /// Reads exactly an HTTP head from `s` (peeking for its end), so that the frames
 /// after it start at the socket's next byte: (head, nothing).
 async fn read_head_exact(s: &TcpStream) -> Result<(Vec<u8>, Vec<u8>), String> {
     let mut buf = vec![0u8; MAX_HEAD];
     loop {
         s.readable().await.map_err(|e| e.to_string())?;
-        let got = s.try_io(Interest::READABLE, || {
-            // SAFETY: recv into our buffer, peeking (the bytes stay queued).
-            let n = unsafe {
-                libc::recv(
-                    s.as_raw_fd(),
-                    buf.as_mut_ptr().cast(),
-                    buf.len(),
-                    libc::MSG_PEEK | libc::MSG_DONTWAIT,
-                )
-            };
-            if n < 0 {
-                Err(std::io::Error::last_os_error())
-            } else {
-                Ok(n as usize)
-            }
-        });
+        let got = s.try_io(Interest::READABLE, || peek(s, &mut buf));
         let n = match got {
             Ok(0) => return Err("the SDK's server closed before its HTTP head".into()),
             Ok(n) => n,
@@ -896,22 +900,7 @@ async fn peek_frame(server: &TcpStream) -> std::io::Result<Option<(usize, bool)>
     let mut b = [0u8; 15];
     loop {
         server.readable().await?;
-        let got = server.try_io(Interest::READABLE, || {
-            // SAFETY: recv into our buffer, peeking (the bytes stay queued).
-            let n = unsafe {
-                libc::recv(
-                    server.as_raw_fd(),
-                    b.as_mut_ptr().cast(),
-                    b.len(),
-                    libc::MSG_PEEK | libc::MSG_DONTWAIT,
-                )
-            };
-            if n < 0 {
-                Err(std::io::Error::last_os_error())
-            } else {
-                Ok(n as usize)
-            }
-        });
+        let got = server.try_io(Interest::READABLE, || peek(server, &mut b));
         let n = match got {
             Ok(0) => return Ok(None),
             Ok(n) => n,
