@@ -603,6 +603,69 @@ fn driver_targets(p: &Path) -> Vec<Target> {
             let _ = jderobot::mcapfmt::decompress("jpeg", b);
         },
     });
+    #[cfg(feature = "rplidar")]
+    t.push(Target {
+        name: "rplidar",
+        // A SCAN descriptor, then nodes as the RPLIDAR protocol lays them out
+        // (quality and S/!S, angle·64 with C = 1, distance·4): a start node at 0°
+        // and one at 90°, 1 m; and a GET_INFO reply.
+        seeds: vec![
+            vec![
+                0xA5, 0x5A, 0x05, 0, 0, 0x40, 0x81, 0x3D, 0x01, 0x00, 0xA0, 0x0F, 0x3E, 0x01, 0x2D,
+                0xA0, 0x0F,
+            ],
+            [
+                vec![0xA5, 0x5A, 0x14, 0, 0, 0, 0x04, 0x18, 29, 1, 7],
+                vec![0x10; 16],
+            ]
+            .concat(),
+        ],
+        text: false,
+        run: |b| {
+            use jderobot::drivers::rplidar::protocol::{self, Revolution};
+            if let Ok(d) = <&[u8; 7]>::try_from(b.get(..7).unwrap_or(&[])) {
+                let _ = protocol::descriptor(d);
+            }
+            let _ = protocol::Info::parse(b.get(7..27).unwrap_or(&[]));
+            let _ = protocol::health(b.get(7..10).unwrap_or(&[]));
+            let (mut rev, mut out) = (Revolution::new(360, 1.0, -180.0, 12000), Vec::new());
+            for c in b.windows(5) {
+                if let Some(n) = protocol::node(c) {
+                    let _ = rev.push(&n, &mut out);
+                }
+            }
+        },
+    });
+    #[cfg(feature = "roomba")]
+    t.push(Target {
+        name: "roomba",
+        // Two sensor-stream frames of the packets the driver asks for (header 19, n,
+        // each id and its data, a checksum that makes the sum 0), as the Create 2
+        // Open Interface streams them.
+        seeds: {
+            use jderobot::drivers::roomba::protocol;
+            let ids = protocol::stream_command()[2..].to_vec();
+            let mut f = vec![19, protocol::frame_n() as u8];
+            for (k, id) in ids.iter().enumerate() {
+                f.push(*id);
+                let size = protocol::packet_size(*id).unwrap_or(0);
+                f.extend((0..size).map(|i| (i + k) as u8));
+            }
+            let sum = f.iter().fold(0u8, |a, b| a.wrapping_add(*b));
+            f.push(0u8.wrapping_sub(sum));
+            vec![[f.clone(), f].concat()]
+        },
+        text: false,
+        run: |b| {
+            let mut buf = b.to_vec();
+            for _ in 0..b.len() + 1 {
+                // Ok(None): the rest is a partial frame.
+                if let Ok(None) = jderobot::drivers::roomba::protocol::take_frame(&mut buf) {
+                    break;
+                }
+            }
+        },
+    });
     t
 }
 
