@@ -45,9 +45,8 @@ use std::{
 };
 
 use rustdds::{
-    DomainParticipant, QosPolicies, QosPolicyBuilder, TopicKind,
+    DomainParticipant, TopicKind,
     no_key::{DataReader, DataWriter},
-    policy::{Durability, History, Reliability},
 };
 
 use crate::{
@@ -57,7 +56,7 @@ use crate::{
     },
     interfaces::{AnyInterface, Encoders, Image, Imu, Interface, Laser, Motors, Source},
     mcapfmt::{
-        dds::{Cdr, CdrAdapter, Graph, dds_topic, ros_topic},
+        dds::{Cdr, CdrAdapter, Graph, dds_topic, reliable_qos, ros_topic, sensor_qos},
         ros2::{self, Ros2},
     },
     runtime::{Driver, Runtime},
@@ -98,20 +97,6 @@ struct Lines {
 
 type Reader = DataReader<Cdr, CdrAdapter>;
 
-fn qos(reliable: bool) -> QosPolicies {
-    let b = QosPolicyBuilder::new()
-        .history(History::KeepLast { depth: 5 })
-        .durability(Durability::Volatile);
-    if reliable {
-        b.reliability(Reliability::Reliable {
-            max_blocking_time: rustdds::Duration::from_millis(100),
-        })
-        .build()
-    } else {
-        b.reliability(Reliability::BestEffort).build()
-    }
-}
-
 /// One sensor topic read into one interface.
 struct Input {
     topic: String,
@@ -141,12 +126,23 @@ fn input<T: Ros2>(
         .create_topic(
             dds_topic(&topic),
             dds_type.into(),
-            &qos(reliable),
+            &if reliable {
+                reliable_qos(5)
+            } else {
+                sensor_qos()
+            },
             TopicKind::NoKey,
         )
         .map_err(|e| anyhow::anyhow!("driver ros2: topic {topic}: {e}"))?;
     let reader = sub
-        .create_datareader_no_key::<Cdr, CdrAdapter>(&t, Some(qos(reliable)))
+        .create_datareader_no_key::<Cdr, CdrAdapter>(
+            &t,
+            Some(if reliable {
+                reliable_qos(5)
+            } else {
+                sensor_qos()
+            }),
+        )
         .map_err(|e| anyhow::anyhow!("driver ros2: a reader of {topic}: {e}"))?;
     let name = topic.clone();
     Ok(Input {
@@ -185,14 +181,13 @@ struct Session {
 
 impl Robot {
     fn send_motors(&mut self, m: Motors) {
-        if let Some((iface, w, _)) = &self.motors {
+        if let Some((_, w, _)) = &self.motors {
             let s = crate::interfaces::Sample {
                 clock: 1,
                 stamp: Instant::now(),
                 time: SystemTime::now(),
                 value: m,
             };
-            let _ = iface;
             if ros2::encode("", &s, &mut self.buf) {
                 let _ = w.write(Cdr(std::mem::take(&mut self.buf)), None);
             }
@@ -262,19 +257,19 @@ impl crate::supervisor::Device for Robot {
                 self.send_motors(cmd);
             }
         }
-        let waiting: Vec<&str> = self
-            .inputs
-            .iter()
-            .filter(|i| i.last.is_none())
-            .map(|i| i.topic.as_str())
-            .collect();
-        if s.since.elapsed() >= self.silence {
+        // A topic still silent after `silence`: say why (a wrong type, or no
+        // publisher). Only then is discovery's topic list looked at.
+        if s.since.elapsed() >= self.silence && self.inputs.iter().any(|i| i.last.is_none()) {
             if let Some(e) = self.wrong_type() {
                 return Err(e);
             }
-            if !waiting.is_empty() {
-                return Err(format!("waiting for a publisher on {}", waiting.join(", ")));
-            }
+            let waiting: Vec<&str> = self
+                .inputs
+                .iter()
+                .filter(|i| i.last.is_none())
+                .map(|i| i.topic.as_str())
+                .collect();
+            return Err(format!("waiting for a publisher on {}", waiting.join(", ")));
         }
         if let Some(i) = self
             .inputs
@@ -317,10 +312,10 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
     let graph = Graph::join("driver ros2", l.domain, &l.namespace, &l.node)?;
     let (ns, dp) = (graph.ns.clone(), &graph.dp);
     let sub = dp
-        .create_subscriber(&qos(true))
+        .create_subscriber(&reliable_qos(5))
         .map_err(|e| anyhow::anyhow!("driver ros2: {e}"))?;
     let publ = dp
-        .create_publisher(&qos(true))
+        .create_publisher(&reliable_qos(5))
         .map_err(|e| anyhow::anyhow!("driver ros2: {e}"))?;
     let mut inputs = vec![];
     let mut motors = None;
@@ -364,12 +359,12 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
                     .create_topic(
                         dds_topic(&topic),
                         dds_type.into(),
-                        &qos(true),
+                        &reliable_qos(5),
                         TopicKind::NoKey,
                     )
                     .map_err(|e| anyhow::anyhow!("driver ros2: topic {topic}: {e}"))?;
                 let w = publ
-                    .create_datawriter_no_key::<Cdr, CdrAdapter>(&t, Some(qos(true)))
+                    .create_datawriter_no_key::<Cdr, CdrAdapter>(&t, Some(reliable_qos(5)))
                     .map_err(|e| anyhow::anyhow!("driver ros2: a writer of {topic}: {e}"))?;
                 motors = Some((i, w, topic));
             }

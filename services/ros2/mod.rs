@@ -61,7 +61,7 @@ use std::{
 use rustdds::{
     DomainParticipant, Publisher, QosPolicies, QosPolicyBuilder, Subscriber, TopicKind,
     no_key::{DataReader, DataWriter},
-    policy::{Durability, History, Reliability},
+    policy::{History, Reliability},
 };
 
 use crate::{
@@ -73,7 +73,7 @@ use crate::{
         Encoders, Image, Imu, Interface, InterfaceValue, Laser, Motors, Mount, Source, Watch,
     },
     mcapfmt::{
-        dds::{Cdr, CdrAdapter, Graph, dds_topic, ros_topic},
+        dds::{Cdr, CdrAdapter, Graph, dds_topic, reliable_qos, ros_topic, sensor_qos, static_qos},
         ros2::{self, Ros2, Transform},
     },
     runtime::{Driver, Runtime},
@@ -115,37 +115,6 @@ struct Lines {
     serves: Vec<(String, Option<String>)>,
     frames: (String, String, String, String),
     motors_timeout: u64,
-}
-
-/// The QoS ROS 2 calls sensor data: best effort, keep last 5, volatile.
-pub fn sensor_qos() -> QosPolicies {
-    QosPolicyBuilder::new()
-        .reliability(Reliability::BestEffort)
-        .history(History::KeepLast { depth: 5 })
-        .durability(Durability::Volatile)
-        .build()
-}
-
-/// ROS 2's default QoS: reliable, keep last `depth`, volatile.
-pub fn reliable_qos(depth: i32) -> QosPolicies {
-    QosPolicyBuilder::new()
-        .reliability(Reliability::Reliable {
-            max_blocking_time: rustdds::Duration::from_millis(100),
-        })
-        .history(History::KeepLast { depth })
-        .durability(Durability::Volatile)
-        .build()
-}
-
-/// `/tf_static`'s QoS: reliable, transient local, keep last 1.
-pub fn static_qos() -> QosPolicies {
-    QosPolicyBuilder::new()
-        .reliability(Reliability::Reliable {
-            max_blocking_time: rustdds::Duration::from_millis(100),
-        })
-        .history(History::KeepLast { depth: 1 })
-        .durability(Durability::TransientLocal)
-        .build()
 }
 
 type Writer = DataWriter<Cdr, CdrAdapter>;

@@ -7,8 +7,9 @@
 
 use bytes::Bytes;
 use rustdds::{
-    RepresentationIdentifier,
+    QosPolicies, QosPolicyBuilder, RepresentationIdentifier,
     no_key::{Decode, DefaultDecoder, DeserializerAdapter, SerializerAdapter},
+    policy::{Durability, History, Reliability},
 };
 
 /// A whole little-endian CDR message, its encapsulation header first (what
@@ -137,4 +138,36 @@ impl Graph {
         let sep = if self.ns.ends_with('/') { "" } else { "/" };
         format!("{}{sep}{}", self.ns, self.name)
     }
+}
+
+/// The QoS ROS 2 calls sensor data: best effort, keep last 5, volatile.
+pub fn sensor_qos() -> QosPolicies {
+    QosPolicyBuilder::new()
+        .reliability(Reliability::BestEffort)
+        .history(History::KeepLast { depth: 5 })
+        .durability(Durability::Volatile)
+        .build()
+}
+
+/// ROS 2's default QoS: reliable, keep last `depth`, volatile. A write to a
+/// slow reliable reader blocks 100 ms at most.
+pub fn reliable_qos(depth: i32) -> QosPolicies {
+    QosPolicyBuilder::new()
+        .reliability(Reliability::Reliable {
+            max_blocking_time: rustdds::Duration::from_millis(100),
+        })
+        .history(History::KeepLast { depth })
+        .durability(Durability::Volatile)
+        .build()
+}
+
+/// `/tf_static`'s QoS: reliable, transient local, keep last 1.
+pub fn static_qos() -> QosPolicies {
+    QosPolicyBuilder::new()
+        .reliability(Reliability::Reliable {
+            max_blocking_time: rustdds::Duration::from_millis(100),
+        })
+        .history(History::KeepLast { depth: 1 })
+        .durability(Durability::TransientLocal)
+        .build()
 }
