@@ -517,6 +517,7 @@ fn max_gap_s(times: &[u64]) -> f64 {
 
 #[test]
 fn a_client_that_stops_reading_loses_only_its_own_frames() {
+    let _alone = common::memory_alone();
     let (rt, a) = start("max_queue 4\nserves colorA\nserves encoders\nserves motors\n");
     rt.stop("introrob").unwrap();
     // The slow client subscribes to the camera and stops reading for 8 s (longer
@@ -568,6 +569,7 @@ fn a_client_that_stops_reading_loses_only_its_own_frames() {
 
 #[test]
 fn connect_cycles_leave_memory_where_it_was() {
+    let _alone = common::memory_alone();
     let (rt, a) = start("serves laser\nserves encoders\n");
     let laser = rt.interfaces.get_any("laser").unwrap();
     let cycle = || {
@@ -581,15 +583,17 @@ fn connect_cycles_leave_memory_where_it_was() {
     std::thread::sleep(Duration::from_millis(300));
     let before = rss_kb();
     let users0 = laser.users();
-    for _ in 0..100 {
+    // 300 cycles under 8 MB: a leak of 27 kB a connection shows; the other tests of
+    // this binary, running beside it, may still move RSS by a few MB.
+    for _ in 0..300 {
         cycle();
     }
     common::eventually("every client gone", || ps(&rt).contains(": 0 client(s)"));
     std::thread::sleep(Duration::from_millis(300));
     let after = rss_kb();
     assert!(
-        after < before + 4096,
-        "RSS {before} kB -> {after} kB after 100 connect/disconnect cycles"
+        after < before + 8192,
+        "RSS {before} kB -> {after} kB after 300 connect/disconnect cycles"
     );
     // The laser is suspended again once nobody subscribes.
     common::eventually("laser back to its own users", || laser.users() == users0);
@@ -834,6 +838,7 @@ fn the_door_and_the_sdk_keep_accepting_after_running_out_of_descriptors() {
 
 #[test]
 fn unfinished_messages_and_ping_floods_are_bounded_in_time_and_memory() {
+    let _alone = common::memory_alone();
     let (rt, a) = start("max_message 65536\n");
     rt.stop("introrob").unwrap();
     let rss0 = rss_kb();

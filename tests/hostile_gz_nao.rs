@@ -294,6 +294,7 @@ fn assert_stop_arrives(on: &AtomicBool, log: &TwistLog, what: &str) {
 
 #[test]
 fn gz_a_discovery_flood_does_not_hold_the_stop_and_gazebo_stays_bound() {
+    let _alone = common::memory_alone();
     let Some(bin) = gazebo::peer_bin() else {
         return;
     };
@@ -576,6 +577,7 @@ fn gz_decoys_silent_publishers_and_bad_addresses_do_not_hold_the_driver() {
 
 #[test]
 fn gz_unfinished_more_frames_are_capped_per_message_and_gazebo_is_bound_after() {
+    let _alone = common::memory_alone();
     let Some(bin) = gazebo::peer_bin() else {
         return;
     };
@@ -1072,6 +1074,7 @@ fn rss_of(pid: u32) -> (f64, f64) {
 
 #[test]
 fn nao_a_huge_error_reply_is_shown_short() {
+    let _alone = common::memory_alone();
     let port = fake_naoqi(Vec::new(), 30 << 20).port;
     let dir = tempfile::tempdir().unwrap();
     let conf = dir.path().join("nao.conf");

@@ -24,6 +24,8 @@ use std::{
     time::Instant,
 };
 
+use crate::common;
+
 use jderobot::{
     interfaces::{Image, Sample},
     mcapfmt::{self, Profile, Recorded, Snapshot, Summary, reader},
@@ -219,8 +221,7 @@ fn positions(len: usize) -> Vec<usize> {
 /// original's messages, a damaged one a subset of them.
 #[test]
 fn every_single_byte_flip_is_read_without_panic_or_huge_allocation() {
-    let quiet = std::panic::take_hook();
-    std::panic::set_hook(Box::new(|_| {}));
+    let quiet = common::quiet_panics();
     let mut failures = Vec::new();
     let mut copies = 0;
     for (form, file) in forms(100) {
@@ -268,7 +269,7 @@ fn every_single_byte_flip_is_read_without_panic_or_huge_allocation() {
             }
         }
     }
-    std::panic::set_hook(quiet);
+    drop(quiet);
     assert!(
         failures.is_empty(),
         "{} of {copies} copies failed:\n{}",
@@ -585,8 +586,7 @@ fn a_device_or_a_directory_is_not_read() {
 /// message): no panic, the allocation bound held.
 #[test]
 fn fuzz_smoke_ten_thousand_structured_mutations() {
-    let quiet = std::panic::take_hook();
-    std::panic::set_hook(Box::new(|_| {}));
+    let quiet = common::quiet_panics();
     let bases: Vec<Vec<u8>> = vec![
         recording_in(Some(mcap::Compression::Zstd), 24, 8),
         recording_in(Some(mcap::Compression::Lz4), 24, 8),
@@ -682,7 +682,7 @@ fn fuzz_smoke_ten_thousand_structured_mutations() {
             failures.push(format!("input {i}: {}", panic_text(&e)));
         }
     }
-    std::panic::set_hook(quiet);
+    drop(quiet);
     assert!(
         failures.is_empty(),
         "{} panics:\n{}",

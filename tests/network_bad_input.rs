@@ -118,6 +118,7 @@ const PROBE_REPLY: &[u8] = b"1023 40.00 0.00 7.00\n";
 
 #[test]
 fn bad_clients_are_dropped_alone_and_memory_stays_bounded() {
+    let _alone = common::memory_alone();
     let prev = std::panic::take_hook();
     std::panic::set_hook(Box::new(move |i| {
         PANICS.fetch_add(1, Ordering::Relaxed);

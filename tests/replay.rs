@@ -145,16 +145,16 @@ fn start_and_end_cut_the_recording_and_motors_move_nothing() {
         "only the command written during the replay is recorded: {motors:?}"
     );
     let (_, orig) = messages(Path::new(&recording()));
-    let enc = &by["encoders"];
-    let first = orig["encoders"]
-        .iter()
-        .position(|d| d == &enc[0])
-        .expect("replayed encoders are recorded ones");
-    assert_eq!(
-        &orig["encoders"][first..first + enc.len()],
-        &enc[..],
-        "the replayed odometry is the recording's, whatever the motors say"
-    );
+    // Each replayed odometry sample is a recorded one, in the recorded order (a
+    // loaded machine may let the recorder skip one: interfaces keep the latest value).
+    assert!(!by["encoders"].is_empty(), "no odometry was replayed");
+    let mut recorded = orig["encoders"].iter();
+    for d in &by["encoders"] {
+        assert!(
+            recorded.any(|o| o == d),
+            "the replayed odometry is the recording's, whatever the motors say: {d:?}"
+        );
+    }
 }
 
 fn messages(path: &Path) -> (Summary, BTreeMap<String, Vec<Decoded>>) {

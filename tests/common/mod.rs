@@ -13,6 +13,44 @@ use std::{
 
 use jderobot::{Conf, Runtime, State};
 
+/// Taken by the tests that measure this process's memory (RSS) and by those that
+/// allocate tens of MB in it: a suite runs its tests on several threads, and one
+/// test's buffers would otherwise count as another's growth.
+pub fn memory_alone() -> std::sync::MutexGuard<'static, ()> {
+    static LOCK: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    LOCK.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// Keeps the panics of this thread off the output until the guard drops, for tests
+/// that catch panics on purpose (fuzzing, damaged files). Only this thread: a
+/// process-wide silent hook would also hide the messages of the tests running beside.
+pub fn quiet_panics() -> QuietPanics {
+    static INSTALL: std::sync::Once = std::sync::Once::new();
+    INSTALL.call_once(|| {
+        let loud = std::panic::take_hook();
+        std::panic::set_hook(Box::new(move |info| {
+            if !QUIET.with(|q| q.get()) {
+                loud(info)
+            }
+        }));
+    });
+    QUIET.with(|q| q.set(true));
+    QuietPanics(())
+}
+
+thread_local! {
+    static QUIET: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+/// See [`quiet_panics`].
+pub struct QuietPanics(());
+
+impl Drop for QuietPanics {
+    fn drop(&mut self) {
+        QUIET.with(|q| q.set(false));
+    }
+}
+
 /// The `jderobot` binary with `args`, as every test runs it: warnings only in
 /// the log, no display (headless), standard streams piped.
 pub fn jderobot<I, S>(args: I) -> Command
