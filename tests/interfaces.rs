@@ -266,3 +266,52 @@ fn namespace_typed_exports() {
     ns.remove_component("introrob");
     assert!(ns.import::<f32>("introrob", "v").is_err());
 }
+
+/// A reader that must see every sample (the recorder) gets, after a late wake-up,
+/// each one it slept through from the history, oldest first; past the history's
+/// length it is told how many are gone; without a history only the latest is there.
+#[test]
+fn since_gives_every_sample_a_late_reader_slept_through() {
+    use jderobot::interfaces::HISTORY;
+    let enc = Interface::<Encoders>::new("encoders", "robot");
+    let x = |x: f32| Encoders {
+        x,
+        ..Encoders::default()
+    };
+    enc.publish(x(1.0)).unwrap();
+    let mut out = Vec::new();
+    // No history asked for: only the latest.
+    enc.publish(x(2.0)).unwrap();
+    assert_eq!(enc.since(0, &mut out), 1);
+    assert_eq!(out.iter().map(|s| s.clock).collect::<Vec<_>>(), [2]);
+
+    enc.keep_history(true);
+    for k in 3..=7 {
+        enc.publish(x(k as f32)).unwrap();
+    }
+    out.clear();
+    assert_eq!(enc.since(2, &mut out), 0, "nothing gone");
+    assert_eq!(
+        out.iter().map(|s| (s.clock, s.value.x)).collect::<Vec<_>>(),
+        [(3, 3.0), (4, 4.0), (5, 5.0), (6, 6.0), (7, 7.0)]
+    );
+    out.clear();
+    assert_eq!(enc.since(7, &mut out), 0);
+    assert!(out.is_empty(), "nothing new");
+
+    // More than the history holds: the oldest are gone, and counted.
+    for k in 0..(HISTORY as u64 + 4) {
+        enc.publish(x(k as f32)).unwrap();
+    }
+    out.clear();
+    assert_eq!(enc.since(7, &mut out), 4);
+    assert_eq!(out.len(), HISTORY);
+    assert_eq!(out[0].clock, 12);
+    assert!(out.windows(2).all(|w| w[1].clock == w[0].clock + 1));
+
+    enc.keep_history(false);
+    enc.publish(x(0.5)).unwrap();
+    out.clear();
+    enc.since(enc.clock() - 1, &mut out);
+    assert_eq!(out.len(), 1, "history off: the latest alone");
+}

@@ -36,7 +36,8 @@
 //! `record start|stop` switch it.
 //!
 //! Writing never blocks a schema: a poller thread, woken by each new value, takes
-//! each new sample (shared, no copy) into a bounded queue and a writer thread
+//! each new sample (shared, no copy; from the interface's short history, so a
+//! wake-up delayed by a loaded machine loses nothing) into a bounded queue and a writer thread
 //! encodes and writes it; when the queue is full the sample is dropped and counted.
 //! Chunks are closed at least once a second, so a run killed mid-write loses at
 //! most the last second.
@@ -343,6 +344,7 @@ fn poll_loop(
     let mut last: Vec<u64> = vec![0; srcs.len()];
     let mut was_recording = false;
     let mut fresh: Vec<(usize, Snapshot)> = Vec::with_capacity(srcs.len());
+    let mut taken: Vec<Snapshot> = Vec::new();
     // A grace period: `jderobot check` builds and shuts down a recorder at once,
     // and must not leave a file behind.
     let t0 = Instant::now();
@@ -357,6 +359,7 @@ fn poll_loop(
     let watch = Watch::for_current_thread();
     for s in srcs.iter() {
         s.any().watch(watch.clone());
+        s.keep_history(true);
     }
     'poll: while !stop.load(Ordering::Acquire) {
         let want = status.want.load(Ordering::Acquire);
@@ -372,14 +375,18 @@ fn poll_loop(
                 if clock == 0 || clock == last[i] {
                     continue;
                 }
-                let snap = s.snapshot();
-                let c = snap.clock();
-                if last[i] != 0 && c > last[i] + 1 {
-                    // Replaced before this thread woke: lost.
-                    status.dropped.fetch_add(c - last[i] - 1, Ordering::Relaxed);
+                if last[i] == 0 {
+                    taken.push(s.snapshot());
+                } else {
+                    // Every sample since the last one taken, from the interface's
+                    // history: a late wake-up loses nothing unless it is very late.
+                    let gone = s.since(last[i], &mut taken);
+                    status.dropped.fetch_add(gone, Ordering::Relaxed);
                 }
-                last[i] = c;
-                fresh.push((i, snap));
+                if let Some(newest) = taken.last() {
+                    last[i] = newest.clock();
+                }
+                fresh.extend(taken.drain(..).map(|snap| (i, snap)));
             }
             // In publication order (a command and the sensing it caused can be
             // new in one pass): what a lock-step replay relies on.
@@ -399,6 +406,7 @@ fn poll_loop(
     }
     for s in srcs.iter() {
         s.any().unwatch(&*watch);
+        s.keep_history(false);
     }
 }
 

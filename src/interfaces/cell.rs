@@ -57,7 +57,16 @@ struct Writer<T> {
     held: Option<Arc<Sample<T>>>,
     recent: VecDeque<Instant>,
     first: Option<Instant>,
+    /// The latest samples, newest last, kept while someone needs every sample and
+    /// not only the latest (see [`Interface::keep_history`]); empty otherwise.
+    history: VecDeque<Arc<Sample<T>>>,
+    /// How many readers asked for the history.
+    historians: usize,
 }
+
+/// How many samples [`Interface::since`] can give back: at 20 Hz, a reader that
+/// did not run for 0.8 s still misses nothing.
+pub const HISTORY: usize = 16;
 
 const RATE_WINDOW: Duration = Duration::from_secs(2);
 
@@ -199,6 +208,8 @@ impl<T: InterfaceValue> Interface<T> {
                 held: None,
                 recent: VecDeque::new(),
                 first: None,
+                history: VecDeque::new(),
+                historians: 0,
             }),
             users: AtomicUsize::new(0),
             wake: (Mutex::new(()), Condvar::new()),
@@ -382,12 +393,19 @@ impl<T: InterfaceValue> Interface<T> {
         value: T,
     ) -> (u64, Arc<Sample<T>>) {
         let stamp = Instant::now();
-        let old = self.slot.swap(Arc::new(Sample {
+        let new = Arc::new(Sample {
             clock,
             stamp,
             time,
             value,
-        }));
+        });
+        if w.historians > 0 {
+            if w.history.len() == HISTORY {
+                w.history.pop_front();
+            }
+            w.history.push_back(new.clone());
+        }
+        let old = self.slot.swap(new);
         self.clock.store(clock, Ordering::Release);
         w.published(stamp);
         if self.stale.load().is_some() {
@@ -465,6 +483,46 @@ impl<T: InterfaceValue> Interface<T> {
     /// receiver (a remote robot) reappeared. A sensor waits for its next publish.
     pub fn clear_stale(&self) {
         self.stale.store(None);
+    }
+
+    /// Keeps the last [`HISTORY`] samples from now on (`true`) for
+    /// [`since`](Self::since), or stops when every reader that asked says `false`.
+    /// For a reader that must see every sample, not only the latest (the recorder):
+    /// a thread that wakes late would otherwise find only the newest one.
+    pub fn keep_history(&self, on: bool) {
+        let mut w = self.writer.lock();
+        w.historians = if on {
+            w.historians + 1
+        } else {
+            w.historians.saturating_sub(1)
+        };
+        if w.historians == 0 {
+            w.history.clear();
+        }
+    }
+
+    /// The samples after clock `after`, oldest first, from the history (or the
+    /// latest alone when none is kept), and how many of them are gone: published
+    /// and replaced more than [`HISTORY`] samples ago.
+    pub fn since(&self, after: u64, out: &mut Vec<Arc<Sample<T>>>) -> u64 {
+        let latest = self.snapshot();
+        if latest.clock <= after {
+            return 0;
+        }
+        let w = self.writer.lock();
+        let kept = w.history.iter().filter(|s| s.clock > after);
+        let first = match w.history.iter().find(|s| s.clock > after) {
+            Some(s) => {
+                out.extend(kept.cloned());
+                s.clock
+            }
+            None => {
+                drop(w);
+                out.push(latest.clone());
+                latest.clock
+            }
+        };
+        first - after - 1
     }
 
     /// Tells `watcher` of every new value from now on.

@@ -50,7 +50,7 @@ mod source;
 mod table;
 mod values;
 
-pub use cell::{AnyInterface, Interface, MAX_CLOCK, Notify, Sample, Watch};
+pub use cell::{AnyInterface, HISTORY, Interface, MAX_CLOCK, Notify, Sample, Watch};
 pub use kinds::KINDS;
 pub(crate) use kinds::{by_kind, by_kind_match, for_each_kind};
 pub use laser_map::LaserMap;

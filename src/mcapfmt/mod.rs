@@ -162,6 +162,25 @@ macro_rules! kind_enums {
                 match self { $(Source::$t(i) => Snapshot::$t(i.snapshot()),)* }
             }
 
+            /// Keeps the interface's recent samples for [`since`](Self::since)
+            /// (`Interface::keep_history`).
+            pub fn keep_history(&self, on: bool) {
+                match self { $(Source::$t(i) => i.keep_history(on),)* }
+            }
+
+            /// The samples after clock `after`, oldest first, into `out`; returns
+            /// how many of them are gone (`Interface::since`).
+            pub fn since(&self, after: u64, out: &mut Vec<Snapshot>) -> u64 {
+                match self {
+                    $(Source::$t(i) => {
+                        let mut taken = Vec::new();
+                        let gone = i.since(after, &mut taken);
+                        out.extend(taken.into_iter().map(Snapshot::$t));
+                        gone
+                    })*
+                }
+            }
+
             /// Publishes a recorded value with its clock and wall time; an actuator
             /// is left to whoever commands it (nothing is published).
             pub fn publish_recorded(
