@@ -780,7 +780,7 @@ fn gazebo_wire_targets() -> Vec<Target> {
                             c.set(c.get() + 1);
                             c.get()
                         });
-                        if k % 1024 == 0 {
+                        if k.is_multiple_of(1024) {
                             let (topics, most, processes, subs) = node.remembered();
                             assert!(
                                 topics <= node::MAX_TOPICS
