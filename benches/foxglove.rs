@@ -255,6 +255,7 @@ fn settings(serves: &[&str]) -> Settings {
         world: false,
         limits: Limits::default(),
         insecure: false,
+        tls: None,
     }
 }
 

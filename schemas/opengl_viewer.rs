@@ -225,6 +225,18 @@ impl std::io::BufRead for Counting<'_> {
 
 type MtlResult = tobj::MTLLoadResult;
 
+/// A colour line (`Ka`, `Kd`, `Ks`, `Ke`) with fewer than three numbers: its
+/// 1-based line and what is wrong. tobj 4.0.5 panics on one (its `parse_float3`
+/// unwraps), so the loader refuses it first (found by `tests/fuzz.rs`).
+fn short_colour_line(text: &str) -> Option<(usize, String)> {
+    text.lines().enumerate().find_map(|(i, l)| {
+        let mut words = l.split_whitespace();
+        let key = words.next()?;
+        (matches!(key, "Ka" | "Kd" | "Ks" | "Ke") && words.count() < 3)
+            .then(|| (i + 1, format!("`{key}` wants three numbers (R G B)")))
+    })
+}
+
 /// Parses MTL text; on an error, the line it was found on.
 fn parse_mtl(text: &str) -> (MtlResult, usize) {
     let mut r = Counting::new(text);
@@ -280,6 +292,14 @@ pub fn load_model_text(
         }
         match read_mtl(p) {
             Ok((t, f)) => {
+                if let Some((line, what)) = short_colour_line(&t) {
+                    *mtl_error.borrow_mut() = Some(ModelError {
+                        file: f,
+                        line,
+                        message: format!("bad material library: {what}"),
+                    });
+                    return Err(tobj::LoadError::MaterialParseError);
+                }
                 let (r, line) = parse_mtl(&t);
                 if let Err(e) = &r {
                     *mtl_error.borrow_mut() = Some(ModelError {

@@ -232,11 +232,13 @@ fn help_prints_every_form_and_argument() {
 }
 
 /// A conf of one driver section.
+#[cfg_attr(not(feature = "simulator"), allow(dead_code))]
 fn driver(name: &str, text: &str) -> ComponentConf {
     ComponentConf::from_text(Kind::Driver, name, text).unwrap()
 }
 
 /// The declared range of `key`'s argument `arg` (in form `form`, for a line in forms).
+#[cfg_attr(not(feature = "simulator"), allow(dead_code))]
 fn range(component: &str, key: &str, form: Option<&str>, arg: &str) -> (f64, f64) {
     let decl = registry::find(component).and_then(|e| e.lines).unwrap();
     let s = decl.iter().find(|s| s.key == key).unwrap();
@@ -251,6 +253,7 @@ fn range(component: &str, key: &str, form: Option<&str>, arg: &str) -> (f64, f64
     }
 }
 
+#[cfg(feature = "simulator")]
 #[test]
 fn simulator_values_reach_the_simulation_unchanged() {
     use jderobot::drivers::simulator::Simulation;
@@ -296,6 +299,7 @@ fn simulator_values_reach_the_simulation_unchanged() {
     }
 }
 
+#[cfg(feature = "player")]
 #[test]
 fn player_values_reach_the_driver_unchanged() {
     use jderobot::drivers::player::{PlayerConf, Provided};
@@ -326,6 +330,15 @@ fn player_values_reach_the_driver_unchanged() {
     assert_eq!(Some(p.timeout.as_millis().to_string().as_str()), default);
 }
 
+#[cfg(all(
+    feature = "imagefile",
+    feature = "gige",
+    feature = "opencv",
+    feature = "video4linux2",
+    feature = "firewire",
+    feature = "mplayer",
+    feature = "networkclient"
+))]
 #[test]
 fn image_sizes_reach_the_drivers_unchanged() {
     let (w_min, w_max) = range("imagefile", "provides", Some("varcolor"), "W");

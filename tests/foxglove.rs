@@ -973,3 +973,217 @@ fn a_token_is_asked_for_and_a_bind_beyond_loopback_needs_one() {
     let e = common::start_error(&conf("bind 0.0.0.0\n"));
     assert!(e.contains("token SECRET") && e.contains("insecure"), "{e}");
 }
+
+/// A CA and a server certificate for 127.0.0.1 signed by it, made with openssl
+/// in `d`: (ca.pem, server.pem, server.key).
+fn make_certs(d: &std::path::Path) -> (PathBuf, PathBuf, PathBuf) {
+    assert!(
+        common::have("openssl"),
+        "openssl is needed to make the test's certificates"
+    );
+    let ssl = |args: &[&str]| {
+        let out = Command::new("openssl")
+            .args(args)
+            .current_dir(d)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "openssl {args:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    };
+    let ec = [
+        "-newkey",
+        "ec",
+        "-pkeyopt",
+        "ec_paramgen_curve:P-256",
+        "-nodes",
+    ];
+    ssl(&[
+        &["req", "-x509"][..],
+        &ec[..],
+        &[
+            "-days", "2", "-subj", "/CN=ca", "-keyout", "ca.key", "-out", "ca.pem",
+        ],
+    ]
+    .concat());
+    std::fs::write(
+        d.join("ext.cnf"),
+        "subjectAltName=IP:127.0.0.1,DNS:localhost\nbasicConstraints=CA:FALSE\n",
+    )
+    .unwrap();
+    ssl(&[
+        &["req"][..],
+        &ec[..],
+        &[
+            "-subj",
+            "/CN=robot",
+            "-keyout",
+            "robot.key",
+            "-out",
+            "robot.csr",
+        ],
+    ]
+    .concat());
+    ssl(&[
+        "x509",
+        "-req",
+        "-in",
+        "robot.csr",
+        "-CA",
+        "ca.pem",
+        "-CAkey",
+        "ca.key",
+        "-CAcreateserial",
+        "-days",
+        "2",
+        "-extfile",
+        "ext.cnf",
+        "-out",
+        "robot.pem",
+    ]);
+    (d.join("ca.pem"), d.join("robot.pem"), d.join("robot.key"))
+}
+
+/// A TLS client (rustls, trusting only `ca`) connected to `a` as `127.0.0.1`.
+fn tls_connect(
+    a: SocketAddr,
+    ca: &std::path::Path,
+) -> std::io::Result<
+    tokio_rustls::rustls::StreamOwned<tokio_rustls::rustls::ClientConnection, TcpStream>,
+> {
+    use tokio_rustls::rustls::{
+        self, ClientConfig, RootCertStore,
+        pki_types::{CertificateDer, ServerName, pem::PemObject},
+    };
+    let mut roots = RootCertStore::empty();
+    for c in CertificateDer::pem_file_iter(ca).unwrap() {
+        roots.add(c.unwrap()).unwrap();
+    }
+    let config =
+        ClientConfig::builder_with_provider(Arc::new(rustls::crypto::ring::default_provider()))
+            .with_safe_default_protocol_versions()
+            .unwrap()
+            .with_root_certificates(roots)
+            .with_no_client_auth();
+    let name = ServerName::try_from("127.0.0.1").unwrap();
+    let conn = rustls::ClientConnection::new(Arc::new(config), name).unwrap();
+    let s = TcpStream::connect(a)?;
+    s.set_read_timeout(Some(Duration::from_secs(5)))?;
+    let mut tls = rustls::StreamOwned::new(conn, s);
+    while tls.conn.is_handshaking() {
+        tls.conn.complete_io(&mut tls.sock)?;
+    }
+    Ok(tls)
+}
+
+/// The upgrade request for `path` over any stream, and the answer's head with
+/// what came after it within 2 s.
+fn upgrade_over<S: Read + Write>(s: &mut S, path: &str, protocol: &str) -> (String, Vec<u8>) {
+    // A write may fail: a TLS port closes on a plain request.
+    let _ = write!(
+        s,
+        "GET {path} HTTP/1.1\r\nHost: 127.0.0.1\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n\
+         Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\
+         Sec-WebSocket-Protocol: {protocol}\r\n\r\n"
+    );
+    let _ = s.flush();
+    let mut got = Vec::new();
+    let mut b = [0u8; 4096];
+    let t0 = Instant::now();
+    while t0.elapsed() < Duration::from_secs(2) && !got.windows(10).any(|w| w == b"serverInfo") {
+        match s.read(&mut b) {
+            Ok(0) | Err(_) => break,
+            Ok(n) => got.extend_from_slice(&b[..n]),
+        }
+    }
+    let end = got
+        .windows(4)
+        .position(|w| w == b"\r\n\r\n")
+        .map_or(got.len(), |i| i + 4);
+    let rest = got.split_off(end);
+    (String::from_utf8_lossy(&got).into_owned(), rest)
+}
+
+/// Issue 38: Foxglove over TLS. Beyond loopback the service wants `tls` and
+/// `token` both; with them, both ports speak wss:// only: a rustls client that
+/// trusts the test's CA upgrades with the token and gets serverInfo, without it
+/// gets 401; a plain ws:// client gets no upgrade; and the official client
+/// (`@foxglove/ws-protocol` on Node's `ws`, trusting the CA through
+/// NODE_EXTRA_CA_CERTS) lists, decodes and drives over wss://.
+#[test]
+fn wss_with_a_token_serves_beyond_loopback_and_plain_ws_gets_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let (ca, cert, key) = make_certs(dir.path());
+    let tls = format!("tls {} {}\n", cert.display(), key.display());
+    // Beyond loopback: a token alone, or TLS alone, is not enough.
+    let e = common::start_error(&conf("bind 0.0.0.0\ntoken s3cret\n"));
+    assert!(e.contains("add `tls CERT.pem KEY.pem` too"), "{e}");
+    let e = common::start_error(&conf(&format!("bind 0.0.0.0\n{tls}")));
+    assert!(e.contains("add `token SECRET` too"), "{e}");
+    // A key that does not go with the certificate is said at the `tls` line.
+    let bad = format!(
+        "tls {} {}\n",
+        cert.display(),
+        dir.path().join("ca.key").display()
+    );
+    let e = common::start_error(&conf(&bad));
+    assert!(
+        e.contains("test.conf:") && e.contains("does not go with"),
+        "{e}"
+    );
+
+    let rt = common::start_conf(&conf(&format!(
+        "bind 0.0.0.0\ntoken s3cret\n{tls}sdk_port 0\n"
+    )));
+    let port = addr(&rt).port();
+    let a = SocketAddr::from(([127, 0, 0, 1], port));
+    assert!(ps(&rt).contains("foxglove: wss://"), "{}", ps(&rt));
+    // Plain ws:// on the TLS port: no upgrade.
+    let mut plain = TcpStream::connect(a).unwrap();
+    plain
+        .set_read_timeout(Some(Duration::from_secs(5)))
+        .unwrap();
+    let (head, _) = upgrade_over(&mut plain, "/?token=s3cret", "foxglove.websocket.v1");
+    assert!(!head.contains(" 101 "), "plain ws on the TLS port: {head}");
+    // wss:// without the token: 401; with it: 101 and serverInfo, on both ports.
+    let mut t = tls_connect(a, &ca).expect("a TLS handshake");
+    let (head, _) = upgrade_over(&mut t, "/", "foxglove.websocket.v1");
+    assert!(head.starts_with("HTTP/1.1 401"), "{head}");
+    let b = *rt
+        .names
+        .import::<SocketAddr>("foxglove", "sdk_address")
+        .unwrap();
+    for port in [port, b.port()] {
+        let at = SocketAddr::from(([127, 0, 0, 1], port));
+        let mut t = tls_connect(at, &ca).expect("a TLS handshake");
+        let (head, rest) = upgrade_over(&mut t, "/?token=s3cret", "foxglove.websocket.v1");
+        assert!(head.starts_with("HTTP/1.1 101"), "{at}: {head}");
+        assert!(
+            String::from_utf8_lossy(&rest).contains("\"serverInfo\""),
+            "{at}: no serverInfo over TLS"
+        );
+    }
+    // The official client over wss://.
+    if let Some(dir) = node_client() {
+        let out = Command::new("node")
+            .arg(dir.join("client.js"))
+            .arg(format!("wss://127.0.0.1:{port}/?token=s3cret"))
+            .env("NODE_EXTRA_CA_CERTS", &ca)
+            .current_dir(&dir)
+            .output()
+            .expect("run node");
+        let stdout = String::from_utf8_lossy(&out.stdout);
+        assert!(
+            out.status.success(),
+            "client.js over wss failed: {}\n{stdout}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let r: Value = serde_json::from_str(stdout.trim()).expect("one JSON report");
+        assert_eq!(r["protocol"], "foxglove.websocket.v1", "{r}");
+        assert!(r["counts"]["laser"].as_u64().unwrap_or(0) > 0, "{r}");
+        assert!(r["twists"].as_u64().unwrap_or(0) > 0, "{r}");
+    }
+    rt.shutdown();
+}

@@ -431,6 +431,14 @@ fn driver_targets(p: &Path) -> Vec<Target> {
             },
         });
     }
+    #[cfg(feature = "gazebo")]
+    t.extend(gazebo_wire_targets());
+    #[cfg(feature = "foxglove")]
+    t.push(relay_target());
+    #[cfg(feature = "opengl_viewer")]
+    t.push(obj_mtl_target());
+    #[cfg(feature = "ros2")]
+    t.push(ros2_dds_target());
     #[cfg(feature = "evi")]
     t.push(Target {
         name: "visca",
@@ -669,6 +677,361 @@ fn driver_targets(p: &Path) -> Vec<Target> {
     t
 }
 
+#[cfg(feature = "gazebo")]
+thread_local! {
+    /// The discovery target's node: one for the whole run, so what the packets
+    /// build up (publishers, processes, subscribers) meets the caps. It wants no
+    /// topic and advertises none, so it connects to nothing and sends nothing.
+    static GZ_NODE: std::cell::RefCell<Option<jderobot::drivers::gazebo::node::Node>> =
+        const { std::cell::RefCell::new(None) };
+    static GZ_PACKETS: std::cell::Cell<u64> = const { std::cell::Cell::new(0) };
+}
+
+/// gz-transport's discovery packets (a 2-byte length and a `Discovery`, as
+/// gz-transport's Discovery.hh lays them out) into a node's real handler, and
+/// ZMTP 3.0 byte streams (rfc.zeromq.org/spec/23: greeting, READY, frames with
+/// MORE and long sizes) into the framer every connection reads with.
+#[cfg(feature = "gazebo")]
+fn gazebo_wire_targets() -> Vec<Target> {
+    use jderobot::drivers::gazebo::{
+        node::{self, Node},
+        pb::{Discovery, Publisher, disc},
+        zmtp,
+    };
+    let puuid = GZ_NODE.with(|n| {
+        let mut n = n.borrow_mut();
+        let node = n.get_or_insert_with(|| {
+            Node::new("127.0.0.1", "fuzz").expect("a gz-transport node on loopback")
+        });
+        node.puuid.clone()
+    });
+    let packet = |kind: u64, sub: Option<&str>, ctrl: &str| {
+        let d = Discovery {
+            version: node::WIRE_VERSION,
+            process_uuid: "0c3d2f5e-5bd0-4a4a-9a1e-6a1b6c7d8e9f".into(),
+            kind,
+            relay: false,
+            sub: sub.map(String::from),
+            publisher: (kind != disc::SUBSCRIBE && kind != disc::BYE).then(|| Publisher {
+                topic: node::qualify("fuzz", "/model/robot1/cmd_vel"),
+                address: "tcp://127.0.0.1:1".into(),
+                process_uuid: "0c3d2f5e-5bd0-4a4a-9a1e-6a1b6c7d8e9f".into(),
+                node_uuid: "9f8e7d6c-1b6a-4e1a-8a4a-5e5f2d3c0b1a".into(),
+                scope: 2,
+                ctrl: ctrl.into(),
+                msg_type: "gz.msgs.Twist".into(),
+            }),
+        };
+        let mut body = Vec::new();
+        d.encode(&mut body);
+        let mut b = (body.len() as u16).to_le_bytes().to_vec();
+        b.extend_from_slice(&body);
+        b
+    };
+    let discovery_seeds = vec![
+        packet(disc::ADVERTISE, None, ""),
+        packet(disc::UNADVERTISE, None, ""),
+        packet(disc::SUBSCRIBE, Some("@/fuzz@/model/robot1/cmd_vel"), ""),
+        packet(disc::HEARTBEAT, None, ""),
+        packet(disc::NEW_CONNECTION, None, &puuid),
+        packet(disc::END_CONNECTION, None, &puuid),
+        packet(disc::BYE, None, ""),
+    ];
+    let mut stream = zmtp::greeting().to_vec();
+    stream.extend_from_slice(&zmtp::ready("PUB"));
+    let message = |out: &mut Vec<u8>, data: &[u8]| {
+        for (i, part) in [
+            &b"@/fuzz@/scan"[..],
+            b"tcp://127.0.0.1:40000",
+            data,
+            b"gz.msgs.LaserScan",
+        ]
+        .iter()
+        .enumerate()
+        {
+            zmtp::frame(out, i < 3, part);
+        }
+    };
+    let mut small = stream.clone();
+    message(&mut small, &[0x3f; 40]);
+    message(&mut small, b"");
+    let mut long = stream.clone();
+    message(&mut long, &[7; 300]);
+    let mut subscribe = stream.clone();
+    zmtp::frame(&mut subscribe, false, b"\x01@/fuzz@/scan");
+    vec![
+        Target {
+            name: "gazebo_discovery",
+            seeds: discovery_seeds,
+            text: false,
+            run: |b| {
+                let _ = node::parse_packet(b);
+                // The same message with its length field made to fit, so the
+                // mutations of the message itself reach the node.
+                let body = b.get(2..).unwrap_or_default();
+                let body = &body[..body.len().min(65535)];
+                let mut fixed = (body.len() as u16).to_le_bytes().to_vec();
+                fixed.extend_from_slice(body);
+                GZ_NODE.with(|n| {
+                    if let Some(node) = n.borrow_mut().as_mut() {
+                        node.discovery(b);
+                        node.discovery(&fixed);
+                        let k = GZ_PACKETS.with(|c| {
+                            c.set(c.get() + 1);
+                            c.get()
+                        });
+                        if k.is_multiple_of(1024) {
+                            let (topics, most, processes, subs) = node.remembered();
+                            assert!(
+                                topics <= node::MAX_TOPICS
+                                    && most <= node::MAX_PUBLISHERS
+                                    && processes <= node::MAX_KNOWN
+                                    && subs <= node::MAX_SUBSCRIBERS,
+                                "over a cap: {topics} topics, {most} publishers of one, \
+                                 {processes} processes, {subs} subscribers"
+                            );
+                            if k == 1 << 20 {
+                                // What the packets reached (one line per run).
+                                println!(
+                                    "fuzz gazebo_discovery: after {k} packets the node remembers \
+                                     {topics} topics (at most {most} publishers of one), \
+                                     {processes} processes, {subs} subscribers"
+                                );
+                            }
+                        }
+                    }
+                });
+            },
+        },
+        Target {
+            name: "gazebo_zmtp",
+            seeds: vec![small, long, subscribe],
+            text: false,
+            run: |b| {
+                // Whole, then in pieces of the sizes the first byte says (a
+                // stream arrives cut anywhere).
+                let step = 1 + b.first().copied().unwrap_or(0) as usize % 97;
+                for chunks in [b.len().max(1), step] {
+                    let mut f = zmtp::Framer::new("fuzz".into());
+                    'feed: for c in b.chunks(chunks) {
+                        let mut at = 0;
+                        while at < c.len() {
+                            let n = f.feed(&c[at..]);
+                            at += n;
+                            loop {
+                                match f.next_item() {
+                                    Ok(Some(_)) => {}
+                                    Ok(None) => break,
+                                    Err(_) => break 'feed,
+                                }
+                            }
+                            // Full with no whole message in it cannot happen (a
+                            // message fits); if it did, stop rather than spin.
+                            if n == 0 {
+                                break 'feed;
+                            }
+                        }
+                    }
+                }
+            },
+        },
+    ]
+}
+
+/// The Foxglove relay's front door on a client's bytes: the upgrade request
+/// (RFC 6455 §4.1: its head, the token, the subprotocol rename) and the frames
+/// after it (§5.2: headers, masks, fragments, control frames, the message cap).
+#[cfg(feature = "foxglove")]
+fn relay_target() -> Target {
+    let head = |path: &str, proto: &str| {
+        format!(
+            "GET {path} HTTP/1.1\r\nHost: 127.0.0.1:8765\r\nUpgrade: websocket\r\n\
+             Connection: Upgrade\r\nSec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\n\
+             Sec-WebSocket-Version: 13\r\nSec-WebSocket-Protocol: {proto}\r\n\r\n"
+        )
+        .into_bytes()
+    };
+    // A masked text frame, a masked ping, and a fragment with its continuation.
+    let frame = |fin: bool, op: u8, payload: &[u8]| {
+        let mut f = vec![(fin as u8) << 7 | op];
+        if payload.len() < 126 {
+            f.push(0x80 | payload.len() as u8);
+        } else {
+            f.push(0x80 | 126);
+            f.extend_from_slice(&(payload.len() as u16).to_be_bytes());
+        }
+        let mask = [1u8, 2, 3, 4];
+        f.extend_from_slice(&mask);
+        f.extend(payload.iter().enumerate().map(|(i, b)| b ^ mask[i % 4]));
+        f
+    };
+    let sub = br#"{"op":"subscribe","subscriptions":[{"id":1,"channelId":1}]}"#;
+    let mut a = head("/?token=s3cret", "foxglove.websocket.v1");
+    a.extend(frame(true, 1, sub));
+    a.extend(frame(true, 9, b"ping"));
+    let mut b = head("/", "foxglove.sdk.v1, foxglove.sdk.v1.1");
+    b.extend(frame(false, 1, &sub[..20]));
+    b.extend(frame(true, 0, &sub[20..]));
+    b.extend(frame(true, 2, &[7; 300]));
+    let mut c = b"GET / HTTP/1.1\r\nAuthorization: Bearer s3cret\r\n".to_vec();
+    c.extend(b"Sec-WebSocket-Protocol: foxglove.websocket.v1\r\n\r\n");
+    c.extend(frame(true, 8, &[3, 232]));
+    Target {
+        name: "foxglove_relay",
+        seeds: vec![a, b, c],
+        text: false,
+        run: |b| {
+            use jderobot::services::foxglove::relay;
+            let mut buf = b.to_vec();
+            let (head, rest) = match relay::split_head(&mut buf) {
+                Some(r) => r,
+                None => (buf, Vec::new()),
+            };
+            for token in [None, Some("s3cret")] {
+                if let Ok((head, to_sdk, _legacy)) = relay::check_request(head.clone(), token) {
+                    let _ = relay::offered(&head);
+                    let _ = relay::replace_protocol(&to_sdk, relay::LEGACY);
+                }
+            }
+            let _ = relay::presented_token(&String::from_utf8_lossy(&head));
+            let t0 = std::time::Instant::now();
+            for max in [1024, 65536] {
+                let mut frames = relay::ClientFrames::new(max);
+                let mut at = 0;
+                for (k, c) in rest.chunks(1 + rest.len() / 3).enumerate() {
+                    let now = t0 + std::time::Duration::from_millis(4000 * k as u64);
+                    match frames.feed(c, now) {
+                        Ok(n) => at += n,
+                        Err((n, _)) => {
+                            assert!(n <= c.len());
+                            break;
+                        }
+                    }
+                    let _ = frames.deadline();
+                }
+                assert!(at <= rest.len());
+            }
+            // The server's frames as the relay peeks them.
+            let _ = relay::parse_header(&rest);
+        },
+    }
+}
+
+/// OBJ and MTL text (the Wavefront formats, through tobj, as the opengl_viewer
+/// model loader reads them): the input is the OBJ, a NUL, then the MTL.
+#[cfg(feature = "opengl_viewer")]
+fn obj_mtl_target() -> Target {
+    let obj = std::fs::read(root().join("assets/models/pioneer.obj")).unwrap_or_default();
+    let mtl = std::fs::read(root().join("assets/models/pioneer.mtl")).unwrap_or_default();
+    let cube = b"mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nvn 0 0 1\n\
+                 vt 0 0\nusemtl red\nf 1/1/1 2/1/1 3/1/1 4/1/1\nf -1 -2 -3\ng side\nf 1 2 5\n\0\
+                 newmtl red\nKd 1 0 0\nKa 0.1 0.1 0.1\nNs 10\nd 1\nillum 2\n"
+        .to_vec();
+    Target {
+        name: "obj_mtl",
+        seeds: vec![[obj, vec![0], mtl].concat(), cube],
+        text: true,
+        run: |b| {
+            let (obj, mtl) = match b.iter().position(|&c| c == 0) {
+                Some(i) => (&b[..i], &b[i + 1..]),
+                None => (b, &b[..0]),
+            };
+            let (obj, mtl) = (text(obj), text(mtl));
+            let _ = jderobot::schemas::opengl_viewer::load_model_text(
+                &obj,
+                Path::new("fuzz/m.obj"),
+                Some(&mtl),
+                1.0,
+            );
+        },
+    }
+}
+
+/// What `obj_mtl` found: tobj 4.0.5 panicked on a colour line with fewer than
+/// three numbers (`Kd 0`); the loader now refuses it, naming the file and line.
+#[cfg(feature = "opengl_viewer")]
+#[test]
+fn a_short_colour_line_is_an_error_at_its_line_not_a_panic() {
+    let obj = "mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl red\nf 1 2 3\n";
+    for (mtl, line) in [
+        ("newmtl red\nKd 0\n", 2),
+        ("newmtl red\nKa 0.1 0.1 0.1\n\tKs\n", 3),
+        ("newmtl red\nKe 1 1\n", 2),
+    ] {
+        let e = jderobot::schemas::opengl_viewer::load_model_text(
+            obj,
+            Path::new("models/m.obj"),
+            Some(mtl),
+            1.0,
+        )
+        .err()
+        .unwrap_or_else(|| panic!("{mtl:?} was taken"));
+        let shown = e.to_string();
+        assert!(
+            shown.starts_with(&format!("models/m.mtl:{line}: ")) && shown.contains("three numbers"),
+            "{mtl:?}: {shown}"
+        );
+    }
+}
+
+/// ROS 2 messages as DDS hands them over: the CDR body after RTPS's
+/// encapsulation header, through the DataReader's decoder, then each message the
+/// service and the driver read (Twist, LaserScan, Odometry, Image, Imu),
+/// checked in range as `Interface::accept` does.
+#[cfg(feature = "ros2")]
+fn ros2_dds_target() -> Target {
+    use jderobot::interfaces::{Encoders, Image, Imu, Laser, Motors, Sample};
+    use jderobot::mcapfmt::ros2;
+    fn body<T: ros2::Ros2>(v: T) -> Vec<u8> {
+        let s = Sample {
+            clock: 1,
+            stamp: std::time::Instant::now(),
+            time: std::time::SystemTime::UNIX_EPOCH + std::time::Duration::from_secs(7),
+            value: v,
+        };
+        let mut out = Vec::new();
+        ros2::encode("fuzz", &s, &mut out);
+        out.split_off(4)
+    }
+    let seeds = vec![
+        body(Motors { v: 100.0, w: -20.0 }),
+        body(Laser {
+            readings: vec![1000; 8],
+            ..Default::default()
+        }),
+        body(Encoders::default()),
+        body(Image::new(4, 2)),
+        body(Imu::default()),
+    ];
+    Target {
+        name: "ros2_dds",
+        seeds,
+        text: false,
+        run: |b| {
+            use jderobot::mcapfmt::dds::CdrDecoder;
+            use rustdds::{RepresentationIdentifier, no_key::Decode};
+            fn read<T: ros2::Ros2>(data: &[u8]) {
+                if let Ok((_, v)) = ros2::decode::<T>("fuzz", data, 0) {
+                    let _ = v.validate("fuzz");
+                }
+            }
+            for enc in [
+                RepresentationIdentifier::CDR_LE,
+                RepresentationIdentifier::CDR_BE,
+            ] {
+                let Ok(m) = CdrDecoder.decode_bytes(b, enc) else {
+                    continue;
+                };
+                read::<Motors>(&m.0);
+                read::<Laser>(&m.0);
+                read::<Encoders>(&m.0);
+                read::<Image>(&m.0);
+                read::<Imu>(&m.0);
+            }
+        },
+    }
+}
+
 /// What one target's run found.
 #[derive(Debug, Default)]
 struct Found {
@@ -755,7 +1118,7 @@ fn every_parser_survives_random_inputs() {
     let seed: u64 = env("FUZZ_SEED").unwrap_or(1);
     let only: Option<String> = std::env::var("FUZZ_TARGET").ok();
     // Panics are caught and counted; keep their messages off the output.
-    std::panic::set_hook(Box::new(|_| {}));
+    let quiet = common::quiet_panics();
     let mut failures = Vec::new();
     for t in targets() {
         if only.as_deref().is_some_and(|o| !t.name.contains(o)) {
@@ -792,6 +1155,6 @@ fn every_parser_survives_random_inputs() {
             ));
         }
     }
-    let _ = std::panic::take_hook();
+    drop(quiet);
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }

@@ -2,7 +2,8 @@
 //! real path: the real gz-transport peer (`tests/gazebo/peer.cc` on Debian's
 //! libignition-transport11) or the NAOqi stand-in on the real libqi
 //! (`tests/emulators/naoqi.py`), plus a hostile node written here from the
-//! documented wires, on loopback (each gazebo test in its own partition):
+//! documented wires, on loopback (each gazebo test in its own partition; the
+//! discovery flood in a private network namespace of its own, `unshare -rn`):
 //!
 //! - gz-transport discovery: UDP multicast 239.255.0.7:10317, a 2-byte
 //!   little-endian length and a `Discovery` protobuf (gz-transport 11's
@@ -292,12 +293,32 @@ fn assert_stop_arrives(on: &AtomicBool, log: &TwistLog, what: &str) {
     on.store(true, Ordering::SeqCst);
 }
 
+/// In a private network namespace (`unshare -rn`): the flood never reaches the
+/// host's network, and no other test's gz-transport nodes see it.
 #[test]
 fn gz_a_discovery_flood_does_not_hold_the_stop_and_gazebo_stays_bound() {
+    let name = "hostile_gz_nao::gz_a_discovery_flood_does_not_hold_the_stop_and_gazebo_stays_bound";
+    if common::in_private_netns(name) == common::Netns::Done {
+        return;
+    }
     let _alone = common::memory_alone();
     let Some(bin) = gazebo::peer_bin() else {
         return;
     };
+    // In the namespace, loopback is the only interface: the host's is not reached.
+    if std::env::var_os("JDE_TEST_IN_NETNS").is_some() {
+        let dev = std::fs::read_to_string("/proc/self/net/dev").unwrap();
+        let ifaces: Vec<&str> = dev
+            .lines()
+            .skip(2)
+            .filter_map(|l| l.split(':').next().map(str::trim))
+            .collect();
+        assert_eq!(
+            ifaces,
+            ["lo"],
+            "only loopback in the test's network namespace"
+        );
+    }
     let part = gazebo::partition();
     let _peer = gazebo::robot(&bin, &part, &["--model", "robot1", "--lidar", "/lidar"]);
     let log = TwistLog::start(&bin, &part, "/model/robot1/cmd_vel");

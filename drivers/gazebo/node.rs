@@ -382,6 +382,18 @@ impl Node {
             .collect()
     }
 
+    /// What the node remembers of other processes: (topics, the most publishers
+    /// of one topic, processes, remote subscribers), each under its cap.
+    pub fn remembered(&self) -> (usize, usize, usize, usize) {
+        let most = self.remote.values().map(Vec::len).max().unwrap_or(0);
+        (
+            self.remote.len(),
+            most,
+            self.activity.len(),
+            self.subscribers.len(),
+        )
+    }
+
     /// Says goodbye (BYE; END_CONNECTION for each registration).
     pub fn bye(&mut self) {
         for i in 0..self.wants.len() {
@@ -730,14 +742,14 @@ impl Node {
         true
     }
 
-    fn discovery(&mut self, b: &[u8]) {
-        if b.len() < 2 || u16::from_le_bytes([b[0], b[1]]) as usize + 2 != b.len() {
-            return;
-        }
-        let Ok(d) = Discovery::decode(&b[2..]) else {
+    /// Handles one discovery packet as it came from the socket (public so the
+    /// fuzz target of `tests/fuzz.rs` drives the same path on bytes; a node that
+    /// wants no topic and advertises none sends nothing in answer).
+    pub fn discovery(&mut self, b: &[u8]) {
+        let Some(d) = parse_packet(b) else {
             return;
         };
-        if d.version != WIRE_VERSION || d.process_uuid == self.puuid || d.relay {
+        if d.process_uuid == self.puuid || d.relay {
             return;
         }
         // A flood of made-up processes or topics is not kept without bound.
@@ -1037,6 +1049,17 @@ impl Node {
             self.conn_lost(&peer, bad);
         }
     }
+}
+
+/// A discovery packet: a 2-byte little-endian length, then a `Discovery` of our
+/// wire version; None for anything else.
+pub fn parse_packet(b: &[u8]) -> Option<Discovery> {
+    if b.len() < 2 || u16::from_le_bytes([b[0], b[1]]) as usize + 2 != b.len() {
+        return None;
+    }
+    Discovery::decode(&b[2..])
+        .ok()
+        .filter(|d| d.version == WIRE_VERSION)
 }
 
 /// The message types the driver accepts for a gz-msgs message name (`Twist`):

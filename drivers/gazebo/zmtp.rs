@@ -25,7 +25,7 @@ const MAX_PREFIXES: usize = 32;
 const MAX_PARTS: usize = 16;
 
 /// Our greeting: signature, version 3.0, NULL mechanism, as-server 0, filler.
-fn greeting() -> [u8; 64] {
+pub fn greeting() -> [u8; 64] {
     let mut g = [0u8; 64];
     g[0] = 0xff;
     g[9] = 0x7f;
@@ -36,7 +36,7 @@ fn greeting() -> [u8; 64] {
 }
 
 /// A READY command with `Socket-Type`.
-fn ready(socket_type: &str) -> Vec<u8> {
+pub fn ready(socket_type: &str) -> Vec<u8> {
     let mut body = vec![5];
     body.extend_from_slice(b"READY");
     body.push(11);
@@ -49,7 +49,7 @@ fn ready(socket_type: &str) -> Vec<u8> {
 }
 
 /// Appends one frame.
-fn frame(out: &mut Vec<u8>, more: bool, data: &[u8]) {
+pub fn frame(out: &mut Vec<u8>, more: bool, data: &[u8]) {
     let m = if more { 1 } else { 0 };
     if data.len() < 256 {
         out.push(m);
@@ -67,19 +67,29 @@ pub enum Item {
     Command(Vec<u8>),
 }
 
-/// One ZMTP connection, either end; reading is incremental.
-pub struct Conn {
-    pub stream: TcpStream,
+/// The reading half of a connection: bytes in, whole messages out, with no
+/// socket, so the framing is also callable on bytes (the fuzz target of
+/// `tests/fuzz.rs` feeds it). The buffer grows only with bytes that arrived,
+/// to one whole message at most.
+pub struct Framer {
     /// Received bytes: `inbuf[start..end]` is not parsed yet.
     inbuf: Vec<u8>,
     start: usize,
     end: usize,
-    outbuf: Vec<u8>,
     greeted: bool,
     ready: bool,
     parts: Vec<Vec<u8>>,
     /// The bytes of `parts` so far (the message's size is capped as a whole).
     parts_bytes: u64,
+    /// The peer's address (for messages).
+    peer: String,
+}
+
+/// One ZMTP connection, either end; reading is incremental.
+pub struct Conn {
+    pub stream: TcpStream,
+    framer: Framer,
+    outbuf: Vec<u8>,
     /// Until when the peer may take to connect and greet (None: greeted).
     pub greet_by: Option<std::time::Instant>,
     /// The peer's address (for messages).
@@ -92,14 +102,8 @@ impl Conn {
         stream.set_nonblocking(true)?;
         let mut c = Conn {
             stream,
-            inbuf: vec![0; 1 << 16],
-            start: 0,
-            end: 0,
+            framer: Framer::new(peer.clone()),
             outbuf: Vec::new(),
-            greeted: false,
-            ready: false,
-            parts: Vec::new(),
-            parts_bytes: 0,
             greet_by: Some(std::time::Instant::now() + GREETING_TIME),
             peer,
         };
@@ -168,7 +172,7 @@ impl Conn {
     /// Queues a message of several frames. A subscriber that cannot keep up
     /// (over `cap` bytes queued) loses the message, as ZeroMQ's high-water mark does.
     pub fn send(&mut self, parts: &[&[u8]], cap: usize) -> io::Result<()> {
-        if !self.ready || self.outbuf.len() > cap {
+        if !self.framer.ready || self.outbuf.len() > cap {
             return Ok(());
         }
         for (i, p) in parts.iter().enumerate() {
@@ -188,22 +192,14 @@ impl Conn {
     /// Reads what has arrived; `Ok(false)` when the peer closed.
     pub fn read_some(&mut self) -> io::Result<bool> {
         loop {
-            if self.end == self.inbuf.len() {
-                self.compact();
-                if self.end == self.inbuf.len() {
-                    // Room for one whole message and its frame heads, no more: the
-                    // rest waits in the socket until next_item took what is here.
-                    let most = MAX_MESSAGE as usize + (1 << 20);
-                    if self.inbuf.len() >= most {
-                        return Ok(true);
-                    }
-                    let n = (self.inbuf.len() * 2).min(most);
-                    self.inbuf.resize(n, 0);
-                }
+            let room = self.framer.room();
+            if room.is_empty() {
+                // The rest waits in the socket until next_item took what is here.
+                return Ok(true);
             }
-            match self.stream.read(&mut self.inbuf[self.end..]) {
+            match self.stream.read(room) {
                 Ok(0) => return Ok(false),
-                Ok(n) => self.end += n,
+                Ok(n) => self.framer.filled(n),
                 Err(e) => {
                     return match e.kind() {
                         io::ErrorKind::WouldBlock | io::ErrorKind::NotConnected => Ok(true),
@@ -213,6 +209,67 @@ impl Conn {
                 }
             }
         }
+    }
+
+    /// The next whole message or command read, if any.
+    pub fn next_item(&mut self) -> io::Result<Option<Item>> {
+        let item = self.framer.next_item();
+        if self.framer.greeted {
+            self.greet_by = None;
+        }
+        item
+    }
+}
+
+impl Framer {
+    /// A framer for bytes from `peer` (named in its errors), before the greeting.
+    pub fn new(peer: String) -> Framer {
+        Framer {
+            inbuf: Vec::new(),
+            start: 0,
+            end: 0,
+            greeted: false,
+            ready: false,
+            parts: Vec::new(),
+            parts_bytes: 0,
+            peer,
+        }
+    }
+
+    /// Where the next bytes go: empty when one whole message and its frame heads
+    /// are buffered already.
+    fn room(&mut self) -> &mut [u8] {
+        if self.end == self.inbuf.len() {
+            self.compact();
+            if self.end == self.inbuf.len() {
+                let most = MAX_MESSAGE as usize + (1 << 20);
+                let n = (self.inbuf.len() * 2).clamp(1 << 16, most);
+                self.inbuf.resize(n, 0);
+            }
+        }
+        &mut self.inbuf[self.end..]
+    }
+
+    /// `n` bytes were written into [`room`](Self::room).
+    fn filled(&mut self, n: usize) {
+        self.end += n;
+    }
+
+    /// Takes what fits of `b` (all of it, unless a whole message is waiting to be
+    /// read with [`next_item`](Self::next_item)): the bytes taken.
+    pub fn feed(&mut self, b: &[u8]) -> usize {
+        let mut taken = 0;
+        while taken < b.len() {
+            let room = self.room();
+            if room.is_empty() {
+                break;
+            }
+            let n = room.len().min(b.len() - taken);
+            room[..n].copy_from_slice(&b[taken..taken + n]);
+            self.filled(n);
+            taken += n;
+        }
+        taken
     }
 
     /// Moves the unparsed bytes to the front.
@@ -228,14 +285,14 @@ impl Conn {
         io::Error::new(io::ErrorKind::InvalidData, m)
     }
 
-    /// The next whole message or command read, if any.
+    /// The next whole message or command in the bytes fed, if any.
     pub fn next_item(&mut self) -> io::Result<Option<Item>> {
         loop {
             if self.start == self.end {
                 (self.start, self.end) = (0, 0);
                 // A big message passed: give its memory back.
                 if self.inbuf.len() > 8 << 20 {
-                    self.inbuf = vec![0; 1 << 16];
+                    self.inbuf = Vec::new();
                 }
             }
             let buf = &self.inbuf[self.start..self.end];
@@ -259,7 +316,6 @@ impl Conn {
                     )));
                 }
                 self.greeted = true;
-                self.greet_by = None;
                 self.start += 64;
                 continue;
             }

@@ -18,7 +18,8 @@
 //! max_message 65536     # bytes: a longer client message closes its connection (1009)
 //! max_clients 64        # connections at once; when full the longest idle one is closed
 //! token SECRET          # off by default: clients connect to ws://HOST:8765/?token=SECRET
-//! insecure              # off by default: beyond loopback without a token, on purpose
+//! tls cert.pem key.pem  # off by default: wss:// on both ports (PEM certificate chain, key)
+//! insecure              # off by default: beyond loopback without TLS and a token, on purpose
 //! end_service
 //! ```
 //!
@@ -52,20 +53,22 @@
 //! (both ports): a new one closes the longest idle; running out of descriptors
 //! does the same, and the door keeps accepting.
 //!
-//! Beyond loopback the service refuses to start without `token SECRET` (or an
-//! `insecure` line saying so on purpose). The token travels in the URL: on a
-//! network you do not trust, put the port behind a TLS proxy (wss://); this build
-//! has no TLS of its own.
+//! Beyond loopback the service refuses to start without both `tls CERT.pem
+//! KEY.pem` and `token SECRET` (or an `insecure` line saying so on purpose): the
+//! token travels in the URL, so it must not cross the network in the clear. With
+//! `tls`, both ports speak `wss://` only ([`tls`]: rustls in front of the door).
 //!
 //! System packages: none (tokio and the SDK are compiled in).
 
 pub mod channels;
 pub mod control;
 pub mod relay;
+pub mod tls;
 
 use std::{
     collections::HashMap,
     net::{IpAddr, Ipv4Addr, SocketAddr},
+    path::PathBuf,
     sync::{
         Arc,
         atomic::{AtomicBool, Ordering},
@@ -85,7 +88,7 @@ use parking_lot::Mutex;
 use crate::{
     conf::{
         ComponentConf, ConfError,
-        settings::{self, Setting, choice, int, on_off, word},
+        settings::{self, Setting, choice, int, on_off, path, word},
     },
     interfaces::{self, AnyInterface, Watch},
     mcapfmt::Source,
@@ -108,8 +111,10 @@ pub struct Settings {
     pub jpeg: Option<u8>,
     pub world: bool,
     pub limits: Limits,
-    /// Beyond loopback without a token, said on purpose (`insecure`).
+    /// Beyond loopback without TLS and a token, said on purpose (`insecure`).
     pub insecure: bool,
+    /// `wss://` on both ports: the certificate chain and the private key (PEM).
+    pub tls: Option<(PathBuf, PathBuf)>,
 }
 
 const LINES: &[Setting] = &[
@@ -167,6 +172,11 @@ const LINES: &[Setting] = &[
         "a secret clients must present (ws://HOST:PORT/?token=SECRET, or `Authorization: Bearer SECRET`)",
         &[word("SECRET")],
     ),
+    Setting::new(
+        "tls",
+        "serve wss:// (TLS) on both ports with this certificate chain and its private key (PEM files)",
+        &[path("CERT.pem"), path("KEY.pem")],
+    ),
     settings::INSECURE,
 ];
 
@@ -182,6 +192,8 @@ struct Lines {
     max_message: usize,
     max_clients: usize,
     token: Option<String>,
+    #[allow(dead_code)] // read through `existing_file`, which checks them
+    tls: Option<(String, String)>,
     /// `settings::guard_listen` reads the `insecure` line from the conf itself.
     #[serde(rename = "insecure", default)]
     _insecure: bool,
@@ -234,13 +246,34 @@ pub fn parse(conf: &ComponentConf) -> Result<Settings, ConfError> {
     if serves.iter().any(|s| s == "all") {
         serves.clear();
     }
+    let tls = match conf.line("tls") {
+        Some(l) => {
+            let cert = l.existing_file(0, "the certificate chain")?;
+            let key = l.existing_file(1, "the private key")?;
+            tls::server_config(&cert, &key).map_err(|e| l.error(format!("`tls`: {e}")))?;
+            Some((cert, key))
+        }
+        None => None,
+    };
+    let add_one = match (&lines.token, &tls) {
+        (Some(_), None) => {
+            "add `tls CERT.pem KEY.pem` too, so the token does not cross the network in the \
+             clear (clients then connect to wss://HOST:PORT/?token=SECRET)"
+        }
+        (None, Some(_)) => {
+            "add `token SECRET` too (clients connect to wss://HOST:PORT/?token=SECRET)"
+        }
+        _ => {
+            "add `tls CERT.pem KEY.pem` and `token SECRET` (clients connect to \
+             wss://HOST:PORT/?token=SECRET)"
+        }
+    };
     let exposure = settings::guard_listen(
         conf,
         "bind",
         &bind.to_string(),
-        lines.token.is_some(),
-        "add `token SECRET` (clients connect to ws://HOST:PORT/?token=SECRET; put it behind \
-         a TLS proxy for wss://, this build has no TLS of its own)",
+        lines.token.is_some() && tls.is_some(),
+        add_one,
     )?;
     Ok(Settings {
         bind,
@@ -256,11 +289,14 @@ pub fn parse(conf: &ComponentConf) -> Result<Settings, ConfError> {
             token: lines.token,
         },
         insecure: exposure == settings::Exposure::Insecure,
+        tls,
     })
 }
 
 /// What `ps` shows of a running server (exported as `<name>.status`).
 pub struct Status {
+    /// `ws` or `wss` (`tls`).
+    pub scheme: &'static str,
     pub addr: SocketAddr,
     /// The second port (`sdk_port`), if it was asked for.
     pub direct: Option<SocketAddr>,
@@ -274,10 +310,11 @@ impl Status {
         let r = &self.relay;
         let direct = self
             .direct
-            .map(|d| format!("; also ws://{d} (sdk_port)"))
+            .map(|d| format!("; also {}://{d} (sdk_port)", self.scheme))
             .unwrap_or_default();
         format!(
-            "ws://{}: {} client(s), {} message(s) sent, {} evicted (max_clients), {} command(s), {} refused{direct}",
+            "{}://{}: {} client(s), {} message(s) sent, {} evicted (max_clients), {} command(s), {} refused{direct}",
+            self.scheme,
             self.addr,
             r.clients.load(Ordering::Relaxed),
             r.sent.load(Ordering::Relaxed),
@@ -494,6 +531,12 @@ fn listen(
     runtime: &tokio::runtime::Runtime,
     door: &Arc<relay::Door>,
 ) -> anyhow::Result<Vec<SocketAddr>> {
+    let acceptor = match &s.tls {
+        Some((cert, key)) => Some(tokio_rustls::TlsAcceptor::from(
+            tls::server_config(cert, key).map_err(|e| anyhow::anyhow!("foxglove: `tls`: {e}"))?,
+        )),
+        None => None,
+    };
     let mut addrs = Vec::new();
     for port in std::iter::once(s.port).chain(s.sdk_port) {
         let std_listener = std::net::TcpListener::bind((s.bind, port)).with_context(|| {
@@ -504,11 +547,26 @@ fn listen(
         })?;
         std_listener.set_nonblocking(true)?;
         addrs.push(std_listener.local_addr()?);
-        let listener = {
-            let _g = runtime.enter();
-            tokio::net::TcpListener::from_std(std_listener)?
+        let _g = runtime.enter();
+        let listener = tokio::net::TcpListener::from_std(std_listener)?;
+        let Some(acceptor) = &acceptor else {
+            runtime.spawn(relay::accept_loop(listener, door.clone()));
+            continue;
         };
-        runtime.spawn(relay::accept_loop(listener, door.clone()));
+        // TLS on the public port, the door behind it on a loopback port of its own.
+        let plain = std::net::TcpListener::bind((Ipv4Addr::LOCALHOST, 0))
+            .context("foxglove: cannot listen on a loopback port for the door behind TLS")?;
+        plain.set_nonblocking(true)?;
+        let door_addr = plain.local_addr()?;
+        let plain = tokio::net::TcpListener::from_std(plain)?;
+        runtime.spawn(relay::accept_loop(plain, door.clone()));
+        runtime.spawn(tls::accept_loop(
+            listener,
+            acceptor.clone(),
+            door_addr,
+            door.clone(),
+            s.limits.max_clients,
+        ));
     }
     Ok(addrs)
 }
@@ -586,20 +644,22 @@ pub fn start(s: &Settings, rt: &Runtime) -> anyhow::Result<Foxglove> {
     me.addr = addr;
     me.direct = addrs.get(1).copied();
     me.runtime = Some(runtime);
-    // Without a token, `settings::guard_listen` said so when the conf was read.
+    let scheme = if s.tls.is_some() { "wss" } else { "ws" };
+    // Without TLS and a token, `settings::guard_listen` said so when the conf was read.
     if !s.bind.is_loopback() && !s.insecure {
         tracing::info!(
-            "foxglove: listening beyond loopback on {addr}; clients need the token (ws://HOST:PORT/?token=...)"
+            "foxglove: listening beyond loopback on {addr}; clients need the token (wss://HOST:PORT/?token=...)"
         );
     }
-    tracing::info!("foxglove: listening on ws://{addr}");
+    tracing::info!("foxglove: listening on {scheme}://{addr}");
     if let Some(d) = me.direct {
-        tracing::info!("foxglove: and on ws://{d} (`sdk_port`)");
+        tracing::info!("foxglove: and on {scheme}://{d} (`sdk_port`)");
     }
     let _ = rt.names.export(
         "foxglove",
         STATUS_EXPORT,
         Status {
+            scheme,
             addr,
             direct: me.direct,
             relay: relay_stats,
@@ -776,7 +836,15 @@ mod tests {
             ("images png\n", "raw, jpeg"),
             ("max_message 10\n", "between 1024"),
             ("colour red\n", "takes no `colour` line"),
-            ("bind 0.0.0.0\n", "add `token SECRET`"),
+            (
+                "bind 0.0.0.0\n",
+                "`tls CERT.pem KEY.pem` and `token SECRET`",
+            ),
+            (
+                "bind 0.0.0.0\ntoken s3cret\n",
+                "add `tls CERT.pem KEY.pem` too",
+            ),
+            ("tls /nonexistent.pem k.pem\n", "the certificate chain"),
         ] {
             let e = parse_text(text).unwrap_err();
             assert!(e.contains(want) && e.contains(':'), "{text:?}: {e}");

@@ -165,7 +165,7 @@ impl Door {
     }
 
     /// Closes the connection idle longest; false when there is none.
-    fn evict_idle(&self, why: &str) -> bool {
+    pub(crate) fn evict_idle(&self, why: &str) -> bool {
         let victim = {
             let conns = self.conns.lock();
             conns
@@ -309,9 +309,8 @@ async fn read_head<R: AsyncRead + Unpin>(r: &mut R) -> Result<(Vec<u8>, Vec<u8>)
     let mut buf = Vec::with_capacity(1024);
     let mut chunk = [0u8; 2048];
     loop {
-        if let Some(end) = find(&buf, b"\r\n\r\n") {
-            let rest = buf.split_off(end + 4);
-            return Ok((buf, rest));
+        if let Some(r) = split_head(&mut buf) {
+            return Ok(r);
         }
         if buf.len() > MAX_HEAD {
             return Err(format!("an HTTP head over {MAX_HEAD} bytes"));
@@ -325,6 +324,14 @@ async fn read_head<R: AsyncRead + Unpin>(r: &mut R) -> Result<(Vec<u8>, Vec<u8>)
         }
         buf.extend_from_slice(&chunk[..n]);
     }
+}
+
+/// When `buf` holds a whole HTTP head (up to the empty line): (head, the bytes
+/// after it), and `buf` is left empty.
+pub fn split_head(buf: &mut Vec<u8>) -> Option<(Vec<u8>, Vec<u8>)> {
+    let end = find(buf, b"\r\n\r\n")?;
+    let rest = buf.split_off(end + 4);
+    Some((std::mem::take(buf), rest))
 }
 
 /// Copies what `s` has queued into `buf` without taking it (`MSG_PEEK`), without
@@ -478,6 +485,53 @@ pub fn replace_protocol(head: &str, protocol: &str) -> String {
     out
 }
 
+/// Why an upgrade request is refused: the HTTP status, the answer's text and
+/// the log line's.
+#[derive(Debug, PartialEq, Eq)]
+pub struct Refusal {
+    pub status: &'static str,
+    pub answer: &'static str,
+    pub log: &'static str,
+}
+
+/// Checks a client's upgrade request head (text, a GET, the token when `token`
+/// is set): (the head, the head to send the SDK, whether the client speaks the
+/// legacy name), or why it is refused. No I/O, so it is callable on bytes.
+pub fn check_request(
+    head: Vec<u8>,
+    token: Option<&str>,
+) -> Result<(String, String, bool), Refusal> {
+    let bad = |answer, log| Refusal {
+        status: "400 Bad Request",
+        answer,
+        log,
+    };
+    let Ok(head) = String::from_utf8(head) else {
+        return Err(bad(
+            "the HTTP head is not text",
+            "sent a head that is not text",
+        ));
+    };
+    if !head.starts_with("GET ") {
+        return Err(bad(
+            "expected a WebSocket upgrade request (GET)",
+            "sent something that is not a WebSocket upgrade request",
+        ));
+    }
+    if let Some(want) = token
+        && !presented_token(&head).is_some_and(|t| same_secret(&t, want))
+    {
+        return Err(Refusal {
+            status: "401 Unauthorized",
+            answer: "this server wants its token: ws[s]://HOST:PORT/?token=SECRET \
+                     (or the header `Authorization: Bearer SECRET`)",
+            log: "no token or a wrong one",
+        });
+    }
+    let (to_sdk, legacy) = rewrite_request(&head);
+    Ok((head, to_sdk, legacy))
+}
+
 async fn refuse(client: &mut TcpStream, status: &str, why: &str) {
     let body = format!("{why}\n");
     let reply = format!(
@@ -513,25 +567,14 @@ async fn connection(mut client: TcpStream, door: &Door, conn: &Conn) -> Result<(
             return Err(why);
         }
     };
-    let Ok(head) = String::from_utf8(head) else {
-        refuse(&mut client, "400 Bad Request", "the HTTP head is not text").await;
-        return Err("sent a head that is not text".into());
+    let (head, to_sdk, legacy) = match check_request(head, door.limits.token.as_deref()) {
+        Ok(r) => r,
+        Err(r) => {
+            refuse(&mut client, r.status, r.answer).await;
+            return Err(r.log.into());
+        }
     };
-    if !head.starts_with("GET ") {
-        let why = "expected a WebSocket upgrade request (GET)";
-        refuse(&mut client, "400 Bad Request", why).await;
-        return Err("sent something that is not a WebSocket upgrade request".into());
-    }
-    if let Some(want) = &door.limits.token
-        && !presented_token(&head).is_some_and(|t| same_secret(&t, want))
-    {
-        let why = "this server wants its token: ws[s]://HOST:PORT/?token=SECRET \
-                   (or the header `Authorization: Bearer SECRET`)";
-        refuse(&mut client, "401 Unauthorized", why).await;
-        return Err("no token or a wrong one".into());
-    }
     door.touch(conn);
-    let (to_sdk, legacy) = rewrite_request(&head);
     let mut server = door.reach_sdk().await?;
     let _ = server.set_nodelay(true);
     server

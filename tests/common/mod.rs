@@ -448,3 +448,50 @@ pub fn x_display() -> std::sync::MutexGuard<'static, ()> {
     static DISPLAY: std::sync::Mutex<()> = std::sync::Mutex::new(());
     DISPLAY.lock().unwrap_or_else(|e| e.into_inner())
 }
+
+/// Where a test that floods the network runs its body.
+#[derive(Debug, PartialEq, Eq)]
+pub enum Netns {
+    /// Here: this process is the run inside a private network namespace (or, off
+    /// CI, `unshare` is missing and the body runs on the host's loopback).
+    RunHere,
+    /// The run inside the namespace has happened (and passed).
+    Done,
+}
+
+/// Runs test `name` (its path in the test binary, `module::test`) again inside a
+/// fresh network namespace of its own (`unshare -rn`: only a loopback interface,
+/// brought up), so what it sends (multicast discovery floods) cannot reach the
+/// host's network or other tests. Under CI, missing `unshare` or `ip` fails.
+pub fn in_private_netns(name: &str) -> Netns {
+    const INSIDE: &str = "JDE_TEST_IN_NETNS";
+    if std::env::var_os(INSIDE).is_some() {
+        return Netns::RunHere;
+    }
+    let works = have("ip")
+        && Command::new("unshare")
+            .args(["-rn", "true"])
+            .stderr(Stdio::null())
+            .status()
+            .is_ok_and(|s| s.success());
+    if !works {
+        let note = "`unshare -rn` (util-linux) and `ip` (iproute2) are needed to run this \
+                    test in a private network namespace";
+        assert!(std::env::var_os("CI").is_none(), "under CI: {note}");
+        eprintln!("NOTE: {note}; running it on the host's loopback instead");
+        return Netns::RunHere;
+    }
+    let exe = std::env::current_exe().expect("the test binary");
+    let st = Command::new("unshare")
+        .args(["-rn", "sh", "-c", r#"ip link set lo up && exec "$0" "$@""#])
+        .arg(exe)
+        .args(["--exact", name, "--nocapture", "--test-threads=1"])
+        .env(INSIDE, "1")
+        .status()
+        .expect("run unshare");
+    assert!(
+        st.success(),
+        "{name} failed in its network namespace (its output is above)"
+    );
+    Netns::Done
+}

@@ -199,9 +199,11 @@ async function waitFor(what, f, ms = 10000) {
 (async () => {
   await waitFor("the connection", () => report.protocol !== null);
   await waitFor("channels and services", () => channels.size > 0 && services.size > 0);
+  // FOXGLOVE_EXPECT (comma-separated topics) for a robot without a world map.
+  const expect = (process.env.FOXGLOVE_EXPECT || "laser,encoders,/tf,colorA,world").split(",");
   await waitFor(
-    "a message on each of laser, encoders, /tf, colorA, world",
-    () => ["laser", "encoders", "/tf", "colorA", "world"].every((t) => report.counts[t] > 0),
+    `a message on each of ${expect.join(", ")}`,
+    () => expect.every((t) => report.counts[t] > 0),
   );
   report.stop = await call("stop", { name: "introrob" });
   report.parameters = await getParameters(["encoders"]);
@@ -220,6 +222,10 @@ async function waitFor(what, f, ms = 10000) {
     await sleep(100);
   }
   report.posesDuringTwist = report.poses.slice(before);
+  // FOXGLOVE_RUN_AGAIN: start introrob again, for the next client (the soak).
+  if (process.env.FOXGLOVE_RUN_AGAIN) {
+    report.runAgain = await call("run", { name: "introrob" });
+  }
   // Leave without unadvertising: the server must zero the motors itself.
   clearTimeout(timer);
   console.log(JSON.stringify(report));
