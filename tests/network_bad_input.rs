@@ -1,5 +1,6 @@
-//! networkserver under bad clients, over real loopback sockets: 10,000 mutated and
-//! random lines, partial lines, huge lines, silent clients, too many clients, 1,000
+//! networkserver under bad clients, over real loopback sockets: 4,000 mutated and
+//! random lines (most of them close the connection: about 5 ms each; the wire's
+//! parser alone takes 10 million in the fuzz table, target `netwire`), partial lines, huge lines, silent clients, too many clients, 1,000
 //! connect/disconnect cycles and a client that stops reading mid-image. Meanwhile
 //! a well-behaved client keeps getting its laser pushes and frames, memory stays
 //! bounded and nothing panics.
@@ -245,12 +246,12 @@ fn bad_clients_are_dropped_alone_and_memory_stays_bounded() {
     let rss0 = rss_kib();
     let t0 = Instant::now();
 
-    // 10,000 mutated and random lines, each followed by a probe (1022) so we know
+    // 4,000 mutated and random lines, each followed by a probe (1022) so we know
     // whether the server went on or dropped us.
     let mut rng = Rng::new(0x9e37_79b9_7f4a_7c15);
     let mut s = connect(addr);
     let (mut answered, mut dropped) = (0, 0);
-    for _ in 0..10_000 {
+    for _ in 0..4_000 {
         let mut line = mutate(&mut rng);
         line.push(b'\n');
         line.extend_from_slice(b"1022\n");
