@@ -303,20 +303,26 @@ impl Ppht {
         self.mask[i as usize * self.w + j as usize] != 0
     }
 
+    /// Fills `cells` with the accumulator cells of (x, y), one per angle.
+    fn find_cells(&mut self, (j, i): (i32, i32)) {
+        let (c, s) = (&self.tc, &self.ts);
+        indices(
+            j as f32,
+            i as f32,
+            c,
+            s,
+            self.half,
+            self.nr,
+            &mut self.cells,
+        );
+    }
+
     /// Adds the votes of (x, y); the angle of its most voted cell when that
     /// reaches `threshold` (the first such angle on ties).
     fn vote(&mut self, (j, i): (i32, i32), threshold: u32) -> Option<usize> {
         let mut max_val = threshold as i32 - 1;
         let mut max_n = 0;
-        indices(
-            j as f32,
-            i as f32,
-            &self.tc,
-            &self.ts,
-            self.half,
-            self.nr,
-            &mut self.cells,
-        );
+        self.find_cells((j, i));
         for (n, &k) in self.cells.iter().enumerate() {
             let a = &mut self.acc[k as usize];
             *a += 1;
@@ -329,15 +335,7 @@ impl Ppht {
     }
 
     fn unvote(&mut self, (j, i): (i32, i32)) {
-        indices(
-            j as f32,
-            i as f32,
-            &self.tc,
-            &self.ts,
-            self.half,
-            self.nr,
-            &mut self.cells,
-        );
+        self.find_cells((j, i));
         for &k in &self.cells {
             self.acc[k as usize] -= 1;
         }
