@@ -577,15 +577,8 @@ impl Device for Camera {
     fn step(&mut self, d: &mut Session) -> Result<(), String> {
         if d.grab(&self.c, Duration::from_millis(200), &mut self.buf)? {
             self.last_frame = Instant::now();
-            let (w, h) = (self.c.width, self.c.height);
-            let buf = &mut self.buf;
-            if let Err(e) = self.iface.write(|img| {
-                img.width = w;
-                img.height = h;
-                std::mem::swap(&mut img.data, buf);
-            }) {
-                self.iface.set_stale(e);
-            }
+            self.iface
+                .publish_frame(self.c.width, self.c.height, &mut self.buf);
         } else if self.last_frame.elapsed() > NO_FRAME_STALE {
             self.iface.set_stale(format!(
                 "camera {}: no frame for {} s",

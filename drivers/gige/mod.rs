@@ -527,14 +527,7 @@ impl Device for Capture {
             match convert(buf.image_pixel_format(), data, w, h, &mut self.out) {
                 Ok(()) => {
                     self.last_frame = Instant::now();
-                    let out = &mut self.out;
-                    if let Err(e) = self.iface.write(|img| {
-                        img.width = w;
-                        img.height = h;
-                        std::mem::swap(&mut img.data, out);
-                    }) {
-                        self.iface.set_stale(e);
-                    }
+                    self.iface.publish_frame(w, h, &mut self.out);
                 }
                 Err(e) => self.iface.set_stale(format!("camera `{}`: {e}", c.camera)),
             }

@@ -517,6 +517,68 @@ struct Body {
     limits: Option<(Joint, Joint)>,
 }
 
+/// ALMotion with the methods the conf's interfaces call (None when none needs
+/// it), and the walk command it has.
+fn motion_service(
+    qi: &mut Session,
+    c: &NaoConf,
+    url: &str,
+) -> Result<(Option<Service>, Walk), String> {
+    if !(c.motors || c.encoders || c.ptencoders || c.ptmotors) {
+        return Ok((None, Walk::Move));
+    }
+    let m = need_service(qi, url, "ALMotion", "the walk, the head and odometry")?;
+    let mut walk = Walk::Move;
+    let mut want: Vec<(&str, usize)> = Vec::new();
+    if c.motors {
+        if m.method("move", 3).is_none() && m.method("moveToward", 3).is_some() {
+            walk = Walk::MoveToward;
+            want.push(("moveToward", 3));
+        } else {
+            want.push(("move", 3));
+        }
+        want.push(("stopMove", 0));
+    }
+    if c.ptmotors {
+        want.extend([("setAngles", 3), ("getLimits", 1)]);
+    }
+    if c.ptencoders {
+        want.push(("getAngles", 2));
+    }
+    if c.encoders {
+        want.push(("getRobotPosition", 1));
+    }
+    need_methods(qi, url, &m, &want)?;
+    Ok((Some(m), walk))
+}
+
+/// ALMemory for the sonars and bumpers, and ALSonar subscribed when the robot
+/// has it (a real NAO updates the sonar values only while it is subscribed).
+fn memory_services(
+    qi: &mut Session,
+    c: &NaoConf,
+    url: &str,
+) -> Result<(Option<Service>, Option<Service>), String> {
+    if !(c.sonars || c.bumpers) {
+        return Ok((None, None));
+    }
+    let mem = need_service(qi, url, "ALMemory", "the sonars and bumpers")?;
+    need_methods(qi, url, &mem, &[("getListData", 1)])?;
+    let sonar = if c.sonars {
+        qi.service("ALSonar")
+            .ok()
+            .flatten()
+            .filter(|s| s.method("subscribe", 1).is_some())
+    } else {
+        None
+    };
+    if let Some(s) = &sonar {
+        qi.call(s, "subscribe", &[Value::str("jderobot")])
+            .map_err(|e| format!("{url}: {e}"))?;
+    }
+    Ok((Some(mem), sonar))
+}
+
 struct BodySession {
     qi: Session,
     motion: Option<Service>,
@@ -546,60 +608,8 @@ impl Body {
             self.watch = Some(w);
         }
         let mut qi = connect(&c)?;
-        let needs_motion = c.motors || c.encoders || c.ptencoders || c.ptmotors;
-        let motion = if needs_motion {
-            Some(need_service(
-                &mut qi,
-                &url,
-                "ALMotion",
-                "the walk, the head and odometry",
-            )?)
-        } else {
-            None
-        };
-        let mut walk = Walk::Move;
-        if let Some(m) = &motion {
-            let mut want: Vec<(&str, usize)> = Vec::new();
-            if c.motors {
-                if m.method("move", 3).is_none() && m.method("moveToward", 3).is_some() {
-                    walk = Walk::MoveToward;
-                    want.push(("moveToward", 3));
-                } else {
-                    want.push(("move", 3));
-                }
-                want.push(("stopMove", 0));
-            }
-            if c.ptmotors {
-                want.extend([("setAngles", 3), ("getLimits", 1)]);
-            }
-            if c.ptencoders {
-                want.push(("getAngles", 2));
-            }
-            if c.encoders {
-                want.push(("getRobotPosition", 1));
-            }
-            need_methods(&mut qi, &url, m, &want)?;
-        }
-        let (memory, sonar) = if c.sonars || c.bumpers {
-            let mem = need_service(&mut qi, &url, "ALMemory", "the sonars and bumpers")?;
-            need_methods(&mut qi, &url, &mem, &[("getListData", 1)])?;
-            // A real NAO updates the sonar values only while ALSonar is subscribed.
-            let sonar = if c.sonars {
-                qi.service("ALSonar")
-                    .ok()
-                    .flatten()
-                    .filter(|s| s.method("subscribe", 1).is_some())
-            } else {
-                None
-            };
-            if let Some(s) = &sonar {
-                qi.call(s, "subscribe", &[Value::str("jderobot")])
-                    .map_err(|e| format!("{url}: {e}"))?;
-            }
-            (Some(mem), sonar)
-        } else {
-            (None, None)
-        };
+        let (motion, walk) = motion_service(&mut qi, &c, &url)?;
+        let (memory, sonar) = memory_services(&mut qi, &c, &url)?;
         // The robot is back: a command now reaches it.
         if let Some(m) = &self.motors {
             m.clear_stale();
@@ -625,37 +635,49 @@ impl Body {
                 s.sent = Some((0.0, 0.0));
             }
             if c.ptmotors {
-                let mut get = |name: &str| -> Result<Joint, String> {
-                    let v =
-                        s.qi.call(&m, "getLimits", &[Value::str(name)])
-                            .map_err(|e| format!("{url}: {e}"))?;
-                    joint(&v).ok_or_else(|| {
-                        format!(
-                            "{url}: ALMotion.getLimits(\"{name}\") gave {}, not [[min, max, maxVelocity, maxTorque]] \
-                             with {JOINT_RANGE}: refused",
-                            short(&v)
-                        )
-                    })
-                };
-                let (yaw, pitch) = (get(HEAD[0])?, get(HEAD[1])?);
-                self.limits = Some((yaw, pitch));
-                if let Some(p) = &self.ptm {
-                    // A copy of the latest command with the robot's limits.
-                    let mut v = p.read().value;
-                    v.min_longitude = yaw.min.to_degrees();
-                    v.max_longitude = yaw.max.to_degrees();
-                    v.min_latitude = -pitch.max.to_degrees();
-                    v.max_latitude = -pitch.min.to_degrees();
-                    v.max_longitude_speed = yaw.speed.to_degrees();
-                    v.max_latitude_speed = pitch.speed.to_degrees();
-                    v.longitude_speed = limit(v.longitude_speed, 0.0, v.max_longitude_speed);
-                    v.latitude_speed = limit(v.latitude_speed, 0.0, v.max_latitude_speed);
-                    let _ = p.publish(v);
-                    s.head_clock = Some(p.clock());
-                }
+                self.read_head_limits(&mut s, &m, &url)?;
             }
         }
         Ok(s)
+    }
+
+    /// Reads the head's joint limits from the robot, keeps them, and publishes
+    /// them in a copy of the latest head command.
+    fn read_head_limits(
+        &mut self,
+        s: &mut BodySession,
+        m: &Service,
+        url: &str,
+    ) -> Result<(), String> {
+        let mut get = |name: &str| -> Result<Joint, String> {
+            let v =
+                s.qi.call(m, "getLimits", &[Value::str(name)])
+                    .map_err(|e| format!("{url}: {e}"))?;
+            joint(&v).ok_or_else(|| {
+                format!(
+                    "{url}: ALMotion.getLimits(\"{name}\") gave {}, not [[min, max, maxVelocity, maxTorque]] \
+                     with {JOINT_RANGE}: refused",
+                    short(&v)
+                )
+            })
+        };
+        let (yaw, pitch) = (get(HEAD[0])?, get(HEAD[1])?);
+        self.limits = Some((yaw, pitch));
+        if let Some(p) = &self.ptm {
+            // A copy of the latest command with the robot's limits.
+            let mut v = p.read().value;
+            v.min_longitude = yaw.min.to_degrees();
+            v.max_longitude = yaw.max.to_degrees();
+            v.min_latitude = -pitch.max.to_degrees();
+            v.max_latitude = -pitch.min.to_degrees();
+            v.max_longitude_speed = yaw.speed.to_degrees();
+            v.max_latitude_speed = pitch.speed.to_degrees();
+            v.longitude_speed = limit(v.longitude_speed, 0.0, v.max_longitude_speed);
+            v.latitude_speed = limit(v.latitude_speed, 0.0, v.max_latitude_speed);
+            let _ = p.publish(v);
+            s.head_clock = Some(p.clock());
+        }
+        Ok(())
     }
 
     /// Wakes the robot up (stiffness on, standing) before it walks or moves its head.

@@ -181,6 +181,71 @@ pub struct Robot {
     pub odometer: f64,
 }
 
+impl Robot {
+    /// Pan-tilt: towards the (clamped) target at the commanded speed; speed 0
+    /// means the unit's maximum speed (as the EVI driver did).
+    fn step_pantilt(&mut self, dt: f64) {
+        let (lim, c) = (self.model.pantilt, self.pt_cmd);
+        let pan = (
+            lim.min_longitude,
+            lim.max_longitude,
+            lim.max_longitude_speed,
+        );
+        let tilt = (lim.min_latitude, lim.max_latitude, lim.max_latitude_speed);
+        self.pan = pt_axis(self.pan, (c.longitude, c.longitude_speed), pan, dt);
+        self.tilt = pt_axis(self.tilt, (c.latitude, c.latitude_speed), tilt, dt);
+    }
+}
+
+/// One pan-tilt axis after `dt`: from `cur` towards the (target, speed) command
+/// within the (min, max, max speed) limits.
+fn pt_axis(
+    cur: f64,
+    (target, speed): (f32, f32),
+    (lo, hi, max_speed): (f32, f32, f32),
+    dt: f64,
+) -> f64 {
+    let target = if target.is_finite() {
+        target.clamp(lo, hi) as f64
+    } else {
+        cur
+    };
+    let sp = if speed.is_finite() && speed > 0.0 {
+        speed.min(max_speed)
+    } else {
+        max_speed
+    } as f64;
+    cur + (target - cur).clamp(-sp * dt, sp * dt)
+}
+
+/// Which bumper a contact at `c` (world direction from the robot) presses on a
+/// robot heading `theta` radians.
+fn bumper_at(c: Point2, theta: f64) -> usize {
+    let a = (c[1].atan2(c[0]) - theta).to_degrees().rem_euclid(360.0);
+    let a = if a > 180.0 { a - 360.0 } else { a };
+    if a.abs() <= 90.0 {
+        // Front: five sectors from left (+90) to right (-90).
+        ((90.0 - a) / 36.0).floor().clamp(0.0, 4.0) as usize
+    } else {
+        // Rear: five sectors from right to left.
+        let b = if a > 0.0 { a - 90.0 } else { a + 270.0 };
+        5 + ((b / 36.0).floor().clamp(0.0, 4.0) as usize)
+    }
+}
+
+/// Where one step takes a robot ([`Sim::plan_move`]).
+struct Move {
+    start: Pose,
+    pose: Pose,
+    /// Speeds after the acceleration limits: mm/s, deg/s.
+    v: f64,
+    w: f64,
+    /// The fraction of the step it drove before a contact (1 without).
+    frac: f64,
+    /// The obstacle's direction at the contact.
+    contact: Option<Point2>,
+}
+
 /// Restitution of ball bounces.
 const RESTITUTION: f64 = 0.6;
 
@@ -336,6 +401,39 @@ impl Sim {
     }
 
     fn step_robot(&mut self, i: usize, dt: f64) {
+        let mv = self.plan_move(i, dt);
+        let noise = self.noise.clone();
+        let rng = &mut self.rng;
+        let r = &mut self.robots[i];
+        let ds = mv.v * dt * mv.frac;
+        let dth = mv.pose.theta - mv.start.theta;
+        r.pose = Pose {
+            theta: mv.pose.theta.rem_euclid(std::f64::consts::TAU),
+            ..mv.pose
+        };
+        let new_v = if mv.contact.is_some() { 0.0 } else { mv.v };
+        r.accel = (new_v - r.v) / dt;
+        r.v = new_v;
+        r.w = mv.w;
+        r.stalled = mv.contact.is_some();
+        r.odometer += ds.abs();
+        r.bumpers = [0; NUM_BUMPERS];
+        if let Some(c) = mv.contact {
+            r.bumpers[bumper_at(c, r.pose.theta)] = 1;
+        }
+        // Odometry: integrate what really happened, with noise.
+        let ds_n = ds * (1.0 + rng.gauss(noise.odometry_distance));
+        let dth_n = dth * (1.0 + rng.gauss(noise.odometry_angle));
+        let mid = r.odom.theta + dth_n / 2.0;
+        r.odom.x += ds_n * mid.cos();
+        r.odom.y += ds_n * mid.sin();
+        r.odom.theta = (r.odom.theta + dth_n).rem_euclid(std::f64::consts::TAU);
+        r.step_pantilt(dt);
+    }
+
+    /// Robot i's speeds after the acceleration limits, and where the arc they
+    /// drive over `dt` ends: at the first contact when it meets an obstacle.
+    fn plan_move(&self, i: usize, dt: f64) -> Move {
         let r = &self.robots[i];
         let m = &r.model;
         let finite = |x: f32| if x.is_finite() { x as f64 } else { 0.0 };
@@ -363,20 +461,25 @@ impl Sim {
             };
             Pose { x, y, theta: th }
         };
-        let mut pose = at(1.0);
-        let mut frac = 1.0;
-        let mut contact = None;
+        let mut mv = Move {
+            start,
+            pose: at(1.0),
+            v,
+            w,
+            frac: 1.0,
+            contact: None,
+        };
         // A robot that starts inside an obstacle may still move away from it.
-        let escaping = || {
+        let escaping = |pose: Pose| {
             self.blocked(i, [start.x, start.y], radius)
                 .is_some_and(|s| (pose.x - start.x) * s[0] + (pose.y - start.y) * s[1] < 0.0)
         };
         if v != 0.0
-            && let Some(c) = self.blocked(i, [pose.x, pose.y], radius)
-            && !escaping()
+            && let Some(c) = self.blocked(i, [mv.pose.x, mv.pose.y], radius)
+            && !escaping(mv.pose)
         {
             // Find how far it can go: bisect the free fraction of the step.
-            contact = Some(c);
+            mv.contact = Some(c);
             let (mut lo, mut hi) = (0.0, 1.0);
             for _ in 0..12 {
                 let mid = 0.5 * (lo + hi);
@@ -387,87 +490,16 @@ impl Sim {
                     lo = mid;
                 }
             }
-            frac = lo;
+            mv.frac = lo;
             let p = at(lo);
             // Stop there, but finish the turn in place (a disc can always turn).
-            pose = Pose {
+            mv.pose = Pose {
                 x: p.x,
                 y: p.y,
                 theta: start.theta + w.to_radians() * dt,
             };
         }
-        let noise = self.noise.clone();
-        let rng = &mut self.rng;
-        let r = &mut self.robots[i];
-        let ds = v * dt * frac;
-        let dth = pose.theta - start.theta;
-        r.pose = Pose {
-            theta: pose.theta.rem_euclid(std::f64::consts::TAU),
-            ..pose
-        };
-        let new_v = if contact.is_some() { 0.0 } else { v };
-        r.accel = (new_v - r.v) / dt;
-        r.v = new_v;
-        r.w = w;
-        r.stalled = contact.is_some();
-        r.odometer += ds.abs();
-        r.bumpers = [0; NUM_BUMPERS];
-        if let Some(c) = contact {
-            // Which bumper: angle of the contact relative to the heading.
-            let a = (c[1].atan2(c[0]) - r.pose.theta)
-                .to_degrees()
-                .rem_euclid(360.0);
-            let a = if a > 180.0 { a - 360.0 } else { a };
-            let k = if a.abs() <= 90.0 {
-                // Front: five sectors from left (+90) to right (-90).
-                ((90.0 - a) / 36.0).floor().clamp(0.0, 4.0) as usize
-            } else {
-                // Rear: five sectors from right to left.
-                let b = if a > 0.0 { a - 90.0 } else { a + 270.0 };
-                5 + ((b / 36.0).floor().clamp(0.0, 4.0) as usize)
-            };
-            r.bumpers[k] = 1;
-        }
-        // Odometry: integrate what really happened, with noise.
-        let ds_n = ds * (1.0 + rng.gauss(noise.odometry_distance));
-        let dth_n = dth * (1.0 + rng.gauss(noise.odometry_angle));
-        let mid = r.odom.theta + dth_n / 2.0;
-        r.odom.x += ds_n * mid.cos();
-        r.odom.y += ds_n * mid.sin();
-        r.odom.theta = (r.odom.theta + dth_n).rem_euclid(std::f64::consts::TAU);
-        // Pan-tilt: towards the (clamped) target at the commanded speed; speed 0
-        // means the unit's maximum speed (as the EVI driver did).
-        let lim = r.model.pantilt;
-        let c = r.pt_cmd;
-        let axis = |cur: f64, target: f32, speed: f32, lo: f32, hi: f32, max_speed: f32| -> f64 {
-            let target = if target.is_finite() {
-                target.clamp(lo, hi) as f64
-            } else {
-                cur
-            };
-            let sp = if speed.is_finite() && speed > 0.0 {
-                speed.min(max_speed)
-            } else {
-                max_speed
-            } as f64;
-            cur + (target - cur).clamp(-sp * dt, sp * dt)
-        };
-        r.pan = axis(
-            r.pan,
-            c.longitude,
-            c.longitude_speed,
-            lim.min_longitude,
-            lim.max_longitude,
-            lim.max_longitude_speed,
-        );
-        r.tilt = axis(
-            r.tilt,
-            c.latitude,
-            c.latitude_speed,
-            lim.min_latitude,
-            lim.max_latitude,
-            lim.max_latitude_speed,
-        );
+        mv
     }
 
     fn step_balls(&mut self, dt: f64) {

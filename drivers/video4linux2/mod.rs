@@ -454,14 +454,7 @@ impl runtime::Device for Grabber {
                 ) {
                     Ok(()) => {
                         self.last = Instant::now();
-                        let (w, h) = (c.width, c.height);
-                        if let Err(e) = self.iface.write(|img| {
-                            img.width = w;
-                            img.height = h;
-                            std::mem::swap(&mut img.data, out);
-                        }) {
-                            self.iface.set_stale(e);
-                        }
+                        self.iface.publish_frame(c.width, c.height, out);
                     }
                     // A corrupt frame (MJPEG glitch): skip it.
                     Err(e) => tracing::debug!("{}: {e}", c.device.display()),

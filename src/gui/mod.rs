@@ -39,7 +39,7 @@ use std::{
 
 use parking_lot::Mutex;
 
-use crate::runtime::{Panel, Runtime};
+use crate::runtime::{Panel, Runtime, SchemaSlot, SchemaStatus};
 
 /// The services that open the window: `gui` and 4.3's names for it.
 pub const GUI_SERVICES: [&str; 4] = ["gui", "graphics_gtk", "graphics_xforms", "graphics_glut"];
@@ -179,15 +179,7 @@ impl GuiHost {
 
     /// Draws one frame into `ui` (the whole window's area).
     pub fn ui(&mut self, ui: &mut egui::Ui) {
-        let now = Instant::now();
-        self.frames.push_back(now);
-        while self
-            .frames
-            .front()
-            .is_some_and(|t| now.duration_since(*t) > Duration::from_secs(1))
-        {
-            self.frames.pop_front();
-        }
+        self.count_frame();
         {
             let mut c = self.handle.inner.ctx.lock();
             if c.is_none() {
@@ -199,30 +191,46 @@ impl GuiHost {
         }
         let rt = self.rt.clone();
         let status = rt.status();
-        // Which shown schemas have panels, docked or not.
-        let mut docked = Vec::new();
-        let mut windows = Vec::new();
-        for s in status.iter().filter(|s| s.shown) {
-            let Some(slot) = rt.schema(&s.name) else {
-                continue;
-            };
-            let (has, dock, title) = match slot.panel.lock().as_ref() {
-                Some(p) => (true, p.docked(), p.title()),
-                None => (false, false, None),
-            };
-            let title = title.unwrap_or_else(|| s.name.clone());
-            if has && dock {
-                docked.push((s.name.clone(), slot));
-            } else {
-                windows.push((s.name.clone(), title, slot, has));
-            }
+        let (docked, windows) = shown_panels(&rt, &status);
+        self.top_bar(ui, &rt, &status);
+        if !docked.is_empty() {
+            docked_panels(ui, &rt, &docked);
         }
+        let free = central_area(ui, windows.is_empty());
+        self.layout.free = Some(free);
+        let ctx = ui.ctx().clone();
+        self.panel_windows(&ctx, &rt, &windows, free);
+        // Busy (something changed since the last frame): the next frame in one
+        // frame period, as a 30 fps loop would. Idle: the heartbeat, or the watcher
+        // wakes the window at the next change.
+        let now = signature(&rt, &mut self.prints);
+        let mut last = self.handle.inner.last_frame.lock();
+        let busy = last.1.as_ref() != Some(&now);
+        *last = (Instant::now(), Some(now));
+        drop(last);
+        ctx.request_repaint_after(if busy { FRAME_PERIOD } else { HEARTBEAT });
+    }
 
+    /// Keeps the times of the frames of the last second, for [`fps`](Self::fps).
+    fn count_frame(&mut self) {
+        let now = Instant::now();
+        self.frames.push_back(now);
+        while self
+            .frames
+            .front()
+            .is_some_and(|t| now.duration_since(*t) > Duration::from_secs(1))
+        {
+            self.frames.pop_front();
+        }
+    }
+
+    /// The bar with the Panels menu, Quit and the counts.
+    fn top_bar(&mut self, ui: &mut egui::Ui, rt: &Runtime, status: &[SchemaStatus]) {
         egui::Panel::top("jde_top").show(ui, |ui| {
             ui.horizontal(|ui| {
                 ui.strong("jderobot");
                 ui.menu_button("Panels", |ui| {
-                    for s in &status {
+                    for s in status {
                         let mut shown = s.shown;
                         if ui.checkbox(&mut shown, &s.name).changed() {
                             let _ = if shown {
@@ -248,46 +256,27 @@ impl GuiHost {
                 ));
             });
         });
+    }
 
-        if !docked.is_empty() {
-            egui::Panel::left("jde_docked")
-                .default_size(380.0)
-                .show(ui, |ui| {
-                    egui::ScrollArea::vertical().show(ui, |ui| {
-                        for (name, slot) in &docked {
-                            draw_panel(ui, &rt, name, &slot.panel);
-                            ui.separator();
-                        }
-                    });
-                });
-        }
-
-        let free = egui::CentralPanel::default_margins()
-            .show(ui, |ui| {
-                if windows.is_empty() {
-                    ui.centered_and_justified(|ui| {
-                        ui.weak(
-                            "Schema panels appear here. Show one with `show NAME` in the shell, \
-                             the Panels menu, or mastergui's show toggle.",
-                        );
-                    });
-                }
-            })
-            .response
-            .rect;
-        self.layout.free = Some(free);
-
-        let ctx = ui.ctx().clone();
+    /// The undocked panels as windows tiled in `free`; closing one hides it.
+    fn panel_windows(
+        &mut self,
+        ctx: &egui::Context,
+        rt: &Runtime,
+        windows: &[PanelWindow],
+        free: egui::Rect,
+    ) {
         // A lone panel gets the whole free width; several share it as tiles.
         let size = if windows.len() == 1 {
             egui::vec2((free.width() - 2.0).max(PANEL_SIZE.x), PANEL_SIZE.y)
         } else {
             PANEL_SIZE
         };
-        for (i, (name, title, slot, has)) in windows.iter().enumerate() {
+        for (i, w) in windows.iter().enumerate() {
+            let name = w.name.as_str();
             let mut open = true;
-            let shown = egui::Window::new(title.as_str())
-                .id(egui::Id::unique(("jde_panel", name.as_str())))
+            let shown = egui::Window::new(w.title.as_str())
+                .id(egui::Id::unique(("jde_panel", name)))
                 .open(&mut open)
                 .default_pos(self.layout.place(name, i, free, size))
                 // Tall enough for introrob's and teleoperator's panels; it scrolls
@@ -295,9 +284,9 @@ impl GuiHost {
                 .default_size(size)
                 .constrain_to(free)
                 .scroll(true)
-                .show(&ctx, |ui| {
-                    if *has {
-                        draw_panel(ui, &rt, name, &slot.panel);
+                .show(ctx, |ui| {
+                    if w.has_panel {
+                        draw_panel(ui, rt, name, &w.slot.panel);
                     } else {
                         ui.label(format!("schema `{name}` has no panel"));
                     }
@@ -309,16 +298,76 @@ impl GuiHost {
                 let _ = rt.hide(name);
             }
         }
-        // Busy (something changed since the last frame): the next frame in one
-        // frame period, as a 30 fps loop would. Idle: the heartbeat, or the watcher
-        // wakes the window at the next change.
-        let now = signature(&rt, &mut self.prints);
-        let mut last = self.handle.inner.last_frame.lock();
-        let busy = last.1.as_ref() != Some(&now);
-        *last = (Instant::now(), Some(now));
-        drop(last);
-        ctx.request_repaint_after(if busy { FRAME_PERIOD } else { HEARTBEAT });
     }
+}
+
+/// A shown schema drawn in a window of its own.
+struct PanelWindow {
+    name: String,
+    title: String,
+    slot: Arc<SchemaSlot>,
+    has_panel: bool,
+}
+
+/// The shown schemas: those whose panels dock (by name), and the others.
+fn shown_panels(
+    rt: &Runtime,
+    status: &[SchemaStatus],
+) -> (Vec<(String, Arc<SchemaSlot>)>, Vec<PanelWindow>) {
+    let mut docked = Vec::new();
+    let mut windows = Vec::new();
+    for s in status.iter().filter(|s| s.shown) {
+        let Some(slot) = rt.schema(&s.name) else {
+            continue;
+        };
+        let (has_panel, dock, title) = match slot.panel.lock().as_ref() {
+            Some(p) => (true, p.docked(), p.title()),
+            None => (false, false, None),
+        };
+        if has_panel && dock {
+            docked.push((s.name.clone(), slot));
+        } else {
+            windows.push(PanelWindow {
+                name: s.name.clone(),
+                title: title.unwrap_or_else(|| s.name.clone()),
+                slot,
+                has_panel,
+            });
+        }
+    }
+    (docked, windows)
+}
+
+/// The docked panels (mastergui), one under the other in a left side panel.
+fn docked_panels(ui: &mut egui::Ui, rt: &Runtime, docked: &[(String, Arc<SchemaSlot>)]) {
+    egui::Panel::left("jde_docked")
+        .default_size(380.0)
+        .show(ui, |ui| {
+            egui::ScrollArea::vertical().show(ui, |ui| {
+                for (name, slot) in docked {
+                    draw_panel(ui, rt, name, &slot.panel);
+                    ui.separator();
+                }
+            });
+        });
+}
+
+/// The central area, with a hint while no panel window is open; its rectangle is
+/// where panel windows may go.
+fn central_area(ui: &mut egui::Ui, no_windows: bool) -> egui::Rect {
+    egui::CentralPanel::default_margins()
+        .show(ui, |ui| {
+            if no_windows {
+                ui.centered_and_justified(|ui| {
+                    ui.weak(
+                        "Schema panels appear here. Show one with `show NAME` in the shell, \
+                         the Panels menu, or mastergui's show toggle.",
+                    );
+                });
+            }
+        })
+        .response
+        .rect
 }
 
 /// Calls a panel; a panel that panics is replaced by a note.

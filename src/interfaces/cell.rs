@@ -19,7 +19,7 @@ use parking_lot::{Condvar, Mutex};
 use super::{
     source::Source,
     table::InterfaceError,
-    values::{InterfaceValue, Motors, PtMotors, limit},
+    values::{Image, InterfaceValue, Motors, PtMotors, limit},
 };
 
 /// The largest clock an interface takes from outside (a recording, a sender's
@@ -554,6 +554,21 @@ impl Interface<Motors> {
     /// driving on a stale command).
     pub fn command(&self, timeout: Duration) -> Motors {
         self.fresh(timeout).map(|s| s.value).unwrap_or_default()
+    }
+}
+
+impl Interface<Image> {
+    /// Publishes a captured `width` x `height` frame by swapping `data` in (the
+    /// old buffer comes back in `data` for the next frame, so capture allocates
+    /// nothing); a frame that cannot be published marks the interface stale.
+    pub fn publish_frame(&self, width: u32, height: u32, data: &mut Vec<u8>) {
+        if let Err(e) = self.write(|img| {
+            img.width = width;
+            img.height = height;
+            std::mem::swap(&mut img.data, data);
+        }) {
+            self.set_stale(e);
+        }
     }
 }
 

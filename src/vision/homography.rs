@@ -161,23 +161,12 @@ fn warp_row_avx2(src: &[u8], (sw, sh): (i32, i32), m: &[f64; 9], y: f64, dst: &m
         (y * m[4] + m[5]) as f32,
         (y * m[7] + m[8]) as f32,
     );
-    let stride = sw * 3;
     let n = dst.len() / 3;
     let lanes = _mm256_setr_ps(0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0);
     let (vm0, vm3, vm6) = (_mm256_set1_ps(m0), _mm256_set1_ps(m3), _mm256_set1_ps(m6));
     let (vmx, vmy, vmw) = (_mm256_set1_ps(mx), _mm256_set1_ps(my), _mm256_set1_ps(mw));
     let big = _mm256_set1_ps(1e9);
     let abs = _mm256_castsi256_ps(_mm256_set1_epi32(i32::MAX));
-    let (zero, max) = (_mm256_setzero_ps(), _mm256_set1_ps(255.0));
-    let byte = _mm256_set1_epi32(0xff);
-    // Packs 4 pixels of 0x00RRGGBB per 128-bit lane into 12 BGR bytes.
-    let pack = _mm256_setr_epi8(
-        0, 1, 2, 4, 5, 6, 8, 9, 10, 12, 13, 14, -1, -1, -1, -1, 0, 1, 2, 4, 5, 6, 8, 9, 10, 12, 13,
-        14, -1, -1, -1, -1,
-    );
-    // Offsets fit in i32 (checked by the caller), and an inside block reads at most
-    // up to (y0 + 1)·stride + 3·sw <= src.len().
-    let base = src.as_ptr() as *const i32;
     let mut i = 0;
     while i < n {
         let x = _mm256_add_ps(_mm256_set1_ps(i as f32), lanes);
@@ -204,87 +193,130 @@ fn warp_row_avx2(src: &[u8], (sw, sh): (i32, i32), m: &[f64; 9], y: f64, dst: &m
         );
         let inside = _mm256_and_si256(inside, _mm256_castps_si256(ok));
         if i + 8 <= n && _mm256_movemask_ps(_mm256_castsi256_ps(inside)) == 0xff {
-            let o = _mm256_add_epi32(
-                _mm256_mullo_epi32(y0, _mm256_set1_epi32(stride)),
-                _mm256_mullo_epi32(x0, _mm256_set1_epi32(3)),
-            );
-            let o1 = _mm256_add_epi32(o, _mm256_set1_epi32(stride));
-            let two = _mm256_set1_epi32(2);
-            // SAFETY: every lane is an inside pixel, so each 4-byte load lies in
-            // src (the bound above): (x0, y0) at o, (x0+1, y0) at o+2 (shifted by a
-            // byte), the next row at o1.
-            let (g0, g1, g2, g3) = unsafe {
-                (
-                    _mm256_i32gather_epi32::<1>(base, o),
-                    _mm256_srli_epi32::<8>(_mm256_i32gather_epi32::<1>(
-                        base,
-                        _mm256_add_epi32(o, two),
-                    )),
-                    _mm256_i32gather_epi32::<1>(base, o1),
-                    _mm256_srli_epi32::<8>(_mm256_i32gather_epi32::<1>(
-                        base,
-                        _mm256_add_epi32(o1, two),
-                    )),
-                )
-            };
-            let channel = |g: __m256i, c: i32| {
-                _mm256_cvtepi32_ps(_mm256_and_si256(
-                    _mm256_srl_epi32(g, _mm_cvtsi32_si128(8 * c)),
-                    byte,
-                ))
-            };
-            let mut px = _mm256_setzero_si256();
-            for c in 0..3 {
-                let (p0, p1, p2, p3) = (
-                    channel(g0, c),
-                    channel(g1, c),
-                    channel(g2, c),
-                    channel(g3, c),
-                );
-                let v0 = _mm256_fmadd_ps(a, _mm256_sub_ps(p1, p0), p0);
-                let v1 = _mm256_fmadd_ps(a, _mm256_sub_ps(p3, p2), p2);
-                let v = _mm256_fmadd_ps(b, _mm256_sub_ps(v1, v0), v0);
-                let v = _mm256_round_ps::<{ _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC }>(v);
-                let v = _mm256_cvtps_epi32(_mm256_min_ps(_mm256_max_ps(v, zero), max));
-                px = _mm256_or_si256(px, _mm256_sll_epi32(v, _mm_cvtsi32_si128(8 * c)));
-            }
-            let mut t = [0u8; 32];
-            // SAFETY: t has 32 bytes.
-            unsafe {
-                _mm256_storeu_si256(
-                    t.as_mut_ptr() as *mut __m256i,
-                    _mm256_shuffle_epi8(px, pack),
-                )
-            };
-            let d = &mut dst[3 * i..3 * i + 24];
-            d[..12].copy_from_slice(&t[..12]);
-            d[12..].copy_from_slice(&t[16..28]);
+            warp8_inside(src, sw * 3, (x0, y0, a, b), &mut dst[3 * i..3 * i + 24]);
         } else {
-            // Border block (or the row's tail): spill and go pixel by pixel.
-            let (mut ax, mut ay, mut fa, mut fb) = ([0i32; 8], [0i32; 8], [0f32; 8], [0f32; 8]);
-            let okm = _mm256_movemask_ps(ok);
-            // SAFETY: each array has 8 lanes.
-            unsafe {
-                _mm256_storeu_si256(ax.as_mut_ptr() as *mut __m256i, x0);
-                _mm256_storeu_si256(ay.as_mut_ptr() as *mut __m256i, y0);
-                _mm256_storeu_ps(fa.as_mut_ptr(), a);
-                _mm256_storeu_ps(fb.as_mut_ptr(), b);
-            }
-            for k in 0..8.min(n - i) {
-                let (px, py) = if okm >> k & 1 == 1 {
-                    (ax[k], ay[k])
-                } else {
-                    (i32::MIN / 2, i32::MIN / 2)
-                };
-                warp_pixel(
-                    src,
-                    (sw, sh),
-                    (px, py, fa[k], fb[k]),
-                    &mut dst[3 * (i + k)..3 * (i + k + 1)],
-                );
-            }
+            // Border block (or the row's tail): go pixel by pixel.
+            let k = 8.min(n - i);
+            let pos = (x0, y0, a, b, _mm256_movemask_ps(ok));
+            warp8_border(src, (sw, sh), pos, &mut dst[3 * i..3 * (i + k)]);
         }
         i += 8;
+    }
+}
+
+/// 8 destination pixels whose source squares all lie inside the source: gathered
+/// loads, bilinear blend in f32 with FMA, 24 BGR bytes into `d`.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+fn warp8_inside(
+    src: &[u8],
+    stride: i32,
+    pos: (
+        std::arch::x86_64::__m256i,
+        std::arch::x86_64::__m256i,
+        std::arch::x86_64::__m256,
+        std::arch::x86_64::__m256,
+    ),
+    d: &mut [u8],
+) {
+    use std::arch::x86_64::*;
+    let (x0, y0, a, b) = pos;
+    let (zero, max) = (_mm256_setzero_ps(), _mm256_set1_ps(255.0));
+    let byte = _mm256_set1_epi32(0xff);
+    // Packs 4 pixels of 0x00RRGGBB per 128-bit lane into 12 BGR bytes.
+    let pack = _mm256_setr_epi8(
+        0, 1, 2, 4, 5, 6, 8, 9, 10, 12, 13, 14, -1, -1, -1, -1, 0, 1, 2, 4, 5, 6, 8, 9, 10, 12, 13,
+        14, -1, -1, -1, -1,
+    );
+    // Offsets fit in i32 (checked by warp_perspective), and an inside block reads
+    // at most up to (y0 + 1)·stride + 3·sw <= src.len().
+    let base = src.as_ptr() as *const i32;
+    let o = _mm256_add_epi32(
+        _mm256_mullo_epi32(y0, _mm256_set1_epi32(stride)),
+        _mm256_mullo_epi32(x0, _mm256_set1_epi32(3)),
+    );
+    let o1 = _mm256_add_epi32(o, _mm256_set1_epi32(stride));
+    let two = _mm256_set1_epi32(2);
+    // SAFETY: every lane is an inside pixel, so each 4-byte load lies in
+    // src (the bound above): (x0, y0) at o, (x0+1, y0) at o+2 (shifted by a
+    // byte), the next row at o1.
+    let (g0, g1, g2, g3) = unsafe {
+        (
+            _mm256_i32gather_epi32::<1>(base, o),
+            _mm256_srli_epi32::<8>(_mm256_i32gather_epi32::<1>(base, _mm256_add_epi32(o, two))),
+            _mm256_i32gather_epi32::<1>(base, o1),
+            _mm256_srli_epi32::<8>(_mm256_i32gather_epi32::<1>(base, _mm256_add_epi32(o1, two))),
+        )
+    };
+    let channel = |g: __m256i, c: i32| {
+        _mm256_cvtepi32_ps(_mm256_and_si256(
+            _mm256_srl_epi32(g, _mm_cvtsi32_si128(8 * c)),
+            byte,
+        ))
+    };
+    let mut px = _mm256_setzero_si256();
+    for c in 0..3 {
+        let (p0, p1, p2, p3) = (
+            channel(g0, c),
+            channel(g1, c),
+            channel(g2, c),
+            channel(g3, c),
+        );
+        let v0 = _mm256_fmadd_ps(a, _mm256_sub_ps(p1, p0), p0);
+        let v1 = _mm256_fmadd_ps(a, _mm256_sub_ps(p3, p2), p2);
+        let v = _mm256_fmadd_ps(b, _mm256_sub_ps(v1, v0), v0);
+        let v = _mm256_round_ps::<{ _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC }>(v);
+        let v = _mm256_cvtps_epi32(_mm256_min_ps(_mm256_max_ps(v, zero), max));
+        px = _mm256_or_si256(px, _mm256_sll_epi32(v, _mm_cvtsi32_si128(8 * c)));
+    }
+    let mut t = [0u8; 32];
+    // SAFETY: t has 32 bytes.
+    unsafe {
+        _mm256_storeu_si256(
+            t.as_mut_ptr() as *mut __m256i,
+            _mm256_shuffle_epi8(px, pack),
+        )
+    };
+    d[..12].copy_from_slice(&t[..12]);
+    d[12..24].copy_from_slice(&t[16..28]);
+}
+
+/// Up to 8 destination pixels (as many as `d` holds) that touch the source's
+/// border: spilled lanes through [`warp_pixel`]; lanes not set in the `ok` bit
+/// mask are far outside.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+fn warp8_border(
+    src: &[u8],
+    size: (i32, i32),
+    pos: (
+        std::arch::x86_64::__m256i,
+        std::arch::x86_64::__m256i,
+        std::arch::x86_64::__m256,
+        std::arch::x86_64::__m256,
+        i32,
+    ),
+    d: &mut [u8],
+) {
+    use std::arch::x86_64::*;
+    let (x0, y0, a, b, okm) = pos;
+    let (mut ax, mut ay, mut fa, mut fb) = ([0i32; 8], [0i32; 8], [0f32; 8], [0f32; 8]);
+    // SAFETY: each array has 8 lanes.
+    unsafe {
+        _mm256_storeu_si256(ax.as_mut_ptr() as *mut __m256i, x0);
+        _mm256_storeu_si256(ay.as_mut_ptr() as *mut __m256i, y0);
+        _mm256_storeu_ps(fa.as_mut_ptr(), a);
+        _mm256_storeu_ps(fb.as_mut_ptr(), b);
+    }
+    for (k, px) in d.chunks_exact_mut(3).enumerate() {
+        let (x, y) = if okm >> k & 1 == 1 {
+            (ax[k], ay[k])
+        } else {
+            (i32::MIN / 2, i32::MIN / 2)
+        };
+        warp_pixel(src, size, (x, y, fa[k], fb[k]), px);
     }
 }
 

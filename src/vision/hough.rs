@@ -208,128 +208,27 @@ pub fn hough_lines_p(
     if !valid(rho, theta) || edges.width == 0 || edges.height == 0 {
         return lines;
     }
-    let (width, height) = (edges.width as i32, edges.height as i32);
-    let (w, h) = (width as usize, height as usize);
-    let na = numangle(theta);
-    let nr = numrho(edges.width, edges.height, rho);
-    // OpenCV's HoughLinesP angle table: cos/sin of n·θ in f64.
-    let irho = 1.0 / rho;
-    let tc: Vec<f32> = (0..na)
-        .map(|n| ((n as f64 * theta).cos() * irho) as f32)
-        .collect();
-    let ts: Vec<f32> = (0..na)
-        .map(|n| ((n as f64 * theta).sin() * irho) as f32)
-        .collect();
-    let mut acc = vec![0i32; na * nr];
-    let mut mask = vec![0u8; w * h];
-    let mut nz: Vec<(i32, i32)> = Vec::new();
-    for (i, row) in edges.data.chunks_exact(w).take(h).enumerate() {
-        for (j, &v) in row.iter().enumerate() {
-            if v != 0 {
-                mask[i * w + j] = 1;
-                nz.push((j as i32, i as i32));
-            }
-        }
-    }
-    let half = (nr as i32 - 1) / 2;
-    let mut cells = vec![0u32; na];
+    let (mut state, mut nz) = Ppht::new(edges, rho, theta);
     let mut rng = CvRng(u64::MAX);
-    const SHIFT: i32 = 16;
     let mut count = nz.len();
     while count > 0 {
+        // A random edge pixel not yet taken by a segment votes.
         let idx = rng.uniform(0, count as u32) as usize;
-        let (j, i) = nz[idx];
+        let seed = nz[idx];
         nz[idx] = nz[count - 1];
         count -= 1;
-        if mask[i as usize * w + j as usize] == 0 {
+        if !state.is_edge(seed) {
             continue;
         }
-        let mut max_val = threshold as i32 - 1;
-        let mut max_n = 0;
-        indices(j as f32, i as f32, &tc, &ts, half, nr, &mut cells);
-        for (n, &k) in cells.iter().enumerate() {
-            let a = &mut acc[k as usize];
-            *a += 1;
-            if max_val < *a {
-                max_val = *a;
-                max_n = n;
-            }
-        }
-        if max_val < threshold as i32 {
+        let Some(n) = state.vote(seed, threshold) else {
             continue;
-        }
-        let a = -ts[max_n];
-        let b = tc[max_n];
-        let (mut x0, mut y0) = (j, i);
-        let (dx0, dy0, xflag);
-        if a.abs() > b.abs() {
-            xflag = true;
-            dx0 = if a > 0.0 { 1 } else { -1 };
-            dy0 = (b * (1 << SHIFT) as f32 / a.abs()).round_ties_even() as i32;
-            y0 = (y0 << SHIFT) + (1 << (SHIFT - 1));
-        } else {
-            xflag = false;
-            dy0 = if b > 0.0 { 1 } else { -1 };
-            dx0 = (a * (1 << SHIFT) as f32 / b.abs()).round_ties_even() as i32;
-            x0 = (x0 << SHIFT) + (1 << (SHIFT - 1));
-        }
-        let at = |x: i32, y: i32| {
-            if xflag {
-                (x, y >> SHIFT)
-            } else {
-                (x >> SHIFT, y)
-            }
         };
-        let mut end = [(j, i); 2];
-        for (k, e) in end.iter_mut().enumerate() {
-            let (dx, dy) = if k > 0 { (-dx0, -dy0) } else { (dx0, dy0) };
-            let (mut x, mut y, mut gap) = (x0, y0, 0);
-            loop {
-                let (j1, i1) = at(x, y);
-                if j1 < 0 || j1 >= width || i1 < 0 || i1 >= height {
-                    break;
-                }
-                if mask[i1 as usize * w + j1 as usize] != 0 {
-                    gap = 0;
-                    *e = (j1, i1);
-                } else {
-                    gap += 1;
-                    if gap > max_line_gap {
-                        break;
-                    }
-                }
-                x += dx;
-                y += dy;
-            }
-        }
+        // Its best line reached the threshold: walk it both ways from the seed.
+        let walk = Walk::new(seed, -state.ts[n], state.tc[n]);
+        let end = state.ends(&walk, seed, max_line_gap);
         let good = (end[1].0 - end[0].0).abs() >= min_line_length
             || (end[1].1 - end[0].1).abs() >= min_line_length;
-        for (k, e) in end.iter().enumerate() {
-            let (dx, dy) = if k > 0 { (-dx0, -dy0) } else { (dx0, dy0) };
-            let (mut x, mut y) = (x0, y0);
-            loop {
-                let (j1, i1) = at(x, y);
-                // The walk ends at the segment's end, found inside the image above.
-                if j1 < 0 || j1 >= width || i1 < 0 || i1 >= height {
-                    break;
-                }
-                let m = &mut mask[i1 as usize * w + j1 as usize];
-                if *m != 0 {
-                    if good {
-                        indices(j1 as f32, i1 as f32, &tc, &ts, half, nr, &mut cells);
-                        for &k in &cells {
-                            acc[k as usize] -= 1;
-                        }
-                    }
-                    *m = 0;
-                }
-                if (j1, i1) == *e {
-                    break;
-                }
-                x += dx;
-                y += dy;
-            }
-        }
+        state.take(&walk, &end, good);
         if good {
             lines.push(Segment {
                 x1: end[0].0,
@@ -340,6 +239,207 @@ pub fn hough_lines_p(
         }
     }
     lines
+}
+
+/// [`hough_lines_p`]'s state: OpenCV's angle table (cos/sin of n·θ in f64, over
+/// ρ), the votes of the pixels seen so far, and the mask of edge pixels that no
+/// segment has taken yet.
+struct Ppht {
+    tc: Vec<f32>,
+    ts: Vec<f32>,
+    acc: Vec<i32>,
+    cells: Vec<u32>,
+    half: i32,
+    nr: usize,
+    mask: Vec<u8>,
+    w: usize,
+    size: (i32, i32),
+}
+
+impl Ppht {
+    /// The state for `edges`, and its edge pixels (x, y) in row order.
+    fn new(edges: &GrayImage, rho: f64, theta: f64) -> (Ppht, Vec<(i32, i32)>) {
+        let (w, h) = (edges.width as usize, edges.height as usize);
+        let na = numangle(theta);
+        let nr = numrho(edges.width, edges.height, rho);
+        let irho = 1.0 / rho;
+        let tc = (0..na)
+            .map(|n| ((n as f64 * theta).cos() * irho) as f32)
+            .collect();
+        let ts = (0..na)
+            .map(|n| ((n as f64 * theta).sin() * irho) as f32)
+            .collect();
+        let mut mask = vec![0u8; w * h];
+        let mut nz = Vec::new();
+        for (i, row) in edges.data.chunks_exact(w).take(h).enumerate() {
+            for (j, &v) in row.iter().enumerate() {
+                if v != 0 {
+                    mask[i * w + j] = 1;
+                    nz.push((j as i32, i as i32));
+                }
+            }
+        }
+        let state = Ppht {
+            tc,
+            ts,
+            acc: vec![0; na * nr],
+            cells: vec![0; na],
+            half: (nr as i32 - 1) / 2,
+            nr,
+            mask,
+            w,
+            size: (edges.width as i32, edges.height as i32),
+        };
+        (state, nz)
+    }
+
+    /// The mask index of (x, y), or None outside the image.
+    fn index(&self, (j, i): (i32, i32)) -> Option<usize> {
+        let inside = j >= 0 && j < self.size.0 && i >= 0 && i < self.size.1;
+        inside.then(|| i as usize * self.w + j as usize)
+    }
+
+    fn is_edge(&self, (j, i): (i32, i32)) -> bool {
+        self.mask[i as usize * self.w + j as usize] != 0
+    }
+
+    /// Fills `cells` with the accumulator cells of (x, y), one per angle.
+    fn find_cells(&mut self, (j, i): (i32, i32)) {
+        let (c, s) = (&self.tc, &self.ts);
+        indices(
+            j as f32,
+            i as f32,
+            c,
+            s,
+            self.half,
+            self.nr,
+            &mut self.cells,
+        );
+    }
+
+    /// Adds the votes of (x, y); the angle of its most voted cell when that
+    /// reaches `threshold` (the first such angle on ties).
+    fn vote(&mut self, (j, i): (i32, i32), threshold: u32) -> Option<usize> {
+        let mut max_val = threshold as i32 - 1;
+        let mut max_n = 0;
+        self.find_cells((j, i));
+        for (n, &k) in self.cells.iter().enumerate() {
+            let a = &mut self.acc[k as usize];
+            *a += 1;
+            if max_val < *a {
+                max_val = *a;
+                max_n = n;
+            }
+        }
+        (max_val >= threshold as i32).then_some(max_n)
+    }
+
+    fn unvote(&mut self, (j, i): (i32, i32)) {
+        self.find_cells((j, i));
+        for &k in &self.cells {
+            self.acc[k as usize] -= 1;
+        }
+    }
+
+    /// The last edge pixel each way from `seed` before a gap longer than
+    /// `max_line_gap` or the image's border.
+    fn ends(&self, walk: &Walk, seed: (i32, i32), max_line_gap: i32) -> [(i32, i32); 2] {
+        let mut end = [seed; 2];
+        for (k, e) in end.iter_mut().enumerate() {
+            let (dx, dy) = walk.step(k);
+            let (mut x, mut y, mut gap) = (walk.x0, walk.y0, 0);
+            while let Some(at) = self.index(walk.at(x, y)) {
+                if self.mask[at] != 0 {
+                    gap = 0;
+                    *e = walk.at(x, y);
+                } else {
+                    gap += 1;
+                    if gap > max_line_gap {
+                        break;
+                    }
+                }
+                x += dx;
+                y += dy;
+            }
+        }
+        end
+    }
+
+    /// Takes the pixels from the seed to each end out of the mask and, for a
+    /// `good` segment, their votes out of the accumulator.
+    fn take(&mut self, walk: &Walk, end: &[(i32, i32); 2], good: bool) {
+        for (k, e) in end.iter().enumerate() {
+            let (dx, dy) = walk.step(k);
+            let (mut x, mut y) = (walk.x0, walk.y0);
+            // The walk ends at the segment's end, found inside the image by `ends`.
+            while let Some(at) = self.index(walk.at(x, y)) {
+                if self.mask[at] != 0 {
+                    if good {
+                        self.unvote(walk.at(x, y));
+                    }
+                    self.mask[at] = 0;
+                }
+                if walk.at(x, y) == *e {
+                    break;
+                }
+                x += dx;
+                y += dy;
+            }
+        }
+    }
+}
+
+/// OpenCV's fixed-point walk along the line of direction (a, b) through a seed:
+/// one pixel a step along the major axis, 16 fractional bits on the other.
+struct Walk {
+    x0: i32,
+    y0: i32,
+    dx0: i32,
+    dy0: i32,
+    xflag: bool,
+}
+
+impl Walk {
+    const SHIFT: i32 = 16;
+
+    fn new((j, i): (i32, i32), a: f32, b: f32) -> Walk {
+        let (one, half) = (1 << Self::SHIFT, 1 << (Self::SHIFT - 1));
+        if a.abs() > b.abs() {
+            Walk {
+                x0: j,
+                y0: (i << Self::SHIFT) + half,
+                dx0: if a > 0.0 { 1 } else { -1 },
+                dy0: (b * one as f32 / a.abs()).round_ties_even() as i32,
+                xflag: true,
+            }
+        } else {
+            Walk {
+                x0: (j << Self::SHIFT) + half,
+                y0: i,
+                dx0: (a * one as f32 / b.abs()).round_ties_even() as i32,
+                dy0: if b > 0.0 { 1 } else { -1 },
+                xflag: false,
+            }
+        }
+    }
+
+    /// The pixel of walk position (x, y).
+    fn at(&self, x: i32, y: i32) -> (i32, i32) {
+        if self.xflag {
+            (x, y >> Self::SHIFT)
+        } else {
+            (x >> Self::SHIFT, y)
+        }
+    }
+
+    /// The step of direction k (0 forward, 1 backward).
+    fn step(&self, k: usize) -> (i32, i32) {
+        if k > 0 {
+            (-self.dx0, -self.dy0)
+        } else {
+            (self.dx0, self.dy0)
+        }
+    }
 }
 
 #[cfg(test)]

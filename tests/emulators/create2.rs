@@ -33,14 +33,13 @@ use std::{
         Arc,
         atomic::{AtomicBool, Ordering},
     },
-    thread::JoinHandle,
     time::{Duration, Instant},
 };
 
 use parking_lot::Mutex;
 
+use super::room::{Cable, read_fd, write_fd};
 use super::room::{ROBOT_RADIUS, Shared, wrap};
-use super::room::{open_pty, read_fd, write_fd};
 
 pub const WHEEL_BASE: f64 = 235.0;
 pub const COUNTS_PER_MM: f64 = 508.8 / (std::f64::consts::PI * 72.0);
@@ -99,8 +98,7 @@ pub struct Create2 {
     pub link: PathBuf,
     pub state: Arc<Mutex<State>>,
     pub room: Shared,
-    stop: Arc<AtomicBool>,
-    thread: Option<JoinHandle<()>>,
+    cable: Option<Cable>,
 }
 
 impl Create2 {
@@ -123,8 +121,7 @@ impl Create2 {
             link: link.to_path_buf(),
             state,
             room,
-            stop: Arc::new(AtomicBool::new(false)),
-            thread: None,
+            cable: None,
         };
         c.plug();
         c
@@ -133,21 +130,16 @@ impl Create2 {
     /// (Re)connects the cable: a new pty at the link. The robot keeps its state
     /// (and, as a real one, its last Drive Direct).
     pub fn plug(&mut self) {
-        let pty = open_pty();
-        let _ = std::fs::remove_file(&self.link);
-        std::os::unix::fs::symlink(&pty.slave_path, &self.link).expect("symlink to the pty");
-        self.stop = Arc::new(AtomicBool::new(false));
-        let (st, room, stop) = (self.state.clone(), self.room.clone(), self.stop.clone());
-        self.thread = Some(std::thread::spawn(move || serve(pty, &st, &room, &stop)));
+        self.cable = None;
+        let (st, room) = (self.state.clone(), self.room.clone());
+        self.cable = Some(Cable::plug(&self.link, move |pty, stop| {
+            serve(pty, &st, &room, stop)
+        }));
     }
 
     /// Pulls the cable: the pty closes and its path disappears.
     pub fn unplug(&mut self) {
-        self.stop.store(true, Ordering::Release);
-        if let Some(t) = self.thread.take() {
-            let _ = t.join();
-        }
-        let _ = std::fs::remove_file(&self.link);
+        self.cable = None;
     }
 
     pub fn faults(&self, f: impl FnOnce(&mut Faults)) {
@@ -156,12 +148,6 @@ impl Create2 {
 
     pub fn received(&self) -> Vec<u8> {
         self.state.lock().received.clone()
-    }
-}
-
-impl Drop for Create2 {
-    fn drop(&mut self) {
-        self.unplug();
     }
 }
 

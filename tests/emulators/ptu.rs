@@ -42,6 +42,42 @@ pub struct Pty {
     pub slave_path: PathBuf,
 }
 
+/// A serial cable into an emulated device: a pty whose slave is linked at `link`,
+/// and the thread that serves its master side. Dropping it pulls the cable: the
+/// thread stops and the link disappears.
+pub struct Cable {
+    link: PathBuf,
+    stop: Arc<AtomicBool>,
+    thread: Option<JoinHandle<()>>,
+}
+
+impl Cable {
+    /// Plugs a new pty in at `link` (replacing what is there) and runs `serve` on
+    /// it until the cable is pulled (`serve` returns when its flag is set).
+    pub fn plug(link: &Path, serve: impl FnOnce(Pty, &AtomicBool) + Send + 'static) -> Cable {
+        let pty = open_pty();
+        let _ = std::fs::remove_file(link);
+        std::os::unix::fs::symlink(&pty.slave_path, link).expect("symlink to the pty");
+        let stop = Arc::new(AtomicBool::new(false));
+        let sp = stop.clone();
+        Cable {
+            link: link.to_path_buf(),
+            stop,
+            thread: Some(std::thread::spawn(move || serve(pty, &sp))),
+        }
+    }
+}
+
+impl Drop for Cable {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Release);
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+        let _ = std::fs::remove_file(&self.link);
+    }
+}
+
 /// Opens a pty pair (raw slave), like a serial cable into the device.
 pub fn open_pty() -> Pty {
     let (mut m, mut s) = (0, 0);
@@ -280,8 +316,7 @@ impl State {
 pub struct Ptu {
     pub link: PathBuf,
     pub state: Arc<Mutex<State>>,
-    stop: Arc<AtomicBool>,
-    thread: Option<JoinHandle<()>>,
+    _cable: Cable,
 }
 
 const GPS: &str = "$GPGGA,123519,4807.038,N,01131.000,E,1,08,0.9,545.4,M,46.9,M,,*47";
@@ -289,8 +324,6 @@ const GPS: &str = "$GPGGA,123519,4807.038,N,01131.000,E,1,08,0.9,545.4,M,46.9,M,
 impl Ptu {
     /// Plugs a unit in at `link` (which must not exist).
     pub fn start(link: &Path) -> Ptu {
-        let pty = open_pty();
-        std::os::unix::fs::symlink(&pty.slave_path, link).expect("symlink to the pty");
         let state = Arc::new(Mutex::new(State {
             pan: AxisState::new(-3090, 3090),
             tilt: AxisState::new(-907, 604),
@@ -300,14 +333,11 @@ impl Ptu {
             last_rx: None,
             faults: Faults::default(),
         }));
-        let stop = Arc::new(AtomicBool::new(false));
-        let (st, sp) = (state.clone(), stop.clone());
-        let thread = std::thread::spawn(move || serve(pty, &st, &sp));
+        let st = state.clone();
         Ptu {
             link: link.to_path_buf(),
             state,
-            stop,
-            thread: Some(thread),
+            _cable: Cable::plug(link, move |pty, stop| serve(pty, &st, stop)),
         }
     }
 
@@ -332,23 +362,7 @@ impl Ptu {
     }
 
     /// The unit goes away: its pty closes and its path disappears.
-    pub fn unplug(mut self) {
-        self.shutdown();
-    }
-
-    fn shutdown(&mut self) {
-        self.stop.store(true, Ordering::Release);
-        if let Some(t) = self.thread.take() {
-            let _ = t.join();
-        }
-        let _ = std::fs::remove_file(&self.link);
-    }
-}
-
-impl Drop for Ptu {
-    fn drop(&mut self) {
-        self.shutdown();
-    }
+    pub fn unplug(self) {}
 }
 
 fn serve(pty: Pty, state: &Mutex<State>, stop: &AtomicBool) {

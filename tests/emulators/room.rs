@@ -86,4 +86,4 @@ pub fn wrap(a: f64) -> f64 {
 }
 
 /// The pty helpers of the PTU emulator (a serial cable into the device).
-pub use super::ptu::{Pty, open_pty, read_fd, write_fd};
+pub use super::ptu::{Cable, Pty, read_fd, write_fd};

@@ -30,14 +30,13 @@ use std::{
         Arc,
         atomic::{AtomicBool, Ordering},
     },
-    thread::JoinHandle,
     time::{Duration, Instant},
 };
 
 use parking_lot::Mutex;
 
 use super::room::Shared;
-use super::room::{open_pty, read_fd, write_fd};
+use super::room::{Cable, read_fd, write_fd};
 
 pub const RATE_HZ: f64 = 5.5;
 pub const SAMPLES: f64 = 360.5;
@@ -62,8 +61,7 @@ pub struct Lidar {
     pub link: PathBuf,
     pub state: Arc<Mutex<State>>,
     pub room: Shared,
-    stop: Arc<AtomicBool>,
-    thread: Option<JoinHandle<()>>,
+    cable: Option<Cable>,
 }
 
 impl Lidar {
@@ -77,29 +75,23 @@ impl Lidar {
                 revolutions: 0,
             })),
             room,
-            stop: Arc::new(AtomicBool::new(false)),
-            thread: None,
+            cable: None,
         };
         l.plug();
         l
     }
 
     pub fn plug(&mut self) {
-        let pty = open_pty();
-        let _ = std::fs::remove_file(&self.link);
-        std::os::unix::fs::symlink(&pty.slave_path, &self.link).expect("symlink to the pty");
-        self.stop = Arc::new(AtomicBool::new(false));
+        self.cable = None;
         self.state.lock().scanning = false;
-        let (st, room, stop) = (self.state.clone(), self.room.clone(), self.stop.clone());
-        self.thread = Some(std::thread::spawn(move || serve(pty, &st, &room, &stop)));
+        let (st, room) = (self.state.clone(), self.room.clone());
+        self.cable = Some(Cable::plug(&self.link, move |pty, stop| {
+            serve(pty, &st, &room, stop)
+        }));
     }
 
     pub fn unplug(&mut self) {
-        self.stop.store(true, Ordering::Release);
-        if let Some(t) = self.thread.take() {
-            let _ = t.join();
-        }
-        let _ = std::fs::remove_file(&self.link);
+        self.cable = None;
     }
 
     pub fn faults(&self, f: impl FnOnce(&mut Faults)) {
@@ -108,12 +100,6 @@ impl Lidar {
 
     pub fn received(&self) -> Vec<u8> {
         self.state.lock().received.clone()
-    }
-}
-
-impl Drop for Lidar {
-    fn drop(&mut self) {
-        self.unplug();
     }
 }
 

@@ -28,17 +28,13 @@
 
 use std::{
     path::{Path, PathBuf},
-    sync::{
-        Arc,
-        atomic::{AtomicBool, Ordering},
-    },
-    thread::JoinHandle,
+    sync::{Arc, atomic::Ordering},
     time::{Duration, Instant},
 };
 
 use parking_lot::Mutex;
 
-use super::ptu::{open_pty, read_fd, write_fd};
+use super::ptu::{Cable, read_fd, write_fd};
 
 /// Pan speeds, deg/s, of modes 1..24 (EVI-D100 specification).
 const SPEEDS: [f64; 24] = [
@@ -256,19 +252,15 @@ impl State {
 pub struct Evi {
     pub link: PathBuf,
     pub state: Arc<Mutex<State>>,
-    stop: Arc<AtomicBool>,
-    thread: Option<JoinHandle<()>>,
+    _cable: Cable,
 }
 
 impl Evi {
     /// Plugs a camera in at `link`; it starts with the power off (standby).
     pub fn start(link: &Path) -> Evi {
-        let pty = open_pty();
-        std::os::unix::fs::symlink(&pty.slave_path, link).expect("symlink to the pty");
         let state = Arc::new(Mutex::new(State::new()));
-        let stop = Arc::new(AtomicBool::new(false));
-        let (st, sp) = (state.clone(), stop.clone());
-        let thread = std::thread::spawn(move || {
+        let st = state.clone();
+        let cable = Cable::plug(link, move |pty, sp| {
             let mut packet = Vec::new();
             let mut buf = [0u8; 256];
             let mut last = Instant::now();
@@ -312,8 +304,7 @@ impl Evi {
         Evi {
             link: link.to_path_buf(),
             state,
-            stop,
-            thread: Some(thread),
+            _cable: cable,
         }
     }
 
@@ -342,20 +333,6 @@ impl Evi {
     pub fn set_power(&self, on: bool) {
         self.state.lock().power = on;
     }
-    pub fn unplug(mut self) {
-        self.shutdown();
-    }
-    fn shutdown(&mut self) {
-        self.stop.store(true, Ordering::Release);
-        if let Some(t) = self.thread.take() {
-            let _ = t.join();
-        }
-        let _ = std::fs::remove_file(&self.link);
-    }
-}
-
-impl Drop for Evi {
-    fn drop(&mut self) {
-        self.shutdown();
-    }
+    /// The camera goes away: its pty closes and its path disappears.
+    pub fn unplug(self) {}
 }
