@@ -533,9 +533,10 @@ fn memory_stays_bounded_with_1000_remote_cyclone_readers_and_writers() {
         peak - before
     );
     assert!(f(&got, &["matched_scan"]) > 0.0, "{got}");
-    // The bound docs/ros2.md states: 1,000 remote endpoints cost at most 256 MB.
+    // The bound docs/ros2.md states: 1,000 remote endpoints cost at most 64 MB
+    // (measured: +7.5 MB, debug build).
     assert!(
-        peak - before < 256 * 1024,
+        peak - before < 64 * 1024,
         "RSS grew {} kB with 1000 remote endpoints",
         peak - before
     );
