@@ -19,9 +19,20 @@ fn domain(offset: u32) -> u32 {
 }
 
 fn peer(py: &std::path::Path, mode: &str, domain: u32, secs: u32) -> std::process::Child {
+    peer_with(py, mode, domain, secs, &[])
+}
+
+fn peer_with(
+    py: &std::path::Path,
+    mode: &str,
+    domain: u32,
+    secs: u32,
+    more: &[&str],
+) -> std::process::Child {
     Command::new(py)
         .arg(root().join("tests/ros2/cyclone_peer.py"))
         .args([mode, &domain.to_string(), &secs.to_string()])
+        .args(more)
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
@@ -70,9 +81,10 @@ fn a_cyclone_subscriber_reads_every_type_and_drives_the_robot_on_cmd_vel() {
     std::fs::write(
         &conf,
         format!(
-            "driver simulator\nworld {}\nrobot robot1 1000 1000 90\nprovides encoders\n\
-             provides motors\nprovides laser 180 1\nprovides colorA\nprovides imu\nend_driver\n\
-             service ros2\ninsecure\ndomain {d}\nend_service\n\
+            "driver simulator\nworld {}\nrobot robot1 3000 3500 90\nprovides encoders\n\
+             provides motors\nprovides laser 180 1\nprovides colorA\nprovides imu\nprovides sonars\n\
+             provides bumpers\nprovides pantiltencoders\nprovides pantiltmotors\nend_driver\n\
+             service ros2\ninsecure\ndomain {d}\ncompressed colorA 70\nend_service\n\
              load_driver simulator\nload_service ros2\n",
             common::world_path("simple.world")
         ),
@@ -93,10 +105,11 @@ fn a_cyclone_subscriber_reads_every_type_and_drives_the_robot_on_cmd_vel() {
     let r0 = got["scan"]["ranges"][0].as_f64().unwrap();
     assert!(r0 > 0.05 && r0 < 10.0, "a range in metres: {r0}");
     assert!(f(&got, &["scan", "stamp"]) > 1.6e9, "wall-clock stamps");
-    // Odometry and /tf: odom → base_link, metres; the robot started at (1 m, 1 m).
+    // Odometry and /tf: odom → base_link, metres; the robot started at (3 m, 3.5 m),
+    // 0.25 m from the north wall, facing it.
     assert_eq!(s(&got, &["odom", "frame"]), "odom");
     assert_eq!(s(&got, &["odom", "child"]), "base_link");
-    assert!((f(&got, &["odom_first", "x"]) - 1.0).abs() < 0.3, "{got}");
+    assert!((f(&got, &["odom_first", "x"]) - 3.0).abs() < 0.3, "{got}");
     assert!(
         (f(&got, &["odom_first", "yaw"]) - 90f64.to_radians()).abs() < 0.3,
         "{got}"
@@ -113,6 +126,45 @@ fn a_cyclone_subscriber_reads_every_type_and_drives_the_robot_on_cmd_vel() {
     assert_eq!(f(&got, &["image", "step"]), 960.0);
     assert_eq!(f(&got, &["image", "bytes"]), 320.0 * 240.0 * 3.0);
     assert!(got["imu"]["qw"].is_number(), "{got}");
+    // sensor_msgs/Range, one topic and frame per sonar (16: sonar_0..sonar_15),
+    // ULTRASOUND, the `sonar` line's defaults 25 deg, 0.1..5 m.
+    for (i, k) in [(0, "sonar_0"), (15, "sonar_15")] {
+        assert_eq!(s(&got, &[k, "frame"]), format!("sonar_{i}"));
+        assert_eq!(f(&got, &[k, "radiation_type"]), 0.0);
+        assert!((f(&got, &[k, "field_of_view"]) - 25f64.to_radians()).abs() < 1e-5);
+        assert!((f(&got, &[k, "min_range"]) - 0.1).abs() < 1e-6);
+        assert!((f(&got, &[k, "max_range"]) - 5.0).abs() < 1e-6);
+        let r = f(&got, &[k, "range"]);
+        assert!(r > 0.0 && r <= 5.0, "{k}: {r} m");
+        assert!(f(&got, &[k, "stamp"]) > 1.6e9);
+    }
+    // The bumpers as the Create 3's HazardDetectionVector: empty while free,
+    // then one BUMP (type 1) per touching bumper once it hit the wall ahead.
+    assert_eq!(s(&got, &["hazards", "frame"]), "base_link");
+    assert_eq!(s(&got, &["bumped", "frame"]), "base_link");
+    let det = &got["bumped"]["detections"][0];
+    assert_eq!(det["type"].as_f64(), Some(1.0), "{got}");
+    assert!(s(det, &["frame"]).starts_with("bumper_"), "{got}");
+    // JointState: pan and tilt in radians; joint_command moved the pan to 0.5 rad.
+    assert_eq!(got["joints"]["name"], serde_json::json!(["pan", "tilt"]));
+    assert!(
+        (got["joints"]["position"][0].as_f64().unwrap() - 0.5).abs() < 0.02,
+        "{got}"
+    );
+    assert_eq!(f(&got, &["joints", "effort"]), 0.0);
+    let pan = robot.ask_until("echo pantiltencoders", "the pan-tilt", |l| {
+        l.starts_with("pantiltencoders clock=")
+    });
+    assert!(pan.contains("pan_angle=28.6"), "{pan}");
+    // CompressedImage: image_transport's format string and a 320x240 JPEG.
+    assert_eq!(
+        s(&got, &["compressed", "format"]),
+        "bgr8; jpeg compressed bgr8"
+    );
+    assert_eq!(s(&got, &["compressed", "frame"]), "camera");
+    assert_eq!(f(&got, &["compressed", "width"]), 320.0);
+    assert_eq!(f(&got, &["compressed", "height"]), 240.0);
+    assert!(f(&got, &["compressed", "bytes"]) < 320.0 * 240.0, "{got}");
     // /cmd_vel (0.3 m/s, 0.2 rad/s) drove the simulated robot.
     robot.expect_moved(&start, 100.0);
     let m = robot.ask_until("echo motors", "motors", |l| l.starts_with("motors clock="));
@@ -174,4 +226,320 @@ fn without_insecure_the_service_and_the_driver_refuse_to_start() {
     assert!(e.contains("insecure") && e.contains("DDS Security"), "{e}");
     let e = common::start_error("driver ros2\nprovides laser\nend_driver\nload_driver ros2\n");
     assert!(e.contains("insecure"), "{e}");
+}
+
+#[test]
+fn the_driver_refuses_nan_and_bad_images_and_names_a_wrong_type() {
+    let Some(py) = common::python_with("cyclonedds") else {
+        return;
+    };
+    let d = domain(2);
+    let dir = tempfile::tempdir().unwrap();
+    let conf = dir.path().join("bad.conf");
+    std::fs::write(
+        &conf,
+        format!(
+            "driver ros2\ninsecure\ndomain {d}\nprovides laser /scan\nprovides encoders /odom\n\
+             provides imu /imu\nprovides varcolorA /camera/image_raw\n\
+             provides varcolorB /camera/image_raw/compressed\nprovides laser.w /wrong\n\
+             silence 1500\nend_driver\nload_driver ros2\n"
+        ),
+    )
+    .unwrap();
+    let mut robot = Proc::start(&conf);
+    let bad = peer(&py, "bad", d, 8);
+    let said = |what: &str| robot.text().contains(what);
+    let wrong = "/wrong carries sensor_msgs::msg::dds_::Image_, \
+                 the driver reads sensor_msgs::msg::dds_::LaserScan_";
+    let lines = [
+        "ros2: /scan: dropped a value",
+        "ros2: /odom: dropped a value",
+        "ros2: /imu: dropped a value",
+        "ros2: /camera/image_raw: dropped a value",
+        "ros2: /camera/image_raw/compressed: dropped a value",
+        wrong,
+    ];
+    let ok = common::poll_until(30, || lines.iter().all(|l| said(l)));
+    json_of(bad, "the bad Cyclone publisher", &robot);
+    assert!(ok, "missing refusals:\n{}", robot.text());
+    let text = robot.text();
+    assert!(
+        text.contains("a 640x480 `bgr8` image of 100 bytes"),
+        "{text}"
+    );
+    // Nothing reached an interface: each is still waiting for a good value.
+    for i in ["laser", "encoders", "imu", "varcolorA", "varcolorB"] {
+        let head = format!("{i} clock=");
+        let e = robot.ask_until(&format!("echo {i}"), i, |l| l.starts_with(&head));
+        assert!(
+            e.starts_with(&format!("{i} clock=0 ")),
+            "{i} got a value: {e}"
+        );
+    }
+    robot.quit();
+}
+
+#[test]
+fn the_driver_reads_a_cyclone_compressed_image() {
+    let Some(py) = common::python_with("cyclonedds") else {
+        return;
+    };
+    let d = domain(3);
+    let dir = tempfile::tempdir().unwrap();
+    // A 64x48 JPEG: red left half, blue right half.
+    let jpg = dir.path().join("frame.jpg");
+    let img = image::RgbImage::from_fn(64, 48, |x, _| {
+        if x < 32 {
+            image::Rgb([255, 0, 0])
+        } else {
+            image::Rgb([0, 0, 255])
+        }
+    });
+    img.save(&jpg).unwrap();
+    let conf = dir.path().join("camera.conf");
+    std::fs::write(
+        &conf,
+        format!(
+            "driver ros2\ninsecure\ndomain {d}\n\
+             provides varcolorA /camera/image_raw/compressed\nend_driver\nload_driver ros2\n"
+        ),
+    )
+    .unwrap();
+    let mut robot = Proc::start(&conf);
+    let mut cam = peer_with(&py, "camera", d, 30, &[jpg.to_str().unwrap()]);
+    let got = robot.ask_until("echo varcolorA", "a decoded image", |l| {
+        l.starts_with("varcolorA clock=") && !l.starts_with("varcolorA clock=0 ")
+    });
+    assert!(got.contains("64x48"), "{got}");
+    let _ = cam.kill();
+    let _ = cam.wait();
+    robot.quit();
+}
+
+/// A datagram of RTPS's shape (OMG DDSI-RTPS 2.5, 8.3.3): the `RTPS` header, then
+/// submessages of the real kinds with random flags, bodies and lengths (some
+/// longer than the datagram, some absurd sequence and parameter lengths).
+fn rtps_garbage(rng: &mut common::Rng, ids: &[u8]) -> Vec<u8> {
+    let mut d = b"RTPS\x02\x03\x01\x0f".to_vec();
+    d.extend(rng.bytes(12));
+    for _ in 0..1 + rng.below(4) {
+        d.push(ids[rng.below(ids.len())]);
+        d.push(rng.bytes(1)[0] | 1);
+        let body = rng.below(300);
+        let len = match rng.below(4) {
+            0 => 0xffff,
+            1 => rng.below(0x10000) as u16,
+            _ => body as u16,
+        };
+        d.extend(len.to_le_bytes());
+        let mut b = rng.bytes(body);
+        if body >= 24 && rng.below(2) == 0 {
+            // A DATA's serialized payload: PL_CDR_LE with a huge parameter, or
+            // CDR_LE with a huge sequence length.
+            b[20..24].copy_from_slice(&[0x00, 0x03, 0x00, 0x00]);
+            if body >= 32 {
+                b[24..32].copy_from_slice(&[0x59, 0x00, 0xff, 0xff, 0xff, 0xff, 0xff, 0x7f]);
+            }
+        }
+        d.extend(b);
+    }
+    d
+}
+
+#[test]
+fn garbage_rtps_datagrams_neither_crash_nor_stop_the_service_and_the_driver() {
+    let d = domain(4);
+    let dir = tempfile::tempdir().unwrap();
+    // One process serves the simulated laser, another reads it back over DDS.
+    let served = dir.path().join("served.conf");
+    std::fs::write(
+        &served,
+        format!(
+            "driver simulator\nworld {}\nprovides laser 180 1\nend_driver\n\
+             service ros2\ninsecure\ndomain {d}\nend_service\n\
+             load_driver simulator\nload_service ros2\n",
+            common::world_path("simple.world")
+        ),
+    )
+    .unwrap();
+    let reads = dir.path().join("reads.conf");
+    std::fs::write(
+        &reads,
+        format!(
+            "driver ros2\ninsecure\ndomain {d}\nprovides laser /scan\nend_driver\n\
+             load_driver ros2\n"
+        ),
+    )
+    .unwrap();
+    let mut server = Proc::start(&served);
+    let mut robot = Proc::start(&reads);
+    let first = robot.ask_until("echo laser", "the laser over DDS", |l| {
+        l.starts_with("laser clock=") && !l.starts_with("laser clock=0 ")
+    });
+    // RTPS ports (DDSI-RTPS 9.6.1.1): 7400 + 250·domain + {0: discovery
+    // multicast, 10 + 2·id: discovery unicast, 11 + 2·id: user unicast} for
+    // participant ids 0..20, and the discovery multicast group.
+    let base = 7400 + 250 * d as u16;
+    let sock = std::net::UdpSocket::bind("0.0.0.0:0").unwrap();
+    let mut rng = common::Rng::new(34);
+    let mut sent = 0;
+    for round in 0..20_000 {
+        let data = if round % 3 == 0 {
+            let n = rng.below(1500);
+            rng.bytes(n)
+        } else {
+            // PAD, ACKNACK, HEARTBEAT, GAP, INFO_TS, INFO_SRC, INFO_DST, NACK_FRAG,
+            // HEARTBEAT_FRAG, DATA, DATA_FRAG. Not INFO_REPLY (0x0f): RustDDS
+            // 0.11.8 aborts on some (the ignored test below).
+            let ids = [
+                0x01, 0x06, 0x07, 0x08, 0x09, 0x0c, 0x0e, 0x12, 0x13, 0x15, 0x16,
+            ];
+            rtps_garbage(&mut rng, &ids)
+        };
+        let port = base + rng.below(52) as u16;
+        if sock.send_to(&data, ("127.0.0.1", port)).is_ok() {
+            sent += 1;
+        }
+        if round % 10 == 0 {
+            let _ = sock.send_to(&data, ("239.255.0.1", base));
+        }
+    }
+    eprintln!("{sent} garbage datagrams sent");
+    for p in [&mut robot, &mut server] {
+        assert!(
+            p.child.try_wait().unwrap().is_none(),
+            "jderobot ended:\n{}",
+            p.text()
+        );
+    }
+    // Still served: the laser keeps arriving over DDS after the garbage.
+    let clock = |l: &str| -> u64 {
+        l.split_whitespace()
+            .find_map(|w| w.strip_prefix("clock="))
+            .and_then(|c| c.parse().ok())
+            .unwrap_or(0)
+    };
+    let c0 = clock(&first);
+    let mut later = String::new();
+    assert!(
+        common::poll_until(20, || {
+            later = robot.ask_until("echo laser", "laser", |l| l.starts_with("laser clock="));
+            clock(&later) > c0 + 20
+        }),
+        "the laser stopped after the garbage: {first} / {later}\n{}",
+        robot.text()
+    );
+    for p in [&robot, &server] {
+        assert!(!p.text().contains("panicked"), "{}", p.text());
+    }
+    robot.quit();
+    server.quit();
+}
+
+/// KNOWN TO FAIL (RustDDS 0.11.8): an INFO_REPLY submessage with an absurd
+/// locator list length makes RustDDS's reader (speedy's `read_vec` in
+/// `messages/submessages/info_reply.rs`) reserve it at once, and the process
+/// aborts ("memory allocation of 121338688736 bytes failed"): one UDP datagram
+/// from anyone on the LAN ends the service or the driver. Run with `--ignored`
+/// once RustDDS bounds the list.
+#[test]
+#[ignore = "RustDDS 0.11.8 aborts on an INFO_REPLY with a huge locator count"]
+fn garbage_info_reply_submessages_do_not_end_the_service() {
+    let d = domain(6);
+    let dir = tempfile::tempdir().unwrap();
+    let conf = dir.path().join("served.conf");
+    std::fs::write(
+        &conf,
+        format!("service ros2\ninsecure\ndomain {d}\nend_service\nload_service ros2\n"),
+    )
+    .unwrap();
+    let mut server = Proc::start(&conf);
+    std::thread::sleep(std::time::Duration::from_secs(2));
+    // The same garbage as above, INFO_REPLY submessages only.
+    let sock = std::net::UdpSocket::bind("0.0.0.0:0").unwrap();
+    let base = 7400 + 250 * d as u16;
+    let mut rng = common::Rng::new(34);
+    for _ in 0..20_000 {
+        let data = rtps_garbage(&mut rng, &[0x0f]);
+        let _ = sock.send_to(&data, ("127.0.0.1", base + rng.below(52) as u16));
+    }
+    std::thread::sleep(std::time::Duration::from_secs(1));
+    assert!(
+        server.child.try_wait().unwrap().is_none(),
+        "the service ended:\n{}",
+        server.text()
+    );
+    server.quit();
+}
+
+/// The resident memory of process `pid`, kB.
+fn rss_kb(pid: u32) -> u64 {
+    let s = std::fs::read_to_string(format!("/proc/{pid}/status")).unwrap_or_default();
+    s.lines()
+        .find_map(|l| l.strip_prefix("VmRSS:"))
+        .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())
+        .unwrap_or(0)
+}
+
+#[test]
+fn memory_stays_bounded_with_1000_remote_cyclone_readers_and_writers() {
+    let Some(py) = common::python_with("cyclonedds") else {
+        return;
+    };
+    let d = domain(5);
+    let dir = tempfile::tempdir().unwrap();
+    let conf = dir.path().join("many.conf");
+    std::fs::write(
+        &conf,
+        format!(
+            "driver simulator\nworld {}\nprovides encoders\nprovides motors\n\
+             provides laser 180 1\nend_driver\n\
+             service ros2\ninsecure\ndomain {d}\nend_service\n\
+             load_driver simulator\nload_service ros2\n",
+            common::world_path("simple.world")
+        ),
+    )
+    .unwrap();
+    let mut robot = Proc::start(&conf);
+    robot.ask_until("echo encoders", "the robot", |l| {
+        l.starts_with("encoders clock=")
+    });
+    std::thread::sleep(std::time::Duration::from_secs(2));
+    let pid = robot.child.id();
+    let before = rss_kb(pid);
+    let many = peer(&py, "many", d, 25);
+    let mut peak = before;
+    let mut got = None;
+    let mut many = Some(many);
+    common::poll_until(60, || {
+        peak = peak.max(rss_kb(pid));
+        if let Some(c) = many.as_mut()
+            && c.try_wait().ok().flatten().is_some()
+        {
+            got = many.take();
+        }
+        got.is_some()
+    });
+    let got = json_of(
+        got.expect("the many-endpoint peer ends"),
+        "1000 endpoints",
+        &robot,
+    );
+    eprintln!(
+        "ros2 service RSS: {before} kB before, {peak} kB peak with {} remote readers \
+         and {} writers (+{} kB)",
+        got["readers"],
+        got["writers"],
+        peak - before
+    );
+    assert!(f(&got, &["matched_scan"]) > 0.0, "{got}");
+    // The bound docs/ros2.md states: 1,000 remote endpoints cost at most 64 MB
+    // (measured: +7.5 MB, debug build).
+    assert!(
+        peak - before < 64 * 1024,
+        "RSS grew {} kB with 1000 remote endpoints",
+        peak - before
+    );
+    assert!(robot.child.try_wait().unwrap().is_none());
+    robot.quit();
 }

@@ -16,6 +16,8 @@
 //! provides motors /cmd_vel        # geometry_msgs/msg/Twist, written reliable
 //! provides imu /imu               # sensor_msgs/msg/Imu, best effort
 //! provides colorA /camera/image_raw   # sensor_msgs/msg/Image (bgr8), best effort
+//! provides varcolorA /camera/image_raw/compressed   # a topic ending in /compressed:
+//!                                 #   sensor_msgs/msg/CompressedImage (JPEG or PNG)
 //! silence 2000                    # ms without a message before the robot counts as lost
 //! motors_timeout 500              # ms: a motors command older than this is sent as zero
 //! end_driver
@@ -23,8 +25,8 @@
 //!
 //! # Interfaces (the units of `crate::interfaces`)
 //! `laser` (mm, the scan's own geometry: start, step, range limits), `encoders`
-//! (x, y mm, θ rad), `imu` (SI), `colorA..D`/`varcolorA..D` (BGR; `bgr8` images
-//! only), `motors` (v mm/s, w deg/s → Twist m/s, rad/s, sent every 100 ms and on
+//! (x, y mm, θ rad), `imu` (SI), `colorA..D`/`varcolorA..D` (BGR; `bgr8` Images,
+//! or JPEG/PNG CompressedImages of at most 8192x8192 pixels), `motors` (v mm/s, w deg/s → Twist m/s, rad/s, sent every 100 ms and on
 //! each new command).
 //!
 //! Sensor readers are best effort (they match best-effort and reliable writers:
@@ -114,6 +116,11 @@ type Decode = Box<dyn FnMut(&Source, &[u8]) -> bool + Send>;
 /// `motors` and the `/cmd_vel` writer it feeds, with the topic's name.
 type CmdVelOut = (Arc<Interface<Motors>>, DataWriter<Cdr, CdrAdapter>, String);
 
+/// Decodes a message of `topic`: (wall time ns, value); the last argument is
+/// the time of messages without a header.
+type DecodeFn<T> = fn(&str, &[u8], u64) -> Result<(u64, T), crate::mcapfmt::FormatError>;
+
+/// A reader of `topic` with its kind's ROS 2 message into `iface`.
 fn input<T: Ros2>(
     dp: &DomainParticipant,
     sub: &rustdds::Subscriber,
@@ -122,6 +129,34 @@ fn input<T: Ros2>(
     iface: Arc<Interface<T>>,
 ) -> anyhow::Result<Input> {
     let dds_type = T::MESSAGE.map(|m| m.dds).unwrap_or("");
+    input_as(dp, sub, topic, reliable, iface, dds_type, ros2::decode::<T>)
+}
+
+/// A topic ending in `/compressed` carries `sensor_msgs/msg/CompressedImage`
+/// (image_transport's name for it), any other camera topic `sensor_msgs/msg/Image`.
+fn camera_input(
+    dp: &DomainParticipant,
+    sub: &rustdds::Subscriber,
+    topic: String,
+    iface: Arc<Interface<Image>>,
+) -> anyhow::Result<Input> {
+    if topic.ends_with("/compressed") {
+        let dec: DecodeFn<Image> = |t, d, _| ros2::decode_compressed(t, d);
+        input_as(dp, sub, topic, false, iface, ros2::COMPRESSED_IMAGE, dec)
+    } else {
+        input(dp, sub, topic, false, iface)
+    }
+}
+
+fn input_as<T: crate::interfaces::InterfaceValue>(
+    dp: &DomainParticipant,
+    sub: &rustdds::Subscriber,
+    topic: String,
+    reliable: bool,
+    iface: Arc<Interface<T>>,
+    dds_type: &'static str,
+    decode: DecodeFn<T>,
+) -> anyhow::Result<Input> {
     let t = dp
         .create_topic(
             dds_topic(&topic),
@@ -152,7 +187,7 @@ fn input<T: Ros2>(
         reader,
         apply: Box::new(move |source, data| {
             let now = crate::mcapfmt::nanos(SystemTime::now());
-            match ros2::decode::<T>(&name, data, now) {
+            match decode(&name, data, now) {
                 Ok((_, v)) => iface.accept(source, v).is_some(),
                 Err(e) => {
                     source.refused(e);
@@ -349,7 +384,7 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
             Some("image") => {
                 let i = rt.interfaces.provide::<Image>(name, &conf.name)?;
                 ifaces.push(i.clone());
-                inputs.push(input(dp, &sub, topic, false, i)?);
+                inputs.push(camera_input(dp, &sub, topic, i)?);
             }
             Some("motors") => {
                 let i = rt.interfaces.provide::<Motors>(name, &conf.name)?;

@@ -22,6 +22,9 @@
 //! serves laser             # what is served (default: every interface with a
 //! serves encoders odom     #   ROS 2 message); an optional ROS 2 topic name
 //! frames odom base_link laser camera   # frame ids (these are the defaults)
+//! compressed colorA 80     # also colorA as CompressedImage, JPEG quality 80 (repeatable)
+//! sonar 25 100 5000        # each sonar's field of view (deg), min and max range (mm)
+//! joints pan tilt          # the pan-tilt's joint names
 //! motors_timeout 500       # ms: /cmd_vel older than this counts as zero
 //! end_service
 //! ```
@@ -35,11 +38,17 @@
 //! | laser | `/tf_static` | base_link → laser (the laser's mount) | reliable, transient local, keep last 1 |
 //! | imu | `imu` | `sensor_msgs/msg/Imu` | best effort, keep last 5 |
 //! | colorA..D, varcolorA..D | `NAME/image_raw` | `sensor_msgs/msg/Image` `bgr8` | best effort, keep last 5 |
+//! | sonars | `sonar_0`..`sonar_N` | `sensor_msgs/msg/Range` ULTRASOUND, frame `sonar_I` | best effort, keep last 5 |
+//! | bumpers | `hazard_detection` | `irobot_create_msgs/msg/HazardDetectionVector` (the Create 3's): a BUMP per pressed bumper, frame `bumper_I` | best effort, keep last 5 |
+//! | pantiltencoders | `joint_states` | `sensor_msgs/msg/JointState` `pan`, `tilt`, rad | reliable, keep last 10 |
+//! | pantiltmotors | `joint_command` (read) | `sensor_msgs/msg/JointState`: positions rad, velocities rad/s | best-effort reader |
+//! | `compressed` cameras | `NAME/image_raw/compressed` | `sensor_msgs/msg/CompressedImage` JPEG | best effort, keep last 5 |
 //! | motors | `cmd_vel` (read) | `geometry_msgs/msg/Twist` → v mm/s, w deg/s | reliable (a best-effort writer matches too) |
 //!
 //! A Twist that is not a valid motors value (NaN, infinite, out of motors' range)
 //! is refused with one line. Motors are set to zero `motors_timeout` after the
-//! last `/cmd_vel` (so also when its writer leaves), and when the service stops.
+//! last `/cmd_vel` (so also when its writer leaves), and when the service stops;
+//! the pan-tilt is then held where its encoders say it is (0° would swing it).
 //!
 //! # Security
 //! RustDDS 0.11 speaks on every multicast-capable interface; it cannot keep
@@ -67,14 +76,15 @@ use rustdds::{
 use crate::{
     conf::{
         ComponentConf,
-        settings::{self, MOTORS_TIMEOUT, Setting, int, interface, word},
+        settings::{self, MOTORS_TIMEOUT, Setting, float, int, interface, word},
     },
     interfaces::{
-        Encoders, Image, Imu, Interface, InterfaceValue, Laser, Motors, Mount, Source, Watch,
+        Bumpers, Encoders, Image, Imu, Interface, InterfaceValue, Laser, Motors, Mount, PtEncoders,
+        PtMotors, Sample, Sonars, Source, Watch,
     },
     mcapfmt::{
         dds::{Cdr, CdrAdapter, Graph, dds_topic, reliable_qos, ros_topic, sensor_qos, static_qos},
-        ros2::{self, Ros2, Transform},
+        ros2::{self, Joints, RangeReading, Ros2, Transform},
     },
     runtime::{Driver, Runtime},
     supervisor::Worker,
@@ -102,6 +112,32 @@ const LINES: &[Setting] = &[
         &[word("ODOM"), word("BASE"), word("LASER"), word("CAMERA")],
     )
     .default("odom base_link laser camera"),
+    Setting::new(
+        "compressed",
+        "also serve camera INTERFACE as sensor_msgs/msg/CompressedImage (JPEG of QUALITY) \
+         on NAME/image_raw/compressed",
+        &[
+            interface("INTERFACE"),
+            int("QUALITY", "", 1, 100).optional(),
+        ],
+    )
+    .repeats(),
+    Setting::new(
+        "sonar",
+        "each sonar's field of view and range limits (sensor_msgs/msg/Range)",
+        &[
+            float("FOV", "deg", 0.0, 180.0),
+            float("MIN", "mm", 0.0, 1e6),
+            float("MAX", "mm", 0.0, 1e6),
+        ],
+    )
+    .default("25 100 5000"),
+    Setting::new(
+        "joints",
+        "the pan-tilt's joint names on joint_states and joint_command",
+        &[word("PAN"), word("TILT")],
+    )
+    .default("pan tilt"),
     MOTORS_TIMEOUT,
 ];
 
@@ -114,10 +150,14 @@ struct Lines {
     domain: u16,
     serves: Vec<(String, Option<String>)>,
     frames: (String, String, String, String),
+    compressed: Vec<(String, Option<u8>)>,
+    sonar: (f32, f32, f32),
+    joints: (String, String),
     motors_timeout: u64,
 }
 
 type Writer = DataWriter<Cdr, CdrAdapter>;
+type Reader = DataReader<Cdr, CdrAdapter>;
 
 fn writer(
     dp: &DomainParticipant,
@@ -138,23 +178,27 @@ fn dds_name<T: Ros2>() -> &'static str {
     T::MESSAGE.map(|m| m.dds).unwrap_or("")
 }
 
+/// Writes a sample's message into the buffer (frame, sample); false: nothing to send.
+type Encode<T> = Box<dyn Fn(&str, &Sample<T>, &mut Vec<u8>) -> bool + Send>;
+
 /// One served sensor: its interface, its writer, the last clock sent.
 struct Served<T> {
     iface: Arc<Interface<T>>,
     topic: String,
     frame: String,
     writer: Writer,
+    encode: Encode<T>,
     clock: u64,
 }
 
-impl<T: Ros2> Served<T> {
-    fn send(&mut self, buf: &mut Vec<u8>) -> Option<Arc<crate::interfaces::Sample<T>>> {
+impl<T: InterfaceValue> Served<T> {
+    fn send(&mut self, buf: &mut Vec<u8>) -> Option<Arc<Sample<T>>> {
         let s = self.iface.snapshot();
         if s.clock == self.clock || s.clock == 0 {
             return None;
         }
         self.clock = s.clock;
-        if ros2::encode(&self.frame, &s, buf)
+        if (self.encode)(&self.frame, &s, buf)
             && let Err(e) = self.writer.write(Cdr(std::mem::take(buf)), None)
         {
             tracing::debug!("ros2: {}: {e}", self.topic);
@@ -163,13 +207,80 @@ impl<T: Ros2> Served<T> {
     }
 }
 
+/// What the serving thread sends on each new value of an interface.
+trait Out: Send {
+    fn send(&mut self, buf: &mut Vec<u8>);
+    /// Watches and resumes the interface; the closure lets it go.
+    fn use_it(&self, watch: &Arc<Watch>) -> Box<dyn FnOnce()>;
+}
+
+impl<T: InterfaceValue> Out for Served<T> {
+    fn send(&mut self, buf: &mut Vec<u8>) {
+        Served::send(self, buf);
+    }
+    fn use_it(&self, watch: &Arc<Watch>) -> Box<dyn FnOnce()> {
+        in_use(&self.iface, watch)
+    }
+}
+
+/// The sonar ring: one `sensor_msgs/msg/Range` topic per sonar (`BASE_I`, frame
+/// `FRAME_I`), each writer made when its sonar first reports.
+struct SonarsOut {
+    iface: Arc<Interface<Sonars>>,
+    topic: String,
+    frame: String,
+    geometry: (f32, f32, f32),
+    writers: Vec<Writer>,
+    dp: DomainParticipant,
+    publisher: Publisher,
+    clock: u64,
+}
+
+impl Out for SonarsOut {
+    fn send(&mut self, buf: &mut Vec<u8>) {
+        let s = self.iface.snapshot();
+        if s.clock == self.clock || s.clock == 0 {
+            return;
+        }
+        self.clock = s.clock;
+        let (fov, min, max) = self.geometry;
+        for (i, us) in s.value.us.iter().enumerate() {
+            if i == self.writers.len() {
+                let topic = format!("{}_{i}", self.topic);
+                match writer(&self.dp, &self.publisher, &topic, ros2::RANGE, sensor_qos()) {
+                    Ok(w) => self.writers.push(w),
+                    Err(e) => {
+                        tracing::warn!("service ros2: {e}");
+                        return;
+                    }
+                }
+            }
+            let frame = format!("{}_{i}", self.frame);
+            let r = RangeReading {
+                frame: &frame,
+                field_of_view: fov.to_radians(),
+                min_range: min / 1000.0,
+                max_range: max / 1000.0,
+                range: us / 1000.0,
+            };
+            ros2::encode_range(s.time, &r, buf);
+            let _ = self.writers[i].write(Cdr(std::mem::take(buf)), None);
+        }
+    }
+    fn use_it(&self, watch: &Arc<Watch>) -> Box<dyn FnOnce()> {
+        in_use(&self.iface, watch)
+    }
+}
+
 #[derive(Default)]
 struct Plan {
-    lasers: Vec<Served<Laser>>,
+    sensors: Vec<Box<dyn Out>>,
     odom: Vec<(Served<Encoders>, Writer)>,
-    imus: Vec<Served<Imu>>,
-    images: Vec<Served<Image>>,
-    cmd: Option<CmdVelIn>,
+    cmd: Option<Command<Motors>>,
+    pantilt: Option<Command<PtMotors>>,
+    /// The pan-tilt's encoders (to hold it where it is), and its joint names.
+    pt_encoders: Option<Arc<Interface<PtEncoders>>>,
+    joints: (String, String),
     /// The robot's frame (`frames` line), the child of odom on `/tf`.
     base_frame: String,
     /// `/tf_static`'s writer, and the mounts it sends.
@@ -177,8 +288,63 @@ struct Plan {
     statics: Vec<Transform>,
 }
 
-/// `motors` and the `/cmd_vel` reader that drives it, with the topic's name.
-type CmdVelIn = (Arc<Interface<Motors>>, DataReader<Cdr, CdrAdapter>, String);
+/// A commanded interface, the reader of the topic that drives it, and when the
+/// last accepted command came.
+struct Command<T> {
+    iface: Arc<Interface<T>>,
+    reader: Reader,
+    topic: String,
+    source: Source,
+    last: Option<Instant>,
+}
+
+impl<T> Command<T> {
+    fn new(iface: Arc<Interface<T>>, reader: Reader, topic: String) -> Command<T> {
+        let source = Source::new(format!("ros2: {topic}"));
+        Command {
+            iface,
+            reader,
+            topic,
+            source,
+            last: None,
+        }
+    }
+
+    /// Takes every waiting message; `apply` turns one into a value or says why not.
+    fn drain(&mut self, mut apply: impl FnMut(&str, &[u8]) -> Result<T, String>)
+    where
+        T: InterfaceValue,
+    {
+        loop {
+            match self.reader.take_next_sample() {
+                Ok(Some(sample)) => match apply(&self.topic, &sample.value().0) {
+                    Ok(v) => {
+                        if self.iface.accept(&self.source, v).is_some() {
+                            self.last = Some(Instant::now());
+                        }
+                    }
+                    Err(e) => {
+                        self.source.refused(e);
+                    }
+                },
+                Ok(None) => break,
+                Err(e) => {
+                    self.source.refused(format!("{}: {e}", self.topic));
+                    break;
+                }
+            }
+        }
+    }
+
+    /// True once when the last command is `timeout` old (or at stop: `timeout` 0).
+    fn expired(&mut self, timeout: Duration) -> bool {
+        let old = self.last.is_some_and(|t| t.elapsed() >= timeout);
+        if old {
+            self.last = None;
+        }
+        old
+    }
+}
 
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>> {
     let l: Lines = conf.settings(LINES)?;
@@ -191,26 +357,8 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
         );
     }
     let d = Dds::join(&l)?;
-    let ns = d.graph.ns.clone();
-    // What is served: the serves lines, or every interface with a ROS 2 message.
-    let serves: Vec<(String, Option<String>)> = if l.serves.is_empty() {
-        rt.interfaces
-            .all()
-            .iter()
-            .filter(|i| ros2::message(i.kind()).is_some())
-            .map(|i| (i.name().to_string(), None))
-            .collect()
-    } else {
-        l.serves.clone()
-    };
-    let frames = Frames::from(&l);
-    let mut plan = Plan {
-        base_frame: frames.base.clone(),
-        ..Plan::default()
-    };
-    for (name, topic) in &serves {
-        plan.add(rt, &d, &ns, &frames, name, topic.as_deref())?;
-    }
+    let serves = served_names(&l, rt);
+    let mut plan = Plan::new(rt, &d, &l, &serves)?;
     if !plan.statics.is_empty() {
         let w = writer(
             &d.graph.dp,
@@ -246,6 +394,32 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
     Ok(Box::new(Ros2Service { worker, watch }))
 }
 
+/// The kinds this service has a ROS 2 topic for.
+const SERVED_KINDS: &[&str] = &[
+    "laser",
+    "encoders",
+    "motors",
+    "imu",
+    "image",
+    "sonars",
+    "bumpers",
+    "pantiltencoders",
+    "pantiltmotors",
+];
+
+/// What is served: the serves lines, or every interface with a ROS 2 topic.
+fn served_names(l: &Lines, rt: &Runtime) -> Vec<(String, Option<String>)> {
+    if !l.serves.is_empty() {
+        return l.serves.clone();
+    }
+    rt.interfaces
+        .all()
+        .iter()
+        .filter(|i| SERVED_KINDS.contains(&i.kind()))
+        .map(|i| (i.name().to_string(), None))
+        .collect()
+}
+
 /// The node in the ROS 2 graph and the DDS entities its topics hang from.
 struct Dds {
     graph: Graph,
@@ -270,10 +444,8 @@ impl Dds {
             subscriber,
         })
     }
-}
 
-impl Dds {
-    /// `iface` served on `topic` with its kind's ROS 2 type.
+    /// `iface` served on `topic` with its kind's ROS 2 message.
     fn served<T: Ros2>(
         &self,
         iface: Arc<Interface<T>>,
@@ -281,30 +453,39 @@ impl Dds {
         frame: String,
         qos: QosPolicies,
     ) -> anyhow::Result<Served<T>> {
-        let writer = writer(
-            &self.graph.dp,
-            &self.publisher,
-            &topic,
-            dds_name::<T>(),
-            qos,
-        )?;
+        let enc: Encode<T> = Box::new(|f, s, b| ros2::encode(f, s, b));
+        self.served_as(iface, topic, frame, qos, dds_name::<T>(), enc)
+    }
+
+    /// `iface` served on `topic` as DDS type `dds_type`, written by `encode`.
+    fn served_as<T>(
+        &self,
+        iface: Arc<Interface<T>>,
+        topic: String,
+        frame: String,
+        qos: QosPolicies,
+        dds_type: &str,
+        encode: Encode<T>,
+    ) -> anyhow::Result<Served<T>> {
+        let writer = writer(&self.graph.dp, &self.publisher, &topic, dds_type, qos)?;
         Ok(Served {
             iface,
             topic,
             frame,
             writer,
+            encode,
             clock: 0,
         })
     }
 
-    /// The reader of a `geometry_msgs/msg/Twist` topic that drives `motors`.
-    fn cmd_vel_reader(&self, topic: &str) -> anyhow::Result<DataReader<Cdr, CdrAdapter>> {
+    /// The reader of a command topic of DDS type `dds_type`.
+    fn reader(&self, topic: &str, dds_type: &str) -> anyhow::Result<Reader> {
         let t = self
             .graph
             .dp
             .create_topic(
                 dds_topic(topic),
-                dds_name::<Motors>().into(),
+                dds_type.into(),
                 &reliable_qos(10),
                 TopicKind::NoKey,
             )
@@ -332,65 +513,84 @@ fn mount_transform(parent: &str, child: &str, m: Mount) -> Transform {
     }
 }
 
-/// The frame ids of the `frames` line.
-struct Frames {
-    odom: String,
-    base: String,
-    laser: String,
-    camera: String,
+/// What `add` needs besides the plan: the conf, the runtime, the DDS entities.
+struct Ctx<'a> {
+    rt: &'a Runtime,
+    d: &'a Dds,
+    l: &'a Lines,
 }
 
-impl From<&Lines> for Frames {
-    fn from(l: &Lines) -> Frames {
-        let (odom, base, laser, camera) = l.frames.clone();
-        Frames {
-            odom,
-            base,
-            laser,
-            camera,
+impl Ctx<'_> {
+    /// The frame (or frame prefix) of interface `name`: `first` (the kind's own
+    /// interface) gets `own`, another robot's its name with `_`.
+    fn frame(&self, name: &str, first: bool, own: &str) -> String {
+        if first {
+            own.to_string()
+        } else {
+            format!("{}_{own}", name.replace('.', "_"))
         }
     }
 }
 
 impl Plan {
-    /// Adds interface `name` on `topic` (or its kind's usual topic) to what is served.
-    fn add(
-        &mut self,
+    fn new(
         rt: &Runtime,
         d: &Dds,
-        ns: &str,
-        f: &Frames,
-        name: &str,
-        topic: Option<&str>,
-    ) -> anyhow::Result<()> {
-        let plan = self;
+        l: &Lines,
+        serves: &[(String, Option<String>)],
+    ) -> anyhow::Result<Plan> {
+        let mut plan = Plan {
+            base_frame: l.frames.1.clone(),
+            joints: l.joints.clone(),
+            ..Plan::default()
+        };
+        let c = Ctx { rt, d, l };
+        for (name, topic) in serves {
+            plan.add(&c, name, topic.as_deref())?;
+        }
+        for (name, quality) in &l.compressed {
+            plan.add_compressed(&c, name, quality.unwrap_or(80))?;
+        }
+        Ok(plan)
+    }
+
+    /// Adds interface `name` on `topic` (or its kind's usual topic) to what is served.
+    fn add(&mut self, c: &Ctx, name: &str, topic: Option<&str>) -> anyhow::Result<()> {
+        let (rt, d, f) = (c.rt, c.d, &c.l.frames);
         let iface = rt
             .interfaces
             .get_any(name)
             .map_err(|e| anyhow::anyhow!("service ros2: serves {name}: {e}"))?;
         let first = name == iface.kind() || name == "laser";
         let kind = iface.kind();
+        let sub = name.replace('.', "/");
         let default = match kind {
             "laser" if first => "scan".to_string(),
             "encoders" => "odom".to_string(),
             "motors" => "cmd_vel".to_string(),
             "imu" => "imu".to_string(),
-            "image" => format!("{name}/image_raw"),
-            _ => name.replace('.', "/"),
+            "image" => format!("{sub}/image_raw"),
+            "sonars" if first => "sonar".to_string(),
+            "sonars" => format!("{sub}/sonar"),
+            "bumpers" if first => "hazard_detection".to_string(),
+            "pantiltencoders" if first => "joint_states".to_string(),
+            "pantiltmotors" if first => "joint_command".to_string(),
+            _ => sub,
         };
-        let topic = ros_topic(ns, topic.unwrap_or(&default));
+        let topic = ros_topic(&d.graph.ns, topic.unwrap_or(&default));
         let sensor = sensor_qos();
         match kind {
             "laser" => {
                 let iface = rt.interfaces.get::<Laser>(name)?;
                 let frame = if first {
-                    f.laser.clone()
+                    f.2.clone()
                 } else {
                     name.replace('.', "_")
                 };
-                plan.statics
-                    .push(mount_transform(&f.base, &frame, iface.read().value.mount));
-                plan.lasers.push(d.served(iface, topic, frame, sensor)?);
+                self.statics
+                    .push(mount_transform(&f.1, &frame, iface.read().value.mount));
+                self.sensors
+                    .push(Box::new(d.served(iface, topic, frame, sensor)?));
             }
             "encoders" => {
                 let iface = rt.interfaces.get::<Encoders>(name)?;
@@ -401,29 +601,112 @@ impl Plan {
                     ros2::TF_MESSAGE,
                     reliable_qos(100),
                 )?;
-                let odom = d.served(iface, topic, f.odom.clone(), reliable_qos(10))?;
-                plan.odom.push((odom, tf));
+                let odom = d.served(iface, topic, f.0.clone(), reliable_qos(10))?;
+                self.odom.push((odom, tf));
             }
             "imu" => {
                 let iface = rt.interfaces.get::<Imu>(name)?;
-                plan.imus
-                    .push(d.served(iface, topic, f.base.clone(), sensor)?);
+                self.sensors
+                    .push(Box::new(d.served(iface, topic, f.1.clone(), sensor)?));
             }
             "image" => {
                 let iface = rt.interfaces.get::<Image>(name)?;
-                plan.images
-                    .push(d.served(iface, topic, f.camera.clone(), sensor)?);
+                self.sensors
+                    .push(Box::new(d.served(iface, topic, f.3.clone(), sensor)?));
             }
             "motors" => {
                 let iface = rt.interfaces.get::<Motors>(name)?;
-                let r = d.cmd_vel_reader(&topic)?;
-                plan.cmd = Some((iface, r, topic));
+                let r = d.reader(&topic, dds_name::<Motors>())?;
+                self.cmd = Some(Command::new(iface, r, topic));
+            }
+            _ => return self.add_other(c, name, first, topic),
+        }
+        Ok(())
+    }
+
+    /// Sonars, bumpers and the pan-tilt, the kinds without a `Ros2` message of their own.
+    fn add_other(&mut self, c: &Ctx, name: &str, first: bool, topic: String) -> anyhow::Result<()> {
+        let (rt, d) = (c.rt, c.d);
+        let iface = rt.interfaces.get_any(name)?;
+        match iface.kind() {
+            "sonars" => {
+                self.sensors.push(Box::new(SonarsOut {
+                    iface: rt.interfaces.get::<Sonars>(name)?,
+                    topic,
+                    frame: c.frame(name, first, "sonar"),
+                    geometry: c.l.sonar,
+                    writers: vec![],
+                    dp: d.graph.dp.clone(),
+                    publisher: d.publisher.clone(),
+                    clock: 0,
+                }));
+            }
+            "bumpers" => {
+                let iface = rt.interfaces.get::<Bumpers>(name)?;
+                let prefix = c.frame(name, first, "bumper");
+                let enc: Encode<Bumpers> = Box::new(move |frame, s, buf| {
+                    let bumped: Vec<String> = (s.value.bumpers.iter().enumerate())
+                        .filter(|(_, b)| **b != 0)
+                        .map(|(i, _)| format!("{prefix}_{i}"))
+                        .collect();
+                    ros2::encode_hazards(s.time, frame, &bumped, buf);
+                    true
+                });
+                let base = c.l.frames.1.clone();
+                let s = d.served_as(iface, topic, base, sensor_qos(), ros2::HAZARDS, enc)?;
+                self.sensors.push(Box::new(s));
+            }
+            "pantiltencoders" => {
+                let iface = rt.interfaces.get::<PtEncoders>(name)?;
+                self.pt_encoders = Some(iface.clone());
+                let (pan, tilt) = self.joints.clone();
+                let enc: Encode<PtEncoders> = Box::new(move |_, s, buf| {
+                    let j = Joints {
+                        names: vec![pan.clone(), tilt.clone()],
+                        position: vec![
+                            (s.value.pan_angle as f64).to_radians(),
+                            (s.value.tilt_angle as f64).to_radians(),
+                        ],
+                        velocity: vec![],
+                    };
+                    ros2::encode_joints(s.time, &j, buf);
+                    true
+                });
+                let qos = reliable_qos(10);
+                let s = d.served_as(iface, topic, String::new(), qos, ros2::JOINT_STATE, enc)?;
+                self.sensors.push(Box::new(s));
+            }
+            "pantiltmotors" => {
+                let iface = rt.interfaces.get::<PtMotors>(name)?;
+                let r = d.reader(&topic, ros2::JOINT_STATE)?;
+                self.pantilt = Some(Command::new(iface, r, topic));
             }
             other => anyhow::bail!(
                 "service ros2: serves {name}: a {other} interface has no ROS 2 message here; \
-                 serve laser, encoders, imu, motors or a camera"
+                 serve laser, encoders, imu, motors, sonars, bumpers, pantiltencoders, \
+                 pantiltmotors or a camera"
             ),
         }
+        Ok(())
+    }
+
+    /// `compressed NAME QUALITY`: camera `NAME` as JPEG on `NAME/image_raw/compressed`.
+    fn add_compressed(&mut self, c: &Ctx, name: &str, quality: u8) -> anyhow::Result<()> {
+        let iface =
+            c.rt.interfaces
+                .get::<Image>(name)
+                .map_err(|e| anyhow::anyhow!("service ros2: compressed {name}: {e}"))?;
+        let topic = ros_topic(
+            &c.d.graph.ns,
+            &format!("{}/image_raw/compressed", name.replace('.', "/")),
+        );
+        let enc: Encode<Image> =
+            Box::new(move |frame, s, buf| ros2::encode_compressed(frame, s, quality, buf));
+        let frame = c.l.frames.3.clone();
+        let qos = sensor_qos();
+        let s =
+            c.d.served_as(iface, topic, frame, qos, ros2::COMPRESSED_IMAGE, enc)?;
+        self.sensors.push(Box::new(s));
         Ok(())
     }
 }
@@ -442,7 +725,6 @@ impl Driver for Ros2Service {
     }
 }
 
-/// The thread: sends each new sensor value, applies /cmd_vel.
 /// Watches and resumes a served interface; the returned closure lets it go.
 fn in_use<T: InterfaceValue>(iface: &Arc<Interface<T>>, watch: &Arc<Watch>) -> Box<dyn FnOnce()> {
     iface.watch(watch.clone());
@@ -454,6 +736,52 @@ fn in_use<T: InterfaceValue>(iface: &Arc<Interface<T>>, watch: &Arc<Watch>) -> B
     })
 }
 
+/// A `sensor_msgs/msg/JointState` command applied to the pan-tilt: the joints
+/// it names move to their positions (rad → deg), at their velocities when
+/// given (rad/s → deg/s), else at the unit's maximum speed.
+fn pantilt_command(
+    now: PtMotors,
+    joints: &(String, String),
+    topic: &str,
+    data: &[u8],
+) -> Result<PtMotors, String> {
+    let j = ros2::decode_joints(topic, data).map_err(|e| e.to_string())?;
+    let mut m = now;
+    for (i, n) in j.names.iter().enumerate() {
+        let Some(p) = j.position.get(i) else {
+            return Err(format!("{topic}: joint `{n}` has no position"));
+        };
+        let p = p.to_degrees() as f32;
+        let v = j.velocity.get(i).map(|v| v.abs().to_degrees() as f32);
+        if *n == joints.0 {
+            m.longitude = p;
+            m.longitude_speed = v.unwrap_or(m.max_longitude_speed);
+        } else if *n == joints.1 {
+            m.latitude = p;
+            m.latitude_speed = v.unwrap_or(m.max_latitude_speed);
+        } else {
+            return Err(format!(
+                "{topic}: no joint `{n}` (the pan-tilt's are `{}` and `{}`)",
+                joints.0, joints.1
+            ));
+        }
+    }
+    Ok(m)
+}
+
+/// Holds the pan-tilt where its encoders say it is (a position unit has no
+/// "zero" that is safe: it stays put, as a ROS 2 controller does when commands stop).
+fn hold(pt: &Command<PtMotors>, enc: Option<&Arc<Interface<PtEncoders>>>) {
+    if let Some(e) = enc {
+        let at = e.read().value;
+        let mut m = pt.iface.read().value;
+        m.longitude = at.pan_angle.clamp(m.min_longitude, m.max_longitude);
+        m.latitude = at.tilt_angle.clamp(m.min_latitude, m.max_latitude);
+        let _ = pt.iface.publish(m);
+    }
+}
+
+/// The thread: sends each new sensor value, applies /cmd_vel and joint_command.
 fn serve(
     mut plan: Plan,
     watch: Arc<Watch>,
@@ -462,24 +790,17 @@ fn serve(
     _keep: Graph,
 ) {
     let mut users: Vec<Box<dyn FnOnce()>> = vec![];
-    users.extend(plan.lasers.iter().map(|s| in_use(&s.iface, &watch)));
+    users.extend(plan.sensors.iter().map(|s| s.use_it(&watch)));
     users.extend(plan.odom.iter().map(|(s, _)| in_use(&s.iface, &watch)));
-    users.extend(plan.imus.iter().map(|s| in_use(&s.iface, &watch)));
-    users.extend(plan.images.iter().map(|s| in_use(&s.iface, &watch)));
     let mut buf = Vec::new();
     if let Some(w) = &plan.tf_static {
         let tfs = &plan.statics;
         ros2::encode_tf(SystemTime::now(), tfs, &mut buf);
         let _ = w.write(Cdr(std::mem::take(&mut buf)), None);
     }
-    let source = plan
-        .cmd
-        .as_ref()
-        .map(|(_, _, t)| Source::new(format!("ros2: {t}")));
-    let mut last_cmd: Option<Instant> = None;
     while !stop.load(Ordering::Acquire) {
         watch.wait(Duration::from_millis(2));
-        for s in &mut plan.lasers {
+        for s in &mut plan.sensors {
             s.send(&mut buf);
         }
         for (s, tf) in &mut plan.odom {
@@ -497,42 +818,34 @@ fn serve(
                 let _ = tf.write(Cdr(std::mem::take(&mut buf)), None);
             }
         }
-        for s in &mut plan.imus {
-            s.send(&mut buf);
-        }
-        for s in &mut plan.images {
-            s.send(&mut buf);
-        }
-        if let (Some((motors, reader, topic)), Some(source)) = (&mut plan.cmd, &source) {
-            loop {
-                match reader.take_next_sample() {
-                    Ok(Some(sample)) => match ros2::decode::<Motors>(topic, &sample.value().0, 0) {
-                        Ok((_, m)) => {
-                            if motors.accept(source, m).is_some() {
-                                last_cmd = Some(Instant::now());
-                            }
-                        }
-                        Err(e) => {
-                            source.refused(e);
-                        }
-                    },
-                    Ok(None) => break,
-                    Err(e) => {
-                        source.refused(format!("{topic}: {e}"));
-                        break;
-                    }
-                }
+        if let Some(c) = &mut plan.cmd {
+            c.drain(|t, d| {
+                ros2::decode::<Motors>(t, d, 0)
+                    .map(|x| x.1)
+                    .map_err(|e| e.to_string())
+            });
+            if c.expired(timeout) {
+                let _ = c.iface.publish(Motors::default());
             }
-            if last_cmd.is_some_and(|t| t.elapsed() >= timeout) {
-                last_cmd = None;
-                let _ = motors.publish(Motors::default());
+        }
+        if let Some(pt) = &mut plan.pantilt {
+            let joints = &plan.joints;
+            let now = pt.iface.read().value;
+            pt.drain(|t, d| pantilt_command(now, joints, t, d));
+            if pt.expired(timeout) {
+                hold(pt, plan.pt_encoders.as_ref());
             }
         }
     }
-    if let Some((motors, _, _)) = &plan.cmd
-        && last_cmd.is_some()
+    if let Some(c) = &mut plan.cmd
+        && c.expired(Duration::ZERO)
     {
-        let _ = motors.publish(Motors::default());
+        let _ = c.iface.publish(Motors::default());
+    }
+    if let Some(pt) = &mut plan.pantilt
+        && pt.expired(Duration::ZERO)
+    {
+        hold(pt, plan.pt_encoders.as_ref());
     }
     users.into_iter().for_each(|f| f());
 }
@@ -540,7 +853,7 @@ fn serve(
 crate::register_driver!(
     Service,
     "ros2",
-    "a ROS 2 node over DDS serving the robot: /scan, /odom, /tf, /imu, images; /cmd_vel drives motors",
+    "a ROS 2 node over DDS serving the robot: /scan, /odom, /tf, /imu, images, sonars, bumpers, pan-tilt; /cmd_vel drives motors",
     create,
     lines = LINES
 );

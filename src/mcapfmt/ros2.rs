@@ -250,9 +250,16 @@ impl Ros2 for Laser {
         if n > r.data.len() / 4 {
             return Err(bad(r.topic, "a LaserScan with more ranges than bytes"));
         }
+        // REP 117: +inf is no return, NaN an erroneous one (both: max_range, what
+        // the interface calls no return), -inf too close to measure (min_range).
         let mut readings = Vec::with_capacity(n);
         for _ in 0..n {
-            readings.push((r.f32()? as f64 * 1000.0).round() as i32);
+            let v = match r.f32()? {
+                v if v.is_nan() || v > range_max => range_max,
+                f32::NEG_INFINITY => range_min,
+                v => v,
+            };
+            readings.push((v as f64 * 1000.0).round() as i32);
         }
         let resolution = if inc > 0.0 {
             ((1.0 / (inc as f64).to_degrees()) as f32 * 1000.0).round() / 1000.0
@@ -507,6 +514,165 @@ pub fn encode_tf(time: SystemTime, transforms: &[Transform], out: &mut Vec<u8>) 
             w.f64(v);
         }
     }
+}
+
+fn start(out: &mut Vec<u8>) -> Writer<'_> {
+    out.clear();
+    out.extend_from_slice(&[0, 1, 0, 0]);
+    Writer(out)
+}
+
+/// The DDS type name of `sensor_msgs/msg/Range` (one sonar).
+pub const RANGE: &str = "sensor_msgs::msg::dds_::Range_";
+
+/// One sonar's reading, what `sensor_msgs/msg/Range` carries (metres, radians).
+pub struct RangeReading<'a> {
+    pub frame: &'a str,
+    pub field_of_view: f32,
+    pub min_range: f32,
+    pub max_range: f32,
+    pub range: f32,
+}
+
+/// Encodes `sensor_msgs/msg/Range` (radiation type ULTRASOUND, as Humble's and
+/// Jazzy's definition: no `variance`) into `out` (cleared first).
+pub fn encode_range(time: SystemTime, r: &RangeReading, out: &mut Vec<u8>) {
+    let mut w = start(out);
+    w.header(time, r.frame);
+    w.u8(0);
+    for v in [r.field_of_view, r.min_range, r.max_range, r.range] {
+        w.f32(v);
+    }
+}
+
+/// The DDS type name of `irobot_create_msgs/msg/HazardDetectionVector`.
+pub const HAZARDS: &str = "irobot_create_msgs::msg::dds_::HazardDetectionVector_";
+
+/// Encodes `irobot_create_msgs/msg/HazardDetectionVector` (the iRobot Create 3's
+/// `/hazard_detection`): one `HazardDetection` of type BUMP (1) per frame in
+/// `bumped`, each stamped `time` in its own frame; `frame` is the vector's.
+pub fn encode_hazards(time: SystemTime, frame: &str, bumped: &[String], out: &mut Vec<u8>) {
+    let mut w = start(out);
+    w.header(time, frame);
+    w.u32(bumped.len() as u32);
+    for b in bumped {
+        w.header(time, b);
+        w.u8(1);
+    }
+}
+
+/// The DDS type name of `sensor_msgs/msg/JointState`.
+pub const JOINT_STATE: &str = "sensor_msgs::msg::dds_::JointState_";
+
+/// A `sensor_msgs/msg/JointState`: names, positions (rad), velocities (rad/s);
+/// the efforts are not kept.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Joints {
+    pub names: Vec<String>,
+    pub position: Vec<f64>,
+    pub velocity: Vec<f64>,
+}
+
+/// Encodes `sensor_msgs/msg/JointState` (no efforts) into `out` (cleared first).
+pub fn encode_joints(time: SystemTime, j: &Joints, out: &mut Vec<u8>) {
+    let mut w = start(out);
+    w.header(time, "");
+    w.u32(j.names.len() as u32);
+    for n in &j.names {
+        w.string(n);
+    }
+    for v in [&j.position, &j.velocity] {
+        w.u32(v.len() as u32);
+        for x in v.iter() {
+            w.f64(*x);
+        }
+    }
+    w.u32(0);
+}
+
+impl Reader<'_> {
+    /// A sequence's length, refused when it could not fit in what is left
+    /// (`size` bytes per element at least): a damaged length allocates nothing.
+    fn len(&mut self, size: usize, what: &str) -> Result<usize, FormatError> {
+        let n = self.u32()? as usize;
+        if n.saturating_mul(size) > self.data.len().saturating_sub(self.at) {
+            return Err(bad(
+                self.topic,
+                format!("{what}: {n} elements in {} bytes", self.data.len()),
+            ));
+        }
+        Ok(n)
+    }
+    fn f64s(&mut self, what: &str) -> Result<Vec<f64>, FormatError> {
+        let n = self.len(8, what)?;
+        (0..n).map(|_| self.f64()).collect()
+    }
+}
+
+/// Decodes a `sensor_msgs/msg/JointState` CDR message.
+pub fn decode_joints(topic: &str, data: &[u8]) -> Result<Joints, FormatError> {
+    if data.len() < 4 || data[..2] != [0, 1] {
+        return Err(bad(topic, "not little-endian CDR (encapsulation 0x0001)"));
+    }
+    let mut r = Reader { data, at: 4, topic };
+    r.header()?;
+    let n = r.len(5, "JointState.name")?;
+    let names = (0..n).map(|_| r.string()).collect::<Result<_, _>>()?;
+    let position = r.f64s("JointState.position")?;
+    let velocity = r.f64s("JointState.velocity")?;
+    Ok(Joints {
+        names,
+        position,
+        velocity,
+    })
+}
+
+/// The DDS type name of `sensor_msgs/msg/CompressedImage`.
+pub const COMPRESSED_IMAGE: &str = "sensor_msgs::msg::dds_::CompressedImage_";
+
+/// Encodes `sensor_msgs/msg/CompressedImage` as image_transport's `compressed`
+/// plugin writes it (format `bgr8; jpeg compressed bgr8`): the image as JPEG of
+/// `quality` (1..=100). False when the encoder fails.
+pub fn encode_compressed(frame: &str, s: &Sample<Image>, quality: u8, out: &mut Vec<u8>) -> bool {
+    let Some(jpeg) = super::jpeg(&s.value, quality) else {
+        return false;
+    };
+    let mut w = start(out);
+    w.header(s.time, frame);
+    w.string("bgr8; jpeg compressed bgr8");
+    w.u32(jpeg.len() as u32);
+    w.0.extend_from_slice(&jpeg);
+    true
+}
+
+/// The largest image a CompressedImage may unpack to (pixels): 8192x8192, so a
+/// small message cannot claim gigabytes.
+const MAX_PIXELS: u64 = 8192 * 8192;
+
+/// Decodes a `sensor_msgs/msg/CompressedImage` (JPEG or PNG, as image_transport's
+/// `compressed` plugin sends) into a BGR image: (wall time ns, image).
+pub fn decode_compressed(topic: &str, data: &[u8]) -> Result<(u64, Image), FormatError> {
+    if data.len() < 4 || data[..2] != [0, 1] {
+        return Err(bad(topic, "not little-endian CDR (encapsulation 0x0001)"));
+    }
+    let mut r = Reader { data, at: 4, topic };
+    let t = r.header()?;
+    let format = r.string()?;
+    let n = r.len(1, "CompressedImage.data")?;
+    let bytes = r.take(n, 1)?;
+    let fail = |e: String| bad(topic, format!("a CompressedImage `{format}`: {e}"));
+    let mut dec = image::ImageReader::new(std::io::Cursor::new(bytes))
+        .with_guessed_format()
+        .map_err(|e| fail(e.to_string()))?;
+    let mut limits = image::Limits::default();
+    limits.max_alloc = Some(MAX_PIXELS * 4);
+    dec.limits(limits);
+    let img = dec.decode().map_err(|e| fail(e.to_string()))?.into_rgb8();
+    let (w, h) = img.dimensions();
+    if w as u64 * h as u64 > MAX_PIXELS || w == 0 || h == 0 {
+        return Err(fail(format!("{w}x{h} pixels")));
+    }
+    Ok((t, Image::from_rgb(w, h, img.into_raw())))
 }
 
 /// The kinds without a ROS 2 message.

@@ -1,14 +1,22 @@
 """A ROS 2 peer on Eclipse Cyclone DDS (the `cyclonedds` Python binding), independent
 of jderobot's code: its types are the ROS 2 message definitions of
 ros2/common_interfaces (sensor_msgs/LaserScan, nav_msgs/Odometry, tf2_msgs/TFMessage,
-geometry_msgs/Twist, sensor_msgs/Image, sensor_msgs/Imu) under the DDS names a ROS 2
+geometry_msgs/Twist, sensor_msgs/Image, sensor_msgs/Imu, sensor_msgs/Range,
+sensor_msgs/JointState, sensor_msgs/CompressedImage) and of irobot/irobot_create_msgs
+(HazardDetection, HazardDetectionVector) under the DDS names a ROS 2
 node uses (topic `rt/scan`, type `sensor_msgs::msg::dds_::LaserScan_`, ...), written
 in XCDR1 as rmw_cyclonedds does.
 
     cyclone_peer.py listen DOMAIN SECS   subscribe to a served robot, decode every
                                          type field by field, drive it on /cmd_vel
+                                         and its pan-tilt on /joint_command
     cyclone_peer.py robot DOMAIN SECS    be a robot: publish /scan and /odom of a
                                          robot in a 10 m square room, move as /cmd_vel says
+
+    cyclone_peer.py bad DOMAIN SECS      publish NaN/inf values, images whose size
+                                         disagrees with their data, a wrong type
+    cyclone_peer.py many DOMAIN SECS     1,000 endpoints: 500 readers of rt/scan, 500 writers
+    cyclone_peer.py camera DOMAIN SECS JPG  publish a JPEG file as a CompressedImage
 
 Prints one JSON line.
 """
@@ -148,6 +156,60 @@ class Imu(IdlStruct, typename="sensor_msgs::msg::dds_::Imu_"):
     linear_acceleration_covariance: array[float64, 9]
 
 
+@dataclass
+class Range(IdlStruct, typename="sensor_msgs::msg::dds_::Range_"):
+    header: Header
+    radiation_type: uint8
+    field_of_view: float32
+    min_range: float32
+    max_range: float32
+    range: float32
+
+
+@dataclass
+class JointState(IdlStruct, typename="sensor_msgs::msg::dds_::JointState_"):
+    header: Header
+    name: sequence[str]
+    position: sequence[float64]
+    velocity: sequence[float64]
+    effort: sequence[float64]
+
+
+@dataclass
+class CompressedImage(IdlStruct, typename="sensor_msgs::msg::dds_::CompressedImage_"):
+    header: Header
+    format: str
+    data: sequence[uint8]
+
+
+@dataclass
+class HazardDetection(IdlStruct, typename="irobot_create_msgs::msg::dds_::HazardDetection_"):
+    header: Header
+    type: uint8
+
+
+@dataclass
+class HazardDetectionVector(IdlStruct, typename="irobot_create_msgs::msg::dds_::HazardDetectionVector_"):
+    header: Header
+    detections: sequence[HazardDetection]
+
+
+def jpeg_size(data):
+    """(width, height) from a JPEG's SOF0..SOF2 segment (ITU T.81 B.2.2), or None."""
+    b = bytes(data)
+    if b[:2] != b"\xff\xd8":
+        return None
+    i = 2
+    while i + 9 < len(b):
+        if b[i] != 0xFF:
+            return None
+        marker, n = b[i + 1], int.from_bytes(b[i + 2:i + 4], "big")
+        if marker in (0xC0, 0xC1, 0xC2):
+            return int.from_bytes(b[i + 7:i + 9], "big"), int.from_bytes(b[i + 5:i + 7], "big")
+        i += 2 + n
+    return None
+
+
 XCDR1 = Policy.DataRepresentation(use_cdrv0_representation=True)
 # rclcpp's defaults: SystemDefaultsQoS / default (reliable, keep last 10, volatile),
 # the sensor data profile (best effort, keep last 5), tf_static (transient local).
@@ -167,15 +229,21 @@ def listen(dp, secs):
     readers = {}
     for name, typ, qos in [("scan", LaserScan, SENSOR), ("odom", Odometry, DEFAULT), ("tf", TFMessage, DEFAULT),
                            ("tf_static", TFMessage, STATIC), ("colorA/image_raw", Image, SENSOR),
-                           ("imu", Imu, SENSOR)]:
+                           ("imu", Imu, SENSOR), ("sonar_0", Range, SENSOR), ("sonar_15", Range, SENSOR),
+                           ("hazard_detection", HazardDetectionVector, SENSOR),
+                           ("joint_states", JointState, DEFAULT),
+                           ("colorA/image_raw/compressed", CompressedImage, SENSOR)]:
         readers[name] = DataReader(dp, Topic(dp, "rt/" + name, typ, qos=qos), qos=qos)
     cmd = DataWriter(dp, Topic(dp, "rt/cmd_vel", Twist, qos=DEFAULT), qos=DEFAULT)
+    joint_cmd = DataWriter(dp, Topic(dp, "rt/joint_command", JointState, qos=DEFAULT), qos=DEFAULT)
     got = {}
     end = time.time() + secs
     odom_first = None
     while time.time() < end:
         if odom_first:  # drive once the starting pose is known
             cmd.write(Twist(Vector3(0.3, 0.0, 0.0), Vector3(0.0, 0.0, 0.2)))
+            # pan 0.5 rad at 1 rad/s, tilt -0.3 rad at the unit's speed (no velocity)
+            joint_cmd.write(JointState(Header(Time(0, 0), ""), ["pan", "tilt"], [0.5, -0.3], [1.0], []))
         for name, r in readers.items():
             for m in r.take(N=10):
                 if name == "scan":
@@ -200,13 +268,32 @@ def listen(dp, secs):
                     got["image"] = {"frame": m.header.frame_id, "width": m.width, "height": m.height,
                                     "encoding": m.encoding, "step": m.step, "bytes": len(m.data),
                                     "big": m.is_bigendian}
+                elif name.startswith("sonar_"):
+                    got[name] = {"frame": m.header.frame_id, "radiation_type": m.radiation_type,
+                                 "field_of_view": m.field_of_view, "min_range": m.min_range,
+                                 "max_range": m.max_range, "range": m.range, "stamp": m.header.stamp.sec}
+                elif name == "hazard_detection":
+                    h = {"frame": m.header.frame_id, "n": len(m.detections),
+                         "detections": [{"frame": d.header.frame_id, "type": d.type} for d in m.detections]}
+                    got["hazards"] = h
+                    if m.detections:
+                        got["bumped"] = h
+                elif name == "joint_states":
+                    got["joints"] = {"name": list(m.name), "position": list(m.position),
+                                     "velocity": len(m.velocity), "effort": len(m.effort)}
+                elif name == "colorA/image_raw/compressed":
+                    size = jpeg_size(m.data)
+                    got["compressed"] = {"frame": m.header.frame_id, "format": m.format, "bytes": len(m.data),
+                                         "width": size[0] if size else None, "height": size[1] if size else None}
                 elif name == "imu":
                     got["imu"] = {"frame": m.header.frame_id, "qw": m.orientation.w,
                                   "az": m.linear_acceleration.z}
-        want = ["scan", "odom", "tf", "tf_static", "image", "imu"]
+        want = ["scan", "odom", "tf", "tf_static", "image", "imu", "sonar_0", "sonar_15", "hazards", "bumped",
+                "joints", "compressed"]
+        panned = "joints" in got and abs(got["joints"]["position"][0] - 0.5) < 0.02
         moved = "odom" in got and math.hypot(got["odom"]["x"] - got["odom_first"]["x"],
                                              got["odom"]["y"] - got["odom_first"]["y"]) > 0.1
-        if all(k in got for k in want) and moved:
+        if all(k in got for k in want) and moved and panned:
             break
         time.sleep(0.05)
     print(json.dumps(got))
@@ -261,10 +348,73 @@ def robot(dp, secs):
     print(json.dumps({"x": x, "y": y, "theta": th, "cmds": cmds, "max_v": max_v}))
 
 
+def bad(dp, secs):
+    """Publishes what a broken or hostile ROS 2 node might: NaN and infinite
+    values, an image whose size disagrees with its data, a CompressedImage that is
+    not an image, and an Image on the topic a LaserScan is expected on."""
+    scan_w = DataWriter(dp, Topic(dp, "rt/scan", LaserScan, qos=SENSOR), qos=SENSOR)
+    odom_w = DataWriter(dp, Topic(dp, "rt/odom", Odometry, qos=DEFAULT), qos=DEFAULT)
+    img_w = DataWriter(dp, Topic(dp, "rt/camera/image_raw", Image, qos=SENSOR), qos=SENSOR)
+    jpg_w = DataWriter(dp, Topic(dp, "rt/camera/image_raw/compressed", CompressedImage, qos=SENSOR), qos=SENSOR)
+    imu_w = DataWriter(dp, Topic(dp, "rt/imu", Imu, qos=SENSOR), qos=SENSOR)
+    wrong_w = DataWriter(dp, Topic(dp, "rt/wrong", Image, qos=SENSOR), qos=SENSOR)
+    zero = [0.0] * 36
+    nine = [0.0] * 9
+    nan, inf = float("nan"), float("inf")
+    end = time.time() + secs
+    n = 0
+    while time.time() < end:
+        h = Header(Time(int(time.time()), 0), "x")
+        scan_w.write(LaserScan(h, nan, 1.0, 0.01, 0.0, 0.0, 0.1, inf, [1.0] * 10, []))
+        odom_w.write(Odometry(h, "base", PoseWithCovariance(Pose(Point(nan, 0.0, 0.0),
+                                                                  Quaternion(0, 0, 0, 1)), zero),
+                              TwistWithCovariance(Twist(Vector3(0, 0, 0), Vector3(0, 0, 0)), zero)))
+        img_w.write(Image(h, 480, 640, "bgr8", 0, 1920, [7] * 100))
+        jpg_w.write(CompressedImage(h, "jpeg", [0xFF, 0xD8, 0xFF, 0xC0, 0, 17, 8, 0xFF, 0xFF, 0xFF, 0xFF] + [1] * 40))
+        imu_w.write(Imu(h, Quaternion(0, 0, 0, inf), nine, Vector3(0, 0, 0), nine, Vector3(0, 0, nan), nine))
+        wrong_w.write(Image(h, 1, 1, "bgr8", 0, 3, [0, 0, 0]))
+        n += 1
+        time.sleep(0.05)
+    print(json.dumps({"sent": n}))
+
+
+def camera(dp, secs, path):
+    """Publishes the JPEG file `path` as image_transport's compressed plugin
+    does: sensor_msgs/CompressedImage on rt/camera/image_raw/compressed."""
+    w = DataWriter(dp, Topic(dp, "rt/camera/image_raw/compressed", CompressedImage, qos=SENSOR), qos=SENSOR)
+    data = list(open(path, "rb").read())
+    end = time.time() + secs
+    n = 0
+    while time.time() < end:
+        w.write(CompressedImage(Header(Time(int(time.time()), 0), "camera"), "bgr8; jpeg compressed bgr8", data))
+        n += 1
+        time.sleep(0.05)
+    print(json.dumps({"sent": n, "size": jpeg_size(data)}))
+
+
+def many(dp, secs):
+    """1,000 remote endpoints: 500 readers of rt/scan (each a best-effort reader
+    the service must match and send to) and 500 writers of topics of their own."""
+    readers = [DataReader(dp, Topic(dp, "rt/scan", LaserScan, qos=SENSOR), qos=SENSOR) for _ in range(500)]
+    writers = [DataWriter(dp, Topic(dp, "rt/noise_%d" % i, Twist, qos=DEFAULT), qos=DEFAULT) for i in range(500)]
+    end = time.time() + secs
+    matched = 0
+    while time.time() < end:
+        for w in writers[:50]:
+            w.write(Twist(Vector3(0, 0, 0), Vector3(0, 0, 0)))
+        for r in readers:
+            matched += len(r.take(N=5))
+        time.sleep(0.2)
+    print(json.dumps({"readers": len(readers), "writers": len(writers), "matched_scan": matched}))
+
+
 def main():
     mode, domain, secs = sys.argv[1], int(sys.argv[2]), float(sys.argv[3])
     dp = DomainParticipant(domain)
-    {"listen": listen, "robot": robot}[mode](dp, secs)
+    if mode == "camera":
+        camera(dp, secs, sys.argv[4])
+    else:
+        {"listen": listen, "robot": robot, "bad": bad, "many": many}[mode](dp, secs)
 
 
 if __name__ == "__main__":
