@@ -691,6 +691,9 @@ impl PlayerDriver {
     }
 }
 
+/// Every `motors` interface the driver provides.
+type AllMotors = Vec<Arc<Interface<Motors>>>;
+
 /// Provides the interfaces of every `provides` line (each waiting for its
 /// device), and the motors among them.
 fn provide(
@@ -698,7 +701,7 @@ fn provide(
     ifaces: &Interfaces,
     names: &crate::namespace::Namespace,
     provider: &str,
-) -> anyhow::Result<(Vec<Pending>, Vec<Arc<Interface<Motors>>>)> {
+) -> anyhow::Result<(Vec<Pending>, AllMotors)> {
     let mut pending = Vec::new();
     let mut motors_all = Vec::new();
     for w in &pc.wants {
