@@ -189,7 +189,7 @@ fn laser(bin: &Path, hz: u32, secs: u32) -> (f64, f64, usize) {
 fn decode(rays: usize) -> f64 {
     let mut msg = Vec::new();
     let mut w = pb::W(&mut msg);
-    w.msg(1, |w| w.msg(1, |w| w.uint(1, 12)));
+    w.message(1, |w| w.message(1, |w| w.uint(1, 12)));
     w.bytes(2, b"robot1::lidar_link::lidar");
     w.double(4, -std::f64::consts::PI);
     w.double(5, std::f64::consts::PI);

@@ -99,10 +99,7 @@ fn link() -> Link {
     ));
     let server = NetServer::start(
         ServerConf::default(),
-        Sources {
-            images: vec![(0, src.clone())],
-            ..Default::default()
-        },
+        Sources::default().serving_image(0, src.clone()),
     )
     .unwrap();
     let port = server.local_addr().port();
@@ -244,11 +241,9 @@ fn hundred_clients(secs: f64) -> (f64, f64, u64, f64) {
     let enc = Arc::new(Interface::<Encoders>::new("encoders", "robot"));
     let server = NetServer::start(
         ServerConf::default(),
-        Sources {
-            laser: Some(laser.clone()),
-            encoders: Some(enc.clone()),
-            ..Default::default()
-        },
+        Sources::default()
+            .serving(laser.clone())
+            .serving(enc.clone()),
     )
     .unwrap();
     let addr = server.local_addr();

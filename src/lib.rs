@@ -30,6 +30,8 @@ pub mod netwire;
 pub mod operator;
 pub mod output;
 pub mod progeo;
+#[cfg(any(feature = "gazebo", feature = "_mcap"))]
+pub mod protowire;
 pub mod registry;
 pub mod runtime;
 #[cfg(feature = "_serialhead")]

@@ -380,7 +380,7 @@ fn driver_targets(p: &Path) -> Vec<Target> {
         let mut seeds = Vec::new();
         let mut scan = Vec::new();
         let mut w = pb::W(&mut scan);
-        w.msg(1, |w| w.msg(1, |w| w.uint(1, 3)));
+        w.message(1, |w| w.message(1, |w| w.uint(1, 3)));
         w.double(4, -1.5);
         w.double(6, 0.01);
         w.double(8, 10.0);

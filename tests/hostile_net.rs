@@ -31,11 +31,7 @@ fn still_laser_server(conf: ServerConf) -> (NetServer, Arc<Interface<Motors>>) {
     let laser = Arc::new(Interface::<Laser>::new("laser", "robot"));
     laser.publish(Laser::jde43(vec![1000; 10], 1.0)).unwrap();
     let motors = Arc::new(Interface::<Motors>::new("motors", "robot"));
-    let sources = Sources {
-        laser: Some(laser),
-        motors: Some(motors.clone()),
-        ..Default::default()
-    };
+    let sources = Sources::default().serving(laser).serving(motors.clone());
     (NetServer::start(conf, sources).unwrap(), motors)
 }
 

@@ -139,14 +139,13 @@ fn bad_clients_are_dropped_alone_and_memory_stays_bounded() {
         "robot",
         Image::new(1280, 960),
     ));
-    let sources = Sources {
-        images: vec![(0, small.clone()), (1, big.clone())],
-        laser: Some(laser.clone()),
-        encoders: Some(encoders.clone()),
-        motors: Some(motors.clone()),
-        zm: Some(zoom.clone()),
-        ..Default::default()
-    };
+    let sources = Sources::default()
+        .serving_image(0, small.clone())
+        .serving_image(1, big.clone())
+        .serving(laser.clone())
+        .serving(encoders.clone())
+        .serving(motors.clone())
+        .serving(zoom.clone());
     let conf = ServerConf {
         timeout: Duration::from_millis(300),
         max_clients: 64,
@@ -407,11 +406,9 @@ fn bad_clients_are_dropped_alone_and_memory_stays_bounded() {
 /// flag is set.
 fn laser_server(conf: ServerConf) -> (NetServer, Arc<AtomicBool>, thread::JoinHandle<()>) {
     let laser = Arc::new(Interface::<Laser>::new("laser", "robot"));
-    let sources = Sources {
-        laser: Some(laser.clone()),
-        motors: Some(Arc::new(Interface::<Motors>::new("motors", "robot"))),
-        ..Default::default()
-    };
+    let sources = Sources::default()
+        .serving(laser.clone())
+        .serving(Arc::new(Interface::<Motors>::new("motors", "robot")));
     let server = NetServer::start(conf, sources).unwrap();
     let stop = Arc::new(AtomicBool::new(false));
     let t = {

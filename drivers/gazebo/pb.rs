@@ -1,4 +1,5 @@
-//! The protobuf messages the driver reads and writes, encoded and decoded by hand:
+//! The protobuf messages the driver reads and writes, on the one protobuf wire
+//! ([`crate::protowire`]):
 //! gz-transport's `Discovery` and the gz-msgs messages of the topics (field numbers
 //! from gz-msgs 8's `.proto` files, the same in `gz.msgs` of Garden and later).
 //!
@@ -12,153 +13,26 @@
 //! | `LaserScan` | 1 header, 4 angle_min, 5 angle_max, 6 angle_step, 7 range_min, 8 range_max, 9 count, 14 ranges (packed double) |
 //! | `Image` | 1 header, 2 width, 3 height, 4 step, 5 data, 6 pixel_format_type |
 
-use std::fmt;
-
-/// A malformed message: what was wrong.
-#[derive(Debug, Clone, PartialEq)]
-pub struct PbError(pub String);
-
-impl fmt::Display for PbError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(&self.0)
-    }
-}
+use crate::protowire;
+pub use crate::protowire::{Value as Val, WireError as PbError, Writer as W};
 
 fn bad(m: impl Into<String>) -> PbError {
     PbError(m.into())
 }
 
-/// One field's value.
-#[derive(Clone, Copy, Debug)]
-pub enum Val<'a> {
-    Varint(u64),
-    I64(u64),
-    Len(&'a [u8]),
-    I32(u32),
+/// The fields of a message ([`protowire::fields`]).
+fn fields(b: &[u8]) -> protowire::Fields<'_> {
+    protowire::fields(b)
 }
 
-impl<'a> Val<'a> {
-    pub fn u64(self) -> u64 {
-        match self {
-            Val::Varint(v) | Val::I64(v) => v,
-            Val::I32(v) => v as u64,
-            Val::Len(_) => 0,
-        }
-    }
-    pub fn f64(self) -> f64 {
-        match self {
-            Val::I64(v) => f64::from_bits(v),
-            Val::I32(v) => f32::from_bits(v) as f64,
-            _ => 0.0,
-        }
-    }
-    pub fn bytes(self) -> &'a [u8] {
-        match self {
-            Val::Len(b) => b,
-            _ => &[],
-        }
-    }
-    pub fn str(self) -> Result<&'a str, PbError> {
+/// A string field.
+trait Text<'a> {
+    fn str(self) -> Result<&'a str, PbError>;
+}
+
+impl<'a> Text<'a> for Val<'a> {
+    fn str(self) -> Result<&'a str, PbError> {
         std::str::from_utf8(self.bytes()).map_err(|_| bad("a string field is not UTF-8"))
-    }
-}
-
-/// The fields of a message, in order; a malformed field ends with an error.
-pub struct Fields<'a> {
-    b: &'a [u8],
-    at: usize,
-}
-
-pub fn fields(b: &[u8]) -> Fields<'_> {
-    Fields { b, at: 0 }
-}
-
-impl<'a> Fields<'a> {
-    fn varint(&mut self) -> Result<u64, PbError> {
-        let mut v = 0u64;
-        for shift in (0..64).step_by(7) {
-            let Some(&byte) = self.b.get(self.at) else {
-                return Err(bad("a varint runs past the end"));
-            };
-            self.at += 1;
-            v |= ((byte & 0x7f) as u64) << shift;
-            if byte < 0x80 {
-                return Ok(v);
-            }
-        }
-        Err(bad("a varint is longer than 10 bytes"))
-    }
-    fn take(&mut self, n: usize) -> Result<&'a [u8], PbError> {
-        let end = self
-            .at
-            .checked_add(n)
-            .filter(|e| *e <= self.b.len())
-            .ok_or_else(|| bad(format!("a field of {n} bytes runs past the end")))?;
-        let s = &self.b[self.at..end];
-        self.at = end;
-        Ok(s)
-    }
-    fn next_field(&mut self) -> Result<(u64, Val<'a>), PbError> {
-        let key = self.varint()?;
-        let (field, wire) = (key >> 3, key & 7);
-        let v = match wire {
-            0 => Val::Varint(self.varint()?),
-            1 => Val::I64(u64::from_le_bytes(self.take(8)?.try_into().expect("8"))),
-            2 => {
-                let n = self.varint()?;
-                let n = usize::try_from(n).map_err(|_| bad("absurd length"))?;
-                Val::Len(self.take(n)?)
-            }
-            5 => Val::I32(u32::from_le_bytes(self.take(4)?.try_into().expect("4"))),
-            w => return Err(bad(format!("field {field} has wire type {w}"))),
-        };
-        Ok((field, v))
-    }
-}
-
-impl<'a> Iterator for Fields<'a> {
-    type Item = Result<(u64, Val<'a>), PbError>;
-    fn next(&mut self) -> Option<Self::Item> {
-        if self.at >= self.b.len() {
-            return None;
-        }
-        let r = self.next_field();
-        if r.is_err() {
-            self.at = self.b.len();
-        }
-        Some(r)
-    }
-}
-
-/// Protobuf writing.
-pub struct W<'a>(pub &'a mut Vec<u8>);
-
-impl W<'_> {
-    fn varint(&mut self, mut v: u64) {
-        while v >= 0x80 {
-            self.0.push(v as u8 | 0x80);
-            v >>= 7;
-        }
-        self.0.push(v as u8);
-    }
-    pub fn uint(&mut self, field: u64, v: u64) {
-        self.varint(field << 3);
-        self.varint(v);
-    }
-    pub fn double(&mut self, field: u64, v: f64) {
-        self.varint(field << 3 | 1);
-        self.0.extend_from_slice(&v.to_le_bytes());
-    }
-    pub fn bytes(&mut self, field: u64, b: &[u8]) {
-        self.varint(field << 3 | 2);
-        self.varint(b.len() as u64);
-        self.0.extend_from_slice(b);
-    }
-    /// A sub-message written by `f`.
-    pub fn msg(&mut self, field: u64, f: impl FnOnce(&mut W)) {
-        let mut inner = Vec::new();
-        f(&mut W(&mut inner));
-        self.bytes(field, &inner);
     }
 }
 
@@ -256,16 +130,16 @@ impl Discovery {
         w.bytes(3, self.process_uuid.as_bytes());
         w.uint(4, self.kind);
         if let Some(t) = &self.sub {
-            w.msg(6, |w| w.bytes(1, t.as_bytes()));
+            w.message(6, |w| w.bytes(1, t.as_bytes()));
         }
         if let Some(p) = &self.publisher {
-            w.msg(7, |w| {
+            w.message(7, |w| {
                 w.bytes(1, p.topic.as_bytes());
                 w.bytes(2, p.address.as_bytes());
                 w.bytes(3, p.process_uuid.as_bytes());
                 w.bytes(4, p.node_uuid.as_bytes());
                 w.uint(5, p.scope);
-                w.msg(6, |w| {
+                w.message(6, |w| {
                     w.bytes(1, p.ctrl.as_bytes());
                     w.bytes(2, p.msg_type.as_bytes());
                     w.uint(4, u64::MAX);
@@ -371,8 +245,8 @@ pub fn decode_imu(b: &[u8]) -> Result<ImuReading, PbError> {
 pub fn encode_twist(v: f64, w: f64, out: &mut Vec<u8>) {
     out.clear();
     let mut m = W(out);
-    m.msg(2, |m| m.double(2, v));
-    m.msg(3, |m| m.double(4, w));
+    m.message(2, |m| m.double(2, v));
+    m.message(3, |m| m.double(4, w));
 }
 
 /// A `Twist`'s linear x and angular z.

@@ -64,11 +64,10 @@ use crate::{
         settings::{self, Form, MOTORS_TIMEOUT, Setting, choice, int, word},
     },
     interfaces::{
-        AnyInterface, COLOR_HEIGHT, COLOR_WIDTH, Encoders, Image, Imu, Interface, Interfaces,
-        Laser, Motors, PtEncoders, PtMotors, Sonars, Source, ZoomEncoders, ZoomMotors, canonical,
-        family,
+        AnyInterface, COLOR_HEIGHT, COLOR_WIDTH, Image, Interface, Interfaces, Source, by_kind,
+        canonical, family,
     },
-    netwire::{self, Feed, LineEvent, LineReader, Message, Request},
+    netwire::{self, Feed, LineEvent, LineReader, Message, Net43, OnWire, Request, WireError},
     runtime::{self, Backoff, Driver, Runtime, Supervision, Supervisor},
 };
 
@@ -230,16 +229,10 @@ impl ClientConf {
 /// A device and its local interface.
 #[derive(Clone)]
 enum Dev {
+    /// Frames on request: the image, its network id and required size.
     Image(Arc<Interface<Image>>, u32, Option<(u32, u32)>),
-    Laser(Arc<Interface<Laser>>),
-    Encoders(Arc<Interface<Encoders>>, (f32, f32, f32)),
-    Sonars(Arc<Interface<Sonars>>),
-    PtEncoders(Arc<Interface<PtEncoders>>),
-    ZoomEncoders(Arc<Interface<ZoomEncoders>>),
-    Imu(Arc<Interface<Imu>>),
-    Motors(Arc<Interface<Motors>>, Duration),
-    PtMotors(Arc<Interface<PtMotors>>),
-    ZoomMotors(Arc<Interface<ZoomMotors>>),
+    /// A pushed or commanded kind.
+    Wired(Arc<dyn Wired>),
 }
 
 impl Dev {
@@ -247,30 +240,94 @@ impl Dev {
     fn interface(&self) -> Arc<dyn AnyInterface> {
         match self {
             Dev::Image(i, ..) => i.clone(),
-            Dev::Laser(i) => i.clone(),
-            Dev::Encoders(i, _) => i.clone(),
-            Dev::Sonars(i) => i.clone(),
-            Dev::PtEncoders(i) => i.clone(),
-            Dev::ZoomEncoders(i) => i.clone(),
-            Dev::Imu(i) => i.clone(),
-            Dev::Motors(i, _) => i.clone(),
-            Dev::PtMotors(i) => i.clone(),
-            Dev::ZoomMotors(i) => i.clone(),
+            Dev::Wired(w) => w.interface(),
         }
     }
 
     /// The pushed feed of a sensor.
     fn feed(&self) -> Option<Feed> {
-        Some(match self {
-            Dev::Laser(_) => Feed::Laser,
-            Dev::Encoders(..) => Feed::Encoders,
-            Dev::Sonars(_) => Feed::Sonars,
-            Dev::PtEncoders(_) => Feed::PtEncoders,
-            Dev::ZoomEncoders(_) => Feed::ZoomEncoders,
-            Dev::Imu(_) => Feed::Imu,
-            _ => return None,
-        })
+        match self {
+            Dev::Wired(w) => Feed::of(w.interface().kind()),
+            Dev::Image(..) => None,
+        }
     }
+}
+
+/// A remote device of a pushed or commanded kind, whatever the kind: its local
+/// interface and its kind's [`Net43`] code.
+trait Wired: Send + Sync {
+    fn interface(&self) -> Arc<dyn AnyInterface>;
+    fn on_wire(&self) -> OnWire;
+    /// Pushed: publishes a push's fields (`f[0]` the clock).
+    fn take_push(&self, code: u32, f: &[&str], from: &Source) -> Result<(), WireError>;
+    /// Commanded: the requests that send the command (a renewed one older than
+    /// `timeout` as zero).
+    fn requests(&self, timeout: Duration) -> Vec<Request>;
+    /// Commanded: what to send when the driver stops, before the goodbye.
+    fn farewell(&self) -> Vec<Request>;
+    /// Commanded: publishes the limits the server answered; the new clock.
+    fn take_limits(&self, code: u32, f: &[&str]) -> Result<Option<u64>, WireError>;
+    /// Publishes the zero value (a renewed command whose connection is gone).
+    fn zero(&self);
+}
+
+/// A local interface of kind `T` fed or sent by a connection.
+struct Remote43<T> {
+    iface: Arc<Interface<T>>,
+    origin: netwire::Origin,
+}
+
+impl<T: Net43> Wired for Remote43<T> {
+    fn interface(&self) -> Arc<dyn AnyInterface> {
+        self.iface.clone()
+    }
+    fn on_wire(&self) -> OnWire {
+        T::ON_WIRE
+    }
+    fn take_push(&self, code: u32, f: &[&str], from: &Source) -> Result<(), WireError> {
+        self.iface.accept(from, T::read_push(code, f, self.origin)?);
+        Ok(())
+    }
+    fn requests(&self, timeout: Duration) -> Vec<Request> {
+        match T::ON_WIRE {
+            OnWire::Commanded {
+                keep_alive: true, ..
+            } => self
+                .iface
+                .fresh(timeout)
+                .map(|s| s.value.clone())
+                .unwrap_or_default()
+                .requests(),
+            _ => self.iface.read().value.requests(),
+        }
+    }
+    fn farewell(&self) -> Vec<Request> {
+        self.iface.read().value.farewell()
+    }
+    fn take_limits(&self, code: u32, f: &[&str]) -> Result<Option<u64>, WireError> {
+        let mut v = self.iface.read().value.clone();
+        v.read_limits(code, f)?;
+        Ok(self.iface.publish(v).ok())
+    }
+    fn zero(&self) {
+        if let OnWire::Commanded {
+            keep_alive: true, ..
+        } = T::ON_WIRE
+        {
+            let _ = self.iface.publish(T::default());
+        }
+    }
+}
+
+/// Provides interface `r.name` of kind `T` on `ifaces`, at the client's origin.
+fn wired<T: Net43>(
+    ifaces: &Interfaces,
+    r: &Remote,
+    provider: &str,
+    origin: netwire::Origin,
+) -> anyhow::Result<Dev> {
+    let iface = ifaces.provide_value(&r.name, provider, T::initial(origin))?;
+    Ok(Dev::Wired(Arc::new(Remote43 { iface, origin })))
 }
 
 /// The running driver: one supervised connection per device.
@@ -289,8 +346,12 @@ impl NetClient {
         let stop = Arc::new(AtomicBool::new(false));
         let mut devs = Vec::new();
         for r in &cc.remotes {
-            let dev = match family(&r.name).unwrap_or("") {
-                "image" => {
+            let kind = family(&r.name).unwrap_or("");
+            let dev = match netwire::on_wire(kind) {
+                OnWire::Absent => {
+                    anyhow::bail!("networkclient: cannot provide a {kind} interface")
+                }
+                OnWire::Frames => {
                     let (w, h) = r.size.unwrap_or((COLOR_WIDTH, COLOR_HEIGHT));
                     Dev::Image(
                         ifaces.provide_value(&r.name, provider, Image::new(w, h))?,
@@ -298,26 +359,11 @@ impl NetClient {
                         r.size,
                     )
                 }
-                "laser" => Dev::Laser(ifaces.provide(&r.name, provider)?),
-                "encoders" => {
-                    let (x, y, t) = cc.initial;
-                    Dev::Encoders(
-                        ifaces.provide_value(
-                            &r.name,
-                            provider,
-                            Encoders::from_pose(x, y, t.to_radians()),
-                        )?,
-                        cc.initial,
-                    )
-                }
-                "sonars" => Dev::Sonars(ifaces.provide(&r.name, provider)?),
-                "pantiltencoders" => Dev::PtEncoders(ifaces.provide(&r.name, provider)?),
-                "zoomencoders" => Dev::ZoomEncoders(ifaces.provide(&r.name, provider)?),
-                "imu" => Dev::Imu(ifaces.provide(&r.name, provider)?),
-                "motors" => Dev::Motors(ifaces.provide(&r.name, provider)?, cc.motors_timeout),
-                "pantiltmotors" => Dev::PtMotors(ifaces.provide(&r.name, provider)?),
-                "zoommotors" => Dev::ZoomMotors(ifaces.provide(&r.name, provider)?),
-                other => anyhow::bail!("networkclient: cannot provide a {other} interface"),
+                _ => by_kind!(
+                    kind,
+                    wired(ifaces, r, provider, cc.initial),
+                    Err(anyhow::anyhow!("networkclient: no {kind} kind"))
+                )?,
             };
             devs.push((r.clone(), dev));
         }
@@ -343,6 +389,7 @@ impl NetClient {
                 stop: stop.clone(),
                 name,
                 depth: cc.depth,
+                timeout: cc.motors_timeout,
             };
             links.push(Supervisor::start(how, link)?);
         }
@@ -383,6 +430,8 @@ struct Link {
     stop: Arc<AtomicBool>,
     name: [u8; netwire::NAME_LEN],
     depth: u32,
+    /// A renewed command (motors) older than this is sent as zero.
+    timeout: Duration,
     /// The server's values, refused (an encoders pose out of range, ...) with one
     /// log line per change of state.
     from: Source,
@@ -404,10 +453,8 @@ enum State {
         buf: Vec<u8>,
         reported: Option<(u32, u32)>,
     },
-    /// When the last command was sent, and the command's clock then.
-    Motors { last_sent: Instant, last_clock: u64 },
-    /// Pan-tilt or zoom commands: the clock of the last one sent.
-    Command { last_clock: u64 },
+    /// A command: when it was last sent, and its clock then.
+    Command { last_sent: Instant, last_clock: u64 },
 }
 
 impl runtime::Device for Link {
@@ -429,22 +476,19 @@ impl runtime::Device for Link {
                 buf: Vec::new(),
                 reported: None,
             },
-            Dev::Motors(..) => State::Motors {
-                last_sent: Instant::now() - Duration::from_secs(1),
-                last_clock: u64::MAX,
-            },
-            Dev::PtMotors(_) | Dev::ZoomMotors(_) => {
-                let query = if matches!(self.dev, Dev::PtMotors(_)) {
-                    Request::PtLimitsQuery
-                } else {
-                    Request::ZoomLimitsQuery
-                };
-                self.send(&stream, &[query]).map_err(|e| self.lost(e))?;
-                State::Command {
-                    last_clock: u64::MAX,
+            Dev::Wired(w) => match w.on_wire() {
+                OnWire::Commanded { limits, .. } => {
+                    if let Some(l) = limits {
+                        self.send(&stream, &[Request::LimitsQuery(l.query)])
+                            .map_err(|e| self.lost(e))?;
+                    }
+                    State::Command {
+                        last_sent: Instant::now() - Duration::from_secs(1),
+                        last_clock: u64::MAX,
+                    }
                 }
-            }
-            _ => State::Sensor { subscribed: false },
+                _ => State::Sensor { subscribed: false },
+            },
         };
         Ok(Session {
             stream,
@@ -469,18 +513,12 @@ impl runtime::Device for Link {
                 },
             ) => self.image_step(stream, lines, i, *netid, *size, inflight, buf, reported),
             (
-                Dev::Motors(m, timeout),
-                State::Motors {
+                Dev::Wired(w),
+                State::Command {
                     last_sent,
                     last_clock,
                 },
-            ) => self.motors_step(stream, lines, m, *timeout, last_sent, last_clock),
-            (Dev::PtMotors(p), State::Command { last_clock }) => {
-                self.ptmotors_step(stream, lines, p, last_clock)
-            }
-            (Dev::ZoomMotors(z), State::Command { last_clock }) => {
-                self.zoommotors_step(stream, lines, z, last_clock)
-            }
+            ) => self.command_step(stream, lines, &**w, last_sent, last_clock),
             (_, State::Sensor { subscribed }) => self.sensor_step(stream, lines, subscribed),
             _ => Err("internal: a session of another kind".into()),
         };
@@ -498,40 +536,24 @@ impl runtime::Device for Link {
         true
     }
 
-    /// The connection is gone: a motors command counts as zero here too.
+    /// The connection is gone: a renewed command (motors) counts as zero here too.
     fn on_loss(&mut self) {
-        if let Dev::Motors(m, _) = &self.dev {
-            let _ = m.publish(Motors::default());
+        if let Dev::Wired(w) = &self.dev {
+            w.zero();
         }
     }
 
     /// The driver stops: stop what moves on the server, and say goodbye.
     fn close(&mut self, s: Session) {
-        let farewell: Vec<Request> = match &self.dev {
-            Dev::Image(..) => vec![Request::GoodbyeImages],
-            Dev::Motors(..) => vec![
-                Request::DriveSpeed { v: 0.0, ac: 0.0 },
-                Request::SteerSpeed { w: 0.0, ac: 0.0 },
-                Request::Goodbye,
-            ],
-            Dev::PtMotors(p) => vec![pt_command(&p.read().value), Request::Goodbye],
-            Dev::ZoomMotors(_) => vec![Request::Goodbye],
-            sensor => match sensor.feed() {
-                Some(d) => vec![Request::Unsubscribe(d), Request::Goodbye],
-                None => vec![Request::Goodbye],
-            },
+        let mut farewell = match (&self.dev, self.dev.feed()) {
+            (Dev::Image(..), _) => vec![Request::GoodbyeImages],
+            (_, Some(d)) => vec![Request::Unsubscribe(d)],
+            (Dev::Wired(w), None) => w.farewell(),
         };
+        if !matches!(self.dev, Dev::Image(..)) {
+            farewell.push(Request::Goodbye);
+        }
         let _ = self.send(&s.stream, &farewell);
-    }
-}
-
-/// A pan-tilt command as 4.3's `1006` line.
-fn pt_command(c: &PtMotors) -> Request {
-    Request::PtPosition {
-        pan: c.longitude,
-        tilt: c.latitude,
-        pan_speed: c.longitude_speed,
-        tilt_speed: c.latitude_speed,
     }
 }
 
@@ -604,67 +626,17 @@ impl Link {
             *subscribed = true;
         }
         if let Some(line) = self.next_line(lr, s)? {
-            let m = Message::parse(line).map_err(|e| format!("the server sent a bad line: {e}"))?;
-            self.publish(m);
+            let m = Message::parse(line).map_err(bad_line)?;
+            self.publish(m).map_err(bad_line)?;
         }
         Ok(())
     }
 
-    fn publish(&self, m: Message) {
+    /// Publishes a push of this device's feed; logs the server's errors.
+    fn publish(&self, m: Message) -> Result<(), WireError> {
         match (&self.dev, m) {
-            (Dev::Laser(i), Message::Laser { readings, .. }) => {
-                i.accept_with(&self.from, |l| {
-                    l.readings.clear();
-                    l.readings.extend_from_slice(&readings);
-                    // 4.3's wire carries only the readings, of 4.3's laser: 180°
-                    // from −90° (docs/network.md).
-                    l.resolution = (readings.len() as f32 / 180.0).max(f32::MIN_POSITIVE);
-                    l.start = crate::interfaces::JDE43_LASER_START;
-                });
-            }
-            (
-                Dev::Encoders(i, (x0, y0, t0)),
-                Message::Encoders {
-                    x, y, theta_deg, ..
-                },
-            ) => {
-                let (s, c) = t0.to_radians().sin_cos();
-                let gx = x0 + c * x - s * y;
-                let gy = y0 + s * x + c * y;
-                i.accept(
-                    &self.from,
-                    Encoders::from_pose(gx, gy, (theta_deg + t0).to_radians()),
-                );
-            }
-            (Dev::Sonars(i), Message::Sonars { us, .. }) => {
-                let n = us.iter().map(|(k, _)| k + 1).max().unwrap_or(0);
-                i.accept_with(&self.from, |v| {
-                    v.us.clear();
-                    v.us.resize(n, 0.0);
-                    for (k, u) in &us {
-                        v.us[*k] = *u;
-                    }
-                });
-            }
-            (Dev::PtEncoders(i), Message::PtEncoders { pan, tilt, .. }) => {
-                i.accept(
-                    &self.from,
-                    PtEncoders {
-                        pan_angle: pan,
-                        tilt_angle: tilt,
-                    },
-                );
-            }
-            (Dev::ZoomEncoders(i), Message::ZoomEncoders { zoom, .. }) => {
-                i.accept(
-                    &self.from,
-                    ZoomEncoders {
-                        zoom_position: zoom,
-                    },
-                );
-            }
-            (Dev::Imu(i), Message::Imu { fields, .. }) => {
-                i.accept(&self.from, Imu::from_fields(fields));
+            (Dev::Wired(w), Message::Push { feed, fields }) if Some(feed) == self.dev.feed() => {
+                w.take_push(feed.codes().2, &fields, &self.from)?;
             }
             (_, Message::Error(t)) => {
                 tracing::warn!(
@@ -675,6 +647,7 @@ impl Link {
             }
             (_, m) => tracing::debug!("networkclient: unexpected {m:?}"),
         }
+        Ok(())
     }
 
     /// Keeps `depth` image requests in flight and publishes the next frame.
@@ -698,7 +671,7 @@ impl Link {
         let Some(line) = self.next_line(lr, s)? else {
             return Ok(());
         };
-        let m = Message::parse(line).map_err(|e| format!("the server sent a bad line: {e}"))?;
+        let m = Message::parse(line).map_err(bad_line)?;
         let (width, height) = match m {
             Message::Image {
                 netid: id,
@@ -714,10 +687,7 @@ impl Link {
                 }
                 (width, height)
             }
-            other => {
-                self.publish(other);
-                return Ok(());
-            }
+            other => return self.publish(other).map_err(bad_line),
         };
         *inflight = inflight.saturating_sub(1);
         let bytes = width as usize * height as usize * 3;
@@ -762,114 +732,50 @@ impl Link {
         Ok(())
     }
 
-    /// Sends the command when it changes, and every 100 ms (a stale one as zero).
-    fn motors_step(
+    /// Sends the command when it changes (a renewed one also every 100 ms, a
+    /// stale one as zero); takes the limits the server answers.
+    fn command_step(
         &self,
         s: &TcpStream,
         lr: &mut LineReader,
-        m: &Interface<Motors>,
-        timeout: Duration,
+        w: &dyn Wired,
         last_sent: &mut Instant,
         last_clock: &mut u64,
     ) -> Result<(), String> {
-        let clock = m.clock();
-        if clock != *last_clock || last_sent.elapsed() >= Duration::from_millis(100) {
-            let c = m.command(timeout);
-            self.send(
-                s,
-                &[
-                    Request::DriveSpeed { v: c.v, ac: 0.0 },
-                    Request::SteerSpeed { w: c.w, ac: 0.0 },
-                ],
-            )?;
+        let renewed = matches!(
+            w.on_wire(),
+            OnWire::Commanded {
+                keep_alive: true,
+                ..
+            }
+        );
+        let clock = w.interface().clock();
+        let due = renewed && last_sent.elapsed() >= Duration::from_millis(100);
+        if clock != *last_clock || due {
+            if clock > 0 || renewed {
+                self.send(s, &w.requests(self.timeout))?;
+            }
             *last_clock = clock;
             *last_sent = Instant::now();
         }
         // The read doubles as the tick's sleep and notices a closed server.
-        if let Some(line) = self.next_line(lr, s)?
-            && let Ok(msg) = Message::parse(line)
-        {
-            self.publish(msg);
-        }
-        Ok(())
-    }
-
-    /// Sends the pan-tilt command when it changes; takes the limits the server
-    /// answers.
-    fn ptmotors_step(
-        &self,
-        s: &TcpStream,
-        lr: &mut LineReader,
-        p: &Interface<PtMotors>,
-        last_clock: &mut u64,
-    ) -> Result<(), String> {
-        let clock = p.clock();
-        if clock != *last_clock {
-            if clock > 0 {
-                self.send(s, &[pt_command(&p.read().value)])?;
-            }
-            *last_clock = clock;
-        }
         if let Some(line) = self.next_line(lr, s)? {
-            match Message::parse(line) {
-                Ok(Message::PtLimits(v)) => {
-                    let mut c = p.read().value;
-                    c.max_longitude = v[0];
-                    c.max_latitude = v[1];
-                    c.min_longitude = v[2];
-                    c.min_latitude = v[3];
-                    c.max_longitude_speed = v[4];
-                    c.max_latitude_speed = v[5];
-                    if let Ok(k) = p.publish(c) {
+            match Message::parse(line).map_err(bad_line)? {
+                Message::Limits { code, fields } => {
+                    if let Some(k) = w.take_limits(code, &fields).map_err(bad_line)? {
                         *last_clock = k;
                     }
                 }
-                Ok(m) => self.publish(m),
-                Err(e) => return Err(format!("the server sent a bad line: {e}")),
+                m => self.publish(m).map_err(bad_line)?,
             }
         }
         Ok(())
     }
+}
 
-    /// Sends the zoom command when it changes; takes the limits the server answers.
-    fn zoommotors_step(
-        &self,
-        s: &TcpStream,
-        lr: &mut LineReader,
-        z: &Interface<ZoomMotors>,
-        last_clock: &mut u64,
-    ) -> Result<(), String> {
-        let clock = z.clock();
-        if clock != *last_clock {
-            if clock > 0 {
-                let c = z.read().value;
-                self.send(
-                    s,
-                    &[Request::ZoomPosition {
-                        zoom: c.zoom,
-                        speed: c.zoom_speed,
-                    }],
-                )?;
-            }
-            *last_clock = clock;
-        }
-        if let Some(line) = self.next_line(lr, s)? {
-            match Message::parse(line) {
-                Ok(Message::ZoomLimits(v)) => {
-                    let mut c = z.read().value;
-                    c.max_zoom = v[0];
-                    c.min_zoom = v[1];
-                    c.max_zoom_speed = v[2];
-                    if let Ok(k) = z.publish(c) {
-                        *last_clock = k;
-                    }
-                }
-                Ok(m) => self.publish(m),
-                Err(e) => return Err(format!("the server sent a bad line: {e}")),
-            }
-        }
-        Ok(())
-    }
+/// The error of a line from the server that is not what the wire allows.
+fn bad_line(e: WireError) -> String {
+    format!("the server sent a bad line: {e}")
 }
 
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>> {

@@ -657,95 +657,8 @@ impl PlayerDriver {
         provider: &str,
     ) -> anyhow::Result<PlayerDriver> {
         let srv = server(&pc);
-        let mut pending = Vec::new();
-        let mut motors_all = Vec::new();
-        for w in &pc.wants {
-            let off = pc.offset(&w.robot);
-            let binding = match &w.kind {
-                Provided::Encoders => Binding::Sink(Sink::Encoders(
-                    ifaces.provide_value(
-                        &w.name,
-                        provider,
-                        sinks::encoders(&Default::default(), &off),
-                    )?,
-                    off,
-                )),
-                Provided::Motors => {
-                    let m = ifaces.provide::<Motors>(&w.name, provider)?;
-                    motors_all.push(m.clone());
-                    Binding::Motors(m)
-                }
-                Provided::Laser(n, r) => Binding::Sink(Sink::Laser(
-                    ifaces.provide(&w.name, provider)?,
-                    LaserMap::new(*n, *r).mounted(Mount::PIONEER_LASER),
-                )),
-                Provided::Sonars => Binding::Sink(Sink::Sonars(ifaces.provide(&w.name, provider)?)),
-                Provided::Bumpers => {
-                    Binding::Sink(Sink::Bumpers(ifaces.provide(&w.name, provider)?))
-                }
-                Provided::PanTiltEncoders => {
-                    Binding::Sink(Sink::PtEncoders(ifaces.provide(&w.name, provider)?))
-                }
-                Provided::PanTiltMotors => Binding::PtMotors(ifaces.provide(&w.name, provider)?),
-                Provided::Camera(fixed) => {
-                    let init = if *fixed {
-                        Image::new(320, 240)
-                    } else {
-                        Image::default()
-                    };
-                    Binding::Sink(Sink::Camera(
-                        ifaces.provide_value(&w.name, provider, init)?,
-                        *fixed,
-                    ))
-                }
-                Provided::Blobs => {
-                    let b = names.export(
-                        provider,
-                        &w.name,
-                        LiveBlobs::from_pointee(BlobFrame::default()),
-                    )?;
-                    Binding::Sink(Sink::Blobs(b))
-                }
-            };
-            pending.push(Pending {
-                want: w.clone(),
-                binding,
-            });
-        }
-        let (conn, devices, pending) = match Conn::open(&pc.host, pc.port, pc.timeout) {
-            Ok(mut c) => {
-                let list = device_list(&mut c, pc.timeout).map_err(|e| {
-                    anyhow::anyhow!("the Player server at {srv} did not list its devices: {e}")
-                })?;
-                let (devices, failed) = bind(pending, &list, &srv);
-                if let Some((_, why)) = failed.into_iter().next() {
-                    c.close();
-                    return Err(anyhow::anyhow!("{}", why.trim_start_matches("player: ")));
-                }
-                tracing::info!(
-                    "player: connected to Player {} at {srv}; devices used: {}",
-                    c.version,
-                    devices
-                        .iter()
-                        .map(|d| d.addr.to_string())
-                        .collect::<Vec<_>>()
-                        .join(", ")
-                );
-                (Some(c), devices, Vec::new())
-            }
-            Err(e) => {
-                let why = format!(
-                    "player: cannot reach a Player server at {srv} ({e}). Start one first: for \
-                     Stage, `player /usr/share/stage/worlds/simple.cfg` (or your robot's .cfg); or \
-                     fix `hostname H port P` in the player driver's conf. Retrying in the background"
-                );
-                tracing::error!("{why}");
-                for p in &pending {
-                    p.set_stale(&why);
-                }
-                (None, Vec::new(), pending)
-            }
-        };
+        let (pending, motors_all) = provide(&pc, ifaces, names, provider)?;
+        let (conn, devices, pending) = first_connect(&pc, pending, &srv)?;
         let lost_since = conn.is_none().then(Instant::now);
         let link = Link {
             session: Session {
@@ -776,6 +689,117 @@ impl PlayerDriver {
             motors: motors_all,
         })
     }
+}
+
+/// Every `motors` interface the driver provides.
+type AllMotors = Vec<Arc<Interface<Motors>>>;
+
+/// Provides the interfaces of every `provides` line (each waiting for its
+/// device), and the motors among them.
+fn provide(
+    pc: &PlayerConf,
+    ifaces: &Interfaces,
+    names: &crate::namespace::Namespace,
+    provider: &str,
+) -> anyhow::Result<(Vec<Pending>, AllMotors)> {
+    let mut pending = Vec::new();
+    let mut motors_all = Vec::new();
+    for w in &pc.wants {
+        let off = pc.offset(&w.robot);
+        let binding = match &w.kind {
+            Provided::Encoders => Binding::Sink(Sink::Encoders(
+                ifaces.provide_value(
+                    &w.name,
+                    provider,
+                    sinks::encoders(&Default::default(), &off),
+                )?,
+                off,
+            )),
+            Provided::Motors => {
+                let m = ifaces.provide::<Motors>(&w.name, provider)?;
+                motors_all.push(m.clone());
+                Binding::Motors(m)
+            }
+            Provided::Laser(n, r) => Binding::Sink(Sink::Laser(
+                ifaces.provide(&w.name, provider)?,
+                LaserMap::new(*n, *r).mounted(Mount::PIONEER_LASER),
+            )),
+            Provided::Sonars => Binding::Sink(Sink::Sonars(ifaces.provide(&w.name, provider)?)),
+            Provided::Bumpers => Binding::Sink(Sink::Bumpers(ifaces.provide(&w.name, provider)?)),
+            Provided::PanTiltEncoders => {
+                Binding::Sink(Sink::PtEncoders(ifaces.provide(&w.name, provider)?))
+            }
+            Provided::PanTiltMotors => Binding::PtMotors(ifaces.provide(&w.name, provider)?),
+            Provided::Camera(fixed) => {
+                let init = if *fixed {
+                    Image::new(320, 240)
+                } else {
+                    Image::default()
+                };
+                Binding::Sink(Sink::Camera(
+                    ifaces.provide_value(&w.name, provider, init)?,
+                    *fixed,
+                ))
+            }
+            Provided::Blobs => {
+                let b = names.export(
+                    provider,
+                    &w.name,
+                    LiveBlobs::from_pointee(BlobFrame::default()),
+                )?;
+                Binding::Sink(Sink::Blobs(b))
+            }
+        };
+        pending.push(Pending {
+            want: w.clone(),
+            binding,
+        });
+    }
+    Ok((pending, motors_all))
+}
+
+/// The first connection: the lines bound to the server's devices (a device it
+/// lacks is an error), or, with no server there, every line still pending and
+/// stale with the reason.
+fn first_connect(
+    pc: &PlayerConf,
+    pending: Vec<Pending>,
+    srv: &str,
+) -> anyhow::Result<(Option<Conn>, Vec<Device>, Vec<Pending>)> {
+    Ok(match Conn::open(&pc.host, pc.port, pc.timeout) {
+        Ok(mut c) => {
+            let list = device_list(&mut c, pc.timeout).map_err(|e| {
+                anyhow::anyhow!("the Player server at {srv} did not list its devices: {e}")
+            })?;
+            let (devices, failed) = bind(pending, &list, srv);
+            if let Some((_, why)) = failed.into_iter().next() {
+                c.close();
+                return Err(anyhow::anyhow!("{}", why.trim_start_matches("player: ")));
+            }
+            tracing::info!(
+                "player: connected to Player {} at {srv}; devices used: {}",
+                c.version,
+                devices
+                    .iter()
+                    .map(|d| d.addr.to_string())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            );
+            (Some(c), devices, Vec::new())
+        }
+        Err(e) => {
+            let why = format!(
+                "player: cannot reach a Player server at {srv} ({e}). Start one first: for \
+                 Stage, `player /usr/share/stage/worlds/simple.cfg` (or your robot's .cfg); or \
+                 fix `hostname H port P` in the player driver's conf. Retrying in the background"
+            );
+            tracing::error!("{why}");
+            for p in &pending {
+                p.set_stale(&why);
+            }
+            (None, Vec::new(), pending)
+        }
+    })
 }
 
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>> {

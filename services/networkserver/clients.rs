@@ -32,7 +32,7 @@ use std::{
 use parking_lot::{Condvar, Mutex};
 
 use crate::{
-    interfaces::{Motors, Notify, Source},
+    interfaces::{Notify, Source},
     netwire::{self, Feed},
 };
 
@@ -431,8 +431,8 @@ fn client(stream: TcpStream, peer: SocketAddr, id: u64, slot: &Slot, sh: &Arc<Sh
             sh.sources.images[k].1.suspend();
         }
     }
-    if drove && let Some(m) = &sh.sources.motors {
-        let _ = m.publish(Motors::default());
+    if drove {
+        sh.sources.zero_renewed();
     }
     let (why, bad) = if slot.evicted.load(Ordering::Acquire) {
         (

@@ -151,7 +151,8 @@ impl ServerConf {
         for (l, (name, id)) in conf.lines_with("serves").zip(lines.serves) {
             let name = canonical(&name);
             let fam = family(&name).unwrap_or_default();
-            let netid = if fam == "image" {
+            let on_wire = netwire::on_wire(fam);
+            let netid = if on_wire == netwire::OnWire::Frames {
                 let Some(id) = id else {
                     return Err(err(
                         l,
@@ -168,10 +169,10 @@ impl ServerConf {
                 if id.is_some() {
                     return Err(err(l, format!("`serves {name}` takes no network id")));
                 }
-                if fam == "bumpers" {
+                if on_wire == netwire::OnWire::Absent {
                     return Err(err(
                         l,
-                        "4.3's wire has no bumpers message; bumpers cannot be served",
+                        format!("4.3's wire has no {fam} message; {fam} cannot be served"),
                     ));
                 }
                 if c.serves.iter().any(|(n, _)| family(n) == Some(fam)) {

@@ -116,11 +116,8 @@ use parking_lot::Mutex;
 
 use crate::{
     conf::ComponentConf,
-    interfaces::{
-        AnyInterface, Encoders, Image, Imu, Interface, Interfaces, Laser, Motors, PtEncoders,
-        PtMotors, Sonars, ZoomEncoders, ZoomMotors, family,
-    },
-    netwire::Feed,
+    interfaces::{AnyInterface, Image, Interface, Interfaces, KINDS, by_kind, family},
+    netwire::{self, Net43, OnWire, Request},
     runtime::{Driver, Runtime},
 };
 
@@ -133,15 +130,9 @@ pub use conf::ServerConf;
 pub struct Sources {
     /// (network id, image).
     pub images: Vec<(u32, Arc<Interface<Image>>)>,
-    pub laser: Option<Arc<Interface<Laser>>>,
-    pub encoders: Option<Arc<Interface<Encoders>>>,
-    pub sonars: Option<Arc<Interface<Sonars>>>,
-    pub motors: Option<Arc<Interface<Motors>>>,
-    pub pte: Option<Arc<Interface<PtEncoders>>>,
-    pub ptm: Option<Arc<Interface<PtMotors>>>,
-    pub ze: Option<Arc<Interface<ZoomEncoders>>>,
-    pub zm: Option<Arc<Interface<ZoomMotors>>>,
-    pub imu: Option<Arc<Interface<Imu>>>,
+    /// The served devices, one slot per kind of the table (4.3's wire has one
+    /// device of a kind per server).
+    devices: [Option<Arc<dyn Served>>; KINDS.len()],
 }
 
 impl Sources {
@@ -157,34 +148,100 @@ impl Sources {
                     "networkserver: `serves {name}`: load the driver that provides `{name}` before networkserver"
                 )
             };
-            match family(name).unwrap_or("") {
-                "image" => s
+            let kind = family(name).unwrap_or("");
+            match netwire::on_wire(kind) {
+                OnWire::Absent => {
+                    anyhow::bail!("networkserver: cannot serve a {kind} interface")
+                }
+                OnWire::Frames => s
                     .images
                     .push((netid.unwrap_or(0), ifaces.get(name).with_context(ctx)?)),
-                "laser" => s.laser = Some(ifaces.get(name).with_context(ctx)?),
-                "encoders" => s.encoders = Some(ifaces.get(name).with_context(ctx)?),
-                "sonars" => s.sonars = Some(ifaces.get(name).with_context(ctx)?),
-                "motors" => s.motors = Some(ifaces.get(name).with_context(ctx)?),
-                "pantiltencoders" => s.pte = Some(ifaces.get(name).with_context(ctx)?),
-                "pantiltmotors" => s.ptm = Some(ifaces.get(name).with_context(ctx)?),
-                "zoomencoders" => s.ze = Some(ifaces.get(name).with_context(ctx)?),
-                "zoommotors" => s.zm = Some(ifaces.get(name).with_context(ctx)?),
-                "imu" => s.imu = Some(ifaces.get(name).with_context(ctx)?),
-                other => anyhow::bail!("networkserver: cannot serve a {other} interface"),
+                _ => s = by_kind!(kind, serve(s, ifaces, name, ctx), Ok(s))?,
             }
         }
         Ok(s)
     }
 
-    fn feed(&self, d: Feed) -> Option<Arc<dyn AnyInterface>> {
-        match d {
-            Feed::Laser => self.laser.clone().map(|i| i as Arc<dyn AnyInterface>),
-            Feed::Encoders => self.encoders.clone().map(|i| i as Arc<dyn AnyInterface>),
-            Feed::Sonars => self.sonars.clone().map(|i| i as Arc<dyn AnyInterface>),
-            Feed::PtEncoders => self.pte.clone().map(|i| i as Arc<dyn AnyInterface>),
-            Feed::ZoomEncoders => self.ze.clone().map(|i| i as Arc<dyn AnyInterface>),
-            Feed::Imu => self.imu.clone().map(|i| i as Arc<dyn AnyInterface>),
+    /// These sources and image `iface` under network id `netid`.
+    pub fn serving_image(mut self, netid: u32, iface: Arc<Interface<Image>>) -> Sources {
+        self.images.push((netid, iface));
+        self
+    }
+
+    /// These sources and device `iface` (a pushed or commanded kind).
+    pub fn serving<T: Net43>(mut self, iface: Arc<Interface<T>>) -> Sources {
+        let k = KINDS.iter().position(|k| *k == T::KIND).expect("a kind");
+        self.devices[k] = Some(Arc::new(iface));
+        self
+    }
+
+    /// Zeroes the served commands that must be renewed (motors): their client left.
+    fn zero_renewed(&self) {
+        for (k, dev) in self.devices.iter().enumerate() {
+            if let (
+                Some(dev),
+                OnWire::Commanded {
+                    keep_alive: true, ..
+                },
+            ) = (dev, netwire::WIRE[k])
+            {
+                dev.zero();
+            }
         }
+    }
+
+    /// The served device of the kind at index `k` of the table.
+    fn device(&self, k: usize) -> Option<&Arc<dyn Served>> {
+        self.devices[k].as_ref()
+    }
+}
+
+/// `s` and the interface `name` of kind `T` on `ifaces`.
+fn serve<T: Net43>(
+    s: Sources,
+    ifaces: &Interfaces,
+    name: &str,
+    ctx: impl FnOnce() -> String,
+) -> anyhow::Result<Sources> {
+    Ok(s.serving(ifaces.get::<T>(name).with_context(ctx)?))
+}
+
+/// A served device, whatever its kind: its interface and its kind's
+/// [`Net43`] code.
+trait Served: Send + Sync {
+    fn interface(&self) -> Arc<dyn AnyInterface>;
+    /// Appends its push if its sample is newer than `last` (the clock pushed last).
+    fn push(&self, last: &mut u64, epoch: Instant, out: &mut Vec<u8>);
+    /// Sets the value from a command request; Err: the value was refused.
+    fn apply(&self, req: &Request) -> Result<(), String>;
+    /// Appends its limits reply.
+    fn write_limits(&self, out: &mut Vec<u8>);
+    /// Sets the zero value (a renewed command whose client left).
+    fn zero(&self);
+}
+
+impl<T: Net43> Served for Arc<Interface<T>> {
+    fn interface(&self) -> Arc<dyn AnyInterface> {
+        self.clone()
+    }
+    fn push(&self, last: &mut u64, epoch: Instant, out: &mut Vec<u8>) {
+        let s = self.snapshot();
+        if s.clock != *last {
+            *last = s.clock;
+            let us = s.stamp.saturating_duration_since(epoch).as_micros() as u64;
+            s.value.write_push(s.clock, us, out);
+        }
+    }
+    fn apply(&self, req: &Request) -> Result<(), String> {
+        let mut v = self.read().value.clone();
+        v.apply(req);
+        self.publish(v).map(|_| ()).map_err(|e| e.to_string())
+    }
+    fn write_limits(&self, out: &mut Vec<u8>) {
+        self.read().value.write_limits(out);
+    }
+    fn zero(&self) {
+        let _ = self.publish(T::default());
     }
 }
 

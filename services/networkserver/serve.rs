@@ -15,8 +15,8 @@ use std::{
 use parking_lot::{Condvar, Mutex};
 
 use crate::{
-    interfaces::{AnyInterface, Interface, InterfaceValue, Sample, Source},
-    netwire::{self, Feed, LineEvent, LineReader, Request},
+    interfaces::{AnyInterface, KINDS, Source},
+    netwire::{self, Feed, LineEvent, LineReader, OnWire, Request},
 };
 
 use super::{Shared, Sources, clients::Slot, frames};
@@ -92,13 +92,7 @@ pub(super) fn reader(
                 last_line = Instant::now();
                 match Request::parse(line) {
                     Ok(req) => {
-                        commanded |= matches!(
-                            req,
-                            Request::DriveSpeed { .. }
-                                | Request::SteerSpeed { .. }
-                                | Request::PtPosition { .. }
-                                | Request::ZoomPosition { .. }
-                        );
+                        commanded |= netwire::commanded_kind(req.code()).is_some();
                         if let Err((why, bad)) = handle(req, cl, sh, resumed, drove) {
                             cl.close(why, bad);
                             return;
@@ -185,154 +179,129 @@ fn handle(
     drove: &mut bool,
 ) -> Result<(), (String, bool)> {
     let src = &sh.sources;
-    let reply = |bytes: Vec<u8>| -> Result<(), (String, bool)> {
-        let mut st = cl.st.lock();
-        let queued = st.replies.len() + st.images.iter().sum::<u32>() as usize;
-        if queued >= sh.conf.max_queue {
-            return Err((
-                format!(
-                    "more than {} requests waiting (it does not read what it asks for)",
-                    sh.conf.max_queue
-                ),
-                true,
-            ));
-        }
-        st.replies.push_back(bytes);
-        drop(st);
-        cl.cv.notify_all();
-        Ok(())
-    };
-    let error = |text: String| {
-        let mut out = Vec::new();
-        netwire::write_error(&mut out, &text);
-        reply(out)
-    };
     match req {
-        Request::Goodbye | Request::GoodbyeImages => {
-            return Err(("said goodbye".into(), false));
-        }
-        Request::Subscribe(d) | Request::Unsubscribe(d) => {
-            let on = matches!(req, Request::Subscribe(_));
-            let Some(iface) = src.feed(d) else {
-                return error(format!("{} is not served", d.interface()));
+        Request::Goodbye | Request::GoodbyeImages => Err(("said goodbye".into(), false)),
+        Request::Subscribe(d) => subscribe(cl, sh, resumed, d, true),
+        Request::Unsubscribe(d) => subscribe(cl, sh, resumed, d, false),
+        Request::ImageQuery(netid) => image_query(cl, sh, resumed, netid),
+        Request::LimitsQuery(c) => {
+            let (k, limits) = netwire::limits_kind(c).expect("parsed as a limits query");
+            let Some(dev) = src.device(k) else {
+                return error(cl, sh, limits.unserved.into());
             };
-            let slot = &mut resumed.subs[d.index()];
-            if on && slot.is_none() {
-                iface.resume();
-                *slot = Some(iface);
-            } else if !on && let Some(i) = slot.take() {
-                i.suspend();
-            }
-            cl.st.lock().subs[d.index()] = on;
-            cl.cv.notify_all();
-        }
-        Request::ImageQuery(netid) => {
-            let Some(k) = src.images.iter().position(|(id, _)| *id == netid) else {
-                return error(format!("no image has network id {netid}"));
-            };
-            if !resumed.images[k] {
-                src.images[k].1.resume();
-                resumed.images[k] = true;
-            }
-            let mut st = cl.st.lock();
-            let queued = st.replies.len() + st.images.iter().sum::<u32>() as usize;
-            if queued >= sh.conf.max_queue {
-                return Err((
-                    format!(
-                        "more than {} requests waiting (it does not read what it asks for)",
-                        sh.conf.max_queue
-                    ),
-                    true,
-                ));
-            }
-            st.images[k] += 1;
-            drop(st);
-            cl.cv.notify_all();
-        }
-        Request::DriveSpeed { v, .. } | Request::SteerSpeed { w: v, .. } => {
-            let Some(m) = &src.motors else {
-                return error("motors are not served".into());
-            };
-            let mut cmd = m.read().value;
-            if matches!(req, Request::DriveSpeed { .. }) {
-                cmd.v = v;
-            } else {
-                cmd.w = v;
-            }
-            *drove = true;
-            if let Err(e) = m.publish(cmd) {
-                cl.from.refused(&e);
-                return error(format!("refused: {e}"));
-            }
-            cl.from.accepted();
-        }
-        Request::PtPosition {
-            pan,
-            tilt,
-            pan_speed,
-            tilt_speed,
-        } => {
-            let Some(p) = &src.ptm else {
-                return error("pantiltmotors are not served".into());
-            };
-            let mut c = p.read().value;
-            c.longitude = pan;
-            c.latitude = tilt;
-            c.longitude_speed = pan_speed;
-            c.latitude_speed = tilt_speed;
-            if let Err(e) = p.publish(c) {
-                cl.from.refused(&e);
-                return error(format!("refused: {e}"));
-            }
-            cl.from.accepted();
-        }
-        Request::PtLimitsQuery => {
-            let Some(p) = &src.ptm else {
-                // 4.3's text, typo included.
-                return error("Error importing 'ptmotors' varialbes".into());
-            };
-            let c = p.read().value;
             let mut out = Vec::new();
-            netwire::write_pt_limits(
-                &mut out,
-                [
-                    c.max_longitude,
-                    c.max_latitude,
-                    c.min_longitude,
-                    c.min_latitude,
-                    c.max_longitude_speed,
-                    c.max_latitude_speed,
-                ],
-            );
-            return reply(out);
-        }
-        Request::ZoomPosition { zoom, speed } => {
-            // 4.3 gated this on the pan-tilt motors; it needs the zoom motors.
-            let Some(z) = &src.zm else {
-                return error("zoommotors are not served".into());
-            };
-            let mut c = z.read().value;
-            c.zoom = zoom;
-            c.zoom_speed = speed;
-            if let Err(e) = z.publish(c) {
-                cl.from.refused(&e);
-                return error(format!("refused: {e}"));
-            }
-            cl.from.accepted();
-        }
-        Request::ZoomLimitsQuery => {
-            let Some(z) = &src.zm else {
-                return error("zoommotors are not served".into());
-            };
-            let c = z.read().value;
-            let mut out = Vec::new();
-            netwire::write_zoom_limits(&mut out, [c.max_zoom, c.min_zoom, c.max_zoom_speed]);
-            return reply(out);
+            dev.write_limits(&mut out);
+            reply(cl, sh, out)
         }
         Request::Unhandled(c) => {
-            return error(format!("message {c} is not handled by this server"));
+            error(cl, sh, format!("message {c} is not handled by this server"))
+        }
+        command => {
+            let Some(k) = netwire::commanded_kind(command.code()) else {
+                return error(
+                    cl,
+                    sh,
+                    format!("message {} is not handled by this server", command.code()),
+                );
+            };
+            let Some(dev) = src.device(k) else {
+                return error(cl, sh, format!("{} are not served", KINDS[k]));
+            };
+            if matches!(
+                netwire::WIRE[k],
+                OnWire::Commanded {
+                    keep_alive: true,
+                    ..
+                }
+            ) {
+                *drove = true;
+            }
+            if let Err(e) = dev.apply(&command) {
+                cl.from.refused(&e);
+                return error(cl, sh, format!("refused: {e}"));
+            }
+            cl.from.accepted();
+            Ok(())
         }
     }
+}
+
+/// The error of a client with more than `max_queue` requests waiting, if it has.
+fn over_queue(st: &ClientState, sh: &Shared) -> Result<(), (String, bool)> {
+    let queued = st.replies.len() + st.images.iter().sum::<u32>() as usize;
+    if queued >= sh.conf.max_queue {
+        return Err((
+            format!(
+                "more than {} requests waiting (it does not read what it asks for)",
+                sh.conf.max_queue
+            ),
+            true,
+        ));
+    }
+    Ok(())
+}
+
+/// Queues a reply for the writer.
+fn reply(cl: &Client, sh: &Shared, bytes: Vec<u8>) -> Result<(), (String, bool)> {
+    let mut st = cl.st.lock();
+    over_queue(&st, sh)?;
+    st.replies.push_back(bytes);
+    drop(st);
+    cl.cv.notify_all();
+    Ok(())
+}
+
+/// Queues a `1027 TEXT` reply.
+fn error(cl: &Client, sh: &Shared, text: String) -> Result<(), (String, bool)> {
+    let mut out = Vec::new();
+    netwire::write_error(&mut out, &text);
+    reply(cl, sh, out)
+}
+
+/// (Un)subscribes the client to feed `d`, resuming its interface for it.
+fn subscribe(
+    cl: &Client,
+    sh: &Shared,
+    resumed: &mut Resumed,
+    d: Feed,
+    on: bool,
+) -> Result<(), (String, bool)> {
+    let Some(dev) = sh.sources.device(d.index()) else {
+        return error(cl, sh, format!("{} is not served", d.interface()));
+    };
+    let slot = &mut resumed.subs[d.index()];
+    if on && slot.is_none() {
+        let iface = dev.interface();
+        iface.resume();
+        *slot = Some(iface);
+    } else if !on && let Some(i) = slot.take() {
+        i.suspend();
+    }
+    cl.st.lock().subs[d.index()] = on;
+    cl.cv.notify_all();
+    Ok(())
+}
+
+/// Queues a request for the next new frame of image `netid`.
+fn image_query(
+    cl: &Client,
+    sh: &Shared,
+    resumed: &mut Resumed,
+    netid: u32,
+) -> Result<(), (String, bool)> {
+    let src = &sh.sources;
+    let Some(k) = src.images.iter().position(|(id, _)| *id == netid) else {
+        return error(cl, sh, format!("no image has network id {netid}"));
+    };
+    if !resumed.images[k] {
+        src.images[k].1.resume();
+        resumed.images[k] = true;
+    }
+    let mut st = cl.st.lock();
+    over_queue(&st, sh)?;
+    st.images[k] += 1;
+    drop(st);
+    cl.cv.notify_all();
     Ok(())
 }
 
@@ -428,55 +397,9 @@ fn push(
     out: &mut Vec<u8>,
     epoch: Instant,
 ) {
-    /// The sample of `iface`, if it is newer than the last one pushed.
-    fn fresh<T: InterfaceValue>(
-        iface: &Option<Arc<Interface<T>>>,
-        last: &mut u64,
-    ) -> Option<Arc<Sample<T>>> {
-        let s = iface.as_ref()?.snapshot();
-        (s.clock != *last).then(|| {
-            *last = s.clock;
-            s
-        })
-    }
-    for d in Feed::ALL {
-        let k = d.index();
-        if !subs[k] {
-            continue;
-        }
-        let last = &mut last[k];
-        match d {
-            Feed::Laser => {
-                if let Some(s) = fresh(&src.laser, last) {
-                    netwire::write_laser(out, s.clock, &s.readings);
-                }
-            }
-            Feed::Encoders => {
-                if let Some(s) = fresh(&src.encoders, last) {
-                    let us = s.stamp.saturating_duration_since(epoch).as_micros() as u64;
-                    netwire::write_encoders(out, s.clock, s.x, s.y, s.theta.to_degrees(), us);
-                }
-            }
-            Feed::Sonars => {
-                if let Some(s) = fresh(&src.sonars, last) {
-                    netwire::write_sonars(out, s.clock, &s.us);
-                }
-            }
-            Feed::PtEncoders => {
-                if let Some(s) = fresh(&src.pte, last) {
-                    netwire::write_pt_encoders(out, s.clock, s.pan_angle, s.tilt_angle);
-                }
-            }
-            Feed::ZoomEncoders => {
-                if let Some(s) = fresh(&src.ze, last) {
-                    netwire::write_zoom_encoders(out, s.clock, s.zoom_position);
-                }
-            }
-            Feed::Imu => {
-                if let Some(s) = fresh(&src.imu, last) {
-                    netwire::write_imu(out, s.clock, s.fields());
-                }
-            }
+    for k in Feed::all().iter().map(|d| d.index()).filter(|&k| subs[k]) {
+        if let Some(dev) = src.device(k) {
+            dev.push(&mut last[k], epoch, out);
         }
     }
 }

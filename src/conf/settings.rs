@@ -788,132 +788,182 @@ fn check_args(
     line: &ConfLine,
     component: &str,
 ) -> Result<Vec<Value>, ConfError> {
-    let words = line.args();
-    let required = args
-        .iter()
-        .take_while(|a| !a.optional && !matches!(a.ty, ArgType::Flags(_)))
-        .count();
-    let open_end = args
-        .last()
-        .is_some_and(|a| matches!(a.ty, ArgType::Rest | ArgType::Flags(_)));
-    let fixed: usize = args
-        .iter()
-        .filter(|a| !matches!(a.ty, ArgType::Rest | ArgType::Flags(_)))
-        .count();
-    let max = if open_end { usize::MAX } else { fixed };
-    let arity = || {
-        let n = words.len();
-        line.error(format!(
-            "`{key}` takes {}, got {n}; usage: {usage} (see `jderobot help {component}`)",
+    let mut c = ArgCheck {
+        key,
+        usage,
+        line,
+        component,
+        args,
+        words: line.args(),
+        out: Vec::with_capacity(args.len()),
+        skipped: None,
+        skipped_begun: false,
+        at: 0,
+    };
+    let mut i = 0; // the next argument
+    while i < args.len() {
+        let a = &args[i];
+        match a.ty {
+            ArgType::Rest => c.rest(a)?,
+            ArgType::Flags(_) => c.flags(a)?,
+            _ => {
+                // A group: this argument and the required ones after it.
+                let end = args[i + 1..]
+                    .iter()
+                    .position(|b| b.optional || matches!(b.ty, ArgType::Rest | ArgType::Flags(_)))
+                    .map_or(args.len(), |p| i + 1 + p);
+                c.group(&args[i..end])?;
+                i = end;
+                continue;
+            }
+        }
+        i += 1;
+    }
+    c.finish()
+}
+
+/// [`check_args`]'s state: the words read so far and what they gave.
+struct ArgCheck<'a> {
+    key: &'a str,
+    usage: &'a str,
+    line: &'a ConfLine,
+    component: &'a str,
+    args: &'a [Arg],
+    words: &'a [String],
+    out: Vec<Value>,
+    /// The first error of a group that was skipped: the likely mistake when
+    /// words are left over; and whether that group was begun.
+    skipped: Option<ConfError>,
+    skipped_begun: bool,
+    /// The next word.
+    at: usize,
+}
+
+impl ArgCheck<'_> {
+    /// The error of a wrong number of words.
+    fn arity(&self) -> ConfError {
+        let args = self.args;
+        let required = args
+            .iter()
+            .take_while(|a| !a.optional && !matches!(a.ty, ArgType::Flags(_)))
+            .count();
+        let open_end = args
+            .last()
+            .is_some_and(|a| matches!(a.ty, ArgType::Rest | ArgType::Flags(_)));
+        let fixed: usize = args
+            .iter()
+            .filter(|a| !matches!(a.ty, ArgType::Rest | ArgType::Flags(_)))
+            .count();
+        let max = if open_end { usize::MAX } else { fixed };
+        let n = self.words.len();
+        self.line.error(format!(
+            "`{}` takes {}, got {n}; usage: {} (see `jderobot help {}`)",
+            self.key,
             match (required, max) {
                 (a, b) if a == b => format!("{a} argument(s)"),
                 (a, usize::MAX) => format!("at least {a} argument(s)"),
                 (a, b) => format!("{a} to {b} arguments"),
             },
+            self.usage,
+            self.component,
         ))
-    };
-    let mut out = Vec::with_capacity(args.len());
-    // The first error of a group that was skipped: the likely mistake when words
-    // are left over.
-    let mut skipped: Option<ConfError> = None;
-    let mut skipped_begun = false;
-    let mut at = 0; // the next word
-    let mut i = 0; // the next argument
-    while i < args.len() {
-        let a = &args[i];
-        match a.ty {
-            ArgType::Rest => {
-                if words.len() <= at && !a.optional {
-                    return Err(arity());
-                }
-                for (k, w) in words.iter().enumerate().skip(at) {
-                    out.push(check_word(line, k, a, w)?);
-                }
-                at = words.len();
-                i += 1;
-                continue;
-            }
-            ArgType::Flags(_) => {
-                let mut list: Vec<String> = Vec::new();
-                for (k, w) in words.iter().enumerate().skip(at) {
-                    if let Err(e) = check_word(line, k, a, w) {
-                        return Err(skipped.unwrap_or(e));
-                    }
-                    if list.contains(w) {
-                        return Err(line.error(format!(
-                            "`{key}`: `{}` is given twice; usage: {usage}",
-                            echo(w)
-                        )));
-                    }
-                    list.push(w.clone());
-                }
-                out.push(Value::List(list));
-                at = words.len();
-                i += 1;
-                continue;
-            }
-            _ => {}
+    }
+
+    /// A trailing `Rest`: every word left.
+    fn rest(&mut self, a: &Arg) -> Result<(), ConfError> {
+        if self.words.len() <= self.at && !a.optional {
+            return Err(self.arity());
         }
-        // A group: this argument and the required ones after it.
-        let end = args[i + 1..]
-            .iter()
-            .position(|b| b.optional || matches!(b.ty, ArgType::Rest | ArgType::Flags(_)))
-            .map_or(args.len(), |p| i + 1 + p);
-        let group = &args[i..end];
-        if !a.optional {
+        for (k, w) in self.words.iter().enumerate().skip(self.at) {
+            self.out.push(check_word(self.line, k, a, w)?);
+        }
+        self.at = self.words.len();
+        Ok(())
+    }
+
+    /// Trailing `Flags`: every word left, each once.
+    fn flags(&mut self, a: &Arg) -> Result<(), ConfError> {
+        let mut list: Vec<String> = Vec::new();
+        for (k, w) in self.words.iter().enumerate().skip(self.at) {
+            if let Err(e) = check_word(self.line, k, a, w) {
+                return Err(self.skipped.take().unwrap_or(e));
+            }
+            if list.contains(w) {
+                return Err(self.line.error(format!(
+                    "`{}`: `{}` is given twice; usage: {}",
+                    self.key,
+                    echo(w),
+                    self.usage
+                )));
+            }
+            list.push(w.clone());
+        }
+        self.out.push(Value::List(list));
+        self.at = self.words.len();
+        Ok(())
+    }
+
+    /// A group: a required one must fit; an optional one is taken when it fits.
+    fn group(&mut self, group: &[Arg]) -> Result<(), ConfError> {
+        let (line, at, words) = (self.line, self.at, self.words);
+        if !group[0].optional {
             if words.len() < at + group.len() {
-                return Err(arity());
+                return Err(self.arity());
             }
             for (k, b) in group.iter().enumerate() {
-                out.push(check_word(line, at + k, b, &words[at + k])?);
+                self.out.push(check_word(line, at + k, b, &words[at + k])?);
             }
-            at += group.len();
+            self.at += group.len();
+            return Ok(());
+        }
+        let fits = if words.len() >= at + group.len() {
+            group
+                .iter()
+                .enumerate()
+                .map(|(k, b)| check_word(line, at + k, b, &words[at + k]))
+                .collect::<Result<Vec<Value>, ConfError>>()
         } else {
-            let fits = if words.len() >= at + group.len() {
-                group
-                    .iter()
-                    .enumerate()
-                    .map(|(k, b)| check_word(line, at + k, b, &words[at + k]))
-                    .collect::<Result<Vec<Value>, ConfError>>()
-            } else {
-                Err(arity())
-            };
-            match fits {
-                Ok(v) => {
-                    out.extend(v);
-                    at += group.len();
+            Err(self.arity())
+        };
+        match fits {
+            Ok(v) => {
+                self.out.extend(v);
+                self.at += group.len();
+            }
+            Err(e) => {
+                // A group whose first word fits was begun: its error is the
+                // one to tell; else the first wrong word's.
+                let begun = words
+                    .get(at)
+                    .is_some_and(|w| check_word(line, at, &group[0], w).is_ok());
+                if words.len() > at
+                    && (begun || !e.message.contains(" takes "))
+                    && (self.skipped.is_none() || (begun && !self.skipped_begun))
+                {
+                    self.skipped = Some(e);
+                    self.skipped_begun = begun;
                 }
-                Err(e) => {
-                    // A group whose first word fits was begun: its error is the
-                    // one to tell; else the first wrong word's.
-                    let begun = words
-                        .get(at)
-                        .is_some_and(|w| check_word(line, at, a, w).is_ok());
-                    if words.len() > at
-                        && (begun || !e.message.contains(" takes "))
-                        && (skipped.is_none() || (begun && !skipped_begun))
-                    {
-                        skipped = Some(e);
-                        skipped_begun = begun;
-                    }
-                    out.extend(group.iter().map(|_| Value::Absent));
-                }
+                self.out.extend(group.iter().map(|_| Value::Absent));
             }
         }
-        i = end;
+        Ok(())
     }
-    if at < words.len() {
-        return Err(match skipped {
-            Some(mut e) => {
-                if !e.message.contains("usage:") {
-                    e.message.push_str(&format!("; usage: {usage}"));
+
+    /// The values, or the error of words left over.
+    fn finish(mut self) -> Result<Vec<Value>, ConfError> {
+        if self.at < self.words.len() {
+            return Err(match self.skipped.take() {
+                Some(mut e) => {
+                    if !e.message.contains("usage:") {
+                        e.message.push_str(&format!("; usage: {}", self.usage));
+                    }
+                    e
                 }
-                e
-            }
-            None => arity(),
-        });
+                None => self.arity(),
+            });
+        }
+        Ok(self.out)
     }
-    Ok(out)
 }
 
 /// The checked values of every declared line: given or default.

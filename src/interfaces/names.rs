@@ -1,39 +1,55 @@
 //! The standard interface names of the seed, their families (derived from the value
 //! types), 4.3's aliases and robot suffixes.
 
-use super::values::{
-    Bumpers, Encoders, Image, Imu, InterfaceValue, Laser, Motors, PtEncoders, PtMotors, Sonars,
-    ZoomEncoders, ZoomMotors,
+use super::{
+    kinds::KINDS,
+    values::{Image, InterfaceValue},
 };
 
-/// Every standard interface name and its family, the value type's [`InterfaceValue::KIND`].
-pub const STANDARD: &[(&str, &str)] = &[
-    ("colorA", Image::KIND),
-    ("colorB", Image::KIND),
-    ("colorC", Image::KIND),
-    ("colorD", Image::KIND),
-    ("varcolorA", Image::KIND),
-    ("varcolorB", Image::KIND),
-    ("varcolorC", Image::KIND),
-    ("varcolorD", Image::KIND),
-    ("laser", Laser::KIND),
-    ("sonars", Sonars::KIND),
-    ("encoders", Encoders::KIND),
-    ("motors", Motors::KIND),
-    ("pantiltencoders", PtEncoders::KIND),
-    ("pantiltmotors", PtMotors::KIND),
-    ("zoomencoders", ZoomEncoders::KIND),
-    ("zoommotors", ZoomMotors::KIND),
-    ("bumpers", Bumpers::KIND),
-    ("imu", Imu::KIND),
+/// The standard names of images (family [`Image::KIND`]); every other kind of the
+/// table has one standard name, its own.
+const IMAGE_NAMES: [&str; 8] = [
+    "colorA",
+    "colorB",
+    "colorC",
+    "colorD",
+    "varcolorA",
+    "varcolorB",
+    "varcolorC",
+    "varcolorD",
 ];
 
-/// The standard interface names, for help texts and error messages.
-pub const STANDARD_NAMES: [&str; STANDARD.len()] = {
-    let mut out = [""; STANDARD.len()];
+/// Whether two names are the same (`==` in a const context).
+const fn same(a: &str, b: &str) -> bool {
+    let (a, b) = (a.as_bytes(), b.as_bytes());
+    if a.len() != b.len() {
+        return false;
+    }
     let mut i = 0;
-    while i < STANDARD.len() {
-        out[i] = STANDARD[i].0;
+    while i < a.len() {
+        if a[i] != b[i] {
+            return false;
+        }
+        i += 1;
+    }
+    true
+}
+
+/// The standard interface names, for help texts and error messages: the
+/// images', then every other kind of the table ([`KINDS`]) under its own name.
+pub const STANDARD_NAMES: [&str; IMAGE_NAMES.len() + KINDS.len() - 1] = {
+    let mut out = [""; IMAGE_NAMES.len() + KINDS.len() - 1];
+    let mut n = 0;
+    while n < IMAGE_NAMES.len() {
+        out[n] = IMAGE_NAMES[n];
+        n += 1;
+    }
+    let mut i = 0;
+    while i < KINDS.len() {
+        if !same(KINDS[i], Image::KIND) {
+            out[n] = KINDS[i];
+            n += 1;
+        }
         i += 1;
     }
     out
@@ -43,10 +59,13 @@ pub const STANDARD_NAMES: [&str; STANDARD.len()] = {
 /// `laser.robot2` → laser), after resolving 4.3's aliases.
 pub fn family(name: &str) -> Option<&'static str> {
     let base = canonical(name.split('.').next().unwrap_or(name));
-    STANDARD
+    if IMAGE_NAMES.contains(&base.as_str()) {
+        return Some(Image::KIND);
+    }
+    KINDS
         .iter()
-        .find(|(n, _)| *n == base)
-        .map(|(_, kind)| *kind)
+        .find(|k| **k == base && **k != Image::KIND)
+        .copied()
 }
 
 /// Resolves 4.3's export names to the manual's interface names.

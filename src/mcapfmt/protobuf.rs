@@ -1,5 +1,5 @@
-//! Foxglove's protobuf messages for images and laser scans, encoded and decoded by
-//! hand (the messages are small and fixed: a few varint and length-delimited fields).
+//! Foxglove's protobuf messages for images and laser scans, written and read on the
+//! one protobuf wire ([`crate::protowire`]; the messages are small and fixed).
 //!
 //! The MCAP schema data (`protobuf` schema encoding) is Foxglove's own
 //! `FileDescriptorSet` of each message, from the `foxglove-schemas-protobuf` package
@@ -14,7 +14,10 @@
 //! | `foxglove.Pose` | 1 position (`Vector3`: 1 x, 2 y, 3 z), 2 orientation (`Quaternion`: 1 x, 2 y, 3 z, 4 w), doubles |
 
 use super::{FormatError, Recorded, bad};
-use crate::interfaces::{Image, Laser, Mount};
+use crate::{
+    interfaces::{Image, Laser, Mount},
+    protowire::{self, Value, Writer},
+};
 
 /// `foxglove.RawImage`'s FileDescriptorSet (Foxglove's, see `assets/foxglove`).
 pub const RAW_IMAGE: &[u8] = include_bytes!("../../assets/foxglove/RawImage.fdset");
@@ -23,64 +26,12 @@ pub const COMPRESSED_IMAGE: &[u8] = include_bytes!("../../assets/foxglove/Compre
 /// `foxglove.LaserScan`'s FileDescriptorSet.
 pub const LASER_SCAN: &[u8] = include_bytes!("../../assets/foxglove/LaserScan.fdset");
 
-const VARINT: u64 = 0;
-const I64: u64 = 1;
-const LEN: u64 = 2;
-const I32: u64 = 5;
-
-/// Protobuf wire writing into a buffer.
-pub(super) struct Writer<'a>(pub &'a mut Vec<u8>);
-
-impl Writer<'_> {
-    fn varint(&mut self, mut v: u64) {
-        while v >= 0x80 {
-            self.0.push(v as u8 | 0x80);
-            v >>= 7;
-        }
-        self.0.push(v as u8);
-    }
-    fn tag(&mut self, field: u64, wire: u64) {
-        self.varint(field << 3 | wire);
-    }
-    fn uint(&mut self, field: u64, v: u64) {
-        self.tag(field, VARINT);
-        self.varint(v);
-    }
-    fn fixed32(&mut self, field: u64, v: u32) {
-        self.tag(field, I32);
-        self.0.extend_from_slice(&v.to_le_bytes());
-    }
-    fn double(&mut self, field: u64, v: f64) {
-        self.tag(field, I64);
-        self.0.extend_from_slice(&v.to_le_bytes());
-    }
-    fn bytes(&mut self, field: u64, b: &[u8]) {
-        self.tag(field, LEN);
-        self.varint(b.len() as u64);
-        self.0.extend_from_slice(b);
-    }
-    /// A nested message: its length is written before it once known.
-    fn message(&mut self, field: u64, body: impl FnOnce(&mut Self)) {
-        self.tag(field, LEN);
-        let at = self.0.len();
-        self.0.push(0);
-        body(self);
-        let len = self.0.len() - at - 1;
-        if len < 0x80 {
-            self.0[at] = len as u8;
-        } else {
-            let mut prefix = Vec::new();
-            Writer(&mut prefix).varint(len as u64);
-            self.0.splice(at..at + 1, prefix);
-        }
-    }
-    /// A `google.protobuf.Timestamp` of `ns` nanoseconds since the Unix epoch.
-    fn timestamp(&mut self, field: u64, ns: u64) {
-        self.message(field, |w| {
-            w.uint(1, ns / 1_000_000_000);
-            w.uint(2, ns % 1_000_000_000);
-        });
-    }
+/// A `google.protobuf.Timestamp` of `ns` nanoseconds since the Unix epoch.
+fn write_timestamp(w: &mut Writer, field: u64, ns: u64) {
+    w.message(field, |w| {
+        w.uint(1, ns / 1_000_000_000);
+        w.uint(2, ns % 1_000_000_000);
+    });
 }
 
 /// Encodes a `foxglove.RawImage` (`bgr8`, the bytes as they are) into `out`.
@@ -88,7 +39,7 @@ pub fn raw_image(frame_id: &str, ns: u64, img: &Image, out: &mut Vec<u8>) {
     out.clear();
     out.reserve(img.data.len() + 64 + frame_id.len());
     let mut w = Writer(out);
-    w.timestamp(1, ns);
+    write_timestamp(&mut w, 1, ns);
     w.bytes(7, frame_id.as_bytes());
     w.fixed32(2, img.width);
     w.fixed32(3, img.height);
@@ -102,7 +53,7 @@ pub fn compressed_image(frame_id: &str, ns: u64, format: &str, data: &[u8], out:
     out.clear();
     out.reserve(data.len() + 64 + frame_id.len());
     let mut w = Writer(out);
-    w.timestamp(1, ns);
+    write_timestamp(&mut w, 1, ns);
     w.bytes(4, frame_id.as_bytes());
     w.bytes(2, data);
     w.bytes(3, format.as_bytes());
@@ -124,7 +75,7 @@ fn steps(n: usize) -> f64 {
 pub fn laser_scan(frame_id: &str, ns: u64, l: &Laser, out: &mut Vec<u8>) {
     out.clear();
     let mut w = Writer(out);
-    w.timestamp(1, ns);
+    write_timestamp(&mut w, 1, ns);
     w.bytes(2, frame_id.as_bytes());
     let half_yaw = (l.mount.yaw as f64).to_radians() / 2.0;
     w.message(3, |w| {
@@ -145,92 +96,16 @@ pub fn laser_scan(frame_id: &str, ns: u64, l: &Laser, out: &mut Vec<u8>) {
     };
     w.double(4, start);
     w.double(5, end);
-    if !l.readings.is_empty() {
-        w.tag(6, LEN);
-        w.varint(8 * l.readings.len() as u64);
-        for r in &l.readings {
-            w.0.extend_from_slice(&(*r as f64 / 1000.0).to_le_bytes());
-        }
-    }
+    let ranges = l.readings.iter().map(|r| *r as f64 / 1000.0);
+    w.packed_doubles(6, l.readings.len(), ranges);
 }
 
-/// One field of a protobuf message.
-enum Value<'a> {
-    Varint(u64),
-    I64([u8; 8]),
-    Len(&'a [u8]),
-    I32([u8; 4]),
-}
-
-/// The fields of a protobuf message, in order; an error for a malformed one.
-struct Fields<'a> {
-    data: &'a [u8],
+/// The fields of a protobuf message, its errors naming `topic`.
+fn each<'a>(
     topic: &'a str,
-}
-
-impl<'a> Fields<'a> {
-    fn new(topic: &'a str, data: &'a [u8]) -> Self {
-        Fields { data, topic }
-    }
-    fn varint(&mut self) -> Result<u64, FormatError> {
-        let mut v = 0u64;
-        for i in 0..10 {
-            let (&b, rest) = self
-                .data
-                .split_first()
-                .ok_or_else(|| bad(self.topic, "the protobuf message ends inside a varint"))?;
-            self.data = rest;
-            v |= ((b & 0x7f) as u64) << (7 * i);
-            if b < 0x80 {
-                return Ok(v);
-            }
-        }
-        Err(bad(self.topic, "a protobuf varint longer than 10 bytes"))
-    }
-    fn take(&mut self, n: usize) -> Result<&'a [u8], FormatError> {
-        if n > self.data.len() {
-            return Err(bad(self.topic, "the protobuf message ends early"));
-        }
-        let (a, b) = self.data.split_at(n);
-        self.data = b;
-        Ok(a)
-    }
-    fn next_field(&mut self) -> Option<Result<(u64, Value<'a>), FormatError>> {
-        if self.data.is_empty() {
-            return None;
-        }
-        Some(self.read_field())
-    }
-    fn read_field(&mut self) -> Result<(u64, Value<'a>), FormatError> {
-        let key = self.varint()?;
-        let value = match key & 7 {
-            VARINT => Value::Varint(self.varint()?),
-            I64 => Value::I64(self.take(8)?.try_into().expect("8 bytes")),
-            LEN => {
-                let n = self.varint()?;
-                Value::Len(self.take(usize::try_from(n).unwrap_or(usize::MAX))?)
-            }
-            I32 => Value::I32(self.take(4)?.try_into().expect("4 bytes")),
-            w => {
-                return Err(bad(
-                    self.topic,
-                    format!("protobuf wire type {w} (groups are not used by Foxglove's messages)"),
-                ));
-            }
-        };
-        Ok((key >> 3, value))
-    }
-}
-
-impl<'a> Iterator for Fields<'a> {
-    type Item = Result<(u64, Value<'a>), FormatError>;
-    fn next(&mut self) -> Option<Self::Item> {
-        let r = self.next_field();
-        if matches!(r, Some(Err(_))) {
-            self.data = &[];
-        }
-        r
-    }
+    data: &'a [u8],
+) -> impl Iterator<Item = Result<(u64, Value<'a>), FormatError>> + 'a {
+    protowire::fields(data).map(move |r| r.map_err(|e| bad(topic, e.0)))
 }
 
 fn wrong(topic: &str, message: &str, field: u64) -> FormatError {
@@ -242,7 +117,7 @@ fn wrong(topic: &str, message: &str, field: u64) -> FormatError {
 
 fn timestamp(topic: &str, data: &[u8]) -> Result<u64, FormatError> {
     let (mut sec, mut nsec) = (0u64, 0u64);
-    for f in Fields::new(topic, data) {
+    for f in each(topic, data) {
         match f? {
             (1, Value::Varint(v)) => sec = v,
             (2, Value::Varint(v)) => nsec = v,
@@ -272,7 +147,7 @@ pub fn decode_image(
     let mut time = log_time;
     if compressed {
         let (mut bytes, mut format): (&[u8], &str) = (&[], "");
-        for f in Fields::new(topic, data) {
+        for f in each(topic, data) {
             match f? {
                 (1, Value::Len(b)) => time = timestamp(topic, b)?,
                 (2, Value::Len(b)) => bytes = b,
@@ -287,7 +162,7 @@ pub fn decode_image(
     }
     let (mut width, mut height, mut encoding, mut pixels): (u32, u32, &str, &[u8]) =
         (0, 0, "", &[]);
-    for f in Fields::new(topic, data) {
+    for f in each(topic, data) {
         match f? {
             (1, Value::Len(b)) => time = timestamp(topic, b)?,
             (2, Value::I32(b)) => width = u32::from_le_bytes(b),
@@ -337,7 +212,7 @@ pub fn decode_laser(
     let (mut start, mut end) = (0.0f64, 0.0f64);
     let mut mount = Mount::default();
     let mut readings = Vec::new();
-    for f in Fields::new(topic, data) {
+    for f in each(topic, data) {
         match f? {
             (1, Value::Len(b)) => time = timestamp(topic, b)?,
             (3, Value::Len(b)) => mount = pose(topic, b)?,
@@ -386,7 +261,7 @@ pub fn decode_laser(
 /// orientation quaternion in degrees.
 fn pose(topic: &str, data: &[u8]) -> Result<Mount, FormatError> {
     let (mut p, mut q) = ([0.0f64; 3], [0.0, 0.0, 0.0, 1.0f64]);
-    for f in Fields::new(topic, data) {
+    for f in each(topic, data) {
         match f? {
             (1, Value::Len(b)) => doubles(topic, "Vector3", b, &mut p)?,
             (2, Value::Len(b)) => doubles(topic, "Quaternion", b, &mut q)?,
@@ -404,7 +279,7 @@ fn pose(topic: &str, data: &[u8]) -> Result<Mount, FormatError> {
 
 /// The double fields 1..=N of a message into `out`.
 fn doubles(topic: &str, message: &str, data: &[u8], out: &mut [f64]) -> Result<(), FormatError> {
-    for f in Fields::new(topic, data) {
+    for f in each(topic, data) {
         match f? {
             (n, Value::I64(b)) if (1..=out.len() as u64).contains(&n) => {
                 out[n as usize - 1] = f64::from_le_bytes(b)
@@ -424,23 +299,6 @@ fn mm(m: f64) -> i32 {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn varints_and_long_nested_messages() {
-        let mut out = Vec::new();
-        let mut w = Writer(&mut out);
-        w.message(3, |w| w.bytes(1, &[7u8; 300]));
-        // tag 3/LEN, length 303 as a two-byte varint, then tag 1/LEN, 300 as varint.
-        assert_eq!(&out[..3], &[0x1a, 0xaf, 0x02]);
-        assert_eq!(&out[3..6], &[0x0a, 0xac, 0x02]);
-        assert_eq!(out.len(), 3 + 3 + 300);
-        let mut f = Fields::new("t", &out);
-        match f.next() {
-            Some(Ok((3, Value::Len(b)))) => assert_eq!(b.len(), 303),
-            _ => panic!("not a nested message"),
-        }
-        assert!(f.next().is_none());
-    }
 
     #[test]
     fn laser_resolution_and_readings_come_back_exactly() {

@@ -435,80 +435,29 @@ pub fn read_messages(
     while at < data_end {
         let (opcode, body, next) = match record_at(&bytes[..data_end], at) {
             Ok(r) => r,
-            Err(RecErr::PastEnd(why)) => {
-                // Cut short, or a damaged length: a readable chunk further on tells.
-                match resync(bytes, data_end, at + 1) {
-                    Some(n) => {
-                        out.problem(
-                            Damage::Corrupt,
-                            at,
-                            format!("{why}: a damaged length; bytes {at}..{n} are skipped"),
-                        );
-                        at = n;
-                        continue;
-                    }
-                    None => {
-                        let (damage, what) = if out.complete {
-                            (
-                                Damage::Corrupt,
-                                format!("{why}: a damaged length; the data after it is skipped"),
-                            )
-                        } else {
-                            (
-                                Damage::CutShort,
-                                format!("{why}: the file was cut short there; the rest is lost"),
-                            )
-                        };
-                        out.problem(damage, at, what);
-                        break;
-                    }
+            Err(RecErr::PastEnd(why)) => match skip_past_end(bytes, data_end, at, &why, &mut out) {
+                Some(n) => {
+                    at = n;
+                    continue;
                 }
-            }
+                None => break,
+            },
         };
         // Err: the framing is broken here; Ok(Some): only this record is damaged.
-        let checked: R<Option<String>> = if first && opcode != op::HEADER {
+        let checked = if first && opcode != op::HEADER {
             Err(format!(
                 "the file starts with record {opcode:#04x}, not the header"
             ))
         } else if !first && opcode == op::HEADER {
             Err("a second header record".into())
         } else {
-            match opcode {
-                op::HEADER => {
-                    let mut c = Cur { b: body };
-                    c.str("the header's profile").map(|p| {
-                        out.profile = p.into();
-                        None
-                    })
-                }
-                op::SCHEMA => tables.schema(body).map(|()| None),
-                op::CHANNEL => tables.channel(body).map(|()| None),
-                op::MESSAGE => message(body, &tables, &summary, &mut out, &mut f).map(|()| None),
-                op::CHUNK => parse_chunk(body)
-                    .map_err(|why| format!("a chunk record that does not parse: {why}"))
-                    .map(|c| {
-                        chunk(bytes.len(), &c, &mut tables, &summary, &mut out, &mut f)
-                            .err()
-                            .map(|why| {
-                                format!(
-                                    "chunk of {} bytes: {why}; its messages are skipped",
-                                    next - at
-                                )
-                            })
-                    }),
-                op::ATTACHMENT => check_record(opcode, body).map(|()| {
-                    attachment_crc(body)
-                        .err()
-                        .map(|why| format!("{why}; it is skipped"))
-                }),
-                op::DATA_END => {
-                    check_record(opcode, body).map(|()| data_crc(bytes, at, body, &out).err())
-                }
-                op::FOOTER | 0x07..=0x0E => check_record(opcode, body).map(|()| None),
-                _ => Err(format!(
-                    "record opcode {opcode:#04x} is not an MCAP record jderobot knows (0x01–0x0F)"
-                )),
-            }
+            let rec = Record {
+                opcode,
+                body,
+                at,
+                next,
+            };
+            read_record(bytes, &rec, &mut tables, &summary, &mut out, &mut f)
         };
         if out.stopped {
             return Ok(out);
@@ -546,6 +495,99 @@ pub fn read_messages(
     }
     out.problems.sort_by_key(|p| p.offset);
     Ok(out)
+}
+
+/// A record of the data section: its opcode, body and where it starts and ends.
+struct Record<'a> {
+    opcode: u8,
+    body: &'a [u8],
+    at: usize,
+    next: usize,
+}
+
+/// A record that runs past the end at `at` (`why`): the next readable chunk to
+/// go on at, or None when the rest is lost; the damage noted in `out`.
+fn skip_past_end(
+    bytes: &[u8],
+    data_end: usize,
+    at: usize,
+    why: &str,
+    out: &mut Outcome,
+) -> Option<usize> {
+    // Cut short, or a damaged length: a readable chunk further on tells.
+    if let Some(n) = resync(bytes, data_end, at + 1) {
+        out.problem(
+            Damage::Corrupt,
+            at,
+            format!("{why}: a damaged length; bytes {at}..{n} are skipped"),
+        );
+        return Some(n);
+    }
+    let (damage, what) = if out.complete {
+        (
+            Damage::Corrupt,
+            format!("{why}: a damaged length; the data after it is skipped"),
+        )
+    } else {
+        (
+            Damage::CutShort,
+            format!("{why}: the file was cut short there; the rest is lost"),
+        )
+    };
+    out.problem(damage, at, what);
+    None
+}
+
+/// Reads one record after the header checks: Err when the framing is broken
+/// here, Ok(Some(why)) when only this record is damaged.
+fn read_record(
+    bytes: &[u8],
+    rec: &Record<'_>,
+    tables: &mut Tables,
+    summary: &Tables,
+    out: &mut Outcome,
+    f: &mut impl FnMut(&Message<'_>) -> ControlFlow<()>,
+) -> R<Option<String>> {
+    let Record {
+        opcode,
+        body,
+        at,
+        next,
+    } = *rec;
+    match opcode {
+        op::HEADER => {
+            let mut c = Cur { b: body };
+            c.str("the header's profile").map(|p| {
+                out.profile = p.into();
+                None
+            })
+        }
+        op::SCHEMA => tables.schema(body).map(|()| None),
+        op::CHANNEL => tables.channel(body).map(|()| None),
+        op::MESSAGE => message(body, tables, summary, out, f).map(|()| None),
+        op::CHUNK => parse_chunk(body)
+            .map_err(|why| format!("a chunk record that does not parse: {why}"))
+            .map(|c| {
+                chunk(bytes.len(), &c, tables, summary, out, f)
+                    .err()
+                    .map(|why| {
+                        format!(
+                            "chunk of {} bytes: {why}; its messages are skipped",
+                            next - at
+                        )
+                    })
+            }),
+        op::ATTACHMENT => check_record(opcode, body).map(|()| {
+            attachment_crc(body)
+                .err()
+                .map(|why| format!("{why}; it is skipped"))
+        }),
+        op::DATA_END => check_record(opcode, body).map(|()| data_crc(bytes, at, body, out).err()),
+        op::FOOTER | 0x07..=0x0E => check_record(opcode, body).map(|()| None),
+        _ => Err(format!(
+            "record opcode {opcode:#04x} is not an MCAP record jderobot knows (0x01–0x0F)"
+        )),
+    }
 }
 
 /// Where the data section ends (the summary section or the footer starts) and
