@@ -388,11 +388,10 @@ fn garbage_rtps_datagrams_neither_crash_nor_stop_the_service_and_the_driver() {
             let n = rng.below(1500);
             rng.bytes(n)
         } else {
-            // PAD, ACKNACK, HEARTBEAT, GAP, INFO_TS, INFO_SRC, INFO_DST, NACK_FRAG,
-            // HEARTBEAT_FRAG, DATA, DATA_FRAG. Not INFO_REPLY (0x0f): RustDDS
-            // 0.11.8 aborts on some (the ignored test below).
+            // PAD, ACKNACK, HEARTBEAT, GAP, INFO_TS, INFO_SRC, INFO_REPLY,
+            // INFO_DST, NACK_FRAG, HEARTBEAT_FRAG, DATA, DATA_FRAG.
             let ids = [
-                0x01, 0x06, 0x07, 0x08, 0x09, 0x0c, 0x0e, 0x12, 0x13, 0x15, 0x16,
+                0x01, 0x06, 0x07, 0x08, 0x09, 0x0c, 0x0f, 0x0e, 0x12, 0x13, 0x15, 0x16,
             ];
             rtps_garbage(&mut rng, &ids)
         };
@@ -436,14 +435,12 @@ fn garbage_rtps_datagrams_neither_crash_nor_stop_the_service_and_the_driver() {
     server.quit();
 }
 
-/// KNOWN TO FAIL (RustDDS 0.11.8): an INFO_REPLY submessage with an absurd
-/// locator list length makes RustDDS's reader (speedy's `read_vec` in
-/// `messages/submessages/info_reply.rs`) reserve it at once, and the process
-/// aborts ("memory allocation of 121338688736 bytes failed"): one UDP datagram
-/// from anyone on the LAN ends the service or the driver. Run with `--ignored`
-/// once RustDDS bounds the list.
+/// An INFO_REPLY submessage with an absurd locator count: RustDDS 0.11.8's reader
+/// (speedy's `read_vec` in `messages/submessages/info_reply.rs`) reserved it at
+/// once and the process aborted ("memory allocation of 121338688736 bytes
+/// failed"): one UDP datagram ended the service. Our patched copy
+/// (`vendor/rustdds`, Cargo.toml's `[patch]`) refuses the count first.
 #[test]
-#[ignore = "RustDDS 0.11.8 aborts on an INFO_REPLY with a huge locator count"]
 fn garbage_info_reply_submessages_do_not_end_the_service() {
     let d = domain(6);
     let dir = tempfile::tempdir().unwrap();
