@@ -27,8 +27,12 @@ fn missing(note: &str) -> Option<PathBuf> {
     None
 }
 
-/// The peer, compiled into target/gazebo-peer when its source is newer.
+/// The peer, compiled into target/gazebo-peer when its source is newer. The tests
+/// of one binary ask for it at the same time: one compiles while the others wait
+/// (an executable being written cannot be run: "Text file busy").
 pub(crate) fn peer_bin() -> Option<PathBuf> {
+    static BUILD: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    let _one = BUILD.lock().unwrap_or_else(|e| e.into_inner());
     let src = root().join("tests/gazebo/peer.cc");
     let dir = root().join("target/gazebo-peer");
     let bin = dir.join("peer");
@@ -57,7 +61,7 @@ pub(crate) fn peer_bin() -> Option<PathBuf> {
         }
     };
     std::fs::create_dir_all(&dir).unwrap();
-    // Build to a temporary name: tests compile it at the same time.
+    // Build to a temporary name: test binaries may compile it at the same time.
     let tmp = dir.join(format!("peer.{}", std::process::id()));
     let st = Command::new("g++")
         .args(["-O2", "-std=c++17"])
