@@ -977,72 +977,8 @@ fn a_token_is_asked_for_and_a_bind_beyond_loopback_needs_one() {
 /// A CA and a server certificate for 127.0.0.1 signed by it, made with openssl
 /// in `d`: (ca.pem, server.pem, server.key).
 fn make_certs(d: &std::path::Path) -> (PathBuf, PathBuf, PathBuf) {
-    assert!(
-        common::have("openssl"),
-        "openssl is needed to make the test's certificates"
-    );
-    let ssl = |args: &[&str]| {
-        let out = Command::new("openssl")
-            .args(args)
-            .current_dir(d)
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "openssl {args:?}: {}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-    };
-    let ec = [
-        "-newkey",
-        "ec",
-        "-pkeyopt",
-        "ec_paramgen_curve:P-256",
-        "-nodes",
-    ];
-    ssl(&[
-        &["req", "-x509"][..],
-        &ec[..],
-        &[
-            "-days", "2", "-subj", "/CN=ca", "-keyout", "ca.key", "-out", "ca.pem",
-        ],
-    ]
-    .concat());
-    std::fs::write(
-        d.join("ext.cnf"),
-        "subjectAltName=IP:127.0.0.1,DNS:localhost\nbasicConstraints=CA:FALSE\n",
-    )
-    .unwrap();
-    ssl(&[
-        &["req"][..],
-        &ec[..],
-        &[
-            "-subj",
-            "/CN=robot",
-            "-keyout",
-            "robot.key",
-            "-out",
-            "robot.csr",
-        ],
-    ]
-    .concat());
-    ssl(&[
-        "x509",
-        "-req",
-        "-in",
-        "robot.csr",
-        "-CA",
-        "ca.pem",
-        "-CAkey",
-        "ca.key",
-        "-CAcreateserial",
-        "-days",
-        "2",
-        "-extfile",
-        "ext.cnf",
-        "-out",
-        "robot.pem",
-    ]);
+    common::certs::ca(d, "ca");
+    common::certs::signed(d, "robot", "ca");
     (d.join("ca.pem"), d.join("robot.pem"), d.join("robot.key"))
 }
 

@@ -119,85 +119,17 @@ fn python_over_mutual_tls_reads_and_only_the_writer_drives() {
     let Some(py) = common::python_with("zenoh") else {
         return;
     };
-    assert!(
-        common::have("openssl"),
-        "openssl is needed to make the test's certificates"
-    );
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let ssl = |args: &[&str]| {
-        let out = Command::new("openssl")
-            .args(args)
-            .current_dir(d)
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "openssl {args:?}: {}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-    };
-    for ca in ["ca", "otherca"] {
-        ssl(&[
-            "req",
-            "-x509",
-            "-newkey",
-            "ec",
-            "-pkeyopt",
-            "ec_paramgen_curve:P-256",
-            "-nodes",
-            "-days",
-            "2",
-            "-subj",
-            &format!("/CN={ca}"),
-            "-keyout",
-            &format!("{ca}.key"),
-            "-out",
-            &format!("{ca}.pem"),
-        ]);
-    }
-    std::fs::write(
-        d.join("ext.cnf"),
-        "subjectAltName=IP:127.0.0.1,DNS:localhost\nbasicConstraints=CA:FALSE\n",
-    )
-    .unwrap();
+    common::certs::ca(d, "ca");
+    common::certs::ca(d, "otherca");
     for (who, ca) in [
         ("robot", "ca"),
         ("operator", "ca"),
         ("stranger", "ca"),
         ("outsider", "otherca"),
     ] {
-        ssl(&[
-            "req",
-            "-newkey",
-            "ec",
-            "-pkeyopt",
-            "ec_paramgen_curve:P-256",
-            "-nodes",
-            "-subj",
-            &format!("/CN={who}"),
-            "-keyout",
-            &format!("{who}.key"),
-            "-out",
-            &format!("{who}.csr"),
-        ]);
-        ssl(&[
-            "x509",
-            "-req",
-            "-in",
-            &format!("{who}.csr"),
-            "-CA",
-            &format!("{ca}.pem"),
-            "-CAkey",
-            &format!("{ca}.key"),
-            "-CAcreateserial",
-            "-days",
-            "2",
-            "-extfile",
-            "ext.cnf",
-            "-out",
-            &format!("{who}.pem"),
-        ]);
+        common::certs::signed(d, who, ca);
     }
     let port = free_port();
     let conf = d.join("robot.conf");

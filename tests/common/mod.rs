@@ -51,6 +51,90 @@ impl Drop for QuietPanics {
     }
 }
 
+/// Test certificates made with openssl in a folder: EC P-256, valid 2 days.
+pub mod certs {
+    use std::{path::Path, process::Command};
+
+    fn openssl(dir: &Path, args: &[&str]) {
+        assert!(
+            super::have("openssl"),
+            "openssl is needed to make the test's certificates"
+        );
+        let out = Command::new("openssl")
+            .args(args)
+            .current_dir(dir)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "openssl {args:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+
+    const EC: [&str; 5] = [
+        "-newkey",
+        "ec",
+        "-pkeyopt",
+        "ec_paramgen_curve:P-256",
+        "-nodes",
+    ];
+
+    /// A CA, `NAME.pem` and `NAME.key` in `dir`.
+    pub fn ca(dir: &Path, name: &str) {
+        let (subj, key, pem) = (
+            format!("/CN={name}"),
+            format!("{name}.key"),
+            format!("{name}.pem"),
+        );
+        let mut args = vec!["req", "-x509"];
+        args.extend(EC);
+        args.extend(["-days", "2", "-subj", &subj, "-keyout", &key, "-out", &pem]);
+        openssl(dir, &args);
+    }
+
+    /// A certificate for 127.0.0.1 and localhost with common name `who`, signed by
+    /// the CA `ca` of `dir`: `WHO.pem` and `WHO.key`.
+    pub fn signed(dir: &Path, who: &str, ca: &str) {
+        std::fs::write(
+            dir.join("ext.cnf"),
+            "subjectAltName=IP:127.0.0.1,DNS:localhost\nbasicConstraints=CA:FALSE\n",
+        )
+        .unwrap();
+        let (subj, key, csr, pem) = (
+            format!("/CN={who}"),
+            format!("{who}.key"),
+            format!("{who}.csr"),
+            format!("{who}.pem"),
+        );
+        let (ca_pem, ca_key) = (format!("{ca}.pem"), format!("{ca}.key"));
+        let mut args = vec!["req"];
+        args.extend(EC);
+        args.extend(["-subj", &subj, "-keyout", &key, "-out", &csr]);
+        openssl(dir, &args);
+        openssl(
+            dir,
+            &[
+                "x509",
+                "-req",
+                "-in",
+                &csr,
+                "-CA",
+                &ca_pem,
+                "-CAkey",
+                &ca_key,
+                "-CAcreateserial",
+                "-days",
+                "2",
+                "-extfile",
+                "ext.cnf",
+                "-out",
+                &pem,
+            ],
+        );
+    }
+}
+
 /// The `jderobot` binary with `args`, as every test runs it: warnings only in
 /// the log, no display (headless), standard streams piped.
 pub fn jderobot<I, S>(args: I) -> Command
