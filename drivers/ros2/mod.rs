@@ -328,6 +328,28 @@ impl crate::supervisor::Device for Robot {
     }
 }
 
+/// The writer of the robot's velocity command (`/cmd_vel`, reliable) for `motors`.
+fn motors_output(
+    dp: &DomainParticipant,
+    publ: &rustdds::Publisher,
+    topic: String,
+    motors: Arc<Interface<Motors>>,
+) -> anyhow::Result<CmdVelOut> {
+    let dds_type = Motors::MESSAGE.map(|m| m.dds).unwrap_or("");
+    let t = dp
+        .create_topic(
+            dds_topic(&topic),
+            dds_type.into(),
+            &reliable_qos(5),
+            TopicKind::NoKey,
+        )
+        .map_err(|e| anyhow::anyhow!("driver ros2: topic {topic}: {e}"))?;
+    let w = publ
+        .create_datawriter_no_key::<Cdr, CdrAdapter>(&t, Some(reliable_qos(5)))
+        .map_err(|e| anyhow::anyhow!("driver ros2: a writer of {topic}: {e}"))?;
+    Ok((motors, w, topic))
+}
+
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>> {
     let l: Lines = conf.settings(LINES)?;
     if !l.insecure {
@@ -389,19 +411,7 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
             Some("motors") => {
                 let i = rt.interfaces.provide::<Motors>(name, &conf.name)?;
                 ifaces.push(i.clone());
-                let dds_type = Motors::MESSAGE.map(|m| m.dds).unwrap_or("");
-                let t = dp
-                    .create_topic(
-                        dds_topic(&topic),
-                        dds_type.into(),
-                        &reliable_qos(5),
-                        TopicKind::NoKey,
-                    )
-                    .map_err(|e| anyhow::anyhow!("driver ros2: topic {topic}: {e}"))?;
-                let w = publ
-                    .create_datawriter_no_key::<Cdr, CdrAdapter>(&t, Some(reliable_qos(5)))
-                    .map_err(|e| anyhow::anyhow!("driver ros2: a writer of {topic}: {e}"))?;
-                motors = Some((i, w, topic));
+                motors = Some(motors_output(dp, &publ, topic, i)?);
             }
             _ => anyhow::bail!(
                 "driver ros2: provides {name}: this driver provides laser, encoders, motors, \
