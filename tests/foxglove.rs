@@ -76,19 +76,7 @@ fn the_official_client_lists_decodes_drives_and_stops_a_schema() {
     let rt = common::start_conf(&conf(""));
     let a = addr(&rt);
     assert!(a.ip().is_loopback(), "loopback by default: {a}");
-    let out = Command::new("node")
-        .arg(dir.join("client.js"))
-        .arg(format!("ws://{a}"))
-        .current_dir(&dir)
-        .output()
-        .expect("run node");
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "client.js failed: {}\n{stdout}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let r: Value = serde_json::from_str(stdout.trim()).expect("one JSON report");
+    let r = run_node_client(&dir, &format!("ws://{a}"), None);
     // The legacy subprotocol, answered under its own name.
     assert_eq!(r["protocol"], "foxglove.websocket.v1");
     for cap in ["clientPublish", "services", "parameters"] {
@@ -974,6 +962,24 @@ fn a_token_is_asked_for_and_a_bind_beyond_loopback_needs_one() {
     assert!(e.contains("token SECRET") && e.contains("insecure"), "{e}");
 }
 
+/// Runs the official client (`tests/foxglove_node/client.js`, in `dir`) against
+/// `url`, trusting `ca` for wss; it must succeed and print one JSON report.
+fn run_node_client(dir: &std::path::Path, url: &str, ca: Option<&std::path::Path>) -> Value {
+    let mut node = Command::new("node");
+    node.arg(dir.join("client.js")).arg(url).current_dir(dir);
+    if let Some(ca) = ca {
+        node.env("NODE_EXTRA_CA_CERTS", ca);
+    }
+    let out = node.output().expect("run node");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "client.js {url} failed: {}\n{stdout}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_str(stdout.trim()).expect("one JSON report")
+}
+
 /// A CA and a server certificate for 127.0.0.1 signed by it, made with openssl
 /// in `d`: (ca.pem, server.pem, server.key).
 fn make_certs(d: &std::path::Path) -> (PathBuf, PathBuf, PathBuf) {
@@ -1103,20 +1109,11 @@ fn wss_with_a_token_serves_beyond_loopback_and_plain_ws_gets_nothing() {
     }
     // The official client over wss://.
     if let Some(dir) = node_client() {
-        let out = Command::new("node")
-            .arg(dir.join("client.js"))
-            .arg(format!("wss://127.0.0.1:{port}/?token=s3cret"))
-            .env("NODE_EXTRA_CA_CERTS", &ca)
-            .current_dir(&dir)
-            .output()
-            .expect("run node");
-        let stdout = String::from_utf8_lossy(&out.stdout);
-        assert!(
-            out.status.success(),
-            "client.js over wss failed: {}\n{stdout}",
-            String::from_utf8_lossy(&out.stderr)
+        let r = run_node_client(
+            &dir,
+            &format!("wss://127.0.0.1:{port}/?token=s3cret"),
+            Some(&ca),
         );
-        let r: Value = serde_json::from_str(stdout.trim()).expect("one JSON report");
         assert_eq!(r["protocol"], "foxglove.websocket.v1", "{r}");
         assert!(r["counts"]["laser"].as_u64().unwrap_or(0) > 0, "{r}");
         assert!(r["twists"].as_u64().unwrap_or(0) > 0, "{r}");
