@@ -28,7 +28,7 @@ use std::{
 
 use jderobot::{
     drivers::networkclient::{ClientConf, NetClient, Remote},
-    interfaces::{Encoders, Image, Interface, Interfaces, Laser, Watch},
+    interfaces::{Encoders, Image, Interface, Interfaces, Laser},
     services::networkserver::{NetServer, ServerConf, Sources},
 };
 
@@ -130,34 +130,46 @@ fn link() -> Link {
 }
 
 /// Frames per second through server and client. The producer acts as a camera
-/// that always has the next frame ready: each time the client's interface gets a
-/// frame, it writes the next one (the server is then sending the one after the
-/// client's, so it never waits for the camera), and at least every millisecond.
-/// It sleeps on the client interface's watch in between: until 2026-11-27 it
-/// polled the server every 30 µs, 48–170 µs of CPU a frame that the raw copy does
-/// not pay, on a 2-core machine where the link itself needs both cores. Like the
-/// raw copy's sender, it produces no pixels (it marks one byte): what is measured
-/// is the link. `Interface::write` hands it the buffer of a frame the server has
-/// sent, so no frame is copied on the way.
+/// that always has the next frame ready: as soon as the server takes the latest
+/// frame (holds it to send it), it writes the next one. Like the raw copy's
+/// sender, it produces no pixels (it marks one byte): what is measured is the
+/// link. `Interface::write` hands it the buffer of a frame the server has sent,
+/// so no frame is copied on the way (until 2026-11-25 a write after a frame the
+/// server still held copied the latest 900 KB frame). Waking it when a frame
+/// arrives at the client instead (tried 2026-11-27) halves the rate: the server
+/// then finishes a frame before the next exists and waits two thread wake-ups.
 /// Returns (frames/s, the producer's CPU µs per frame delivered).
 fn net_fps(l: &Link) -> (f64, f64) {
     let stop = AtomicBool::new(false);
     let counting = AtomicBool::new(false);
     thread::scope(|sc| {
         let producer = sc.spawn(|| {
-            let watch = Watch::for_current_thread();
-            l.dst.watch(watch.clone());
+            let (src, stats) = (&l.src, l.server.stats());
             let mut cpu0 = None;
             let mut k = 0u8;
+            let _ = src.write(|i| i.data[0] = 255);
+            let mut cur = src.snapshot();
+            let mut sent = stats.frames.load(Ordering::Relaxed);
+            let mut at = Instant::now();
             while !stop.load(Ordering::Relaxed) {
                 if cpu0.is_none() && counting.load(Ordering::Relaxed) {
                     cpu0 = Some(thread_cpu());
                 }
-                k = k.wrapping_add(1);
-                let _ = l.src.write(|i| i.data[0] = k);
-                watch.wait(Duration::from_millis(1));
+                // Taken: held by the slot, `cur` and the server; or the server
+                // finished a frame (maybe this one) and wants a newer one.
+                let done = stats.frames.load(Ordering::Relaxed);
+                // (And at least every millisecond, as a camera would.)
+                if Arc::strong_count(&cur) > 2 || done != sent || at.elapsed().as_micros() > 1000 {
+                    sent = done;
+                    at = Instant::now();
+                    drop(cur);
+                    k = k.wrapping_add(1);
+                    let _ = src.write(|i| i.data[0] = k);
+                    cur = src.snapshot();
+                } else {
+                    thread::sleep(Duration::from_micros(30));
+                }
             }
-            l.dst.unwatch(&*watch);
             thread_cpu() - cpu0.unwrap_or_else(thread_cpu)
         });
         thread::sleep(Duration::from_millis(300));
