@@ -1,9 +1,10 @@
-//! recorder and replay benchmarks (harness = false; medians of several rounds):
+//! recorder and replay benchmarks (harness = false; medians of 5 rounds):
 //!
 //! 1. Write throughput: the writer's path (encode + MCAP chunk writing, no
 //!    compression and zstd) for the load "640x480 BGR at 30 fps + laser 10 Hz +
 //!    encoders 20 Hz + sonars 10 Hz", as seconds of robot time written per wall
-//!    second (x real time).
+//!    second (x real time), to disk and to memory (/dev/shm). Reference, in the
+//!    same alternated rounds: the frames' pixels alone written with `write_all`.
 //! 2. The recorder service at 1x on that load for 5 s: messages dropped, CPU of
 //!    its threads (recorder-poller + recorder-writer, from /proc) as % of one core.
 //! 3. The replay driver at `speed max`: laser messages/s and 640x480 frames/s
@@ -11,12 +12,13 @@
 //! 4. File size of 10 s of the simulator (colorA, laser, encoders, sonars): zstd,
 //!    lz4 and no compression.
 //!
-//! Run: `cargo bench --features full --bench recorder`.
+//! Run: `cargo bench --features full --bench recorder` (`-- write`: only 1).
 
 mod common;
-use common::median;
+use common::{median, percentile, threads_cpu};
 
 use std::{
+    io::Write,
     path::{Path, PathBuf},
     sync::{Arc, atomic::Ordering},
     time::{Duration, Instant, SystemTime},
@@ -116,9 +118,8 @@ fn write_profile(
     seconds: &[Vec<(&str, Snapshot)>],
     profile: Profile,
 ) -> u64 {
-    let mut w = mcapfmt::write_options(compression, profile)
-        .create(std::fs::File::create(path).unwrap())
-        .unwrap();
+    let mut w =
+        mcapfmt::writer(std::fs::File::create(path).unwrap(), compression, profile).unwrap();
     let mut channels = std::collections::HashMap::new();
     let mut buf = Vec::new();
     for sec in seconds {
@@ -147,25 +148,47 @@ fn write_profile(
     std::fs::metadata(path).unwrap().len()
 }
 
-/// CPU seconds of this process's threads whose name starts with `prefix`.
-fn thread_cpu(prefix: &str) -> f64 {
-    let tick = 100.0; // USER_HZ
-    let mut total = 0.0;
-    for e in std::fs::read_dir("/proc/self/task").unwrap().flatten() {
-        let comm = std::fs::read_to_string(e.path().join("comm")).unwrap_or_default();
-        if !comm.trim().starts_with(prefix) {
-            continue;
-        }
-        let stat = std::fs::read_to_string(e.path().join("stat")).unwrap_or_default();
-        let after = stat.rsplit(')').next().unwrap_or("");
-        let f: Vec<&str> = after.split_whitespace().collect();
-        // fields after ")": state(0) ... utime(11) stime(12)
-        if f.len() > 12 {
-            total +=
-                (f[11].parse::<f64>().unwrap_or(0.0) + f[12].parse::<f64>().unwrap_or(0.0)) / tick;
+/// The reference writer: the frames' pixels back to back with `write_all`.
+fn write_raw(path: &Path, seconds: &[Vec<(&str, Snapshot)>]) -> u64 {
+    let mut f = std::fs::File::create(path).unwrap();
+    for (_, snap) in seconds.iter().flatten() {
+        if let Snapshot::Image(s) = snap {
+            f.write_all(&s.value.data).unwrap();
         }
     }
-    total
+    drop(f);
+    std::fs::metadata(path).unwrap().len()
+}
+
+/// x real time of each writer to each target (`[writer][target]`, 5 rounds, the
+/// order reversed every other round so none always runs first) and a file's size.
+fn rounds(
+    targets: &[(&str, PathBuf)],
+    writers: &[&dyn Fn(&Path) -> u64],
+    secs: u64,
+) -> (Vec<Vec<Vec<f64>>>, u64) {
+    let mut xs = vec![vec![Vec::new(); targets.len()]; writers.len()];
+    let mut size = 0;
+    let jobs: Vec<(usize, usize)> = (0..writers.len())
+        .flat_map(|w| (0..targets.len()).map(move |t| (w, t)))
+        .collect();
+    for round in 0..5 {
+        for j in 0..jobs.len() {
+            let (w, t) = jobs[if round % 2 == 0 {
+                j
+            } else {
+                jobs.len() - 1 - j
+            }];
+            let start = Instant::now();
+            let n = writers[w](&targets[t].1);
+            xs[w][t].push(secs as f64 / start.elapsed().as_secs_f64());
+            if w == 0 {
+                size = n;
+            }
+            let _ = std::fs::remove_file(&targets[t].1);
+        }
+    }
+    (xs, size)
 }
 
 fn main() {
@@ -186,6 +209,9 @@ fn main() {
         .chain(shm.as_ref().map(|d| ("memory", d.path().join("w.mcap"))))
         .collect();
     let foxglove = Profile::Foxglove { jpeg: None };
+    // The reference, in the same rounds as the recorder's path without compression:
+    // the frames' pixels alone written to the same file with `write_all` (no MCAP).
+    let raw = |p: &Path| write_raw(p, &load);
     for (label, c, profile) in [
         ("none", None, foxglove),
         ("lz4", Some(mcap::Compression::Lz4), foxglove),
@@ -196,21 +222,37 @@ fn main() {
             Profile::Ros2,
         ),
     ] {
-        for (to, file) in &targets {
-            let mut xs = Vec::new();
-            let mut size = 0;
-            for _ in 0..5 {
-                let t = Instant::now();
-                size = write_profile(file, c, &load, profile);
-                xs.push(secs as f64 / t.elapsed().as_secs_f64());
-            }
-            let _ = std::fs::remove_file(file);
+        let ours = |p: &Path| write_profile(p, c, &load, profile);
+        let writers: Vec<&dyn Fn(&Path) -> u64> = if label == "none" {
+            vec![&ours as &dyn Fn(&Path) -> u64, &raw]
+        } else {
+            vec![&ours as &dyn Fn(&Path) -> u64]
+        };
+        let (xs, size) = rounds(&targets, &writers, secs);
+        for (k, (to, _)) in targets.iter().enumerate() {
             println!(
-                "write throughput to {to}, compression {label}: median {:.1}x real time ({} MB for {secs} s)",
-                median(xs),
+                "write throughput to {to}, compression {label}: median {:.1}x real time, rounds {:.1}-{:.1}x ({} MB for {secs} s)",
+                median(&xs[0][k]),
+                percentile(&xs[0][k], 0.0),
+                percentile(&xs[0][k], 1.0),
                 size / 1_000_000
             );
+            if writers.len() > 1 {
+                let ratio: Vec<f64> = xs[0][k].iter().zip(&xs[1][k]).map(|(a, b)| a / b).collect();
+                println!(
+                    "  reference, the pixels alone with write_all to {to}: median {:.1}x real time; the recorder's path is {:.0} % of it (rounds {:.0}-{:.0} %)",
+                    median(&xs[1][k]),
+                    median(&ratio) * 100.0,
+                    percentile(&ratio, 0.0) * 100.0,
+                    percentile(&ratio, 1.0) * 100.0
+                );
+            }
         }
+    }
+
+    // `write` as an argument: only the write throughput.
+    if std::env::args().any(|a| a == "write") {
+        return;
     }
 
     // 2. The recorder service at 1x.
@@ -233,7 +275,7 @@ fn main() {
             .import::<RecorderStatus>("recorder", "status")
             .unwrap();
         std::thread::sleep(Duration::from_millis(400));
-        let cpu0 = thread_cpu("recorder-");
+        let cpu0 = threads_cpu("recorder-");
         let start = Instant::now();
         let imgs = [noisy_image(1), noisy_image(2)];
         let mut k = 0u64;
@@ -269,7 +311,7 @@ fn main() {
             k += 1;
         }
         let wall = start.elapsed().as_secs_f64();
-        let cpu = thread_cpu("recorder-") - cpu0;
+        let cpu = threads_cpu("recorder-") - cpu0;
         let written = status.messages.load(Ordering::Relaxed);
         let dropped = status.dropped.load(Ordering::Relaxed);
         rt.shutdown();

@@ -1,21 +1,26 @@
 //! jderobot over Zenoh against Zenoh alone, between two processes on loopback, in
-//! the same run (harness = false; medians of alternating rounds):
+//! the same run (harness = false; medians of 5 rounds, the order alternated):
 //!
 //! 1. Throughput of 640x480 BGR frames (921,608-byte payloads). Reference: Zenoh's
 //!    throughput example (`z_pub_thr`: one publisher putting the same payload as
 //!    fast as it can, a subscriber counting). Ours: a `zenoh` service publishing
 //!    an image interface that a producer refreshes every 0.1 ms, and a
 //!    `zenoh` driver providing it in the other process (frames published into the
-//!    local interface per second).
+//!    local interface per second). Also Zenoh alone with the one copy an
+//!    interface's frame takes on arrival (its pixels are a `Vec`).
 //! 2. `motors` round trips. Reference: Zenoh's `z_ping`/`z_pong` with the same
 //!    payload (8 bytes) and attachment (16 bytes). Ours: a `zenoh` driver's
-//!    `motors` → the other process's `zenoh` service → its `motors` interface → an
-//!    echo thread → its `encoders` interface → back into this process's
-//!    `encoders`: interface to interface, both ways.
+//!    `motors` → the other process's `zenoh` service → its `motors` interface → the
+//!    echo → its `encoders` interface → back into this process's
+//!    `encoders`: interface to interface, both ways. The echo answers either on
+//!    the thread that publishes `motors` there (a `Notify`, as z_pong answers in
+//!    its callback: the like-for-like figure) or from a thread it wakes (one
+//!    thread hop more than the reference).
 //! 3. Build time is measured by a clean build with and without the feature (see
 //!    docs/zenoh.md), not here.
 //!
-//! Run: `cargo bench --features full --bench zenoh`.
+//! Run: `cargo bench --features full --bench zenoh` (`-- frames` or `-- motors`:
+//! only that part).
 
 mod common;
 use common::{free_port, median, percentile};
@@ -33,7 +38,7 @@ use std::{
 use jderobot::{
     Conf, Runtime,
     conf::Kind,
-    interfaces::{Encoders, Image, Interface, Motors, Watch},
+    interfaces::{Encoders, Image, Interface, Motors, Notify, Watch},
     loader,
 };
 use zenoh::{Wait, qos::CongestionControl};
@@ -85,6 +90,33 @@ fn payload_image() -> Image {
 }
 
 // ---- the other process ----
+
+/// The encoders value that answers a `motors` command of speed `v`.
+fn echoed(v: f32) -> Encoders {
+    Encoders {
+        x: v,
+        y: 0.0,
+        theta: 1.0,
+        cos: 1f32.cos(),
+        sin: 1f32.sin(),
+    }
+}
+
+/// Answers each new `motors` command on the publishing thread.
+struct Echo {
+    motors: Arc<Interface<Motors>>,
+    encoders: Arc<Interface<Encoders>>,
+    last: AtomicU64,
+}
+
+impl Notify for Echo {
+    fn notify(&self) {
+        let m = self.motors.snapshot();
+        if self.last.swap(m.clock, Ordering::Relaxed) != m.clock {
+            let _ = self.encoders.publish(echoed(m.v));
+        }
+    }
+}
 
 fn child_main(role: &str, port: u16) {
     match role {
@@ -164,6 +196,18 @@ fn child_main(role: &str, port: u16) {
                 },
             );
             let (motors, encoders) = ifs.unwrap();
+            if std::env::var("ZBENCH_ECHO").as_deref() == Ok("inline") {
+                // Answered on the thread that publishes `motors` (Zenoh's), as
+                // z_pong answers in its callback.
+                let echo = Arc::new(Echo {
+                    motors: motors.clone(),
+                    encoders,
+                    last: AtomicU64::new(0),
+                });
+                motors.watch(echo);
+                std::thread::park();
+                return;
+            }
             let watch = Watch::for_current_thread();
             motors.watch(watch.clone());
             let mut last = 0;
@@ -172,14 +216,7 @@ fn child_main(role: &str, port: u16) {
                 let m = motors.snapshot();
                 if m.clock != last {
                     last = m.clock;
-                    let e = Encoders {
-                        x: m.v,
-                        y: 0.0,
-                        theta: 1.0,
-                        cos: 1f32.cos(),
-                        sin: 1f32.sin(),
-                    };
-                    encoders.publish(e).unwrap();
+                    encoders.publish(echoed(m.v)).unwrap();
                 }
             }
         }
@@ -188,8 +225,10 @@ fn child_main(role: &str, port: u16) {
 }
 
 fn spawn(role: &str, port: u16) -> Child {
+    let (role, echo) = role.split_once(':').unwrap_or((role, ""));
     Command::new(std::env::current_exe().unwrap())
         .env("ZBENCH_ROLE", role)
+        .env("ZBENCH_ECHO", echo)
         .env("ZBENCH_PORT", port.to_string())
         .env("RUST_LOG", "error")
         .stdin(Stdio::null())
@@ -214,15 +253,24 @@ fn stop(mut c: Child) {
 // ---- this process ----
 
 /// Frames per second received over a 2 s window after 1.5 s of warm-up.
-fn throughput_ref() -> f64 {
+/// With `copy`, the callback also copies each payload into a recycled buffer, the
+/// one copy an interface's frame (a `Vec`) takes on arrival.
+fn throughput_ref(copy: bool) -> f64 {
     let port = free_port();
     let s = session(Some(port), None);
     let count = Arc::new(AtomicU64::new(0));
     let _sub = {
         let count = count.clone();
+        let mut frame: Vec<u8> = Vec::new();
         s.declare_subscriber("bench/img")
-            .callback(move |sample| {
+            .callback_mut(move |sample| {
                 assert_eq!(sample.payload().len(), 921_608);
+                if copy {
+                    frame.clear();
+                    for sl in sample.payload().slices() {
+                        frame.extend_from_slice(sl);
+                    }
+                }
                 count.fetch_add(1, Ordering::Relaxed);
             })
             .wait()
@@ -316,8 +364,9 @@ fn pings_ref() -> Vec<f64> {
         p.extend_from_slice(&0f32.to_le_bytes());
         publisher.put(p).attachment(vec![0u8; 16]).wait().unwrap();
     };
-    // Until the other side answers.
-    let mut i = 1_000_000;
+    // Until the other side answers (with speeds past the measured ones but within
+    // motors' range, ±10,000 mm/s, which jderobot's interface refuses beyond).
+    let mut i = 9_000;
     while got.load(Ordering::Acquire) != i as u64 {
         i += 1;
         put(i);
@@ -336,7 +385,9 @@ fn pings_ref() -> Vec<f64> {
     v
 }
 
-fn pings_ours() -> Vec<f64> {
+/// Round-trip times in µs; the other process answers on `echo`: `thread` (a
+/// thread woken by `motors`) or `inline` (on the thread that publishes it).
+fn pings_ours(echo: &str) -> Vec<f64> {
     let port = free_port();
     let rt = runtime(
         Kind::Driver,
@@ -351,9 +402,9 @@ fn pings_ours() -> Vec<f64> {
     encoders.resume();
     let watch = Watch::for_current_thread();
     encoders.watch(watch.clone());
-    let child = spawn("pong-ours", port);
+    let child = spawn(&format!("pong-ours:{echo}"), port);
     let mut v = Vec::with_capacity(PINGS);
-    let mut i = 1_000_000usize;
+    let mut i = 9_000usize;
     let answered = |i: usize| encoders.read().x == i as f32;
     while !answered(i) {
         i += 1;
@@ -390,46 +441,101 @@ fn main() {
         child_main(&role, port.parse().unwrap());
         return;
     }
-    println!("== 640x480 BGR frames between two processes (frames/s received) ==");
-    let (mut r, mut o) = (Vec::new(), Vec::new());
-    for round in 0..ROUNDS {
-        let a = throughput_ref();
-        let b = throughput_ours();
-        println!(
-            "round {round}: zenoh alone {a:.0}  jderobot {b:.0}  ({:.0} %)",
-            100.0 * b / a
-        );
-        r.push(a);
-        o.push(b);
+    // `frames` or `motors` as an argument runs only that part.
+    let only = |part: &str| {
+        let args: Vec<String> = std::env::args().skip(1).collect();
+        !args.iter().any(|a| a == "frames" || a == "motors") || args.iter().any(|a| a == part)
+    };
+    if only("frames") {
+        frames();
     }
-    let ratios: Vec<f64> = r.iter().zip(&o).map(|(a, b)| b / a).collect();
-    println!(
-        "median: zenoh alone {:.0} frames/s ({:.0} MB/s), jderobot {:.0} frames/s: {:.0} % (goal >= 90 %)",
-        median(r.clone()),
-        median(r.clone()) * 0.921_608,
-        median(o.clone()),
-        100.0 * median(ratios)
-    );
+    if only("motors") {
+        motors();
+    }
+}
 
-    println!("== motors round trips between two processes (µs) ==");
-    let (mut p50r, mut p50o) = (Vec::new(), Vec::new());
+fn frames() {
+    println!("== 640x480 BGR frames between two processes (frames/s received) ==");
+    // Zenoh alone, Zenoh alone with the one copy on arrival, and ours; the order
+    // rotates every round so none always runs on a warmer machine.
+    let runs: [(&str, fn() -> f64); 3] = [
+        ("zenoh alone", (|| throughput_ref(false)) as fn() -> f64),
+        (
+            "zenoh alone + one copy",
+            (|| throughput_ref(true)) as fn() -> f64,
+        ),
+        ("jderobot", throughput_ours as fn() -> f64),
+    ];
+    let mut fps = vec![Vec::new(); runs.len()];
     for round in 0..ROUNDS {
-        let mut a = pings_ref();
-        let mut b = pings_ours();
-        let (a50, a90) = (percentile(&mut a, 0.5), percentile(&mut a, 0.9));
-        let (b50, b90) = (percentile(&mut b, 0.5), percentile(&mut b, 0.9));
-        println!(
-            "round {round}: zenoh alone p50 {a50:.0} p90 {a90:.0}  jderobot p50 {b50:.0} p90 {b90:.0}  (p50 {:.2}x)",
-            b50 / a50
-        );
-        p50r.push(a50);
-        p50o.push(b50);
+        let mut line = format!("round {round}:");
+        for j in 0..runs.len() {
+            let k = (j + round) % runs.len();
+            let f = (runs[k].1)();
+            fps[k].push(f);
+            line += &format!("  {} {f:.0}", runs[k].0);
+        }
+        println!("{line}");
     }
-    let ratios: Vec<f64> = p50r.iter().zip(&p50o).map(|(a, b)| b / a).collect();
     println!(
-        "median p50: zenoh alone {:.0} µs, jderobot {:.0} µs: {:.2}x (goal <= 1.2x)",
-        median(p50r),
-        median(p50o),
-        median(ratios)
+        "median: zenoh alone {:.0} frames/s ({:.0} MB/s)",
+        median(&fps[0]),
+        median(&fps[0]) * 0.921_608
     );
+    for k in 1..runs.len() {
+        let ratios: Vec<f64> = fps[0].iter().zip(&fps[k]).map(|(a, b)| b / a).collect();
+        println!(
+            "  {} {:.0} frames/s: {:.0} % of zenoh alone (goal for jderobot >= 100 %), rounds {:.0}-{:.0} %",
+            runs[k].0,
+            median(&fps[k]),
+            100.0 * median(&ratios),
+            100.0 * percentile(&ratios, 0.0),
+            100.0 * percentile(&ratios, 1.0)
+        );
+    }
+}
+
+fn motors() {
+    println!("== motors round trips between two processes (µs) ==");
+    // The reference, ours answered inline (as z_pong answers in its callback) and
+    // ours answered by a woken thread; the order rotates every round.
+    let runs: [(&str, fn() -> Vec<f64>); 3] = [
+        ("zenoh alone", pings_ref as fn() -> Vec<f64>),
+        (
+            "jderobot, inline echo",
+            (|| pings_ours("inline")) as fn() -> Vec<f64>,
+        ),
+        (
+            "jderobot, echo thread",
+            (|| pings_ours("thread")) as fn() -> Vec<f64>,
+        ),
+    ];
+    let mut p50 = vec![Vec::new(); runs.len()];
+    for round in 0..ROUNDS {
+        let mut line = format!("round {round}:");
+        for j in 0..runs.len() {
+            let k = (j + round) % runs.len();
+            let v = (runs[k].1)();
+            p50[k].push(percentile(&v, 0.5));
+            line += &format!(
+                "  {} p50 {:.0} p90 {:.0}",
+                runs[k].0,
+                percentile(&v, 0.5),
+                percentile(&v, 0.9)
+            );
+        }
+        println!("{line}");
+    }
+    println!("median p50: {} {:.0} µs", runs[0].0, median(&p50[0]));
+    for k in 1..runs.len() {
+        let ratios: Vec<f64> = p50[0].iter().zip(&p50[k]).map(|(a, b)| b / a).collect();
+        println!(
+            "  {} {:.0} µs: {:.2}x (goal <= 1.1x), rounds {:.2}-{:.2}x",
+            runs[k].0,
+            median(&p50[k]),
+            median(&ratios),
+            percentile(&ratios, 0.0),
+            percentile(&ratios, 1.0)
+        );
+    }
 }

@@ -142,6 +142,36 @@ fn write_takes_back_a_buffer_its_reader_let_go() {
     assert_eq!(iface.read().value.data[0], 5);
 }
 
+/// Two readers holding two frames (a Zenoh publisher: one on the wire, one
+/// waiting for room) while the writer goes on: once the older is let go, the
+/// next write gets its buffer back, not a copy of the latest frame.
+#[test]
+fn write_takes_back_a_buffer_when_two_readers_held_frames() {
+    let iface: Interface<Image> = Interface::with_value("varcolorB", "t", Image::new(64, 48));
+    iface.write(|i| i.data.fill(1)).unwrap();
+    let on_the_wire = iface.snapshot();
+    iface.write(|i| i.data.fill(2)).unwrap();
+    let waiting = iface.snapshot();
+    iface.write(|i| i.data.fill(3)).unwrap();
+    drop(on_the_wire);
+    let mut got = 0;
+    iface
+        .write(|i| {
+            got = i.data[0];
+            i.data.fill(5)
+        })
+        .unwrap();
+    assert_eq!(
+        got, 1,
+        "the buffer of frame 1, let go, not a copy of frame 3"
+    );
+    assert_eq!(
+        waiting.value.data[0], 2,
+        "a frame still held is not touched"
+    );
+    assert_eq!(iface.read().value.data[0], 5);
+}
+
 #[test]
 fn resume_suspend_reference_counting() {
     let iface: Arc<Interface<Encoders>> = Arc::new(Interface::new("encoders", "t"));

@@ -38,6 +38,15 @@ pub fn cpu_ticks(pid: u32) -> Option<u64> {
     Some(f.get(11)?.parse::<u64>().ok()? + f.get(12)?.parse::<u64>().ok()?)
 }
 
+/// CPU seconds run so far by the calling thread (`/proc/thread-self/schedstat`).
+pub fn thread_cpu() -> f64 {
+    std::fs::read_to_string("/proc/thread-self/schedstat")
+        .ok()
+        .and_then(|s| s.split(' ').next()?.parse::<f64>().ok())
+        .unwrap_or(0.0)
+        / 1e9
+}
+
 /// CPU seconds run so far by this process's threads whose name starts with
 /// `prefix` (`/proc/self/task/*/schedstat`, nanosecond resolution).
 pub fn threads_cpu(prefix: &str) -> f64 {

@@ -412,7 +412,7 @@ fn poll_loop(
 
 /// One open file.
 struct Open {
-    writer: mcap::Writer<File>,
+    writer: mcap::Writer<std::io::BufWriter<File>>,
     path: PathBuf,
     opened: Instant,
     channels: Vec<Option<u16>>,
@@ -426,8 +426,7 @@ fn open(settings: &Settings, n: u32) -> anyhow::Result<Open> {
     }
     let file = File::create(&path)
         .with_context(|| format!("recorder: cannot create {}", path.display()))?;
-    let writer = mcapfmt::write_options(settings.compression, settings.profile())
-        .create(file)
+    let writer = mcapfmt::writer(file, settings.compression, settings.profile())
         .with_context(|| format!("recorder: cannot start {}", path.display()))?;
     Ok(Open {
         writer,

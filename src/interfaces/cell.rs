@@ -50,11 +50,12 @@ impl<T> std::ops::Deref for Sample<T> {
 /// What writers share: a recycled buffer and recent publish times (for the rate).
 struct Writer<T> {
     spare: Option<T>,
-    /// The sample replaced last while a reader still held it (a frame a network
-    /// writer was sending): the next write takes its buffer back if the reader has
-    /// let it go by then, so a writer that outruns a reader does not copy the
-    /// latest value every time. At most one is kept.
-    held: Option<Arc<Sample<T>>>,
+    /// Samples replaced while a reader still held them (a frame a network writer
+    /// was sending, another waiting for room to be sent): the next write takes the
+    /// buffer of the first one its readers have let go, so a writer that outruns
+    /// its readers does not copy the latest value every time. At most [`HELD`],
+    /// oldest first.
+    held: VecDeque<Arc<Sample<T>>>,
     recent: VecDeque<Instant>,
     first: Option<Instant>,
     /// The latest samples, newest last, kept while someone needs every sample and
@@ -186,6 +187,16 @@ impl Notify for Watch {
     }
 }
 
+/// How many replaced samples a writer waits for readers to let go of (a frame
+/// on the wire and one waiting for room: a Zenoh publisher holds two).
+const HELD: usize = 3;
+
+/// The value of the oldest held sample no reader holds any more, taken out.
+fn let_go<T>(held: &mut VecDeque<Arc<Sample<T>>>) -> Option<T> {
+    let i = held.iter().position(|s| Arc::strong_count(s) == 1)?;
+    Arc::try_unwrap(held.remove(i)?).ok().map(|s| s.value)
+}
+
 impl<T: InterfaceValue> Interface<T> {
     /// A new interface holding `T::default()` at clock 0.
     pub fn new(name: &str, provider: &str) -> Self {
@@ -205,7 +216,7 @@ impl<T: InterfaceValue> Interface<T> {
             }),
             writer: Mutex::new(Writer {
                 spare: None,
-                held: None,
+                held: VecDeque::new(),
                 recent: VecDeque::new(),
                 first: None,
                 history: VecDeque::new(),
@@ -301,16 +312,9 @@ impl<T: InterfaceValue> Interface<T> {
             }
             At::Received(clock, time) => self.check_after(clock).ok().map(|()| (clock, time)),
         };
-        let mut value = match w.spare.take() {
+        let mut value = match w.spare.take().or_else(|| let_go(&mut w.held)) {
             Some(v) => v,
-            None => match w.held.take().map(Arc::try_unwrap) {
-                Some(Ok(s)) => s.value,
-                Some(Err(still)) => {
-                    w.held = Some(still);
-                    self.read().value.clone()
-                }
-                None => self.read().value.clone(),
-            },
+            None => self.read().value.clone(),
         };
         fill(&mut value);
         if let Err(e) = value.validate(&self.name) {
@@ -323,7 +327,12 @@ impl<T: InterfaceValue> Interface<T> {
         };
         match Arc::try_unwrap(old) {
             Ok(s) => w.spare = Some(s.value),
-            Err(old) => w.held = Some(old),
+            Err(old) => {
+                if w.held.len() == HELD {
+                    w.held.pop_front();
+                }
+                w.held.push_back(old);
+            }
         }
         drop(w);
         self.tell_watchers();

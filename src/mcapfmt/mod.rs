@@ -373,6 +373,18 @@ pub fn write_options(
         .calculate_data_section_crc(false)
 }
 
+/// An MCAP writer on `file` as the recorder writes ([`write_options`]), through a
+/// 64 KiB buffer: a message's record header and an index are not system calls
+/// of their own (pixels go straight through), and [`mcap::Writer::flush`] still
+/// hands everything to the kernel.
+pub fn writer(
+    file: std::fs::File,
+    compression: Option<mcap::Compression>,
+    profile: Profile,
+) -> mcap::McapResult<mcap::Writer<std::io::BufWriter<std::fs::File>>> {
+    write_options(compression, profile).create(std::io::BufWriter::with_capacity(64 << 10, file))
+}
+
 /// Encodes a sample of a JSON channel (encoders and the kinds without a Foxglove
 /// schema) into `out`, cleared first: the timestamp, the clock, (for encoders)
 /// Foxglove's pose, and `jderobot`, the value's fields in its units.
