@@ -893,6 +893,28 @@ mod tests {
     }
 
     #[test]
+    fn images_are_paced_by_what_the_clients_took() {
+        let stats = Arc::new(RelayStats::default());
+        let mut p = Pace::new(stats.clone(), 2);
+        // FRAMES_AHEAD frames go, then none until a client takes one.
+        for _ in 0..FRAMES_AHEAD {
+            assert!(p.take(0, false));
+        }
+        assert!(!p.take(0, false));
+        // A new subscriber is greeted whatever the credit; the other channel has its own.
+        assert!(p.take(0, true));
+        assert!(p.take(1, false));
+        stats.sent.fetch_add(1, Ordering::Relaxed);
+        p.refill();
+        assert!(p.take(0, false));
+        assert!(!p.take(0, false));
+        // Taken frames never give more than FRAMES_AHEAD of credit.
+        stats.sent.fetch_add(100, Ordering::Relaxed);
+        p.refill();
+        assert_eq!(p.credit, vec![FRAMES_AHEAD; 2]);
+    }
+
+    #[test]
     fn bad_lines_name_the_line_and_the_fix() {
         for (text, want) in [
             ("bind localhost\n", "is not an IP address"),
