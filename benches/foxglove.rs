@@ -4,13 +4,16 @@
 //!
 //! 1. 640x480 BGR frames per second to one client. Reference: the SDK alone (a
 //!    `WebSocketServer` and a `Channel<RawImage>`; a producer makes a fresh frame
-//!    every 0.1 ms and logs it, its bytes moved into the message; the client
-//!    connects with `foxglove.sdk.v1`). Ours: the same producer publishes into an
-//!    image interface that the service serves (the frame shared with the message,
-//!    no copy), measured on both of its ports: through the relay (`port`, the
-//!    client with `foxglove.websocket.v1`) and straight from the SDK's server
-//!    (`sdk_port`, the client with `foxglove.sdk.v1`). The three alternate in
-//!    each round, their order rotating.
+//!    (a copy) every 0.25 ms on absolute deadlines, 4000 frames/s when it keeps
+//!    up, and logs it, its bytes moved into the message; the client connects with
+//!    `foxglove.sdk.v1`). Ours: the same producer, same pace, publishes into an
+//!    image interface that the service serves, measured on both of its ports
+//!    (both through the door): `port` (the client with `foxglove.websocket.v1`)
+//!    and `sdk_port` (`foxglove.sdk.v1`). The three alternate in each round,
+//!    their order rotating. Each run also prints the frames the producer made per
+//!    second and the CPU time per delivered frame of each thread (`producer`,
+//!    `client`, the SDK's `tokio-rt-worker`, our `foxglove` publisher and
+//!    `foxglove-io`), kernel time included (`/proc/self/task/*/schedstat`).
 //! 2. Twist → `motors`: a client publishes a Twist on `/cmd_vel`; the time until
 //!    the `motors` interface's clock moves (p50, p99).
 //! 3. CPU of the service's threads (`foxglove`, `foxglove-io`) with 10 clients on
@@ -24,12 +27,13 @@
 //! Run: `cargo bench --features full --bench foxglove` (`-- frames`: part 1 only).
 
 use std::{
+    collections::BTreeMap,
     io::{Read, Write},
     net::{SocketAddr, TcpStream},
     path::Path,
     sync::{
         Arc,
-        atomic::{AtomicBool, Ordering},
+        atomic::{AtomicBool, AtomicU64, Ordering},
     },
     time::{Duration, Instant, SystemTime},
 };
@@ -50,16 +54,23 @@ const W: u32 = 640;
 const H: u32 = 480;
 const ROUNDS: usize = 7;
 const SECS: f64 = 2.0;
+/// The camera's period in part 1 (4000 frames/s, above what either server
+/// delivers): both producers keep it on absolute deadlines, so both are fed alike.
+const PERIOD: Duration = Duration::from_micros(250);
 
-fn median(v: &mut [f64]) -> f64 {
-    v.sort_by(|a, b| a.partial_cmp(b).unwrap());
-    v[v.len() / 2]
+/// Sleeps until the next frame's deadline (a late producer starts afresh).
+fn pace(next: &mut Instant) {
+    *next += PERIOD;
+    let now = Instant::now();
+    if *next > now {
+        std::thread::sleep(*next - now);
+    } else if now - *next > 4 * PERIOD {
+        *next = now;
+    }
 }
 
-fn percentile(v: &mut [f64], p: f64) -> f64 {
-    v.sort_by(|a, b| a.partial_cmp(b).unwrap());
-    v[((v.len() - 1) as f64 * p).round() as usize]
-}
+mod common;
+use common::{cpu_by_thread, median, percentile};
 
 /// A minimal WebSocket client (RFC 6455) speaking the Foxglove protocol.
 struct Ws {
@@ -200,8 +211,49 @@ fn frame() -> Image {
     img
 }
 
+/// One measurement: frames/s the client got, frames/s the producer made, and the
+/// CPU seconds each thread name used over the counting window.
+struct Run {
+    fps: f64,
+    made: f64,
+    cpu: BTreeMap<String, f64>,
+}
+
+/// Spawns a thread named `name` (its CPU shows under that name).
+fn named<T: Send + 'static>(
+    name: &str,
+    f: impl FnOnce() -> T + Send + 'static,
+) -> std::thread::JoinHandle<T> {
+    std::thread::Builder::new()
+        .name(name.into())
+        .spawn(f)
+        .unwrap()
+}
+
+/// Counts what `ws` receives for [`SECS`] on a thread named `client`, after 0.3 s
+/// of warm-up; `made` says how many frames the producer has made so far.
+fn count(mut ws: Ws, made: impl Fn() -> u64 + Send + 'static) -> Run {
+    named("client", move || {
+        ws.count_for(0.3);
+        let (c0, m0, t0) = (cpu_by_thread(), made(), Instant::now());
+        let fps = ws.count_for(SECS);
+        let (c1, m1) = (cpu_by_thread(), made());
+        let cpu = c1
+            .into_iter()
+            .map(|(k, v)| (k.clone(), v - c0.get(&k).copied().unwrap_or(0.0)))
+            .collect();
+        Run {
+            fps,
+            made: (m1 - m0) as f64 / t0.elapsed().as_secs_f64(),
+            cpu,
+        }
+    })
+    .join()
+    .unwrap()
+}
+
 /// The SDK alone: frames/s to one client.
-fn sdk_fps() -> f64 {
+fn sdk_fps() -> Run {
     let ctx = Context::new();
     let server = WebSocketServer::new()
         .context(&ctx)
@@ -214,9 +266,11 @@ fn sdk_fps() -> f64 {
         .build::<RawImage>();
     let img = frame();
     let stop = Arc::new(AtomicBool::new(false));
+    let made = Arc::new(AtomicU64::new(0));
     let producer = {
-        let stop = stop.clone();
-        std::thread::spawn(move || {
+        let (stop, made) = (stop.clone(), made.clone());
+        named("producer", move || {
+            let mut next = Instant::now();
             while !stop.load(Ordering::Acquire) {
                 // The same camera as ours (a fresh frame each time), its bytes
                 // handed to the SDK without a copy, encoded and logged.
@@ -230,19 +284,18 @@ fn sdk_fps() -> f64 {
                     step: frame.width * 3,
                     data: Bytes::from(frame.data),
                 });
-                std::thread::sleep(Duration::from_micros(100));
+                made.fetch_add(1, Ordering::Relaxed);
+                pace(&mut next);
             }
         })
     };
     let mut ws = Ws::connect(a, "foxglove.sdk.v1");
     ws.subscribe_all(&["camera"]);
-    ws.count_for(0.3);
-    let fps = ws.count_for(SECS);
+    let run = count(ws, move || made.load(Ordering::Relaxed));
     stop.store(true, Ordering::Release);
     producer.join().unwrap();
-    drop(ws);
     server.stop().wait_blocking();
-    fps
+    run
 }
 
 fn settings(serves: &[&str]) -> Settings {
@@ -260,26 +313,27 @@ fn settings(serves: &[&str]) -> Settings {
 }
 
 /// The service: frames/s of an image interface to one client.
-fn ours_fps(a: SocketAddr, protocol: &str, cam: &Arc<Interface<Image>>) -> f64 {
+fn ours_fps(a: SocketAddr, protocol: &str, cam: &Arc<Interface<Image>>) -> Run {
     let stop = Arc::new(AtomicBool::new(false));
     let producer = {
         let stop = stop.clone();
         let cam = cam.clone();
         let img = frame();
-        std::thread::spawn(move || {
+        named("producer", move || {
+            let mut next = Instant::now();
             while !stop.load(Ordering::Acquire) {
                 cam.publish(img.clone()).unwrap();
-                std::thread::sleep(Duration::from_micros(100));
+                pace(&mut next);
             }
         })
     };
     let mut ws = Ws::connect(a, protocol);
     ws.subscribe_all(&["varcolorA"]);
-    ws.count_for(0.3);
-    let fps = ws.count_for(SECS);
+    let clock = cam.clone();
+    let run = count(ws, move || clock.clock());
     stop.store(true, Ordering::Release);
     producer.join().unwrap();
-    fps
+    run
 }
 
 fn twist_latency(a: SocketAddr, motors: &Arc<Interface<Motors>>) -> (f64, f64) {
@@ -306,27 +360,7 @@ fn twist_latency(a: SocketAddr, motors: &Arc<Interface<Motors>>) -> (f64, f64) {
         lat.push(t0.elapsed().as_secs_f64() * 1e3);
         std::thread::sleep(Duration::from_millis(2));
     }
-    (percentile(&mut lat, 0.5), percentile(&mut lat, 0.99))
-}
-
-/// utime + stime (s) of this process's threads whose name starts with `prefix`.
-fn threads_cpu(prefix: &str) -> f64 {
-    let tick = unsafe { libc::sysconf(libc::_SC_CLK_TCK) } as f64;
-    let mut total = 0.0;
-    for t in std::fs::read_dir("/proc/self/task").unwrap().flatten() {
-        let Ok(stat) = std::fs::read_to_string(t.path().join("stat")) else {
-            continue;
-        };
-        let (Some(open), Some(close)) = (stat.find('('), stat.rfind(')')) else {
-            continue;
-        };
-        if !stat[open + 1..close].starts_with(prefix) {
-            continue;
-        }
-        let f: Vec<&str> = stat[close + 2..].split_whitespace().collect();
-        total += (f[11].parse::<f64>().unwrap() + f[12].parse::<f64>().unwrap()) / tick;
-    }
-    total
+    (percentile(&lat, 0.5), percentile(&lat, 0.99))
 }
 
 fn cpu_ten_clients(
@@ -337,7 +371,7 @@ fn cpu_ten_clients(
     let stop = Arc::new(AtomicBool::new(false));
     let producer = {
         let (stop, laser, enc) = (stop.clone(), laser.clone(), enc.clone());
-        std::thread::spawn(move || {
+        named("producer", move || {
             let mut k = 0.0f32;
             while !stop.load(Ordering::Acquire) {
                 k += 1.0;
@@ -359,7 +393,7 @@ fn cpu_ten_clients(
     let readers: Vec<_> = (0..10)
         .map(|_| {
             let stop = stop.clone();
-            std::thread::spawn(move || {
+            named("client", move || {
                 let mut ws = Ws::connect(a, "foxglove.websocket.v1");
                 ws.subscribe_all(&["laser", "encoders", "/tf"]);
                 ws.s.set_read_timeout(Some(Duration::from_millis(200)))
@@ -378,9 +412,9 @@ fn cpu_ten_clients(
         })
         .collect();
     std::thread::sleep(Duration::from_millis(500));
-    let (c0, t0) = (threads_cpu("foxglove"), Instant::now());
+    let (c0, t0) = (common::threads_cpu("foxglove"), Instant::now());
     std::thread::sleep(Duration::from_secs(5));
-    let pct = (threads_cpu("foxglove") - c0) / t0.elapsed().as_secs_f64() * 100.0;
+    let pct = (common::threads_cpu("foxglove") - c0) / t0.elapsed().as_secs_f64() * 100.0;
     stop.store(true, Ordering::Release);
     producer.join().unwrap();
     let bytes: u64 = readers.into_iter().map(|r| r.join().unwrap()).sum();
@@ -469,10 +503,10 @@ fn recorder_encodings() {
         }));
     }
     let (oi, si, ol, sl) = (
-        median(&mut ours_i),
-        median(&mut sdk_i),
-        median(&mut ours_l),
-        median(&mut sdk_l),
+        median(&ours_i),
+        median(&sdk_i),
+        median(&ours_l),
+        median(&sdk_l),
     );
     println!(
         "recorder encoding, 640x480 RawImage: ours {oi:.0}/s, SDK schemas {si:.0}/s (SDK/ours {:.2}); 180-reading LaserScan: ours {ol:.0}/s, SDK {sl:.0}/s ({:.2})",
@@ -622,9 +656,82 @@ fn recorder_write() {
         let _ = std::fs::remove_file(file);
         println!(
             "recorder, raw to {to} (640x480 30 fps + laser + encoders), x real time: ours {:.1}, SDK schemas {:.1}; SDK/ours median {:.2}",
-            median(&mut ours),
-            median(&mut sdk),
-            median(&mut ratio)
+            median(&ours),
+            median(&sdk),
+            median(&ratio)
+        );
+    }
+}
+
+/// Part 1: the three servers in rotating order each round; the frame rates, their
+/// ratios, and where the CPU went per delivered frame.
+fn frames(relay: SocketAddr, direct: SocketAddr, cam: &Arc<Interface<Image>>) {
+    println!("foxglove service vs the Foxglove SDK's own server, loopback, {W}x{H} BGR RawImage");
+    const NAMES: [&str; 3] = ["SDK alone", "relay (port)", "direct (sdk_port)"];
+    let mut runs: [Vec<Run>; 3] = Default::default();
+    for r in 0..ROUNDS {
+        for k in 0..3 {
+            let which = (r + k) % 3;
+            runs[which].push(match which {
+                0 => sdk_fps(),
+                1 => ours_fps(relay, "foxglove.websocket.v1", cam),
+                _ => ours_fps(direct, "foxglove.sdk.v1", cam),
+            });
+        }
+        let f = |w: usize| runs[w][r].fps;
+        println!(
+            "  round {r}: SDK alone {:.0} frames/s, jderobot relay {:.0} ({:.0} %), direct {:.0} ({:.0} %)",
+            f(0),
+            f(1),
+            f(1) / f(0) * 100.0,
+            f(2),
+            f(2) / f(0) * 100.0
+        );
+    }
+    let fps = |w: usize| runs[w].iter().map(|r| r.fps).collect::<Vec<_>>();
+    let ratio = |w: usize| {
+        let v: Vec<f64> = (0..ROUNDS)
+            .map(|r| runs[w][r].fps / runs[0][r].fps)
+            .collect();
+        median(&v) * 100.0
+    };
+    println!(
+        "frames/s to one client: median SDK {:.0}, jderobot relay (port) {:.0}, direct (sdk_port) {:.0}; \
+         ratio medians: relay {:.0} %, direct {:.0} % (goal >= 95 %)",
+        median(fps(0)),
+        median(fps(1)),
+        median(fps(2)),
+        ratio(1),
+        ratio(2)
+    );
+    println!("  CPU per delivered frame, medians of the rounds, us (thread: us):");
+    for (w, name) in NAMES.iter().enumerate() {
+        let made = median(runs[w].iter().map(|r| r.made).collect::<Vec<_>>());
+        let mut threads: Vec<&String> = runs[w].iter().flat_map(|r| r.cpu.keys()).collect();
+        threads.sort();
+        threads.dedup();
+        let per = |t: &str| {
+            let v: Vec<f64> = runs[w]
+                .iter()
+                .map(|r| r.cpu.get(t).copied().unwrap_or(0.0) / (r.fps * SECS) * 1e6)
+                .collect();
+            median(v)
+        };
+        let total = median(
+            runs[w]
+                .iter()
+                .map(|r| r.cpu.values().sum::<f64>() / (r.fps * SECS) * 1e6)
+                .collect::<Vec<_>>(),
+        );
+        let parts: Vec<String> = threads
+            .iter()
+            .map(|t| (t, per(t)))
+            .filter(|(_, us)| *us >= 1.0)
+            .map(|(t, us)| format!("{t} {us:.0}"))
+            .collect();
+        println!(
+            "    {name}: total {total:.0} ({}); frames made {made:.0}/s",
+            parts.join(", ")
         );
     }
 }
@@ -651,49 +758,16 @@ fn main() {
     .unwrap();
     let a = server.local_addr();
     let direct = server.sdk_addr().expect("sdk_port is set");
-    println!("foxglove service vs the Foxglove SDK's own server, loopback, {W}x{H} BGR RawImage");
-    let (mut sdk, mut relay, mut direct_fps) = (vec![], vec![], vec![]);
-    let (mut relay_ratio, mut direct_ratio) = (vec![], vec![]);
-    for r in 0..ROUNDS {
-        let mut got = [0.0f64; 3];
-        for k in 0..3 {
-            let which = (r + k) % 3;
-            got[which] = match which {
-                0 => sdk_fps(),
-                1 => ours_fps(a, "foxglove.websocket.v1", &cam),
-                _ => ours_fps(direct, "foxglove.sdk.v1", &cam),
-            };
-        }
-        let [s, o, d] = got;
-        println!(
-            "  round {r}: SDK alone {s:.0} frames/s, jderobot relay {o:.0} ({:.0} %), direct {d:.0} ({:.0} %)",
-            o / s * 100.0,
-            d / s * 100.0
-        );
-        sdk.push(s);
-        relay.push(o);
-        direct_fps.push(d);
-        relay_ratio.push(o / s);
-        direct_ratio.push(d / s);
-    }
-    println!(
-        "frames/s to one client: median SDK {:.0}, jderobot relay (port) {:.0}, direct (sdk_port) {:.0}; \
-         ratio medians: relay {:.0} %, direct {:.0} % (goal >= 90 %)",
-        median(&mut sdk),
-        median(&mut relay),
-        median(&mut direct_fps),
-        median(&mut relay_ratio) * 100.0,
-        median(&mut direct_ratio) * 100.0
-    );
+    frames(a, direct, &cam);
     if std::env::args().any(|a| a == "frames") {
         return;
     }
     let (p50, p99) = twist_latency(a, &motors);
     println!("Twist -> motors: p50 {p50:.3} ms, p99 {p99:.3} ms (goal p50 <= 1 ms)");
-    let mut cpu: Vec<f64> = (0..3).map(|_| cpu_ten_clients(a, &laser, &enc)).collect();
+    let cpu: Vec<f64> = (0..3).map(|_| cpu_ten_clients(a, &laser, &enc)).collect();
     println!(
         "CPU of the service's threads, 10 clients on laser + encoders (+/tf) at 20 Hz: median {:.1} % of one core",
-        median(&mut cpu)
+        median(&cpu)
     );
     recorder_encodings();
     recorder_write();

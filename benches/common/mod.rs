@@ -73,3 +73,24 @@ pub fn threads_cpu(prefix: &str) -> f64 {
     }
     total
 }
+
+/// CPU seconds run so far by each of this process's threads, summed by thread
+/// name (`/proc/self/task/*/comm` and `schedstat`): a breakdown of where a
+/// benchmark's time goes, kernel time included.
+pub fn cpu_by_thread() -> std::collections::BTreeMap<String, f64> {
+    let mut by = std::collections::BTreeMap::new();
+    let Ok(dir) = std::fs::read_dir("/proc/self/task") else {
+        return by;
+    };
+    for t in dir.flatten() {
+        let (Ok(comm), Ok(st)) = (
+            std::fs::read_to_string(t.path().join("comm")),
+            std::fs::read_to_string(t.path().join("schedstat")),
+        ) else {
+            continue;
+        };
+        let ns = st.split(' ').next().and_then(|n| n.parse::<f64>().ok());
+        *by.entry(comm.trim().to_string()).or_insert(0.0) += ns.unwrap_or(0.0) / 1e9;
+    }
+    by
+}

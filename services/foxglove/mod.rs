@@ -46,7 +46,10 @@
 //! clients, then splices the bytes in the kernel (server → client) and checks the
 //! client's frame headers (client → server). A client that stops reading loses its
 //! own oldest message frames in the SDK's backlog (`max_queue`), and is closed after
-//! taking nothing for 15 s; client messages over `max_message`, unfinished for 10 s,
+//! taking nothing for 15 s. Images are paced to the clients: a new frame is
+//! encoded only while fewer than 4 are on their way to them (the door counts what
+//! their sockets take; at least one every 100 ms), so a camera faster than the
+//! fastest client costs no encoding of frames the backlog would drop; client messages over `max_message`, unfinished for 10 s,
 //! or over 100 pings a second close the connection (1009, 1008). Garbage JSON gets
 //! an error status from the SDK; a request that is not a WebSocket upgrade gets
 //! `400`, a missing or wrong token `401`. At most `max_clients` connections at once
@@ -91,7 +94,7 @@ use crate::{
         settings::{self, Setting, choice, int, on_off, path, word},
     },
     interfaces::{self, AnyInterface, Watch},
-    mcapfmt::Source,
+    mcapfmt::{Snapshot, Source},
     runtime::{Driver, Runtime},
     world::{self, LiveBalls, World},
 };
@@ -591,12 +594,13 @@ pub fn start(s: &Settings, rt: &Runtime) -> anyhow::Result<Foxglove> {
     let thread = {
         let stop = stop.clone();
         let wanted = wanted.clone();
+        let pace = Pace::new(relay_stats.clone(), served.len());
         std::thread::Builder::new()
             .name("foxglove".into())
             .spawn(move || {
                 let watch = Watch::for_current_thread();
                 let _ = tx.send(watch.clone());
-                publish_loop(served, world, &wanted, &watch, &stop);
+                publish_loop(served, world, &wanted, &watch, &stop, pace);
             })
             .context("foxglove: cannot start its thread")?
     };
@@ -711,6 +715,58 @@ impl Sdk {
     }
 }
 
+/// Image frames logged ahead of what the clients have taken: the SDK's queues and
+/// the sockets hold them; more would only be dropped by the SDK's backlog.
+const FRAMES_AHEAD: u64 = 4;
+/// An image is logged at least this often even when no client takes anything
+/// (a new or a stalled client still gets frames).
+const PACE_FLOOR: Duration = Duration::from_millis(100);
+
+/// Paces images to the clients: a frame is encoded and logged only while fewer
+/// than [`FRAMES_AHEAD`] are on their way, counted by the door's `sent` (message
+/// frames the clients' sockets took, every client and port). A camera faster
+/// than the fastest client thus costs no encoding and no copy of the frames the
+/// SDK's backlog would drop; a slow client next to a fast one still loses only
+/// its own frames (the fast one's progress paces the logging).
+struct Pace {
+    sent: Arc<RelayStats>,
+    seen: u64,
+    credit: Vec<u64>,
+    logged_at: Vec<Instant>,
+}
+
+impl Pace {
+    fn new(sent: Arc<RelayStats>, n: usize) -> Pace {
+        let seen = sent.sent.load(Ordering::Relaxed);
+        Pace {
+            sent,
+            seen,
+            credit: vec![FRAMES_AHEAD; n],
+            logged_at: vec![Instant::now(); n],
+        }
+    }
+
+    /// Adds what the clients took since the last call to every channel's credit.
+    fn refill(&mut self) {
+        let now = self.sent.sent.load(Ordering::Relaxed);
+        let took = now.wrapping_sub(self.seen);
+        self.seen = now;
+        for c in &mut self.credit {
+            *c = (*c + took).min(FRAMES_AHEAD);
+        }
+    }
+
+    /// Whether served interface `i`'s new image may go now (then it is counted).
+    fn take(&mut self, i: usize, greet: bool) -> bool {
+        if self.credit[i] == 0 && !greet && self.logged_at[i].elapsed() < PACE_FLOOR {
+            return false;
+        }
+        self.credit[i] = self.credit[i].saturating_sub(1);
+        self.logged_at[i] = Instant::now();
+        true
+    }
+}
+
 /// Sends each wanted interface's new values, and the world, until `stop`.
 fn publish_loop(
     served: Vec<Served>,
@@ -718,6 +774,7 @@ fn publish_loop(
     wanted: &[Wanted],
     watch: &Arc<Watch>,
     stop: &AtomicBool,
+    mut pace: Pace,
 ) {
     for s in &served {
         s.source.any().watch(watch.clone());
@@ -727,12 +784,14 @@ fn publish_loop(
     let mut balls_at = Instant::now();
     while !stop.load(Ordering::Acquire) {
         watch.wait(Duration::from_millis(100));
+        pace.refill();
         for (i, s) in served.iter().enumerate() {
             let w = &wanted[i];
             if w.subs.load(Ordering::Acquire) == 0 {
                 continue;
             }
-            if w.greet.swap(false, Ordering::AcqRel) {
+            let greet = w.greet.swap(false, Ordering::AcqRel);
+            if greet {
                 last[i] = 0;
             }
             let snap = s.source.snapshot();
@@ -740,33 +799,41 @@ fn publish_loop(
             if clock == 0 || clock == last[i] {
                 continue;
             }
+            if matches!(snap, Snapshot::Image(_)) && !pace.take(i, greet) {
+                continue;
+            }
             last[i] = clock;
             s.out.log(&s.name, &snap, &mut buf);
         }
         if let Some(wo) = &world {
-            let w = &wanted[served.len()];
-            if w.subs.load(Ordering::Acquire) > 0 {
-                let now = SystemTime::now();
-                let mut entities = Vec::new();
-                if w.greet.swap(false, Ordering::AcqRel)
-                    && let Some(m) = &wo.map
-                {
-                    entities.push(channels::world_entity(now, m));
-                }
-                if let Some(b) = &wo.balls
-                    && (!entities.is_empty() || balls_at.elapsed() >= Duration::from_millis(100))
-                {
-                    balls_at = Instant::now();
-                    entities.push(channels::balls_entity(now, &b.load()));
-                }
-                if !entities.is_empty() {
-                    wo.channel.log(&channels::scene(entities));
-                }
-            }
+            send_world(wo, &wanted[served.len()], &mut balls_at);
         }
     }
     for s in &served {
         s.source.any().unwatch(&**watch);
+    }
+}
+
+/// The world's scene update: the map when a client subscribes, the balls at 10 Hz.
+fn send_world(wo: &WorldOut, w: &Wanted, balls_at: &mut Instant) {
+    if w.subs.load(Ordering::Acquire) == 0 {
+        return;
+    }
+    let now = SystemTime::now();
+    let mut entities = Vec::new();
+    if w.greet.swap(false, Ordering::AcqRel)
+        && let Some(m) = &wo.map
+    {
+        entities.push(channels::world_entity(now, m));
+    }
+    if let Some(b) = &wo.balls
+        && (!entities.is_empty() || balls_at.elapsed() >= Duration::from_millis(100))
+    {
+        *balls_at = Instant::now();
+        entities.push(channels::balls_entity(now, &b.load()));
+    }
+    if !entities.is_empty() {
+        wo.channel.log(&channels::scene(entities));
     }
 }
 
@@ -823,6 +890,28 @@ mod tests {
                 .serves
                 .is_empty()
         );
+    }
+
+    #[test]
+    fn images_are_paced_by_what_the_clients_took() {
+        let stats = Arc::new(RelayStats::default());
+        let mut p = Pace::new(stats.clone(), 2);
+        // FRAMES_AHEAD frames go, then none until a client takes one.
+        for _ in 0..FRAMES_AHEAD {
+            assert!(p.take(0, false));
+        }
+        assert!(!p.take(0, false));
+        // A new subscriber is greeted whatever the credit; the other channel has its own.
+        assert!(p.take(0, true));
+        assert!(p.take(1, false));
+        stats.sent.fetch_add(1, Ordering::Relaxed);
+        p.refill();
+        assert!(p.take(0, false));
+        assert!(!p.take(0, false));
+        // Taken frames never give more than FRAMES_AHEAD of credit.
+        stats.sent.fetch_add(100, Ordering::Relaxed);
+        p.refill();
+        assert_eq!(p.credit, vec![FRAMES_AHEAD; 2]);
     }
 
     #[test]
