@@ -708,8 +708,12 @@ impl Writer {
     for msg in messages_to_send {
       match target_reader_opt {
         None => {
-          // To all
-          self.send_message_to_readers(DeliveryMode::Multicast, msg, &mut self.readers.values());
+          // To all. jderobot's patch: by unicast to each reader's locator, not
+          // to the multicast group a reader also offers: that group reached
+          // every socket joined to it on the host (the writer's own participant
+          // among them) and a 640x480 image sent there at full rate filled the
+          // subscribers' buffers (benches/ros2.rs: no image arrived whole).
+          self.send_message_to_readers(DeliveryMode::Unicast, msg, &mut self.readers.values());
         }
         Some(reader_proxy) => {
           // To one
