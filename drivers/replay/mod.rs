@@ -300,7 +300,7 @@ fn run(
     summary: &Summary,
     settings: &Settings,
     targets: &BTreeMap<String, (String, Source)>,
-    (gate, clock): (Option<&StepGate>, Option<&RunClock>),
+    (gate, run_clock): (Option<&StepGate>, Option<&RunClock>),
     stop: &AtomicBool,
 ) {
     let from = summary.start_ns + (settings.start * 1e9) as u64;
@@ -367,7 +367,7 @@ fn run(
                         d.clock.saturating_add(offset),
                         mcapfmt::from_nanos(d.time_ns),
                     );
-                    if let Some(c) = clock {
+                    if let Some(c) = run_clock {
                         c.set(time);
                     }
                     if let Err(e) = target.publish_recorded(clock, time, d.value) {
