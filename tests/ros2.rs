@@ -540,3 +540,125 @@ fn memory_stays_bounded_with_1000_remote_cyclone_readers_and_writers() {
     assert!(robot.child.try_wait().unwrap().is_none());
     robot.quit();
 }
+
+#[test]
+fn the_service_publishes_the_simulated_time_on_clock() {
+    let Some(py) = common::python_with("cyclonedds") else {
+        return;
+    };
+    let d = domain(7);
+    let dir = tempfile::tempdir().unwrap();
+    let conf = dir.path().join("sim4.conf");
+    // The simulator at 4x real time: its time is the run's clock (`clock auto`).
+    std::fs::write(
+        &conf,
+        format!(
+            "driver simulator\nworld {}\nspeed 4\nprovides laser 180 1\nend_driver\n\
+             service ros2\ninsecure\ndomain {d}\nend_service\n\
+             load_driver simulator\nload_service ros2\n",
+            common::world_path("simple.world")
+        ),
+    )
+    .unwrap();
+    let robot = Proc::start(&conf);
+    let got = json_of(
+        peer(&py, "clock", d, 5),
+        "the Cyclone /clock reader",
+        &robot,
+    );
+    let (first, last, wall) = (f(&got, &["first"]), f(&got, &["last"]), f(&got, &["wall"]));
+    assert!(f(&got, &["n"]) >= 20.0, "{got}");
+    assert_eq!(f(&got, &["backwards"]), 0.0, "{got}");
+    let rate = (last - first) / wall;
+    assert!(
+        (2.5..6.0).contains(&rate),
+        "/clock advanced {rate:.2} s per wall second at speed 4: {got}"
+    );
+    // The messages are stamped with the same clock.
+    let skew = f(&got, &["scan_stamp"]) - f(&got, &["clock_at_scan"]);
+    assert!(
+        skew.abs() < 1.0,
+        "/scan stamped {skew:.3} s off /clock: {got}"
+    );
+    robot.quit();
+}
+
+#[test]
+fn cmd_vel_reaches_motors_promptly_while_a_reliable_subscriber_stalls() {
+    use jderobot::{
+        Conf, Kind, Runtime,
+        interfaces::{Encoders, Motors, Watch},
+    };
+    use std::time::{Duration, SystemTime, UNIX_EPOCH};
+    let Some(py) = common::python_with("cyclonedds") else {
+        return;
+    };
+    let d = domain(8);
+    let rt = Runtime::new(std::path::Path::new("stall.conf"));
+    let enc = rt
+        .interfaces
+        .provide::<Encoders>("encoders", "test")
+        .unwrap();
+    let motors = rt.interfaces.provide::<Motors>("motors", "test").unwrap();
+    let text = format!(
+        "service ros2\ninsecure\ndomain {d}\nserves encoders\nserves motors\nend_service\n"
+    );
+    let conf = Conf::parse(&text, std::path::Path::new("stall.conf")).unwrap();
+    jderobot::loader::load(&rt, &conf, Some(Kind::Service), "ros2", None).unwrap();
+    // Odometry at 200 Hz: every value is a reliable write of /odom and /tf.
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let feed = {
+        let (enc, stop) = (enc.clone(), stop.clone());
+        std::thread::spawn(move || {
+            let mut k = 0.0;
+            while !stop.load(std::sync::atomic::Ordering::Acquire) {
+                let _ = enc.publish(Encoders::from_pose(k, 0.0, 0.0));
+                k += 1.0;
+                std::thread::sleep(Duration::from_millis(5));
+            }
+        })
+    };
+    let w = Watch::for_current_thread();
+    motors.watch(w.clone());
+    let mut stall = peer(&py, "stall", d, 4);
+    let mut arrived = vec![];
+    let mut seen = motors.clock();
+    while stall.try_wait().unwrap().is_none() {
+        if !w.wait(Duration::from_millis(50)) {
+            continue;
+        }
+        let s = motors.read();
+        if s.clock != seen {
+            seen = s.clock;
+            let now = SystemTime::now().duration_since(UNIX_EPOCH).unwrap();
+            arrived.push((s.value.v.round() as i64, now.as_secs_f64()));
+        }
+    }
+    let out = stall.wait_with_output().unwrap();
+    stop.store(true, std::sync::atomic::Ordering::Release);
+    feed.join().unwrap();
+    rt.shutdown();
+    let got: serde_json::Value = serde_json::from_str(
+        String::from_utf8_lossy(&out.stdout)
+            .lines()
+            .last()
+            .unwrap_or(""),
+    )
+    .expect("the stalling peer's JSON line");
+    let mut lat: Vec<f64> = arrived
+        .iter()
+        .filter_map(|(k, at)| Some((at - got["sent"][k.to_string()].as_f64()?) * 1e3))
+        .collect();
+    lat.sort_by(f64::total_cmp);
+    eprintln!("cmd_vel -> motors with stalled /odom and /tf readers: {lat:?} ms");
+    assert!(
+        lat.len() >= 40,
+        "{} commands arrived of 80: {lat:?}",
+        lat.len()
+    );
+    let (p50, max) = (lat[lat.len() / 2], lat[lat.len() - 1]);
+    assert!(
+        p50 < 20.0 && max < 100.0,
+        "p50 {p50:.1} ms, max {max:.1} ms"
+    );
+}

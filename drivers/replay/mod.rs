@@ -49,7 +49,9 @@
 //!
 //! # Name space
 //! In `stepped on`, exports `replay.step` ([`StepGate`]); the shell's `step [N]`,
-//! a command this driver registers, lets N messages through.
+//! a command this driver registers, lets N messages through. Always exports the
+//! run's clock `run.clock` ([`RunClock`]): the recorded time of the last message
+//! published (the `ros2` service publishes it on `/clock`).
 //!
 //! No system package is needed. The file is read into memory whole (a regular
 //! file of at most `mcapfmt::MAX_FILE_BYTES`).
@@ -73,7 +75,7 @@ use crate::{
         settings::{Setting, float, on_off, path, rest, word},
     },
     mcapfmt::{self, Source, Summary},
-    runtime::{Driver, Runtime, Worker},
+    runtime::{Driver, RunClock, Runtime, Worker},
 };
 
 /// The replay's settings.
@@ -272,6 +274,9 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
     } else {
         None
     };
+    let clock = RunClock::export(&rt.names)
+        .map_err(|e| tracing::warn!("replay: its time is not the run's clock: {e}"))
+        .ok();
     let stop = Arc::new(AtomicBool::new(false));
     let worker = {
         let flag = stop.clone();
@@ -281,7 +286,7 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
                 &summary,
                 &settings,
                 &targets,
-                gate.as_deref(),
+                (gate.as_deref(), clock.as_deref()),
                 &flag,
             )
         })?
@@ -295,7 +300,7 @@ fn run(
     summary: &Summary,
     settings: &Settings,
     targets: &BTreeMap<String, (String, Source)>,
-    gate: Option<&StepGate>,
+    (gate, run_clock): (Option<&StepGate>, Option<&RunClock>),
     stop: &AtomicBool,
 ) {
     let from = summary.start_ns + (settings.start * 1e9) as u64;
@@ -362,6 +367,9 @@ fn run(
                         d.clock.saturating_add(offset),
                         mcapfmt::from_nanos(d.time_ns),
                     );
+                    if let Some(c) = run_clock {
+                        c.set(time);
+                    }
                     if let Err(e) = target.publish_recorded(clock, time, d.value) {
                         errors += 1;
                         if errors <= 5 {

@@ -58,7 +58,7 @@ use crate::{
     },
     interfaces::{AnyInterface, Encoders, Image, Imu, Interface, Laser, Motors, Source},
     mcapfmt::{
-        dds::{Cdr, CdrAdapter, Graph, dds_topic, reliable_qos, ros_topic, sensor_qos},
+        dds::{Cdr, CdrAdapter, Graph, Readiness, dds_topic, reliable_qos, ros_topic, sensor_qos},
         ros2::{self, Ros2},
     },
     runtime::{Driver, Runtime},
@@ -207,6 +207,8 @@ struct Robot {
     /// The node; dropping it leaves the graph.
     graph: Graph,
     buf: Vec<u8>,
+    /// Wakes `step` when a reader has data (it also runs every 2 ms for motors).
+    ready: Readiness,
 }
 
 struct Session {
@@ -262,7 +264,7 @@ impl crate::supervisor::Device for Robot {
     }
 
     fn step(&mut self, s: &mut Session) -> Result<(), String> {
-        std::thread::sleep(Duration::from_millis(2));
+        self.ready.wait(Duration::from_millis(2));
         for i in &mut self.inputs {
             loop {
                 match i.reader.take_next_sample() {
@@ -419,6 +421,10 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
             ),
         }
     }
+    let mut ready = Readiness::new("driver ros2")?;
+    for i in &mut inputs {
+        ready.add(&mut i.reader)?;
+    }
     let waits: Vec<String> = inputs.iter().map(|i| i.topic.clone()).collect();
     tracing::info!(
         "ros2: node {} on domain {} reads {}{}",
@@ -437,6 +443,7 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
         timeout: Duration::from_millis(l.motors_timeout),
         graph,
         buf: Vec::new(),
+        ready,
     };
     let how = Supervision {
         name: "ros2".into(),

@@ -87,6 +87,9 @@ pub struct Simulation {
     pub periods: Periods,
     pub motors_timeout: Duration,
     pub publish_always: bool,
+    /// The run's clock (`run.clock`), exported when the simulation does not run
+    /// in real time (`speed` other than 1, `max`, `stepped`): simulated time.
+    pub run_clock: Option<std::sync::Arc<crate::runtime::RunClock>>,
 }
 
 /// The sensors a `period` line names.
@@ -526,6 +529,7 @@ impl Simulation {
             periods: s.periods,
             motors_timeout,
             publish_always: s.publish_always,
+            run_clock: None,
         })
     }
 }

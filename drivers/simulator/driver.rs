@@ -171,6 +171,9 @@ fn used<T: InterfaceValue>(i: &Interface<T>, always: bool) -> bool {
 /// Publishes what is due after a step.
 fn publish(simulation: &mut Simulation, out: &mut Outputs, next: &mut NextPublish) {
     let t = simulation.sim.time;
+    if let Some(c) = &simulation.run_clock {
+        c.set_elapsed(t);
+    }
     let p = simulation.periods;
     let always = simulation.publish_always;
     let imu = is_due(&mut next.imu, t, p.imu);

@@ -62,7 +62,10 @@
 //! balls start), and `world.balls`, the balls as they roll
 //! ([`LiveBalls`], refreshed at the encoders' period). Schemas read them with
 //! [`crate::world::map`] and [`crate::world::balls`], whichever driver exported
-//! them.
+//! them. When it does not run in real time (`speed` other than 1, `max`,
+//! `stepped`), it also exports its simulated time as the run's clock, `run.clock`
+//! ([`RunClock`]): the simulator's start time plus the simulated seconds (the
+//! `ros2` service publishes it on `/clock`).
 //!
 //! # Files
 //! - [`conf`]: the conf lines above → a [`Simulation`] ready to run.
@@ -79,7 +82,7 @@ pub mod sensors;
 
 use crate::{
     conf::ComponentConf,
-    runtime::{Driver, Runtime},
+    runtime::{Driver, RunClock, Runtime},
     world::{self, LiveBalls},
 };
 
@@ -89,7 +92,13 @@ pub use driver::SimDriver;
 pub use physics::{Noise, Pose, Rng, Robot, RobotModel, Sim};
 
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>> {
-    let simulation = Simulation::parse(conf)?;
+    let mut simulation = Simulation::parse(conf)?;
+    if !matches!(simulation.clock, Clock::Speed(s) if s == 1.0) {
+        match RunClock::export(&rt.names) {
+            Ok(c) => simulation.run_clock = Some(c),
+            Err(e) => tracing::warn!("simulator: its time is not the run's clock: {e}"),
+        }
+    }
     let balls = simulation.sim.balls.clone();
     // The first exporter of the world keeps the keys; a second one warns and runs
     // with balls nobody else sees.

@@ -25,6 +25,8 @@
 //! compressed colorA 80     # also colorA as CompressedImage, JPEG quality 80 (repeatable)
 //! sonar 25 100 5000        # each sonar's field of view (deg), min and max range (mm)
 //! joints pan tilt          # the pan-tilt's joint names
+//! clock auto               # stamps and /clock: auto (the run's clock if there is
+//!                          #   one, else wall), sim (the run's clock), wall (no /clock)
 //! motors_timeout 500       # ms: /cmd_vel older than this counts as zero
 //! end_service
 //! ```
@@ -44,6 +46,21 @@
 //! | pantiltmotors | `joint_command` (read) | `sensor_msgs/msg/JointState`: positions rad, velocities rad/s | best-effort reader |
 //! | `compressed` cameras | `NAME/image_raw/compressed` | `sensor_msgs/msg/CompressedImage` JPEG | best effort, keep last 5 |
 //! | motors | `cmd_vel` (read) | `geometry_msgs/msg/Twist` → v mm/s, w deg/s | reliable (a best-effort writer matches too) |
+//! | (the run's clock) | `/clock` | `rosgraph_msgs/msg/Clock` | reliable, keep last 1 |
+//!
+//! # Time
+//! With `clock auto` (the default) or `sim`, when the run's time is not wall time
+//! (a replay, or the simulator with `speed` other than 1, `max` or `stepped`:
+//! they export [`RunClock`] as `run.clock`), the service publishes that time on
+//! `/clock` (when it moved, every 10 ms at most) and stamps every message with
+//! it, so ROS 2 nodes run with `use_sim_time:=true`. Otherwise stamps are the
+//! samples' own (wall) times and there is no `/clock`.
+//!
+//! # Threads
+//! One thread sends the sensor topics as their interfaces change; `/cmd_vel` and
+//! `joint_command` are read on a thread of their own (`ros2-cmd`), woken by the
+//! data, so a reliable write to a slow subscriber of `/odom` or `/tf` (which can
+//! block up to 100 ms) never delays a command or a stop.
 //!
 //! A Twist that is not a valid motors value (NaN, infinite, out of motors' range)
 //! is refused with one line. Motors are set to zero `motors_timeout` after the
@@ -76,17 +93,20 @@ use rustdds::{
 use crate::{
     conf::{
         ComponentConf,
-        settings::{self, MOTORS_TIMEOUT, Setting, float, int, interface, word},
+        settings::{self, MOTORS_TIMEOUT, Setting, choice, float, int, interface, word},
     },
     interfaces::{
         Bumpers, Encoders, Image, Imu, Interface, InterfaceValue, Laser, Motors, Mount, PtEncoders,
         PtMotors, Sample, Sonars, Source, Watch,
     },
     mcapfmt::{
-        dds::{Cdr, CdrAdapter, Graph, dds_topic, reliable_qos, ros_topic, sensor_qos, static_qos},
+        dds::{
+            Cdr, CdrAdapter, Graph, Readiness, dds_topic, reliable_qos, ros_topic, sensor_qos,
+            static_qos,
+        },
         ros2::{self, Joints, RangeReading, Ros2, Transform},
     },
-    runtime::{Driver, Runtime},
+    runtime::{Driver, RunClock, Runtime},
     supervisor::Worker,
 };
 
@@ -138,6 +158,14 @@ const LINES: &[Setting] = &[
         &[word("PAN"), word("TILT")],
     )
     .default("pan tilt"),
+    Setting::new(
+        "clock",
+        "the time of the stamps and of /clock: auto (the run's clock when a replay or a \
+         simulator not in real time keeps one, else wall), sim (the run's clock; an error \
+         without one) or wall (no /clock)",
+        &[choice("MODE", &["auto", "sim", "wall"])],
+    )
+    .default("auto"),
     MOTORS_TIMEOUT,
 ];
 
@@ -153,6 +181,7 @@ struct Lines {
     compressed: Vec<(String, Option<u8>)>,
     sonar: (f32, f32, f32),
     joints: (String, String),
+    clock: String,
     motors_timeout: u64,
 }
 
@@ -192,15 +221,21 @@ struct Served<T> {
 }
 
 impl<T: InterfaceValue> Served<T> {
-    fn send(&mut self, buf: &mut Vec<u8>) -> Option<Arc<Sample<T>>> {
+    /// Sends the interface's value if it is new, stamped `stamp` (the run's
+    /// clock) or else with its own time.
+    fn send(&mut self, buf: &mut Vec<u8>, stamp: Option<SystemTime>) -> Option<Arc<Sample<T>>> {
         let s = self.iface.snapshot();
         if s.clock == self.clock || s.clock == 0 {
             return None;
         }
         self.clock = s.clock;
-        if (self.encode)(&self.frame, &s, buf)
-            && let Err(e) = self.writer.write(Cdr(std::mem::take(buf)), None)
-        {
+        if !(self.encode)(&self.frame, &s, buf) {
+            return Some(s);
+        }
+        if let Some(t) = stamp {
+            ros2::restamp(buf, t);
+        }
+        if let Err(e) = self.writer.write(Cdr(std::mem::take(buf)), None) {
             tracing::debug!("ros2: {}: {e}", self.topic);
         }
         Some(s)
@@ -209,14 +244,15 @@ impl<T: InterfaceValue> Served<T> {
 
 /// What the serving thread sends on each new value of an interface.
 trait Out: Send {
-    fn send(&mut self, buf: &mut Vec<u8>);
+    /// Sends a new value, stamped `stamp` if given (else its own time).
+    fn send(&mut self, buf: &mut Vec<u8>, stamp: Option<SystemTime>);
     /// Watches and resumes the interface; the closure lets it go.
     fn use_it(&self, watch: &Arc<Watch>) -> Box<dyn FnOnce()>;
 }
 
 impl<T: InterfaceValue> Out for Served<T> {
-    fn send(&mut self, buf: &mut Vec<u8>) {
-        Served::send(self, buf);
+    fn send(&mut self, buf: &mut Vec<u8>, stamp: Option<SystemTime>) {
+        Served::send(self, buf, stamp);
     }
     fn use_it(&self, watch: &Arc<Watch>) -> Box<dyn FnOnce()> {
         in_use(&self.iface, watch)
@@ -237,7 +273,7 @@ struct SonarsOut {
 }
 
 impl Out for SonarsOut {
-    fn send(&mut self, buf: &mut Vec<u8>) {
+    fn send(&mut self, buf: &mut Vec<u8>, stamp: Option<SystemTime>) {
         let s = self.iface.snapshot();
         if s.clock == self.clock || s.clock == 0 {
             return;
@@ -263,7 +299,7 @@ impl Out for SonarsOut {
                 max_range: max / 1000.0,
                 range: us / 1000.0,
             };
-            ros2::encode_range(s.time, &r, buf);
+            ros2::encode_range(stamp.unwrap_or(s.time), &r, buf);
             let _ = self.writers[i].write(Cdr(std::mem::take(buf)), None);
         }
     }
@@ -276,16 +312,25 @@ impl Out for SonarsOut {
 struct Plan {
     sensors: Vec<Box<dyn Out>>,
     odom: Vec<(Served<Encoders>, Writer)>,
-    cmd: Option<Command<Motors>>,
-    pantilt: Option<Command<PtMotors>>,
-    /// The pan-tilt's encoders (to hold it where it is), and its joint names.
-    pt_encoders: Option<Arc<Interface<PtEncoders>>>,
-    joints: (String, String),
+    commands: Commands,
     /// The robot's frame (`frames` line), the child of odom on `/tf`.
     base_frame: String,
     /// `/tf_static`'s writer, and the mounts it sends.
     tf_static: Option<Writer>,
     statics: Vec<Transform>,
+    /// The run's clock and `/clock`'s writer (`clock` auto or sim, with a clock).
+    clock: Option<(Arc<RunClock>, Writer)>,
+}
+
+/// What drives the robot: `/cmd_vel` and `joint_command`, read on a thread of
+/// their own.
+#[derive(Default)]
+struct Commands {
+    cmd: Option<Command<Motors>>,
+    pantilt: Option<Command<PtMotors>>,
+    /// The pan-tilt's encoders (to hold it where it is), and its joint names.
+    pt_encoders: Option<Arc<Interface<PtEncoders>>>,
+    joints: (String, String),
 }
 
 /// A commanded interface, the reader of the topic that drives it, and when the
@@ -369,6 +414,7 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
         )?;
         plan.tf_static = Some(w);
     }
+    plan.clock = run_clock(&l, rt, &d)?;
     let timeout = Duration::from_millis(l.motors_timeout);
     let stop = Arc::new(AtomicBool::new(false));
     let stop2 = stop.clone();
@@ -392,6 +438,33 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
             .join(", ")
     );
     Ok(Box::new(Ros2Service { worker, watch }))
+}
+
+/// The run's clock and `/clock`'s writer, per the `clock` line.
+fn run_clock(l: &Lines, rt: &Runtime, d: &Dds) -> anyhow::Result<Option<(Arc<RunClock>, Writer)>> {
+    let clock = match l.clock.as_str() {
+        "wall" => None,
+        "sim" => Some(RunClock::import(&rt.names).ok_or_else(|| {
+            anyhow::anyhow!(
+                "service ros2: clock sim: no run's clock (`run.clock`) to serve; load a replay \
+                 or a simulator with `speed` other than 1 before the service, or say `clock wall`"
+            )
+        })?),
+        _ => RunClock::import(&rt.names),
+    };
+    let Some(clock) = clock else {
+        return Ok(None);
+    };
+    // Reliable, keep last 1: rclcpp's ClockQoS readers (best effort) and
+    // default-QoS readers (reliable) both match it.
+    let qos = QosPolicyBuilder::new()
+        .reliability(Reliability::Reliable {
+            max_blocking_time: rustdds::Duration::from_millis(100),
+        })
+        .history(History::KeepLast { depth: 1 })
+        .build();
+    let w = writer(&d.graph.dp, &d.publisher, "/clock", ros2::CLOCK, qos)?;
+    Ok(Some((clock, w)))
 }
 
 /// The kinds this service has a ROS 2 topic for.
@@ -541,9 +614,9 @@ impl Plan {
     ) -> anyhow::Result<Plan> {
         let mut plan = Plan {
             base_frame: l.frames.1.clone(),
-            joints: l.joints.clone(),
             ..Plan::default()
         };
+        plan.commands.joints = l.joints.clone();
         let c = Ctx { rt, d, l };
         for (name, topic) in serves {
             plan.add(&c, name, topic.as_deref())?;
@@ -617,7 +690,7 @@ impl Plan {
             "motors" => {
                 let iface = rt.interfaces.get::<Motors>(name)?;
                 let r = d.reader(&topic, dds_name::<Motors>())?;
-                self.cmd = Some(Command::new(iface, r, topic));
+                self.commands.cmd = Some(Command::new(iface, r, topic));
             }
             _ => return self.add_other(c, name, first, topic),
         }
@@ -658,8 +731,8 @@ impl Plan {
             }
             "pantiltencoders" => {
                 let iface = rt.interfaces.get::<PtEncoders>(name)?;
-                self.pt_encoders = Some(iface.clone());
-                let (pan, tilt) = self.joints.clone();
+                self.commands.pt_encoders = Some(iface.clone());
+                let (pan, tilt) = self.commands.joints.clone();
                 let enc: Encode<PtEncoders> = Box::new(move |_, s, buf| {
                     let j = Joints {
                         names: vec![pan.clone(), tilt.clone()],
@@ -679,7 +752,7 @@ impl Plan {
             "pantiltmotors" => {
                 let iface = rt.interfaces.get::<PtMotors>(name)?;
                 let r = d.reader(&topic, ros2::JOINT_STATE)?;
-                self.pantilt = Some(Command::new(iface, r, topic));
+                self.commands.pantilt = Some(Command::new(iface, r, topic));
             }
             other => anyhow::bail!(
                 "service ros2: serves {name}: a {other} interface has no ROS 2 message here; \
@@ -781,7 +854,7 @@ fn hold(pt: &Command<PtMotors>, enc: Option<&Arc<Interface<PtEncoders>>>) {
     }
 }
 
-/// The thread: sends each new sensor value, applies /cmd_vel and joint_command.
+/// The thread: sends each new sensor value; the commands have their own.
 fn serve(
     mut plan: Plan,
     watch: Arc<Watch>,
@@ -789,6 +862,14 @@ fn serve(
     stop: Arc<AtomicBool>,
     _keep: Graph,
 ) {
+    let commands = std::mem::take(&mut plan.commands);
+    let stop2 = stop.clone();
+    let cmd_thread = std::thread::Builder::new()
+        .name("ros2-cmd".into())
+        .spawn(move || commands.run(timeout, &stop2));
+    if let Err(e) = &cmd_thread {
+        tracing::warn!("service ros2: no thread for /cmd_vel: {e}");
+    }
     let mut users: Vec<Box<dyn FnOnce()>> = vec![];
     users.extend(plan.sensors.iter().map(|s| s.use_it(&watch)));
     users.extend(plan.odom.iter().map(|(s, _)| in_use(&s.iface, &watch)));
@@ -798,13 +879,18 @@ fn serve(
         ros2::encode_tf(SystemTime::now(), tfs, &mut buf);
         let _ = w.write(Cdr(std::mem::take(&mut buf)), None);
     }
+    let mut clock_sent = (None, Instant::now());
     while !stop.load(Ordering::Acquire) {
-        watch.wait(Duration::from_millis(2));
+        watch.wait(Duration::from_millis(20));
+        let stamp = plan.clock.as_ref().and_then(|(c, _)| c.now());
+        if let Some((_, w)) = &plan.clock {
+            send_clock(w, stamp, &mut clock_sent, &mut buf);
+        }
         for s in &mut plan.sensors {
-            s.send(&mut buf);
+            s.send(&mut buf, stamp);
         }
         for (s, tf) in &mut plan.odom {
-            if let Some(sample) = s.send(&mut buf) {
+            if let Some(sample) = s.send(&mut buf, stamp) {
                 let e = sample.value;
                 let t = Transform {
                     parent: s.frame.clone(),
@@ -814,11 +900,65 @@ fn serve(
                     z: 0.0,
                     yaw: e.theta as f64,
                 };
-                ros2::encode_tf(sample.time, &[t], &mut buf);
+                ros2::encode_tf(stamp.unwrap_or(sample.time), &[t], &mut buf);
                 let _ = tf.write(Cdr(std::mem::take(&mut buf)), None);
             }
         }
-        if let Some(c) = &mut plan.cmd {
+    }
+    if let Ok(t) = cmd_thread {
+        let _ = t.join();
+    }
+    users.into_iter().for_each(|f| f());
+}
+
+/// Publishes the run's clock on `/clock` when it moved, every 10 ms at most.
+fn send_clock(
+    w: &Writer,
+    now: Option<SystemTime>,
+    sent: &mut (Option<SystemTime>, Instant),
+    buf: &mut Vec<u8>,
+) {
+    let Some(t) = now else { return };
+    if sent.0 == Some(t) || (sent.0.is_some() && sent.1.elapsed() < Duration::from_millis(10)) {
+        return;
+    }
+    *sent = (Some(t), Instant::now());
+    ros2::encode_clock(t, buf);
+    let _ = w.write(Cdr(std::mem::take(buf)), None);
+}
+
+impl Commands {
+    /// Applies each command as it comes (a reliable write of a sensor topic to
+    /// a slow reader blocks up to 100 ms: it must not delay a stop), zeroes
+    /// motors `timeout` after the last one and at stop.
+    fn run(mut self, timeout: Duration, stop: &AtomicBool) {
+        let mut ready = match Readiness::new("service ros2") {
+            Ok(r) => r,
+            Err(e) => {
+                tracing::warn!("{e}");
+                return;
+            }
+        };
+        let readers = [
+            self.cmd.as_mut().map(|c| &mut c.reader),
+            self.pantilt.as_mut().map(|c| &mut c.reader),
+        ];
+        for r in readers.into_iter().flatten() {
+            if let Err(e) = ready.add(r) {
+                tracing::warn!("service ros2: {e}");
+            }
+        }
+        while !stop.load(Ordering::Acquire) {
+            ready.wait(Duration::from_millis(10));
+            self.step(timeout);
+        }
+        self.step(Duration::ZERO);
+    }
+
+    /// Takes the waiting commands; motors to zero, the pan-tilt held, when the
+    /// last command is `timeout` old.
+    fn step(&mut self, timeout: Duration) {
+        if let Some(c) = &mut self.cmd {
             c.drain(|t, d| {
                 ros2::decode::<Motors>(t, d, 0)
                     .map(|x| x.1)
@@ -828,26 +968,15 @@ fn serve(
                 let _ = c.iface.publish(Motors::default());
             }
         }
-        if let Some(pt) = &mut plan.pantilt {
-            let joints = &plan.joints;
+        if let Some(pt) = &mut self.pantilt {
+            let joints = &self.joints;
             let now = pt.iface.read().value;
             pt.drain(|t, d| pantilt_command(now, joints, t, d));
             if pt.expired(timeout) {
-                hold(pt, plan.pt_encoders.as_ref());
+                hold(pt, self.pt_encoders.as_ref());
             }
         }
     }
-    if let Some(c) = &mut plan.cmd
-        && c.expired(Duration::ZERO)
-    {
-        let _ = c.iface.publish(Motors::default());
-    }
-    if let Some(pt) = &mut plan.pantilt
-        && pt.expired(Duration::ZERO)
-    {
-        hold(pt, plan.pt_encoders.as_ref());
-    }
-    users.into_iter().for_each(|f| f());
 }
 
 crate::register_driver!(

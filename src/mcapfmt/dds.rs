@@ -171,3 +171,38 @@ pub fn static_qos() -> QosPolicies {
         .durability(Durability::TransientLocal)
         .build()
 }
+
+/// Waits for data on DDS readers (RustDDS's mio event source of each), so a
+/// message wakes its thread at once rather than a polling period later.
+pub struct Readiness {
+    poll: mio::Poll,
+    events: mio::Events,
+    count: usize,
+}
+
+impl Readiness {
+    /// `who` (`driver ros2`) names the component in errors.
+    pub fn new(who: &str) -> anyhow::Result<Readiness> {
+        Ok(Readiness {
+            poll: mio::Poll::new().map_err(|e| anyhow::anyhow!("{who}: a mio poll: {e}"))?,
+            events: mio::Events::with_capacity(16),
+            count: 0,
+        })
+    }
+
+    /// Wakes [`Readiness::wait`] when `reader` has data.
+    pub fn add<S: mio::event::Source>(&mut self, reader: &mut S) -> anyhow::Result<()> {
+        self.count += 1;
+        self.poll
+            .registry()
+            .register(reader, mio::Token(self.count), mio::Interest::READABLE)
+            .map_err(|e| anyhow::anyhow!("ros2: watching a reader: {e}"))
+    }
+
+    /// Waits until a reader has data or `timeout` passes.
+    pub fn wait(&mut self, timeout: std::time::Duration) {
+        if self.poll.poll(&mut self.events, Some(timeout)).is_err() {
+            std::thread::sleep(timeout);
+        }
+    }
+}

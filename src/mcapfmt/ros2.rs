@@ -516,6 +516,27 @@ pub fn encode_tf(time: SystemTime, transforms: &[Transform], out: &mut Vec<u8>) 
     }
 }
 
+/// The DDS type name of `rosgraph_msgs/msg/Clock` (`/clock`).
+pub const CLOCK: &str = "rosgraph_msgs::msg::dds_::Clock_";
+
+/// Encodes `rosgraph_msgs/msg/Clock` (a `builtin_interfaces/Time`) into `out`.
+pub fn encode_clock(time: SystemTime, out: &mut Vec<u8>) {
+    let mut w = start(out);
+    let ns = nanos(time);
+    w.i32((ns / 1_000_000_000) as i32);
+    w.u32((ns % 1_000_000_000) as u32);
+}
+
+/// Sets the stamp of an encoded message that starts with a `std_msgs/Header`
+/// (every sensor message here) to `time`.
+pub fn restamp(msg: &mut [u8], time: SystemTime) {
+    let ns = nanos(time);
+    if let Some(b) = msg.get_mut(4..12) {
+        b[..4].copy_from_slice(&((ns / 1_000_000_000) as i32).to_le_bytes());
+        b[4..].copy_from_slice(&((ns % 1_000_000_000) as u32).to_le_bytes());
+    }
+}
+
 fn start(out: &mut Vec<u8>) -> Writer<'_> {
     out.clear();
     out.extend_from_slice(&[0, 1, 0, 0]);

@@ -39,6 +39,7 @@ mod error;
 pub mod pacer;
 #[cfg(feature = "gui")]
 mod panel;
+pub mod runclock;
 mod schema;
 mod slot;
 
@@ -59,6 +60,7 @@ pub use driver::Driver;
 pub use error::RuntimeError;
 #[cfg(feature = "gui")]
 pub use panel::Panel;
+pub use runclock::RunClock;
 pub use schema::{Schema, State};
 pub use slot::{SchemaSlot, SchemaStatus};
 

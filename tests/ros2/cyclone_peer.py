@@ -17,6 +17,9 @@ in XCDR1 as rmw_cyclonedds does.
                                          disagrees with their data, a wrong type
     cyclone_peer.py many DOMAIN SECS     1,000 endpoints: 500 readers of rt/scan, 500 writers
     cyclone_peer.py camera DOMAIN SECS JPG  publish a JPEG file as a CompressedImage
+    cyclone_peer.py clock DOMAIN SECS    read /clock (rclcpp's ClockQoS) and /scan's stamps
+    cyclone_peer.py stall DOMAIN SECS    stall reliable readers of /odom and /tf (never
+                                         take, room for 1 sample) while sending /cmd_vel
 
 Prints one JSON line.
 """
@@ -392,6 +395,67 @@ def camera(dp, secs, path):
     print(json.dumps({"sent": n, "size": jpeg_size(data)}))
 
 
+@dataclass
+class Clock(IdlStruct, typename="rosgraph_msgs::msg::dds_::Clock_"):
+    clock: Time
+
+
+# rclcpp::ClockQoS: best effort, keep last 1 (what use_sim_time's TimeSource reads with).
+CLOCK = Qos(Policy.Reliability.BestEffort, Policy.History.KeepLast(1), Policy.Durability.Volatile, XCDR1)
+
+
+def clock(dp, secs):
+    """Reads rosgraph_msgs/Clock on rt/clock and /scan's header stamps for SECS
+    wall seconds after the first Clock."""
+    clk = DataReader(dp, Topic(dp, "rt/clock", Clock, qos=CLOCK), qos=CLOCK)
+    scan = DataReader(dp, Topic(dp, "rt/scan", LaserScan, qos=SENSOR), qos=SENSOR)
+    got = {"n": 0, "backwards": 0}
+    end = time.time() + 20
+    start = None
+    last = None
+    while time.time() < end:
+        for m in clk.take(N=100):
+            t = m.clock.sec + m.clock.nanosec / 1e9
+            if start is None:
+                start = time.time()
+                end = start + secs
+                got["first"] = t
+            elif t < last:
+                got["backwards"] += 1
+            last = t
+            got["n"] += 1
+        for m in scan.take(N=10):
+            if last is not None:
+                got["scan_stamp"] = m.header.stamp.sec + m.header.stamp.nanosec / 1e9
+                got["clock_at_scan"] = last
+        time.sleep(0.01)
+    got["last"] = last
+    got["wall"] = time.time() - start if start else 0
+    print(json.dumps(got))
+
+
+def stall(dp, secs):
+    """A slow reliable subscriber: readers of /odom and /tf with room for one
+    sample that never take (DDS flow control then holds the writer back), while
+    /cmd_vel Twists go out at 20 Hz: linear.x = K mm/s. Prints when each K was sent."""
+    keep1 = Qos(Policy.Reliability.Reliable(duration(milliseconds=100)), Policy.History.KeepAll,
+                Policy.ResourceLimits(max_samples=1, max_instances=1, max_samples_per_instance=1),
+                Policy.Durability.Volatile, XCDR1)
+    stalled = [DataReader(dp, Topic(dp, "rt/" + t, typ, qos=DEFAULT), qos=keep1)
+               for t, typ in [("odom", Odometry), ("tf", TFMessage)]]
+    cmd = DataWriter(dp, Topic(dp, "rt/cmd_vel", Twist, qos=DEFAULT), qos=DEFAULT)
+    time.sleep(2.0)  # discovery, and the stalled readers' room filled
+    sent = {}
+    end = time.time() + secs
+    k = 0
+    while time.time() < end:
+        k += 1
+        sent[k] = time.time()
+        cmd.write(Twist(Vector3(k / 1000.0, 0.0, 0.0), Vector3(0.0, 0.0, 0.0)))
+        time.sleep(0.05)
+    print(json.dumps({"sent": sent, "stalled": len(stalled)}))
+
+
 def many(dp, secs):
     """1,000 remote endpoints: 500 readers of rt/scan (each a best-effort reader
     the service must match and send to) and 500 writers of topics of their own."""
@@ -414,7 +478,8 @@ def main():
     if mode == "camera":
         camera(dp, secs, sys.argv[4])
     else:
-        {"listen": listen, "robot": robot, "bad": bad, "many": many}[mode](dp, secs)
+        {"listen": listen, "robot": robot, "bad": bad, "many": many, "clock": clock,
+         "stall": stall}[mode](dp, secs)
 
 
 if __name__ == "__main__":

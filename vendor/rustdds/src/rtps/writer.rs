@@ -393,9 +393,11 @@ impl Writer {
       nackfrag_response_delay: NACK_RESPONSE_DELAY, // default value from dp_event_loop
       repairfrags_continue_delay: std::time::Duration::from_millis(1),
       nack_suppression_duration: NACK_SUPPRESSION_DURATION,
-      data_max_size_serialized: 1024,
-      // ^^ TODO: Maybe a smarter selection would be in order.
-      // We should get the minimum over all outgoing interfaces.
+      // jderobot's patch: 1024-byte DATA_FRAGs sent one per datagram made a
+      // 640x480 image 900 sendto calls (benches/ros2.rs: about half of Cyclone
+      // DDS's frames per second). 14 KiB fragments make datagrams of the size
+      // Cyclone's packed DATA_FRAGs reach (its maxmessagesize, 14720 bytes).
+      data_max_size_serialized: 14 * 1024,
       my_guid: i.guid,
       writer_command_receiver: i.writer_command_receiver,
       writer_command_receiver_waker: i.writer_command_receiver_waker,
@@ -706,8 +708,12 @@ impl Writer {
     for msg in messages_to_send {
       match target_reader_opt {
         None => {
-          // To all
-          self.send_message_to_readers(DeliveryMode::Multicast, msg, &mut self.readers.values());
+          // To all. jderobot's patch: by unicast to each reader's locator, not
+          // to the multicast group a reader also offers: that group reached
+          // every socket joined to it on the host (the writer's own participant
+          // among them) and a 640x480 image sent there at full rate filled the
+          // subscribers' buffers (benches/ros2.rs: no image arrived whole).
+          self.send_message_to_readers(DeliveryMode::Unicast, msg, &mut self.readers.values());
         }
         Some(reader_proxy) => {
           // To one
