@@ -84,23 +84,26 @@ fn level(src: &GrayImage, pad: usize, derivs: bool) -> Level {
     let (w, h) = (src.width as usize, src.height as usize);
     let stride = w + 2 * pad;
     let rows = h + 2 * pad;
-    let mut img = vec![0u8; stride * rows];
+    // Built by appending rows, not by filling zeroed buffers: on a large photo the
+    // zeroing cost as much as the derivatives themselves (perf).
+    let mut img = Vec::with_capacity(stride * rows);
     for py in 0..rows {
         let sy = reflect101(py as isize - pad as isize, h);
         let s = &src.data[sy * w..(sy + 1) * w];
-        let d = &mut img[py * stride..(py + 1) * stride];
-        d[pad..pad + w].copy_from_slice(s);
-        for i in 0..pad {
-            d[i] = s[reflect101(i as isize - pad as isize, w)];
-            d[pad + w + i] = s[reflect101((w + i) as isize, w)];
-        }
+        img.extend((0..pad).map(|i| s[reflect101(i as isize - pad as isize, w)]));
+        img.extend_from_slice(s);
+        img.extend((0..pad).map(|i| s[reflect101((w + i) as isize, w)]));
     }
     let (mut dx, mut dy) = (Vec::new(), Vec::new());
     if derivs {
-        dx = vec![0i16; stride * rows];
-        dy = vec![0i16; stride * rows];
-        let mut t0 = vec![0i16; w + 2];
-        let mut t1 = vec![0i16; w + 2];
+        (dx, dy) = (
+            Vec::with_capacity(stride * rows),
+            Vec::with_capacity(stride * rows),
+        );
+        dx.resize(pad * stride + pad, 0);
+        dy.resize(pad * stride + pad, 0);
+        let (mut t0, mut t1) = (vec![0i16; w + 2], vec![0i16; w + 2]);
+        let (mut rx, mut ry) = (vec![0i16; w], vec![0i16; w]);
         let (l, r) = (reflect101(-1, w), reflect101(w as isize, w));
         let row = |y: isize| {
             let y = reflect101(y, h);
@@ -118,10 +121,14 @@ fn level(src: &GrayImage, pad: usize, derivs: bool) -> Level {
             t1[0] = t1[l + 1];
             t0[w + 1] = t0[r + 1];
             t1[w + 1] = t1[r + 1];
-            let o = (y + pad) * stride + pad;
-            let (ox, oy) = (&mut dx[o..o + w], &mut dy[o..o + w]);
-            scharr_h(&t0, &t1, ox, oy);
+            scharr_h(&t0, &t1, &mut rx, &mut ry);
+            dx.extend_from_slice(&rx);
+            dy.extend_from_slice(&ry);
+            dx.resize(dx.len() + 2 * pad, 0);
+            dy.resize(dy.len() + 2 * pad, 0);
         }
+        dx.resize(stride * rows, 0);
+        dy.resize(stride * rows, 0);
     }
     Level {
         w,
@@ -516,21 +523,18 @@ pub fn optical_flow_pyr_lk(
     // Pyramids; stop before a level gets smaller than the window (as OpenCV).
     // The padding also covers the reads of whole 8-lane template rows (`padded`).
     let pad = padded(win) + 1;
-    let mut pi = vec![prev.clone()];
-    let mut pj = vec![next.clone()];
-    while pi.len() <= params.max_level {
-        let (a, b) = (
-            pyr_down_gray(pi.last().expect("level")),
-            pyr_down_gray(pj.last().expect("level")),
-        );
-        if a.width as usize <= win || a.height as usize <= win {
+    let (mut li, mut lj) = (vec![level(prev, pad, true)], vec![level(next, pad, false)]);
+    let (mut a, mut b): (Option<GrayImage>, Option<GrayImage>) = (None, None);
+    while li.len() <= params.max_level {
+        let na = pyr_down_gray(a.as_ref().unwrap_or(prev));
+        let nb = pyr_down_gray(b.as_ref().unwrap_or(next));
+        if na.width as usize <= win || na.height as usize <= win {
             break;
         }
-        pi.push(a);
-        pj.push(b);
+        li.push(level(&na, pad, true));
+        lj.push(level(&nb, pad, false));
+        (a, b) = (Some(na), Some(nb));
     }
-    let li: Vec<Level> = pi.iter().map(|g| level(g, pad, true)).collect();
-    let lj: Vec<Level> = pj.iter().map(|g| level(g, pad, false)).collect();
     track(&li, &lj, points, params, win, pad)
 }
 
