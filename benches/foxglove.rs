@@ -23,6 +23,9 @@
 //!
 //! Run: `cargo bench --features full --bench foxglove` (`-- frames`: part 1 only).
 
+mod common;
+use common::{load::one_second, median, percentile};
+
 use std::{
     io::{Read, Write},
     net::{SocketAddr, TcpStream},
@@ -50,16 +53,6 @@ const W: u32 = 640;
 const H: u32 = 480;
 const ROUNDS: usize = 7;
 const SECS: f64 = 2.0;
-
-fn median(v: &mut [f64]) -> f64 {
-    v.sort_by(|a, b| a.partial_cmp(b).unwrap());
-    v[v.len() / 2]
-}
-
-fn percentile(v: &mut [f64], p: f64) -> f64 {
-    v.sort_by(|a, b| a.partial_cmp(b).unwrap());
-    v[((v.len() - 1) as f64 * p).round() as usize]
-}
 
 /// A minimal WebSocket client (RFC 6455) speaking the Foxglove protocol.
 struct Ws {
@@ -481,60 +474,6 @@ fn recorder_encodings() {
     );
 }
 
-/// One second of the recorder bench's load (benches/recorder.rs): 640x480 BGR at
-/// 30 fps, encoders 20 Hz, laser and sonars 10 Hz.
-fn one_second(t0: SystemTime, second: u64) -> Vec<(&'static str, Snapshot)> {
-    let s = |clock, t, v| {
-        Arc::new(Sample {
-            clock,
-            stamp: Instant::now(),
-            time: t,
-            value: v,
-        })
-    };
-    let mut v = Vec::new();
-    let mut img = frame();
-    img.data[0] = second as u8;
-    for k in 0..60u64 {
-        let t = t0 + Duration::from_secs(second) + Duration::from_millis(k * 1000 / 60);
-        if k.is_multiple_of(2) {
-            v.push((
-                "camera",
-                Snapshot::Image(s(second * 30 + k / 2 + 1, t, img.clone())),
-            ));
-        }
-        if k.is_multiple_of(3) {
-            let e = Encoders::from_pose(k as f32, 2.0, 1.0);
-            v.push((
-                "encoders",
-                Snapshot::Encoders(Arc::new(Sample {
-                    clock: second * 20 + k / 3 + 1,
-                    stamp: Instant::now(),
-                    time: t,
-                    value: e,
-                })),
-            ));
-        }
-        if k.is_multiple_of(6) {
-            let l = Laser {
-                readings: (0..180).map(|i| 1000 + i * 7 + k as i32).collect(),
-                resolution: 1.0,
-                ..Laser::default()
-            };
-            v.push((
-                "laser",
-                Snapshot::Laser(Arc::new(Sample {
-                    clock: second * 10 + k / 6 + 1,
-                    stamp: Instant::now(),
-                    time: t,
-                    value: l,
-                })),
-            ));
-        }
-    }
-    v
-}
-
 /// The recorder's writer path to a file, images and laser encoded by ours
 /// (`mcapfmt::encode`, `assets/foxglove/*.fdset`) or by the SDK's schemas (their
 /// own descriptors); the rest JSON either way.
@@ -574,17 +513,7 @@ fn write_load(path: &Path, sdk: bool, load: &[Vec<(&str, Snapshot)>]) {
                     mcapfmt::encode(profile, name, snap, &mut buf);
                 }
             }
-            let t = mcapfmt::nanos(snap.time());
-            w.write_to_known_channel(
-                &mcap::records::MessageHeader {
-                    channel_id: id,
-                    sequence: snap.clock() as u32,
-                    log_time: t,
-                    publish_time: t,
-                },
-                &buf,
-            )
-            .unwrap();
+            w.write_to_known_channel(&snap.header(id), &buf).unwrap();
         }
     }
     w.finish().unwrap();
@@ -621,7 +550,7 @@ fn recorder_write() {
         }
         let _ = std::fs::remove_file(file);
         println!(
-            "recorder, raw to {to} (640x480 30 fps + laser + encoders), x real time: ours {:.1}, SDK schemas {:.1}; SDK/ours median {:.2}",
+            "recorder, raw to {to} (640x480 30 fps + laser + encoders + sonars), x real time: ours {:.1}, SDK schemas {:.1}; SDK/ours median {:.2}",
             median(&mut ours),
             median(&mut sdk),
             median(&mut ratio)
