@@ -107,7 +107,7 @@ fn main() {
     simulator_file_size(dir.path());
 }
 
-/// 1. Write throughput: to a file in the temporary directory (on this machine's
+/// Write throughput: to a file in the temporary directory (on this machine's
 /// disk, through the page cache) and, where there is one, to a file in /dev/shm
 /// (memory: what the recorder's own path can do, whatever the disk).
 fn write_throughput(dir: &Path, load: &[Vec<(&str, Snapshot)>], secs: u64) {
@@ -144,7 +144,7 @@ fn write_throughput(dir: &Path, load: &[Vec<(&str, Snapshot)>], secs: u64) {
     }
 }
 
-/// 2. The recorder service at 1x.
+/// The recorder service at 1x.
 fn recorder_service(dir: &Path) {
     let conf_path = dir.join("rec.conf");
     std::fs::write(
@@ -210,7 +210,7 @@ fn recorder_service(dir: &Path) {
     );
 }
 
-/// 3. Replay at speed max.
+/// Replay at speed max.
 fn replay_speed(dir: &Path, t0: SystemTime) {
     for (what, keep) in [("laser messages", "laser"), ("640x480 frames", "camera")] {
         let file = dir.join(format!("{keep}.mcap"));
@@ -255,7 +255,7 @@ fn replay_speed(dir: &Path, t0: SystemTime) {
     }
 }
 
-/// 4. File size for 10 s of the simulator.
+/// File size for 10 s of the simulator.
 fn simulator_file_size(dir: &Path) {
     let conf_path = dir.join("sim.conf");
     std::fs::write(
