@@ -26,6 +26,9 @@
 //!
 //! Run: `cargo bench --features full --bench foxglove` (`-- frames`: part 1 only).
 
+mod common;
+use common::{cpu_by_thread, load::one_second, median, percentile};
+
 use std::{
     collections::BTreeMap,
     io::{Read, Write},
@@ -68,9 +71,6 @@ fn pace(next: &mut Instant) {
         *next = now;
     }
 }
-
-mod common;
-use common::{cpu_by_thread, median, percentile};
 
 /// A minimal WebSocket client (RFC 6455) speaking the Foxglove protocol.
 struct Ws {
@@ -515,60 +515,6 @@ fn recorder_encodings() {
     );
 }
 
-/// One second of the recorder bench's load (benches/recorder.rs): 640x480 BGR at
-/// 30 fps, encoders 20 Hz, laser and sonars 10 Hz.
-fn one_second(t0: SystemTime, second: u64) -> Vec<(&'static str, Snapshot)> {
-    let s = |clock, t, v| {
-        Arc::new(Sample {
-            clock,
-            stamp: Instant::now(),
-            time: t,
-            value: v,
-        })
-    };
-    let mut v = Vec::new();
-    let mut img = frame();
-    img.data[0] = second as u8;
-    for k in 0..60u64 {
-        let t = t0 + Duration::from_secs(second) + Duration::from_millis(k * 1000 / 60);
-        if k.is_multiple_of(2) {
-            v.push((
-                "camera",
-                Snapshot::Image(s(second * 30 + k / 2 + 1, t, img.clone())),
-            ));
-        }
-        if k.is_multiple_of(3) {
-            let e = Encoders::from_pose(k as f32, 2.0, 1.0);
-            v.push((
-                "encoders",
-                Snapshot::Encoders(Arc::new(Sample {
-                    clock: second * 20 + k / 3 + 1,
-                    stamp: Instant::now(),
-                    time: t,
-                    value: e,
-                })),
-            ));
-        }
-        if k.is_multiple_of(6) {
-            let l = Laser {
-                readings: (0..180).map(|i| 1000 + i * 7 + k as i32).collect(),
-                resolution: 1.0,
-                ..Laser::default()
-            };
-            v.push((
-                "laser",
-                Snapshot::Laser(Arc::new(Sample {
-                    clock: second * 10 + k / 6 + 1,
-                    stamp: Instant::now(),
-                    time: t,
-                    value: l,
-                })),
-            ));
-        }
-    }
-    v
-}
-
 /// The recorder's writer path to a file, images and laser encoded by ours
 /// (`mcapfmt::encode`, `assets/foxglove/*.fdset`) or by the SDK's schemas (their
 /// own descriptors); the rest JSON either way.
@@ -608,17 +554,7 @@ fn write_load(path: &Path, sdk: bool, load: &[Vec<(&str, Snapshot)>]) {
                     mcapfmt::encode(profile, name, snap, &mut buf);
                 }
             }
-            let t = mcapfmt::nanos(snap.time());
-            w.write_to_known_channel(
-                &mcap::records::MessageHeader {
-                    channel_id: id,
-                    sequence: snap.clock() as u32,
-                    log_time: t,
-                    publish_time: t,
-                },
-                &buf,
-            )
-            .unwrap();
+            w.write_to_known_channel(&snap.header(id), &buf).unwrap();
         }
     }
     w.finish().unwrap();
@@ -655,7 +591,7 @@ fn recorder_write() {
         }
         let _ = std::fs::remove_file(file);
         println!(
-            "recorder, raw to {to} (640x480 30 fps + laser + encoders), x real time: ours {:.1}, SDK schemas {:.1}; SDK/ours median {:.2}",
+            "recorder, raw to {to} (640x480 30 fps + laser + encoders + sonars), x real time: ours {:.1}, SDK schemas {:.1}; SDK/ours median {:.2}",
             median(&ours),
             median(&sdk),
             median(&ratio)

@@ -11,6 +11,8 @@
 
 mod common;
 use common::median;
+#[path = "../tests/gazebo/compile.rs"]
+mod compile;
 
 use std::{
     hint::black_box,
@@ -26,30 +28,11 @@ use jderobot::{
     interfaces::{Image, Laser, LaserMap, Watch},
 };
 
+/// The peer, compiled for this run (`None`, said why, without gz-transport).
 fn peer() -> Option<PathBuf> {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let bin = root.join("target/gazebo-peer/peer-bench");
-    std::fs::create_dir_all(bin.parent().unwrap()).ok()?;
-    let flags = Command::new("pkg-config")
-        .args([
-            "--cflags",
-            "--libs",
-            "ignition-transport11",
-            "ignition-msgs8",
-        ])
-        .output()
+    compile::build_peer(Path::new(env!("CARGO_MANIFEST_DIR")), "peer-bench")
+        .map_err(|why| eprintln!("gazebo bench: {why}"))
         .ok()
-        .filter(|o| o.status.success())?;
-    let ok = Command::new("g++")
-        .args(["-O2", "-std=c++17"])
-        .arg(root.join("tests/gazebo/peer.cc"))
-        .args(String::from_utf8_lossy(&flags.stdout).split_whitespace())
-        .arg("-o")
-        .arg(&bin)
-        .status()
-        .ok()?
-        .success();
-    ok.then_some(bin)
 }
 
 struct Proc(Child);

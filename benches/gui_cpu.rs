@@ -10,39 +10,25 @@
 //! `xvfb-run -a cargo bench --bench gui_cpu` (needs a display).
 
 mod common;
-use common::{cpu_ticks, median};
+use common::median;
 
 use std::{
     path::{Path, PathBuf},
-    process::{Command, Stdio},
-    time::{Duration, Instant},
+    process::Command,
+    time::Duration,
 };
 
 const RUNS: usize = 3;
 const WARMUP: Duration = Duration::from_secs(3);
 const WINDOW: Duration = Duration::from_secs(8);
 
-/// % of one core that `bin` uses running `conf` with its window.
+/// % of one core that `bin` uses running `conf` (with its window unless `headless`).
 fn cpu_percent(bin: &Path, conf: &str, headless: bool) -> f64 {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let mut child = Command::new(bin)
-        .args(["--no-shell", conf])
+    let mut cmd = Command::new(bin);
+    cmd.args(["--no-shell", conf])
         .args(headless.then_some("--headless"))
-        .current_dir(root)
-        .env("LIBGL_ALWAYS_SOFTWARE", "1")
-        .stdin(Stdio::null())
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .expect("start jderobot");
-    std::thread::sleep(WARMUP);
-    let tick = unsafe { libc::sysconf(libc::_SC_CLK_TCK) } as f64;
-    let (t0, c0) = (Instant::now(), cpu_ticks(child.id()).expect("running"));
-    std::thread::sleep(WINDOW);
-    let (t1, c1) = (Instant::now(), cpu_ticks(child.id()).expect("running"));
-    let _ = child.kill();
-    let _ = child.wait();
-    100.0 * (c1 - c0) as f64 / tick / (t1 - t0).as_secs_f64()
+        .current_dir(Path::new(env!("CARGO_MANIFEST_DIR")));
+    common::cpu_percent(cmd, WARMUP, WINDOW)
 }
 
 fn main() {

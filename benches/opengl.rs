@@ -20,11 +20,11 @@
 //! `xvfb-run -a -s "-screen 0 1280x800x24" cargo bench --features full --bench opengl`
 
 mod common;
-use common::{cpu_ticks, median};
+use common::median;
 
 use std::{
     path::{Path, PathBuf},
-    process::{Command, Stdio},
+    process::Command,
     sync::Arc,
     time::{Duration, Instant},
 };
@@ -119,25 +119,11 @@ impl eframe::App for App {
     }
 }
 
+/// % of one core that the binary uses with `conf`'s window, over 8 s after 3 s.
 fn cpu_percent(conf: &Path) -> f64 {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_jderobot"))
-        .arg("--no-shell")
-        .arg(conf)
-        .env("LIBGL_ALWAYS_SOFTWARE", "1")
-        .stdin(Stdio::null())
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .expect("start jderobot");
-    std::thread::sleep(Duration::from_secs(3));
-    // SAFETY: sysconf has no preconditions.
-    let tick = unsafe { libc::sysconf(libc::_SC_CLK_TCK) } as f64;
-    let (t0, c0) = (Instant::now(), cpu_ticks(child.id()).expect("running"));
-    std::thread::sleep(Duration::from_secs(8));
-    let (t1, c1) = (Instant::now(), cpu_ticks(child.id()).expect("running"));
-    let _ = child.kill();
-    let _ = child.wait();
-    100.0 * (c1 - c0) as f64 / tick / (t1 - t0).as_secs_f64()
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_jderobot"));
+    cmd.arg("--no-shell").arg(conf);
+    common::cpu_percent(cmd, Duration::from_secs(3), Duration::from_secs(8))
 }
 
 /// Which panels the idle-CPU window shows (besides mastergui).

@@ -25,16 +25,10 @@ fn median_ms(mut f: impl FnMut()) -> f64 {
     t[t.len() / 2]
 }
 
+/// `n` reproducible pseudo-random bytes (every value).
 fn noise(n: usize) -> Vec<u8> {
-    let mut s = 0x2545_f491u32;
-    (0..n)
-        .map(|_| {
-            s ^= s << 13;
-            s ^= s >> 17;
-            s ^= s << 5;
-            (s >> 11) as u8
-        })
-        .collect()
+    let mut rng = fastrand::Rng::with_seed(0x2545_f491);
+    std::iter::repeat_with(|| rng.u8(..)).take(n).collect()
 }
 
 #[cfg(feature = "firewire")]

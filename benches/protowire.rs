@@ -6,7 +6,7 @@
 //! Run with `cargo bench --features recorder,gazebo --bench protowire`.
 
 mod common;
-use common::median;
+use common::Case;
 
 use std::{hint::black_box, time::Instant};
 
@@ -100,6 +100,10 @@ fn stamp() -> Option<Timestamp> {
     })
 }
 
+fn our_scan(l: &Laser, out: &mut Vec<u8>) {
+    protobuf::laser_scan("laser", NS, l, out)
+}
+
 fn prost_scan(l: &Laser, out: &mut Vec<u8>) {
     let half = (l.mount.yaw as f64).to_radians() / 2.0;
     let start = (l.start as f64).to_radians();
@@ -161,6 +165,10 @@ fn prost_image(b: &[u8]) -> usize {
     RawImage::decode(b).unwrap().data.len()
 }
 
+fn our_raw(img: &Image, out: &mut Vec<u8>) {
+    protobuf::raw_image("camera", NS, img, out)
+}
+
 fn prost_raw(img: &Image, out: &mut Vec<u8>) {
     // The message owns its bytes: the copy is part of prost's encode.
     let m = RawImage {
@@ -204,42 +212,24 @@ fn main() {
         "each reads the other's"
     );
     let rounds = 7;
-    let names = [
-        "LaserScan 1081 encode",
-        "LaserScan 1081 decode",
-        "RawImage 640x480 encode",
-        "RawImage 640x480 decode",
-    ];
-    let mut t = vec![(Vec::new(), Vec::new()); names.len()];
-    let mut img_ours = Vec::new();
-    let mut img_theirs = Vec::new();
-    for _ in 0..rounds {
-        t[0].0.push(time(2000, || {
-            protobuf::laser_scan("laser", NS, black_box(&l), &mut ours)
-        }));
-        t[0].1
-            .push(time(2000, || prost_scan(black_box(&l), &mut theirs)));
-        t[1].0.push(time(2000, || {
-            black_box(our_ranges(black_box(&ours)));
-        }));
-        t[1].1.push(time(2000, || {
-            black_box(prost_ranges(black_box(&theirs)));
-        }));
-        t[2].0.push(time(200, || {
-            protobuf::raw_image("camera", NS, black_box(&img), &mut img_ours)
-        }));
-        t[2].1
-            .push(time(200, || prost_raw(black_box(&img), &mut img_theirs)));
-        t[3].0.push(time(200, || {
-            black_box(our_image(black_box(&img_ours)));
-        }));
-        t[3].1.push(time(200, || {
-            black_box(prost_image(black_box(&img_theirs)));
-        }));
-    }
+    let mut cases = Vec::new();
+    cases.extend(message_cases(
+        "LaserScan 1081",
+        2000,
+        &l,
+        [our_scan, prost_scan],
+        [our_ranges, prost_ranges],
+    ));
+    cases.extend(message_cases(
+        "RawImage 640x480",
+        200,
+        &img,
+        [our_raw, prost_raw],
+        [our_image, prost_image],
+    ));
+    let medians = common::alternated(rounds, &mut cases);
     println!("protobuf wire: ours vs prost 0.14, medians of {rounds} alternated rounds");
-    for (name, (o, p)) in names.iter().zip(&t) {
-        let (o, p) = (median(o), median(p));
+    for ((name, ..), (o, p)) in cases.iter().zip(medians) {
         println!(
             "{name:<26} ours {:>9.1} µs   prost {:>9.1} µs   prost/ours {:.2}",
             o / 1e3,
@@ -247,4 +237,31 @@ fn main() {
             p / o
         );
     }
+}
+
+/// The encode and the decode case of message `m`, ours (A) against prost's (B),
+/// `n` calls a run; each decoder reads what its own encoder wrote.
+fn message_cases<'a, M, R: 'a>(
+    name: &str,
+    n: usize,
+    m: &'a M,
+    [enc_a, enc_b]: [fn(&M, &mut Vec<u8>); 2],
+    [dec_a, dec_b]: [fn(&[u8]) -> R; 2],
+) -> [Case<'a>; 2] {
+    let (mut a, mut b) = (Vec::new(), Vec::new());
+    enc_a(m, &mut a);
+    enc_b(m, &mut b);
+    let (mut out_a, mut out_b) = (Vec::new(), Vec::new());
+    [
+        (
+            format!("{name} encode"),
+            Box::new(move || time(n, || enc_a(black_box(m), &mut out_a))),
+            Box::new(move || time(n, || enc_b(black_box(m), &mut out_b))),
+        ),
+        (
+            format!("{name} decode"),
+            Box::new(move || time(n, || drop(black_box(dec_a(black_box(&a)))))),
+            Box::new(move || time(n, || drop(black_box(dec_b(black_box(&b)))))),
+        ),
+    ]
 }

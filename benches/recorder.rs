@@ -15,7 +15,10 @@
 //! Run: `cargo bench --features full --bench recorder` (`-- write`: only 1).
 
 mod common;
-use common::{median, percentile, threads_cpu};
+use common::{
+    load::{noisy_image, one_second, sample},
+    median, percentile, threads_cpu,
+};
 
 use std::{
     io::Write,
@@ -31,76 +34,6 @@ use jderobot::{
     loader,
     mcapfmt::{self, Profile, RecorderStatus, Snapshot},
 };
-
-fn sample<T>(clock: u64, t: SystemTime, value: T) -> Arc<Sample<T>> {
-    Arc::new(Sample {
-        clock,
-        stamp: Instant::now(),
-        time: t,
-        value,
-    })
-}
-
-fn noisy_image(seed: u64) -> Image {
-    let mut img = Image::new(640, 480);
-    let mut x = seed | 1;
-    for (i, b) in img.data.iter_mut().enumerate() {
-        // Smooth gradient plus a little noise: like a camera, not like random bytes.
-        x ^= x << 13;
-        x ^= x >> 7;
-        x ^= x << 17;
-        *b = ((i / 3 % 640) as u64 / 3 + (x & 7)) as u8;
-    }
-    img
-}
-
-/// One second of the load: (channel, snapshot) in time order.
-fn one_second(t0: SystemTime, second: u64) -> Vec<(&'static str, Snapshot)> {
-    let mut v = Vec::new();
-    let img = noisy_image(second + 1);
-    for k in 0..60u64 {
-        // 60 slots of 1/60 s
-        let t = t0 + Duration::from_secs(second) + Duration::from_millis(k * 1000 / 60);
-        if k.is_multiple_of(2) {
-            v.push((
-                "camera",
-                Snapshot::Image(sample(second * 30 + k / 2 + 1, t, img.clone())),
-            ));
-        }
-        if k.is_multiple_of(3) {
-            let e = Encoders {
-                x: k as f32,
-                y: 2.0,
-                theta: 1.0,
-                cos: 0.5,
-                sin: 0.8,
-            };
-            v.push((
-                "encoders",
-                Snapshot::Encoders(sample(second * 20 + k / 3 + 1, t, e)),
-            ));
-        }
-        if k.is_multiple_of(6) {
-            let l = Laser {
-                readings: (0..180).map(|i| 1000 + i * 7 + k as i32).collect(),
-                resolution: 1.0,
-                ..Laser::default()
-            };
-            v.push((
-                "laser",
-                Snapshot::Laser(sample(second * 10 + k / 6 + 1, t, l)),
-            ));
-            let s = Sonars {
-                us: (0..16).map(|i| 500.0 + i as f32).collect(),
-            };
-            v.push((
-                "sonars",
-                Snapshot::Sonars(sample(second * 10 + k / 6 + 1, t, s)),
-            ));
-        }
-    }
-    v
-}
 
 fn write_file(
     path: &Path,
@@ -200,18 +133,29 @@ fn main() {
     println!(
         "## recorder / replay (load: 640x480 BGR 30 fps + laser 10 Hz + encoders 20 Hz + sonars 10 Hz = {raw_mb_s:.1} MB/s of pixels)"
     );
+    write_throughput(dir.path(), &load, secs);
+    // `write` as an argument: only the write throughput.
+    if std::env::args().any(|a| a == "write") {
+        return;
+    }
 
-    // 1. Write throughput: to a file in the temporary directory (on this machine's
-    // disk, through the page cache) and, where there is one, to a file in /dev/shm
-    // (memory: what the recorder's own path can do, whatever the disk).
+    recorder_service(dir.path());
+    replay_speed(dir.path(), t0);
+    simulator_file_size(dir.path());
+}
+
+/// 1. Write throughput: to a file in the temporary directory (on this machine's
+/// disk, through the page cache) and, where there is one, to a file in /dev/shm
+/// (memory: what the recorder's own path can do, whatever the disk).
+fn write_throughput(dir: &Path, load: &[Vec<(&str, Snapshot)>], secs: u64) {
     let shm = tempfile::tempdir_in("/dev/shm").ok();
-    let targets: Vec<(&str, PathBuf)> = std::iter::once(("disk", dir.path().join("w.mcap")))
+    let targets: Vec<(&str, PathBuf)> = std::iter::once(("disk", dir.join("w.mcap")))
         .chain(shm.as_ref().map(|d| ("memory", d.path().join("w.mcap"))))
         .collect();
     let foxglove = Profile::Foxglove { jpeg: None };
     // The reference, in the same rounds as the recorder's path without compression:
     // the frames' pixels alone written to the same file with `write_all` (no MCAP).
-    let raw = |p: &Path| write_raw(p, &load);
+    let raw = |p: &Path| write_raw(p, load);
     for (label, c, profile) in [
         ("none", None, foxglove),
         ("lz4", Some(mcap::Compression::Lz4), foxglove),
@@ -222,7 +166,7 @@ fn main() {
             Profile::Ros2,
         ),
     ] {
-        let ours = |p: &Path| write_profile(p, c, &load, profile);
+        let ours = |p: &Path| write_profile(p, c, load, profile);
         let writers: Vec<&dyn Fn(&Path) -> u64> = if label == "none" {
             vec![&ours as &dyn Fn(&Path) -> u64, &raw]
         } else {
@@ -249,81 +193,78 @@ fn main() {
             }
         }
     }
+}
 
-    // `write` as an argument: only the write throughput.
-    if std::env::args().any(|a| a == "write") {
-        return;
-    }
-
-    // 2. The recorder service at 1x.
-    {
-        let conf_path = dir.path().join("rec.conf");
-        std::fs::write(
-            &conf_path,
-            "service recorder\nfile live.mcap\ncompression none\nend_service\n",
-        )
+/// 2. The recorder service at 1x: messages written and dropped, its threads' CPU.
+fn recorder_service(dir: &Path) {
+    let conf_path = dir.join("rec.conf");
+    std::fs::write(
+        &conf_path,
+        "service recorder\nfile live.mcap\ncompression none\nend_service\n",
+    )
+    .unwrap();
+    let conf = Conf::load(&conf_path).unwrap();
+    let rt: Arc<Runtime> = Runtime::new(&conf_path);
+    let cam: Arc<Interface<Image>> = rt.interfaces.provide("varcolorA", "bench").unwrap();
+    let laser: Arc<Interface<Laser>> = rt.interfaces.provide("laser", "bench").unwrap();
+    let enc: Arc<Interface<Encoders>> = rt.interfaces.provide("encoders", "bench").unwrap();
+    let son: Arc<Interface<Sonars>> = rt.interfaces.provide("sonars", "bench").unwrap();
+    loader::load(&rt, &conf, Some(Kind::Service), "recorder", None).unwrap();
+    let status = rt
+        .names
+        .import::<RecorderStatus>("recorder", "status")
         .unwrap();
-        let conf = Conf::load(&conf_path).unwrap();
-        let rt: Arc<Runtime> = Runtime::new(&conf_path);
-        let cam: Arc<Interface<Image>> = rt.interfaces.provide("varcolorA", "bench").unwrap();
-        let laser: Arc<Interface<Laser>> = rt.interfaces.provide("laser", "bench").unwrap();
-        let enc: Arc<Interface<Encoders>> = rt.interfaces.provide("encoders", "bench").unwrap();
-        let son: Arc<Interface<Sonars>> = rt.interfaces.provide("sonars", "bench").unwrap();
-        loader::load(&rt, &conf, Some(Kind::Service), "recorder", None).unwrap();
-        let status = rt
-            .names
-            .import::<RecorderStatus>("recorder", "status")
-            .unwrap();
-        std::thread::sleep(Duration::from_millis(400));
-        let cpu0 = threads_cpu("recorder-");
-        let start = Instant::now();
-        let imgs = [noisy_image(1), noisy_image(2)];
-        let mut k = 0u64;
-        let run = Duration::from_secs(5);
-        while start.elapsed() < run {
-            let due = start + Duration::from_millis(k * 1000 / 60);
-            if let Some(w) = due.checked_duration_since(Instant::now()) {
-                std::thread::sleep(w);
-            }
-            if k.is_multiple_of(2) {
-                cam.publish(imgs[(k / 2 % 2) as usize].clone()).unwrap();
-            }
-            if k.is_multiple_of(3) {
-                enc.publish(Encoders {
-                    x: k as f32,
-                    ..Encoders::default()
-                })
-                .unwrap();
-            }
-            if k.is_multiple_of(6) {
-                laser
-                    .publish(Laser {
-                        readings: vec![1000 + k as i32; 180],
-                        resolution: 1.0,
-                        ..Laser::default()
-                    })
-                    .unwrap();
-                son.publish(Sonars {
-                    us: vec![k as f32; 16],
-                })
-                .unwrap();
-            }
-            k += 1;
+    std::thread::sleep(Duration::from_millis(400));
+    let cpu0 = threads_cpu("recorder-");
+    let start = Instant::now();
+    let imgs = [noisy_image(1), noisy_image(2)];
+    let mut k = 0u64;
+    let run = Duration::from_secs(5);
+    while start.elapsed() < run {
+        let due = start + Duration::from_millis(k * 1000 / 60);
+        if let Some(w) = due.checked_duration_since(Instant::now()) {
+            std::thread::sleep(w);
         }
-        let wall = start.elapsed().as_secs_f64();
-        let cpu = threads_cpu("recorder-") - cpu0;
-        let written = status.messages.load(Ordering::Relaxed);
-        let dropped = status.dropped.load(Ordering::Relaxed);
-        rt.shutdown();
-        println!(
-            "recorder service at 1x for {wall:.1} s: {written} messages written, {dropped} dropped, recorder threads CPU {:.0} % of one core",
-            cpu / wall * 100.0
-        );
+        if k.is_multiple_of(2) {
+            cam.publish(imgs[(k / 2 % 2) as usize].clone()).unwrap();
+        }
+        if k.is_multiple_of(3) {
+            enc.publish(Encoders {
+                x: k as f32,
+                ..Encoders::default()
+            })
+            .unwrap();
+        }
+        if k.is_multiple_of(6) {
+            laser
+                .publish(Laser {
+                    readings: vec![1000 + k as i32; 180],
+                    resolution: 1.0,
+                    ..Laser::default()
+                })
+                .unwrap();
+            son.publish(Sonars {
+                us: vec![k as f32; 16],
+            })
+            .unwrap();
+        }
+        k += 1;
     }
+    let wall = start.elapsed().as_secs_f64();
+    let cpu = threads_cpu("recorder-") - cpu0;
+    let written = status.messages.load(Ordering::Relaxed);
+    let dropped = status.dropped.load(Ordering::Relaxed);
+    rt.shutdown();
+    println!(
+        "recorder service at 1x for {wall:.1} s: {written} messages written, {dropped} dropped, recorder threads CPU {:.0} % of one core",
+        cpu / wall * 100.0
+    );
+}
 
-    // 3. Replay at speed max.
+/// 3. The replay driver at `speed max`: laser messages/s and 640x480 frames/s.
+fn replay_speed(dir: &Path, t0: SystemTime) {
     for (what, keep) in [("laser messages", "laser"), ("640x480 frames", "camera")] {
-        let file = dir.path().join(format!("{keep}.mcap"));
+        let file = dir.join(format!("{keep}.mcap"));
         let n_secs: u64 = if keep == "laser" { 100 } else { 10 };
         let only: Vec<Vec<(&str, Snapshot)>> = (0..n_secs)
             .map(|s| {
@@ -337,7 +278,7 @@ fn main() {
         let count: usize = only.iter().map(Vec::len).sum();
         let mut rates = Vec::new();
         for _ in 0..3 {
-            let conf_path = dir.path().join("replay.conf");
+            let conf_path = dir.join("replay.conf");
             std::fs::write(
                 &conf_path,
                 format!(
@@ -363,60 +304,60 @@ fn main() {
             median(rates)
         );
     }
+}
 
-    // 4. File size for 10 s of the simulator.
-    {
-        let conf_path = dir.path().join("sim.conf");
-        std::fs::write(
-            &conf_path,
-            format!(
-                "driver simulator\nworld {}/assets/worlds/simple.world\nprovides encoders\nprovides motors\n\
-                 provides laser\nprovides sonars\nprovides colorA\npublish_always on\nend_driver\n\
-                 service recorder\nfile sim.mcap\ncompression none\nend_service\n\
-                 load_driver simulator\nload_service recorder\n",
-                env!("CARGO_MANIFEST_DIR")
-            ),
-        )
+/// 4. File size of 10 s of the simulator: raw, zstd and lz4.
+fn simulator_file_size(dir: &Path) {
+    let conf_path = dir.join("sim.conf");
+    std::fs::write(
+        &conf_path,
+        format!(
+            "driver simulator\nworld {}/assets/worlds/simple.world\nprovides encoders\nprovides motors\n\
+             provides laser\nprovides sonars\nprovides colorA\npublish_always on\nend_driver\n\
+             service recorder\nfile sim.mcap\ncompression none\nend_service\n\
+             load_driver simulator\nload_service recorder\n",
+            env!("CARGO_MANIFEST_DIR")
+        ),
+    )
+    .unwrap();
+    let conf = Conf::load(&conf_path).unwrap();
+    let rt = loader::start(&conf).unwrap();
+    let motors = rt
+        .interfaces
+        .get::<jderobot::interfaces::Motors>("motors")
         .unwrap();
-        let conf = Conf::load(&conf_path).unwrap();
-        let rt = loader::start(&conf).unwrap();
-        let motors = rt
-            .interfaces
-            .get::<jderobot::interfaces::Motors>("motors")
+    let t = Instant::now();
+    while t.elapsed() < Duration::from_secs(10) {
+        motors
+            .publish(jderobot::interfaces::Motors { v: 200.0, w: 10.0 })
             .unwrap();
-        let t = Instant::now();
-        while t.elapsed() < Duration::from_secs(10) {
-            motors
-                .publish(jderobot::interfaces::Motors { v: 200.0, w: 10.0 })
-                .unwrap();
-            std::thread::sleep(Duration::from_millis(100));
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    rt.shutdown();
+    let raw = dir.join("sim.mcap");
+    let raw_size = std::fs::metadata(&raw).unwrap().len();
+    // The same messages rewritten with zstd and lz4 chunks.
+    let bytes = std::fs::read(&raw).unwrap();
+    for (label, c) in [
+        ("zstd", mcap::Compression::Zstd),
+        ("lz4", mcap::Compression::Lz4),
+    ] {
+        let out = dir.join(format!("sim-{label}.mcap"));
+        let mut w = mcap::WriteOptions::new()
+            .compression(Some(c))
+            .chunk_size(Some(4 * 1024 * 1024))
+            .create(std::fs::File::create(&out).unwrap())
+            .unwrap();
+        for m in mcap::MessageStream::new(&bytes).unwrap() {
+            w.write(&m.unwrap()).unwrap();
         }
-        rt.shutdown();
-        let raw = dir.path().join("sim.mcap");
-        let raw_size = std::fs::metadata(&raw).unwrap().len();
-        // The same messages rewritten with zstd and lz4 chunks.
-        let bytes = std::fs::read(&raw).unwrap();
-        for (label, c) in [
-            ("zstd", mcap::Compression::Zstd),
-            ("lz4", mcap::Compression::Lz4),
-        ] {
-            let out = dir.path().join(format!("sim-{label}.mcap"));
-            let mut w = mcap::WriteOptions::new()
-                .compression(Some(c))
-                .chunk_size(Some(4 * 1024 * 1024))
-                .create(std::fs::File::create(&out).unwrap())
-                .unwrap();
-            for m in mcap::MessageStream::new(&bytes).unwrap() {
-                w.write(&m.unwrap()).unwrap();
-            }
-            w.finish().unwrap();
-            let size = std::fs::metadata(&out).unwrap().len();
-            println!(
-                "10 s of the simulator (colorA, laser, encoders, sonars, motors): raw {:.2} MB, {label} {:.2} MB (ratio {:.1}x)",
-                raw_size as f64 / 1e6,
-                size as f64 / 1e6,
-                raw_size as f64 / size as f64
-            );
-        }
+        w.finish().unwrap();
+        let size = std::fs::metadata(&out).unwrap().len();
+        println!(
+            "10 s of the simulator (colorA, laser, encoders, sonars, motors): raw {:.2} MB, {label} {:.2} MB (ratio {:.1}x)",
+            raw_size as f64 / 1e6,
+            size as f64 / 1e6,
+            raw_size as f64 / size as f64
+        );
     }
 }

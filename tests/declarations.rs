@@ -11,10 +11,10 @@ use crate::common;
 
 use jderobot::{
     conf::{
-        ComponentConf, Conf, Kind,
+        ComponentConf, Kind,
         settings::{Arg, ArgType, Setting},
     },
-    loader, registry,
+    registry,
 };
 
 /// A word that `a` refuses, if there is one.
@@ -72,33 +72,16 @@ fn line(key: &str, args: &[Arg], replace: Option<(usize, &str)>) -> String {
     words.join(" ")
 }
 
-/// `check` of a conf with `component`'s section holding `line` (at line 2).
-fn problems(kind: &str, name: &str, line: &str) -> Vec<String> {
-    let text = format!("{kind} {name}\n{line}\nend_{kind}\nload_{kind} {name}\n");
-    let conf = Conf::parse(&text, std::path::Path::new("t.conf")).expect("grammar");
-    loader::check(&conf)
-        .into_iter()
-        .map(|e| e.to_string())
-        .collect()
-}
-
 /// Whether `p` holds no problem of line 2 (a required line left out is another matter).
 fn accepted(p: &[String]) -> bool {
     p.iter()
         .all(|e| !e.starts_with("t.conf:2: ") || e.contains(", and needs one: "))
 }
 
-fn declared() -> Vec<(&'static registry::Entry, &'static [Setting])> {
-    registry::components()
-        .into_iter()
-        .filter_map(|e| e.lines.map(|l| (e, l)))
-        .collect()
-}
-
 #[test]
 fn every_argument_of_every_form_refuses_a_bad_value_at_its_line() {
     let (mut tried, mut forms) = (0, 0);
-    for (entry, decl) in declared() {
+    for (entry, decl) in common::declared() {
         let kind = entry.kind.to_string();
         for s in decl {
             forms += s.forms.len();
@@ -110,7 +93,7 @@ fn every_argument_of_every_form_refuses_a_bad_value_at_its_line() {
                     }
                     let Some(bad) = bad_word(a) else { continue };
                     let l = line(s.key, args, Some((i, &bad)));
-                    let p = problems(&kind, entry.name, &l);
+                    let p = common::line_problems(&kind, entry.name, &l);
                     // Where another form starts with the same word, the bad line
                     // may read as that form: it is refused all the same.
                     let first = args.first().and_then(good_word).unwrap_or_default();
@@ -134,7 +117,7 @@ fn every_argument_of_every_form_refuses_a_bad_value_at_its_line() {
                     .any(|a| matches!(a.ty, ArgType::Rest | ArgType::Flags(_)))
                 {
                     let l = format!("{} extra", line(s.key, args, None));
-                    let p = problems(&kind, entry.name, &l);
+                    let p = common::line_problems(&kind, entry.name, &l);
                     assert!(
                         p.iter()
                             .any(|e| e.starts_with("t.conf:2: ") && e.contains("usage: ")),
@@ -145,7 +128,7 @@ fn every_argument_of_every_form_refuses_a_bad_value_at_its_line() {
             }
             if !s.forms.is_empty() {
                 let l = format!("{} no_such_interface", s.key);
-                let p = problems(&kind, entry.name, &l);
+                let p = common::line_problems(&kind, entry.name, &l);
                 assert!(
                     p.iter().any(|e| e.starts_with("t.conf:2: ")
                         && e.contains("not `no_such_interface`")
@@ -155,7 +138,7 @@ fn every_argument_of_every_form_refuses_a_bad_value_at_its_line() {
                 );
             }
         }
-        let p = problems(&kind, entry.name, "no_such_line 1");
+        let p = common::line_problems(&kind, entry.name, "no_such_line 1");
         assert!(
             p.iter().any(|e| e.starts_with("t.conf:2: ")
                 && e.contains("`no_such_line`")
@@ -170,12 +153,12 @@ fn every_argument_of_every_form_refuses_a_bad_value_at_its_line() {
 
 #[test]
 fn every_form_is_accepted_with_good_values_and_at_both_ends_of_each_range() {
-    for (entry, decl) in declared() {
+    for (entry, decl) in common::declared() {
         let kind = entry.kind.to_string();
         for s in decl {
             for args in shapes(s) {
                 let l = line(s.key, args, None);
-                let p = problems(&kind, entry.name, &l);
+                let p = common::line_problems(&kind, entry.name, &l);
                 assert!(accepted(&p), "{} `{l}`: {p:?}", entry.name);
                 for (i, a) in args.iter().enumerate() {
                     let ends = match a.ty {
@@ -187,7 +170,7 @@ fn every_form_is_accepted_with_good_values_and_at_both_ends_of_each_range() {
                     };
                     for end in ends {
                         let l = line(s.key, args, Some((i, &end)));
-                        let p = problems(&kind, entry.name, &l);
+                        let p = common::line_problems(&kind, entry.name, &l);
                         assert!(accepted(&p), "{} `{l}`: {p:?}", entry.name);
                     }
                 }
@@ -198,7 +181,7 @@ fn every_form_is_accepted_with_good_values_and_at_both_ends_of_each_range() {
 
 #[test]
 fn help_prints_every_form_and_argument() {
-    for (entry, decl) in declared() {
+    for (entry, decl) in common::declared() {
         let text = common::help(entry.name);
         assert!(text.contains(entry.summary), "{text}");
         for s in decl {

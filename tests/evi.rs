@@ -10,14 +10,12 @@ use crate::ptu;
 mod visca;
 
 use std::{
-    io::{BufRead, BufReader, Write},
     path::Path,
-    process::{Command, Stdio},
-    sync::{Arc, mpsc},
+    sync::Arc,
     time::{Duration, Instant},
 };
 
-use common::{eventually, poll_until, start_conf};
+use common::{eventually, process::Proc, start_conf};
 use jderobot::interfaces::{Interface, PtEncoders, PtMotors, ZoomEncoders, ZoomMotors};
 use visca::{Evi, Faults};
 
@@ -57,31 +55,13 @@ fn shell_sets_the_head_echo_follows_and_quit_powers_off() {
     let cam = Evi::start(&port);
     let file = dir.path().join("evi.conf");
     std::fs::write(&file, conf(&port, "")).unwrap();
-    let mut child = Command::new(env!("CARGO_BIN_EXE_jderobot"))
-        .arg("--headless")
-        .arg(&file)
-        .env("RUST_LOG", "warn")
-        .env_remove("DISPLAY")
-        .env_remove("WAYLAND_DISPLAY")
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .expect("start jderobot");
-    let mut stdin = child.stdin.take().unwrap();
-    let (tx, rx) = mpsc::channel::<String>();
-    let out = child.stdout.take().unwrap();
-    std::thread::spawn(move || {
-        for l in BufReader::new(out).lines().map_while(Result::ok) {
-            let _ = tx.send(l);
-        }
-    });
+    let mut shell = Proc::start(&file);
     eventually("address set, IF_Clear, power inquiry, power on", || {
         cam.received().starts_with(INIT)
     });
     assert!(cam.power());
     cam.clear_received();
-    writeln!(stdin, "set pantiltmotors longitude=30 latitude=-10").unwrap();
+    shell.send("set pantiltmotors longitude=30 latitude=-10");
     // 30 deg = 680 units (0x02A8), -10 deg = -160 (0xFF60), at the maximum speeds
     // (modes 0x18 and 0x14).
     let packet = [
@@ -94,21 +74,10 @@ fn shell_sets_the_head_echo_follows_and_quit_powers_off() {
         (p.0, p.1) == (680, -160)
     });
     std::thread::sleep(Duration::from_millis(300));
-    writeln!(stdin, "echo pantiltencoders").unwrap();
-    let mut echo = None;
-    let got = poll_until(20, || {
-        while let Ok(l) = rx.try_recv() {
-            if l.contains("pantiltencoders clock=") {
-                echo = Some(l);
-            }
-        }
-        echo.is_some()
+    let echo = shell.ask_until("echo pantiltencoders", "an echo line", |l| {
+        l.contains("pantiltencoders clock=")
     });
-    writeln!(stdin, "quit").unwrap();
-    drop(stdin);
-    let status = child.wait().unwrap();
-    let echo = echo.unwrap_or_default();
-    assert!(got, "no echo line");
+    let status = shell.quit();
     assert!(
         echo.contains("pan_angle=30.00 deg") || echo.contains("pan_angle=29.99 deg"),
         "{echo}"

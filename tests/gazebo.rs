@@ -17,6 +17,9 @@ use std::{
     time::{Duration, Instant, SystemTime},
 };
 
+#[path = "gazebo/compile.rs"]
+mod compile;
+
 use common::{eventually, poll_until, root, start_conf};
 use jderobot::interfaces::{Encoders, Image, Imu, Laser, Motors, PtEncoders, PtMotors};
 
@@ -34,8 +37,7 @@ pub(crate) fn peer_bin() -> Option<PathBuf> {
     static BUILD: std::sync::Mutex<()> = std::sync::Mutex::new(());
     let _one = BUILD.lock().unwrap_or_else(|e| e.into_inner());
     let src = root().join("tests/gazebo/peer.cc");
-    let dir = root().join("target/gazebo-peer");
-    let bin = dir.join("peer");
+    let bin = root().join("target/gazebo-peer/peer");
     let newer = |a: &Path, b: &Path| {
         let m = |p: &Path| std::fs::metadata(p).and_then(|m| m.modified()).ok();
         m(a) > m(b)
@@ -43,40 +45,7 @@ pub(crate) fn peer_bin() -> Option<PathBuf> {
     if bin.exists() && !newer(&src, &bin) {
         return Some(bin);
     }
-    let flags = Command::new("pkg-config")
-        .args([
-            "--cflags",
-            "--libs",
-            "ignition-transport11",
-            "ignition-msgs8",
-        ])
-        .output();
-    let flags = match flags {
-        Ok(o) if o.status.success() => String::from_utf8_lossy(&o.stdout).into_owned(),
-        _ => {
-            return missing(
-                "the gazebo peer needs pkg-config and gz-transport 11: apt-get install pkg-config \
-                 g++ libignition-transport-dev libignition-msgs-dev ignition-transport-cli",
-            );
-        }
-    };
-    std::fs::create_dir_all(&dir).unwrap();
-    // Build to a temporary name: test binaries may compile it at the same time.
-    let tmp = dir.join(format!("peer.{}", std::process::id()));
-    let st = Command::new("g++")
-        .args(["-O2", "-std=c++17"])
-        .arg(&src)
-        .args(flags.split_whitespace())
-        .arg("-o")
-        .arg(&tmp)
-        .status();
-    match st {
-        Ok(s) if s.success() => {
-            std::fs::rename(&tmp, &bin).unwrap();
-            Some(bin)
-        }
-        _ => missing("g++ could not build tests/gazebo/peer.cc (apt-get install g++)"),
-    }
+    compile::build_peer(&root(), "peer").map_or_else(|why| missing(&why), Some)
 }
 
 /// gz-transport's echo tool, where Debian puts it.

@@ -323,6 +323,21 @@ fn gl_pixel(cam: &PinholeCamera, p: [f64; 3]) -> (f64, f64) {
     (row_up, col)
 }
 
+/// OpenGL's matrices of `cam` put each of `points` on progeo's pixel.
+fn assert_gl_on_progeo(cam: &PinholeCamera, points: &[[f64; 3]]) {
+    for &p in points {
+        let q = cam.project(HPoint3D::point(p[0], p[1], p[2]));
+        assert_eq!(q.h, 1.0);
+        let (x, y) = gl_pixel(cam, p);
+        assert!(
+            close(x, q.x, 1e-6) && close(y, q.y, 1e-6),
+            "{p:?}: gl ({x}, {y}) progeo ({}, {})",
+            q.x,
+            q.y
+        );
+    }
+}
+
 #[test]
 fn opengl_camera_to_progeo_and_back_gazebo() {
     // The manual's Gazebo camera: 320x240, aperture 60 degrees on the height, so
@@ -353,21 +368,14 @@ fn opengl_camera_to_progeo_and_back_gazebo() {
     assert!(close(back.aspect, 320.0 / 240.0, 1e-12));
     assert_eq!((back.position, back.foa), (gl.position, gl.foa));
     // OpenGL's matrices put points on progeo's pixels.
-    for p in [
-        [4000.0, 500.0, 800.0],
-        [3000.0, -900.0, 0.0],
-        [2500.0, 1200.0, 1900.0],
-    ] {
-        let q = cam.project(HPoint3D::point(p[0], p[1], p[2]));
-        assert_eq!(q.h, 1.0);
-        let (x, y) = gl_pixel(&cam, p);
-        assert!(
-            close(x, q.x, 1e-6) && close(y, q.y, 1e-6),
-            "{p:?}: gl ({x}, {y}) progeo ({}, {})",
-            q.x,
-            q.y
-        );
-    }
+    assert_gl_on_progeo(
+        &cam,
+        &[
+            [4000.0, 500.0, 800.0],
+            [3000.0, -900.0, 0.0],
+            [2500.0, 1200.0, 1900.0],
+        ],
+    );
 }
 
 #[test]
@@ -399,14 +407,5 @@ fn opengl_camera_to_progeo_and_back_webots() {
     odd.skew = 0.01;
     odd.roll = 0.2;
     odd.update_camera_matrix();
-    for p in [[100.0, 1000.0, 50.0], [-300.0, 2500.0, -200.0]] {
-        let q = odd.project(HPoint3D::point(p[0], p[1], p[2]));
-        let (x, y) = gl_pixel(&odd, p);
-        assert!(
-            close(x, q.x, 1e-6) && close(y, q.y, 1e-6),
-            "{p:?}: gl ({x}, {y}) progeo ({}, {})",
-            q.x,
-            q.y
-        );
-    }
+    assert_gl_on_progeo(&odd, &[[100.0, 1000.0, 50.0], [-300.0, 2500.0, -200.0]]);
 }

@@ -8,15 +8,9 @@
 use crate::common;
 use crate::ptu;
 
-use std::{
-    io::{BufRead, BufReader, Write},
-    path::Path,
-    process::{Command, Stdio},
-    sync::{Arc, mpsc},
-    time::Duration,
-};
+use std::{path::Path, sync::Arc, time::Duration};
 
-use common::{eventually, poll_until, start_conf};
+use common::{eventually, process::Proc, start_conf};
 use jderobot::interfaces::{Interface, PtEncoders, PtMotors};
 use ptu::{Faults, Ptu};
 
@@ -45,31 +39,13 @@ fn shell_sets_the_head_and_echo_follows() {
     let unit = Ptu::start(&port);
     let file = dir.path().join("pantilt.conf");
     std::fs::write(&file, conf(&port, "poll 100\n")).unwrap();
-    let mut child = Command::new(env!("CARGO_BIN_EXE_jderobot"))
-        .args(["--headless"])
-        .arg(&file)
-        .env("RUST_LOG", "warn")
-        .env_remove("DISPLAY")
-        .env_remove("WAYLAND_DISPLAY")
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("start jderobot");
-    let mut stdin = child.stdin.take().unwrap();
-    let (tx, rx) = mpsc::channel::<String>();
-    let out = child.stdout.take().unwrap();
-    std::thread::spawn(move || {
-        for l in BufReader::new(out).lines().map_while(Result::ok) {
-            let _ = tx.send(l);
-        }
-    });
+    let mut shell = Proc::start(&file);
     // The init sequence and the limit queries, exactly as 4.3 sent them.
     eventually("the init sequence and limit queries", || {
         unit.received().starts_with(INIT)
     });
     unit.clear_received();
-    writeln!(stdin, "set pantiltmotors longitude=30 latitude=-10").unwrap();
+    shell.send("set pantiltmotors longitude=30 latitude=-10");
     // 30 deg = 583.3 steps, -10 deg = -194.4 steps; only the positions changed.
     eventually("PP583 and TP-194 on the wire", || {
         let r = unit.received();
@@ -90,21 +66,10 @@ fn shell_sets_the_head_and_echo_follows() {
         unit.position() == (583, -194)
     });
     std::thread::sleep(Duration::from_millis(400)); // two polls
-    writeln!(stdin, "echo pantiltencoders").unwrap();
-    let mut echo = None;
-    let got = poll_until(20, || {
-        while let Ok(l) = rx.try_recv() {
-            if l.contains("pantiltencoders clock=") {
-                echo = Some(l);
-            }
-        }
-        echo.is_some()
+    let echo = shell.ask_until("echo pantiltencoders", "an echo line", |l| {
+        l.contains("pantiltencoders clock=")
     });
-    writeln!(stdin, "quit").unwrap();
-    drop(stdin);
-    let status = child.wait().unwrap();
-    let echo = echo.unwrap_or_default();
-    assert!(got, "no echo line");
+    let status = shell.quit();
     let field = |name: &str| -> f64 {
         let i = echo
             .find(name)
@@ -116,7 +81,6 @@ fn shell_sets_the_head_and_echo_follows() {
     assert!((field("tilt_angle=") + 194.0 * ENC).abs() < 0.006, "{echo}");
     assert!(!echo.contains("STALE"), "{echo}");
     assert!(status.success(), "{status:?}");
-    let _ = child.stderr.take();
 }
 
 /// Sets fields on a copy of the latest command and publishes it.

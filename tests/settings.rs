@@ -4,28 +4,6 @@
 
 use crate::common;
 
-use jderobot::{
-    conf::{Conf, settings::Setting},
-    loader, registry,
-};
-
-/// `check` of a conf with `component`'s section holding `line` (at line 2).
-fn problems(kind: &str, name: &str, line: &str) -> Vec<String> {
-    let text = format!("{kind} {name}\n{line}\nend_{kind}\nload_{kind} {name}\n");
-    let conf = Conf::parse(&text, std::path::Path::new("t.conf")).expect("grammar");
-    loader::check(&conf)
-        .into_iter()
-        .map(|e| e.to_string())
-        .collect()
-}
-
-fn declared() -> Vec<(&'static registry::Entry, &'static [Setting])> {
-    registry::components()
-        .into_iter()
-        .filter_map(|e| e.lines.map(|l| (e, l)))
-        .collect()
-}
-
 /// `jderobot help` of a component with units, and of one that does not exist
 /// (every component's help is tried in tests/declarations.rs).
 #[test]
@@ -87,9 +65,9 @@ fn values_accepted_silently_before_are_refused() {
 #[test]
 fn every_required_line_is_named_when_absent() {
     let mut tried = 0;
-    for (entry, decl) in declared() {
+    for (entry, decl) in common::declared() {
         for s in decl.iter().filter(|s| s.required) {
-            let p = problems(&entry.kind.to_string(), entry.name, "# nothing");
+            let p = common::line_problems(&entry.kind.to_string(), entry.name, "# nothing");
             assert!(
                 p.iter()
                     .any(|e| e.contains(&format!("has no `{}` line", s.key))

@@ -3,6 +3,9 @@
 //! process's threads. One home, so every bench computes its figures the same way.
 #![allow(dead_code)]
 
+#[cfg(feature = "_mcap")]
+pub mod load;
+
 /// The median of `v` (the upper one of an even count; NaN when empty).
 pub fn median(v: impl AsRef<[f64]>) -> f64 {
     percentile(v, 0.5)
@@ -19,6 +22,27 @@ pub fn percentile(v: impl AsRef<[f64]>, p: f64) -> f64 {
         return v[v.len() / 2];
     }
     v[((v.len() - 1) as f64 * p.clamp(0.0, 1.0)).round() as usize]
+}
+
+/// One case of an A/B comparison: its name and the two runs of a round, each
+/// returning its figure (a time).
+pub type Case<'a> = (
+    String,
+    Box<dyn FnMut() -> f64 + 'a>,
+    Box<dyn FnMut() -> f64 + 'a>,
+);
+
+/// `rounds` alternated rounds (each case's A, then its B, case after case): the
+/// medians (A, B) of each case.
+pub fn alternated(rounds: usize, cases: &mut [Case]) -> Vec<(f64, f64)> {
+    let mut t = vec![(Vec::new(), Vec::new()); cases.len()];
+    for _ in 0..rounds {
+        for ((_, a, b), t) in cases.iter_mut().zip(&mut t) {
+            t.0.push(a());
+            t.1.push(b());
+        }
+    }
+    t.iter().map(|(a, b)| (median(a), median(b))).collect()
 }
 
 /// A TCP port on 127.0.0.1 that was free a moment ago.
@@ -45,6 +69,39 @@ pub fn thread_cpu() -> f64 {
         .and_then(|s| s.split(' ').next()?.parse::<f64>().ok())
         .unwrap_or(0.0)
         / 1e9
+}
+
+/// % of one core that the process `cmd` starts uses (user + system, from /proc)
+/// over `window` after `warmup`; its window (if any) under software GL, its
+/// standard streams closed. The process is killed after.
+pub fn cpu_percent(
+    mut cmd: std::process::Command,
+    warmup: std::time::Duration,
+    window: std::time::Duration,
+) -> f64 {
+    use std::process::Stdio;
+    let mut child = cmd
+        .env("LIBGL_ALWAYS_SOFTWARE", "1")
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("start the process");
+    std::thread::sleep(warmup);
+    // SAFETY: sysconf has no preconditions.
+    let tick = unsafe { libc::sysconf(libc::_SC_CLK_TCK) } as f64;
+    let (t0, c0) = (
+        std::time::Instant::now(),
+        cpu_ticks(child.id()).expect("running"),
+    );
+    std::thread::sleep(window);
+    let (t1, c1) = (
+        std::time::Instant::now(),
+        cpu_ticks(child.id()).expect("running"),
+    );
+    let _ = child.kill();
+    let _ = child.wait();
+    100.0 * (c1 - c0) as f64 / tick / (t1 - t0).as_secs_f64()
 }
 
 /// CPU seconds run so far by this process's threads whose name starts with

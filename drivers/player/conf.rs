@@ -6,7 +6,7 @@ use crate::conf::{
     ComponentConf, ConfLine,
     settings::{Form, MOTORS_TIMEOUT, Setting, choice, float, int, name, word},
 };
-use crate::interfaces::interface_name;
+use crate::interfaces::{IMAGE_NAMES, interface_name};
 
 use super::xdr::{Addr, interf};
 
@@ -153,7 +153,7 @@ pub const LINES: &[Setting] = &[
             ),
             Form::new(
                 "device",
-                "from position2d (encoders, motors), sonar or ranger, bumper, ptz, camera, blobfinder",
+                "from position2d (encoders, motors), sonar or ranger, bumper, ptz, blobfinder",
                 provides_tail![choice(
                     "INTERFACE",
                     &[
@@ -167,17 +167,15 @@ pub const LINES: &[Setting] = &[
                         "ptencoders",
                         "pantiltmotors",
                         "ptmotors",
-                        "colorA",
-                        "colorB",
-                        "colorC",
-                        "colorD",
-                        "varcolorA",
-                        "varcolorB",
-                        "varcolorC",
-                        "varcolorD",
                         "blobs",
                     ],
                 )],
+            ),
+            // Read as a `device` line too: the images are the standard image names.
+            Form::new(
+                "device",
+                "an image from camera",
+                provides_tail![choice("IMAGE", &IMAGE_NAMES)],
             ),
         ],
     )

@@ -54,11 +54,13 @@ use rustdds::{
 use crate::{
     conf::{
         ComponentConf,
-        settings::{self, MOTORS_TIMEOUT, Setting, int, word},
+        settings::{self, MOTORS_TIMEOUT, Setting, int},
     },
     interfaces::{AnyInterface, Encoders, Image, Imu, Interface, Laser, Motors, Source},
     mcapfmt::{
-        dds::{Cdr, CdrAdapter, Graph, Readiness, dds_topic, reliable_qos, ros_topic, sensor_qos},
+        dds::{
+            self, Cdr, CdrAdapter, Graph, Readiness, dds_topic, reliable_qos, ros_topic, sensor_qos,
+        },
         ros2::{self, Ros2},
     },
     runtime::{Driver, Runtime},
@@ -68,14 +70,9 @@ use crate::{
 const LINES: &[Setting] = &[
     settings::provides("provides laser|encoders|motors|imu|colorA..D|varcolorA..D [TOPIC]"),
     settings::INSECURE,
-    Setting::new("domain", "ROS_DOMAIN_ID", &[int("ID", "", 0, 232)]).default("0"),
-    Setting::new("node", "the ROS 2 node's name", &[word("NAME")]).default("jderobot_driver"),
-    Setting::new(
-        "namespace",
-        "the namespace of relative topic names",
-        &[word("NS")],
-    )
-    .default("/"),
+    settings::ROS_DOMAIN,
+    settings::ROS_NODE.default("jderobot_driver"),
+    settings::ROS_NAMESPACE,
     Setting::new(
         "silence",
         "a topic without a message this long makes the robot lost",
@@ -354,14 +351,7 @@ fn motors_output(
 
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>> {
     let l: Lines = conf.settings(LINES)?;
-    if !l.insecure {
-        anyhow::bail!(
-            "driver ros2: DDS here has no authentication and RustDDS reaches every \
-             multicast interface (it cannot keep discovery to this host): anyone on the \
-             LAN could read the robot and drive it; DDS Security would be needed. Add an \
-             `insecure` line to drive it anyway"
-        );
-    }
+    dds::require_insecure(l.insecure, "driver ros2", "drive it")?;
     if l.provides.is_empty() {
         anyhow::bail!(
             "driver ros2 has no `provides` line, and needs one: provides laser /scan, \

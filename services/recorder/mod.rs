@@ -481,18 +481,8 @@ fn write_one(
     if channel == u16::MAX || !mcapfmt::encode(profile, name, snap, buf) {
         return Ok(());
     }
-    // The interface's clock is the message's sequence (mod 2^32).
-    let sequence = snap.clock() as u32;
-    let t = mcapfmt::nanos(snap.time());
-    o.writer.write_to_known_channel(
-        &mcap::records::MessageHeader {
-            channel_id: channel,
-            sequence,
-            log_time: t,
-            publish_time: t,
-        },
-        buf,
-    )?;
+    o.writer
+        .write_to_known_channel(&snap.header(channel), buf)?;
     Ok(())
 }
 

@@ -101,8 +101,8 @@ use crate::{
     },
     mcapfmt::{
         dds::{
-            Cdr, CdrAdapter, Graph, Readiness, dds_topic, reliable_qos, ros_topic, sensor_qos,
-            static_qos,
+            self, Cdr, CdrAdapter, Graph, Readiness, dds_topic, reliable_qos, ros_topic,
+            sensor_qos, static_qos,
         },
         ros2::{self, Joints, RangeReading, Ros2, Transform},
     },
@@ -112,14 +112,9 @@ use crate::{
 
 const LINES: &[Setting] = &[
     settings::INSECURE,
-    Setting::new("node", "the ROS 2 node's name", &[word("NAME")]).default("jderobot"),
-    Setting::new(
-        "namespace",
-        "the node's namespace, also its relative topics'",
-        &[word("NS")],
-    )
-    .default("/"),
-    Setting::new("domain", "ROS_DOMAIN_ID", &[int("ID", "", 0, 232)]).default("0"),
+    settings::ROS_NODE.default("jderobot"),
+    settings::ROS_NAMESPACE,
+    settings::ROS_DOMAIN,
     Setting::new(
         "serves",
         "an interface served, on its default topic or TOPIC (default: all with a ROS 2 message)",
@@ -393,14 +388,7 @@ impl<T> Command<T> {
 
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>> {
     let l: Lines = conf.settings(LINES)?;
-    if !l.insecure {
-        anyhow::bail!(
-            "service ros2: DDS here has no authentication and RustDDS reaches every \
-             multicast interface (it cannot keep discovery to this host): anyone on the \
-             LAN could read and drive the robot; DDS Security would be needed. Add an \
-             `insecure` line to serve it anyway"
-        );
-    }
+    dds::require_insecure(l.insecure, "service ros2", "serve it")?;
     let d = Dds::join(&l)?;
     let serves = served_names(&l, rt);
     let mut plan = Plan::new(rt, &d, &l, &serves)?;

@@ -371,6 +371,18 @@ pub const BIND: Setting = Setting::new(
 )
 .default("127.0.0.1");
 
+/// `domain ID`: the ROS 2 domain (ROS_DOMAIN_ID) of the ros2 driver and service.
+pub const ROS_DOMAIN: Setting =
+    Setting::new("domain", "ROS_DOMAIN_ID", &[int("ID", "", 0, 232)]).default("0");
+/// `node NAME`: the ROS 2 node's name (each component gives its default).
+pub const ROS_NODE: Setting = Setting::new("node", "the ROS 2 node's name", &[word("NAME")]);
+/// `namespace NS`: the ROS 2 node's namespace, which relative topic names are in.
+pub const ROS_NAMESPACE: Setting = Setting::new(
+    "namespace",
+    "the node's namespace, also its relative topics'",
+    &[word("NS")],
+)
+.default("/");
 /// `insecure`: serve beyond loopback with no secret and no TLS, on purpose (a
 /// network you trust). Every server that can listen beyond loopback declares it,
 /// and [`guard_listen`] reads it.

@@ -54,7 +54,7 @@ pub use cell::{AnyInterface, HISTORY, Interface, MAX_CLOCK, Notify, Sample, Watc
 pub use kinds::KINDS;
 pub(crate) use kinds::{by_kind, by_kind_match, for_each_kind};
 pub use laser_map::LaserMap;
-pub use names::{STANDARD_NAMES, canonical, family, interface_name};
+pub use names::{IMAGE_NAMES, STANDARD_NAMES, canonical, family, interface_name};
 pub use source::Source;
 pub use table::{InUse, InterfaceError, Interfaces};
 pub use values::{

@@ -8,7 +8,7 @@ use super::{
 
 /// The standard names of images (family [`Image::KIND`]); every other kind of the
 /// table has one standard name, its own.
-const IMAGE_NAMES: [&str; 8] = [
+pub const IMAGE_NAMES: [&str; 8] = [
     "colorA",
     "colorB",
     "colorC",

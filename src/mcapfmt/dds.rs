@@ -79,6 +79,21 @@ impl DefaultDecoder<Cdr> for CdrAdapter {
     const DECODER: CdrDecoder = CdrDecoder;
 }
 
+/// DDS here has no authentication and RustDDS reaches every multicast interface:
+/// a ROS 2 component (`who`: `driver ros2`) starts only when its conf has an
+/// `insecure` line; `does` is what the line lets it do (`drive it`).
+pub fn require_insecure(insecure: bool, who: &str, does: &str) -> anyhow::Result<()> {
+    if !insecure {
+        anyhow::bail!(
+            "{who}: DDS here has no authentication and RustDDS reaches every multicast \
+             interface (it cannot keep discovery to this host): anyone on the LAN could \
+             read and drive the robot; DDS Security would be needed. Add an `insecure` \
+             line to {does} anyway"
+        );
+    }
+    Ok(())
+}
+
 /// The DDS topic of a ROS 2 topic name: `/scan` → `rt/scan`.
 pub fn dds_topic(ros: &str) -> String {
     format!("rt/{}", ros.trim_start_matches('/'))

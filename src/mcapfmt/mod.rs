@@ -253,6 +253,20 @@ pub fn nanos(t: SystemTime) -> u64 {
         .unwrap_or(0)
 }
 
+impl Snapshot {
+    /// Its MCAP record header on channel `channel_id`: the interface's clock is the
+    /// message's sequence (mod 2^32), its time both the log and the publish time.
+    pub fn header(&self, channel_id: u16) -> mcap::records::MessageHeader {
+        let t = nanos(self.time());
+        mcap::records::MessageHeader {
+            channel_id,
+            sequence: self.clock() as u32,
+            log_time: t,
+            publish_time: t,
+        }
+    }
+}
+
 /// The time `ns` nanoseconds after the Unix epoch.
 pub fn from_nanos(ns: u64) -> SystemTime {
     UNIX_EPOCH + Duration::from_nanos(ns)
@@ -732,14 +746,7 @@ mod tests {
             let name = format!("x{i}");
             let id = add_channel(&mut w, &name, kind, profile).unwrap().unwrap();
             assert!(encode(profile, &name, snap, &mut buf));
-            let t = nanos(snap.time());
-            let header = mcap::records::MessageHeader {
-                channel_id: id,
-                sequence: snap.clock() as u32,
-                log_time: t,
-                publish_time: t,
-            };
-            w.write_to_known_channel(&header, &buf).unwrap();
+            w.write_to_known_channel(&snap.header(id), &buf).unwrap();
         }
         w.finish().unwrap();
         let file = w.into_inner().into_inner();

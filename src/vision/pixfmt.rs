@@ -837,15 +837,8 @@ mod tests {
     use super::*;
 
     fn noise(n: usize) -> Vec<u8> {
-        let mut s = 0x9e37_79b9u32;
-        (0..n)
-            .map(|_| {
-                s ^= s << 13;
-                s ^= s >> 17;
-                s ^= s << 5;
-                (s >> 11) as u8
-            })
-            .collect()
+        let mut rng = fastrand::Rng::with_seed(0x9e37_79b9);
+        std::iter::repeat_with(|| rng.u8(..)).take(n).collect()
     }
 
     /// The portable build and the dispatched (AVX2 where the CPU has it) agree.

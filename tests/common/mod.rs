@@ -272,6 +272,28 @@ pub fn emulate_by_hand<T>(
     std::thread::sleep(Duration::from_secs(secs));
 }
 
+/// `jderobot check`'s problems with a conf whose `kind name` section holds `line`
+/// (at line 2 of `t.conf`).
+pub fn line_problems(kind: &str, name: &str, line: &str) -> Vec<String> {
+    let text = format!("{kind} {name}\n{line}\nend_{kind}\nload_{kind} {name}\n");
+    let conf = Conf::parse(&text, Path::new("t.conf")).expect("grammar");
+    jderobot::loader::check(&conf)
+        .into_iter()
+        .map(|e| e.to_string())
+        .collect()
+}
+
+/// Every compiled-in component that declares its lines, with its declaration.
+pub fn declared() -> Vec<(
+    &'static jderobot::registry::Entry,
+    &'static [jderobot::conf::settings::Setting],
+)> {
+    jderobot::registry::components()
+        .into_iter()
+        .filter_map(|e| e.lines.map(|l| (e, l)))
+        .collect()
+}
+
 /// A small, fast, reproducible generator (xorshift64*) for random test inputs.
 #[allow(dead_code)]
 pub struct Rng(u64);

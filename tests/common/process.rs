@@ -100,13 +100,19 @@ impl Proc {
         })
     }
 
-    pub fn quit(mut self) {
+    /// Types `quit`; the process's exit status (it must end within 20 s).
+    pub fn quit(mut self) -> std::process::ExitStatus {
         self.send("quit");
-        if !super::poll_until(20, || self.child.try_wait().ok().flatten().is_some()) {
+        let mut status = None;
+        if !super::poll_until(20, || {
+            status = self.child.try_wait().ok().flatten();
+            status.is_some()
+        }) {
             let _ = self.child.kill();
             let _ = self.child.wait();
             panic!("jderobot did not quit; output:\n{}", self.text());
         }
+        status.unwrap()
     }
 }
 

@@ -27,6 +27,7 @@ import json
 import math
 import sys
 import time
+import types
 from dataclasses import dataclass
 
 from cyclonedds.core import Policy, Qos
@@ -39,162 +40,69 @@ from cyclonedds.topic import Topic
 from cyclonedds.util import duration
 
 
-@dataclass
-class Time(IdlStruct, typename="builtin_interfaces::msg::dds_::Time_"):
-    sec: int32
-    nanosec: uint32
+# The message definitions, as in their .msg files (ros2/common_interfaces,
+# ros2/rcl_interfaces, irobot/irobot_create_msgs): `package/Name` and its fields in
+# order; `T[]` is a sequence, `T[N]` an array, a bare name a message above it.
+MESSAGES = [
+    ("builtin_interfaces/Time", "int32 sec, uint32 nanosec"),
+    ("std_msgs/Header", "Time stamp, string frame_id"),
+    ("sensor_msgs/LaserScan", "Header header, float32 angle_min, float32 angle_max, "
+     "float32 angle_increment, float32 time_increment, float32 scan_time, "
+     "float32 range_min, float32 range_max, float32[] ranges, float32[] intensities"),
+    ("geometry_msgs/Vector3", "float64 x, float64 y, float64 z"),
+    ("geometry_msgs/Point", "float64 x, float64 y, float64 z"),
+    ("geometry_msgs/Quaternion", "float64 x, float64 y, float64 z, float64 w"),
+    ("geometry_msgs/Pose", "Point position, Quaternion orientation"),
+    ("geometry_msgs/PoseWithCovariance", "Pose pose, float64[36] covariance"),
+    ("geometry_msgs/Twist", "Vector3 linear, Vector3 angular"),
+    ("geometry_msgs/TwistWithCovariance", "Twist twist, float64[36] covariance"),
+    ("nav_msgs/Odometry", "Header header, string child_frame_id, "
+     "PoseWithCovariance pose, TwistWithCovariance twist"),
+    ("geometry_msgs/Transform", "Vector3 translation, Quaternion rotation"),
+    ("geometry_msgs/TransformStamped", "Header header, string child_frame_id, Transform transform"),
+    ("tf2_msgs/TFMessage", "TransformStamped[] transforms"),
+    ("sensor_msgs/Image", "Header header, uint32 height, uint32 width, string encoding, "
+     "uint8 is_bigendian, uint32 step, uint8[] data"),
+    ("sensor_msgs/Imu", "Header header, Quaternion orientation, float64[9] orientation_covariance, "
+     "Vector3 angular_velocity, float64[9] angular_velocity_covariance, "
+     "Vector3 linear_acceleration, float64[9] linear_acceleration_covariance"),
+    ("sensor_msgs/Range", "Header header, uint8 radiation_type, float32 field_of_view, "
+     "float32 min_range, float32 max_range, float32 range"),
+    ("sensor_msgs/JointState", "Header header, string[] name, float64[] position, "
+     "float64[] velocity, float64[] effort"),
+    ("sensor_msgs/CompressedImage", "Header header, string format, uint8[] data"),
+    ("irobot_create_msgs/HazardDetection", "Header header, uint8 type"),
+    ("irobot_create_msgs/HazardDetectionVector", "Header header, HazardDetection[] detections"),
+]
+
+PRIMITIVES = {"int32": int32, "uint32": uint32, "uint8": uint8, "float32": float32,
+              "float64": float64, "string": str}
 
 
-@dataclass
-class Header(IdlStruct, typename="std_msgs::msg::dds_::Header_"):
-    stamp: Time
-    frame_id: str
+def idl_structs(messages):
+    """The IdlStruct dataclass of each message, under the DDS name a ROS 2 node
+    uses (`sensor_msgs/LaserScan` is `sensor_msgs::msg::dds_::LaserScan_`)."""
+    made = {}
+    for full, fields in messages:
+        package, name = full.split("/")
+        annotations = {}
+        for field in fields.split(", "):
+            typ, field_name = field.split()
+            base, _, count = typ.partition("[")
+            t = PRIMITIVES.get(base) or made[base]
+            if count == "]":
+                t = sequence[t]
+            elif count:
+                t = array[t, int(count[:-1])]
+            annotations[field_name] = t
+        body = lambda ns, a=annotations: ns.update(__annotations__=a)  # noqa: E731
+        typename = f"{package}::msg::dds_::{name}_"
+        made[name] = dataclass(types.new_class(name, (IdlStruct,), {"typename": typename}, body))
+    return made
 
 
-@dataclass
-class LaserScan(IdlStruct, typename="sensor_msgs::msg::dds_::LaserScan_"):
-    header: Header
-    angle_min: float32
-    angle_max: float32
-    angle_increment: float32
-    time_increment: float32
-    scan_time: float32
-    range_min: float32
-    range_max: float32
-    ranges: sequence[float32]
-    intensities: sequence[float32]
-
-
-@dataclass
-class Vector3(IdlStruct, typename="geometry_msgs::msg::dds_::Vector3_"):
-    x: float64
-    y: float64
-    z: float64
-
-
-@dataclass
-class Point(IdlStruct, typename="geometry_msgs::msg::dds_::Point_"):
-    x: float64
-    y: float64
-    z: float64
-
-
-@dataclass
-class Quaternion(IdlStruct, typename="geometry_msgs::msg::dds_::Quaternion_"):
-    x: float64
-    y: float64
-    z: float64
-    w: float64
-
-
-@dataclass
-class Pose(IdlStruct, typename="geometry_msgs::msg::dds_::Pose_"):
-    position: Point
-    orientation: Quaternion
-
-
-@dataclass
-class PoseWithCovariance(IdlStruct, typename="geometry_msgs::msg::dds_::PoseWithCovariance_"):
-    pose: Pose
-    covariance: array[float64, 36]
-
-
-@dataclass
-class Twist(IdlStruct, typename="geometry_msgs::msg::dds_::Twist_"):
-    linear: Vector3
-    angular: Vector3
-
-
-@dataclass
-class TwistWithCovariance(IdlStruct, typename="geometry_msgs::msg::dds_::TwistWithCovariance_"):
-    twist: Twist
-    covariance: array[float64, 36]
-
-
-@dataclass
-class Odometry(IdlStruct, typename="nav_msgs::msg::dds_::Odometry_"):
-    header: Header
-    child_frame_id: str
-    pose: PoseWithCovariance
-    twist: TwistWithCovariance
-
-
-@dataclass
-class Transform(IdlStruct, typename="geometry_msgs::msg::dds_::Transform_"):
-    translation: Vector3
-    rotation: Quaternion
-
-
-@dataclass
-class TransformStamped(IdlStruct, typename="geometry_msgs::msg::dds_::TransformStamped_"):
-    header: Header
-    child_frame_id: str
-    transform: Transform
-
-
-@dataclass
-class TFMessage(IdlStruct, typename="tf2_msgs::msg::dds_::TFMessage_"):
-    transforms: sequence[TransformStamped]
-
-
-@dataclass
-class Image(IdlStruct, typename="sensor_msgs::msg::dds_::Image_"):
-    header: Header
-    height: uint32
-    width: uint32
-    encoding: str
-    is_bigendian: uint8
-    step: uint32
-    data: sequence[uint8]
-
-
-@dataclass
-class Imu(IdlStruct, typename="sensor_msgs::msg::dds_::Imu_"):
-    header: Header
-    orientation: Quaternion
-    orientation_covariance: array[float64, 9]
-    angular_velocity: Vector3
-    angular_velocity_covariance: array[float64, 9]
-    linear_acceleration: Vector3
-    linear_acceleration_covariance: array[float64, 9]
-
-
-@dataclass
-class Range(IdlStruct, typename="sensor_msgs::msg::dds_::Range_"):
-    header: Header
-    radiation_type: uint8
-    field_of_view: float32
-    min_range: float32
-    max_range: float32
-    range: float32
-
-
-@dataclass
-class JointState(IdlStruct, typename="sensor_msgs::msg::dds_::JointState_"):
-    header: Header
-    name: sequence[str]
-    position: sequence[float64]
-    velocity: sequence[float64]
-    effort: sequence[float64]
-
-
-@dataclass
-class CompressedImage(IdlStruct, typename="sensor_msgs::msg::dds_::CompressedImage_"):
-    header: Header
-    format: str
-    data: sequence[uint8]
-
-
-@dataclass
-class HazardDetection(IdlStruct, typename="irobot_create_msgs::msg::dds_::HazardDetection_"):
-    header: Header
-    type: uint8
-
-
-@dataclass
-class HazardDetectionVector(IdlStruct, typename="irobot_create_msgs::msg::dds_::HazardDetectionVector_"):
-    header: Header
-    detections: sequence[HazardDetection]
+# Time, Header, LaserScan, ...: one class per message, under its own name.
+globals().update(idl_structs(MESSAGES))
 
 
 def jpeg_size(data):
