@@ -16,7 +16,7 @@
 
 mod common;
 use common::{
-    load::{noisy_image, one_second, sample},
+    load::{noisy_image, one_second},
     median, percentile, threads_cpu,
 };
 
@@ -30,7 +30,7 @@ use std::{
 use jderobot::{
     Conf, Runtime,
     conf::Kind,
-    interfaces::{Encoders, Image, Interface, Laser, Sample, Sonars},
+    interfaces::{Encoders, Image, Interface, Laser, Sonars},
     loader,
     mcapfmt::{self, Profile, RecorderStatus, Snapshot},
 };
@@ -144,7 +144,7 @@ fn main() {
     simulator_file_size(dir.path());
 }
 
-/// 1. Write throughput: to a file in the temporary directory (on this machine's
+/// Step 1, write throughput: to a file in the temporary directory (on this machine's
 /// disk, through the page cache) and, where there is one, to a file in /dev/shm
 /// (memory: what the recorder's own path can do, whatever the disk).
 fn write_throughput(dir: &Path, load: &[Vec<(&str, Snapshot)>], secs: u64) {
@@ -195,7 +195,7 @@ fn write_throughput(dir: &Path, load: &[Vec<(&str, Snapshot)>], secs: u64) {
     }
 }
 
-/// 2. The recorder service at 1x: messages written and dropped, its threads' CPU.
+/// Step 2, the recorder service at 1x: messages written and dropped, its threads' CPU.
 fn recorder_service(dir: &Path) {
     let conf_path = dir.join("rec.conf");
     std::fs::write(
@@ -261,7 +261,7 @@ fn recorder_service(dir: &Path) {
     );
 }
 
-/// 3. The replay driver at `speed max`: laser messages/s and 640x480 frames/s.
+/// Step 3, the replay driver at `speed max`: laser messages/s and 640x480 frames/s.
 fn replay_speed(dir: &Path, t0: SystemTime) {
     for (what, keep) in [("laser messages", "laser"), ("640x480 frames", "camera")] {
         let file = dir.join(format!("{keep}.mcap"));
@@ -306,7 +306,7 @@ fn replay_speed(dir: &Path, t0: SystemTime) {
     }
 }
 
-/// 4. File size of 10 s of the simulator: raw, zstd and lz4.
+/// Step 4, file size of 10 s of the simulator: raw, zstd and lz4.
 fn simulator_file_size(dir: &Path) {
     let conf_path = dir.join("sim.conf");
     std::fs::write(

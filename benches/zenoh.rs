@@ -46,6 +46,8 @@ use zenoh::{Wait, qos::CongestionControl};
 const ROUNDS: usize = 5;
 const PINGS: usize = 2000;
 
+/// A measure and the name it is printed under.
+type Named<T> = (&'static str, fn() -> T);
 fn session(listen: Option<u16>, connect: Option<u16>) -> zenoh::Session {
     let mut c = zenoh::Config::default();
     let ep = |p: Option<u16>| match p {
@@ -458,7 +460,7 @@ fn frames() {
     println!("== 640x480 BGR frames between two processes (frames/s received) ==");
     // Zenoh alone, Zenoh alone with the one copy on arrival, and ours; the order
     // rotates every round so none always runs on a warmer machine.
-    let runs: [(&str, fn() -> f64); 3] = [
+    let runs: [Named<f64>; 3] = [
         ("zenoh alone", (|| throughput_ref(false)) as fn() -> f64),
         (
             "zenoh alone + one copy",
@@ -499,7 +501,7 @@ fn motors() {
     println!("== motors round trips between two processes (µs) ==");
     // The reference, ours answered inline (as z_pong answers in its callback) and
     // ours answered by a woken thread; the order rotates every round.
-    let runs: [(&str, fn() -> Vec<f64>); 3] = [
+    let runs: [Named<Vec<f64>>; 3] = [
         ("zenoh alone", pings_ref as fn() -> Vec<f64>),
         (
             "jderobot, inline echo",
