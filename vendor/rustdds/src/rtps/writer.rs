@@ -708,12 +708,12 @@ impl Writer {
     for msg in messages_to_send {
       match target_reader_opt {
         None => {
-          // To all. jderobot's patch: by unicast to each reader's locator, not
-          // to the multicast group a reader also offers: that group reached
-          // every socket joined to it on the host (the writer's own participant
-          // among them) and a 640x480 image sent there at full rate filled the
-          // subscribers' buffers (benches/ros2.rs: no image arrived whole).
-          self.send_message_to_readers(DeliveryMode::Unicast, msg, &mut self.readers.values());
+          // To all (to each reader's multicast group where it has one). A patch
+          // that sent by unicast instead (for whole 640x480 images at a Cyclone
+          // subscriber, benches/ros2.rs) stopped RustDDS-to-RustDDS delivery
+          // (tests/ros2.rs `garbage_rtps_datagrams_...`: the driver never got
+          // the service's laser), so it was taken back.
+          self.send_message_to_readers(DeliveryMode::Multicast, msg, &mut self.readers.values());
         }
         Some(reader_proxy) => {
           // To one
