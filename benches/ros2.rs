@@ -38,7 +38,7 @@ use std::{
 use jderobot::{
     Conf, Runtime,
     conf::Kind,
-    interfaces::{Encoders, Image, Interface, Laser, Motors, Watch},
+    interfaces::{Encoders, Image, Interface, InterfaceValue, Laser, Motors, Watch},
 };
 
 const ROUNDS: usize = 5;
@@ -228,22 +228,33 @@ fn cyclone_images(bin: &Path, d: &str) -> f64 {
 
 /// (b) LaserScan publish → the driver's `laser`: p50 ms and the count.
 fn ours_laser(bin: &Path, d: &str, laser: &Arc<Interface<Laser>>) -> (f64, usize) {
+    let publ = cyclone(bin, &["pub-scan", d, &SECS.to_string(), "50"]);
+    arrivals(publ, laser, |l| l.readings[0] as i64)
+}
+
+/// The p50 ms from each message the Cyclone publisher `publ` sent (numbered by
+/// `number` of the value, as the publisher numbered it) to its arrival in `iface`,
+/// and how many arrived, until the publisher ends.
+fn arrivals<T: InterfaceValue>(
+    mut publ: Peer,
+    iface: &Arc<Interface<T>>,
+    number: impl Fn(&T) -> i64,
+) -> (f64, usize) {
     let w = Watch::for_current_thread();
-    laser.watch(w.clone());
-    let mut publ = cyclone(bin, &["pub-scan", d, &SECS.to_string(), "50"]);
+    iface.watch(w.clone());
     let mut got = vec![];
-    let mut seen = laser.clock();
+    let mut seen = iface.clock();
     while !publ.ended() {
         if !w.wait(Duration::from_millis(50)) {
             continue;
         }
-        let s = laser.read();
+        let s = iface.read();
         if s.clock != seen {
             seen = s.clock;
-            got.push((s.value.readings[0] as i64, wall_ns()));
+            got.push((number(&s.value), wall_ns()));
         }
     }
-    laser.unwatch(&*w);
+    iface.unwatch(&*w);
     let sent = sent(&output(publ));
     let lat: Vec<f64> = got
         .iter()
@@ -262,28 +273,8 @@ fn cyclone_latency(bin: &Path, d: &str, sub: &str, publ: &str, hz: &str) -> (f64
 
 /// (c) `/cmd_vel` → the service's `motors`: p50 ms and the count.
 fn ours_cmd_vel(bin: &Path, d: &str, motors: &Arc<Interface<Motors>>) -> (f64, usize) {
-    let w = Watch::for_current_thread();
-    motors.watch(w.clone());
-    let mut publ = cyclone(bin, &["pub-twist", d, &SECS.to_string(), "100"]);
-    let mut got = vec![];
-    let mut seen = motors.clock();
-    while !publ.ended() {
-        if !w.wait(Duration::from_millis(50)) {
-            continue;
-        }
-        let s = motors.read();
-        if s.clock != seen {
-            seen = s.clock;
-            got.push((s.value.v.round() as i64, wall_ns()));
-        }
-    }
-    motors.unwatch(&*w);
-    let sent = sent(&output(publ));
-    let lat: Vec<f64> = got
-        .iter()
-        .filter_map(|(k, at)| Some((at - sent.get(k)?) as f64 / 1e6))
-        .collect();
-    (median(&lat), lat.len())
+    let publ = cyclone(bin, &["pub-twist", d, &SECS.to_string(), "100"]);
+    arrivals(publ, motors, |m| m.v.round() as i64)
 }
 
 /// % of one core from clock ticks over `secs` (USER_HZ is 100 on Linux).
