@@ -566,7 +566,7 @@ pub enum Netns {
 }
 
 /// Runs test `name` (its path in the test binary, `module::test`) again inside a
-/// fresh network namespace of its own (`unshare -rn`: only a loopback interface,
+/// fresh network namespace of its own (`unshare -n` as root, `unshare -rn` otherwise: only a loopback interface,
 /// brought up), so what it sends (multicast discovery floods) cannot reach the
 /// host's network or other tests. Under CI, missing `unshare` or `ip` fails.
 pub fn in_private_netns(name: &str) -> Netns {
@@ -574,14 +574,22 @@ pub fn in_private_netns(name: &str) -> Netns {
     if std::env::var_os(INSIDE).is_some() {
         return Netns::RunHere;
     }
+    // As root, a network namespace alone (`-n`): a user namespace (`-r`) is refused
+    // in a chroot; others map themselves to root in a user namespace first.
+    // SAFETY: geteuid has no preconditions.
+    let flags = if unsafe { libc::geteuid() } == 0 {
+        "-n"
+    } else {
+        "-rn"
+    };
     let works = have("ip")
         && Command::new("unshare")
-            .args(["-rn", "true"])
+            .args([flags, "true"])
             .stderr(Stdio::null())
             .status()
             .is_ok_and(|s| s.success());
     if !works {
-        let note = "`unshare -rn` (util-linux) and `ip` (iproute2) are needed to run this \
+        let note = "`unshare -n` (as root, else `unshare -rn`; util-linux) and `ip` (iproute2) are needed to run this \
                     test in a private network namespace";
         assert!(std::env::var_os("CI").is_none(), "under CI: {note}");
         eprintln!("NOTE: {note}; running it on the host's loopback instead");
@@ -589,7 +597,7 @@ pub fn in_private_netns(name: &str) -> Netns {
     }
     let exe = std::env::current_exe().expect("the test binary");
     let st = Command::new("unshare")
-        .args(["-rn", "sh", "-c", r#"ip link set lo up && exec "$0" "$@""#])
+        .args([flags, "sh", "-c", r#"ip link set lo up && exec "$0" "$@""#])
         .arg(exe)
         .args(["--exact", name, "--nocapture", "--test-threads=1"])
         .env(INSIDE, "1")
