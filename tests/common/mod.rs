@@ -566,35 +566,32 @@ pub enum Netns {
 }
 
 /// Runs test `name` (its path in the test binary, `module::test`) again inside a
-/// fresh network namespace of its own (`unshare -n` as root, `unshare -rn` otherwise: only a loopback interface,
-/// brought up), so what it sends (multicast discovery floods) cannot reach the
+/// fresh network namespace of its own (`unshare -n`, or `unshare -rn` where only
+/// that works: only a loopback interface, brought up), so what it sends (multicast discovery floods) cannot reach the
 /// host's network or other tests. Under CI, missing `unshare` or `ip` fails.
 pub fn in_private_netns(name: &str) -> Netns {
     const INSIDE: &str = "JDE_TEST_IN_NETNS";
     if std::env::var_os(INSIDE).is_some() {
         return Netns::RunHere;
     }
-    // As root, a network namespace alone (`-n`): a user namespace (`-r`) is refused
-    // in a chroot; others map themselves to root in a user namespace first.
-    // SAFETY: geteuid has no preconditions.
-    let flags = if unsafe { libc::geteuid() } == 0 {
-        "-n"
-    } else {
-        "-rn"
-    };
-    let works = have("ip")
-        && Command::new("unshare")
-            .args([flags, "true"])
-            .stderr(Stdio::null())
-            .status()
-            .is_ok_and(|s| s.success());
-    if !works {
-        let note = "`unshare -n` (as root, else `unshare -rn`; util-linux) and `ip` (iproute2) are needed to run this \
+    // A network namespace alone (`-n`: root with CAP_SYS_ADMIN; a user namespace is
+    // refused in a chroot), else inside a user namespace of its own (`-rn`: any
+    // user, where the kernel allows it).
+    let flags = ["-n", "-rn"].into_iter().find(|f| {
+        have("ip")
+            && Command::new("unshare")
+                .args([f, "true"])
+                .stderr(Stdio::null())
+                .status()
+                .is_ok_and(|s| s.success())
+    });
+    let Some(flags) = flags else {
+        let note = "`unshare -n` or `unshare -rn` (util-linux) and `ip` (iproute2) are needed to run this \
                     test in a private network namespace";
         assert!(std::env::var_os("CI").is_none(), "under CI: {note}");
         eprintln!("NOTE: {note}; running it on the host's loopback instead");
         return Netns::RunHere;
-    }
+    };
     let exe = std::env::current_exe().expect("the test binary");
     let st = Command::new("unshare")
         .args([flags, "sh", "-c", r#"ip link set lo up && exec "$0" "$@""#])
