@@ -60,6 +60,11 @@ fn shell_sets_the_head_echo_follows_and_quit_powers_off() {
         cam.received().starts_with(INIT)
     });
     assert!(cam.power());
+    // The shell answers for the interface once the driver has provided it: a
+    // `set` typed before that would be refused (seen under CI's load).
+    shell.ask_until("echo pantiltmotors", "the pantiltmotors interface", |l| {
+        l.contains("pantiltmotors clock=")
+    });
     cam.clear_received();
     shell.send("set pantiltmotors longitude=30 latitude=-10");
     // 30 deg = 680 units (0x02A8), -10 deg = -160 (0xFF60), at the maximum speeds

@@ -44,6 +44,10 @@ fn shell_sets_the_head_and_echo_follows() {
     eventually("the init sequence and limit queries", || {
         unit.received().starts_with(INIT)
     });
+    // Once the driver has provided the interface (a `set` before is refused).
+    shell.ask_until("echo pantiltmotors", "the pantiltmotors interface", |l| {
+        l.contains("pantiltmotors clock=")
+    });
     unit.clear_received();
     shell.send("set pantiltmotors longitude=30 latitude=-10");
     // 30 deg = 583.3 steps, -10 deg = -194.4 steps; only the positions changed.
