@@ -1090,8 +1090,12 @@ impl DomainParticipantInner {
     let (sender_remove_reader, receiver_remove_reader) = mio_channel::sync_channel::<GUID>(4);
 
     // Writers
+    // jderobot's patch: room for 100 as for readers (was 10). With more than 10
+    // writers made at once (the ros2 service makes about 20), `create_datawriter`
+    // blocked on a full channel while the event loop waited for the discovery
+    // database: a deadlock seen in `jderobot check examples/ros2-robot.conf`.
     let (add_writer_sender, add_writer_receiver) =
-      mio_channel::sync_channel::<WriterIngredients>(10);
+      mio_channel::sync_channel::<WriterIngredients>(100);
     let (remove_writer_sender, remove_writer_receiver) = mio_channel::sync_channel::<GUID>(4);
 
     let domain_info = DomainInfo {
