@@ -280,7 +280,7 @@ impl SessionConf {
             set(&mut c, "connect/endpoints", json_list(&self.connect))?;
         }
         if let Some(t) = &self.tls {
-            let file = |p: &PathBuf| format!("{:?}", p.display().to_string());
+            let file = |p: &PathBuf| serde_json::Value::from(p.display().to_string()).to_string();
             let tls = "transport/link/tls";
             set(&mut c, &format!("{tls}/root_ca_certificate"), file(&t.ca))?;
             set(&mut c, &format!("{tls}/listen_certificate"), file(&t.cert))?;

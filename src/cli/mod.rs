@@ -67,12 +67,18 @@ pub enum Command {
     },
 }
 
+/// What is logged when `RUST_LOG` is not set: our warnings; winit's errors only;
+/// nothing of RustDDS's own log (it logs teardown order and peers' unusual but
+/// harmless traffic as warnings and errors; what matters reaches us as results and
+/// is said in our lines). `RUST_LOG=warn` shows everything.
+const DEFAULT_LOG: &str = "warn,winit=error,rustdds=off";
+
 /// Runs the program; returns its exit code.
 pub fn main() -> ExitCode {
     tracing_subscriber::fmt()
         .with_env_filter(
             tracing_subscriber::EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn,winit=error")),
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(DEFAULT_LOG)),
         )
         .with_writer(crate::output::LogWriter)
         .init();

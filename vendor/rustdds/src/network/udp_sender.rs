@@ -144,7 +144,17 @@ impl UDPSender {
 
     match locator {
       Locator::UdpV4(socket_address) => send(SocketAddr::from(*socket_address)),
-      Locator::UdpV6(socket_address) => send(SocketAddr::from(*socket_address)),
+      Locator::UdpV6(socket_address) => {
+        let address = SocketAddr::from(*socket_address);
+        if address.ip().is_multicast() {
+          send(address)
+        } else {
+          // jderobot's patch: the unicast socket is IPv4 (0.0.0.0), so a send to an
+          // IPv6 unicast address could only fail (EAFNOSUPPORT): a wasted syscall
+          // and a WARN line per message on any host with an IPv6 address.
+          trace!("send_to_locator: no IPv6 unicast socket for {address}");
+        }
+      }
       Locator::Invalid | Locator::Reserved => {
         error!("send_to_locator: Cannot send to {locator:?}");
       }
