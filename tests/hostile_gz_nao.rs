@@ -38,7 +38,7 @@ use std::{
 };
 
 use common::{eventually, poll_until, process::free_port, start_conf};
-use jderobot::interfaces::{Encoders, Image, Laser, Motors, PtMotors, Sonars};
+use jderobot::interfaces::{Encoders, Image, Interface, Laser, Motors, PtMotors, Sonars};
 
 // ------------------------------------------------------------ protobuf by hand
 
@@ -293,6 +293,57 @@ fn assert_stop_arrives(on: &AtomicBool, log: &TwistLog, what: &str) {
     on.store(true, Ordering::SeqCst);
 }
 
+/// True when this process only launched `test` again in a private network
+/// namespace (`unshare -rn`), where the run does the test.
+fn launched_in_netns(test: &str) -> bool {
+    common::in_private_netns(&format!("hostile_gz_nao::{test}")) == common::Netns::Done
+}
+
+/// The C++ gz peer for `test` inside its private network namespace; None when this
+/// process only launched it there, or the peer is missing (skipped).
+fn peer_in_netns(test: &str) -> Option<std::path::PathBuf> {
+    if launched_in_netns(test) {
+        return None;
+    }
+    gazebo::peer_bin()
+}
+
+/// The gazebo driver on robot1's encoders and motors and the /lidar laser, stopping
+/// within MOTORS_TIMEOUT + CYCLE, and those interfaces.
+struct GzRobot {
+    rt: Arc<jderobot::Runtime>,
+    enc: Arc<Interface<Encoders>>,
+    laser: Arc<Interface<Laser>>,
+    motors: Arc<Interface<Motors>>,
+}
+
+impl GzRobot {
+    fn start(part: &str) -> GzRobot {
+        let rt = start_conf(&format!(
+            "{}provides encoders robot1\nprovides motors robot1\nprovides laser lidar\n\
+             motors_timeout {MOTORS_TIMEOUT}\ncycle {CYCLE}\nend_driver\nload_driver gazebo\n",
+            gazebo::head(part, "gazebo")
+        ));
+        GzRobot {
+            enc: rt.interfaces.get::<Encoders>("encoders").unwrap(),
+            laser: rt.interfaces.get::<Laser>("laser").unwrap(),
+            motors: rt.interfaces.get::<Motors>("motors").unwrap(),
+            rt,
+        }
+    }
+}
+
+/// The real room's scan from the real /lidar: the wall ahead at x = 5 m from where
+/// the robot is.
+fn assert_wall_ahead(laser: &Interface<Laser>, enc: &Interface<Encoders>) {
+    let ahead = laser.read().readings[90] as f32;
+    let x = enc.read().x;
+    assert!(
+        (ahead - (5000.0 - x)).abs() < 600.0,
+        "ahead {ahead} mm at x = {x} mm"
+    );
+}
+
 /// The gz message types and the odometry topic the hostile ends use.
 const SCAN: &str = "ignition.msgs.LaserScan";
 const ODOMETRY: &str = "ignition.msgs.Odometry";
@@ -395,26 +446,22 @@ fn flood(
 /// host's network, and no other test's gz-transport nodes see it.
 #[test]
 fn gz_a_discovery_flood_does_not_hold_the_stop_and_gazebo_stays_bound() {
-    let name = "hostile_gz_nao::gz_a_discovery_flood_does_not_hold_the_stop_and_gazebo_stays_bound";
-    if common::in_private_netns(name) == common::Netns::Done {
-        return;
-    }
-    let _alone = common::memory_alone();
-    let Some(bin) = gazebo::peer_bin() else {
+    let Some(bin) =
+        peer_in_netns("gz_a_discovery_flood_does_not_hold_the_stop_and_gazebo_stays_bound")
+    else {
         return;
     };
+    let _alone = common::memory_alone();
     assert_only_loopback();
     let part = gazebo::partition();
     let _peer = gazebo::robot(&bin, &part, &["--model", "robot1", "--lidar", "/lidar"]);
     let log = TwistLog::start(&bin, &part, "/model/robot1/cmd_vel");
-    let rt = start_conf(&format!(
-        "{}provides encoders robot1\nprovides motors robot1\nprovides laser lidar\n\
-         motors_timeout {MOTORS_TIMEOUT}\ncycle {CYCLE}\nend_driver\nload_driver gazebo\n",
-        gazebo::head(&part, "gazebo")
-    ));
-    let enc = rt.interfaces.get::<Encoders>("encoders").unwrap();
-    let laser = rt.interfaces.get::<Laser>("laser").unwrap();
-    let motors = rt.interfaces.get::<Motors>("motors").unwrap();
+    let GzRobot {
+        rt,
+        enc,
+        laser,
+        motors,
+    } = GzRobot::start(&part);
     let (on, stop) = (
         Arc::new(AtomicBool::new(true)),
         Arc::new(AtomicBool::new(false)),
@@ -461,13 +508,7 @@ fn gz_a_discovery_flood_does_not_hold_the_stop_and_gazebo_stays_bound() {
     eventually("odometry and scans after the flood", || {
         enc.read().clock > e + 5 && laser.read().clock > l + 3 && enc.stale().is_none()
     });
-    // The real room's scan: the wall ahead at x = 5 m from where the robot is.
-    let ahead = laser.read().readings[90] as f32;
-    let x = enc.read().x;
-    assert!(
-        (ahead - (5000.0 - x)).abs() < 600.0,
-        "ahead {ahead} mm at x = {x} mm"
-    );
+    assert_wall_ahead(&laser, &enc);
     stop.store(true, Ordering::SeqCst);
     rt.shutdown();
 }
@@ -537,13 +578,9 @@ fn gz_message(topic: &str, addr: &str, data: &[u8], ty: &str) -> Vec<u8> {
 
 #[test]
 fn gz_decoys_silent_publishers_and_bad_addresses_do_not_hold_the_driver() {
-    if common::in_private_netns(
-        "hostile_gz_nao::gz_decoys_silent_publishers_and_bad_addresses_do_not_hold_the_driver",
-    ) == common::Netns::Done
-    {
-        return;
-    }
-    let Some(bin) = gazebo::peer_bin() else {
+    let Some(bin) =
+        peer_in_netns("gz_decoys_silent_publishers_and_bad_addresses_do_not_hold_the_driver")
+    else {
         return;
     };
     let part = gazebo::partition();
@@ -569,14 +606,12 @@ fn gz_decoys_silent_publishers_and_bad_addresses_do_not_hold_the_driver() {
     );
     std::thread::sleep(Duration::from_millis(800));
     let log = TwistLog::start(&bin, &part, "/model/robot1/cmd_vel");
-    let rt = start_conf(&format!(
-        "{}provides encoders robot1\nprovides motors robot1\nprovides laser lidar\n\
-         motors_timeout {MOTORS_TIMEOUT}\ncycle {CYCLE}\nend_driver\nload_driver gazebo\n",
-        gazebo::head(&part, "gazebo")
-    ));
-    let enc = rt.interfaces.get::<Encoders>("encoders").unwrap();
-    let laser = rt.interfaces.get::<Laser>("laser").unwrap();
-    let motors = rt.interfaces.get::<Motors>("motors").unwrap();
+    let GzRobot {
+        rt,
+        enc,
+        laser,
+        motors,
+    } = GzRobot::start(&part);
     // The decoy alone: a publisher with no data is marked stale, not kept.
     std::thread::sleep(Duration::from_secs(5));
     assert!(
@@ -597,13 +632,7 @@ fn gz_decoys_silent_publishers_and_bad_addresses_do_not_hold_the_driver() {
         enc.stale(),
         motors.stale()
     );
-    // The real /lidar: the wall ahead at x = 5 m from where the robot is.
-    let ahead = laser.read().readings[90] as f32;
-    let x = enc.read().x;
-    assert!(
-        (ahead - (5000.0 - x)).abs() < 600.0,
-        "ahead {ahead} mm at x = {x} mm"
-    );
+    assert_wall_ahead(&laser, &enc);
     eventually("our twist at the robot", || log.seen("twist 0.3000 0.0000"));
     assert_stop_arrives(&on, &log, "with the decoys about");
     stop.store(true, Ordering::SeqCst);
@@ -620,16 +649,12 @@ fn gz_decoys_silent_publishers_and_bad_addresses_do_not_hold_the_driver() {
 
 #[test]
 fn gz_unfinished_more_frames_are_capped_per_message_and_gazebo_is_bound_after() {
-    if common::in_private_netns(
-        "hostile_gz_nao::gz_unfinished_more_frames_are_capped_per_message_and_gazebo_is_bound_after",
-    ) == common::Netns::Done
-    {
-        return;
-    }
-    let _alone = common::memory_alone();
-    let Some(bin) = gazebo::peer_bin() else {
+    let Some(bin) =
+        peer_in_netns("gz_unfinished_more_frames_are_capped_per_message_and_gazebo_is_bound_after")
+    else {
         return;
     };
+    let _alone = common::memory_alone();
     let part = gazebo::partition();
     // The hostile publisher of /lidar: MORE frames of 16 MiB that never end.
     let (port, accepted) = zmtp_publisher(|mut s| {
@@ -789,10 +814,7 @@ fn absurd_then_good_publisher(part: &str) -> u16 {
 
 #[test]
 fn gz_absurd_values_are_refused_and_never_reach_an_interface() {
-    if common::in_private_netns(
-        "hostile_gz_nao::gz_absurd_values_are_refused_and_never_reach_an_interface",
-    ) == common::Netns::Done
-    {
+    if launched_in_netns("gz_absurd_values_are_refused_and_never_reach_an_interface") {
         return;
     }
     let part = gazebo::partition();
