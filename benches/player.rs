@@ -48,7 +48,7 @@ fn per_call(n: usize, mut f: impl FnMut()) -> f64 {
 }
 
 /// The player driver on the emulator at `port`, providing `provides`.
-fn start_player(port: u16, provides: &str) -> jderobot::Runtime {
+fn start_player(port: u16, provides: &str) -> Arc<jderobot::Runtime> {
     let text = format!(
         "driver player\nhostname 127.0.0.1 port {port}\nprovides {provides}\nend_driver\nload_driver player\n"
     );
