@@ -9,7 +9,7 @@
     feature = "introrob"
 ))]
 
-use crate::common::{self, world_path};
+use crate::common::world_path;
 
 use std::{path::Path, process::Command};
 
