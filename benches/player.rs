@@ -47,7 +47,17 @@ fn per_call(n: usize, mut f: impl FnMut()) -> f64 {
     median(v)
 }
 
-fn main() {
+/// The player driver on the emulator at `port`, providing `provides`.
+fn start_player(port: u16, provides: &str) -> Arc<jderobot::Runtime> {
+    let text = format!(
+        "driver player\nhostname 127.0.0.1 port {port}\nprovides {provides}\nend_driver\nload_driver player\n"
+    );
+    let conf = Conf::parse(&text, Path::new("bench.conf")).unwrap();
+    jderobot::loader::start(&conf).unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// The codec against the anchor, per call.
+fn codec() {
     let msg = player_emulator::hex(SCAN_HEX);
     let payload = msg[40..].to_vec();
 
@@ -120,17 +130,14 @@ fn main() {
         cmd,
         cmd / anchor
     );
+}
 
-    // Latency over loopback: the emulator stamps each scan just before writing it;
-    // we spin on the interface's clock.
+/// Latency over loopback: the emulator stamps each scan just before writing it;
+/// we spin on the interface's clock.
+fn scan_latency() -> Vec<f64> {
     let emu = player_emulator::Emulator::with_devices(vec![(6, 0)]);
     *emu.shared.period.lock().unwrap() = Duration::from_millis(5);
-    let text = format!(
-        "driver player\nhostname 127.0.0.1 port {}\nprovides laser 180 1\nend_driver\nload_driver player\n",
-        emu.port
-    );
-    let conf = Conf::parse(&text, Path::new("bench.conf")).unwrap();
-    let rt = jderobot::loader::start(&conf).unwrap_or_else(|e| panic!("{e}"));
+    let rt = start_player(emu.port, "laser 180 1");
     let laser: Arc<Interface<Laser>> = rt.interfaces.get("laser").unwrap();
     rt.run("laser").unwrap();
     let mut lat = Vec::new();
@@ -151,15 +158,15 @@ fn main() {
         }
         std::hint::spin_loop();
     }
-    // Commands: from a motors publish to the server receiving it (one cycle, 75 ms,
-    // at most; about half a cycle on average).
+    rt.shutdown();
+    lat
+}
+
+/// Commands: from a motors publish to the server receiving it (one cycle, 75 ms,
+/// at most; about half a cycle on average).
+fn command_latency() -> Vec<f64> {
     let emu2 = player_emulator::Emulator::with_devices(vec![(4, 0)]);
-    let text = format!(
-        "driver player\nhostname 127.0.0.1 port {}\nprovides motors\nend_driver\nload_driver player\n",
-        emu2.port
-    );
-    let conf = Conf::parse(&text, Path::new("bench.conf")).unwrap();
-    let rt2 = jderobot::loader::start(&conf).unwrap_or_else(|e| panic!("{e}"));
+    let rt2 = start_player(emu2.port, "motors");
     let motors: Arc<Interface<jderobot::interfaces::Motors>> =
         rt2.interfaces.get("motors").unwrap();
     rt2.run("motors").unwrap();
@@ -192,7 +199,13 @@ fn main() {
     }
     rt2.shutdown();
     cmd_lat.sort_by(f64::total_cmp);
-    rt.shutdown();
+    cmd_lat
+}
+
+fn main() {
+    codec();
+    let mut lat = scan_latency();
+    let cmd_lat = command_latency();
     let n = lat.len();
     let p50 = median(lat.clone());
     lat.sort_by(f64::total_cmp);

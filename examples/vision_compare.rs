@@ -16,7 +16,8 @@
 //! Outputs: `rs_*.raw` (u8 or little-endian i16),
 //! `rs_*.txt`.
 
-use std::{fs, path::Path, time::Instant};
+#[path = "vision_common/mod.rs"]
+mod vision_common;
 
 use jderobot::{
     colorspaces::{HsvRange, Lookup, hsv_mask},
@@ -24,71 +25,45 @@ use jderobot::{
     interfaces::Image,
     schemas::calibrador::calibrate,
     vision::{
-        self, Kernel, LkParams,
+        self, GrayImage, Kernel,
         pixfmt::{self, Bayer, Yuv422Order, YuvMatrix},
     },
 };
+use vision_common::Run;
 
-fn median_ms<T>(repeats: usize, mut f: impl FnMut() -> T) -> (f64, T) {
-    let mut out = f(); // warm-up
-    let mut times = Vec::with_capacity(repeats);
-    for _ in 0..repeats {
-        let t = Instant::now();
-        out = std::hint::black_box(f());
-        times.push(t.elapsed().as_secs_f64() * 1e3);
-    }
-    times.sort_by(f64::total_cmp);
-    (times[times.len() / 2], out)
-}
-
-fn numbers(path: &Path) -> anyhow::Result<Vec<Vec<f64>>> {
-    let text = fs::read_to_string(path)?;
-    text.lines()
-        .filter(|l| !l.trim().is_empty())
-        .map(|l| {
-            l.split_whitespace()
-                .map(|w| {
-                    w.parse::<f64>()
-                        .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
-                })
-                .collect()
-        })
-        .collect()
+/// `d` as little-endian bytes.
+fn le_bytes(d: &[i16]) -> Vec<u8> {
+    d.iter().flat_map(|v| v.to_le_bytes()).collect()
 }
 
 fn main() -> anyhow::Result<()> {
-    let args: Vec<String> = std::env::args().collect();
-    if args.len() != 5 {
-        anyhow::bail!("usage: vision_compare DIR WIDTH HEIGHT REPEATS");
-    }
-    let dir = Path::new(&args[1]);
-    let (w, h): (u32, u32) = (args[2].parse()?, args[3].parse()?);
-    let repeats: usize = args[4].parse()?;
-    let load = |name: &str| -> anyhow::Result<Image> {
-        let data = fs::read(dir.join(name))?;
-        anyhow::ensure!(data.len() == (w * h * 3) as usize, "{name}: wrong size");
+    let mut run = Run::from_args("vision_compare")?;
+    let bgr = |name: &str| -> anyhow::Result<Image> {
         Ok(Image {
-            width: w,
-            height: h,
-            data,
+            width: run.w,
+            height: run.h,
+            data: run.frame(name, 3)?,
         })
     };
-    let a = load("a.bgr")?;
-    let b = load("b.bgr")?;
-    let mut times: Vec<(String, f64)> = Vec::new();
-    let write_u8 = |name: &str, d: &[u8]| fs::write(dir.join(name), d);
-    let write_i16 = |name: &str, d: &[i16]| {
-        fs::write(
-            dir.join(name),
-            d.iter().flat_map(|v| v.to_le_bytes()).collect::<Vec<u8>>(),
-        )
-    };
+    let (a, b) = (bgr("a.bgr")?, bgr("b.bgr")?);
+    let g = colour_and_edges(&mut run, &a)?;
+    hough(&mut run)?;
+    calibration(&mut run)?;
+    filters(&mut run, &a)?;
+    run.optical_flow_lk(&g, &vision::grayscale(&b))?;
+    homography(&mut run, &a)?;
+    pixel_formats(&mut run)?;
+    fuzzy(&mut run)?;
+    run.print_times();
+    Ok(())
+}
 
-    let (t, g) = median_ms(repeats, || vision::grayscale(&a));
-    times.push(("gray".into(), t));
-    write_u8("rs_gray.raw", &g.data)?;
+/// Grey, the HSV mask, Sobel and Canny; gives the grey frame.
+fn colour_and_edges(run: &mut Run, a: &Image) -> anyhow::Result<GrayImage> {
+    let g = run.time("gray", || vision::grayscale(a));
+    run.write("rs_gray.raw", &g.data)?;
 
-    let hv = &numbers(&dir.join("hsv.txt"))?[0];
+    let hv = &run.numbers("hsv.txt")?[0];
     let range = HsvRange {
         hmin: hv[0] as f32,
         hmax: hv[1] as f32,
@@ -97,128 +72,108 @@ fn main() -> anyhow::Result<()> {
         vmin: hv[4] as f32,
         vmax: hv[5] as f32,
     };
-    let (t, m) = median_ms(repeats, || hsv_mask(&a, &range, Lookup::Exact));
-    times.push(("hsv_filter".into(), t));
-    write_u8("rs_hsv.raw", &m.data)?;
+    let m = run.time("hsv_filter", || hsv_mask(a, &range, Lookup::Exact));
+    run.write("rs_hsv.raw", &m.data)?;
 
-    let (t, (dx, dy)) = median_ms(repeats, || vision::sobel(&g));
-    times.push(("sobel_dx_dy".into(), t));
-    write_i16("rs_sobel_dx.raw", &dx.data)?;
-    write_i16("rs_sobel_dy.raw", &dy.data)?;
+    let (dx, dy) = run.time("sobel_dx_dy", || vision::sobel(&g));
+    run.write("rs_sobel_dx.raw", le_bytes(&dx.data))?;
+    run.write("rs_sobel_dy.raw", le_bytes(&dy.data))?;
 
-    let (t, e) = median_ms(repeats, || vision::canny(&g, 50.0, 150.0, false));
-    times.push(("canny".into(), t));
-    write_u8("rs_canny.raw", &e.data)?;
+    let e = run.time("canny", || vision::canny(&g, 50.0, 150.0, false));
+    run.write("rs_canny.raw", &e.data)?;
+    Ok(g)
+}
 
-    // Hough on OpenCV's Canny edges (edges.raw), so both sides vote the same points.
-    let edges = vision::GrayImage {
-        width: w,
-        height: h,
-        data: fs::read(dir.join("edges.raw"))?,
-    };
-    anyhow::ensure!(
-        edges.data.len() == (w * h) as usize,
-        "edges.raw: wrong size"
-    );
+/// Hough on OpenCV's Canny edges (edges.raw), so both sides vote the same points.
+fn hough(run: &mut Run) -> anyhow::Result<()> {
+    let edges = run.gray("edges.raw")?;
     let theta = std::f64::consts::PI / 180.0;
-    let (t, lines) = median_ms(repeats, || vision::hough_lines(&edges, 1.0, theta, 80));
-    times.push(("hough_lines".into(), t));
+    let lines = run.time("hough_lines", || {
+        vision::hough_lines(&edges, 1.0, theta, 80)
+    });
     let s: String = lines
         .iter()
         .map(|l| format!("{} {}\n", l.rho, l.theta))
         .collect();
-    fs::write(dir.join("rs_hough.txt"), s)?;
-    let (t, segs) = median_ms(repeats, || {
-        vision::hough_lines_p(&edges, 1.0, theta, 50, 30, 5)
-    });
-    times.push(("hough_lines_p".into(), t));
-    let s: String = segs
-        .iter()
-        .map(|l| format!("{} {} {} {}\n", l.x1, l.y1, l.x2, l.y2))
-        .collect();
-    fs::write(dir.join("rs_houghp.txt"), s)?;
+    run.write("rs_hough.txt", s)?;
+    run.hough_lines_p(&edges)
+}
 
-    // calibrador's solver on `calib.txt` (X Y Z U V per line: a 3D pattern, noisy pixels).
-    let cal = numbers(&dir.join("calib.txt"))?;
+/// calibrador's solver on `calib.txt` (X Y Z U V per line: a 3D pattern, noisy pixels).
+fn calibration(run: &mut Run) -> anyhow::Result<()> {
+    let cal = run.numbers("calib.txt")?;
     let world: Vec<[f64; 3]> = cal.iter().map(|r| [r[0], r[1], r[2]]).collect();
     let pix: Vec<(f64, f64)> = cal.iter().map(|r| (r[3], r[4])).collect();
-    let (t, c) = median_ms(repeats, || calibrate(&world, &pix));
-    times.push(("calibrate".into(), t));
+    let c = run.time("calibrate", || calibrate(&world, &pix));
     let c = c.map_err(|e| anyhow::anyhow!("calibrate: {e}"))?;
     let pos = c.position();
-    fs::write(
-        dir.join("rs_calib.txt"),
+    run.write(
+        "rs_calib.txt",
         format!(
             "{} {} {} {} {} {} {} {}\n",
             c.rms, c.fx, c.fy, c.cx, c.cy, pos.x, pos.y, pos.z
         ),
-    )?;
+    )
+}
 
-    let (t, p) = median_ms(repeats, || vision::pyr_down(&a));
-    times.push(("pyrdown".into(), t));
-    write_u8("rs_pyrdown.raw", &p.data)?;
-
+/// pyrDown and the bundled kernels.
+fn filters(run: &mut Run, a: &Image) -> anyhow::Result<()> {
+    let p = run.time("pyrdown", || vision::pyr_down(a));
+    run.write("rs_pyrdown.raw", &p.data)?;
     for name in ["sharpen", "gaussian5", "edge"] {
         let k = Kernel::load(format!("assets/kernels/{name}.kernel"))?;
-        let (t, c) = median_ms(repeats, || vision::convolve(&a, &k));
-        times.push((format!("filter2d_{name}"), t));
-        write_u8(&format!("rs_conv_{name}.raw"), &c.data)?;
+        let c = run.time(&format!("filter2d_{name}"), || vision::convolve(a, &k));
+        run.write(&format!("rs_conv_{name}.raw"), &c.data)?;
     }
+    Ok(())
+}
 
-    let pts: Vec<(f32, f32)> = numbers(&dir.join("points.txt"))?
-        .iter()
-        .map(|p| (p[0] as f32, p[1] as f32))
-        .collect();
-    let gb = vision::grayscale(&b);
-    let (t, tracked) = median_ms(repeats, || {
-        vision::optical_flow_pyr_lk(&g, &gb, &pts, &LkParams::default())
-    });
-    times.push(("optical_flow_lk".into(), t));
-    let mut s = String::new();
-    for p in &tracked {
-        s += &format!("{} {} {} {}\n", p.x, p.y, p.found as u8, p.error);
-    }
-    fs::write(dir.join("rs_lk.txt"), s)?;
-
-    let hp = numbers(&dir.join("homography.txt"))?;
+/// findHomography on `homography.txt` (`sx sy dx dy` a line), then the warp.
+fn homography(run: &mut Run, a: &Image) -> anyhow::Result<()> {
+    let hp = run.numbers("homography.txt")?;
     let src: Vec<(f64, f64)> = hp.iter().map(|r| (r[0], r[1])).collect();
     let dst: Vec<(f64, f64)> = hp.iter().map(|r| (r[2], r[3])).collect();
-    let (t, hm) = median_ms(repeats, || vision::find_homography(&src, &dst));
-    times.push(("find_homography".into(), t));
+    let hm = run.time("find_homography", || vision::find_homography(&src, &dst));
     let hm = hm.ok_or_else(|| anyhow::anyhow!("homography failed"))?;
-    fs::write(
-        dir.join("rs_homography.txt"),
+    run.write(
+        "rs_homography.txt",
         hm.transpose()
             .iter()
             .map(|v| format!("{v:e}"))
             .collect::<Vec<_>>()
             .join(" "),
     )?;
-    let (t, wp) = median_ms(repeats, || vision::warp_perspective(&a, &hm, w, h));
-    times.push(("warp_perspective".into(), t));
-    write_u8("rs_warp.raw", &wp.data)?;
+    let (w, h) = (run.w, run.h);
+    let wp = run.time("warp_perspective", || {
+        vision::warp_perspective(a, &hm, w, h)
+    });
+    run.write("rs_warp.raw", &wp.data)
+}
 
-    // Camera pixel formats → BGR (the drivers' conversions), into a reused buffer.
-    let yuyv = fs::read(dir.join("a.yuyv"))?;
+/// Camera pixel formats → BGR (the drivers' conversions), into a reused buffer.
+fn pixel_formats(run: &mut Run) -> anyhow::Result<()> {
+    let (w, h) = (run.w, run.h);
+    let yuyv = run.frame("a.yuyv", 2)?;
     let mut out = Vec::new();
-    let (t, ()) = median_ms(repeats, || {
+    run.time("yuyv_bgr", || {
         pixfmt::yuv422_to_bgr(&yuyv, w, h, Yuv422Order::Yuyv, YuvMatrix::Bt601, &mut out)
             .expect("YUYV frame")
     });
-    times.push(("yuyv_bgr".into(), t));
-    write_u8("rs_yuyv.raw", &out)?;
-    let bayer = fs::read(dir.join("a.bayer"))?;
-    let (t, ()) = median_ms(repeats, || {
+    run.write("rs_yuyv.raw", &out)?;
+    let bayer = run.frame("a.bayer", 1)?;
+    run.time("bayer_bgr", || {
         pixfmt::bayer_to_bgr(&bayer, w, h, Bayer::Rggb, &mut out).expect("Bayer frame")
     });
-    times.push(("bayer_bgr".into(), t));
-    write_u8("rs_bayer.raw", &out)?;
+    run.write("rs_bayer.raw", &out)
+}
 
+/// `assets/fuzzy/example.fzz` on `fuzzy.txt` (`var1 var2` a line), both inferences.
+fn fuzzy(run: &mut Run) -> anyhow::Result<()> {
     let mut fz = Controller::from_file("assets/fuzzy/example.fzz")?;
-    let inputs = numbers(&dir.join("fuzzy.txt"))?;
+    let inputs = run.numbers("fuzzy.txt")?;
     for (mode, name) in [(Inference::Jde, "jde"), (Inference::Mamdani, "mamdani")] {
         fz.set_inference(mode);
-        let (t, outs) = median_ms(repeats, || {
+        let outs = run.time(&format!("fuzzy_{name}"), || {
             inputs
                 .iter()
                 .map(|v| {
@@ -228,7 +183,6 @@ fn main() -> anyhow::Result<()> {
                 })
                 .collect::<Vec<_>>()
         });
-        times.push((format!("fuzzy_{name}"), t));
         let s: String = outs
             .iter()
             .map(|o| match o {
@@ -236,13 +190,7 @@ fn main() -> anyhow::Result<()> {
                 None => "nan 0\n".into(),
             })
             .collect();
-        fs::write(dir.join(format!("rs_fuzzy_{name}.txt")), s)?;
+        run.write(&format!("rs_fuzzy_{name}.txt"), s)?;
     }
-
-    let json: Vec<String> = times
-        .iter()
-        .map(|(k, v)| format!("\"{k}\": {v:.4}"))
-        .collect();
-    println!("{{{}}}", json.join(", "));
     Ok(())
 }

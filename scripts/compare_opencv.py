@@ -21,38 +21,13 @@ import os
 import subprocess
 import sys
 import tempfile
-import time
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-VENV = os.path.join(ROOT, "target", "compare-venv")
+from compare_common import ROOT, TUNED_MALLOC, build_example, ensure_venv, median_ms, write_markdown
+
 PHOTOS = os.path.join(ROOT, "assets", "photos")
 W, H = 640, 480
 # Ops whose input does not depend on the image: tabled for the synthetic scene only.
 IMAGE_FREE = {"calibrate", "find_homography", "fuzzy_jde", "fuzzy_mamdani"}
-
-
-def ensure_venv():
-    """Re-run this script inside the venv (creating it when needed)."""
-    py = os.path.join(VENV, "bin", "python")
-    if os.path.abspath(sys.prefix) == os.path.abspath(VENV):
-        return
-    if not os.path.exists(py):
-        subprocess.check_call([sys.executable, "-m", "venv", VENV])
-    subprocess.check_call(
-        [py, "-m", "pip", "install", "-q", "opencv-python-headless", "numpy", "scikit-fuzzy", "scipy", "networkx", "packaging"]
-    )
-    os.execv(py, [py] + sys.argv)
-
-
-def median_ms(fn, repeats):
-    out = fn()
-    ts = []
-    for _ in range(repeats):
-        t = time.perf_counter()
-        out = fn()
-        ts.append((time.perf_counter() - t) * 1e3)
-    ts.sort()
-    return ts[len(ts) // 2], out
 
 
 def scene(np, cv2):
@@ -134,7 +109,7 @@ def fuzzy_jde_reference(v1, v2, labels, rules):
 
 
 def main():
-    ensure_venv()
+    ensure_venv(["opencv-python-headless", "numpy", "scikit-fuzzy", "scipy", "networkx", "packaging"])
     import cv2
     import numpy as np
     import skfuzzy as fuzz
@@ -220,27 +195,14 @@ def main():
             sys.exit(f"{PHOTOS}/{f}: not a {W}x{H} colour image")
         inputs.append((os.path.splitext(f)[0], setup(img)))
 
-    # The executable cargo reports (the target dir may be shared, with other trees
-    # linking their own build to the same examples/vision_compare name). The example
-    # needs only the calibrador feature (its solver); the library's vision code has none.
-    built = subprocess.check_output(
-        ["cargo", "build", "--release", "--no-default-features", "--features", "calibrador",
-         "--example", "vision_compare", "--message-format=json-render-diagnostics"], cwd=ROOT
-    ).decode()
-    exe = None
-    for line in built.splitlines():
-        msg = json.loads(line)
-        if msg.get("reason") == "compiler-artifact" and msg["target"]["name"] == "vision_compare":
-            exe = msg.get("executable") or exe
-    if exe is None:
-        sys.exit("cargo did not report the vision_compare executable")
-    # glibc hands every allocation above 128 KiB fresh mmapped pages (page faults on
-    # first touch) until its dynamic threshold adapts; a long-running process (Python
-    # here, a schema in jderobot) reuses its heap instead. Give the Rust process that
-    # steady state from the start; --untuned-malloc measures without it.
+    # The example needs only the calibrador feature (its solver); the library's
+    # vision code has none.
+    exe = build_example("vision_compare", ["calibrador"])
+    # The Rust process in a long-running process's steady state (compare_common's
+    # TUNED_MALLOC); --untuned-malloc measures without it.
     env = dict(os.environ)
     if not args.untuned_malloc:
-        env.update(MALLOC_MMAP_THRESHOLD_="67108864", MALLOC_TRIM_THRESHOLD_="134217728")
+        env.update(TUNED_MALLOC)
     def measure(ctx):
         """One round: the Rust side's times and outputs, then OpenCV's; the rows."""
         d, a, b, g, gb, pts, fin, hsv, yuyv, bayer, src8, dst8 = (ctx[k] for k in (
@@ -484,9 +446,7 @@ def main():
           f"per side the fastest of {args.rounds} alternating rounds' medians of {R} runs; "
           f"photos from {PHOTOS}; inputs in {', '.join(ctx['d'] for _, ctx in inputs)}")
     print(table)
-    if args.markdown_out:
-        with open(args.markdown_out, "w") as f:
-            f.write(table + "\n")
+    write_markdown(table, args.markdown_out)
 
 if __name__ == "__main__":
     main()

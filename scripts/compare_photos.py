@@ -21,46 +21,16 @@ import argparse
 import json
 import os
 import subprocess
-import sys
 import tempfile
-import time
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-VENV = os.path.join(ROOT, "target", "compare-venv")
-# As scripts/compare_opencv.py: glibc reuses its heap from the start (a long-running
-# process's steady state; the Python side already is one).
-RUST_ENV = dict(os.environ, MALLOC_MMAP_THRESHOLD_="67108864", MALLOC_TRIM_THRESHOLD_="134217728")
+from compare_common import (ROOT, TUNED_MALLOC, build_example, ensure_venv, median, median_ms,
+                            write_markdown)
+
+RUST_ENV = dict(os.environ, **TUNED_MALLOC)
 TUNED = ["astronaut", "chelsea", "coffee", "gravel"]
 # Drawings, synthetic test patterns and binary masks are not photographs.
 NOT_PHOTOS = {"chessboard_GRAY", "chessboard_RGB", "color", "horse", "logo", "phantom",
               "lbpcascade_frontalface_opencv", "no_time_for_that_tiny"}
-
-
-def ensure_venv():
-    """Re-run this script inside the venv (creating it when needed)."""
-    py = os.path.join(VENV, "bin", "python")
-    if os.path.abspath(sys.prefix) == os.path.abspath(VENV):
-        return
-    if not os.path.exists(py):
-        subprocess.check_call([sys.executable, "-m", "venv", VENV])
-    subprocess.check_call([py, "-m", "pip", "install", "-q", "opencv-python-headless", "numpy",
-                           "scikit-image"])
-    os.execv(py, [py] + sys.argv)
-
-
-def median(v):
-    v = sorted(v)
-    return v[len(v) // 2]
-
-
-def median_ms(fn, repeats):
-    out = fn()
-    ts = []
-    for _ in range(repeats):
-        t = time.perf_counter()
-        out = fn()
-        ts.append((time.perf_counter() - t) * 1e3)
-    return median(ts), out
 
 
 def photographs(np, cv2):
@@ -153,23 +123,8 @@ def table(title, names, inputs, results):
     return "\n".join(lines)
 
 
-def build():
-    """Builds examples/vision_photos.rs (release); its path as cargo reports it."""
-    built = subprocess.check_output(
-        ["cargo", "build", "--release", "--no-default-features", "--example", "vision_photos",
-         "--message-format=json-render-diagnostics"], cwd=ROOT).decode()
-    exe = None
-    for line in built.splitlines():
-        msg = json.loads(line)
-        if msg.get("reason") == "compiler-artifact" and msg["target"]["name"] == "vision_photos":
-            exe = msg.get("executable") or exe
-    if exe is None:
-        sys.exit("cargo did not report the vision_photos executable")
-    return exe
-
-
 def main():
-    ensure_venv()
+    ensure_venv(["opencv-python-headless", "numpy", "scikit-image"])
     import cv2
     import numpy as np
 
@@ -181,7 +136,7 @@ def main():
     ap.add_argument("--exe", help="a vision_photos executable built before (skips cargo)")
     args = ap.parse_args()
     cv2.setNumThreads(1)
-    exe = args.exe or build()
+    exe = args.exe or build_example("vision_photos")
 
 
     only = set(args.only.split(",")) if args.only else None
@@ -203,9 +158,7 @@ def main():
     print(f"OpenCV {cv2.__version__}, numpy {np.__version__}; medians of {args.rounds} alternating "
           f"rounds' medians of {args.repeats} runs, one thread")
     print(out)
-    if args.markdown_out:
-        with open(args.markdown_out, "w") as f:
-            f.write(out + "\n")
+    write_markdown(out, args.markdown_out)
 
 
 if __name__ == "__main__":

@@ -70,15 +70,8 @@ fn node_client() -> Option<PathBuf> {
     None
 }
 
-#[test]
-fn the_official_client_lists_decodes_drives_and_stops_a_schema() {
-    let Some(dir) = node_client() else { return };
-    let rt = common::start_conf(&conf(""));
-    let a = addr(&rt);
-    assert!(a.ip().is_loopback(), "loopback by default: {a}");
-    let r = run_node_client(&dir, &format!("ws://{a}"), None);
-    // The legacy subprotocol, answered under its own name.
-    assert_eq!(r["protocol"], "foxglove.websocket.v1");
+/// The capabilities and the channels, with Foxglove's schemas.
+fn assert_channels(r: &Value) {
     for cap in ["clientPublish", "services", "parameters"] {
         assert!(
             r["capabilities"]
@@ -89,7 +82,6 @@ fn the_official_client_lists_decodes_drives_and_stops_a_schema() {
             "{cap}: {r}"
         );
     }
-    // Channels with Foxglove's schemas.
     let schema = |topic: &str| {
         r["channels"]
             .as_array()
@@ -104,37 +96,22 @@ fn the_official_client_lists_decodes_drives_and_stops_a_schema() {
             })
             .unwrap_or_else(|| panic!("no channel {topic}: {r}"))
     };
-    assert_eq!(
-        schema("laser"),
-        ("protobuf".into(), "foxglove.LaserScan".into())
-    );
-    assert_eq!(
-        schema("sonars"),
-        ("protobuf".into(), "foxglove.LaserScan".into())
-    );
-    assert_eq!(
-        schema("colorA"),
-        ("protobuf".into(), "foxglove.RawImage".into())
-    );
-    assert_eq!(
-        schema("encoders"),
-        ("protobuf".into(), "foxglove.PoseInFrame".into())
-    );
-    assert_eq!(
-        schema("/tf"),
-        ("protobuf".into(), "foxglove.FrameTransform".into())
-    );
-    assert_eq!(
-        schema("world"),
-        ("protobuf".into(), "foxglove.SceneUpdate".into())
-    );
-    assert_eq!(schema("motors"), ("json".into(), "jderobot.motors".into()));
-    assert_eq!(
-        schema("bumpers"),
-        ("json".into(), "jderobot.bumpers".into())
-    );
-    // Decoded with the advertised schemas.
-    let d = &r["decoded"];
+    for (topic, encoding, name) in [
+        ("laser", "protobuf", "foxglove.LaserScan"),
+        ("sonars", "protobuf", "foxglove.LaserScan"),
+        ("colorA", "protobuf", "foxglove.RawImage"),
+        ("encoders", "protobuf", "foxglove.PoseInFrame"),
+        ("/tf", "protobuf", "foxglove.FrameTransform"),
+        ("world", "protobuf", "foxglove.SceneUpdate"),
+        ("motors", "json", "jderobot.motors"),
+        ("bumpers", "json", "jderobot.bumpers"),
+    ] {
+        assert_eq!(schema(topic), (encoding.into(), name.into()));
+    }
+}
+
+/// What the client decoded with the advertised schemas.
+fn assert_decoded(d: &Value) {
     assert_eq!(d["laser"]["ranges"], 180);
     assert_eq!(d["laser"]["frame_id"], "base_link");
     assert!(
@@ -165,6 +142,19 @@ fn the_official_client_lists_decodes_drives_and_stops_a_schema() {
         "{map:?}"
     );
     assert!(d["motors"]["jderobot"]["v"].is_number());
+}
+
+#[test]
+fn the_official_client_lists_decodes_drives_and_stops_a_schema() {
+    let Some(dir) = node_client() else { return };
+    let rt = common::start_conf(&conf(""));
+    let a = addr(&rt);
+    assert!(a.ip().is_loopback(), "loopback by default: {a}");
+    let r = run_node_client(&dir, &format!("ws://{a}"), None);
+    // The legacy subprotocol, answered under its own name.
+    assert_eq!(r["protocol"], "foxglove.websocket.v1");
+    assert_channels(&r);
+    assert_decoded(&r["decoded"]);
     // `stop introrob` slept it.
     assert_eq!(r["stop"]["ok"], true);
     let p = ps(&rt);

@@ -38,7 +38,7 @@ use std::{
 };
 
 use common::{eventually, poll_until, process::free_port, start_conf};
-use jderobot::interfaces::{Encoders, Image, Laser, Motors, PtMotors, Sonars};
+use jderobot::interfaces::{Encoders, Image, Interface, Laser, Motors, PtMotors, Sonars};
 
 // ------------------------------------------------------------ protobuf by hand
 
@@ -293,19 +293,91 @@ fn assert_stop_arrives(on: &AtomicBool, log: &TwistLog, what: &str) {
     on.store(true, Ordering::SeqCst);
 }
 
-/// In a private network namespace (`unshare -rn`): the flood never reaches the
-/// host's network, and no other test's gz-transport nodes see it.
-#[test]
-fn gz_a_discovery_flood_does_not_hold_the_stop_and_gazebo_stays_bound() {
-    let name = "hostile_gz_nao::gz_a_discovery_flood_does_not_hold_the_stop_and_gazebo_stays_bound";
-    if common::in_private_netns(name) == common::Netns::Done {
-        return;
+/// True when this process only launched `test` again in a private network
+/// namespace (`unshare -rn`), where the run does the test.
+fn launched_in_netns(test: &str) -> bool {
+    common::in_private_netns(&format!("hostile_gz_nao::{test}")) == common::Netns::Done
+}
+
+/// The C++ gz peer for `test` inside its private network namespace; None when this
+/// process only launched it there, or the peer is missing (skipped).
+fn peer_in_netns(test: &str) -> Option<std::path::PathBuf> {
+    if launched_in_netns(test) {
+        return None;
     }
-    let _alone = common::memory_alone();
-    let Some(bin) = gazebo::peer_bin() else {
-        return;
-    };
-    // In the namespace, loopback is the only interface: the host's is not reached.
+    gazebo::peer_bin()
+}
+
+/// The gazebo driver on robot1's encoders and motors and the /lidar laser, stopping
+/// within MOTORS_TIMEOUT + CYCLE, and those interfaces.
+struct GzRobot {
+    rt: Arc<jderobot::Runtime>,
+    enc: Arc<Interface<Encoders>>,
+    laser: Arc<Interface<Laser>>,
+    motors: Arc<Interface<Motors>>,
+}
+
+impl GzRobot {
+    fn start(part: &str) -> GzRobot {
+        let rt = start_conf(&format!(
+            "{}provides encoders robot1\nprovides motors robot1\nprovides laser lidar\n\
+             motors_timeout {MOTORS_TIMEOUT}\ncycle {CYCLE}\nend_driver\nload_driver gazebo\n",
+            gazebo::head(part, "gazebo")
+        ));
+        GzRobot {
+            enc: rt.interfaces.get::<Encoders>("encoders").unwrap(),
+            laser: rt.interfaces.get::<Laser>("laser").unwrap(),
+            motors: rt.interfaces.get::<Motors>("motors").unwrap(),
+            rt,
+        }
+    }
+}
+
+/// The real room's scan from the real /lidar: the wall ahead at x = 5 m from where
+/// the robot is.
+fn assert_wall_ahead(laser: &Interface<Laser>, enc: &Interface<Encoders>) {
+    let ahead = laser.read().readings[90] as f32;
+    let x = enc.read().x;
+    assert!(
+        (ahead - (5000.0 - x)).abs() < 600.0,
+        "ahead {ahead} mm at x = {x} mm"
+    );
+}
+
+/// The gz message types and the odometry topic the hostile ends use.
+const SCAN: &str = "ignition.msgs.LaserScan";
+const ODOMETRY: &str = "ignition.msgs.Odometry";
+const IMAGE: &str = "ignition.msgs.Image";
+const ODOM: &str = "/model/robot1/odometry";
+
+/// One advertisement a hostile process repeats: node, topic, address, type.
+type Ad = (u64, &'static str, String, &'static str);
+
+/// A hostile process (`process` makes its id) advertising `ads` and sending a
+/// heartbeat every `every` until `stop` is set.
+fn advertiser(
+    part: &str,
+    process: u64,
+    ads: Vec<Ad>,
+    every: Duration,
+    stop: Arc<AtomicBool>,
+) -> std::thread::JoinHandle<()> {
+    let part = part.to_string();
+    std::thread::spawn(move || {
+        let h = Hostile::new(&part);
+        let p = uuid(process);
+        while !stop.load(Ordering::SeqCst) {
+            for (node, topic, addr, ty) in &ads {
+                h.advertise(&p, &uuid(*node), topic, addr, ty);
+            }
+            h.heartbeat(&p);
+            std::thread::sleep(every);
+        }
+    })
+}
+
+/// In the namespace, loopback is the only interface: the host's is not reached.
+fn assert_only_loopback() {
     if std::env::var_os("JDE_TEST_IN_NETNS").is_some() {
         let dev = std::fs::read_to_string("/proc/self/net/dev").unwrap();
         let ifaces: Vec<&str> = dev
@@ -319,17 +391,77 @@ fn gz_a_discovery_flood_does_not_hold_the_stop_and_gazebo_stays_bound() {
             "only loopback in the test's network namespace"
         );
     }
+}
+
+/// The flood: ADVERTISE of the driver's topics with a new node id each (and a
+/// new process every 8), the decoy topics it could pick, and NEW_CONNECTION
+/// registrations to our cmd_vel: about 3,000 packets a second for 8 s.
+fn flood(
+    part: String,
+    ours: Option<String>,
+    flooding: Arc<AtomicBool>,
+    sent: Arc<AtomicUsize>,
+) -> std::thread::JoinHandle<()> {
+    std::thread::spawn(move || {
+        let h = Hostile::new(&part);
+        let mut n = 0u64;
+        while flooding.load(Ordering::SeqCst) {
+            for _ in 0..30 {
+                n += 1;
+                let process = uuid(0xbad0_0000_0000 + n / 8);
+                let node = uuid(n);
+                let addr = "tcp://127.0.0.1:1";
+                h.advertise(
+                    &process,
+                    &node,
+                    "/model/robot1/odometry",
+                    addr,
+                    "ignition.msgs.Odometry",
+                );
+                h.advertise(&process, &node, "/lidar", addr, "ignition.msgs.LaserScan");
+                h.advertise(
+                    &process,
+                    &node,
+                    &format!("/decoy{n}/lidar"),
+                    addr,
+                    "ignition.msgs.LaserScan",
+                );
+                if let Some(o) = &ours {
+                    let t = h.fq("/model/robot1/cmd_vel");
+                    h.send(&discovery(
+                        NEW_CONNECTION,
+                        &process,
+                        None,
+                        Some((&t, addr, &node, o, "ignition.msgs.Twist")),
+                    ));
+                }
+                sent.fetch_add(4, Ordering::SeqCst);
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+    })
+}
+
+/// In a private network namespace (`unshare -rn`): the flood never reaches the
+/// host's network, and no other test's gz-transport nodes see it.
+#[test]
+fn gz_a_discovery_flood_does_not_hold_the_stop_and_gazebo_stays_bound() {
+    let Some(bin) =
+        peer_in_netns("gz_a_discovery_flood_does_not_hold_the_stop_and_gazebo_stays_bound")
+    else {
+        return;
+    };
+    let _alone = common::memory_alone();
+    assert_only_loopback();
     let part = gazebo::partition();
     let _peer = gazebo::robot(&bin, &part, &["--model", "robot1", "--lidar", "/lidar"]);
     let log = TwistLog::start(&bin, &part, "/model/robot1/cmd_vel");
-    let rt = start_conf(&format!(
-        "{}provides encoders robot1\nprovides motors robot1\nprovides laser lidar\n\
-         motors_timeout {MOTORS_TIMEOUT}\ncycle {CYCLE}\nend_driver\nload_driver gazebo\n",
-        gazebo::head(&part, "gazebo")
-    ));
-    let enc = rt.interfaces.get::<Encoders>("encoders").unwrap();
-    let laser = rt.interfaces.get::<Laser>("laser").unwrap();
-    let motors = rt.interfaces.get::<Motors>("motors").unwrap();
+    let GzRobot {
+        rt,
+        enc,
+        laser,
+        motors,
+    } = GzRobot::start(&part);
     let (on, stop) = (
         Arc::new(AtomicBool::new(true)),
         Arc::new(AtomicBool::new(false)),
@@ -344,53 +476,9 @@ fn gz_a_discovery_flood_does_not_hold_the_stop_and_gazebo_stays_bound() {
     let ours = sniff_driver_process(&part, "/model/robot1/cmd_vel");
     let _memory = MEMORY.lock().unwrap_or_else(|e| e.into_inner());
     let rss0 = rss_mb();
-    // The flood: ADVERTISE of the driver's topics with a new node id each (and a
-    // new process every 8), the decoy topics it could pick, and NEW_CONNECTION
-    // registrations to our cmd_vel: about 3,000 packets a second for 8 s.
     let flooding = Arc::new(AtomicBool::new(true));
     let sent = Arc::new(AtomicUsize::new(0));
-    let flood = {
-        let (part, flooding, sent, ours) =
-            (part.clone(), flooding.clone(), sent.clone(), ours.clone());
-        std::thread::spawn(move || {
-            let h = Hostile::new(&part);
-            let mut n = 0u64;
-            while flooding.load(Ordering::SeqCst) {
-                for _ in 0..30 {
-                    n += 1;
-                    let process = uuid(0xbad0_0000_0000 + n / 8);
-                    let node = uuid(n);
-                    let addr = "tcp://127.0.0.1:1";
-                    h.advertise(
-                        &process,
-                        &node,
-                        "/model/robot1/odometry",
-                        addr,
-                        "ignition.msgs.Odometry",
-                    );
-                    h.advertise(&process, &node, "/lidar", addr, "ignition.msgs.LaserScan");
-                    h.advertise(
-                        &process,
-                        &node,
-                        &format!("/decoy{n}/lidar"),
-                        addr,
-                        "ignition.msgs.LaserScan",
-                    );
-                    if let Some(o) = &ours {
-                        let t = h.fq("/model/robot1/cmd_vel");
-                        h.send(&discovery(
-                            NEW_CONNECTION,
-                            &process,
-                            None,
-                            Some((&t, addr, &node, o, "ignition.msgs.Twist")),
-                        ));
-                    }
-                    sent.fetch_add(4, Ordering::SeqCst);
-                }
-                std::thread::sleep(Duration::from_millis(10));
-            }
-        })
-    };
+    let flood = flood(part.clone(), ours.clone(), flooding.clone(), sent.clone());
     let t0 = Instant::now();
     std::thread::sleep(Duration::from_secs(2));
     assert_stop_arrives(&on, &log, "during the flood");
@@ -420,13 +508,7 @@ fn gz_a_discovery_flood_does_not_hold_the_stop_and_gazebo_stays_bound() {
     eventually("odometry and scans after the flood", || {
         enc.read().clock > e + 5 && laser.read().clock > l + 3 && enc.stale().is_none()
     });
-    // The real room's scan: the wall ahead at x = 5 m from where the robot is.
-    let ahead = laser.read().readings[90] as f32;
-    let x = enc.read().x;
-    assert!(
-        (ahead - (5000.0 - x)).abs() < 600.0,
-        "ahead {ahead} mm at x = {x} mm"
-    );
+    assert_wall_ahead(&laser, &enc);
     stop.store(true, Ordering::SeqCst);
     rt.shutdown();
 }
@@ -474,16 +556,13 @@ fn zmtp_publisher(serve: impl Fn(TcpStream) + Send + Sync + 'static) -> (u16, Ar
     (port, accepted)
 }
 
-/// One ZMTP frame.
+/// One ZMTP 3.0 frame (rfc.zeromq.org/spec/23 §2.3: a flags byte with MORE in
+/// bit 0 and LONG in bit 1, then the size in one byte, or eight big-endian).
 fn zframe(out: &mut Vec<u8>, more: bool, data: &[u8]) {
-    let m = more as u8;
-    if data.len() < 256 {
-        out.push(m);
-        out.push(data.len() as u8);
-    } else {
-        out.push(m | 2);
-        out.extend_from_slice(&(data.len() as u64).to_be_bytes());
-    }
+    let size = (data.len() as u64).to_be_bytes();
+    let long = data.len() > 255;
+    out.push(u8::from(more) | (u8::from(long) << 1));
+    out.extend_from_slice(if long { &size } else { &size[7..] });
     out.extend_from_slice(data);
 }
 
@@ -499,13 +578,9 @@ fn gz_message(topic: &str, addr: &str, data: &[u8], ty: &str) -> Vec<u8> {
 
 #[test]
 fn gz_decoys_silent_publishers_and_bad_addresses_do_not_hold_the_driver() {
-    if common::in_private_netns(
-        "hostile_gz_nao::gz_decoys_silent_publishers_and_bad_addresses_do_not_hold_the_driver",
-    ) == common::Netns::Done
-    {
-        return;
-    }
-    let Some(bin) = gazebo::peer_bin() else {
+    let Some(bin) =
+        peer_in_netns("gz_decoys_silent_publishers_and_bad_addresses_do_not_hold_the_driver")
+    else {
         return;
     };
     let part = gazebo::partition();
@@ -516,51 +591,27 @@ fn gz_decoys_silent_publishers_and_bad_addresses_do_not_hold_the_driver() {
         drop(s);
     });
     let stop = Arc::new(AtomicBool::new(false));
-    let decoy = {
-        let (part, stop) = (part.clone(), stop.clone());
-        std::thread::spawn(move || {
-            let h = Hostile::new(&part);
-            let p = uuid(0xdec0);
-            let addr = format!("tcp://127.0.0.1:{silent}");
-            while !stop.load(Ordering::SeqCst) {
-                h.advertise(
-                    &p,
-                    &uuid(1),
-                    "/decoy/lidar",
-                    &addr,
-                    "ignition.msgs.LaserScan",
-                );
-                // A name to resolve (never resolved: IP literals only) and a port
-                // nobody listens on, for the odometry.
-                h.advertise(
-                    &p,
-                    &uuid(2),
-                    "/model/robot1/odometry",
-                    "tcp://gazebo.invalid:5555",
-                    "ignition.msgs.Odometry",
-                );
-                h.advertise(
-                    &p,
-                    &uuid(3),
-                    "/model/robot1/odometry",
-                    "tcp://127.0.0.1:1",
-                    "ignition.msgs.Odometry",
-                );
-                h.heartbeat(&p);
-                std::thread::sleep(Duration::from_millis(200));
-            }
-        })
-    };
+    let decoy = advertiser(
+        &part,
+        0xdec0,
+        vec![
+            (1, "/decoy/lidar", format!("tcp://127.0.0.1:{silent}"), SCAN),
+            // A name to resolve (never resolved: IP literals only) and a port
+            // nobody listens on, for the odometry.
+            (2, ODOM, "tcp://gazebo.invalid:5555".into(), ODOMETRY),
+            (3, ODOM, "tcp://127.0.0.1:1".into(), ODOMETRY),
+        ],
+        Duration::from_millis(200),
+        stop.clone(),
+    );
     std::thread::sleep(Duration::from_millis(800));
     let log = TwistLog::start(&bin, &part, "/model/robot1/cmd_vel");
-    let rt = start_conf(&format!(
-        "{}provides encoders robot1\nprovides motors robot1\nprovides laser lidar\n\
-         motors_timeout {MOTORS_TIMEOUT}\ncycle {CYCLE}\nend_driver\nload_driver gazebo\n",
-        gazebo::head(&part, "gazebo")
-    ));
-    let enc = rt.interfaces.get::<Encoders>("encoders").unwrap();
-    let laser = rt.interfaces.get::<Laser>("laser").unwrap();
-    let motors = rt.interfaces.get::<Motors>("motors").unwrap();
+    let GzRobot {
+        rt,
+        enc,
+        laser,
+        motors,
+    } = GzRobot::start(&part);
     // The decoy alone: a publisher with no data is marked stale, not kept.
     std::thread::sleep(Duration::from_secs(5));
     assert!(
@@ -581,13 +632,7 @@ fn gz_decoys_silent_publishers_and_bad_addresses_do_not_hold_the_driver() {
         enc.stale(),
         motors.stale()
     );
-    // The real /lidar: the wall ahead at x = 5 m from where the robot is.
-    let ahead = laser.read().readings[90] as f32;
-    let x = enc.read().x;
-    assert!(
-        (ahead - (5000.0 - x)).abs() < 600.0,
-        "ahead {ahead} mm at x = {x} mm"
-    );
+    assert_wall_ahead(&laser, &enc);
     eventually("our twist at the robot", || log.seen("twist 0.3000 0.0000"));
     assert_stop_arrives(&on, &log, "with the decoys about");
     stop.store(true, Ordering::SeqCst);
@@ -604,16 +649,12 @@ fn gz_decoys_silent_publishers_and_bad_addresses_do_not_hold_the_driver() {
 
 #[test]
 fn gz_unfinished_more_frames_are_capped_per_message_and_gazebo_is_bound_after() {
-    if common::in_private_netns(
-        "hostile_gz_nao::gz_unfinished_more_frames_are_capped_per_message_and_gazebo_is_bound_after",
-    ) == common::Netns::Done
-    {
-        return;
-    }
-    let _alone = common::memory_alone();
-    let Some(bin) = gazebo::peer_bin() else {
+    let Some(bin) =
+        peer_in_netns("gz_unfinished_more_frames_are_capped_per_message_and_gazebo_is_bound_after")
+    else {
         return;
     };
+    let _alone = common::memory_alone();
     let part = gazebo::partition();
     // The hostile publisher of /lidar: MORE frames of 16 MiB that never end.
     let (port, accepted) = zmtp_publisher(|mut s| {
@@ -628,24 +669,14 @@ fn gz_unfinished_more_frames_are_capped_per_message_and_gazebo_is_bound_after() 
         std::thread::sleep(Duration::from_secs(60));
     });
     let stop = Arc::new(AtomicBool::new(false));
-    let hostile = {
-        let (part, stop) = (part.clone(), stop.clone());
-        std::thread::spawn(move || {
-            let h = Hostile::new(&part);
-            let p = uuid(0xf00d);
-            while !stop.load(Ordering::SeqCst) {
-                h.advertise(
-                    &p,
-                    &uuid(9),
-                    "/lidar",
-                    &format!("tcp://127.0.0.1:{port}"),
-                    "ignition.msgs.LaserScan",
-                );
-                h.heartbeat(&p);
-                std::thread::sleep(Duration::from_millis(300));
-            }
-        })
-    };
+    let addr = format!("tcp://127.0.0.1:{port}");
+    let hostile = advertiser(
+        &part,
+        0xf00d,
+        vec![(9, "/lidar", addr, SCAN)],
+        Duration::from_millis(300),
+        stop.clone(),
+    );
     std::thread::sleep(Duration::from_millis(700));
     let conf = format!(
         "{}provides laser lidar\nend_driver\nload_driver gazebo\n",
@@ -714,20 +745,14 @@ fn image(w: u64, h: u64, data: &[u8]) -> Vec<u8> {
     m
 }
 
-#[test]
-fn gz_absurd_values_are_refused_and_never_reach_an_interface() {
-    if common::in_private_netns(
-        "hostile_gz_nao::gz_absurd_values_are_refused_and_never_reach_an_interface",
-    ) == common::Netns::Done
-    {
-        return;
-    }
-    let part = gazebo::partition();
+/// A publisher of /lidar, the odometry and /camera that sends absurd values
+/// (twice, in case the subscription is not in yet), then good ones; its port.
+fn absurd_then_good_publisher(part: &str) -> u16 {
     let lidar = format!("@/{part}@/lidar");
     let odom = format!("@/{part}@/model/robot1/odometry");
     let cam = format!("@/{part}@/camera");
     let (l2, o2, c2) = (lidar.clone(), odom.clone(), cam.clone());
-    let (port, _) = zmtp_publisher(move |mut s| {
+    zmtp_publisher(move |mut s| {
         let me = "tcp://127.0.0.1:1";
         let rays = vec![1.0; 360];
         let step = std::f64::consts::TAU / 360.0;
@@ -783,29 +808,27 @@ fn gz_absurd_values_are_refused_and_never_reach_an_interface() {
             }
             std::thread::sleep(Duration::from_millis(100));
         }
-    });
+    })
+    .0
+}
+
+#[test]
+fn gz_absurd_values_are_refused_and_never_reach_an_interface() {
+    if launched_in_netns("gz_absurd_values_are_refused_and_never_reach_an_interface") {
+        return;
+    }
+    let part = gazebo::partition();
+    let port = absurd_then_good_publisher(&part);
     let stop = Arc::new(AtomicBool::new(false));
-    let hostile = {
-        let (part, stop) = (part.clone(), stop.clone());
-        std::thread::spawn(move || {
-            let h = Hostile::new(&part);
-            let p = uuid(0xabad);
-            let addr = format!("tcp://127.0.0.1:{port}");
-            while !stop.load(Ordering::SeqCst) {
-                h.advertise(&p, &uuid(1), "/lidar", &addr, "ignition.msgs.LaserScan");
-                h.advertise(
-                    &p,
-                    &uuid(1),
-                    "/model/robot1/odometry",
-                    &addr,
-                    "ignition.msgs.Odometry",
-                );
-                h.advertise(&p, &uuid(1), "/camera", &addr, "ignition.msgs.Image");
-                h.heartbeat(&p);
-                std::thread::sleep(Duration::from_millis(300));
-            }
-        })
-    };
+    let addr = format!("tcp://127.0.0.1:{port}");
+    let ads = [("/lidar", SCAN), (ODOM, ODOMETRY), ("/camera", IMAGE)];
+    let hostile = advertiser(
+        &part,
+        0xabad,
+        ads.map(|(topic, ty)| (1, topic, addr.clone(), ty)).to_vec(),
+        Duration::from_millis(300),
+        stop.clone(),
+    );
     let rt = start_conf(&format!(
         "{}provides laser lidar\nprovides encoders robot1\nprovides varcolorA camera\n\
          end_driver\nload_driver gazebo\n",
@@ -918,151 +941,174 @@ struct FakeNao {
     log: Arc<Mutex<Vec<String>>>,
 }
 
+/// What the fake NAOqi serves each connection from.
+struct NaoState {
+    endpoints: Vec<String>,
+    /// The error `service` answers, when it is asked to.
+    error: Option<Vec<u8>>,
+    trickle: Arc<AtomicBool>,
+    log: Arc<Mutex<Vec<String>>>,
+}
+
 fn fake_naoqi(endpoints: Vec<String>, error_bytes: usize) -> FakeNao {
-    fn msg(id: u32, ty: u8, svc: u32, act: u32, p: &[u8]) -> Vec<u8> {
-        let mut b = vec![0x42, 0xde, 0xad, 0x42];
-        b.extend_from_slice(&id.to_le_bytes());
-        b.extend_from_slice(&(p.len() as u32).to_le_bytes());
-        b.extend_from_slice(&0u16.to_le_bytes());
-        b.push(ty);
-        b.push(0);
-        for x in [svc, 1, act] {
-            b.extend_from_slice(&x.to_le_bytes());
-        }
-        b.extend_from_slice(p);
-        b
-    }
-    fn s(out: &mut Vec<u8>, t: &str) {
-        out.extend_from_slice(&(t.len() as u32).to_le_bytes());
-        out.extend_from_slice(t.as_bytes());
-    }
-    fn u(out: &mut Vec<u8>, x: u32) {
-        out.extend_from_slice(&x.to_le_bytes());
-    }
-    /// A MetaObject of `methods` (uid, return, name, parameters).
-    fn meta(methods: &[(u32, &str, &str, &str)]) -> Vec<u8> {
-        let mut out = Vec::new();
-        u(&mut out, methods.len() as u32);
-        for (uid, ret, name, params) in methods {
-            u(&mut out, *uid);
-            u(&mut out, *uid);
-            s(&mut out, ret);
-            s(&mut out, name);
-            s(&mut out, params);
-            s(&mut out, "");
-            u(&mut out, 0);
-            s(&mut out, "");
-        }
-        u(&mut out, 0);
-        u(&mut out, 0);
-        s(&mut out, "");
-        out
-    }
     let l = TcpListener::bind("127.0.0.1:0").unwrap();
     let port = l.local_addr().unwrap().port();
-    let endpoints = Arc::new(endpoints);
-    let error = Arc::new({
+    let error = (error_bytes > 0).then(|| {
         let mut out = Vec::new();
-        s(&mut out, "s");
-        s(&mut out, &"x".repeat(error_bytes));
+        qi_str(&mut out, "s");
+        qi_str(&mut out, &"x".repeat(error_bytes));
         out
     });
-    let trickle = Arc::new(AtomicBool::new(false));
-    let log = Arc::new(Mutex::new(Vec::new()));
-    let (t, lg) = (trickle.clone(), log.clone());
+    let state = Arc::new(NaoState {
+        endpoints,
+        error,
+        trickle: Arc::new(AtomicBool::new(false)),
+        log: Arc::new(Mutex::new(Vec::new())),
+    });
+    let (trickle, log) = (state.trickle.clone(), state.log.clone());
     std::thread::spawn(move || {
         for c in l.incoming() {
-            let Ok(mut c) = c else { continue };
-            let (endpoints, error, trickle, log) =
-                (endpoints.clone(), error.clone(), t.clone(), lg.clone());
-            std::thread::spawn(move || {
-                loop {
-                    let mut h = [0u8; 28];
-                    if c.read_exact(&mut h).is_err() {
-                        return;
-                    }
-                    let w = |i: usize| u32::from_le_bytes(h[i..i + 4].try_into().unwrap());
-                    let (id, size, svc, act) = (w(4), w(8) as usize, w(16), w(24));
-                    let mut p = vec![0u8; size];
-                    if c.read_exact(&mut p).is_err() {
-                        return;
-                    }
-                    let mut out = Vec::new();
-                    let reply = match (svc, act) {
-                        (0, 8) => {
-                            // {sm}: __qi_auth_state -> 3 (done)
-                            u(&mut out, 1);
-                            s(&mut out, "__qi_auth_state");
-                            s(&mut out, "I");
-                            u(&mut out, 3);
-                            msg(id, 2, svc, act, &out)
-                        }
-                        (1, 2) => msg(
-                            id,
-                            2,
-                            svc,
-                            act,
-                            &meta(&[(100, "(sIsI[s]s)", "service", "(s)")]),
-                        ),
-                        (7, 2) => msg(
-                            id,
-                            2,
-                            svc,
-                            act,
-                            &meta(&[
-                                (100, "v", "move", "(fff)"),
-                                (101, "v", "stopMove", "()"),
-                                (102, "[f]", "getRobotPosition", "(b)"),
-                            ]),
-                        ),
-                        (1, 100) if error_bytes > 0 => msg(id, 3, svc, act, &error),
-                        (1, 100) => {
-                            // ServiceInfo (s I s I [s] s)
-                            s(&mut out, "ALMotion");
-                            u(&mut out, 7);
-                            s(&mut out, "machine");
-                            u(&mut out, 1);
-                            u(&mut out, endpoints.len() as u32);
-                            for e in endpoints.iter() {
-                                s(&mut out, e);
-                            }
-                            s(&mut out, "session");
-                            msg(id, 2, svc, act, &out)
-                        }
-                        (7, 100) | (7, 101) => {
-                            log.lock()
-                                .unwrap()
-                                .push(if act == 100 { "move" } else { "stopMove" }.into());
-                            msg(id, 2, svc, act, &[])
-                        }
-                        (7, 102) => {
-                            u(&mut out, 3);
-                            for x in [0.25f32, 0.0, 0.0] {
-                                out.extend_from_slice(&x.to_le_bytes());
-                            }
-                            msg(id, 2, svc, act, &out)
-                        }
-                        _ => {
-                            s(&mut out, "s");
-                            s(&mut out, "no such thing");
-                            msg(id, 3, svc, act, &out)
-                        }
-                    };
-                    if trickle.load(Ordering::SeqCst) {
-                        for b in reply {
-                            std::thread::sleep(Duration::from_millis(1500));
-                            if c.write_all(&[b]).is_err() {
-                                return;
-                            }
-                        }
-                    } else if c.write_all(&reply).is_err() {
-                        return;
-                    }
-                }
-            });
+            let Ok(c) = c else { continue };
+            let state = state.clone();
+            std::thread::spawn(move || nao_connection(c, &state));
         }
     });
     FakeNao { port, trickle, log }
+}
+
+/// One client of the fake NAOqi: reads each call's header and payload and
+/// answers it (one byte every 1.5 s while `trickle` is set).
+fn nao_connection(mut c: TcpStream, state: &NaoState) {
+    loop {
+        let mut h = [0u8; 28];
+        if c.read_exact(&mut h).is_err() {
+            return;
+        }
+        let w = |i: usize| u32::from_le_bytes(h[i..i + 4].try_into().unwrap());
+        let (id, size, svc, act) = (w(4), w(8) as usize, w(16), w(24));
+        let mut p = vec![0u8; size];
+        if c.read_exact(&mut p).is_err() {
+            return;
+        }
+        let reply = nao_reply(state, id, svc, act);
+        if state.trickle.load(Ordering::SeqCst) {
+            for b in reply {
+                std::thread::sleep(Duration::from_millis(1500));
+                if c.write_all(&[b]).is_err() {
+                    return;
+                }
+            }
+        } else if c.write_all(&reply).is_err() {
+            return;
+        }
+    }
+}
+
+/// The fake NAOqi's answer to call `id` of action `act` on service `svc`.
+fn nao_reply(state: &NaoState, id: u32, svc: u32, act: u32) -> Vec<u8> {
+    let (s, u) = (qi_str, qi_u32);
+    let msg = |ty: u8, p: &[u8]| qi_msg(id, ty, svc, act, p);
+    let mut out = Vec::new();
+    match (svc, act) {
+        (0, 8) => {
+            // {sm}: __qi_auth_state -> 3 (done)
+            u(&mut out, 1);
+            s(&mut out, "__qi_auth_state");
+            s(&mut out, "I");
+            u(&mut out, 3);
+            msg(2, &out)
+        }
+        (1, 2) => msg(2, &qi_meta(&[(100, "(sIsI[s]s)", "service", "(s)")])),
+        (7, 2) => msg(
+            2,
+            &qi_meta(&[
+                (100, "v", "move", "(fff)"),
+                (101, "v", "stopMove", "()"),
+                (102, "[f]", "getRobotPosition", "(b)"),
+            ]),
+        ),
+        (1, 100) if state.error.is_some() => msg(3, state.error.as_deref().unwrap_or_default()),
+        (1, 100) => {
+            // ServiceInfo (s I s I [s] s)
+            s(&mut out, "ALMotion");
+            u(&mut out, 7);
+            s(&mut out, "machine");
+            u(&mut out, 1);
+            u(&mut out, state.endpoints.len() as u32);
+            for e in &state.endpoints {
+                s(&mut out, e);
+            }
+            s(&mut out, "session");
+            msg(2, &out)
+        }
+        (7, 100) | (7, 101) => {
+            state
+                .log
+                .lock()
+                .unwrap()
+                .push(if act == 100 { "move" } else { "stopMove" }.into());
+            msg(2, &[])
+        }
+        (7, 102) => {
+            u(&mut out, 3);
+            for x in [0.25f32, 0.0, 0.0] {
+                out.extend_from_slice(&x.to_le_bytes());
+            }
+            msg(2, &out)
+        }
+        _ => {
+            s(&mut out, "s");
+            s(&mut out, "no such thing");
+            msg(3, &out)
+        }
+    }
+}
+
+/// A libqi message: the header (magic, id, size, version, type, flags, service,
+/// object 1, action) and the payload.
+fn qi_msg(id: u32, ty: u8, svc: u32, act: u32, p: &[u8]) -> Vec<u8> {
+    let mut b = vec![0x42, 0xde, 0xad, 0x42];
+    b.extend_from_slice(&id.to_le_bytes());
+    b.extend_from_slice(&(p.len() as u32).to_le_bytes());
+    b.extend_from_slice(&0u16.to_le_bytes());
+    b.push(ty);
+    b.push(0);
+    for x in [svc, 1, act] {
+        b.extend_from_slice(&x.to_le_bytes());
+    }
+    b.extend_from_slice(p);
+    b
+}
+
+/// A libqi string: its length, then its bytes.
+fn qi_str(out: &mut Vec<u8>, t: &str) {
+    out.extend_from_slice(&(t.len() as u32).to_le_bytes());
+    out.extend_from_slice(t.as_bytes());
+}
+
+fn qi_u32(out: &mut Vec<u8>, x: u32) {
+    out.extend_from_slice(&x.to_le_bytes());
+}
+
+/// A MetaObject of `methods` (uid, return, name, parameters).
+fn qi_meta(methods: &[(u32, &str, &str, &str)]) -> Vec<u8> {
+    let (s, u) = (qi_str, qi_u32);
+    let mut out = Vec::new();
+    u(&mut out, methods.len() as u32);
+    for (uid, ret, name, params) in methods {
+        u(&mut out, *uid);
+        u(&mut out, *uid);
+        s(&mut out, ret);
+        s(&mut out, name);
+        s(&mut out, params);
+        s(&mut out, "");
+        u(&mut out, 0);
+        s(&mut out, "");
+    }
+    u(&mut out, 0);
+    u(&mut out, 0);
+    s(&mut out, "");
+    out
 }
 
 #[test]

@@ -14,14 +14,12 @@
     feature = "simulator"
 ))]
 
-use crate::common;
+use crate::common::{self, can_screenshot, quit, spawn_window};
 
 use std::{
     path::{Path, PathBuf},
     time::{Duration, Instant},
 };
-
-use common::{can_screenshot, quit, spawn_window};
 
 /// Pixels within `tol` of `c`: their count and centroid.
 fn find(img: &(usize, usize, Vec<[u8; 3]>), c: [u8; 3], tol: i32) -> (usize, [f32; 2]) {

@@ -117,14 +117,9 @@ fn closed_within(s: &mut TcpStream, secs: f64) -> bool {
 
 const PROBE_REPLY: &[u8] = b"1023 40.00 0.00 7.00\n";
 
-#[test]
-fn bad_clients_are_dropped_alone_and_memory_stays_bounded() {
-    let _alone = common::memory_alone();
-    let prev = std::panic::take_hook();
-    std::panic::set_hook(Box::new(move |i| {
-        PANICS.fetch_add(1, Ordering::Relaxed);
-        prev(i)
-    }));
+/// The server on two images, laser, encoders, motors and zoom motors, and the
+/// robot: a thread writing new values at 50 Hz until the returned flag is set.
+fn abused_server() -> (NetServer, Arc<AtomicBool>, thread::JoinHandle<()>) {
     let laser = Arc::new(Interface::<Laser>::new("laser", "robot"));
     let encoders = Arc::new(Interface::<Encoders>::new("encoders", "robot"));
     let motors = Arc::new(Interface::<Motors>::new("motors", "robot"));
@@ -151,8 +146,7 @@ fn bad_clients_are_dropped_alone_and_memory_stays_bounded() {
         max_clients: 64,
         ..Default::default()
     };
-    let mut server = NetServer::start(conf, sources).unwrap();
-    let addr = server.local_addr();
+    let server = NetServer::start(conf, sources).unwrap();
 
     // The robot: new values at 50 Hz.
     let stop = Arc::new(AtomicBool::new(false));
@@ -179,74 +173,76 @@ fn bad_clients_are_dropped_alone_and_memory_stays_bounded() {
             .unwrap()
     };
 
-    // The good client: laser pushes and frames all along.
-    let gaps = Arc::new(Mutex::new((0usize, Duration::ZERO, 0usize)));
-    let good_stop = Arc::new(AtomicBool::new(false));
-    let good = {
-        let (stop, gaps) = (good_stop.clone(), gaps.clone());
-        thread::spawn(move || {
-            let mut robot = connect(addr);
-            robot
-                .set_read_timeout(Some(Duration::from_millis(500)))
-                .unwrap();
-            robot.write_all(b"27\n").unwrap();
-            let mut cam = connect(addr);
-            cam.set_read_timeout(Some(Duration::from_secs(20))).unwrap();
-            let mut buf = vec![0u8; 1 << 16];
-            let mut last = Instant::now();
-            let mut frame = vec![0u8; 320 * 240 * 3];
-            let mut last_said = Instant::now();
-            let g_every = |t: &mut Instant| {
-                let due = t.elapsed() >= Duration::from_millis(500);
-                if due {
-                    *t = Instant::now();
-                }
-                due
-            };
-            while !stop.load(Ordering::Acquire) {
-                let n = match robot.read(&mut buf) {
-                    Ok(n) => n,
-                    Err(e) if e.kind() == ErrorKind::WouldBlock => 0,
-                    Err(e) => panic!("the good client's pushes: {e}"),
-                };
-                let mut g = gaps.lock().unwrap();
-                g.1 = g.1.max(last.elapsed());
-                if n == 0 {
-                    continue;
-                }
-                g.0 += buf[..n].windows(3).filter(|w| w == b"26 ").count();
-                last = Instant::now();
-                drop(g);
-                // Now and then it says it is still there (re-subscribing is
-                // harmless): with the table full, the client that sent nothing
-                // for longest makes room (issue 38), and this one is not idle.
-                if g_every(&mut last_said) {
-                    robot.write_all(b"27\n").unwrap();
-                }
-                // One frame per push round.
-                cam.write_all(b"1019 0\n").unwrap();
-                let mut hdr = Vec::new();
-                let mut b = [0u8; 1];
-                while b[0] != b'\n' {
-                    cam.read_exact(&mut b).expect("frames keep coming");
-                    hdr.push(b[0]);
-                }
-                assert!(
-                    hdr.starts_with(b"1020 "),
-                    "{:?}",
-                    String::from_utf8_lossy(&hdr)
-                );
-                cam.read_exact(&mut frame).unwrap();
-                gaps.lock().unwrap().2 += 1;
-            }
-        })
-    };
-    thread::sleep(Duration::from_millis(300));
-    let rss0 = rss_kib();
-    let t0 = Instant::now();
+    (server, stop, producer)
+}
 
-    // 4,000 mutated and random lines, each followed by a probe (1022) so we know
-    // whether the server went on or dropped us.
+/// Counts (laser pushes, longest gap, frames) of the good client.
+type Gaps = Arc<Mutex<(usize, Duration, usize)>>;
+
+/// The good client: laser pushes and frames all along.
+fn good_client(addr: SocketAddr, stop: Arc<AtomicBool>, gaps: Gaps) -> thread::JoinHandle<()> {
+    thread::spawn(move || {
+        let mut robot = connect(addr);
+        robot
+            .set_read_timeout(Some(Duration::from_millis(500)))
+            .unwrap();
+        robot.write_all(b"27\n").unwrap();
+        let mut cam = connect(addr);
+        cam.set_read_timeout(Some(Duration::from_secs(20))).unwrap();
+        let mut buf = vec![0u8; 1 << 16];
+        let mut last = Instant::now();
+        let mut frame = vec![0u8; 320 * 240 * 3];
+        let mut last_said = Instant::now();
+        let g_every = |t: &mut Instant| {
+            let due = t.elapsed() >= Duration::from_millis(500);
+            if due {
+                *t = Instant::now();
+            }
+            due
+        };
+        while !stop.load(Ordering::Acquire) {
+            let n = match robot.read(&mut buf) {
+                Ok(n) => n,
+                Err(e) if e.kind() == ErrorKind::WouldBlock => 0,
+                Err(e) => panic!("the good client's pushes: {e}"),
+            };
+            let mut g = gaps.lock().unwrap();
+            g.1 = g.1.max(last.elapsed());
+            if n == 0 {
+                continue;
+            }
+            g.0 += buf[..n].windows(3).filter(|w| w == b"26 ").count();
+            last = Instant::now();
+            drop(g);
+            // Now and then it says it is still there (re-subscribing is
+            // harmless): with the table full, the client that sent nothing
+            // for longest makes room (issue 38), and this one is not idle.
+            if g_every(&mut last_said) {
+                robot.write_all(b"27\n").unwrap();
+            }
+            // One frame per push round.
+            cam.write_all(b"1019 0\n").unwrap();
+            let mut hdr = Vec::new();
+            let mut b = [0u8; 1];
+            while b[0] != b'\n' {
+                cam.read_exact(&mut b).expect("frames keep coming");
+                hdr.push(b[0]);
+            }
+            assert!(
+                hdr.starts_with(b"1020 "),
+                "{:?}",
+                String::from_utf8_lossy(&hdr)
+            );
+            cam.read_exact(&mut frame).unwrap();
+            gaps.lock().unwrap().2 += 1;
+        }
+    })
+}
+
+/// 4,000 mutated and random lines, each followed by a probe (1022) so we know
+/// whether the server went on or dropped us.
+fn mutated_lines(addr: SocketAddr) {
+    let t0 = Instant::now();
     let mut rng = Rng::new(0x9e37_79b9_7f4a_7c15);
     let mut s = connect(addr);
     let (mut answered, mut dropped) = (0, 0);
@@ -285,8 +281,10 @@ fn bad_clients_are_dropped_alone_and_memory_stays_bounded() {
         t0.elapsed().as_secs_f64()
     );
     assert!(answered > 100 && dropped > 100, "{answered} / {dropped}");
+}
 
-    // Partial lines, huge lines, silent clients: each dropped within the timeout.
+/// Partial lines, huge lines, silent clients: each dropped within the timeout.
+fn partial_huge_and_silent_clients(addr: SocketAddr) {
     let mut partial: Vec<TcpStream> = (0..5)
         .map(|_| {
             let mut s = connect(addr);
@@ -304,12 +302,10 @@ fn bad_clients_are_dropped_alone_and_memory_stays_bounded() {
     {
         assert!(closed_within(s, 5.0), "a bad client was not dropped");
     }
+}
 
-    eprintln!(
-        "partial/huge/silent done at {:.1} s",
-        t0.elapsed().as_secs_f64()
-    );
-    // Too many clients: the extra ones get a 1027 line and are closed.
+/// Too many clients: the extra ones get a 1027 line and are closed.
+fn too_many_clients(addr: SocketAddr) {
     let crowd: Vec<TcpStream> = (0..70).map(|_| connect(addr)).collect();
     let mut refused = 0;
     thread::sleep(Duration::from_millis(200));
@@ -323,9 +319,11 @@ fn bad_clients_are_dropped_alone_and_memory_stays_bounded() {
         }
     }
     assert!(refused >= 6, "only {refused} refused beyond max_clients");
+}
 
-    eprintln!("crowd done at {:.1} s", t0.elapsed().as_secs_f64());
-    // 1,000 connect/disconnect cycles (half never say their name).
+/// 1,000 connect/disconnect cycles (half never say their name); gives the slowest
+/// connect and the count of accepted clients before them.
+fn connect_disconnect_cycles(server: &NetServer, addr: SocketAddr) -> (Duration, u64) {
     let mut slowest = Duration::ZERO;
     let accepted0 = server.stats().accepted.load(Ordering::Acquire);
     for k in 0..1000 {
@@ -345,17 +343,11 @@ fn bad_clients_are_dropped_alone_and_memory_stays_bounded() {
             });
         }
     }
+    (slowest, accepted0)
+}
 
-    eprintln!(
-        "cycles done at {:.1} s (slowest connect {slowest:?}); good client so far {:?}",
-        t0.elapsed().as_secs_f64(),
-        gaps.lock().unwrap()
-    );
-    common::eventually("the cycled clients accepted and gone", || {
-        server.stats().accepted.load(Ordering::Acquire) >= accepted0 + 1000
-            && server.stats().clients.load(Ordering::Acquire) <= 4
-    });
-    // A client that asks for big frames and stops reading mid-image.
+/// A client that asks for big frames and stops reading mid-image.
+fn stuck_reader(addr: SocketAddr) {
     let mut stuck = connect(addr);
     stuck
         .write_all(b"1019 1\n1019 1\n1019 1\n1019 1\n")
@@ -367,6 +359,43 @@ fn bad_clients_are_dropped_alone_and_memory_stays_bounded() {
         closed_within(&mut stuck, 5.0),
         "the stuck reader was not dropped"
     );
+}
+
+#[test]
+fn bad_clients_are_dropped_alone_and_memory_stays_bounded() {
+    let _alone = common::memory_alone();
+    let prev = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |i| {
+        PANICS.fetch_add(1, Ordering::Relaxed);
+        prev(i)
+    }));
+    let (mut server, stop, producer) = abused_server();
+    let addr = server.local_addr();
+    let gaps = Arc::new(Mutex::new((0usize, Duration::ZERO, 0usize)));
+    let good_stop = Arc::new(AtomicBool::new(false));
+    let good = good_client(addr, good_stop.clone(), gaps.clone());
+    thread::sleep(Duration::from_millis(300));
+    let rss0 = rss_kib();
+    let t0 = Instant::now();
+    mutated_lines(addr);
+    partial_huge_and_silent_clients(addr);
+    eprintln!(
+        "partial/huge/silent done at {:.1} s",
+        t0.elapsed().as_secs_f64()
+    );
+    too_many_clients(addr);
+    eprintln!("crowd done at {:.1} s", t0.elapsed().as_secs_f64());
+    let (slowest, accepted0) = connect_disconnect_cycles(&server, addr);
+    eprintln!(
+        "cycles done at {:.1} s (slowest connect {slowest:?}); good client so far {:?}",
+        t0.elapsed().as_secs_f64(),
+        gaps.lock().unwrap()
+    );
+    common::eventually("the cycled clients accepted and gone", || {
+        server.stats().accepted.load(Ordering::Acquire) >= accepted0 + 1000
+            && server.stats().clients.load(Ordering::Acquire) <= 4
+    });
+    stuck_reader(addr);
 
     // Let the server reap, then compare.
     common::eventually("dropped clients gone", || {

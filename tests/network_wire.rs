@@ -116,13 +116,8 @@ const IMU: Imu = Imu {
     az: 9.81,
 };
 
-#[test]
-fn a_4_3_client_gets_every_message_kind_from_our_server() {
-    let (rt, addr) = served("");
-    assert!(addr.ip().is_loopback(), "bound to {addr}, not loopback");
-    publish_all(&rt, 1);
-
-    // Images: one connection per camera, each query answered with a new frame.
+/// Images: one connection per camera, each query answered with a new frame.
+fn gets_images(rt: &Runtime, addr: SocketAddr) {
     let mut cam = Client43::connect(addr, None);
     let (h, px) = cam.image(0);
     assert_eq!(&h[2..], ["0", "320", "240", "3"], "{h:?}");
@@ -133,7 +128,7 @@ fn a_4_3_client_gets_every_message_kind_from_our_server() {
     let clock0: u64 = h[1].parse().unwrap();
     cam.send("1019 0");
     std::thread::sleep(Duration::from_millis(50));
-    publish_all(&rt, 2);
+    publish_all(rt, 2);
     let (h2, px2) = cam.read_image();
     assert!(
         h2[1].parse::<u64>().unwrap() > clock0,
@@ -146,9 +141,10 @@ fn a_4_3_client_gets_every_message_kind_from_our_server() {
     assert_eq!(px.len(), 640 * 480 * 3);
     var.send("1000");
     assert!(var.closed_within(5), "1000 (goodbye images) closes");
+}
 
-    // Subscriptions: pushes in 4.3's formats.
-    let mut robot = Client43::connect(addr, None);
+/// Subscriptions: pushes in 4.3's formats.
+fn gets_pushes(robot: &mut Client43) {
     for s in ["27", "11", "2", "1001", "1025", "2001"] {
         robot.send(s);
     }
@@ -184,8 +180,10 @@ fn a_4_3_client_gets_every_message_kind_from_our_server() {
             "9.81"
         ]
     );
+}
 
-    // Commands.
+/// Commands reach the interfaces.
+fn commands_arrive(rt: &Runtime, robot: &mut Client43) {
     robot.send("22 150.0 0.0");
     robot.send("23 -10.5 0.0");
     robot.send("1006 20.0 -10.0 30.0 40.0");
@@ -219,12 +217,14 @@ fn a_4_3_client_gets_every_message_kind_from_our_server() {
     assert_eq!((zm.zoom, zm.zoom_speed), (5.0, 1.0));
     // The subscriptions resumed the served interfaces (a simulator computes them).
     assert!(rt.interfaces.get_any("laser").unwrap().users() >= 1);
+}
 
-    // Unsubscribe: no more laser lines once what was in flight is read.
+/// Unsubscribe: no more laser lines once what was in flight is read.
+fn unsubscribe_stops_the_laser(rt: &Runtime, robot: &mut Client43) {
     robot.send("28");
     robot.send("1004");
     robot.expect("1005");
-    publish_all(&rt, 3);
+    publish_all(rt, 3);
     robot.send("1022");
     let mut saw_laser = false;
     loop {
@@ -244,9 +244,23 @@ fn a_4_3_client_gets_every_message_kind_from_our_server() {
         }
     }
     let _ = saw_laser;
+}
+
+#[test]
+fn a_4_3_client_gets_every_message_kind_from_our_server() {
+    let (rt, addr) = served("");
+    assert!(addr.ip().is_loopback(), "bound to {addr}, not loopback");
+    publish_all(&rt, 1);
+
+    gets_images(&rt, addr);
+    let mut robot = Client43::connect(addr, None);
+    gets_pushes(&mut robot);
+    commands_arrive(&rt, &mut robot);
+    unsubscribe_stops_the_laser(&rt, &mut robot);
     // Goodbye: the server closes, the motors the client drove go to zero.
     robot.send("0");
     assert!(robot.closed_within(5), "0 (goodbye) closes");
+    let m = rt.interfaces.get::<Motors>("motors").unwrap();
     eventually("motors zeroed after the driving client left", || {
         m.read().value == Motors::default()
     });

@@ -9,11 +9,10 @@
     feature = "introrob"
 ))]
 
-use crate::common;
+use crate::common::world_path;
 
 use std::{path::Path, process::Command};
 
-use common::world_path;
 use jderobot::{
     interfaces::Motors,
     mcapfmt::{self, Recorded, Summary},

@@ -28,18 +28,14 @@
 #![allow(dead_code)]
 
 use std::{
-    path::{Path, PathBuf},
-    sync::{
-        Arc,
-        atomic::{AtomicBool, Ordering},
-    },
+    path::Path,
+    sync::atomic::{AtomicBool, Ordering},
     time::{Duration, Instant},
 };
 
 use parking_lot::Mutex;
 
-use super::room::{Cable, read_fd, write_fd};
-use super::room::{ROBOT_RADIUS, Shared, wrap};
+use super::room::{Device, ROBOT_RADIUS, Shared, read_fd, wrap, write_fd};
 
 pub const WHEEL_BASE: f64 = 235.0;
 pub const COUNTS_PER_MM: f64 = 508.8 / (std::f64::consts::PI * 72.0);
@@ -94,18 +90,16 @@ pub struct State {
     pub last_drive: Option<(Instant, (i16, i16))>,
 }
 
-pub struct Create2 {
-    pub link: PathBuf,
-    pub state: Arc<Mutex<State>>,
-    pub room: Shared,
-    cable: Option<Cable>,
-}
+/// The robot on its serial cable.
+pub type Create2 = Device<State>;
 
 impl Create2 {
     /// The robot on a pty reached through `link` (a symlink), in `room`. Its
-    /// encoders start near the 16-bit roll-over, so the driver meets it.
+    /// encoders start near the 16-bit roll-over, so the driver meets it. When
+    /// plugged in again it keeps its state (and, as a real one, its last Drive
+    /// Direct).
     pub fn start(link: &Path, room: Shared) -> Create2 {
-        let state = Arc::new(Mutex::new(State {
+        let state = State {
             mode: 0,
             wheels: (0, 0),
             stream: Vec::new(),
@@ -116,30 +110,8 @@ impl Create2 {
             faults: Faults::default(),
             frames: 0,
             last_drive: None,
-        }));
-        let mut c = Create2 {
-            link: link.to_path_buf(),
-            state,
-            room,
-            cable: None,
         };
-        c.plug();
-        c
-    }
-
-    /// (Re)connects the cable: a new pty at the link. The robot keeps its state
-    /// (and, as a real one, its last Drive Direct).
-    pub fn plug(&mut self) {
-        self.cable = None;
-        let (st, room) = (self.state.clone(), self.room.clone());
-        self.cable = Some(Cable::plug(&self.link, move |pty, stop| {
-            serve(pty, &st, &room, stop)
-        }));
-    }
-
-    /// Pulls the cable: the pty closes and its path disappears.
-    pub fn unplug(&mut self) {
-        self.cable = None;
+        Device::new(link, room, state, serve)
     }
 
     pub fn faults(&self, f: impl FnOnce(&mut Faults)) {

@@ -139,109 +139,98 @@ fn serve(
     let mut next = Instant::now();
     let mut buf = String::new();
     while !stop.load(Ordering::Acquire) {
-        match inp.read_line(&mut buf) {
-            Ok(0) => return,
-            Ok(_) if buf.ends_with('\n') => {
+        if let Ok(n) = inp.read_line(&mut buf) {
+            if n == 0 {
+                return;
+            }
+            if buf.ends_with('\n') {
                 let l = buf.trim_end().to_string();
                 buf.clear();
                 lines.lock().unwrap().push(l.clone());
                 let f: Vec<&str> = l.split(' ').collect();
                 let c = clock.fetch_add(1, Ordering::AcqRel);
-                let r = match f[0] {
-                    "0" | "1000" => {
-                        let _ = out.shutdown(Shutdown::Both);
-                        return;
-                    }
-                    "27" => {
-                        subs.push("laser");
-                        Ok(())
-                    }
-                    "28" => {
-                        subs.retain(|x| *x != "laser");
-                        Ok(())
-                    }
-                    "11" => {
-                        subs.push("encoders");
-                        Ok(())
-                    }
-                    "12" => {
-                        subs.retain(|x| *x != "encoders");
-                        Ok(())
-                    }
-                    "2" => {
-                        subs.push("sonars");
-                        Ok(())
-                    }
-                    "3" => {
-                        subs.retain(|x| *x != "sonars");
-                        Ok(())
-                    }
-                    "1001" => {
-                        subs.push("pantilt");
-                        Ok(())
-                    }
-                    "1002" => {
-                        subs.retain(|x| *x != "pantilt");
-                        Ok(())
-                    }
-                    "1025" => {
-                        subs.push("zoom");
-                        Ok(())
-                    }
-                    "1026" => {
-                        subs.retain(|x| *x != "zoom");
-                        Ok(())
-                    }
-                    "1004" => out.write_all(b"1005 159.13 30.00 -159.13 -46.00 205.89 205.89\n"),
-                    "1022" => out.write_all(b"1023 40.00 0.00 7.00\n"),
-                    "1019" => {
-                        let cam: usize = f[1].parse().unwrap();
-                        let (w, h) = robot.sizes[cam];
-                        let mut msg = format!("1020 {c} {cam} {w} {h} 3\n").into_bytes();
-                        // Pixel i of frame c: (i + c) mod 251.
-                        msg.extend((0..w * h * 3).map(|i| ((i as u64 + c) % 251) as u8));
-                        out.write_all(&msg)
-                    }
-                    _ => Ok(()),
-                };
-                if r.is_err() {
+                if !matches!(request(&f, c, &robot, &mut subs, &mut out), Ok(true)) {
                     return;
                 }
             }
-            Ok(_) => {}
-            Err(_) => {}
         }
         if Instant::now() >= next {
             next += Duration::from_millis(33);
             let c = clock.fetch_add(1, Ordering::AcqRel);
-            let mut msg = String::new();
-            for d in &subs {
-                match *d {
-                    "laser" => {
-                        msg += &format!("26 {c}");
-                        for i in 0..robot.laser_number {
-                            msg += &format!(" {}", 1000 + i);
-                        }
-                        msg += "\n";
-                    }
-                    "encoders" => {
-                        msg += &format!("10 {c} {:.1} {:.1} {:.5} {c}\n", 1500.0, -250.0, 90.0)
-                    }
-                    "sonars" => {
-                        msg += &format!("1 {c}");
-                        for i in 0..robot.sonars_number {
-                            msg += &format!(" {i} {:.1}", 300.0 + i as f64);
-                        }
-                        msg += "\n";
-                    }
-                    "pantilt" => msg += &format!("1003 {c} {:.1} {:.1}\n", 12.5, -7.5),
-                    "zoom" => msg += &format!("1021 {c} {:.1}\n", 3.0),
-                    _ => {}
-                }
-            }
-            if out.write_all(msg.as_bytes()).is_err() {
+            if out.write_all(pushes(&subs, c, &robot).as_bytes()).is_err() {
                 return;
             }
         }
     }
+}
+
+/// 4.3's subscribe and unsubscribe codes of each pushed device.
+const SUBSCRIPTIONS: [(&str, &str, &str); 5] = [
+    ("27", "28", "laser"),
+    ("11", "12", "encoders"),
+    ("2", "3", "sonars"),
+    ("1001", "1002", "pantilt"),
+    ("1025", "1026", "zoom"),
+];
+
+/// Answers one request line `f` at clock `c`; false once the client said goodbye.
+fn request(
+    f: &[&str],
+    c: u64,
+    robot: &Robot43,
+    subs: &mut Vec<&'static str>,
+    out: &mut TcpStream,
+) -> std::io::Result<bool> {
+    if let Some(&(_, _, d)) = SUBSCRIPTIONS.iter().find(|s| s.0 == f[0]) {
+        subs.push(d);
+    } else if let Some(&(_, _, d)) = SUBSCRIPTIONS.iter().find(|s| s.1 == f[0]) {
+        subs.retain(|x| *x != d);
+    } else {
+        match f[0] {
+            "0" | "1000" => {
+                let _ = out.shutdown(Shutdown::Both);
+                return Ok(false);
+            }
+            "1004" => out.write_all(b"1005 159.13 30.00 -159.13 -46.00 205.89 205.89\n")?,
+            "1022" => out.write_all(b"1023 40.00 0.00 7.00\n")?,
+            "1019" => {
+                let cam: usize = f[1].parse().unwrap();
+                let (w, h) = robot.sizes[cam];
+                let mut msg = format!("1020 {c} {cam} {w} {h} 3\n").into_bytes();
+                // Pixel i of frame c: (i + c) mod 251.
+                msg.extend((0..w * h * 3).map(|i| ((i as u64 + c) % 251) as u8));
+                out.write_all(&msg)?
+            }
+            _ => {}
+        }
+    }
+    Ok(true)
+}
+
+/// The lines pushed at clock `c` for the subscribed devices, in 4.3's formats.
+fn pushes(subs: &[&str], c: u64, robot: &Robot43) -> String {
+    let mut msg = String::new();
+    for d in subs {
+        match *d {
+            "laser" => {
+                msg += &format!("26 {c}");
+                for i in 0..robot.laser_number {
+                    msg += &format!(" {}", 1000 + i);
+                }
+                msg += "\n";
+            }
+            "encoders" => msg += &format!("10 {c} {:.1} {:.1} {:.5} {c}\n", 1500.0, -250.0, 90.0),
+            "sonars" => {
+                msg += &format!("1 {c}");
+                for i in 0..robot.sonars_number {
+                    msg += &format!(" {i} {:.1}", 300.0 + i as f64);
+                }
+                msg += "\n";
+            }
+            "pantilt" => msg += &format!("1003 {c} {:.1} {:.1}\n", 12.5, -7.5),
+            "zoom" => msg += &format!("1021 {c} {:.1}\n", 3.0),
+            _ => {}
+        }
+    }
+    msg
 }

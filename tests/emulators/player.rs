@@ -28,13 +28,22 @@ use std::{
     time::{Duration, Instant},
 };
 
+// The interface codes of the devices served (player.h, PLAYER_*_CODE).
+/// PLAYER_POSITION2D_CODE
 pub const POSITION2D: u32 = 4;
+/// PLAYER_SONAR_CODE
 pub const SONAR: u32 = 5;
+/// PLAYER_LASER_CODE
 pub const LASER: u32 = 6;
+/// PLAYER_BLOBFINDER_CODE
 pub const BLOBFINDER: u32 = 7;
+/// PLAYER_PTZ_CODE
 pub const PTZ: u32 = 8;
+/// PLAYER_BUMPER_CODE
 pub const BUMPER: u32 = 14;
+/// PLAYER_CAMERA_CODE
 pub const CAMERA: u32 = 40;
+/// PLAYER_RANGER_CODE
 pub const RANGER: u32 = 62;
 
 /// What the robot and its world are.
@@ -473,38 +482,22 @@ fn serve(s: &Shared, mut stream: TcpStream, port: u16) -> std::io::Result<()> {
             let payload = buf[40..40 + size].to_vec();
             buf.drain(..40 + size);
             if !s.faults.stall.load(Ordering::Acquire) {
-                for out in handle(
-                    s, &mut c, port, interf, index, mtype, subtype, seq, &payload,
-                ) {
+                let r = Request {
+                    port,
+                    interf,
+                    index,
+                    mtype,
+                    subtype,
+                    seq,
+                    time: s.world.lock().unwrap().time,
+                    p: &payload,
+                };
+                for out in handle(s, &mut c, &r) {
                     stream.write_all(&out)?;
                 }
             }
         }
-        let g = s.faults.garbage.swap(0, Ordering::AcqRel);
-        if g > 0 {
-            let mut x: u32 = 0x1234_5678;
-            let junk: Vec<u8> = (0..g)
-                .map(|_| {
-                    x ^= x << 13;
-                    x ^= x >> 17;
-                    x ^= x << 5;
-                    x as u8
-                })
-                .collect();
-            stream.write_all(&junk)?;
-        }
-        if s.faults.oversized.swap(false, Ordering::AcqRel) {
-            let mut m = server_msg(port, LASER, 0, 1, 1, 0.0, 0, &[]);
-            m[36..40].copy_from_slice(&0x7fff_fff0u32.to_be_bytes());
-            stream.write_all(&m)?;
-        }
-        if s.faults.bad_count.swap(false, Ordering::AcqRel) {
-            // A scan that claims a million ranges in a 60-byte payload.
-            let mut p = scan_payload(&[1.0; 4]);
-            p[16..20].copy_from_slice(&1_000_000u32.to_be_bytes());
-            p[20..24].copy_from_slice(&1_000_000u32.to_be_bytes());
-            stream.write_all(&server_msg(port, LASER, 0, 1, 1, 0.0, 0, &p))?;
-        }
+        send_faults(s, &mut stream, port)?;
         let now = Instant::now();
         if now >= next_data {
             let period = *s.period.lock().unwrap();
@@ -536,152 +529,220 @@ fn serve(s: &Shared, mut stream: TcpStream, port: u16) -> std::io::Result<()> {
     result
 }
 
+/// The faults asked for since the last call: garbage bytes, an oversized
+/// header, a scan with an absurd count.
+fn send_faults(s: &Shared, stream: &mut TcpStream, port: u16) -> std::io::Result<()> {
+    let g = s.faults.garbage.swap(0, Ordering::AcqRel);
+    if g > 0 {
+        let mut x: u32 = 0x1234_5678;
+        let junk: Vec<u8> = (0..g)
+            .map(|_| {
+                x ^= x << 13;
+                x ^= x >> 17;
+                x ^= x << 5;
+                x as u8
+            })
+            .collect();
+        stream.write_all(&junk)?;
+    }
+    if s.faults.oversized.swap(false, Ordering::AcqRel) {
+        let mut m = server_msg(port, LASER, 0, 1, 1, 0.0, 0, &[]);
+        m[36..40].copy_from_slice(&0x7fff_fff0u32.to_be_bytes());
+        stream.write_all(&m)?;
+    }
+    if s.faults.bad_count.swap(false, Ordering::AcqRel) {
+        // A scan that claims a million ranges in a 60-byte payload.
+        let mut p = scan_payload(&[1.0; 4]);
+        p[16..20].copy_from_slice(&1_000_000u32.to_be_bytes());
+        p[20..24].copy_from_slice(&1_000_000u32.to_be_bytes());
+        stream.write_all(&server_msg(port, LASER, 0, 1, 1, 0.0, 0, &p))?;
+    }
+    Ok(())
+}
+
 fn has(s: &Shared, interf: u32, index: u32) -> bool {
     s.devices.lock().unwrap().contains(&(interf, index))
 }
 
-#[allow(clippy::too_many_arguments)]
-fn handle(
-    s: &Shared,
-    c: &mut Client,
+/// One message from a client: its header's fields, its payload and the world's
+/// time; it makes the replies addressed back to it.
+struct Request<'a> {
     port: u16,
     interf: u32,
     index: u32,
     mtype: u32,
     subtype: u32,
     seq: u32,
-    p: &[u8],
-) -> Vec<Vec<u8>> {
-    let time = s.world.lock().unwrap().time;
-    let ack = |payload: &[u8]| server_msg(port, interf, index, 4, subtype, time, seq, payload);
-    let nack = || server_msg(port, interf, index, 6, subtype, time, seq, &[]);
-    let be = |i: usize| -> u32 {
-        p.get(i..i + 4)
+    time: f64,
+    p: &'a [u8],
+}
+
+impl Request<'_> {
+    fn ack(&self, payload: &[u8]) -> Vec<u8> {
+        let (port, interf, index, subtype) = (self.port, self.interf, self.index, self.subtype);
+        server_msg(
+            port, interf, index, 4, subtype, self.time, self.seq, payload,
+        )
+    }
+
+    fn nack(&self) -> Vec<u8> {
+        let (port, interf, index, subtype) = (self.port, self.interf, self.index, self.subtype);
+        server_msg(port, interf, index, 6, subtype, self.time, self.seq, &[])
+    }
+
+    /// The XDR unsigned int, float or double at byte `i` of the payload (0 past its end).
+    fn be(&self, i: usize) -> u32 {
+        self.p
+            .get(i..i + 4)
             .map(|b| u32::from_be_bytes([b[0], b[1], b[2], b[3]]))
             .unwrap_or(0)
-    };
-    let bef64 = |i: usize| -> f64 {
-        p.get(i..i + 8)
+    }
+
+    fn bef32(&self, i: usize) -> f32 {
+        f32::from_bits(self.be(i))
+    }
+
+    fn bef64(&self, i: usize) -> f64 {
+        self.p
+            .get(i..i + 8)
             .map(|b| f64::from_be_bytes(b.try_into().unwrap()))
             .unwrap_or(0.0)
-    };
-    let bef32 = |i: usize| -> f32 { f32::from_bits(be(i)) };
-    if mtype == 3 && s.faults.nack_all.load(Ordering::Acquire) {
-        return vec![nack()];
     }
-    match (interf, mtype) {
-        (1, 3) => match subtype {
-            1 => {
-                s.devlists.fetch_add(1, Ordering::AcqRel);
-                let devs = s.devices.lock().unwrap().clone();
-                let mut out = Vec::new();
-                put_u32(&mut out, devs.len() as u32);
-                put_u32(&mut out, devs.len() as u32);
-                for (i, k) in devs {
-                    out.extend_from_slice(&[1, 0, 0, 127]);
-                    put_u32(&mut out, port as u32);
-                    put_u32(&mut out, i);
-                    put_u32(&mut out, k);
-                }
-                vec![ack(&out)]
-            }
-            3 => {
-                let (di, dk, access) = (be(8), be(12), be(16));
-                let mut out = Vec::new();
-                out.extend_from_slice(&[1, 0, 0, 127]);
-                put_u32(&mut out, port as u32);
-                put_u32(&mut out, di);
-                put_u32(&mut out, dk);
-                if !has(s, di, dk) {
-                    put_u32(&mut out, 3);
-                    put_opaque(&mut out, &[]);
-                    return vec![server_msg(port, 1, 0, 6, 3, time, seq, &out)];
-                }
-                put_u32(&mut out, access);
-                put_opaque(&mut out, b"emulator\0");
-                let mut subs = s.subscribed.lock().unwrap();
-                if access == 1 && !c.subs.contains(&(di, dk)) {
-                    c.subs.push((di, dk));
-                    subs.push((di, dk));
-                } else if access == 2
-                    && let Some(i) = c.subs.iter().position(|x| *x == (di, dk))
-                {
-                    c.subs.remove(i);
-                    if let Some(j) = subs.iter().position(|x| *x == (di, dk)) {
-                        subs.remove(j);
-                    }
-                }
-                vec![ack(&out)]
-            }
-            4 => {
-                // PULL: the ACK, the queued data, then a SYNCH.
-                let mut v = vec![ack(&[])];
-                v.extend(c.queue.drain(..));
-                let mut synch = server_msg(port, 1, 0, 5, 1, 0.0, 0, &[]);
-                synch[0..8].fill(0);
-                v.push(synch);
-                v
-            }
-            5 => {
-                c.pull = be(0) == 2;
-                vec![ack(&[])]
-            }
-            _ => vec![nack()],
-        },
+}
+
+fn handle(s: &Shared, c: &mut Client, r: &Request) -> Vec<Vec<u8>> {
+    if r.mtype == 3 && s.faults.nack_all.load(Ordering::Acquire) {
+        return vec![r.nack()];
+    }
+    let (index, subtype, p) = (r.index, r.subtype, r.p);
+    match (r.interf, r.mtype) {
+        (1, 3) => player_request(s, c, r),
         (i, 3) if !has(s, i, index) => Vec::new(),
-        (RANGER, 3) if subtype == 5 => {
-            let mut out = Vec::new();
-            let (lo, hi, res, max) = if index == 1 {
-                (
-                    -std::f64::consts::FRAC_PI_2,
-                    std::f64::consts::FRAC_PI_2,
-                    std::f64::consts::PI / 180.0,
-                    8.0,
-                )
-            } else {
-                (0.0, 0.0, 0.0, 5.0)
-            };
-            for v in [lo, hi, res, 0.0, max, 0.02, 10.0] {
-                put_f64(&mut out, v);
-            }
-            vec![ack(&out)]
-        }
-        (LASER, 3) if subtype == 3 => {
-            let mut out = Vec::new();
-            for v in [
-                -std::f32::consts::FRAC_PI_2,
-                std::f32::consts::FRAC_PI_2,
-                0.017453292,
-                8.0,
-                0.02,
-            ] {
-                put_f32(&mut out, v);
-            }
-            put_u32(&mut out, 0);
-            put_f32(&mut out, 10.0);
-            vec![ack(&out)]
-        }
-        (_, 3) if subtype == 1 => vec![ack(&[0u8; 72])],
-        (POSITION2D, 3) if subtype == 2 => vec![ack(&[])],
-        (_, 3) => vec![nack()],
+        (RANGER, 3) if subtype == 5 => vec![r.ack(&ranger_config(index))],
+        (LASER, 3) if subtype == 3 => vec![r.ack(&laser_config())],
+        (_, 3) if subtype == 1 => vec![r.ack(&[0u8; 72])],
+        (POSITION2D, 3) if subtype == 2 => vec![r.ack(&[])],
+        (_, 3) => vec![r.nack()],
         (POSITION2D, 2) if subtype == 1 && p.len() >= 28 => {
             let mut w = s.world.lock().unwrap();
-            w.v = bef64(0);
-            w.w = bef64(16);
+            w.v = r.bef64(0);
+            w.w = r.bef64(16);
             let (v, a) = (w.v, w.w);
             w.commands.push((v, a, Instant::now()));
             Vec::new()
         }
         (PTZ, 2) if subtype == 1 && p.len() >= 20 => {
             let mut w = s.world.lock().unwrap();
-            w.pan = bef32(0);
-            w.tilt = bef32(4);
+            w.pan = r.bef32(0);
+            w.tilt = r.bef32(4);
             let (pa, ti) = (w.pan, w.tilt);
             w.ptz_commands.push((pa, ti));
             Vec::new()
         }
         _ => Vec::new(),
     }
+}
+
+/// A request to the `player` device: the device list, a subscription, a PULL,
+/// the data mode.
+fn player_request(s: &Shared, c: &mut Client, r: &Request) -> Vec<Vec<u8>> {
+    let port = r.port;
+    match r.subtype {
+        1 => {
+            s.devlists.fetch_add(1, Ordering::AcqRel);
+            let devs = s.devices.lock().unwrap().clone();
+            let mut out = Vec::new();
+            put_u32(&mut out, devs.len() as u32);
+            put_u32(&mut out, devs.len() as u32);
+            for (i, k) in devs {
+                out.extend_from_slice(&[1, 0, 0, 127]);
+                put_u32(&mut out, port as u32);
+                put_u32(&mut out, i);
+                put_u32(&mut out, k);
+            }
+            vec![r.ack(&out)]
+        }
+        3 => {
+            let (di, dk, access) = (r.be(8), r.be(12), r.be(16));
+            let mut out = Vec::new();
+            out.extend_from_slice(&[1, 0, 0, 127]);
+            put_u32(&mut out, port as u32);
+            put_u32(&mut out, di);
+            put_u32(&mut out, dk);
+            if !has(s, di, dk) {
+                put_u32(&mut out, 3);
+                put_opaque(&mut out, &[]);
+                return vec![server_msg(port, 1, 0, 6, 3, r.time, r.seq, &out)];
+            }
+            put_u32(&mut out, access);
+            put_opaque(&mut out, b"emulator\0");
+            let mut subs = s.subscribed.lock().unwrap();
+            if access == 1 && !c.subs.contains(&(di, dk)) {
+                c.subs.push((di, dk));
+                subs.push((di, dk));
+            } else if access == 2
+                && let Some(i) = c.subs.iter().position(|x| *x == (di, dk))
+            {
+                c.subs.remove(i);
+                if let Some(j) = subs.iter().position(|x| *x == (di, dk)) {
+                    subs.remove(j);
+                }
+            }
+            vec![r.ack(&out)]
+        }
+        4 => {
+            // PULL: the ACK, the queued data, then a SYNCH.
+            let mut v = vec![r.ack(&[])];
+            v.extend(c.queue.drain(..));
+            let mut synch = server_msg(port, 1, 0, 5, 1, 0.0, 0, &[]);
+            synch[0..8].fill(0);
+            v.push(synch);
+            v
+        }
+        5 => {
+            c.pull = r.be(0) == 2;
+            vec![r.ack(&[])]
+        }
+        _ => vec![r.nack()],
+    }
+}
+
+/// A ranger's geometry and configuration (min and max angle, resolution, min
+/// and max range, range resolution, frequency): ranger 1 is the laser.
+fn ranger_config(index: u32) -> Vec<u8> {
+    let mut out = Vec::new();
+    let (lo, hi, res, max) = if index == 1 {
+        (
+            -std::f64::consts::FRAC_PI_2,
+            std::f64::consts::FRAC_PI_2,
+            std::f64::consts::PI / 180.0,
+            8.0,
+        )
+    } else {
+        (0.0, 0.0, 0.0, 5.0)
+    };
+    for v in [lo, hi, res, 0.0, max, 0.02, 10.0] {
+        put_f64(&mut out, v);
+    }
+    out
+}
+
+/// The laser's configuration (min and max angle, resolution, max range, range
+/// resolution, intensity off, frequency).
+fn laser_config() -> Vec<u8> {
+    let mut out = Vec::new();
+    for v in [
+        -std::f32::consts::FRAC_PI_2,
+        std::f32::consts::FRAC_PI_2,
+        0.017453292,
+        8.0,
+        0.02,
+    ] {
+        put_f32(&mut out, v);
+    }
+    put_u32(&mut out, 0);
+    put_f32(&mut out, 10.0);
+    out
 }
 
 fn data_messages(s: &Shared, c: &Client, port: u16) -> Vec<Vec<u8>> {

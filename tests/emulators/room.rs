@@ -5,7 +5,10 @@
 //! lidar sits at the robot's centre, its forward axis the robot's.
 #![allow(dead_code)]
 
-use std::sync::Arc;
+use std::{
+    path::{Path, PathBuf},
+    sync::{Arc, atomic::AtomicBool},
+};
 
 use parking_lot::Mutex;
 
@@ -87,3 +90,45 @@ pub fn wrap(a: f64) -> f64 {
 
 /// The pty helpers of the PTU emulator (a serial cable into the device).
 pub use super::ptu::{Cable, Pty, read_fd, write_fd};
+
+/// How a device answers on its pty: with its state, in the room, until the flag is set.
+pub type Serve<S> = fn(Pty, &Mutex<S>, &Shared, &AtomicBool);
+
+/// A serial device in the room: its state, and the pty at `link` (a symlink) that
+/// `serve` answers on while the cable is plugged in.
+pub struct Device<S> {
+    pub link: PathBuf,
+    pub state: Arc<Mutex<S>>,
+    pub room: Shared,
+    serve: Serve<S>,
+    cable: Option<Cable>,
+}
+
+impl<S: Send + 'static> Device<S> {
+    /// The device, plugged in.
+    pub fn new(link: &Path, room: Shared, state: S, serve: Serve<S>) -> Device<S> {
+        let mut d = Device {
+            link: link.to_path_buf(),
+            state: Arc::new(Mutex::new(state)),
+            room,
+            serve,
+            cable: None,
+        };
+        d.plug();
+        d
+    }
+
+    /// (Re)connects the cable: a new pty at the link. The device keeps its state.
+    pub fn plug(&mut self) {
+        self.cable = None;
+        let (st, room, serve) = (self.state.clone(), self.room.clone(), self.serve);
+        self.cable = Some(Cable::plug(&self.link, move |pty, stop| {
+            serve(pty, &st, &room, stop)
+        }));
+    }
+
+    /// Pulls the cable: the pty closes and its path disappears.
+    pub fn unplug(&mut self) {
+        self.cable = None;
+    }
+}

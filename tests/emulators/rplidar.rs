@@ -25,18 +25,14 @@
 #![allow(dead_code)]
 
 use std::{
-    path::{Path, PathBuf},
-    sync::{
-        Arc,
-        atomic::{AtomicBool, Ordering},
-    },
+    path::Path,
+    sync::atomic::{AtomicBool, Ordering},
     time::{Duration, Instant},
 };
 
 use parking_lot::Mutex;
 
-use super::room::Shared;
-use super::room::{Cable, read_fd, write_fd};
+use super::room::{Device, Shared, read_fd, write_fd};
 
 pub const RATE_HZ: f64 = 5.5;
 pub const SAMPLES: f64 = 360.5;
@@ -57,41 +53,18 @@ pub struct State {
     pub revolutions: u64,
 }
 
-pub struct Lidar {
-    pub link: PathBuf,
-    pub state: Arc<Mutex<State>>,
-    pub room: Shared,
-    cable: Option<Cable>,
-}
+/// The lidar on its serial cable; plugged in again, it is not scanning.
+pub type Lidar = Device<State>;
 
 impl Lidar {
     pub fn start(link: &Path, room: Shared) -> Lidar {
-        let mut l = Lidar {
-            link: link.to_path_buf(),
-            state: Arc::new(Mutex::new(State {
-                scanning: false,
-                received: Vec::new(),
-                faults: Faults::default(),
-                revolutions: 0,
-            })),
-            room,
-            cable: None,
+        let state = State {
+            scanning: false,
+            received: Vec::new(),
+            faults: Faults::default(),
+            revolutions: 0,
         };
-        l.plug();
-        l
-    }
-
-    pub fn plug(&mut self) {
-        self.cable = None;
-        self.state.lock().scanning = false;
-        let (st, room) = (self.state.clone(), self.room.clone());
-        self.cable = Some(Cable::plug(&self.link, move |pty, stop| {
-            serve(pty, &st, &room, stop)
-        }));
-    }
-
-    pub fn unplug(&mut self) {
-        self.cable = None;
+        Device::new(link, room, state, serve)
     }
 
     pub fn faults(&self, f: impl FnOnce(&mut Faults)) {
@@ -119,6 +92,7 @@ pub fn node(start: bool, angle_deg: f64, mm: f64) -> [u8; 5] {
 }
 
 fn serve(pty: super::room::Pty, state: &Mutex<State>, room: &Shared, stop: &AtomicBool) {
+    state.lock().scanning = false;
     let mut buf = [0u8; 256];
     let mut pending: Vec<u8> = Vec::new();
     // The sample clock: sample k of the scan at k / (RATE_HZ · SAMPLES) s.
