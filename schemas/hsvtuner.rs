@@ -28,8 +28,9 @@
 //! Interfaces used: the `image` (BGR); provided: `output` if given.
 //!
 //! Headless the schema filters every cycle and exports, component `hsvtuner`:
-//! `state` ([`Tuner`]: the ranges, the toggle, the image in use, the pixels that
-//! passed, the colour histogram). System packages: none.
+//! `state` ([`Tuner`]: the ranges as a [`HsvRange`], H in degrees; the toggle, the
+//! image in use, the pixels that passed, the colour histogram). System packages:
+//! none.
 
 use crate::{
     colorspaces::{HsvRange, Lookup, hsv_mask, hsv_table},

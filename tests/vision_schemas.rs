@@ -248,8 +248,9 @@ mod hsvtuner {
         // Drag on the cheese from its right edge (hue 0, s 0.9·) to its top.
         drag(&mut h, "hsvtuner cheese", (0.9, 0.5), (0.5, 0.1));
         let r = *st.ranges.lock();
-        assert!(r.hmin < 0.1 || r.hmin > 6.2, "{r:?}");
-        assert!((r.hmax - std::f32::consts::FRAC_PI_2).abs() < 0.1, "{r:?}");
+        let (hmin, hmax) = (r.hmin.to_radians(), r.hmax.to_radians());
+        assert!(hmin < 0.1 || hmin > 6.2, "{r:?}");
+        assert!((hmax - std::f32::consts::FRAC_PI_2).abs() < 0.1, "{r:?}");
         assert!(r.smax > 0.8 && r.smin > 0.7, "{r:?}");
         h.get_by_label("Print");
         h.get_by_label("Copy");
