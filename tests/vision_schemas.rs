@@ -249,7 +249,7 @@ mod hsvtuner {
         drag(&mut h, "hsvtuner cheese", (0.9, 0.5), (0.5, 0.1));
         let r = *st.ranges.lock();
         let (hmin, hmax) = (r.hmin.to_radians(), r.hmax.to_radians());
-        assert!(hmin < 0.1 || hmin > 6.2, "{r:?}");
+        assert!(!(0.1..=6.2).contains(&hmin), "{r:?}");
         assert!((hmax - std::f32::consts::FRAC_PI_2).abs() < 0.1, "{r:?}");
         assert!(r.smax > 0.8 && r.smin > 0.7, "{r:?}");
         h.get_by_label("Print");
