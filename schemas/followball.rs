@@ -335,11 +335,11 @@ impl Schema for FollowBall {
 const LINES: &[Setting] = &[
     settings::uses(
         "image",
-        "colorA",
         "the camera image it filters (colorA..D, varcolorA..D)",
-    ),
-    settings::uses("pantiltencoders", "pantiltencoders", "the head's angles"),
-    settings::uses("pantiltmotors", "pantiltmotors", "the head it drives"),
+    )
+    .default("colorA"),
+    settings::uses("pantiltencoders", "the head's angles"),
+    settings::uses("pantiltmotors", "the head it drives"),
     // The ball's colour: the HSV range lines the tuners share.
     imagesource::HMIN.default("6.0"),
     imagesource::HMAX.default("0.35"),
@@ -380,12 +380,8 @@ struct Lines {
     image: String,
     pantiltencoders: String,
     pantiltmotors: String,
-    hmin: f32,
-    hmax: f32,
-    smin: f32,
-    smax: f32,
-    vmin: f32,
-    vmax: f32,
+    #[serde(deserialize_with = "imagesource::hsv_lines")]
+    hsv: HsvRange,
     deadband: f32,
     min_pixels: u32,
     cycle: u64,
@@ -416,7 +412,7 @@ pub fn parse(conf: &ComponentConf) -> anyhow::Result<(Settings, [String; 3], Dur
         },
         invert_pan: l.invert.iter().any(|a| a == "pan"),
         invert_tilt: l.invert.iter().any(|a| a == "tilt"),
-        range: HsvRange::from_radians(l.hmin, l.hmax, l.smin, l.smax, l.vmin, l.vmax),
+        range: l.hsv,
     };
     let names = [
         crate::interfaces::canonical(&l.image),

@@ -28,8 +28,9 @@
 //! Interfaces used: the `image` (BGR); provided: `output` if given.
 //!
 //! Headless the schema filters every cycle and exports, component `hsvtuner`:
-//! `state` ([`Tuner`]: the ranges, the toggle, the image in use, the pixels that
-//! passed, the colour histogram). System packages: none.
+//! `state` ([`Tuner`]: the ranges as a [`HsvRange`], H in degrees; the toggle, the
+//! image in use, the pixels that passed, the colour histogram). System packages:
+//! none.
 
 use crate::{
     colorspaces::{HsvRange, Lookup, hsv_mask, hsv_table},
@@ -44,45 +45,18 @@ use crate::{
 
 const TAU: f32 = std::f32::consts::TAU;
 
-/// HSV ranges in 4.3's GUI and conf units: H radians 0..2π, S 0..1, V 0..255.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct HsvRadians {
-    pub hmin: f32,
-    pub hmax: f32,
-    pub smin: f32,
-    pub smax: f32,
-    pub vmin: f32,
-    pub vmax: f32,
-}
-
-impl Default for HsvRadians {
-    /// 4.3's defaults: H 0..1 rad, S 0.2..0.4, V 0..255.
-    fn default() -> Self {
-        HsvRadians {
-            hmin: 0.0,
-            hmax: 1.0,
-            smin: 0.2,
-            smax: 0.4,
-            vmin: 0.0,
-            vmax: 255.0,
-        }
-    }
-}
-
-impl HsvRadians {
-    /// The colorspaces range (H in degrees).
-    pub fn range(&self) -> HsvRange {
-        HsvRange::from_radians(
-            self.hmin, self.hmax, self.smin, self.smax, self.vmin, self.vmax,
-        )
-    }
-    /// The conf lines that opencvdemo and followball accept, one per key.
-    pub fn conf_lines(&self) -> String {
-        format!(
-            "hmin {:.3}\nhmax {:.3}\nsmin {:.3}\nsmax {:.3}\nvmin {:.0}\nvmax {:.0}\n",
-            self.hmin, self.hmax, self.smin, self.smax, self.vmin, self.vmax
-        )
-    }
+/// The conf lines that opencvdemo and followball accept for `r`, one per key,
+/// in 4.3's units (H radians).
+pub fn conf_lines(r: &HsvRange) -> String {
+    format!(
+        "hmin {:.3}\nhmax {:.3}\nsmin {:.3}\nsmax {:.3}\nvmin {:.0}\nvmax {:.0}\n",
+        r.hmin.to_radians(),
+        r.hmax.to_radians(),
+        r.smin,
+        r.smax,
+        r.vmin,
+        r.vmax
+    )
 }
 
 /// Hue bins (10° each) and saturation bins (0.1 each) of the colour histogram.
@@ -91,9 +65,9 @@ pub const SAT_BINS: usize = 10;
 
 /// The state shared by the schema, its panel and the name space; its result's
 /// `hist` counts pixels per (hue bin, saturation bin): `hist[h * SAT_BINS + s]`.
-pub type Tuner = ColourTuner<HsvRadians>;
+pub type Tuner = ColourTuner<HsvRange>;
 
-impl RangeFilter for HsvRadians {
+impl RangeFilter for HsvRange {
     fn filter(&self, img: &Image, toblack: bool) -> (Image, usize, Vec<u32>) {
         filter(img, self, toblack)
     }
@@ -101,8 +75,8 @@ impl RangeFilter for HsvRadians {
 
 /// Filters `img`: the image with rejected pixels black or grey, the count that
 /// passed and the H–S histogram.
-pub fn filter(img: &Image, ranges: &HsvRadians, toblack: bool) -> (Image, usize, Vec<u32>) {
-    let mask = hsv_mask(img, &ranges.range(), Lookup::Exact);
+pub fn filter(img: &Image, ranges: &HsvRange, toblack: bool) -> (Image, usize, Vec<u32>) {
+    let mask = hsv_mask(img, ranges, Lookup::Exact);
     let mut out = img.clone();
     let n = (img.width as usize * img.height as usize).min(img.data.len() / 3);
     let mut passed = 0;
@@ -145,12 +119,8 @@ const LINES: &[Setting] = &[
 #[derive(serde::Deserialize)]
 struct Lines {
     image: String,
-    hmin: f32,
-    hmax: f32,
-    smin: f32,
-    smax: f32,
-    vmin: f32,
-    vmax: f32,
+    #[serde(deserialize_with = "imagesource::hsv_lines")]
+    hsv: HsvRange,
     toblack: bool,
     output: Option<String>,
     cycle: u64,
@@ -158,21 +128,13 @@ struct Lines {
 
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>> {
     let l: Lines = conf.settings(LINES)?;
-    let r = HsvRadians {
-        hmin: l.hmin,
-        hmax: l.hmax,
-        smin: l.smin,
-        smax: l.smax,
-        vmin: l.vmin,
-        vmax: l.vmax,
-    };
     let lines = imagesource::TunerLines {
         image: &l.image,
         output: l.output.as_deref(),
         toblack: l.toblack,
         cycle: l.cycle,
     };
-    let schema = Tuner::schema(conf, rt, lines, r)?;
+    let schema = Tuner::schema(conf, rt, lines, l.hsv)?;
     #[cfg(feature = "gui")]
     let schema = {
         let state = schema.work.clone();
@@ -238,7 +200,8 @@ pub mod panel {
             }
         }
 
-        fn cheese(&mut self, ui: &mut egui::Ui, r: &mut HsvRadians, hist: &[u32]) {
+        /// The H-S cheese of `r` (its hue in degrees, drawn in radians).
+        fn cheese(&mut self, ui: &mut egui::Ui, r: &mut HsvRange, hist: &[u32]) {
             let side = 220.0;
             let (rect, resp) = ui.allocate_exact_size(vec2(side, side), Sense::click_and_drag());
             crate::widgets::label_response(&resp, "hsvtuner cheese");
@@ -269,21 +232,21 @@ pub mod panel {
                 );
             }
             // The selected sector, counter-clockwise from hmin to hmax.
-            let span = (r.hmax - r.hmin).rem_euclid(TAU);
-            let span = if r.hmax >= r.hmin {
-                r.hmax - r.hmin
+            let (hmin, hmax) = (r.hmin.to_radians(), r.hmax.to_radians());
+            let span = if hmax >= hmin {
+                hmax - hmin
             } else {
-                span
+                (hmax - hmin).rem_euclid(TAU)
             };
             let steps = 32;
             let mut pts: Vec<Pos2> = Vec::new();
             for k in 0..=steps {
-                let h = r.hmin + span * k as f32 / steps as f32;
+                let h = hmin + span * k as f32 / steps as f32;
                 let (dx, dy) = cheese::to_screen(h, r.smax, radius);
                 pts.push(pos2(c.x + dx, c.y + dy));
             }
             for k in (0..=steps).rev() {
-                let h = r.hmin + span * k as f32 / steps as f32;
+                let h = hmin + span * k as f32 / steps as f32;
                 let (dx, dy) = cheese::to_screen(h, r.smin, radius);
                 pts.push(pos2(c.x + dx, c.y + dy));
             }
@@ -298,14 +261,25 @@ pub mod panel {
             {
                 let (hmin, hmax, smin, smax) =
                     cheese::drag_sector(a, (pos.x - c.x, pos.y - c.y), radius);
-                r.hmin = hmin;
-                r.hmax = hmax;
+                r.hmin = hmin.to_degrees();
+                r.hmax = hmax.to_degrees();
                 r.smin = smin;
                 r.smax = smax;
             }
             if resp.drag_stopped() {
                 self.drag_from = None;
             }
+        }
+    }
+
+    /// A slider on a hue kept in degrees, shown in radians as 4.3's.
+    fn hue_slider(ui: &mut egui::Ui, deg: &mut f32, text: &str) {
+        let mut rad = deg.to_radians();
+        if ui
+            .add(egui::Slider::new(&mut rad, 0.0..=TAU).text(text))
+            .changed()
+        {
+            *deg = rad.to_degrees();
         }
     }
 
@@ -326,8 +300,8 @@ pub mod panel {
                 ui.horizontal_top(|ui| {
                     ui.vertical(|ui| {
                         ui.set_max_width(230.0);
-                        ui.add(egui::Slider::new(&mut r.hmin, 0.0..=TAU).text("Hmin rad"));
-                        ui.add(egui::Slider::new(&mut r.hmax, 0.0..=TAU).text("Hmax rad"));
+                        hue_slider(ui, &mut r.hmin, "Hmin rad");
+                        hue_slider(ui, &mut r.hmax, "Hmax rad");
                         ui.add(egui::Slider::new(&mut r.smin, 0.0..=1.0).text("Smin"));
                         ui.add(egui::Slider::new(&mut r.smax, 0.0..=1.0).text("Smax"));
                         ui.add(egui::Slider::new(&mut r.vmin, 0.0..=255.0).text("Vmin"));
@@ -335,12 +309,12 @@ pub mod panel {
                         self.cheese(ui, r, &res.hist);
                         ui.horizontal(|ui| {
                             if ui.button("Print").clicked() {
-                                for line in r.conf_lines().lines() {
+                                for line in conf_lines(r).lines() {
                                     output::println(line);
                                 }
                             }
                             if ui.button("Copy").clicked() {
-                                ui.ctx().copy_text(r.conf_lines());
+                                ui.ctx().copy_text(conf_lines(r));
                             }
                         });
                     });

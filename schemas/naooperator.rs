@@ -52,22 +52,14 @@ const LINES: &[Setting] = &[
     operator::MAX_V,
     operator::MAX_W,
     CYCLE.default("100"),
-    settings::uses("motors", "motors", "the interface it walks the robot with"),
-    settings::uses(
-        "pantiltmotors",
-        "pantiltmotors",
-        "the head it points (none: no head)",
-    ),
-    settings::uses(
-        "pantiltencoders",
-        "pantiltencoders",
-        "the head angles it shows (none: none)",
-    ),
+    settings::uses("motors", "the interface it walks the robot with"),
+    settings::uses("pantiltmotors", "the head it points (none: no head)"),
+    settings::uses("pantiltencoders", "the head angles it shows (none: none)"),
     settings::uses(
         "camera",
-        "varcolorA",
         "the image it shows (4.3.1 used varcolorX; none: none)",
-    ),
+    )
+    .default("varcolorA"),
 ];
 
 /// The values of [`LINES`].

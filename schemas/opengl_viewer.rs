@@ -117,15 +117,10 @@ const LINES: &[Setting] = &[
     )
     .default("1500"),
     settings::WORLD,
+    settings::uses("encoders", "the robot's pose (none: at the origin)"),
+    settings::uses("laser", "the laser fan (none: none)"),
+    settings::uses("sonars", "the sonar cones (none: none)"),
     settings::uses(
-        "encoders",
-        "encoders",
-        "the robot's pose (none: at the origin)",
-    ),
-    settings::uses("laser", "laser", "the laser fan (none: none)"),
-    settings::uses("sonars", "sonars", "the sonar cones (none: none)"),
-    settings::uses(
-        "pantiltencoders",
         "pantiltencoders",
         "where the camera points (none: straight ahead)",
     ),

@@ -22,6 +22,7 @@ use std::{
 use parking_lot::Mutex;
 
 use crate::{
+    colorspaces::HsvRange,
     conf::{
         ComponentConf,
         settings::{self, Arg, Setting, float, interface, on_off},
@@ -31,11 +32,8 @@ use crate::{
 };
 
 /// `image INTERFACE`: the image a schema works on.
-pub const IMAGE: Setting = settings::uses(
-    "image",
-    "colorA",
-    "the image it works on: colorA..D or varcolorA..D",
-);
+pub const IMAGE: Setting =
+    settings::uses("image", "the image it works on: colorA..D or varcolorA..D").default("colorA");
 /// `output INTERFACE`: a new image interface the result is published on.
 pub const OUTPUT: Setting = Setting::new(
     "output",
@@ -54,19 +52,47 @@ const TAU: f64 = std::f64::consts::TAU;
 const HUE: &[Arg] = &[float("H", "radians", 0.0, TAU)];
 const SAT: &[Arg] = &[float("S", "", 0.0, 1.0)];
 const VAL: &[Arg] = &[float("V", "", 0.0, 255.0)];
+/// The group of the HSV range lines, read into a [`HsvRange`] field with
+/// [`hsv_lines`].
+pub const HSV: &str = "hsv";
 /// The HSV range lines as 4.3 wrote them (each schema gives its defaults):
 /// hue in radians 0..2π (wrapping through 0 when `hmin > hmax`), saturation
-/// 0..1, value 0..255 (V = max(R, G, B)).
+/// 0..1, value 0..255 (V = max(R, G, B)); the group [`HSV`].
 pub const HMIN: Setting = Setting::new(
     "hmin",
     "the hue range's start (wraps when hmin > hmax)",
     HUE,
-);
-pub const HMAX: Setting = Setting::new("hmax", "the hue range's end", HUE);
-pub const SMIN: Setting = Setting::new("smin", "the saturation range's start", SAT);
-pub const SMAX: Setting = Setting::new("smax", "the saturation range's end", SAT);
-pub const VMIN: Setting = Setting::new("vmin", "the value range's start", VAL);
-pub const VMAX: Setting = Setting::new("vmax", "the value range's end", VAL);
+)
+.group(HSV);
+pub const HMAX: Setting = Setting::new("hmax", "the hue range's end", HUE).group(HSV);
+pub const SMIN: Setting = Setting::new("smin", "the saturation range's start", SAT).group(HSV);
+pub const SMAX: Setting = Setting::new("smax", "the saturation range's end", SAT).group(HSV);
+pub const VMIN: Setting = Setting::new("vmin", "the value range's start", VAL).group(HSV);
+pub const VMAX: Setting = Setting::new("vmax", "the value range's end", VAL).group(HSV);
+
+/// Reads the group [`HSV`] (H in radians, as written) into a [`HsvRange`] (H in
+/// degrees): `#[serde(deserialize_with = "imagesource::hsv_lines")] hsv: HsvRange`.
+pub fn hsv_lines<'de, D: serde::Deserializer<'de>>(d: D) -> Result<HsvRange, D::Error> {
+    const KEYS: &[&str] = &["hmin", "hmax", "smin", "smax", "vmin", "vmax"];
+    struct Six;
+    impl<'de> serde::de::Visitor<'de> for Six {
+        type Value = [f32; 6];
+        fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+            f.write_str("the lines hmin .. vmax")
+        }
+        fn visit_map<M: serde::de::MapAccess<'de>>(self, mut m: M) -> Result<[f32; 6], M::Error> {
+            let mut v = [f32::NAN; 6];
+            while let Some(k) = m.next_key::<String>()? {
+                let i = KEYS.iter().position(|x| *x == k);
+                let i = i.ok_or_else(|| serde::de::Error::unknown_field(&k, KEYS))?;
+                v[i] = m.next_value()?;
+            }
+            Ok(v)
+        }
+    }
+    let [hmin, hmax, smin, smax, vmin, vmax] = d.deserialize_struct("HsvRange", KEYS, Six)?;
+    Ok(HsvRange::from_radians(hmin, hmax, smin, smax, vmin, vmax))
+}
 
 /// An error at the line `key` of `conf`, or (a default value) at its file.
 pub fn error_at(conf: &ComponentConf, key: &str, message: impl std::fmt::Display) -> anyhow::Error {

@@ -2,8 +2,8 @@
 //! PTU-46; `evi`, an EVI-D100) share.
 //!
 //! - Their shared lines, declared once: [`SERIAL`], [`POLL`] (each head gives its
-//!   own default), [`REPLY_TIMEOUT`], and the reading of `serial` and `provides`
-//!   with their errors ([`HeadConf::new`]).
+//!   own default), [`REPLY_TIMEOUT`]; a head puts them and its `provides` line in
+//!   the group [`HEAD`], read as [`HeadLines`] and checked by [`HeadConf::new`].
 //! - [`open_port`]: the one place a serial port is opened, with errors that say
 //!   what to check (a missing device, a file that is not a tty, permissions);
 //!   [`read_some`], the one way a head's link reads it.
@@ -48,6 +48,19 @@ pub const REPLY_TIMEOUT: Setting = Setting::new(
 )
 .default("1000");
 
+/// The group of a head's shared lines (`serial`, `poll`, `reply_timeout`,
+/// `provides`: [`crate::conf::settings::Setting::group`]), read as [`HeadLines`].
+pub const HEAD: &str = "head";
+
+/// The values of the group [`HEAD`].
+#[derive(serde::Deserialize)]
+pub struct HeadLines {
+    pub serial: String,
+    pub poll: u64,
+    pub reply_timeout: u64,
+    pub provides: Vec<String>,
+}
+
 /// The shared lines of a head, read and checked.
 #[derive(Clone, Debug)]
 pub struct HeadConf {
@@ -59,18 +72,10 @@ pub struct HeadConf {
 }
 
 impl HeadConf {
-    /// From the values of the shared lines (`serial` absent: `None`; `provides`
-    /// as written). `offered` names what the head can provide, for the error
-    /// when it provides nothing.
-    pub fn new(
-        conf: &ComponentConf,
-        serial: String,
-        poll: u64,
-        reply_timeout: u64,
-        provides: &[String],
-        offered: &[&str],
-    ) -> anyhow::Result<HeadConf> {
-        if provides.is_empty() {
+    /// From the values of the shared lines (`provides` as written). `offered`
+    /// names what the head can provide, for the error when it provides nothing.
+    pub fn new(conf: &ComponentConf, l: HeadLines, offered: &[&str]) -> anyhow::Result<HeadConf> {
+        if l.provides.is_empty() {
             anyhow::bail!(
                 "{}: driver {} provides nothing; add one or more of `provides {}`",
                 conf.file.display(),
@@ -79,10 +84,10 @@ impl HeadConf {
             );
         }
         Ok(HeadConf {
-            serial,
-            poll: Duration::from_millis(poll),
-            reply_timeout: Duration::from_millis(reply_timeout),
-            provides: provides.iter().map(|p| canonical(p)).collect(),
+            serial: l.serial,
+            poll: Duration::from_millis(l.poll),
+            reply_timeout: Duration::from_millis(l.reply_timeout),
+            provides: l.provides.iter().map(|p| canonical(p)).collect(),
         })
     }
 
@@ -250,13 +255,19 @@ mod tests {
             e.contains("has no `serial` line") && e.contains("serial DEVICE"),
             "{e}"
         );
-        let e = HeadConf::new(&conf, "/dev/x".into(), 100, 1000, &[], &["a", "b"]);
+        let lines = |provides: &[&str]| HeadLines {
+            serial: "/dev/x".into(),
+            poll: 100,
+            reply_timeout: 1000,
+            provides: provides.iter().map(|p| p.to_string()).collect(),
+        };
+        let e = HeadConf::new(&conf, lines(&[]), &["a", "b"]);
         let e = e.unwrap_err().to_string();
         assert!(
             e.contains("add one or more of `provides a`, `provides b`"),
             "{e}"
         );
-        let c = HeadConf::new(&conf, "/dev/x".into(), 100, 1000, &["ptmotors".into()], &[]);
+        let c = HeadConf::new(&conf, lines(&["ptmotors"]), &[]);
         assert!(c.unwrap().provides("pantiltmotors"));
     }
 }

@@ -45,82 +45,53 @@ pub enum Flow {
 /// A command's name, usage and one-line help.
 type CommandDoc = (&'static str, &'static str, &'static str);
 
+/// A command of the shell's own tables, `NAME [USAGE]: help`, as a [`CommandDoc`].
+fn doc(line: &'static str) -> CommandDoc {
+    let (head, help) = line.split_once(": ").unwrap_or((line, ""));
+    let (name, usage) = head.split_once(' ').unwrap_or((head, ""));
+    (name, usage, help)
+}
+
 /// The commands of both states.
-const SHARED_COMMANDS: &[CommandDoc] = &[
-    ("help", "[COMMAND]", "Display this help text"),
-    ("?", "[COMMAND]", "Synonym for `help'"),
-    ("cd", "DIR", "Change working directory to DIR"),
-    (
-        "dir",
-        "[DIR]",
-        "List files in the working directory (or DIR)",
-    ),
-    ("pwd", "", "Print the current working directory"),
-    ("view", "FILE", "View the contents of FILE"),
+const SHARED_COMMANDS: &[&str] = &[
+    "help [COMMAND]: Display this help text",
+    "? [COMMAND]: Synonym for `help'",
+    "cd DIR: Change working directory to DIR",
+    "dir [DIR]: List files in the working directory (or DIR)",
+    "pwd: Print the current working directory",
+    "view FILE: View the contents of FILE",
 ];
 
 /// The main state's own commands.
-const MAIN_COMMANDS: &[CommandDoc] = &[
-    (
-        "ls",
-        "",
-        "List loaded schemas, drivers, services and interfaces",
-    ),
-    ("load_driver", "NAME [CONF]", "Load driver NAME"),
-    ("load_service", "NAME [CONF]", "Load service NAME"),
-    ("load_schema", "NAME [CONF]", "Load schema NAME"),
-    (
-        "load",
-        "NAME [CONF]",
-        "Load component NAME, whatever its kind",
-    ),
-    (
-        "ps",
-        "",
-        "Print schemas' states, ips and jitter, and interfaces' clocks and rates",
-    ),
-    ("run", "NAME", "Run schema NAME (or resume interface NAME)"),
-    (
-        "stop",
-        "NAME",
-        "Stop schema NAME (or suspend interface NAME)",
-    ),
-    ("show", "NAME", "Show the GUI panel of schema NAME"),
-    ("hide", "NAME", "Hide the GUI panel of schema NAME"),
-    ("zoom", "NAME", "Change to schema state of NAME"),
-    (
-        "reload",
-        "NAME",
-        "Build schema NAME again from its conf (a python schema reads its program again)",
-    ),
-    (
-        "echo",
-        "NAME [N]",
-        "Print interface NAME's value, or its next N values",
-    ),
-    (
-        "set",
-        "NAME FIELD=VALUE...",
-        "Write fields of actuator interface NAME",
-    ),
-    ("show_license", "", "Show the license"),
-    ("exit", "", "Quit using jderobot"),
-    ("quit", "", "Quit using jderobot"),
+const MAIN_COMMANDS: &[&str] = &[
+    "ls: List loaded schemas, drivers, services and interfaces",
+    "load_driver NAME [CONF]: Load driver NAME",
+    "load_service NAME [CONF]: Load service NAME",
+    "load_schema NAME [CONF]: Load schema NAME",
+    "load NAME [CONF]: Load component NAME, whatever its kind",
+    "ps: Print schemas' states, ips and jitter, and interfaces' clocks and rates",
+    "run NAME: Run schema NAME (or resume interface NAME)",
+    "stop NAME: Stop schema NAME (or suspend interface NAME)",
+    "show NAME: Show the GUI panel of schema NAME",
+    "hide NAME: Hide the GUI panel of schema NAME",
+    "zoom NAME: Change to schema state of NAME",
+    "reload NAME: Build schema NAME again from its conf (a python schema reads its program again)",
+    "echo NAME [N]: Print interface NAME's value, or its next N values",
+    "set NAME FIELD=VALUE...: Write fields of actuator interface NAME",
+    "show_license: Show the license",
+    "exit: Quit using jderobot",
+    "quit: Quit using jderobot",
 ];
 
 /// The schema state's own commands.
-const SCHEMA_COMMANDS: &[CommandDoc] = &[
-    ("run", "", "Run the schema"),
-    ("stop", "", "Stop the schema"),
-    ("show", "", "Show the schema's GUI panel"),
-    ("hide", "", "Hide the schema's GUI panel"),
-    (
-        "init",
-        "[CONF]",
-        "Init the schema again from CONF (default: the main conf file)",
-    ),
-    ("terminate", "", "Terminate the schema"),
-    ("exit", "", "Exit schema state"),
+const SCHEMA_COMMANDS: &[&str] = &[
+    "run: Run the schema",
+    "stop: Stop the schema",
+    "show: Show the schema's GUI panel",
+    "hide: Hide the schema's GUI panel",
+    "init [CONF]: Init the schema again from CONF (default: the main conf file)",
+    "terminate: Terminate the schema",
+    "exit: Exit schema state",
 ];
 
 /// Every command of the main state (`zoomed` false) or the schema state: the
@@ -132,7 +103,12 @@ fn commands(zoomed: bool) -> Vec<CommandDoc> {
     } else {
         MAIN_COMMANDS
     };
-    let mut v: Vec<CommandDoc> = SHARED_COMMANDS.iter().chain(own).copied().collect();
+    let mut v: Vec<CommandDoc> = SHARED_COMMANDS
+        .iter()
+        .chain(own)
+        .copied()
+        .map(doc)
+        .collect();
     if !zoomed {
         v.extend(
             registry::commands()
@@ -841,4 +817,23 @@ fn interactive(shell: &mut Shell) -> rustyline::Result<()> {
         let _ = rl.save_history(h);
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_table_line_reads_as_name_usage_help() {
+        assert_eq!(doc("pwd: Print it"), ("pwd", "", "Print it"));
+        assert_eq!(
+            doc("set NAME FIELD=VALUE...: Write: fields"),
+            ("set", "NAME FIELD=VALUE...", "Write: fields")
+        );
+        for line in [SHARED_COMMANDS, MAIN_COMMANDS, SCHEMA_COMMANDS].concat() {
+            let (name, usage, help) = doc(line);
+            assert!(!name.is_empty() && !help.is_empty(), "{line}");
+            assert!(!name.contains(':') && !usage.contains(": "), "{line}");
+        }
+    }
 }

@@ -118,6 +118,11 @@ pub struct Supervision {
     pub absent: Option<String>,
 }
 
+/// How often a camera in use that cannot be opened is tried again.
+pub const CAMERA_RETRY: Duration = Duration::from_secs(2);
+/// How long a camera may send no frame before its interface counts as stale.
+pub const CAMERA_NO_FRAME: Duration = Duration::from_secs(5);
+
 /// A device not there at load: where its conf line is, the driver, why, and
 /// what ends the wait (`the camera answers`).
 pub struct Absent<'a> {
@@ -127,17 +132,29 @@ pub struct Absent<'a> {
     pub until: &'a str,
 }
 
+impl<'a> Absent<'a> {
+    /// The device of `driver`'s conf line at `at` is absent for `why` until `until`.
+    pub fn new(at: &'a str, driver: &'a str, why: String, until: &'a str) -> Absent<'a> {
+        Absent {
+            at,
+            driver,
+            why,
+            until,
+        }
+    }
+}
+
 impl Supervision {
     /// A camera (or any on-demand device of one interface), retried every
-    /// `retry` while used. When it was `absent` at load, that is said once
+    /// [`CAMERA_RETRY`] while used. When it was `absent` at load, that is said once
     /// (`AT: driver DRIVER: WHY; IFACE stays stale until UNTIL (tried every N s
     /// while used)`) and its interface is stale with the reason until it appears.
     pub fn camera(
         name: String,
         iface: Arc<dyn AnyInterface>,
-        retry: Duration,
         absent: Option<Absent>,
     ) -> Supervision {
+        let retry = CAMERA_RETRY;
         let how = Supervision {
             name,
             interfaces: vec![iface.clone()],

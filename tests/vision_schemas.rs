@@ -144,9 +144,9 @@ fn drag(h: &mut egui_kittest::Harness<'static>, label: &str, a: (f32, f32), b: (
 mod hsvtuner {
     use super::*;
     use jderobot::{
-        colorspaces::{Lookup, hsv_mask},
+        colorspaces::{HsvRange, Lookup, hsv_mask},
         interfaces::Image,
-        schemas::hsvtuner::{HsvRadians, Tuner, cheese, filter},
+        schemas::hsvtuner::{Tuner, cheese, conf_lines, filter},
     };
     use std::sync::atomic::Ordering;
 
@@ -159,15 +159,8 @@ mod hsvtuner {
         eventually("a filtered image", || st.result.lock().clock > 0);
         let r = st.result.lock().clone();
         let src = rt.interfaces.get::<Image>("colorA").unwrap().snapshot();
-        let range = HsvRadians {
-            hmin: 5.5,
-            hmax: 0.7,
-            smin: 0.4,
-            smax: 1.0,
-            vmin: 60.0,
-            vmax: 255.0,
-        };
-        let mask = hsv_mask(&src.value, &range.range(), Lookup::Exact);
+        let range = HsvRange::from_radians(5.5, 0.7, 0.4, 1.0, 60.0, 255.0);
+        let mask = hsv_mask(&src.value, &range, Lookup::Exact);
         let want = mask.data.iter().filter(|&&m| m != 0).count();
         assert!(want > 0, "the testcard has reds");
         assert_eq!(r.passed, want);
@@ -195,19 +188,12 @@ mod hsvtuner {
     fn hue_wraps_when_hmin_exceeds_hmax() {
         let mut img = Image::new(3, 1);
         img.data = vec![0, 0, 255, 0, 255, 0, 255, 0, 0]; // red, green, blue (BGR)
-        let wrap = HsvRadians {
-            hmin: 6.0,
-            hmax: 0.5,
-            smin: 0.0,
-            smax: 1.0,
-            vmin: 0.0,
-            vmax: 255.0,
-        };
+        let wrap = HsvRange::from_radians(6.0, 0.5, 0.0, 1.0, 0.0, 255.0);
         let (out, passed, _) = filter(&img, &wrap, true);
         assert_eq!(passed, 1);
         assert_eq!(out.data, vec![0, 0, 255, 0, 0, 0, 0, 0, 0]);
         assert_eq!(
-            wrap.conf_lines(),
+            conf_lines(&wrap),
             "hmin 6.000\nhmax 0.500\nsmin 0.000\nsmax 1.000\nvmin 0\nvmax 255\n"
         );
     }
@@ -262,8 +248,9 @@ mod hsvtuner {
         // Drag on the cheese from its right edge (hue 0, s 0.9·) to its top.
         drag(&mut h, "hsvtuner cheese", (0.9, 0.5), (0.5, 0.1));
         let r = *st.ranges.lock();
-        assert!(r.hmin < 0.1 || r.hmin > 6.2, "{r:?}");
-        assert!((r.hmax - std::f32::consts::FRAC_PI_2).abs() < 0.1, "{r:?}");
+        let (hmin, hmax) = (r.hmin.to_radians(), r.hmax.to_radians());
+        assert!(!(0.1..=6.2).contains(&hmin), "{r:?}");
+        assert!((hmax - std::f32::consts::FRAC_PI_2).abs() < 0.1, "{r:?}");
         assert!(r.smax > 0.8 && r.smin > 0.7, "{r:?}");
         h.get_by_label("Print");
         h.get_by_label("Copy");

@@ -62,7 +62,10 @@ use crate::{
     },
     interfaces::{AnyInterface, Interface, PtEncoders, PtMotors, ZoomEncoders, ZoomMotors, limit},
     runtime::{Device, Driver, Runtime, Supervisor},
-    serialhead::{self, HeadConf, POLL, PollClock, PortError, REPLY_TIMEOUT, SERIAL, read_some},
+    serialhead::{
+        self, HEAD, HeadConf, HeadLines, POLL, PollClock, PortError, REPLY_TIMEOUT, SERIAL,
+        read_some,
+    },
 };
 use protocol::{Reply, ViscaError};
 
@@ -76,15 +79,15 @@ pub struct EviConf {
 
 /// The lines `evi` takes (`jderobot help evi` prints them).
 const LINES: &[Setting] = &[
-    SERIAL,
+    SERIAL.group(HEAD),
     Setting::new(
         "camera",
         "the camera's VISCA address (after an address set, the first camera is 1)",
         &[int("ADDRESS", "", 1, 7)],
     )
     .default("1"),
-    POLL.default("100"),
-    REPLY_TIMEOUT,
+    POLL.default("100").group(HEAD),
+    REPLY_TIMEOUT.group(HEAD),
     Setting::new(
         "provides",
         "an interface it provides: pantiltencoders, pantiltmotors, zoomencoders, zoommotors (4.3's ptencoders, ptmotors, zencoders, zmotors)",
@@ -102,17 +105,15 @@ const LINES: &[Setting] = &[
             ],
         )],
     )
-    .repeats(),
+    .repeats()
+    .group(HEAD),
 ];
 
 /// The values of [`LINES`].
 #[derive(serde::Deserialize)]
 struct Lines {
-    serial: String,
+    head: HeadLines,
     camera: u8,
-    poll: u64,
-    reply_timeout: u64,
-    provides: Vec<String>,
 }
 
 impl EviConf {
@@ -124,16 +125,8 @@ impl EviConf {
             "zoommotors",
         ];
         let l: Lines = conf.settings(LINES)?;
-        let head = HeadConf::new(
-            conf,
-            l.serial,
-            l.poll,
-            l.reply_timeout,
-            &l.provides,
-            &offered,
-        )?;
         Ok(EviConf {
-            head,
+            head: HeadConf::new(conf, l.head, &offered)?,
             camera: l.camera,
         })
     }

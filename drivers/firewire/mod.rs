@@ -55,7 +55,7 @@ use crate::{
     },
     interfaces::{COLOR_HEIGHT, COLOR_WIDTH, Image, Interface},
     runtime::{Device, Driver, Runtime, Supervision, Supervisor},
-    supervisor::Absent,
+    supervisor::{Absent, CAMERA_NO_FRAME},
     vision::pixfmt::{self, Bayer, Yuv422Order, YuvMatrix},
 };
 
@@ -553,11 +553,6 @@ pub fn convert_frame(
     r.map_err(|e| e.to_string())
 }
 
-/// How long without a frame before the interface is marked stale.
-const NO_FRAME_STALE: Duration = Duration::from_secs(5);
-/// Wait between attempts to open an absent camera.
-const RETRY: Duration = Duration::from_secs(2);
-
 /// One camera under the runtime's [`Supervisor`]: it opens the camera while its
 /// interface is used, and serves it a frame at a time.
 struct Camera {
@@ -579,7 +574,7 @@ impl Device for Camera {
             self.last_frame = Instant::now();
             self.iface
                 .publish_frame(self.c.width, self.c.height, &mut self.buf);
-        } else if self.last_frame.elapsed() > NO_FRAME_STALE {
+        } else if self.last_frame.elapsed() > CAMERA_NO_FRAME {
             self.iface.set_stale(format!(
                 "camera {}: no frame for {} s",
                 self.c.cam,
@@ -607,13 +602,7 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
         let how = Supervision::camera(
             format!("firewire camera {}", c.cam),
             iface.clone(),
-            RETRY,
-            absent.map(|why| Absent {
-                at: &c.at,
-                driver: &conf.name,
-                why,
-                until: &until,
-            }),
+            absent.map(|why| Absent::new(&c.at, &conf.name, why, &until)),
         );
         cameras.push(Supervisor::start(
             how,

@@ -44,7 +44,7 @@ use std::{
         Arc,
         atomic::{AtomicU64, Ordering},
     },
-    time::{Duration, Instant},
+    time::Instant,
 };
 
 use crate::{
@@ -54,7 +54,7 @@ use crate::{
     },
     interfaces::{COLOR_HEIGHT, COLOR_WIDTH, Image, Interface},
     runtime::{Device, Driver, Runtime, Supervision, Supervisor},
-    supervisor::Absent,
+    supervisor::{Absent, CAMERA_NO_FRAME},
     vision::pixfmt::{self, Bayer, Yuv422Order, YuvMatrix},
 };
 
@@ -476,9 +476,6 @@ pub static DROPPED: AtomicU64 = AtomicU64::new(0);
 /// frame ids while acquiring), for tests and benchmarks.
 pub static SKIPPED: AtomicU64 = AtomicU64::new(0);
 
-const NO_FRAME_STALE: Duration = Duration::from_secs(5);
-const RETRY: Duration = Duration::from_secs(2);
-
 /// One camera under the runtime's [`Supervisor`]: opened while its interface is
 /// used, acquiring a frame at a time; acquisition pauses while nobody uses it.
 struct Capture {
@@ -503,7 +500,7 @@ impl Device for Capture {
             self.last_id = None;
         }
         let Some(buf) = d.stream.timeout_pop_buffer(200_000) else {
-            if self.last_frame.elapsed() > NO_FRAME_STALE {
+            if self.last_frame.elapsed() > CAMERA_NO_FRAME {
                 return Err(format!(
                     "camera `{}`: no frame for {} s (unplugged or unreachable?)",
                     c.camera,
@@ -584,13 +581,7 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
         let how = Supervision::camera(
             format!("gige camera `{}`", c.camera),
             iface.clone(),
-            RETRY,
-            absent.map(|why| Absent {
-                at: &c.at,
-                driver: &conf.name,
-                why,
-                until: "the camera answers",
-            }),
+            absent.map(|why| Absent::new(&c.at, &conf.name, why, "the camera answers")),
         );
         cameras.push(Supervisor::start(
             how,

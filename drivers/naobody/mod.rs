@@ -1249,16 +1249,10 @@ pub fn start(conf: NaoConf, rt: &Runtime, provider: &str) -> anyhow::Result<Vec<
         let how = Supervision::camera(
             format!("{provider} {}", c.iface),
             iface.clone(),
-            Duration::from_secs(2),
             absent
                 .as_ref()
                 .filter(|_| !conf.has_body())
-                .map(|why| Absent {
-                    at: &c.at,
-                    driver: provider,
-                    why: why.clone(),
-                    until: "NAOqi answers",
-                }),
+                .map(|why| Absent::new(&c.at, provider, why.clone(), "NAOqi answers")),
         );
         // With a body, its line said NAOqi is absent: the camera is only marked.
         let how = match (&absent, how.absent.is_some()) {

@@ -54,7 +54,10 @@ use crate::{
     },
     interfaces::{AnyInterface, Interface, PtEncoders, PtMotors, limit},
     runtime::{Device, Driver, Runtime, Supervisor},
-    serialhead::{self, HeadConf, POLL, PollClock, PortError, REPLY_TIMEOUT, SERIAL, read_some},
+    serialhead::{
+        self, HEAD, HeadConf, HeadLines, POLL, PollClock, PortError, REPLY_TIMEOUT, SERIAL,
+        read_some,
+    },
 };
 use protocol::{Axis, ENCOD_TO_DEG, Query, ReplyError};
 
@@ -68,15 +71,15 @@ pub struct PtuConf {
 
 /// The lines `pantilt` takes (`jderobot help pantilt` prints them).
 const LINES: &[Setting] = &[
-    SERIAL,
+    SERIAL.group(HEAD),
     Setting::new(
         "baud",
         "the line speed (the unit's default is 9600)",
         &[int("RATE", "baud", 300, 115_200)],
     )
     .default("9600"),
-    POLL.default("300"),
-    REPLY_TIMEOUT,
+    POLL.default("300").group(HEAD),
+    REPLY_TIMEOUT.group(HEAD),
     Setting::new(
         "provides",
         "an interface it provides: pantiltencoders and/or pantiltmotors (4.3's ptencoders, ptmotors)",
@@ -85,17 +88,15 @@ const LINES: &[Setting] = &[
             &["pantiltencoders", "pantiltmotors", "ptencoders", "ptmotors"],
         )],
     )
-    .repeats(),
+    .repeats()
+    .group(HEAD),
 ];
 
 /// The values of [`LINES`].
 #[derive(serde::Deserialize)]
 struct Lines {
-    serial: String,
+    head: HeadLines,
     baud: u32,
-    poll: u64,
-    reply_timeout: u64,
-    provides: Vec<String>,
 }
 
 impl PtuConf {
@@ -103,15 +104,10 @@ impl PtuConf {
     pub fn parse(conf: &ComponentConf) -> anyhow::Result<PtuConf> {
         let l: Lines = conf.settings(LINES)?;
         let offered = ["pantiltencoders", "pantiltmotors"];
-        let head = HeadConf::new(
-            conf,
-            l.serial,
-            l.poll,
-            l.reply_timeout,
-            &l.provides,
-            &offered,
-        )?;
-        Ok(PtuConf { head, baud: l.baud })
+        Ok(PtuConf {
+            head: HeadConf::new(conf, l.head, &offered)?,
+            baud: l.baud,
+        })
     }
 }
 

@@ -56,16 +56,9 @@
 //! No system package is needed. The file is read into memory whole (a regular
 //! file of at most `mcapfmt::MAX_FILE_BYTES`).
 
-use std::{
-    collections::BTreeMap,
-    ops::ControlFlow,
-    path::PathBuf,
-    sync::{
-        Arc,
-        atomic::{AtomicBool, Ordering},
-    },
-    time::{Duration, Instant},
-};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+use std::{collections::BTreeMap, ops::ControlFlow, path::PathBuf, sync::Arc};
 
 use anyhow::{Context as _, bail};
 

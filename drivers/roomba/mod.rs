@@ -59,7 +59,7 @@ use crate::{
     },
     interfaces::{AnyInterface, Bumpers, Encoders, Interface, Motors, Sonars},
     runtime::{Backoff, Device, Driver, Runtime, Supervision, Supervisor},
-    serialhead::{HeadConf, REPLY_TIMEOUT, SERIAL, open_port},
+    serialhead::{HeadConf, HeadLines, REPLY_TIMEOUT, SERIAL, open_port},
 };
 use protocol::{FrameError, Odometry, Sensors};
 
@@ -115,14 +115,13 @@ pub struct RoombaConf {
 impl RoombaConf {
     pub fn parse(conf: &ComponentConf) -> anyhow::Result<RoombaConf> {
         let l: Lines = conf.settings(LINES)?;
-        let head = HeadConf::new(
-            conf,
-            l.serial,
-            15,
-            l.reply_timeout,
-            &l.provides,
-            &["motors", "encoders", "bumpers", "sonars"],
-        )?;
+        let lines = HeadLines {
+            serial: l.serial,
+            poll: 15,
+            reply_timeout: l.reply_timeout,
+            provides: l.provides,
+        };
+        let head = HeadConf::new(conf, lines, &["motors", "encoders", "bumpers", "sonars"])?;
         Ok(RoombaConf {
             head,
             baud: l.baud,

@@ -28,14 +28,9 @@
 //! frame (clock + 1), every 33 ms as in 4.3. Segments that cross a camera's
 //! plane are drawn clipped (4.3.0 left them out; 4.3.1 drew them).
 
-use std::{
-    path::PathBuf,
-    sync::{
-        Arc,
-        atomic::{AtomicBool, Ordering},
-    },
-    time::{Duration, Instant},
-};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+use std::{path::PathBuf, sync::Arc};
 
 use crate::{
     conf::{

@@ -56,7 +56,7 @@ use crate::{
     },
     interfaces::{COLOR_HEIGHT, COLOR_WIDTH, Image, Interface},
     runtime::{self, Driver, Runtime, Supervision, Supervisor},
-    supervisor::Absent,
+    supervisor::{Absent, CAMERA_NO_FRAME},
     vision::pixfmt::{self, Bayer, Yuv422Order, YuvMatrix},
 };
 
@@ -388,9 +388,6 @@ pub fn check(c: &DevConf) -> Result<(), CheckError> {
     negotiate(&dev, c).map(|_| ()).map_err(CheckError::Unusable)
 }
 
-const NO_FRAME_STALE: Duration = Duration::from_secs(5);
-const RETRY: Duration = Duration::from_secs(2);
-
 /// Stops a stream; the `v4l` crate panics in `Drop` on some errors (other than
 /// ENODEV), which must not take the capture thread down.
 fn drop_stream(s: MmapStream<'_>) {
@@ -462,7 +459,7 @@ impl runtime::Device for Grabber {
                 Ok(())
             }
             Err(e) if e.kind() == std::io::ErrorKind::TimedOut => {
-                if self.last.elapsed() > NO_FRAME_STALE {
+                if self.last.elapsed() > CAMERA_NO_FRAME {
                     self.iface.set_stale(format!(
                         "{}: no frame for {} s",
                         c.device.display(),
@@ -507,13 +504,7 @@ fn start(conf: &ComponentConf, rt: &Runtime, v4l1: bool) -> anyhow::Result<Box<d
         let how = Supervision::camera(
             format!("video4linux2 {}", d.device.display()),
             iface.clone(),
-            RETRY,
-            absent.map(|why| Absent {
-                at: &d.at,
-                driver: &conf.name,
-                why,
-                until: "the device appears",
-            }),
+            absent.map(|why| Absent::new(&d.at, &conf.name, why, "the device appears")),
         );
         devices.push(Supervisor::start(
             how,

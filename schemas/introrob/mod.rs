@@ -119,9 +119,8 @@ impl Schema for Introrob {
             image: image.as_ref().map(|s| &s.value),
             time: self.started.elapsed().as_secs_f64(),
         };
-        let m = self.brain.step(&input);
-        self.motors.publish(m).map_err(anyhow::Error::msg)?;
-        Ok(())
+        // The brain's command, every cycle (a rejected one is the error).
+        Ok(self.motors.publish(self.brain.step(&input)).map(drop)?)
     }
     fn on_stop(&mut self, _ctx: &Context) {
         let _ = self.motors.publish(Motors::default());

@@ -90,14 +90,13 @@ pub const LINES: &[Setting] = &[
     ),
     settings::uses(
         "laser",
-        "laser",
         "the laser it avoids obstacles with (none: a robot without one; no laser obstacles)",
     ),
-    settings::uses("encoders", "encoders", "the robot's pose"),
-    settings::uses("motors", "motors", "the base it drives"),
-    settings::uses("sonars", "sonars", "sonars it shows (none: none)"),
-    settings::uses("bumpers", "bumpers", "bumpers it reacts to (none: none)"),
-    settings::uses("camera", "colorA", "the image it shows (none: none)"),
+    settings::uses("encoders", "the robot's pose"),
+    settings::uses("motors", "the base it drives"),
+    settings::uses("sonars", "sonars it shows (none: none)"),
+    settings::uses("bumpers", "bumpers it reacts to (none: none)"),
+    settings::uses("camera", "the image it shows (none: none)").default("colorA"),
 ];
 
 /// The behaviours' names (with 4.3's synonyms).

@@ -193,12 +193,8 @@ const LINES: &[Setting] = &[
 struct Lines {
     image: String,
     filter: String,
-    hmin: f32,
-    hmax: f32,
-    smin: f32,
-    smax: f32,
-    vmin: f32,
-    vmax: f32,
+    #[serde(deserialize_with = "imagesource::hsv_lines")]
+    hsv: HsvRange,
     canny: f64,
     hough: u32,
     houghp: (u32, i32, i32),
@@ -272,7 +268,7 @@ fn kernel(conf: &ComponentConf, l: &Lines) -> anyhow::Result<Kernel> {
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>> {
     let l: Lines = conf.settings(LINES)?;
     let p = Params {
-        hsv: HsvRange::from_radians(l.hmin, l.hmax, l.smin, l.smax, l.vmin, l.vmax),
+        hsv: l.hsv,
         canny: l.canny,
         hough_votes: l.hough,
         houghp: l.houghp,

@@ -96,23 +96,11 @@ const LINES: &[Setting] = &[
         &[on_off("SWITCH")],
     )
     .default("on"),
-    settings::uses(
-        "motors",
-        "motors",
-        "the base HAL.setV/setW drive (none: none)",
-    ),
-    settings::uses(
-        "encoders",
-        "encoders",
-        "HAL.getPose3d's odometry (none: none)",
-    ),
-    settings::uses("laser", "laser", "HAL.getLaserData's scan (none: none)"),
-    settings::uses(
-        "bumpers",
-        "bumpers",
-        "HAL.getBumperData's bumpers (none: none)",
-    ),
-    settings::uses("camera", "colorA", "HAL.getImage's camera (none: none)"),
+    settings::uses("motors", "the base HAL.setV/setW drive (none: none)"),
+    settings::uses("encoders", "HAL.getPose3d's odometry (none: none)"),
+    settings::uses("laser", "HAL.getLaserData's scan (none: none)"),
+    settings::uses("bumpers", "HAL.getBumperData's bumpers (none: none)"),
+    settings::uses("camera", "HAL.getImage's camera (none: none)").default("colorA"),
 ];
 
 /// The values of [`LINES`].

@@ -57,24 +57,15 @@ const LINES: &[Setting] = &[
     operator::MAX_W,
     settings::WORLD,
     CYCLE.default("100"),
-    settings::uses("motors", "motors", "the base it drives"),
+    settings::uses("motors", "the base it drives"),
+    settings::uses("encoders", "the robot's pose in the 3D canvas (none: none)"),
+    settings::uses("laser", "the laser in the 3D canvas (none: none)"),
+    settings::uses("pantiltmotors", "the pan-tilt unit it points (none: none)"),
     settings::uses(
-        "encoders",
-        "encoders",
-        "the robot's pose in the 3D canvas (none: none)",
-    ),
-    settings::uses("laser", "laser", "the laser in the 3D canvas (none: none)"),
-    settings::uses(
-        "pantiltmotors",
-        "pantiltmotors",
-        "the pan-tilt unit it points (none: none)",
-    ),
-    settings::uses(
-        "pantiltencoders",
         "pantiltencoders",
         "the pan-tilt angles it shows (none: none)",
     ),
-    settings::uses("camera", "colorA", "the image it shows (none: none)"),
+    settings::uses("camera", "the image it shows (none: none)").default("colorA"),
 ];
 
 /// The values of [`LINES`].

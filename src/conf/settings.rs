@@ -34,6 +34,10 @@
 //! declaration, which serde has no place for. The two are kept in step by a check at
 //! parse time (every declared key must be a field and every field a declared key)
 //! and by a test that parses every component's defaults.
+//!
+//! Lines several components share as a set (a serial head's, the HSV range) are a
+//! group ([`Setting::group`]): each is still declared and written as a plain line,
+//! and the group is read into one field, a struct of its own, checked the same way.
 
 use std::fmt::{self, Write as _};
 
@@ -245,6 +249,8 @@ pub struct Setting {
     /// The forms of a line whose first word chooses the rest (`args` is then
     /// empty): see [`Form`].
     pub forms: &'static [Form],
+    /// The group of lines it belongs to ([`Setting::group`]).
+    pub group: Option<&'static str>,
 }
 
 impl Setting {
@@ -257,6 +263,7 @@ impl Setting {
             repeats: false,
             required: false,
             forms: &[],
+            group: None,
         }
     }
     /// A line in several forms, its first word choosing which ([`Form`]).
@@ -284,6 +291,13 @@ impl Setting {
     /// under their own name).
     pub const fn key(mut self, key: &'static str) -> Setting {
         self.key = key;
+        self
+    }
+    /// The line belongs to the group `name`: a set of lines several components
+    /// share, read into one field `name` of the settings struct (a struct of its
+    /// own that derives `Deserialize`). The conf and `help` see plain lines.
+    pub const fn group(mut self, name: &'static str) -> Setting {
+        self.group = Some(name);
         self
     }
     /// The same line with another help text.
@@ -544,11 +558,12 @@ pub struct ProvidesOnly<P> {
 }
 
 /// `KEY INTERFACE`: an interface the component uses in a role (`motors motors`,
-/// `camera varcolorA`), `default` when absent; schemas take `none` for "do
-/// without" where they can (the help says so).
-pub const fn uses(key: &'static str, default: &'static str, help: &'static str) -> Setting {
+/// `camera varcolorA`), the interface of the role's own name when absent
+/// (another with `.default("colorA")`); schemas take `none` for "do without"
+/// where they can (the help says so).
+pub const fn uses(key: &'static str, help: &'static str) -> Setting {
     const ARGS: &[Arg] = &[interface("INTERFACE")];
-    Setting::new(key, help, ARGS).default(default)
+    Setting::new(key, help, ARGS).default(key)
 }
 
 /// Says a range in words.
@@ -1117,7 +1132,8 @@ impl ComponentConf {
         let parsed = parse(self, decl).map_err(|mut e| e.remove(0))?;
         let at = conf_location(self);
         T::deserialize(Lines {
-            parsed: &parsed,
+            entries: parsed.entries.iter().collect(),
+            group: None,
             at: &at,
         })
         .map_err(|e| e.0)
@@ -1146,10 +1162,42 @@ impl de::Error for DeError {
     }
 }
 
-/// The whole component: a map from key to line.
+/// The whole component (`group` None), or one group of its lines: a map from
+/// key (or group name) to line (or group).
 struct Lines<'p, 'a> {
-    parsed: &'p Parsed<'a>,
+    entries: Vec<&'p Entry<'a>>,
+    group: Option<&'static str>,
     at: &'p Location,
+}
+
+/// A field at one level: a line, or a group of lines (`group`).
+struct Item<'p, 'a> {
+    key: &'static str,
+    group: bool,
+    entries: Vec<&'p Entry<'a>>,
+}
+
+impl<'p, 'a> Lines<'p, 'a> {
+    /// The fields at this level, in declaration order: a line outside any group
+    /// (or inside the group read here) by its key, a group by its name.
+    fn items(&self) -> Vec<Item<'p, 'a>> {
+        let mut items: Vec<Item<'p, 'a>> = Vec::new();
+        for &e in &self.entries {
+            let (key, group) = match e.0.group {
+                Some(g) if self.group != Some(g) => (g, true),
+                _ => (e.0.key, false),
+            };
+            match items.iter_mut().find(|i| i.key == key) {
+                Some(i) => i.entries.push(e),
+                None => items.push(Item {
+                    key,
+                    group,
+                    entries: vec![e],
+                }),
+            }
+        }
+        items
+    }
 }
 
 impl<'de> de::Deserializer<'de> for Lines<'_, '_> {
@@ -1170,27 +1218,30 @@ impl<'de> de::Deserializer<'de> for Lines<'_, '_> {
                 message: format!("internal: {m}"),
             })
         };
-        for (s, _, _) in &self.parsed.entries {
-            if !fields.contains(&s.key) {
+        let items = self.items();
+        for i in &items {
+            if !fields.contains(&i.key) {
                 return Err(internal(format!(
-                    "line `{}` is declared but the settings struct has no such field",
-                    s.key
+                    "line or group `{}` is declared but the settings struct has no such field",
+                    i.key
                 )));
             }
         }
         for f in fields {
-            if !self.parsed.entries.iter().any(|(s, _, _)| s.key == *f) {
+            if !items.iter().any(|i| i.key == *f) {
                 return Err(internal(format!(
-                    "field `{f}` of the settings struct is not a declared line"
+                    "field `{f}` of the settings struct is not a declared line or group"
                 )));
             }
         }
         visitor.visit_map(LineMap {
-            entries: self
-                .parsed
-                .entries
-                .iter()
-                .filter(|(s, _, v)| s.repeats || !v.is_empty())
+            // An absent line without default is left out (an `Option` reads None).
+            items: items
+                .into_iter()
+                .filter(|i| {
+                    let (s, _, v) = i.entries[0];
+                    i.group || s.repeats || !v.is_empty()
+                })
                 .collect(),
             next: 0,
             at: self.at,
@@ -1208,7 +1259,7 @@ impl<'de> de::Deserializer<'de> for Lines<'_, '_> {
 type Entry<'a> = (&'a Setting, Option<Location>, Vec<Checked>);
 
 struct LineMap<'p, 'a> {
-    entries: Vec<&'p Entry<'a>>,
+    items: Vec<Item<'p, 'a>>,
     next: usize,
     at: &'p Location,
 }
@@ -1219,14 +1270,22 @@ impl<'de> MapAccess<'de> for LineMap<'_, '_> {
         &mut self,
         seed: K,
     ) -> Result<Option<K::Value>, DeError> {
-        let Some((s, _, _)) = self.entries.get(self.next) else {
+        let Some(i) = self.items.get(self.next) else {
             return Ok(None);
         };
-        seed.deserialize(s.key.into_deserializer()).map(Some)
+        seed.deserialize(i.key.into_deserializer()).map(Some)
     }
     fn next_value_seed<V: DeserializeSeed<'de>>(&mut self, seed: V) -> Result<V::Value, DeError> {
-        let (s, at, values) = self.entries[self.next];
+        let i = &self.items[self.next];
         self.next += 1;
+        if i.group {
+            return seed.deserialize(Lines {
+                entries: i.entries.clone(),
+                group: Some(i.key),
+                at: self.at,
+            });
+        }
+        let (s, at, values) = i.entries[0];
         let at = at.as_ref().unwrap_or(self.at);
         let relocate = |e: DeError| {
             DeError(ConfError {
@@ -1615,6 +1674,42 @@ mod tests {
             ]
         );
         assert!(d.debug);
+    }
+
+    #[test]
+    fn a_group_of_lines_is_one_field() {
+        #[derive(serde::Deserialize, Debug)]
+        struct Head {
+            port: String,
+            poll: u64,
+            extra: Option<String>,
+        }
+        #[derive(serde::Deserialize, Debug)]
+        struct Lines {
+            head: Head,
+            cycle: u64,
+        }
+        const LINES: &[Setting] = &[
+            Setting::new("port", "p", &[word("DEV")]).group("head"),
+            CYCLE.default("100"),
+            Setting::new("poll", "q", &[int("MS", "ms", 1, 9)])
+                .default("3")
+                .group("head"),
+            Setting::new("extra", "e", &[word("W")]).group("head"),
+        ];
+        let l: Lines = conf("port /dev/x\ncycle 7\n").settings(LINES).unwrap();
+        assert_eq!(
+            (l.head.port.as_str(), l.head.poll, l.cycle),
+            ("/dev/x", 3, 7)
+        );
+        assert!(l.head.extra.is_none());
+        let e = conf("port a\npoll 10\n")
+            .settings::<Lines>(LINES)
+            .unwrap_err();
+        assert!(e.to_string().starts_with("<inline>:2: "), "{e}");
+        // The struct and the declaration must agree about groups as well.
+        let e = conf("port a\n").settings::<Head>(&LINES[..1]).unwrap_err();
+        assert!(e.to_string().contains("group `head`"), "{e}");
     }
 
     #[test]

@@ -335,11 +335,12 @@ pyr_horizontal!(pyr_horizontal3, 3);
 
 /// Halves a `cn`-channel image with OpenCV's `pyrDown` (5x5 Gaussian
 /// [1 4 6 4 1]²/256, rounded, `BORDER_REFLECT_101`); output ⌈w/2⌉ x ⌈h/2⌉.
-fn pyr_down_raw(src: &[u8], w: usize, h: usize, cn: usize) -> (Vec<u8>, usize, usize) {
+fn pyr_down_raw(src: &[u8], w: u32, h: u32, cn: usize) -> (Vec<u8>, u32, u32) {
+    let (w, h) = (w as usize, h as usize);
     let (dw, dh) = (w.div_ceil(2), h.div_ceil(2));
     let mut out = vec![0u8; dw * dh * cn];
     if w == 0 || h == 0 {
-        return (out, dw, dh);
+        return (out, dw as u32, dh as u32);
     }
     let row = |y: isize| {
         let y = reflect101(y, h);
@@ -365,33 +366,25 @@ fn pyr_down_raw(src: &[u8], w: usize, h: usize, cn: usize) -> (Vec<u8>, usize, u
             _ => unreachable!("pyrDown of 1 or 3 channels"),
         }
     }
-    (out, dw, dh)
+    (out, dw as u32, dh as u32)
 }
 
 /// OpenCV's `pyrDown` of a BGR image.
 pub fn pyr_down(img: &Image) -> Image {
-    if !is_valid(img) {
-        return Image::default();
+    let mut out = Image::default();
+    if is_valid(img) {
+        (out.data, out.width, out.height) = pyr_down_raw(&img.data, img.width, img.height, 3);
     }
-    let (data, w, h) = pyr_down_raw(&img.data, img.width as usize, img.height as usize, 3);
-    Image {
-        width: w as u32,
-        height: h as u32,
-        data,
-    }
+    out
 }
 
 /// OpenCV's `pyrDown` of a grey image.
 pub fn pyr_down_gray(img: &GrayImage) -> GrayImage {
-    if !valid_len(img.width, img.height, 1, img.data.len()) {
-        return GrayImage::default();
+    let mut out = GrayImage::default();
+    if valid_len(img.width, img.height, 1, img.data.len()) {
+        (out.data, out.width, out.height) = pyr_down_raw(&img.data, img.width, img.height, 1);
     }
-    let (data, w, h) = pyr_down_raw(&img.data, img.width as usize, img.height as usize, 1);
-    GrayImage {
-        width: w as u32,
-        height: h as u32,
-        data,
-    }
+    out
 }
 
 /// The multiresolution pyramid: `img` then `levels` successive [`pyr_down`]s
@@ -440,8 +433,8 @@ mod tests {
         for (w, h) in [(1, 1), (2, 3), (3, 2), (5, 7), (13, 9), (40, 17)] {
             for cn in [1, 3] {
                 let src: Vec<u8> = (0..w * h * cn).map(|i| (i * 7919 % 256) as u8).collect();
-                let (got, dw, dh) = pyr_down_raw(&src, w, h, cn);
-                assert_eq!((dw, dh), (w.div_ceil(2), h.div_ceil(2)));
+                let (got, dw, dh) = pyr_down_raw(&src, w as u32, h as u32, cn);
+                assert_eq!((dw as usize, dh as usize), (w.div_ceil(2), h.div_ceil(2)));
                 assert_eq!(got, pyr_down_reference(&src, w, h, cn), "{w}x{h}x{cn}");
             }
         }
