@@ -25,6 +25,7 @@ Prints one JSON line.
 """
 import json
 import math
+import os
 import sys
 import time
 import types
@@ -361,7 +362,11 @@ def stall(dp, secs):
         sent[k] = time.time()
         cmd.write(Twist(Vector3(k / 1000.0, 0.0, 0.0), Vector3(0.0, 0.0, 0.0)))
         time.sleep(0.05)
-    print(json.dumps({"sent": sent, "stalled": len(stalled)}))
+    print(json.dumps({"sent": sent, "stalled": len(stalled)}), flush=True)
+    # Leave at once: the interpreter's teardown of these stalled reliable readers
+    # took ~48 s while the service kept writing /odom to them (the test waits for
+    # this process to end).
+    os._exit(0)
 
 
 def many(dp, secs):
