@@ -853,10 +853,18 @@ mod calibrador {
             .unwrap();
         let c = st.result.lock().clone().expect("calibrated at load");
         assert!(c.rms < 0.01, "{c:?}");
-        *st.size.lock() = (640, 480);
-        st.save();
-        let saved = PinholeCamera::load(&out).unwrap();
-        assert_eq!((saved.columns, saved.rows), (640, 480));
+        // The schema sets `size` from its image (320x240) every 100 ms: a save whose
+        // size it replaced between these two lines is tried again.
+        let mut saved = None;
+        eventually("a camera file saved at 640x480", || {
+            *st.size.lock() = (640, 480);
+            st.save();
+            let s = PinholeCamera::load(&out).unwrap();
+            let done = (s.columns, s.rows) == (640, 480);
+            saved = Some(s);
+            done
+        });
+        let saved = saved.unwrap();
         assert!(
             (saved.u0 - 250.0).abs() < 0.01 && (saved.v0 - 330.0).abs() < 0.01,
             "{saved:?}"
