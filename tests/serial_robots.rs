@@ -411,6 +411,7 @@ fn unplugging_and_plugging_back_both_recover() {
     lrt.shutdown();
 }
 
+#[cfg(feature = "introrob")]
 #[test]
 fn introrob_vff_drives_the_create2_and_its_rplidar_to_the_target() {
     use jderobot::schemas::introrob::Dashboard;
