@@ -87,7 +87,12 @@ pub fn hsv_lines<'de, D: serde::Deserializer<'de>>(d: D) -> Result<HsvRange, D::
                 let i = i.ok_or_else(|| serde::de::Error::unknown_field(&k, KEYS))?;
                 v[i] = m.next_value()?;
             }
-            Ok(v)
+            // Every line of the group has a default where it is declared; one left
+            // out of a declaration is an error here, not a NaN in the filter.
+            match v.iter().position(|x| x.is_nan()) {
+                Some(i) => Err(serde::de::Error::missing_field(KEYS[i])),
+                None => Ok(v),
+            }
         }
     }
     let [hmin, hmax, smin, smax, vmin, vmax] = d.deserialize_struct("HsvRange", KEYS, Six)?;
