@@ -59,7 +59,8 @@ use crate::{
     interfaces::{AnyInterface, Encoders, Image, Imu, Interface, Laser, Motors, Source},
     mcapfmt::{
         dds::{
-            self, Cdr, CdrAdapter, Graph, Readiness, dds_topic, reliable_qos, ros_topic, sensor_qos,
+            self, Cdr, CdrAdapter, Graph, Readiness, Recycler, dds_topic, reliable_qos, ros_topic,
+            sensor_qos,
         },
         ros2::{self, Ros2},
     },
@@ -203,7 +204,7 @@ struct Robot {
     timeout: Duration,
     /// The node; dropping it leaves the graph.
     graph: Graph,
-    buf: Vec<u8>,
+    bufs: Recycler,
     /// Wakes `step` when a reader has data (it also runs every 2 ms for motors).
     ready: Readiness,
 }
@@ -222,8 +223,9 @@ impl Robot {
                 time: SystemTime::now(),
                 value: m,
             };
-            if ros2::encode("", &s, &mut self.buf) {
-                let _ = w.write(Cdr(std::mem::take(&mut self.buf)), None);
+            let mut buf = self.bufs.buffer();
+            if ros2::encode("", &s, &mut buf) {
+                let _ = w.write(self.bufs.message(buf), None);
             }
         }
     }
@@ -432,7 +434,7 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
         silence: Duration::from_millis(l.silence),
         timeout: Duration::from_millis(l.motors_timeout),
         graph,
-        buf: Vec::new(),
+        bufs: Recycler::default(),
         ready,
     };
     let how = Supervision {

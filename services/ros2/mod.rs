@@ -101,7 +101,7 @@ use crate::{
     },
     mcapfmt::{
         dds::{
-            self, Cdr, CdrAdapter, Graph, Readiness, dds_topic, reliable_qos, ros_topic,
+            self, Cdr, CdrAdapter, Graph, Readiness, Recycler, dds_topic, reliable_qos, ros_topic,
             sensor_qos, static_qos,
         },
         ros2::{self, Joints, RangeReading, Ros2, Transform},
@@ -212,25 +212,27 @@ struct Served<T> {
     frame: String,
     writer: Writer,
     encode: Encode<T>,
+    bufs: Recycler,
     clock: u64,
 }
 
 impl<T: InterfaceValue> Served<T> {
     /// Sends the interface's value if it is new, stamped `stamp` (the run's
     /// clock) or else with its own time.
-    fn send(&mut self, buf: &mut Vec<u8>, stamp: Option<SystemTime>) -> Option<Arc<Sample<T>>> {
+    fn send(&mut self, stamp: Option<SystemTime>) -> Option<Arc<Sample<T>>> {
         let s = self.iface.snapshot();
         if s.clock == self.clock || s.clock == 0 {
             return None;
         }
         self.clock = s.clock;
-        if !(self.encode)(&self.frame, &s, buf) {
+        let mut buf = self.bufs.buffer();
+        if !(self.encode)(&self.frame, &s, &mut buf) {
             return Some(s);
         }
         if let Some(t) = stamp {
-            ros2::restamp(buf, t);
+            ros2::restamp(&mut buf, t);
         }
-        if let Err(e) = self.writer.write(Cdr(std::mem::take(buf)), None) {
+        if let Err(e) = self.writer.write(self.bufs.message(buf), None) {
             tracing::debug!("ros2: {}: {e}", self.topic);
         }
         Some(s)
@@ -240,14 +242,14 @@ impl<T: InterfaceValue> Served<T> {
 /// What the serving thread sends on each new value of an interface.
 trait Out: Send {
     /// Sends a new value, stamped `stamp` if given (else its own time).
-    fn send(&mut self, buf: &mut Vec<u8>, stamp: Option<SystemTime>);
+    fn send(&mut self, stamp: Option<SystemTime>);
     /// Watches and resumes the interface; the closure lets it go.
     fn use_it(&self, watch: &Arc<Watch>) -> Box<dyn FnOnce()>;
 }
 
 impl<T: InterfaceValue> Out for Served<T> {
-    fn send(&mut self, buf: &mut Vec<u8>, stamp: Option<SystemTime>) {
-        Served::send(self, buf, stamp);
+    fn send(&mut self, stamp: Option<SystemTime>) {
+        Served::send(self, stamp);
     }
     fn use_it(&self, watch: &Arc<Watch>) -> Box<dyn FnOnce()> {
         in_use(&self.iface, watch)
@@ -264,11 +266,12 @@ struct SonarsOut {
     writers: Vec<Writer>,
     dp: DomainParticipant,
     publisher: Publisher,
+    bufs: Recycler,
     clock: u64,
 }
 
 impl Out for SonarsOut {
-    fn send(&mut self, buf: &mut Vec<u8>, stamp: Option<SystemTime>) {
+    fn send(&mut self, stamp: Option<SystemTime>) {
         let s = self.iface.snapshot();
         if s.clock == self.clock || s.clock == 0 {
             return;
@@ -294,8 +297,9 @@ impl Out for SonarsOut {
                 max_range: max / 1000.0,
                 range: us / 1000.0,
             };
-            ros2::encode_range(stamp.unwrap_or(s.time), &r, buf);
-            let _ = self.writers[i].write(Cdr(std::mem::take(buf)), None);
+            let mut buf = self.bufs.buffer();
+            ros2::encode_range(stamp.unwrap_or(s.time), &r, &mut buf);
+            let _ = self.writers[i].write(self.bufs.message(buf), None);
         }
     }
     fn use_it(&self, watch: &Arc<Watch>) -> Box<dyn FnOnce()> {
@@ -535,6 +539,7 @@ impl Dds {
             frame,
             writer,
             encode,
+            bufs: Recycler::default(),
             clock: 0,
         })
     }
@@ -699,6 +704,7 @@ impl Plan {
                     writers: vec![],
                     dp: d.graph.dp.clone(),
                     publisher: d.publisher.clone(),
+                    bufs: Recycler::default(),
                     clock: 0,
                 }));
             }
@@ -861,24 +867,24 @@ fn serve(
     let mut users: Vec<Box<dyn FnOnce()>> = vec![];
     users.extend(plan.sensors.iter().map(|s| s.use_it(&watch)));
     users.extend(plan.odom.iter().map(|(s, _)| in_use(&s.iface, &watch)));
-    let mut buf = Vec::new();
+    let mut bufs = Recycler::default();
     if let Some(w) = &plan.tf_static {
-        let tfs = &plan.statics;
-        ros2::encode_tf(SystemTime::now(), tfs, &mut buf);
-        let _ = w.write(Cdr(std::mem::take(&mut buf)), None);
+        let mut buf = bufs.buffer();
+        ros2::encode_tf(SystemTime::now(), &plan.statics, &mut buf);
+        let _ = w.write(bufs.message(buf), None);
     }
     let mut clock_sent = (None, Instant::now());
     while !stop.load(Ordering::Acquire) {
         watch.wait(Duration::from_millis(20));
         let stamp = plan.clock.as_ref().and_then(|(c, _)| c.now());
         if let Some((_, w)) = &plan.clock {
-            send_clock(w, stamp, &mut clock_sent, &mut buf);
+            send_clock(w, stamp, &mut clock_sent, &mut bufs);
         }
         for s in &mut plan.sensors {
-            s.send(&mut buf, stamp);
+            s.send(stamp);
         }
         for (s, tf) in &mut plan.odom {
-            if let Some(sample) = s.send(&mut buf, stamp) {
+            if let Some(sample) = s.send(stamp) {
                 let e = sample.value;
                 let t = Transform {
                     parent: s.frame.clone(),
@@ -888,8 +894,9 @@ fn serve(
                     z: 0.0,
                     yaw: e.theta as f64,
                 };
+                let mut buf = bufs.buffer();
                 ros2::encode_tf(stamp.unwrap_or(sample.time), &[t], &mut buf);
-                let _ = tf.write(Cdr(std::mem::take(&mut buf)), None);
+                let _ = tf.write(bufs.message(buf), None);
             }
         }
     }
@@ -904,15 +911,16 @@ fn send_clock(
     w: &Writer,
     now: Option<SystemTime>,
     sent: &mut (Option<SystemTime>, Instant),
-    buf: &mut Vec<u8>,
+    bufs: &mut Recycler,
 ) {
     let Some(t) = now else { return };
     if sent.0 == Some(t) || (sent.0.is_some() && sent.1.elapsed() < Duration::from_millis(10)) {
         return;
     }
     *sent = (Some(t), Instant::now());
-    ros2::encode_clock(t, buf);
-    let _ = w.write(Cdr(std::mem::take(buf)), None);
+    let mut buf = bufs.buffer();
+    ros2::encode_clock(t, &mut buf);
+    let _ = w.write(bufs.message(buf), None);
 }
 
 impl Commands {

@@ -162,6 +162,10 @@ impl HistoryBuffer {
     self.first_seq
   }
 
+  fn len(&self) -> usize {
+    self.history_buffer.len()
+  }
+
   fn get_change(&self, ts: Timestamp) -> Option<&CacheChange> {
     self.history_buffer.get(&ts)
   }
@@ -708,12 +712,19 @@ impl Writer {
     for msg in messages_to_send {
       match target_reader_opt {
         None => {
-          // To all (to each reader's multicast group where it has one). A patch
-          // that sent by unicast instead (for whole 640x480 images at a Cyclone
-          // subscriber, benches/ros2.rs) stopped RustDDS-to-RustDDS delivery
-          // (tests/ros2.rs `garbage_rtps_datagrams_...`: the driver never got
-          // the service's laser), so it was taken back.
-          self.send_message_to_readers(DeliveryMode::Multicast, msg, &mut self.readers.values());
+          // To all. jderobot's patch: user data goes to each reader's unicast
+          // locator, not to the multicast group it also offers: on one host that
+          // group reaches every participant's socket, and a 640x480 image sent
+          // there unpaced overflowed a Cyclone subscriber's buffer (benches/ros2.rs:
+          // no image arrived whole; by unicast 91 % of Cyclone's own rate).
+          // Discovery (built-in writers) stays on multicast: SPDP announcements
+          // must reach participants not yet known.
+          let mode = if self.my_guid.entity_id.kind().is_user_defined() {
+            DeliveryMode::Unicast
+          } else {
+            DeliveryMode::Multicast
+          };
+          self.send_message_to_readers(mode, msg, &mut self.readers.values());
         }
         Some(reader_proxy) => {
           // To one
@@ -743,6 +754,19 @@ impl Writer {
     let timestamp = Timestamp::now();
 
     self.history_buffer.add_change(timestamp, new_cache_change);
+
+    // jderobot's patch: the history is bounded at each write, not only by the
+    // cache cleaning every 4 s: at one 640x480 image per ms a best-effort camera
+    // writer held ~4000 images (3.6 GB) between two cleanings. A best-effort
+    // writer never resends, so it keeps its depth; a reliable one the cleaning's
+    // limit.
+    let bound = match self.qos_policies.history {
+      Some(History::KeepLast { depth }) if !self.is_reliable() => depth.max(1) as usize,
+      _ => 32,
+    };
+    if self.history_buffer.len() > bound {
+      self.handle_cache_cleaning();
+    }
 
     // Do not add to Global DDS cache, as we do not necessarily have a local Reader.
     // If we do, then we will receive the ATA packet from network.
@@ -1243,7 +1267,9 @@ impl Writer {
     depth: Option<usize>,
     resource_limit: usize,
   ) {
-    let first_keeper = if !self.like_stateless {
+    // jderobot's patch: a best-effort writer keeps its depth whatever its readers
+    // acked (they never ack: the whole resource limit was kept).
+    let first_keeper = if !self.like_stateless && self.is_reliable() {
       // Regular stateful writer behavior
       // All readers have acked up to this point (SequenceNumber)
       let acked_by_all_readers = self
