@@ -234,20 +234,30 @@ fn cyclone_images(bin: &Path, d: &str) -> f64 {
     num(&output(sub), "rate")
 }
 
-/// (b) LaserScan publish → the driver's `laser`: p50 ms and the count.
-fn ours_laser(bin: &Path, d: &str, laser: &Arc<Interface<Laser>>) -> (f64, usize) {
+/// (b) LaserScan publish → the driver's `laser`.
+fn ours_laser(bin: &Path, d: &str, laser: &Arc<Interface<Laser>>) -> Arrivals {
     let publ = cyclone(bin, &["pub-scan", d, &SECS.to_string(), "50"]);
     arrivals(publ, laser, |l| l.readings[0] as i64)
 }
 
-/// The p50 ms from each message the Cyclone publisher `publ` sent (numbered by
-/// `number` of the value, as the publisher numbered it) to its arrival in `iface`,
-/// and how many arrived, until the publisher ends.
+/// The p50 ms from a message's publication to its arrival in an interface: when
+/// it is stored (`Sample::stamp`: the moment any reader can read it, what a
+/// Cyclone subscriber's take is) and when a reader woken by a watch has it (one
+/// more thread wake-up); how many arrived.
+struct Arrivals {
+    stored: f64,
+    woken: f64,
+    n: usize,
+}
+
+/// The [`Arrivals`] of each message the Cyclone publisher `publ` sent (numbered
+/// by `number` of the value, as the publisher numbered it) in `iface`, until the
+/// publisher ends.
 fn arrivals<T: InterfaceValue>(
     mut publ: Peer,
     iface: &Arc<Interface<T>>,
     number: impl Fn(&T) -> i64,
-) -> (f64, usize) {
+) -> Arrivals {
     let w = Watch::for_current_thread();
     iface.watch(w.clone());
     let mut got = vec![];
@@ -259,16 +269,28 @@ fn arrivals<T: InterfaceValue>(
         let s = iface.read();
         if s.clock != seen {
             seen = s.clock;
-            got.push((number(&s.value), wall_ns()));
+            let at = wall_ns();
+            got.push((
+                number(&s.value),
+                at - s.stamp.elapsed().as_nanos() as i64,
+                at,
+            ));
         }
     }
     iface.unwatch(&*w);
     let sent = sent(&output(publ));
-    let lat: Vec<f64> = got
-        .iter()
-        .filter_map(|(k, at)| Some((at - sent.get(k)?) as f64 / 1e6))
-        .collect();
-    (median(&lat), lat.len())
+    let (mut stored, mut woken) = (vec![], vec![]);
+    for (k, at_store, at_wake) in got {
+        if let Some(t) = sent.get(&k) {
+            stored.push((at_store - t) as f64 / 1e6);
+            woken.push((at_wake - t) as f64 / 1e6);
+        }
+    }
+    Arrivals {
+        n: stored.len(),
+        stored: median(&stored),
+        woken: median(&woken),
+    }
 }
 
 /// (b), (c): a Cyclone subscriber's p50 ms for publisher mode `publ`.
@@ -279,8 +301,8 @@ fn cyclone_latency(bin: &Path, d: &str, sub: &str, publ: &str, hz: &str) -> (f64
     (num(&out, "p50_ms"), num(&out, "n") as usize)
 }
 
-/// (c) `/cmd_vel` → the service's `motors`: p50 ms and the count.
-fn ours_cmd_vel(bin: &Path, d: &str, motors: &Arc<Interface<Motors>>) -> (f64, usize) {
+/// (c) `/cmd_vel` → the service's `motors`.
+fn ours_cmd_vel(bin: &Path, d: &str, motors: &Arc<Interface<Motors>>) -> Arrivals {
     let publ = cyclone(bin, &["pub-twist", d, &SECS.to_string(), "100"]);
     arrivals(publ, motors, |m| m.v.round() as i64)
 }
@@ -333,13 +355,31 @@ fn scan(k: u64) -> Laser {
     }
 }
 
+fn show_arrivals((a, c): &(Arrivals, (f64, usize))) -> String {
+    format!(
+        "jderobot stored {:.3} woken {:.3} (n {}), Cyclone {:.3} (n {})",
+        a.stored, a.woken, a.n, c.0, c.1
+    )
+}
+
+/// Medians over the rounds: stored, woken, Cyclone's, and of the rounds' ratios
+/// stored / Cyclone's.
+fn latencies(r: &[(Arrivals, (f64, usize))]) -> (f64, f64, f64, f64) {
+    (
+        median(r.iter().map(|x| x.0.stored).collect::<Vec<_>>()),
+        median(r.iter().map(|x| x.0.woken).collect::<Vec<_>>()),
+        median(r.iter().map(|x| x.1.0).collect::<Vec<_>>()),
+        median(r.iter().map(|x| x.0.stored / x.1.0).collect::<Vec<_>>()),
+    )
+}
+
 /// Runs `ours` and `theirs` alternately ROUNDS times: (ours, theirs) per round.
-fn rounds<T>(
+fn rounds<O, T>(
     what: &str,
-    mut ours: impl FnMut() -> T,
+    mut ours: impl FnMut() -> O,
     mut theirs: impl FnMut() -> T,
-    show: impl Fn(&T) -> String,
-) -> Vec<(T, T)> {
+    show: impl Fn(&(O, T)) -> String,
+) -> Vec<(O, T)> {
     (0..ROUNDS)
         .map(|r| {
             let (o, t) = if r % 2 == 0 {
@@ -349,12 +389,9 @@ fn rounds<T>(
                 let t = theirs();
                 (ours(), t)
             };
-            println!(
-                "  {what} round {r}: jderobot {}, Cyclone {}",
-                show(&o),
-                show(&t)
-            );
-            (o, t)
+            let x = (o, t);
+            println!("  {what} round {r}: {}", show(&x));
+            x
         })
         .collect()
 }
@@ -377,7 +414,7 @@ fn main() {
             "images/s",
             || ours_images(&bin, &domain(0), &s),
             || cyclone_images(&bin, &d),
-            |x| format!("{x:.0}"),
+            |(o, t)| format!("jderobot {o:.0}, Cyclone {t:.0}"),
         );
         let o = median(r.iter().map(|x| x.0).collect::<Vec<_>>());
         let t = median(r.iter().map(|x| x.1).collect::<Vec<_>>());
@@ -402,14 +439,14 @@ fn main() {
             "laser p50 ms",
             || ours_laser(&bin, &d, &laser),
             || cyclone_latency(&bin, &d2, "sub-scan", "pub-scan", "50"),
-            |x| format!("{:.3} (n {})", x.0, x.1),
+            show_arrivals,
         );
-        let o = median(r.iter().map(|x| x.0.0).collect::<Vec<_>>());
-        let t = median(r.iter().map(|x| x.1.0).collect::<Vec<_>>());
-        let ratio = median(r.iter().map(|x| x.0.0 / x.1.0).collect::<Vec<_>>());
+        let (o, w, t, ratio) = latencies(&r);
         println!(
-            "(b) LaserScan publish -> driver's laser p50 {o:.3} ms; Cyclone -> Cyclone \
-             {t:.3} ms (ratio {ratio:.2}x, goal <= 1.1x)"
+            "(b) LaserScan publish -> driver's laser p50: stored {o:.3} ms, woken reader \
+             {w:.3} ms; Cyclone -> Cyclone {t:.3} ms (ratio stored {ratio:.2}x, goal <= 1.1x; \
+             woken {:.2}x)",
+            w / t
         );
         rt.shutdown();
     }
@@ -420,14 +457,12 @@ fn main() {
             "cmd_vel p50 ms",
             || ours_cmd_vel(&bin, &domain(0), &s.motors),
             || cyclone_latency(&bin, &d2, "sub-twist", "pub-twist", "100"),
-            |x| format!("{:.3} (n {})", x.0, x.1),
+            show_arrivals,
         );
-        let o = median(r.iter().map(|x| x.0.0).collect::<Vec<_>>());
-        let t = median(r.iter().map(|x| x.1.0).collect::<Vec<_>>());
+        let (o, w, t, ratio) = latencies(&r);
         println!(
-            "(c) /cmd_vel -> service's motors p50 {o:.3} ms (goal <= 1 ms); Cyclone -> \
-             Cyclone {t:.3} ms (ratio {:.2}x)",
-            o / t
+            "(c) /cmd_vel -> service's motors p50: stored {o:.3} ms (goal <= 1 ms), woken \
+             reader {w:.3} ms; Cyclone -> Cyclone {t:.3} ms (ratio stored {ratio:.2}x)"
         );
         s.rt.shutdown();
     }
@@ -444,7 +479,12 @@ fn main() {
                 "CPU % of a core",
                 || ours_cpu(&bin, &domain(0), &s, image),
                 || cyclone_cpu(&bin, &d2, image),
-                |x| format!("{:.1} ({:.0} scans/sub)", x.0, x.1),
+                |(o, t)| {
+                    format!(
+                        "jderobot {:.1} ({:.0} scans/sub), Cyclone {:.1} ({:.0} scans/sub)",
+                        o.0, o.1, t.0, t.1
+                    )
+                },
             );
             let o = median(r.iter().map(|x| x.0.0).collect::<Vec<_>>());
             let t = median(r.iter().map(|x| x.1.0).collect::<Vec<_>>());

@@ -15,22 +15,8 @@ use std::{
     time::{Duration, Instant},
 };
 
-use common::{eventually, have, poll_until, root};
+use common::{eventually, have, need, poll_until, root};
 use jderobot::{Conf, Interface, Runtime, interfaces::Image};
-
-/// Whether `prog` is installed; under CI a missing program fails the test.
-fn need(prog: &str) -> bool {
-    if have(prog) {
-        return true;
-    }
-    if std::env::var_os("CI").is_some() {
-        panic!(
-            "`{prog}` is not installed and CI is set: install the Debian package (ffmpeg, mplayer)"
-        );
-    }
-    eprintln!("skipped: `{prog}` is not installed");
-    false
-}
 
 /// Writes `conf` as `dir/test.conf` and starts a runtime from it.
 fn start_in(dir: &Path, conf: &str) -> Result<Arc<Runtime>, String> {

@@ -396,6 +396,20 @@ pub fn have(cmd: &str) -> bool {
         .is_ok_and(|s| s.success())
 }
 
+/// Whether `prog` is installed; under CI a missing program fails the test.
+pub fn need(prog: &str) -> bool {
+    if have(prog) {
+        return true;
+    }
+    if std::env::var_os("CI").is_some() {
+        panic!(
+            "`{prog}` is not installed and CI is set: install the Debian package (ffmpeg, mplayer)"
+        );
+    }
+    eprintln!("skipped: `{prog}` is not installed");
+    false
+}
+
 /// Whether a screenshot test can run here: an X display and imagemagick's
 /// `tools`. If not, says why (naming `test`): under `CI` the test fails, elsewhere
 /// it skips.
