@@ -714,3 +714,87 @@ fn a_camera_served_at_25_fps_keeps_the_memory_bounded() {
         peak - before
     );
 }
+
+/// The inodes of process `pid`'s sockets.
+fn socket_inodes(pid: u32) -> Vec<String> {
+    std::fs::read_dir(format!("/proc/{pid}/fd"))
+        .map(|d| {
+            d.flatten()
+                .filter_map(|e| std::fs::read_link(e.path()).ok())
+                .filter_map(|l| {
+                    let l = l.to_string_lossy().into_owned();
+                    Some(l.strip_prefix("socket:[")?.strip_suffix(']')?.to_string())
+                })
+                .collect()
+        })
+        .unwrap_or_default()
+}
+
+/// `discovery localhost` (ROS 2's ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST): no
+/// `insecure` needed; every UDP socket of the service is bound to 127.0.0.1 but
+/// the two multicast listeners of the domain (joined on the loopback interface
+/// only), none is IPv6; and a Cyclone peer set up as rmw_cyclonedds's localhost
+/// mode (the loopback interface, with multicast) reads /scan.
+#[test]
+fn discovery_localhost_keeps_dds_on_loopback_and_a_localhost_cyclone_peer_reads_scan() {
+    let Some(py) = common::python_with("cyclonedds") else {
+        return;
+    };
+    let d = domain(10);
+    let dir = tempfile::tempdir().unwrap();
+    let conf = dir.path().join("local.conf");
+    std::fs::write(
+        &conf,
+        format!(
+            "driver simulator\nworld {}\nprovides laser 180 1\nend_driver\n\
+             service ros2\ndiscovery localhost\ndomain {d}\nend_service\n\
+             load_driver simulator\nload_service ros2\n",
+            common::world_path("simple.world")
+        ),
+    )
+    .unwrap();
+    let mut robot = Proc::start(&conf);
+    robot.ask_until("echo laser", "the laser", |l| {
+        l.starts_with("laser clock=") && !l.starts_with("laser clock=0 ")
+    });
+    // The sockets (DDSI-RTPS 9.6.1.1: multicast ports 7400 + 250·domain + 0, 1).
+    let pid = robot.child.id();
+    let ours = socket_inodes(pid);
+    let base = 7400 + 250 * d;
+    let mut seen = 0;
+    for (file, v6) in [("udp", false), ("udp6", true)] {
+        let table = std::fs::read_to_string(format!("/proc/{pid}/net/{file}")).unwrap_or_default();
+        for row in table.lines().skip(1) {
+            let f: Vec<&str> = row.split_whitespace().collect();
+            if f.len() < 10 || !ours.iter().any(|i| i == f[9]) {
+                continue;
+            }
+            seen += 1;
+            assert!(!v6, "an IPv6 socket: {row}");
+            let (ip, port) = f[1].split_once(':').unwrap();
+            let port = u32::from_str_radix(port, 16).unwrap();
+            let multicast_listener = ip == "00000000" && (port == base || port == base + 1);
+            assert!(
+                ip == "0100007F" || multicast_listener,
+                "a UDP socket beyond loopback: {row} (multicast ports {base}, {})",
+                base + 1
+            );
+        }
+    }
+    assert!(seen >= 4, "only {seen} UDP sockets of the service found");
+    let uri = "<CycloneDDS><Domain><General><Interfaces>\
+               <NetworkInterface address=\"127.0.0.1\" multicast=\"true\"/>\
+               </Interfaces></General></Domain></CycloneDDS>";
+    let peer = Command::new(&py)
+        .arg(root().join("tests/ros2/cyclone_peer.py"))
+        .args(["scans", &d.to_string(), "8"])
+        .env("CYCLONEDDS_URI", uri)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("start the Cyclone peer");
+    let got = json_of(peer, "the localhost Cyclone peer", &robot);
+    eprintln!("a localhost Cyclone peer of a `discovery localhost` service: {got}");
+    assert!(f(&got, &["scans"]) >= 5.0, "{got}");
+    robot.quit();
+}

@@ -7,7 +7,9 @@
 //! # Conf
 //! ```text
 //! driver ros2
-//! insecure                        # required (DDS here has no authentication; docs/ros2.md)
+//! discovery subnet                # the robot is another machine: the LAN (default),
+//!                                 #   or localhost (a simulator on this host)
+//! insecure                        # for subnet (DDS here has no authentication; docs/ros2.md)
 //! domain 0                        # ROS_DOMAIN_ID, 0..232 (default 0)
 //! node jderobot_driver            # the node's name (default jderobot_driver)
 //! namespace /                     # namespace of relative topic names (default /)
@@ -71,6 +73,7 @@ use crate::{
 const LINES: &[Setting] = &[
     settings::provides("provides laser|encoders|motors|imu|colorA..D|varcolorA..D [TOPIC]"),
     settings::INSECURE,
+    settings::ROS_DISCOVERY,
     settings::ROS_DOMAIN,
     settings::ROS_NODE.default("jderobot_driver"),
     settings::ROS_NAMESPACE,
@@ -88,6 +91,8 @@ struct Lines {
     provides: Vec<(String, Option<String>)>,
     #[serde(default)]
     insecure: bool,
+    #[serde(default)]
+    discovery: Option<String>,
     domain: u16,
     node: String,
     namespace: String,
@@ -353,14 +358,19 @@ fn motors_output(
 
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>> {
     let l: Lines = conf.settings(LINES)?;
-    dds::require_insecure(l.insecure, "driver ros2", "drive it")?;
+    let range = dds::discovery_range(
+        l.discovery.as_deref(),
+        l.insecure,
+        "driver ros2",
+        "drive it",
+    )?;
     if l.provides.is_empty() {
         anyhow::bail!(
             "driver ros2 has no `provides` line, and needs one: provides laser /scan, \
              provides encoders /odom, provides motors /cmd_vel, ..."
         );
     }
-    let graph = Graph::join("driver ros2", l.domain, &l.namespace, &l.node)?;
+    let graph = Graph::join("driver ros2", range, l.domain, &l.namespace, &l.node)?;
     let (ns, dp) = (graph.ns.clone(), &graph.dp);
     let sub = dp
         .create_subscriber(&reliable_qos(5))
@@ -419,9 +429,10 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
     }
     let waits: Vec<String> = inputs.iter().map(|i| i.topic.clone()).collect();
     tracing::info!(
-        "ros2: node {} on domain {} reads {}{}",
+        "ros2: node {} on domain {} ({}) reads {}{}",
         graph.full_name(),
         l.domain,
+        graph.reach(),
         waits.join(", "),
         motors
             .as_ref()

@@ -15,7 +15,9 @@
 //! # Conf
 //! ```text
 //! service ros2
-//! insecure                 # required: DDS here has no authentication (see below)
+//! discovery localhost      # this host only (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST),
+//!                          #   or subnet (the LAN, the default: needs `insecure`)
+//! insecure                 # for subnet: DDS here has no authentication (see below)
 //! node jderobot            # the node's name (default jderobot)
 //! namespace /              # the node's namespace and its relative topics' (default /)
 //! domain 0                 # ROS_DOMAIN_ID, 0..232 (default 0)
@@ -68,11 +70,14 @@
 //! the pan-tilt is then held where its encoders say it is (0° would swing it).
 //!
 //! # Security
-//! RustDDS 0.11 speaks on every multicast-capable interface; it cannot keep
-//! discovery to this host as ROS 2's `ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`
-//! does. Anyone on the LAN could then read the robot and drive it: DDS Security
-//! would be needed to prevent it, and it is not set up here. So the service
-//! starts only with `insecure`, which says so.
+//! With `discovery localhost` (or, without the line, ROS 2's
+//! `ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST` / `ROS_LOCALHOST_ONLY=1`) DDS stays on
+//! this host: multicast on the loopback interface, sockets on 127.0.0.1, nothing
+//! sent elsewhere (the vendored RustDDS's `set_localhost_only`; one range per
+//! process). With `subnet` it speaks on every multicast-capable interface, and
+//! anyone on the LAN could read the robot and drive it: DDS Security would be
+//! needed to prevent it, and it is not set up here. So `subnet` starts only with
+//! `insecure`, which says so.
 //!
 //! Provides no interface; uses the served ones.
 
@@ -112,6 +117,7 @@ use crate::{
 
 const LINES: &[Setting] = &[
     settings::INSECURE,
+    settings::ROS_DISCOVERY,
     settings::ROS_NODE.default("jderobot"),
     settings::ROS_NAMESPACE,
     settings::ROS_DOMAIN,
@@ -168,6 +174,8 @@ const LINES: &[Setting] = &[
 struct Lines {
     #[serde(default)]
     insecure: bool,
+    #[serde(default)]
+    discovery: Option<String>,
     node: String,
     namespace: String,
     domain: u16,
@@ -392,8 +400,13 @@ impl<T> Command<T> {
 
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>> {
     let l: Lines = conf.settings(LINES)?;
-    dds::require_insecure(l.insecure, "service ros2", "serve it")?;
-    let d = Dds::join(&l)?;
+    let range = dds::discovery_range(
+        l.discovery.as_deref(),
+        l.insecure,
+        "service ros2",
+        "serve it",
+    )?;
+    let d = Dds::join(&l, range)?;
     let serves = served_names(&l, rt);
     let mut plan = Plan::new(rt, &d, &l, &serves)?;
     if !plan.statics.is_empty() {
@@ -411,7 +424,7 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
     let stop = Arc::new(AtomicBool::new(false));
     let stop2 = stop.clone();
     let (tx, rx) = std::sync::mpsc::sync_channel(1);
-    let keep_name = d.graph.full_name();
+    let keep_name = format!("{} ({})", d.graph.full_name(), d.graph.reach());
     let keep = d.graph;
     let worker = Worker::start("ros2", stop.clone(), move || {
         let watch = Watch::for_current_thread();
@@ -493,8 +506,8 @@ struct Dds {
 }
 
 impl Dds {
-    fn join(l: &Lines) -> anyhow::Result<Dds> {
-        let graph = Graph::join("service ros2", l.domain, &l.namespace, &l.node)?;
+    fn join(l: &Lines, range: dds::Range) -> anyhow::Result<Dds> {
+        let graph = Graph::join("service ros2", range, l.domain, &l.namespace, &l.node)?;
         let publisher = graph
             .dp
             .create_publisher(&reliable_qos(10))

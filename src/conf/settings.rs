@@ -388,6 +388,15 @@ pub const BIND: Setting = Setting::new(
 /// `domain ID`: the ROS 2 domain (ROS_DOMAIN_ID) of the ros2 driver and service.
 pub const ROS_DOMAIN: Setting =
     Setting::new("domain", "ROS_DOMAIN_ID", &[int("ID", "", 0, 232)]).default("0");
+/// `discovery localhost|subnet`: how far a ROS 2 component's DDS reaches (ROS 2's
+/// `ROS_AUTOMATIC_DISCOVERY_RANGE`); without the line, that variable (or
+/// `ROS_LOCALHOST_ONLY=1`) decides, else `subnet`.
+pub const ROS_DISCOVERY: Setting = Setting::new(
+    "discovery",
+    "how far DDS reaches: localhost (this host only) or subnet (the LAN; needs `insecure`); \
+     default: ROS_AUTOMATIC_DISCOVERY_RANGE or ROS_LOCALHOST_ONLY, else subnet",
+    &[choice("RANGE", &["localhost", "subnet"])],
+);
 /// `node NAME`: the ROS 2 node's name (each component gives its default).
 pub const ROS_NODE: Setting = Setting::new("node", "the ROS 2 node's name", &[word("NAME")]);
 /// `namespace NS`: the ROS 2 node's namespace, which relative topic names are in.

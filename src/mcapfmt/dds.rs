@@ -115,19 +115,74 @@ impl DefaultDecoder<Cdr> for CdrAdapter {
     const DECODER: CdrDecoder = CdrDecoder;
 }
 
-/// DDS here has no authentication and RustDDS reaches every multicast interface:
-/// a ROS 2 component (`who`: `driver ros2`) starts only when its conf has an
-/// `insecure` line; `does` is what the line lets it do (`drive it`).
-pub fn require_insecure(insecure: bool, who: &str, does: &str) -> anyhow::Result<()> {
-    if !insecure {
+/// How far a ROS 2 component's DDS reaches: `localhost` (this host only, as ROS
+/// 2's `ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`: loopback multicast and
+/// addresses, nothing else sent or heard) or `subnet` (every multicast-capable
+/// interface). `line` is the component's `discovery` line; without it ROS 2's
+/// variables decide, else `subnet`. DDS here has no authentication, so `subnet`
+/// starts only when the conf has an `insecure` line; `who` (`driver ros2`) and
+/// `does` (`drive it`) name the component and what the line lets it do.
+pub fn discovery_range(
+    line: Option<&str>,
+    insecure: bool,
+    who: &str,
+    does: &str,
+) -> anyhow::Result<Range> {
+    let env = |k: &str| std::env::var(k).unwrap_or_default();
+    let localhost = match line {
+        Some(r) => r == "localhost",
+        None => {
+            env("ROS_AUTOMATIC_DISCOVERY_RANGE").eq_ignore_ascii_case("localhost")
+                || env("ROS_LOCALHOST_ONLY") == "1"
+        }
+    };
+    if !localhost && !insecure {
         anyhow::bail!(
-            "{who}: DDS here has no authentication and RustDDS reaches every multicast \
-             interface (it cannot keep discovery to this host): anyone on the LAN could \
-             read and drive the robot; DDS Security would be needed. Add an `insecure` \
-             line to {does} anyway"
+            "{who}: DDS here has no authentication and `discovery subnet` (the default) \
+             reaches every multicast interface: anyone on the LAN could read and drive the \
+             robot; DDS Security would be needed. Add `discovery localhost` to keep it to \
+             this host, or an `insecure` line to {does} on the LAN anyway"
         );
     }
-    Ok(())
+    Ok(Range { localhost })
+}
+
+/// A discovery range ([`discovery_range`]).
+#[derive(Clone, Copy, Debug)]
+pub struct Range {
+    pub localhost: bool,
+}
+
+/// RustDDS keeps one range per process: the one of the participants alive (the
+/// range, how many).
+static RANGE_IN_USE: std::sync::Mutex<(bool, usize)> = std::sync::Mutex::new((false, 0));
+
+/// A participant's hold on the process's range, let go when it drops.
+struct RangeHold;
+
+impl RangeHold {
+    fn take(range: Range, who: &str) -> anyhow::Result<RangeHold> {
+        let mut r = RANGE_IN_USE.lock().unwrap_or_else(|e| e.into_inner());
+        let name = |l: bool| if l { "localhost" } else { "subnet" };
+        if r.1 > 0 && r.0 != range.localhost {
+            anyhow::bail!(
+                "{who}: `discovery {}`, but another ROS 2 component of this run uses `discovery \
+                 {}`: DDS keeps one range per process; give them the same `discovery` line",
+                name(range.localhost),
+                name(r.0)
+            );
+        }
+        rustdds::set_localhost_only(range.localhost);
+        *r = (range.localhost, r.1 + 1);
+        Ok(RangeHold)
+    }
+}
+
+impl Drop for RangeHold {
+    fn drop(&mut self) {
+        let mut r = RANGE_IN_USE.lock().unwrap_or_else(|e| e.into_inner());
+        r.1 = r.1.saturating_sub(1);
+    }
 }
 
 /// The DDS topic of a ROS 2 topic name: `/scan` → `rt/scan`.
@@ -155,13 +210,24 @@ pub struct Graph {
     pub context: ros2_client::Context,
     pub node: ros2_client::Node,
     pub dp: rustdds::DomainParticipant,
+    /// This host only, or the LAN.
+    pub range: Range,
+    _hold: RangeHold,
 }
 
 impl Graph {
-    /// Joins DDS domain `domain` as node `name` in namespace `ns` (a `/` put in
-    /// front when missing); `who` (`service ros2`) names the component in errors.
-    pub fn join(who: &str, domain: u16, ns: &str, name: &str) -> anyhow::Result<Graph> {
+    /// Joins DDS domain `domain` within `range` as node `name` in namespace `ns`
+    /// (a `/` put in front when missing); `who` (`service ros2`) names the
+    /// component in errors.
+    pub fn join(
+        who: &str,
+        range: Range,
+        domain: u16,
+        ns: &str,
+        name: &str,
+    ) -> anyhow::Result<Graph> {
         use ros2_client::{Context, ContextOptions, NodeName, NodeOptions};
+        let hold = RangeHold::take(range, who)?;
         let ns = if ns.starts_with('/') {
             ns.to_string()
         } else {
@@ -181,6 +247,8 @@ impl Graph {
             context,
             node,
             dp,
+            range,
+            _hold: hold,
         })
     }
 
@@ -188,6 +256,15 @@ impl Graph {
     pub fn full_name(&self) -> String {
         let sep = if self.ns.ends_with('/') { "" } else { "/" };
         format!("{}{sep}{}", self.ns, self.name)
+    }
+
+    /// How far it reaches, for the log lines.
+    pub fn reach(&self) -> &'static str {
+        if self.range.localhost {
+            "this host only"
+        } else {
+            "the LAN"
+        }
     }
 }
 

@@ -369,6 +369,20 @@ def stall(dp, secs):
     os._exit(0)
 
 
+def scans(dp, secs):
+    """Reads /scan (sensor QoS) until SECS pass: how many arrived, and the seconds
+    from the start to the first."""
+    r = DataReader(dp, Topic(dp, "rt/scan", LaserScan, qos=SENSOR), qos=SENSOR)
+    start = time.time()
+    n, first = 0, None
+    while time.time() < start + secs:
+        for _ in r.take(N=10):
+            n += 1
+            first = first or time.time() - start
+        time.sleep(0.01)
+    print(json.dumps({"scans": n, "first_s": first}), flush=True)
+
+
 def many(dp, secs):
     """1,000 remote endpoints: 500 readers of rt/scan (each a best-effort reader
     the service must match and send to) and 500 writers of topics of their own."""
@@ -392,7 +406,7 @@ def main():
         camera(dp, secs, sys.argv[4])
     else:
         {"listen": listen, "robot": robot, "bad": bad, "many": many, "clock": clock,
-         "stall": stall}[mode](dp, secs)
+         "stall": stall, "scans": scans}[mode](dp, secs)
 
 
 if __name__ == "__main__":

@@ -219,6 +219,8 @@ pub use dds::{
 /// Needed to specify serialized data representation in case it is other than
 /// CDR.
 pub use serialization::RepresentationIdentifier;
+/// jderobot's patch: RTPS kept to this host (see the function).
+pub use network::util::{localhost_only, set_localhost_only};
 #[doc(inline)]
 pub use serialization::{
   CDRDeserializerAdapter, CDRSerializerAdapter, CdrDeserializer, CdrSerializer,

@@ -66,6 +66,18 @@ impl UDPListener {
       }
     }
 
+    // jderobot's patch: kept to this host, a unicast listener binds the loopback
+    // address, and a multicast one takes only the groups it joined itself (on
+    // the loopback interface), not those other sockets joined on the LAN.
+    let host = if super::util::localhost_only() && !reuse_addr && host == "0.0.0.0" {
+      "127.0.0.1"
+    } else {
+      host
+    };
+    #[cfg(target_os = "linux")]
+    if super::util::localhost_only() && reuse_addr {
+      raw_socket.set_multicast_all_v4(false)?;
+    }
     let address = SocketAddr::new(
       host
         .parse()

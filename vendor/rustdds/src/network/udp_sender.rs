@@ -24,7 +24,13 @@ pub struct UDPSender {
 impl UDPSender {
   pub fn new(sender_port: u16) -> io::Result<Self> {
     let unicast_socket = {
-      let saddr: SocketAddr = SocketAddr::new("0.0.0.0".parse().unwrap(), sender_port);
+      // jderobot's patch: kept to this host, the sender binds the loopback address.
+      let host = if crate::network::util::localhost_only() {
+        "127.0.0.1"
+      } else {
+        "0.0.0.0"
+      };
+      let saddr: SocketAddr = SocketAddr::new(host.parse().unwrap(), sender_port);
       mio_08::net::UdpSocket::bind(saddr)?
     };
 
@@ -133,6 +139,15 @@ impl UDPSender {
       warn!("send_to_locator: Message size = {}", buffer.len());
     }
     let send = |socket_address: SocketAddr| {
+      if crate::network::util::localhost_only()
+        && !socket_address.ip().is_multicast()
+        && !socket_address.ip().is_loopback()
+      {
+        // jderobot's patch: kept to this host, nothing goes to another address
+        // (a peer could announce one).
+        trace!("send_to_locator: {socket_address} is not this host's loopback");
+        return;
+      }
       if socket_address.ip().is_multicast() {
         for socket in &self.multicast_sockets {
           self.send_to_udp_socket(buffer, socket, &socket_address);

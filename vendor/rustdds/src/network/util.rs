@@ -1,6 +1,7 @@
 use std::{
   io,
-  net::{IpAddr, SocketAddr},
+  net::{IpAddr, Ipv4Addr, SocketAddr},
+  sync::atomic::{AtomicBool, Ordering},
 };
 
 use log::error;
@@ -8,12 +9,33 @@ use pnet::datalink::NetworkInterface;
 
 use crate::structure::locator::Locator;
 
+/// jderobot's patch: RTPS kept to this host, as ROS 2's
+/// `ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST` (rmw_cyclonedds's localhost mode:
+/// the loopback interface with multicast): multicast joined and sent on the
+/// loopback interface only, unicast listeners bound to 127.0.0.1, only loopback
+/// locators announced, nothing sent to another address. One setting per process
+/// (every participant shares it), set before the first participant is made.
+static LOCALHOST_ONLY: AtomicBool = AtomicBool::new(false);
+
+/// Keeps every participant made from now on to this host (or not).
+pub fn set_localhost_only(on: bool) {
+  LOCALHOST_ONLY.store(on, Ordering::Release);
+}
+
+/// Whether RTPS is kept to this host ([`set_localhost_only`]).
+pub fn localhost_only() -> bool {
+  LOCALHOST_ONLY.load(Ordering::Acquire)
+}
+
 pub fn get_local_multicast_locators(port: u16) -> Vec<Locator> {
   let saddr = SocketAddr::new("239.255.0.1".parse().unwrap(), port);
   vec![Locator::from(saddr)]
 }
 
 pub fn get_local_unicast_locators(port: u16) -> Vec<Locator> {
+  if localhost_only() {
+    return vec![Locator::from(SocketAddr::new(Ipv4Addr::LOCALHOST.into(), port))];
+  }
   match if_addrs::get_if_addrs() {
     Ok(ifaces) => ifaces
       .iter()
@@ -31,6 +53,9 @@ pub fn get_local_unicast_locators(port: u16) -> Vec<Locator> {
 ///
 /// The result of this function is used to set up senders and listeners.
 pub fn get_local_multicast_ip_addrs() -> io::Result<Vec<IpAddr>> {
+  if localhost_only() {
+    return Ok(vec![Ipv4Addr::LOCALHOST.into()]);
+  }
   // grab a list of system intefaces.
   //
   // note: `pnet` works on mac, windows, and linux, potentially alongside
