@@ -334,3 +334,51 @@ impl Readiness {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn one_discovery_range_per_process() {
+        let (lan, local) = (Range { localhost: false }, Range { localhost: true });
+        let a = RangeHold::take(lan, "service ros2").unwrap();
+        let e = RangeHold::take(local, "driver ros2").err().unwrap().to_string();
+        assert!(
+            e.contains("driver ros2") && e.contains("discovery localhost"),
+            "{e}"
+        );
+        assert!(e.contains("discovery subnet"), "{e}");
+        let b = RangeHold::take(lan, "driver ros2").unwrap();
+        drop((a, b));
+        // Once every participant is gone, the next may take the other range.
+        drop(RangeHold::take(local, "driver ros2").unwrap());
+        rustdds::set_localhost_only(false);
+    }
+
+    #[test]
+    fn the_lan_needs_insecure_and_localhost_does_not() {
+        let e = discovery_range(Some("subnet"), false, "service ros2", "serve it")
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(e.contains("insecure") && e.contains("discovery localhost"), "{e}");
+        assert!(discovery_range(Some("subnet"), true, "s", "d").is_ok());
+        assert!(discovery_range(Some("localhost"), false, "s", "d").unwrap().localhost);
+    }
+
+    #[test]
+    fn a_recycled_buffer_comes_back_once_the_message_is_gone() {
+        let mut r = Recycler::default();
+        let mut b = r.buffer();
+        b.extend_from_slice(&[0, 1, 0, 0, 7, 7]);
+        let ptr = b.as_ptr();
+        let m = r.message(b);
+        assert_eq!(&CdrAdapter::to_bytes(&m).unwrap()[..], &[7, 7]);
+        // Still held (RustDDS's history): a new buffer.
+        assert_ne!(r.buffer().as_ptr(), ptr);
+        drop(m);
+        let again = r.buffer();
+        assert_eq!((again.as_ptr(), again.len()), (ptr, 0));
+    }
+}
