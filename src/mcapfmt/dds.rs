@@ -343,7 +343,10 @@ mod tests {
     fn one_discovery_range_per_process() {
         let (lan, local) = (Range { localhost: false }, Range { localhost: true });
         let a = RangeHold::take(lan, "service ros2").unwrap();
-        let e = RangeHold::take(local, "driver ros2").err().unwrap().to_string();
+        let e = RangeHold::take(local, "driver ros2")
+            .err()
+            .unwrap()
+            .to_string();
         assert!(
             e.contains("driver ros2") && e.contains("discovery localhost"),
             "{e}"
@@ -362,9 +365,16 @@ mod tests {
             .err()
             .unwrap()
             .to_string();
-        assert!(e.contains("insecure") && e.contains("discovery localhost"), "{e}");
+        assert!(
+            e.contains("insecure") && e.contains("discovery localhost"),
+            "{e}"
+        );
         assert!(discovery_range(Some("subnet"), true, "s", "d").is_ok());
-        assert!(discovery_range(Some("localhost"), false, "s", "d").unwrap().localhost);
+        assert!(
+            discovery_range(Some("localhost"), false, "s", "d")
+                .unwrap()
+                .localhost
+        );
     }
 
     #[test]
@@ -376,7 +386,8 @@ mod tests {
         let m = r.message(b);
         assert_eq!(&CdrAdapter::to_bytes(&m).unwrap()[..], &[7, 7]);
         // Still held (RustDDS's history): a new buffer.
-        assert_ne!(r.buffer().as_ptr(), ptr);
+        let other = r.buffer();
+        assert_ne!(other.as_ptr(), ptr);
         drop(m);
         let again = r.buffer();
         assert_eq!((again.as_ptr(), again.len()), (ptr, 0));

@@ -63,6 +63,8 @@ pub enum DeliveryMode {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) enum TimedEvent {
   Heartbeat,
+  /// jderobot's patch: one heartbeat, not re-armed (see `update_reader_proxy`).
+  HeartbeatOnce,
   CacheCleaning,
   SendRepairData { to_reader: GUID },
   SendRepairFrags { to_reader: GUID },
@@ -468,6 +470,7 @@ impl Writer {
               .set_timeout(std::time::Duration::from(period), TimedEvent::Heartbeat);
           }
         }
+        TimedEvent::HeartbeatOnce => self.handle_heartbeat_tick(false),
         TimedEvent::CacheCleaning => {
           self.handle_cache_cleaning();
           self.timed_event_timer.set_timeout(
@@ -478,21 +481,40 @@ impl Writer {
         TimedEvent::SendRepairData {
           to_reader: reader_guid,
         } => {
-          self.handle_repair_data_send(reader_guid);
-          if let Some(rp) = self.lookup_reader_proxy_mut(reader_guid) {
-            if rp.repair_mode {
-              let delay_to_next_repair = self
+          // jderobot's patch: a discovery (built-in) writer repairs up to 32 changes
+          // per timer event, the next ones 1 ms later. It sent one per event, the
+          // next a fifth of the deadline later (theirs is infinite), and the timer
+          // ticks every 100 ms: a new peer got one of our publications per
+          // heartbeat (1 s), the ros2 service's 20th (`rt/scan`, say) 1.5-5 s after
+          // it started. User writers keep RustDDS's pace: bursts of repairs to a
+          // stalled reliable reader would hold the event loop (and /cmd_vel).
+          let built_in = self.my_guid.entity_id.kind().is_built_in();
+          let repairing = |w: &mut Self| {
+            w.lookup_reader_proxy_mut(reader_guid)
+              .is_some_and(|rp| rp.repair_mode)
+          };
+          for _ in 0..if built_in { 32 } else { 1 } {
+            self.handle_repair_data_send(reader_guid);
+            if !repairing(self) {
+              break;
+            }
+          }
+          if repairing(self) {
+            let delay_to_next_repair = if built_in {
+              Duration::from_millis(1)
+            } else {
+              self
                 .qos_policies
                 .deadline()
                 .map_or_else(|| Duration::from_millis(1), |dl| dl.0)
-                / 5;
-              self.timed_event_timer.set_timeout(
-                std::time::Duration::from(delay_to_next_repair),
-                TimedEvent::SendRepairData {
-                  to_reader: reader_guid,
-                },
-              );
-            }
+                / 5
+            };
+            self.timed_event_timer.set_timeout(
+              std::time::Duration::from(delay_to_next_repair),
+              TimedEvent::SendRepairData {
+                to_reader: reader_guid,
+              },
+            );
           }
         }
         TimedEvent::SendRepairFrags {
@@ -1487,8 +1509,22 @@ impl Writer {
             local_writer: self.my_guid,
             remote_reader: reader_proxy.remote_reader_guid,
           });
-          // If we're reliable, should we send out a heartbeat so that new reader can
-          // catch up?
+          // jderobot's patch: a reliable discovery writer heartbeats soon to a new
+          // reader, which then asks for what it lacks (our publications and
+          // subscriptions) rather than a heartbeat period (1 s) later. Soon, not at
+          // once: the new peer must first have our participant announcement (sent
+          // 10 ms after we found it), or it ignores us; the timer ticks every 100
+          // ms. Only discovery's writers: a user writer's extra heartbeat to a
+          // stalled reliable reader kept /cmd_vel from arriving (tests/ros2.rs
+          // `cmd_vel_reaches_motors_promptly_while_a_reliable_subscriber_stalls`).
+          if self.is_reliable()
+            && !self.like_stateless
+            && self.my_guid.entity_id.kind().is_built_in()
+          {
+            self
+              .timed_event_timer
+              .set_timeout(std::time::Duration::from_millis(50), TimedEvent::HeartbeatOnce);
+          }
           info!(
             "Matched new remote reader on topic={:?} reader={:?}",
             self.topic_name(),
