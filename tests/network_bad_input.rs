@@ -1,5 +1,5 @@
 //! networkserver under bad clients, over real loopback sockets: 4,000 mutated and
-//! random lines (most of them close the connection: about 5 ms each; the wire's
+//! random lines (most of them close the connection; the wire's
 //! parser alone takes 10 million in the fuzz table, target `netwire`), partial lines, huge lines, silent clients, too many clients, 1,000
 //! connect/disconnect cycles and a client that stops reading mid-image. Meanwhile
 //! a well-behaved client keeps getting its laser pushes and frames, memory stays
