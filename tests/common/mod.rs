@@ -13,12 +13,36 @@ use std::{
 
 use jderobot::{Conf, Runtime, State};
 
-/// Taken by the tests that measure this process's memory (RSS) and by those that
-/// allocate tens of MB in it: a suite runs its tests on several threads, and one
-/// test's buffers would otherwise count as another's growth.
-pub fn memory_alone() -> std::sync::MutexGuard<'static, ()> {
-    static LOCK: std::sync::Mutex<()> = std::sync::Mutex::new(());
-    LOCK.lock().unwrap_or_else(|e| e.into_inner())
+/// Runs test `name` (its path in the test binary, `module::test`) again in a
+/// process of its own, and says whether that run happened and passed (true: the
+/// caller returns) or this process is that run (false: the caller does the test).
+/// For the tests that measure their process's memory (RSS, peak): a suite runs its
+/// tests on several threads, and the tests beside would move the figure. Taking
+/// turns in one process cost the network suite 70 s of waiting (docs/benchmarks.md,
+/// CI); a process each lets them run beside the others.
+pub fn ran_in_own_process(name: &str) -> bool {
+    const INSIDE: &str = "JDE_TEST_OWN_PROCESS";
+    if std::env::var_os(INSIDE).is_some() || std::env::var_os(NETNS_INSIDE).is_some() {
+        return false;
+    }
+    let out = Command::new(std::env::current_exe().expect("the test binary"))
+        .args(["--exact", name, "--nocapture", "--test-threads=1"])
+        .env(INSIDE, "1")
+        .output()
+        .expect("run the test binary again");
+    // Shown by the harness with this test's result (on failure, or with --nocapture).
+    print!("{}", String::from_utf8_lossy(&out.stdout));
+    eprint!("{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{name} failed in its own process ({}; its output is above)",
+        out.status
+    );
+    assert!(
+        String::from_utf8_lossy(&out.stdout).contains("test result: ok. 1 passed"),
+        "no test is named {name}: pass the module path and the function's name"
+    );
+    true
 }
 
 /// Keeps the panics of this thread off the output until the guard drops, for tests
@@ -569,6 +593,9 @@ pub fn x_display() -> std::sync::MutexGuard<'static, ()> {
     DISPLAY.lock().unwrap_or_else(|e| e.into_inner())
 }
 
+/// Set in the run of a test inside its network namespace ([`in_private_netns`]).
+const NETNS_INSIDE: &str = "JDE_TEST_IN_NETNS";
+
 /// Where a test that floods the network runs its body.
 #[derive(Debug, PartialEq, Eq)]
 pub enum Netns {
@@ -584,7 +611,7 @@ pub enum Netns {
 /// that works: only a loopback interface, brought up), so what it sends (multicast discovery floods) cannot reach the
 /// host's network or other tests. Under CI, missing `unshare` or `ip` fails.
 pub fn in_private_netns(name: &str) -> Netns {
-    const INSIDE: &str = "JDE_TEST_IN_NETNS";
+    const INSIDE: &str = NETNS_INSIDE;
     if std::env::var_os(INSIDE).is_some() {
         return Netns::RunHere;
     }
