@@ -1417,9 +1417,14 @@ impl Writer {
         let buffer = message.write_to_vec_with_ctx(self.endianness).unwrap();
         let mut already_sent_to = BTreeSet::new();
 
+        // jderobot's patch: at most 4 locators of a reader. Since user data goes
+        // to each reader's unicast locators (not one multicast group), a peer
+        // announcing a thousand of them would have had every sample, images
+        // included, sent a thousand times.
+        const MAX_LOCATORS_PER_READER: usize = 4;
         macro_rules! send_unless_sent_and_mark {
           ($locs:expr) => {
-            for loc in $locs.iter() {
+            for loc in $locs.iter().take(MAX_LOCATORS_PER_READER) {
               if already_sent_to.contains(loc) {
                 trace!("Already sent to {:?}", loc);
               } else {
