@@ -60,21 +60,9 @@ fn write_profile(
             let id = *channels.entry(*name).or_insert_with(|| {
                 mcapfmt::add_channel(&mut w, name, snap.kind(), profile).unwrap()
             });
-            let Some(id) = id else { continue };
-            if !mcapfmt::encode(profile, name, snap, &mut buf) {
-                continue;
+            if let Some(id) = id {
+                mcapfmt::write_sample(&mut w, profile, id, name, snap, &mut buf).unwrap();
             }
-            let t = mcapfmt::nanos(snap.time());
-            w.write_to_known_channel(
-                &mcap::records::MessageHeader {
-                    channel_id: id,
-                    sequence: snap.clock() as u32,
-                    log_time: t,
-                    publish_time: t,
-                },
-                &buf,
-            )
-            .unwrap();
         }
     }
     w.finish().unwrap();

@@ -478,11 +478,9 @@ fn write_one(
             c
         }
     };
-    if channel == u16::MAX || !mcapfmt::encode(profile, name, snap, buf) {
-        return Ok(());
+    if channel != u16::MAX {
+        mcapfmt::write_sample(&mut o.writer, profile, channel, name, snap, buf)?;
     }
-    o.writer
-        .write_to_known_channel(&snap.header(channel), buf)?;
     Ok(())
 }
 

@@ -337,6 +337,46 @@ pub fn encode(profile: Profile, name: &str, snap: &Snapshot, out: &mut Vec<u8>) 
     true
 }
 
+/// Encodes `snap` as the recorder writes it: the message is `head` (encoded into
+/// it) followed by the returned slice, a raw image's pixels borrowed from the
+/// sample, so a frame reaches the file without a copy (the rest: all in `head`,
+/// an empty slice). `None` for a sample the profile does not carry.
+pub fn encode_parts<'a>(
+    profile: Profile,
+    name: &str,
+    snap: &'a Snapshot,
+    head: &mut Vec<u8>,
+) -> Option<&'a [u8]> {
+    match (profile, snap) {
+        (Profile::Ros2, Snapshot::Image(img)) => ros2::image_head(name, img, head),
+        (Profile::Foxglove { jpeg: None }, Snapshot::Image(img)) => {
+            protobuf::raw_image_head(name, nanos(img.time), img, head)
+        }
+        _ => return encode(profile, name, snap, head).then_some(&[]),
+    }
+    let Snapshot::Image(img) = snap else {
+        unreachable!("matched above")
+    };
+    Some(&img.value.data)
+}
+
+/// Writes `snap` on `channel` as the recorder does ([`encode_parts`], `buf` for the
+/// encoded part); `Ok(false)` when the profile does not carry it.
+pub fn write_sample<W: std::io::Write + std::io::Seek>(
+    w: &mut mcap::Writer<W>,
+    profile: Profile,
+    channel: u16,
+    name: &str,
+    snap: &Snapshot,
+    buf: &mut Vec<u8>,
+) -> mcap::McapResult<bool> {
+    let Some(tail) = encode_parts(profile, name, snap, buf) else {
+        return Ok(false);
+    };
+    w.write_parts_to_known_channel(&snap.header(channel), &[buf, tail])?;
+    Ok(true)
+}
+
 /// The JSON schema (name, schema text) of an interface kind written as JSON:
 /// `foxglove.PoseInFrame` for encoders, `jderobot.KIND` for the rest.
 pub fn json_schema(kind: &str) -> (String, String) {
@@ -745,8 +785,7 @@ mod tests {
         for (i, (snap, _, kind)) in cases.iter().enumerate() {
             let name = format!("x{i}");
             let id = add_channel(&mut w, &name, kind, profile).unwrap().unwrap();
-            assert!(encode(profile, &name, snap, &mut buf));
-            w.write_to_known_channel(&snap.header(id), &buf).unwrap();
+            assert!(write_sample(&mut w, profile, id, &name, snap, &mut buf).unwrap());
         }
         w.finish().unwrap();
         let file = w.into_inner().into_inner();
@@ -769,6 +808,27 @@ mod tests {
         assert!(o.problems.is_empty() && o.complete, "{o:?}");
         let want: Vec<Recorded> = cases.iter().map(|c| c.1.clone()).collect();
         assert_eq!(back, want);
+    }
+
+    #[test]
+    fn an_image_in_parts_is_the_same_message_as_in_one_piece() {
+        let mut img = Image::new(4, 3);
+        img.data
+            .iter_mut()
+            .enumerate()
+            .for_each(|(i, p)| *p = i as u8);
+        let snap = Recorded::Image(img).sample(9, from_nanos(1_700_000_000_000_000_005));
+        for profile in [Profile::Foxglove { jpeg: None }, Profile::Ros2] {
+            let (mut whole, mut head) = (Vec::new(), Vec::new());
+            assert!(encode(profile, "colorA", &snap, &mut whole));
+            let tail = encode_parts(profile, "colorA", &snap, &mut head).unwrap();
+            assert_eq!(
+                tail.len(),
+                36,
+                "{profile:?}: the pixels are the part borrowed"
+            );
+            assert_eq!([&head[..], tail].concat(), whole, "{profile:?}");
+        }
     }
 
     #[test]

@@ -36,8 +36,15 @@ fn write_timestamp(w: &mut Writer, field: u64, ns: u64) {
 
 /// Encodes a `foxglove.RawImage` (`bgr8`, the bytes as they are) into `out`.
 pub fn raw_image(frame_id: &str, ns: u64, img: &Image, out: &mut Vec<u8>) {
-    out.clear();
     out.reserve(img.data.len() + 64 + frame_id.len());
+    raw_image_head(frame_id, ns, img, out);
+    out.extend_from_slice(&img.data);
+}
+
+/// [`raw_image`] but the pixels, which come last: the message is `out` followed by
+/// `img.data`, so a writer can take the pixels from where they are.
+pub fn raw_image_head(frame_id: &str, ns: u64, img: &Image, out: &mut Vec<u8>) {
+    out.clear();
     let mut w = Writer(out);
     write_timestamp(&mut w, 1, ns);
     w.bytes(7, frame_id.as_bytes());
@@ -45,7 +52,8 @@ pub fn raw_image(frame_id: &str, ns: u64, img: &Image, out: &mut Vec<u8>) {
     w.fixed32(3, img.height);
     w.bytes(4, b"bgr8");
     w.fixed32(5, img.width * 3);
-    w.bytes(6, &img.data);
+    w.tag(6, protowire::LEN);
+    w.varint(img.data.len() as u64);
 }
 
 /// Encodes a `foxglove.CompressedImage` (`format`, e.g. `jpeg`) into `out`.

@@ -281,6 +281,25 @@ impl Ros2 for Laser {
     }
 }
 
+/// An image's CDR fields up to its pixels' length; the pixels come last.
+fn image_fields_but_pixels(img: &Image, name: &str, time: SystemTime, w: &mut Writer) {
+    w.header(time, name);
+    w.u32(img.height);
+    w.u32(img.width);
+    w.string("bgr8");
+    w.u8(0);
+    w.u32(img.width * 3);
+    w.u32(img.data.len() as u32);
+}
+
+/// [`encode`] of an image but its pixels, which come last: the message is `out`
+/// followed by `s.value.data`, so a writer can take the pixels from where they are.
+pub fn image_head(name: &str, s: &Sample<Image>, out: &mut Vec<u8>) {
+    out.clear();
+    out.extend_from_slice(&[0, 1, 0, 0]);
+    image_fields_but_pixels(&s.value, name, s.time, &mut Writer(out));
+}
+
 const IMAGE: Message = Message {
     name: "sensor_msgs/msg/Image",
     dds: "sensor_msgs::msg::dds_::Image_",
@@ -296,13 +315,7 @@ const IMAGE: Message = Message {
 impl Ros2 for Image {
     const MESSAGE: Option<&'static Message> = Some(&IMAGE);
     fn to_cdr(&self, name: &str, time: SystemTime, w: &mut Writer) {
-        w.header(time, name);
-        w.u32(self.height);
-        w.u32(self.width);
-        w.string("bgr8");
-        w.u8(0);
-        w.u32(self.width * 3);
-        w.u32(self.data.len() as u32);
+        image_fields_but_pixels(self, name, time, w);
         w.0.extend_from_slice(&self.data);
     }
     fn from_cdr(r: &mut Reader, _log_time: u64) -> Result<(u64, Self), FormatError> {
