@@ -13,7 +13,7 @@
 //! Run: `cargo bench --features full --bench network` (`-- frames`: only 1).
 
 mod common;
-use common::{median, percentile, thread_cpu, threads_cpu};
+use common::{Sched, median, percentile, thread_cpu, threads_cpu};
 
 use std::{
     io::{BufRead, BufReader, Read, Write},
@@ -39,7 +39,8 @@ const ROUNDS: usize = 9;
 const SECS: f64 = 1.0;
 
 /// Raw TCP: frames (a 1020 header and the pixels) written back to back for `SECS`.
-fn raw_fps() -> f64 {
+/// Returns (frames/s, the process's scheduling per frame).
+fn raw_fps() -> (f64, (f64, f64, f64)) {
     let l = TcpListener::bind("127.0.0.1:0").unwrap();
     let addr = l.local_addr().unwrap();
     let stop = Arc::new(AtomicBool::new(false));
@@ -67,7 +68,7 @@ fn raw_fps() -> f64 {
         r.read_line(&mut line).unwrap();
         r.read_exact(&mut px).unwrap();
     }
-    let t0 = Instant::now();
+    let (t0, s0) = (Instant::now(), Sched::now());
     let mut n = 0;
     while t0.elapsed().as_secs_f64() < SECS {
         line.clear();
@@ -76,10 +77,11 @@ fn raw_fps() -> f64 {
         n += 1;
     }
     let fps = n as f64 / t0.elapsed().as_secs_f64();
+    let sched = Sched::now().per(&s0, n as f64);
     stop.store(true, Ordering::Relaxed);
     drop(r);
     sender.join().unwrap();
-    fps
+    (fps, sched)
 }
 
 /// A server with a 640x480 `varcolorA` (network id 0) and a client interface fed by it.
@@ -142,8 +144,9 @@ fn link() -> Link {
 /// run of main that day, about a fifth of a core at 2,000 frames/s, which the raw
 /// copy does not pay; a frame takes 300–450 µs to send, so 100 µs still writes the
 /// next one in time).
-/// Returns (frames/s, the producer's CPU µs per frame delivered).
-fn net_fps(l: &Link) -> (f64, f64) {
+/// Returns (frames/s, the producer's CPU µs per frame delivered, the process's
+/// scheduling per frame).
+fn net_fps(l: &Link) -> (f64, f64, (f64, f64, f64)) {
     let stop = AtomicBool::new(false);
     let counting = AtomicBool::new(false);
     thread::scope(|sc| {
@@ -178,7 +181,7 @@ fn net_fps(l: &Link) -> (f64, f64) {
         });
         thread::sleep(Duration::from_millis(300));
         counting.store(true, Ordering::Relaxed);
-        let c0 = l.dst.clock();
+        let (c0, s0) = (l.dst.clock(), Sched::now());
         let t0 = Instant::now();
         let (mut last, mut since, mut gap) = (c0, Instant::now(), Duration::ZERO);
         while t0.elapsed().as_secs_f64() < SECS {
@@ -191,6 +194,7 @@ fn net_fps(l: &Link) -> (f64, f64) {
         }
         let frames = (l.dst.clock() - c0) as f64;
         let fps = frames / t0.elapsed().as_secs_f64();
+        let sched = Sched::now().per(&s0, frames);
         stop.store(true, Ordering::Relaxed);
         let cpu = producer.join().unwrap_or(0.0);
         if gap > Duration::from_millis(100) {
@@ -199,7 +203,7 @@ fn net_fps(l: &Link) -> (f64, f64) {
                 gap.as_secs_f64() * 1e3
             );
         }
-        (fps, cpu * 1e6 / frames.max(1.0))
+        (fps, cpu * 1e6 / frames.max(1.0), sched)
     })
 }
 
@@ -305,9 +309,10 @@ fn main() {
     // Warm up the link.
     net_fps(&l);
     let (mut raw, mut net, mut ratio, mut prod) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let mut sched: [[Vec<f64>; 3]; 2] = Default::default();
     for r in 0..ROUNDS {
         // Alternate the order so neither side always runs on a warmer machine.
-        let (a, (b, p)) = if r % 2 == 0 {
+        let ((a, sa), (b, p, sb)) = if r % 2 == 0 {
             let a = raw_fps();
             (a, net_fps(&l))
         } else {
@@ -322,11 +327,28 @@ fn main() {
         net.push(b);
         ratio.push(b / a);
         prod.push(p);
+        for (side, s) in [sa, sb].into_iter().enumerate() {
+            for (k, v) in [s.0, s.1, s.2].into_iter().enumerate() {
+                sched[side][k].push(v);
+            }
+        }
     }
     println!(
         "producer (the camera's stand-in) CPU: median {:.1} µs a frame delivered",
         median(&mut prod)
     );
+    for (side, name) in ["raw TCP copy", "networkserver->networkclient"]
+        .iter()
+        .enumerate()
+    {
+        let [run, wait, slices] = &sched[side];
+        println!(
+            "per frame, all threads (schedstat), medians: {name}: {:.0} µs of CPU, {:.0} µs runnable waiting for a core, {:.1} time slices",
+            median(run),
+            median(wait),
+            median(slices)
+        );
+    }
     println!(
         "frames/s: raw TCP copy median {:.0}, networkserver->networkclient median {:.0}: {:.0} % of raw (goal >= 90 %), ratio range {:.0}-{:.0} %",
         median(&mut raw),

@@ -151,3 +151,48 @@ pub fn cpu_by_thread() -> std::collections::BTreeMap<String, f64> {
     }
     by
 }
+
+/// This process's scheduling so far, all threads summed (`/proc/self/task/*/schedstat`):
+/// CPU seconds run, seconds spent runnable but waiting for a CPU, and time slices.
+/// Deltas over a part of a bench say what it cost beyond its useful work: the wait
+/// is contention for the cores, the slices are context switches.
+#[derive(Clone, Copy, Default)]
+pub struct Sched {
+    pub run: f64,
+    pub wait: f64,
+    pub slices: f64,
+}
+
+impl Sched {
+    pub fn now() -> Sched {
+        let mut s = Sched::default();
+        let Ok(dir) = std::fs::read_dir("/proc/self/task") else {
+            return s;
+        };
+        for t in dir.flatten() {
+            let Ok(st) = std::fs::read_to_string(t.path().join("schedstat")) else {
+                continue;
+            };
+            let f: Vec<f64> = st
+                .split_whitespace()
+                .filter_map(|n| n.parse().ok())
+                .collect();
+            if let [run, wait, slices] = f[..] {
+                s.run += run / 1e9;
+                s.wait += wait / 1e9;
+                s.slices += slices;
+            }
+        }
+        s
+    }
+
+    /// What happened since `before`, per `n` (e.g. frames): (µs run, µs waiting, slices).
+    pub fn per(&self, before: &Sched, n: f64) -> (f64, f64, f64) {
+        let n = n.max(1.0);
+        (
+            (self.run - before.run) * 1e6 / n,
+            (self.wait - before.wait) * 1e6 / n,
+            (self.slices - before.slices) / n,
+        )
+    }
+}
