@@ -286,8 +286,6 @@ pub fn split_head(buf: &mut Vec<u8>) -> Option<(Vec<u8>, Vec<u8>)> {
     Some((std::mem::take(buf), rest))
 }
 
-/// Copies what `s` has queued into `buf` without taking it (`MSG_PEEK`), without
-
 fn find(hay: &[u8], needle: &[u8]) -> Option<usize> {
     hay.windows(needle.len()).position(|w| w == needle)
 }
