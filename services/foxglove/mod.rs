@@ -608,6 +608,7 @@ pub fn start(s: &Settings, rt: &Runtime) -> anyhow::Result<Foxglove> {
             .context("foxglove: cannot start its thread")?
     };
     let watch = rx.recv().context("foxglove: its thread did not start")?;
+    let _ = relay_stats.taken.set(watch.clone());
     let mut me = Foxglove {
         _ctx: ctx.clone(),
         runtime: None,
@@ -787,12 +788,21 @@ fn publish_loop(
     for s in &served {
         s.source.any().watch(watch.clone());
     }
+    // An image channel out of credit is not watched: the camera's frames would
+    // only wake this thread to skip them; the door wakes it when a client takes one.
+    let mut watched = vec![true; served.len()];
     let mut last = vec![0u64; served.len()];
     let mut buf = Vec::new();
     let mut balls_at = Instant::now();
     while !stop.load(Ordering::Acquire) {
         watch.wait(Duration::from_millis(100));
         pace.refill();
+        for (i, s) in served.iter().enumerate() {
+            if !watched[i] && pace.credit[i] > 0 {
+                s.source.any().watch(watch.clone());
+                watched[i] = true;
+            }
+        }
         for (i, s) in served.iter().enumerate() {
             let w = &wanted[i];
             if w.subs.load(Ordering::Acquire) == 0 {
@@ -808,6 +818,10 @@ fn publish_loop(
                 continue;
             }
             if matches!(snap, Snapshot::Image(_)) && !pace.take(i, greet) {
+                if watched[i] {
+                    s.source.any().unwatch(&**watch);
+                    watched[i] = false;
+                }
                 continue;
             }
             last[i] = clock;
@@ -817,7 +831,7 @@ fn publish_loop(
             send_world(wo, &wanted[served.len()], &mut balls_at);
         }
     }
-    for s in &served {
+    for (s, _) in served.iter().zip(&watched).filter(|(_, w)| **w) {
         s.source.any().unwatch(&**watch);
     }
 }

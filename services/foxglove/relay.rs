@@ -89,6 +89,9 @@ pub struct RelayStats {
     pub refused: AtomicU64,
     /// Message-data frames sent to clients.
     pub sent: AtomicU64,
+    /// Woken when a client's socket took a message-data frame (the publishing
+    /// thread, which paces images to the clients).
+    pub taken: std::sync::OnceLock<Arc<crate::interfaces::Watch>>,
     /// Connections closed to admit another (the cap, or out of descriptors).
     pub evicted: AtomicU64,
 }
@@ -1091,7 +1094,11 @@ impl AsyncWrite for DoorStream {
         let n = ready!(me.poll_socket_write(cx, Some(&buf[..max])))?;
         let done = me.out.feed(&buf[..n]);
         if done > 0 {
-            me.door.stats.sent.fetch_add(done, Ordering::Relaxed);
+            let stats = &me.door.stats;
+            stats.sent.fetch_add(done, Ordering::Relaxed);
+            if let Some(w) = stats.taken.get() {
+                w.wake();
+            }
         }
         if me.closing.is_some()
             && me.out.at_end()
