@@ -8,9 +8,16 @@
 //!    up, and logs it, its bytes moved into the message; the client connects with
 //!    `foxglove.sdk.v1`). Ours: the same producer, same pace, publishes into an
 //!    image interface that the service serves, measured on both of its ports
-//!    (both through the door): `port` (the client with `foxglove.websocket.v1`)
-//!    and `sdk_port` (`foxglove.sdk.v1`). The three alternate in each round,
-//!    their order rotating. Each run also prints the frames the producer made per
+//!    (both through the front door, which hands the socket to the service's SDK
+//!    server): `port` (the client with `foxglove.websocket.v1`) and `sdk_port`
+//!    (`foxglove.sdk.v1`). The three alternate in each round, their order
+//!    rotating. The camera is the same on both sides (a fresh frame every
+//!    0.25 ms); what differs is each program's shape: with the SDK alone the
+//!    producer encodes inline (`log`), so it makes only the frames its encoding
+//!    lets it (about as many as the client gets); ours publishes at the camera's
+//!    pace and the service encodes on its own thread, paced to the client.
+//!    `-- frames only=N` runs one server alone (0 SDK, 1 `port`, 2 `sdk_port`),
+//!    7 rounds, for a profiler (`perf record -g`, `strace -c -f`). Each run also prints the frames the producer made per
 //!    second and the CPU time per delivered frame of each thread (`producer`,
 //!    `client`, the SDK's `tokio-rt-worker`, our `foxglove` publisher and
 //!    `foxglove-io`), kernel time included (`/proc/self/task/*/schedstat`).
@@ -605,6 +612,23 @@ fn frames(relay: SocketAddr, direct: SocketAddr, cam: &Arc<Interface<Image>>) {
     println!("foxglove service vs the Foxglove SDK's own server, loopback, {W}x{H} BGR RawImage");
     const NAMES: [&str; 3] = ["SDK alone", "relay (port)", "direct (sdk_port)"];
     let mut runs: [Vec<Run>; 3] = Default::default();
+    // `-- frames only=N` (0 SDK, 1 port, 2 sdk_port): that server alone, for a profiler.
+    let only: Option<usize> = std::env::args().find_map(|a| a.strip_prefix("only=")?.parse().ok());
+    if let Some(w) = only {
+        let fps: Vec<f64> = (0..ROUNDS)
+            .map(|_| match w {
+                0 => sdk_fps(),
+                1 => ours_fps(relay, "foxglove.websocket.v1", cam),
+                _ => ours_fps(direct, "foxglove.sdk.v1", cam),
+            }.fps)
+            .collect();
+        println!(
+            "{}: frames/s median {:.0} (rounds {fps:.0?})",
+            NAMES[w],
+            median(&fps)
+        );
+        return;
+    }
     for r in 0..ROUNDS {
         for k in 0..3 {
             let which = (r + k) % 3;

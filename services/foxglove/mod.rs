@@ -41,20 +41,23 @@
 //! # Subprotocols, the front door and its limits
 //! The SDK's server accepts `foxglove.sdk.v1`/`v1.1` only; `@foxglove/ws-protocol`
 //! 0.8.0 and Lichtblick offer `foxglove.websocket.v1` only. Both ports (`port`, and
-//! `sdk_port` when set) are a front door ([`relay`]) to the SDK's server on an
-//! ephemeral loopback port: it renames the subprotocol in the handshake for legacy
-//! clients, then splices the bytes in the kernel (server → client) and checks the
-//! client's frame headers (client → server). A client that stops reading loses its
-//! own oldest message frames in the SDK's backlog (`max_queue`), and is closed after
-//! taking nothing for 15 s. Images are paced to the clients: a new frame is
-//! encoded only while fewer than 4 are on their way to them (the door counts what
-//! their sockets take; at least one every 100 ms), so a camera faster than the
-//! fastest client costs no encoding of frames the backlog would drop; client messages over `max_message`, unfinished for 10 s,
-//! or over 100 pings a second close the connection (1009, 1008). Garbage JSON gets
-//! an error status from the SDK; a request that is not a WebSocket upgrade gets
-//! `400`, a missing or wrong token `401`. At most `max_clients` connections at once
-//! (both ports): a new one closes the longest idle; running out of descriptors
-//! does the same, and the door keeps accepting.
+//! `sdk_port` when set) are a front door ([`relay`]): it caps the connections,
+//! reads the upgrade request and checks the token, then hands the socket to the
+//! SDK's server (the vendored SDK's `serve_stream`) wrapped in its limits: the
+//! subprotocol renamed in the handshake for legacy clients, the client's frame
+//! headers checked before the SDK reads them, the SDK's frames written straight
+//! to the client. A client that stops reading loses its own oldest message
+//! frames in the SDK's backlog (`max_queue`), and is closed after taking nothing
+//! for 15 s. Images are paced to the clients: a new frame is encoded only while
+//! fewer than 4 are on their way to them (the door counts what their sockets
+//! take; at least one every 100 ms), so a camera faster than the fastest client
+//! costs no encoding of frames the backlog would drop; client messages over
+//! `max_message`, unfinished for 10 s, or over 100 pings a second close the
+//! connection (1009, 1008). Garbage JSON gets an error status from the SDK; a
+//! request that is not a WebSocket upgrade gets `400`, a missing or wrong token
+//! `401`. At most `max_clients` connections at once (both ports): a new one
+//! closes the longest idle; running out of descriptors does the same, and the
+//! door keeps accepting.
 //!
 //! Beyond loopback the service refuses to start without both `tls CERT.pem
 //! KEY.pem` and `token SECRET` (or an `insecure` line saying so on purpose): the
@@ -107,7 +110,7 @@ use relay::{Limits, RelayStats};
 pub struct Settings {
     pub bind: IpAddr,
     pub port: u16,
-    /// The port where the SDK's server listens itself (no relay), if any.
+    /// A second port to the same server (the same front door), if any.
     pub sdk_port: Option<u16>,
     /// Interface names; empty: all.
     pub serves: Vec<String>,
@@ -130,8 +133,8 @@ const LINES: &[Setting] = &[
     .default("8765"),
     Setting::new(
         "sdk_port",
-        "also serve `foxglove.sdk.v1` clients straight from the SDK's server on this port, \
-         at the same `bind` (no relay: faster; the SDK's own queues; 0: any free port)",
+        "a second port to the same server, at the same `bind`, through the same front door \
+         (the same limits and token; 0: any free port)",
         &[int("PORT", "", 0, 65_535)],
     ),
     Setting::new(
@@ -375,7 +378,7 @@ pub struct Foxglove {
     /// The SDK's context of the channels (the server and channels hold it weakly).
     _ctx: Arc<Context>,
     runtime: Option<tokio::runtime::Runtime>,
-    /// The SDK's server (replaced when it has to be started again).
+    /// The SDK's server, which the door hands its checked sockets to.
     server: Arc<Mutex<Option<WebSocketServerHandle>>>,
     stop: Arc<AtomicBool>,
     watch: Arc<Watch>,
@@ -605,6 +608,7 @@ pub fn start(s: &Settings, rt: &Runtime) -> anyhow::Result<Foxglove> {
             .context("foxglove: cannot start its thread")?
     };
     let watch = rx.recv().context("foxglove: its thread did not start")?;
+    let _ = relay_stats.taken.set(watch.clone());
     let mut me = Foxglove {
         _ctx: ctx.clone(),
         runtime: None,
@@ -639,10 +643,15 @@ pub fn start(s: &Settings, rt: &Runtime) -> anyhow::Result<Foxglove> {
         backlog: s.limits.max_queue,
         slot: me.server.clone(),
     };
-    let inner = sdk.start()?;
+    sdk.start()?;
     raise_fd_limit();
-    let respawn: relay::Respawn = Arc::new(move || sdk.start().map_err(|e| e.to_string()));
-    let door = relay::Door::new(inner, respawn, s.limits.clone(), relay_stats.clone());
+    let slot = me.server.clone();
+    let serve: relay::Serve = Arc::new(move |stream, peer| {
+        slot.lock()
+            .as_ref()
+            .is_some_and(|server| server.serve_stream(stream, peer))
+    });
+    let door = relay::Door::new(serve, s.limits.clone(), relay_stats.clone());
     let addrs = listen(s, &runtime, &door)?;
     let addr = addrs[0];
     me.addr = addr;
@@ -673,7 +682,7 @@ pub fn start(s: &Settings, rt: &Runtime) -> anyhow::Result<Foxglove> {
     Ok(me)
 }
 
-/// What starting the SDK's server takes (again, should its accept loop end).
+/// What starting the SDK's server takes.
 struct Sdk {
     ctx: Arc<Context>,
     io: tokio::runtime::Handle,
@@ -684,9 +693,9 @@ struct Sdk {
 }
 
 impl Sdk {
-    /// Starts the SDK's server on an ephemeral loopback port that only the front
-    /// door ([`relay`]) reaches (the door caps, authenticates and renames); an
-    /// earlier one is stopped. Its address.
+    /// Starts the SDK's server (on an ephemeral loopback port of its own, which
+    /// the front door does not use: the door hands it the sockets it checked);
+    /// an earlier one is stopped. Its address.
     fn start(&self) -> anyhow::Result<SocketAddr> {
         let server = WebSocketServer::new()
             .name("jderobot")
@@ -779,12 +788,21 @@ fn publish_loop(
     for s in &served {
         s.source.any().watch(watch.clone());
     }
+    // An image channel out of credit is not watched: the camera's frames would
+    // only wake this thread to skip them; the door wakes it when a client takes one.
+    let mut watched = vec![true; served.len()];
     let mut last = vec![0u64; served.len()];
     let mut buf = Vec::new();
     let mut balls_at = Instant::now();
     while !stop.load(Ordering::Acquire) {
         watch.wait(Duration::from_millis(100));
         pace.refill();
+        for (i, s) in served.iter().enumerate() {
+            if !watched[i] && pace.credit[i] > 0 {
+                s.source.any().watch(watch.clone());
+                watched[i] = true;
+            }
+        }
         for (i, s) in served.iter().enumerate() {
             let w = &wanted[i];
             if w.subs.load(Ordering::Acquire) == 0 {
@@ -800,6 +818,10 @@ fn publish_loop(
                 continue;
             }
             if matches!(snap, Snapshot::Image(_)) && !pace.take(i, greet) {
+                if watched[i] {
+                    s.source.any().unwatch(&**watch);
+                    watched[i] = false;
+                }
                 continue;
             }
             last[i] = clock;
@@ -809,7 +831,7 @@ fn publish_loop(
             send_world(wo, &wanted[served.len()], &mut balls_at);
         }
     }
-    for s in &served {
+    for (s, _) in served.iter().zip(&watched).filter(|(_, w)| **w) {
         s.source.any().unwatch(&**watch);
     }
 }

@@ -1,13 +1,12 @@
-//! The ports users connect to: a splicing front door to the SDK's server.
+//! The ports users connect to: a front door that checks each connection and
+//! then hands its socket to the SDK's server.
 //!
-//! The SDK's server (bound to an ephemeral loopback port) accepts only the
-//! subprotocols `foxglove.sdk.v1` and `foxglove.sdk.v1.1`, while the official npm
-//! client `@foxglove/ws-protocol` 0.8.0 and Lichtblick offer only
-//! `foxglove.websocket.v1` (the same messages under the protocol's older name; the
-//! client checks that the server answers with that exact name). The SDK's own
-//! accept loop also ends for good on the first failed `accept` (out of file
-//! descriptors), and it has no connection cap. So every port (`port`, `sdk_port`)
-//! is this front door, which for each connection
+//! The SDK's server accepts only the subprotocols `foxglove.sdk.v1` and
+//! `foxglove.sdk.v1.1`, while the official npm client `@foxglove/ws-protocol` 0.8.0
+//! and Lichtblick offer only `foxglove.websocket.v1` (the same messages under the
+//! protocol's older name; the client checks that the server answers with that exact
+//! name). The SDK also has no connection cap and no limit on what a client sends.
+//! So every port (`port`, `sdk_port`) is this front door, which for each connection
 //!
 //! 1. admits it under the cap `max_clients` (over both ports): when full, the
 //!    connection that has been idle longest (no byte either way) is closed to make
@@ -17,42 +16,47 @@
 //!    [`HEAD_TIMEOUT`]; anything else is answered `400` and closed), checks the
 //!    `token` when the conf sets one (`?token=` in the URL or `Authorization:
 //!    Bearer`; else `401`);
-//! 3. when the client offers `foxglove.websocket.v1` and no `foxglove.sdk.v1*`,
-//!    asks the SDK for `foxglove.sdk.v1` and answers the client with
-//!    `foxglove.websocket.v1` (the frames that follow are the same protocol);
-//!    offers of `foxglove.sdk.v1*` pass unchanged;
-//! 4. then moves bytes, not messages:
-//!    - server → client: spliced through a pipe in the kernel (`splice(2)`, no copy
-//!      in user space), one RFC 6455 frame at a time (the relay peeks each frame's
-//!      header, so it knows where frames end). A client that stops reading holds
-//!      back only its own socket: the SDK's per-client backlog (`max_queue`
-//!      message frames) then drops that client's oldest messages, and a client
-//!      that takes no byte for [`WRITE_TIMEOUT`] while a frame waits is closed;
-//!    - client → server: copied as read, its frame headers parsed: a message (all
-//!      its fragments) over `max_message` bytes, a message left unfinished for
-//!      [`MESSAGE_TIMEOUT`], or more than [`MAX_CONTROL_PER_SEC`] control frames
-//!      (pings) in a second close the connection with status 1009 (too big) or
-//!      1008 (policy), sent after the frame in flight to the client.
+//! 3. hands the socket to the SDK's server (the vendored SDK's `serve_stream`),
+//!    wrapped in a [`DoorStream`]: the SDK reads the request (asking for
+//!    `foxglove.sdk.v1` when the client offers only `foxglove.websocket.v1`; its
+//!    answer then names `foxglove.websocket.v1` again; offers of `foxglove.sdk.v1*`
+//!    pass unchanged), and then
+//!    - server → client: the SDK writes its frames straight to the client's socket
+//!      (no second connection, no copy); the wrapper follows the frame headers, so
+//!      it knows where frames end and counts the message-data frames the socket
+//!      took. A client that stops reading holds back only its own socket: the
+//!      SDK's per-client backlog (`max_queue` message frames) then drops that
+//!      client's oldest messages, and a client that takes no byte for
+//!      [`WRITE_TIMEOUT`] while a frame waits is closed;
+//!    - client → server: what the SDK reads passes the frame-header checks
+//!      first: a message (all its fragments) over `max_message` bytes, a message
+//!      left unfinished for [`MESSAGE_TIMEOUT`], or more than
+//!      [`MAX_CONTROL_PER_SEC`] control frames (pings) in a second close the
+//!      connection with status 1009 (too big) or 1008 (policy), sent after the
+//!      frame in flight to the client; the SDK never sees the offending frame.
 //!
-//! Memory per connection: one pipe (at most [`PIPE_BYTES`] in the kernel), a
-//! 16 KiB read buffer, the SDK's `max_queue` messages; the SDK never holds more of a
-//! client's unfinished message than `max_message`.
+//! Memory per connection: the socket's send buffer ([`SOCKET_BUFFER`]) and the
+//! SDK's `max_queue` messages; the SDK never holds more of a client's unfinished
+//! message than `max_message`.
 
 use std::{
     net::SocketAddr,
-    os::fd::{AsRawFd, FromRawFd, OwnedFd, RawFd},
+    os::fd::AsRawFd,
+    pin::Pin,
     sync::{
         Arc,
         atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering},
     },
+    task::{Context, Poll, Waker, ready},
     time::{Duration, Instant},
 };
 
 use parking_lot::Mutex;
 use tokio::{
-    io::{AsyncRead, AsyncReadExt, AsyncWriteExt, Interest},
+    io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt, ReadBuf},
     net::{TcpListener, TcpStream},
     sync::Notify,
+    time::Sleep,
 };
 
 /// The longest HTTP upgrade request or response head.
@@ -67,8 +71,6 @@ pub const MESSAGE_TIMEOUT: Duration = Duration::from_secs(10);
 pub const MAX_CONTROL_PER_SEC: u32 = 100;
 /// How long a close waits for the frame in flight to the client to end.
 const CLOSE_GRACE: Duration = Duration::from_secs(1);
-/// The kernel pipe each connection splices through (asked for; the kernel may give less).
-pub const PIPE_BYTES: usize = 1 << 20;
 
 /// The protocol's older name, which `@foxglove/ws-protocol` and Lichtblick offer.
 pub const LEGACY: &str = "foxglove.websocket.v1";
@@ -87,6 +89,9 @@ pub struct RelayStats {
     pub refused: AtomicU64,
     /// Message-data frames sent to clients.
     pub sent: AtomicU64,
+    /// Woken when a client's socket took a message-data frame (the publishing
+    /// thread, which paces images to the clients).
+    pub taken: std::sync::OnceLock<Arc<crate::interfaces::Watch>>,
     /// Connections closed to admit another (the cap, or out of descriptors).
     pub evicted: AtomicU64,
 }
@@ -123,15 +128,13 @@ struct Conn {
     killed: AtomicBool,
 }
 
-/// Starts the SDK's server again (its address), for when its accept loop ended.
-pub type Respawn = Arc<dyn Fn() -> Result<SocketAddr, String> + Send + Sync>;
+/// Hands a checked connection to the SDK's server (the peer's address); false
+/// when the server is stopped.
+pub type Serve = Arc<dyn Fn(DoorStream, SocketAddr) -> bool + Send + Sync>;
 
 /// The open connections over all ports, and the clock of their activity.
 pub struct Door {
-    inner: Mutex<SocketAddr>,
-    respawn: Respawn,
-    /// One restart at a time.
-    respawning: tokio::sync::Mutex<()>,
+    serve: Serve,
     limits: Limits,
     stats: Arc<RelayStats>,
     conns: Mutex<Vec<Arc<Conn>>>,
@@ -141,17 +144,10 @@ pub struct Door {
 }
 
 impl Door {
-    /// A door in front of the SDK's server at `inner`.
-    pub fn new(
-        inner: SocketAddr,
-        respawn: Respawn,
-        limits: Limits,
-        stats: Arc<RelayStats>,
-    ) -> Arc<Door> {
+    /// A door in front of the SDK's server, which `serve` hands connections to.
+    pub fn new(serve: Serve, limits: Limits, stats: Arc<RelayStats>) -> Arc<Door> {
         Arc::new(Door {
-            inner: Mutex::new(inner),
-            respawn,
-            respawning: tokio::sync::Mutex::new(()),
+            serve,
             limits,
             stats,
             conns: Mutex::new(Vec::new()),
@@ -159,7 +155,6 @@ impl Door {
             cap_logged: AtomicU64::new(u64::MAX),
         })
     }
-
     fn now(&self) -> u64 {
         self.t0.elapsed().as_millis() as u64
     }
@@ -219,61 +214,19 @@ impl Door {
         self.conns.lock().retain(|o| !Arc::ptr_eq(o, c));
     }
 
-    /// A connection to the SDK's server; when it refuses (its accept loop ended,
-    /// e.g. out of descriptors, which the SDK never recovers from), it is started
-    /// again, once, with a log line.
-    async fn reach_sdk(&self) -> Result<TcpStream, String> {
-        let at = *self.inner.lock();
-        match connect_bounded(at).await {
-            Ok(s) => return Ok(s),
-            Err(e) if e.kind() != std::io::ErrorKind::ConnectionRefused => {
-                return Err(format!("cannot reach the SDK's server at {at}: {e}"));
-            }
-            Err(_) => {}
-        }
-        {
-            let _one = self.respawning.lock().await;
-            if *self.inner.lock() == at {
-                tracing::warn!(
-                    "foxglove: the SDK's server at {at} stopped accepting (out of descriptors?); starting it again"
-                );
-                let respawn = self.respawn.clone();
-                let new = tokio::task::spawn_blocking(move || respawn())
-                    .await
-                    .map_err(|e| e.to_string())??;
-                *self.inner.lock() = new;
-            }
-        }
-        let at = *self.inner.lock();
-        connect_bounded(at)
-            .await
-            .map_err(|e| format!("cannot reach the SDK's server at {at}: {e}"))
-    }
-
     fn touch(&self, c: &Conn) {
         c.last.store(self.now(), Ordering::Relaxed);
     }
 }
 
-/// The kernel buffers on the door's side of each connection (asked for; Linux
-/// doubles them): what a client that stops reading holds there, besides the pipe,
-/// before the SDK's backlog starts dropping its oldest frames.
+/// The kernel send buffer of each client's socket (asked for; Linux doubles it):
+/// what a client that stops reading holds there before the SDK's backlog starts
+/// dropping its oldest frames.
 pub const SOCKET_BUFFER: u32 = 1 << 20;
 
-/// A connection to the SDK's server with a bounded receive buffer (set before the
-/// handshake, so the window is sized by it).
-async fn connect_bounded(at: SocketAddr) -> std::io::Result<TcpStream> {
-    let s = if at.is_ipv4() {
-        tokio::net::TcpSocket::new_v4()?
-    } else {
-        tokio::net::TcpSocket::new_v6()?
-    };
-    s.set_recv_buffer_size(SOCKET_BUFFER)?;
-    s.connect(at).await
-}
-
-/// Accepts on `listener` and relays each connection to the SDK's server, for ever
-/// (a failed accept, e.g. out of descriptors, frees the longest idle one and goes on).
+/// Accepts on `listener` and hands each checked connection to the SDK's server,
+/// for ever (a failed accept, e.g. out of descriptors, frees the longest idle one
+/// and goes on).
 pub async fn accept_loop(listener: TcpListener, door: Arc<Door>) {
     loop {
         let (client, peer) = match listener.accept().await {
@@ -291,8 +244,10 @@ pub async fn accept_loop(listener: TcpListener, door: Arc<Door>) {
         let conn = door.admit();
         let door = door.clone();
         tokio::spawn(async move {
+            // A killed connection's socket is shut down (`Handed`'s drop), which
+            // ends the SDK's session too.
             let r = tokio::select! {
-                r = connection(client, &door, &conn) => r,
+                r = connection(client, peer, &door, &conn) => r,
                 () = conn.kill.notified() => Err("closed to admit a newer client (max_clients)".into()),
             };
             door.leave(&conn);
@@ -332,60 +287,6 @@ pub fn split_head(buf: &mut Vec<u8>) -> Option<(Vec<u8>, Vec<u8>)> {
     let end = find(buf, b"\r\n\r\n")?;
     let rest = buf.split_off(end + 4);
     Some((std::mem::take(buf), rest))
-}
-
-/// Copies what `s` has queued into `buf` without taking it (`MSG_PEEK`), without
-/// blocking: the bytes stay for the next read or splice.
-fn peek(s: &TcpStream, buf: &mut [u8]) -> std::io::Result<usize> {
-    // SAFETY: recv into a valid buffer of its length, peeking.
-    let n = unsafe {
-        libc::recv(
-            s.as_raw_fd(),
-            buf.as_mut_ptr().cast(),
-            buf.len(),
-            libc::MSG_PEEK | libc::MSG_DONTWAIT,
-        )
-    };
-    if n < 0 {
-        Err(std::io::Error::last_os_error())
-    } else {
-        Ok(n as usize)
-    }
-}
-
-/// Reads exactly an HTTP head from `s` (peeking for its end), so that the frames
-/// after it start at the socket's next byte: (head, nothing).
-async fn read_head_exact(s: &TcpStream) -> Result<(Vec<u8>, Vec<u8>), String> {
-    let mut buf = vec![0u8; MAX_HEAD];
-    loop {
-        s.readable().await.map_err(|e| e.to_string())?;
-        let got = s.try_io(Interest::READABLE, || peek(s, &mut buf));
-        let n = match got {
-            Ok(0) => return Err("the SDK's server closed before its HTTP head".into()),
-            Ok(n) => n,
-            Err(e) if would_block(&e) => continue,
-            Err(e) => return Err(e.to_string()),
-        };
-        if let Some(end) = find(&buf[..n], b"\r\n\r\n") {
-            let mut head = vec![0u8; end + 4];
-            let mut at = 0;
-            while at < head.len() {
-                s.readable().await.map_err(|e| e.to_string())?;
-                match s.try_read(&mut head[at..]) {
-                    Ok(0) => return Err("the SDK's server closed in its HTTP head".into()),
-                    Ok(k) => at += k,
-                    Err(e) if would_block(&e) => {}
-                    Err(e) => return Err(e.to_string()),
-                }
-            }
-            return Ok((head, Vec::new()));
-        }
-        if n >= MAX_HEAD {
-            return Err(format!("the SDK's HTTP head is over {MAX_HEAD} bytes"));
-        }
-        // The head's end has not come yet (it comes in one piece in practice).
-        tokio::time::sleep(Duration::from_millis(1)).await;
-    }
 }
 
 fn find(hay: &[u8], needle: &[u8]) -> Option<usize> {
@@ -542,19 +443,46 @@ async fn refuse(client: &mut TcpStream, status: &str, why: &str) {
     let _ = client.shutdown().await;
 }
 
-async fn connection(mut client: TcpStream, door: &Door, conn: &Conn) -> Result<(), String> {
-    let _ = client.set_nodelay(true);
+fn set_send_buffer(s: &TcpStream) {
     let size = SOCKET_BUFFER as libc::c_int;
     // SAFETY: setsockopt on a socket we hold open, with an int we own.
     unsafe {
         libc::setsockopt(
-            client.as_raw_fd(),
+            s.as_raw_fd(),
             libc::SOL_SOCKET,
             libc::SO_SNDBUF,
             (&size as *const libc::c_int).cast(),
             std::mem::size_of::<libc::c_int>() as libc::socklen_t,
         )
     };
+}
+
+/// A socket handed to the SDK: shut down when the door lets go of it before
+/// the SDK is done (the connection was evicted), so the SDK's session ends too.
+struct Handed {
+    client: Arc<TcpStream>,
+    end: Arc<End>,
+    stats: Arc<RelayStats>,
+}
+
+impl Drop for Handed {
+    fn drop(&mut self) {
+        self.stats.clients.fetch_sub(1, Ordering::Relaxed);
+        if !self.end.done.load(Ordering::Acquire) {
+            // SAFETY: shutdown of a socket we hold open.
+            unsafe { libc::shutdown(self.client.as_raw_fd(), libc::SHUT_RDWR) };
+        }
+    }
+}
+
+async fn connection(
+    mut client: TcpStream,
+    peer: SocketAddr,
+    door: &Arc<Door>,
+    conn: &Arc<Conn>,
+) -> Result<(), String> {
+    let _ = client.set_nodelay(true);
+    set_send_buffer(&client);
     let (head, early) = match tokio::time::timeout(HEAD_TIMEOUT, read_head(&mut client)).await {
         Ok(Ok(h)) => h,
         Ok(Err(why)) => {
@@ -575,53 +503,82 @@ async fn connection(mut client: TcpStream, door: &Door, conn: &Conn) -> Result<(
         }
     };
     door.touch(conn);
-    let mut server = door.reach_sdk().await?;
-    let _ = server.set_nodelay(true);
-    server
-        .write_all(to_sdk.as_bytes())
-        .await
-        .map_err(|e| e.to_string())?;
-    let (reply, server_early) =
-        match tokio::time::timeout(HEAD_TIMEOUT, read_head_exact(&server)).await {
-            Ok(r) => r?,
-            Err(_) => {
-                return Err(format!(
-                    "the SDK's server did not answer within {HEAD_TIMEOUT:?}"
-                ));
-            }
-        };
-    let reply = String::from_utf8_lossy(&reply).into_owned();
-    let upgraded = reply.starts_with("HTTP/1.1 101");
-    let reply = if legacy && upgraded {
-        replace_protocol(&reply, LEGACY)
-    } else {
-        reply
-    };
-    client
-        .write_all(reply.as_bytes())
-        .await
-        .map_err(|e| e.to_string())?;
-    if !upgraded {
-        // The SDK refused (e.g. no subprotocol it knows): pass its answer on.
-        let mut rest = server_early;
-        let _ = tokio::time::timeout(HEAD_TIMEOUT, server.read_to_end(&mut rest)).await;
-        let _ = client.write_all(&rest).await;
-        let _ = client.shutdown().await;
-        return Err(format!(
-            "refused by the SDK's server: {} (offered subprotocols: {})",
-            reply.lines().next().unwrap_or(""),
-            offered(&head).join(", ")
-        ));
-    }
-    // Bytes the SDK sent right after its head (its serverInfo) go first.
-    client
-        .write_all(&server_early)
-        .await
-        .map_err(|e| e.to_string())?;
+    let client = Arc::new(client);
+    let end = Arc::new(End::default());
+    let stream = DoorStream::new(
+        client.clone(),
+        to_sdk.into_bytes(),
+        early,
+        legacy,
+        door.clone(),
+        conn.clone(),
+        end.clone(),
+    );
     door.stats.clients.fetch_add(1, Ordering::Relaxed);
-    let r = relay(&client, &server, early, door, conn).await;
-    door.stats.clients.fetch_sub(1, Ordering::Relaxed);
-    r
+    let handed = Handed {
+        client,
+        end: end.clone(),
+        stats: door.stats.clone(),
+    };
+    if !(door.serve)(stream, peer) {
+        return Err("the SDK's server is stopped".into());
+    }
+    end.finished.notified().await;
+    let how = std::mem::take(&mut *end.how.lock());
+    match how {
+        How::Open => Ok(()),
+        How::Refused(status) => Err(format!(
+            "refused by the SDK's server: {status} (offered subprotocols: {})",
+            offered(&head).join(", ")
+        )),
+        How::Closed(code, why) => {
+            let _ = tokio::time::timeout(CLOSE_GRACE, lingering_close(&handed.client, code, &why))
+                .await;
+            Err(format!("closed with {code}: {why}"))
+        }
+        How::ClosedMidFrame(code, why) => {
+            Err(format!("closed ({code}: {why}) in the middle of a frame"))
+        }
+        How::Stuck => Err(format!(
+            "took no byte for {WRITE_TIMEOUT:?} with a frame waiting; disconnected"
+        )),
+    }
+}
+
+/// Sends a close frame, then reads and drops what the client still sends until it
+/// closes too (RFC 6455 §7.1.1): closing with unread bytes would reset the
+/// connection and lose the close frame on the way.
+async fn lingering_close(client: &TcpStream, code: u16, why: &str) {
+    let frame = close_frame(code, why);
+    let mut b: &[u8] = &frame;
+    while !b.is_empty() {
+        if client.writable().await.is_err() {
+            return;
+        }
+        match client.try_write(b) {
+            Ok(n) => b = &b[n..],
+            Err(e) if would_block(&e) => {}
+            Err(_) => return,
+        }
+    }
+    // SAFETY: shutdown of writes on a socket we hold open.
+    unsafe { libc::shutdown(client.as_raw_fd(), libc::SHUT_WR) };
+    let mut b = vec![0u8; 16 * 1024];
+    loop {
+        if client.readable().await.is_err() {
+            return;
+        }
+        match client.try_read(&mut b) {
+            Ok(0) => return,
+            Ok(_) => {}
+            Err(e) if would_block(&e) => {}
+            Err(_) => return,
+        }
+    }
+}
+
+fn would_block(e: &std::io::Error) -> bool {
+    e.kind() == std::io::ErrorKind::WouldBlock
 }
 
 /// A frame header: (fin, opcode, masked, payload length, header length), or None
@@ -769,304 +726,396 @@ impl ClientFrames {
     }
 }
 
-/// A kernel pipe, both ends non-blocking.
-struct Pipe {
-    r: OwnedFd,
-    w: OwnedFd,
-    cap: usize,
+/// How a handed connection ended, as the door logs it.
+#[derive(Default)]
+enum How {
+    /// The SDK or the client closed it.
+    #[default]
+    Open,
+    /// The SDK refused the upgrade (its status line).
+    Refused(String),
+    /// A client-frame limit: the close to send (the stream was at a frame's end).
+    Closed(u16, String),
+    /// The same, the frame in flight not finished within [`CLOSE_GRACE`].
+    ClosedMidFrame(u16, String),
+    /// The client took no byte for [`WRITE_TIMEOUT`] while a frame waited.
+    Stuck,
 }
 
-impl Pipe {
-    fn new() -> std::io::Result<Pipe> {
-        let mut fds = [0 as RawFd; 2];
-        // SAFETY: pipe2 writes two descriptors into the array we own.
-        if unsafe { libc::pipe2(fds.as_mut_ptr(), libc::O_NONBLOCK | libc::O_CLOEXEC) } != 0 {
-            return Err(std::io::Error::last_os_error());
-        }
-        // SAFETY: both are fresh descriptors nobody else owns.
-        let (r, w) = unsafe { (OwnedFd::from_raw_fd(fds[0]), OwnedFd::from_raw_fd(fds[1])) };
-        // SAFETY: fcntl on our own descriptor; failure leaves the default size.
-        let got = unsafe { libc::fcntl(w.as_raw_fd(), libc::F_SETPIPE_SZ, PIPE_BYTES as i32) };
-        let cap = if got > 0 { got as usize } else { 64 * 1024 };
-        Ok(Pipe { r, w, cap })
-    }
+/// What a [`DoorStream`] tells the door when the SDK lets go of it.
+#[derive(Default)]
+pub struct End {
+    done: AtomicBool,
+    finished: Notify,
+    how: Mutex<How>,
 }
 
-fn splice(from: RawFd, to: RawFd, len: usize) -> std::io::Result<usize> {
-    // SAFETY: splice between descriptors we hold open; null offsets (streams).
-    let n = unsafe {
-        libc::splice(
-            from,
-            std::ptr::null_mut(),
-            to,
-            std::ptr::null_mut(),
-            len,
-            libc::SPLICE_F_MOVE | libc::SPLICE_F_NONBLOCK,
-        )
-    };
-    if n < 0 {
-        Err(std::io::Error::last_os_error())
-    } else {
-        Ok(n as usize)
-    }
+/// Where the server → client byte stream is: frame headers followed, so the
+/// door knows where frames end and which were message data.
+#[derive(Default)]
+struct OutFrames {
+    hdr: [u8; 14],
+    hl: usize,
+    /// Payload bytes of the current frame still to go.
+    left: u64,
+    /// The frame is binary and final, its first payload byte not seen yet.
+    first: bool,
+    /// The frame is message data (binary, first byte 0x01).
+    data: bool,
 }
 
-fn would_block(e: &std::io::Error) -> bool {
-    e.kind() == std::io::ErrorKind::WouldBlock
-}
-
-/// Relays an upgraded connection until either side closes.
-async fn relay(
-    client: &TcpStream,
-    server: &TcpStream,
-    early: Vec<u8>,
-    door: &Door,
-    conn: &Conn,
-) -> Result<(), String> {
-    let close: Mutex<Option<Close>> = Mutex::new(None);
-    let closing = Notify::new();
-    let up = async {
-        let r = client_to_server(client, server, early, door, conn).await;
-        match r {
-            Err(UpEnd::Close(c)) => {
-                *close.lock() = Some(c);
-                closing.notify_one();
-                std::future::pending::<Result<(), String>>().await
-            }
-            Err(UpEnd::Io(e)) => Err(e),
-            Ok(()) => Ok(()),
-        }
-    };
-    let down = server_to_client(client, server, door, conn, &close, &closing);
-    tokio::select! {
-        r = up => r,
-        r = down => r,
-    }
-}
-
-enum UpEnd {
-    Close(Close),
-    Io(String),
-}
-
-async fn client_to_server(
-    client: &TcpStream,
-    server: &TcpStream,
-    early: Vec<u8>,
-    door: &Door,
-    conn: &Conn,
-) -> Result<(), UpEnd> {
-    let mut frames = ClientFrames::new(door.limits.max_message);
-    let mut buf = vec![0u8; 16 * 1024];
-    let mut pending = early;
-    loop {
-        if !pending.is_empty() {
-            let ok = frames.feed(&pending, Instant::now());
-            let n = match &ok {
-                Ok(n) => *n,
-                Err((n, _)) => *n,
-            };
-            write_all(server, &pending[..n]).await.map_err(UpEnd::Io)?;
-            if let Err((_, c)) = ok {
-                return Err(UpEnd::Close(c));
-            }
-            pending.clear();
-        }
-        let read = async {
-            loop {
-                client.readable().await?;
-                match client.try_read(&mut buf) {
-                    Err(e) if would_block(&e) => continue,
-                    r => return r,
+impl OutFrames {
+    /// Follows `b`: message-data frames it finished.
+    fn feed(&mut self, b: &[u8]) -> u64 {
+        let (mut at, mut done) = (0, 0);
+        while at < b.len() {
+            if self.left > 0 {
+                if self.first {
+                    self.data = b[at] == 0x01;
+                    self.first = false;
                 }
-            }
-        };
-        let n = match frames.deadline() {
-            Some(d) => match tokio::time::timeout_at(d.into(), read).await {
-                Ok(r) => r,
-                Err(_) => {
-                    return Err(UpEnd::Close((
-                        1008,
-                        format!("a message left unfinished for {MESSAGE_TIMEOUT:?}"),
-                    )));
+                let n = self.left.min((b.len() - at) as u64);
+                self.left -= n;
+                at += n as usize;
+                if self.left == 0 && std::mem::take(&mut self.data) {
+                    done += 1;
                 }
-            },
-            None => read.await,
-        }
-        .map_err(|e| UpEnd::Io(e.to_string()))?;
-        if n == 0 {
-            return Ok(());
-        }
-        door.touch(conn);
-        pending.extend_from_slice(&buf[..n]);
-    }
-}
-
-async fn write_all(s: &TcpStream, mut b: &[u8]) -> Result<(), String> {
-    while !b.is_empty() {
-        s.writable().await.map_err(|e| e.to_string())?;
-        match s.try_write(b) {
-            Ok(n) => b = &b[n..],
-            Err(e) if would_block(&e) => {}
-            Err(e) => return Err(e.to_string()),
-        }
-    }
-    Ok(())
-}
-
-/// Sends a close frame, then reads and drops what the client still sends until it
-/// closes too (RFC 6455 §7.1.1): closing with unread bytes would reset the
-/// connection and lose the close frame on the way.
-async fn lingering_close(client: &TcpStream, code: u16, why: &str) {
-    if write_all(client, &close_frame(code, why)).await.is_err() {
-        return;
-    }
-    // SAFETY: shutdown of writes on a socket we hold open.
-    unsafe { libc::shutdown(client.as_raw_fd(), libc::SHUT_WR) };
-    let mut b = vec![0u8; 16 * 1024];
-    loop {
-        if client.readable().await.is_err() {
-            return;
-        }
-        match client.try_read(&mut b) {
-            Ok(0) => return,
-            Ok(_) => {}
-            Err(e) if would_block(&e) => {}
-            Err(_) => return,
-        }
-    }
-}
-
-/// Peeks the next frame's header (and its first payload byte): (frame length,
-/// a message-data frame), None at the end of the stream.
-async fn peek_frame(server: &TcpStream) -> std::io::Result<Option<(usize, bool)>> {
-    let mut b = [0u8; 15];
-    loop {
-        server.readable().await?;
-        let got = server.try_io(Interest::READABLE, || peek(server, &mut b));
-        let n = match got {
-            Ok(0) => return Ok(None),
-            Ok(n) => n,
-            Err(e) if would_block(&e) => continue,
-            Err(e) => return Err(e),
-        };
-        if let Some((fin, op, _, len, hl)) = parse_header(&b[..n]) {
-            let data = fin && op == 0x2 && (n > hl && b[hl] == 0x01);
-            let total = (hl as u64).saturating_add(len);
-            return usize::try_from(total)
-                .map(|t| Some((t, data)))
-                .map_err(|_| std::io::Error::other("a frame longer than memory"));
-        }
-        // Part of a header only (rare: the SDK writes a frame at once): wait a little.
-        tokio::time::sleep(Duration::from_millis(1)).await;
-    }
-}
-
-async fn server_to_client(
-    client: &TcpStream,
-    server: &TcpStream,
-    door: &Door,
-    conn: &Conn,
-    close: &Mutex<Option<Close>>,
-    closing: &Notify,
-) -> Result<(), String> {
-    let pipe = Pipe::new().map_err(|e| format!("no pipe: {e}"))?;
-    let (sfd, cfd) = (server.as_raw_fd(), client.as_raw_fd());
-    loop {
-        // At a frame boundary: a close the client side asked for goes now.
-        let asked = close.lock().take();
-
-        if let Some((code, why)) = asked {
-            let _ = tokio::time::timeout(CLOSE_GRACE, lingering_close(client, code, &why)).await;
-            return Err(format!("closed with {code}: {why}"));
-        }
-        let next = tokio::select! {
-            f = peek_frame(server) => f.map_err(|e| e.to_string())?,
-            () = closing.notified() => continue,
-        };
-        let Some((mut left, data)) = next else {
-            return Ok(());
-        };
-        let mut in_pipe = 0usize;
-        let mut stuck_since: Option<Instant> = None;
-        while left > 0 || in_pipe > 0 {
-            let mut moved = false;
-            if left > 0 && in_pipe < pipe.cap {
-                let want = left.min(pipe.cap - in_pipe);
-                // With the pipe empty, "would block" can only mean the socket is
-                // empty (tokio's readiness is cleared); with bytes in the pipe it may
-                // mean a full pipe, so the readiness is left alone and the pipe drained.
-                let got = if in_pipe == 0 {
-                    server.try_io(Interest::READABLE, || splice(sfd, pipe.w.as_raw_fd(), want))
-                } else {
-                    splice(sfd, pipe.w.as_raw_fd(), want)
-                };
-                match got {
-                    Ok(0) => return Ok(()),
-                    Ok(n) => {
-                        left -= n;
-                        in_pipe += n;
-                        moved = true;
-                    }
-                    Err(e) if would_block(&e) => {}
-                    Err(e) => return Err(e.to_string()),
-                }
-            }
-            if in_pipe > 0 {
-                match client.try_io(Interest::WRITABLE, || {
-                    splice(pipe.r.as_raw_fd(), cfd, in_pipe)
-                }) {
-                    Ok(n) => {
-                        in_pipe -= n;
-                        moved = true;
-                        stuck_since = None;
-                        door.touch(conn);
-                    }
-                    Err(e) if would_block(&e) => {
-                        stuck_since.get_or_insert_with(Instant::now);
-                    }
-                    Err(e) => return Err(e.to_string()),
-                }
-            }
-            if moved {
                 continue;
             }
-            // A close asked for mid-frame waits for the frame's end a second at most.
-            let closing_by = close.lock().is_some().then(|| Instant::now() + CLOSE_GRACE);
-            let stuck_by = *stuck_since.get_or_insert_with(Instant::now) + WRITE_TIMEOUT;
-            let deadline = closing_by.map_or(stuck_by, |c| c.min(stuck_by));
-            let need_out = in_pipe > 0;
-            let wait = async {
-                tokio::select! {
-                    r = async {
-                        if need_out {
-                            client.writable().await
-                        } else {
-                            server.readable().await
-                        }
-                    } => r.map(|_| true),
-                    () = closing.notified(), if closing_by.is_none() => Ok(false),
-                }
-            };
-            match tokio::time::timeout_at(deadline.into(), wait).await {
-                Ok(r) => {
-                    r.map_err(|e| e.to_string())?;
-                }
-                Err(_) if closing_by.is_some() => {
-                    let asked = close.lock().take();
-                    let (code, why) = asked.unwrap_or_default();
-                    return Err(format!("closed ({code}: {why}) in the middle of a frame"));
-                }
-                Err(_) => {
-                    return Err(format!(
-                        "took no byte for {WRITE_TIMEOUT:?} with a frame waiting; disconnected"
-                    ));
-                }
+            self.hdr[self.hl] = b[at];
+            self.hl += 1;
+            at += 1;
+            if let Some((fin, op, _, len, _)) = parse_header(&self.hdr[..self.hl]) {
+                self.hl = 0;
+                self.left = len;
+                self.first = fin && op == 0x2 && len > 0;
+            } else if self.hl == self.hdr.len() {
+                self.hl = 0; // not a header (the SDK writes none such): start again
             }
         }
-        if data {
-            door.stats.sent.fetch_add(1, Ordering::Relaxed);
+        done
+    }
+
+    fn at_end(&self) -> bool {
+        self.left == 0 && self.hl == 0
+    }
+
+    /// Bytes that may go without starting another frame.
+    fn in_frame(&self) -> usize {
+        if self.hl > 0 {
+            1
+        } else {
+            usize::try_from(self.left).unwrap_or(usize::MAX)
         }
+    }
+}
+
+/// A client's socket as the SDK's server sees it: the request head the door
+/// read (rewritten for the SDK), then the client's bytes through the frame
+/// checks ([`ClientFrames`]); the SDK's writes go straight to the socket, its
+/// answer's protocol name rewritten for legacy clients.
+pub struct DoorStream {
+    client: Arc<TcpStream>,
+    /// The request head for the SDK, then the bytes the client sent after it.
+    head: Vec<u8>,
+    head_at: usize,
+    early: Vec<u8>,
+    frames: ClientFrames,
+    /// The SDK's answer head, collected until its end (None after).
+    reply: Option<Vec<u8>>,
+    /// Bytes of the rewritten answer still to write.
+    pending: Vec<u8>,
+    legacy: bool,
+    out: OutFrames,
+    /// A limit the client broke: the close to send at the next frame's end.
+    closing: Option<(u16, String)>,
+    /// Reads give end-of-stream, writes an error: the door closes the connection.
+    ended: bool,
+    read_waker: Option<Waker>,
+    message_timer: Option<(Instant, Pin<Box<Sleep>>)>,
+    grace: Option<Pin<Box<Sleep>>>,
+    /// Armed while the client takes no byte.
+    stuck: Option<Pin<Box<Sleep>>>,
+    door: Arc<Door>,
+    conn: Arc<Conn>,
+    end: Arc<End>,
+}
+
+impl DoorStream {
+    fn new(
+        client: Arc<TcpStream>,
+        head: Vec<u8>,
+        early: Vec<u8>,
+        legacy: bool,
+        door: Arc<Door>,
+        conn: Arc<Conn>,
+        end: Arc<End>,
+    ) -> DoorStream {
+        DoorStream {
+            client,
+            head,
+            head_at: 0,
+            early,
+            frames: ClientFrames::new(door.limits.max_message),
+            reply: Some(Vec::new()),
+            pending: Vec::new(),
+            legacy,
+            out: OutFrames::default(),
+            closing: None,
+            ended: false,
+            read_waker: None,
+            message_timer: None,
+            grace: None,
+            stuck: None,
+            door,
+            conn,
+            end,
+        }
+    }
+
+    fn finish(&mut self, how: How) {
+        self.ended = true;
+        *self.end.how.lock() = how;
+    }
+
+    /// At a frame's end (nothing of the answer head pending either).
+    fn at_end(&self) -> bool {
+        self.out.at_end() && self.pending.is_empty() && self.reply.is_none()
+    }
+
+    /// A limit was broken: end the stream at the frame's end (within the grace).
+    fn poll_close(&mut self, cx: &mut Context<'_>) -> Poll<std::io::Result<()>> {
+        let (code, why) = self.closing.clone().unwrap_or_default();
+        if self.at_end() {
+            self.finish(How::Closed(code, why));
+            return Poll::Ready(Ok(()));
+        }
+        self.read_waker = Some(cx.waker().clone());
+        let grace = self
+            .grace
+            .get_or_insert_with(|| Box::pin(tokio::time::sleep(CLOSE_GRACE)));
+        ready!(grace.as_mut().poll(cx));
+        self.finish(How::ClosedMidFrame(code, why));
+        Poll::Ready(Ok(()))
+    }
+
+    /// Passes the client's bytes in `got` (just put in `buf`) through the frame
+    /// checks: how many may go to the SDK.
+    fn check(&mut self, got: &[u8]) -> usize {
+        match self.frames.feed(got, Instant::now()) {
+            Ok(n) => n,
+            Err((n, close)) => {
+                self.closing = Some(close);
+                n
+            }
+        }
+    }
+
+    /// Pending when the client's unfinished message still has time; else the close.
+    fn poll_message_timer(&mut self, cx: &mut Context<'_>) -> Poll<()> {
+        let Some(d) = self.frames.deadline() else {
+            self.message_timer = None;
+            return Poll::Pending;
+        };
+        if self.message_timer.as_ref().is_none_or(|(at, _)| *at != d) {
+            let t = Box::pin(tokio::time::sleep_until(d.into()));
+            self.message_timer = Some((d, t));
+        }
+        let (_, t) = self.message_timer.as_mut().expect("set above");
+        ready!(t.as_mut().poll(cx));
+        self.closing = Some((
+            1008,
+            format!("a message left unfinished for {MESSAGE_TIMEOUT:?}"),
+        ));
+        Poll::Ready(())
+    }
+
+    /// Writes what is left of the answer head.
+    fn poll_pending(&mut self, cx: &mut Context<'_>) -> Poll<std::io::Result<()>> {
+        while !self.pending.is_empty() {
+            let n = ready!(self.poll_socket_write(cx, None))?;
+            self.pending.drain(..n);
+        }
+        Poll::Ready(Ok(()))
+    }
+
+    /// Writes `buf` (or the pending head) to the socket, closing a client that
+    /// takes no byte for [`WRITE_TIMEOUT`].
+    fn poll_socket_write(
+        &mut self,
+        cx: &mut Context<'_>,
+        buf: Option<&[u8]>,
+    ) -> Poll<std::io::Result<usize>> {
+        loop {
+            if self.client.poll_write_ready(cx).is_pending() {
+                let stuck = self
+                    .stuck
+                    .get_or_insert_with(|| Box::pin(tokio::time::sleep(WRITE_TIMEOUT)));
+                ready!(stuck.as_mut().poll(cx));
+                self.finish(How::Stuck);
+                // SAFETY: shutdown of a socket we hold open (wakes the SDK's reader).
+                unsafe { libc::shutdown(self.client.as_raw_fd(), libc::SHUT_RDWR) };
+                return Poll::Ready(Err(std::io::ErrorKind::TimedOut.into()));
+            }
+            let b = buf.unwrap_or(&self.pending);
+            match self.client.try_write(b) {
+                Ok(n) => {
+                    self.stuck = None;
+                    self.door.touch(&self.conn);
+                    return Poll::Ready(Ok(n));
+                }
+                Err(e) if would_block(&e) => {}
+                Err(e) => return Poll::Ready(Err(e)),
+            }
+        }
+    }
+
+    /// Collects the SDK's answer head; at its end, rewrites it for a legacy
+    /// client and queues it (with any frame bytes after it).
+    fn take_reply(&mut self, buf: &[u8]) -> std::io::Result<()> {
+        let reply = self.reply.as_mut().expect("collecting the answer");
+        reply.extend_from_slice(buf);
+        let Some(end) = find(reply, b"\r\n\r\n") else {
+            if reply.len() > MAX_HEAD {
+                return Err(std::io::Error::other("the SDK's answer head is too long"));
+            }
+            return Ok(());
+        };
+        let rest = reply.split_off(end + 4);
+        let head = String::from_utf8_lossy(reply).into_owned();
+        self.reply = None;
+        let upgraded = head.starts_with("HTTP/1.1 101");
+        let head = if self.legacy && upgraded {
+            replace_protocol(&head, LEGACY)
+        } else {
+            head
+        };
+        if !upgraded {
+            let status = head.lines().next().unwrap_or("").to_string();
+            *self.end.how.lock() = How::Refused(status);
+        }
+        self.pending = head.into_bytes();
+        self.door
+            .stats
+            .sent
+            .fetch_add(self.out.feed(&rest), Ordering::Relaxed);
+        self.pending.extend_from_slice(&rest);
+        Ok(())
+    }
+}
+
+impl Drop for DoorStream {
+    fn drop(&mut self) {
+        self.end.done.store(true, Ordering::Release);
+        self.end.finished.notify_one();
+    }
+}
+
+impl AsyncRead for DoorStream {
+    fn poll_read(
+        self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+        buf: &mut ReadBuf<'_>,
+    ) -> Poll<std::io::Result<()>> {
+        let me = self.get_mut();
+        if me.head_at < me.head.len() {
+            let n = buf.remaining().min(me.head.len() - me.head_at);
+            buf.put_slice(&me.head[me.head_at..me.head_at + n]);
+            me.head_at += n;
+            return Poll::Ready(Ok(()));
+        }
+        if me.ended {
+            return Poll::Ready(Ok(()));
+        }
+        if me.closing.is_some() {
+            return me.poll_close(cx);
+        }
+        if !me.early.is_empty() {
+            let k = buf.remaining().min(me.early.len());
+            let early: Vec<u8> = me.early.drain(..k).collect();
+            let n = me.check(&early);
+            buf.put_slice(&early[..n]);
+            return if n == 0 && me.closing.is_some() {
+                me.poll_close(cx)
+            } else {
+                Poll::Ready(Ok(()))
+            };
+        }
+        loop {
+            if me.client.poll_read_ready(cx).is_pending() {
+                ready!(me.poll_message_timer(cx));
+                return me.poll_close(cx);
+            }
+            let unfilled = buf.initialize_unfilled();
+            match me.client.try_read(unfilled) {
+                Ok(0) => return Poll::Ready(Ok(())),
+                Ok(got) => {
+                    me.door.touch(&me.conn);
+                    let n = me.check(&buf.initialize_unfilled()[..got]);
+                    buf.advance(n);
+                    if n == 0 && me.closing.is_some() {
+                        return me.poll_close(cx);
+                    }
+                    return Poll::Ready(Ok(()));
+                }
+                Err(e) if would_block(&e) => {}
+                Err(e) => return Poll::Ready(Err(e)),
+            }
+        }
+    }
+}
+
+impl AsyncWrite for DoorStream {
+    fn poll_write(
+        self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+        buf: &[u8],
+    ) -> Poll<std::io::Result<usize>> {
+        let me = self.get_mut();
+        if me.ended {
+            return Poll::Ready(Err(std::io::ErrorKind::BrokenPipe.into()));
+        }
+        if me.reply.is_some() {
+            me.take_reply(buf)?;
+            return Poll::Ready(Ok(buf.len()));
+        }
+        ready!(me.poll_pending(cx))?;
+        let mut max = buf.len();
+        if me.closing.is_some() {
+            if me.out.at_end() {
+                // The close goes next: no new frame; the reader ends the stream.
+                if let Some(w) = me.read_waker.take() {
+                    w.wake();
+                }
+                return Poll::Pending;
+            }
+            max = max.min(me.out.in_frame());
+        }
+        let n = ready!(me.poll_socket_write(cx, Some(&buf[..max])))?;
+        let done = me.out.feed(&buf[..n]);
+        if done > 0 {
+            let stats = &me.door.stats;
+            stats.sent.fetch_add(done, Ordering::Relaxed);
+            if let Some(w) = stats.taken.get() {
+                w.wake();
+            }
+        }
+        if me.closing.is_some()
+            && me.out.at_end()
+            && let Some(w) = me.read_waker.take()
+        {
+            w.wake();
+        }
+        Poll::Ready(Ok(n))
+    }
+
+    fn poll_flush(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<std::io::Result<()>> {
+        self.get_mut().poll_pending(cx)
+    }
+
+    fn poll_shutdown(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<std::io::Result<()>> {
+        // The door closes the socket once the SDK lets go of it.
+        self.get_mut().poll_pending(cx)
     }
 }
 
@@ -1167,6 +1216,29 @@ mod tests {
         h.extend_from_slice(&(1u64 << 63).to_be_bytes());
         h.extend_from_slice(&[0; 4]);
         assert_eq!(p.feed(&h, t).unwrap_err().1.0, 1009);
+    }
+
+    #[test]
+    fn server_frames_are_followed_across_split_writes() {
+        // A message-data frame (binary, first byte 0x01, 300 bytes), a text
+        // frame, a binary frame of another op byte: fed in pieces of every size.
+        let mut bytes = vec![0x82, 126, 1, 44, 0x01];
+        bytes.extend(std::iter::repeat_n(7u8, 299));
+        bytes.extend([0x81, 3, b'{', b'}', b' ', 0x82, 2, 0x02, 0]);
+        for piece in 1..bytes.len() {
+            let mut o = OutFrames::default();
+            let mut data = 0;
+            for chunk in bytes.chunks(piece) {
+                data += o.feed(chunk);
+            }
+            assert_eq!(data, 1, "pieces of {piece}");
+            assert!(o.at_end());
+        }
+        let mut o = OutFrames::default();
+        o.feed(&bytes[..3]);
+        assert_eq!(o.in_frame(), 1);
+        o.feed(&bytes[3..10]);
+        assert_eq!((o.at_end(), o.in_frame()), (false, 294));
     }
 
     #[test]

@@ -6,7 +6,7 @@
 //! finishes the TLS handshake and hands the plain WebSocket bytes to the door
 //! ([`relay`](super::relay)) on a loopback port of its own, so the door's token,
 //! connection cap, subprotocol rename and message limits apply unchanged (the door
-//! splices plain sockets in the kernel, which TLS rules out). TLS is terminated
+//! checks plain bytes and hands the plain socket to the SDK). TLS is terminated
 //! here rather than in the SDK's server (`websocket-tls`) because the SDK is
 //! reached only through the door, which must see the plain bytes.
 //!
