@@ -355,9 +355,12 @@ impl<C: Cell> Ppht<C> {
     /// The state for `edges`.
     fn new(edges: &GrayImage, rho: f64, theta: f64) -> Ppht<C> {
         let (w, h) = (edges.width as usize, edges.height as usize);
+        // OpenCV's HoughLinesP takes ρ and θ as float: its tables come from the
+        // rounded steps (the f64 θ = π/180 gave other segments on 4 of 40 photos).
+        let (rho, theta) = (f64::from(rho as f32), f64::from(theta as f32));
         let na = numangle(theta);
         let nr = numrho(edges.width, edges.height, rho);
-        let irho = 1.0 / rho;
+        let irho = f64::from(1.0 / rho as f32);
         let tc = (0..na)
             .map(|n| ((n as f64 * theta).cos() * irho) as f32)
             .collect();
