@@ -321,6 +321,24 @@ impl Cell for i32 {
     }
 }
 
+/// Adds a vote to each of the `cells` of `acc`; their new counts into `counts`.
+/// Kept out of line: inlined into the large loop of [`segments`], its registers
+/// spilled to the stack in some builds, and the whole transform ran 25 % slower.
+#[inline(never)]
+fn add_votes<C: Cell>(acc: &mut [C], cells: &[u32], counts: &mut [i32]) {
+    for (v, &k) in counts.iter_mut().zip(cells) {
+        *v = acc[k as usize].add();
+    }
+}
+
+/// Takes a vote from each of the `cells` of `acc` (out of line, as [`add_votes`]).
+#[inline(never)]
+fn remove_votes<C: Cell>(acc: &mut [C], cells: &[u32]) {
+    for &k in cells {
+        acc[k as usize].remove();
+    }
+}
+
 /// [`hough_lines_p`]'s state: OpenCV's angle table (cos/sin of n·θ in f64, over
 /// ρ), the votes of the pixels seen so far, and the mask of edge pixels that no
 /// segment has taken yet.
@@ -421,9 +439,7 @@ impl<C: Cell> Ppht<C> {
         // The increments first, then the maximum over their counts (vector code):
         // a running maximum in the same loop chains every cell's compare to the
         // previous one, and that chain, not the cache misses, set the loop's pace.
-        for (v, &k) in self.counts.iter_mut().zip(&self.cells) {
-            *v = self.acc[k as usize].add();
-        }
+        add_votes(&mut self.acc, &self.cells, &mut self.counts);
         let max = self.counts.iter().copied().max().unwrap_or(0);
         if max < threshold as i32 {
             return None;
@@ -433,9 +449,7 @@ impl<C: Cell> Ppht<C> {
 
     fn unvote(&mut self, (j, i): (i32, i32)) {
         self.find_cells((j, i));
-        for &k in &self.cells {
-            self.acc[k as usize].remove();
-        }
+        remove_votes(&mut self.acc, &self.cells);
     }
 
     /// The last edge pixel each way from `seed` before a gap longer than
