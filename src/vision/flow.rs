@@ -786,7 +786,7 @@ mod tests {
                     for x in 0..win {
                         let k = y * n + x;
                         if extreme {
-                            (t[0][k], t[1][k], t[2][k]) = (8160 * case as i32, 4080, -4080);
+                            (t[0][k], t[1][k], t[2][k]) = (8160 * case, 4080, -4080);
                         } else {
                             t[0][k] = (rnd() % 8161) as i32;
                             t[1][k] = (rnd() % 8161) as i32 - 4080;
