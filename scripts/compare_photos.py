@@ -20,6 +20,7 @@ largest position difference where both found the point, and status differences.
 import argparse
 import json
 import os
+import shutil
 import subprocess
 import tempfile
 
@@ -154,6 +155,8 @@ def main():
     for _ in range(args.rounds):
         for n, ctx in inputs.items():
             results[n].append(measure(exe, ctx, args.repeats, np, cv2))
+    for ctx in inputs.values():
+        shutil.rmtree(ctx["d"])
     out = "\n\n".join(table(title, names, inputs, results) for title, names in sets.items() if names)
     print(f"OpenCV {cv2.__version__}, numpy {np.__version__}; medians of {args.rounds} alternating "
           f"rounds' medians of {args.repeats} runs, one thread")

@@ -43,100 +43,92 @@ pub struct TrackedPoint {
     pub error: f32,
 }
 
-/// A pyramid level padded by `pad` pixels: image (reflect 101) and, for the first
-/// image, its Scharr derivatives (zero outside).
+/// A pyramid level padded by `pad` pixels (reflect 101), which covers every read
+/// of a window that [`track`] keeps: the image only. The template's derivatives
+/// are computed per window ([`scharr_block`]) instead of over the whole level:
+/// on a 1411x1411 photo the derivative images (zeroed padding, Scharr over
+/// 2 Mpx, their copies, and the template's cache misses on 8 MB of them) took 40 %
+/// of the run (perf), for windows covering a few percent of the image.
 struct Level {
     w: usize,
     h: usize,
     stride: usize,
+    pad: usize,
     img: Vec<u8>,
-    dx: Vec<i16>,
-    dy: Vec<i16>,
 }
 
-multiversion! {
-    fn scharr_rows(a: &[u8], b: &[u8], c: &[u8], t0: &mut [i16], t1: &mut [i16]) {
-        let w = t0.len() - 2;
-        let (a, b, c) = (&a[..w], &b[..w], &c[..w]);
-        let t0 = &mut t0[1..w + 1];
-        let t1 = &mut t1[1..w + 1];
-        for i in 0..w {
-            t0[i] = (a[i] as i16 + c[i] as i16) * 3 + b[i] as i16 * 10;
-            t1[i] = c[i] as i16 - a[i] as i16;
+impl Level {
+    fn new(src: &GrayImage, pad: usize) -> Level {
+        let (w, h) = (src.width as usize, src.height as usize);
+        let stride = w + 2 * pad;
+        // Built by appending rows, not by filling a zeroed buffer (perf).
+        let mut img = Vec::with_capacity(stride * (h + 2 * pad));
+        let left: Vec<usize> = (0..pad)
+            .map(|i| reflect101(i as isize - pad as isize, w))
+            .collect();
+        let right: Vec<usize> = (0..pad).map(|i| reflect101((w + i) as isize, w)).collect();
+        for py in 0..h + 2 * pad {
+            let sy = reflect101(py as isize - pad as isize, h);
+            let s = &src.data[sy * w..(sy + 1) * w];
+            img.extend(left.iter().map(|&x| s[x]));
+            img.extend_from_slice(s);
+            img.extend(right.iter().map(|&x| s[x]));
+        }
+        Level {
+            w,
+            h,
+            stride,
+            pad,
+            img,
         }
     }
-}
 
-multiversion! {
-    fn scharr_h(t0: &[i16], t1: &[i16], dx: &mut [i16], dy: &mut [i16]) {
-        let w = dx.len();
-        let dy = &mut dy[..w];
-        let (a0, a2) = (&t0[..w], &t0[2..w + 2]);
-        let (b0, b1, b2) = (&t1[..w], &t1[1..w + 1], &t1[2..w + 2]);
-        for i in 0..w {
-            dx[i] = a2[i] - a0[i];
-            dy[i] = (b0[i] + b2[i]) * 3 + b1[i] * 10;
-        }
+    /// The pixels from (x0, y0) on (at most `pad` outside the level), as (the
+    /// buffer from that pixel on, row stride).
+    #[inline(always)]
+    fn block(&self, (x0, y0): (i32, i32)) -> (&[u8], usize) {
+        let (x, y) = (x0 + self.pad as i32, y0 + self.pad as i32);
+        (
+            &self.img[y as usize * self.stride + x as usize..],
+            self.stride,
+        )
     }
 }
 
-fn level(src: &GrayImage, pad: usize, derivs: bool) -> Level {
-    let (w, h) = (src.width as usize, src.height as usize);
-    let stride = w + 2 * pad;
-    let rows = h + 2 * pad;
-    // Built by appending rows, not by filling zeroed buffers: on a large photo the
-    // zeroing cost as much as the derivatives themselves (perf).
-    let mut img = Vec::with_capacity(stride * rows);
-    for py in 0..rows {
-        let sy = reflect101(py as isize - pad as isize, h);
-        let s = &src.data[sy * w..(sy + 1) * w];
-        img.extend((0..pad).map(|i| s[reflect101(i as isize - pad as isize, w)]));
-        img.extend_from_slice(s);
-        img.extend((0..pad).map(|i| s[reflect101((w + i) as isize, w)]));
-    }
-    let (mut dx, mut dy) = (Vec::new(), Vec::new());
-    if derivs {
-        (dx, dy) = (
-            Vec::with_capacity(stride * rows),
-            Vec::with_capacity(stride * rows),
-        );
-        dx.resize(pad * stride + pad, 0);
-        dy.resize(pad * stride + pad, 0);
-        let (mut t0, mut t1) = (vec![0i16; w + 2], vec![0i16; w + 2]);
-        let (mut rx, mut ry) = (vec![0i16; w], vec![0i16; w]);
-        let (l, r) = (reflect101(-1, w), reflect101(w as isize, w));
-        let row = |y: isize| {
-            let y = reflect101(y, h);
-            &src.data[y * w..(y + 1) * w]
-        };
-        for y in 0..h {
-            scharr_rows(
-                row(y as isize - 1),
-                row(y as isize),
-                row(y as isize + 1),
-                &mut t0,
-                &mut t1,
+/// Columns of a window's derivative rows: the template reads `padded(win) + 1`,
+/// rounded up to whole 16-lane vectors.
+fn deriv_cols(win: usize) -> usize {
+    (padded(win) + 1).next_multiple_of(16)
+}
+
+/// Scharr derivatives as OpenCV's `calcScharrDeriv` (dx: [3 10 3]ᵀ·[−1 0 1], dy its
+/// transpose; |value| <= 4080, exact in i16) of `rows` rows of `cols` pixels,
+/// from the block `src` (row stride `stride`) that starts one row above and one
+/// column left of the first pixel; `dx`, `dy` get `cols` a row. Each value straight
+/// from the nine pixels: storing the vertical sums and loading them again at
+/// offsets 1 and 2 stalled on store forwarding (perf).
+#[inline(always)]
+fn scharr_block(
+    (src, stride): (&[u8], usize),
+    (cols, rows): (usize, usize),
+    dx: &mut [i16],
+    dy: &mut [i16],
+) {
+    for y in 0..rows {
+        let a = &src[y * stride..][..cols + 2];
+        let b = &src[(y + 1) * stride..][..cols + 2];
+        let c = &src[(y + 2) * stride..][..cols + 2];
+        let (rx, ry) = (&mut dx[y * cols..][..cols], &mut dy[y * cols..][..cols]);
+        for x in 0..cols {
+            let p = |r: &[u8], k: usize| r[x + k] as i16;
+            let (t0l, t0r) = (
+                (p(a, 0) + p(c, 0)) * 3 + p(b, 0) * 10,
+                (p(a, 2) + p(c, 2)) * 3 + p(b, 2) * 10,
             );
-            t0[0] = t0[l + 1];
-            t1[0] = t1[l + 1];
-            t0[w + 1] = t0[r + 1];
-            t1[w + 1] = t1[r + 1];
-            scharr_h(&t0, &t1, &mut rx, &mut ry);
-            dx.extend_from_slice(&rx);
-            dy.extend_from_slice(&ry);
-            dx.resize(dx.len() + 2 * pad, 0);
-            dy.resize(dy.len() + 2 * pad, 0);
+            let t1 = |k: usize| p(c, k) - p(a, k);
+            rx[x] = t0r - t0l;
+            ry[x] = (t1(0) + t1(2)) * 3 + t1(1) * 10;
         }
-        dx.resize(stride * rows, 0);
-        dy.resize(stride * rows, 0);
-    }
-    Level {
-        w,
-        h,
-        stride,
-        img,
-        dx,
-        dy,
     }
 }
 
@@ -234,44 +226,70 @@ fn gradient_row(r0: &[u8], r1: &[u8], wt: [i32; 4], (iv, ix, iy): Tmpl) -> (i32,
     (s1.iter().sum(), s2.iter().sum())
 }
 
-/// [`gradient_row`] with 16-bit multiply-adds (as OpenCV): the bilinear sample
-/// as (a[x], a[x+1])·(w00, w01) + (b[x], b[x+1])·(w10, w11), then diff·ix with
-/// ix's high half masked off (diff and ix fit in i16: |diff| <= 8160, |ix| <= 4080).
-/// Exact integer arithmetic, so the same sums.
+/// [`gradient_window`]'s sums over `win` rows of the second image's block `src`
+/// (row stride `stride`) with 16-bit multiply-adds (as OpenCV): the bilinear
+/// sample as (a[x], a[x+1])·(w00, w01) + (b[x], b[x+1])·(w10, w11), then diff·ix
+/// with ix's high half masked off (diff and ix fit in i16: |diff| <= 8160, |ix| <=
+/// 4080). A lane adds one product a block, so `blocks · 8160 · 4080` a row; the
+/// lanes are summed into i64 every `i32::MAX` / that many rows (all 21 rows of a
+/// 21x21 window; the sums of each row cost as much as the row). Exact integers, so
+/// the same sums as [`gradient_row`].
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-fn gradient_row_avx2(r0: &[u8], r1: &[u8], wt: [i32; 4], (iv, ix, iy): Tmpl) -> (i32, i32) {
+fn gradient_window_avx2(
+    (src, stride): (&[u8], usize),
+    wt: [i32; 4],
+    (iv, ix, iy): Tmpl,
+    win: usize,
+) -> (i64, i64) {
     use std::arch::x86_64::*;
-    let n = ix.len();
-    assert!(n.is_multiple_of(8) && r0.len() > n && r1.len() > n && iv.len() >= n && iy.len() >= n);
+    let n = padded(win);
+    assert!(src.len() > win * stride + n && stride > n);
+    assert!(iv.len() >= win * n && ix.len() >= win * n && iy.len() >= win * n);
+    let flush = (i32::MAX as usize / (n / 8 * 8160 * 4080)).max(1);
     let wa = _mm256_set1_epi32(wt[0] | (wt[1] << 16));
     let wb = _mm256_set1_epi32(wt[2] | (wt[3] << 16));
     let (round, lo) = (_mm256_set1_epi32(1 << 8), _mm256_set1_epi32(0xffff));
     let (mut s1, mut s2) = (_mm256_setzero_si256(), _mm256_setzero_si256());
-    for k in (0..n).step_by(8) {
-        // SAFETY: k + 9 <= n + 1 <= r0.len(), r1.len(), and k + 8 <= n for the
-        // template rows (asserted above); all loads are unaligned.
-        let (pa, pb, tv, tx, ty) = unsafe {
-            let p = |r: &[u8]| {
-                let x0 = _mm_loadl_epi64(r.as_ptr().add(k) as *const __m128i);
-                let x1 = _mm_loadl_epi64(r.as_ptr().add(k + 1) as *const __m128i);
-                _mm256_cvtepu8_epi16(_mm_unpacklo_epi8(x0, x1))
+    let (mut b1, mut b2) = (0i64, 0i64);
+    let lanes = |v: __m256i| {
+        let mut a = [0i32; 8];
+        // SAFETY: `a` has 8 lanes.
+        unsafe { _mm256_storeu_si256(a.as_mut_ptr() as *mut __m256i, v) };
+        a.iter().map(|&x| x as i64).sum::<i64>()
+    };
+    for y in 0..win {
+        for k in (0..n).step_by(8) {
+            // SAFETY: the image reads end at (y + 1)·stride + k + 9 <= win·stride +
+            // n + 1 <= src.len(), the template's at y·n + k + 8 <= win·n (asserted
+            // above); all loads are unaligned.
+            let (pa, pb, tv, tx, ty) = unsafe {
+                let p = |o: usize| {
+                    let x0 = _mm_loadl_epi64(src.as_ptr().add(o) as *const __m128i);
+                    let x1 = _mm_loadl_epi64(src.as_ptr().add(o + 1) as *const __m128i);
+                    _mm256_cvtepu8_epi16(_mm_unpacklo_epi8(x0, x1))
+                };
+                let t = y * n + k;
+                let l = |v: &[i32]| _mm256_loadu_si256(v.as_ptr().add(t) as *const __m256i);
+                (
+                    p(y * stride + k),
+                    p((y + 1) * stride + k),
+                    l(iv),
+                    l(ix),
+                    l(iy),
+                )
             };
-            let l = |t: &[i32]| _mm256_loadu_si256(t.as_ptr().add(k) as *const __m256i);
-            (p(r0), p(r1), l(iv), l(ix), l(iy))
-        };
-        let v = _mm256_add_epi32(_mm256_madd_epi16(pa, wa), _mm256_madd_epi16(pb, wb));
-        let d = _mm256_sub_epi32(_mm256_srai_epi32::<9>(_mm256_add_epi32(v, round)), tv);
-        s1 = _mm256_add_epi32(s1, _mm256_madd_epi16(d, _mm256_and_si256(tx, lo)));
-        s2 = _mm256_add_epi32(s2, _mm256_madd_epi16(d, _mm256_and_si256(ty, lo)));
+            let v = _mm256_add_epi32(_mm256_madd_epi16(pa, wa), _mm256_madd_epi16(pb, wb));
+            let d = _mm256_sub_epi32(_mm256_srai_epi32::<9>(_mm256_add_epi32(v, round)), tv);
+            s1 = _mm256_add_epi32(s1, _mm256_madd_epi16(d, _mm256_and_si256(tx, lo)));
+            s2 = _mm256_add_epi32(s2, _mm256_madd_epi16(d, _mm256_and_si256(ty, lo)));
+        }
+        if (y + 1) % flush == 0 || y + 1 == win {
+            (b1, b2) = (b1 + lanes(s1), b2 + lanes(s2));
+            (s1, s2) = (_mm256_setzero_si256(), _mm256_setzero_si256());
+        }
     }
-    let mut out = [[0i32; 8]; 2];
-    // SAFETY: each array has 8 lanes.
-    unsafe {
-        _mm256_storeu_si256(out[0].as_mut_ptr() as *mut __m256i, s1);
-        _mm256_storeu_si256(out[1].as_mut_ptr() as *mut __m256i, s2);
-    }
-    (out[0].iter().sum(), out[1].iter().sum())
+    (b1, b2)
 }
 
 type DerivRows<'a> = (&'a [i16], &'a [i16], &'a [i16], &'a [i16]);
@@ -381,49 +399,98 @@ fn template_row_avx2(src: TemplateSource, (iv, ix, iy): TmplMut) -> (i64, i64, i
     (sum(&out[0]), sum(&out[1]), sum(&out[2]))
 }
 
-/// A window of side `win` on a level padded by `pad`, at the whole pixel `p`
-/// (top-left, unpadded) with the bilinear weights `wt` of the point's fraction.
+/// A window of side `win` at the whole pixel `p` (top-left) with the bilinear
+/// weights `wt` of the point's fraction.
 #[derive(Clone, Copy)]
 struct Window {
     p: (i32, i32),
     wt: [i32; 4],
     win: usize,
-    pad: usize,
 }
 
 impl Window {
     /// The window whose top-left corner is the point `at` (pixels).
     #[inline(always)]
-    fn at(at: (f32, f32), win: usize, pad: usize) -> Window {
+    fn at(at: (f32, f32), win: usize) -> Window {
         let p = (at.0.floor() as i32, at.1.floor() as i32);
         let wt = weights(at.0 - p.0 as f32, at.1 - p.1 as f32);
-        Window { p, wt, win, pad }
+        Window { p, wt, win }
     }
-    /// Where its row `y` starts in `l`'s (padded) buffers.
-    #[inline(always)]
-    fn row(&self, l: &Level, y: usize) -> usize {
-        let pad = self.pad as i32;
-        (self.p.1 + pad + y as i32) as usize * l.stride + (self.p.0 + pad) as usize
+}
+
+/// The per-point buffers, allocated once per call: the template (`iv`, `ix`, `iy`,
+/// [`padded`] rows) and its derivatives.
+struct Scratch {
+    iv: Vec<i32>,
+    ix: Vec<i32>,
+    iy: Vec<i32>,
+    /// The template's derivatives, [`deriv_cols`] a row.
+    dx: Vec<i16>,
+    dy: Vec<i16>,
+}
+
+impl Scratch {
+    fn new(win: usize) -> Scratch {
+        let tlen = win * padded(win);
+        let (cols, rows) = (deriv_cols(win), win + 1);
+        Scratch {
+            iv: vec![0; tlen],
+            ix: vec![0; tlen],
+            iy: vec![0; tlen],
+            dx: vec![0; cols * rows],
+            dy: vec![0; cols * rows],
+        }
+    }
+}
+
+/// The first image's derivatives over the `win + 1` rows and [`deriv_cols`]
+/// columns from the window's corner into `dx`, `dy` (0 outside the level, as
+/// OpenCV's zero-bordered derivative image), from `block`: the level's pixels from
+/// one row above and one column left of the corner.
+#[inline(always)]
+fn window_derivs(li: &Level, w: Window, block: (&[u8], usize), (dx, dy): (&mut [i16], &mut [i16])) {
+    let (cols, rows) = (deriv_cols(w.win), w.win + 1);
+    scharr_block(block, (cols, rows), dx, dy);
+    // The rows and columns inside the level: ys, xs.
+    let inside = |p: i32, n: usize, len: usize| {
+        (-p).clamp(0, n as i32) as usize..(len as i32 - p).clamp(0, n as i32) as usize
+    };
+    let (xs, ys) = (inside(w.p.0, cols, li.w), inside(w.p.1, rows, li.h));
+    if xs.len() == cols && ys.len() == rows {
+        return;
+    }
+    for (y, (rx, ry)) in dx.chunks_mut(cols).zip(dy.chunks_mut(cols)).enumerate() {
+        for r in [rx, ry] {
+            if ys.contains(&y) && xs.start < xs.end {
+                r[..xs.start].fill(0);
+                r[xs.end..].fill(0);
+            } else {
+                r.fill(0);
+            }
+        }
     }
 }
 
 /// The template over the window `w` of the first image's level `li` (written to
-/// `iv`, `ix`, `iy`, [`padded`] rows) and its (Σ ix², Σ ix·iy, Σ iy²).
+/// `s.iv`, `s.ix`, `s.iy`, [`padded`] rows) and its (Σ ix², Σ ix·iy, Σ iy²).
 #[inline(always)]
-fn template_window(li: &Level, w: Window, (iv, ix, iy): TmplMut, avx2: bool) -> (i64, i64, i64) {
+fn template_window(li: &Level, w: Window, s: &mut Scratch, avx2: bool) -> (i64, i64, i64) {
+    let Scratch { iv, ix, iy, dx, dy } = s;
+    let (cols, wp) = (deriv_cols(w.win), padded(w.win));
+    let (src, stride) = li.block((w.p.0 - 1, w.p.1 - 1));
+    window_derivs(li, w, (src, stride), (dx, dy));
     let (mut a11, mut a12, mut a22) = (0i64, 0i64, 0i64);
-    let wp = padded(w.win);
     for y in 0..w.win {
-        let o = w.row(li, y);
+        let o = (y + 1) * stride + 1;
         let r = y * wp..(y + 1) * wp;
         let src = TemplateSource {
-            i0: &li.img[o..],
-            i1: &li.img[o + li.stride..],
+            i0: &src[o..],
+            i1: &src[o + stride..],
             d: (
-                &li.dx[o..],
-                &li.dx[o + li.stride..],
-                &li.dy[o..],
-                &li.dy[o + li.stride..],
+                &dx[y * cols..],
+                &dx[(y + 1) * cols..],
+                &dy[y * cols..],
+                &dy[(y + 1) * cols..],
             ),
             wt: w.wt,
             win: w.win,
@@ -448,45 +515,38 @@ fn template_window(li: &Level, w: Window, (iv, ix, iy): TmplMut, avx2: bool) -> 
     (a11, a12, a22)
 }
 
-/// (Σ diff·ix, Σ diff·iy) over the window `w` of `lj` (the iteration's right-hand
-/// side).
+/// (Σ diff·ix, Σ diff·iy) over the window `w` of the second image's `block`
+/// (the iteration's right-hand side).
 #[inline(always)]
-fn gradient_window(lj: &Level, w: Window, (iv, ix, iy): Tmpl, avx2: bool) -> (i64, i64) {
-    let wp = padded(w.win);
+fn gradient_window(block: (&[u8], usize), w: Window, (iv, ix, iy): Tmpl, avx2: bool) -> (i64, i64) {
+    #[cfg(target_arch = "x86_64")]
+    if avx2 {
+        // SAFETY: the caller checked that the CPU has AVX2.
+        return unsafe { gradient_window_avx2(block, w.wt, (iv, ix, iy), w.win) };
+    }
+    let _ = avx2;
+    let ((src, stride), wp) = (block, padded(w.win));
     let (mut b1, mut b2) = (0i64, 0i64);
     for y in 0..w.win {
-        let o = w.row(lj, y);
         let r = y * wp..(y + 1) * wp;
-        let (r0, r1) = (&lj.img[o..], &lj.img[o + lj.stride..]);
         let t = (&iv[r.clone()], &ix[r.clone()], &iy[r]);
-        #[cfg(target_arch = "x86_64")]
-        let (s1, s2) = if avx2 {
-            // SAFETY: the caller checked that the CPU has AVX2.
-            unsafe { gradient_row_avx2(r0, r1, w.wt, t) }
-        } else {
-            gradient_row(r0, r1, w.wt, t)
-        };
-        #[cfg(not(target_arch = "x86_64"))]
-        let (s1, s2) = {
-            let _ = avx2;
-            gradient_row(r0, r1, w.wt, t)
-        };
+        let (s1, s2) = gradient_row(&src[y * stride..], &src[(y + 1) * stride..], w.wt, t);
         b1 += s1 as i64;
         b2 += s2 as i64;
     }
     (b1, b2)
 }
 
-/// (Σ diff·ix, Σ diff·iy, Σ |diff|) over the window `w` of `lj`.
+/// (Σ diff·ix, Σ diff·iy, Σ |diff|) over the window `w` of the second image's
+/// `block`.
 #[inline(always)]
-fn mismatch_window(lj: &Level, w: Window, (iv, ix, iy): Tmpl) -> (i64, i64, i64) {
-    let wp = padded(w.win);
+fn mismatch_window(block: (&[u8], usize), w: Window, (iv, ix, iy): Tmpl) -> (i64, i64, i64) {
+    let ((src, stride), wp) = (block, padded(w.win));
     let (mut b1, mut b2, mut e) = (0i64, 0i64, 0i64);
     for y in 0..w.win {
-        let o = w.row(lj, y);
         let r = y * wp..y * wp + w.win;
         let t = (&iv[r.clone()], &ix[r.clone()], &iy[r]);
-        let (s1, s2, s3) = mismatch_row(&lj.img[o..], &lj.img[o + lj.stride..], w.wt, t);
+        let (s1, s2, s3) = mismatch_row(&src[y * stride..], &src[(y + 1) * stride..], w.wt, t);
         b1 += s1 as i64;
         b2 += s2 as i64;
         e += s3 as i64;
@@ -521,9 +581,10 @@ pub fn optical_flow_pyr_lk(
         return points.iter().map(lost).collect();
     }
     // Pyramids; stop before a level gets smaller than the window (as OpenCV).
-    // The padding also covers the reads of whole 8-lane template rows (`padded`).
-    let pad = padded(win) + 1;
-    let (mut li, mut lj) = (vec![level(prev, pad, true)], vec![level(next, pad, false)]);
+    // The padding covers the template's blocks (`deriv_cols` + 2 wide, from one
+    // pixel left of a window that starts at most `win` left of the level).
+    let pad = deriv_cols(win) + 1;
+    let (mut li, mut lj) = (vec![Level::new(prev, pad)], vec![Level::new(next, pad)]);
     let (mut a, mut b): (Option<GrayImage>, Option<GrayImage>) = (None, None);
     while li.len() <= params.max_level {
         let na = pyr_down_gray(a.as_ref().unwrap_or(prev));
@@ -531,15 +592,15 @@ pub fn optical_flow_pyr_lk(
         if na.width as usize <= win || na.height as usize <= win {
             break;
         }
-        li.push(level(&na, pad, true));
-        lj.push(level(&nb, pad, false));
+        li.push(Level::new(&na, pad));
+        lj.push(Level::new(&nb, pad));
         (a, b) = (Some(na), Some(nb));
     }
-    track(&li, &lj, points, params, win, pad)
+    track(&li, &lj, points, params, win)
 }
 
 multiversion! {
-    fn track(li: &[Level], lj: &[Level], points: &[(f32, f32)], params: &LkParams, win: usize, pad: usize) -> Vec<TrackedPoint> {
+    fn track(li: &[Level], lj: &[Level], points: &[(f32, f32)], params: &LkParams, win: usize) -> Vec<TrackedPoint> {
     let max_level = li.len() - 1;
     #[cfg(target_arch = "x86_64")]
     let avx2 = std::arch::is_x86_feature_detected!("avx2");
@@ -549,8 +610,7 @@ multiversion! {
     let eps2 = params.epsilon.clamp(0.0, 10.0).powi(2);
     const FLT_SCALE: f32 = 1.0 / (1 << 20) as f32;
     let area = win * win;
-    let tlen = win * padded(win);
-    let (mut iv, mut ix, mut iy) = (vec![0i32; tlen], vec![0i32; tlen], vec![0i32; tlen]);
+    let mut s = Scratch::new(win);
     let inside = |p: (i32, i32), l: &Level| {
         p.0 >= -(win as i32) && p.0 < l.w as i32 && p.1 >= -(win as i32) && p.1 < l.h as i32
     };
@@ -570,22 +630,22 @@ multiversion! {
         let mut next_pt = (0f32, 0f32);
         for lvl in (0..=max_level).rev() {
             let (li, lj) = (&li[lvl], &lj[lvl]);
-            let s = 1.0 / (1u32 << lvl) as f32;
-            let mut prev_pt = (pt.0 * s, pt.1 * s);
+            let sc = 1.0 / (1u32 << lvl) as f32;
+            let mut prev_pt = (pt.0 * sc, pt.1 * sc);
             next_pt = if lvl == max_level {
                 prev_pt
             } else {
                 (next_pt.0 * 2.0, next_pt.1 * 2.0)
             };
             prev_pt = (prev_pt.0 - half, prev_pt.1 - half);
-            let w = Window::at(prev_pt, win, pad);
+            let w = Window::at(prev_pt, win);
             // Lost at the finest level only; a coarser level is skipped.
             let lose = lvl == 0;
             if !inside(w.p, li) {
                 res.found &= !lose;
                 continue;
             }
-            let (a11, a12, a22) = template_window(li, w, (&mut iv, &mut ix, &mut iy), avx2);
+            let (a11, a12, a22) = template_window(li, w, &mut s, avx2);
             let (a11, a12, a22) = (
                 a11 as f32 * FLT_SCALE,
                 a12 as f32 * FLT_SCALE,
@@ -602,15 +662,17 @@ multiversion! {
             next_pt = (next_pt.0 - half, next_pt.1 - half);
             let mut prev_delta = (0f32, 0f32);
             let mut result = next_pt;
+            let tmpl = (&s.iv[..], &s.ix[..], &s.iy[..]);
             for j in 0..params.max_iter.min(100) {
-                let w = Window::at(next_pt, win, pad);
+                let w = Window::at(next_pt, win);
                 if !inside(w.p, lj) {
                     res.found &= !lose;
                     break;
                 }
                 // A plain fn, not a closure: closures do not inherit the AVX2 target
                 // feature of `track`, and this is the hot loop.
-                let (b1, b2) = gradient_window(lj, w, (&iv, &ix, &iy), avx2);
+                let block = lj.block(w.p);
+                let (b1, b2) = gradient_window(block, w, tmpl, avx2);
                 let (b1, b2) = (b1 as f32 * FLT_SCALE, b2 as f32 * FLT_SCALE);
                 let delta = ((a12 * b2 - a22 * b1) * d, (a12 * b1 - a11 * b2) * d);
                 next_pt = (next_pt.0 + delta.0, next_pt.1 + delta.1);
@@ -629,11 +691,12 @@ multiversion! {
             }
             next_pt = (result.0 + half, result.1 + half);
             if lvl == 0 && res.found {
-                let w = Window::at(result, win, pad);
+                let w = Window::at(result, win);
                 if !inside(w.p, lj) {
                     res.found = false;
                 } else {
-                    let (_, _, e) = mismatch_window(lj, w, (&iv, &ix, &iy));
+                    let block = lj.block(w.p);
+                    let (_, _, e) = mismatch_window(block, w, tmpl);
                     res.error = e as f32 / (32 * area) as f32;
                 }
             }
@@ -650,8 +713,8 @@ multiversion! {
 mod tests {
     use super::*;
 
-    /// The AVX2 row kernels give the portable kernels' integers, on random rows with
-    /// derivatives at Scharr's extremes and random bilinear weights.
+    /// The AVX2 template rows give the portable kernel's integers, on random rows
+    /// with derivatives at Scharr's extremes and random bilinear weights.
     #[test]
     fn avx2_rows_match_portable_rows() {
         if !std::arch::is_x86_feature_detected!("avx2") {
@@ -687,14 +750,132 @@ mod tests {
                 // SAFETY: AVX2 checked above.
                 let s2 = unsafe { template_row_avx2(src, (v2, x2, y2)) };
                 assert_eq!((s1, &t1), (s2, &t2), "win {win}");
-                let next: Vec<Vec<u8>> = (0..2)
-                    .map(|_| (0..=n).map(|_| rnd() as u8).collect())
+            }
+        }
+    }
+
+    /// The AVX2 iteration sums over a whole window give the portable rows' sums:
+    /// random windows, and windows where every product is at its extreme
+    /// (|diff| = 8160, |ix| = |iy| = 4080), whose sums need i64.
+    #[test]
+    fn avx2_window_sums_match_portable_rows() {
+        if !std::arch::is_x86_feature_detected!("avx2") {
+            return;
+        }
+        let mut seed = 777u32;
+        let mut rnd = move || {
+            seed = seed.wrapping_mul(1664525).wrapping_add(1013904223);
+            seed >> 8
+        };
+        for win in [3usize, 5, 8, 21, 31, 51] {
+            let (n, stride) = (padded(win), padded(win) + 5);
+            for case in 0..20 {
+                let extreme = case < 2;
+                // Extremes: image 255 against a template of 0, or 0 against 8160.
+                let img: Vec<u8> = (0..(win + 1) * stride)
+                    .map(|_| {
+                        if extreme {
+                            255 * (1 - case as u8)
+                        } else {
+                            rnd() as u8
+                        }
+                    })
                     .collect();
-                let t = (&t1[0][..], &t1[1][..], &t1[2][..]);
-                let g1 = gradient_row(&next[0], &next[1], wt, t);
-                // SAFETY: AVX2 checked above.
-                let g2 = unsafe { gradient_row_avx2(&next[0], &next[1], wt, t) };
-                assert_eq!(g1, g2, "win {win}");
+                let mut t: [Vec<i32>; 3] = std::array::from_fn(|_| vec![0; win * n]);
+                for y in 0..win {
+                    for x in 0..win {
+                        let k = y * n + x;
+                        if extreme {
+                            (t[0][k], t[1][k], t[2][k]) = (8160 * case, 4080, -4080);
+                        } else {
+                            t[0][k] = (rnd() % 8161) as i32;
+                            t[1][k] = (rnd() % 8161) as i32 - 4080;
+                            t[2][k] = (rnd() % 8161) as i32 - 4080;
+                        }
+                    }
+                }
+                let wt = if extreme {
+                    [1 << 14, 0, 0, 0]
+                } else {
+                    weights(
+                        (rnd() % 1000) as f32 / 1000.0,
+                        (rnd() % 1000) as f32 / 1000.0,
+                    )
+                };
+                let w = Window { p: (0, 0), wt, win };
+                let tm = (&t[0][..], &t[1][..], &t[2][..]);
+                let portable = gradient_window((&img, stride), w, tm, false);
+                let vector = gradient_window((&img, stride), w, tm, true);
+                assert_eq!(portable, vector, "win {win} case {case}");
+                if extreme {
+                    let sum = (win * win * 8160 * 4080) as i64;
+                    let sign = 1 - 2 * case as i64;
+                    assert_eq!(portable, (sign * sum, -sign * sum), "win {win}");
+                }
+            }
+        }
+    }
+
+    /// Scharr over the whole image straight from its definition: reflect 101 at
+    /// the borders, 0 outside the image.
+    fn scharr_reference(img: &[u8], w: usize, h: usize, x: i32, y: i32) -> (i16, i16) {
+        if x < 0 || y < 0 || x >= w as i32 || y >= h as i32 {
+            return (0, 0);
+        }
+        let p = |dx: i32, dy: i32| {
+            let (sx, sy) = (
+                reflect101((x + dx) as isize, w),
+                reflect101((y + dy) as isize, h),
+            );
+            img[sy * w + sx] as i16
+        };
+        let gx =
+            3 * (p(1, -1) + p(1, 1)) + 10 * p(1, 0) - 3 * (p(-1, -1) + p(-1, 1)) - 10 * p(-1, 0);
+        let gy =
+            3 * (p(-1, 1) + p(1, 1)) + 10 * p(0, 1) - 3 * (p(-1, -1) + p(1, -1)) - 10 * p(0, -1);
+        (gx, gy)
+    }
+
+    /// A window's derivatives (computed per window on the padded level) are the
+    /// whole image's Scharr derivatives, inside the image, at its borders and past
+    /// them, for windows anywhere `track` keeps them.
+    #[test]
+    fn window_derivatives_are_the_image_derivatives() {
+        let mut seed = 99u32;
+        let mut rnd = move || {
+            seed = seed.wrapping_mul(1664525).wrapping_add(1013904223);
+            seed >> 8
+        };
+        let win = 21;
+        for (w, h) in [(40usize, 30usize), (23, 64), (97, 41)] {
+            let img: Vec<u8> = (0..w * h).map(|_| rnd() as u8).collect();
+            let g = GrayImage {
+                width: w as u32,
+                height: h as u32,
+                data: img.clone(),
+            };
+            let level = Level::new(&g, deriv_cols(win) + 1);
+            let (cols, rows) = (deriv_cols(win), win + 1);
+            let (mut dx, mut dy) = (vec![0i16; cols * rows], vec![0i16; cols * rows]);
+            for _ in 0..60 {
+                let p = (
+                    (rnd() % (w + win) as u32) as i32 - win as i32,
+                    (rnd() % (h + win) as u32) as i32 - win as i32,
+                );
+                let wnd = Window {
+                    p,
+                    wt: [1 << 14, 0, 0, 0],
+                    win,
+                };
+                let block = level.block((p.0 - 1, p.1 - 1));
+                window_derivs(&level, wnd, block, (&mut dx, &mut dy));
+                for y in 0..rows {
+                    for x in 0..cols {
+                        let want = scharr_reference(&img, w, h, p.0 + x as i32, p.1 + y as i32);
+                        let got = (dx[y * cols + x], dy[y * cols + x]);
+                        assert_eq!(got, want, "{w}x{h} window {p:?} at ({x}, {y})");
+                    }
+                }
             }
         }
     }
