@@ -60,12 +60,24 @@ fn trig(n: usize, theta: f64, irho: f64) -> (Vec<f32>, Vec<f32>) {
     (c, s)
 }
 
-fn valid(rho: f64, theta: f64) -> bool {
-    rho.is_finite()
+/// The most accumulator cells (ρ steps × θ steps) a transform allocates: 2^26, a
+/// quarter GiB of counts. A step so fine that it asks for more (ρ = 1e-9 asked for
+/// ~10^12 cells and aborted the process) gives no lines instead.
+const MAX_CELLS: f64 = (1u64 << 26) as f64;
+
+/// Positive finite steps, θ ≤ π, a non-empty image, and an accumulator of at most
+/// [`MAX_CELLS`].
+fn valid(edges: &GrayImage, rho: f64, theta: f64) -> bool {
+    let steps_ok = rho.is_finite()
         && theta.is_finite()
         && rho > 0.0
         && theta > 0.0
-        && theta <= std::f64::consts::PI
+        && theta <= std::f64::consts::PI;
+    let cells = || {
+        let rhos = ((f64::from(edges.width) + f64::from(edges.height)) * 2.0 + 1.0) / rho;
+        rhos * (std::f64::consts::PI / theta + 1.0)
+    };
+    steps_ok && edges.width > 0 && edges.height > 0 && cells() <= MAX_CELLS
 }
 
 /// `round_half_even(v)` for |v| < 2^22 (clamped there), by the float trick that
@@ -121,9 +133,9 @@ super::multiversion! {
 
 /// OpenCV's `HoughLines(edges, rho, theta, threshold)` (srn = stn = 0,
 /// θ in 0..π): lines with more than `threshold` votes, most voted first.
-/// Bad steps (not positive, θ > π) give no lines.
+/// Bad steps (not positive, θ > π, finer than [`MAX_CELLS`] allows) give no lines.
 pub fn hough_lines(edges: &GrayImage, rho: f64, theta: f64, threshold: u32) -> Vec<PolarLine> {
-    if !valid(rho, theta) || edges.width == 0 || edges.height == 0 {
+    if !valid(edges, rho, theta) {
         return Vec::new();
     }
     let (w, h) = (edges.width as usize, edges.height as usize);
@@ -205,7 +217,7 @@ pub fn hough_lines_p(
     min_line_length: i32,
     max_line_gap: i32,
 ) -> Vec<Segment> {
-    if !valid(rho, theta) || edges.width == 0 || edges.height == 0 {
+    if !valid(edges, rho, theta) {
         return Vec::new();
     }
     let limits = (threshold, min_line_length, max_line_gap);
@@ -556,6 +568,15 @@ impl Walk {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn steps_too_fine_for_memory_give_no_lines() {
+        let g = image_with((0..50).map(|i| (i, i)), 64, 64);
+        assert!(!hough_lines(&g, 1.0, std::f64::consts::PI / 180.0, 20).is_empty());
+        assert!(hough_lines(&g, 1e-9, std::f64::consts::PI / 180.0, 20).is_empty());
+        assert!(hough_lines_p(&g, 1.0, 1e-12, 20, 10, 2).is_empty());
+        assert!(hough_lines_p(&g, 1e-9, 0.01, 20, 10, 2).is_empty());
+    }
 
     fn image_with(points: impl Iterator<Item = (u32, u32)>, w: u32, h: u32) -> GrayImage {
         let mut g = GrayImage::new(w, h);
