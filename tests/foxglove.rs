@@ -1118,3 +1118,60 @@ fn wss_with_a_token_serves_beyond_loopback_and_plain_ws_gets_nothing() {
     }
     rt.shutdown();
 }
+
+/// TCP ports this process listens on (`/proc/self/net/tcp{,6}` rows in state LISTEN
+/// whose socket is one of this process's descriptors).
+fn listening_ports() -> Vec<u16> {
+    let mine: std::collections::HashSet<String> = std::fs::read_dir("/proc/self/fd")
+        .map(|d| {
+            d.flatten()
+                .filter_map(|e| std::fs::read_link(e.path()).ok())
+                .filter_map(|l| {
+                    let l = l.to_string_lossy().into_owned();
+                    Some(l.strip_prefix("socket:[")?.strip_suffix(']')?.to_string())
+                })
+                .collect()
+        })
+        .unwrap_or_default();
+    let mut ports = Vec::new();
+    for table in ["/proc/self/net/tcp", "/proc/self/net/tcp6"] {
+        for row in std::fs::read_to_string(table)
+            .unwrap_or_default()
+            .lines()
+            .skip(1)
+        {
+            let f: Vec<&str> = row.split_whitespace().collect();
+            // local_address is ADDR:PORT in hex; state 0A is LISTEN; the inode is field 9.
+            if f.len() > 9 && f[3] == "0A" && mine.contains(f[9]) {
+                let port = f[1].rsplit(':').next().unwrap();
+                ports.push(u16::from_str_radix(port, 16).unwrap());
+            }
+        }
+    }
+    ports.sort_unstable();
+    ports
+}
+
+/// The SDK's server binds no port of its own (the vendored SDK's
+/// `handed_streams_only`): the only ports are the door's, `port` and `sdk_port`,
+/// so no connection reaches the SDK around the door's token and cap. In a process
+/// of its own, so the listening sockets are this service's only.
+#[test]
+fn the_sdk_listens_on_no_port_of_its_own() {
+    if common::ran_in_own_process("foxglove::the_sdk_listens_on_no_port_of_its_own") {
+        return;
+    }
+    let (rt, a) = start("token s3cret\nsdk_port 0\n");
+    let direct = *rt
+        .names
+        .import::<SocketAddr>("foxglove", "sdk_address")
+        .expect("with sdk_port, foxglove exports its address");
+    let mut doors = vec![a.port(), direct.port()];
+    doors.sort_unstable();
+    assert_eq!(
+        listening_ports(),
+        doors,
+        "the door's two ports and no other"
+    );
+    rt.shutdown();
+}

@@ -693,14 +693,15 @@ struct Sdk {
 }
 
 impl Sdk {
-    /// Starts the SDK's server (on an ephemeral loopback port of its own, which
-    /// the front door does not use: the door hands it the sockets it checked);
-    /// an earlier one is stopped. Its address.
-    fn start(&self) -> anyhow::Result<SocketAddr> {
+    /// Starts the SDK's server, which binds no port of its own (the vendored SDK's
+    /// `handed_streams_only`): it serves only the sockets the front door checked
+    /// and hands it, so nothing reaches it around the door's token and cap. An
+    /// earlier one is stopped.
+    fn start(&self) -> anyhow::Result<()> {
         let server = WebSocketServer::new()
             .name("jderobot")
             .context(&self.ctx)
-            .bind(Ipv4Addr::LOCALHOST.to_string(), 0)
+            .handed_streams_only()
             .tokio_runtime(&self.io)
             .capabilities([
                 Capability::ClientPublish,
@@ -716,11 +717,10 @@ impl Sdk {
             .message_backlog_size(self.backlog)
             .start_blocking()
             .map_err(|e| anyhow::anyhow!("foxglove: the SDK's server did not start: {e}"))?;
-        let addr = SocketAddr::new(IpAddr::V4(Ipv4Addr::LOCALHOST), server.port());
         if let Some(old) = self.slot.lock().replace(server) {
             drop(old.stop());
         }
-        Ok(addr)
+        Ok(())
     }
 }
 

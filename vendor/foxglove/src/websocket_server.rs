@@ -194,6 +194,15 @@ impl WebSocketServer {
         self
     }
 
+    /// jderobot patch: the server binds no port of its own and serves only the
+    /// streams handed to [`WebSocketServerHandle::serve_stream`] (the embedding
+    /// program accepts and checks them); its handle's port is 0.
+    #[cfg(not(feature = "websocket-tls"))]
+    pub fn handed_streams_only(mut self) -> Self {
+        self.options.handed_streams_only = true;
+        self
+    }
+
     /// Configure the set of services to advertise to clients.
     ///
     /// Automatically adds [`Capability::Services`] to the set of advertised capabilities.

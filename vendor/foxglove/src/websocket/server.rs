@@ -52,6 +52,8 @@ pub(crate) struct ServerOptions {
     pub channel_filter: Option<Arc<dyn SinkChannelFilter>>,
     pub server_info: Option<HashMap<String, String>>,
     pub playback_time_range: Option<(u64, u64)>,
+    /// jderobot patch: serve only streams handed to `serve_stream`; bind no port.
+    pub handed_streams_only: bool,
 }
 
 impl std::fmt::Debug for ServerOptions {
@@ -171,6 +173,8 @@ pub(crate) struct Server {
     channel_filter: Option<Arc<dyn SinkChannelFilter>>,
     /// Callbacks for handling client messages, etc.
     listener: Option<Arc<dyn ServerListener>>,
+    /// jderobot patch: no listening socket of its own (see `start`).
+    handed_streams_only: bool,
     /// Capabilities advertised to clients
     capabilities: IndexSet<Capability>,
     /// Parameters subscribed to by clients
@@ -262,6 +266,7 @@ impl Server {
                 .unwrap_or_else(crate::runtime::get_runtime_handle),
             channel_filter: opts.channel_filter.clone(),
             listener: opts.listener,
+            handed_streams_only: opts.handed_streams_only,
             session_id: parking_lot::RwLock::new(
                 opts.session_id.unwrap_or_else(Self::generate_session_id),
             ),
@@ -321,6 +326,21 @@ impl Server {
                 return Err(FoxgloveError::ServerAlreadyStarted);
             }
             tasks.replace(JoinSet::new());
+        }
+
+        // jderobot patch: a server fed only by `serve_stream` binds no port, so no
+        // connection can reach it around the program that checks and hands them.
+        if self.handed_streams_only {
+            let cancellation_token = self.cancellation_token.clone();
+            let server = self.arc();
+            self.runtime.spawn(async move {
+                tokio::select! {
+                    () = server.clone().reap_completed_tasks() => (),
+                    () = cancellation_token.cancelled() => (),
+                }
+            });
+            tracing::info!("Started server for handed streams only");
+            return Ok(SocketAddr::from(([127, 0, 0, 1], 0)));
         }
 
         let addr = format!("{host}:{port}");
