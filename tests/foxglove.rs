@@ -1122,17 +1122,9 @@ fn wss_with_a_token_serves_beyond_loopback_and_plain_ws_gets_nothing() {
 /// TCP ports this process listens on (`/proc/self/net/tcp{,6}` rows in state LISTEN
 /// whose socket is one of this process's descriptors).
 fn listening_ports() -> Vec<u16> {
-    let mine: std::collections::HashSet<String> = std::fs::read_dir("/proc/self/fd")
-        .map(|d| {
-            d.flatten()
-                .filter_map(|e| std::fs::read_link(e.path()).ok())
-                .filter_map(|l| {
-                    let l = l.to_string_lossy().into_owned();
-                    Some(l.strip_prefix("socket:[")?.strip_suffix(']')?.to_string())
-                })
-                .collect()
-        })
-        .unwrap_or_default();
+    let mine: std::collections::HashSet<String> = common::socket_inodes(std::process::id())
+        .into_iter()
+        .collect();
     let mut ports = Vec::new();
     for table in ["/proc/self/net/tcp", "/proc/self/net/tcp6"] {
         for row in std::fs::read_to_string(table)

@@ -715,21 +715,6 @@ fn a_camera_served_at_25_fps_keeps_the_memory_bounded() {
     );
 }
 
-/// The inodes of process `pid`'s sockets.
-fn socket_inodes(pid: u32) -> Vec<String> {
-    std::fs::read_dir(format!("/proc/{pid}/fd"))
-        .map(|d| {
-            d.flatten()
-                .filter_map(|e| std::fs::read_link(e.path()).ok())
-                .filter_map(|l| {
-                    let l = l.to_string_lossy().into_owned();
-                    Some(l.strip_prefix("socket:[")?.strip_suffix(']')?.to_string())
-                })
-                .collect()
-        })
-        .unwrap_or_default()
-}
-
 /// `discovery localhost` (ROS 2's ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST): no
 /// `insecure` needed; every UDP socket of the service is bound to 127.0.0.1 but
 /// the two multicast listeners of the domain (joined on the loopback interface
@@ -759,7 +744,7 @@ fn discovery_localhost_keeps_dds_on_loopback_and_a_localhost_cyclone_peer_reads_
     });
     // The sockets (DDSI-RTPS 9.6.1.1: multicast ports 7400 + 250·domain + 0, 1).
     let pid = robot.child.id();
-    let ours = socket_inodes(pid);
+    let ours = common::socket_inodes(pid);
     let base = 7400 + 250 * d;
     let mut seen = 0;
     for (file, v6) in [("udp", false), ("udp6", true)] {

@@ -647,3 +647,19 @@ pub fn in_private_netns(name: &str) -> Netns {
     );
     Netns::Done
 }
+
+/// The inodes of process `pid`'s sockets (from `/proc/PID/fd`), to find its rows in
+/// `/proc/PID/net/{tcp,udp}{,6}`.
+pub fn socket_inodes(pid: u32) -> Vec<String> {
+    std::fs::read_dir(format!("/proc/{pid}/fd"))
+        .map(|d| {
+            d.flatten()
+                .filter_map(|e| std::fs::read_link(e.path()).ok())
+                .filter_map(|l| {
+                    let l = l.to_string_lossy().into_owned();
+                    Some(l.strip_prefix("socket:[")?.strip_suffix(']')?.to_string())
+                })
+                .collect()
+        })
+        .unwrap_or_default()
+}
