@@ -348,16 +348,16 @@ pub fn encode_parts<'a>(
     head: &mut Vec<u8>,
 ) -> Option<&'a [u8]> {
     match (profile, snap) {
-        (Profile::Ros2, Snapshot::Image(img)) => ros2::image_head(name, img, head),
-        (Profile::Foxglove { jpeg: None }, Snapshot::Image(img)) => {
-            protobuf::raw_image_head(name, nanos(img.time), img, head)
+        (Profile::Ros2, Snapshot::Image(img)) => {
+            ros2::image_head(name, img, head);
+            Some(&img.value.data)
         }
-        _ => return encode(profile, name, snap, head).then_some(&[]),
+        (Profile::Foxglove { jpeg: None }, Snapshot::Image(img)) => {
+            protobuf::raw_image_head(name, nanos(img.time), img, head);
+            Some(&img.value.data)
+        }
+        _ => encode(profile, name, snap, head).then_some(&[]),
     }
-    let Snapshot::Image(img) = snap else {
-        unreachable!("matched above")
-    };
-    Some(&img.value.data)
 }
 
 /// Writes `snap` on `channel` as the recorder does ([`encode_parts`], `buf` for the

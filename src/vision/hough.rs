@@ -73,10 +73,8 @@ fn valid(edges: &GrayImage, rho: f64, theta: f64) -> bool {
         && rho > 0.0
         && theta > 0.0
         && theta <= std::f64::consts::PI;
-    let cells = || {
-        let rhos = ((f64::from(edges.width) + f64::from(edges.height)) * 2.0 + 1.0) / rho;
-        rhos * (std::f64::consts::PI / theta + 1.0)
-    };
+    // In f64: the product of two huge counts would overflow usize.
+    let cells = || numrho(edges.width, edges.height, rho) as f64 * numangle(theta) as f64;
     steps_ok && edges.width > 0 && edges.height > 0 && cells() <= MAX_CELLS
 }
 
