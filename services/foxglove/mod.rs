@@ -627,23 +627,17 @@ pub fn start(s: &Settings, rt: &Runtime) -> anyhow::Result<Foxglove> {
         .enable_all()
         .build()
         .context("foxglove: cannot start its tokio runtime")?;
-    let sdk = Sdk {
-        ctx: ctx.clone(),
-        io: runtime.handle().clone(),
+    let listener = Arc::new(Listener {
+        by_channel,
+        wanted,
+        actuators,
         rt: rt.arc(),
-        listener: Arc::new(Listener {
-            by_channel,
-            wanted,
-            actuators,
-            rt: rt.arc(),
-            drivers: Mutex::new(HashMap::new()),
-            wake: watch,
-            counters: counters.clone(),
-        }),
-        backlog: s.limits.max_queue,
-        slot: me.server.clone(),
-    };
-    sdk.start()?;
+        drivers: Mutex::new(HashMap::new()),
+        wake: watch,
+        counters: counters.clone(),
+    });
+    let sdk = start_sdk(&ctx, runtime.handle(), rt, listener, s.limits.max_queue)?;
+    *me.server.lock() = Some(sdk);
     raise_fd_limit();
     let slot = me.server.clone();
     let serve: relay::Serve = Arc::new(move |stream, peer| {
@@ -682,46 +676,33 @@ pub fn start(s: &Settings, rt: &Runtime) -> anyhow::Result<Foxglove> {
     Ok(me)
 }
 
-/// What starting the SDK's server takes.
-struct Sdk {
-    ctx: Arc<Context>,
-    io: tokio::runtime::Handle,
-    rt: Arc<Runtime>,
+/// Starts the SDK's server, which binds no port of its own (the vendored SDK's
+/// `handed_streams_only`): it serves only the sockets the front door checked and
+/// hands it, so nothing reaches it around the door's token and cap.
+fn start_sdk(
+    ctx: &Arc<Context>,
+    io: &tokio::runtime::Handle,
+    rt: &Runtime,
     listener: Arc<Listener>,
     backlog: usize,
-    slot: Arc<Mutex<Option<WebSocketServerHandle>>>,
-}
-
-impl Sdk {
-    /// Starts the SDK's server, which binds no port of its own (the vendored SDK's
-    /// `handed_streams_only`): it serves only the sockets the front door checked
-    /// and hands it, so nothing reaches it around the door's token and cap. An
-    /// earlier one is stopped.
-    fn start(&self) -> anyhow::Result<()> {
-        let server = WebSocketServer::new()
-            .name("jderobot")
-            .context(&self.ctx)
-            .handed_streams_only()
-            .tokio_runtime(&self.io)
-            .capabilities([
-                Capability::ClientPublish,
-                Capability::Services,
-                Capability::Parameters,
-            ])
-            .supported_encodings(["json"])
-            .services(control::services(&self.rt))
-            .parameter_handler(Arc::new(Params {
-                rt: self.rt.clone(),
-            }))
-            .listener(self.listener.clone())
-            .message_backlog_size(self.backlog)
-            .start_blocking()
-            .map_err(|e| anyhow::anyhow!("foxglove: the SDK's server did not start: {e}"))?;
-        if let Some(old) = self.slot.lock().replace(server) {
-            drop(old.stop());
-        }
-        Ok(())
-    }
+) -> anyhow::Result<WebSocketServerHandle> {
+    WebSocketServer::new()
+        .name("jderobot")
+        .context(ctx)
+        .handed_streams_only()
+        .tokio_runtime(io)
+        .capabilities([
+            Capability::ClientPublish,
+            Capability::Services,
+            Capability::Parameters,
+        ])
+        .supported_encodings(["json"])
+        .services(control::services(&rt.arc()))
+        .parameter_handler(Arc::new(Params { rt: rt.arc() }))
+        .listener(listener)
+        .message_backlog_size(backlog)
+        .start_blocking()
+        .map_err(|e| anyhow::anyhow!("foxglove: the SDK's server did not start: {e}"))
 }
 
 /// Image frames logged ahead of what the clients have taken: the SDK's queues and
