@@ -165,12 +165,26 @@ pub struct Sched {
 
 impl Sched {
     pub fn now() -> Sched {
-        let mut s = Sched::default();
+        Sched::by_thread()
+            .into_values()
+            .fold(Sched::default(), |a, t| Sched {
+                run: a.run + t.run,
+                wait: a.wait + t.wait,
+                slices: a.slices + t.slices,
+            })
+    }
+
+    /// The same, summed by thread name (`/proc/self/task/*/comm`).
+    pub fn by_thread() -> std::collections::BTreeMap<String, Sched> {
+        let mut by = std::collections::BTreeMap::<String, Sched>::new();
         let Ok(dir) = std::fs::read_dir("/proc/self/task") else {
-            return s;
+            return by;
         };
         for t in dir.flatten() {
-            let Ok(st) = std::fs::read_to_string(t.path().join("schedstat")) else {
+            let (Ok(comm), Ok(st)) = (
+                std::fs::read_to_string(t.path().join("comm")),
+                std::fs::read_to_string(t.path().join("schedstat")),
+            ) else {
                 continue;
             };
             let f: Vec<f64> = st
@@ -178,12 +192,29 @@ impl Sched {
                 .filter_map(|n| n.parse().ok())
                 .collect();
             if let [run, wait, slices] = f[..] {
+                let s = by.entry(comm.trim().to_string()).or_default();
                 s.run += run / 1e9;
                 s.wait += wait / 1e9;
                 s.slices += slices;
             }
         }
-        s
+        by
+    }
+
+    /// Prints each thread's share per `n` since `before` (from
+    /// [`by_thread`](Self::by_thread)) when `BENCH_THREADS` is set.
+    pub fn print_threads(before: &std::collections::BTreeMap<String, Sched>, n: f64) {
+        if std::env::var_os("BENCH_THREADS").is_none() {
+            return;
+        }
+        for (name, t) in Sched::by_thread() {
+            let (run, wait, slices) = t.per(before.get(&name).unwrap_or(&Sched::default()), n);
+            if run > 1.0 {
+                println!(
+                    "    {name:>16}: {run:5.1} µs CPU, {wait:5.1} µs waiting, {slices:.2} slices"
+                );
+            }
+        }
     }
 
     /// What happened since `before`, per `n` (e.g. frames): (µs run, µs waiting, slices).
