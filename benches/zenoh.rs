@@ -6,8 +6,13 @@
 //!    fast as it can, a subscriber counting). Ours: a `zenoh` service publishing
 //!    an image interface that a producer refreshes every 0.1 ms, and a
 //!    `zenoh` driver providing it in the other process (frames published into the
-//!    local interface per second). Also Zenoh alone with the one copy an
-//!    interface's frame takes on arrival (its pixels are a `Vec`).
+//!    local interface per second). The reference publishes as ours does
+//!    (blocking, not express, priority `DataLow`) with Zenoh's default queues;
+//!    also Zenoh alone with the one copy an interface's frame takes on arrival
+//!    (its pixels are a `Vec`), and Zenoh alone with the frame queue jderobot's
+//!    sessions set (`data_low` 16 batches, `session::FRAME_QUEUE`).
+//!    `ZBENCH_THREADS=1` prints CPU per frame by thread of both processes;
+//!    `ZBENCH_ONLY=K` runs only case K, `ZBENCH_SECS` its window (to profile).
 //! 2. `motors` round trips. Reference: Zenoh's `z_ping`/`z_pong` with the same
 //!    payload (8 bytes) and attachment (16 bytes). Ours: a `zenoh` driver's
 //!    `motors` → the other process's `zenoh` service → its `motors` interface → the
@@ -26,6 +31,7 @@ mod common;
 use common::{free_port, median, percentile};
 
 use std::{
+    collections::BTreeMap,
     io::Read,
     process::{Child, Command, Stdio},
     sync::{
@@ -41,14 +47,19 @@ use jderobot::{
     interfaces::{Encoders, Image, Interface, Motors, Notify, Watch},
     loader,
 };
-use zenoh::{Wait, qos::CongestionControl};
+use zenoh::{
+    Wait,
+    qos::{CongestionControl, Priority},
+};
 
 const ROUNDS: usize = 5;
 const PINGS: usize = 2000;
 
 /// A measure and the name it is printed under.
 type Named<T> = (&'static str, fn() -> T);
-fn session(listen: Option<u16>, connect: Option<u16>) -> zenoh::Session {
+/// A Zenoh session with Zenoh's defaults but the endpoints (and, with
+/// `frame_queue`, the queue jderobot's sessions give frames: `data_low` 16).
+fn session(listen: Option<u16>, connect: Option<u16>, frame_queue: bool) -> zenoh::Session {
     let mut c = zenoh::Config::default();
     let ep = |p: Option<u16>| match p {
         Some(p) => format!(r#"["tcp/127.0.0.1:{p}"]"#),
@@ -58,6 +69,10 @@ fn session(listen: Option<u16>, connect: Option<u16>) -> zenoh::Session {
     c.insert_json5("connect/endpoints", &ep(connect)).unwrap();
     c.insert_json5("scouting/multicast/enabled", "false")
         .unwrap();
+    if frame_queue {
+        c.insert_json5("transport/link/tx/queue/size/data_low", "16")
+            .unwrap();
+    }
     zenoh::open(c).wait().unwrap()
 }
 
@@ -122,11 +137,13 @@ impl Notify for Echo {
 
 fn child_main(role: &str, port: u16) {
     match role {
-        "pub-ref" => {
-            let s = session(None, Some(port));
+        "pub-ref" | "pub-ref-queue" => {
+            let s = session(None, Some(port), role == "pub-ref-queue");
+            // As jderobot's frames go: blocking, not express, priority DataLow.
             let publisher = s
                 .declare_publisher("bench/img")
                 .congestion_control(CongestionControl::Block)
+                .priority(Priority::DataLow)
                 .wait()
                 .unwrap();
             let mut payload = Vec::new();
@@ -161,7 +178,7 @@ fn child_main(role: &str, port: u16) {
             }
         }
         "pong-ref" => {
-            let s = session(None, Some(port));
+            let s = session(None, Some(port), false);
             let publisher = s
                 .declare_publisher("bench/pong")
                 .express(true)
@@ -257,9 +274,9 @@ fn stop(mut c: Child) {
 /// Frames per second received over a 2 s window after 1.5 s of warm-up.
 /// With `copy`, the callback also copies each payload into a recycled buffer, the
 /// one copy an interface's frame (a `Vec`) takes on arrival.
-fn throughput_ref(copy: bool) -> f64 {
+fn throughput_ref(copy: bool, frame_queue: bool) -> f64 {
     let port = free_port();
-    let s = session(Some(port), None);
+    let s = session(Some(port), None, frame_queue);
     let count = Arc::new(AtomicU64::new(0));
     let _sub = {
         let count = count.clone();
@@ -278,21 +295,95 @@ fn throughput_ref(copy: bool) -> f64 {
             .wait()
             .unwrap()
     };
-    let child = spawn("pub-ref", port);
-    let fps = rate(&count);
+    let child = spawn(
+        if frame_queue {
+            "pub-ref-queue"
+        } else {
+            "pub-ref"
+        },
+        port,
+    );
+    let fps = rate(&count, child.id());
     stop(child);
     s.close().wait().unwrap();
     fps
 }
 
-/// Counts per second of `count` over 2 s, after 1.5 s of warm-up.
-fn rate(count: &AtomicU64) -> f64 {
+/// Each thread's scheduling so far in process `pid`, summed by thread name
+/// (`/proc/PID/task/*/comm` and `schedstat`): seconds run, seconds runnable but
+/// waiting for a core, time slices.
+fn threads(pid: u32) -> BTreeMap<String, [f64; 3]> {
+    let mut by = BTreeMap::new();
+    let Ok(dir) = std::fs::read_dir(format!("/proc/{pid}/task")) else {
+        return by;
+    };
+    for t in dir.flatten() {
+        let (Ok(comm), Ok(st)) = (
+            std::fs::read_to_string(t.path().join("comm")),
+            std::fs::read_to_string(t.path().join("schedstat")),
+        ) else {
+            continue;
+        };
+        let f: Vec<f64> = st
+            .split_whitespace()
+            .filter_map(|n| n.parse().ok())
+            .collect();
+        if let [run, wait, slices] = f[..] {
+            let e: &mut [f64; 3] = by.entry(comm.trim().to_string()).or_default();
+            e[0] += run / 1e9;
+            e[1] += wait / 1e9;
+            e[2] += slices;
+        }
+    }
+    by
+}
+
+/// With `ZBENCH_THREADS` set: CPU per frame by thread of both processes over the
+/// measured window (µs run, µs waiting for a core, slices).
+fn print_threads(
+    who: &str,
+    before: &BTreeMap<String, [f64; 3]>,
+    after: &BTreeMap<String, [f64; 3]>,
+    frames: f64,
+) {
+    let mut total = [0.0; 3];
+    let mut line = String::new();
+    for (name, a) in after {
+        let b = before.get(name).copied().unwrap_or_default();
+        let d: Vec<f64> = (0..3).map(|i| (a[i] - b[i]) / frames.max(1.0)).collect();
+        (0..3).for_each(|i| total[i] += d[i]);
+        if d[0] * 1e6 >= 1.0 {
+            line += &format!(" {name} {:.0}/{:.0}/{:.2}", d[0] * 1e6, d[1] * 1e6, d[2]);
+        }
+    }
+    println!(
+        "    {who}: all {:.0} µs run/{:.0} waiting/{:.2} slices a frame;{line}",
+        total[0] * 1e6,
+        total[1] * 1e6,
+        total[2]
+    );
+}
+
+/// Counts per second of `count` over 2 s (`ZBENCH_SECS`), after 1.5 s of
+/// warm-up; `child` is the other process (for `ZBENCH_THREADS`).
+fn rate(count: &AtomicU64, child: u32) -> f64 {
     std::thread::sleep(Duration::from_millis(1500));
+    let secs: f64 = std::env::var("ZBENCH_SECS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(2.0);
+    let show = std::env::var_os("ZBENCH_THREADS").is_some();
+    let (me0, ch0) = (threads(std::process::id()), threads(child));
     let c0 = count.load(Ordering::Relaxed);
     let t0 = Instant::now();
-    std::thread::sleep(Duration::from_secs(2));
+    std::thread::sleep(Duration::from_secs_f64(secs));
     let n = count.load(Ordering::Relaxed) - c0;
-    n as f64 / t0.elapsed().as_secs_f64()
+    let dt = t0.elapsed().as_secs_f64();
+    if show {
+        print_threads("subscriber", &me0, &threads(std::process::id()), n as f64);
+        print_threads("publisher", &ch0, &threads(child), n as f64);
+    }
+    n as f64 / dt
 }
 
 fn throughput_ours() -> f64 {
@@ -325,7 +416,7 @@ fn throughput_ours() -> f64 {
             }
         })
     };
-    let fps = rate(&count);
+    let fps = rate(&count, child.id());
     stop(child);
     stop_flag.store(true, Ordering::Relaxed);
     counter.join().unwrap();
@@ -337,7 +428,7 @@ fn throughput_ours() -> f64 {
 /// Round-trip times in µs.
 fn pings_ref() -> Vec<f64> {
     let port = free_port();
-    let s = session(Some(port), None);
+    let s = session(Some(port), None, false);
     let watch = Watch::for_current_thread();
     let got = Arc::new(AtomicU64::new(0));
     let _sub = {
@@ -458,21 +549,40 @@ fn main() {
 
 fn frames() {
     println!("== 640x480 BGR frames between two processes (frames/s received) ==");
-    // Zenoh alone, Zenoh alone with the one copy on arrival, and ours; the order
-    // rotates every round so none always runs on a warmer machine.
-    let runs: [Named<f64>; 3] = [
-        ("zenoh alone", (|| throughput_ref(false)) as fn() -> f64),
+    // Zenoh alone (its default queues), Zenoh alone with the one copy on
+    // arrival, Zenoh alone with the frame queue jderobot's sessions set, and
+    // ours; the order rotates every round so none always runs on a warmer machine.
+    let runs: [Named<f64>; 4] = [
+        (
+            "zenoh alone",
+            (|| throughput_ref(false, false)) as fn() -> f64,
+        ),
         (
             "zenoh alone + one copy",
-            (|| throughput_ref(true)) as fn() -> f64,
+            (|| throughput_ref(true, false)) as fn() -> f64,
+        ),
+        (
+            "zenoh alone, jderobot's frame queue",
+            (|| throughput_ref(false, true)) as fn() -> f64,
         ),
         ("jderobot", throughput_ours as fn() -> f64),
     ];
+    // `ZBENCH_ONLY=K`: only run K (0, 1, 2), e.g. under a profiler.
+    let only: Option<usize> = std::env::var("ZBENCH_ONLY")
+        .ok()
+        .and_then(|s| s.parse().ok());
     let mut fps = vec![Vec::new(); runs.len()];
     for round in 0..ROUNDS {
         let mut line = format!("round {round}:");
         for j in 0..runs.len() {
             let k = (j + round) % runs.len();
+            if only.is_some_and(|o| o != k) {
+                fps[k].push(f64::NAN);
+                continue;
+            }
+            if std::env::var_os("ZBENCH_THREADS").is_some() {
+                println!("  {}:", runs[k].0);
+            }
             let f = (runs[k].1)();
             fps[k].push(f);
             line += &format!("  {} {f:.0}", runs[k].0);
@@ -495,6 +605,13 @@ fn frames() {
             100.0 * percentile(&ratios, 1.0)
         );
     }
+    let same: Vec<f64> = fps[2].iter().zip(&fps[3]).map(|(a, b)| b / a).collect();
+    println!(
+        "  jderobot: {:.0} % of zenoh alone with the same frame queue, rounds {:.0}-{:.0} %",
+        100.0 * median(&same),
+        100.0 * percentile(&same, 0.0),
+        100.0 * percentile(&same, 1.0)
+    );
 }
 
 fn motors() {

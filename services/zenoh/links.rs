@@ -18,7 +18,7 @@ use zenoh::{
     bytes::{Encoding, ZBytes},
     matching::MatchingListener,
     pubsub::{Publisher, Subscriber},
-    qos::CongestionControl,
+    qos::{CongestionControl, Priority},
     sample::{Locality, Sample as ZSample, SampleKind},
 };
 
@@ -158,7 +158,10 @@ pub fn outbound<T: Wire>(
     // Small values go on the publisher's thread: never wait, drop instead. Frames
     // go from the component's own thread, which waits for room: the link then
     // carries whole frames back to back (the latest each time), not fragments of
-    // frames dropped halfway.
+    // frames dropped halfway. Frames go at a lower priority than everything else,
+    // in their own queue (deep enough for a whole frame, see
+    // `session::FRAME_QUEUE`): a `motors` command never waits behind a frame's
+    // fragments.
     let image = T::KIND == "image";
     let publisher = session
         .declare_publisher(route.key.clone())
@@ -166,6 +169,11 @@ pub fn outbound<T: Wire>(
             CongestionControl::Block
         } else {
             CongestionControl::Drop
+        })
+        .priority(if image {
+            Priority::DataLow
+        } else {
+            Priority::Data
         })
         .express(!image)
         .wait()

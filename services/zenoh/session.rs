@@ -10,6 +10,13 @@ use crate::conf::{
     settings::{self, Setting, choice, path, rest},
 };
 
+/// Batches (64 KiB each) in the transmit queue of frames (`data_low`, the
+/// priority images go at; Zenoh's default is 2, the most 16): a 640x480 frame
+/// (900 KB) fits whole, so the thread that puts it fills the queue in one go
+/// instead of waking the link's writer for every two batches. Set unless a
+/// `config` file is given (then the file's value, or Zenoh's default, holds).
+pub const FRAME_QUEUE: usize = 16;
+
 /// How multicast scouting finds peers (`scouting` line).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Scouting {
@@ -292,6 +299,13 @@ impl SessionConf {
         if !self.writers.is_empty() {
             set(&mut c, "access_control", acl(&self.writers))?;
         }
+        if self.config.is_none() {
+            set(
+                &mut c,
+                "transport/link/tx/queue/size/data_low",
+                FRAME_QUEUE.to_string(),
+            )?;
+        }
         if self.config.is_none() || self.scouting != Scouting::Loopback {
             match self.scouting {
                 Scouting::Loopback => {
@@ -431,6 +445,8 @@ mod tests {
         let c = s.config().unwrap();
         let listen = c.get_json("listen/endpoints").unwrap();
         assert!(listen.contains("tcp/127.0.0.1:0"), "{listen}");
+        let q = c.get_json("transport/link/tx/queue/size/data_low").unwrap();
+        assert_eq!(q.trim(), FRAME_QUEUE.to_string());
     }
 
     #[test]
