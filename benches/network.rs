@@ -7,7 +7,9 @@
 //!    paced by the 4.3 protocol's requests (`1019` lines, two ahead; no camera, no
 //!    interfaces): what the protocol itself allows; and against that paced copy
 //!    double-buffered (two source and two destination buffers in turn, as a
-//!    camera's frames must be; one buffer stays in a core's cache). In rotating
+//!    camera's frames must be; one buffer stays in a core's cache), and that copy
+//!    taking its frames from an interface fed by the same camera stand-in as
+//!    ours (the camera's and the interface's cost, none of the link's). In rotating
 //!    order; per frame, all threads' CPU, time runnable but waiting for a core,
 //!    time slices.
 //! 2. Frame latency at 100 frames/s: from the publish on the server's interface to
@@ -27,7 +29,7 @@ use std::{
     net::{TcpListener, TcpStream},
     sync::{
         Arc,
-        atomic::{AtomicBool, Ordering},
+        atomic::{AtomicBool, AtomicU64, Ordering},
     },
     thread,
     time::{Duration, Instant},
@@ -35,7 +37,7 @@ use std::{
 
 use jderobot::{
     drivers::networkclient::{ClientConf, NetClient, Remote},
-    interfaces::{Encoders, Image, Interface, Interfaces, Laser},
+    interfaces::{Encoders, Image, Interface, Interfaces, Laser, Notify},
     services::networkserver::{NetServer, ServerConf, Sources},
 };
 
@@ -45,22 +47,49 @@ const FRAME: usize = (W * H * 3) as usize;
 const ROUNDS: usize = 9;
 const SECS: f64 = 1.0;
 
+/// Where the raw copy's sender takes its pixels.
+#[derive(Clone, Copy, PartialEq)]
+enum Pixels {
+    /// One buffer, sent again and again (it stays in the sender's L2 cache).
+    OneBuffer,
+    /// Two buffers in turn, and two on the reader's side, as a camera's frames must
+    /// be (one is sent while the next is filled; one is published while the next
+    /// is read): the same copies, but 1.8 MB each side where one 900-KB buffer
+    /// stays in a core's L2 cache (1 MiB a core here).
+    TwoBuffers,
+    /// An interface that the camera stand-in of [`net_fps`] refreshes: for each
+    /// request the sender waits for a frame it has not sent (woken by the
+    /// interface's publish, as the server's writer is) and writes the sample's
+    /// pixels. The camera's and the interface's cost with none of the link's.
+    Camera,
+}
+
 /// Raw TCP: frames (a 1020 header and the pixels) written back to back for `SECS`.
 /// With `requests`, as the 4.3 protocol asks for frames: the reader sends a `1019 0`
 /// line for each frame (two ahead, as the client's `depth 2`) and the writer sends
-/// a frame for each line it reads (one thread, no camera): the protocol's own cost.
-/// With `double_buffered`, the writer sends from two buffers in turn and the reader
-/// reads into two in turn, as a camera's frames must be (one is sent while the
-/// next is filled; one is published while the next is read): the same copies as
-/// with one buffer each, but 1.8 MB of source and 1.8 MB of destination, where one
-/// 900-KB buffer stays in a core's L2 cache (1 MiB a core here).
+/// a frame for each line it reads (one thread): the protocol's own cost.
 /// Returns (frames/s, the process's scheduling per frame).
-fn raw_fps(requests: bool, double_buffered: bool) -> (f64, (f64, f64, f64)) {
-    let buffers = if double_buffered { 2 } else { 1 };
+fn raw_fps(requests: bool, pixels: Pixels) -> (f64, (f64, f64, f64)) {
+    let buffers = if pixels == Pixels::OneBuffer { 1 } else { 2 };
     let l = TcpListener::bind("127.0.0.1:0").unwrap();
     let addr = l.local_addr().unwrap();
     let stop = Arc::new(AtomicBool::new(false));
-    let st = stop.clone();
+    let src = Arc::new(Interface::with_value(
+        "varcolorA",
+        "robot",
+        Image::new(W, H),
+    ));
+    let sent = Arc::new(AtomicU64::new(0));
+    let wake = Arc::new(Wake::default());
+    src.watch(wake.clone());
+    let camera = (pixels == Pixels::Camera).then(|| {
+        let (src, sent, stop) = (src.clone(), sent.clone(), stop.clone());
+        thread::Builder::new()
+            .name("camera".into())
+            .spawn(move || camera(&src, &sent, &stop, &AtomicBool::new(true)))
+            .unwrap()
+    });
+    let (st, src2) = (stop.clone(), src.clone());
     let sender = thread::Builder::new()
         .name("raw-sender".into())
         .spawn(move || {
@@ -68,7 +97,7 @@ fn raw_fps(requests: bool, double_buffered: bool) -> (f64, (f64, f64, f64)) {
             s.set_nodelay(true).unwrap();
             let mut asks = BufReader::new(s.try_clone().unwrap());
             let (px, mut ask) = (vec![vec![7u8; FRAME]; buffers], String::new());
-            let mut k = 0u64;
+            let (mut k, mut last) = (0u64, 0u64);
             while !st.load(Ordering::Relaxed) {
                 k += 1;
                 if requests && !matches!(asks.read_line(&mut ask), Ok(n) if n > 0) {
@@ -76,10 +105,25 @@ fn raw_fps(requests: bool, double_buffered: bool) -> (f64, (f64, f64, f64)) {
                 }
                 ask.clear();
                 let hdr = format!("1020 {k} 0 {W} {H} 3\n");
-                let px = &px[k as usize % buffers];
+                let frame = (pixels == Pixels::Camera).then(|| {
+                    let mut g = wake.lock.lock();
+                    while src2.clock() == last && !st.load(Ordering::Relaxed) {
+                        wake.cv.wait_for(&mut g, Duration::from_millis(10));
+                    }
+                    drop(g);
+                    let f = src2.snapshot();
+                    last = f.clock;
+                    f
+                });
+                let px = match &frame {
+                    Some(f) => &f.data,
+                    None => &px[k as usize % buffers],
+                };
                 if s.write_all(hdr.as_bytes()).is_err() || s.write_all(px).is_err() {
                     break;
                 }
+                drop(frame);
+                sent.fetch_add(1, Ordering::Relaxed);
             }
         });
     let s = TcpStream::connect(addr).unwrap();
@@ -118,7 +162,69 @@ fn raw_fps(requests: bool, double_buffered: bool) -> (f64, (f64, f64, f64)) {
     // Both directions: a writer waiting for a request sees the end too.
     let _ = r.get_ref().shutdown(std::net::Shutdown::Both);
     sender.unwrap().join().unwrap();
+    if let Some(c) = camera {
+        c.join().unwrap();
+    }
     (fps, sched)
+}
+
+/// Wakes the raw copy's sender on a new frame (a lock and a notify a publish,
+/// where the server's `FrameWake` skips both when its writer is busy).
+#[derive(Default)]
+struct Wake {
+    lock: parking_lot::Mutex<()>,
+    cv: parking_lot::Condvar,
+}
+
+impl Notify for Wake {
+    fn notify(&self) {
+        let _g = self.lock.lock();
+        self.cv.notify_all();
+    }
+}
+
+/// The camera's stand-in: it always has the next frame ready. As soon as the
+/// sender takes the latest frame (holds it to send it: `src`'s slot, `cur` and
+/// the sender hold it) or has sent one (`sent` changed), it writes the next one.
+/// It produces no pixels (it marks one byte): what is measured is the link.
+/// `Interface::write` hands it the buffer of a frame the sender has sent, so no
+/// frame is copied on the way (until 2026-11-25 a write after a frame the server
+/// still held copied the latest 900 KB frame). Waking it when a frame arrives at
+/// the client instead (tried 2026-11-27) halves the rate: the server then
+/// finishes a frame before the next exists and waits two thread wake-ups. It
+/// looks every 100 µs (30 µs until 2026-11-27: 66–132 µs of CPU a frame, about a
+/// fifth of a core at 2,000 frames/s). Returns its CPU seconds from when
+/// `counting` is set.
+fn camera(
+    src: &Interface<Image>,
+    sent: &AtomicU64,
+    stop: &AtomicBool,
+    counting: &AtomicBool,
+) -> f64 {
+    let mut cpu0 = None;
+    let mut k = 0u8;
+    let _ = src.write(|i| i.data[0] = 255);
+    let mut cur = src.snapshot();
+    let mut seen = sent.load(Ordering::Relaxed);
+    let mut at = Instant::now();
+    while !stop.load(Ordering::Relaxed) {
+        if cpu0.is_none() && counting.load(Ordering::Relaxed) {
+            cpu0 = Some(thread_cpu());
+        }
+        let done = sent.load(Ordering::Relaxed);
+        // (And at least every millisecond, as a camera would.)
+        if Arc::strong_count(&cur) > 2 || done != seen || at.elapsed().as_micros() > 1000 {
+            seen = done;
+            at = Instant::now();
+            drop(cur);
+            k = k.wrapping_add(1);
+            let _ = src.write(|i| i.data[0] = k);
+            cur = src.snapshot();
+        } else {
+            thread::sleep(Duration::from_micros(100));
+        }
+    }
+    thread_cpu() - cpu0.unwrap_or_else(thread_cpu)
 }
 
 /// A server with a 640x480 `varcolorA` (network id 0) and a client interface fed by it.
@@ -168,19 +274,8 @@ fn link() -> Link {
     }
 }
 
-/// Frames per second through server and client. The producer acts as a camera
-/// that always has the next frame ready: as soon as the server takes the latest
-/// frame (holds it to send it), it writes the next one. Like the raw copy's
-/// sender, it produces no pixels (it marks one byte): what is measured is the
-/// link. `Interface::write` hands it the buffer of a frame the server has sent,
-/// so no frame is copied on the way (until 2026-11-25 a write after a frame the
-/// server still held copied the latest 900 KB frame). Waking it when a frame
-/// arrives at the client instead (tried 2026-11-27) halves the rate: the server
-/// then finishes a frame before the next exists and waits two thread wake-ups.
-/// It looks every 100 µs (30 µs until 2026-11-27: 66–132 µs of CPU a frame in a
-/// run of main that day, about a fifth of a core at 2,000 frames/s, which the raw
-/// copy does not pay; a frame takes 300–450 µs to send, so 100 µs still writes the
-/// next one in time).
+/// Frames per second through server and client, the server's image refreshed by
+/// [`camera`].
 /// Returns (frames/s, the producer's CPU µs per frame delivered, the process's
 /// scheduling per frame).
 fn net_fps(l: &Link) -> (f64, f64, (f64, f64, f64)) {
@@ -190,36 +285,7 @@ fn net_fps(l: &Link) -> (f64, f64, (f64, f64, f64)) {
         let producer = thread::Builder::new()
             .name("camera".into())
             .spawn_scoped(sc, || {
-                let (src, stats) = (&l.src, l.server.stats());
-                let mut cpu0 = None;
-                let mut k = 0u8;
-                let _ = src.write(|i| i.data[0] = 255);
-                let mut cur = src.snapshot();
-                let mut sent = stats.frames.load(Ordering::Relaxed);
-                let mut at = Instant::now();
-                while !stop.load(Ordering::Relaxed) {
-                    if cpu0.is_none() && counting.load(Ordering::Relaxed) {
-                        cpu0 = Some(thread_cpu());
-                    }
-                    // Taken: held by the slot, `cur` and the server; or the server
-                    // finished a frame (maybe this one) and wants a newer one.
-                    let done = stats.frames.load(Ordering::Relaxed);
-                    // (And at least every millisecond, as a camera would.)
-                    if Arc::strong_count(&cur) > 2
-                        || done != sent
-                        || at.elapsed().as_micros() > 1000
-                    {
-                        sent = done;
-                        at = Instant::now();
-                        drop(cur);
-                        k = k.wrapping_add(1);
-                        let _ = src.write(|i| i.data[0] = k);
-                        cur = src.snapshot();
-                    } else {
-                        thread::sleep(Duration::from_micros(100));
-                    }
-                }
-                thread_cpu() - cpu0.unwrap_or_else(thread_cpu)
+                camera(&l.src, &l.server.stats().frames, &stop, &counting)
             });
         thread::sleep(Duration::from_millis(300));
         counting.store(true, Ordering::Relaxed);
@@ -351,24 +417,26 @@ fn main() {
     let mut l = link();
     // Warm up the link.
     net_fps(&l);
-    const NAMES: [&str; 4] = [
+    const NAMES: [&str; 5] = [
         "raw TCP copy",
         "raw TCP with the 4.3 requests",
         "raw TCP with the 4.3 requests, double-buffered",
+        "raw TCP with the 4.3 requests, from the camera's interface",
         "networkserver->networkclient",
     ];
     const OURS: usize = NAMES.len() - 1;
     // fps, then (CPU µs, runnable-waiting µs, time slices) per frame, by case.
-    let (mut fps, mut prod): ([Vec<f64>; 4], _) = (Default::default(), vec![]);
-    let mut sched: [[Vec<f64>; 3]; 4] = Default::default();
+    let (mut fps, mut prod): ([Vec<f64>; 5], _) = (Default::default(), vec![]);
+    let mut sched: [[Vec<f64>; 3]; 5] = Default::default();
     for r in 0..ROUNDS {
         // The order rotates so no case always runs on a warmer machine.
         for k in 0..NAMES.len() {
             let case = (r + k) % NAMES.len();
             let (f, s) = match case {
-                0 => raw_fps(false, false),
-                1 => raw_fps(true, false),
-                2 => raw_fps(true, true),
+                0 => raw_fps(false, Pixels::OneBuffer),
+                1 => raw_fps(true, Pixels::OneBuffer),
+                2 => raw_fps(true, Pixels::TwoBuffers),
+                3 => raw_fps(true, Pixels::Camera),
                 _ => {
                     let (f, p, s) = net_fps(&l);
                     prod.push(p);
@@ -382,14 +450,16 @@ fn main() {
         }
         let f = |c: usize| fps[c][r];
         println!(
-            "  round {r}: raw TCP {:.0} frames/s, with requests {:.0}, double-buffered {:.0}, server->client interface {:.0} ({:.0} %, {:.0} %, {:.0} % of them), producer {:.1} µs CPU a frame",
+            "  round {r}: raw TCP {:.0} frames/s, with requests {:.0}, double-buffered {:.0}, from the camera {:.0}, server->client interface {:.0} ({:.0} %, {:.0} %, {:.0} %, {:.0} % of them), producer {:.1} µs CPU a frame",
             f(0),
             f(1),
             f(2),
+            f(3),
             f(OURS),
             f(OURS) / f(0) * 100.0,
             f(OURS) / f(1) * 100.0,
             f(OURS) / f(2) * 100.0,
+            f(OURS) / f(3) * 100.0,
             prod[r]
         );
     }
