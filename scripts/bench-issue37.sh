@@ -34,7 +34,7 @@ args() { case $1 in
     foxglove|network) echo frames ;; recorder) echo write ;; *) ;; esac; }
 summary() { case $1 in
     foxglove) grep -E "^frames/s|total" ;;
-    network) grep -E "^frames/s|^producer|^per frame" ;;
+    network) grep -E "^frames/s|^producer|^per frame|^  [0-9]+ % of" ;;
     gazebo) grep -E "median of|LaserScan|frames/s" ;;
     zenoh) grep -E "^median|^  |median p50" ;;
     recorder) grep -E "compression none:|reference" ;;
