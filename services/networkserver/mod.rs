@@ -83,7 +83,10 @@
 //! frame latency 0.44 ms, p99 push lateness 1.5 ms and 7 % of one core for 100
 //! clients on laser and encoders. No tokio version was built to compare: with the
 //! goals met, an async runtime would add a dependency and build time for no
-//! measured gain.
+//! measured gain. One thread a client (the writer reading the requests itself,
+//! in `poll(2)` with an eventfd for new frames) was built and measured slower:
+//! the request's wake-up then lands on the thread that sends the frames
+//! (`docs/network.md`, "Threads, not tokio").
 //!
 //! System packages: none.
 //!
