@@ -34,6 +34,7 @@ say "debootstrap done"
 # What a machine of this kind has before CI: the CA bundle its registries need,
 # pip's and npm's settings, gcc, git and curl, the Rust toolchain.
 cp /etc/resolv.conf "$root/etc/"
+mkdir -p "$root/usr/local/share/ca-certificates"
 for f in /usr/local/share/ca-certificates/*.crt; do cp "$f" "$root/usr/local/share/ca-certificates/"; done
 cp /etc/apt/sources.list.d/debian.sources "$root/etc/apt/sources.list.d/" 2>/dev/null &&
   rm -f "$root/etc/apt/sources.list"
