@@ -28,7 +28,7 @@
 //! only that part).
 
 mod common;
-use common::{free_port, median, percentile};
+use common::{Sched, free_port, median, percentile};
 
 use std::{
     collections::BTreeMap,
@@ -309,58 +309,31 @@ fn throughput_ref(copy: bool, frame_queue: bool) -> f64 {
     fps
 }
 
-/// Each thread's scheduling so far in process `pid`, summed by thread name
-/// (`/proc/PID/task/*/comm` and `schedstat`): seconds run, seconds runnable but
-/// waiting for a core, time slices.
-fn threads(pid: u32) -> BTreeMap<String, [f64; 3]> {
-    let mut by = BTreeMap::new();
-    let Ok(dir) = std::fs::read_dir(format!("/proc/{pid}/task")) else {
-        return by;
-    };
-    for t in dir.flatten() {
-        let (Ok(comm), Ok(st)) = (
-            std::fs::read_to_string(t.path().join("comm")),
-            std::fs::read_to_string(t.path().join("schedstat")),
-        ) else {
-            continue;
-        };
-        let f: Vec<f64> = st
-            .split_whitespace()
-            .filter_map(|n| n.parse().ok())
-            .collect();
-        if let [run, wait, slices] = f[..] {
-            let e: &mut [f64; 3] = by.entry(comm.trim().to_string()).or_default();
-            e[0] += run / 1e9;
-            e[1] += wait / 1e9;
-            e[2] += slices;
-        }
-    }
-    by
+/// Each thread's scheduling so far in process `pid`, by thread name.
+fn threads(pid: u32) -> BTreeMap<String, Sched> {
+    Sched::by_thread_in(&pid.to_string())
 }
 
 /// With `ZBENCH_THREADS` set: CPU per frame by thread of both processes over the
 /// measured window (µs run, µs waiting for a core, slices).
 fn print_threads(
     who: &str,
-    before: &BTreeMap<String, [f64; 3]>,
-    after: &BTreeMap<String, [f64; 3]>,
+    before: &BTreeMap<String, Sched>,
+    after: &BTreeMap<String, Sched>,
     frames: f64,
 ) {
     let mut total = [0.0; 3];
     let mut line = String::new();
     for (name, a) in after {
-        let b = before.get(name).copied().unwrap_or_default();
-        let d: Vec<f64> = (0..3).map(|i| (a[i] - b[i]) / frames.max(1.0)).collect();
-        (0..3).for_each(|i| total[i] += d[i]);
-        if d[0] * 1e6 >= 1.0 {
-            line += &format!(" {name} {:.0}/{:.0}/{:.2}", d[0] * 1e6, d[1] * 1e6, d[2]);
+        let (run, wait, slices) = a.per(before.get(name).unwrap_or(&Sched::default()), frames);
+        (0..3).for_each(|i| total[i] += [run, wait, slices][i]);
+        if run >= 1.0 {
+            line += &format!(" {name} {run:.0}/{wait:.0}/{slices:.2}");
         }
     }
     println!(
         "    {who}: all {:.0} µs run/{:.0} waiting/{:.2} slices a frame;{line}",
-        total[0] * 1e6,
-        total[1] * 1e6,
-        total[2]
+        total[0], total[1], total[2]
     );
 }
 

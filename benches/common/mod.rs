@@ -176,8 +176,13 @@ impl Sched {
 
     /// The same, summed by thread name (`/proc/self/task/*/comm`).
     pub fn by_thread() -> std::collections::BTreeMap<String, Sched> {
+        Sched::by_thread_in("self")
+    }
+
+    /// [`by_thread`](Self::by_thread) of process `pid` (a number, or `self`).
+    pub fn by_thread_in(pid: &str) -> std::collections::BTreeMap<String, Sched> {
         let mut by = std::collections::BTreeMap::<String, Sched>::new();
-        let Ok(dir) = std::fs::read_dir("/proc/self/task") else {
+        let Ok(dir) = std::fs::read_dir(format!("/proc/{pid}/task")) else {
             return by;
         };
         for t in dir.flatten() {
