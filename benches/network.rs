@@ -29,7 +29,7 @@ use std::{
     net::{TcpListener, TcpStream},
     sync::{
         Arc,
-        atomic::{AtomicBool, AtomicU64, Ordering},
+        atomic::{AtomicBool, AtomicU64, Ordering, fence},
     },
     thread,
     time::{Duration, Instant},
@@ -106,11 +106,15 @@ fn raw_fps(requests: bool, pixels: Pixels) -> (f64, (f64, f64, f64)) {
                 ask.clear();
                 let hdr = format!("1020 {k} 0 {W} {H} 3\n");
                 let frame = (pixels == Pixels::Camera).then(|| {
-                    let mut g = wake.lock.lock();
-                    while src2.clock() == last && !st.load(Ordering::Relaxed) {
-                        wake.cv.wait_for(&mut g, Duration::from_millis(10));
+                    if src2.clock() == last {
+                        let mut g = wake.lock.lock();
+                        wake.waiting.store(true, Ordering::Relaxed);
+                        fence(Ordering::SeqCst);
+                        while src2.clock() == last && !st.load(Ordering::Relaxed) {
+                            wake.cv.wait_for(&mut g, Duration::from_millis(10));
+                        }
+                        wake.waiting.store(false, Ordering::Relaxed);
                     }
-                    drop(g);
                     let f = src2.snapshot();
                     last = f.clock;
                     f
@@ -168,18 +172,24 @@ fn raw_fps(requests: bool, pixels: Pixels) -> (f64, (f64, f64, f64)) {
     (fps, sched)
 }
 
-/// Wakes the raw copy's sender on a new frame (a lock and a notify a publish,
-/// where the server's `FrameWake` skips both when its writer is busy).
+/// Wakes the raw copy's sender on a new frame, as the server's `FrameWake` wakes
+/// its writer: only while it waits (the flag, set under the lock before a last
+/// look at the clock; the SeqCst fences pair), so a busy sender costs a publish
+/// one atomic load.
 #[derive(Default)]
 struct Wake {
     lock: parking_lot::Mutex<()>,
     cv: parking_lot::Condvar,
+    waiting: AtomicBool,
 }
 
 impl Notify for Wake {
     fn notify(&self) {
-        let _g = self.lock.lock();
-        self.cv.notify_all();
+        fence(Ordering::SeqCst);
+        if self.waiting.load(Ordering::Relaxed) {
+            let _g = self.lock.lock();
+            self.cv.notify_all();
+        }
     }
 }
 
