@@ -161,7 +161,7 @@ fn raw_fps(requests: bool, pixels: Pixels) -> (f64, (f64, f64, f64)) {
     }
     let fps = n as f64 / t0.elapsed().as_secs_f64();
     let sched = Sched::now().per(&s0, n as f64);
-    Sched::print_threads(&t0s, n as f64);
+    Sched::print_threads("a frame", &t0s, &Sched::by_thread(), n as f64);
     stop.store(true, Ordering::Relaxed);
     // Both directions: a writer waiting for a request sees the end too.
     let _ = r.get_ref().shutdown(std::net::Shutdown::Both);
@@ -313,7 +313,7 @@ fn net_fps(l: &Link) -> (f64, f64, (f64, f64, f64)) {
         let frames = (l.dst.clock() - c0) as f64;
         let fps = frames / t0.elapsed().as_secs_f64();
         let sched = Sched::now().per(&s0, frames);
-        Sched::print_threads(&t0s, frames);
+        Sched::print_threads("a frame", &t0s, &Sched::by_thread(), frames);
         stop.store(true, Ordering::Relaxed);
         let cpu = producer.unwrap().join().unwrap_or(0.0);
         if gap > Duration::from_millis(100) {

@@ -11,7 +11,7 @@
 //!    also Zenoh alone with the one copy an interface's frame takes on arrival
 //!    (its pixels are a `Vec`), and Zenoh alone with the frame queue jderobot's
 //!    sessions set (`data_low` 16 batches, `session::FRAME_QUEUE`).
-//!    `ZBENCH_THREADS=1` prints CPU per frame by thread of both processes;
+//!    `BENCH_THREADS=1` prints CPU per frame by thread of both processes;
 //!    `ZBENCH_ONLY=K` runs only case K, `ZBENCH_SECS` its window (to profile).
 //! 2. `motors` round trips. Reference: Zenoh's `z_ping`/`z_pong` with the same
 //!    payload (8 bytes) and attachment (16 bytes). Ours: a `zenoh` driver's
@@ -58,7 +58,7 @@ const PINGS: usize = 2000;
 /// A measure and the name it is printed under.
 type Named<T> = (&'static str, fn() -> T);
 /// A Zenoh session with Zenoh's defaults but the endpoints (and, with
-/// `frame_queue`, the queue jderobot's sessions give frames: `data_low` 16).
+/// `frame_queue`, the queue jderobot's sessions give frames: `FRAME_QUEUE`).
 fn session(listen: Option<u16>, connect: Option<u16>, frame_queue: bool) -> zenoh::Session {
     let mut c = zenoh::Config::default();
     let ep = |p: Option<u16>| match p {
@@ -70,8 +70,11 @@ fn session(listen: Option<u16>, connect: Option<u16>, frame_queue: bool) -> zeno
     c.insert_json5("scouting/multicast/enabled", "false")
         .unwrap();
     if frame_queue {
-        c.insert_json5("transport/link/tx/queue/size/data_low", "16")
-            .unwrap();
+        c.insert_json5(
+            "transport/link/tx/queue/size/data_low",
+            &jderobot::services::zenoh::FRAME_QUEUE.to_string(),
+        )
+        .unwrap();
     }
     zenoh::open(c).wait().unwrap()
 }
@@ -314,48 +317,27 @@ fn threads(pid: u32) -> BTreeMap<String, Sched> {
     Sched::by_thread_in(&pid.to_string())
 }
 
-/// With `ZBENCH_THREADS` set: CPU per frame by thread of both processes over the
-/// measured window (µs run, µs waiting for a core, slices).
-fn print_threads(
-    who: &str,
-    before: &BTreeMap<String, Sched>,
-    after: &BTreeMap<String, Sched>,
-    frames: f64,
-) {
-    let mut total = [0.0; 3];
-    let mut line = String::new();
-    for (name, a) in after {
-        let (run, wait, slices) = a.per(before.get(name).unwrap_or(&Sched::default()), frames);
-        (0..3).for_each(|i| total[i] += [run, wait, slices][i]);
-        if run >= 1.0 {
-            line += &format!(" {name} {run:.0}/{wait:.0}/{slices:.2}");
-        }
-    }
-    println!(
-        "    {who}: all {:.0} µs run/{:.0} waiting/{:.2} slices a frame;{line}",
-        total[0], total[1], total[2]
-    );
-}
-
 /// Counts per second of `count` over 2 s (`ZBENCH_SECS`), after 1.5 s of
-/// warm-up; `child` is the other process (for `ZBENCH_THREADS`).
+/// warm-up; `child` is the other process (for `BENCH_THREADS`).
 fn rate(count: &AtomicU64, child: u32) -> f64 {
     std::thread::sleep(Duration::from_millis(1500));
     let secs: f64 = std::env::var("ZBENCH_SECS")
         .ok()
         .and_then(|s| s.parse().ok())
         .unwrap_or(2.0);
-    let show = std::env::var_os("ZBENCH_THREADS").is_some();
     let (me0, ch0) = (threads(std::process::id()), threads(child));
     let c0 = count.load(Ordering::Relaxed);
     let t0 = Instant::now();
     std::thread::sleep(Duration::from_secs_f64(secs));
     let n = count.load(Ordering::Relaxed) - c0;
     let dt = t0.elapsed().as_secs_f64();
-    if show {
-        print_threads("subscriber", &me0, &threads(std::process::id()), n as f64);
-        print_threads("publisher", &ch0, &threads(child), n as f64);
-    }
+    Sched::print_threads(
+        "subscriber, a frame",
+        &me0,
+        &threads(std::process::id()),
+        n as f64,
+    );
+    Sched::print_threads("publisher, a frame", &ch0, &threads(child), n as f64);
     n as f64 / dt
 }
 
@@ -540,7 +522,7 @@ fn frames() {
         ),
         ("jderobot", throughput_ours as fn() -> f64),
     ];
-    // `ZBENCH_ONLY=K`: only run K (0, 1, 2), e.g. under a profiler.
+    // `ZBENCH_ONLY=K`: only run case K (0 to 3, in `runs`' order), e.g. under a profiler.
     let only: Option<usize> = std::env::var("ZBENCH_ONLY")
         .ok()
         .and_then(|s| s.parse().ok());
@@ -553,7 +535,7 @@ fn frames() {
                 fps[k].push(f64::NAN);
                 continue;
             }
-            if std::env::var_os("ZBENCH_THREADS").is_some() {
+            if std::env::var_os("BENCH_THREADS").is_some() {
                 println!("  {}:", runs[k].0);
             }
             let f = (runs[k].1)();

@@ -206,20 +206,32 @@ impl Sched {
         by
     }
 
-    /// Prints each thread's share per `n` since `before` (from
-    /// [`by_thread`](Self::by_thread)) when `BENCH_THREADS` is set.
-    pub fn print_threads(before: &std::collections::BTreeMap<String, Sched>, n: f64) {
+    /// With `BENCH_THREADS` set, prints what `who`'s threads did per `n` (e.g.
+    /// frames) from `before` to `after` (both from [`by_thread_in`](Self::by_thread_in)):
+    /// the total, then each thread above 1 µs, as µs run / µs waiting for a core /
+    /// time slices.
+    pub fn print_threads(
+        who: &str,
+        before: &std::collections::BTreeMap<String, Sched>,
+        after: &std::collections::BTreeMap<String, Sched>,
+        n: f64,
+    ) {
         if std::env::var_os("BENCH_THREADS").is_none() {
             return;
         }
-        for (name, t) in Sched::by_thread() {
-            let (run, wait, slices) = t.per(before.get(&name).unwrap_or(&Sched::default()), n);
-            if run > 1.0 {
-                println!(
-                    "    {name:>16}: {run:5.1} µs CPU, {wait:5.1} µs waiting, {slices:.2} slices"
-                );
+        let mut total = [0.0; 3];
+        let mut each = String::new();
+        for (name, a) in after {
+            let (run, wait, slices) = a.per(before.get(name).unwrap_or(&Sched::default()), n);
+            total = [total[0] + run, total[1] + wait, total[2] + slices];
+            if run >= 1.0 {
+                each += &format!(" {name} {run:.0}/{wait:.0}/{slices:.2}");
             }
         }
+        println!(
+            "    {who}: all {:.0} µs run/{:.0} waiting/{:.2} slices;{each}",
+            total[0], total[1], total[2]
+        );
     }
 
     /// What happened since `before`, per `n` (e.g. frames): (µs run, µs waiting, slices).

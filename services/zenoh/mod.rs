@@ -90,7 +90,7 @@ use crate::{
     runtime::{Driver, Runtime},
 };
 use links::{Keep, Outbound, Route};
-pub use session::{Scouting, SessionConf};
+pub use session::{FRAME_QUEUE, Scouting, SessionConf};
 use wire::{Format, Wire};
 
 /// What to publish or provide: one interface, or all.
