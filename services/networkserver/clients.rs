@@ -19,7 +19,6 @@
 //! (subscribing again is harmless, on 4.3 servers too).
 
 use std::{
-    collections::VecDeque,
     io::{self, Write},
     net::{IpAddr, Shutdown, SocketAddr, TcpListener, TcpStream},
     sync::{
@@ -29,17 +28,16 @@ use std::{
     time::{Duration, Instant},
 };
 
-use parking_lot::{Condvar, Mutex};
-
 use crate::{
     interfaces::{Notify, Source},
-    netwire::{self, Feed},
+    netwire,
 };
 
 use super::{
     Shared,
+    frames::Bell,
     frames::FrameWake,
-    serve::{Client, ClientState, Resumed, reader, writer},
+    serve::{Client, Resumed, serve},
 };
 
 /// A connection in the server's table.
@@ -310,7 +308,7 @@ pub(super) fn accept_loop(listener: TcpListener, sh: Arc<Shared>) {
         sh.stats.clients.fetch_add(1, Ordering::AcqRel);
         let sh2 = sh.clone();
         let t = std::thread::Builder::new()
-            .name(format!("nsrv-r{id}"))
+            .name(format!("nsrv-{id}"))
             .spawn(move || {
                 client(stream, peer, id, &slot, &sh2);
                 sh2.stats.clients.fetch_sub(1, Ordering::AcqRel);
@@ -381,33 +379,14 @@ fn client(stream: TcpStream, peer: SocketAddr, id: u64, slot: &Slot, sh: &Arc<Sh
         return finish("closed to make room before its name was read".into(), true);
     }
     tracing::info!("networkserver: new client {cname} from {peer}");
-    let Ok(wstream) = stream.try_clone() else {
-        return finish("cannot clone the socket".into(), true);
+    let bell = match Bell::new() {
+        Ok(b) => b,
+        Err(e) => return finish(format!("cannot make its wake-up descriptor: {e}"), true),
     };
     let cl = Arc::new(Client {
-        st: Mutex::new(ClientState {
-            closed: false,
-            why: None,
-            subs: [false; Feed::COUNT],
-            images: vec![0; sh.sources.images.len()],
-            replies: VecDeque::new(),
-        }),
-        cv: Condvar::new(),
-        stream: wstream,
+        bell,
         waiting_frame: AtomicBool::new(false),
-        from: Source::new(format!("networkserver: client {cname} from {peer}")),
     });
-    let writer = {
-        let cl = cl.clone();
-        let sh = sh.clone();
-        std::thread::Builder::new()
-            .name(format!("nsrv-w{id}"))
-            .spawn(move || writer(&cl, &sh))
-    };
-    let writer = match writer {
-        Ok(w) => w,
-        Err(e) => return finish(format!("cannot start its writer thread: {e}"), true),
-    };
     let wake: Arc<dyn Notify> = Arc::new(FrameWake(Arc::downgrade(&cl)));
     for (_, img) in &sh.sources.images {
         img.watch(wake.clone());
@@ -417,9 +396,8 @@ fn client(stream: TcpStream, peer: SocketAddr, id: u64, slot: &Slot, sh: &Arc<Sh
         ..Default::default()
     };
     let mut drove = false;
-    reader(&stream, &cl, sh, slot, &mut resumed, &mut drove);
-    cl.close("reader ended", false);
-    let _ = writer.join();
+    let from = Source::new(format!("networkserver: client {cname} from {peer}"));
+    let ended = serve(&stream, &cl, sh, slot, from, &mut resumed, &mut drove);
     for (_, img) in &sh.sources.images {
         img.unwatch(&*wake);
     }
@@ -442,7 +420,7 @@ fn client(stream: TcpStream, peer: SocketAddr, id: u64, slot: &Slot, sh: &Arc<Sh
             false,
         )
     } else {
-        cl.st.lock().why.clone().unwrap_or(("closed".into(), false))
+        ended
     };
     finish(why, bad);
 }

@@ -1,15 +1,17 @@
 //! Image frames: a frame is written with one `writev` straight from the
 //! interface's shared sample (the header from a small buffer, the pixels from the
-//! sample: no copy), and a writer that waits for a frame is woken by the image's
-//! publish ([`FrameWake`]).
+//! sample: no copy), and a client's thread that waits for a frame is woken by the
+//! image's publish ([`FrameWake`] rings its [`Bell`]).
 
 use std::{
     io,
     net::TcpStream,
+    os::fd::{AsRawFd, FromRawFd, OwnedFd, RawFd},
     sync::{
         Weak,
         atomic::{Ordering, fence},
     },
+    time::Duration,
 };
 
 use crate::{
@@ -35,10 +37,9 @@ pub(super) fn send(
     netwire::write_all_vectored(w, &[out.as_slice(), &s.data])
 }
 
-/// Wakes a client's writer when a served image has a new frame, if it sleeps
-/// waiting for one (instead of polling for it; a busy writer costs the camera's
-/// thread one atomic load). It takes the client's lock, so the writer is asleep
-/// on the condition variable, not between its last look and its wait.
+/// Wakes a client's thread when a served image has a new frame, if it sleeps
+/// waiting for one (instead of polling for it; a busy thread costs the camera's
+/// thread one atomic load).
 pub(super) struct FrameWake(pub(super) Weak<Client>);
 
 impl Notify for FrameWake {
@@ -47,8 +48,64 @@ impl Notify for FrameWake {
         if let Some(cl) = self.0.upgrade()
             && cl.waiting_frame.load(Ordering::Relaxed)
         {
-            let _st = cl.st.lock();
-            cl.cv.notify_all();
+            cl.bell.ring();
         }
+    }
+}
+
+/// An eventfd that another thread rings and a client's thread waits on beside
+/// its socket, in one `ppoll(2)`. A ring stays until [`Bell::clear`], so one that
+/// comes just before the wait is not lost.
+pub(super) struct Bell(OwnedFd);
+
+impl Bell {
+    pub(super) fn new() -> io::Result<Bell> {
+        // SAFETY: eventfd takes no pointers; a descriptor it returns is ours.
+        let fd = unsafe { libc::eventfd(0, libc::EFD_CLOEXEC | libc::EFD_NONBLOCK) };
+        if fd < 0 {
+            return Err(io::Error::last_os_error());
+        }
+        // SAFETY: `fd` is a new descriptor that nothing else owns.
+        Ok(Bell(unsafe { OwnedFd::from_raw_fd(fd) }))
+    }
+
+    pub(super) fn ring(&self) {
+        let one = 1u64;
+        // SAFETY: writes 8 bytes from a live u64. It can fail only when the
+        // counter is full, which 2^64 rings never reach.
+        unsafe { libc::write(self.0.as_raw_fd(), (&raw const one).cast(), 8) };
+    }
+
+    pub(super) fn clear(&self) {
+        let mut n = 0u64;
+        // SAFETY: reads at most 8 bytes into a live u64 (EAGAIN when not rung).
+        unsafe { libc::read(self.0.as_raw_fd(), (&raw mut n).cast(), 8) };
+    }
+
+    /// Waits until `fd` is readable (or closed), the bell rings, or `timeout`
+    /// passes: whether the bell rang, whether `fd` is readable (or closed).
+    pub(super) fn wait_with(&self, fd: RawFd, timeout: Duration) -> (bool, bool) {
+        let mut fds = [
+            libc::pollfd {
+                fd,
+                events: libc::POLLIN,
+                revents: 0,
+            },
+            libc::pollfd {
+                fd: self.0.as_raw_fd(),
+                events: libc::POLLIN,
+                revents: 0,
+            },
+        ];
+        // ppoll, not poll: poll's whole milliseconds would make pushes up to a
+        // millisecond late.
+        let ts = libc::timespec {
+            tv_sec: timeout.as_secs().min(i32::MAX as u64) as libc::time_t,
+            tv_nsec: timeout.subsec_nanos() as libc::c_long,
+        };
+        // SAFETY: two valid pollfds and a timespec for the duration of the call.
+        // An error (EINTR) only means the caller looks again.
+        unsafe { libc::ppoll(fds.as_mut_ptr(), 2, &ts, std::ptr::null()) };
+        (fds[1].revents & libc::POLLIN != 0, fds[0].revents != 0)
     }
 }

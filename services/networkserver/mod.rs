@@ -72,21 +72,22 @@
 //!   started (documented so in 4.3, which sent the clock again).
 //!
 //! # Why plain threads (not tokio)
-//! Each client gets a reader thread and a writer thread with blocking sockets. A
-//! frame is written with one `writev` straight from the interface's shared sample
-//! (no copy), pushes are paced against absolute deadlines per client, and a client
-//! that stops reading blocks only its own writer until the write timeout. With
-//! 100 clients that is 200 mostly-sleeping threads. The benchmark
-//! (`benches/network.rs`, figures in `docs/network.md`) meets the goals with
-//! threads: 640x480 frames at a median 89 % of a raw TCP copy of the same bytes
-//! measured in the same run (68-101 % across runs on a busy 2-core machine), p50
-//! frame latency 0.44 ms, p99 push lateness 1.5 ms and 7 % of one core for 100
-//! clients on laser and encoders. No tokio version was built to compare: with the
-//! goals met, an async runtime would add a dependency and build time for no
-//! measured gain. One thread a client (the writer reading the requests itself,
-//! in `poll(2)` with an eventfd for new frames) was built and measured slower:
-//! the request's wake-up then lands on the thread that sends the frames
-//! (`docs/network.md`, "Threads, not tokio").
+//! Each client gets one thread with a blocking socket for writes: it reads the
+//! requests without waiting, writes what is due and sleeps in `ppoll(2)` on the
+//! socket and on an eventfd that a new frame rings. A frame is written with one
+//! `writev` straight from the interface's shared sample (no copy), pushes are
+//! paced against absolute deadlines per client, and a client that stops reading
+//! blocks only its own thread until the write timeout. With 100 clients that is
+//! 100 mostly-sleeping threads. The benchmark (`benches/network.rs`, figures in
+//! `docs/network.md`): 640x480 frames at 86-87 % of a raw TCP copy of the same
+//! bytes measured in the same run (three runs), p50 frame latency 0.4 ms, p99
+//! push lateness 0.3 ms and 10 % of one core for 100 clients on laser and
+//! encoders. No tokio version was built to compare: an async runtime would add a
+//! dependency and build time, and a client's thread already sleeps on its socket
+//! and its frames together. Until 2026-11-28 a client had a reader thread and a
+//! writer thread; alternated with this one on the same bench it served 65-85 %
+//! of the raw copy against 86-87 % (each request cost a thread wake-up and
+//! two cores had one more thread to share).
 //!
 //! System packages: none.
 //!
@@ -94,8 +95,7 @@
 //! - `conf.rs`: [`ServerConf`] and the declared lines.
 //! - `clients.rs`: the accept loop, the table of connections, admission (the
 //!   name, the token, eviction when full) and each connection's life.
-//! - `serve.rs`: a client's reader (requests, the idle rule) and writer
-//!   (replies, pushes).
+//! - `serve.rs`: a client's thread (requests, the idle rule, replies, pushes).
 //! - `frames.rs`: image frames (one `writev` from the shared sample, and the
 //!   wake-up on a new frame).
 

@@ -1,10 +1,21 @@
-//! A client's two threads: the reader (requests, with the partial-line and idle
-//! rules) and the writer (replies, image frames, pushes paced every 33 ms).
+//! A client's thread, from its name to its goodbye: it reads the client's requests
+//! (with the partial-line and idle rules) and writes what they ask for (replies,
+//! image frames, pushes paced every 33 ms). Between the two it sleeps in `ppoll(2)`
+//! on the socket and on the client's [`Bell`], which a served image's publish rings
+//! while the thread waits for a frame ([`super::frames::FrameWake`]).
+//!
+//! One thread, not a reader thread and a writer thread (as until 2026-11-28): a
+//! request then costs no thread wake-up, and two cores have fewer threads to
+//! share (640x480 frames, alternated on the same bench: 86-87 % of a raw TCP copy
+//! against 65-85 % with two threads; `docs/network.md`). Requests are read
+//! without waiting (`recv` with `MSG_DONTWAIT`) before each write; writes block,
+//! up to `timeout`, so a client that stops reading holds only its own thread, and
+//! its requests wait in the kernel's buffer meanwhile.
 
 use std::{
-    collections::VecDeque,
-    io::{self, Write},
-    net::{Shutdown, TcpStream},
+    io::{self, Read, Write},
+    net::TcpStream,
+    os::fd::AsRawFd,
     sync::{
         Arc,
         atomic::{AtomicBool, Ordering, fence},
@@ -12,49 +23,25 @@ use std::{
     time::{Duration, Instant},
 };
 
-use parking_lot::{Condvar, Mutex};
-
 use crate::{
     interfaces::{AnyInterface, KINDS, Source},
     netwire::{self, Feed, LineEvent, LineReader, OnWire, Request},
 };
 
-use super::{Shared, Sources, clients::Slot, frames};
+use super::{
+    Shared, Sources,
+    clients::Slot,
+    frames::{self, Bell},
+};
 
-/// What a client's reader and writer share.
-pub(super) struct ClientState {
-    pub(super) closed: bool,
-    /// Why the connection ends (the first reason wins) and whether it was the
-    /// client's fault.
-    pub(super) why: Option<(String, bool)>,
-    pub(super) subs: [bool; Feed::COUNT],
-    /// Outstanding image requests per served image (index in `Sources::images`).
-    pub(super) images: Vec<u32>,
-    pub(super) replies: VecDeque<Vec<u8>>,
-}
+/// Why a connection ends, and whether it was the client's fault.
+pub(super) type End = (String, bool);
 
+/// What a client's thread shares with the publishes of the images it serves.
 pub(super) struct Client {
-    pub(super) st: Mutex<ClientState>,
-    pub(super) cv: Condvar,
-    pub(super) stream: TcpStream,
-    /// The writer sleeps waiting for a frame (so a new frame must wake it).
+    pub(super) bell: Bell,
+    /// The thread sleeps waiting for a frame (so a new frame must ring the bell).
     pub(super) waiting_frame: AtomicBool,
-    /// Its commands, refused with one log line per change of state when out of
-    /// their interface's range (`interfaces::RANGES`).
-    pub(super) from: Source,
-}
-
-impl Client {
-    pub(super) fn close(&self, why: impl Into<String>, bad: bool) {
-        let mut st = self.st.lock();
-        if st.why.is_none() {
-            st.why = Some((why.into(), bad));
-        }
-        st.closed = true;
-        drop(st);
-        self.cv.notify_all();
-        let _ = self.stream.shutdown(Shutdown::Both);
-    }
 }
 
 /// Interfaces a client resumed, to suspend when it leaves.
@@ -64,328 +51,404 @@ pub(super) struct Resumed {
     pub(super) images: Vec<bool>,
 }
 
-pub(super) fn reader(
+/// Lines read in one go before the thread writes what is due: a client that sends
+/// without pause still gets its frames and pushes.
+const LINES_PER_PASS: usize = 64;
+
+/// What a client's thread keeps.
+struct Session<'a> {
+    stream: &'a TcpStream,
+    cl: &'a Client,
+    sh: &'a Shared,
+    slot: &'a Slot,
+    resumed: &'a mut Resumed,
+    /// It drove the motors (set them to zero when it leaves).
+    drove: &'a mut bool,
+    /// Its commands, refused with one log line per change of state when out of
+    /// their interface's range (`interfaces::RANGES`).
+    from: Source,
+    subs: [bool; Feed::COUNT],
+    /// Image requests not answered yet, per served image (index in
+    /// `Sources::images`).
+    images: Vec<u32>,
+    /// Replies to the requests read in this pass, written after them.
+    replies: Vec<u8>,
+    lr: LineReader,
+    /// The pass stopped at `LINES_PER_PASS` with lines left in `lr`.
+    more_lines: bool,
+    /// The last wait's poll found nothing to read, and no frame went out since:
+    /// reading now would only cost a syscall (a push to a hundred idle clients
+    /// would cost two each). Whatever arrives meanwhile is found by the next
+    /// wait's poll, which looks at the socket before sleeping.
+    quiet: bool,
+    partial_since: Option<Instant>,
+    last_line: Instant,
+    /// It sent a motors, pan-tilt or zoom command: a controller, which may send
+    /// nothing while the command stands (4.3's pan-tilt client sends on change).
+    commanded: bool,
+    next_push: Instant,
+    last_push: [u64; Feed::COUNT],
+    last_img: Vec<u64>,
+    /// Scratch space for a frame's header and the pushes.
+    out: Vec<u8>,
+}
+
+/// Serves a named client until the connection ends; returns why it ended.
+pub(super) fn serve(
     stream: &TcpStream,
     cl: &Client,
     sh: &Shared,
     slot: &Slot,
+    from: Source,
     resumed: &mut Resumed,
     drove: &mut bool,
-) {
-    let conf = &sh.conf;
-    let tick = Duration::from_millis(100).min(conf.timeout);
-    let _ = stream.set_read_timeout(Some(tick));
-    let mut lr = LineReader::new(conf.max_line);
-    let mut r = stream;
-    let mut partial_since: Option<Instant> = None;
-    let mut last_line = Instant::now();
-    // It sent a motors, pan-tilt or zoom command: a controller, which may send
-    // nothing while the command stands (4.3's pan-tilt client sends on change).
-    let mut commanded = false;
-    loop {
-        if cl.st.lock().closed || sh.stop.load(Ordering::Acquire) {
-            return;
-        }
-        match lr.read_line(&mut r) {
-            Ok(LineEvent::Line(line)) => {
-                partial_since = None;
-                last_line = Instant::now();
-                match Request::parse(line) {
-                    Ok(req) => {
-                        commanded |= netwire::commanded_kind(req.code()).is_some();
-                        if let Err((why, bad)) = handle(req, cl, sh, resumed, drove) {
-                            cl.close(why, bad);
-                            return;
-                        }
-                        let engaged = commanded || {
-                            let st = cl.st.lock();
-                            st.subs.iter().any(|s| *s) || st.images.iter().any(|n| *n > 0)
-                        };
-                        slot.heard(sh, engaged);
-                    }
-                    Err(e) => {
-                        let shown: String = String::from_utf8_lossy(&line[..line.len().min(40)])
-                            .chars()
-                            .map(|c| {
-                                if c.is_ascii_graphic() || c == ' ' {
-                                    c
-                                } else {
-                                    '?'
-                                }
-                            })
-                            .collect();
-                        cl.close(format!("sent a bad line `{shown}`: {e}"), true);
-                        return;
-                    }
-                }
-            }
-            Ok(LineEvent::Closed) => {
-                cl.close("closed the connection", false);
-                return;
-            }
-            Err(e) if netwire::is_timeout(&e) => {
-                if lr.pending() > 0 {
-                    let t0 = *partial_since.get_or_insert_with(Instant::now);
-                    if t0.elapsed() >= conf.timeout {
-                        cl.close(
-                            format!(
-                                "sent a partial line and no newline for {} ms",
-                                conf.timeout.as_millis()
-                            ),
-                            true,
-                        );
-                        return;
-                    }
-                }
-                if !conf.idle_timeout.is_zero()
-                    && !commanded
-                    && last_line.elapsed() >= conf.idle_timeout
-                {
-                    let st = cl.st.lock();
-                    let busy = st.subs.iter().any(|s| *s)
-                        || st.images.iter().any(|n| *n > 0)
-                        || !st.replies.is_empty();
-                    drop(st);
-                    if !busy {
-                        cl.close(
-                            format!(
-                                "idle for {} ms with no subscription (idle_timeout)",
-                                conf.idle_timeout.as_millis()
-                            ),
-                            false,
-                        );
-                        return;
-                    }
-                }
-            }
-            Err(e) if e.kind() == io::ErrorKind::InvalidData => {
-                cl.close(format!("sent a {e}"), true);
-                return;
-            }
-            Err(e) => {
-                cl.close(format!("connection error: {e}"), false);
-                return;
-            }
-        }
-    }
-}
-
-/// Carries out one request; Err((why, bad)) ends the connection.
-fn handle(
-    req: Request,
-    cl: &Client,
-    sh: &Shared,
-    resumed: &mut Resumed,
-    drove: &mut bool,
-) -> Result<(), (String, bool)> {
-    let src = &sh.sources;
-    match req {
-        Request::Goodbye | Request::GoodbyeImages => Err(("said goodbye".into(), false)),
-        Request::Subscribe(d) => subscribe(cl, sh, resumed, d, true),
-        Request::Unsubscribe(d) => subscribe(cl, sh, resumed, d, false),
-        Request::ImageQuery(netid) => image_query(cl, sh, resumed, netid),
-        Request::LimitsQuery(c) => {
-            let (k, limits) = netwire::limits_kind(c).expect("parsed as a limits query");
-            let Some(dev) = src.device(k) else {
-                return error(cl, sh, limits.unserved.into());
-            };
-            let mut out = Vec::new();
-            dev.write_limits(&mut out);
-            reply(cl, sh, out)
-        }
-        Request::Unhandled(c) => {
-            error(cl, sh, format!("message {c} is not handled by this server"))
-        }
-        command => {
-            let Some(k) = netwire::commanded_kind(command.code()) else {
-                return error(
-                    cl,
-                    sh,
-                    format!("message {} is not handled by this server", command.code()),
-                );
-            };
-            let Some(dev) = src.device(k) else {
-                return error(cl, sh, format!("{} are not served", KINDS[k]));
-            };
-            if matches!(
-                netwire::WIRE[k],
-                OnWire::Commanded {
-                    keep_alive: true,
-                    ..
-                }
-            ) {
-                *drove = true;
-            }
-            if let Err(e) = dev.apply(&command) {
-                cl.from.refused(&e);
-                return error(cl, sh, format!("refused: {e}"));
-            }
-            cl.from.accepted();
-            Ok(())
-        }
-    }
-}
-
-/// The error of a client with more than `max_queue` requests waiting, if it has.
-fn over_queue(st: &ClientState, sh: &Shared) -> Result<(), (String, bool)> {
-    let queued = st.replies.len() + st.images.iter().sum::<u32>() as usize;
-    if queued >= sh.conf.max_queue {
-        return Err((
-            format!(
-                "more than {} requests waiting (it does not read what it asks for)",
-                sh.conf.max_queue
-            ),
-            true,
-        ));
-    }
-    Ok(())
-}
-
-/// Queues a reply for the writer.
-fn reply(cl: &Client, sh: &Shared, bytes: Vec<u8>) -> Result<(), (String, bool)> {
-    let mut st = cl.st.lock();
-    over_queue(&st, sh)?;
-    st.replies.push_back(bytes);
-    drop(st);
-    cl.cv.notify_all();
-    Ok(())
-}
-
-/// Queues a `1027 TEXT` reply.
-fn error(cl: &Client, sh: &Shared, text: String) -> Result<(), (String, bool)> {
-    let mut out = Vec::new();
-    netwire::write_error(&mut out, &text);
-    reply(cl, sh, out)
-}
-
-/// (Un)subscribes the client to feed `d`, resuming its interface for it.
-fn subscribe(
-    cl: &Client,
-    sh: &Shared,
-    resumed: &mut Resumed,
-    d: Feed,
-    on: bool,
-) -> Result<(), (String, bool)> {
-    let Some(dev) = sh.sources.device(d.index()) else {
-        return error(cl, sh, format!("{} is not served", d.interface()));
-    };
-    let slot = &mut resumed.subs[d.index()];
-    if on && slot.is_none() {
-        let iface = dev.interface();
-        iface.resume();
-        *slot = Some(iface);
-    } else if !on && let Some(i) = slot.take() {
-        i.suspend();
-    }
-    cl.st.lock().subs[d.index()] = on;
-    cl.cv.notify_all();
-    Ok(())
-}
-
-/// Queues a request for the next new frame of image `netid`.
-fn image_query(
-    cl: &Client,
-    sh: &Shared,
-    resumed: &mut Resumed,
-    netid: u32,
-) -> Result<(), (String, bool)> {
-    let src = &sh.sources;
-    let Some(k) = src.images.iter().position(|(id, _)| *id == netid) else {
-        return error(cl, sh, format!("no image has network id {netid}"));
-    };
-    if !resumed.images[k] {
-        src.images[k].1.resume();
-        resumed.images[k] = true;
-    }
-    let mut st = cl.st.lock();
-    over_queue(&st, sh)?;
-    st.images[k] += 1;
-    drop(st);
-    cl.cv.notify_all();
-    Ok(())
-}
-
-pub(super) fn writer(cl: &Client, sh: &Shared) {
+) -> End {
     let period = Duration::from_millis(netwire::PUSH_PERIOD_MS);
-    let mut next_push = Instant::now() + period;
-    let mut last_push = [0u64; Feed::COUNT];
-    let mut last_img = vec![0u64; sh.sources.images.len()];
-    let mut out: Vec<u8> = Vec::with_capacity(8192);
-    let mut w = &cl.stream;
+    let n_images = sh.sources.images.len();
+    let mut s = Session {
+        stream,
+        cl,
+        sh,
+        slot,
+        resumed,
+        drove,
+        from,
+        subs: [false; Feed::COUNT],
+        images: vec![0; n_images],
+        replies: Vec::new(),
+        lr: LineReader::new(sh.conf.max_line),
+        more_lines: false,
+        quiet: false,
+        partial_since: None,
+        last_line: Instant::now(),
+        commanded: false,
+        next_push: Instant::now() + period,
+        last_push: [0; Feed::COUNT],
+        last_img: vec![0; n_images],
+        out: Vec::with_capacity(8192),
+    };
     loop {
-        let mut st = cl.st.lock();
-        if st.closed {
-            return;
+        if let Err(end) = s.step(period) {
+            return end;
         }
-        if let Some(r) = st.replies.pop_front() {
-            drop(st);
-            if let Err(e) = w.write_all(&r) {
-                return write_failed(cl, sh, e);
-            }
-            continue;
+    }
+}
+
+impl Session<'_> {
+    /// Reads what the client sent, then writes one thing that is due (replies
+    /// first, then a frame, then the pushes) or, with nothing due, waits.
+    fn step(&mut self, period: Duration) -> Result<(), End> {
+        if self.sh.stop.load(Ordering::Acquire) {
+            return Err(("the server stops".into(), false));
         }
-        let ready = (0..st.images.len())
-            .find(|&k| st.images[k] > 0 && sh.sources.images[k].1.clock() != last_img[k]);
-        if let Some(k) = ready {
-            st.images[k] -= 1;
-            drop(st);
+        if !self.quiet {
+            self.read_requests()?;
+        }
+        if !self.replies.is_empty() {
+            let r = std::mem::take(&mut self.replies);
+            self.write(&r)?;
+            self.replies = r;
+            self.replies.clear();
+        }
+        if let Some(k) = self.ready_image() {
+            self.images[k] -= 1;
+            let sh = self.sh;
             let (netid, iface) = &sh.sources.images[k];
-            if let Err(e) = frames::send(&mut w, &mut out, *netid, iface, &mut last_img[k]) {
-                return write_failed(cl, sh, e);
-            }
-            sh.stats.frames.fetch_add(1, Ordering::Relaxed);
-            continue;
+            frames::send(
+                &mut self.stream,
+                &mut self.out,
+                *netid,
+                iface,
+                &mut self.last_img[k],
+            )
+            .map_err(|e| self.write_failed(e))?;
+            self.sh.stats.frames.fetch_add(1, Ordering::Relaxed);
+            self.quiet = false;
+            return Ok(());
         }
         let now = Instant::now();
-        if now >= next_push {
-            let subs = st.subs;
-            drop(st);
-            let deadline = next_push;
-            next_push += period;
-            if next_push <= now {
-                next_push = now + period;
+        if now >= self.next_push {
+            let deadline = self.next_push;
+            self.next_push += period;
+            if self.next_push <= now {
+                self.next_push = now + period;
             }
-            if !subs.iter().any(|s| *s) {
-                continue;
+            if self.subs.iter().any(|s| *s) {
+                self.out.clear();
+                push(
+                    &self.sh.sources,
+                    self.subs,
+                    &mut self.last_push,
+                    &mut self.out,
+                    self.sh.epoch,
+                );
+                if !self.out.is_empty() {
+                    let out = std::mem::take(&mut self.out);
+                    let written = self.write(&out);
+                    self.out = out;
+                    written?;
+                }
+                self.sh
+                    .stats
+                    .record_lateness(Instant::now().saturating_duration_since(deadline));
             }
-            out.clear();
-            push(&sh.sources, subs, &mut last_push, &mut out, sh.epoch);
-            if !out.is_empty()
-                && let Err(e) = w.write_all(&out)
-            {
-                return write_failed(cl, sh, e);
-            }
-            sh.stats
-                .record_lateness(Instant::now().saturating_duration_since(deadline));
-            continue;
+            return Ok(());
         }
-        // Until a new frame of a served image (FrameWake), a request, or the next
-        // push. The flag, set before a last look at the clocks, tells FrameWake to
-        // wake this thread; a frame published before the flag shows is seen by
-        // that look (the SeqCst fences pair with FrameWake's).
-        let wants_frame = st.images.iter().any(|n| *n > 0);
-        cl.waiting_frame.store(wants_frame, Ordering::Relaxed);
+        self.check_silence(now)?;
+        if !self.more_lines {
+            self.wait(now);
+        }
+        Ok(())
+    }
+
+    /// Carries out the complete lines the socket holds now (at most
+    /// `LINES_PER_PASS`), without waiting for more.
+    fn read_requests(&mut self) -> Result<(), End> {
+        self.more_lines = false;
+        for _ in 0..LINES_PER_PASS {
+            let req = match self.lr.read_line(&mut DontWait(self.stream)) {
+                Ok(LineEvent::Line(line)) => Request::parse(line).map_err(|e| {
+                    let shown: String = String::from_utf8_lossy(&line[..line.len().min(40)])
+                        .chars()
+                        .map(|c| {
+                            if c.is_ascii_graphic() || c == ' ' {
+                                c
+                            } else {
+                                '?'
+                            }
+                        })
+                        .collect();
+                    (format!("sent a bad line `{shown}`: {e}"), true)
+                })?,
+                Ok(LineEvent::Closed) => return Err(("closed the connection".into(), false)),
+                Err(e) if netwire::is_timeout(&e) => return Ok(()),
+                Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
+                Err(e) if e.kind() == io::ErrorKind::InvalidData => {
+                    return Err((format!("sent a {e}"), true));
+                }
+                Err(e) => return Err((format!("connection error: {e}"), false)),
+            };
+            self.partial_since = None;
+            self.last_line = Instant::now();
+            self.commanded |= netwire::commanded_kind(req.code()).is_some();
+            self.handle(req)?;
+            let engaged = self.commanded || self.engaged();
+            self.slot.heard(self.sh, engaged);
+        }
+        self.more_lines = true;
+        Ok(())
+    }
+
+    /// It has a subscription or an image request.
+    fn engaged(&self) -> bool {
+        self.subs.iter().any(|s| *s) || self.images.iter().any(|n| *n > 0)
+    }
+
+    /// Ends a connection that holds a partial line for `timeout`, or that is
+    /// idle for `idle_timeout` (no line, no subscription, no image request, no
+    /// command ever).
+    fn check_silence(&mut self, now: Instant) -> Result<(), End> {
+        let conf = &self.sh.conf;
+        if self.lr.pending() > 0 {
+            let t0 = *self.partial_since.get_or_insert(now);
+            if now - t0 >= conf.timeout {
+                return Err((
+                    format!(
+                        "sent a partial line and no newline for {} ms",
+                        conf.timeout.as_millis()
+                    ),
+                    true,
+                ));
+            }
+        }
+        if !conf.idle_timeout.is_zero()
+            && !self.commanded
+            && !self.engaged()
+            && now - self.last_line >= conf.idle_timeout
+        {
+            return Err((
+                format!(
+                    "idle for {} ms with no subscription (idle_timeout)",
+                    conf.idle_timeout.as_millis()
+                ),
+                false,
+            ));
+        }
+        Ok(())
+    }
+
+    /// Sleeps until the client sends something, a frame it waits for is
+    /// published, or the next push is due. The flag, set before a last look at
+    /// the clocks, tells `FrameWake` to ring the bell; a frame published before
+    /// the flag shows is seen by that look (the SeqCst fences pair with
+    /// `FrameWake`'s), and a ring after it stays in the bell until read.
+    fn wait(&mut self, now: Instant) {
+        let wants_frame = self.images.iter().any(|n| *n > 0);
+        self.cl.waiting_frame.store(wants_frame, Ordering::Relaxed);
         fence(Ordering::SeqCst);
-        let arrived = (0..st.images.len())
-            .any(|k| st.images[k] > 0 && sh.sources.images[k].1.clock() != last_img[k]);
-        if !arrived {
-            cl.cv.wait_until(&mut st, next_push);
+        if self.ready_image().is_none() {
+            let left = self.next_push.saturating_duration_since(now);
+            let (rang, readable) = self.cl.bell.wait_with(self.stream.as_raw_fd(), left);
+            if rang {
+                self.cl.bell.clear();
+            }
+            self.quiet = !readable;
+        } else {
+            self.quiet = false;
         }
-        cl.waiting_frame.store(false, Ordering::Relaxed);
+        self.cl.waiting_frame.store(false, Ordering::Relaxed);
+    }
+
+    /// A served image with a request waiting and a frame not sent yet.
+    fn ready_image(&self) -> Option<usize> {
+        let src = &self.sh.sources.images;
+        (0..self.images.len()).find(|&k| self.images[k] > 0 && src[k].1.clock() != self.last_img[k])
+    }
+
+    fn write(&mut self, bytes: &[u8]) -> Result<(), End> {
+        self.stream
+            .write_all(bytes)
+            .map_err(|e| self.write_failed(e))
+    }
+
+    fn write_failed(&self, e: io::Error) -> End {
+        if netwire::is_timeout(&e) {
+            (
+                format!(
+                    "does not read what it is sent (a write waited {} ms)",
+                    self.sh.conf.timeout.as_millis()
+                ),
+                true,
+            )
+        } else {
+            (format!("connection error: {e}"), false)
+        }
+    }
+
+    /// Carries out one request.
+    fn handle(&mut self, req: Request) -> Result<(), End> {
+        let sh = self.sh;
+        let src = &sh.sources;
+        match req {
+            Request::Goodbye | Request::GoodbyeImages => Err(("said goodbye".into(), false)),
+            Request::Subscribe(d) => self.subscribe(d, true),
+            Request::Unsubscribe(d) => self.subscribe(d, false),
+            Request::ImageQuery(netid) => self.image_query(netid),
+            Request::LimitsQuery(c) => {
+                let (k, limits) = netwire::limits_kind(c).expect("parsed as a limits query");
+                match src.device(k) {
+                    Some(dev) => dev.write_limits(&mut self.replies),
+                    None => self.error(limits.unserved),
+                }
+                Ok(())
+            }
+            Request::Unhandled(c) => {
+                self.error(&format!("message {c} is not handled by this server"));
+                Ok(())
+            }
+            command => {
+                let Some(k) = netwire::commanded_kind(command.code()) else {
+                    self.error(&format!(
+                        "message {} is not handled by this server",
+                        command.code()
+                    ));
+                    return Ok(());
+                };
+                let Some(dev) = src.device(k) else {
+                    self.error(&format!("{} are not served", KINDS[k]));
+                    return Ok(());
+                };
+                if matches!(
+                    netwire::WIRE[k],
+                    OnWire::Commanded {
+                        keep_alive: true,
+                        ..
+                    }
+                ) {
+                    *self.drove = true;
+                }
+                match dev.apply(&command) {
+                    Ok(()) => self.from.accepted(),
+                    Err(e) => {
+                        self.from.refused(&e);
+                        self.error(&format!("refused: {e}"));
+                    }
+                }
+                Ok(())
+            }
+        }
+    }
+
+    /// Queues a `1027 TEXT` reply.
+    fn error(&mut self, text: &str) {
+        netwire::write_error(&mut self.replies, text);
+    }
+
+    /// (Un)subscribes the client to feed `d`, resuming its interface for it.
+    fn subscribe(&mut self, d: Feed, on: bool) -> Result<(), End> {
+        let sh = self.sh;
+        let Some(dev) = sh.sources.device(d.index()) else {
+            self.error(&format!("{} is not served", d.interface()));
+            return Ok(());
+        };
+        let slot = &mut self.resumed.subs[d.index()];
+        if on && slot.is_none() {
+            let iface = dev.interface();
+            iface.resume();
+            *slot = Some(iface);
+        } else if !on && let Some(i) = slot.take() {
+            i.suspend();
+        }
+        self.subs[d.index()] = on;
+        Ok(())
+    }
+
+    /// Counts a request for the next new frame of image `netid`.
+    fn image_query(&mut self, netid: u32) -> Result<(), End> {
+        let sh = self.sh;
+        let src = &sh.sources;
+        let Some(k) = src.images.iter().position(|(id, _)| *id == netid) else {
+            self.error(&format!("no image has network id {netid}"));
+            return Ok(());
+        };
+        if !self.resumed.images[k] {
+            src.images[k].1.resume();
+            self.resumed.images[k] = true;
+        }
+        let max = self.sh.conf.max_queue;
+        if self.images.iter().sum::<u32>() as usize >= max {
+            return Err((
+                format!(
+                    "more than {max} image requests waiting (it does not read what it asks for)"
+                ),
+                true,
+            ));
+        }
+        self.images[k] += 1;
+        Ok(())
     }
 }
 
-pub(super) fn write_failed(cl: &Client, sh: &Shared, e: io::Error) {
-    if netwire::is_timeout(&e) {
-        cl.close(
-            format!(
-                "does not read what it is sent (a write waited {} ms)",
-                sh.conf.timeout.as_millis()
-            ),
-            true,
-        );
-    } else {
-        cl.close(format!("connection error: {e}"), false);
+/// Reads what the socket holds now, without waiting (`recv` with
+/// `MSG_DONTWAIT`: the socket stays blocking for the writes).
+struct DontWait<'a>(&'a TcpStream);
+
+impl Read for DontWait<'_> {
+    fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+        // SAFETY: `buf` is valid for writes of `buf.len()` bytes during the call.
+        let n = unsafe {
+            libc::recv(
+                self.0.as_raw_fd(),
+                buf.as_mut_ptr().cast(),
+                buf.len(),
+                libc::MSG_DONTWAIT,
+            )
+        };
+        if n < 0 {
+            Err(io::Error::last_os_error())
+        } else {
+            Ok(n as usize)
+        }
     }
 }
 
