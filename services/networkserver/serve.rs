@@ -205,8 +205,12 @@ impl Session<'_> {
     /// `LINES_PER_PASS`), without waiting for more.
     fn read_requests(&mut self) -> Result<(), End> {
         self.more_lines = false;
+        let mut socket = DontWait {
+            stream: self.stream,
+            drained: false,
+        };
         for _ in 0..LINES_PER_PASS {
-            let req = match self.lr.read_line(&mut DontWait(self.stream)) {
+            let req = match self.lr.read_line(&mut socket) {
                 Ok(LineEvent::Line(line)) => Request::parse(line).map_err(|e| {
                     let shown: String = String::from_utf8_lossy(&line[..line.len().min(40)])
                         .chars()
@@ -430,25 +434,34 @@ impl Session<'_> {
 }
 
 /// Reads what the socket holds now, without waiting (`recv` with
-/// `MSG_DONTWAIT`: the socket stays blocking for the writes).
-struct DontWait<'a>(&'a TcpStream);
+/// `MSG_DONTWAIT`: the socket stays blocking for the writes). A read that got
+/// less than it asked for emptied the socket, so the next one answers
+/// `WouldBlock` without a syscall (one `recv` a frame instead of two); the next
+/// pass asks the kernel again.
+struct DontWait<'a> {
+    stream: &'a TcpStream,
+    drained: bool,
+}
 
 impl Read for DontWait<'_> {
     fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+        if self.drained {
+            return Err(io::ErrorKind::WouldBlock.into());
+        }
         // SAFETY: `buf` is valid for writes of `buf.len()` bytes during the call.
         let n = unsafe {
             libc::recv(
-                self.0.as_raw_fd(),
+                self.stream.as_raw_fd(),
                 buf.as_mut_ptr().cast(),
                 buf.len(),
                 libc::MSG_DONTWAIT,
             )
         };
         if n < 0 {
-            Err(io::Error::last_os_error())
-        } else {
-            Ok(n as usize)
+            return Err(io::Error::last_os_error());
         }
+        self.drained = (n as usize) < buf.len();
+        Ok(n as usize)
     }
 }
 
