@@ -39,7 +39,9 @@ macro_rules! for_each_kind {
 pub(crate) use for_each_kind;
 
 /// Calls `$f::<T>(args)` with `T` the value type of interface kind `$kind` (a
-/// `&str`), or evaluates `$other` for a name that is no kind.
+/// `&str`), or evaluates `$other` for a name that is no kind. (Only components
+/// behind cargo features use it, hence the `allow` for a build without them.)
+#[allow(unused_macros)]
 macro_rules! by_kind {
     ($kind:expr, $f:ident $args:tt, $other:expr) => {
         $crate::interfaces::for_each_kind!(
@@ -47,9 +49,11 @@ macro_rules! by_kind {
         )
     };
 }
+#[allow(unused_imports)]
 pub(crate) use by_kind;
 
 #[doc(hidden)]
+#[allow(unused_macros)]
 macro_rules! by_kind_match {
     ($kind:expr, $f:ident, $args:tt, $other:expr ; $(($t:ident, $k:literal)),*) => {
         match $kind {
@@ -58,6 +62,7 @@ macro_rules! by_kind_match {
         }
     };
 }
+#[allow(unused_imports)]
 pub(crate) use by_kind_match;
 
 /// The kind names, in the table's order.

@@ -52,6 +52,7 @@ mod values;
 
 pub use cell::{AnyInterface, HISTORY, Interface, MAX_CLOCK, Notify, Sample, Watch};
 pub use kinds::KINDS;
+#[allow(unused_imports)] // by_kind: only components behind cargo features use it
 pub(crate) use kinds::{by_kind, by_kind_match, for_each_kind};
 pub use laser_map::LaserMap;
 pub use names::{IMAGE_NAMES, STANDARD_NAMES, canonical, family, interface_name};
