@@ -574,6 +574,53 @@ fn a_slow_name_is_cut_at_the_timeout_in_all() {
     t.join().unwrap();
 }
 
+/// A client that reads a trickle (64 KB every 50 ms) while big frames wait for it:
+/// each write takes a little, so the kernel's timeout, which counts one call,
+/// never fires. The server's write has `timeout` in all and drops it.
+#[test]
+fn a_client_reading_a_trickle_is_dropped_at_the_timeout_in_all() {
+    let big = Arc::new(Interface::with_value(
+        "varcolorA",
+        "robot",
+        Image::new(1280, 960),
+    ));
+    let conf = ServerConf {
+        timeout: Duration::from_millis(500),
+        ..Default::default()
+    };
+    let server = NetServer::start(conf, Sources::default().serving_image(1, big.clone())).unwrap();
+    let stop = Arc::new(AtomicBool::new(false));
+    let camera = {
+        let (stop, big) = (stop.clone(), big.clone());
+        thread::spawn(move || {
+            while !stop.load(Ordering::Acquire) {
+                let _ = big.write(|i| i.data[0] ^= 1);
+                thread::sleep(Duration::from_millis(20));
+            }
+        })
+    };
+    let mut s = connect(server.local_addr());
+    s.write_all(&b"1019 1\n".repeat(16)).unwrap();
+    common::poll_until(5, || server.stats().clients.load(Ordering::Acquire) == 1);
+    let t0 = Instant::now();
+    let mut b = vec![0u8; 64 << 10];
+    let mut dropped = None;
+    while t0.elapsed() < Duration::from_secs(10) {
+        let _ = s.read(&mut b);
+        if server.stats().clients.load(Ordering::Acquire) == 0 {
+            dropped = Some(t0.elapsed());
+            break;
+        }
+        thread::sleep(Duration::from_millis(50));
+    }
+    stop.store(true, Ordering::Release);
+    camera.join().unwrap();
+    let dropped = dropped.expect(
+        "a client reading 1.3 MB/s of 59 MB asked for was still served after 10 s (timeout 500 ms)",
+    );
+    eprintln!("the trickle reader was dropped after {dropped:?}");
+}
+
 /// Issue 28, N1: while strangers fill the table with connections that never send
 /// a name, a client with the token still gets in (the one waiting longest for
 /// its name makes room).

@@ -85,7 +85,7 @@ pub(super) const LINES: &[Setting] = &[
     .default("1024"),
     Setting::new(
         "max_queue",
-        "requests waiting per client; more close it",
+        "image requests waiting per client; more close it",
         &[int("N", "", 1, 4096)],
     )
     .default("32"),

@@ -4,14 +4,14 @@
 //! image's publish ([`FrameWake`] rings its [`Bell`]).
 
 use std::{
-    io,
+    io::{self, Write},
     net::TcpStream,
     os::fd::{AsRawFd, FromRawFd, OwnedFd, RawFd},
     sync::{
         Weak,
         atomic::{Ordering, fence},
     },
-    time::Duration,
+    time::{Duration, Instant},
 };
 
 use crate::{
@@ -22,9 +22,11 @@ use crate::{
 use super::serve::Client;
 
 /// Sends the latest frame of `iface` as image `netid` (`1020` header and pixels)
-/// and records its clock in `last`. `out` is scratch space for the header.
+/// within `timeout` (see [`write_all_within`]) and records its clock in `last`.
+/// `out` is scratch space for the header.
 pub(super) fn send(
-    w: &mut &TcpStream,
+    w: &TcpStream,
+    timeout: Duration,
     out: &mut Vec<u8>,
     netid: u32,
     iface: &Interface<Image>,
@@ -34,7 +36,57 @@ pub(super) fn send(
     *last = s.clock;
     out.clear();
     netwire::write_image_header(out, s.clock, netid, s.width, s.height);
-    netwire::write_all_vectored(w, &[out.as_slice(), &s.data])
+    write_all_within(w, &[out.as_slice(), &s.data], timeout)
+}
+
+/// Writes every slice (one `writev` when the socket takes it all) within
+/// `timeout` in all, the socket's write timeout (set when the client came). The
+/// kernel's timeout counts one call, and a client that reads a trickle lets each
+/// call write a little: after a partial write the socket's timeout becomes what
+/// is left (and `timeout` again at the end), so such a client is dropped like one
+/// that reads nothing. A frame written whole costs no extra syscall.
+pub(super) fn write_all_within(
+    mut w: &TcpStream,
+    parts: &[&[u8]],
+    timeout: Duration,
+) -> io::Result<()> {
+    let deadline = Instant::now() + timeout;
+    let mut slices: Vec<io::IoSlice<'_>> = parts.iter().map(|p| io::IoSlice::new(p)).collect();
+    let mut bufs = &mut slices[..];
+    let mut shortened = false;
+    let written = loop {
+        if bufs.is_empty() {
+            break Ok(());
+        }
+        match w.write_vectored(bufs) {
+            Ok(0) => {
+                break Err(io::Error::new(
+                    io::ErrorKind::WriteZero,
+                    "the connection took no more bytes",
+                ));
+            }
+            Ok(n) => {
+                io::IoSlice::advance_slices(&mut bufs, n);
+                if bufs.is_empty() {
+                    continue;
+                }
+                let left = deadline.saturating_duration_since(Instant::now());
+                if left.is_zero() {
+                    break Err(io::ErrorKind::TimedOut.into());
+                }
+                if let Err(e) = w.set_write_timeout(Some(left)) {
+                    break Err(e);
+                }
+                shortened = true;
+            }
+            Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
+            Err(e) => break Err(e),
+        }
+    };
+    if shortened {
+        let _ = w.set_write_timeout(Some(timeout));
+    }
+    written
 }
 
 /// Wakes a client's thread when a served image has a new frame, if it sleeps

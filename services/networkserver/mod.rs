@@ -18,7 +18,7 @@
 //!                          #   (jderobot's extension of the wire)
 //! max_clients 128          # connections at once (more are refused with a 1027 line)
 //! max_line 1024            # bytes in a request line
-//! max_queue 32             # image requests + replies waiting per client
+//! max_queue 32             # image requests waiting per client (more close it)
 //! timeout 5000             # ms: a client whose name takes longer (in all), holding
 //!                          #   a partial line, or not reading what it is sent is disconnected
 //! idle_timeout 60000       # ms: a client with no subscription, no image request, no

@@ -13,7 +13,7 @@
 //! its requests wait in the kernel's buffer meanwhile.
 
 use std::{
-    io::{self, Read, Write},
+    io::{self, Read},
     net::TcpStream,
     os::fd::AsRawFd,
     sync::{
@@ -155,7 +155,8 @@ impl Session<'_> {
             let sh = self.sh;
             let (netid, iface) = &sh.sources.images[k];
             frames::send(
-                &mut self.stream,
+                self.stream,
+                self.sh.conf.timeout,
                 &mut self.out,
                 *netid,
                 iface,
@@ -211,19 +212,8 @@ impl Session<'_> {
         };
         for _ in 0..LINES_PER_PASS {
             let req = match self.lr.read_line(&mut socket) {
-                Ok(LineEvent::Line(line)) => Request::parse(line).map_err(|e| {
-                    let shown: String = String::from_utf8_lossy(&line[..line.len().min(40)])
-                        .chars()
-                        .map(|c| {
-                            if c.is_ascii_graphic() || c == ' ' {
-                                c
-                            } else {
-                                '?'
-                            }
-                        })
-                        .collect();
-                    (format!("sent a bad line `{shown}`: {e}"), true)
-                })?,
+                Ok(LineEvent::Line(line)) => Request::parse(line)
+                    .map_err(|e| (format!("sent a bad line `{}`: {e}", shown(line)), true))?,
                 Ok(LineEvent::Closed) => return Err(("closed the connection".into(), false)),
                 Err(e) if netwire::is_timeout(&e) => return Ok(()),
                 Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
@@ -310,8 +300,7 @@ impl Session<'_> {
     }
 
     fn write(&mut self, bytes: &[u8]) -> Result<(), End> {
-        self.stream
-            .write_all(bytes)
+        frames::write_all_within(self.stream, &[bytes], self.sh.conf.timeout)
             .map_err(|e| self.write_failed(e))
     }
 
@@ -319,7 +308,7 @@ impl Session<'_> {
         if netwire::is_timeout(&e) {
             (
                 format!(
-                    "does not read what it is sent (a write waited {} ms)",
+                    "does not read what it is sent (a write took more than {} ms)",
                     self.sh.conf.timeout.as_millis()
                 ),
                 true,
@@ -431,6 +420,21 @@ impl Session<'_> {
         self.images[k] += 1;
         Ok(())
     }
+}
+
+/// The start of a bad line as a log can show it: 40 bytes, the unprintable ones
+/// as `?`.
+fn shown(line: &[u8]) -> String {
+    String::from_utf8_lossy(&line[..line.len().min(40)])
+        .chars()
+        .map(|c| {
+            if c.is_ascii_graphic() || c == ' ' {
+                c
+            } else {
+                '?'
+            }
+        })
+        .collect()
 }
 
 /// Reads what the socket holds now, without waiting (`recv` with
