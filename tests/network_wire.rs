@@ -696,3 +696,77 @@ impl jderobot::interfaces::Notify for Count {
         self.0.fetch_add(1, std::sync::atomic::Ordering::AcqRel);
     }
 }
+
+/// A frame that comes in pieces (a slow link) is published whole as soon as its
+/// last byte is in. The client waits for a frame's bytes with the socket's
+/// low-water mark (`SO_RCVLOWAT`), which must not hold a read that has copied part
+/// of the frame: the kernel would then wake it only at its read timeout (50 ms).
+#[test]
+fn a_frame_arriving_in_pieces_is_published_when_its_last_byte_is_in() {
+    use std::{
+        io::{BufRead, BufReader, Read, Write},
+        net::TcpListener,
+        sync::mpsc,
+        thread,
+        time::Instant,
+    };
+    const FRAMES: u8 = 5;
+    const BYTES: usize = 640 * 480 * 3;
+    let l = TcpListener::bind("127.0.0.1:0").unwrap();
+    let port = l.local_addr().unwrap().port();
+    let (last_byte, sent) = mpsc::channel::<Instant>();
+    // A 4.3 server by hand: the 20-byte name, then a frame for each `1019 0`,
+    // its header at once and its pixels in three pieces 80 ms apart.
+    let server = thread::spawn(move || {
+        let (mut w, _) = l.accept().unwrap();
+        let mut r = BufReader::new(w.try_clone().unwrap());
+        r.read_exact(&mut [0u8; 20]).unwrap();
+        for k in 1..=FRAMES {
+            let mut line = String::new();
+            r.read_line(&mut line).unwrap();
+            assert_eq!(line, "1019 0\n");
+            w.write_all(format!("1020 {k} 0 640 480 3\n").as_bytes())
+                .unwrap();
+            for piece in vec![k; BYTES].chunks(BYTES / 3 + 1) {
+                thread::sleep(Duration::from_millis(80));
+                w.write_all(piece).unwrap();
+            }
+            last_byte.send(Instant::now()).unwrap();
+        }
+        let _ = r.read_line(&mut String::new());
+    });
+    let rt = Runtime::new(std::path::Path::new("test.conf"));
+    load(
+        &rt,
+        Kind::Driver,
+        "networkclient",
+        &format!("provides varcolorA 127.0.0.1 {port} 0 640 480\n"),
+    )
+    .unwrap();
+    let img = rt.interfaces.get::<Image>("varcolorA").unwrap();
+    img.resume();
+    let mut late = Vec::new();
+    let mut clock = img.clock();
+    for k in 1..=FRAMES {
+        let t_sent = sent.recv_timeout(Duration::from_secs(20)).unwrap();
+        assert!(
+            poll_until(20, || img.clock() != clock),
+            "frame {k} never published"
+        );
+        let published = Instant::now();
+        clock = img.clock();
+        late.push(published.saturating_duration_since(t_sent));
+        let frame = img.read();
+        assert!(
+            frame.data.len() == BYTES && frame.data.iter().all(|&b| b == k),
+            "frame {k} is not whole"
+        );
+    }
+    late.sort();
+    assert!(
+        late[late.len() / 2] < Duration::from_millis(15),
+        "frames published long after their last byte: {late:?}"
+    );
+    rt.shutdown();
+    drop(server);
+}

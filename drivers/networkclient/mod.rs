@@ -422,6 +422,15 @@ const SENSOR_TICK: Duration = Duration::from_millis(50);
 const MAX_LINE: usize = 64 * 1024;
 /// The largest frame accepted, in bytes (a bigger announced size ends the connection).
 const MAX_FRAME: usize = 256 << 20;
+/// Frames from this size on are read with the socket's low-water mark at the
+/// bytes still to come (`SO_RCVLOWAT`), so the kernel wakes this thread once a
+/// frame, when its pixels are all there, instead of for each 64-KB segment that
+/// loopback or the network delivers (about 6 a 640x480 frame). Measured on the
+/// frames bench, five pairs: 3.2 time slices a frame instead of 6.0, all threads'
+/// CPU 234-251 µs a frame instead of 269-307, and the link's rate 92-102 % of a
+/// raw TCP copy instead of 82-107 %. The two `setsockopt` calls and the `poll`
+/// a frame cost less than the wake-ups they save only for large frames.
+const WAKE_ONCE_FROM: usize = 64 * 1024;
 
 /// One device's connection, as its [`Supervisor`] opens and serves it.
 struct Link {
@@ -699,6 +708,10 @@ impl Link {
         buf.resize(bytes, 0);
         let stop = &self.stop;
         let mut stalled_since: Option<Instant> = None;
+        let rest = bytes - lr.pending().min(bytes);
+        if rest >= WAKE_ONCE_FROM {
+            wait_for_bytes(s, rest, SENSOR_TICK);
+        }
         lr.read_exact(&mut &*s, buf, || {
             let t0 = *stalled_since.get_or_insert_with(Instant::now);
             !stop.load(Ordering::Acquire) && t0.elapsed() < Duration::from_secs(10)
@@ -774,6 +787,42 @@ impl Link {
 }
 
 /// The error of a line from the server that is not what the wire allows.
+/// Waits (at most `timeout`) until `bytes` have arrived on the socket, woken once:
+/// the receive low-water mark is set to `bytes` for a `poll`, then back to 1.
+/// Not for the read itself: the kernel wakes a blocked reader when the bytes not
+/// yet copied reach the mark, so a read that copied part of a frame would then
+/// wait for a whole mark more (until the next frame or its timeout). Linux caps
+/// the mark at half the largest receive buffer and grows the buffer to hold it;
+/// on a timeout, an error, or the peer closing, `poll` returns and the read that
+/// follows says what happened.
+fn wait_for_bytes(s: &TcpStream, bytes: usize, timeout: Duration) {
+    use std::os::fd::AsRawFd;
+    let fd = s.as_raw_fd();
+    let mark = |v: libc::c_int| {
+        // SAFETY: setsockopt on a socket we hold open, with an int we own.
+        unsafe {
+            libc::setsockopt(
+                fd,
+                libc::SOL_SOCKET,
+                libc::SO_RCVLOWAT,
+                (&v as *const libc::c_int).cast(),
+                std::mem::size_of::<libc::c_int>() as libc::socklen_t,
+            ) == 0
+        }
+    };
+    if !mark(bytes.min(i32::MAX as usize) as libc::c_int) {
+        return;
+    }
+    let mut p = libc::pollfd {
+        fd,
+        events: libc::POLLIN,
+        revents: 0,
+    };
+    // SAFETY: one pollfd we own, for a socket we hold open.
+    unsafe { libc::poll(&mut p, 1, timeout.as_millis().min(i32::MAX as u128) as i32) };
+    mark(1);
+}
+
 fn bad_line(e: WireError) -> String {
     format!("the server sent a bad line: {e}")
 }
