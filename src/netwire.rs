@@ -1044,13 +1044,14 @@ impl LineReader {
     }
 
     /// Fills `dst` from what is buffered, then straight from the stream. A timeout
-    /// calls `on_timeout`, which says whether to keep waiting (false gives the
-    /// timeout error; the bytes read so far are lost, so give up the stream then).
+    /// calls `on_timeout` with the bytes read so far, which says whether to keep
+    /// waiting (false gives the timeout error; the bytes read so far are lost, so
+    /// give up the stream then).
     pub fn read_exact<R: Read>(
         &mut self,
         r: &mut R,
         dst: &mut [u8],
-        mut on_timeout: impl FnMut() -> bool,
+        mut on_timeout: impl FnMut(usize) -> bool,
     ) -> io::Result<()> {
         let k = self.pending().min(dst.len());
         dst[..k].copy_from_slice(&self.buf[self.start..self.start + k]);
@@ -1071,7 +1072,7 @@ impl LineReader {
                 Ok(n) => done += n,
                 Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
                 Err(e) if is_timeout(&e) => {
-                    if !on_timeout() {
+                    if !on_timeout(done) {
                         return Err(e);
                     }
                 }

@@ -18,7 +18,8 @@ use jde43_server::{Robot43, Server43};
 use jderobot::{
     ComponentConf, Kind, Runtime,
     interfaces::{
-        Encoders, Image, Imu, Laser, Motors, PtEncoders, PtMotors, Sonars, ZoomEncoders, ZoomMotors,
+        Encoders, Image, Imu, Interface, Laser, Motors, PtEncoders, PtMotors, Sonars, ZoomEncoders,
+        ZoomMotors,
     },
     registry,
 };
@@ -697,70 +698,88 @@ impl jderobot::interfaces::Notify for Count {
     }
 }
 
-/// A frame that comes in pieces (a slow link) is published whole as soon as its
-/// last byte is in. The client waits for a frame's bytes with the socket's
-/// low-water mark (`SO_RCVLOWAT`), which must not hold a read that has copied part
-/// of the frame: the kernel would then wake it only at its read timeout (50 ms).
-#[test]
-fn a_frame_arriving_in_pieces_is_published_when_its_last_byte_is_in() {
-    use std::{
-        io::{BufRead, BufReader, Read, Write},
-        net::TcpListener,
-        sync::mpsc,
-        thread,
-        time::Instant,
-    };
-    const FRAMES: u8 = 5;
-    const BYTES: usize = 640 * 480 * 3;
-    let l = TcpListener::bind("127.0.0.1:0").unwrap();
+/// A 4.3 server by hand, for one image connection: it takes the 20-byte name,
+/// then answers each `1019 0` with frame k = 1..=`frames` (every pixel byte k),
+/// its header at once and its pixels in `pieces` pieces `gap` apart (a slow
+/// link). Returns its port and when each frame's last byte was written.
+fn trickling_server(
+    (w, h): (u32, u32),
+    frames: u8,
+    pieces: usize,
+    gap: Duration,
+) -> (u16, std::sync::mpsc::Receiver<std::time::Instant>) {
+    use std::io::{BufRead, BufReader, Read, Write};
+    let l = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
     let port = l.local_addr().unwrap().port();
-    let (last_byte, sent) = mpsc::channel::<Instant>();
-    // A 4.3 server by hand: the 20-byte name, then a frame for each `1019 0`,
-    // its header at once and its pixels in three pieces 80 ms apart.
-    let server = thread::spawn(move || {
-        let (mut w, _) = l.accept().unwrap();
-        let mut r = BufReader::new(w.try_clone().unwrap());
+    let (last_byte, sent) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let (mut out, _) = l.accept().unwrap();
+        let mut r = BufReader::new(out.try_clone().unwrap());
         r.read_exact(&mut [0u8; 20]).unwrap();
-        for k in 1..=FRAMES {
+        let bytes = (w * h * 3) as usize;
+        for k in 1..=frames {
             let mut line = String::new();
             r.read_line(&mut line).unwrap();
             assert_eq!(line, "1019 0\n");
-            w.write_all(format!("1020 {k} 0 640 480 3\n").as_bytes())
+            out.write_all(format!("1020 {k} 0 {w} {h} 3\n").as_bytes())
                 .unwrap();
-            for piece in vec![k; BYTES].chunks(BYTES / 3 + 1) {
-                thread::sleep(Duration::from_millis(80));
-                w.write_all(piece).unwrap();
+            for piece in vec![k; bytes].chunks(bytes.div_ceil(pieces)) {
+                std::thread::sleep(gap);
+                if out.write_all(piece).is_err() {
+                    return; // the client hung up: `sent` closes
+                }
             }
-            last_byte.send(Instant::now()).unwrap();
+            let _ = last_byte.send(std::time::Instant::now());
         }
         let _ = r.read_line(&mut String::new());
     });
+    (port, sent)
+}
+
+/// Our client on `varcolorA` of size `w h` from a server on `port`.
+fn image_client(port: u16, (w, h): (u32, u32)) -> (Arc<Runtime>, Arc<Interface<Image>>) {
     let rt = Runtime::new(std::path::Path::new("test.conf"));
     load(
         &rt,
         Kind::Driver,
         "networkclient",
-        &format!("provides varcolorA 127.0.0.1 {port} 0 640 480\n"),
+        &format!("provides varcolorA 127.0.0.1 {port} 0 {w} {h}\n"),
     )
     .unwrap();
     let img = rt.interfaces.get::<Image>("varcolorA").unwrap();
     img.resume();
+    (rt, img)
+}
+
+/// Whether the interface holds frame k whole.
+fn whole(img: &Interface<Image>, (w, h): (u32, u32), k: u8) -> bool {
+    let f = img.read();
+    f.data.len() == (w * h * 3) as usize && f.data.iter().all(|&b| b == k)
+}
+
+/// A frame that comes in pieces is published whole as soon as its last byte is
+/// in. The client waits for a frame's bytes with the socket's low-water mark
+/// (`SO_RCVLOWAT`), which must not hold a read that has copied part of the frame:
+/// the kernel would then wake it only at its read timeout (50 ms).
+#[test]
+fn a_frame_arriving_in_pieces_is_published_when_its_last_byte_is_in() {
+    const FRAMES: u8 = 5;
+    let size = (640, 480);
+    let (port, sent) = trickling_server(size, FRAMES, 3, Duration::from_millis(80));
+    let (rt, img) = image_client(port, size);
     let mut late = Vec::new();
     let mut clock = img.clock();
     for k in 1..=FRAMES {
-        let t_sent = sent.recv_timeout(Duration::from_secs(20)).unwrap();
+        let t_sent = sent
+            .recv_timeout(Duration::from_secs(20))
+            .expect("the client hung up before the frame's last byte");
         assert!(
             poll_until(20, || img.clock() != clock),
             "frame {k} never published"
         );
-        let published = Instant::now();
+        late.push(std::time::Instant::now().saturating_duration_since(t_sent));
         clock = img.clock();
-        late.push(published.saturating_duration_since(t_sent));
-        let frame = img.read();
-        assert!(
-            frame.data.len() == BYTES && frame.data.iter().all(|&b| b == k),
-            "frame {k} is not whole"
-        );
+        assert!(whole(&img, size, k), "frame {k} is not whole");
     }
     late.sort();
     assert!(
@@ -768,5 +787,23 @@ fn a_frame_arriving_in_pieces_is_published_when_its_last_byte_is_in() {
         "frames published long after their last byte: {late:?}"
     );
     rt.shutdown();
-    drop(server);
+}
+
+/// A slow link that keeps delivering may take longer for a frame than the
+/// client's stall limit (10 s without a byte): the frame still arrives. Until
+/// 2026-11-28 the limit ran from the first read timeout, so a frame slower than
+/// 10 s in all was given up, and on such a link every frame.
+#[test]
+fn a_frame_slower_than_the_stall_limit_but_never_stalled_arrives() {
+    let size = (160, 120);
+    let (port, sent) = trickling_server(size, 1, 105, Duration::from_millis(100));
+    let (rt, img) = image_client(port, size);
+    sent.recv_timeout(Duration::from_secs(30))
+        .expect("the client hung up before the frame's last byte");
+    assert!(
+        poll_until(5, || whole(&img, size, 1)),
+        "the frame never arrived whole ({})",
+        img.stale().unwrap_or_default()
+    );
+    rt.shutdown();
 }

@@ -40,7 +40,8 @@
 //! when the server is back. An image of an unexpected size is an error naming both
 //! sizes (logged once; the interface is stale) and the connection goes on.
 //! Image requests are pipelined (`depth`, default 2), so frame rate is not bound by
-//! one round trip per frame.
+//! one round trip per frame, and a frame's pixels are read once they are all there
+//! (one wake-up a frame: `WAKE_ONCE_FROM`).
 //!
 //! 4.3 differences: 4.3 exited when a `colorA` frame was not 320x240; it had no
 //! reconnection (a server restart left stale values forever) and no `varcolor`
@@ -422,6 +423,9 @@ const SENSOR_TICK: Duration = Duration::from_millis(50);
 const MAX_LINE: usize = 64 * 1024;
 /// The largest frame accepted, in bytes (a bigger announced size ends the connection).
 const MAX_FRAME: usize = 256 << 20;
+/// How long a frame's bytes may stop coming before the connection is given up
+/// (counted from the last byte, so a slow link may take longer for a frame).
+const FRAME_STALL: Duration = Duration::from_secs(10);
 /// Frames from this size on are read with the socket's low-water mark at the
 /// bytes still to come (`SO_RCVLOWAT`), so the kernel wakes this thread once a
 /// frame, when its pixels are all there, instead of for each 64-KB segment that
@@ -707,16 +711,30 @@ impl Link {
         }
         buf.resize(bytes, 0);
         let stop = &self.stop;
-        let mut stalled_since: Option<Instant> = None;
         let rest = bytes - lr.pending().min(bytes);
         if rest >= WAKE_ONCE_FROM {
             wait_for_bytes(s, rest, SENSOR_TICK);
         }
-        lr.read_exact(&mut &*s, buf, || {
-            let t0 = *stalled_since.get_or_insert_with(Instant::now);
-            !stop.load(Ordering::Acquire) && t0.elapsed() < Duration::from_secs(10)
+        // The bytes read when the stall began, and when: a slow link that keeps
+        // delivering may take longer than FRAME_STALL for a whole frame.
+        let mut stall = (0, Instant::now());
+        lr.read_exact(&mut &*s, buf, |done| {
+            if done != stall.0 {
+                stall = (done, Instant::now());
+            }
+            !stop.load(Ordering::Acquire) && stall.1.elapsed() < FRAME_STALL
         })
-        .map_err(|e| format!("while reading a {width}x{height} frame: {e}"))?;
+        .map_err(|e| {
+            if netwire::is_timeout(&e) {
+                format!(
+                    "no byte for {} s after {} of the {bytes} bytes of a {width}x{height} frame",
+                    FRAME_STALL.as_secs(),
+                    stall.0
+                )
+            } else {
+                format!("while reading a {width}x{height} frame: {e}")
+            }
+        })?;
         if let Some((w, h)) = size
             && (w, h) != (width, height)
         {
