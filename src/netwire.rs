@@ -990,6 +990,20 @@ pub fn is_timeout(e: &io::Error) -> bool {
     )
 }
 
+/// Waits until `fd` has something to read (or is closed, or failed) or `timeout`
+/// passes (whole milliseconds). An error (EINTR) returns early: the caller looks
+/// again.
+pub fn wait_readable(fd: &impl std::os::fd::AsRawFd, timeout: std::time::Duration) {
+    let mut p = libc::pollfd {
+        fd: fd.as_raw_fd(),
+        events: libc::POLLIN,
+        revents: 0,
+    };
+    let ms = timeout.as_millis().min(i32::MAX as u128) as libc::c_int;
+    // SAFETY: one valid pollfd for the duration of the call.
+    unsafe { libc::poll(&mut p, 1, ms) };
+}
+
 impl LineReader {
     pub fn new(max_line: usize) -> Self {
         LineReader {
@@ -1043,15 +1057,17 @@ impl LineReader {
         }
     }
 
-    /// Fills `dst` from what is buffered, then straight from the stream. A timeout
-    /// calls `on_timeout` with the bytes read so far, which says whether to keep
-    /// waiting (false gives the timeout error; the bytes read so far are lost, so
-    /// give up the stream then).
+    /// Fills `dst` from what is buffered, then straight from the stream. After
+    /// each read that leaves `dst` short (some bytes came, or the stream's timeout
+    /// passed), `keep_going` gets the bytes read so far and says whether to go on:
+    /// false gives a timeout error (the bytes read so far are lost, so give up the
+    /// stream then). It is how a caller puts one deadline on the whole read: a
+    /// peer sending a byte now and then never lets the stream's timeout pass.
     pub fn read_exact<R: Read>(
         &mut self,
         r: &mut R,
         dst: &mut [u8],
-        mut on_timeout: impl FnMut(usize) -> bool,
+        mut keep_going: impl FnMut(usize) -> bool,
     ) -> io::Result<()> {
         let k = self.pending().min(dst.len());
         dst[..k].copy_from_slice(&self.buf[self.start..self.start + k]);
@@ -1069,10 +1085,15 @@ impl LineReader {
                         format!("the connection closed after {done} of {} bytes", dst.len()),
                     ));
                 }
-                Ok(n) => done += n,
+                Ok(n) => {
+                    done += n;
+                    if done < dst.len() && !keep_going(done) {
+                        return Err(io::ErrorKind::TimedOut.into());
+                    }
+                }
                 Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
                 Err(e) if is_timeout(&e) => {
-                    if !on_timeout(done) {
+                    if !keep_going(done) {
                         return Err(e);
                     }
                 }

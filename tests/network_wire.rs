@@ -807,3 +807,29 @@ fn a_frame_slower_than_the_stall_limit_but_never_stalled_arrives() {
     );
     rt.shutdown();
 }
+
+/// A server that sends a byte every 20 ms never lets the client's read time
+/// out (50 ms), so only a deadline on the whole frame ends it: a frame must come
+/// at 4 KB/s or faster, and any frame may take 10 s. Until 2026-11-28 this server
+/// held the client's image connection for as long as it liked.
+#[test]
+fn a_server_trickling_a_frame_is_dropped_at_the_frame_deadline() {
+    let size = (16, 16);
+    let (port, _sent) = trickling_server(size, 1, 768, Duration::from_millis(20));
+    let t0 = std::time::Instant::now();
+    let (rt, img) = image_client(port, size);
+    assert!(
+        poll_until(20, || img
+            .stale()
+            .is_some_and(|why| why.contains("slower than 4 KB/s"))),
+        "the trickle was not dropped ({:?})",
+        img.stale()
+    );
+    let after = t0.elapsed();
+    assert!(
+        after < Duration::from_secs(14),
+        "dropped after {after:?}, the deadline is 10 s"
+    );
+    assert_eq!(img.clock(), 0, "the trickled frame was published");
+    rt.shutdown();
+}

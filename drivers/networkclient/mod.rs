@@ -423,9 +423,13 @@ const SENSOR_TICK: Duration = Duration::from_millis(50);
 const MAX_LINE: usize = 64 * 1024;
 /// The largest frame accepted, in bytes (a bigger announced size ends the connection).
 const MAX_FRAME: usize = 256 << 20;
-/// How long a frame's bytes may stop coming before the connection is given up
-/// (counted from the last byte, so a slow link may take longer for a frame).
+/// How long a frame's bytes may stop coming before the connection is given up.
 const FRAME_STALL: Duration = Duration::from_secs(10);
+/// Bytes/s: a frame must come at least this fast (32 kbit/s; a 640x480 frame
+/// within 225 s, any frame within FRAME_STALL), so a server that sends a byte
+/// now and then cannot hold the connection forever, and a slow link that keeps
+/// delivering still gets its frames.
+const SLOWEST_LINK: f64 = 4096.0;
 /// Frames from this size on are read with the socket's low-water mark at the
 /// bytes still to come (`SO_RCVLOWAT`), so the kernel wakes this thread once a
 /// frame, when its pixels are all there, instead of for each 64-KB segment that
@@ -715,24 +719,35 @@ impl Link {
         if rest >= WAKE_ONCE_FROM {
             wait_for_bytes(s, rest, SENSOR_TICK);
         }
-        // The bytes read when the stall began, and when: a slow link that keeps
-        // delivering may take longer than FRAME_STALL for a whole frame.
-        let mut stall = (0, Instant::now());
+        // One deadline for the whole frame, from the slowest link served, and
+        // FRAME_STALL without a byte (`stall`: the bytes in, and since when).
+        let t0 = Instant::now();
+        let within = FRAME_STALL.max(Duration::from_secs_f64(bytes as f64 / SLOWEST_LINK));
+        let mut stall = (0, t0);
         lr.read_exact(&mut &*s, buf, |done| {
+            let now = Instant::now();
             if done != stall.0 {
-                stall = (done, Instant::now());
+                stall = (done, now);
             }
-            !stop.load(Ordering::Acquire) && stall.1.elapsed() < FRAME_STALL
+            !stop.load(Ordering::Acquire) && now - stall.1 < FRAME_STALL && now - t0 < within
         })
         .map_err(|e| {
-            if netwire::is_timeout(&e) {
+            let what = format!("a {width}x{height} frame ({bytes} bytes)");
+            if !netwire::is_timeout(&e) || stop.load(Ordering::Acquire) {
+                format!("while reading {what}: {e}")
+            } else if stall.1.elapsed() >= FRAME_STALL {
                 format!(
-                    "no byte for {} s after {} of the {bytes} bytes of a {width}x{height} frame",
+                    "no byte for {} s after {} bytes of {what}",
                     FRAME_STALL.as_secs(),
                     stall.0
                 )
             } else {
-                format!("while reading a {width}x{height} frame: {e}")
+                format!(
+                    "{what} took over {:.0} s ({} bytes in): slower than {} KB/s",
+                    within.as_secs_f64(),
+                    stall.0,
+                    SLOWEST_LINK / 1024.0
+                )
             }
         })?;
         if let Some((w, h)) = size
@@ -804,7 +819,6 @@ impl Link {
     }
 }
 
-/// The error of a line from the server that is not what the wire allows.
 /// Waits (at most `timeout`) until `bytes` have arrived on the socket, woken once:
 /// the receive low-water mark is set to `bytes` for a `poll`, then back to 1.
 /// Not for the read itself: the kernel wakes a blocked reader when the bytes not
@@ -815,12 +829,11 @@ impl Link {
 /// follows says what happened.
 fn wait_for_bytes(s: &TcpStream, bytes: usize, timeout: Duration) {
     use std::os::fd::AsRawFd;
-    let fd = s.as_raw_fd();
     let mark = |v: libc::c_int| {
         // SAFETY: setsockopt on a socket we hold open, with an int we own.
         unsafe {
             libc::setsockopt(
-                fd,
+                s.as_raw_fd(),
                 libc::SOL_SOCKET,
                 libc::SO_RCVLOWAT,
                 (&v as *const libc::c_int).cast(),
@@ -828,19 +841,13 @@ fn wait_for_bytes(s: &TcpStream, bytes: usize, timeout: Duration) {
             ) == 0
         }
     };
-    if !mark(bytes.min(i32::MAX as usize) as libc::c_int) {
-        return;
+    if mark(bytes.min(i32::MAX as usize) as libc::c_int) {
+        netwire::wait_readable(s, timeout);
+        mark(1);
     }
-    let mut p = libc::pollfd {
-        fd,
-        events: libc::POLLIN,
-        revents: 0,
-    };
-    // SAFETY: one pollfd we own, for a socket we hold open.
-    unsafe { libc::poll(&mut p, 1, timeout.as_millis().min(i32::MAX as u128) as i32) };
-    mark(1);
 }
 
+/// The error of a line from the server that is not what the wire allows.
 fn bad_line(e: WireError) -> String {
     format!("the server sent a bad line: {e}")
 }

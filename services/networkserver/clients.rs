@@ -87,20 +87,7 @@ pub(super) const EVICT_IDLE: Duration = Duration::from_secs(2);
 const ACCEPT_BACKOFF_MAX: Duration = Duration::from_secs(1);
 
 /// How often the accept loop looks at the stop flag while no one connects.
-const ACCEPT_TICK_MS: i32 = 100;
-
-/// Waits until the listener has a connection or ACCEPT_TICK_MS pass.
-fn wait_readable(listener: &TcpListener) {
-    use std::os::fd::AsRawFd;
-    let mut p = libc::pollfd {
-        fd: listener.as_raw_fd(),
-        events: libc::POLLIN,
-        revents: 0,
-    };
-    // SAFETY: one valid pollfd for the duration of the call. An error (EINTR)
-    // only means the caller looks at the stop flag and the listener again.
-    unsafe { libc::poll(&mut p, 1, ACCEPT_TICK_MS) };
-}
+const ACCEPT_TICK: Duration = Duration::from_millis(100);
 
 /// Closes one connection to make room (see the module's doc for which), telling
 /// a named one why with a `1027` line. True if one was closed.
@@ -224,7 +211,7 @@ fn failed(sh: &Shared, e: &io::Error, what: &str, f: &mut Failing) {
     pause(sh, pause_for);
 }
 
-/// Sleeps `d` in slices of at most ACCEPT_TICK_MS, returning early on stop.
+/// Sleeps `d` in slices of at most ACCEPT_TICK, returning early on stop.
 fn pause(sh: &Shared, d: Duration) {
     let end = Instant::now() + d;
     while !sh.stop.load(Ordering::Acquire) {
@@ -232,7 +219,7 @@ fn pause(sh: &Shared, d: Duration) {
         if left.is_zero() {
             return;
         }
-        std::thread::sleep(left.min(Duration::from_millis(ACCEPT_TICK_MS as u64)));
+        std::thread::sleep(left.min(ACCEPT_TICK));
     }
 }
 
@@ -246,7 +233,7 @@ pub(super) fn accept_loop(listener: TcpListener, sh: Arc<Shared>) {
         let (stream, peer) = match listener.accept() {
             Ok(x) => x,
             Err(e) if e.kind() == io::ErrorKind::WouldBlock => {
-                wait_readable(&listener);
+                netwire::wait_readable(&listener, ACCEPT_TICK);
                 continue;
             }
             Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,

@@ -386,7 +386,7 @@ impl NetServer {
         if self.shared.stop.swap(true, Ordering::AcqRel) {
             return;
         }
-        // The accept loop sees the flag within ACCEPT_TICK_MS.
+        // The accept loop sees the flag within ACCEPT_TICK.
         if let Some(t) = self.accept.take() {
             let _ = t.join();
         }
