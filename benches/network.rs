@@ -108,14 +108,9 @@ fn raw_fps(requests: bool, pixels: Pixels) -> (f64, (f64, f64, f64)) {
                 ask.clear();
                 let hdr = format!("1020 {k} 0 {W} {H} 3\n");
                 let frame = (pixels == Pixels::Camera).then(|| {
-                    if src2.clock() == last {
-                        let mut g = wake.lock.lock();
-                        wake.waiting.store(true, Ordering::Relaxed);
-                        fence(Ordering::SeqCst);
-                        while src2.clock() == last && !st.load(Ordering::Relaxed) {
-                            wake.cv.wait_for(&mut g, Duration::from_millis(10));
-                        }
-                        wake.waiting.store(false, Ordering::Relaxed);
+                    let new = || src2.clock() != last || st.load(Ordering::Relaxed);
+                    while !new() {
+                        wake.sleep(Duration::from_millis(10), new);
                     }
                     let f = src2.snapshot();
                     last = f.clock;
@@ -189,6 +184,20 @@ struct Wake {
     waiting: AtomicBool,
 }
 
+impl Wake {
+    /// Sleeps until notified or `timeout` passes, unless `done` holds when looked
+    /// at after the flag shows (so a notify just before the sleep is not lost).
+    fn sleep(&self, timeout: Duration, done: impl Fn() -> bool) {
+        let mut g = self.lock.lock();
+        self.waiting.store(true, Ordering::Relaxed);
+        fence(Ordering::SeqCst);
+        if !done() {
+            self.cv.wait_for(&mut g, timeout);
+        }
+        self.waiting.store(false, Ordering::Relaxed);
+    }
+}
+
 impl Notify for Wake {
     fn notify(&self) {
         fence(Ordering::SeqCst);
@@ -240,11 +249,9 @@ fn camera(
             let _ = src.write(|i| i.data[0] = k);
             cur = src.snapshot();
         } else {
-            let mut g = arrived.lock.lock();
-            arrived.waiting.store(true, Ordering::Relaxed);
-            fence(Ordering::SeqCst);
-            arrived.cv.wait_for(&mut g, Duration::from_micros(100));
-            arrived.waiting.store(false, Ordering::Relaxed);
+            arrived.sleep(Duration::from_micros(100), || {
+                Arc::strong_count(&cur) > 2 || sent.load(Ordering::Relaxed) != seen
+            });
         }
     }
     thread_cpu() - cpu0.unwrap_or_else(thread_cpu)
