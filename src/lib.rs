@@ -37,6 +37,7 @@ pub mod runtime;
 #[cfg(feature = "_serialhead")]
 pub mod serialhead;
 pub mod shell;
+pub mod sockets;
 pub mod supervisor;
 pub mod vision;
 #[cfg(feature = "gui")]

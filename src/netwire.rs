@@ -990,20 +990,6 @@ pub fn is_timeout(e: &io::Error) -> bool {
     )
 }
 
-/// Waits until `fd` has something to read (or is closed, or failed) or `timeout`
-/// passes (whole milliseconds). An error (EINTR) returns early: the caller looks
-/// again.
-pub fn wait_readable(fd: &impl std::os::fd::AsRawFd, timeout: std::time::Duration) {
-    let mut p = libc::pollfd {
-        fd: fd.as_raw_fd(),
-        events: libc::POLLIN,
-        revents: 0,
-    };
-    let ms = timeout.as_millis().min(i32::MAX as u128) as libc::c_int;
-    // SAFETY: one valid pollfd for the duration of the call.
-    unsafe { libc::poll(&mut p, 1, ms) };
-}
-
 impl LineReader {
     pub fn new(max_line: usize) -> Self {
         LineReader {

@@ -70,6 +70,7 @@ use crate::{
     },
     netwire::{self, Feed, LineEvent, LineReader, Message, Net43, OnWire, Request, WireError},
     runtime::{self, Backoff, Driver, Runtime, Supervision, Supervisor},
+    sockets,
 };
 
 /// One `provides` line.
@@ -828,21 +829,12 @@ impl Link {
 /// on a timeout, an error, or the peer closing, `poll` returns and the read that
 /// follows says what happened.
 fn wait_for_bytes(s: &TcpStream, bytes: usize, timeout: Duration) {
-    use std::os::fd::AsRawFd;
-    let mark = |v: libc::c_int| {
-        // SAFETY: setsockopt on a socket we hold open, with an int we own.
-        unsafe {
-            libc::setsockopt(
-                s.as_raw_fd(),
-                libc::SOL_SOCKET,
-                libc::SO_RCVLOWAT,
-                (&v as *const libc::c_int).cast(),
-                std::mem::size_of::<libc::c_int>() as libc::socklen_t,
-            ) == 0
-        }
+    let mark = |v: usize| {
+        let v = v.min(i32::MAX as usize) as libc::c_int;
+        sockets::set_int_option(s, libc::SOL_SOCKET, libc::SO_RCVLOWAT, v).is_ok()
     };
-    if mark(bytes.min(i32::MAX as usize) as libc::c_int) {
-        netwire::wait_readable(s, timeout);
+    if mark(bytes) {
+        sockets::wait_readable(s, timeout);
         mark(1);
     }
 }

@@ -59,6 +59,8 @@ use tokio::{
     time::Sleep,
 };
 
+use crate::sockets;
+
 /// The longest HTTP upgrade request or response head.
 pub const MAX_HEAD: usize = 16 * 1024;
 /// How long a client may take to send its upgrade request.
@@ -445,16 +447,7 @@ async fn refuse(client: &mut TcpStream, status: &str, why: &str) {
 
 fn set_send_buffer(s: &TcpStream) {
     let size = SOCKET_BUFFER as libc::c_int;
-    // SAFETY: setsockopt on a socket we hold open, with an int we own.
-    unsafe {
-        libc::setsockopt(
-            s.as_raw_fd(),
-            libc::SOL_SOCKET,
-            libc::SO_SNDBUF,
-            (&size as *const libc::c_int).cast(),
-            std::mem::size_of::<libc::c_int>() as libc::socklen_t,
-        )
-    };
+    let _ = sockets::set_int_option(s, libc::SOL_SOCKET, libc::SO_SNDBUF, size);
 }
 
 /// A socket handed to the SDK: shut down when the door lets go of it before

@@ -30,7 +30,7 @@ use std::{
 
 use crate::{
     interfaces::{Notify, Source},
-    netwire,
+    netwire, sockets,
 };
 
 use super::{
@@ -233,7 +233,7 @@ pub(super) fn accept_loop(listener: TcpListener, sh: Arc<Shared>) {
         let (stream, peer) = match listener.accept() {
             Ok(x) => x,
             Err(e) if e.kind() == io::ErrorKind::WouldBlock => {
-                netwire::wait_readable(&listener, ACCEPT_TICK);
+                sockets::wait_readable(&listener, ACCEPT_TICK);
                 continue;
             }
             Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
