@@ -40,7 +40,7 @@ use std::{
 };
 
 use crate::interfaces::{
-    Bumpers, Encoders, Image, Imu, InterfaceValue, KINDS, Laser, Motors, PtEncoders, PtMotors,
+    Bumpers, Encoders, Image, Imu, InterfaceValue, Kind, Laser, Motors, PtEncoders, PtMotors,
     Sonars, ZoomEncoders, ZoomMotors, for_each_kind,
 };
 
@@ -127,7 +127,7 @@ pub struct Limits {
     pub unserved: &'static str,
 }
 
-/// Every kind's [`OnWire`], in the table's order ([`KINDS`]).
+/// Every kind's [`OnWire`], in the table's order ([`Kind::ALL`]).
 pub const WIRE: &[OnWire] = for_each_kind!(kind_wire! {});
 
 /// `<T as Net43>::ON_WIRE` of every kind of the table.
@@ -138,25 +138,21 @@ macro_rules! kind_wire {
 }
 use kind_wire;
 
-/// The [`OnWire`] of kind `kind` ([`OnWire::Absent`] for a name that is no kind).
-pub fn on_wire(kind: &str) -> OnWire {
-    KINDS
-        .iter()
-        .position(|k| *k == kind)
-        .map_or(OnWire::Absent, |i| WIRE[i])
+/// The [`OnWire`] of kind `kind`.
+pub fn on_wire(kind: Kind) -> OnWire {
+    WIRE[kind.index()]
 }
 
-/// A pushed kind (4.3 calls it a device): its index in the kinds table.
+/// A pushed kind (4.3 calls it a device).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub struct Feed(usize);
+pub struct Feed(Kind);
 
 impl Feed {
     /// Slots for feeds: one per kind of the table (only pushed kinds use theirs).
-    pub const COUNT: usize = KINDS.len();
+    pub const COUNT: usize = Kind::ALL.len();
     /// The feed of kind `kind`, if it is pushed.
-    pub fn of(kind: &str) -> Option<Feed> {
-        let i = KINDS.iter().position(|k| *k == kind)?;
-        matches!(WIRE[i], OnWire::Pushed { .. }).then_some(Feed(i))
+    pub fn of(kind: Kind) -> Option<Feed> {
+        matches!(on_wire(kind), OnWire::Pushed { .. }).then_some(Feed(kind))
     }
     /// Every pushed kind, in the order a push round writes them: 4.3's server's
     /// ([`PUSH_ORDER`]), then any other in the table's order.
@@ -175,11 +171,11 @@ impl Feed {
     }
     /// Index in the kinds table (and in arrays of [`Feed::COUNT`] slots).
     pub fn index(self) -> usize {
-        self.0
+        self.0.index()
     }
     /// (subscribe, unsubscribe, push) codes.
     pub fn codes(self) -> (u32, u32, u32) {
-        match WIRE[self.0] {
+        match on_wire(self.0) {
             OnWire::Pushed {
                 subscribe,
                 unsubscribe,
@@ -189,8 +185,8 @@ impl Feed {
         }
     }
     /// The interface kind.
-    pub fn interface(self) -> &'static str {
-        KINDS[self.0]
+    pub fn interface(self) -> Kind {
+        self.0
     }
 }
 
@@ -207,23 +203,22 @@ pub const PUSH_ORDER: &[u32] = &[
 
 /// Every pushed kind, in the table's order.
 fn pushed() -> impl Iterator<Item = Feed> {
-    (0..KINDS.len())
-        .filter(|&i| matches!(WIRE[i], OnWire::Pushed { .. }))
-        .map(Feed)
+    Kind::ALL.iter().filter_map(|&k| Feed::of(k))
 }
 
-/// The kind (index in the table) that command request `code` sets.
-pub fn commanded_kind(code: u32) -> Option<usize> {
-    WIRE.iter()
-        .position(|w| matches!(w, OnWire::Commanded { commands, .. } if commands.contains(&code)))
+/// The kind that command request `code` sets.
+pub fn commanded_kind(code: u32) -> Option<Kind> {
+    Kind::ALL.iter().copied().find(
+        |&k| matches!(on_wire(k), OnWire::Commanded { commands, .. } if commands.contains(&code)),
+    )
 }
 
-/// The kind (index in the table) whose limits query is `code`, and the query.
-pub fn limits_kind(code: u32) -> Option<(usize, Limits)> {
-    WIRE.iter().enumerate().find_map(|(i, w)| match w {
+/// The kind whose limits query is `code`, and the query.
+pub fn limits_kind(code: u32) -> Option<(Kind, Limits)> {
+    Kind::ALL.iter().find_map(|&k| match on_wire(k) {
         OnWire::Commanded {
             limits: Some(l), ..
-        } if l.query == code || l.reply == code => Some((i, *l)),
+        } if l.query == code || l.reply == code => Some((k, l)),
         _ => None,
     })
 }
@@ -1094,7 +1089,7 @@ impl LineReader {
 mod tests {
     use super::*;
 
-    fn feed(kind: &str) -> Feed {
+    fn feed(kind: Kind) -> Feed {
         Feed::of(kind).unwrap()
     }
 

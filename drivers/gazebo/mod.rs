@@ -81,14 +81,14 @@ use std::{
 
 use crate::{
     conf::{
-        ComponentConf, ConfLine,
+        ComponentConf, ConfError, ConfLine,
         settings::{
-            COLOR, CYCLE, Form, MOTORS_TIMEOUT, Setting, VARCOLOR, choice, float, int, word,
+            COLOR, CYCLE, Form, MOTORS_TIMEOUT, Setting, VARCOLOR, choice, float, int, kinds, word,
         },
     },
     interfaces::{
         AnyInterface, COLOR_HEIGHT, COLOR_WIDTH, Encoders, Image, Imu, Interface, Interfaces,
-        Laser, LaserMap, Motors, PtEncoders, PtMotors, Source, limit,
+        Kind as IfaceKind, Laser, LaserMap, Motors, PtEncoders, PtMotors, Source, limit,
     },
     runtime::{self, Backoff, Driver, Runtime, Supervision, Supervisor},
 };
@@ -112,16 +112,14 @@ pub const LINES: &[Setting] = &[
                 "device",
                 "a model's odometry, cmd_vel or pan-tilt joints, or an IMU sensor",
                 &[
-                    choice(
+                    kinds(
                         "INTERFACE",
                         &[
-                            "encoders",
-                            "motors",
-                            "pantiltencoders",
-                            "pantiltmotors",
-                            "imu",
-                            "ptencoders",
-                            "ptmotors",
+                            IfaceKind::Encoders,
+                            IfaceKind::Motors,
+                            IfaceKind::PtEncoders,
+                            IfaceKind::PtMotors,
+                            IfaceKind::Imu,
                         ],
                     ),
                     word("MODEL|SENSOR|/TOPIC"),
@@ -131,7 +129,7 @@ pub const LINES: &[Setting] = &[
                 "laser",
                 "a lidar sensor's scan: N readings at R per degree (default 180 at 1)",
                 &[
-                    choice("laser", &["laser"]),
+                    kinds("laser", &[IfaceKind::Laser]),
                     word("SENSOR|/TOPIC"),
                     int("N", "", 1, 3600).optional(),
                     float("R", "readings/deg", 0.01, 100.0),
@@ -181,8 +179,7 @@ pub const LINES: &[Setting] = &[
 
 #[derive(serde::Deserialize)]
 struct Lines {
-    #[allow(dead_code)]
-    provides: Vec<Vec<String>>,
+    provides: Vec<ProvidesLine>,
     partition: Option<String>,
     ip: Option<String>,
     messages: String,
@@ -260,73 +257,57 @@ pub struct GzConf {
     pub joints: (String, String),
 }
 
-fn parse_provides(l: &ConfLine) -> anyhow::Result<Want> {
-    let a = l.args();
-    if a.len() < 2 {
-        return Err(l
-            .error(format!("`provides` needs INTERFACE NAME; usage: {USAGE}"))
-            .into());
-    }
-    let iface = crate::interfaces::canonical(&a[0]);
-    let kind = match iface.as_str() {
-        "encoders" => Kind::Encoders,
-        "motors" => Kind::Motors,
-        "pantiltencoders" => Kind::PtEncoders,
-        "pantiltmotors" => Kind::PtMotors,
-        "imu" => Kind::Imu,
-        "laser" => {
-            if a.len() == 4 {
-                let n: usize = l.number(2, "a number of readings", 1..=3600)?;
-                let r: f64 = l.number(3, "readings per degree", 0.01..=100.0)?;
-                Kind::Laser(n, r)
-            } else {
-                Kind::Laser(180, 1.0)
-            }
-        }
-        n if n.starts_with("colorA") || ["colorB", "colorC", "colorD"].contains(&n) => {
-            Kind::Camera(true)
-        }
-        n if ["varcolorA", "varcolorB", "varcolorC", "varcolorD"].contains(&n) => {
-            Kind::Camera(false)
-        }
-        other => {
-            return Err(l
-                .error(format!(
-                    "`provides {other}`: the gazebo driver gives encoders, motors, laser, imu, colorA..D, \
-                     varcolorA..D, pantiltencoders and pantiltmotors (gz-sim has no sonars or bumpers); usage: {USAGE}"
-                ))
-                .into());
-        }
-    };
-    if matches!(kind, Kind::PtMotors) && a[1].starts_with('/') {
-        return Err(l
-            .error(format!(
-                "`provides pantiltmotors` takes the model's name (its joints' cmd_pos topics follow \
-                 from it and `joints`), not a topic; usage: {USAGE}"
-            ))
-            .into());
-    }
-    let max = if matches!(kind, Kind::Laser(..)) {
-        4
-    } else {
-        2
-    };
-    if a.len() != max && !(max == 4 && a.len() == 2) {
-        return Err(l
-            .error(format!(
-                "`provides {iface}` takes {}; usage: {USAGE}",
-                if max == 4 {
-                    "SENSOR [N R]"
-                } else {
-                    "a name or a /topic"
+/// A `provides` line in its declared form: the interface, what it names (a
+/// model, a sensor or a `/topic`) and, for a laser, N and R.
+#[derive(serde::Deserialize)]
+enum ProvidesLine {
+    #[serde(rename = "device")]
+    Device(IfaceKind, String),
+    #[serde(rename = "laser")]
+    Laser(IfaceKind, String, Option<usize>, Option<f64>),
+    #[serde(rename = "color")]
+    Color(String, String),
+    #[serde(rename = "varcolor")]
+    Varcolor(String, String),
+}
+
+/// What line `l` (read as `p`) wants.
+fn want(p: ProvidesLine, l: &ConfLine) -> Result<Want, ConfError> {
+    let (iface, kind, target) = match p {
+        ProvidesLine::Device(k, target) => {
+            let kind = match k {
+                IfaceKind::Encoders => Kind::Encoders,
+                IfaceKind::Motors => Kind::Motors,
+                IfaceKind::PtEncoders => Kind::PtEncoders,
+                IfaceKind::PtMotors => Kind::PtMotors,
+                IfaceKind::Imu => Kind::Imu,
+                other => {
+                    return Err(l.error(format!(
+                        "`provides {other}`: the gazebo driver gives encoders, motors, laser, imu, \
+                         colorA..D, varcolorA..D, pantiltencoders and pantiltmotors (gz-sim has no \
+                         sonars or bumpers); usage: {USAGE}"
+                    )));
                 }
-            ))
-            .into());
+            };
+            (k.name().to_string(), kind, target)
+        }
+        ProvidesLine::Laser(k, target, n, r) => {
+            let kind = Kind::Laser(n.unwrap_or(180), r.unwrap_or(1.0));
+            (k.name().to_string(), kind, target)
+        }
+        ProvidesLine::Color(name, target) => (name, Kind::Camera(true), target),
+        ProvidesLine::Varcolor(name, target) => (name, Kind::Camera(false), target),
+    };
+    if matches!(kind, Kind::PtMotors) && target.starts_with('/') {
+        return Err(l.error(format!(
+            "`provides pantiltmotors` takes the model's name (its joints' cmd_pos topics follow \
+             from it and `joints`), not a topic; usage: {USAGE}"
+        )));
     }
     Ok(Want {
         iface,
         kind,
-        target: a[1].clone(),
+        target,
         at: l.at.to_string(),
     })
 }
@@ -340,8 +321,8 @@ impl GzConf {
     pub fn parse(conf: &ComponentConf) -> anyhow::Result<GzConf> {
         let lines: Lines = conf.settings(LINES)?;
         let mut wants: Vec<Want> = Vec::new();
-        for l in conf.lines_with("provides") {
-            let w = parse_provides(l)?;
+        for (l, p) in conf.lines_with("provides").zip(lines.provides) {
+            let w = want(p, l)?;
             if wants.iter().any(|x| x.iface == w.iface) {
                 return Err(l
                     .error(format!("interface `{}` is provided twice", w.iface))

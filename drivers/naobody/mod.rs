@@ -65,11 +65,11 @@ use std::{
 use crate::{
     conf::{
         ComponentConf, ConfLine,
-        settings::{self, MOTORS_TIMEOUT, Setting, choice, float, int, word},
+        settings::{self, Form, MOTORS_TIMEOUT, Setting, choice, float, int, kinds, pixels, word},
     },
     interfaces::{
-        AnyInterface, Bumpers, COLOR_HEIGHT, COLOR_WIDTH, Encoders, Image, Interface, Motors,
-        PtEncoders, PtMotors, Sonars, Source, Watch, canonical, limit,
+        AnyInterface, Bumpers, COLOR_HEIGHT, COLOR_WIDTH, Encoders, Image, Interface, Kind, Motors,
+        PtEncoders, PtMotors, Sonars, Source, Watch, limit,
     },
     runtime::{Backoff, Device, Driver, Runtime, Supervision, Supervisor},
     supervisor::Absent,
@@ -83,7 +83,42 @@ W H 160 120, 320 240, 640 480 or 1280 960)";
 
 /// The lines `naobody` takes (`jderobot help naobody` prints them).
 const LINES: &[Setting] = &[
-    settings::provides(USAGE).required(),
+    settings::provides_forms(
+        USAGE,
+        &[
+            Form::new(
+                "device",
+                "the walk, the odometry, the head, the sonars or the foot bumpers",
+                &[kinds(
+                    "INTERFACE",
+                    &[
+                        Kind::Motors,
+                        Kind::Encoders,
+                        Kind::PtEncoders,
+                        Kind::PtMotors,
+                        Kind::Sonars,
+                        Kind::Bumpers,
+                    ],
+                )],
+            ),
+            Form::new(
+                "color",
+                "a camera at 320x240 (CAMERA 0 top, the default, or 1 bottom)",
+                &[settings::COLOR, int("CAMERA", "", 0, 1).optional()],
+            ),
+            Form::new(
+                "varcolor",
+                "a camera at W x H: 160 120, 320 240, 640 480 or 1280 960",
+                &[
+                    settings::VARCOLOR,
+                    int("CAMERA", "", 0, 1),
+                    pixels("W", 1280),
+                    pixels("H", 960),
+                ],
+            ),
+        ],
+    )
+    .required(),
     Setting::new(
         "url",
         "NAOqi's endpoint, instead of host and port",
@@ -135,11 +170,23 @@ const LINES: &[Setting] = &[
     .default("2000"),
 ];
 
-/// The values of [`LINES`] (`provides` is read line by line for its errors).
+/// A `provides` line in its declared form.
+#[derive(serde::Deserialize)]
+enum ProvidesLine {
+    #[serde(rename = "device")]
+    Device(Kind),
+    /// colorA..D [CAMERA].
+    #[serde(rename = "color")]
+    Color(String, Option<i64>),
+    /// varcolorA..D CAMERA W H.
+    #[serde(rename = "varcolor")]
+    Varcolor(String, i64, u32, u32),
+}
+
+/// The values of [`LINES`].
 #[derive(serde::Deserialize)]
 struct Lines {
-    #[allow(dead_code)]
-    provides: Vec<(String, Option<String>)>,
+    provides: Vec<ProvidesLine>,
     url: Option<String>,
     host: String,
     port: u16,
@@ -257,77 +304,44 @@ impl NaoConf {
             reply_timeout: Duration::from_millis(lines.reply_timeout),
             at: conf.file.display().to_string(),
         };
-        for l in conf.lines.iter().filter(|l| l.keyword() == "provides") {
-            c.provides(l)?;
+        for (l, p) in conf.lines_with("provides").zip(lines.provides) {
+            c.provides(p, l)?;
         }
         Ok(c)
     }
 
-    fn provides(&mut self, l: &ConfLine) -> anyhow::Result<()> {
-        let a = l.args();
-        let name = canonical(a.first().map(String::as_str).unwrap_or_default());
-        let flag = match name.as_str() {
-            "motors" => Some(&mut self.motors),
-            "encoders" => Some(&mut self.encoders),
-            "pantiltencoders" => Some(&mut self.ptencoders),
-            "pantiltmotors" => Some(&mut self.ptmotors),
-            "sonars" => Some(&mut self.sonars),
-            "bumpers" => Some(&mut self.bumpers),
-            _ => None,
+    /// Puts one `provides` line (read as `p`) into the settings.
+    fn provides(&mut self, p: ProvidesLine, l: &ConfLine) -> anyhow::Result<()> {
+        let (iface, camera, size) = match p {
+            ProvidesLine::Device(kind) => {
+                let flag = match kind {
+                    Kind::Motors => &mut self.motors,
+                    Kind::Encoders => &mut self.encoders,
+                    Kind::PtEncoders => &mut self.ptencoders,
+                    Kind::PtMotors => &mut self.ptmotors,
+                    Kind::Sonars => &mut self.sonars,
+                    Kind::Bumpers => &mut self.bumpers,
+                    other => {
+                        return Err(l
+                            .error(format!(
+                                "`provides {other}`: a NAO has none; usage: {USAGE}"
+                            ))
+                            .into());
+                    }
+                };
+                if *flag {
+                    return Err(l.error(format!("`{kind}` is provided twice")).into());
+                }
+                *flag = true;
+                return Ok(());
+            }
+            ProvidesLine::Color(name, camera) => (name, camera, (COLOR_WIDTH, COLOR_HEIGHT)),
+            ProvidesLine::Varcolor(name, camera, w, h) => (name, Some(camera), (w, h)),
         };
-        if let Some(flag) = flag {
-            if a.len() != 1 {
-                return Err(l
-                    .error(format!(
-                        "`provides {name}` takes no more words; usage: {USAGE}"
-                    ))
-                    .into());
-            }
-            if *flag {
-                return Err(l.error(format!("`{name}` is provided twice")).into());
-            }
-            *flag = true;
-            return Ok(());
+        if self.cameras.iter().any(|c| c.iface == iface) {
+            return Err(l.error(format!("`{iface}` is provided twice")).into());
         }
-        let image = l.image_interface(0, "naobody", USAGE)?;
-        if self.cameras.iter().any(|c| c.iface == image.name) {
-            return Err(l
-                .error(format!("`{}` is provided twice", image.name))
-                .into());
-        }
-        let camera = if a.len() > 1 {
-            let cam: i64 = l.arg(1, "a camera: 0 (top) or 1 (bottom)")?;
-            if !(0..=1).contains(&cam) {
-                return Err(l
-                    .error(format!(
-                        "camera {cam}: a NAO has cameras 0 (top) and 1 (bottom)"
-                    ))
-                    .into());
-            }
-            cam
-        } else {
-            0
-        };
-        let (width, height) = match (image.fixed_size, a.len()) {
-            (true, 1 | 2) => (COLOR_WIDTH, COLOR_HEIGHT),
-            (false, 4) => (
-                l.arg(2, "a width in pixels")?,
-                l.arg(3, "a height in pixels")?,
-            ),
-            _ => {
-                return Err(l
-                    .error(format!(
-                        "`provides {}` takes {}; usage: {USAGE}",
-                        image.name,
-                        if image.fixed_size {
-                            "[CAMERA]"
-                        } else {
-                            "CAMERA W H"
-                        }
-                    ))
-                    .into());
-            }
-        };
+        let (width, height) = size;
         let Some(&(_, _, resolution)) = RESOLUTIONS
             .iter()
             .find(|(w, h, _)| (*w, *h) == (width, height))
@@ -339,8 +353,8 @@ impl NaoConf {
                 .into());
         };
         self.cameras.push(CamConf {
-            iface: image.name,
-            camera,
+            iface,
+            camera: camera.unwrap_or(0),
             width,
             height,
             resolution,

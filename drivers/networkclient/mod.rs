@@ -65,8 +65,8 @@ use crate::{
         settings::{self, Form, MOTORS_TIMEOUT, Setting, choice, int, word},
     },
     interfaces::{
-        AnyInterface, COLOR_HEIGHT, COLOR_WIDTH, Image, Interface, Interfaces, Source, by_kind,
-        canonical, family,
+        AnyInterface, COLOR_HEIGHT, COLOR_WIDTH, Image, Interface, Interfaces, Source, canonical,
+        family, with_kind,
     },
     netwire::{self, Feed, LineEvent, LineReader, Message, Net43, OnWire, Request, WireError},
     runtime::{self, Backoff, Driver, Runtime, Supervision, Supervisor},
@@ -348,7 +348,12 @@ impl NetClient {
         let stop = Arc::new(AtomicBool::new(false));
         let mut devs = Vec::new();
         for r in &cc.remotes {
-            let kind = family(&r.name).unwrap_or("");
+            let Some(kind) = family(&r.name) else {
+                anyhow::bail!(
+                    "networkclient: `{}`: no interface kind has that name",
+                    r.name
+                )
+            };
             let dev = match netwire::on_wire(kind) {
                 OnWire::Absent => {
                     anyhow::bail!("networkclient: cannot provide a {kind} interface")
@@ -361,11 +366,7 @@ impl NetClient {
                         r.size,
                     )
                 }
-                _ => by_kind!(
-                    kind,
-                    wired(ifaces, r, provider, cc.initial),
-                    Err(anyhow::anyhow!("networkclient: no {kind} kind"))
-                )?,
+                _ => with_kind!(kind, wired(ifaces, r, provider, cc.initial))?,
             };
             devs.push((r.clone(), dev));
         }

@@ -67,6 +67,7 @@ use crate::{
         ComponentConf,
         settings::{Setting, float, on_off, path, rest, word},
     },
+    interfaces::Kind,
     mcapfmt::{self, Source, Summary},
     runtime::{Driver, RunClock, Runtime, Worker},
 };
@@ -212,7 +213,7 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
     } else {
         settings.provides.clone()
     };
-    let mut targets: BTreeMap<String, (String, Source)> = BTreeMap::new();
+    let mut targets: BTreeMap<String, (Kind, Source)> = BTreeMap::new();
     for name in &wanted {
         let Some(c) = summary
             .channels
@@ -230,7 +231,7 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
                     .join(", ")
             );
         };
-        let Some(kind) = c.kind.clone() else {
+        let Some(name) = c.kind.clone() else {
             bail!(
                 "replay: channel `{}` of {} (schema `{}`, encoding `{}`) was not written by jderobot's recorder",
                 c.topic,
@@ -239,7 +240,9 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
                 c.encoding
             );
         };
-        if matches!(kind.as_str(), "image" | "laser") && c.encoding == "json" {
+        let kind = Kind::parse_or_list(&name)
+            .map_err(|e| anyhow::anyhow!("replay: channel `{}`: {e}", c.name))?;
+        if matches!(kind, Kind::Image | Kind::Laser) && c.encoding == "json" {
             bail!(
                 "replay: channel `{}` of {} is a JSON {kind} channel (`{}`), recorded before jderobot wrote images and laser scans as protobuf; it is not read (record it again)",
                 c.topic,
@@ -247,11 +250,11 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
                 c.schema
             );
         }
-        let target = Source::provide(&rt.interfaces, &c.name, &kind, &conf.name)
+        let target = Source::provide(&rt.interfaces, &c.name, kind, &conf.name)
             .map_err(|e| anyhow::anyhow!("replay: channel `{}`: {e}", c.name))?;
         targets.insert(c.topic.clone(), (kind, target));
     }
-    if settings.lockstep && !targets.values().any(|(kind, _)| kind == "motors") {
+    if settings.lockstep && !targets.values().any(|(kind, _)| *kind == Kind::Motors) {
         bail!(
             "{}: `stepped motors` needs a motors channel in {} (provided)",
             conf.name,
@@ -292,7 +295,7 @@ fn run(
     bytes: &[u8],
     summary: &Summary,
     settings: &Settings,
-    targets: &BTreeMap<String, (String, Source)>,
+    targets: &BTreeMap<String, (Kind, Source)>,
     (gate, run_clock): (Option<&StepGate>, Option<&RunClock>),
     stop: &AtomicBool,
 ) {
@@ -353,7 +356,7 @@ fn run(
                     std::thread::sleep(wait.min(Duration::from_millis(50)));
                 }
             }
-            match mcapfmt::decode_read(kind, m) {
+            match mcapfmt::decode_read(*kind, m) {
                 Ok(d) => {
                     last_clock = last_clock.max(d.clock.saturating_add(offset));
                     let (clock, time) = (

@@ -58,7 +58,7 @@ use crate::{
         ComponentConf,
         settings::{self, MOTORS_TIMEOUT, Setting, int},
     },
-    interfaces::{AnyInterface, Encoders, Image, Imu, Interface, Laser, Motors, Source},
+    interfaces::{AnyInterface, Encoders, Image, Imu, Interface, Kind, Laser, Motors, Source},
     mcapfmt::{
         dds::{
             self, Cdr, CdrAdapter, Graph, Readiness, Recycler, dds_topic, reliable_qos, ros_topic,
@@ -382,42 +382,50 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
     let mut motors = None;
     let mut ifaces: Vec<Arc<dyn AnyInterface>> = vec![];
     for (name, topic) in &l.provides {
-        let base = name.split('.').next().unwrap_or(name);
-        let default = match base {
-            "laser" => "scan".to_string(),
-            "encoders" => "odom".to_string(),
-            "motors" => "cmd_vel".to_string(),
-            "imu" => "imu".to_string(),
+        let kind = crate::interfaces::family(name);
+        let default = match kind {
+            Some(Kind::Laser) => "scan".to_string(),
+            Some(Kind::Encoders) => "odom".to_string(),
+            Some(Kind::Motors) => "cmd_vel".to_string(),
+            Some(Kind::Imu) => "imu".to_string(),
             _ => format!("{name}/image_raw"),
         };
         let topic = ros_topic(&ns, topic.as_deref().unwrap_or(&default));
-        match crate::interfaces::family(base) {
-            Some("laser") => {
+        match kind {
+            Some(Kind::Laser) => {
                 let i = rt.interfaces.provide::<Laser>(name, &conf.name)?;
                 ifaces.push(i.clone());
                 inputs.push(input(dp, &sub, topic, false, i)?);
             }
-            Some("encoders") => {
+            Some(Kind::Encoders) => {
                 let i = rt.interfaces.provide::<Encoders>(name, &conf.name)?;
                 ifaces.push(i.clone());
                 inputs.push(input(dp, &sub, topic, true, i)?);
             }
-            Some("imu") => {
+            Some(Kind::Imu) => {
                 let i = rt.interfaces.provide::<Imu>(name, &conf.name)?;
                 ifaces.push(i.clone());
                 inputs.push(input(dp, &sub, topic, false, i)?);
             }
-            Some("image") => {
+            Some(Kind::Image) => {
                 let i = rt.interfaces.provide::<Image>(name, &conf.name)?;
                 ifaces.push(i.clone());
                 inputs.push(camera_input(dp, &sub, topic, i)?);
             }
-            Some("motors") => {
+            Some(Kind::Motors) => {
                 let i = rt.interfaces.provide::<Motors>(name, &conf.name)?;
                 ifaces.push(i.clone());
                 motors = Some(motors_output(dp, &publ, topic, i)?);
             }
-            _ => anyhow::bail!(
+            Some(
+                Kind::Sonars
+                | Kind::Bumpers
+                | Kind::PtEncoders
+                | Kind::PtMotors
+                | Kind::ZoomEncoders
+                | Kind::ZoomMotors,
+            )
+            | None => anyhow::bail!(
                 "driver ros2: provides {name}: this driver provides laser, encoders, motors, \
                  imu and cameras (colorA..D, varcolorA..D)"
             ),

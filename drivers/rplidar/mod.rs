@@ -47,9 +47,9 @@ use std::{
 use crate::{
     conf::{
         ComponentConf,
-        settings::{self, Setting, float, int},
+        settings::{Setting, float, int, kinds},
     },
-    interfaces::{AnyInterface, Interface, Laser, Mount},
+    interfaces::{AnyInterface, Interface, Kind, Laser, Mount},
     runtime::{Backoff, Device, Driver, Runtime, Supervision, Supervisor},
     serialhead::{REPLY_TIMEOUT, SERIAL, open_port},
 };
@@ -84,7 +84,16 @@ const LINES: &[Setting] = &[
     .default("0 0 0"),
     REPLY_TIMEOUT
         .help("how long an answer, or a good scan node, may take before the lidar counts as lost"),
-    settings::provides(USAGE),
+    Setting::new(
+        "provides",
+        USAGE,
+        &[
+            kinds("laser", &[Kind::Laser]),
+            int("N", "", 1, 7200).optional(),
+            float("RESOLUTION", "readings/deg", 0.01, 20.0),
+        ],
+    )
+    .required(),
 ];
 
 #[derive(serde::Deserialize)]
@@ -94,9 +103,8 @@ struct Lines {
     max_range: i32,
     mount: (f64, f64, f64),
     reply_timeout: u64,
-    /// Read below (its forms: `laser`, `laser N R`).
-    #[allow(dead_code)]
-    provides: serde::de::IgnoredAny,
+    /// `provides laser [N RESOLUTION]`: the scan's readings and readings/deg.
+    provides: (Kind, Option<usize>, Option<f64>),
 }
 
 /// The driver's settings.
@@ -114,42 +122,8 @@ pub struct LidarConf {
 impl LidarConf {
     pub fn parse(conf: &ComponentConf) -> anyhow::Result<LidarConf> {
         let l: Lines = conf.settings(LINES)?;
-        let mut laser = None;
-        for p in conf.lines_with("provides") {
-            let a = p.args();
-            if crate::interfaces::canonical(&a[0]) != "laser" {
-                return Err(p
-                    .error(format!(
-                        "`provides {}`: the rplidar gives only a laser; usage: {USAGE}",
-                        a[0]
-                    ))
-                    .into());
-            }
-            if laser.is_some() {
-                return Err(p.error("the laser is provided twice").into());
-            }
-            laser = Some(match a.len() {
-                1 => (360, 1.0),
-                3 => (
-                    p.number(1, "a number of readings", 1..=7200usize)?,
-                    p.number(2, "readings per degree", 0.01..=20.0f64)?,
-                ),
-                _ => {
-                    return Err(p
-                        .error(format!(
-                            "`provides laser` takes N RESOLUTION or nothing; usage: {USAGE}"
-                        ))
-                        .into());
-                }
-            });
-        }
-        let Some((n, per_deg)) = laser else {
-            anyhow::bail!(
-                "{}: driver {} provides nothing; add `provides laser` ({USAGE})",
-                conf.file.display(),
-                conf.name
-            );
-        };
+        let (_, n, per_deg) = l.provides;
+        let (n, per_deg) = (n.unwrap_or(360), per_deg.unwrap_or(1.0));
         if n as f64 / per_deg > 360.0 + 1e-9 {
             let p = conf.lines_with("provides").next().expect("read above");
             return Err(p

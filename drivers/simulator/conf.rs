@@ -10,11 +10,11 @@ use crate::{
     conf::{
         ComponentConf, ConfError, ConfLine,
         settings::{
-            self, Form, MOTORS_TIMEOUT, NumberOr, Setting, choice, float, float_or, int, name,
-            on_off, path, pixels,
+            self, Form, MOTORS_TIMEOUT, NumberOr, Setting, choice, float, float_or, int, kinds,
+            name, on_off, path, pixels,
         },
     },
-    interfaces::{COLOR_HEIGHT, COLOR_WIDTH, interface_name},
+    interfaces::{COLOR_HEIGHT, COLOR_WIDTH, Kind, interface_name},
     world::{World, closest_on_segment},
 };
 
@@ -92,7 +92,7 @@ pub struct Simulation {
     pub run_clock: Option<std::sync::Arc<crate::runtime::RunClock>>,
 }
 
-/// The sensors a `period` line names.
+/// The sensors a `period` line names (the words of [`Sensor`]).
 const SENSORS: &[&str] = &[
     "encoders",
     "laser",
@@ -101,6 +101,31 @@ const SENSORS: &[&str] = &[
     "camera",
     "pantiltencoders",
     "imu",
+];
+
+/// A sensor a `period` line names: an interface kind, or the camera (every image
+/// interface of the robot).
+#[derive(Clone, Copy, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+enum Sensor {
+    Encoders,
+    Laser,
+    Sonars,
+    Bumpers,
+    Camera,
+    Pantiltencoders,
+    Imu,
+}
+
+/// The devices a `provides` line of the device form names.
+const DEVICES: &[Kind] = &[
+    Kind::Encoders,
+    Kind::Motors,
+    Kind::Sonars,
+    Kind::Bumpers,
+    Kind::PtEncoders,
+    Kind::PtMotors,
+    Kind::Imu,
 ];
 
 /// The simulator's lines, declared once (`jderobot help simulator`) and read
@@ -129,27 +154,13 @@ pub const LINES: &[Setting] = &[
             Form::new(
                 "device",
                 "the robot's device",
-                &[
-                    choice(
-                        "INTERFACE",
-                        &[
-                            "encoders",
-                            "motors",
-                            "sonars",
-                            "bumpers",
-                            "pantiltencoders",
-                            "pantiltmotors",
-                            "imu",
-                        ],
-                    ),
-                    name("ROBOT").optional(),
-                ],
+                &[kinds("INTERFACE", DEVICES), name("ROBOT").optional()],
             ),
             Form::new(
                 "laser",
                 "its laser: N readings at RESOLUTION readings/deg (default: 180 at 1)",
                 &[
-                    choice("laser", &["laser"]),
+                    kinds("laser", &[Kind::Laser]),
                     int("N", "", 1, 720).optional(),
                     float("RESOLUTION", "readings/deg", 0.01, 100.0),
                     name("ROBOT").optional(),
@@ -222,7 +233,7 @@ pub const LINES: &[Setting] = &[
                 "range",
                 "a range sensor's standard deviation",
                 &[
-                    choice("laser|sonars", &["laser", "sonars"]),
+                    kinds("laser|sonars", &[Kind::Laser, Kind::Sonars]),
                     float("MM", "mm", 0.0, 1e6),
                 ],
             ),
@@ -279,7 +290,7 @@ struct Lines {
     stepped: Option<f64>,
     seed: u64,
     step: f64,
-    period: Vec<(String, f64)>,
+    period: Vec<(Sensor, f64)>,
     noise: Vec<NoiseLine>,
     accel: Option<(f64, f64)>,
     radius: Option<f64>,
@@ -296,9 +307,9 @@ type RobotLine = (String, Option<f64>, Option<f64>, Option<f64>);
 #[derive(serde::Deserialize)]
 enum ProvidesLine {
     #[serde(rename = "device")]
-    Device(String, Option<String>),
+    Device(Kind, Option<String>),
     #[serde(rename = "laser")]
-    Laser(String, Option<usize>, Option<f64>, Option<String>),
+    Laser(Kind, Option<usize>, Option<f64>, Option<String>),
     #[serde(rename = "color")]
     Color(String, Option<String>),
     #[serde(rename = "varcolor")]
@@ -310,7 +321,7 @@ enum NoiseLine {
     #[serde(rename = "odometry")]
     Odometry(serde::de::IgnoredAny, f64, f64),
     #[serde(rename = "range")]
-    Range(String, f64),
+    Range(Kind, f64),
 }
 
 /// The lines that are not `provides`: the world, the robots, the clock, the model.
@@ -381,21 +392,21 @@ fn model(l: &Lines) -> (RobotModel, Noise, Periods) {
             NoiseLine::Odometry(_, d, a) => {
                 (noise.odometry_distance, noise.odometry_angle) = (*d, *a)
             }
-            NoiseLine::Range(s, mm) if s == "laser" => noise.laser = *mm,
+            NoiseLine::Range(Kind::Laser, mm) => noise.laser = *mm,
             NoiseLine::Range(_, mm) => noise.sonars = *mm,
         }
     }
     let mut periods = Periods::default();
     for (sensor, ms) in &l.period {
         let p = &mut periods;
-        *match sensor.as_str() {
-            "encoders" => &mut p.encoders,
-            "laser" => &mut p.laser,
-            "sonars" => &mut p.sonars,
-            "bumpers" => &mut p.bumpers,
-            "camera" => &mut p.camera,
-            "imu" => &mut p.imu,
-            _ => &mut p.pantiltencoders,
+        *match sensor {
+            Sensor::Encoders => &mut p.encoders,
+            Sensor::Laser => &mut p.laser,
+            Sensor::Sonars => &mut p.sonars,
+            Sensor::Bumpers => &mut p.bumpers,
+            Sensor::Camera => &mut p.camera,
+            Sensor::Imu => &mut p.imu,
+            Sensor::Pantiltencoders => &mut p.pantiltencoders,
         } = ms / 1000.0;
     }
     (model, noise, periods)
@@ -437,8 +448,8 @@ fn provides(
     provides: &mut [Provides],
 ) -> Result<String, ConfError> {
     let (kind, robot) = match &p {
-        ProvidesLine::Device(k, r) | ProvidesLine::Color(k, r) => (k.clone(), r.clone()),
-        ProvidesLine::Laser(k, .., r) | ProvidesLine::Varcolor(k, .., r) => (k.clone(), r.clone()),
+        ProvidesLine::Device(k, r) | ProvidesLine::Laser(k, .., r) => (k.to_string(), r.clone()),
+        ProvidesLine::Color(k, r) | ProvidesLine::Varcolor(k, .., r) => (k.clone(), r.clone()),
     };
     let robot = match robot {
         Some(w) => names.iter().position(|n| *n == w).ok_or_else(|| {
@@ -452,15 +463,18 @@ fn provides(
     let name = interface_name(&kind, (robot > 0).then(|| names[robot].as_str()));
     let p_robot = &mut provides[robot];
     match p {
-        ProvidesLine::Device(..) => {
-            *match kind.as_str() {
-                "encoders" => &mut p_robot.encoders,
-                "motors" => &mut p_robot.motors,
-                "sonars" => &mut p_robot.sonars,
-                "bumpers" => &mut p_robot.bumpers,
-                "pantiltencoders" => &mut p_robot.pantiltencoders,
-                "imu" => &mut p_robot.imu,
-                _ => &mut p_robot.pantiltmotors,
+        ProvidesLine::Device(device, _) => {
+            *match device {
+                Kind::Encoders => &mut p_robot.encoders,
+                Kind::Motors => &mut p_robot.motors,
+                Kind::Sonars => &mut p_robot.sonars,
+                Kind::Bumpers => &mut p_robot.bumpers,
+                Kind::PtEncoders => &mut p_robot.pantiltencoders,
+                Kind::Imu => &mut p_robot.imu,
+                Kind::PtMotors => &mut p_robot.pantiltmotors,
+                Kind::Image | Kind::Laser | Kind::ZoomEncoders | Kind::ZoomMotors => {
+                    return Err(l.error(format!("`provides {device}`: the simulator has none")));
+                }
             } = Some(name.clone());
         }
         ProvidesLine::Laser(_, n, r, _) => {

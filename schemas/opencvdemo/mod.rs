@@ -50,7 +50,7 @@ use crate::{
     colorspaces::HsvRange,
     conf::{
         ComponentConf, ConfLine,
-        settings::{CYCLE, Setting, choice, float, int, path, rest},
+        settings::{CYCLE, Setting, choice, float, int, numbers, path},
     },
     imagesource::{self, Frame, Frames, Source, Work},
     interfaces::Image,
@@ -174,7 +174,10 @@ const LINES: &[Setting] = &[
     Setting::new(
         "row",
         "row N (1-based) of the kernel: `size` coefficients",
-        &[int("N", "", 1, 15), rest("COEFFICIENTS")],
+        &[
+            int("N", "", 1, 15),
+            numbers("COEFFICIENTS", "", f32::MIN as f64, f32::MAX as f64),
+        ],
     )
     .repeats(),
     Setting::new(
@@ -201,9 +204,8 @@ struct Lines {
     size: Option<usize>,
     modulo: i32,
     offset: i32,
-    /// Read from the `row` lines themselves, so each coefficient's error names its line.
-    #[allow(dead_code)]
-    row: serde::de::IgnoredAny,
+    /// `row N COEFFICIENTS...`, one per line.
+    row: Vec<(usize, Vec<f32>)>,
     kernel: Option<String>,
     output: Option<String>,
     cycle: u64,
@@ -219,12 +221,8 @@ fn kernel(conf: &ComponentConf, l: &Lines) -> anyhow::Result<Kernel> {
         return Ok(Kernel::load(&f).map_err(|e| line.error(format!("kernel: {e}")))?);
     }
     let mut rows: Vec<(usize, Vec<f32>, &ConfLine)> = Vec::new();
-    for line in conf.lines_with("row") {
-        let n: usize = line.number(0, "row number (1-based)", 1..=15)?;
-        let v = (1..line.args().len())
-            .map(|i| line.number::<f32>(i, "coefficient", ..))
-            .collect::<Result<Vec<_>, _>>()?;
-        rows.push((n, v, line));
+    for (line, (n, v)) in conf.lines_with("row").zip(&l.row) {
+        rows.push((*n, v.clone(), line));
     }
     let Some(n) = l.size else {
         if let Some((_, _, line)) = rows.first() {

@@ -25,8 +25,8 @@ use ::foxglove::{
 
 use crate::{
     interfaces::{
-        Bumpers, Encoders, Image, Imu, InterfaceValue, Laser, Motors, PtEncoders, PtMotors, Sample,
-        Sonars, ZoomEncoders, ZoomMotors, for_each_kind,
+        Bumpers, Encoders, Image, Imu, InterfaceValue, Kind, Laser, Motors, PtEncoders, PtMotors,
+        Sample, Sonars, ZoomEncoders, ZoomMotors, for_each_kind,
     },
     mcapfmt::{self, Profile, Snapshot, Source, protobuf},
     world::{Ball, World},
@@ -214,7 +214,7 @@ fn channel_of<T: Serve>(
         .context(ctx)
         .message_encoding(encoding)
         .schema(schema)
-        .add_metadata(mcapfmt::KIND_KEY, T::KIND)
+        .add_metadata(mcapfmt::KIND_KEY, T::KIND.name())
         .build_raw()
         .map_err(|e| anyhow::anyhow!("foxglove: cannot make channel `{name}`: {e}"))
 }
@@ -222,10 +222,9 @@ fn channel_of<T: Serve>(
 /// The per-kind dispatch, from the table of kinds.
 macro_rules! serve_kinds {
     (; $(($t:ident, $k:literal)),*) => {
-        fn channel_of_kind(ctx: &Arc<Context>, name: &str, kind: &str, opts: Opts) -> anyhow::Result<(Arc<RawChannel>, bool)> {
+        fn channel_of_kind(ctx: &Arc<Context>, name: &str, kind: Kind, opts: Opts) -> anyhow::Result<(Arc<RawChannel>, bool)> {
             match kind {
-                $($k => Ok((channel_of::<$t>(ctx, name, opts)?, <$t as Serve>::TF)),)*
-                other => anyhow::bail!("foxglove: `{name}` is of kind `{other}`, which no table row names"),
+                $(Kind::$t => Ok((channel_of::<$t>(ctx, name, opts)?, <$t as Serve>::TF)),)*
             }
         }
 
@@ -252,7 +251,7 @@ impl Out {
     pub fn new(
         ctx: &Arc<Context>,
         name: &str,
-        kind: &str,
+        kind: Kind,
         opts: Opts,
         tf: &Arc<Channel<FrameTransform>>,
     ) -> anyhow::Result<Out> {

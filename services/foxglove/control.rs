@@ -24,7 +24,9 @@ use parking_lot::Mutex;
 use serde_json::Value;
 
 use crate::{
-    interfaces::{AnyInterface, Interface, InterfaceValue, Interfaces, Motors, Watch, by_kind},
+    interfaces::{
+        AnyInterface, Interface, InterfaceValue, Interfaces, Kind, Motors, Watch, with_kind,
+    },
     runtime::Runtime,
 };
 
@@ -107,7 +109,7 @@ impl Listener {
             return self
                 .actuators
                 .values()
-                .find(|i| i.kind() == "motors")
+                .find(|i| i.kind() == Kind::Motors)
                 .cloned();
         }
         self.actuators.get(topic.trim_start_matches('/')).cloned()
@@ -149,7 +151,7 @@ fn write_json<T: InterfaceValue + serde::de::DeserializeOwned>(
     j: &Value,
 ) -> Result<u64, String> {
     let i: Arc<Interface<T>> = interfaces.get(name).map_err(|e| e.to_string())?;
-    let v: T = if T::KIND == "motors" {
+    let v: T = if T::KIND == Kind::Motors {
         let m = motors_from_json(j)?;
         serde_json::from_value(serde_json::json!({"v": m.v, "w": m.w}))
             .map_err(|e| e.to_string())?
@@ -205,11 +207,7 @@ impl ServerListener for Listener {
             }
         };
         let name = target.name().to_string();
-        let r = by_kind!(
-            target.kind(),
-            write_json(&self.rt.interfaces, &name, &j),
-            Err(format!("`{name}` cannot be written"))
-        );
+        let r = with_kind!(target.kind(), write_json(&self.rt.interfaces, &name, &j));
         match r {
             Ok(_) => {
                 self.counters.commands.fetch_add(1, Ordering::Relaxed);

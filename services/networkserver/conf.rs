@@ -150,7 +150,12 @@ impl ServerConf {
         }
         for (l, (name, id)) in conf.lines_with("serves").zip(lines.serves) {
             let name = canonical(&name);
-            let fam = family(&name).unwrap_or_default();
+            let Some(fam) = family(&name) else {
+                return Err(err(
+                    l,
+                    format!("`serves {name}`: no interface kind has that name"),
+                ));
+            };
             let on_wire = netwire::on_wire(fam);
             let netid = if on_wire == netwire::OnWire::Frames {
                 let Some(id) = id else {

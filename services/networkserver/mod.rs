@@ -119,7 +119,7 @@ use parking_lot::Mutex;
 
 use crate::{
     conf::ComponentConf,
-    interfaces::{AnyInterface, Image, Interface, Interfaces, KINDS, by_kind, family},
+    interfaces::{AnyInterface, Image, Interface, Interfaces, Kind, family, with_kind},
     netwire::{self, Net43, OnWire, Request},
     runtime::{Driver, Runtime},
 };
@@ -135,7 +135,7 @@ pub struct Sources {
     pub images: Vec<(u32, Arc<Interface<Image>>)>,
     /// The served devices, one slot per kind of the table (4.3's wire has one
     /// device of a kind per server).
-    devices: [Option<Arc<dyn Served>>; KINDS.len()],
+    devices: [Option<Arc<dyn Served>>; Kind::ALL.len()],
 }
 
 impl Sources {
@@ -151,7 +151,9 @@ impl Sources {
                     "networkserver: `serves {name}`: load the driver that provides `{name}` before networkserver"
                 )
             };
-            let kind = family(name).unwrap_or("");
+            let Some(kind) = family(name) else {
+                anyhow::bail!("networkserver: `serves {name}`: no interface kind has that name")
+            };
             match netwire::on_wire(kind) {
                 OnWire::Absent => {
                     anyhow::bail!("networkserver: cannot serve a {kind} interface")
@@ -159,7 +161,7 @@ impl Sources {
                 OnWire::Frames => s
                     .images
                     .push((netid.unwrap_or(0), ifaces.get(name).with_context(ctx)?)),
-                _ => s = by_kind!(kind, serve(s, ifaces, name, ctx), Ok(s))?,
+                _ => s = with_kind!(kind, serve(s, ifaces, name, ctx))?,
             }
         }
         Ok(s)
@@ -173,29 +175,28 @@ impl Sources {
 
     /// These sources and device `iface` (a pushed or commanded kind).
     pub fn serving<T: Net43>(mut self, iface: Arc<Interface<T>>) -> Sources {
-        let k = KINDS.iter().position(|k| *k == T::KIND).expect("a kind");
-        self.devices[k] = Some(Arc::new(iface));
+        self.devices[T::KIND.index()] = Some(Arc::new(iface));
         self
     }
 
     /// Zeroes the served commands that must be renewed (motors): their client left.
     fn zero_renewed(&self) {
-        for (k, dev) in self.devices.iter().enumerate() {
+        for (&k, dev) in Kind::ALL.iter().zip(&self.devices) {
             if let (
                 Some(dev),
                 OnWire::Commanded {
                     keep_alive: true, ..
                 },
-            ) = (dev, netwire::WIRE[k])
+            ) = (dev, netwire::on_wire(k))
             {
                 dev.zero();
             }
         }
     }
 
-    /// The served device of the kind at index `k` of the table.
-    fn device(&self, k: usize) -> Option<&Arc<dyn Served>> {
-        self.devices[k].as_ref()
+    /// The served device of kind `k`.
+    fn device(&self, k: Kind) -> Option<&Arc<dyn Served>> {
+        self.devices[k.index()].as_ref()
     }
 }
 

@@ -24,7 +24,7 @@ use std::{
 };
 
 use crate::{
-    interfaces::{AnyInterface, KINDS, Source},
+    interfaces::{AnyInterface, Source},
     netwire::{self, Feed, LineEvent, LineReader, OnWire, Request},
 };
 
@@ -348,11 +348,11 @@ impl Session<'_> {
                     return Ok(());
                 };
                 let Some(dev) = src.device(k) else {
-                    self.error(&format!("{} are not served", KINDS[k]));
+                    self.error(&format!("{k} are not served"));
                     return Ok(());
                 };
                 if matches!(
-                    netwire::WIRE[k],
+                    netwire::on_wire(k),
                     OnWire::Commanded {
                         keep_alive: true,
                         ..
@@ -380,7 +380,7 @@ impl Session<'_> {
     /// (Un)subscribes the client to feed `d`, resuming its interface for it.
     fn subscribe(&mut self, d: Feed, on: bool) -> Result<(), End> {
         let sh = self.sh;
-        let Some(dev) = sh.sources.device(d.index()) else {
+        let Some(dev) = sh.sources.device(d.interface()) else {
             self.error(&format!("{} is not served", d.interface()));
             return Ok(());
         };

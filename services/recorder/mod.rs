@@ -280,7 +280,7 @@ fn sources(interfaces: &Interfaces, records: &Option<Vec<String>>) -> anyhow::Re
                     anyhow::anyhow!(
                         "recorder: `{n}` is a {} interface; jderobot records {}",
                         any.kind(),
-                        mcapfmt::KINDS.join(", ")
+                        crate::interfaces::Kind::NAMES.join(", ")
                     )
                 })
             })
@@ -470,7 +470,11 @@ fn write_one(
                     // Not in the profile: never written (said once, at the first sample).
                     tracing::warn!(
                         "recorder: profile ros2 carries {}; `{name}` ({kind}) is not recorded",
-                        mcapfmt::ros2::kinds().join(", ")
+                        mcapfmt::ros2::kinds()
+                            .iter()
+                            .map(|k| k.name())
+                            .collect::<Vec<_>>()
+                            .join(", ")
                     );
                     u16::MAX
                 });

@@ -101,8 +101,8 @@ use crate::{
         settings::{self, MOTORS_TIMEOUT, Setting, choice, float, int, interface, word},
     },
     interfaces::{
-        Bumpers, Encoders, Image, Imu, Interface, InterfaceValue, Laser, Motors, Mount, PtEncoders,
-        PtMotors, Sample, Sonars, Source, Watch,
+        Bumpers, Encoders, Image, Imu, Interface, InterfaceValue, Kind, Laser, Motors, Mount,
+        PtEncoders, PtMotors, Sample, Sonars, Source, Watch,
     },
     mcapfmt::{
         dds::{
@@ -473,16 +473,16 @@ fn run_clock(l: &Lines, rt: &Runtime, d: &Dds) -> anyhow::Result<Option<(Arc<Run
 }
 
 /// The kinds this service has a ROS 2 topic for.
-const SERVED_KINDS: &[&str] = &[
-    "laser",
-    "encoders",
-    "motors",
-    "imu",
-    "image",
-    "sonars",
-    "bumpers",
-    "pantiltencoders",
-    "pantiltmotors",
+const SERVED_KINDS: &[Kind] = &[
+    Kind::Laser,
+    Kind::Encoders,
+    Kind::Motors,
+    Kind::Imu,
+    Kind::Image,
+    Kind::Sonars,
+    Kind::Bumpers,
+    Kind::PtEncoders,
+    Kind::PtMotors,
 ];
 
 /// What is served: the serves lines, or every interface with a ROS 2 topic.
@@ -640,26 +640,32 @@ impl Plan {
             .interfaces
             .get_any(name)
             .map_err(|e| anyhow::anyhow!("service ros2: serves {name}: {e}"))?;
-        let first = name == iface.kind() || name == "laser";
         let kind = iface.kind();
+        // The interface of the kind's own name (`laser`, not `laser.robot2`).
+        let first = name == kind.name();
         let sub = name.replace('.', "/");
         let default = match kind {
-            "laser" if first => "scan".to_string(),
-            "encoders" => "odom".to_string(),
-            "motors" => "cmd_vel".to_string(),
-            "imu" => "imu".to_string(),
-            "image" => format!("{sub}/image_raw"),
-            "sonars" if first => "sonar".to_string(),
-            "sonars" => format!("{sub}/sonar"),
-            "bumpers" if first => "hazard_detection".to_string(),
-            "pantiltencoders" if first => "joint_states".to_string(),
-            "pantiltmotors" if first => "joint_command".to_string(),
-            _ => sub,
+            Kind::Laser if first => "scan".to_string(),
+            Kind::Encoders => "odom".to_string(),
+            Kind::Motors => "cmd_vel".to_string(),
+            Kind::Imu => "imu".to_string(),
+            Kind::Image => format!("{sub}/image_raw"),
+            Kind::Sonars if first => "sonar".to_string(),
+            Kind::Sonars => format!("{sub}/sonar"),
+            Kind::Bumpers if first => "hazard_detection".to_string(),
+            Kind::PtEncoders if first => "joint_states".to_string(),
+            Kind::PtMotors if first => "joint_command".to_string(),
+            Kind::Laser
+            | Kind::Bumpers
+            | Kind::PtEncoders
+            | Kind::PtMotors
+            | Kind::ZoomEncoders
+            | Kind::ZoomMotors => sub,
         };
         let topic = ros_topic(&d.graph.ns, topic.unwrap_or(&default));
         let sensor = sensor_qos();
         match kind {
-            "laser" => {
+            Kind::Laser => {
                 let iface = rt.interfaces.get::<Laser>(name)?;
                 let frame = if first {
                     f.2.clone()
@@ -671,7 +677,7 @@ impl Plan {
                 self.sensors
                     .push(Box::new(d.served(iface, topic, frame, sensor)?));
             }
-            "encoders" => {
+            Kind::Encoders => {
                 let iface = rt.interfaces.get::<Encoders>(name)?;
                 let tf = writer(
                     &d.graph.dp,
@@ -683,32 +689,38 @@ impl Plan {
                 let odom = d.served(iface, topic, f.0.clone(), reliable_qos(10))?;
                 self.odom.push((odom, tf));
             }
-            "imu" => {
+            Kind::Imu => {
                 let iface = rt.interfaces.get::<Imu>(name)?;
                 self.sensors
                     .push(Box::new(d.served(iface, topic, f.1.clone(), sensor)?));
             }
-            "image" => {
+            Kind::Image => {
                 let iface = rt.interfaces.get::<Image>(name)?;
                 self.sensors
                     .push(Box::new(d.served(iface, topic, f.3.clone(), sensor)?));
             }
-            "motors" => {
+            Kind::Motors => {
                 let iface = rt.interfaces.get::<Motors>(name)?;
                 let r = d.reader(&topic, dds_name::<Motors>())?;
                 self.commands.cmd = Some(Command::new(iface, r, topic));
             }
-            _ => return self.add_other(c, name, first, topic),
+            other => return self.add_other(c, name, other, first, topic),
         }
         Ok(())
     }
 
     /// Sonars, bumpers and the pan-tilt, the kinds without a `Ros2` message of their own.
-    fn add_other(&mut self, c: &Ctx, name: &str, first: bool, topic: String) -> anyhow::Result<()> {
+    fn add_other(
+        &mut self,
+        c: &Ctx,
+        name: &str,
+        kind: Kind,
+        first: bool,
+        topic: String,
+    ) -> anyhow::Result<()> {
         let (rt, d) = (c.rt, c.d);
-        let iface = rt.interfaces.get_any(name)?;
-        match iface.kind() {
-            "sonars" => {
+        match kind {
+            Kind::Sonars => {
                 self.sensors.push(Box::new(SonarsOut {
                     iface: rt.interfaces.get::<Sonars>(name)?,
                     topic,
@@ -721,7 +733,7 @@ impl Plan {
                     clock: 0,
                 }));
             }
-            "bumpers" => {
+            Kind::Bumpers => {
                 let iface = rt.interfaces.get::<Bumpers>(name)?;
                 let prefix = c.frame(name, first, "bumper");
                 let enc: Encode<Bumpers> = Box::new(move |frame, s, buf| {
@@ -736,7 +748,7 @@ impl Plan {
                 let s = d.served_as(iface, topic, base, sensor_qos(), ros2::HAZARDS, enc)?;
                 self.sensors.push(Box::new(s));
             }
-            "pantiltencoders" => {
+            Kind::PtEncoders => {
                 let iface = rt.interfaces.get::<PtEncoders>(name)?;
                 self.commands.pt_encoders = Some(iface.clone());
                 let (pan, tilt) = self.commands.joints.clone();
@@ -756,13 +768,19 @@ impl Plan {
                 let s = d.served_as(iface, topic, String::new(), qos, ros2::JOINT_STATE, enc)?;
                 self.sensors.push(Box::new(s));
             }
-            "pantiltmotors" => {
+            Kind::PtMotors => {
                 let iface = rt.interfaces.get::<PtMotors>(name)?;
                 let r = d.reader(&topic, ros2::JOINT_STATE)?;
                 self.commands.pantilt = Some(Command::new(iface, r, topic));
             }
-            other => anyhow::bail!(
-                "service ros2: serves {name}: a {other} interface has no ROS 2 message here; \
+            Kind::ZoomEncoders
+            | Kind::ZoomMotors
+            | Kind::Laser
+            | Kind::Encoders
+            | Kind::Imu
+            | Kind::Image
+            | Kind::Motors => anyhow::bail!(
+                "service ros2: serves {name}: a {kind} interface has no ROS 2 message here; \
                  serve laser, encoders, imu, motors, sonars, bumpers, pantiltencoders, \
                  pantiltmotors or a camera"
             ),

@@ -24,7 +24,7 @@ use zenoh::{
 
 use super::wire::{self, Fill, Format, Wire};
 use crate::{
-    interfaces::{AnyInterface, Interface, Motors, Notify, Source, Watch},
+    interfaces::{AnyInterface, Interface, Kind, Motors, Notify, Source, Watch},
     mcapfmt,
 };
 
@@ -39,7 +39,7 @@ pub struct Route {
 
 impl Route {
     /// Whether this kind goes as a ROS 2 message on this route.
-    fn ros2(&self, kind: &str) -> bool {
+    fn ros2(&self, kind: Kind) -> bool {
         self.format == Format::Ros2 && wire::ros2_type(kind).is_some()
     }
 }
@@ -87,7 +87,7 @@ impl<T: Wire> Outbound for Out<T> {
     }
 
     fn inline(&self) -> bool {
-        T::KIND != "image"
+        T::KIND != Kind::Image
     }
 
     fn greet_newcomers(&self) {
@@ -162,7 +162,7 @@ pub fn outbound<T: Wire>(
     // in their own queue (deep enough for a whole frame, see
     // `session::FRAME_QUEUE`): a `motors` command never waits behind a frame's
     // fragments.
-    let image = T::KIND == "image";
+    let image = T::KIND == Kind::Image;
     let publisher = session
         .declare_publisher(route.key.clone())
         .congestion_control(if image {
@@ -290,7 +290,7 @@ pub fn watch_server(
     interfaces: &crate::interfaces::Interfaces,
 ) -> anyhow::Result<Box<dyn Send>> {
     let token = format!("{key}/served");
-    let motors: Option<Arc<Interface<Motors>>> = (iface.kind() == "motors")
+    let motors: Option<Arc<Interface<Motors>>> = (iface.kind() == Kind::Motors)
         .then(|| interfaces.get(iface.name()).ok())
         .flatten();
     iface.set_stale(&format!(

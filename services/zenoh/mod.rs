@@ -80,7 +80,7 @@ use zenoh::{Session, Wait, key_expr::KeyExpr, pubsub::Subscriber};
 
 use serde::de::IgnoredAny;
 
-use crate::interfaces::by_kind;
+use crate::interfaces::{Kind, with_kind};
 use crate::{
     conf::{
         ComponentConf, ConfError, ConfLine,
@@ -102,7 +102,7 @@ pub enum Which {
         name: String,
         key: Option<String>,
         /// The interface kind when the name is not a standard one (`provides`).
-        kind: Option<String>,
+        kind: Option<Kind>,
     },
 }
 
@@ -165,7 +165,7 @@ const LINES: &[Setting] = &[
     Setting::new(
         "provides",
         "a remote interface to provide here (robot <robot>'s, or the one on KEY; a non-standard NAME says its KIND); `provides all ROBOT`: every interface robot ROBOT serves",
-        &[word("NAME"), word("KEY").optional(), choice("KIND", wire::KINDS).optional()],
+        &[word("NAME"), word("KEY").optional(), choice("KIND", Kind::NAMES).optional()],
     )
     .repeats(),
     Setting::new(
@@ -207,7 +207,7 @@ const LINES: &[Setting] = &[
 struct Lines {
     robot: String,
     publishes: Vec<(String, Option<String>)>,
-    provides: Vec<(String, Option<String>, Option<String>)>,
+    provides: Vec<(String, Option<String>, Option<Kind>)>,
     format: String,
     domain: u32,
     images: (String, Option<u8>),
@@ -302,11 +302,6 @@ pub fn parse(conf: &ComponentConf) -> Result<Settings, ConfError> {
     Ok(s)
 }
 
-/// The interface kinds that travel.
-fn travels(kind: &str) -> bool {
-    wire::KINDS.contains(&kind)
-}
-
 struct Zenoh {
     session: Session,
     stop: Arc<AtomicBool>,
@@ -364,7 +359,7 @@ struct Plan {
     keep: Keep,
 }
 
-fn route(s: &Settings, robot: &str, name: &str, kind: &str, key: &Option<String>) -> Route {
+fn route(s: &Settings, robot: &str, name: &str, kind: Kind, key: &Option<String>) -> Route {
     Route {
         key: key
             .clone()
@@ -386,7 +381,7 @@ fn serve<T: Wire>(
         .push(links::token(session, format!("{}/served", route.key))?);
     if iface.is_actuator() {
         let typed: Arc<Interface<T>> = rt.interfaces.get(iface.name())?;
-        if T::KIND == "motors" {
+        if T::KIND == Kind::Motors {
             let motors = rt.interfaces.get(iface.name())?;
             plan.keep
                 .push(links::watch_writers(session, &route.key, motors)?);
@@ -447,10 +442,7 @@ fn publishes(s: &Settings, interfaces: &Interfaces) -> anyhow::Result<Served> {
         match w {
             Which::All => {
                 for i in interfaces.all() {
-                    if travels(i.kind())
-                        && i.provider() != "zenoh"
-                        && !v.iter().any(|(j, _)| j.name() == i.name())
-                    {
+                    if i.provider() != "zenoh" && !v.iter().any(|(j, _)| j.name() == i.name()) {
                         v.push((i, None));
                     }
                 }
@@ -463,12 +455,6 @@ fn publishes(s: &Settings, interfaces: &Interfaces) -> anyhow::Result<Served> {
                         interfaces.names().join(", ")
                     )
                 })?;
-                if !travels(i.kind()) {
-                    anyhow::bail!(
-                        "zenoh: `publishes {name}`: interfaces of kind {} do not travel",
-                        i.kind()
-                    );
-                }
                 v.retain(|(j, _)| j.name() != name);
                 v.push((i, key.clone()));
             }
@@ -486,11 +472,11 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
         let kind = iface.kind();
         let r = route(&s, &s.robot, iface.name(), kind, &key);
         tracing::info!("zenoh: serving `{}` on {}", iface.name(), r.key);
-        by_kind!(kind, serve(&session, rt, iface, r, &mut plan), Ok(()))?;
+        with_kind!(kind, serve(&session, rt, iface, r, &mut plan))?;
     }
     for (which, robot) in &s.provides {
-        let wanted: Vec<(String, Option<String>, Option<String>)> = match which {
-            Which::One { name, key, kind } => vec![(name.clone(), key.clone(), kind.clone())],
+        let wanted: Vec<(String, Option<String>, Option<Kind>)> = match which {
+            Which::One { name, key, kind } => vec![(name.clone(), key.clone(), *kind)],
             Which::All => {
                 let prefix = match s.format {
                     Format::Jderobot => format!("jderobot/{robot}"),
@@ -533,16 +519,12 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
             }
         };
         for (name, key, kind) in wanted {
-            let kind: String = kind
-                .or_else(|| interfaces::family(&name).map(str::to_string))
-                .unwrap_or_default();
-            let r = route(&s, robot, &name, &kind, &key);
+            let Some(kind) = kind.or_else(|| interfaces::family(&name)) else {
+                anyhow::bail!("zenoh: `provides {name}`: say its kind: provides {name} KEY KIND");
+            };
+            let r = route(&s, robot, &name, kind, &key);
             tracing::info!("zenoh: providing `{name}` from {}", r.key);
-            by_kind!(
-                kind.as_str(),
-                provide(&session, rt, &name, r, &mut plan),
-                Ok(())
-            )?;
+            with_kind!(kind, provide(&session, rt, &name, r, &mut plan))?;
         }
     }
     let stop = Arc::new(AtomicBool::new(false));
@@ -604,7 +586,7 @@ mod tests {
             Which::One {
                 name: "laser2".into(),
                 key: Some("lab/r2/laser".into()),
-                kind: Some("laser".into())
+                kind: Some(Kind::Laser)
             }
         );
         assert_eq!((s.format, s.domain, s.jpeg), (Format::Ros2, 7, Some(60)));

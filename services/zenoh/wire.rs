@@ -10,10 +10,9 @@ use std::{
 
 use zenoh::bytes::ZBytes;
 
-pub use crate::interfaces::KINDS;
 use crate::{
     interfaces::{
-        Bumpers, Encoders, Image, Imu, Laser, Motors, PtEncoders, PtMotors, Sample, Sonars,
+        Bumpers, Encoders, Image, Imu, Kind, Laser, Motors, PtEncoders, PtMotors, Sample, Sonars,
         ZoomEncoders, ZoomMotors,
     },
     mcapfmt::{self, ros2::Ros2},
@@ -30,7 +29,7 @@ pub enum Format {
 }
 
 /// The Zenoh encoding of `jderobot` payloads: `jderobot/<kind>`.
-pub fn encoding(kind: &str) -> String {
+pub fn encoding(kind: Kind) -> String {
     format!("jderobot/{kind}")
 }
 
@@ -76,7 +75,7 @@ pub fn read_rmw_attachment(a: &[u8]) -> Option<(u64, SystemTime)> {
 /// The ROS 2 type of a kind in the `ros2` format: (DDS type name as rmw_zenoh
 /// writes it in keys, RIHS01 type hash of ROS 2 Jazzy), from the kind's
 /// [`Ros2`] message.
-pub fn ros2_type(kind: &str) -> Option<(&'static str, &'static str)> {
+pub fn ros2_type(kind: Kind) -> Option<(&'static str, &'static str)> {
     mcapfmt::ros2::message(kind).map(|m| (m.dds, m.hash))
 }
 
@@ -84,7 +83,7 @@ pub fn ros2_type(kind: &str) -> Option<(&'static str, &'static str)> {
 /// (`jderobot` format), or rmw_zenoh's `<domain>/<robot>/<name>/<type>/<hash>`
 /// (the ROS 2 topic `/<robot>/<name>`) in the `ros2` format for kinds with a ROS
 /// message. A suffixed name `laser.robot2` keeps its dot (a valid key chunk).
-pub fn default_key(format: Format, domain: u32, robot: &str, name: &str, kind: &str) -> String {
+pub fn default_key(format: Format, domain: u32, robot: &str, name: &str, kind: Kind) -> String {
     match (format, ros2_type(kind)) {
         (Format::Ros2, Some((ty, hash))) => format!("{domain}/{robot}/{name}/{ty}/{hash}"),
         _ => format!("jderobot/{robot}/{name}"),
@@ -392,11 +391,11 @@ mod tests {
         // Any cut is an error, never a panic.
         for n in 0..b.len() {
             // A laser without its geometry trailer is an older peer's, and valid.
-            let old_laser = T::KIND == "laser" && n == b.len() - GEOMETRY_BYTES;
+            let old_laser = T::KIND == Kind::Laser && n == b.len() - GEOMETRY_BYTES;
             assert!(
                 T::take(&b[..n]).is_err()
-                    || T::KIND == "bumpers"
-                    || T::KIND == "sonars"
+                    || T::KIND == Kind::Bumpers
+                    || T::KIND == Kind::Sonars
                     || old_laser
             );
         }
@@ -441,12 +440,21 @@ mod tests {
 
     #[test]
     fn the_kinds_with_a_ros_type_are_the_documented_ones() {
-        let ros: Vec<&str> = KINDS
+        let ros: Vec<Kind> = Kind::ALL
             .iter()
             .copied()
-            .filter(|k| ros2_type(k).is_some())
+            .filter(|&k| ros2_type(k).is_some())
             .collect();
-        assert_eq!(ros, ["image", "laser", "encoders", "motors", "imu"]);
+        assert_eq!(
+            ros,
+            [
+                Kind::Image,
+                Kind::Laser,
+                Kind::Encoders,
+                Kind::Motors,
+                Kind::Imu
+            ]
+        );
     }
 
     #[test]

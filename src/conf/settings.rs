@@ -77,6 +77,19 @@ pub enum ArgType {
     /// Every remaining word, each one of these and each at most once, in any order
     /// (must be last; none is fine). Read as a `Vec`.
     Flags(&'static [&'static str]),
+    /// One of these interface kinds, by its name (4.3's aliases accepted): read
+    /// as a [`Kind`](crate::interfaces::Kind), so a `provides` line's interface is
+    /// a kind from the declaration on, never a string matched again.
+    Kinds(&'static [crate::interfaces::Kind]),
+    /// Every remaining word, each a finite number within `[min, max]` (must be
+    /// last; at least one). Read as a `Vec` of numbers.
+    Numbers { min: f64, max: f64 },
+    /// A word that `check` accepts (a Zenoh key, an IPv4 address); `what` says
+    /// what it must be, in `help` and in the error. Read as a `String`.
+    Custom {
+        what: &'static str,
+        check: fn(&str) -> Result<(), String>,
+    },
 }
 
 /// One argument of a declared line.
@@ -95,7 +108,11 @@ pub struct Arg {
 impl Arg {
     /// Whether `word` is one of a [`choice`]'s words (a form's first word).
     pub fn accepts(&self, word: &str) -> bool {
-        matches!(self.ty, ArgType::Choice(c) if c.contains(&word))
+        match self.ty {
+            ArgType::Choice(c) => c.contains(&word),
+            ArgType::Kinds(k) => kind_in(k, word).is_some(),
+            _ => false,
+        }
     }
     /// This argument opens an optional group (it and the required ones after it).
     pub const fn optional(mut self) -> Arg {
@@ -192,6 +209,27 @@ pub const fn name(name: &'static str) -> Arg {
 /// Any of these words, each at most once, in any order, to the end of the line.
 pub const fn flags(name: &'static str, words: &'static [&'static str]) -> Arg {
     arg(name, ArgType::Flags(words), "")
+}
+/// One of interface kinds `kinds` (read as a [`Kind`](crate::interfaces::Kind)).
+pub const fn kinds(name: &'static str, kinds: &'static [crate::interfaces::Kind]) -> Arg {
+    arg(name, ArgType::Kinds(kinds), "")
+}
+/// A word that `check` accepts; `what` names what it must be.
+pub const fn custom(
+    name: &'static str,
+    what: &'static str,
+    check: fn(&str) -> Result<(), String>,
+) -> Arg {
+    arg(name, ArgType::Custom { what, check }, "")
+}
+/// Every remaining word, each a number in `[min, max]`, in `unit`.
+pub const fn numbers(name: &'static str, unit: &'static str, min: f64, max: f64) -> Arg {
+    arg(name, ArgType::Numbers { min, max }, unit)
+}
+/// The kind of `kinds` that `word` names (4.3's aliases accepted).
+fn kind_in(kinds: &[crate::interfaces::Kind], word: &str) -> Option<crate::interfaces::Kind> {
+    crate::interfaces::Kind::parse(&crate::interfaces::canonical(word))
+        .filter(|k| kinds.contains(k))
 }
 /// A size in pixels, 1..=`max`.
 pub const fn pixels(name: &'static str, max: i64) -> Arg {
@@ -339,7 +377,7 @@ fn usage(key: &str, args: &[Arg]) -> String {
                 s.push_str("]...");
                 open = false;
             }
-            ArgType::Rest => {
+            ArgType::Rest | ArgType::Numbers { .. } => {
                 s.push_str(a.name);
                 s.push_str("...");
             }
@@ -590,6 +628,16 @@ fn range_words(min: f64, max: f64) -> String {
     }
 }
 
+impl ArgType {
+    /// Whether it takes every remaining word (it must be last).
+    pub fn takes_the_rest(&self) -> bool {
+        matches!(
+            self,
+            ArgType::Rest | ArgType::Flags(_) | ArgType::Numbers { .. }
+        )
+    }
+}
+
 impl fmt::Display for ArgType {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
@@ -614,6 +662,14 @@ impl fmt::Display for ArgType {
                 f.write_str("a name (a word that is not a number, without dots or colons)")
             }
             ArgType::Flags(w) => write!(f, "any of {}, each at most once", w.join(", ")),
+            ArgType::Kinds(k) => {
+                let names: Vec<&str> = k.iter().map(|k| k.name()).collect();
+                write!(f, "one of {}", names.join(", "))
+            }
+            ArgType::Custom { what, .. } => f.write_str(what),
+            ArgType::Numbers { min, max } => {
+                write!(f, "one or more numbers, each {}", range_words(*min, *max))
+            }
         }
     }
 }
@@ -643,6 +699,8 @@ enum Value {
     Str(String),
     /// The words of a [`ArgType::Flags`] argument.
     List(Vec<String>),
+    /// The numbers of a [`ArgType::Numbers`] argument.
+    Numbers(Vec<f64>),
     /// An optional argument left out.
     Absent,
 }
@@ -723,6 +781,18 @@ fn check_word(line: &ConfLine, i: usize, a: &Arg, w: &str) -> Result<Value, Conf
                 Err(bad(a.ty.to_string()))
             }
         }
+        ArgType::Kinds(k) => match kind_in(k, w) {
+            Some(kind) => Ok(Value::Str(kind.name().to_string())),
+            None => Err(bad(a.ty.to_string())),
+        },
+        ArgType::Numbers { min, max } => match w.parse::<f64>() {
+            Ok(v) if v.is_finite() && v >= min && v <= max => Ok(Value::Float(v)),
+            _ => Err(bad(format!("a number {}{unit}", range_words(min, max)))),
+        },
+        ArgType::Custom { what, check } => match check(w) {
+            Ok(()) => Ok(Value::Str(w.to_string())),
+            Err(why) => Err(bad(format!("{what} ({why})"))),
+        },
     }
 }
 
@@ -796,7 +866,7 @@ fn check_line(s: &Setting, line: &ConfLine, component: &str) -> Result<Checked, 
         (0..words.len())
             .take_while(|&k| {
                 let a = &f.args[k.min(f.args.len() - 1)];
-                (k < f.args.len() || matches!(a.ty, ArgType::Rest | ArgType::Flags(_)))
+                (k < f.args.len() || a.ty.takes_the_rest())
                     && check_word(line, k, a, &words[k]).is_ok()
             })
             .count()
@@ -841,12 +911,13 @@ fn check_args(
         let a = &args[i];
         match a.ty {
             ArgType::Rest => c.rest(a)?,
+            ArgType::Numbers { .. } => c.numbers(a)?,
             ArgType::Flags(_) => c.flags(a)?,
             _ => {
                 // A group: this argument and the required ones after it.
                 let end = args[i + 1..]
                     .iter()
-                    .position(|b| b.optional || matches!(b.ty, ArgType::Rest | ArgType::Flags(_)))
+                    .position(|b| b.optional || b.ty.takes_the_rest())
                     .map_or(args.len(), |p| i + 1 + p);
                 c.group(&args[i..end])?;
                 i = end;
@@ -883,13 +954,8 @@ impl ArgCheck<'_> {
             .iter()
             .take_while(|a| !a.optional && !matches!(a.ty, ArgType::Flags(_)))
             .count();
-        let open_end = args
-            .last()
-            .is_some_and(|a| matches!(a.ty, ArgType::Rest | ArgType::Flags(_)));
-        let fixed: usize = args
-            .iter()
-            .filter(|a| !matches!(a.ty, ArgType::Rest | ArgType::Flags(_)))
-            .count();
+        let open_end = args.last().is_some_and(|a| a.ty.takes_the_rest());
+        let fixed: usize = args.iter().filter(|a| !a.ty.takes_the_rest()).count();
         let max = if open_end { usize::MAX } else { fixed };
         let n = self.words.len();
         self.line.error(format!(
@@ -913,6 +979,22 @@ impl ArgCheck<'_> {
         for (k, w) in self.words.iter().enumerate().skip(self.at) {
             self.out.push(check_word(self.line, k, a, w)?);
         }
+        self.at = self.words.len();
+        Ok(())
+    }
+
+    /// A trailing `Numbers`: every word left, one list.
+    fn numbers(&mut self, a: &Arg) -> Result<(), ConfError> {
+        if self.words.len() <= self.at {
+            return Err(self.arity());
+        }
+        let mut list = Vec::new();
+        for (k, w) in self.words.iter().enumerate().skip(self.at) {
+            if let Value::Float(v) = check_word(self.line, k, a, w)? {
+                list.push(v);
+            }
+        }
+        self.out.push(Value::Numbers(list));
         self.at = self.words.len();
         Ok(())
     }
@@ -1385,6 +1467,7 @@ impl<'p> LineValue<'p> {
                 Value::List(l) => {
                     out.extend(l.iter().map(|w| ValueDe(Some(Value::Str(w.clone())))))
                 }
+                Value::Numbers(l) => out.extend(l.iter().map(|x| ValueDe(Some(Value::Float(*x))))),
                 v => out.push(ValueDe(Some(v.clone()))),
             }
         }
@@ -1497,6 +1580,10 @@ impl fmt::Display for Value {
             Value::Float(x) => write!(f, "{x}"),
             Value::Bool(b) => f.write_str(if *b { "on" } else { "off" }),
             Value::List(l) => f.write_str(&l.join(" ")),
+            Value::Numbers(l) => {
+                let words: Vec<String> = l.iter().map(f64::to_string).collect();
+                f.write_str(&words.join(" "))
+            }
             Value::Absent => Ok(()),
         }
     }
@@ -1526,6 +1613,11 @@ impl<'de> de::Deserializer<'de> for ValueDe {
             Some(Value::List(l)) => visitor.visit_seq(
                 l.into_iter()
                     .map(|w| ValueDe(Some(Value::Str(w))))
+                    .collect::<Seq<_>>(),
+            ),
+            Some(Value::Numbers(l)) => visitor.visit_seq(
+                l.into_iter()
+                    .map(|x| ValueDe(Some(Value::Float(x))))
                     .collect::<Seq<_>>(),
             ),
             Some(Value::Absent) | None => visitor.visit_none(),

@@ -17,6 +17,7 @@ use arc_swap::{ArcSwap, ArcSwapOption, Guard};
 use parking_lot::{Condvar, Mutex};
 
 use super::{
+    kinds::Kind,
     source::Source,
     table::InterfaceError,
     values::{Image, InterfaceValue, Motors, PtMotors, limit},
@@ -597,7 +598,7 @@ impl Interface<PtMotors> {
 pub trait AnyInterface: Any + Send + Sync {
     fn name(&self) -> &str;
     /// The interface family (`laser`, `image`, ...).
-    fn kind(&self) -> &'static str;
+    fn kind(&self) -> Kind;
     /// The component that provides it.
     fn provider(&self) -> &str;
     fn is_actuator(&self) -> bool;
@@ -632,7 +633,7 @@ impl<T: InterfaceValue> AnyInterface for Interface<T> {
     fn name(&self) -> &str {
         &self.name
     }
-    fn kind(&self) -> &'static str {
+    fn kind(&self) -> Kind {
         T::KIND
     }
     fn provider(&self) -> &str {

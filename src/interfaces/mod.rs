@@ -16,8 +16,9 @@
 //! | `bumpers` | [`Bumpers`] | one byte per bumper, 1 = pressed |
 //! | `imu` | [`Imu`] | orientation `qx qy qz qw` (unit quaternion), angular velocity `wx wy wz` rad/s, linear acceleration `ax ay az` m/s² |
 //!
-//! The kinds and their value types are listed once, in [`KINDS`] (`kinds.rs`);
-//! code that handles any kind dispatches through it ([`by_kind!`]).
+//! The kinds and their value types are listed once, in the table of `kinds.rs`; a
+//! kind is a [`Kind`] (an enum, never a string), and code that handles any kind
+//! dispatches through the table ([`with_kind!`]).
 //!
 //! 4.3's export names `ptencoders`, `ptmotors`, `zencoders`, `zmotors` are accepted
 //! as aliases. A driver serving several robots names them with a suffix
@@ -51,9 +52,9 @@ mod table;
 mod values;
 
 pub use cell::{AnyInterface, HISTORY, Interface, MAX_CLOCK, Notify, Sample, Watch};
-pub use kinds::KINDS;
-#[allow(unused_imports)] // by_kind: only components behind cargo features use it
-pub(crate) use kinds::{by_kind, by_kind_match, for_each_kind};
+pub use kinds::Kind;
+#[allow(unused_imports)] // with_kind: only components behind cargo features use it
+pub(crate) use kinds::{for_each_kind, with_kind, with_kind_match};
 pub use laser_map::LaserMap;
 pub use names::{IMAGE_NAMES, STANDARD_NAMES, canonical, family, interface_name};
 pub use source::Source;

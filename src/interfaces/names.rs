@@ -1,12 +1,9 @@
 //! The standard interface names of the seed, their families (derived from the value
 //! types), 4.3's aliases and robot suffixes.
 
-use super::{
-    kinds::KINDS,
-    values::{Image, InterfaceValue},
-};
+use super::kinds::Kind;
 
-/// The standard names of images (family [`Image::KIND`]); every other kind of the
+/// The standard names of images (family [`Kind::Image`]); every other kind of the
 /// table has one standard name, its own.
 pub const IMAGE_NAMES: [&str; 8] = [
     "colorA",
@@ -36,18 +33,18 @@ const fn same(a: &str, b: &str) -> bool {
 }
 
 /// The standard interface names, for help texts and error messages: the
-/// images', then every other kind of the table ([`KINDS`]) under its own name.
-pub const STANDARD_NAMES: [&str; IMAGE_NAMES.len() + KINDS.len() - 1] = {
-    let mut out = [""; IMAGE_NAMES.len() + KINDS.len() - 1];
+/// images', then every other kind of the table ([`Kind::ALL`]) under its own name.
+pub const STANDARD_NAMES: [&str; IMAGE_NAMES.len() + Kind::ALL.len() - 1] = {
+    let mut out = [""; IMAGE_NAMES.len() + Kind::ALL.len() - 1];
     let mut n = 0;
     while n < IMAGE_NAMES.len() {
         out[n] = IMAGE_NAMES[n];
         n += 1;
     }
     let mut i = 0;
-    while i < KINDS.len() {
-        if !same(KINDS[i], Image::KIND) {
-            out[n] = KINDS[i];
+    while i < Kind::ALL.len() {
+        if !same(Kind::NAMES[i], Kind::Image.name()) {
+            out[n] = Kind::NAMES[i];
             n += 1;
         }
         i += 1;
@@ -57,15 +54,12 @@ pub const STANDARD_NAMES: [&str; IMAGE_NAMES.len() + KINDS.len() - 1] = {
 
 /// The interface family a standard name belongs to (`varcolorB` → image,
 /// `laser.robot2` → laser), after resolving 4.3's aliases.
-pub fn family(name: &str) -> Option<&'static str> {
+pub fn family(name: &str) -> Option<Kind> {
     let base = canonical(name.split('.').next().unwrap_or(name));
     if IMAGE_NAMES.contains(&base.as_str()) {
-        return Some(Image::KIND);
+        return Some(Kind::Image);
     }
-    KINDS
-        .iter()
-        .find(|k| **k == base && **k != Image::KIND)
-        .copied()
+    Kind::parse(&base).filter(|k| *k != Kind::Image)
 }
 
 /// Resolves 4.3's export names to the manual's interface names.

@@ -6,6 +6,7 @@ use parking_lot::RwLock;
 
 use super::{
     cell::{AnyInterface, Interface},
+    kinds::Kind,
     names::canonical,
     values::InterfaceValue,
 };
@@ -18,8 +19,8 @@ pub enum InterfaceError {
     #[error("interface `{name}` is a {found} interface, not {expected}")]
     WrongType {
         name: String,
-        expected: &'static str,
-        found: &'static str,
+        expected: Kind,
+        found: Kind,
     },
     #[error("interface `{name}` is already provided by {provider}")]
     Duplicate { name: String, provider: String },

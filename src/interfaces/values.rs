@@ -2,10 +2,12 @@
 
 use std::fmt::Write as _;
 
+use super::Kind;
+
 /// A value type that an interface can hold.
 pub trait InterfaceValue: Clone + Default + Send + Sync + 'static {
     /// The interface family name (`laser`, `motors`, `image`...).
-    const KIND: &'static str;
+    const KIND: Kind;
     /// The documented range of each field, one line, that
     /// [`validate`](Self::validate) checks (listed together in [`RANGES`]).
     const RANGE: &'static str;
@@ -42,12 +44,12 @@ pub trait InterfaceValue: Clone + Default + Send + Sync + 'static {
 /// The documented ranges that [`InterfaceValue::validate`] checks, per kind and
 /// field (every number must also be finite): each kind's [`InterfaceValue::RANGE`],
 /// in the kinds table's order.
-pub const RANGES: &[(&str, &str)] = super::for_each_kind!(kind_ranges! {});
+pub const RANGES: &[(Kind, &str)] = super::for_each_kind!(kind_ranges! {});
 
 /// `(KIND, RANGE)` of every kind of the table.
 macro_rules! kind_ranges {
     (; $(($t:ident, $k:literal)),*) => {
-        &[$(($k, <$t as InterfaceValue>::RANGE)),*]
+        &[$((Kind::$t, <$t as InterfaceValue>::RANGE)),*]
     };
 }
 use kind_ranges;
@@ -167,7 +169,7 @@ pub fn fold_bytes(bytes: &[u8]) -> u64 {
 }
 
 impl InterfaceValue for Image {
-    const KIND: &'static str = "image";
+    const KIND: Kind = Kind::Image;
     const RANGE: &'static str = "data is width x height x 3 bytes; colorA..D are 320x240";
     fn fingerprint(&self) -> u64 {
         fold_bytes(&self.data) ^ ((self.width as u64) << 32 | self.height as u64)
@@ -340,7 +342,7 @@ impl Laser {
 }
 
 impl InterfaceValue for Laser {
-    const KIND: &'static str = "laser";
+    const KIND: Kind = Kind::Laser;
     const RANGE: &'static str = "readings >= 0 mm; resolution >= 0 readings/deg; start in [-360, 360] deg; \
          0 <= min_range <= max_range <= 1e6 mm; mount |x|, |y| <= 1e5 mm, yaw in [-360, 360] deg";
     fn describe(&self) -> String {
@@ -419,7 +421,7 @@ pub struct Sonars {
 }
 
 impl InterfaceValue for Sonars {
-    const KIND: &'static str = "sonars";
+    const KIND: Kind = Kind::Sonars;
     const RANGE: &'static str = "us in [0, 1e6] mm";
     fn describe(&self) -> String {
         let v: Vec<String> = self.us.iter().map(|u| format!("{u:.0}")).collect();
@@ -472,7 +474,7 @@ impl Encoders {
 }
 
 impl InterfaceValue for Encoders {
-    const KIND: &'static str = "encoders";
+    const KIND: Kind = Kind::Encoders;
     const RANGE: &'static str =
         "|x|, |y| <= 1e9 mm (1000 km); |theta| <= 2π rad; cos, sin in [-1, 1]";
     fn describe(&self) -> String {
@@ -528,7 +530,7 @@ pub fn limit(x: f32, lo: f32, hi: f32) -> f32 {
 }
 
 impl InterfaceValue for Motors {
-    const KIND: &'static str = "motors";
+    const KIND: Kind = Kind::Motors;
     const RANGE: &'static str = "|v| <= 10000 mm/s (10 m/s); |w| <= 3600 deg/s (10 turns/s); each driver limits them \
          further to its robot's maxima";
     const ACTUATOR: bool = true;
@@ -558,7 +560,7 @@ pub struct PtEncoders {
 }
 
 impl InterfaceValue for PtEncoders {
-    const KIND: &'static str = "pantiltencoders";
+    const KIND: Kind = Kind::PtEncoders;
     const RANGE: &'static str = "pan_angle, tilt_angle in [-360, 360] deg";
     fn describe(&self) -> String {
         format!(
@@ -607,7 +609,7 @@ impl Default for PtMotors {
 }
 
 impl InterfaceValue for PtMotors {
-    const KIND: &'static str = "pantiltmotors";
+    const KIND: Kind = Kind::PtMotors;
     const RANGE: &'static str = "longitude, latitude finite (each driver limits them); the limits in [-360, 360] deg, \
          min <= max; speeds in [-1e4, 1e4] deg/s";
     const ACTUATOR: bool = true;
@@ -682,7 +684,7 @@ pub struct ZoomEncoders {
 }
 
 impl InterfaceValue for ZoomEncoders {
-    const KIND: &'static str = "zoomencoders";
+    const KIND: Kind = Kind::ZoomEncoders;
     const RANGE: &'static str = "zoom_position finite";
     fn describe(&self) -> String {
         format!("zoom_position={:.2}", self.zoom_position)
@@ -716,7 +718,7 @@ impl Default for ZoomMotors {
 }
 
 impl InterfaceValue for ZoomMotors {
-    const KIND: &'static str = "zoommotors";
+    const KIND: Kind = Kind::ZoomMotors;
     const RANGE: &'static str = "zoom, zoom_speed and the limits finite, min_zoom <= max_zoom";
     const ACTUATOR: bool = true;
     fn describe(&self) -> String {
@@ -761,7 +763,7 @@ pub struct Bumpers {
 }
 
 impl InterfaceValue for Bumpers {
-    const KIND: &'static str = "bumpers";
+    const KIND: Kind = Kind::Bumpers;
     const RANGE: &'static str = "any bytes";
     fn describe(&self) -> String {
         format!("number={} bumpers={:?}", self.bumpers.len(), self.bumpers)
@@ -847,7 +849,7 @@ impl Imu {
 }
 
 impl InterfaceValue for Imu {
-    const KIND: &'static str = "imu";
+    const KIND: Kind = Kind::Imu;
     const RANGE: &'static str = "qx, qy, qz, qw a unit quaternion (length 1 ± 0.01); |wx|, |wy|, |wz| <= 1e3 rad/s; \
          |ax|, |ay|, |az| <= 1e4 m/s²";
     fn describe(&self) -> String {

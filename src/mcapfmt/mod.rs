@@ -58,8 +58,7 @@ use std::{
 use serde::Deserialize;
 use serde_json::Value;
 
-pub use crate::interfaces::KINDS;
-use crate::interfaces::{AnyInterface, Image, Interface, Interfaces, Sample, for_each_kind};
+use crate::interfaces::{AnyInterface, Image, Interface, Interfaces, Kind, Sample, for_each_kind};
 
 /// The metadata key of a channel that names the interface kind.
 pub const KIND_KEY: &str = "jderobot.kind";
@@ -114,8 +113,8 @@ macro_rules! kind_enums {
                 match self { $(Snapshot::$t(s) => s.time,)* }
             }
             /// The interface kind (`AnyInterface::kind`).
-            pub fn kind(&self) -> &'static str {
-                match self { $(Snapshot::$t(_) => $k,)* }
+            pub fn kind(&self) -> Kind {
+                match self { $(Snapshot::$t(_) => Kind::$t,)* }
             }
 
             /// Encodes the sample as its ROS 2 message (CDR); false for a kind without one.
@@ -135,8 +134,7 @@ macro_rules! kind_enums {
             /// The typed interface `name`, or `None` when there is none.
             pub fn find(interfaces: &Interfaces, name: &str) -> Option<Source> {
                 match interfaces.get_any(name).ok()?.kind() {
-                    $($k => Some(Source::$t(interfaces.get(name).ok()?)),)*
-                    _ => None,
+                    $(Kind::$t => Some(Source::$t(interfaces.get(name).ok()?)),)*
                 }
             }
 
@@ -144,12 +142,11 @@ macro_rules! kind_enums {
             pub fn provide(
                 interfaces: &Interfaces,
                 name: &str,
-                kind: &str,
+                kind: Kind,
                 provider: &str,
             ) -> Result<Source, String> {
                 match kind {
-                    $($k => interfaces.provide(name, provider).map(Source::$t).map_err(|e| e.to_string()),)*
-                    other => Err(format!("`{other}` is not an interface kind jderobot knows ({})", KINDS.join(", "))),
+                    $(Kind::$t => interfaces.provide(name, provider).map(Source::$t).map_err(|e| e.to_string()),)*
                 }
             }
 
@@ -216,29 +213,27 @@ macro_rules! kind_enums {
                 }
             }
             /// The interface kind (`AnyInterface::kind`).
-            pub fn kind(&self) -> &'static str {
-                match self { $(Recorded::$t(_) => $k,)* }
+            pub fn kind(&self) -> Kind {
+                match self { $(Recorded::$t(_) => Kind::$t,)* }
             }
             /// A value of kind `kind` from the `jderobot` object of a JSON message.
-            fn from_json(topic: &str, kind: &str, j: &Value) -> Result<Recorded, FormatError> {
+            fn from_json(topic: &str, kind: Kind, j: &Value) -> Result<Recorded, FormatError> {
                 match kind {
-                    $($k => crate::interfaces::$t::deserialize(j)
+                    $(Kind::$t => crate::interfaces::$t::deserialize(j)
                         .map(Recorded::$t)
                         .map_err(|e| bad(topic, format!("`jderobot` is not a {} value: {e}", $k))),)*
-                    other => Err(FormatError::Kind { topic: topic.into(), kind: other.into() }),
                 }
             }
             /// A CDR message of kind `kind` ([`ros2::decode`]): (time ns, value).
             fn from_cdr(
                 topic: &str,
-                kind: &str,
+                kind: Kind,
                 data: &[u8],
                 log_time: u64,
             ) -> Result<(u64, Recorded), FormatError> {
                 match kind {
-                    $($k => ros2::decode::<crate::interfaces::$t>(topic, data, log_time)
+                    $(Kind::$t => ros2::decode::<crate::interfaces::$t>(topic, data, log_time)
                         .map(|(t, v)| (t, Recorded::$t(v))),)*
-                    other => Err(FormatError::Kind { topic: topic.into(), kind: other.into() }),
                 }
             }
         }
@@ -288,7 +283,7 @@ pub enum Profile {
 pub fn add_channel<W: std::io::Write + std::io::Seek>(
     writer: &mut mcap::Writer<W>,
     name: &str,
-    kind: &str,
+    kind: Kind,
     profile: Profile,
 ) -> Result<Option<u16>, mcap::McapError> {
     let mut meta = metadata(kind);
@@ -304,12 +299,25 @@ pub fn add_channel<W: std::io::Write + std::io::Seek>(
                 .add_channel(sid, &ros2::topic(name), "cdr", &meta)
                 .map(Some);
         }
-        (Profile::Foxglove { jpeg: None }, "image") => ("foxglove.RawImage", protobuf::RAW_IMAGE),
-        (Profile::Foxglove { jpeg: Some(_) }, "image") => {
+        (Profile::Foxglove { jpeg: None }, Kind::Image) => {
+            ("foxglove.RawImage", protobuf::RAW_IMAGE)
+        }
+        (Profile::Foxglove { jpeg: Some(_) }, Kind::Image) => {
             ("foxglove.CompressedImage", protobuf::COMPRESSED_IMAGE)
         }
-        (_, "laser") => ("foxglove.LaserScan", protobuf::LASER_SCAN),
-        _ => {
+        (_, Kind::Laser) => ("foxglove.LaserScan", protobuf::LASER_SCAN),
+        (
+            Profile::Foxglove { .. },
+            Kind::Sonars
+            | Kind::Encoders
+            | Kind::Motors
+            | Kind::PtEncoders
+            | Kind::PtMotors
+            | Kind::ZoomEncoders
+            | Kind::ZoomMotors
+            | Kind::Bumpers
+            | Kind::Imu,
+        ) => {
             let (schema_name, text) = json_schema(kind);
             let sid = writer.add_schema(&schema_name, "jsonschema", text.as_bytes())?;
             return writer.add_channel(sid, name, "json", &meta).map(Some);
@@ -379,7 +387,7 @@ pub fn write_sample<W: std::io::Write + std::io::Seek>(
 
 /// The JSON schema (name, schema text) of an interface kind written as JSON:
 /// `foxglove.PoseInFrame` for encoders, `jderobot.KIND` for the rest.
-pub fn json_schema(kind: &str) -> (String, String) {
+pub fn json_schema(kind: Kind) -> (String, String) {
     use serde_json::json;
     let number = json!({"type": "number"});
     let vec3 = json!({"type": "object", "properties": {"x": number, "y": number, "z": number}});
@@ -391,7 +399,7 @@ pub fn json_schema(kind: &str) -> (String, String) {
     let clock =
         json!({"type": "integer", "description": "the interface's clock: the sample's number"});
     let (name, description, mut properties) = match kind {
-        "encoders" => (
+        Kind::Encoders => (
             "foxglove.PoseInFrame".to_string(),
             "Odometry (jderobot encoders: x, y mm, theta rad in jderobot)".to_string(),
             json!({"frame_id": {"type": "string"},
@@ -560,7 +568,7 @@ fn decode_compressed(topic: &str, format: &str, data: &[u8]) -> Result<Recorded,
 }
 
 /// The channel metadata of an interface kind.
-pub fn metadata(kind: &str) -> BTreeMap<String, String> {
+pub fn metadata(kind: Kind) -> BTreeMap<String, String> {
     BTreeMap::from([(KIND_KEY.to_string(), kind.to_string())])
 }
 
@@ -579,7 +587,7 @@ pub fn interface_name(topic: &str, metadata: &BTreeMap<String, String>) -> Strin
 /// schema name (it tells a raw image from a compressed one).
 pub fn decode_message(
     topic: &str,
-    kind: &str,
+    kind: Kind,
     schema: &str,
     encoding: &str,
     sequence: u32,
@@ -589,13 +597,15 @@ pub fn decode_message(
     match encoding {
         "protobuf" => {
             let (time_ns, value) = match (kind, schema) {
-                ("image", "foxglove.RawImage") => {
+                (Kind::Image, "foxglove.RawImage") => {
                     protobuf::decode_image(topic, false, data, log_time)?
                 }
-                ("image", "foxglove.CompressedImage") => {
+                (Kind::Image, "foxglove.CompressedImage") => {
                     protobuf::decode_image(topic, true, data, log_time)?
                 }
-                ("laser", "foxglove.LaserScan") => protobuf::decode_laser(topic, data, log_time)?,
+                (Kind::Laser, "foxglove.LaserScan") => {
+                    protobuf::decode_laser(topic, data, log_time)?
+                }
                 _ => {
                     return Err(bad(
                         topic,
@@ -629,7 +639,7 @@ pub fn decode_message(
 
 /// Decodes an MCAP message of a channel of interface kind `kind` ([`decode_message`]
 /// with the message's channel, sequence and log time).
-pub fn decode_mcap(kind: &str, m: &mcap::Message) -> Result<Decoded, FormatError> {
+pub fn decode_mcap(kind: Kind, m: &mcap::Message) -> Result<Decoded, FormatError> {
     decode_message(
         &m.channel.topic,
         kind,
@@ -643,7 +653,7 @@ pub fn decode_mcap(kind: &str, m: &mcap::Message) -> Result<Decoded, FormatError
 
 /// Decodes a message read by [`reader`] ([`decode_message`] with its channel,
 /// sequence and log time).
-pub fn decode_read(kind: &str, m: &reader::Message<'_>) -> Result<Decoded, FormatError> {
+pub fn decode_read(kind: Kind, m: &reader::Message<'_>) -> Result<Decoded, FormatError> {
     decode_message(
         &m.channel.topic,
         kind,
@@ -655,19 +665,28 @@ pub fn decode_read(kind: &str, m: &reader::Message<'_>) -> Result<Decoded, Forma
     )
 }
 
-/// The interface kind of a channel: its metadata, or what its schema name says.
-pub fn channel_kind(metadata: &BTreeMap<String, String>, schema: Option<&str>) -> Option<String> {
+/// The interface kind a channel names, as written: its metadata, or what its
+/// schema name says (`jderobot info` shows it even when it is no kind of ours).
+pub fn channel_kind_name(
+    metadata: &BTreeMap<String, String>,
+    schema: Option<&str>,
+) -> Option<String> {
     if let Some(k) = metadata.get(KIND_KEY) {
         return Some(k.clone());
     }
     match schema? {
-        "foxglove.RawImage" | "foxglove.CompressedImage" => Some("image".into()),
-        "foxglove.LaserScan" => Some("laser".into()),
-        "foxglove.PoseInFrame" => Some("encoders".into()),
+        "foxglove.RawImage" | "foxglove.CompressedImage" => Some(Kind::Image.to_string()),
+        "foxglove.LaserScan" => Some(Kind::Laser.to_string()),
+        "foxglove.PoseInFrame" => Some(Kind::Encoders.to_string()),
         s => ros2::kind_of(s)
-            .map(str::to_string)
+            .map(|k| k.to_string())
             .or_else(|| s.strip_prefix("jderobot.").map(str::to_string)),
     }
+}
+
+/// The interface kind of a channel ([`channel_kind_name`]), if it is one of ours.
+pub fn channel_kind(metadata: &BTreeMap<String, String>, schema: Option<&str>) -> Option<Kind> {
+    Kind::parse(&channel_kind_name(metadata, schema)?)
 }
 
 /// A decoded message: the interface's clock, its wall time and its value.
@@ -691,7 +710,7 @@ fn num(v: &Value, key: &str, topic: &str) -> Result<f64, FormatError> {
 
 /// Decodes a JSON message (encoders and the kinds without a Foxglove schema) of
 /// interface kind `kind` on channel `topic`.
-pub fn decode(topic: &str, kind: &str, data: &[u8]) -> Result<Decoded, FormatError> {
+pub fn decode(topic: &str, kind: Kind, data: &[u8]) -> Result<Decoded, FormatError> {
     let v: Value = serde_json::from_slice(data)
         .map_err(|e| bad(topic, format!("the message is not JSON: {e}")))?;
     let ts = get(&v, "timestamp", topic)?;
@@ -699,7 +718,7 @@ pub fn decode(topic: &str, kind: &str, data: &[u8]) -> Result<Decoded, FormatErr
     let clock = get(&v, "clock", topic)?
         .as_u64()
         .ok_or_else(|| bad(topic, "`clock` is not a whole number"))?;
-    if kind == "image" || kind == "laser" {
+    if matches!(kind, Kind::Image | Kind::Laser) {
         return Err(bad(
             topic,
             format!(
@@ -771,7 +790,7 @@ mod tests {
             }),
         ];
         let time = from_nanos(1_700_000_000_123_456_789);
-        let cases: Vec<(Snapshot, Recorded, &str)> = values
+        let cases: Vec<(Snapshot, Recorded, Kind)> = values
             .into_iter()
             .zip(3..)
             .map(|(v, clock)| (v.clone().sample(clock, time), v.clone(), v.kind()))
@@ -784,14 +803,14 @@ mod tests {
         let mut buf = Vec::new();
         for (i, (snap, _, kind)) in cases.iter().enumerate() {
             let name = format!("x{i}");
-            let id = add_channel(&mut w, &name, kind, profile).unwrap().unwrap();
+            let id = add_channel(&mut w, &name, *kind, profile).unwrap().unwrap();
             assert!(write_sample(&mut w, profile, id, &name, snap, &mut buf).unwrap());
         }
         w.finish().unwrap();
         let file = w.into_inner().into_inner();
         let mut n = 0;
         for (m, (snap, value, kind)) in mcap::MessageStream::new(&file).unwrap().zip(&cases) {
-            let d = decode_mcap(kind, &m.unwrap()).unwrap();
+            let d = decode_mcap(*kind, &m.unwrap()).unwrap();
             assert_eq!(&d.value, value);
             assert_eq!(d.clock, snap.clock());
             assert_eq!(d.time_ns, 1_700_000_000_123_456_789);

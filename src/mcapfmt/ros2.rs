@@ -11,8 +11,8 @@ use std::time::SystemTime;
 
 use super::{FormatError, bad, nanos};
 use crate::interfaces::{
-    Bumpers, Encoders, Image, Imu, InterfaceValue, KINDS, Laser, Motors, PtEncoders, PtMotors,
-    Sample, Sonars, ZoomEncoders, ZoomMotors, by_kind,
+    Bumpers, Encoders, Image, Imu, InterfaceValue, Kind, Laser, Motors, PtEncoders, PtMotors,
+    Sample, Sonars, ZoomEncoders, ZoomMotors, with_kind,
 };
 
 const SEP: &str =
@@ -47,40 +47,40 @@ pub trait Ros2: InterfaceValue {
     fn from_cdr(r: &mut Reader, _log_time: u64) -> Result<(u64, Self), FormatError> {
         Err(FormatError::Kind {
             topic: r.topic.into(),
-            kind: Self::KIND.into(),
+            kind: Self::KIND.to_string(),
         })
     }
 }
 
 /// The ROS 2 message of interface kind `kind`, if it has one.
-pub fn message(kind: &str) -> Option<&'static Message> {
+pub fn message(kind: Kind) -> Option<&'static Message> {
     fn of<T: Ros2>() -> Option<&'static Message> {
         T::MESSAGE
     }
-    by_kind!(kind, of(), None)
+    with_kind!(kind, of())
 }
 
 /// The ROS 2 type and its ros2msg definition (with dependencies) for a kind, or
 /// `None` for kinds the profile does not carry.
-pub fn schema(kind: &str) -> Option<(&'static str, String)> {
+pub fn schema(kind: Kind) -> Option<(&'static str, String)> {
     message(kind).map(|m| (m.name, (m.definition)()))
 }
 
 /// The kinds with a ROS 2 message (what the profile carries).
-pub fn kinds() -> Vec<&'static str> {
-    KINDS
+pub fn kinds() -> Vec<Kind> {
+    Kind::ALL
         .iter()
         .copied()
-        .filter(|k| message(k).is_some())
+        .filter(|&k| message(k).is_some())
         .collect()
 }
 
 /// The interface kind of a ROS 2 type this profile reads.
-pub fn kind_of(schema: &str) -> Option<&'static str> {
-    KINDS
+pub fn kind_of(schema: &str) -> Option<Kind> {
+    Kind::ALL
         .iter()
-        .find(|k| message(k).is_some_and(|m| m.name == schema))
         .copied()
+        .find(|&k| message(k).is_some_and(|m| m.name == schema))
 }
 
 /// A ROS topic for an interface name: `laser.robot2` → `/laser/robot2`.
@@ -194,7 +194,7 @@ pub fn decode<T: Ros2>(topic: &str, data: &[u8], log_time: u64) -> Result<(u64, 
     if T::MESSAGE.is_none() {
         return Err(FormatError::Kind {
             topic: topic.into(),
-            kind: T::KIND.into(),
+            kind: T::KIND.to_string(),
         });
     }
     if data.len() < 4 || data[..2] != [0, 1] {
@@ -763,7 +763,7 @@ mod tests {
             },
             &mut b
         ));
-        assert_eq!(kind_of("sensor_msgs/msg/Imu"), Some("imu"));
+        assert_eq!(kind_of("sensor_msgs/msg/Imu"), Some(Kind::Imu));
         assert_eq!(schema("bumpers"), None);
     }
 }

@@ -4,7 +4,7 @@
 
 use std::{collections::BTreeMap, fmt::Write as _, io::Read as _, ops::ControlFlow, path::Path};
 
-use super::{channel_kind, interface_name, reader::read_messages};
+use super::{channel_kind_name, interface_name, reader::read_messages};
 
 /// One channel of a file.
 #[derive(Clone, Debug, Default)]
@@ -119,7 +119,7 @@ impl Summary {
                 ChannelSummary {
                     topic: m.channel.topic.clone(),
                     name: interface_name(&m.channel.topic, &m.channel.metadata),
-                    kind: channel_kind(&m.channel.metadata, schema.as_deref()),
+                    kind: channel_kind_name(&m.channel.metadata, schema.as_deref()),
                     schema: schema.unwrap_or_default(),
                     encoding: m.channel.message_encoding.clone(),
                     first_ns: m.log_time,
