@@ -12,7 +12,9 @@
 //! This schema, `wanderer`, reads the laser and drives the robot: forward when the
 //! way ahead is clear, turning away from the nearer side when it is not.
 //!
-//! Its lines are declared once ([`LINES`]): `jderobot check` validates them and
+//! Its lines are declared once (`jderobot::declare_lines!`: each field of the struct
+//! that receives them beside its declaration; the struct derives serde's
+//! `Deserialize`, so your crate depends on `serde`): `jderobot check` validates them and
 //! `cargo run --example own_schema -- help wanderer` prints them, with their units,
 //! ranges and defaults. A value out of range is an error at its file:line.
 
@@ -27,24 +29,18 @@ use jderobot::{
     interfaces::{Laser, Motors},
 };
 
-/// The lines `wanderer` takes: key, arguments (type, unit, range), default, help.
-const LINES: &[Setting] = &[
-    Setting::new(
-        "clearance",
-        "the closest an obstacle ahead may be before the robot turns",
-        &[float("MM", "mm", 1.0, 10_000.0)],
-    )
-    .default("700"),
-    CYCLE.default("100"),
-];
-
-/// The values of [`LINES`]: one field per line.
-#[derive(serde::Deserialize)]
-struct Lines {
-    clearance: f32,
-    cycle: u64,
+jderobot::declare_lines! {
+    /// The lines `wanderer` takes: key, arguments (type, unit, range), default, help.
+    struct Lines {
+        clearance: f32 = Setting::new(
+            "clearance",
+            "the closest an obstacle ahead may be before the robot turns",
+            &[float("MM", "mm", 1.0, 10_000.0)],
+        )
+        .default("700"),
+        cycle: u64 = CYCLE.default("100"),
+    }
 }
-
 struct Wanderer {
     /// Closest allowed obstacle ahead, mm.
     clearance: f32,
@@ -94,7 +90,7 @@ impl Schema for Wanderer {
 }
 
 fn create(conf: &ComponentConf, _rt: &Runtime) -> anyhow::Result<Box<dyn Schema>> {
-    let lines: Lines = conf.settings(LINES)?;
+    let lines: Lines = conf.read()?;
     Ok(Box::new(Wanderer {
         clearance: lines.clearance,
         cycle: Duration::from_millis(lines.cycle),
@@ -106,7 +102,7 @@ jderobot::register_schema!(
     "example of a user's own schema: wanders, turning away from obstacles",
     create,
     "",
-    lines = LINES
+    lines = Lines
 );
 
 fn main() -> std::process::ExitCode {

@@ -244,81 +244,68 @@ pub fn run_filter(img: &Image, ranges: &Ranges, toblack: bool) -> (Image, usize,
 
 const TAU64: f64 = std::f64::consts::TAU;
 
-/// colortuner's lines, declared once (`jderobot help colortuner`).
-const LINES: &[Setting] = &[
-    imagesource::IMAGE,
-    Setting::new(
-        "space",
-        "the colour space it filters in",
-        &[choice("SPACE", &["hsv", "rgb", "yuv"])],
-    )
-    .default("hsv"),
-    Setting::new(
-        "hsv",
-        "the HSV ranges: hue wraps through 0 when HMIN > HMAX",
-        &[
-            float("HMIN", "radians", 0.0, TAU64),
-            float("HMAX", "radians", 0.0, TAU64),
-            float("SMIN", "", 0.0, 1.0),
-            float("SMAX", "", 0.0, 1.0),
-            float("VMIN", "", 0.0, 255.0),
-            float("VMAX", "", 0.0, 255.0),
-        ],
-    )
-    .default("0 1 0.2 1 0 255"),
-    Setting::new(
-        "rgb",
-        "the RGB ranges",
-        &[
-            float("RMIN", "", 0.0, 255.0),
-            float("RMAX", "", 0.0, 255.0),
-            float("GMIN", "", 0.0, 255.0),
-            float("GMAX", "", 0.0, 255.0),
-            float("BMIN", "", 0.0, 255.0),
-            float("BMAX", "", 0.0, 255.0),
-        ],
-    )
-    .default("0 255 0 255 0 255"),
-    Setting::new(
-        "yuv",
-        "the YUV ranges",
-        &[
-            float("YMIN", "", 0.0, 1.0),
-            float("YMAX", "", 0.0, 1.0),
-            float("UMIN", "", -0.436, 0.436),
-            float("UMAX", "", -0.436, 0.436),
-            float("VMIN", "", -0.615, 0.615),
-            float("VMAX", "", -0.615, 0.615),
-        ],
-    )
-    .default("0 1 -0.436 0.436 -0.615 0.615"),
-    imagesource::TOBLACK,
-    Setting::new(
-        "threshold",
-        "the pixels a bin of the colour plane needs to be drawn",
-        &[int("PIXELS", "", 1, 1_000_000)],
-    )
-    .default("5"),
-    imagesource::OUTPUT,
-    CYCLE.default("100"),
-];
-
-/// The values of [`LINES`].
-#[derive(serde::Deserialize)]
-struct Lines {
-    image: String,
-    space: String,
-    hsv: [f32; 6],
-    rgb: [f32; 6],
-    yuv: [f32; 6],
-    toblack: bool,
-    threshold: u32,
-    output: Option<String>,
-    cycle: u64,
+crate::declare_lines! {
+    /// colortuner's lines, declared once (`jderobot help colortuner`).
+    struct Lines {
+        image: String = imagesource::IMAGE,
+        space: String = Setting::new(
+            "space",
+            "the colour space it filters in",
+            &[choice("SPACE", &["hsv", "rgb", "yuv"])],
+        )
+        .default("hsv"),
+        hsv: [f32; 6] = Setting::new(
+            "hsv",
+            "the HSV ranges: hue wraps through 0 when HMIN > HMAX",
+            &[
+                float("HMIN", "radians", 0.0, TAU64),
+                float("HMAX", "radians", 0.0, TAU64),
+                float("SMIN", "", 0.0, 1.0),
+                float("SMAX", "", 0.0, 1.0),
+                float("VMIN", "", 0.0, 255.0),
+                float("VMAX", "", 0.0, 255.0),
+            ],
+        )
+        .default("0 1 0.2 1 0 255"),
+        rgb: [f32; 6] = Setting::new(
+            "rgb",
+            "the RGB ranges",
+            &[
+                float("RMIN", "", 0.0, 255.0),
+                float("RMAX", "", 0.0, 255.0),
+                float("GMIN", "", 0.0, 255.0),
+                float("GMAX", "", 0.0, 255.0),
+                float("BMIN", "", 0.0, 255.0),
+                float("BMAX", "", 0.0, 255.0),
+            ],
+        )
+        .default("0 255 0 255 0 255"),
+        yuv: [f32; 6] = Setting::new(
+            "yuv",
+            "the YUV ranges",
+            &[
+                float("YMIN", "", 0.0, 1.0),
+                float("YMAX", "", 0.0, 1.0),
+                float("UMIN", "", -0.436, 0.436),
+                float("UMAX", "", -0.436, 0.436),
+                float("VMIN", "", -0.615, 0.615),
+                float("VMAX", "", -0.615, 0.615),
+            ],
+        )
+        .default("0 1 -0.436 0.436 -0.615 0.615"),
+        toblack: bool = imagesource::TOBLACK,
+        threshold: u32 = Setting::new(
+            "threshold",
+            "the pixels a bin of the colour plane needs to be drawn",
+            &[int("PIXELS", "", 1, 1_000_000)],
+        )
+        .default("5"),
+        output: Option<String> = imagesource::OUTPUT,
+        cycle: u64 = CYCLE.default("100"),
+    }
 }
-
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>> {
-    let l: Lines = conf.settings(LINES)?;
+    let l: Lines = conf.read()?;
     let r = Ranges {
         space: Space::ALL
             .into_iter()
@@ -347,7 +334,7 @@ crate::register_schema!(
     "colortuner",
     "colour filters in HSV, RGB or YUV: sliders, click to pick, colour plane with a draggable box",
     create,
-    lines = LINES
+    lines = Lines
 );
 
 #[cfg(feature = "gui")]

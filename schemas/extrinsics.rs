@@ -206,28 +206,20 @@ impl Work for ExtrinsicsWork {
     }
 }
 
-/// extrinsics' lines, declared once (`jderobot help extrinsics`).
-const LINES: &[Setting] = &[
-    Setting::new(
-        "world",
-        "required: the world file (4.3's format) naming cameraINfile and cameraOUTfile \
-         (relative to the world file, or to the current directory as 4.3)",
-        &[path("FILE")],
-    ),
-    imagesource::IMAGE,
-    imagesource::OUTPUT.help("publish the drawn image on this new image interface"),
-    CYCLE.default("100"),
-];
-
-/// The values of [`LINES`].
-#[derive(serde::Deserialize)]
-struct Lines {
-    world: Option<PathBuf>,
-    image: String,
-    output: Option<String>,
-    cycle: u64,
+crate::declare_lines! {
+    /// extrinsics' lines, declared once (`jderobot help extrinsics`).
+    struct Lines {
+        world: Option<PathBuf> = Setting::new(
+            "world",
+            "required: the world file (4.3's format) naming cameraINfile and cameraOUTfile \
+             (relative to the world file, or to the current directory as 4.3)",
+            &[path("FILE")],
+        ),
+        image: String = imagesource::IMAGE,
+        output: Option<String> = imagesource::OUTPUT.help("publish the drawn image on this new image interface"),
+        cycle: u64 = CYCLE.default("100"),
+    }
 }
-
 /// A camera file named in a world file: relative to the world file's directory if
 /// it exists there, else as given (the current directory, as 4.3).
 fn resolve(world_file: &Path, p: &Path) -> PathBuf {
@@ -243,7 +235,7 @@ fn resolve(world_file: &Path, p: &Path) -> PathBuf {
 }
 
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>> {
-    let l: Lines = conf.settings(LINES)?;
+    let l: Lines = conf.read()?;
     let (Some(_), Some(wl)) = (l.world, conf.line("world")) else {
         anyhow::bail!(
             "{}: schema {}: a `world FILE` line is required (a world file naming cameraINfile \
@@ -298,7 +290,7 @@ crate::register_schema!(
     "extrinsics",
     "fit a progeo camera by eye: world lines over the live image, sliders, save/reload/undo",
     create,
-    lines = LINES
+    lines = Lines
 );
 
 #[cfg(feature = "gui")]

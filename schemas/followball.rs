@@ -331,67 +331,56 @@ impl Schema for FollowBall {
     }
 }
 
-/// followball's lines, declared once (`jderobot help followball`).
-const LINES: &[Setting] = &[
-    settings::uses(
-        "image",
-        "the camera image it filters (colorA..D, varcolorA..D)",
-    )
-    .default("colorA"),
-    settings::uses("pantiltencoders", "the head's angles"),
-    settings::uses("pantiltmotors", "the head it drives"),
-    // The ball's colour: the HSV range lines the tuners share.
-    imagesource::HMIN.default("6.0"),
-    imagesource::HMAX.default("0.35"),
-    imagesource::SMIN.default("0.5"),
-    imagesource::SMAX.default("1"),
-    imagesource::VMIN.default("60"),
-    imagesource::VMAX.default("255"),
-    Setting::new(
-        "deadband",
-        "no motion while the ball is this close to the centre (at 320 columns)",
-        &[float("PX", "px", 1.0, 160.0)],
-    )
-    .default("40"),
-    Setting::new(
-        "min_pixels",
-        "fewer passing pixels than this is no ball (at 320x240)",
-        &[int("N", "px", 0, 76_800)],
-    )
-    .default("400"),
-    CYCLE.default("30"),
-    Setting::new(
-        "stop",
-        "how the head stops: go where it is, or speed 0 (the PTU, as 4.3)",
-        &[choice("HOW", &["position", "speed0"])],
-    )
-    .default("position"),
-    Setting::new(
-        "invert",
-        "an axis whose positive direction is the other way (the EVI's pan)",
-        &[choice("AXIS", &["pan", "tilt"])],
-    )
-    .repeats(),
-];
-
-/// The values of [`LINES`].
-#[derive(serde::Deserialize)]
-struct Lines {
-    image: String,
-    pantiltencoders: String,
-    pantiltmotors: String,
-    #[serde(deserialize_with = "imagesource::hsv_lines")]
-    hsv: HsvRange,
-    deadband: f32,
-    min_pixels: u32,
-    cycle: u64,
-    stop: String,
-    invert: Vec<String>,
+crate::declare_lines! {
+    /// followball's lines, declared once (`jderobot help followball`).
+    struct Lines {
+        image: String = settings::uses(
+            "image",
+            "the camera image it filters (colorA..D, varcolorA..D)",
+        )
+        .default("colorA"),
+        pantiltencoders: String = settings::uses("pantiltencoders", "the head's angles"),
+        pantiltmotors: String = settings::uses("pantiltmotors", "the head it drives"),
+        #[serde(deserialize_with = "imagesource::hsv_lines")]
+        hsv: HsvRange = [
+            // The ball's colour: the HSV range lines the tuners share.
+        imagesource::HMIN.default("6.0"),
+            imagesource::HMAX.default("0.35"),
+            imagesource::SMIN.default("0.5"),
+            imagesource::SMAX.default("1"),
+            imagesource::VMIN.default("60"),
+            imagesource::VMAX.default("255"),
+        ],
+        deadband: f32 = Setting::new(
+            "deadband",
+            "no motion while the ball is this close to the centre (at 320 columns)",
+            &[float("PX", "px", 1.0, 160.0)],
+        )
+        .default("40"),
+        min_pixels: u32 = Setting::new(
+            "min_pixels",
+            "fewer passing pixels than this is no ball (at 320x240)",
+            &[int("N", "px", 0, 76_800)],
+        )
+        .default("400"),
+        cycle: u64 = CYCLE.default("30"),
+        stop: String = Setting::new(
+            "stop",
+            "how the head stops: go where it is, or speed 0 (the PTU, as 4.3)",
+            &[choice("HOW", &["position", "speed0"])],
+        )
+        .default("position"),
+        invert: Vec<String> = Setting::new(
+            "invert",
+            "an axis whose positive direction is the other way (the EVI's pan)",
+            &[choice("AXIS", &["pan", "tilt"])],
+        )
+        .repeats(),
+    }
 }
-
 /// Parses the conf: settings, interface names, cycle.
 pub fn parse(conf: &ComponentConf) -> anyhow::Result<(Settings, [String; 3], Duration)> {
-    let l: Lines = conf.settings(LINES)?;
+    let l: Lines = conf.read()?;
     if crate::interfaces::family(&l.image) != Some(Image::KIND) {
         let at = conf
             .line("image")
@@ -463,7 +452,7 @@ crate::register_schema!(
     "followball",
     "keeps a coloured ball centred with a pan-tilt camera (HSV filter, speed control)",
     create,
-    lines = LINES
+    lines = Lines
 );
 
 #[cfg(feature = "gui")]

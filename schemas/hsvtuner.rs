@@ -34,10 +34,7 @@
 
 use crate::{
     colorspaces::{HsvRange, Lookup, hsv_mask, hsv_table},
-    conf::{
-        ComponentConf,
-        settings::{CYCLE, Setting},
-    },
+    conf::{ComponentConf, settings::CYCLE},
     imagesource::{self, ColourTuner, RangeFilter},
     interfaces::Image,
     runtime::{Runtime, Schema},
@@ -101,33 +98,26 @@ pub fn filter(img: &Image, ranges: &HsvRange, toblack: bool) -> (Image, usize, V
     (out, passed, hist)
 }
 
-/// hsvtuner's lines, declared once (`jderobot help hsvtuner`); defaults are 4.3's.
-const LINES: &[Setting] = &[
-    imagesource::IMAGE,
-    imagesource::HMIN.default("0"),
-    imagesource::HMAX.default("1"),
-    imagesource::SMIN.default("0.2"),
-    imagesource::SMAX.default("0.4"),
-    imagesource::VMIN.default("0"),
-    imagesource::VMAX.default("255"),
-    imagesource::TOBLACK,
-    imagesource::OUTPUT,
-    CYCLE.default("100"),
-];
-
-/// The values of [`LINES`].
-#[derive(serde::Deserialize)]
-struct Lines {
-    image: String,
-    #[serde(deserialize_with = "imagesource::hsv_lines")]
-    hsv: HsvRange,
-    toblack: bool,
-    output: Option<String>,
-    cycle: u64,
+crate::declare_lines! {
+    /// hsvtuner's lines, declared once (`jderobot help hsvtuner`); defaults are 4.3's.
+    struct Lines {
+        image: String = imagesource::IMAGE,
+        #[serde(deserialize_with = "imagesource::hsv_lines")]
+        hsv: HsvRange = [
+            imagesource::HMIN.default("0"),
+            imagesource::HMAX.default("1"),
+            imagesource::SMIN.default("0.2"),
+            imagesource::SMAX.default("0.4"),
+            imagesource::VMIN.default("0"),
+            imagesource::VMAX.default("255"),
+        ],
+        toblack: bool = imagesource::TOBLACK,
+        output: Option<String> = imagesource::OUTPUT,
+        cycle: u64 = CYCLE.default("100"),
+    }
 }
-
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>> {
-    let l: Lines = conf.settings(LINES)?;
+    let l: Lines = conf.read()?;
     let lines = imagesource::TunerLines {
         image: &l.image,
         output: l.output.as_deref(),
@@ -147,7 +137,7 @@ crate::register_schema!(
     "hsvtuner",
     "HSV range tuning on a live image: sliders, H-S cheese map, filtered view, conf lines",
     create,
-    lines = LINES
+    lines = Lines
 );
 
 /// The H–S "cheese" geometry: hue as the angle (counter-clockwise from the right),

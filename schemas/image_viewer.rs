@@ -157,34 +157,27 @@ pub fn save_png(image: &Image, path: &Path) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// image_viewer's lines, declared once (`jderobot help image_viewer`).
-const LINES: &[Setting] = &[
-    Setting::new(
-        "images",
-        "up to 8 image interfaces to show (colorA..D, varcolorA..D); default: every image \
-         interface the run provides when the schema is loaded",
-        &[rest("INTERFACE")],
-    ),
-    CYCLE
-        .default("100")
-        .help("the period between statistics updates"),
-    Setting::new(
-        "save_dir",
-        "where the panel's Save button writes NAME-CLOCK.png (default: the current directory)",
-        &[path("DIRECTORY")],
-    ),
-];
-
-/// The values of [`LINES`].
-#[derive(serde::Deserialize)]
-struct Lines {
-    images: Option<Vec<String>>,
-    cycle: u64,
-    save_dir: Option<PathBuf>,
+crate::declare_lines! {
+    /// image_viewer's lines, declared once (`jderobot help image_viewer`).
+    struct Lines {
+        images: Option<Vec<String>> = Setting::new(
+            "images",
+            "up to 8 image interfaces to show (colorA..D, varcolorA..D); default: every image \
+             interface the run provides when the schema is loaded",
+            &[rest("INTERFACE")],
+        ),
+        cycle: u64 = CYCLE
+            .default("100")
+            .help("the period between statistics updates"),
+        save_dir: Option<PathBuf> = Setting::new(
+            "save_dir",
+            "where the panel's Save button writes NAME-CLOCK.png (default: the current directory)",
+            &[path("DIRECTORY")],
+        ),
+    }
 }
-
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>> {
-    let l: Lines = conf.settings(LINES)?;
+    let l: Lines = conf.read()?;
     let images = match l.images {
         Some(names) if names.len() > 8 => {
             return Err(imagesource::error_at(
@@ -234,7 +227,7 @@ crate::register_schema!(
     "image_viewer",
     "every image interface side by side: size, fps, clock, age, pixel BGR/HSV, save PNG",
     create,
-    lines = LINES
+    lines = Lines
 );
 
 #[cfg(feature = "gui")]

@@ -205,51 +205,41 @@ const fn px(name: &'static str) -> Arg {
     float(name, "px", -100_000.0, 100_000.0)
 }
 
-/// imagerectifier's lines, declared once (`jderobot help imagerectifier`).
-const LINES: &[Setting] = &[
-    imagesource::IMAGE,
-    Setting::new(
-        "points",
-        "the 4 input points, in order: top-left, top-right, bottom-right, bottom-left \
-         (with `rectangle`, the homography is solved at load)",
-        &[
-            px("X1"),
-            px("Y1"),
-            px("X2"),
-            px("Y2"),
-            px("X3"),
-            px("Y3"),
-            px("X4"),
-            px("Y4"),
-        ],
-    ),
-    Setting::new(
-        "rectangle",
-        "the output rectangle's opposite corners",
-        &[px("X1"), px("Y1"), px("X2"), px("Y2")],
-    ),
-    Setting::new(
-        "save",
-        "where Save writes the 8 numbers of the homography",
-        &[path("FILE")],
-    ),
-    imagesource::OUTPUT.help("publish the rectified image on this new image interface"),
-    CYCLE.default("100"),
-];
-
-/// The values of [`LINES`].
-#[derive(serde::Deserialize)]
-struct Lines {
-    image: String,
-    points: Option<[f64; 8]>,
-    rectangle: Option<[f64; 4]>,
-    save: Option<PathBuf>,
-    output: Option<String>,
-    cycle: u64,
+crate::declare_lines! {
+    /// imagerectifier's lines, declared once (`jderobot help imagerectifier`).
+    struct Lines {
+        image: String = imagesource::IMAGE,
+        points: Option<[f64; 8]> = Setting::new(
+            "points",
+            "the 4 input points, in order: top-left, top-right, bottom-right, bottom-left \
+             (with `rectangle`, the homography is solved at load)",
+            &[
+                px("X1"),
+                px("Y1"),
+                px("X2"),
+                px("Y2"),
+                px("X3"),
+                px("Y3"),
+                px("X4"),
+                px("Y4"),
+            ],
+        ),
+        rectangle: Option<[f64; 4]> = Setting::new(
+            "rectangle",
+            "the output rectangle's opposite corners",
+            &[px("X1"), px("Y1"), px("X2"), px("Y2")],
+        ),
+        save: Option<PathBuf> = Setting::new(
+            "save",
+            "where Save writes the 8 numbers of the homography",
+            &[path("FILE")],
+        ),
+        output: Option<String> = imagesource::OUTPUT.help("publish the rectified image on this new image interface"),
+        cycle: u64 = CYCLE.default("100"),
+    }
 }
-
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>> {
-    let l: Lines = conf.settings(LINES)?;
+    let l: Lines = conf.read()?;
     let mut points = Points::default();
     if let Some(v) = l.points {
         points.src = v.chunks(2).map(|p| (p[0], p[1])).collect();
@@ -294,7 +284,7 @@ crate::register_schema!(
     "imagerectifier",
     "click 4 points and a rectangle: the homography is solved and the live image rectified",
     create,
-    lines = LINES
+    lines = Lines
 );
 
 #[cfg(feature = "gui")]

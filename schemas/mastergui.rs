@@ -28,10 +28,7 @@ use egui::{Color32, RichText, WidgetInfo};
 use parking_lot::Mutex;
 
 use crate::{
-    conf::{
-        ComponentConf,
-        settings::{CYCLE, Setting},
-    },
+    conf::{ComponentConf, settings::CYCLE},
     runtime::Panel,
     runtime::{Context, Runtime, Schema, State},
     widgets::TimePlot,
@@ -221,7 +218,7 @@ impl MasterPanel {
                                 .on_hover_text(why),
                             None => ui.label(i.name()).on_hover_text(i.describe()),
                         };
-                        ui.label(i.kind());
+                        ui.label(i.kind().name());
                         ui.label(i.clock().to_string());
                         ui.label(format!("{:.1}", i.rate()));
                         ui.label(i.users().to_string());
@@ -282,17 +279,14 @@ impl Panel for MasterPanel {
     }
 }
 
-/// mastergui's lines, declared once (`jderobot help mastergui`).
-const LINES: &[Setting] = &[CYCLE.default("100")];
-
-/// The values of [`LINES`].
-#[derive(serde::Deserialize)]
-struct Lines {
-    cycle: u64,
+crate::declare_lines! {
+    /// mastergui's lines, declared once (`jderobot help mastergui`).
+    struct Lines {
+        cycle: u64 = CYCLE.default("100"),
+    }
 }
-
 fn create(conf: &ComponentConf, _rt: &Runtime) -> anyhow::Result<Box<dyn Schema>> {
-    let lines: Lines = conf.settings(LINES)?;
+    let lines: Lines = conf.read()?;
     Ok(Box::new(MasterGui {
         cycle: Duration::from_millis(lines.cycle),
         history: Arc::new(Mutex::new(TimePlot::new("mastergui_ips", 60.0))),
@@ -304,5 +298,5 @@ crate::register_schema!(
     "mastergui",
     "the control panel: every schema's state, ips, run/stop and show/hide; every driver's interfaces",
     create,
-    lines = LINES
+    lines = Lines
 );

@@ -16,10 +16,7 @@
 use std::time::Duration;
 
 use crate::{
-    conf::{
-        ComponentConf,
-        settings::{CYCLE, Setting},
-    },
+    conf::{ComponentConf, settings::CYCLE},
     runtime::{Context, Runtime, Schema},
 };
 
@@ -38,17 +35,14 @@ impl Schema for MySchema {
     }
 }
 
-/// myschema's lines, declared once (`jderobot help myschema`).
-const LINES: &[Setting] = &[CYCLE.default("150")];
-
-/// The values of [`LINES`].
-#[derive(serde::Deserialize)]
-struct Lines {
-    cycle: u64,
+crate::declare_lines! {
+    /// myschema's lines, declared once (`jderobot help myschema`).
+    struct Lines {
+        cycle: u64 = CYCLE.default("150"),
+    }
 }
-
 fn create(conf: &ComponentConf, _rt: &Runtime) -> anyhow::Result<Box<dyn Schema>> {
-    let lines: Lines = conf.settings(LINES)?;
+    let lines: Lines = conf.read()?;
     Ok(Box::new(MySchema {
         cycle: Duration::from_millis(lines.cycle),
     }))
@@ -58,5 +52,5 @@ crate::register_schema!(
     "myschema",
     "the seed's hello world: prints -->Hello world! each cycle",
     create,
-    lines = LINES
+    lines = Lines
 );

@@ -34,48 +34,35 @@ use std::sync::Arc;
 use crate::{
     conf::{
         ComponentConf,
-        settings::{self, CYCLE, Setting},
+        settings::{self, CYCLE},
     },
     interfaces::{Image, Interface, PtEncoders, PtMotors},
     operator::{self, CommandLines, Operator},
     runtime::{Runtime, Schema},
 };
 
-/// naooperator's lines, declared once (`jderobot help naooperator`).
-const LINES: &[Setting] = &[
-    operator::BASE
-        .key("walk")
-        .help("the initial walk command (limited to max_v and max_w)"),
-    operator::HEAD
-        .key("head")
-        .help("the initial head command (the robot clamps it to its limits)"),
-    operator::MAX_V,
-    operator::MAX_W,
-    CYCLE.default("100"),
-    settings::uses("motors", "the interface it walks the robot with"),
-    settings::uses("pantiltmotors", "the head it points (none: no head)"),
-    settings::uses("pantiltencoders", "the head angles it shows (none: none)"),
-    settings::uses(
-        "camera",
-        "the image it shows (4.3.1 used varcolorX; none: none)",
-    )
-    .default("varcolorA"),
-];
-
-/// The values of [`LINES`].
-#[derive(serde::Deserialize)]
-struct Lines {
-    walk: (f32, f32),
-    head: (f32, f32),
-    max_v: f32,
-    max_w: f32,
-    cycle: u64,
-    motors: String,
-    pantiltmotors: String,
-    pantiltencoders: String,
-    camera: String,
+crate::declare_lines! {
+    /// naooperator's lines, declared once (`jderobot help naooperator`).
+    struct Lines {
+        walk: (f32, f32) = operator::BASE
+            .key("walk")
+            .help("the initial walk command (limited to max_v and max_w)"),
+        head: (f32, f32) = operator::HEAD
+            .key("head")
+            .help("the initial head command (the robot clamps it to its limits)"),
+        max_v: f32 = operator::MAX_V,
+        max_w: f32 = operator::MAX_W,
+        cycle: u64 = CYCLE.default("100"),
+        motors: String = settings::uses("motors", "the interface it walks the robot with"),
+        pantiltmotors: String = settings::uses("pantiltmotors", "the head it points (none: no head)"),
+        pantiltencoders: String = settings::uses("pantiltencoders", "the head angles it shows (none: none)"),
+        camera: String = settings::uses(
+            "camera",
+            "the image it shows (4.3.1 used varcolorX; none: none)",
+        )
+        .default("varcolorA"),
+    }
 }
-
 /// The interfaces it drives and watches.
 #[derive(Clone)]
 pub struct Devices {
@@ -86,7 +73,7 @@ pub struct Devices {
 }
 
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>> {
-    let l: Lines = conf.settings(LINES)?;
+    let l: Lines = conf.read()?;
     let names = operator::interface_names(
         conf,
         rt,
@@ -131,7 +118,7 @@ crate::register_schema!(
     "naooperator",
     "teleoperates a walking robot: walk (v, w), head (pan-tilt) and camera in one panel",
     create,
-    lines = LINES
+    lines = Lines
 );
 
 #[cfg(feature = "gui")]

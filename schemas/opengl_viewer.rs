@@ -73,78 +73,61 @@ use crate::{
     },
 };
 
-/// opengl_viewer's lines, declared once (`jderobot help opengl_viewer`).
-const LINES: &[Setting] = &[
-    Setting::new(
-        "model",
-        "the robot's OBJ model (default: the built-in Pioneer)",
-        &[path("FILE")],
-    ),
-    Setting::new(
-        "model_scale",
-        "model units to mm",
-        &[float("SCALE", "", 1e-4, 1e4)],
-    )
-    .default("1"),
-    settings::look_at("the view: position and focus of attention (default: behind the robot)"),
-    Setting::new(
-        "follow",
-        "keep the view's focus on the robot",
-        &[on_off("FOLLOW")],
-    )
-    .default("on"),
-    Setting::new(
-        "fovy",
-        "the view's vertical aperture",
-        &[float("DEG", "deg", 5.0, 150.0)],
-    )
-    .default("45"),
-    Setting::new(
-        "robot_camera",
-        "the pan-tilt camera on the robot: position, height and horizontal aperture",
-        &[
-            float("X", "mm", -5000.0, 5000.0),
-            float("Y", "mm", -5000.0, 5000.0),
-            float("HEIGHT", "mm", 0.0, 10000.0),
-            float("FOV", "deg", 1.0, 170.0),
-        ],
-    )
-    .default("190 0 500 65"),
-    Setting::new(
-        "frustum",
-        "length of the camera frustum's edges",
-        &[float("LENGTH", "mm", 0.0, 100_000.0)],
-    )
-    .default("1500"),
-    settings::WORLD,
-    settings::uses("encoders", "the robot's pose (none: at the origin)"),
-    settings::uses("laser", "the laser fan (none: none)"),
-    settings::uses("sonars", "the sonar cones (none: none)"),
-    settings::uses(
-        "pantiltencoders",
-        "where the camera points (none: straight ahead)",
-    ),
-    CYCLE.default("100"),
-];
-
-/// The values of [`LINES`].
-#[derive(serde::Deserialize)]
-struct Lines {
-    model: Option<String>,
-    model_scale: f64,
-    camera: Option<(f64, f64, f64, f64, f64, f64)>,
-    follow: bool,
-    fovy: f64,
-    robot_camera: (f64, f64, f64, f64),
-    frustum: f64,
-    world: Option<String>,
-    encoders: String,
-    laser: String,
-    sonars: String,
-    pantiltencoders: String,
-    cycle: u64,
+crate::declare_lines! {
+    /// opengl_viewer's lines, declared once (`jderobot help opengl_viewer`).
+    struct Lines {
+        model: Option<String> = Setting::new(
+            "model",
+            "the robot's OBJ model (default: the built-in Pioneer)",
+            &[path("FILE")],
+        ),
+        model_scale: f64 = Setting::new(
+            "model_scale",
+            "model units to mm",
+            &[float("SCALE", "", 1e-4, 1e4)],
+        )
+        .default("1"),
+        camera: Option<(f64, f64, f64, f64, f64, f64)> = settings::look_at("the view: position and focus of attention (default: behind the robot)"),
+        follow: bool = Setting::new(
+            "follow",
+            "keep the view's focus on the robot",
+            &[on_off("FOLLOW")],
+        )
+        .default("on"),
+        fovy: f64 = Setting::new(
+            "fovy",
+            "the view's vertical aperture",
+            &[float("DEG", "deg", 5.0, 150.0)],
+        )
+        .default("45"),
+        robot_camera: (f64, f64, f64, f64) = Setting::new(
+            "robot_camera",
+            "the pan-tilt camera on the robot: position, height and horizontal aperture",
+            &[
+                float("X", "mm", -5000.0, 5000.0),
+                float("Y", "mm", -5000.0, 5000.0),
+                float("HEIGHT", "mm", 0.0, 10000.0),
+                float("FOV", "deg", 1.0, 170.0),
+            ],
+        )
+        .default("190 0 500 65"),
+        frustum: f64 = Setting::new(
+            "frustum",
+            "length of the camera frustum's edges",
+            &[float("LENGTH", "mm", 0.0, 100_000.0)],
+        )
+        .default("1500"),
+        world: Option<String> = settings::WORLD,
+        encoders: String = settings::uses("encoders", "the robot's pose (none: at the origin)"),
+        laser: String = settings::uses("laser", "the laser fan (none: none)"),
+        sonars: String = settings::uses("sonars", "the sonar cones (none: none)"),
+        pantiltencoders: String = settings::uses(
+            "pantiltencoders",
+            "where the camera points (none: straight ahead)",
+        ),
+        cycle: u64 = CYCLE.default("100"),
+    }
 }
-
 /// The built-in Pioneer model.
 const PIONEER_OBJ: &str = include_str!("../assets/models/pioneer.obj");
 const PIONEER_MTL: &str = include_str!("../assets/models/pioneer.mtl");
@@ -418,7 +401,7 @@ impl Schema for OpenGlViewer {
 }
 
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>> {
-    let lines: Lines = conf.settings(LINES)?;
+    let lines: Lines = conf.read()?;
     let world = settings::world(conf, lines.world.as_deref(), &rt.names)?;
     let model = match &lines.model {
         None => pioneer_model(),
@@ -522,7 +505,7 @@ crate::register_schema!(
     "opengl_viewer",
     "the robot as a 3D model (OBJ) in its world, with laser fan, sonar cones and camera frustum",
     create,
-    lines = LINES
+    lines = Lines
 );
 
 /// The pan-tilt camera on the robot.

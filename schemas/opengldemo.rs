@@ -59,42 +59,32 @@ const REPAINT: Duration = Duration::from_millis(33);
 /// A position or focus coordinate's slider range, mm (the `camera` line's).
 pub const CAMERA_RANGE: f64 = settings::VIEW_RANGE;
 
-/// opengldemo's lines, declared once (`jderobot help opengldemo`).
-const LINES: &[Setting] = &[
-    settings::look_at("the camera: position and focus of attention (default: framing the scene)"),
-    Setting::new(
-        "fovy",
-        "vertical aperture of the camera",
-        &[float("DEG", "deg", 5.0, 150.0)],
-    )
-    .default("45"),
-    Setting::new(
-        "rotate",
-        "orbit the camera about its focus",
-        &[on_off("ROTATE")],
-    )
-    .default("off"),
-    Setting::new(
-        "rotate_speed",
-        "orbit speed",
-        &[float("SPEED", "deg/s", -360.0, 360.0)],
-    )
-    .default("20"),
-    settings::WORLD,
-    CYCLE.default("33"),
-];
-
-/// The values of [`LINES`].
-#[derive(serde::Deserialize)]
-struct Lines {
-    camera: Option<(f64, f64, f64, f64, f64, f64)>,
-    fovy: f64,
-    rotate: bool,
-    rotate_speed: f64,
-    world: Option<String>,
-    cycle: u64,
+crate::declare_lines! {
+    /// opengldemo's lines, declared once (`jderobot help opengldemo`).
+    struct Lines {
+        camera: Option<(f64, f64, f64, f64, f64, f64)> = settings::look_at("the camera: position and focus of attention (default: framing the scene)"),
+        fovy: f64 = Setting::new(
+            "fovy",
+            "vertical aperture of the camera",
+            &[float("DEG", "deg", 5.0, 150.0)],
+        )
+        .default("45"),
+        rotate: bool = Setting::new(
+            "rotate",
+            "orbit the camera about its focus",
+            &[on_off("ROTATE")],
+        )
+        .default("off"),
+        rotate_speed: f64 = Setting::new(
+            "rotate_speed",
+            "orbit speed",
+            &[float("SPEED", "deg/s", -360.0, 360.0)],
+        )
+        .default("20"),
+        world: Option<String> = settings::WORLD,
+        cycle: u64 = CYCLE.default("33"),
+    }
 }
-
 /// What the view shows from: shared by the schema (which orbits it), the panel
 /// (sliders, drag, zoom) and the name space (`opengldemo.view`).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -172,7 +162,7 @@ pub fn demo_camera(fovy_deg: f64) -> LookAtCamera {
 }
 
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>> {
-    let lines: Lines = conf.settings(LINES)?;
+    let lines: Lines = conf.read()?;
     let world = settings::world(conf, lines.world.as_deref(), &rt.names)?;
     let camera = match lines.camera {
         Some((x, y, z, fx, fy, fz)) => {
@@ -222,7 +212,7 @@ crate::register_schema!(
     "opengldemo",
     "4.3's OpenGL demo: the world (or spinning cubes) in 3D from a camera you place; rotate orbits",
     create,
-    lines = LINES
+    lines = Lines
 );
 
 /// The static meshes of the scene, built once.

@@ -83,22 +83,19 @@ impl Schema for Player {
     }
 }
 
-/// pingpong's lines, declared once (`jderobot help pingpong`).
-const LINES: &[Setting] = &[Setting::new(
-    "turn",
-    "the parent's iterations per turn",
-    &[int("N", "iterations", 1, 1_000_000)],
-)
-.default("5")];
-
-/// The values of [`LINES`].
-#[derive(serde::Deserialize)]
-struct Lines {
-    turn: u64,
+crate::declare_lines! {
+    /// pingpong's lines, declared once (`jderobot help pingpong`).
+    struct Lines {
+        turn: u64 = Setting::new(
+        "turn",
+        "the parent's iterations per turn",
+        &[int("N", "iterations", 1, 1_000_000)],
+    )
+    .default("5"),
+    }
 }
-
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>> {
-    let lines: Lines = conf.settings(LINES)?;
+    let lines: Lines = conf.read()?;
     let turn = Arc::new(AtomicBool::new(true));
     // Shared through the name space so the children (or anyone) can see whose turn it is.
     let _ = rt.names.export_arc("pingpong", "turn", turn.clone());
@@ -127,19 +124,19 @@ crate::register_schema!(
     "pingpong",
     "example parent: runs ping and pong as brothers and arbitrates between them",
     create,
-    lines = LINES
+    lines = Lines
 );
 crate::register_schema!(
     "ping",
     "child of pingpong: prints ping N when it wins",
     create_ping,
     "pingpong",
-    lines = &[]
+    lines = crate::conf::settings::NoLines
 );
 crate::register_schema!(
     "pong",
     "child of pingpong: prints pong N when it wins",
     create_pong,
     "pingpong",
-    lines = &[]
+    lines = crate::conf::settings::NoLines
 );

@@ -26,7 +26,7 @@ pub struct GuiService;
 impl Driver for GuiService {}
 
 fn create(conf: &ComponentConf, _rt: &Runtime) -> anyhow::Result<Box<dyn Driver>> {
-    conf.check(&[])?;
+    conf.read::<crate::conf::settings::NoLines>()?;
     Ok(Box::new(GuiService))
 }
 
@@ -56,7 +56,7 @@ crate::register_driver!(
     "gui",
     "the egui window: mastergui and the shown schema panels",
     create,
-    lines = &[]
+    lines = crate::conf::settings::NoLines
 );
 crate::register_driver!(
     Service,

@@ -9,7 +9,7 @@
 use std::{path::Path, sync::Arc};
 
 use crate::{
-    conf::{Action, ComponentConf, Conf, ConfError, ConfErrors, Kind, Location, settings},
+    conf::{Action, ComponentConf, Conf, ConfError, ConfErrors, Kind, Location},
     interfaces,
     registry::{self, Entry, Factory, LookupError},
     runtime::{Runtime, RuntimeError},
@@ -174,8 +174,8 @@ pub fn check(conf: &Conf) -> Vec<ConfError> {
                         ));
                     }
                     if let Ok(cc) = conf.component_conf(c.kind, name, file.as_deref()) {
-                        if let Some(decl) = c.lines {
-                            errors.extend(settings::check(&cc, decl));
+                        if let Some(lines) = c.lines {
+                            errors.extend((lines.check)(&cc));
                         }
                         for l in cc.provides() {
                             if let Some(i) = l.args().first() {

@@ -37,8 +37,28 @@ pub struct Entry {
     pub factory: Factory,
     /// The lines it takes, declared once ([`crate::conf::settings`]): `check`
     /// validates them and `jderobot help NAME` prints them. `None` for a component
-    /// that reads its lines by hand.
-    pub lines: Option<&'static [Setting]>,
+    /// that takes no lines.
+    pub lines: Option<Lines>,
+}
+
+/// A component's declared lines: what `jderobot help` prints and what
+/// `jderobot check` runs.
+#[derive(Clone, Copy)]
+pub struct Lines {
+    pub decl: &'static [Setting],
+    /// Checks a component's lines: against the declaration, then (a
+    /// [`Declared`](crate::conf::settings::Declared) component) the typed read.
+    pub check: fn(&ComponentConf) -> Vec<crate::conf::ConfError>,
+}
+
+impl Lines {
+    /// The lines of `T`, a struct made by [`declare_lines!`](crate::declare_lines).
+    pub const fn of<T: crate::conf::settings::Declared>() -> Lines {
+        Lines {
+            decl: T::LINES,
+            check: crate::conf::settings::check_declared::<T>,
+        }
+    }
 }
 
 inventory::collect!(Entry);
@@ -203,18 +223,20 @@ pub fn lookup(kind: Option<Kind>, name: &str) -> Result<&'static Entry, LookupEr
 ///
 /// `factory_fn: fn(&ComponentConf, &Runtime) -> anyhow::Result<Box<dyn Schema>>`.
 /// The feature is taken to be the name; a user's crate may pass a fourth argument.
-/// A last `lines = DECLARATION` argument declares its lines
-/// ([`crate::conf::settings`]).
+/// A last `lines = TYPE` argument names the struct that declares its lines
+/// ([`declare_lines!`](crate::declare_lines)).
 #[macro_export]
 macro_rules! register_schema {
-    ($name:literal, $summary:literal, $factory:expr, lines = $lines:expr) => {
-        $crate::register_schema!(@ $name, $summary, $factory, $name, Some($lines));
+    ($name:literal, $summary:literal, $factory:expr, lines = $lines:ty) => {
+        $crate::register_schema!(@ $name, $summary, $factory, $name,
+            Some($crate::registry::Lines::of::<$lines>()));
     };
     ($name:literal, $summary:literal, $factory:expr) => {
         $crate::register_schema!(@ $name, $summary, $factory, $name, None);
     };
-    ($name:literal, $summary:literal, $factory:expr, $feature:literal, lines = $lines:expr) => {
-        $crate::register_schema!(@ $name, $summary, $factory, $feature, Some($lines));
+    ($name:literal, $summary:literal, $factory:expr, $feature:literal, lines = $lines:ty) => {
+        $crate::register_schema!(@ $name, $summary, $factory, $feature,
+            Some($crate::registry::Lines::of::<$lines>()));
     };
     ($name:literal, $summary:literal, $factory:expr, $feature:literal) => {
         $crate::register_schema!(@ $name, $summary, $factory, $feature, None);
@@ -236,17 +258,19 @@ macro_rules! register_schema {
 /// Registers a driver or service:
 /// `register_driver!(Driver|Service, "name", "summary", factory_fn)`; a fifth
 /// argument names the feature when it is not the name (aliases such as `graphics_gtk`);
-/// a last `lines = DECLARATION` argument declares its lines.
+/// a last `lines = TYPE` argument names the struct that declares its lines.
 #[macro_export]
 macro_rules! register_driver {
-    ($kind:ident, $name:literal, $summary:literal, $factory:expr, lines = $lines:expr) => {
-        $crate::register_driver!(@ $kind, $name, $summary, $factory, $name, Some($lines));
+    ($kind:ident, $name:literal, $summary:literal, $factory:expr, lines = $lines:ty) => {
+        $crate::register_driver!(@ $kind, $name, $summary, $factory, $name,
+            Some($crate::registry::Lines::of::<$lines>()));
     };
     ($kind:ident, $name:literal, $summary:literal, $factory:expr) => {
         $crate::register_driver!(@ $kind, $name, $summary, $factory, $name, None);
     };
-    ($kind:ident, $name:literal, $summary:literal, $factory:expr, $feature:literal, lines = $lines:expr) => {
-        $crate::register_driver!(@ $kind, $name, $summary, $factory, $feature, Some($lines));
+    ($kind:ident, $name:literal, $summary:literal, $factory:expr, $feature:literal, lines = $lines:ty) => {
+        $crate::register_driver!(@ $kind, $name, $summary, $factory, $feature,
+            Some($crate::registry::Lines::of::<$lines>()));
     };
     ($kind:ident, $name:literal, $summary:literal, $factory:expr, $feature:literal) => {
         $crate::register_driver!(@ $kind, $name, $summary, $factory, $feature, None);

@@ -31,9 +31,28 @@ fn bad_word(a: &Arg) -> Option<String> {
         ArgType::Interface => "lazer".into(),
         ArgType::Name => "1.5".into(),
         ArgType::Flags(_) => "no_such_flag".into(),
+        ArgType::Kinds(_) => "no_such_kind".into(),
+        ArgType::Numbers { max, .. } if max < f64::MAX => format!("{}", max * 2.0 + 1.0),
+        ArgType::Numbers { .. } => "nan".into(),
+        ArgType::Custom { check, .. } => {
+            return CUSTOM_TRIES
+                .iter()
+                .find(|w| check(w).is_err())
+                .map(|w| w.to_string());
+        }
         ArgType::Path | ArgType::Word | ArgType::Rest => return None,
     })
 }
+
+/// Words tried on a `Custom` argument: it takes some and refuses others.
+const CUSTOM_TRIES: &[&str] = &[
+    "robot2",
+    "lab/robot1/laser",
+    "127.0.0.1",
+    "a*b",
+    "a/b",
+    "$x",
+];
 
 /// A word that `a` accepts (None: a `Flags` argument, left out).
 fn good_word(a: &Arg) -> Option<String> {
@@ -47,6 +66,11 @@ fn good_word(a: &Arg) -> Option<String> {
         ArgType::Interface => "none".into(),
         ArgType::Name => "robot2".into(),
         ArgType::Flags(_) => return None,
+        ArgType::Kinds(k) => k[0].name().into(),
+        ArgType::Numbers { min, max } => format!("{}", min.max(0.0).min(max)),
+        ArgType::Custom { check, .. } => {
+            CUSTOM_TRIES.iter().find(|w| check(w).is_ok())?.to_string()
+        }
         ArgType::Path | ArgType::Word | ArgType::Rest => "word".into(),
     })
 }
@@ -112,10 +136,7 @@ fn every_argument_of_every_form_refuses_a_bad_value_at_its_line() {
                     tried += 1;
                 }
                 // Too many words, where the line has an end.
-                if !args
-                    .iter()
-                    .any(|a| matches!(a.ty, ArgType::Rest | ArgType::Flags(_)))
-                {
+                if !args.iter().any(|a| a.ty.takes_the_rest()) {
                     let l = format!("{} extra", line(s.key, args, None));
                     let p = common::line_problems(&kind, entry.name, &l);
                     assert!(
@@ -151,32 +172,107 @@ fn every_argument_of_every_form_refuses_a_bad_value_at_its_line() {
     assert!(forms >= 25, "only {forms} forms declared");
 }
 
+/// The lines a conf needs beside `key`'s for its component to be read at all:
+/// every other required line, with good values, each on a line of its own.
+fn required_besides(decl: &[Setting], key: &str) -> String {
+    decl.iter()
+        .filter(|s| s.required && s.key != key)
+        .map(|s| format!("\n{}", line(s.key, shapes(s)[0], None)))
+        .collect()
+}
+
+/// The ways a line of `args` may be written with good values: every argument
+/// given, every optional group left out, and each word as a `/topic`.
+fn variants(key: &str, args: &[Arg]) -> Vec<String> {
+    let mut out = vec![line(key, args, None)];
+    let mut required = vec![key.to_string()];
+    let mut skipping = false;
+    for a in args {
+        skipping = a.optional || (skipping && !a.ty.takes_the_rest());
+        if !skipping && !matches!(a.ty, ArgType::Flags(_)) {
+            required.extend(good_word(a));
+        }
+    }
+    out.push(required.join(" "));
+    if args.iter().any(|a| matches!(a.ty, ArgType::Word)) {
+        let mut words = vec![key.to_string()];
+        for a in args {
+            match a.ty {
+                ArgType::Word => words.push("/topic".into()),
+                _ => words.extend(good_word(a)),
+            }
+        }
+        out.push(words.join(" "));
+    }
+    out.dedup();
+    out
+}
+
+/// The walk of issue 49: every form of every line of every component, in each
+/// argument count it advertises, with a name and a `/topic` where it takes a word,
+/// and each number at both ends of its range, beside the component's other
+/// required lines, goes through `jderobot check` (the declaration, then the
+/// component's typed read): accepted, and never an `internal` answer.
 #[test]
-fn every_form_is_accepted_with_good_values_and_at_both_ends_of_each_range() {
+fn every_form_is_read_by_its_component_in_every_argument_count_and_at_both_ends() {
+    let mut tried = 0;
     for (entry, decl) in common::declared() {
         let kind = entry.kind.to_string();
         for s in decl {
+            let rest = required_besides(decl, s.key);
             for args in shapes(s) {
-                let l = line(s.key, args, None);
-                let p = common::line_problems(&kind, entry.name, &l);
-                assert!(accepted(&p), "{} `{l}`: {p:?}", entry.name);
+                let mut lines = variants(s.key, args);
                 for (i, a) in args.iter().enumerate() {
                     let ends = match a.ty {
                         ArgType::Int { min, max } => [min.to_string(), max.to_string()],
-                        ArgType::Float { min, max } | ArgType::FloatOr { min, max, .. } => {
-                            [format!("{min}"), format!("{max}")]
-                        }
+                        ArgType::Float { min, max }
+                        | ArgType::FloatOr { min, max, .. }
+                        | ArgType::Numbers { min, max } => [format!("{min}"), format!("{max}")],
                         _ => continue,
                     };
                     for end in ends {
-                        let l = line(s.key, args, Some((i, &end)));
-                        let p = common::line_problems(&kind, entry.name, &l);
-                        assert!(accepted(&p), "{} `{l}`: {p:?}", entry.name);
+                        lines.push(line(s.key, args, Some((i, &end))));
                     }
+                }
+                for l in lines {
+                    let p = common::line_problems(&kind, entry.name, &format!("{l}{rest}"));
+                    assert!(
+                        accepted(&p) && !p.iter().any(|e| e.contains("internal")),
+                        "{} `{l}`: {p:?}",
+                        entry.name
+                    );
+                    tried += 1;
                 }
             }
         }
     }
+    assert!(tried > 300, "only {tried} lines tried");
+}
+
+/// Issue 49's regression: `help gazebo` declares `provides laser SENSOR|/TOPIC [N
+/// R]`, and the line `provides laser /lidar 360 1` stopped a run with
+/// `internal: settings do not match their declaration: invalid type: integer
+/// 360, expected a string`.
+#[cfg(feature = "gazebo")]
+#[test]
+fn gazebo_reads_a_laser_on_a_topic_with_its_readings() {
+    use jderobot::drivers::gazebo::{GzConf, Kind as Gz};
+    let p = common::line_problems("driver", "gazebo", "provides laser /lidar 360 1");
+    assert!(p.is_empty(), "{p:?}");
+    let c = GzConf::parse(&driver("gazebo", "provides laser /lidar 360 1\n")).unwrap();
+    assert_eq!(c.wants[0].kind, Gz::Laser(360, 1.0));
+    assert_eq!(c.wants[0].target, "/lidar");
+    assert_eq!(c.wants[0].fixed_topic().as_deref(), Some("/lidar"));
+    let c = GzConf::parse(&driver(
+        "gazebo",
+        "provides laser front\nprovides ptencoders m\n",
+    ))
+    .unwrap();
+    assert_eq!(c.wants[0].kind, Gz::Laser(180, 1.0));
+    assert_eq!(
+        (c.wants[1].kind.clone(), c.wants[1].iface.as_str()),
+        (Gz::PtEncoders, "pantiltencoders")
+    );
 }
 
 #[test]
@@ -223,7 +319,10 @@ fn driver(name: &str, text: &str) -> ComponentConf {
 /// The declared range of `key`'s argument `arg` (in form `form`, for a line in forms).
 #[cfg_attr(not(feature = "simulator"), allow(dead_code))]
 fn range(component: &str, key: &str, form: Option<&str>, arg: &str) -> (f64, f64) {
-    let decl = registry::find(component).and_then(|e| e.lines).unwrap();
+    let decl = registry::find(component)
+        .and_then(|e| e.lines)
+        .unwrap()
+        .decl;
     let s = decl.iter().find(|s| s.key == key).unwrap();
     let args = match form {
         Some(f) => s.forms.iter().find(|x| x.name == f).unwrap().args,
@@ -307,7 +406,7 @@ fn player_values_reach_the_driver_unchanged() {
         assert_eq!(p.wants[1].device.map(|d| d.1), Some(Some(3)));
     }
     // The default is the declared one.
-    let decl = registry::find("player").and_then(|e| e.lines).unwrap();
+    let decl = registry::find("player").and_then(|e| e.lines).unwrap().decl;
     let default = decl.iter().find(|s| s.key == "timeout").unwrap().default;
     let p = PlayerConf::parse(&driver("player", "provides motors\n")).unwrap();
     assert_eq!(Some(p.timeout.as_millis().to_string().as_str()), default);

@@ -534,7 +534,7 @@ fn zenoh_wire_target() -> Target {
         run: |b| {
             use jderobot::{
                 interfaces::{
-                    Bumpers, Encoders, Image, Imu, KINDS, Laser, Motors, PtEncoders, PtMotors,
+                    Bumpers, Encoders, Image, Imu, Kind, Laser, Motors, PtEncoders, PtMotors,
                     Sonars, ZoomEncoders, ZoomMotors,
                 },
                 services::zenoh::wire::{self, Wire},
@@ -552,7 +552,7 @@ fn zenoh_wire_target() -> Target {
             let _ = ZoomEncoders::take(b);
             let _ = ZoomMotors::take(b);
             let _ = Imu::take(b);
-            for kind in KINDS.iter().chain(&["colorA"]) {
+            for &kind in Kind::ALL {
                 let _ = jderobot::mcapfmt::decode_message("t", kind, "", "cdr", 0, 0, b);
             }
         },
@@ -652,7 +652,7 @@ fn mcap_messages_target() -> Target {
         ],
         text: false,
         run: |b| {
-            for kind in jderobot::interfaces::KINDS.iter().chain(&["colorA"]) {
+            for &kind in jderobot::interfaces::Kind::ALL {
                 let _ = jderobot::mcapfmt::decode("t", kind, b);
                 let _ = jderobot::mcapfmt::decode_message("t", kind, "", "cdr", 0, 0, b);
             }

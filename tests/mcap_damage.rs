@@ -94,13 +94,13 @@ fn recording_in(compression: Option<mcap::Compression>, n: usize, per_chunk: usi
         let schema = m.channel.schema.as_ref().map(|s| s.name.as_str());
         let kind = mcapfmt::channel_kind(&m.channel.metadata, schema).unwrap();
         let id = *ids.entry(m.channel.topic.clone()).or_insert_with(|| {
-            mcapfmt::add_channel(&mut w, &m.channel.topic, &kind, profile)
+            mcapfmt::add_channel(&mut w, &m.channel.topic, kind, profile)
                 .unwrap()
                 .unwrap()
         });
         let mut data: &[u8] = &m.data;
-        if kind == "image" {
-            let d = mcapfmt::decode_mcap(&kind, &m).unwrap();
+        if kind == jderobot::interfaces::Kind::Image {
+            let d = mcapfmt::decode_mcap(kind, &m).unwrap();
             let Recorded::Image(img) = d.value else {
                 panic!("an image")
             };
@@ -157,7 +157,7 @@ fn replay_pass(bytes: &[u8]) -> Result<(reader::Outcome, Vec<Fingerprint>), Stri
     let o = reader::read_messages(bytes, |m| {
         let schema = m.channel.schema.as_ref().map(|s| s.name.as_str());
         if let Some(kind) = mcapfmt::channel_kind(&m.channel.metadata, schema) {
-            let _ = mcapfmt::decode_read(&kind, m);
+            let _ = mcapfmt::decode_read(kind, m);
         }
         seen.push((
             m.channel.topic.clone(),
@@ -418,7 +418,7 @@ fn a_flipped_pixel_is_a_corrupt_chunk_and_the_replay_uses_the_rest() {
     let decode = |m: &Fingerprint| {
         mcapfmt::decode_message(
             &m.0,
-            "laser",
+            jderobot::interfaces::Kind::Laser,
             "foxglove.LaserScan",
             "protobuf",
             m.1,

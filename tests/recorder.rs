@@ -61,7 +61,7 @@ fn messages(path: &Path) -> (Summary, BTreeMap<String, Vec<Decoded>>) {
         )
         .expect("a jderobot channel");
         let d =
-            mcapfmt::decode_mcap(&kind, &m).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+            mcapfmt::decode_mcap(kind, &m).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
         assert_eq!(d.time_ns, m.log_time, "log time is the sample's time");
         by.entry(m.channel.topic.clone()).or_default().push(d);
     }

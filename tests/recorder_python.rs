@@ -41,7 +41,7 @@ fn first_laser_and_image(bytes: &[u8], v: &serde_json::Value) -> (Laser, Image) 
     for m in mcap::MessageStream::new(bytes).unwrap() {
         let m = m.unwrap();
         let kind = mcapfmt::channel_kind(&m.channel.metadata, None).unwrap();
-        match mcapfmt::decode_mcap(&kind, &m).unwrap().value {
+        match mcapfmt::decode_mcap(kind, &m).unwrap().value {
             Recorded::Laser(l) if laser.is_none() => laser = Some(l),
             Recorded::Image(i) if image.is_none() => image = Some(i),
             _ => {}

@@ -165,7 +165,7 @@ fn messages(path: &Path) -> (Summary, BTreeMap<String, Vec<Decoded>>) {
         let kind = mcapfmt::channel_kind(&m.channel.metadata, None).unwrap();
         by.entry(m.channel.topic.clone())
             .or_default()
-            .push(mcapfmt::decode_mcap(&kind, &m).unwrap());
+            .push(mcapfmt::decode_mcap(kind, &m).unwrap());
     }
     (summary, by)
 }

@@ -47,9 +47,13 @@ fn commands(path: &Path) -> Vec<Motors> {
         if m.channel.topic != "motors" {
             continue;
         }
-        match mcapfmt::decode(&m.channel.topic, "motors", &m.data)
-            .unwrap()
-            .value
+        match mcapfmt::decode(
+            &m.channel.topic,
+            jderobot::interfaces::Kind::Motors,
+            &m.data,
+        )
+        .unwrap()
+        .value
         {
             Recorded::Motors(c) => v.push(c),
             other => panic!("{other:?}"),

@@ -77,45 +77,41 @@ pub struct EviConf {
     pub camera: u8,
 }
 
-/// The lines `evi` takes (`jderobot help evi` prints them).
-const LINES: &[Setting] = &[
-    SERIAL.group(HEAD),
-    Setting::new(
-        "camera",
-        "the camera's VISCA address (after an address set, the first camera is 1)",
-        &[int("ADDRESS", "", 1, 7)],
-    )
-    .default("1"),
-    POLL.default("100").group(HEAD),
-    REPLY_TIMEOUT.group(HEAD),
-    Setting::new(
-        "provides",
-        "an interface it provides: pantiltencoders, pantiltmotors, zoomencoders, zoommotors (4.3's ptencoders, ptmotors, zencoders, zmotors)",
-        &[choice(
-            "INTERFACE",
-            &[
-                "pantiltencoders",
-                "pantiltmotors",
-                "zoomencoders",
-                "zoommotors",
-                "ptencoders",
-                "ptmotors",
-                "zencoders",
-                "zmotors",
-            ],
-        )],
-    )
-    .repeats()
-    .group(HEAD),
-];
-
-/// The values of [`LINES`].
-#[derive(serde::Deserialize)]
-struct Lines {
-    head: HeadLines,
-    camera: u8,
+crate::declare_lines! {
+    /// The lines `evi` takes (`jderobot help evi` prints them).
+    struct Lines {
+        head: HeadLines = [
+            SERIAL.group(HEAD),
+            POLL.default("100").group(HEAD),
+            REPLY_TIMEOUT.group(HEAD),
+            Setting::new(
+            "provides",
+            "an interface it provides: pantiltencoders, pantiltmotors, zoomencoders, zoommotors (4.3's ptencoders, ptmotors, zencoders, zmotors)",
+            &[choice(
+                "INTERFACE",
+                &[
+                    "pantiltencoders",
+                    "pantiltmotors",
+                    "zoomencoders",
+                    "zoommotors",
+                    "ptencoders",
+                    "ptmotors",
+                    "zencoders",
+                    "zmotors",
+                ],
+            )],
+        )
+        .repeats()
+        .group(HEAD),
+        ],
+        camera: u8 = Setting::new(
+            "camera",
+            "the camera's VISCA address (after an address set, the first camera is 1)",
+            &[int("ADDRESS", "", 1, 7)],
+        )
+        .default("1"),
+    }
 }
-
 impl EviConf {
     pub fn parse(conf: &ComponentConf) -> anyhow::Result<EviConf> {
         let offered = [
@@ -124,7 +120,7 @@ impl EviConf {
             "zoomencoders",
             "zoommotors",
         ];
-        let l: Lines = conf.settings(LINES)?;
+        let l: Lines = conf.read()?;
         Ok(EviConf {
             head: HeadConf::new(conf, l.head, &offered)?,
             camera: l.camera,
@@ -767,5 +763,5 @@ crate::register_driver!(
     "evi",
     "Sony EVI-D100 pan-tilt-zoom camera over VISCA: pantiltencoders, pantiltmotors, zoomencoders, zoommotors",
     create,
-    lines = LINES
+    lines = Lines
 );

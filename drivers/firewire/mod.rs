@@ -85,52 +85,47 @@ const AUTOFOCUS: settings::Arg = settings::choice(
 )
 .optional();
 
-/// The driver's lines, declared once (`jderobot help firewire`).
-const LINES: &[Setting] = &[
-    settings::provides_forms(
-        "an image interface and the camera it comes from (CAM: 0, 1, ... in the bus's order)",
-        &[
-            Form::new(
-                "color",
-                "320x240 from camera CAM",
-                &[settings::COLOR, settings::int("CAM", "", 0, 63), AUTOFOCUS],
-            ),
-            Form::new(
-                "varcolor",
-                "W x H from camera CAM (a size it has an IIDC mode for)",
-                &[
-                    settings::VARCOLOR,
-                    settings::int("CAM", "", 0, 63),
-                    settings::pixels("W", 8192),
-                    settings::pixels("H", 8192),
-                    AUTOFOCUS,
-                ],
-            ),
-        ],
-    )
-    .required(),
-    Setting::new(
-        "bayer",
-        "camera CAM sends a Bayer mosaic in this pattern (decoded to BGR)",
-        &[
-            settings::int("CAM", "", 0, 63),
-            settings::choice(
-                "PATTERN",
-                &[
-                    "RGGB", "GBRG", "GRBG", "BGGR", "rggb", "gbrg", "grbg", "bggr",
-                ],
-            ),
-        ],
-    )
-    .repeats(),
-];
-
-#[derive(serde::Deserialize)]
-struct Lines {
-    provides: Vec<Provides>,
-    bayer: Vec<(u32, String)>,
+crate::declare_lines! {
+    /// The driver's lines, declared once (`jderobot help firewire`).
+    struct Lines {
+        provides: Vec<Provides> = settings::provides_forms(
+            "an image interface and the camera it comes from (CAM: 0, 1, ... in the bus's order)",
+            &[
+                Form::new(
+                    "color",
+                    "320x240 from camera CAM",
+                    &[settings::COLOR, settings::int("CAM", "", 0, 63), AUTOFOCUS],
+                ),
+                Form::new(
+                    "varcolor",
+                    "W x H from camera CAM (a size it has an IIDC mode for)",
+                    &[
+                        settings::VARCOLOR,
+                        settings::int("CAM", "", 0, 63),
+                        settings::pixels("W", 8192),
+                        settings::pixels("H", 8192),
+                        AUTOFOCUS,
+                    ],
+                ),
+            ],
+        )
+        .required(),
+        bayer: Vec<(u32, String)> = Setting::new(
+            "bayer",
+            "camera CAM sends a Bayer mosaic in this pattern (decoded to BGR)",
+            &[
+                settings::int("CAM", "", 0, 63),
+                settings::choice(
+                    "PATTERN",
+                    &[
+                        "RGGB", "GBRG", "GRBG", "BGGR", "rggb", "gbrg", "grbg", "bggr",
+                    ],
+                ),
+            ],
+        )
+        .repeats(),
+    }
 }
-
 #[derive(serde::Deserialize)]
 enum Provides {
     #[serde(rename = "color")]
@@ -141,7 +136,7 @@ enum Provides {
 
 /// Parses the driver's lines.
 pub fn parse(conf: &ComponentConf) -> anyhow::Result<Vec<CamConf>> {
-    let lines: Lines = conf.settings(LINES)?;
+    let lines: Lines = conf.read()?;
     let mut cams: Vec<CamConf> = Vec::new();
     for (p, l) in lines.provides.into_iter().zip(conf.provides()) {
         let (iface, cam, (width, height), focus) = match p {
@@ -622,7 +617,7 @@ crate::register_driver!(
     "firewire",
     "IEEE 1394 (IIDC) cameras through libdc1394 2.x: colorA..D, varcolorA..D",
     create,
-    lines = LINES
+    lines = Lines
 );
 
 crate::register_driver!(
@@ -631,5 +626,5 @@ crate::register_driver!(
     "the firewire driver under 4.3's libdc1394-2.2 name: colorA..D, varcolorA..D",
     create,
     "firewire22",
-    lines = LINES
+    lines = Lines
 );

@@ -102,93 +102,82 @@ pub const MAX_W: f32 = 180.0;
 const USAGE: &str = "provides encoders|motors|pantiltencoders|pantiltmotors MODEL, provides laser SENSOR [N R], provides imu SENSOR, \
 provides colorA..D|varcolorA..D SENSOR, or any of them with a /topic instead of the name";
 
-/// The driver's lines (`jderobot help gazebo`).
-pub const LINES: &[Setting] = &[
-    Setting::forms(
-        "provides",
-        USAGE,
-        &[
-            Form::new(
-                "device",
-                "a model's odometry, cmd_vel or pan-tilt joints, or an IMU sensor",
-                &[
-                    kinds(
-                        "INTERFACE",
-                        &[
-                            IfaceKind::Encoders,
-                            IfaceKind::Motors,
-                            IfaceKind::PtEncoders,
-                            IfaceKind::PtMotors,
-                            IfaceKind::Imu,
-                        ],
-                    ),
-                    word("MODEL|SENSOR|/TOPIC"),
-                ],
-            ),
-            Form::new(
-                "laser",
-                "a lidar sensor's scan: N readings at R per degree (default 180 at 1)",
-                &[
-                    kinds("laser", &[IfaceKind::Laser]),
-                    word("SENSOR|/TOPIC"),
-                    int("N", "", 1, 3600).optional(),
-                    float("R", "readings/deg", 0.01, 100.0),
-                ],
-            ),
-            Form::new("color", "a camera sensor at 320x240", &[COLOR, word("SENSOR|/TOPIC")]),
-            Form::new(
-                "varcolor",
-                "a camera sensor at its own size",
-                &[VARCOLOR, word("SENSOR|/TOPIC")],
-            ),
-        ],
-    )
-    .repeats()
-    .required(),
-    Setting::new(
-        "partition",
-        "gz-transport's partition (default: IGN_PARTITION, else GZ_PARTITION, else HOSTNAME:USERNAME)",
-        &[word("NAME")],
-    ),
-    Setting::new(
-        "ip",
-        "the IPv4 address for discovery and data (default: IGN_IP, else GZ_IP, else the route's)",
-        &[word("IPV4")],
-    ),
-    Setting::new(
-        "messages",
-        "the type names published: ignition.msgs.* (Fortress), gz.msgs.* (Garden and later), or auto: those Gazebo's topics show",
-        &[choice("NAMESPACE", &["auto", "ignition", "gz"])],
-    )
-    .default("auto"),
-    MOTORS_TIMEOUT,
-    CYCLE.help("how often cmd_vel is sent").default("100"),
-    Setting::new(
-        "joints",
-        "the pan-tilt head's joints (JointPositionController's, JointStatePublisher's)",
-        &[word("PAN"), word("TILT")],
-    )
-    .default("pan_joint tilt_joint"),
-    Setting::new(
-        "wait",
-        "how long a model or sensor may be missing before the topics that exist are listed",
-        &[int("MS", "ms", 100, 600_000)],
-    )
-    .default("5000"),
-];
-
-#[derive(serde::Deserialize)]
-struct Lines {
-    provides: Vec<ProvidesLine>,
-    partition: Option<String>,
-    ip: Option<String>,
-    messages: String,
-    motors_timeout: u64,
-    cycle: u64,
-    joints: Vec<String>,
-    wait: u64,
+crate::declare_lines! {
+    /// The driver's lines (`jderobot help gazebo`).
+    struct Lines {
+        provides: Vec<ProvidesLine> = Setting::forms(
+            "provides",
+            USAGE,
+            &[
+                Form::new(
+                    "device",
+                    "a model's odometry, cmd_vel or pan-tilt joints, or an IMU sensor",
+                    &[
+                        kinds(
+                            "INTERFACE",
+                            &[
+                                IfaceKind::Encoders,
+                                IfaceKind::Motors,
+                                IfaceKind::PtEncoders,
+                                IfaceKind::PtMotors,
+                                IfaceKind::Imu,
+                            ],
+                        ),
+                        word("MODEL|SENSOR|/TOPIC"),
+                    ],
+                ),
+                Form::new(
+                    "laser",
+                    "a lidar sensor's scan: N readings at R per degree (default 180 at 1)",
+                    &[
+                        kinds("laser", &[IfaceKind::Laser]),
+                        word("SENSOR|/TOPIC"),
+                        int("N", "", 1, 3600).optional(),
+                        float("R", "readings/deg", 0.01, 100.0),
+                    ],
+                ),
+                Form::new("color", "a camera sensor at 320x240", &[COLOR, word("SENSOR|/TOPIC")]),
+                Form::new(
+                    "varcolor",
+                    "a camera sensor at its own size",
+                    &[VARCOLOR, word("SENSOR|/TOPIC")],
+                ),
+            ],
+        )
+        .repeats()
+        .required(),
+        partition: Option<String> = Setting::new(
+            "partition",
+            "gz-transport's partition (default: IGN_PARTITION, else GZ_PARTITION, else HOSTNAME:USERNAME)",
+            &[word("NAME")],
+        ),
+        ip: Option<String> = Setting::new(
+            "ip",
+            "the IPv4 address for discovery and data (default: IGN_IP, else GZ_IP, else the route's)",
+            &[word("IPV4")],
+        ),
+        messages: String = Setting::new(
+            "messages",
+            "the type names published: ignition.msgs.* (Fortress), gz.msgs.* (Garden and later), or auto: those Gazebo's topics show",
+            &[choice("NAMESPACE", &["auto", "ignition", "gz"])],
+        )
+        .default("auto"),
+        motors_timeout: u64 = MOTORS_TIMEOUT,
+        cycle: u64 = CYCLE.help("how often cmd_vel is sent").default("100"),
+        joints: Vec<String> = Setting::new(
+            "joints",
+            "the pan-tilt head's joints (JointPositionController's, JointStatePublisher's)",
+            &[word("PAN"), word("TILT")],
+        )
+        .default("pan_joint tilt_joint"),
+        wait: u64 = Setting::new(
+            "wait",
+            "how long a model or sensor may be missing before the topics that exist are listed",
+            &[int("MS", "ms", 100, 600_000)],
+        )
+        .default("5000"),
+    }
 }
-
 /// What a `provides` line gives.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Kind {
@@ -319,7 +308,7 @@ fn env(name: &str) -> Option<String> {
 
 impl GzConf {
     pub fn parse(conf: &ComponentConf) -> anyhow::Result<GzConf> {
-        let lines: Lines = conf.settings(LINES)?;
+        let lines: Lines = conf.read()?;
         let mut wants: Vec<Want> = Vec::new();
         for (l, p) in conf.lines_with("provides").zip(lines.provides) {
             let w = want(p, l)?;
@@ -1138,7 +1127,7 @@ crate::register_driver!(
     "gazebo",
     "a robot and cameras in Gazebo (gz-sim) through gz-transport: encoders, motors, laser, imu, pan-tilt, colorA..D, varcolorA..D",
     create,
-    lines = LINES
+    lines = Lines
 );
 
 crate::register_driver!(
@@ -1147,7 +1136,7 @@ crate::register_driver!(
     "the gazebo driver under 4.3's second name (gz-transport)",
     create,
     "gazebo08",
-    lines = LINES
+    lines = Lines
 );
 
 #[cfg(test)]

@@ -92,67 +92,60 @@ pub struct GigeConf {
 /// `PIXEL_FORMAT`: a GenICam name the driver converts.
 const PIXEL_FORMAT: settings::Arg = settings::choice("PIXEL_FORMAT", FORMAT_NAMES).optional();
 
-/// The driver's lines, declared once (`jderobot help gige`).
-const LINES: &[Line] = &[
-    settings::provides_forms(
-        "an image interface and its camera (an Aravis id, an IP address, or Fake_1)",
-        &[
-            Form::new(
-                "color",
-                "320x240 from CAMERA_ID",
-                &[settings::COLOR, settings::word("CAMERA_ID"), PIXEL_FORMAT],
-            ),
-            Form::new(
-                "varcolor",
-                "W x H from CAMERA_ID (without W H: the camera's current region)",
-                &[
-                    settings::VARCOLOR,
-                    settings::word("CAMERA_ID"),
-                    settings::pixels("W", 16384).optional(),
-                    settings::pixels("H", 16384),
-                    PIXEL_FORMAT,
-                ],
-            ),
-        ],
-    )
-    .required(),
-    Line::new(
-        "exposure",
-        "a camera's exposure time, or auto",
-        &[
-            settings::word("CAMERA_ID"),
-            settings::float_or("MICROSECONDS", "µs", 0.0, 1e9, "auto"),
-        ],
-    )
-    .repeats(),
-    Line::new(
-        "gain",
-        "a camera's gain, or auto",
-        &[
-            settings::word("CAMERA_ID"),
-            settings::float_or("DB", "dB", 0.0, 1000.0, "auto"),
-        ],
-    )
-    .repeats(),
-    Line::new(
-        "framerate",
-        "a camera's frame rate",
-        &[
-            settings::word("CAMERA_ID"),
-            settings::float("FPS", "frames/s", 0.001, 10_000.0),
-        ],
-    )
-    .repeats(),
-];
-
-#[derive(serde::Deserialize)]
-struct Lines {
-    provides: Vec<Provides>,
-    exposure: Vec<(String, NumberOr)>,
-    gain: Vec<(String, NumberOr)>,
-    framerate: Vec<(String, f64)>,
+crate::declare_lines! {
+    /// The driver's lines, declared once (`jderobot help gige`).
+    struct Lines {
+        provides: Vec<Provides> = settings::provides_forms(
+            "an image interface and its camera (an Aravis id, an IP address, or Fake_1)",
+            &[
+                Form::new(
+                    "color",
+                    "320x240 from CAMERA_ID",
+                    &[settings::COLOR, settings::word("CAMERA_ID"), PIXEL_FORMAT],
+                ),
+                Form::new(
+                    "varcolor",
+                    "W x H from CAMERA_ID (without W H: the camera's current region)",
+                    &[
+                        settings::VARCOLOR,
+                        settings::word("CAMERA_ID"),
+                        settings::pixels("W", 16384).optional(),
+                        settings::pixels("H", 16384),
+                        PIXEL_FORMAT,
+                    ],
+                ),
+            ],
+        )
+        .required(),
+        exposure: Vec<(String, NumberOr)> = Line::new(
+            "exposure",
+            "a camera's exposure time, or auto",
+            &[
+                settings::word("CAMERA_ID"),
+                settings::float_or("MICROSECONDS", "µs", 0.0, 1e9, "auto"),
+            ],
+        )
+        .repeats(),
+        gain: Vec<(String, NumberOr)> = Line::new(
+            "gain",
+            "a camera's gain, or auto",
+            &[
+                settings::word("CAMERA_ID"),
+                settings::float_or("DB", "dB", 0.0, 1000.0, "auto"),
+            ],
+        )
+        .repeats(),
+        framerate: Vec<(String, f64)> = Line::new(
+            "framerate",
+            "a camera's frame rate",
+            &[
+                settings::word("CAMERA_ID"),
+                settings::float("FPS", "frames/s", 0.001, 10_000.0),
+            ],
+        )
+        .repeats(),
+    }
 }
-
 #[derive(serde::Deserialize)]
 enum Provides {
     #[serde(rename = "color")]
@@ -172,7 +165,7 @@ impl From<NumberOr> for Setting {
 
 /// Parses the driver's lines.
 pub fn parse(conf: &ComponentConf) -> anyhow::Result<Vec<GigeConf>> {
-    let lines: Lines = conf.settings(LINES)?;
+    let lines: Lines = conf.read()?;
     let mut cams: Vec<GigeConf> = Vec::new();
     for (p, l) in lines.provides.into_iter().zip(conf.provides()) {
         let (iface, camera, size, pixel_format) = match p {
@@ -602,5 +595,5 @@ crate::register_driver!(
     "gige",
     "GigE Vision / USB3 Vision cameras through Aravis 0.8: colorA..D, varcolorA..D",
     create,
-    lines = LINES
+    lines = Lines
 );

@@ -36,7 +36,7 @@ use anyhow::Context as _;
 use crate::{
     conf::{
         ComponentConf, ConfLine,
-        settings::{self, Form, Setting, choice, path, pixels},
+        settings::{self, Form, choice, path, pixels},
     },
     interfaces::{COLOR_HEIGHT, COLOR_WIDTH, Image, Interface},
     media::{
@@ -54,34 +54,36 @@ pub struct Source {
     pub fit: Fit,
 }
 
-/// The driver's lines, declared once (`jderobot help imagefile`).
-const LINES: &[Setting] = &[settings::provides_forms(
-    "an image interface and its file",
-    &[
-        Form::new(
-            "color",
-            "320x240 from FILE (another size is an error unless `scale`: resized to 320x240)",
+crate::declare_lines! {
+    /// The driver's lines, declared once (`jderobot help imagefile`).
+    struct Lines {
+        provides: Vec<Provides> = settings::provides_forms(
+            "an image interface and its file",
             &[
-                settings::COLOR,
-                path("FILE"),
-                choice("scale", &["scale"]).optional(),
+                Form::new(
+                    "color",
+                    "320x240 from FILE (another size is an error unless `scale`: resized to 320x240)",
+                    &[
+                        settings::COLOR,
+                        path("FILE"),
+                        choice("scale", &["scale"]).optional(),
+                    ],
+                ),
+                Form::new(
+                    "varcolor",
+                    "FILE at its own size, or scaled to W x H",
+                    &[
+                        settings::VARCOLOR,
+                        path("FILE"),
+                        pixels("W", 16384).optional(),
+                        pixels("H", 16384),
+                    ],
+                ),
             ],
-        ),
-        Form::new(
-            "varcolor",
-            "FILE at its own size, or scaled to W x H",
-            &[
-                settings::VARCOLOR,
-                path("FILE"),
-                pixels("W", 16384).optional(),
-                pixels("H", 16384),
-            ],
-        ),
-    ],
-)
-.required()];
-
-type Lines = crate::conf::settings::ProvidesOnly<Provides>;
+        )
+        .required(),
+    }
+}
 
 #[derive(serde::Deserialize)]
 enum Provides {
@@ -93,7 +95,7 @@ enum Provides {
 
 /// Parses the driver's lines.
 pub fn parse(conf: &ComponentConf) -> anyhow::Result<Vec<(Source, ConfLine)>> {
-    let lines: Lines = conf.settings(LINES)?;
+    let lines: Lines = conf.read()?;
     let mut out: Vec<(Source, ConfLine)> = Vec::new();
     for (p, l) in lines.provides.into_iter().zip(conf.provides()) {
         let (interface, path, fit) = match p {
@@ -163,5 +165,5 @@ crate::register_driver!(
     "imagefile",
     "images from PNM (4.3), PNG, JPEG and BMP files on colorA..D / varcolorA..D",
     create,
-    lines = LINES
+    lines = Lines
 );

@@ -45,7 +45,7 @@ use anyhow::Context as _;
 use crate::{
     conf::{
         ComponentConf, ConfLine,
-        settings::{self, Form, Setting, choice, int, word},
+        settings::{self, Form, choice, int, word},
     },
     interfaces::{COLOR_HEIGHT, COLOR_WIDTH, Image, Interface},
     media::{
@@ -91,42 +91,44 @@ const REPEAT: settings::Arg = choice("repeat_on|repeat_off", &["repeat_on", "rep
 /// `unpaced`: as fast as it decodes.
 const UNPACED: settings::Arg = choice("unpaced", &["unpaced"]).optional();
 
-/// The driver's lines, declared once (`jderobot help mplayer`).
-const LINES: &[Setting] = &[settings::provides_forms(
-    "an image interface and the video it shows",
-    &[
-        Form::new(
-            "v4l",
-            "320x240 from a V4L2 device's input",
+crate::declare_lines! {
+    /// The driver's lines, declared once (`jderobot help mplayer`).
+    struct Lines {
+        provides: Vec<Provides> = settings::provides_forms(
+            "an image interface and the video it shows",
             &[
-                settings::COLOR,
-                choice("v4l", &["v4l"]),
-                word("DEV"),
-                choice("INPUT", &["cam", "tv", "composite", "s-video"]),
+                Form::new(
+                    "v4l",
+                    "320x240 from a V4L2 device's input",
+                    &[
+                        settings::COLOR,
+                        choice("v4l", &["v4l"]),
+                        word("DEV"),
+                        choice("INPUT", &["cam", "tv", "composite", "s-video"]),
+                    ],
+                ),
+                Form::new(
+                    "color",
+                    "a file or URL at 320x240",
+                    &[settings::COLOR, word("FILE|URL"), REPEAT, UNPACED],
+                ),
+                Form::new(
+                    "varcolor",
+                    "a file or URL at W x H",
+                    &[
+                        settings::VARCOLOR,
+                        word("FILE|URL"),
+                        int("W", "px", 2, 8192),
+                        int("H", "px", 2, 8192),
+                        REPEAT,
+                        UNPACED,
+                    ],
+                ),
             ],
-        ),
-        Form::new(
-            "color",
-            "a file or URL at 320x240",
-            &[settings::COLOR, word("FILE|URL"), REPEAT, UNPACED],
-        ),
-        Form::new(
-            "varcolor",
-            "a file or URL at W x H",
-            &[
-                settings::VARCOLOR,
-                word("FILE|URL"),
-                int("W", "px", 2, 8192),
-                int("H", "px", 2, 8192),
-                REPEAT,
-                UNPACED,
-            ],
-        ),
-    ],
-)
-.required()];
-
-type Lines = crate::conf::settings::ProvidesOnly<Provides>;
+        )
+        .required(),
+    }
+}
 
 #[derive(serde::Deserialize)]
 enum Provides {
@@ -140,7 +142,7 @@ enum Provides {
 
 /// Parses the driver's lines.
 pub fn parse(conf: &ComponentConf) -> anyhow::Result<Vec<(Source, ConfLine)>> {
-    let lines: Lines = conf.settings(LINES)?;
+    let lines: Lines = conf.read()?;
     let mut out: Vec<(Source, ConfLine)> = Vec::new();
     for (p, l) in lines.provides.into_iter().zip(conf.provides()) {
         let file =
@@ -364,5 +366,5 @@ crate::register_driver!(
     "mplayer",
     "any video the mplayer program plays (files, URLs, V4L2) on colorA..D / varcolorA..D",
     create,
-    lines = LINES
+    lines = Lines
 );

@@ -81,95 +81,96 @@ const USAGE: &str = "provides motors|encoders|pantiltencoders|pantiltmotors|sona
 provides colorA..D [CAMERA], provides varcolorA..D CAMERA W H (CAMERA 0 top, 1 bottom; \
 W H 160 120, 320 240, 640 480 or 1280 960)";
 
-/// The lines `naobody` takes (`jderobot help naobody` prints them).
-const LINES: &[Setting] = &[
-    settings::provides_forms(
-        USAGE,
-        &[
-            Form::new(
-                "device",
-                "the walk, the odometry, the head, the sonars or the foot bumpers",
-                &[kinds(
-                    "INTERFACE",
+crate::declare_lines! {
+    /// The lines `naobody` takes (`jderobot help naobody` prints them).
+    struct Lines {
+        provides: Vec<ProvidesLine> = settings::provides_forms(
+            USAGE,
+            &[
+                Form::new(
+                    "device",
+                    "the walk, the odometry, the head, the sonars or the foot bumpers",
+                    &[kinds(
+                        "INTERFACE",
+                        &[
+                            Kind::Motors,
+                            Kind::Encoders,
+                            Kind::PtEncoders,
+                            Kind::PtMotors,
+                            Kind::Sonars,
+                            Kind::Bumpers,
+                        ],
+                    )],
+                ),
+                Form::new(
+                    "color",
+                    "a camera at 320x240 (CAMERA 0 top, the default, or 1 bottom)",
+                    &[settings::COLOR, int("CAMERA", "", 0, 1).optional()],
+                ),
+                Form::new(
+                    "varcolor",
+                    "a camera at W x H: 160 120, 320 240, 640 480 or 1280 960",
                     &[
-                        Kind::Motors,
-                        Kind::Encoders,
-                        Kind::PtEncoders,
-                        Kind::PtMotors,
-                        Kind::Sonars,
-                        Kind::Bumpers,
+                        settings::VARCOLOR,
+                        int("CAMERA", "", 0, 1),
+                        pixels("W", 1280),
+                        pixels("H", 960),
                     ],
-                )],
-            ),
-            Form::new(
-                "color",
-                "a camera at 320x240 (CAMERA 0 top, the default, or 1 bottom)",
-                &[settings::COLOR, int("CAMERA", "", 0, 1).optional()],
-            ),
-            Form::new(
-                "varcolor",
-                "a camera at W x H: 160 120, 320 240, 640 480 or 1280 960",
-                &[
-                    settings::VARCOLOR,
-                    int("CAMERA", "", 0, 1),
-                    pixels("W", 1280),
-                    pixels("H", 960),
-                ],
-            ),
-        ],
-    )
-    .required(),
-    Setting::new(
-        "url",
-        "NAOqi's endpoint, instead of host and port",
-        &[word("tcp://HOST:PORT")],
-    ),
-    Setting::new(
-        "host",
-        "the robot (or simulator) NAOqi runs on",
-        &[word("HOST")],
-    )
-    .default("127.0.0.1"),
-    Setting::new("port", "NAOqi's port", &[int("PORT", "", 1, 65_535)]).default("9559"),
-    Setting::new(
-        "fps",
-        "camera frames per second (NAOqi's cameras give at most 30; above that it polls faster, for peers that serve every call)",
-        &[int("N", "frames/s", 1, 10_000)],
-    )
-    .default("15"),
-    Setting::new(
-        "colorspace",
-        "what the robot sends the camera's frames in (yuv422 is 2/3 of the bytes)",
-        &[choice("SPACE", &["bgr", "rgb", "yuv422"])],
-    )
-    .default("bgr"),
-    Setting::new(
-        "poll",
-        "the time between reads of the head, odometry, sonars and bumpers",
-        &[int("MS", "ms", 10, 10_000)],
-    )
-    .default("100"),
-    Setting::new(
-        "max_v",
-        "the fastest walk sent to the robot",
-        &[float("V", "mm/s", 1.0, 1000.0)],
-    )
-    .default("100"),
-    Setting::new(
-        "max_w",
-        "the fastest turn sent to the robot",
-        &[float("W", "deg/s", 1.0, 360.0)],
-    )
-    .default("40"),
-    MOTORS_TIMEOUT,
-    Setting::new(
-        "reply_timeout",
-        "how long a call may go unanswered before the session counts as lost",
-        &[int("MS", "ms", 10, 60_000)],
-    )
-    .default("2000"),
-];
-
+                ),
+            ],
+        )
+        .required(),
+        url: Option<String> = Setting::new(
+            "url",
+            "NAOqi's endpoint, instead of host and port",
+            &[word("tcp://HOST:PORT")],
+        ),
+        host: String = Setting::new(
+            "host",
+            "the robot (or simulator) NAOqi runs on",
+            &[word("HOST")],
+        )
+        .default("127.0.0.1"),
+        port: u16 = Setting::new("port", "NAOqi's port", &[int("PORT", "", 1, 65_535)]).default("9559"),
+        fps: u32 = Setting::new(
+            "fps",
+            "camera frames per second (NAOqi's cameras give at most 30; above that it polls faster, for peers that serve every call)",
+            &[int("N", "frames/s", 1, 10_000)],
+        )
+        .default("15"),
+        colorspace: String = Setting::new(
+            "colorspace",
+            "what the robot sends the camera's frames in (yuv422 is 2/3 of the bytes)",
+            &[choice("SPACE", &["bgr", "rgb", "yuv422"])],
+        )
+        .default("bgr"),
+        poll: u64 = Setting::new(
+            "poll",
+            "the time between reads of the head, odometry, sonars and bumpers",
+            &[int("MS", "ms", 10, 10_000)],
+        )
+        .default("100"),
+        max_v: f32 = Setting::new(
+            "max_v",
+            "the fastest walk sent to the robot",
+            &[float("V", "mm/s", 1.0, 1000.0)],
+        )
+        .default("100"),
+        max_w: f32 = Setting::new(
+            "max_w",
+            "the fastest turn sent to the robot",
+            &[float("W", "deg/s", 1.0, 360.0)],
+        )
+        .default("40"),
+        motors_timeout: u64 = MOTORS_TIMEOUT,
+        reply_timeout: u64 = Setting::new(
+            "reply_timeout",
+            "how long a call may go unanswered before the session counts as lost",
+            &[int("MS", "ms", 10, 60_000)],
+        )
+        .default("2000"),
+    }
+}
 /// A `provides` line in its declared form.
 #[derive(serde::Deserialize)]
 enum ProvidesLine {
@@ -181,22 +182,6 @@ enum ProvidesLine {
     /// varcolorA..D CAMERA W H.
     #[serde(rename = "varcolor")]
     Varcolor(String, i64, u32, u32),
-}
-
-/// The values of [`LINES`].
-#[derive(serde::Deserialize)]
-struct Lines {
-    provides: Vec<ProvidesLine>,
-    url: Option<String>,
-    host: String,
-    port: u16,
-    fps: u32,
-    colorspace: String,
-    poll: u64,
-    max_v: f32,
-    max_w: f32,
-    motors_timeout: u64,
-    reply_timeout: u64,
 }
 
 /// NAOqi's resolutions (`kQQVGA`..`k4VGA`) by size.
@@ -267,7 +252,7 @@ impl NaoConf {
 
     /// Parses the driver's lines (errors name file:line).
     pub fn parse(conf: &ComponentConf) -> anyhow::Result<NaoConf> {
-        let lines: Lines = conf.settings(LINES)?;
+        let lines: Lines = conf.read()?;
         let (mut host, mut port) = (lines.host, lines.port);
         if let Some(url) = &lines.url {
             let l = conf.line("url").expect("a url line");
@@ -1297,7 +1282,7 @@ crate::register_driver!(
     "naobody",
     "a NAO robot through NAOqi (qi messaging over TCP): walk, head, camera, odometry, sonars, bumpers",
     create,
-    lines = LINES
+    lines = Lines
 );
 
 #[cfg(test)]
@@ -1332,7 +1317,7 @@ mod tests {
             ),
             (
                 "provides varcolorA 2 320 240\n",
-                "cameras 0 (top) and 1 (bottom)",
+                "CAMERA (argument 2) is `2`, expected a whole number between 0 and 1",
             ),
             ("provides varcolorA 0\n", "CAMERA W H"),
             ("provides motors\nprovides motors\n", "provided twice"),

@@ -100,83 +100,75 @@ const HOST: settings::Arg = word("HOST");
 const PORT: settings::Arg = int("PORT", "", 1, 65_535);
 const NETID: settings::Arg = int("NETID", "", 0, u32::MAX as i64);
 
-/// The driver's lines, declared once (`jderobot help networkclient`).
-const LINES: &[Setting] = &[
-    settings::provides_forms(
-        "a remote interface: the server's HOST and PORT (and an image's network id)",
-        &[
-            Form::new(
-                "color",
-                "a 320x240 image, the server's image NETID",
-                &[settings::COLOR, HOST, PORT, NETID],
-            ),
-            Form::new(
-                "varcolor",
-                "an image of any size (exactly W x H when given), the server's image NETID",
-                &[
-                    settings::VARCOLOR,
-                    HOST,
-                    PORT,
-                    NETID,
-                    int("W", "px", 1, 8192).optional(),
-                    int("H", "px", 1, 8192),
-                ],
-            ),
-            Form::new(
-                "device",
-                "a device (4.3's wire has no bumpers message)",
-                &[
-                    choice(
-                        "INTERFACE",
-                        &[
-                            "laser",
-                            "sonars",
-                            "encoders",
-                            "motors",
-                            "pantiltencoders",
-                            "pantiltmotors",
-                            "zoomencoders",
-                            "zoommotors",
-                            "imu",
-                            "us",
-                            "ptencoders",
-                            "ptmotors",
-                            "zencoders",
-                            "zmotors",
-                        ],
-                    ),
-                    HOST,
-                    PORT,
-                ],
-            ),
-        ],
-    )
-    .required(),
-    settings::INITIAL_POSITION.help("the odometry offset added to the remote encoders"),
-    Setting::new(
-        "token",
-        "the server's secret (its `token` line)",
-        &[word("SECRET")],
-    ),
-    MOTORS_TIMEOUT,
-    Setting::new(
-        "depth",
-        "image requests in flight per image",
-        &[int("N", "", 1, 16)],
-    )
-    .default("2"),
-];
-
-#[derive(serde::Deserialize)]
-struct Lines {
-    provides: Vec<Provides>,
-    initial_position: Option<(f32, f32, f32)>,
-    token: Option<String>,
-    #[allow(dead_code)] // read by `conf.motors_timeout()`
-    motors_timeout: u64,
-    depth: u32,
+crate::declare_lines! {
+    /// The driver's lines, declared once (`jderobot help networkclient`).
+    struct Lines {
+        provides: Vec<Provides> = settings::provides_forms(
+            "a remote interface: the server's HOST and PORT (and an image's network id)",
+            &[
+                Form::new(
+                    "color",
+                    "a 320x240 image, the server's image NETID",
+                    &[settings::COLOR, HOST, PORT, NETID],
+                ),
+                Form::new(
+                    "varcolor",
+                    "an image of any size (exactly W x H when given), the server's image NETID",
+                    &[
+                        settings::VARCOLOR,
+                        HOST,
+                        PORT,
+                        NETID,
+                        int("W", "px", 1, 8192).optional(),
+                        int("H", "px", 1, 8192),
+                    ],
+                ),
+                Form::new(
+                    "device",
+                    "a device (4.3's wire has no bumpers message)",
+                    &[
+                        choice(
+                            "INTERFACE",
+                            &[
+                                "laser",
+                                "sonars",
+                                "encoders",
+                                "motors",
+                                "pantiltencoders",
+                                "pantiltmotors",
+                                "zoomencoders",
+                                "zoommotors",
+                                "imu",
+                                "us",
+                                "ptencoders",
+                                "ptmotors",
+                                "zencoders",
+                                "zmotors",
+                            ],
+                        ),
+                        HOST,
+                        PORT,
+                    ],
+                ),
+            ],
+        )
+        .required(),
+        initial_position: Option<(f32, f32, f32)> = settings::INITIAL_POSITION.help("the odometry offset added to the remote encoders"),
+        token: Option<String> = Setting::new(
+            "token",
+            "the server's secret (its `token` line)",
+            &[word("SECRET")],
+        ),
+        #[allow(dead_code)] // read by `conf.motors_timeout()`
+        motors_timeout: u64 = MOTORS_TIMEOUT,
+        depth: u32 = Setting::new(
+            "depth",
+            "image requests in flight per image",
+            &[int("N", "", 1, 16)],
+        )
+        .default("2"),
+    }
 }
-
 #[derive(serde::Deserialize)]
 enum Provides {
     #[serde(rename = "color")]
@@ -189,7 +181,7 @@ enum Provides {
 
 impl ClientConf {
     pub fn parse(conf: &ComponentConf) -> anyhow::Result<ClientConf> {
-        let lines: Lines = conf.settings(LINES)?;
+        let lines: Lines = conf.read()?;
         if let (Some(t), Some(l)) = (&lines.token, conf.line("token")) {
             netwire::check_token(t).map_err(|e| l.error(format!("`token`: {e}")))?;
         }
@@ -855,5 +847,5 @@ crate::register_driver!(
     "networkclient",
     "a robot's interfaces served by networkserver (4.3 wire) on another machine",
     create,
-    lines = LINES
+    lines = Lines
 );

@@ -56,7 +56,7 @@ use anyhow::Context as _;
 use crate::{
     conf::{
         ComponentConf, ConfLine,
-        settings::{self, Form, Setting, choice, flags, pixels, word},
+        settings::{self, Form, choice, flags, pixels, word},
     },
     interfaces::{COLOR_HEIGHT, COLOR_WIDTH, Image, Interface},
     media::{
@@ -94,48 +94,50 @@ pub struct Source {
     pub pace: bool,
 }
 
-/// The driver's lines, declared once (`jderobot help opencv`).
-const LINES: &[Setting] = &[settings::provides_forms(
-    "an image interface and its source: a still image, a V4L2 device or a video file",
-    &[
-        Form::new(
-            "color",
-            "320x240 from PATH; `loop`: start a file again at its end; `unpaced`: as fast as it decodes",
+crate::declare_lines! {
+    /// The driver's lines, declared once (`jderobot help opencv`).
+    struct Lines {
+        provides: Vec<Provides> = settings::provides_forms(
+            "an image interface and its source: a still image, a V4L2 device or a video file",
             &[
-                settings::COLOR,
-                SOURCES,
-                word("PATH"),
-                flags("OPTIONS", &["loop", "unpaced"]),
+                Form::new(
+                    "color",
+                    "320x240 from PATH; `loop`: start a file again at its end; `unpaced`: as fast as it decodes",
+                    &[
+                        settings::COLOR,
+                        SOURCES,
+                        word("PATH"),
+                        flags("OPTIONS", &["loop", "unpaced"]),
+                    ],
+                ),
+                Form::new(
+                    "sized",
+                    "PATH scaled to W x H",
+                    &[
+                        settings::VARCOLOR,
+                        SOURCES,
+                        word("PATH"),
+                        pixels("W", 16384),
+                        pixels("H", 16384),
+                        flags("OPTIONS", &["loop", "unpaced"]),
+                    ],
+                ),
+                Form::new(
+                    "autosize",
+                    "PATH at its own size (`autosize`, or no size)",
+                    &[
+                        settings::VARCOLOR,
+                        SOURCES,
+                        word("PATH"),
+                        choice("autosize", &["autosize"]).optional(),
+                        flags("OPTIONS", &["loop", "unpaced"]),
+                    ],
+                ),
             ],
-        ),
-        Form::new(
-            "sized",
-            "PATH scaled to W x H",
-            &[
-                settings::VARCOLOR,
-                SOURCES,
-                word("PATH"),
-                pixels("W", 16384),
-                pixels("H", 16384),
-                flags("OPTIONS", &["loop", "unpaced"]),
-            ],
-        ),
-        Form::new(
-            "autosize",
-            "PATH at its own size (`autosize`, or no size)",
-            &[
-                settings::VARCOLOR,
-                SOURCES,
-                word("PATH"),
-                choice("autosize", &["autosize"]).optional(),
-                flags("OPTIONS", &["loop", "unpaced"]),
-            ],
-        ),
-    ],
-)
-.required()];
-
-type Lines = crate::conf::settings::ProvidesOnly<Provides>;
+        )
+        .required(),
+    }
+}
 
 #[derive(serde::Deserialize)]
 enum Provides {
@@ -149,7 +151,7 @@ enum Provides {
 
 /// Parses the driver's lines.
 pub fn parse(conf: &ComponentConf) -> anyhow::Result<Vec<(Source, ConfLine)>> {
-    let lines: Lines = conf.settings(LINES)?;
+    let lines: Lines = conf.read()?;
     let mut out: Vec<(Source, ConfLine)> = Vec::new();
     for (p, l) in lines.provides.into_iter().zip(conf.provides()) {
         let (iface, kind, path, size, options) = match p {
@@ -487,5 +489,5 @@ crate::register_driver!(
     "opencv",
     "images, V4L2 capture devices and video files (through FFmpeg) on colorA..D / varcolorA..D",
     create,
-    lines = LINES
+    lines = Lines
 );

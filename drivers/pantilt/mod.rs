@@ -69,40 +69,36 @@ pub struct PtuConf {
     pub baud: u32,
 }
 
-/// The lines `pantilt` takes (`jderobot help pantilt` prints them).
-const LINES: &[Setting] = &[
-    SERIAL.group(HEAD),
-    Setting::new(
-        "baud",
-        "the line speed (the unit's default is 9600)",
-        &[int("RATE", "baud", 300, 115_200)],
-    )
-    .default("9600"),
-    POLL.default("300").group(HEAD),
-    REPLY_TIMEOUT.group(HEAD),
-    Setting::new(
-        "provides",
-        "an interface it provides: pantiltencoders and/or pantiltmotors (4.3's ptencoders, ptmotors)",
-        &[choice(
-            "INTERFACE",
-            &["pantiltencoders", "pantiltmotors", "ptencoders", "ptmotors"],
-        )],
-    )
-    .repeats()
-    .group(HEAD),
-];
-
-/// The values of [`LINES`].
-#[derive(serde::Deserialize)]
-struct Lines {
-    head: HeadLines,
-    baud: u32,
+crate::declare_lines! {
+    /// The lines `pantilt` takes (`jderobot help pantilt` prints them).
+    struct Lines {
+        head: HeadLines = [
+            SERIAL.group(HEAD),
+            POLL.default("300").group(HEAD),
+            REPLY_TIMEOUT.group(HEAD),
+            Setting::new(
+            "provides",
+            "an interface it provides: pantiltencoders and/or pantiltmotors (4.3's ptencoders, ptmotors)",
+            &[choice(
+                "INTERFACE",
+                &["pantiltencoders", "pantiltmotors", "ptencoders", "ptmotors"],
+            )],
+        )
+        .repeats()
+        .group(HEAD),
+        ],
+        baud: u32 = Setting::new(
+            "baud",
+            "the line speed (the unit's default is 9600)",
+            &[int("RATE", "baud", 300, 115_200)],
+        )
+        .default("9600"),
+    }
 }
-
 impl PtuConf {
     /// Parses the driver's lines (errors name file:line).
     pub fn parse(conf: &ComponentConf) -> anyhow::Result<PtuConf> {
-        let l: Lines = conf.settings(LINES)?;
+        let l: Lines = conf.read()?;
         let offered = ["pantiltencoders", "pantiltmotors"];
         Ok(PtuConf {
             head: HeadConf::new(conf, l.head, &offered)?,
@@ -524,5 +520,5 @@ crate::register_driver!(
     "pantilt",
     "Directed Perception pan-tilt unit on a serial line: pantiltencoders, pantiltmotors",
     create,
-    lines = LINES
+    lines = Lines
 );

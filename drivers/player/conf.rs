@@ -106,114 +106,103 @@ macro_rules! provides_tail {
     };
 }
 
-/// The driver's lines, declared once (`jderobot help player`).
-pub const LINES: &[Setting] = &[
-    Setting::new(
-        "hostname",
-        "the Player server (`hostname H port P`)",
-        &[
-            word("HOST"),
-            choice("port", &["port"]).optional(),
-            int("PORT", "", 1, 65_535),
-        ],
-    ),
-    Setting::new(
-        "port",
-        "the Player server's TCP port (`port P hostname H` too)",
-        &[
-            int("PORT", "", 1, 65_535),
-            choice("hostname", &["hostname"]).optional(),
-            word("HOST"),
-        ],
-    ),
-    Setting::new(
-        "initial_position",
-        "the odometry offset of a robot (the one with no suffix unless ROBOT)",
-        &[
-            float("X", "mm", -1e9, 1e9),
-            float("Y", "mm", -1e9, 1e9),
-            float("THETA", "deg", -36_000.0, 36_000.0),
-            name("ROBOT").optional(),
-        ],
-    )
-    .repeats(),
-    Setting::forms(
-        "provides",
-        "an interface and the Player device it comes from: `index I` (the device index, default 0), \
-         `device INTERF[:I]` (a Player interface named explicitly), ROBOT (the interface's suffix)",
-        &[
-            Form::new(
-                "laser",
-                "N readings at R readings/deg (default 180 1), from laser:I or a ranger",
-                provides_tail![
-                    choice("laser", &["laser"]),
-                    int("N", "", 1, 720).optional(),
-                    float("R", "readings/deg", 0.01, 100.0),
-                ],
-            ),
-            Form::new(
-                "device",
-                "from position2d (encoders, motors), sonar or ranger, bumper, ptz, blobfinder",
-                provides_tail![choice(
-                    "INTERFACE",
-                    &[
-                        "encoders",
-                        "jde_robot",
-                        "motors",
-                        "sonars",
-                        "us",
-                        "bumpers",
-                        "pantiltencoders",
-                        "ptencoders",
-                        "pantiltmotors",
-                        "ptmotors",
-                        "blobs",
+crate::declare_lines! {
+    /// The driver's lines, declared once (`jderobot help player`).
+    pub(crate) struct Lines {
+        hostname: Option<(String, Option<String>, Option<u16>)> = Setting::new(
+            "hostname",
+            "the Player server (`hostname H port P`)",
+            &[
+                word("HOST"),
+                choice("port", &["port"]).optional(),
+                int("PORT", "", 1, 65_535),
+            ],
+        ),
+        port: Option<(u16, Option<String>, Option<String>)> = Setting::new(
+            "port",
+            "the Player server's TCP port (`port P hostname H` too)",
+            &[
+                int("PORT", "", 1, 65_535),
+                choice("hostname", &["hostname"]).optional(),
+                word("HOST"),
+            ],
+        ),
+        initial_position: Vec<(f64, f64, f64, Option<String>)> = Setting::new(
+            "initial_position",
+            "the odometry offset of a robot (the one with no suffix unless ROBOT)",
+            &[
+                float("X", "mm", -1e9, 1e9),
+                float("Y", "mm", -1e9, 1e9),
+                float("THETA", "deg", -36_000.0, 36_000.0),
+                name("ROBOT").optional(),
+            ],
+        )
+        .repeats(),
+        provides: Vec<Provides> = Setting::forms(
+            "provides",
+            "an interface and the Player device it comes from: `index I` (the device index, default 0), \
+             `device INTERF[:I]` (a Player interface named explicitly), ROBOT (the interface's suffix)",
+            &[
+                Form::new(
+                    "laser",
+                    "N readings at R readings/deg (default 180 1), from laser:I or a ranger",
+                    provides_tail![
+                        choice("laser", &["laser"]),
+                        int("N", "", 1, 720).optional(),
+                        float("R", "readings/deg", 0.01, 100.0),
                     ],
-                )],
-            ),
-            // Read as a `device` line too: the images are the standard image names.
-            Form::new(
-                "device",
-                "an image from camera",
-                provides_tail![choice("IMAGE", &IMAGE_NAMES)],
-            ),
-        ],
-    )
-    .repeats(),
-    MOTORS_TIMEOUT,
-    Setting::new(
-        "timeout",
-        "how long the server may stay silent before the session counts as lost",
-        &[int("MS", "ms", 50, 60_000)],
-    )
-    .default("2000"),
-    Setting::new(
-        "datamode",
-        "push: the server sends data as it comes; pull: on request each cycle",
-        &[choice("MODE", &["push", "pull"])],
-    )
-    .default("push"),
-    Setting::new(
-        "cycle",
-        "the command cycle (4.3's PLAYER_COMMAND_CYCLE)",
-        &[int("MS", "ms", 5, 10_000)],
-    )
-    .default("75"),
-];
-
-#[derive(serde::Deserialize)]
-struct Lines {
-    hostname: Option<(String, Option<String>, Option<u16>)>,
-    port: Option<(u16, Option<String>, Option<String>)>,
-    initial_position: Vec<(f64, f64, f64, Option<String>)>,
-    provides: Vec<Provides>,
-    #[allow(dead_code)] // read by `conf.motors_timeout()`
-    motors_timeout: u64,
-    timeout: u64,
-    datamode: String,
-    cycle: u64,
+                ),
+                Form::new(
+                    "device",
+                    "from position2d (encoders, motors), sonar or ranger, bumper, ptz, blobfinder",
+                    provides_tail![choice(
+                        "INTERFACE",
+                        &[
+                            "encoders",
+                            "jde_robot",
+                            "motors",
+                            "sonars",
+                            "us",
+                            "bumpers",
+                            "pantiltencoders",
+                            "ptencoders",
+                            "pantiltmotors",
+                            "ptmotors",
+                            "blobs",
+                        ],
+                    )],
+                ),
+                // Read as a `device` line too: the images are the standard image names.
+                Form::new(
+                    "device",
+                    "an image from camera",
+                    provides_tail![choice("IMAGE", &IMAGE_NAMES)],
+                ),
+            ],
+        )
+        .repeats(),
+        #[allow(dead_code)] // read by `conf.motors_timeout()`
+        motors_timeout: u64 = MOTORS_TIMEOUT,
+        timeout: u64 = Setting::new(
+            "timeout",
+            "how long the server may stay silent before the session counts as lost",
+            &[int("MS", "ms", 50, 60_000)],
+        )
+        .default("2000"),
+        datamode: String = Setting::new(
+            "datamode",
+            "push: the server sends data as it comes; pull: on request each cycle",
+            &[choice("MODE", &["push", "pull"])],
+        )
+        .default("push"),
+        cycle: u64 = Setting::new(
+            "cycle",
+            "the command cycle (4.3's PLAYER_COMMAND_CYCLE)",
+            &[int("MS", "ms", 5, 10_000)],
+        )
+        .default("75"),
+    }
 }
-
 /// The words after a `provides` line's interface (and a laser's N R).
 type Tail = (
     Option<String>,
@@ -249,7 +238,7 @@ enum Provides {
 
 impl PlayerConf {
     pub fn parse(conf: &ComponentConf) -> anyhow::Result<PlayerConf> {
-        let lines: Lines = conf.settings(LINES)?;
+        let lines: Lines = conf.read()?;
         // `hostname H [port P]` and `port P [hostname H]`: the last of each counts.
         let mut host = "localhost".to_string();
         let mut port: u16 = 6665;

@@ -817,5 +817,5 @@ crate::register_driver!(
     "player",
     "a robot or Stage through a Player 3 server (TCP): encoders, motors, laser, sonars, bumpers, pan-tilt, cameras, blobs",
     create,
-    lines = conf::LINES
+    lines = conf::Lines
 );

@@ -87,59 +87,48 @@ struct Settings {
     lockstep: bool,
 }
 
-/// The lines `replay` takes (`jderobot help replay` prints them).
-const LINES: &[Setting] = &[
-    Setting::new(
-        "file",
-        "the MCAP recording to replay (required)",
-        &[path("PATH.mcap")],
-    ),
-    Setting::new(
-        "provides",
-        "the channels to provide (recorded names, robot suffixes included); none: every channel of the file",
-        &[rest("NAME")],
-    )
-    .repeats(),
-    Setting::new(
-        "speed",
-        "the replay speed: 1 = as recorded, N = N times faster (0.001 to 1000), max = as fast as possible",
-        &[word("FACTOR|max")],
-    )
-    .default("1"),
-    Setting::new("loop", "start again at the end", &[on_off("SWITCH")]).default("off"),
-    Setting::new(
-        "start",
-        "where to begin, after the recording's first message",
-        &[float("SECONDS", "s", 0.0, f64::MAX)],
-    )
-    .default("0"),
-    Setting::new(
-        "end",
-        "where to stop, after the recording's first message (default: the end)",
-        &[float("SECONDS", "s", 0.0, f64::MAX)],
-    ),
-    Setting::new(
-        "stepped",
-        "on: publish only when the shell says `step [N]`; motors: lock-step with the controller",
-        &[word("on|off|motors")],
-    )
-    .default("off"),
-];
-
-/// The values of [`LINES`].
-#[derive(serde::Deserialize)]
-struct Lines {
-    file: Option<String>,
-    provides: Vec<Vec<String>>,
-    speed: String,
-    r#loop: bool,
-    start: f64,
-    end: Option<f64>,
-    stepped: String,
+crate::declare_lines! {
+    /// The lines `replay` takes (`jderobot help replay` prints them).
+    struct Lines {
+        file: Option<String> = Setting::new(
+            "file",
+            "the MCAP recording to replay (required)",
+            &[path("PATH.mcap")],
+        ),
+        provides: Vec<Vec<String>> = Setting::new(
+            "provides",
+            "the channels to provide (recorded names, robot suffixes included); none: every channel of the file",
+            &[rest("NAME")],
+        )
+        .repeats(),
+        speed: String = Setting::new(
+            "speed",
+            "the replay speed: 1 = as recorded, N = N times faster (0.001 to 1000), max = as fast as possible",
+            &[word("FACTOR|max")],
+        )
+        .default("1"),
+        r#loop: bool = Setting::new("loop", "start again at the end", &[on_off("SWITCH")]).default("off"),
+        start: f64 = Setting::new(
+            "start",
+            "where to begin, after the recording's first message",
+            &[float("SECONDS", "s", 0.0, f64::MAX)],
+        )
+        .default("0"),
+        end: Option<f64> = Setting::new(
+            "end",
+            "where to stop, after the recording's first message (default: the end)",
+            &[float("SECONDS", "s", 0.0, f64::MAX)],
+        ),
+        stepped: String = Setting::new(
+            "stepped",
+            "on: publish only when the shell says `step [N]`; motors: lock-step with the controller",
+            &[word("on|off|motors")],
+        )
+        .default("off"),
+    }
 }
-
 fn parse(conf: &ComponentConf) -> Result<Settings, crate::conf::ConfError> {
-    let lines: Lines = conf.settings(LINES)?;
+    let lines: Lines = conf.read()?;
     let mut s = Settings {
         file: PathBuf::new(),
         provides: lines.provides.into_iter().flatten().collect(),
@@ -482,5 +471,5 @@ crate::register_driver!(
     "replay",
     "provides the interfaces recorded in an MCAP file, with their recorded clocks (speed, loop, start/end, stepped)",
     create,
-    lines = LINES
+    lines = Lines
 );

@@ -63,46 +63,37 @@ use crate::{
 };
 use protocol::{FrameError, Odometry, Sensors};
 
-/// The lines `roomba` takes (`jderobot help roomba`).
-const LINES: &[Setting] = &[
-    SERIAL.help("the serial port the robot is on, e.g. /dev/ttyUSB0"),
-    Setting::new(
-        "baud",
-        "the line speed (the Create 2's is 115200; 19200 after its baud-rate change)",
-        &[int("RATE", "baud", 1200, 115_200)],
-    )
-    .default("115200"),
-    Setting::new(
-        "mode",
-        "the OI mode: safe (the robot's safety stays on) or full (no cliff or wheel-drop safety)",
-        &[choice("MODE", &["safe", "full"])],
-    )
-    .default("safe"),
-    MOTORS_TIMEOUT,
-    REPLY_TIMEOUT.help(
-        "how long without a good stream frame (at 15 ms each) before the robot counts as lost",
-    ),
-    Setting::new(
-        "provides",
-        "an interface it provides: motors, encoders, bumpers, sonars (the light bumper)",
-        &[choice(
-            "INTERFACE",
-            &["motors", "encoders", "bumpers", "sonars", "sonar"],
-        )],
-    )
-    .repeats(),
-];
-
-#[derive(serde::Deserialize)]
-struct Lines {
-    serial: String,
-    baud: u32,
-    mode: String,
-    motors_timeout: u64,
-    reply_timeout: u64,
-    provides: Vec<String>,
+crate::declare_lines! {
+    /// The lines `roomba` takes (`jderobot help roomba`).
+    struct Lines {
+        serial: String = SERIAL.help("the serial port the robot is on, e.g. /dev/ttyUSB0"),
+        baud: u32 = Setting::new(
+            "baud",
+            "the line speed (the Create 2's is 115200; 19200 after its baud-rate change)",
+            &[int("RATE", "baud", 1200, 115_200)],
+        )
+        .default("115200"),
+        mode: String = Setting::new(
+            "mode",
+            "the OI mode: safe (the robot's safety stays on) or full (no cliff or wheel-drop safety)",
+            &[choice("MODE", &["safe", "full"])],
+        )
+        .default("safe"),
+        motors_timeout: u64 = MOTORS_TIMEOUT,
+        reply_timeout: u64 = REPLY_TIMEOUT.help(
+            "how long without a good stream frame (at 15 ms each) before the robot counts as lost",
+        ),
+        provides: Vec<String> = Setting::new(
+            "provides",
+            "an interface it provides: motors, encoders, bumpers, sonars (the light bumper)",
+            &[choice(
+                "INTERFACE",
+                &["motors", "encoders", "bumpers", "sonars", "sonar"],
+            )],
+        )
+        .repeats(),
+    }
 }
-
 /// The driver's settings.
 #[derive(Clone, Debug)]
 pub struct RoombaConf {
@@ -114,7 +105,7 @@ pub struct RoombaConf {
 
 impl RoombaConf {
     pub fn parse(conf: &ComponentConf) -> anyhow::Result<RoombaConf> {
-        let l: Lines = conf.settings(LINES)?;
+        let l: Lines = conf.read()?;
         let lines = HeadLines {
             serial: l.serial,
             poll: 15,
@@ -471,5 +462,5 @@ crate::register_driver!(
     "roomba",
     "iRobot Create 2 / Roomba on a serial line (Open Interface): motors, encoders, bumpers, sonars",
     create,
-    lines = LINES
+    lines = Lines
 );

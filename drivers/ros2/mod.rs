@@ -70,36 +70,25 @@ use crate::{
     supervisor::{Backoff, Supervision, Supervisor},
 };
 
-const LINES: &[Setting] = &[
-    settings::provides("provides laser|encoders|motors|imu|colorA..D|varcolorA..D [TOPIC]"),
-    settings::INSECURE,
-    settings::ROS_DISCOVERY,
-    settings::ROS_DOMAIN,
-    settings::ROS_NODE.default("jderobot_driver"),
-    settings::ROS_NAMESPACE,
-    Setting::new(
-        "silence",
-        "a topic without a message this long makes the robot lost",
-        &[int("MS", "ms", 100, 600_000)],
-    )
-    .default("2000"),
-    MOTORS_TIMEOUT,
-];
-
-#[derive(serde::Deserialize)]
-struct Lines {
-    provides: Vec<(String, Option<String>)>,
-    #[serde(default)]
-    insecure: bool,
-    #[serde(default)]
-    discovery: Option<String>,
-    domain: u16,
-    node: String,
-    namespace: String,
-    silence: u64,
-    motors_timeout: u64,
+crate::declare_lines! {
+    struct Lines {
+        provides: Vec<(String, Option<String>)> = settings::provides("provides laser|encoders|motors|imu|colorA..D|varcolorA..D [TOPIC]"),
+        #[serde(default)]
+        insecure: bool = settings::INSECURE,
+        #[serde(default)]
+        discovery: Option<String> = settings::ROS_DISCOVERY,
+        domain: u16 = settings::ROS_DOMAIN,
+        node: String = settings::ROS_NODE.default("jderobot_driver"),
+        namespace: String = settings::ROS_NAMESPACE,
+        silence: u64 = Setting::new(
+            "silence",
+            "a topic without a message this long makes the robot lost",
+            &[int("MS", "ms", 100, 600_000)],
+        )
+        .default("2000"),
+        motors_timeout: u64 = MOTORS_TIMEOUT,
+    }
 }
-
 type Reader = DataReader<Cdr, CdrAdapter>;
 
 /// One sensor topic read into one interface.
@@ -357,7 +346,7 @@ fn motors_output(
 }
 
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>> {
-    let l: Lines = conf.settings(LINES)?;
+    let l: Lines = conf.read()?;
     let range = dds::discovery_range(
         l.discovery.as_deref(),
         l.insecure,
@@ -474,5 +463,5 @@ crate::register_driver!(
     "ros2",
     "a ROS 2 robot over DDS: laser (/scan), encoders (/odom), motors (/cmd_vel), imu, cameras",
     create,
-    lines = LINES
+    lines = Lines
 );

@@ -57,56 +57,47 @@ use protocol::{Info, Revolution};
 
 const USAGE: &str = "provides laser [N RESOLUTION] (default 360 1)";
 
-/// The lines `rplidar` takes (`jderobot help rplidar`).
-const LINES: &[Setting] = &[
-    SERIAL.help("the serial port the lidar is on, e.g. /dev/ttyUSB0"),
-    Setting::new(
-        "baud",
-        "the line speed: 115200 for an A1 or A2, 256000 for an A3 or S1",
-        &[int("RATE", "baud", 9600, 1_000_000)],
-    )
-    .default("115200"),
-    Setting::new(
-        "max_range",
-        "the model's farthest range; a reading without a return reads this",
-        &[int("MM", "mm", 100, 100_000)],
-    )
-    .default("12000"),
-    Setting::new(
-        "mount",
-        "where the lidar sits on the robot: X forward, Y left (mm), YAW counter-clockwise (deg)",
-        &[
-            float("X", "mm", -10_000.0, 10_000.0),
-            float("Y", "mm", -10_000.0, 10_000.0),
-            float("YAW", "deg", -360.0, 360.0),
-        ],
-    )
-    .default("0 0 0"),
-    REPLY_TIMEOUT
-        .help("how long an answer, or a good scan node, may take before the lidar counts as lost"),
-    Setting::new(
-        "provides",
-        USAGE,
-        &[
-            kinds("laser", &[Kind::Laser]),
-            int("N", "", 1, 7200).optional(),
-            float("RESOLUTION", "readings/deg", 0.01, 20.0),
-        ],
-    )
-    .required(),
-];
-
-#[derive(serde::Deserialize)]
-struct Lines {
-    serial: String,
-    baud: u32,
-    max_range: i32,
-    mount: (f64, f64, f64),
-    reply_timeout: u64,
-    /// `provides laser [N RESOLUTION]`: the scan's readings and readings/deg.
-    provides: (Kind, Option<usize>, Option<f64>),
+crate::declare_lines! {
+    /// The lines `rplidar` takes (`jderobot help rplidar`).
+    struct Lines {
+        serial: String = SERIAL.help("the serial port the lidar is on, e.g. /dev/ttyUSB0"),
+        baud: u32 = Setting::new(
+            "baud",
+            "the line speed: 115200 for an A1 or A2, 256000 for an A3 or S1",
+            &[int("RATE", "baud", 9600, 1_000_000)],
+        )
+        .default("115200"),
+        max_range: i32 = Setting::new(
+            "max_range",
+            "the model's farthest range; a reading without a return reads this",
+            &[int("MM", "mm", 100, 100_000)],
+        )
+        .default("12000"),
+        mount: (f64, f64, f64) = Setting::new(
+            "mount",
+            "where the lidar sits on the robot: X forward, Y left (mm), YAW counter-clockwise (deg)",
+            &[
+                float("X", "mm", -10_000.0, 10_000.0),
+                float("Y", "mm", -10_000.0, 10_000.0),
+                float("YAW", "deg", -360.0, 360.0),
+            ],
+        )
+        .default("0 0 0"),
+        reply_timeout: u64 = REPLY_TIMEOUT
+            .help("how long an answer, or a good scan node, may take before the lidar counts as lost"),
+        /// `provides laser [N RESOLUTION]`: the scan's readings and readings/deg.
+        provides: (Kind, Option<usize>, Option<f64>) = Setting::new(
+            "provides",
+            USAGE,
+            &[
+                kinds("laser", &[Kind::Laser]),
+                int("N", "", 1, 7200).optional(),
+                float("RESOLUTION", "readings/deg", 0.01, 20.0),
+            ],
+        )
+        .required(),
+    }
 }
-
 /// The driver's settings.
 #[derive(Clone, Debug)]
 pub struct LidarConf {
@@ -121,7 +112,7 @@ pub struct LidarConf {
 
 impl LidarConf {
     pub fn parse(conf: &ComponentConf) -> anyhow::Result<LidarConf> {
-        let l: Lines = conf.settings(LINES)?;
+        let l: Lines = conf.read()?;
         let (_, n, per_deg) = l.provides;
         let (n, per_deg) = (n.unwrap_or(360), per_deg.unwrap_or(1.0));
         if n as f64 / per_deg > 360.0 + 1e-9 {
@@ -483,5 +474,5 @@ crate::register_driver!(
     "rplidar",
     "Slamtec RPLIDAR (A1/A2/A3/S) on a serial line: a 360° laser, one scan per revolution",
     create,
-    lines = LINES
+    lines = Lines
 );

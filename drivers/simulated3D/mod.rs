@@ -71,41 +71,36 @@ pub struct Sim3dConf {
     pub cameras: Vec<(String, PinholeCamera)>,
 }
 
-/// The driver's lines, declared once (`jderobot help simulated3D`).
-const LINES: &[Setting] = &[
-    Setting::new(
-        "worldfile",
-        "the world it renders (a world file)",
-        &[settings::path("FILE")],
-    )
-    .required(),
-    settings::provides_forms(
-        "a camera: an image interface and its camera file (progeo's format)",
-        &[
-            Form::new(
-                "color",
-                "a 320x240 camera (its file must say so)",
-                &[settings::COLOR, settings::path("CAMERA_FILE")],
-            ),
-            Form::new(
-                "varcolor",
-                "a camera of the file's columns x rows",
-                &[settings::VARCOLOR, settings::path("CAMERA_FILE")],
-            ),
-        ],
-    )
-    .required(),
-];
-
-#[derive(serde::Deserialize)]
-struct Lines {
-    worldfile: PathBuf,
-    provides: Vec<(String, PathBuf)>,
+crate::declare_lines! {
+    /// The driver's lines, declared once (`jderobot help simulated3D`).
+    struct Lines {
+        worldfile: PathBuf = Setting::new(
+            "worldfile",
+            "the world it renders (a world file)",
+            &[settings::path("FILE")],
+        )
+        .required(),
+        provides: Vec<(String, PathBuf)> = settings::provides_forms(
+            "a camera: an image interface and its camera file (progeo's format)",
+            &[
+                Form::new(
+                    "color",
+                    "a 320x240 camera (its file must say so)",
+                    &[settings::COLOR, settings::path("CAMERA_FILE")],
+                ),
+                Form::new(
+                    "varcolor",
+                    "a camera of the file's columns x rows",
+                    &[settings::VARCOLOR, settings::path("CAMERA_FILE")],
+                ),
+            ],
+        )
+        .required(),
+    }
 }
-
 /// Parses the driver's lines and reads the world and camera files.
 pub fn parse(conf: &ComponentConf) -> anyhow::Result<Sim3dConf> {
-    let lines: Lines = conf.settings(LINES)?;
+    let lines: Lines = conf.read()?;
     let world = World::load(&lines.worldfile).map_err(|e| {
         let at = conf
             .line("worldfile")
@@ -189,5 +184,5 @@ crate::register_driver!(
     "simulated3D",
     "synthetic camera images of a 3D wireframe world (progeo cameras, black lines on white)",
     create,
-    lines = LINES
+    lines = Lines
 );

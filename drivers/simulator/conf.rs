@@ -128,178 +128,157 @@ const DEVICES: &[Kind] = &[
     Kind::Imu,
 ];
 
-/// The simulator's lines, declared once (`jderobot help simulator`) and read
-/// into [`Lines`]; nothing else reads them.
-pub const LINES: &[Setting] = &[
-    Setting::new(
-        "world",
-        "the world: walls, starts, balls (a world file)",
-        &[path("FILE")],
-    ),
-    Setting::new(
-        "robot",
-        "a robot; its pose (mm, mm, deg) or the world's next start",
-        &[
-            name("NAME"),
-            float("X", "mm", -1e7, 1e7).optional(),
-            float("Y", "mm", -1e7, 1e7),
-            float("THETA", "deg", -36_000.0, 36_000.0),
-        ],
-    )
-    .repeats(),
-    settings::INITIAL_POSITION.help("the first robot's pose"),
-    settings::provides_forms(
-        "what a robot provides (ROBOT: a `robot` line's name; default the first robot)",
-        &[
-            Form::new(
-                "device",
-                "the robot's device",
-                &[kinds("INTERFACE", DEVICES), name("ROBOT").optional()],
-            ),
-            Form::new(
-                "laser",
-                "its laser: N readings at RESOLUTION readings/deg (default: 180 at 1)",
-                &[
-                    kinds("laser", &[Kind::Laser]),
-                    int("N", "", 1, 720).optional(),
-                    float("RESOLUTION", "readings/deg", 0.01, 100.0),
-                    name("ROBOT").optional(),
-                ],
-            ),
-            Form::new(
-                "color",
-                "its pan-tilt camera at 320x240",
-                &[settings::COLOR, name("ROBOT").optional()],
-            ),
-            Form::new(
-                "varcolor",
-                "its pan-tilt camera at W x H (default 320x240)",
-                &[
-                    settings::VARCOLOR,
-                    pixels("W", 4096).optional(),
-                    pixels("H", 4096),
-                    name("ROBOT").optional(),
-                ],
-            ),
-        ],
-    ),
-    MOTORS_TIMEOUT,
-    Setting::new(
-        "speed",
-        "simulated seconds per wall second (1 = real time), or max: as fast as it can",
-        &[float_or("N", "", 0.001, 1e6, "max")],
-    )
-    .default("1"),
-    Setting::new(
-        "stepped",
-        "advance this much simulated time per new command on the first robot's motors",
-        &[float("MS", "ms", 0.001, 60_000.0)],
-    ),
-    Setting::new(
-        "seed",
-        "the noise's random seed",
-        &[int("N", "", 0, i64::MAX)],
-    )
-    .default("1"),
-    Setting::new(
-        "step",
-        "the physics step",
-        &[float("MS", "ms", 0.001, 100.0)],
-    )
-    .default("10"),
-    Setting::new(
-        "period",
-        "how often a sensor publishes (simulated time)",
-        &[
-            choice("SENSOR", SENSORS),
-            float("MS", "ms", 0.001, 60_000.0),
-        ],
-    )
-    .repeats(),
-    Setting::forms(
-        "noise",
-        "sensor noise",
-        &[
-            Form::new(
-                "odometry",
-                "odometry's error: a fraction of each distance and of each turn",
-                &[
-                    choice("odometry", &["odometry"]),
-                    float("DISTANCE_FRACTION", "", 0.0, 1e6),
-                    float("ANGLE_FRACTION", "", 0.0, 1e6),
-                ],
-            ),
-            Form::new(
-                "range",
-                "a range sensor's standard deviation",
-                &[
-                    kinds("laser|sonars", &[Kind::Laser, Kind::Sonars]),
-                    float("MM", "mm", 0.0, 1e6),
-                ],
-            ),
-        ],
-    )
-    .repeats(),
-    Setting::new(
-        "accel",
-        "the robot's accelerations",
-        &[
-            float("V", "mm/s²", 0.001, 1e6),
-            float("W", "deg/s²", 0.001, 1e6),
-        ],
-    ),
-    Setting::new(
-        "radius",
-        "the robot's radius",
-        &[float("R", "mm", 0.001, 1e5)],
-    ),
-    Setting::new(
-        "laser_range",
-        "the laser's range",
-        &[float("RANGE", "mm", 0.001, 1e6)],
-    ),
-    Setting::new(
-        "camera_height",
-        "the pan-tilt camera's height",
-        &[float("H", "mm", 0.001, 1e5)],
-    ),
-    Setting::new(
-        "camera_fov",
-        "the pan-tilt camera's horizontal field of view",
-        &[float("FOV", "deg", 0.001, 169.999)],
-    ),
-    Setting::new(
-        "publish_always",
-        "publish sensors even while nobody uses them",
-        &[on_off("SWITCH")],
-    )
-    .default("off"),
-];
-
-/// The simulator's lines as declared.
-#[derive(serde::Deserialize)]
-struct Lines {
-    #[allow(dead_code)] // its file is read by `world`, which names what it is
-    world: Option<std::path::PathBuf>,
-    robot: Vec<RobotLine>,
-    initial_position: Option<(f64, f64, f64)>,
-    provides: Vec<ProvidesLine>,
-    #[allow(dead_code)] // read by `conf.motors_timeout()`
-    motors_timeout: u64,
-    speed: NumberOr,
-    stepped: Option<f64>,
-    seed: u64,
-    step: f64,
-    period: Vec<(Sensor, f64)>,
-    noise: Vec<NoiseLine>,
-    accel: Option<(f64, f64)>,
-    radius: Option<f64>,
-    laser_range: Option<f64>,
-    camera_height: Option<f64>,
-    camera_fov: Option<f64>,
-    publish_always: bool,
+crate::declare_lines! {
+    /// The simulator's lines, declared once (`jderobot help simulator`) and read
+    /// into [`Lines`]; nothing else reads them.
+    pub(crate) struct Lines {
+        #[allow(dead_code)] // its file is read by `world`, which names what it is
+        world: Option<std::path::PathBuf> = Setting::new(
+            "world",
+            "the world: walls, starts, balls (a world file)",
+            &[path("FILE")],
+        ),
+        robot: Vec<RobotLine> = Setting::new(
+            "robot",
+            "a robot; its pose (mm, mm, deg) or the world's next start",
+            &[
+                name("NAME"),
+                float("X", "mm", -1e7, 1e7).optional(),
+                float("Y", "mm", -1e7, 1e7),
+                float("THETA", "deg", -36_000.0, 36_000.0),
+            ],
+        )
+        .repeats(),
+        initial_position: Option<(f64, f64, f64)> = settings::INITIAL_POSITION.help("the first robot's pose"),
+        provides: Vec<ProvidesLine> = settings::provides_forms(
+            "what a robot provides (ROBOT: a `robot` line's name; default the first robot)",
+            &[
+                Form::new(
+                    "device",
+                    "the robot's device",
+                    &[kinds("INTERFACE", DEVICES), name("ROBOT").optional()],
+                ),
+                Form::new(
+                    "laser",
+                    "its laser: N readings at RESOLUTION readings/deg (default: 180 at 1)",
+                    &[
+                        kinds("laser", &[Kind::Laser]),
+                        int("N", "", 1, 720).optional(),
+                        float("RESOLUTION", "readings/deg", 0.01, 100.0),
+                        name("ROBOT").optional(),
+                    ],
+                ),
+                Form::new(
+                    "color",
+                    "its pan-tilt camera at 320x240",
+                    &[settings::COLOR, name("ROBOT").optional()],
+                ),
+                Form::new(
+                    "varcolor",
+                    "its pan-tilt camera at W x H (default 320x240)",
+                    &[
+                        settings::VARCOLOR,
+                        pixels("W", 4096).optional(),
+                        pixels("H", 4096),
+                        name("ROBOT").optional(),
+                    ],
+                ),
+            ],
+        ),
+        #[allow(dead_code)] // read by `conf.motors_timeout()`
+        motors_timeout: u64 = MOTORS_TIMEOUT,
+        speed: NumberOr = Setting::new(
+            "speed",
+            "simulated seconds per wall second (1 = real time), or max: as fast as it can",
+            &[float_or("N", "", 0.001, 1e6, "max")],
+        )
+        .default("1"),
+        stepped: Option<f64> = Setting::new(
+            "stepped",
+            "advance this much simulated time per new command on the first robot's motors",
+            &[float("MS", "ms", 0.001, 60_000.0)],
+        ),
+        seed: u64 = Setting::new(
+            "seed",
+            "the noise's random seed",
+            &[int("N", "", 0, i64::MAX)],
+        )
+        .default("1"),
+        step: f64 = Setting::new(
+            "step",
+            "the physics step",
+            &[float("MS", "ms", 0.001, 100.0)],
+        )
+        .default("10"),
+        period: Vec<(Sensor, f64)> = Setting::new(
+            "period",
+            "how often a sensor publishes (simulated time)",
+            &[
+                choice("SENSOR", SENSORS),
+                float("MS", "ms", 0.001, 60_000.0),
+            ],
+        )
+        .repeats(),
+        noise: Vec<NoiseLine> = Setting::forms(
+            "noise",
+            "sensor noise",
+            &[
+                Form::new(
+                    "odometry",
+                    "odometry's error: a fraction of each distance and of each turn",
+                    &[
+                        choice("odometry", &["odometry"]),
+                        float("DISTANCE_FRACTION", "", 0.0, 1e6),
+                        float("ANGLE_FRACTION", "", 0.0, 1e6),
+                    ],
+                ),
+                Form::new(
+                    "range",
+                    "a range sensor's standard deviation",
+                    &[
+                        kinds("laser|sonars", &[Kind::Laser, Kind::Sonars]),
+                        float("MM", "mm", 0.0, 1e6),
+                    ],
+                ),
+            ],
+        )
+        .repeats(),
+        accel: Option<(f64, f64)> = Setting::new(
+            "accel",
+            "the robot's accelerations",
+            &[
+                float("V", "mm/s²", 0.001, 1e6),
+                float("W", "deg/s²", 0.001, 1e6),
+            ],
+        ),
+        radius: Option<f64> = Setting::new(
+            "radius",
+            "the robot's radius",
+            &[float("R", "mm", 0.001, 1e5)],
+        ),
+        laser_range: Option<f64> = Setting::new(
+            "laser_range",
+            "the laser's range",
+            &[float("RANGE", "mm", 0.001, 1e6)],
+        ),
+        camera_height: Option<f64> = Setting::new(
+            "camera_height",
+            "the pan-tilt camera's height",
+            &[float("H", "mm", 0.001, 1e5)],
+        ),
+        camera_fov: Option<f64> = Setting::new(
+            "camera_fov",
+            "the pan-tilt camera's horizontal field of view",
+            &[float("FOV", "deg", 0.001, 169.999)],
+        ),
+        publish_always: bool = Setting::new(
+            "publish_always",
+            "publish sensors even while nobody uses them",
+            &[on_off("SWITCH")],
+        )
+        .default("off"),
+    }
 }
-
 /// `robot NAME [X Y THETA]`.
 type RobotLine = (String, Option<f64>, Option<f64>, Option<f64>);
 
@@ -415,7 +394,7 @@ fn model(l: &Lines) -> (RobotModel, Noise, Periods) {
 /// Reads the lines (every one through its declaration) into [`Settings`] and the
 /// `provides` lines.
 fn settings(conf: &ComponentConf) -> Result<(Settings, Vec<ProvidesLine>), ConfError> {
-    let l: Lines = conf.settings(LINES)?;
+    let l: Lines = conf.read()?;
     // `speed` and `stepped`: the later line counts.
     let at = |k: &str| conf.lines_with(k).last().map(|l| l.at.line);
     let clock = match (l.stepped, l.speed) {

@@ -122,5 +122,5 @@ crate::register_driver!(
     "simulator",
     "simulated Pioneer robots in a 2D world: encoders, motors, laser, sonars, bumpers, camera, pan-tilt",
     create,
-    lines = conf::LINES
+    lines = conf::Lines
 );

@@ -52,7 +52,7 @@ use v4l::{
 use crate::{
     conf::{
         ComponentConf,
-        settings::{self, Form, Setting, int, path, pixels},
+        settings::{self, Form, int, path, pixels},
     },
     interfaces::{COLOR_HEIGHT, COLOR_WIDTH, Image, Interface},
     runtime::{self, Driver, Runtime, Supervision, Supervisor},
@@ -86,32 +86,39 @@ const VARCOLOR_INPUT: Form = Form::new(
     &[settings::VARCOLOR, path("DEV"), INPUT, W, H],
 );
 
-/// The driver's lines, declared once (`jderobot help video4linux2`).
-const LINES: &[Setting] = &[settings::provides_forms(
-    "an image interface and the V4L2 device it comes from",
-    &[COLOR_FORM, VARCOLOR_INPUT],
-)
-.required()];
-/// 4.3's video4linux lines (INPUT may be left out: input 0).
-const LINES_V4L1: &[Setting] = &[settings::provides_forms(
-    "an image interface and the V4L2 device it comes from",
-    &[
-        Form::new(
-            "color",
-            "320x240 from device DEV (input INPUT, default 0)",
-            &[settings::COLOR, path("DEV"), INPUT.optional()],
-        ),
-        Form::new(
-            "varcolor",
-            "W x H from input 0 of device DEV",
-            &[settings::VARCOLOR, path("DEV"), W, H],
-        ),
-        VARCOLOR_INPUT,
-    ],
-)
-.required()];
+crate::declare_lines! {
+    /// The driver's lines, declared once (`jderobot help video4linux2`).
+    struct Lines {
+        provides: Vec<Provides> = settings::provides_forms(
+            "an image interface and the V4L2 device it comes from",
+            &[COLOR_FORM, VARCOLOR_INPUT],
+        )
+        .required(),
+    }
+}
 
-type Lines = crate::conf::settings::ProvidesOnly<Provides>;
+crate::declare_lines! {
+    /// 4.3's video4linux lines (INPUT may be left out: input 0).
+    struct LinesV4l1 {
+        provides: Vec<Provides> = settings::provides_forms(
+            "an image interface and the V4L2 device it comes from",
+            &[
+                Form::new(
+                    "color",
+                    "320x240 from device DEV (input INPUT, default 0)",
+                    &[settings::COLOR, path("DEV"), INPUT.optional()],
+                ),
+                Form::new(
+                    "varcolor",
+                    "W x H from input 0 of device DEV",
+                    &[settings::VARCOLOR, path("DEV"), W, H],
+                ),
+                VARCOLOR_INPUT,
+            ],
+        )
+        .required(),
+    }
+}
 
 #[derive(serde::Deserialize)]
 enum Provides {
@@ -125,9 +132,13 @@ enum Provides {
 
 /// Parses the driver's lines; `v4l1` accepts 4.3's video4linux lines (no INPUT).
 pub fn parse(conf: &ComponentConf, v4l1: bool) -> anyhow::Result<Vec<DevConf>> {
-    let lines: Lines = conf.settings(if v4l1 { LINES_V4L1 } else { LINES })?;
+    let provides = if v4l1 {
+        conf.read::<LinesV4l1>()?.provides
+    } else {
+        conf.read::<Lines>()?.provides
+    };
     let mut out = Vec::new();
-    for (p, l) in lines.provides.into_iter().zip(conf.provides()) {
+    for (p, l) in provides.into_iter().zip(conf.provides()) {
         let (iface, device, input, (width, height)) = match p {
             Provides::Color(i, d, input) => (i, d, input.unwrap_or(0), (COLOR_WIDTH, COLOR_HEIGHT)),
             Provides::Varcolor(i, d, w, h) => (i, d, 0, (w, h)),
@@ -537,7 +548,7 @@ crate::register_driver!(
     "video4linux2",
     "V4L2 capture devices (webcams, capture cards): colorA..D, varcolorA..D",
     create,
-    lines = LINES
+    lines = Lines
 );
 
 crate::register_driver!(
@@ -546,5 +557,5 @@ crate::register_driver!(
     "4.3's V4L1 lines, run by the video4linux2 driver: colorA..D, varcolorA..D",
     create_v4l1,
     "video4linux",
-    lines = LINES_V4L1
+    lines = LinesV4l1
 );

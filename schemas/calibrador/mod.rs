@@ -183,39 +183,31 @@ const fn px(name: &'static str) -> Arg {
     float(name, "px", -1e9, 1e9)
 }
 
-/// calibrador's lines, declared once (`jderobot help calibrador`).
-const LINES: &[Setting] = &[
-    imagesource::IMAGE.help("the image it calibrates (its size goes in the camera file)"),
-    Setting::new(
-        "point",
-        "a pattern point, in clicking order; with U V (column, row) its pixel is given",
-        &[mm("X"), mm("Y"), mm("Z"), px("U").optional(), px("V")],
-    )
-    .repeats(),
-    Setting::new(
-        "pattern",
-        "a file of `X Y Z [U V]` lines (# comments): more points, in order",
-        &[path("FILE")],
-    )
-    .repeats(),
-    Setting::new(
-        "camera_out",
-        "where Save writes the progeo camera file",
-        &[path("FILE")],
-    ),
-];
-
+crate::declare_lines! {
+    /// calibrador's lines, declared once (`jderobot help calibrador`).
+    struct Lines {
+        image: String = imagesource::IMAGE.help("the image it calibrates (its size goes in the camera file)"),
+        point: Vec<PointLine> = Setting::new(
+            "point",
+            "a pattern point, in clicking order; with U V (column, row) its pixel is given",
+            &[mm("X"), mm("Y"), mm("Z"), px("U").optional(), px("V")],
+        )
+        .repeats(),
+        pattern: Vec<PathBuf> = Setting::new(
+            "pattern",
+            "a file of `X Y Z [U V]` lines (# comments): more points, in order",
+            &[path("FILE")],
+        )
+        .repeats(),
+        camera_out: Option<PathBuf> = Setting::new(
+            "camera_out",
+            "where Save writes the progeo camera file",
+            &[path("FILE")],
+        ),
+    }
+}
 /// A `point X Y Z [U V]` line.
 type PointLine = (f64, f64, f64, Option<f64>, Option<f64>);
-
-/// The values of [`LINES`].
-#[derive(serde::Deserialize)]
-struct Lines {
-    image: String,
-    point: Vec<PointLine>,
-    pattern: Vec<PathBuf>,
-    camera_out: Option<PathBuf>,
-}
 
 /// The points of a pattern file (an error names the conf line and the file's line).
 fn pattern(line: &ConfLine, f: &std::path::Path) -> anyhow::Result<Vec<PatternPoint>> {
@@ -243,7 +235,7 @@ fn pattern(line: &ConfLine, f: &std::path::Path) -> anyhow::Result<Vec<PatternPo
 }
 
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>> {
-    let l: Lines = conf.settings(LINES)?;
+    let l: Lines = conf.read()?;
     // `point` and `pattern` lines give the points in the order they are written.
     let (mut given, mut files) = (l.point.into_iter(), l.pattern.into_iter());
     let mut points = Vec::new();
@@ -309,7 +301,7 @@ crate::register_schema!(
     "calibrador",
     "camera calibration from a known 3D pattern: DLT + refinement, K, pose, progeo camera file",
     create,
-    lines = LINES
+    lines = Lines
 );
 
 #[cfg(feature = "gui")]

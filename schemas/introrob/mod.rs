@@ -262,5 +262,5 @@ crate::register_schema!(
     "introrob",
     "Pioneer teaching schema: teleoperation, VFF, gradient path planning and your own code",
     create,
-    lines = settings::LINES
+    lines = settings::Lines
 );

@@ -53,52 +53,53 @@ pub struct Settings {
     pub names: InterfaceNames,
 }
 
-/// introrob's lines, declared once (`jderobot help introrob`).
-pub const LINES: &[Setting] = &[
-    Setting::new(
-        "behaviour",
-        "what drives the robot at start",
-        &[choice("BEHAVIOUR", BEHAVIOURS)],
-    )
-    .default("teleop"),
-    Setting::new(
-        "behavior",
-        "the same as behaviour",
-        &[choice("BEHAVIOUR", BEHAVIOURS)],
-    ),
-    Setting::new(
-        "target",
-        "vff's and gpp's target, in world coordinates (none: click one in the panel)",
-        &[float("X", "mm", -1e7, 1e7), float("Y", "mm", -1e7, 1e7)],
-    ),
-    operator::BASE
-        .key("teleop")
-        .help("the initial teleoperation command (limited to max_v and max_w)"),
-    operator::MAX_V,
-    operator::MAX_W,
-    CYCLE.default("100"),
-    Setting::new(
-        "cell",
-        "gpp's grid cell",
-        &[float("SIZE", "mm", 10.0, 1000.0)],
-    )
-    .default("50"),
-    Setting::new(
-        "world",
-        "the map for gpp and the panel: a world file, or none (default: the exported world.map)",
-        &[word("FILE|none")],
-    ),
-    settings::uses(
-        "laser",
-        "the laser it avoids obstacles with (none: a robot without one; no laser obstacles)",
-    ),
-    settings::uses("encoders", "the robot's pose"),
-    settings::uses("motors", "the base it drives"),
-    settings::uses("sonars", "sonars it shows (none: none)"),
-    settings::uses("bumpers", "bumpers it reacts to (none: none)"),
-    settings::uses("camera", "the image it shows (none: none)").default("colorA"),
-];
-
+crate::declare_lines! {
+    /// introrob's lines, declared once (`jderobot help introrob`).
+    pub(crate) struct Lines {
+        behaviour: String = Setting::new(
+            "behaviour",
+            "what drives the robot at start",
+            &[choice("BEHAVIOUR", BEHAVIOURS)],
+        )
+        .default("teleop"),
+        behavior: Option<String> = Setting::new(
+            "behavior",
+            "the same as behaviour",
+            &[choice("BEHAVIOUR", BEHAVIOURS)],
+        ),
+        target: Option<[f32; 2]> = Setting::new(
+            "target",
+            "vff's and gpp's target, in world coordinates (none: click one in the panel)",
+            &[float("X", "mm", -1e7, 1e7), float("Y", "mm", -1e7, 1e7)],
+        ),
+        teleop: (f32, f32) = operator::BASE
+            .key("teleop")
+            .help("the initial teleoperation command (limited to max_v and max_w)"),
+        max_v: f32 = operator::MAX_V,
+        max_w: f32 = operator::MAX_W,
+        cycle: u64 = CYCLE.default("100"),
+        cell: f32 = Setting::new(
+            "cell",
+            "gpp's grid cell",
+            &[float("SIZE", "mm", 10.0, 1000.0)],
+        )
+        .default("50"),
+        world: Option<String> = Setting::new(
+            "world",
+            "the map for gpp and the panel: a world file, or none (default: the exported world.map)",
+            &[word("FILE|none")],
+        ),
+        laser: String = settings::uses(
+            "laser",
+            "the laser it avoids obstacles with (none: a robot without one; no laser obstacles)",
+        ),
+        encoders: String = settings::uses("encoders", "the robot's pose"),
+        motors: String = settings::uses("motors", "the base it drives"),
+        sonars: String = settings::uses("sonars", "sonars it shows (none: none)"),
+        bumpers: String = settings::uses("bumpers", "bumpers it reacts to (none: none)"),
+        camera: String = settings::uses("camera", "the image it shows (none: none)").default("colorA"),
+    }
+}
 /// The behaviours' names (with 4.3's synonyms).
 const BEHAVIOURS: &[&str] = &[
     "teleop",
@@ -111,30 +112,10 @@ const BEHAVIOURS: &[&str] = &[
     "your_code",
 ];
 
-/// The values of [`LINES`].
-#[derive(serde::Deserialize)]
-struct Lines {
-    behaviour: String,
-    behavior: Option<String>,
-    target: Option<[f32; 2]>,
-    teleop: (f32, f32),
-    max_v: f32,
-    max_w: f32,
-    cycle: u64,
-    cell: f32,
-    world: Option<String>,
-    laser: String,
-    encoders: String,
-    motors: String,
-    sonars: String,
-    bumpers: String,
-    camera: String,
-}
-
 impl Settings {
     /// Reads introrob's conf lines (every line optional).
     pub fn parse(conf: &ComponentConf) -> Result<Settings, ConfError> {
-        let l: Lines = conf.settings(LINES)?;
+        let l: Lines = conf.read()?;
         let behaviour = l.behavior.as_deref().unwrap_or(&l.behaviour);
         let optional = |n: String| (n != "none").then_some(n);
         let map = match l.world.as_deref() {

@@ -117,100 +117,85 @@ impl Work for DemoWork {
     }
 }
 
-/// opencvdemo's lines, declared once (`jderobot help opencvdemo`); defaults are 4.3's.
-const LINES: &[Setting] = &[
-    imagesource::IMAGE,
-    Setting::new(
-        "filter",
-        "the filter shown at start",
-        &[choice("FILTER", &Filter::NAMES)],
-    )
-    .default("original"),
-    imagesource::HMIN.default("3.3"),
-    imagesource::HMAX.default("4.5"),
-    imagesource::SMIN.default("0.2"),
-    imagesource::SMAX.default("1"),
-    imagesource::VMIN.default("80"),
-    imagesource::VMAX.default("255"),
-    Setting::new(
-        "canny",
-        "Canny's low threshold (the high one is 3 times it)",
-        &[float("LOW", "", 1.0, 1000.0)],
-    )
-    .default("50"),
-    Setting::new(
-        "hough",
-        "the votes a standard Hough line needs",
-        &[int("VOTES", "", 1, 100_000)],
-    )
-    .default("100"),
-    Setting::new(
-        "houghp",
-        "probabilistic Hough: the votes a line needs, its minimum length, the largest gap in it",
-        &[
-            int("VOTES", "", 1, 100_000),
-            int("MIN_LENGTH", "px", 0, 100_000),
-            int("MAX_GAP", "px", 0, 100_000),
+crate::declare_lines! {
+    /// opencvdemo's lines, declared once (`jderobot help opencvdemo`); defaults are 4.3's.
+    struct Lines {
+        image: String = imagesource::IMAGE,
+        filter: String = Setting::new(
+            "filter",
+            "the filter shown at start",
+            &[choice("FILTER", &Filter::NAMES)],
+        )
+        .default("original"),
+        #[serde(deserialize_with = "imagesource::hsv_lines")]
+        hsv: HsvRange = [
+            imagesource::HMIN.default("3.3"),
+            imagesource::HMAX.default("4.5"),
+            imagesource::SMIN.default("0.2"),
+            imagesource::SMAX.default("1"),
+            imagesource::VMIN.default("80"),
+            imagesource::VMAX.default("255"),
         ],
-    )
-    .default("50 30 10"),
-    Setting::new(
-        "size",
-        "the convolution kernel's size (odd; 4.3 took 3 or 5), given by `row` lines",
-        &[int("N", "", 1, 15)],
-    ),
-    Setting::new(
-        "modulo",
-        "the kernel rows are divided by it when it is more than 1",
-        &[int("DIVISOR", "", -1_000_000, 1_000_000)],
-    )
-    .default("1"),
-    Setting::new(
-        "offset",
-        "added to the convolution before saturation",
-        &[int("OFFSET", "", -1_000_000, 1_000_000)],
-    )
-    .default("0"),
-    Setting::new(
-        "row",
-        "row N (1-based) of the kernel: `size` coefficients",
-        &[
-            int("N", "", 1, 15),
-            numbers("COEFFICIENTS", "", f32::MIN as f64, f32::MAX as f64),
-        ],
-    )
-    .repeats(),
-    Setting::new(
-        "kernel",
-        "a kernel file (instead of size and rows; see assets/kernels)",
-        &[path("FILE")],
-    ),
-    imagesource::OUTPUT,
-    CYCLE
-        .default("33")
-        .help("the period of each iteration (a 30 fps source needs 33 or less)"),
-];
-
-/// The values of [`LINES`].
-#[derive(serde::Deserialize)]
-struct Lines {
-    image: String,
-    filter: String,
-    #[serde(deserialize_with = "imagesource::hsv_lines")]
-    hsv: HsvRange,
-    canny: f64,
-    hough: u32,
-    houghp: (u32, i32, i32),
-    size: Option<usize>,
-    modulo: i32,
-    offset: i32,
-    /// `row N COEFFICIENTS...`, one per line.
-    row: Vec<(usize, Vec<f32>)>,
-    kernel: Option<String>,
-    output: Option<String>,
-    cycle: u64,
+        canny: f64 = Setting::new(
+            "canny",
+            "Canny's low threshold (the high one is 3 times it)",
+            &[float("LOW", "", 1.0, 1000.0)],
+        )
+        .default("50"),
+        hough: u32 = Setting::new(
+            "hough",
+            "the votes a standard Hough line needs",
+            &[int("VOTES", "", 1, 100_000)],
+        )
+        .default("100"),
+        houghp: (u32, i32, i32) = Setting::new(
+            "houghp",
+            "probabilistic Hough: the votes a line needs, its minimum length, the largest gap in it",
+            &[
+                int("VOTES", "", 1, 100_000),
+                int("MIN_LENGTH", "px", 0, 100_000),
+                int("MAX_GAP", "px", 0, 100_000),
+            ],
+        )
+        .default("50 30 10"),
+        size: Option<usize> = Setting::new(
+            "size",
+            "the convolution kernel's size (odd; 4.3 took 3 or 5), given by `row` lines",
+            &[int("N", "", 1, 15)],
+        ),
+        modulo: i32 = Setting::new(
+            "modulo",
+            "the kernel rows are divided by it when it is more than 1",
+            &[int("DIVISOR", "", -1_000_000, 1_000_000)],
+        )
+        .default("1"),
+        offset: i32 = Setting::new(
+            "offset",
+            "added to the convolution before saturation",
+            &[int("OFFSET", "", -1_000_000, 1_000_000)],
+        )
+        .default("0"),
+        /// `row N COEFFICIENTS...`, one per line.
+        row: Vec<(usize, Vec<f32>)> = Setting::new(
+            "row",
+            "row N (1-based) of the kernel: `size` coefficients",
+            &[
+                int("N", "", 1, 15),
+                numbers("COEFFICIENTS", "", f32::MIN as f64, f32::MAX as f64),
+            ],
+        )
+        .repeats(),
+        kernel: Option<String> = Setting::new(
+            "kernel",
+            "a kernel file (instead of size and rows; see assets/kernels)",
+            &[path("FILE")],
+        ),
+        output: Option<String> = imagesource::OUTPUT,
+        cycle: u64 = CYCLE
+            .default("33")
+            .help("the period of each iteration (a 30 fps source needs 33 or less)"),
+    }
 }
-
 /// The kernel: a file, else the rows (all `size` of them, `size` values each).
 fn kernel(conf: &ComponentConf, l: &Lines) -> anyhow::Result<Kernel> {
     if let Some(k) = &l.kernel {
@@ -264,7 +249,7 @@ fn kernel(conf: &ComponentConf, l: &Lines) -> anyhow::Result<Kernel> {
 }
 
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>> {
-    let l: Lines = conf.settings(LINES)?;
+    let l: Lines = conf.read()?;
     let p = Params {
         hsv: l.hsv,
         canny: l.canny,
@@ -299,5 +284,5 @@ crate::register_schema!(
     "opencvdemo",
     "4.3's image-processing demo: gray, colour filter, Canny, Sobel, flow, pyramid, convolution, Hough",
     create,
-    lines = LINES
+    lines = Lines
 );

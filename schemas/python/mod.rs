@@ -75,48 +75,35 @@ use crate::{
 pub use program::{CONSOLE_LINES, Shared, bumper_side, laser_geometry, shared};
 use program::{Current, Outcome, Program, Robot};
 
-/// python's lines, declared once (`jderobot help python`).
-const LINES: &[Setting] = &[
-    Setting::new(
-        "file",
-        "the program (Python, the Robotics Academy's HAL and GUI), relative to the conf file",
-        &[settings::path("FILE")],
-    )
-    .required(),
-    CYCLE.default("50"),
-    Setting::new(
-        "venv",
-        "a virtual environment whose packages the program may import (none: only $VIRTUAL_ENV's)",
-        &[word("DIR|none")],
-    )
-    .default("none"),
-    Setting::new(
-        "watch",
-        "reload the program when its file changes",
-        &[on_off("SWITCH")],
-    )
-    .default("on"),
-    settings::uses("motors", "the base HAL.setV/setW drive (none: none)"),
-    settings::uses("encoders", "HAL.getPose3d's odometry (none: none)"),
-    settings::uses("laser", "HAL.getLaserData's scan (none: none)"),
-    settings::uses("bumpers", "HAL.getBumperData's bumpers (none: none)"),
-    settings::uses("camera", "HAL.getImage's camera (none: none)").default("colorA"),
-];
-
-/// The values of [`LINES`].
-#[derive(serde::Deserialize)]
-struct Lines {
-    file: String,
-    cycle: u64,
-    venv: String,
-    watch: bool,
-    motors: String,
-    encoders: String,
-    laser: String,
-    bumpers: String,
-    camera: String,
+crate::declare_lines! {
+    /// python's lines, declared once (`jderobot help python`).
+    struct Lines {
+        file: String = Setting::new(
+            "file",
+            "the program (Python, the Robotics Academy's HAL and GUI), relative to the conf file",
+            &[settings::path("FILE")],
+        )
+        .required(),
+        cycle: u64 = CYCLE.default("50"),
+        venv: String = Setting::new(
+            "venv",
+            "a virtual environment whose packages the program may import (none: only $VIRTUAL_ENV's)",
+            &[word("DIR|none")],
+        )
+        .default("none"),
+        watch: bool = Setting::new(
+            "watch",
+            "reload the program when its file changes",
+            &[on_off("SWITCH")],
+        )
+        .default("on"),
+        motors: String = settings::uses("motors", "the base HAL.setV/setW drive (none: none)"),
+        encoders: String = settings::uses("encoders", "HAL.getPose3d's odometry (none: none)"),
+        laser: String = settings::uses("laser", "HAL.getLaserData's scan (none: none)"),
+        bumpers: String = settings::uses("bumpers", "HAL.getBumperData's bumpers (none: none)"),
+        camera: String = settings::uses("camera", "HAL.getImage's camera (none: none)").default("colorA"),
+    }
 }
-
 /// Which piece of the program runs next.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
 enum Phase {
@@ -375,7 +362,7 @@ impl Watchdog {
 }
 
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>> {
-    let lines: Lines = conf.settings(LINES)?;
+    let lines: Lines = conf.read()?;
     let file_line = conf.line("file").expect("file is required");
     let path = file_line.existing_file(0, "the program")?;
     let _ = &lines.file;
@@ -463,5 +450,5 @@ crate::register_schema!(
     "python",
     "runs a Python program written against the Robotics Academy's HAL and GUI",
     create,
-    lines = LINES
+    lines = Lines
 );

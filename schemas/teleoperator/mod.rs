@@ -41,7 +41,7 @@ use std::sync::Arc;
 use crate::{
     conf::{
         ComponentConf,
-        settings::{self, CYCLE, Setting},
+        settings::{self, CYCLE},
     },
     interfaces::{Encoders, Image, Interface, Laser, Motors, PtEncoders, PtMotors},
     operator::{self, CommandLines, Operator},
@@ -49,42 +49,26 @@ use crate::{
     world,
 };
 
-/// teleoperator's lines, declared once (`jderobot help teleoperator`).
-const LINES: &[Setting] = &[
-    operator::BASE,
-    operator::HEAD,
-    operator::MAX_V,
-    operator::MAX_W,
-    settings::WORLD,
-    CYCLE.default("100"),
-    settings::uses("motors", "the base it drives"),
-    settings::uses("encoders", "the robot's pose in the 3D canvas (none: none)"),
-    settings::uses("laser", "the laser in the 3D canvas (none: none)"),
-    settings::uses("pantiltmotors", "the pan-tilt unit it points (none: none)"),
-    settings::uses(
-        "pantiltencoders",
-        "the pan-tilt angles it shows (none: none)",
-    ),
-    settings::uses("camera", "the image it shows (none: none)").default("colorA"),
-];
-
-/// The values of [`LINES`].
-#[derive(serde::Deserialize)]
-struct Lines {
-    base: (f32, f32),
-    pantilt: (f32, f32),
-    max_v: f32,
-    max_w: f32,
-    world: Option<String>,
-    cycle: u64,
-    motors: String,
-    encoders: String,
-    laser: String,
-    pantiltmotors: String,
-    pantiltencoders: String,
-    camera: String,
+crate::declare_lines! {
+    /// teleoperator's lines, declared once (`jderobot help teleoperator`).
+    struct Lines {
+        base: (f32, f32) = operator::BASE,
+        pantilt: (f32, f32) = operator::HEAD,
+        max_v: f32 = operator::MAX_V,
+        max_w: f32 = operator::MAX_W,
+        world: Option<String> = settings::WORLD,
+        cycle: u64 = CYCLE.default("100"),
+        motors: String = settings::uses("motors", "the base it drives"),
+        encoders: String = settings::uses("encoders", "the robot's pose in the 3D canvas (none: none)"),
+        laser: String = settings::uses("laser", "the laser in the 3D canvas (none: none)"),
+        pantiltmotors: String = settings::uses("pantiltmotors", "the pan-tilt unit it points (none: none)"),
+        pantiltencoders: String = settings::uses(
+            "pantiltencoders",
+            "the pan-tilt angles it shows (none: none)",
+        ),
+        camera: String = settings::uses("camera", "the image it shows (none: none)").default("colorA"),
+    }
 }
-
 /// The interfaces the teleoperator uses (all but motors optional).
 #[derive(Clone)]
 pub struct Devices {
@@ -97,7 +81,7 @@ pub struct Devices {
 }
 
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>> {
-    let lines: Lines = conf.settings(LINES)?;
+    let lines: Lines = conf.read()?;
     let world = settings::world(conf, lines.world.as_deref(), &rt.names)?;
     let names = operator::interface_names(
         conf,
@@ -157,5 +141,5 @@ crate::register_schema!(
     "teleoperator",
     "drive the base and the pan-tilt; 3D view of the world, robot and laser; camera image",
     create,
-    lines = LINES
+    lines = Lines
 );

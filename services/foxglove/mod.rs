@@ -123,91 +123,76 @@ pub struct Settings {
     pub tls: Option<(PathBuf, PathBuf)>,
 }
 
-const LINES: &[Setting] = &[
-    settings::BIND,
-    Setting::new(
-        "port",
-        "the TCP port (0: any free port)",
-        &[int("PORT", "", 0, 65_535)],
-    )
-    .default("8765"),
-    Setting::new(
-        "sdk_port",
-        "a second port to the same server, at the same `bind`, through the same front door \
-         (the same limits and token; 0: any free port)",
-        &[int("PORT", "", 0, 65_535)],
-    ),
-    Setting::new(
-        "serves",
-        "an interface to serve as a channel; `serves all` (the default when none): every one",
-        &[word("NAME")],
-    )
-    .repeats(),
-    Setting::new(
-        "images",
-        "images as raw BGR (foxglove.RawImage), or JPEG of QUALITY (foxglove.CompressedImage, default 80)",
-        &[choice("ENCODING", &["raw", "jpeg"]), int("QUALITY", "", 1, 100).optional()],
-    )
-    .default("raw"),
-    Setting::new(
-        "world",
-        "the world map (walls, boxes, balls) as a foxglove.SceneUpdate on `world`",
-        &[on_off("WORLD")],
-    )
-    .default("on"),
-    Setting::new(
-        "max_queue",
-        "message frames waiting per client; a client that does not read loses the oldest",
-        &[int("N", "", 1, 4096)],
-    )
-    .default("16"),
-    Setting::new(
-        "max_message",
-        "the longest message a client may send; a longer one closes its connection",
-        &[int("BYTES", "bytes", 1024, 16 << 20)],
-    )
-    .default("65536"),
-    Setting::new(
-        "max_clients",
-        "connections at once over both ports; when full, the one idle longest is closed to admit a new one",
-        &[int("N", "", 1, 4096)],
-    )
-    .default("64"),
-    Setting::new(
-        "token",
-        "a secret clients must present (ws://HOST:PORT/?token=SECRET, or `Authorization: Bearer SECRET`)",
-        &[word("SECRET")],
-    ),
-    Setting::new(
-        "tls",
-        "serve wss:// (TLS) on both ports with this certificate chain and its private key (PEM files)",
-        &[path("CERT.pem"), path("KEY.pem")],
-    ),
-    settings::INSECURE,
-];
-
-#[derive(serde::Deserialize)]
-struct Lines {
-    bind: String,
-    port: u16,
-    sdk_port: Option<u16>,
-    serves: Vec<String>,
-    images: (String, Option<u8>),
-    world: bool,
-    max_queue: usize,
-    max_message: usize,
-    max_clients: usize,
-    token: Option<String>,
-    #[allow(dead_code)] // read through `existing_file`, which checks them
-    tls: Option<(String, String)>,
-    /// `settings::guard_listen` reads the `insecure` line from the conf itself.
-    #[serde(rename = "insecure", default)]
-    _insecure: bool,
+crate::declare_lines! {
+    struct Lines {
+        bind: String = settings::BIND,
+        port: u16 = Setting::new(
+            "port",
+            "the TCP port (0: any free port)",
+            &[int("PORT", "", 0, 65_535)],
+        )
+        .default("8765"),
+        sdk_port: Option<u16> = Setting::new(
+            "sdk_port",
+            "a second port to the same server, at the same `bind`, through the same front door \
+             (the same limits and token; 0: any free port)",
+            &[int("PORT", "", 0, 65_535)],
+        ),
+        serves: Vec<String> = Setting::new(
+            "serves",
+            "an interface to serve as a channel; `serves all` (the default when none): every one",
+            &[word("NAME")],
+        )
+        .repeats(),
+        images: (String, Option<u8>) = Setting::new(
+            "images",
+            "images as raw BGR (foxglove.RawImage), or JPEG of QUALITY (foxglove.CompressedImage, default 80)",
+            &[choice("ENCODING", &["raw", "jpeg"]), int("QUALITY", "", 1, 100).optional()],
+        )
+        .default("raw"),
+        world: bool = Setting::new(
+            "world",
+            "the world map (walls, boxes, balls) as a foxglove.SceneUpdate on `world`",
+            &[on_off("WORLD")],
+        )
+        .default("on"),
+        max_queue: usize = Setting::new(
+            "max_queue",
+            "message frames waiting per client; a client that does not read loses the oldest",
+            &[int("N", "", 1, 4096)],
+        )
+        .default("16"),
+        max_message: usize = Setting::new(
+            "max_message",
+            "the longest message a client may send; a longer one closes its connection",
+            &[int("BYTES", "bytes", 1024, 16 << 20)],
+        )
+        .default("65536"),
+        max_clients: usize = Setting::new(
+            "max_clients",
+            "connections at once over both ports; when full, the one idle longest is closed to admit a new one",
+            &[int("N", "", 1, 4096)],
+        )
+        .default("64"),
+        token: Option<String> = Setting::new(
+            "token",
+            "a secret clients must present (ws://HOST:PORT/?token=SECRET, or `Authorization: Bearer SECRET`)",
+            &[word("SECRET")],
+        ),
+        #[allow(dead_code)] // read through `existing_file`, which checks them
+        tls: Option<(String, String)> = Setting::new(
+            "tls",
+            "serve wss:// (TLS) on both ports with this certificate chain and its private key (PEM files)",
+            &[path("CERT.pem"), path("KEY.pem")],
+        ),
+        /// `settings::guard_listen` reads the `insecure` line from the conf itself.
+        #[serde(rename = "insecure", default)]
+        _insecure: bool = settings::INSECURE,
+    }
 }
-
 /// Reads the conf (every error names file:line and the fix).
 pub fn parse(conf: &ComponentConf) -> Result<Settings, ConfError> {
-    let lines: Lines = conf.settings(LINES)?;
+    let lines: Lines = conf.read()?;
     let bind = match lines.bind.parse::<IpAddr>() {
         Ok(a) => a,
         Err(_) => {
@@ -857,7 +842,7 @@ crate::register_driver!(
     "foxglove",
     "a Foxglove WebSocket server (the official SDK): the app's 3D, image, plot and teleop panels on this robot",
     create,
-    lines = LINES
+    lines = Lines
 );
 
 #[cfg(test)]

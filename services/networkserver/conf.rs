@@ -48,77 +48,63 @@ impl Default for ServerConf {
     }
 }
 
-/// The networkserver's lines, declared once (`jderobot help networkserver`).
-pub(super) const LINES: &[Setting] = &[
-    Setting::new(
-        "socket",
-        "the TCP port it listens on",
-        &[int("PORT", "", 0, 65_535)],
-    ),
-    settings::BIND,
-    settings::INSECURE,
-    Setting::new(
-        "token",
-        "a secret every client must send as its name (`networkclient`'s `token`)",
-        &[word("SECRET")],
-    ),
-    Setting::new(
-        "serves",
-        "an interface it serves; images with their network id (0, 1, 2 ...)",
-        &[
-            interface("NAME"),
-            int("NETID", "", 0, u32::MAX as i64).optional(),
-        ],
-    )
-    .repeats(),
-    Setting::new(
-        "max_clients",
-        "clients at once; more are refused",
-        &[int("N", "", 1, 10_000)],
-    )
-    .default("128"),
-    Setting::new(
-        "max_line",
-        "the longest request line",
-        &[int("BYTES", "bytes", 64, 1 << 20)],
-    )
-    .default("1024"),
-    Setting::new(
-        "max_queue",
-        "image requests waiting per client; more close it",
-        &[int("N", "", 1, 4096)],
-    )
-    .default("32"),
-    Setting::new(
-        "timeout",
-        "how long a client's name, or a blocked write, may take",
-        &[int("MS", "ms", 10, 3_600_000)],
-    )
-    .default("5000"),
-    Setting::new(
-        "idle_timeout",
-        "a client that subscribes to nothing and sends nothing this long is closed (0: never)",
-        &[int("MS", "ms", 0, 86_400_000)],
-    )
-    .default("60000"),
-];
-
-/// The values of [`LINES`].
-#[derive(serde::Deserialize)]
-struct Lines {
-    socket: Option<u16>,
-    bind: String,
-    token: Option<String>,
-    #[allow(dead_code)] // read by `settings::guard_listen`
-    insecure: Option<bool>,
-    serves: Vec<(String, Option<u32>)>,
-    max_clients: usize,
-    max_line: usize,
-    max_queue: usize,
-    timeout: u64,
-    idle_timeout: u64,
+crate::declare_lines! {
+    /// The networkserver's lines, declared once (`jderobot help networkserver`).
+    pub(crate) struct Lines {
+        socket: Option<u16> = Setting::new(
+            "socket",
+            "the TCP port it listens on",
+            &[int("PORT", "", 0, 65_535)],
+        ),
+        bind: String = settings::BIND,
+        #[allow(dead_code)] // read by `settings::guard_listen`
+        insecure: Option<bool> = settings::INSECURE,
+        token: Option<String> = Setting::new(
+            "token",
+            "a secret every client must send as its name (`networkclient`'s `token`)",
+            &[word("SECRET")],
+        ),
+        serves: Vec<(String, Option<u32>)> = Setting::new(
+            "serves",
+            "an interface it serves; images with their network id (0, 1, 2 ...)",
+            &[
+                interface("NAME"),
+                int("NETID", "", 0, u32::MAX as i64).optional(),
+            ],
+        )
+        .repeats(),
+        max_clients: usize = Setting::new(
+            "max_clients",
+            "clients at once; more are refused",
+            &[int("N", "", 1, 10_000)],
+        )
+        .default("128"),
+        max_line: usize = Setting::new(
+            "max_line",
+            "the longest request line",
+            &[int("BYTES", "bytes", 64, 1 << 20)],
+        )
+        .default("1024"),
+        max_queue: usize = Setting::new(
+            "max_queue",
+            "image requests waiting per client; more close it",
+            &[int("N", "", 1, 4096)],
+        )
+        .default("32"),
+        timeout: u64 = Setting::new(
+            "timeout",
+            "how long a client's name, or a blocked write, may take",
+            &[int("MS", "ms", 10, 3_600_000)],
+        )
+        .default("5000"),
+        idle_timeout: u64 = Setting::new(
+            "idle_timeout",
+            "a client that subscribes to nothing and sends nothing this long is closed (0: never)",
+            &[int("MS", "ms", 0, 86_400_000)],
+        )
+        .default("60000"),
+    }
 }
-
 fn err(l: &ConfLine, m: impl Into<String>) -> anyhow::Error {
     l.error(m).into()
 }
@@ -126,7 +112,7 @@ fn err(l: &ConfLine, m: impl Into<String>) -> anyhow::Error {
 impl ServerConf {
     /// Reads the service's lines.
     pub fn parse(conf: &ComponentConf) -> anyhow::Result<ServerConf> {
-        let lines: Lines = conf.settings(LINES)?;
+        let lines: Lines = conf.read()?;
         let mut c = ServerConf {
             max_clients: lines.max_clients,
             max_line: lines.max_line,

@@ -125,7 +125,7 @@ use crate::{
 };
 
 use clients::{Conn, accept_loop};
-use conf::LINES;
+use conf::Lines;
 pub use conf::ServerConf;
 
 /// The served interfaces.
@@ -431,5 +431,5 @@ crate::register_driver!(
     "networkserver",
     "serves this process's interfaces over TCP with JDE 4.3's wire protocol",
     create,
-    lines = LINES
+    lines = Lines
 );

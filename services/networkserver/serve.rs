@@ -477,9 +477,9 @@ fn push(
     out: &mut Vec<u8>,
     epoch: Instant,
 ) {
-    for k in Feed::all().iter().map(|d| d.index()).filter(|&k| subs[k]) {
-        if let Some(dev) = src.device(k) {
-            dev.push(&mut last[k], epoch, out);
+    for d in Feed::all().iter().filter(|d| subs[d.index()]) {
+        if let Some(dev) = src.device(d.interface()) {
+            dev.push(&mut last[d.index()], epoch, out);
         }
     }
 }

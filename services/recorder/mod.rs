@@ -132,75 +132,63 @@ fn utc_stamp(t: SystemTime) -> String {
     )
 }
 
-/// The recorder's lines, declared once (`jderobot help recorder`).
-const LINES: &[Setting] = &[
-    Setting::new(
-        "records",
-        "interfaces to record, or all: every interface of a kind jderobot records, provided by \
-         the drivers loaded before the recorder",
-        &[rest("NAME...|all")],
-    )
-    .repeats(),
-    Setting::new(
-        "file",
-        "the file (default recording-YYYYMMDD-HHMMSS.mcap in the current directory, UTC)",
-        &[path("PATH")],
-    ),
-    Setting::new(
-        "split",
-        "start a new file (NAME-1.mcap, ...) past this size or time",
-        &[int("N", "", 1, 1_000_000), choice("UNIT", &["MB", "min"])],
-    ),
-    Setting::new(
-        "compression",
-        "chunk compression",
-        &[choice("COMPRESSION", &["zstd", "lz4", "none"])],
-    )
-    .default("zstd"),
-    Setting::new(
-        "images",
-        "raw: foxglove.RawImage bgr8; jpeg: foxglove.CompressedImage at QUALITY (default 90)",
-        &[
-            choice("FORMAT", &["raw", "jpeg"]),
-            int("QUALITY", "", 1, 100).optional(),
-        ],
-    )
-    .default("raw"),
-    Setting::new(
-        "queue",
-        "messages waiting for the disk at most; more are dropped and counted",
-        &[int("MESSAGES", "", 1, 100_000)],
-    )
-    .default("64"),
-    Setting::new(
-        "profile",
-        "foxglove: Foxglove schemas (protobuf, JSON); ros2: rosbag2 (CDR)",
-        &[choice("PROFILE", &["foxglove", "ros2"])],
-    )
-    .default("foxglove"),
-    Setting::new(
-        "start",
-        "record from the start, or wait for `record start`",
-        &[on_off("SWITCH")],
-    )
-    .default("on"),
-];
-
-/// The values of [`LINES`].
-#[derive(serde::Deserialize)]
-struct Lines {
-    records: Vec<Vec<String>>,
-    file: Option<PathBuf>,
-    split: Option<(u64, String)>,
-    compression: String,
-    images: (String, Option<u8>),
-    queue: usize,
-    profile: String,
-    start: bool,
+crate::declare_lines! {
+    /// The recorder's lines, declared once (`jderobot help recorder`).
+    struct Lines {
+        records: Vec<Vec<String>> = Setting::new(
+            "records",
+            "interfaces to record, or all: every interface of a kind jderobot records, provided by \
+             the drivers loaded before the recorder",
+            &[rest("NAME...|all")],
+        )
+        .repeats(),
+        file: Option<PathBuf> = Setting::new(
+            "file",
+            "the file (default recording-YYYYMMDD-HHMMSS.mcap in the current directory, UTC)",
+            &[path("PATH")],
+        ),
+        split: Option<(u64, String)> = Setting::new(
+            "split",
+            "start a new file (NAME-1.mcap, ...) past this size or time",
+            &[int("N", "", 1, 1_000_000), choice("UNIT", &["MB", "min"])],
+        ),
+        compression: String = Setting::new(
+            "compression",
+            "chunk compression",
+            &[choice("COMPRESSION", &["zstd", "lz4", "none"])],
+        )
+        .default("zstd"),
+        images: (String, Option<u8>) = Setting::new(
+            "images",
+            "raw: foxglove.RawImage bgr8; jpeg: foxglove.CompressedImage at QUALITY (default 90)",
+            &[
+                choice("FORMAT", &["raw", "jpeg"]),
+                int("QUALITY", "", 1, 100).optional(),
+            ],
+        )
+        .default("raw"),
+        queue: usize = Setting::new(
+            "queue",
+            "messages waiting for the disk at most; more are dropped and counted",
+            &[int("MESSAGES", "", 1, 100_000)],
+        )
+        .default("64"),
+        profile: String = Setting::new(
+            "profile",
+            "foxglove: Foxglove schemas (protobuf, JSON); ros2: rosbag2 (CDR)",
+            &[choice("PROFILE", &["foxglove", "ros2"])],
+        )
+        .default("foxglove"),
+        start: bool = Setting::new(
+            "start",
+            "record from the start, or wait for `record start`",
+            &[on_off("SWITCH")],
+        )
+        .default("on"),
+    }
 }
-
 fn parse(conf: &ComponentConf) -> Result<Settings, crate::conf::ConfError> {
-    let l: Lines = conf.settings(LINES)?;
+    let l: Lines = conf.read()?;
     // `records all` (or no records line): None; else every name on every line.
     let mut records: Option<Vec<String>> = None;
     for (line, words) in conf.lines_with("records").zip(&l.records) {
@@ -630,7 +618,7 @@ crate::register_driver!(
     "recorder",
     "records interfaces into an MCAP file (Foxglove schemas, zstd/lz4) for replay, Foxglove and Python",
     create,
-    lines = LINES
+    lines = Lines
 );
 
 #[cfg(test)]

@@ -115,79 +115,64 @@ use crate::{
     supervisor::Worker,
 };
 
-const LINES: &[Setting] = &[
-    settings::INSECURE,
-    settings::ROS_DISCOVERY,
-    settings::ROS_NODE.default("jderobot"),
-    settings::ROS_NAMESPACE,
-    settings::ROS_DOMAIN,
-    Setting::new(
-        "serves",
-        "an interface served, on its default topic or TOPIC (default: all with a ROS 2 message)",
-        &[interface("INTERFACE"), word("TOPIC").optional()],
-    )
-    .repeats(),
-    Setting::new(
-        "frames",
-        "frame ids: odometry, robot base, laser, camera",
-        &[word("ODOM"), word("BASE"), word("LASER"), word("CAMERA")],
-    )
-    .default("odom base_link laser camera"),
-    Setting::new(
-        "compressed",
-        "also serve camera INTERFACE as sensor_msgs/msg/CompressedImage (JPEG of QUALITY) \
-         on NAME/image_raw/compressed",
-        &[
-            interface("INTERFACE"),
-            int("QUALITY", "", 1, 100).optional(),
-        ],
-    )
-    .repeats(),
-    Setting::new(
-        "sonar",
-        "each sonar's field of view and range limits (sensor_msgs/msg/Range)",
-        &[
-            float("FOV", "deg", 0.0, 180.0),
-            float("MIN", "mm", 0.0, 1e6),
-            float("MAX", "mm", 0.0, 1e6),
-        ],
-    )
-    .default("25 100 5000"),
-    Setting::new(
-        "joints",
-        "the pan-tilt's joint names on joint_states and joint_command",
-        &[word("PAN"), word("TILT")],
-    )
-    .default("pan tilt"),
-    Setting::new(
-        "clock",
-        "the time of the stamps and of /clock: auto (the run's clock when a replay or a \
-         simulator not in real time keeps one, else wall), sim (the run's clock; an error \
-         without one) or wall (no /clock)",
-        &[choice("MODE", &["auto", "sim", "wall"])],
-    )
-    .default("auto"),
-    MOTORS_TIMEOUT,
-];
-
-#[derive(serde::Deserialize)]
-struct Lines {
-    #[serde(default)]
-    insecure: bool,
-    #[serde(default)]
-    discovery: Option<String>,
-    node: String,
-    namespace: String,
-    domain: u16,
-    serves: Vec<(String, Option<String>)>,
-    frames: (String, String, String, String),
-    compressed: Vec<(String, Option<u8>)>,
-    sonar: (f32, f32, f32),
-    joints: (String, String),
-    clock: String,
-    motors_timeout: u64,
+crate::declare_lines! {
+    struct Lines {
+        #[serde(default)]
+        insecure: bool = settings::INSECURE,
+        #[serde(default)]
+        discovery: Option<String> = settings::ROS_DISCOVERY,
+        node: String = settings::ROS_NODE.default("jderobot"),
+        namespace: String = settings::ROS_NAMESPACE,
+        domain: u16 = settings::ROS_DOMAIN,
+        serves: Vec<(String, Option<String>)> = Setting::new(
+            "serves",
+            "an interface served, on its default topic or TOPIC (default: all with a ROS 2 message)",
+            &[interface("INTERFACE"), word("TOPIC").optional()],
+        )
+        .repeats(),
+        frames: (String, String, String, String) = Setting::new(
+            "frames",
+            "frame ids: odometry, robot base, laser, camera",
+            &[word("ODOM"), word("BASE"), word("LASER"), word("CAMERA")],
+        )
+        .default("odom base_link laser camera"),
+        compressed: Vec<(String, Option<u8>)> = Setting::new(
+            "compressed",
+            "also serve camera INTERFACE as sensor_msgs/msg/CompressedImage (JPEG of QUALITY) \
+             on NAME/image_raw/compressed",
+            &[
+                interface("INTERFACE"),
+                int("QUALITY", "", 1, 100).optional(),
+            ],
+        )
+        .repeats(),
+        sonar: (f32, f32, f32) = Setting::new(
+            "sonar",
+            "each sonar's field of view and range limits (sensor_msgs/msg/Range)",
+            &[
+                float("FOV", "deg", 0.0, 180.0),
+                float("MIN", "mm", 0.0, 1e6),
+                float("MAX", "mm", 0.0, 1e6),
+            ],
+        )
+        .default("25 100 5000"),
+        joints: (String, String) = Setting::new(
+            "joints",
+            "the pan-tilt's joint names on joint_states and joint_command",
+            &[word("PAN"), word("TILT")],
+        )
+        .default("pan tilt"),
+        clock: String = Setting::new(
+            "clock",
+            "the time of the stamps and of /clock: auto (the run's clock when a replay or a \
+             simulator not in real time keeps one, else wall), sim (the run's clock; an error \
+             without one) or wall (no /clock)",
+            &[choice("MODE", &["auto", "sim", "wall"])],
+        )
+        .default("auto"),
+        motors_timeout: u64 = MOTORS_TIMEOUT,
+    }
 }
-
 type Writer = DataWriter<Cdr, CdrAdapter>;
 type Reader = DataReader<Cdr, CdrAdapter>;
 
@@ -399,7 +384,7 @@ impl<T> Command<T> {
 }
 
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>> {
-    let l: Lines = conf.settings(LINES)?;
+    let l: Lines = conf.read()?;
     let range = dds::discovery_range(
         l.discovery.as_deref(),
         l.insecure,
@@ -1011,7 +996,7 @@ crate::register_driver!(
     "ros2",
     "a ROS 2 node over DDS serving the robot: /scan, /odom, /tf, /imu, images, sonars, bumpers, pan-tilt; /cmd_vel drives motors",
     create,
-    lines = LINES
+    lines = Lines
 );
 
 #[cfg(test)]

@@ -78,13 +78,11 @@ use std::{
 
 use zenoh::{Session, Wait, key_expr::KeyExpr, pubsub::Subscriber};
 
-use serde::de::IgnoredAny;
-
 use crate::interfaces::{Kind, with_kind};
 use crate::{
     conf::{
-        ComponentConf, ConfError, ConfLine,
-        settings::{Setting, choice, int, word},
+        ComponentConf, ConfError,
+        settings::{Arg, Setting, choice, custom, int, word},
     },
     interfaces::{self, AnyInterface, Interface, Interfaces, Watch},
     runtime::{Driver, Runtime},
@@ -123,122 +121,90 @@ pub struct Settings {
 const USAGE_PUBLISHES: &str = "publishes all | publishes NAME [KEY]";
 const USAGE_PROVIDES: &str = "provides all ROBOT | provides NAME [KEY [KIND]]";
 
-/// A key chunk (robot name): no `/` and none of Zenoh's special characters.
-fn chunk<'a>(l: &'a ConfLine, i: usize, what: &str) -> Result<&'a str, ConfError> {
-    let w = l.word(i, what)?;
+/// A key chunk (a robot's name): no `/` and none of Zenoh's special characters.
+fn check_chunk(w: &str) -> Result<(), String> {
     if w.is_empty() || w.contains(['/', '*', '$', '#', '?', '@']) {
-        return Err(l.error(format!(
-            "`{}`: {what} `{w}` cannot be a key chunk (no / * $ # ? @)",
-            l.keyword()
-        )));
+        return Err("it cannot be a key chunk: no / * $ # ? @".into());
     }
-    Ok(w)
+    Ok(())
 }
 
-fn key(l: &ConfLine, i: usize) -> Result<String, ConfError> {
-    let w = l.word(i, "a key expression")?;
+/// One Zenoh key, without wildcards (e.g. lab/robot1/laser).
+fn check_key(w: &str) -> Result<(), String> {
     match KeyExpr::try_from(w) {
-        Ok(k) if !k.as_str().contains('*') && !k.as_str().contains('$') => Ok(w.to_string()),
-        Ok(_) => Err(l.error(format!(
-            "`{}`: key `{w}` has a wildcard; name one key (e.g. lab/robot1/laser)",
-            l.keyword()
-        ))),
-        Err(e) => Err(l.error(format!("`{}`: `{w}` is not a Zenoh key: {e}", l.keyword()))),
+        Ok(k) if !k.as_str().contains('*') && !k.as_str().contains('$') => Ok(()),
+        Ok(_) => Err("it has a wildcard; name one key, e.g. lab/robot1/laser".into()),
+        Err(e) => Err(format!("not a Zenoh key: {e}")),
     }
 }
 
-/// The lines `zenoh` takes (`jderobot help zenoh` prints them), its session's
-/// included ([`session::LINES`]).
-const LINES: &[Setting] = &[
-    Setting::new(
-        "robot",
-        "the robot's name in default keys (jderobot/<robot>/laser)",
-        &[word("NAME")],
-    )
-    .default("robot"),
-    Setting::new(
-        "publishes",
-        "a local interface to put on Zenoh (on jderobot/<robot>/NAME, or on KEY); `publishes all`: every local interface of a kind that travels",
-        &[word("NAME"), word("KEY").optional()],
-    )
-    .repeats(),
-    Setting::new(
-        "provides",
-        "a remote interface to provide here (robot <robot>'s, or the one on KEY; a non-standard NAME says its KIND); `provides all ROBOT`: every interface robot ROBOT serves",
-        &[word("NAME"), word("KEY").optional(), choice("KIND", Kind::NAMES).optional()],
-    )
-    .repeats(),
-    Setting::new(
-        "format",
-        "jderobot: the layouts of docs/zenoh.md; ros2: CDR on rmw_zenoh keys (laser, images, encoders, motors)",
-        &[choice("FORMAT", &["jderobot", "ros2"])],
-    )
-    .default("jderobot"),
-    Setting::new(
-        "domain",
-        "the ROS 2 domain id of `format ros2` keys",
-        &[int("ID", "", 0, 232)],
-    )
-    .default("0"),
-    Setting::new(
-        "images",
-        "how images travel: raw BGR, or JPEG of QUALITY (default 80)",
-        &[choice("ENCODING", &["raw", "jpeg"]), int("QUALITY", "", 1, 100).optional()],
-    )
-    .default("raw"),
-    Setting::new(
-        "discover",
-        "how long `provides all` waits for the robot to answer",
-        &[int("MS", "ms", 0, 600_000)],
-    )
-    .default("3000"),
-    session::MODE,
-    session::LISTEN,
-    session::CONNECT,
-    session::SCOUTING,
-    session::CONFIG,
-    session::TLS,
-    session::WRITERS,
-    crate::conf::settings::INSECURE,
-];
+/// A robot's name in keys.
+const ROBOT: Arg = custom("NAME", "a key chunk", check_chunk);
+/// A key of one interface.
+const KEY: Arg = custom("KEY", "a Zenoh key without wildcards", check_key);
 
-/// The values of [`LINES`] (the session's are read by [`SessionConf::parse`]).
-#[derive(serde::Deserialize)]
-struct Lines {
-    robot: String,
-    publishes: Vec<(String, Option<String>)>,
-    provides: Vec<(String, Option<String>, Option<Kind>)>,
-    format: String,
-    domain: u32,
-    images: (String, Option<u8>),
-    discover: u64,
-    mode: IgnoredAny,
-    listen: IgnoredAny,
-    connect: IgnoredAny,
-    scouting: IgnoredAny,
-    config: Option<IgnoredAny>,
-    tls: Option<IgnoredAny>,
-    writers: Option<IgnoredAny>,
-    insecure: Option<IgnoredAny>,
+crate::declare_lines! {
+    /// The lines `zenoh` takes (`jderobot help zenoh` prints them), its session's
+    /// included (the group [`session::GROUP`]).
+    struct Lines {
+        robot: String = Setting::new(
+            "robot",
+            "the robot's name in default keys (jderobot/<robot>/laser)",
+            &[ROBOT],
+        )
+        .default("robot"),
+        publishes: Vec<(String, Option<String>)> = Setting::new(
+            "publishes",
+            "a local interface to put on Zenoh (on jderobot/<robot>/NAME, or on KEY); `publishes all`: every local interface of a kind that travels",
+            &[word("NAME"), KEY.optional()],
+        )
+        .repeats(),
+        provides: Vec<(String, Option<String>, Option<Kind>)> = Setting::new(
+            "provides",
+            "a remote interface to provide here (robot <robot>'s, or the one on KEY; a non-standard NAME says its KIND); `provides all ROBOT`: every interface robot ROBOT serves",
+            &[word("NAME"), KEY.optional(), choice("KIND", Kind::NAMES).optional()],
+        )
+        .repeats(),
+        format: String = Setting::new(
+            "format",
+            "jderobot: the layouts of docs/zenoh.md; ros2: CDR on rmw_zenoh keys (laser, images, encoders, motors)",
+            &[choice("FORMAT", &["jderobot", "ros2"])],
+        )
+        .default("jderobot"),
+        domain: u32 = Setting::new(
+            "domain",
+            "the ROS 2 domain id of `format ros2` keys",
+            &[int("ID", "", 0, 232)],
+        )
+        .default("0"),
+        images: (String, Option<u8>) = Setting::new(
+            "images",
+            "how images travel: raw BGR, or JPEG of QUALITY (default 80)",
+            &[choice("ENCODING", &["raw", "jpeg"]), int("QUALITY", "", 1, 100).optional()],
+        )
+        .default("raw"),
+        discover: u64 = Setting::new(
+            "discover",
+            "how long `provides all` waits for the robot to answer",
+            &[int("MS", "ms", 0, 600_000)],
+        )
+        .default("3000"),
+        session: session::SessionLines = [
+            session::MODE,
+            session::LISTEN,
+            session::CONNECT,
+            session::SCOUTING,
+            session::CONFIG,
+            session::TLS,
+            session::WRITERS,
+            session::INSECURE,
+        ],
+    }
 }
-
 /// Reads the conf (every error names file:line and the fix).
 pub fn parse(conf: &ComponentConf) -> Result<Settings, ConfError> {
-    let lines: Lines = conf.settings(LINES)?;
-    let _ = (
-        lines.mode,
-        lines.listen,
-        lines.connect,
-        lines.scouting,
-        lines.config,
-        lines.tls,
-        lines.writers,
-        lines.insecure,
-    );
-    let robot = match conf.line("robot") {
-        Some(l) => chunk(l, 0, "the robot name")?.to_string(),
-        None => lines.robot,
-    };
+    let lines: Lines = conf.read()?;
+    let robot = lines.robot;
     let images = conf.line("images");
     let jpeg = match lines.images {
         (e, Some(q)) if e == "jpeg" => Some(q),
@@ -262,19 +228,21 @@ pub fn parse(conf: &ComponentConf) -> Result<Settings, ConfError> {
         },
         domain: lines.domain,
         jpeg,
-        session: SessionConf::parse(conf)?,
+        session: SessionConf::new(conf, lines.session)?,
         discover: Duration::from_millis(lines.discover),
     };
     for (l, (name, k)) in conf.lines_with("publishes").zip(lines.publishes) {
         s.publishes.push(if name == "all" {
             if k.is_some() {
-                l.expect_args(1, 1, USAGE_PUBLISHES)?;
+                return Err(l.error(format!(
+                    "`publishes all` takes no key; usage: {USAGE_PUBLISHES}"
+                )));
             }
             Which::All
         } else {
             Which::One {
                 name: interfaces::canonical(&name),
-                key: k.is_some().then(|| key(l, 1)).transpose()?,
+                key: k,
                 kind: None,
             }
         });
@@ -282,10 +250,14 @@ pub fn parse(conf: &ComponentConf) -> Result<Settings, ConfError> {
     for (l, (name, k, kind)) in conf.lines_with("provides").zip(lines.provides) {
         if name == "all" {
             if k.is_none() || kind.is_some() {
-                l.expect_args(2, 2, USAGE_PROVIDES)?;
+                return Err(l.error(format!(
+                    "`provides all` takes the robot's name and nothing else; usage: {USAGE_PROVIDES}"
+                )));
             }
-            s.provides
-                .push((Which::All, chunk(l, 1, "the robot name")?.into()));
+            let robot = k.unwrap_or_default();
+            check_chunk(&robot)
+                .map_err(|e| l.error(format!("`provides all {robot}`: the robot's name: {e}")))?;
+            s.provides.push((Which::All, robot));
         } else {
             let name = interfaces::canonical(&name);
             if kind.is_none() && interfaces::family(&name).is_none() {
@@ -294,9 +266,8 @@ pub fn parse(conf: &ComponentConf) -> Result<Settings, ConfError> {
                      say its kind: provides {name} KEY KIND (KIND: image, laser, encoders, ...)"
                 )));
             }
-            let key = k.is_some().then(|| key(l, 1)).transpose()?;
             s.provides
-                .push((Which::One { name, key, kind }, robot.clone()));
+                .push((Which::One { name, key: k, kind }, robot.clone()));
         }
     }
     Ok(s)
@@ -558,7 +529,7 @@ crate::register_driver!(
     "zenoh",
     "publishes interfaces on Zenoh and provides remote ones (Python and ROS 2 can join)",
     create,
-    lines = LINES
+    lines = Lines
 );
 
 #[cfg(test)]
@@ -586,7 +557,7 @@ mod tests {
             Which::One {
                 name: "laser2".into(),
                 key: Some("lab/r2/laser".into()),
-                kind: Some(Kind::Laser)
+                kind: Some(crate::interfaces::Kind::Laser)
             }
         );
         assert_eq!((s.format, s.domain, s.jpeg), (Format::Ros2, 7, Some(60)));
@@ -596,7 +567,13 @@ mod tests {
             ("robot", Format::Jderobot, None)
         );
         assert_eq!(
-            wire::default_key(d.format, 0, "robot", "laser", "laser"),
+            wire::default_key(
+                d.format,
+                0,
+                "robot",
+                "laser",
+                crate::interfaces::Kind::Laser
+            ),
             "jderobot/robot/laser"
         );
     }

@@ -28,69 +28,73 @@ pub enum Scouting {
     Off,
 }
 
+/// The group of the session's lines in a component's declaration.
+pub const GROUP: &str = "session";
+
 /// `mode`: what the session is.
 pub const MODE: Setting = Setting::new(
     "mode",
     "peer: talks to peers directly; client: through a router (needs `connect`); router: routes for others",
     &[choice("MODE", &["peer", "client", "router"])],
 )
-.default("peer");
+.default("peer")
+.group(GROUP);
 /// `listen`: endpoints to listen on.
 pub const LISTEN: Setting = Setting::new(
     "listen",
     "endpoints it listens on, e.g. tcp/0.0.0.0:7447 (default tcp/127.0.0.1:0: loopback, any port)",
     &[rest("ENDPOINT")],
 )
-.repeats();
+.repeats()
+.group(GROUP);
 /// `connect`: endpoints to connect to.
 pub const CONNECT: Setting = Setting::new(
     "connect",
     "endpoints it connects to, e.g. tcp/10.0.0.2:7447",
     &[rest("ENDPOINT")],
 )
-.repeats();
+.repeats()
+.group(GROUP);
 /// `scouting`: multicast discovery of peers.
 pub const SCOUTING: Setting = Setting::new(
     "scouting",
     "multicast discovery of peers: on loopback only, on the whole LAN, or off",
     &[choice("WHERE", &["loopback", "lan", "off"])],
 )
-.default("loopback");
+.default("loopback")
+.group(GROUP);
 /// `config`: a Zenoh config file.
 pub const CONFIG: Setting = Setting::new(
     "config",
     "a Zenoh config file (ACL, TLS, timeouts), applied before these lines",
     &[path("FILE.json5")],
-);
+)
+.group(GROUP);
 /// `tls`: Zenoh's TLS transport with mutual authentication.
 pub const TLS: Setting = Setting::new(
     "tls",
     "TLS with mutual authentication for tls/ endpoints: the CA that signs every peer's \
      certificate, this side's certificate and its private key (PEM files)",
     &[path("CA.pem"), path("CERT.pem"), path("KEY.pem")],
-);
+)
+.group(GROUP);
 /// `writers`: who may write actuators from the network.
 pub const WRITERS: Setting = Setting::new(
     "writers",
     "only peers whose TLS certificate has one of these common names may put values here \
      (motors, pan-tilt, zoom); others may only read (needs `tls`)",
     &[rest("CN")],
-);
-/// The session lines, as [`SessionConf::parse`] reads them.
-pub const LINES: &[Setting] = &[
-    MODE,
-    LISTEN,
-    CONNECT,
-    SCOUTING,
-    CONFIG,
-    TLS,
-    WRITERS,
-    settings::INSECURE,
-];
+)
+.group(GROUP);
+/// `insecure`, read with the session's lines ([`guard_listen`](settings::guard_listen)
+/// reads it too).
+pub const INSECURE: Setting = settings::INSECURE.group(GROUP);
 
-/// The values of [`LINES`].
+/// The values of the session's lines (the group [`GROUP`]: `MODE` .. `WRITERS`
+/// and `INSECURE`), read into a component's field with
+/// `session: SessionLines = [session::MODE, ..., session::INSECURE]`.
 #[derive(serde::Deserialize)]
-struct Lines {
+pub struct SessionLines {
     mode: String,
     listen: Vec<Vec<String>>,
     connect: Vec<Vec<String>>,
@@ -128,20 +132,10 @@ pub struct SessionConf {
 }
 
 impl SessionConf {
-    /// Reads `mode`, `listen`, `connect`, `scouting`, `config` ([`LINES`]; later
-    /// lines of a single-valued key override earlier ones; listen/connect repeat).
-    /// Other lines of `conf` are left to the component.
-    pub fn parse(conf: &ComponentConf) -> Result<SessionConf, ConfError> {
-        let only = ComponentConf {
-            lines: conf
-                .lines
-                .iter()
-                .filter(|l| LINES.iter().any(|s| s.key == l.keyword()))
-                .cloned()
-                .collect(),
-            ..conf.clone()
-        };
-        let lines: Lines = only.settings(LINES)?;
+    /// The session of `lines` (read from `conf`'s group [`GROUP`]): the
+    /// endpoints checked, the files opened, `mode client` and `writers` checked
+    /// against the lines they need.
+    pub fn new(conf: &ComponentConf, lines: SessionLines) -> Result<SessionConf, ConfError> {
         let mode = match lines.mode.as_str() {
             "client" => "client",
             "router" => "router",
@@ -433,8 +427,16 @@ mod tests {
     use super::*;
     use crate::conf::Kind;
 
+    crate::declare_lines! {
+        struct Only {
+            session: SessionLines = [MODE, LISTEN, CONNECT, SCOUTING, CONFIG, TLS, WRITERS, INSECURE],
+        }
+    }
+
     fn parse(text: &str) -> Result<SessionConf, ConfError> {
-        SessionConf::parse(&ComponentConf::from_text(Kind::Service, "zenoh", text).unwrap())
+        let conf = ComponentConf::from_text(Kind::Service, "zenoh", text).unwrap();
+        let only: Only = conf.read()?;
+        SessionConf::new(&conf, only.session)
     }
 
     #[test]

@@ -171,9 +171,15 @@ fn help(name: &str) -> ExitCode {
             println!();
         }
         match entry.lines {
-            Some(decl) => print!(
+            Some(lines) => print!(
                 "{}",
-                crate::conf::settings::help_text(entry.kind, entry.name, entry.summary, decl, "")
+                crate::conf::settings::help_text(
+                    entry.kind,
+                    entry.name,
+                    entry.summary,
+                    lines.decl,
+                    ""
+                )
             ),
             None => println!(
                 "{} {}: {}

@@ -45,6 +45,54 @@ use serde::de::{self, DeserializeSeed, IntoDeserializer, MapAccess, SeqAccess, V
 
 use super::{ComponentConf, ConfError, ConfLine, Location};
 
+/// Declares a component's lines once: the struct that receives them, and beside
+/// each field the declaration of its line (a [`Setting`]) or, for a group field,
+/// of its lines (`[A, B, ...]`, each marked with [`Setting::group`]). It derives
+/// `serde::Deserialize` and implements [`Declared`], so `help`, `check` and the
+/// typed read ([`ComponentConf::read`]) all come from this one place.
+///
+/// ```
+/// use jderobot::conf::{ComponentConf, Kind, settings::{self, Setting, float, CYCLE}};
+/// jderobot::declare_lines! {
+///     /// The demo's lines.
+///     struct Lines {
+///         max_v: f32 = Setting::new("max_v", "joystick maximum speed",
+///             &[float("V", "mm/s", 1.0, 1000.0)]).default("500"),
+///         cycle: u64 = CYCLE.default("100"),
+///     }
+/// }
+/// let conf = ComponentConf::from_text(Kind::Schema, "demo", "max_v 300\n").unwrap();
+/// let l: Lines = conf.read().unwrap();
+/// assert_eq!((l.max_v, l.cycle), (300.0, 100));
+/// assert_eq!(<Lines as settings::Declared>::LINES.len(), 2);
+/// ```
+#[macro_export]
+macro_rules! declare_lines {
+    ($(#[$m:meta])* $vis:vis struct $name:ident { $($body:tt)* }) => {
+        $crate::declare_lines!(@field ($(#[$m])* $vis struct $name) [] [] $($body)*);
+    };
+    // A group field: its lines in a row.
+    (@field $head:tt [$($fields:tt)*] [$($decls:tt)*]
+        $(#[$fm:meta])* $fvis:vis $field:ident : $ty:ty = [$($g:expr),+ $(,)?] $(, $($rest:tt)*)?) => {
+        $crate::declare_lines!(@field $head [$($fields)* $(#[$fm])* $fvis $field: $ty,]
+            [$($decls)* $($g,)+] $($($rest)*)?);
+    };
+    // A field of one line.
+    (@field $head:tt [$($fields:tt)*] [$($decls:tt)*]
+        $(#[$fm:meta])* $fvis:vis $field:ident : $ty:ty = $decl:expr $(, $($rest:tt)*)?) => {
+        $crate::declare_lines!(@field $head [$($fields)* $(#[$fm])* $fvis $field: $ty,]
+            [$($decls)* $decl,] $($($rest)*)?);
+    };
+    (@field ($(#[$m:meta])* $vis:vis struct $name:ident) [$($fields:tt)*] [$($decls:tt)*]) => {
+        $(#[$m])*
+        #[derive(serde::Deserialize)]
+        $vis struct $name { $($fields)* }
+        impl $crate::conf::settings::Declared for $name {
+            const LINES: &'static [$crate::conf::settings::Setting] = &[$($decls)*];
+        }
+    };
+}
+
 /// What one argument of a line may be.
 #[derive(Clone, Copy, Debug)]
 pub enum ArgType {
@@ -597,13 +645,6 @@ pub const fn provides_forms(help: &'static str, forms: &'static [Form]) -> Setti
     Setting::forms("provides", help, forms).repeats()
 }
 
-/// The lines of a component whose only lines are [`provides_forms`] (the file,
-/// stream and v4l cameras): one `P` (an enum, a variant a form) per line.
-#[derive(serde::Deserialize)]
-pub struct ProvidesOnly<P> {
-    pub provides: Vec<P>,
-}
-
 /// `KEY INTERFACE`: an interface the component uses in a role (`motors motors`,
 /// `camera varcolorA`), the interface of the role's own name when absent
 /// (another with `.default("colorA")`); schemas take `none` for "do without"
@@ -1089,6 +1130,32 @@ struct Parsed<'a> {
     entries: Vec<Entry<'a>>,
 }
 
+/// A component's lines declared once: the struct that receives them, each field
+/// beside its line's declaration. Made by [`declare_lines!`](crate::declare_lines),
+/// read with [`ComponentConf::read`], registered with `declared = TYPE` so
+/// `jderobot check` and `jderobot help` take the same declaration.
+pub trait Declared: serde::de::DeserializeOwned {
+    /// The lines, in the struct's field order (a group field's lines in a row).
+    const LINES: &'static [Setting];
+}
+
+crate::declare_lines! {
+    /// The lines of a component that takes none (`lines = NoLines`): any line is
+    /// an error naming it.
+    pub struct NoLines {}
+}
+
+/// `jderobot check` of a [`Declared`] component: every line against its
+/// declaration ([`check`]), then, when they pass, the typed read itself, so a
+/// declaration its struct cannot take is an `internal` error here, before a run.
+pub fn check_declared<T: Declared>(conf: &ComponentConf) -> Vec<ConfError> {
+    let errors = check(conf, T::LINES);
+    if !errors.is_empty() {
+        return errors;
+    }
+    conf.read::<T>().err().into_iter().collect()
+}
+
 /// Checks every line of `conf` against `decl`: all problems, in file order.
 pub fn check(conf: &ComponentConf, decl: &[Setting]) -> Vec<ConfError> {
     match parse(conf, decl) {
@@ -1213,6 +1280,11 @@ impl ComponentConf {
     pub fn check(&self, decl: &[Setting]) -> Result<(), ConfError> {
         parse(self, decl).map(drop).map_err(|mut e| e.remove(0))
     }
+    /// Reads this component's lines into `T`, the struct that declares them
+    /// ([`Declared`]): every line checked (type, range, count), defaults filled in.
+    pub fn read<T: Declared>(&self) -> Result<T, ConfError> {
+        self.settings(T::LINES)
+    }
     /// Parses this component's lines into `T` from their declaration `decl`: every
     /// line checked (type, range, count), defaults filled in. The first problem is
     /// returned ([`check`] gives them all).
@@ -1227,9 +1299,20 @@ impl ComponentConf {
             group: None,
             at: &at,
         })
-        .map_err(|e| e.0)
+        .map_err(|e| {
+            // serde's own error (the struct does not take what was declared): the
+            // component's conf is where it shows.
+            if *e.0.at.file == *std::path::Path::new(SERDE_PLACE) {
+                ConfError { at, ..e.0 }
+            } else {
+                e.0
+            }
+        })
     }
 }
+
+/// Where a serde error of its own is, until [`ComponentConf::settings`] places it.
+const SERDE_PLACE: &str = "<settings>";
 
 /// A serde error carrying its location.
 #[derive(Debug)]
@@ -1245,7 +1328,7 @@ impl de::Error for DeError {
     fn custom<T: fmt::Display>(msg: T) -> Self {
         DeError(ConfError {
             at: Location {
-                file: std::sync::Arc::from(std::path::Path::new("<settings>")),
+                file: std::sync::Arc::from(std::path::Path::new(SERDE_PLACE)),
                 line: 0,
             },
             message: format!("internal: settings do not match their declaration: {msg}"),

@@ -820,7 +820,11 @@ mod tests {
         // The same through jderobot's own reader (what replay uses).
         let mut back = Vec::new();
         let o = reader::read_messages(&file, |m| {
-            back.push(decode_read(&m.channel.metadata[KIND_KEY], m).unwrap().value);
+            back.push(
+                decode_read(Kind::parse(&m.channel.metadata[KIND_KEY]).unwrap(), m)
+                    .unwrap()
+                    .value,
+            );
             std::ops::ControlFlow::Continue(())
         })
         .unwrap();
@@ -864,7 +868,7 @@ mod tests {
         ));
         let d = decode_message(
             "encoders",
-            "encoders",
+            Kind::Encoders,
             "foxglove.PoseInFrame",
             "json",
             0,
@@ -878,13 +882,13 @@ mod tests {
 
     #[test]
     fn garbage_is_a_clear_error() {
-        let e = decode("laser", "laser", b"{not json")
+        let e = decode("laser", Kind::Laser, b"{not json")
             .unwrap_err()
             .to_string();
         assert!(e.contains("laser") && e.contains("not JSON"), "{e}");
         let e = decode(
             "motors",
-            "motors",
+            Kind::Motors,
             br#"{"timestamp":{"sec":1,"nsec":2},"clock":1}"#,
         )
         .unwrap_err()

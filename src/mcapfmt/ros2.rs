@@ -764,6 +764,6 @@ mod tests {
             &mut b
         ));
         assert_eq!(kind_of("sensor_msgs/msg/Imu"), Some(Kind::Imu));
-        assert_eq!(schema("bumpers"), None);
+        assert_eq!(schema(Kind::Bumpers), None);
     }
 }

@@ -314,7 +314,7 @@ pub fn declared() -> Vec<(
 )> {
     jderobot::registry::components()
         .into_iter()
-        .filter_map(|e| e.lines.map(|l| (e, l)))
+        .filter_map(|e| e.lines.map(|l| (e, l.decl)))
         .collect()
 }
 
