@@ -855,6 +855,12 @@ enum FastRange {
     /// announce 127.0.0.1 and a shared-memory locator, nothing else) and
     /// shared memory; the service or driver with `discovery localhost`.
     LocalhostOnly,
+    /// Jazzy's and Kilted's `ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`: no
+    /// multicast; discovery by unicast to 127.0.0.1's participant ports; its
+    /// UDPv4 transport otherwise Fast DDS's (every interface's address
+    /// announced, not 127.0.0.1) and shared memory; the service or driver with
+    /// `discovery localhost`.
+    DiscoveryRangeLocalhost,
 }
 
 impl FastRange {
@@ -862,7 +868,9 @@ impl FastRange {
     fn conf(self) -> &'static str {
         match self {
             FastRange::Subnet => "insecure\n",
-            FastRange::LocalhostOnly => "discovery localhost\n",
+            FastRange::LocalhostOnly | FastRange::DiscoveryRangeLocalhost => {
+                "discovery localhost\n"
+            }
         }
     }
 }
@@ -881,8 +889,14 @@ fn fastdds(
         .env_remove("ROS_AUTOMATIC_DISCOVERY_RANGE")
         .stdout(Stdio::piped())
         .stderr(Stdio::piped());
-    if let FastRange::LocalhostOnly = range {
-        c.env("ROS_LOCALHOST_ONLY", "1");
+    match range {
+        FastRange::Subnet => {}
+        FastRange::LocalhostOnly => {
+            c.env("ROS_LOCALHOST_ONLY", "1");
+        }
+        FastRange::DiscoveryRangeLocalhost => {
+            c.env("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST");
+        }
     }
     c.spawn().expect("start the Fast DDS peer")
 }
@@ -1054,4 +1068,22 @@ fn introrob_drives_a_fastdds_robot_through_the_ros2_driver() {
 #[test]
 fn introrob_drives_a_localhost_only_fastdds_robot_through_the_ros2_driver() {
     introrob_drives_a_fastdds_robot(FastRange::LocalhostOnly, domain(14));
+}
+
+/// Jazzy's localhost range: the Fast DDS participant announces only its
+/// interfaces' addresses (192.0.2.2, say) and listens for discovery by unicast;
+/// `discovery localhost` sent nothing to a non-loopback address, so Fast DDS never
+/// heard the service at all (vendor/patches/rustdds/0012-fastdds-localhost-own-addresses.patch:
+/// this host's own addresses are this host).
+#[test]
+fn a_discovery_range_localhost_fastdds_subscriber_reads_the_service_and_drives_it() {
+    a_fastdds_subscriber_reads_the_service_and_drives_it(
+        FastRange::DiscoveryRangeLocalhost,
+        domain(15),
+    );
+}
+
+#[test]
+fn introrob_drives_a_discovery_range_localhost_fastdds_robot_through_the_ros2_driver() {
+    introrob_drives_a_fastdds_robot(FastRange::DiscoveryRangeLocalhost, domain(16));
 }
