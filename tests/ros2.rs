@@ -4,11 +4,19 @@
 //! `sensor_msgs::msg::dds_::LaserScan_`, ...), as rmw_cyclonedds declares them.
 //! Runs in the venv that .ci/run makes (target/py-venv, or `$JDEROBOT_PYTHON`);
 //! without `cyclonedds` the tests skip with a note, but FAIL under `CI`.
+//!
+//! And against eProsima Fast DDS, the DDS of rmw_fastrtps_cpp (ROS 2's default
+//! RMW): `tests/ros2/fastdds_peer.cpp` on Debian's libfastrtps-dev, compiled here
+//! with g++ into target/fastdds-peer; without g++ or the library those tests skip
+//! with a note, but FAIL under `CI`.
 #![cfg(all(feature = "ros2", feature = "simulator", feature = "introrob"))]
 
 use crate::common;
 
-use std::process::{Command, Stdio};
+use std::{
+    path::{Path, PathBuf},
+    process::{Command, Stdio},
+};
 
 use common::{process::Proc, root};
 
@@ -786,4 +794,296 @@ fn discovery_localhost_keeps_dds_on_loopback_and_a_localhost_cyclone_peer_reads_
     // about 1 s since (RustDDS's heartbeat period; Cyclone to Cyclone: 0.05 s).
     assert!(f(&got, &["first_s"]) < 2.5, "{got}");
     robot.quit();
+}
+
+/// The Fast DDS peer (`tests/ros2/fastdds_peer.cpp`), compiled with g++ against
+/// Debian's libfastrtps-dev into target/fastdds-peer when the source is newer
+/// than the binary; None after a note (a failure under `CI`) when it cannot be.
+/// The tests of one binary ask at once: one compiles, the others wait.
+fn fastdds_peer() -> Option<PathBuf> {
+    static BUILD: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    let _one = BUILD.lock().unwrap_or_else(|e| e.into_inner());
+    let src = root().join("tests/ros2/fastdds_peer.cpp");
+    let dir = root().join("target/fastdds-peer");
+    let bin = dir.join("fastdds_peer");
+    let modified = |p: &Path| std::fs::metadata(p).and_then(|m| m.modified()).ok();
+    if bin.exists() && modified(&src) <= modified(&bin) {
+        return Some(bin);
+    }
+    let missing = |note: &str| {
+        assert!(std::env::var_os("CI").is_none(), "under CI: {note}");
+        eprintln!("SKIPPED: {note}");
+        None
+    };
+    if std::fs::create_dir_all(&dir).is_err() {
+        return missing(&format!("cannot make {}", dir.display()));
+    }
+    // Through a temporary name: a running copy is never overwritten.
+    let tmp = dir.join(format!("fastdds_peer.{}", std::process::id()));
+    let out = Command::new("g++")
+        .args(["-O1", "-std=c++17"])
+        .arg(&src)
+        .args(["-lfastrtps", "-lfastcdr", "-o"])
+        .arg(&tmp)
+        .output();
+    match out {
+        Ok(o) if o.status.success() && std::fs::rename(&tmp, &bin).is_ok() => Some(bin),
+        Ok(o) => missing(&format!(
+            "g++ could not build tests/ros2/fastdds_peer.cpp (apt-get install g++ \
+             libfastrtps-dev libfastcdr-dev): {}",
+            String::from_utf8_lossy(&o.stderr)
+                .lines()
+                .take(5)
+                .collect::<Vec<_>>()
+                .join("\n")
+        )),
+        Err(e) => missing(&format!(
+            "no g++ ({e}) for tests/ros2/fastdds_peer.cpp: apt-get install g++ libfastrtps-dev \
+             libfastcdr-dev"
+        )),
+    }
+}
+
+/// How a Fast DDS peer keeps to this host, as ROS 2 sets up rmw_fastrtps.
+#[derive(Clone, Copy)]
+enum FastRange {
+    /// Fast DDS's defaults (ROS 2's SUBNET): multicast discovery on every
+    /// interface, the interfaces' addresses announced; the service or driver
+    /// with `insecure` (`discovery subnet`).
+    Subnet,
+    /// Humble's `ROS_LOCALHOST_ONLY=1`: UDPv4 on 127.0.0.1 alone (its readers
+    /// announce 127.0.0.1 and a shared-memory locator, nothing else) and
+    /// shared memory; the service or driver with `discovery localhost`.
+    LocalhostOnly,
+    /// Jazzy's and Kilted's `ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`: no
+    /// multicast; discovery by unicast to 127.0.0.1's participant ports; its
+    /// UDPv4 transport otherwise Fast DDS's (every interface's address
+    /// announced, not 127.0.0.1) and shared memory; the service or driver with
+    /// `discovery localhost`.
+    DiscoveryRangeLocalhost,
+}
+
+impl FastRange {
+    /// The component's `discovery` line(s).
+    fn conf(self) -> &'static str {
+        match self {
+            FastRange::Subnet => "insecure\n",
+            FastRange::LocalhostOnly | FastRange::DiscoveryRangeLocalhost => {
+                "discovery localhost\n"
+            }
+        }
+    }
+}
+
+/// Starts the Fast DDS peer in `mode` on `domain` for `secs` at most.
+fn fastdds(
+    bin: &Path,
+    mode: &str,
+    domain: u32,
+    secs: u32,
+    range: FastRange,
+) -> std::process::Child {
+    let mut c = Command::new(bin);
+    c.args([mode, &domain.to_string(), &secs.to_string()])
+        .env_remove("ROS_LOCALHOST_ONLY")
+        .env_remove("ROS_AUTOMATIC_DISCOVERY_RANGE")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped());
+    match range {
+        FastRange::Subnet => {}
+        FastRange::LocalhostOnly => {
+            c.env("ROS_LOCALHOST_ONLY", "1");
+        }
+        FastRange::DiscoveryRangeLocalhost => {
+            c.env("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST");
+        }
+    }
+    c.spawn().expect("start the Fast DDS peer")
+}
+
+/// The service's /scan, /odom, /tf, /tf_static, /imu and camera reach a Fast DDS
+/// subscriber (rclcpp's QoS for each), decoded field by field, and its /cmd_vel
+/// drives the simulated robot; the motors stop once it left.
+fn a_fastdds_subscriber_reads_the_service_and_drives_it(range: FastRange, d: u32) {
+    let Some(bin) = fastdds_peer() else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let conf = dir.path().join("robot.conf");
+    std::fs::write(
+        &conf,
+        format!(
+            "driver simulator\nworld {}\nrobot robot1 3000 3500 90\nprovides encoders\n\
+             provides motors\nprovides laser 180 1\nprovides colorA\nprovides imu\nend_driver\n\
+             service ros2\n{}domain {d}\nend_service\n\
+             load_driver simulator\nload_service ros2\n",
+            common::world_path("simple.world"),
+            range.conf()
+        ),
+    )
+    .unwrap();
+    let mut robot = Proc::start(&conf);
+    let start = robot.ask_until("echo encoders", "the robot", |l| {
+        l.starts_with("encoders clock=")
+    });
+    let got = json_of(
+        fastdds(&bin, "listen", d, 40, range),
+        "the Fast DDS subscriber",
+        &robot,
+    );
+    let n = |k: &str| got["counts"][k].as_f64().unwrap_or(0.0);
+    eprintln!(
+        "Fast DDS subscriber received: {} scans, {} odom, {} tf, {} tf_static, {} imu, {} images; \
+         sent {} Twists",
+        n("scan"),
+        n("odom"),
+        n("tf"),
+        n("tf_static"),
+        n("imu"),
+        n("image"),
+        got["cmds"]
+    );
+    assert!(
+        n("scan") >= 5.0 && n("odom") >= 5.0 && n("tf") >= 5.0,
+        "{got}"
+    );
+    assert_eq!(f(&got, &["bad"]), 0.0, "{got}");
+    // LaserScan: 180 readings, 1 per degree from -90°, in metres and radians.
+    assert_eq!(s(&got, &["scan", "frame"]), "laser");
+    assert_eq!(f(&got, &["scan", "n"]), 180.0);
+    assert!((f(&got, &["scan", "angle_min"]) + std::f64::consts::FRAC_PI_2).abs() < 1e-4);
+    assert!((f(&got, &["scan", "angle_increment"]) - 1f64.to_radians()).abs() < 1e-5);
+    let r0 = got["scan"]["ranges"][0].as_f64().unwrap();
+    assert!(r0 > 0.05 && r0 < 10.0, "a range in metres: {r0}");
+    assert!(f(&got, &["scan", "stamp"]) > 1.6e9, "wall-clock stamps");
+    // Odometry and /tf: odom → base_link; the robot started at (3 m, 3.5 m), 90°.
+    assert_eq!(s(&got, &["odom", "frame"]), "odom");
+    assert_eq!(s(&got, &["odom", "child"]), "base_link");
+    assert!((f(&got, &["odom_first", "x"]) - 3.0).abs() < 0.3, "{got}");
+    assert!((f(&got, &["odom_first", "y"]) - 3.5).abs() < 0.3, "{got}");
+    assert!(
+        (f(&got, &["odom_first", "yaw"]) - 90f64.to_radians()).abs() < 0.3,
+        "{got}"
+    );
+    assert_eq!(s(&got, &["tf", "parent"]), "odom");
+    assert_eq!(s(&got, &["tf", "child"]), "base_link");
+    // /tf_static (transient local): base_link → laser.
+    assert_eq!(s(&got, &["tf_static", "parent"]), "base_link");
+    assert_eq!(s(&got, &["tf_static", "child"]), "laser");
+    // The camera (fragmented: 230 KB), 320x240 bgr8, and the IMU.
+    assert_eq!(f(&got, &["image", "width"]), 320.0);
+    assert_eq!(f(&got, &["image", "height"]), 240.0);
+    assert_eq!(s(&got, &["image", "encoding"]), "bgr8");
+    assert_eq!(f(&got, &["image", "bytes"]), 320.0 * 240.0 * 3.0);
+    assert!(got["imu"]["qw"].is_number(), "{got}");
+    // /cmd_vel (0.3 m/s, 0.2 rad/s) drove the simulated robot.
+    assert!(f(&got, &["cmds"]) > 0.0, "{got}");
+    robot.expect_moved(&start, 100.0);
+    // The peer left: motors_timeout later the motors are zero.
+    robot.ask_until("echo motors", "motors zeroed", |l| {
+        l.starts_with("motors clock=") && l.contains("v=0.0 mm/s")
+    });
+    robot.quit();
+}
+
+/// introrob's VFF drives a Fast DDS robot through the driver: the robot's /scan
+/// (best effort) and /odom (reliable) reach it, and its /cmd_vel Twists reach
+/// the robot's reliable reader, counted and checked (introrob's max_v 400 mm/s
+/// is 0.4 m/s; its target straight ahead, so no turning).
+fn introrob_drives_a_fastdds_robot(range: FastRange, d: u32) {
+    let Some(bin) = fastdds_peer() else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let conf = dir.path().join("introrob.conf");
+    std::fs::write(
+        &conf,
+        format!(
+            "driver ros2\n{}domain {d}\nprovides laser /scan\nprovides encoders /odom\n\
+             provides motors /cmd_vel\nsilence 1000\nend_driver\n\
+             schema introrob\nbehaviour vff\ntarget 4000 0\nmax_v 400\nmax_w 40\nworld none\nsonars none\nbumpers none\ncamera none\nend_schema\n\
+             load_driver ros2\nload_schema introrob\nrun introrob\n",
+            range.conf()
+        ),
+    )
+    .unwrap();
+    let robot = Proc::start(&conf);
+    assert!(
+        common::poll_until(20, || robot
+            .text()
+            .contains("waiting for a publisher on /scan, /odom")),
+        "no waiting line:\n{}",
+        robot.text()
+    );
+    let got = json_of(
+        fastdds(&bin, "robot", d, 40, range),
+        "the Fast DDS robot",
+        &robot,
+    );
+    eprintln!(
+        "Fast DDS robot: {} Twists received (the first {} s after it started), max {} m/s; \
+         it sent {} scans and {} odometry messages",
+        got["cmds"], got["first_cmd_s"], got["max_v"], got["scans_sent"], got["odoms_sent"]
+    );
+    assert!(f(&got, &["cmds"]) >= 10.0, "no /cmd_vel: {got}");
+    assert_eq!(f(&got, &["bad"]), 0.0, "{got}");
+    let max_v = f(&got, &["max_v"]);
+    assert!(max_v > 0.05 && max_v <= 0.4 + 1e-6, "{got}");
+    assert!(f(&got, &["max_w"]) < 0.1, "{got}");
+    assert!(
+        f(&got, &["x"]) > 2.0,
+        "VFF took the robot toward x = 4 m: {got}\n{}",
+        robot.text()
+    );
+    assert!(
+        common::poll_until(20, || robot.text().contains("no message on /scan")),
+        "no loss line:\n{}",
+        robot.text()
+    );
+    robot.quit();
+}
+
+#[test]
+fn a_fastdds_subscriber_reads_the_service_and_drives_it_on_cmd_vel() {
+    a_fastdds_subscriber_reads_the_service_and_drives_it(FastRange::Subnet, domain(11));
+}
+
+/// Issue 50: a Fast DDS subscriber as rmw_fastrtps sets it up with
+/// `ROS_LOCALHOST_ONLY=1` announces 127.0.0.1 and a shared-memory locator; RustDDS
+/// dropped every loopback locator of a remote reader, so the service's writers
+/// matched it and sent it nothing (the vendored RustDDS keeps them when the
+/// reader has no other UDP locator: vendor/patches/rustdds/0011-fastdds-loopback-only-readers.patch).
+#[test]
+fn a_localhost_only_fastdds_subscriber_reads_the_service_and_drives_it_on_cmd_vel() {
+    a_fastdds_subscriber_reads_the_service_and_drives_it(FastRange::LocalhostOnly, domain(12));
+}
+
+#[test]
+fn introrob_drives_a_fastdds_robot_through_the_ros2_driver() {
+    introrob_drives_a_fastdds_robot(FastRange::Subnet, domain(13));
+}
+
+/// Issue 50, the driver's side: its /cmd_vel writer matched a localhost-only
+/// Fast DDS robot's reliable reader and no Twist arrived.
+#[test]
+fn introrob_drives_a_localhost_only_fastdds_robot_through_the_ros2_driver() {
+    introrob_drives_a_fastdds_robot(FastRange::LocalhostOnly, domain(14));
+}
+
+/// Jazzy's localhost range: the Fast DDS participant announces only its
+/// interfaces' addresses (192.0.2.2, say) and listens for discovery by unicast;
+/// `discovery localhost` sent nothing to a non-loopback address, so Fast DDS never
+/// heard the service at all (vendor/patches/rustdds/0012-fastdds-localhost-own-addresses.patch:
+/// this host's own addresses are this host).
+#[test]
+fn a_discovery_range_localhost_fastdds_subscriber_reads_the_service_and_drives_it() {
+    a_fastdds_subscriber_reads_the_service_and_drives_it(
+        FastRange::DiscoveryRangeLocalhost,
+        domain(15),
+    );
+}
+
+#[test]
+fn introrob_drives_a_discovery_range_localhost_fastdds_robot_through_the_ros2_driver() {
+    introrob_drives_a_fastdds_robot(FastRange::DiscoveryRangeLocalhost, domain(16));
 }

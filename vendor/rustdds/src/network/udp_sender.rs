@@ -19,6 +19,10 @@ use crate::{network::util::get_local_multicast_ip_addrs, structure::locator::Loc
 pub struct UDPSender {
   unicast_socket: mio_08::net::UdpSocket,
   multicast_sockets: Vec<mio_08::net::UdpSocket>,
+  // jderobot's patch: kept to this host, the addresses of this host's own
+  // interfaces, which a datagram to never leaves it (the kernel delivers it over
+  // the loopback interface).
+  own_addresses: Vec<IpAddr>,
 }
 
 impl UDPSender {
@@ -92,9 +96,17 @@ impl UDPSender {
       multicast_sockets.push(mio_08::net::UdpSocket::from_std(mc_socket));
     } // end for
 
+    let own_addresses = if crate::network::util::localhost_only() {
+      if_addrs::get_if_addrs()
+        .map(|ifaces| ifaces.iter().map(|i| i.ip()).collect())
+        .unwrap_or_default()
+    } else {
+      Vec::new()
+    };
     let sender = Self {
       unicast_socket,
       multicast_sockets,
+      own_addresses,
     };
     info!("UDPSender::new() --> {sender:?}");
     Ok(sender)
@@ -142,10 +154,14 @@ impl UDPSender {
       if crate::network::util::localhost_only()
         && !socket_address.ip().is_multicast()
         && !socket_address.ip().is_loopback()
+        && !self.own_addresses.contains(&socket_address.ip())
       {
-        // jderobot's patch: kept to this host, nothing goes to another address
-        // (a peer could announce one).
-        trace!("send_to_locator: {socket_address} is not this host's loopback");
+        // jderobot's patch: kept to this host, nothing goes to another host's
+        // address (a peer could announce one). This host's own addresses are
+        // kept: a Fast DDS participant in ROS 2's localhost mode (Jazzy's
+        // ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST: unicast discovery to
+        // 127.0.0.1, no multicast) announces its interfaces' addresses only.
+        trace!("send_to_locator: {socket_address} is not this host's");
         return;
       }
       if socket_address.ip().is_multicast() {

@@ -108,7 +108,7 @@ impl RtpsReaderProxy {
         self.multicast_locator_list, update.multicast_locator_list
       );
       let mut unicasts = update.unicast_locator_list.clone();
-      unicasts.retain(Self::not_loopback);
+      Self::drop_loopback_if_reachable_otherwise(&mut unicasts);
       self.unicast_locator_list = unicasts;
       self
         .multicast_locator_list
@@ -209,6 +209,22 @@ impl RtpsReaderProxy {
     !is_loopback
   }
 
+  // jderobot's patch: drops a reader's loopback unicast locators only when it
+  // announces another UDP unicast locator to reach it by. Upstream dropped them
+  // always (the OpenDDS case above: 127.0.0.1 beside a real address, which from
+  // another host would be our own loopback); but a reader that announces loopback
+  // alone is on this host and reachable there only. A Fast DDS reader in ROS 2's
+  // localhost mode (rmw_fastrtps with ROS_LOCALHOST_ONLY=1: UDPv4 on 127.0.0.1
+  // and shared memory) announces 127.0.0.1 and a shared-memory locator: with
+  // the loopback one dropped it kept no UDP locator (and announces no multicast
+  // one), so the writer matched it and sent it nothing, neither DATA nor
+  // HEARTBEAT.
+  fn drop_loopback_if_reachable_otherwise(locators: &mut Vec<Locator>) {
+    if locators.iter().any(|l| l.is_udp() && !l.is_loopback()) {
+      locators.retain(Self::not_loopback);
+    }
+  }
+
   pub fn from_discovered_reader_data(
     discovered_reader_data: &DiscoveredReaderData,
     default_unicast_locators: &[Locator],
@@ -218,7 +234,7 @@ impl RtpsReaderProxy {
       &discovered_reader_data.reader_proxy.unicast_locator_list,
       default_unicast_locators,
     );
-    unicast_locator_list.retain(Self::not_loopback);
+    Self::drop_loopback_if_reachable_otherwise(&mut unicast_locator_list);
 
     let multicast_locator_list = Self::discovered_or_default(
       &discovered_reader_data.reader_proxy.multicast_locator_list,
