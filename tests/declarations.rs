@@ -49,6 +49,7 @@ const CUSTOM_TRIES: &[&str] = &[
     "robot2",
     "lab/robot1/laser",
     "127.0.0.1",
+    "position2d:1",
     "a*b",
     "a/b",
     "$x",

@@ -212,3 +212,73 @@ fn the_checker_sees_upward_and_sideways_imports() {
     .collect();
     assert_eq!(found, ["conf", "gui", "output", "drivers::simulator"]);
 }
+
+/// Where code outside the kinds module matches an interface kind by its name: a
+/// string literal that is a kind's name in a match arm (`"laser" =>`, `"laser" |`),
+/// a comparison (`== "laser"`, `"laser" !=`) or a pattern (`Some("laser")`). A kind
+/// is an `interfaces::Kind`; its name is parsed once, at the edge.
+fn kind_string_matches(files: &[(PathBuf, String)]) -> Vec<String> {
+    let names = jderobot::interfaces::Kind::NAMES;
+    let mut out = Vec::new();
+    for (path, code) in files {
+        if path.ends_with("src/interfaces/kinds.rs") {
+            continue;
+        }
+        for (n, line) in code.lines().enumerate() {
+            let code_part = line.split("//").next().unwrap_or("");
+            for k in names {
+                let lit = format!("\"{k}\"");
+                let hit = [
+                    format!("{lit} =>"),
+                    format!("{lit} |"),
+                    format!("| {lit}"),
+                    format!("== {lit}"),
+                    format!("!= {lit}"),
+                    format!("{lit} =="),
+                    format!("{lit} !="),
+                    format!("Some({lit})"),
+                ]
+                .iter()
+                .any(|p| code_part.contains(p.as_str()));
+                if hit {
+                    out.push(format!("{}:{}: {}", path.display(), n + 1, line.trim()));
+                }
+            }
+        }
+    }
+    out
+}
+
+/// The code of every Rust file of the crate (its tests excepted).
+fn crate_code() -> Vec<(PathBuf, String)> {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut files = Vec::new();
+    for dir in ["src", "drivers", "services", "schemas"] {
+        rust_files(&root.join(dir), &mut files);
+    }
+    files
+        .into_iter()
+        .map(|p| {
+            let code = fs::read_to_string(&p).unwrap();
+            (p, code)
+        })
+        .collect()
+}
+
+#[test]
+fn no_kind_is_matched_as_a_string_outside_the_kinds_module() {
+    let hits = kind_string_matches(&crate_code());
+    assert!(
+        hits.is_empty(),
+        "match an interfaces::Kind, not its name (parse the name once, at the edge, with \
+         Kind::parse):\n{}",
+        hits.join("\n")
+    );
+}
+
+#[test]
+fn the_kind_check_sees_a_string_match() {
+    let code = "match kind {\n    \"laser\" => 1,\n    _ if k == \"motors\" => 2,\n    // \"imu\" => in a comment\n}\n";
+    let hits = kind_string_matches(&[(PathBuf::from("drivers/x/mod.rs"), code.to_string())]);
+    assert_eq!(hits.len(), 2, "{hits:?}");
+}

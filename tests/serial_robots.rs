@@ -483,9 +483,12 @@ fn conf_errors_name_the_line_and_the_range() {
     let e = common::start_error(
         "driver rplidar\nserial /tmp/x\nprovides sonars\nend_driver\nload_driver rplidar\n",
     );
-    assert!(e.contains("only a laser"), "{e}");
+    assert!(
+        e.contains("test.conf:3") && e.contains("is `sonars`, expected one of laser"),
+        "{e}"
+    );
     let e = common::start_error("driver rplidar\nserial /tmp/x\nend_driver\nload_driver rplidar\n");
-    assert!(e.contains("provides nothing"), "{e}");
+    assert!(e.contains("no `provides` line, and needs one"), "{e}");
     let e = common::start_error(
         "driver roomba\nserial /tmp/x\nmode turbo\nprovides motors\nend_driver\nload_driver roomba\n",
     );

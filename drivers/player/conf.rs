@@ -4,9 +4,9 @@ use std::time::Duration;
 
 use crate::conf::{
     ComponentConf, ConfLine,
-    settings::{Form, MOTORS_TIMEOUT, Setting, choice, float, int, name, word},
+    settings::{Form, MOTORS_TIMEOUT, Setting, choice, custom, float, int, kinds, name, word},
 };
-use crate::interfaces::{IMAGE_NAMES, interface_name};
+use crate::interfaces::{IMAGE_NAMES, Kind, interface_name};
 
 use super::xdr::{Addr, interf};
 
@@ -91,6 +91,17 @@ const DEVICES: &[&str] = &[
     "camera",
     "blobfinder",
 ];
+/// Their interface codes, in the same order.
+const DEVICE_CODES: &[u32] = &[
+    interf::POSITION2D,
+    interf::LASER,
+    interf::RANGER,
+    interf::SONAR,
+    interf::BUMPER,
+    interf::PTZ,
+    interf::CAMERA,
+    interf::BLOBFINDER,
+];
 
 /// `[index I] [device INTERF[:I]] [ROBOT]`: what every `provides` form ends with.
 macro_rules! provides_tail {
@@ -100,7 +111,7 @@ macro_rules! provides_tail {
             choice("index", &["index"]).optional(),
             int("I", "", 0, u32::MAX as i64),
             choice("device", &["device"]).optional(),
-            word("INTERF[:I]"),
+            custom("INTERF[:I]", "a Player interface with an optional :INDEX", check_device),
             name("ROBOT").optional(),
         ]
     };
@@ -154,27 +165,26 @@ crate::declare_lines! {
                 ),
                 Form::new(
                     "device",
-                    "from position2d (encoders, motors), sonar or ranger, bumper, ptz, blobfinder",
-                    provides_tail![choice(
+                    "from position2d (encoders, motors), sonar or ranger, bumper, ptz",
+                    provides_tail![kinds(
                         "INTERFACE",
                         &[
-                            "encoders",
-                            "jde_robot",
-                            "motors",
-                            "sonars",
-                            "us",
-                            "bumpers",
-                            "pantiltencoders",
-                            "ptencoders",
-                            "pantiltmotors",
-                            "ptmotors",
-                            "blobs",
+                            Kind::Encoders,
+                            Kind::Motors,
+                            Kind::Sonars,
+                            Kind::Bumpers,
+                            Kind::PtEncoders,
+                            Kind::PtMotors,
                         ],
                     )],
                 ),
-                // Read as a `device` line too: the images are the standard image names.
                 Form::new(
-                    "device",
+                    "named",
+                    "4.3's jde_robot (encoders), the blobs of a blobfinder",
+                    provides_tail![choice("INTERFACE", &["jde_robot", "blobs"])],
+                ),
+                Form::new(
+                    "named",
                     "an image from camera",
                     provides_tail![choice("IMAGE", &IMAGE_NAMES)],
                 ),
@@ -227,6 +237,16 @@ enum Provides {
     ),
     #[serde(rename = "device")]
     Device(
+        Kind,
+        Option<String>,
+        Option<u32>,
+        Option<String>,
+        Option<String>,
+        Option<String>,
+    ),
+    /// `jde_robot`, `blobs`, an image.
+    #[serde(rename = "named")]
+    Named(
         String,
         Option<String>,
         Option<u32>,
@@ -307,43 +327,36 @@ fn err(l: &ConfLine, m: impl Into<String>) -> anyhow::Error {
     l.error(m).into()
 }
 
-/// A `device INTERF[:I]` word: the Player interface's code and its index.
-fn device(l: &ConfLine, d: &str) -> anyhow::Result<(u32, Option<u32>)> {
+/// A `device INTERF[:I]` word: the Player interface's code and its index (the
+/// declaration's check of the word, and its value).
+fn device(d: &str) -> Result<(u32, Option<u32>), String> {
     let (name, idx) = match d.split_once(':') {
         Some((n, k)) => (n, Some(k)),
         None => (d, None),
     };
-    let code = interf_code(name).ok_or_else(|| {
-        err(
-            l,
+    let code = DEVICES
+        .iter()
+        .zip(DEVICE_CODES)
+        .find(|(n, _)| **n == name)
+        .map(|(_, c)| *c)
+        .ok_or_else(|| {
             format!(
                 "`device {d}`: expected a Player interface ({}) with an optional :INDEX",
                 DEVICES.join(", ")
-            ),
-        )
-    })?;
+            )
+        })?;
     let idx = match idx {
         Some(k) => Some(
             k.parse::<u32>()
-                .map_err(|_| err(l, format!("`device {d}`: `{k}` is not a device index")))?,
+                .map_err(|_| format!("`device {d}`: `{k}` is not a device index"))?,
         ),
         None => None,
     };
     Ok((code, idx))
 }
 
-fn interf_code(name: &str) -> Option<u32> {
-    Some(match name {
-        "position2d" => interf::POSITION2D,
-        "laser" => interf::LASER,
-        "ranger" => interf::RANGER,
-        "sonar" => interf::SONAR,
-        "bumper" => interf::BUMPER,
-        "ptz" => interf::PTZ,
-        "camera" => interf::CAMERA,
-        "blobfinder" => interf::BLOBFINDER,
-        _ => return None,
-    })
+fn check_device(d: &str) -> Result<(), String> {
+    device(d).map(drop)
 }
 
 /// One `provides` line, as declared, into what the driver asks the server for.
@@ -354,23 +367,35 @@ fn want(p: Provides, l: &ConfLine) -> anyhow::Result<Want> {
             Provided::Laser(n.unwrap_or(180), r.unwrap_or(1.0)),
             (a, b, c, d, e),
         ),
-        Provides::Device(w, a, b, c, d, e) => {
+        Provides::Device(k, a, b, c, d, e) => {
+            let kind = match k {
+                Kind::Encoders => Provided::Encoders,
+                Kind::Motors => Provided::Motors,
+                Kind::Sonars => Provided::Sonars,
+                Kind::Bumpers => Provided::Bumpers,
+                Kind::PtEncoders => Provided::PanTiltEncoders,
+                Kind::PtMotors => Provided::PanTiltMotors,
+                other => {
+                    return Err(err(
+                        l,
+                        format!("`provides {other}`: Player gives no {other}"),
+                    ));
+                }
+            };
+            (k.name().to_string(), kind, (a, b, c, d, e))
+        }
+        Provides::Named(w, a, b, c, d, e) => {
             let kind = match w.as_str() {
-                "encoders" | "jde_robot" => Provided::Encoders,
-                "motors" => Provided::Motors,
-                "sonars" | "us" => Provided::Sonars,
-                "bumpers" => Provided::Bumpers,
-                "pantiltencoders" | "ptencoders" => Provided::PanTiltEncoders,
-                "pantiltmotors" | "ptmotors" => Provided::PanTiltMotors,
+                "jde_robot" => Provided::Encoders,
                 "blobs" => Provided::Blobs,
-                c => Provided::Camera(c.starts_with("color")),
+                image => Provided::Camera(image.starts_with("color")),
             };
             (w, kind, (a, b, c, d, e))
         }
     };
     let (_, index, _, device_word, robot) = tail;
     let device = match device_word {
-        Some(d) => Some(device(l, &d)?),
+        Some(d) => Some(device(&d).map_err(|e| err(l, e))?),
         None => None,
     };
     let base = match what.as_str() {

@@ -65,7 +65,7 @@ use anyhow::{Context as _, bail};
 use crate::{
     conf::{
         ComponentConf,
-        settings::{Setting, float, on_off, path, rest, word},
+        settings::{NumberOr, Setting, choice, float, float_or, on_off, path, rest},
     },
     interfaces::Kind,
     mcapfmt::{self, Source, Summary},
@@ -101,10 +101,10 @@ crate::declare_lines! {
             &[rest("NAME")],
         )
         .repeats(),
-        speed: String = Setting::new(
+        speed: NumberOr = Setting::new(
             "speed",
-            "the replay speed: 1 = as recorded, N = N times faster (0.001 to 1000), max = as fast as possible",
-            &[word("FACTOR|max")],
+            "the replay speed: 1 = as recorded, N = N times faster, max = as fast as possible",
+            &[float_or("FACTOR", "", 0.001, 1000.0, "max")],
         )
         .default("1"),
         r#loop: bool = Setting::new("loop", "start again at the end", &[on_off("SWITCH")]).default("off"),
@@ -119,44 +119,44 @@ crate::declare_lines! {
             "where to stop, after the recording's first message (default: the end)",
             &[float("SECONDS", "s", 0.0, f64::MAX)],
         ),
-        stepped: String = Setting::new(
+        stepped: Stepped = Setting::new(
             "stepped",
             "on: publish only when the shell says `step [N]`; motors: lock-step with the controller",
-            &[word("on|off|motors")],
+            &[choice("MODE", &["on", "off", "motors"])],
         )
         .default("off"),
     }
 }
+
+/// How a `stepped` line paces the replay.
+#[derive(Clone, Copy, PartialEq, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+enum Stepped {
+    Off,
+    On,
+    /// Lock-step with the controller: a message per new motors command.
+    Motors,
+}
+
 fn parse(conf: &ComponentConf) -> Result<Settings, crate::conf::ConfError> {
     let lines: Lines = conf.read()?;
     let mut s = Settings {
         file: PathBuf::new(),
         provides: lines.provides.into_iter().flatten().collect(),
-        speed: Some(1.0),
+        speed: match lines.speed {
+            NumberOr::Number(n) => Some(n),
+            NumberOr::Word => None,
+        },
         looping: lines.r#loop,
         start: lines.start,
         end: lines.end,
-        stepped: false,
-        lockstep: false,
+        stepped: lines.stepped == Stepped::On,
+        lockstep: lines.stepped == Stepped::Motors,
     };
     if lines.file.is_some()
         && let Some(line) = conf.line("file")
     {
         s.file = line.existing_file(0, "an MCAP file")?;
-    }
-    if let Some(line) = conf.line("speed") {
-        s.speed = if lines.speed == "max" {
-            None
-        } else {
-            Some(line.number::<f64>(0, "a speed factor or `max`", 0.001..=1000.0)?)
-        };
-    }
-    if let Some(line) = conf.line("stepped") {
-        if lines.stepped == "motors" {
-            s.lockstep = true;
-        } else {
-            s.stepped = line.on_off(0, "on, off or motors")?;
-        }
     }
     if let (Some(e), st) = (s.end, s.start)
         && e <= st
