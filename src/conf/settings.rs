@@ -1,43 +1,50 @@
-//! Declared settings: a component declares the lines it takes once, as data (a
-//! [`Setting`] per keyword: its arguments with type, unit and range, a default and a
-//! line of help), and a plain struct that derives `serde::Deserialize` receives the
-//! values. From that one declaration the core
+//! Declared settings: a component declares the lines it takes once, with
+//! [`declare_lines!`](crate::declare_lines): the struct that receives them, each
+//! field beside its line's declaration (a [`Setting`]: its arguments with type,
+//! unit and range, a default and a line of help). From that one declaration the
+//! core
 //!
-//! - parses and checks a component's lines ([`ComponentConf::settings`]): an unknown
-//!   keyword, a missing or extra argument, a word that is not a number, a value out
-//!   of its range — each is an error at `file:line` naming the range or the choices,
-//!   never a silent clamp;
+//! - parses, checks and reads a component's lines ([`ComponentConf::read`]): an
+//!   unknown keyword, a missing or extra argument, a word that is not a number, a
+//!   value out of its range — each is an error at `file:line` naming the range or
+//!   the choices, never a silent clamp;
 //! - prints `jderobot help NAME` ([`help_text`]);
-//! - validates a conf in `jderobot check` before anything is built.
+//! - validates a conf in `jderobot check` before anything is built: the lines
+//!   against their declaration, then the typed read ([`check_declared`]), so a
+//!   declaration its struct cannot take is an error there, never in a run.
 //!
 //! ```
 //! use jderobot::conf::{ComponentConf, Kind, settings::{Setting, float, CYCLE}};
-//! #[derive(serde::Deserialize)]
-//! struct Lines { max_v: f32, walk: (f32, f32), cycle: u64 }
-//! const LINES: &[Setting] = &[
-//!     Setting::new("max_v", "joystick maximum speed", &[float("V", "mm/s", 1.0, 1000.0)]).default("500"),
-//!     Setting::new("walk", "initial walk command", &[float("V", "mm/s", -1000.0, 1000.0),
-//!         float("W", "deg/s", -180.0, 180.0)]).default("0 0"),
-//!     CYCLE.default("100"),
-//! ];
+//! jderobot::declare_lines! {
+//!     struct Lines {
+//!         max_v: f32 = Setting::new("max_v", "joystick maximum speed",
+//!             &[float("V", "mm/s", 1.0, 1000.0)]).default("500"),
+//!         walk: (f32, f32) = Setting::new("walk", "initial walk command",
+//!             &[float("V", "mm/s", -1000.0, 1000.0), float("W", "deg/s", -180.0, 180.0)])
+//!             .default("0 0"),
+//!         cycle: u64 = CYCLE.default("100"),
+//!     }
+//! }
 //! let conf = ComponentConf::from_text(Kind::Schema, "demo", "max_v 300\n").unwrap();
-//! let l: Lines = conf.settings(LINES).unwrap();
+//! let l: Lines = conf.read().unwrap();
 //! assert_eq!((l.max_v, l.walk, l.cycle), (300.0, (0.0, 0.0), 100));
 //! let bad = ComponentConf::from_text(Kind::Schema, "demo", "max_v 4000000000000\n").unwrap();
-//! let e = bad.settings::<Lines>(LINES).err().unwrap().to_string();
+//! let e = bad.read::<Lines>().err().unwrap().to_string();
 //! assert!(e.contains("between 1 and 1000"), "{e}");
 //! ```
 //!
 //! Why serde: the struct a component reads is ordinary Rust (tuples for multi-word
-//! lines, `Option` for lines without default, `Vec` for repeated lines), and serde
+//! lines, `Option` for lines without default, `Vec` for repeated lines, an enum for
+//! a line in forms, [`Kind`](crate::interfaces::Kind) for an interface), and serde
 //! builds it from the checked words; the ranges, units and help live in the
-//! declaration, which serde has no place for. The two are kept in step by a check at
-//! parse time (every declared key must be a field and every field a declared key)
-//! and by a test that parses every component's defaults.
+//! declaration beside each field. A key without its field cannot be written; a
+//! type its declaration does not give fails `jderobot check` and the walk of every
+//! form in `tests/declarations.rs`.
 //!
-//! Lines several components share as a set (a serial head's, the HSV range) are a
-//! group ([`Setting::group`]): each is still declared and written as a plain line,
-//! and the group is read into one field, a struct of its own, checked the same way.
+//! Lines several components share as a set (a serial head's, the HSV range, a
+//! Zenoh session's) are a group ([`Setting::group`]): each is still declared and
+//! written as a plain line, and the group is read into one field, a struct of its
+//! own (`field: Group = [LINE_A, LINE_B, ...]` in `declare_lines!`).
 
 use std::fmt::{self, Write as _};
 
