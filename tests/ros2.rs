@@ -103,37 +103,11 @@ fn a_cyclone_subscriber_reads_every_type_and_drives_the_robot_on_cmd_vel() {
         l.starts_with("encoders clock=")
     });
     let got = json_of(peer(&py, "listen", d, 60), "the Cyclone subscriber", &robot);
-    // LaserScan: 180 readings, 1 per degree from -90°, in metres and radians.
-    assert_eq!(s(&got, &["scan", "frame"]), "laser");
-    assert_eq!(f(&got, &["scan", "n"]), 180.0);
-    assert!((f(&got, &["scan", "angle_min"]) + std::f64::consts::FRAC_PI_2).abs() < 1e-4);
-    assert!((f(&got, &["scan", "angle_increment"]) - 1f64.to_radians()).abs() < 1e-5);
+    assert_serves_the_simulated_robot(&got);
+    // The scan's last angle (89°) and its range limit; the camera's rows of 960 bytes.
     assert!((f(&got, &["scan", "angle_max"]) - 89f64.to_radians()).abs() < 1e-4);
     assert!(f(&got, &["scan", "range_max"]) > 1.0 && f(&got, &["scan", "range_max"]) < 100.0);
-    let r0 = got["scan"]["ranges"][0].as_f64().unwrap();
-    assert!(r0 > 0.05 && r0 < 10.0, "a range in metres: {r0}");
-    assert!(f(&got, &["scan", "stamp"]) > 1.6e9, "wall-clock stamps");
-    // Odometry and /tf: odom → base_link, metres; the robot started at (3 m, 3.5 m),
-    // 0.25 m from the north wall, facing it.
-    assert_eq!(s(&got, &["odom", "frame"]), "odom");
-    assert_eq!(s(&got, &["odom", "child"]), "base_link");
-    assert!((f(&got, &["odom_first", "x"]) - 3.0).abs() < 0.3, "{got}");
-    assert!(
-        (f(&got, &["odom_first", "yaw"]) - 90f64.to_radians()).abs() < 0.3,
-        "{got}"
-    );
-    assert_eq!(s(&got, &["tf", "parent"]), "odom");
-    assert_eq!(s(&got, &["tf", "child"]), "base_link");
-    // /tf_static (transient local): base_link → laser, the laser's mount.
-    assert_eq!(s(&got, &["tf_static", "parent"]), "base_link");
-    assert_eq!(s(&got, &["tf_static", "child"]), "laser");
-    // The camera: 320x240 bgr8, rows of 960 bytes.
-    assert_eq!(f(&got, &["image", "width"]), 320.0);
-    assert_eq!(f(&got, &["image", "height"]), 240.0);
-    assert_eq!(s(&got, &["image", "encoding"]), "bgr8");
     assert_eq!(f(&got, &["image", "step"]), 960.0);
-    assert_eq!(f(&got, &["image", "bytes"]), 320.0 * 240.0 * 3.0);
-    assert!(got["imu"]["qw"].is_number(), "{got}");
     // sensor_msgs/Range, one topic and frame per sonar (16: sonar_0..sonar_15),
     // ULTRASOUND, the `sonar` line's defaults 25 deg, 0.1..5 m.
     for (i, k) in [(0, "sonar_0"), (15, "sonar_15")] {
@@ -948,7 +922,22 @@ fn a_fastdds_subscriber_reads_the_service_and_drives_it(range: FastRange, d: u32
         "{got}"
     );
     assert_eq!(f(&got, &["bad"]), 0.0, "{got}");
-    // LaserScan: 180 readings, 1 per degree from -90°, in metres and radians.
+    assert_serves_the_simulated_robot(&got);
+    // /cmd_vel (0.3 m/s, 0.2 rad/s) drove the simulated robot.
+    assert!(f(&got, &["cmds"]) > 0.0, "{got}");
+    robot.expect_moved(&start, 100.0);
+    // The peer left: motors_timeout later the motors are zero.
+    robot.ask_until("echo motors", "motors zeroed", |l| {
+        l.starts_with("motors clock=") && l.contains("v=0.0 mm/s")
+    });
+    robot.quit();
+}
+
+/// What a ROS 2 subscriber (either peer's `listen` JSON) read of the simulated
+/// robot of these tests: the scan's geometry in metres and radians, odometry and
+/// /tf (odom → base_link; the robot started at (3 m, 3.5 m), 90°), /tf_static
+/// (base_link → laser), the camera (fragmented: 230 KB), 320x240 bgr8, and the IMU.
+fn assert_serves_the_simulated_robot(got: &serde_json::Value) {
     assert_eq!(s(&got, &["scan", "frame"]), "laser");
     assert_eq!(f(&got, &["scan", "n"]), 180.0);
     assert!((f(&got, &["scan", "angle_min"]) + std::f64::consts::FRAC_PI_2).abs() < 1e-4);
@@ -956,7 +945,6 @@ fn a_fastdds_subscriber_reads_the_service_and_drives_it(range: FastRange, d: u32
     let r0 = got["scan"]["ranges"][0].as_f64().unwrap();
     assert!(r0 > 0.05 && r0 < 10.0, "a range in metres: {r0}");
     assert!(f(&got, &["scan", "stamp"]) > 1.6e9, "wall-clock stamps");
-    // Odometry and /tf: odom → base_link; the robot started at (3 m, 3.5 m), 90°.
     assert_eq!(s(&got, &["odom", "frame"]), "odom");
     assert_eq!(s(&got, &["odom", "child"]), "base_link");
     assert!((f(&got, &["odom_first", "x"]) - 3.0).abs() < 0.3, "{got}");
@@ -967,23 +955,13 @@ fn a_fastdds_subscriber_reads_the_service_and_drives_it(range: FastRange, d: u32
     );
     assert_eq!(s(&got, &["tf", "parent"]), "odom");
     assert_eq!(s(&got, &["tf", "child"]), "base_link");
-    // /tf_static (transient local): base_link → laser.
     assert_eq!(s(&got, &["tf_static", "parent"]), "base_link");
     assert_eq!(s(&got, &["tf_static", "child"]), "laser");
-    // The camera (fragmented: 230 KB), 320x240 bgr8, and the IMU.
     assert_eq!(f(&got, &["image", "width"]), 320.0);
     assert_eq!(f(&got, &["image", "height"]), 240.0);
     assert_eq!(s(&got, &["image", "encoding"]), "bgr8");
     assert_eq!(f(&got, &["image", "bytes"]), 320.0 * 240.0 * 3.0);
     assert!(got["imu"]["qw"].is_number(), "{got}");
-    // /cmd_vel (0.3 m/s, 0.2 rad/s) drove the simulated robot.
-    assert!(f(&got, &["cmds"]) > 0.0, "{got}");
-    robot.expect_moved(&start, 100.0);
-    // The peer left: motors_timeout later the motors are zero.
-    robot.ask_until("echo motors", "motors zeroed", |l| {
-        l.starts_with("motors clock=") && l.contains("v=0.0 mm/s")
-    });
-    robot.quit();
 }
 
 /// introrob's VFF drives a Fast DDS robot through the driver: the robot's /scan
