@@ -938,29 +938,29 @@ fn a_fastdds_subscriber_reads_the_service_and_drives_it(range: FastRange, d: u32
 /// /tf (odom → base_link; the robot started at (3 m, 3.5 m), 90°), /tf_static
 /// (base_link → laser), the camera (fragmented: 230 KB), 320x240 bgr8, and the IMU.
 fn assert_serves_the_simulated_robot(got: &serde_json::Value) {
-    assert_eq!(s(&got, &["scan", "frame"]), "laser");
-    assert_eq!(f(&got, &["scan", "n"]), 180.0);
-    assert!((f(&got, &["scan", "angle_min"]) + std::f64::consts::FRAC_PI_2).abs() < 1e-4);
-    assert!((f(&got, &["scan", "angle_increment"]) - 1f64.to_radians()).abs() < 1e-5);
+    assert_eq!(s(got, &["scan", "frame"]), "laser");
+    assert_eq!(f(got, &["scan", "n"]), 180.0);
+    assert!((f(got, &["scan", "angle_min"]) + std::f64::consts::FRAC_PI_2).abs() < 1e-4);
+    assert!((f(got, &["scan", "angle_increment"]) - 1f64.to_radians()).abs() < 1e-5);
     let r0 = got["scan"]["ranges"][0].as_f64().unwrap();
     assert!(r0 > 0.05 && r0 < 10.0, "a range in metres: {r0}");
-    assert!(f(&got, &["scan", "stamp"]) > 1.6e9, "wall-clock stamps");
-    assert_eq!(s(&got, &["odom", "frame"]), "odom");
-    assert_eq!(s(&got, &["odom", "child"]), "base_link");
-    assert!((f(&got, &["odom_first", "x"]) - 3.0).abs() < 0.3, "{got}");
-    assert!((f(&got, &["odom_first", "y"]) - 3.5).abs() < 0.3, "{got}");
+    assert!(f(got, &["scan", "stamp"]) > 1.6e9, "wall-clock stamps");
+    assert_eq!(s(got, &["odom", "frame"]), "odom");
+    assert_eq!(s(got, &["odom", "child"]), "base_link");
+    assert!((f(got, &["odom_first", "x"]) - 3.0).abs() < 0.3, "{got}");
+    assert!((f(got, &["odom_first", "y"]) - 3.5).abs() < 0.3, "{got}");
     assert!(
-        (f(&got, &["odom_first", "yaw"]) - 90f64.to_radians()).abs() < 0.3,
+        (f(got, &["odom_first", "yaw"]) - 90f64.to_radians()).abs() < 0.3,
         "{got}"
     );
-    assert_eq!(s(&got, &["tf", "parent"]), "odom");
-    assert_eq!(s(&got, &["tf", "child"]), "base_link");
-    assert_eq!(s(&got, &["tf_static", "parent"]), "base_link");
-    assert_eq!(s(&got, &["tf_static", "child"]), "laser");
-    assert_eq!(f(&got, &["image", "width"]), 320.0);
-    assert_eq!(f(&got, &["image", "height"]), 240.0);
-    assert_eq!(s(&got, &["image", "encoding"]), "bgr8");
-    assert_eq!(f(&got, &["image", "bytes"]), 320.0 * 240.0 * 3.0);
+    assert_eq!(s(got, &["tf", "parent"]), "odom");
+    assert_eq!(s(got, &["tf", "child"]), "base_link");
+    assert_eq!(s(got, &["tf_static", "parent"]), "base_link");
+    assert_eq!(s(got, &["tf_static", "child"]), "laser");
+    assert_eq!(f(got, &["image", "width"]), 320.0);
+    assert_eq!(f(got, &["image", "height"]), 240.0);
+    assert_eq!(s(got, &["image", "encoding"]), "bgr8");
+    assert_eq!(f(got, &["image", "bytes"]), 320.0 * 240.0 * 3.0);
     assert!(got["imu"]["qw"].is_number(), "{got}");
 }
 
