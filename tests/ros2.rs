@@ -1065,3 +1065,69 @@ fn a_discovery_range_localhost_fastdds_subscriber_reads_the_service_and_drives_i
 fn introrob_drives_a_discovery_range_localhost_fastdds_robot_through_the_ros2_driver() {
     introrob_drives_a_fastdds_robot(FastRange::DiscoveryRangeLocalhost, domain(16));
 }
+
+/// Issue 50, any host: the whole ROS 2 group on a host whose only interface is
+/// loopback (a robot's computer without a network, a sandboxed CI): this test
+/// binary's `ros2::` tests again, inside `unshare -n` with `lo` up. Two RustDDS
+/// participants in subnet mode found each other there only with
+/// vendor/patches/rustdds/0013-loopback-only-host.patch.
+#[test]
+fn the_ros2_tests_pass_in_a_loopback_only_network_namespace() {
+    const ME: &str = "ros2::the_ros2_tests_pass_in_a_loopback_only_network_namespace";
+    const VETH: &str =
+        "ros2::a_cyclone_subscriber_on_another_host_reads_the_service_over_a_veth_pair";
+    if std::env::var_os("JDE_TEST_IN_NETNS").is_some() {
+        return;
+    }
+    let args = ["ros2::", "--skip", ME, "--skip", VETH, "--test-threads=4"];
+    if common::run_in_private_netns(&args, "the ROS 2 group") == common::Netns::RunHere {
+        eprintln!("NOTE: the ROS 2 group ran on the host only");
+    }
+}
+
+/// Issue 50, two hosts: the service in one network namespace with subnet
+/// discovery (`insecure`), a Cyclone subscriber in another, joined by a veth
+/// pair: it reads every topic the service serves and drives the robot.
+#[test]
+fn a_cyclone_subscriber_on_another_host_reads_the_service_over_a_veth_pair() {
+    if std::env::var_os("JDE_TEST_IN_NETNS").is_some() {
+        return;
+    }
+    let Some(py) = common::python_with("cyclonedds") else {
+        return;
+    };
+    let Some(hosts) = common::TwoHosts::new() else {
+        return;
+    };
+    let d = domain(20);
+    let dir = tempfile::tempdir().unwrap();
+    let conf = dir.path().join("robot.conf");
+    std::fs::write(
+        &conf,
+        format!(
+            "driver simulator\nworld {}\nrobot robot1 3000 3500 90\nprovides encoders\n\
+             provides motors\nprovides laser 180 1\nprovides colorA\nprovides imu\nprovides sonars\n\
+             provides bumpers\nprovides pantiltencoders\nprovides pantiltmotors\nend_driver\n\
+             service ros2\ninsecure\ndomain {d}\ncompressed colorA 70\nend_service\n\
+             load_driver simulator\nload_service ros2\n",
+            common::world_path("simple.world")
+        ),
+    )
+    .unwrap();
+    let mut robot = Proc::start_in(&hosts.a, &conf);
+    let start = robot.ask_until("echo encoders", "the robot", |l| {
+        l.starts_with("encoders clock=")
+    });
+    let mut listen = Command::new(&py);
+    listen
+        .arg(root().join("tests/ros2/cyclone_peer.py"))
+        .args(["listen", &d.to_string(), "40"]);
+    let peer = common::TwoHosts::command(&hosts.b, &listen)
+        .spawn()
+        .expect("start the Cyclone peer in the other namespace");
+    let got = json_of(peer, "the Cyclone subscriber on the other host", &robot);
+    assert_serves_the_simulated_robot(&got);
+    // Its /cmd_vel (0.3 m/s, 0.2 rad/s) crossed back and drove the robot.
+    robot.expect_moved(&start, 100.0);
+    robot.quit();
+}

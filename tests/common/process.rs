@@ -37,9 +37,18 @@ pub struct Proc {
 
 impl Proc {
     pub fn start(conf: &Path) -> Proc {
-        let mut child = super::jderobot([Path::new("--headless"), conf])
-            .spawn()
-            .expect("start jderobot");
+        Proc::spawn(super::jderobot([Path::new("--headless"), conf]))
+    }
+
+    /// `jderobot --headless CONF` in network namespace `ns` ([`super::TwoHosts`]).
+    #[allow(dead_code)]
+    pub fn start_in(ns: &str, conf: &Path) -> Proc {
+        let c = super::jderobot([Path::new("--headless"), conf]);
+        Proc::spawn(super::TwoHosts::command(ns, &c))
+    }
+
+    fn spawn(mut c: std::process::Command) -> Proc {
+        let mut child = c.spawn().expect("start jderobot");
         let out = collect_output(&mut child);
         Proc { child, out }
     }

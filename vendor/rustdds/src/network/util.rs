@@ -37,11 +37,20 @@ pub fn get_local_unicast_locators(port: u16) -> Vec<Locator> {
     return vec![Locator::from(SocketAddr::new(Ipv4Addr::LOCALHOST.into(), port))];
   }
   match if_addrs::get_if_addrs() {
-    Ok(ifaces) => ifaces
-      .iter()
-      .filter(|ip| !ip.is_loopback())
-      .map(|ip| Locator::from(SocketAddr::new(ip.ip(), port)))
-      .collect(),
+    Ok(ifaces) => {
+      let addrs: Vec<Locator> = ifaces
+        .iter()
+        .filter(|ip| !ip.is_loopback())
+        .map(|ip| Locator::from(SocketAddr::new(ip.ip(), port)))
+        .collect();
+      // jderobot's patch: on a host whose only interface is loopback (a robot's
+      // computer without a network, a sandbox) the participant is reachable on
+      // loopback, as in localhost mode; it announced no address at all before.
+      if addrs.is_empty() {
+        return vec![Locator::from(SocketAddr::new(Ipv4Addr::LOCALHOST.into(), port))];
+      }
+      addrs
+    }
     Err(e) => {
       error!("Cannot get local network interfaces: get_if_addrs() : {e:?}");
       vec![]
@@ -63,7 +72,13 @@ pub fn get_local_multicast_ip_addrs() -> io::Result<Vec<IpAddr>> {
   let interfaces = pnet::datalink::interfaces();
 
   // grab all the ips from each interface
-  Ok(get_local_multicast_ip_addrs_inner(interfaces))
+  let addrs = get_local_multicast_ip_addrs_inner(interfaces);
+  // jderobot's patch: no multicast interface but loopback: multicast on loopback,
+  // as in localhost mode (it sent no discovery at all before).
+  if addrs.is_empty() {
+    return Ok(vec![Ipv4Addr::LOCALHOST.into()]);
+  }
+  Ok(addrs)
 }
 
 /// Inner implementation of [`get_local_multicast_ip_addrs`], for testing
