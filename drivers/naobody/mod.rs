@@ -514,6 +514,80 @@ struct Body {
     watch: Option<Arc<Watch>>,
     /// The limits read from the robot, kept across sessions.
     limits: Option<(Joint, Joint)>,
+    /// The last odometry reading (m, m) and when it came, for [`odometry_plausible`].
+    last_odometry: Option<(f64, f64, Instant)>,
+}
+
+/// The farthest a NAO's odometry may be from its origin, m: 10 km (a NAO walks
+/// 0.1 m/s at most, so 28 hours of walking); beyond it the reading is not a
+/// NAO's (an attacker's stand-in sent 200 km).
+pub const MAX_ODOMETRY_M: f64 = 10_000.0;
+/// The fastest a reading may move from the one before, m/s (ten times a NAO's
+/// top walk), plus [`ODOMETRY_SLACK_M`]: a jump beyond is refused.
+pub const MAX_ODOMETRY_SPEED: f64 = 1.0;
+pub const ODOMETRY_SLACK_M: f64 = 0.5;
+/// How far past a head joint's limits a reading may be (sensor noise), rad.
+pub const JOINT_SLACK_RAD: f32 = 0.05;
+/// A NAO's head joints (HeadYaw, HeadPitch), rad, when the robot has not told
+/// its own (`getLimits`): Aldebaran's documented ranges.
+pub const NAO_HEAD: (Joint, Joint) = (
+    Joint {
+        min: -2.0857,
+        max: 2.0857,
+        speed: 8.27,
+    },
+    Joint {
+        min: -0.6720,
+        max: 0.5149,
+        speed: 7.19,
+    },
+);
+
+/// Whether odometry reading (x, y) m, taken at `now`, is a NAO's after `prev`:
+/// within [`MAX_ODOMETRY_M`] of the origin and no farther from the previous
+/// reading than [`MAX_ODOMETRY_SPEED`] for the time between, plus
+/// [`ODOMETRY_SLACK_M`]. The reason when it is not.
+pub fn odometry_plausible(
+    prev: Option<(f64, f64, Instant)>,
+    x: f64,
+    y: f64,
+    now: Instant,
+) -> Result<(), String> {
+    let far = x.hypot(y);
+    if far > MAX_ODOMETRY_M {
+        return Err(format!(
+            "odometry {:.0} km from its origin is no NAO's (at most {} km)",
+            far / 1000.0,
+            MAX_ODOMETRY_M / 1000.0
+        ));
+    }
+    if let Some((px, py, at)) = prev {
+        let dt = now.saturating_duration_since(at).as_secs_f64();
+        let jump = (x - px).hypot(y - py);
+        let most = MAX_ODOMETRY_SPEED * dt + ODOMETRY_SLACK_M;
+        if jump > most {
+            return Err(format!(
+                "odometry jumped {jump:.1} m in {dt:.2} s (a NAO walks at most {most:.1} m in that time)"
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Whether head angles (HeadYaw, HeadPitch) rad are within the joints' limits
+/// (the robot's, else a NAO's: [`NAO_HEAD`]) and [`JOINT_SLACK_RAD`]. The reason
+/// when they are not.
+pub fn head_plausible(a: [f32; 2], limits: Option<(Joint, Joint)>) -> Result<(), String> {
+    let (yaw, pitch) = limits.unwrap_or(NAO_HEAD);
+    for ((angle, j), name) in a.into_iter().zip([yaw, pitch]).zip(HEAD) {
+        if angle < j.min - JOINT_SLACK_RAD || angle > j.max + JOINT_SLACK_RAD {
+            return Err(format!(
+                "{name} {angle:.2} rad is outside the joint's limits [{:.2}, {:.2}] rad",
+                j.min, j.max
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// ALMotion with the methods the conf's interfaces call (None when none needs
@@ -773,15 +847,18 @@ impl Body {
             let names = Value::List(HEAD.iter().map(|n| Value::str(n)).collect());
             let v = s.qi.call(&m, "getAngles", &[names, Value::Bool(true)])?;
             match numbers(&v, 2) {
-                Some(a) => {
-                    e.accept(
-                        &self.source,
-                        PtEncoders {
-                            pan_angle: (a[0] as f32).to_degrees(),
-                            tilt_angle: -(a[1] as f32).to_degrees(),
-                        },
-                    );
-                }
+                Some(a) => match head_plausible([a[0] as f32, a[1] as f32], self.limits) {
+                    Ok(()) => {
+                        e.accept(
+                            &self.source,
+                            PtEncoders {
+                                pan_angle: (a[0] as f32).to_degrees(),
+                                tilt_angle: -(a[1] as f32).to_degrees(),
+                            },
+                        );
+                    }
+                    Err(why) => e.set_stale(format!("ALMotion.getAngles: {why}")),
+                },
                 None => e.set_stale(format!(
                     "ALMotion.getAngles gave {}, not 2 angles",
                     short(&v)
@@ -792,14 +869,24 @@ impl Body {
             let v = s.qi.call(&m, "getRobotPosition", &[Value::Bool(true)])?;
             match numbers(&v, 3) {
                 Some(p) => {
-                    e.accept(
-                        &self.source,
-                        Encoders::from_pose(
-                            (p[0] * 1000.0) as f32,
-                            (p[1] * 1000.0) as f32,
-                            p[2] as f32,
-                        ),
-                    );
+                    let now = Instant::now();
+                    let plausible = odometry_plausible(self.last_odometry, p[0], p[1], now);
+                    // The next reading is judged against this one, so a reset of
+                    // the odometry is believed from its second reading on.
+                    self.last_odometry = Some((p[0], p[1], now));
+                    match plausible {
+                        Ok(()) => {
+                            e.accept(
+                                &self.source,
+                                Encoders::from_pose(
+                                    (p[0] * 1000.0) as f32,
+                                    (p[1] * 1000.0) as f32,
+                                    p[2] as f32,
+                                ),
+                            );
+                        }
+                        Err(why) => e.set_stale(format!("ALMotion.getRobotPosition: {why}")),
+                    }
                 }
                 None => e.set_stale(format!(
                     "ALMotion.getRobotPosition gave {}, not [x, y, theta]",
@@ -1241,6 +1328,7 @@ pub fn start(conf: NaoConf, rt: &Runtime, provider: &str) -> anyhow::Result<Vec<
                 source: Source::new(format!("{provider}: {url}")),
                 watch: None,
                 limits: None,
+                last_odometry: None,
             },
         )?);
     }
@@ -1333,6 +1421,30 @@ mod tests {
             let e = parse(text).err().map(|e| e.to_string()).unwrap_or_default();
             assert!(e.contains(expect), "{text}: {e}");
         }
+    }
+
+    #[test]
+    fn odometry_and_head_readings_a_nao_cannot_give_are_refused() {
+        let t0 = Instant::now();
+        let t1 = t0 + Duration::from_millis(100);
+        assert!(odometry_plausible(None, 1.0, 2.0, t0).is_ok());
+        assert!(odometry_plausible(Some((1.0, 2.0, t0)), 1.05, 2.0, t1).is_ok());
+        // 200 km: no NAO's, whatever came before.
+        let e = odometry_plausible(None, 200_000.0, 0.0, t0).unwrap_err();
+        assert!(e.contains("200 km"), "{e}");
+        // A 3 m jump in 0.1 s.
+        let e = odometry_plausible(Some((0.0, 0.0, t0)), 3.0, 0.0, t1).unwrap_err();
+        assert!(e.contains("jumped 3.0 m"), "{e}");
+        // The head: a NAO's limits without the robot's, the robot's when it told them.
+        assert!(head_plausible([2.0, -0.5], None).is_ok());
+        let e = head_plausible([6.0, 0.0], None).unwrap_err();
+        assert!(e.contains("HeadYaw 6.00 rad"), "{e}");
+        let tight = Joint {
+            min: -0.2,
+            max: 0.2,
+            speed: 1.0,
+        };
+        assert!(head_plausible([0.0, 0.5], Some((tight, tight))).is_err());
     }
 
     #[test]
