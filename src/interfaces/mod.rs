@@ -61,8 +61,8 @@ pub use table::{InUse, InterfaceError, Interfaces};
 pub use values::{
     Bumpers, COLOR_HEIGHT, COLOR_WIDTH, Encoders, Image, Imu, InterfaceValue,
     JDE43_LASER_MAX_RANGE, JDE43_LASER_START, Laser, MAX_ACCELERATION, MAX_ANGLE_DEG,
-    MAX_ANGULAR_VELOCITY, MAX_MOTOR_V, MAX_MOTOR_W, MAX_POSITION_MM, MAX_PT_SPEED, Motors, Mount,
-    PtEncoders, PtMotors, RANGES, Sonars, ZoomEncoders, ZoomMotors, limit,
+    MAX_ANGULAR_VELOCITY, MAX_MOTOR_V, MAX_MOTOR_W, MAX_POSITION_MM, MAX_PT_SPEED, MAX_RANGE_MM,
+    Motors, Mount, PtEncoders, PtMotors, RANGES, Sonars, ZoomEncoders, ZoomMotors, limit,
 };
 
 #[cfg(test)]
