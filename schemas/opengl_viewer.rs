@@ -63,7 +63,7 @@ use crate::{
         settings::{self, CYCLE, Setting, float, on_off, path},
     },
     files,
-    interfaces::{Encoders, Interface, InterfaceValue, Laser, PtEncoders, Sonars},
+    interfaces::{Encoders, Interface, InterfaceValue, Laser, PtEncoders, Sonars, heading},
     progeo::{GlCamera, HPoint2D, PinholeCamera},
     runtime::{Context, Panel, Runtime, Schema},
     widgets::{
@@ -757,7 +757,7 @@ impl Panel for ViewerPanel {
                 "robot at ({:.0}, {:.0}) mm, {:.0} deg",
                 pose.x,
                 pose.y,
-                pose.theta.to_degrees()
+                heading(pose.theta).to_degrees()
             ));
         });
         ui.horizontal(|ui| {

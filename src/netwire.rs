@@ -615,8 +615,10 @@ impl Net43 for Laser {
         unsubscribe: code::UNSUBSCRIBE_LASER,
         push: code::LASER,
     };
+    /// What 4.3's wire can say: N readings over 180° from −90°; a scan of any
+    /// other geometry is resampled to 180 at 1° ([`Laser::jde43_readings`]).
     fn write_push(&self, clock: u64, _: u64, out: &mut Vec<u8>) {
-        write_values(out, code::LASER, clock, &self.readings, |a, r| {
+        write_values(out, code::LASER, clock, &*self.jde43_readings(), |a, r| {
             write!(a, " {r}")
         });
     }
@@ -1174,7 +1176,8 @@ mod tests {
     #[test]
     fn pushes_parse_back() {
         let mut out = Vec::new();
-        Laser::jde43(vec![1, 2, 3], 1.0).write_push(7, 0, &mut out);
+        // Three readings over 180° (4.3's wire geometry) go as they are.
+        Laser::jde43(vec![1, 2, 3], 3.0 / 180.0).write_push(7, 0, &mut out);
         Encoders::from_pose(1.0, 2.0, 90f32.to_radians()).write_push(8, 123, &mut out);
         Sonars {
             us: vec![100.0, 200.0],

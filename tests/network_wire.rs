@@ -640,6 +640,78 @@ fn our_client_against_our_server_with_a_token() {
     srv.shutdown();
 }
 
+/// 4.3's wire says only 180° from −90°: a 360° scan (an RPLIDAR's) is resampled
+/// by the server, so reading a at our client is the source's reading at a; a scan
+/// narrower than the front half arrives with "nothing" (8000 mm, no return) where
+/// it does not look (docs/network.md).
+#[test]
+fn a_360_scan_arrives_as_4_3_laser_with_each_angle_right() {
+    let (srv, addr) = served("");
+    let h = format!("127.0.0.1 {}", addr.port());
+    let cli = Runtime::new(std::path::Path::new("test.conf"));
+    load(
+        &cli,
+        Kind::Driver,
+        "networkclient",
+        &format!("provides laser {h}\n"),
+    )
+    .unwrap();
+    let got = cli.interfaces.get::<Laser>("laser").unwrap();
+    got.resume();
+    let src = srv.interfaces.get::<Laser>("laser").unwrap();
+    // 360 readings at 1° from −180°, 12 m, each reading its own.
+    let round = Laser {
+        readings: (0..360).map(|i| 1000 + 7 * i).collect(),
+        resolution: 1.0,
+        start: -180.0,
+        min_range: 150.0,
+        max_range: 12000.0,
+        ..Laser::default()
+    };
+    src.publish(round.clone()).unwrap();
+    eventually("the 360° scan at our client", || {
+        got.read().readings.first() == Some(&(1000 + 7 * 90))
+    });
+    let l = got.read().value.clone();
+    assert_eq!((l.readings.len(), l.start, l.resolution), (180, -90.0, 1.0));
+    for i in 0..180 {
+        let a = l.angle(i);
+        let want = round.readings[round.index_at(a).unwrap()];
+        assert_eq!(l.readings[i], want, "reading {i} at {a}°");
+    }
+    // 90° from −45°, 5.6 m, a no-return straight ahead: outside the scan and
+    // at the no-return, "nothing" (8000 mm, which the client's laser does not
+    // count as a return).
+    let mut narrow = Laser {
+        readings: (0..90).map(|i| 2000 + i).collect(),
+        start: -45.0,
+        max_range: 5600.0,
+        ..Laser::default()
+    };
+    narrow.readings[45] = 5600;
+    src.publish(narrow.clone()).unwrap();
+    eventually("the 90° scan at our client", || {
+        got.read().readings.get(45) == Some(&2000)
+    });
+    let l = got.read().value.clone();
+    assert_eq!(l.readings.len(), 180);
+    for i in 0..180 {
+        let a = l.angle(i);
+        match narrow.index_at(a) {
+            Some(k) if narrow.is_return(narrow.readings[k]) => {
+                assert_eq!(l.readings[i], narrow.readings[k], "reading {i} at {a}°");
+                assert!(l.is_return(l.readings[i]));
+            }
+            _ => {
+                assert_eq!(l.readings[i], 8000, "reading {i} at {a}°");
+                assert!(!l.is_return(l.readings[i]), "nothing at {a}°");
+            }
+        }
+    }
+    cli.shutdown();
+    srv.shutdown();
+}
+
 #[test]
 fn our_client_drops_an_absurd_pose_from_a_server() {
     use std::io::{BufRead, BufReader, Read, Write};

@@ -9,15 +9,16 @@ use std::{
     io::Write,
     path::Path,
     process::{Command, Stdio},
-    time::Duration,
+    sync::Arc,
+    time::{Duration, Instant},
 };
 
 use std::collections::BTreeMap;
 
 use common::root;
 use jderobot::{
-    interfaces::Motors,
-    mcapfmt::{self, Decoded, Recorded, Summary},
+    interfaces::{Laser, Motors, Sample},
+    mcapfmt::{self, Decoded, Recorded, Snapshot, Summary},
 };
 
 const BIN: &str = env!("CARGO_BIN_EXE_jderobot");
@@ -168,4 +169,67 @@ fn messages(path: &Path) -> (Summary, BTreeMap<String, Vec<Decoded>>) {
             .push(mcapfmt::decode_mcap(kind, &m).unwrap());
     }
     (summary, by)
+}
+
+/// foxglove.LaserScan has no range limits: the recorder keeps them in the laser
+/// channel's metadata and the replay gives them back (not 0 and 8000 mm). The scan
+/// comes from a ros2-profile file (its LaserScan carries them), is replayed and
+/// recorded by the binary in jderobot's profile, and that file replayed again.
+#[test]
+fn a_replayed_laser_keeps_its_recorded_range_limits() {
+    let dir = tempfile::tempdir().unwrap();
+    let scan = Laser {
+        readings: vec![20, 1500, 5600, 300],
+        resolution: 0.5,
+        start: -3.0,
+        min_range: 20.0,
+        max_range: 5600.0,
+        ..Laser::default()
+    };
+    // The source: ten scans over a second, as a ros2 bag.
+    let profile = mcapfmt::Profile::Ros2;
+    let mut w = mcapfmt::write_options(None, profile)
+        .create(std::io::Cursor::new(Vec::new()))
+        .unwrap();
+    let id = mcapfmt::add_channel(&mut w, "laser", jderobot::interfaces::Kind::Laser, profile)
+        .unwrap()
+        .unwrap();
+    let mut buf = Vec::new();
+    for k in 1..=10u64 {
+        let snap = Snapshot::Laser(Arc::new(Sample {
+            clock: k,
+            stamp: Instant::now(),
+            time: mcapfmt::from_nanos(1_700_000_000_000_000_000 + k * 100_000_000),
+            value: scan.clone(),
+        }));
+        assert!(mcapfmt::write_sample(&mut w, profile, id, "laser", &snap, &mut buf).unwrap());
+    }
+    w.finish().unwrap();
+    std::fs::write(dir.path().join("src.mcap"), w.into_inner().into_inner()).unwrap();
+
+    // Replayed (in a loop) and recorded in jderobot's profile.
+    shell(
+        dir.path(),
+        "driver replay\nfile src.mcap\nloop on\nend_driver\n\
+         service recorder\nfile rec.mcap\nrecords laser\nend_service\n\
+         load_driver replay\nload_service recorder\n",
+        &[(1500, "echo laser")],
+    );
+    let (_, by) = messages(&dir.path().join("rec.mcap"));
+    let laser = &by["laser"];
+    assert!(!laser.is_empty());
+    for d in laser {
+        let Recorded::Laser(l) = &d.value else {
+            panic!("not a laser: {d:?}")
+        };
+        assert_eq!((l.min_range, l.max_range), (20.0, 5600.0));
+        assert_eq!(l.readings, scan.readings);
+    }
+    // And replayed from it.
+    let (out, _) = shell(
+        dir.path(),
+        "driver replay\nfile rec.mcap\nloop on\nend_driver\nload_driver replay\n",
+        &[(800, "echo laser")],
+    );
+    assert!(out.contains("range=[20, 5600] mm"), "{out}");
 }

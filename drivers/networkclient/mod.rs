@@ -25,7 +25,7 @@
 //! | interface | what |
 //! |---|---|
 //! | `colorA..D` | 320x240 BGR; `varcolorA..D` any size (or exactly `W H` when given) |
-//! | `laser` | readings in mm, as many as the server sends; resolution 1 reading/deg when 180 |
+//! | `laser` | readings in mm, as many as the server sends, read as 4.3's laser: over 180° from −90° (1 reading/deg when 180), 0..8000 mm |
 //! | `encoders` | x, y mm, θ rad (0, 2π] (sent in degrees), after `initial_position` |
 //! | `sonars` | mm, one per sonar |
 //! | `motors` | v mm/s, w deg/s: sent as `22 v 0.0` / `23 w 0.0` every 100 ms and on change |

@@ -28,7 +28,7 @@ use pyo3::{
 };
 
 use crate::{
-    interfaces::{Bumpers, Encoders, Image, Interface, Laser, Motors},
+    interfaces::{Bumpers, Encoders, Image, Interface, Laser, Motors, heading},
     output,
 };
 
@@ -422,15 +422,11 @@ impl Hal {
                 .as_ref()
                 .ok_or_else(|| c.robot.missing("encoders", "getPose3d"))?;
             let p = e.read().value;
-            let mut yaw = p.theta as f64;
-            if yaw > std::f64::consts::PI {
-                yaw -= std::f64::consts::TAU;
-            }
             Ok(Pose3d {
                 x: p.x as f64 / 1000.0,
                 y: p.y as f64 / 1000.0,
                 z: 0.0,
-                yaw,
+                yaw: heading(p.theta) as f64,
                 roll: 0.0,
                 pitch: 0.0,
             })

@@ -60,6 +60,9 @@
 //!   goes on; it never ends while the service runs.
 //! - Stopping needs no network: the accept thread polls its nonblocking listener
 //!   with a stop flag (100 ms), where a self-connect would fail with loopback down.
+//! - A laser scan of another geometry than 4.3's (180° from −90°) is resampled to
+//!   180 readings at 1° from −90°, "nothing" outside its field of view
+//!   ([`crate::interfaces::Laser::jde43_readings`], docs/network.md).
 //! - 4.3 bug fixed: the sonars push carried `laser.number` readings; it carries the
 //!   sonars' own count.
 //! - 4.3 bug fixed: `1024` (zoom) was obeyed only when pan-tilt motors were

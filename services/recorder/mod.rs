@@ -5,7 +5,8 @@
 //! One channel per interface (topic = its name), with Foxglove's schemas where
 //! they fit: `foxglove.RawImage` / `foxglove.CompressedImage` and
 //! `foxglove.LaserScan` in protobuf, `foxglove.PoseInFrame` (encoders) in JSON, and
-//! `jderobot.KIND` JSON schemas for the rest; every message carries the
+//! `jderobot.KIND` JSON schemas for the rest (a laser channel's range limits,
+//! which `foxglove.LaserScan` has no fields for, in its metadata); every message carries the
 //! interface's clock (the MCAP sequence) and the sample's wall time (the format is
 //! `crate::mcapfmt`'s).
 //!
@@ -453,8 +454,8 @@ fn write_one(
         Some(c) => c,
         None => {
             let kind = snap.kind();
-            let c =
-                mcapfmt::add_channel(&mut o.writer, name, kind, profile)?.unwrap_or_else(|| {
+            let c = mcapfmt::add_sample_channel(&mut o.writer, name, snap, profile)?
+                .unwrap_or_else(|| {
                     // Not in the profile: never written (said once, at the first sample).
                     tracing::warn!(
                         "recorder: profile ros2 carries {}; `{name}` ({kind}) is not recorded",

@@ -7,7 +7,7 @@
 //! | `varcolorA..D` | [`Image`] | any size, BGR |
 //! | `laser` | [`Laser`] | `readings` mm (index 0 = right, centre = ahead), `resolution` readings/deg |
 //! | `sonars` | [`Sonars`] | `us` mm, one per sonar |
-//! | `encoders` | [`Encoders`] | `x`, `y` mm, `theta` rad in (0, 2π], `cos`, `sin` (the seed's `robot[5]`) |
+//! | `encoders` | [`Encoders`] | `x`, `y` mm, `theta` rad in (0, 2π], `cos`, `sin` (the seed's `robot[5]`); printed (`echo`, the panels) as a [`heading`] in (−180°, 180°] |
 //! | `motors` | [`Motors`] | `v` mm/s, `w` deg/s (counter-clockwise positive); \|v\| <= [`MAX_MOTOR_V`], \|w\| <= [`MAX_MOTOR_W`] |
 //! | `pantiltencoders` | [`PtEncoders`] | `pan_angle`, `tilt_angle` deg |
 //! | `pantiltmotors` | [`PtMotors`] | `longitude`, `latitude` deg; speeds deg/s; limits |
@@ -62,8 +62,8 @@ pub use table::{InUse, InterfaceError, Interfaces};
 pub use values::{
     Bumpers, COLOR_HEIGHT, COLOR_WIDTH, Encoders, Image, Imu, InterfaceValue,
     JDE43_LASER_MAX_RANGE, JDE43_LASER_START, Laser, MAX_ACCELERATION, MAX_ANGLE_DEG,
-    MAX_ANGULAR_VELOCITY, MAX_MOTOR_V, MAX_MOTOR_W, MAX_POSITION_MM, MAX_PT_SPEED, Motors, Mount,
-    PtEncoders, PtMotors, RANGES, Sonars, ZoomEncoders, ZoomMotors, limit,
+    MAX_ANGULAR_VELOCITY, MAX_MOTOR_V, MAX_MOTOR_W, MAX_POSITION_MM, MAX_PT_SPEED, MAX_RANGE_MM,
+    Motors, Mount, PtEncoders, PtMotors, RANGES, Sonars, ZoomEncoders, ZoomMotors, heading, limit,
 };
 
 #[cfg(test)]

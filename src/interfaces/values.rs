@@ -435,6 +435,22 @@ impl InterfaceValue for Sonars {
     }
 }
 
+/// A heading or yaw (rad, any number of turns) as it is printed: the same
+/// direction in (−π, π], so that 0 and 2π both print as 0 (never −0, 2π or
+/// 360°), 3π/2 as −π/2 (−90°) and π as π (180°). The one helper every printer of
+/// a heading uses (`echo` and mastergui through `describe`, the panels, Python's
+/// `Pose3d`): degrees are `heading(a).to_degrees()`. Values keep their own
+/// convention (the encoders' θ is in (0, 2π], as 4.3's); only what is shown
+/// changes. What is left of a whole turn by f32 rounding (under 1e-6 rad) is 0.
+pub fn heading(rad: f32) -> f32 {
+    use std::f32::consts::{PI, TAU};
+    let mut a = rad.rem_euclid(TAU);
+    if a > PI {
+        a -= TAU;
+    }
+    if a.abs() < 1e-6 { 0.0 } else { a }
+}
+
 /// Robot pose from odometry: the seed's `robot[5]` = x, y (mm), θ (rad, (0, 2π]), cos θ, sin θ.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Encoders {
@@ -477,13 +493,15 @@ impl InterfaceValue for Encoders {
     const KIND: Kind = Kind::Encoders;
     const RANGE: &'static str =
         "|x|, |y| <= 1e9 mm (1000 km); |theta| <= 2π rad; cos, sin in [-1, 1]";
+    /// θ printed as a [`heading`], in (−180°, 180°].
     fn describe(&self) -> String {
+        let theta = heading(self.theta);
         format!(
             "x={:.1} mm y={:.1} mm theta={:.4} rad ({:.2} deg) cos={:.4} sin={:.4}",
             self.x,
             self.y,
-            self.theta,
-            self.theta.to_degrees(),
+            theta,
+            theta.to_degrees(),
             self.cos,
             self.sin
         )
@@ -854,6 +872,7 @@ impl InterfaceValue for Imu {
          |ax|, |ay|, |az| <= 1e4 m/s²";
     fn describe(&self) -> String {
         let (r, p, y) = self.euler();
+        let (r, p, y) = (heading(r), heading(p), heading(y));
         format!(
             "roll={:.2} pitch={:.2} yaw={:.2} deg q=({:.4} {:.4} {:.4} {:.4}) \
              w=({:.3} {:.3} {:.3}) rad/s a=({:.3} {:.3} {:.3}) m/s²",
@@ -897,5 +916,47 @@ impl InterfaceValue for Imu {
             within(name, field, v, -a, a, "m/s²")?;
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::f32::consts::{PI, TAU};
+
+    #[test]
+    fn headings_print_in_minus_180_to_180_with_zero_as_zero() {
+        let deg = |rad: f32| format!("{:.2}", heading(rad).to_degrees());
+        assert_eq!(deg(0.0), "0.00");
+        assert_eq!(deg(TAU), "0.00");
+        assert_eq!(deg(-0.0), "0.00");
+        assert!(heading(-0.0).is_sign_positive());
+        assert_eq!(deg(3.0 * PI / 2.0), "-90.00");
+        assert_eq!(deg(PI), "180.00");
+        assert_eq!(deg(-PI), "180.00");
+        assert_eq!(deg(-PI / 2.0), "-90.00");
+        assert_eq!(deg(5.0 * TAU + 0.5), deg(0.5));
+        // The encoders keep 4.3's (0, 2π]; `echo` prints a heading of zero as 0.
+        let e = Encoders::from_pose(1.0, 2.0, 0.0);
+        assert_eq!(e.theta, TAU);
+        assert!(
+            e.describe().contains("theta=0.0000 rad (0.00 deg)"),
+            "{}",
+            e.describe()
+        );
+        let e = Encoders::from_pose(0.0, 0.0, 270f32.to_radians());
+        assert!(e.describe().contains("(-90.00 deg)"), "{}", e.describe());
+        // A yaw a rounding below 0 (it printed as −0.00) prints as 0.
+        let yaw = Imu {
+            qz: -1e-8,
+            ..Imu::default()
+        };
+        assert!(yaw.euler().2 < 0.0);
+        assert!(
+            yaw.describe()
+                .starts_with("roll=0.00 pitch=0.00 yaw=0.00 deg"),
+            "{}",
+            yaw.describe()
+        );
     }
 }

@@ -12,7 +12,7 @@
 //! |---|---|---|---|
 //! | `image` | `foxglove.RawImage` | protobuf | `encoding` `bgr8`, `data` the BGR bytes as they are |
 //! | `image` (`images jpeg`) | `foxglove.CompressedImage` | protobuf | `format` `jpeg` |
-//! | `laser` | `foxglove.LaserScan` | protobuf | `ranges` in m (the mm readings / 1000), angles in rad (−π/2 first; `end_angle` gives the resolution back) |
+//! | `laser` | `foxglove.LaserScan` | protobuf | `ranges` in m (the mm readings / 1000), angles in rad (−π/2 first; `end_angle` gives the resolution back); the range limits in the channel's metadata ([`MIN_RANGE_KEY`]) |
 //! | `encoders` | `foxglove.PoseInFrame` | JSON | position in m, orientation a quaternion about z; `jderobot` = the exact value |
 //! | others | `jderobot.KIND` | JSON | `jderobot` = the interface's fields in its units |
 //!
@@ -58,13 +58,24 @@ use std::{
 use serde::Deserialize;
 use serde_json::Value;
 
-use crate::interfaces::{AnyInterface, Image, Interface, Interfaces, Kind, Sample, for_each_kind};
+use crate::interfaces::{
+    AnyInterface, Image, Interface, Interfaces, Kind, MAX_RANGE_MM, Sample, for_each_kind,
+};
 
 /// The metadata key of a channel that names the interface kind.
 pub const KIND_KEY: &str = "jderobot.kind";
 /// The metadata key of a channel that names the interface (in the `ros2`
 /// profile, where the topic is `/laser`).
 pub const NAME_KEY: &str = "jderobot.interface";
+/// The metadata keys of a laser channel's range limits (mm, as the shortest text
+/// that reads back the same f32), which `foxglove.LaserScan` has no fields for:
+/// the limits of the channel's first scan (a laser's limits do not change while
+/// it runs). Written by [`add_sample_channel`] in the Foxglove profile (the
+/// `ros2` LaserScan carries them in each message), read back by [`decode_read`]
+/// and [`decode_mcap`].
+pub const MIN_RANGE_KEY: &str = "jderobot.laser.min_range";
+/// See [`MIN_RANGE_KEY`].
+pub const MAX_RANGE_KEY: &str = "jderobot.laser.max_range";
 
 /// Errors decoding a message.
 #[derive(Debug, thiserror::Error)]
@@ -286,7 +297,35 @@ pub fn add_channel<W: std::io::Write + std::io::Seek>(
     kind: Kind,
     profile: Profile,
 ) -> Result<Option<u16>, mcap::McapError> {
+    add_channel_with(writer, name, kind, profile, BTreeMap::new())
+}
+
+/// [`add_channel`] for a channel whose first sample is `snap`, as the recorder
+/// adds them: in the Foxglove profile a laser channel's metadata also carries
+/// the scan's range limits ([`MIN_RANGE_KEY`], [`MAX_RANGE_KEY`]).
+pub fn add_sample_channel<W: std::io::Write + std::io::Seek>(
+    writer: &mut mcap::Writer<W>,
+    name: &str,
+    snap: &Snapshot,
+    profile: Profile,
+) -> Result<Option<u16>, mcap::McapError> {
+    let mut extra = BTreeMap::new();
+    if let (Profile::Foxglove { .. }, Snapshot::Laser(l)) = (profile, snap) {
+        extra.insert(MIN_RANGE_KEY.to_string(), l.value.min_range.to_string());
+        extra.insert(MAX_RANGE_KEY.to_string(), l.value.max_range.to_string());
+    }
+    add_channel_with(writer, name, snap.kind(), profile, extra)
+}
+
+fn add_channel_with<W: std::io::Write + std::io::Seek>(
+    writer: &mut mcap::Writer<W>,
+    name: &str,
+    kind: Kind,
+    profile: Profile,
+    extra: BTreeMap<String, String>,
+) -> Result<Option<u16>, mcap::McapError> {
     let mut meta = metadata(kind);
+    meta.extend(extra);
     let (schema, data) = match (profile, kind) {
         (Profile::Ros2, _) => {
             let Some((type_name, def)) = ros2::schema(kind) else {
@@ -640,7 +679,7 @@ pub fn decode_message(
 /// Decodes an MCAP message of a channel of interface kind `kind` ([`decode_message`]
 /// with the message's channel, sequence and log time).
 pub fn decode_mcap(kind: Kind, m: &mcap::Message) -> Result<Decoded, FormatError> {
-    decode_message(
+    let d = decode_message(
         &m.channel.topic,
         kind,
         m.channel.schema.as_ref().map_or("", |s| s.name.as_str()),
@@ -648,13 +687,14 @@ pub fn decode_mcap(kind: Kind, m: &mcap::Message) -> Result<Decoded, FormatError
         m.sequence,
         m.log_time,
         &m.data,
-    )
+    )?;
+    channel_limits(&m.channel.topic, &m.channel.metadata, d)
 }
 
 /// Decodes a message read by [`reader`] ([`decode_message`] with its channel,
 /// sequence and log time).
 pub fn decode_read(kind: Kind, m: &reader::Message<'_>) -> Result<Decoded, FormatError> {
-    decode_message(
+    let d = decode_message(
         &m.channel.topic,
         kind,
         m.channel.schema.as_ref().map_or("", |s| s.name.as_str()),
@@ -662,7 +702,38 @@ pub fn decode_read(kind: Kind, m: &reader::Message<'_>) -> Result<Decoded, Forma
         m.sequence,
         m.log_time,
         m.data,
-    )
+    )?;
+    channel_limits(&m.channel.topic, &m.channel.metadata, d)
+}
+
+/// A decoded laser with the range limits its channel's metadata records
+/// ([`MIN_RANGE_KEY`], [`MAX_RANGE_KEY`]); without them, what the message gave
+/// (a `foxglove.LaserScan` of another program: see [`protobuf::decode_laser`]).
+fn channel_limits(
+    topic: &str,
+    metadata: &BTreeMap<String, String>,
+    mut d: Decoded,
+) -> Result<Decoded, FormatError> {
+    let Recorded::Laser(l) = &mut d.value else {
+        return Ok(d);
+    };
+    let Some(max) = metadata.get(MAX_RANGE_KEY) else {
+        return Ok(d);
+    };
+    let min = metadata.get(MIN_RANGE_KEY).map_or("0", |s| s.as_str());
+    let (min, max) = (min.parse::<f32>(), max.parse::<f32>());
+    match (min, max) {
+        (Ok(min), Ok(max)) if 0.0 <= min && min <= max && max <= MAX_RANGE_MM => {
+            (l.min_range, l.max_range) = (min, max);
+            Ok(d)
+        }
+        _ => Err(bad(
+            topic,
+            format!(
+                "metadata {MIN_RANGE_KEY}, {MAX_RANGE_KEY} are not mm with 0 <= min <= max <= {MAX_RANGE_MM}"
+            ),
+        )),
+    }
 }
 
 /// The interface kind a channel names, as written: its metadata, or what its
@@ -755,6 +826,8 @@ mod tests {
             Recorded::Laser(Laser {
                 readings: vec![1, 8000, 123, -1],
                 resolution: 1.0,
+                min_range: 20.0,
+                max_range: 5600.5,
                 ..Laser::default()
             }),
             Recorded::Encoders(Encoders {
@@ -803,7 +876,10 @@ mod tests {
         let mut buf = Vec::new();
         for (i, (snap, _, kind)) in cases.iter().enumerate() {
             let name = format!("x{i}");
-            let id = add_channel(&mut w, &name, *kind, profile).unwrap().unwrap();
+            let id = add_sample_channel(&mut w, &name, snap, profile)
+                .unwrap()
+                .unwrap();
+            assert_eq!(snap.kind(), *kind);
             assert!(write_sample(&mut w, profile, id, &name, snap, &mut buf).unwrap());
         }
         w.finish().unwrap();
@@ -831,6 +907,49 @@ mod tests {
         assert!(o.problems.is_empty() && o.complete, "{o:?}");
         let want: Vec<Recorded> = cases.iter().map(|c| c.1.clone()).collect();
         assert_eq!(back, want);
+    }
+
+    #[test]
+    fn a_laser_channel_without_limits_gets_4_3s_and_bad_limits_are_an_error() {
+        let scan = Laser {
+            readings: vec![300, 9000],
+            min_range: 20.0,
+            max_range: 12000.0,
+            ..Laser::default()
+        };
+        let mut data = Vec::new();
+        protobuf::laser_scan("laser", 5, &scan, &mut data);
+        let decode = |meta: &[(&str, &str)]| {
+            let d = decode_message(
+                "laser",
+                Kind::Laser,
+                "foxglove.LaserScan",
+                "protobuf",
+                1,
+                5,
+                &data,
+            )
+            .unwrap();
+            let meta = meta
+                .iter()
+                .map(|(k, v)| (k.to_string(), v.to_string()))
+                .collect();
+            channel_limits("laser", &meta, d).map(|d| match d.value {
+                Recorded::Laser(l) => (l.min_range, l.max_range),
+                _ => unreachable!(),
+            })
+        };
+        // Another program's file: from 0 to the farthest reading, at least 8000 mm.
+        assert_eq!(decode(&[]).unwrap(), (0.0, 9000.0));
+        let both = [(MIN_RANGE_KEY, "20"), (MAX_RANGE_KEY, "12000")];
+        assert_eq!(decode(&both).unwrap(), (20.0, 12000.0));
+        for bad in [
+            [(MIN_RANGE_KEY, "30"), (MAX_RANGE_KEY, "20")],
+            [(MIN_RANGE_KEY, "0"), (MAX_RANGE_KEY, "far")],
+        ] {
+            let e = decode(&bad).unwrap_err().to_string();
+            assert!(e.contains("laser") && e.contains(MAX_RANGE_KEY), "{e}");
+        }
     }
 
     #[test]
