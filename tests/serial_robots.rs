@@ -190,6 +190,258 @@ fn motors_timeout_zeroes_the_wheels_and_stop_leaves_the_robot_passive() {
     assert_eq!(r.emu.state.lock().mode, 1, "Passive");
 }
 
+/// Publishes `m` every 50 ms on a thread until the returned flag is set.
+fn keep_driving(
+    mot: Arc<Interface<Motors>>,
+    m: Motors,
+) -> (
+    Arc<std::sync::atomic::AtomicBool>,
+    std::thread::JoinHandle<()>,
+) {
+    use std::sync::atomic::{AtomicBool, Ordering};
+    let stop = Arc::new(AtomicBool::new(false));
+    let s = stop.clone();
+    let t = std::thread::spawn(move || {
+        while !s.load(Ordering::Acquire) {
+            let _ = mot.publish(m);
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    });
+    (stop, t)
+}
+
+/// Issue 52: a robot that stops streaming, or whose stream turns to noise, is
+/// lost after `reply_timeout`; the stop goes out on the port then, before it is
+/// dropped (not a second later at the reopen), while the controller still
+/// commands 150 mm/s.
+#[test]
+fn a_lost_stream_stops_the_wheels_within_100_ms_of_the_loss() {
+    let dir = tempfile::tempdir().unwrap();
+    let room = room::Room::new(6000.0, 3000.0, 1000.0, 1500.0, 0.0);
+    let r = robot(dir.path(), room);
+    let reply_timeout = Duration::from_millis(300);
+    let (stop, t) = keep_driving(r.mot.clone(), Motors { v: 150.0, w: 0.0 });
+    for fault in ["silent", "noise"] {
+        eventually("driving", || r.emu.state.lock().wheels == (150, 150));
+        let t0 = Instant::now();
+        r.emu.faults(|f| match fault {
+            "silent" => f.silent = true,
+            _ => f.noise = true,
+        });
+        let last_frame = r.emu.state.lock().last_frame_at.unwrap();
+        let mut stopped = None;
+        poll_until(5, || {
+            stopped = r.emu.stop_after(t0);
+            stopped.is_some()
+        });
+        let stopped = stopped.unwrap_or_else(|| panic!("{fault}: no stop in 5 s"));
+        // The driver counts the loss from the last good frame it read.
+        let loss = last_frame + reply_timeout;
+        assert!(
+            stopped >= loss,
+            "{fault}: a stop {:?} before the loss",
+            loss - stopped
+        );
+        let after = stopped - loss;
+        eprintln!(
+            "{fault}: stop {:.1} ms after the loss ({:.1} ms after the fault began)",
+            after.as_secs_f64() * 1e3,
+            (stopped - t0).as_secs_f64() * 1e3
+        );
+        assert!(
+            after < Duration::from_millis(100),
+            "{fault}: the stop came {after:?} after the loss"
+        );
+        assert_eq!(r.emu.state.lock().wheels, (0, 0), "{fault}");
+        r.emu.faults(|f| {
+            f.silent = false;
+            f.noise = false;
+        });
+        eventually("back", || r.enc.stale().is_none());
+    }
+    stop.store(true, std::sync::atomic::Ordering::Release);
+    t.join().unwrap();
+    r.rt.shutdown();
+}
+
+/// A `jderobot --headless` process driving the emulated Create 2 at `port` from
+/// its shell (`set motors`), in a process group of its own (so that a stop
+/// signal's default action is not discarded as for an orphaned group).
+struct Process {
+    child: std::process::Child,
+    out: Arc<std::sync::Mutex<String>>,
+}
+
+impl Process {
+    fn start(dir: &Path, port: &Path) -> Process {
+        use std::os::unix::process::CommandExt;
+        let conf = dir.join("roomba.conf");
+        std::fs::write(
+            &conf,
+            roomba_conf(port, "reply_timeout 300\nmotors_timeout 60000\n"),
+        )
+        .unwrap();
+        let mut child = common::jderobot([Path::new("--headless"), &conf])
+            .process_group(0)
+            .spawn()
+            .expect("start jderobot");
+        let out = common::process::collect_output(&mut child);
+        Process { child, out }
+    }
+    fn send(&mut self, cmd: &str) {
+        use std::io::Write;
+        let stdin = self.child.stdin.as_mut().unwrap();
+        let _ = stdin.write_all(format!("{cmd}\n").as_bytes());
+        let _ = stdin.flush();
+    }
+    fn signal(&self, sig: i32) {
+        // SAFETY: a signal to our own child.
+        unsafe { libc::kill(self.child.id() as i32, sig) };
+    }
+    /// The process's state letter in /proc (R, S, T: stopped, ...).
+    fn state(&self) -> char {
+        let stat =
+            std::fs::read_to_string(format!("/proc/{}/stat", self.child.id())).unwrap_or_default();
+        stat.rsplit(") ")
+            .next()
+            .and_then(|s| s.chars().next())
+            .unwrap_or('?')
+    }
+    fn text(&self) -> String {
+        self.out.lock().unwrap().clone()
+    }
+    fn wait(&mut self, secs: u64) -> Option<std::process::ExitStatus> {
+        let mut status = None;
+        poll_until(secs, || {
+            status = self.child.try_wait().ok().flatten();
+            status.is_some()
+        });
+        status
+    }
+}
+
+impl Drop for Process {
+    fn drop(&mut self) {
+        if self.child.try_wait().ok().flatten().is_none() {
+            let _ = self.child.kill();
+            let _ = self.child.wait();
+        }
+    }
+}
+
+/// Starts the robot and a process driving it at 150 mm/s.
+fn driven(dir: &Path) -> (create2::Create2, Process) {
+    let port = dir.join("create2");
+    let emu = create2::Create2::start(
+        &port,
+        room::Room::new(20_000.0, 3000.0, 1000.0, 1500.0, 0.0),
+    );
+    let mut p = Process::start(dir, &port);
+    let moving = poll_until(20, || {
+        p.send("set motors v=150 w=0");
+        std::thread::sleep(Duration::from_millis(200));
+        emu.state.lock().wheels == (150, 150)
+    });
+    assert!(
+        moving,
+        "the robot never drove; jderobot said:\n{}",
+        p.text()
+    );
+    (emu, p)
+}
+
+/// How long after `t0` the first stop arrived (within 5 s).
+fn time_to_stop(emu: &create2::Create2, t0: Instant, what: &str, p: &Process) -> Duration {
+    let mut stopped = None;
+    poll_until(5, || {
+        stopped = emu.stop_after(t0);
+        stopped.is_some()
+    });
+    let at =
+        stopped.unwrap_or_else(|| panic!("{what}: no stop in 5 s; jderobot said:\n{}", p.text()));
+    at - t0
+}
+
+/// Issue 52: Ctrl+Z (SIGTSTP) sends the stop before the process suspends; the
+/// process does suspend, the wheels stay stopped while it is, and after SIGCONT
+/// it runs on (a new command drives again) and quits normally.
+#[test]
+fn sigtstp_stops_the_wheels_within_100_ms_then_suspends_and_sigcont_resumes() {
+    let dir = tempfile::tempdir().unwrap();
+    let (emu, mut p) = driven(dir.path());
+    let t0 = Instant::now();
+    p.signal(libc::SIGTSTP);
+    let took = time_to_stop(&emu, t0, "SIGTSTP", &p);
+    eprintln!("SIGTSTP: stop after {:.1} ms", took.as_secs_f64() * 1e3);
+    assert!(
+        took < Duration::from_millis(100),
+        "SIGTSTP: stop after {took:?}"
+    );
+    assert!(
+        poll_until(5, || p.state() == 'T'),
+        "not suspended (state {}); jderobot said:\n{}",
+        p.state(),
+        p.text()
+    );
+    std::thread::sleep(Duration::from_millis(700));
+    assert_eq!(emu.state.lock().wheels, (0, 0), "stopped while suspended");
+    assert_eq!(p.state(), 'T');
+    p.signal(libc::SIGCONT);
+    assert!(poll_until(5, || p.state() != 'T'), "not resumed");
+    let driving = poll_until(10, || {
+        p.send("set motors v=120 w=0");
+        std::thread::sleep(Duration::from_millis(200));
+        emu.state.lock().wheels == (120, 120)
+    });
+    assert!(
+        driving,
+        "no command after SIGCONT; jderobot said:\n{}",
+        p.text()
+    );
+    p.send("quit");
+    let status = p.wait(20).expect("quit after SIGCONT");
+    assert!(status.success(), "{status}; jderobot said:\n{}", p.text());
+    assert_eq!(emu.state.lock().wheels, (0, 0), "stopped at quit");
+}
+
+/// Issue 52: SIGTERM, SIGINT and SIGHUP send the stop before the shutdown, and
+/// nothing the driver sends afterwards moves the wheels again.
+#[test]
+fn sigterm_sigint_and_sighup_stop_the_wheels_within_100_ms() {
+    for (sig, name) in [
+        (libc::SIGTERM, "SIGTERM"),
+        (libc::SIGINT, "SIGINT"),
+        (libc::SIGHUP, "SIGHUP"),
+    ] {
+        let dir = tempfile::tempdir().unwrap();
+        let (emu, mut p) = driven(dir.path());
+        let t0 = Instant::now();
+        p.signal(sig);
+        let took = time_to_stop(&emu, t0, name, &p);
+        eprintln!("{name}: stop after {:.1} ms", took.as_secs_f64() * 1e3);
+        assert!(
+            took < Duration::from_millis(100),
+            "{name}: stop after {took:?}"
+        );
+        let status = p
+            .wait(20)
+            .unwrap_or_else(|| panic!("{name} did not end it"));
+        assert_eq!(
+            status.code(),
+            Some(128 + sig),
+            "{name}; jderobot said:\n{}",
+            p.text()
+        );
+        let st = emu.state.lock();
+        let moved_again = st
+            .commands
+            .iter()
+            .any(|(at, c)| *at >= t0 && c[0] == 145 && !create2::is_stop(c));
+        assert!(!moved_again, "{name}: a drive command after the stop");
+        assert_eq!(st.wheels, (0, 0), "{name}");
+    }
+}
+
 #[test]
 fn bad_checksums_garbage_half_frames_and_another_device_mark_stale_then_resync() {
     let dir = tempfile::tempdir().unwrap();

@@ -79,6 +79,11 @@ pub fn drive_direct(right: i16, left: i16) -> [u8; 5] {
     [DRIVE_DIRECT, r[0], r[1], l[0], l[1]]
 }
 
+/// The stop: Drive Direct with both wheels at 0 mm/s (as the driver drives with
+/// Drive Direct; Drive 137 with velocity 0 stops the robot as well). The OI obeys
+/// it in Safe and Full mode; in Passive mode the wheels are stopped already.
+pub const STOP_WHEELS: [u8; 5] = [DRIVE_DIRECT, 0, 0, 0, 0];
+
 /// The wheel speeds (right, left) mm/s for `v` mm/s forward and `w` deg/s
 /// counter-clockwise; if one would exceed 500 mm/s both are scaled down so the
 /// robot keeps its curve.
