@@ -735,7 +735,10 @@ fn conf_errors_name_the_line_and_the_range() {
     let e = common::start_error(
         "driver rplidar\nserial /tmp/x\nprovides sonars\nend_driver\nload_driver rplidar\n",
     );
-    assert!(e.contains("only a laser"), "{e}");
+    assert!(
+        e.contains("test.conf:3") && e.contains("expected one of laser"),
+        "{e}"
+    );
     let e = common::start_error("driver rplidar\nserial /tmp/x\nend_driver\nload_driver rplidar\n");
     assert!(e.contains("provides nothing"), "{e}");
     let e = common::start_error(
