@@ -633,6 +633,75 @@ fn a_health_error_garbage_and_another_device_are_said_and_resynchronised() {
     rt.shutdown();
 }
 
+/// Issue 52: uniformly random bytes on the lidar's line (11520 a second, the
+/// line's rate) made ~430 "scans" a second, mostly 12 m. Now the laser is stale
+/// within one revolution's time (182 ms at the A1's 5.5 Hz: the revolution the
+/// noise lands in is ended by the noise's first start flag, a node or two away,
+/// and fails the checks; the first byte that is no node marks it stale at once),
+/// stays stale with no scan published while the noise lasts, and plausible
+/// revolutions clear it once the noise stops (the revolution the noise ends in is
+/// refused, the next whole one is good: within three revolutions).
+#[test]
+fn noise_on_the_lidar_line_is_stale_within_one_revolution_and_good_scans_clear_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let room = room::Room::new(4000.0, 3000.0, 1000.0, 1000.0, 0.0);
+    let (emu, rt, laser) = lidar(dir.path(), room.clone());
+    let revolution = Duration::from_secs_f64(1.0 / rplidar::RATE_HZ);
+    let port = emu.link.display().to_string();
+    for round in 0..2 {
+        let t0 = Instant::now();
+        emu.faults(|f| f.noise = true);
+        let mut stale_at = None;
+        while t0.elapsed() < Duration::from_secs(2) {
+            if laser.stale().is_some() {
+                stale_at = Some(Instant::now());
+                break;
+            }
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        let took = stale_at.expect("never stale in 2 s of noise") - t0;
+        eprintln!(
+            "noise {round}: stale after {:.1} ms",
+            took.as_secs_f64() * 1e3
+        );
+        assert!(took < revolution, "stale after {took:?}");
+        // 1.5 s of noise: stale all along, no scan published.
+        let c = laser.clock();
+        let t1 = Instant::now();
+        while t1.elapsed() < Duration::from_millis(1500) {
+            assert!(
+                laser.stale().is_some(),
+                "believed the noise at {:?}",
+                t1.elapsed()
+            );
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        assert_eq!(laser.clock(), c, "scans published from noise");
+        let why = laser.stale().unwrap();
+        assert!(
+            why.contains(&port)
+                && why.contains("scan not believed")
+                && why.contains("revolutions/s"),
+            "{why}"
+        );
+        let t2 = Instant::now();
+        emu.faults(|f| f.noise = false);
+        let good = poll_until(5, || laser.stale().is_none());
+        let back = t2.elapsed();
+        assert!(good, "still stale 5 s after the noise: {:?}", laser.stale());
+        eprintln!(
+            "noise {round}: good again after {:.1} ms",
+            back.as_secs_f64() * 1e3
+        );
+        assert!(
+            back < 3 * revolution + Duration::from_millis(100),
+            "good again after {back:?}"
+        );
+        assert!(match_room(&laser.read().value, &room.lock()) > 0.95);
+    }
+    rt.shutdown();
+}
+
 #[test]
 fn unplugging_and_plugging_back_both_recover() {
     let dir = tempfile::tempdir().unwrap();
