@@ -453,20 +453,29 @@ fn bad_checksums_garbage_half_frames_and_another_device_mark_stale_then_resync()
             .import::<jderobot::drivers::roomba::Status>("roomba", "status")
             .unwrap()
     };
+    let x0 = r.enc.read().value.x;
     for (what, expect) in [
         ("checksum", "bad checksum"),
         ("garbage", "no stream frame"),
         ("half", "expected"),
+        ("jump", "wheel counts that jumped by 5000"),
     ] {
+        // The last fault's aftermath is over: good frames again.
+        let c = r.enc.clock();
+        eventually("good frames", || {
+            r.enc.clock() > c + 5 && r.enc.stale().is_none()
+        });
+        let before = status().last_refused();
         r.emu.faults(|f| match what {
             "checksum" => f.bad_checksum = true,
             "garbage" => f.garbage = 7,
+            "jump" => f.jump = true,
             _ => f.half = true,
         });
         // A half frame is found out, and passed, when the next one arrives: the
         // driver's count of refused frames and its last reason say so.
         eventually(what, || {
-            r.enc.stale().is_some() || status().line().contains(expect)
+            r.enc.stale().is_some() || status().last_refused() != before
         });
         let why = r
             .enc
@@ -476,6 +485,9 @@ fn bad_checksums_garbage_half_frames_and_another_device_mark_stale_then_resync()
         assert!(why.contains(&port) && why.contains(expect), "{what}: {why}");
         eventually("resynchronised", || r.enc.stale().is_none());
     }
+    // The jump (2.2 m of counts) is not odometry: the robot stood still.
+    let x = r.enc.read().value.x;
+    assert!((x - x0).abs() < 5.0, "odometry moved {:.0} mm", x - x0);
     // Another device: NMEA text instead of frames; a loss after reply_timeout.
     r.emu.faults(|f| f.other = true);
     eventually("stale", || {

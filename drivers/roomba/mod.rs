@@ -30,8 +30,12 @@
 //! - Opening: Start (128), Safe (131) or Full (132), Stream (148) of packets 7, 21,
 //!   22, 23, 25, 26, 35, 43..51. The first good frame must come within
 //!   `reply_timeout`, otherwise the robot is absent (one line naming the port).
-//! - Every frame's checksum is verified (all its bytes sum to 0 mod 256); garbage,
-//!   a wrong length, a bad checksum or a half frame make one line naming the port and
+//! - Every frame's checksum is verified (all its bytes sum to 0 mod 256), its
+//!   length and its packet ids, then its values: an OI mode over 3, a charging
+//!   state over 5, or wheel counts that moved more than the wheels can turn at
+//!   500 mm/s since the last good frame (a counter reset: odometry goes on from
+//!   the new counts) are not believed. Garbage,
+//!   a wrong length, a bad checksum, a half frame or such a value make one line naming the port and
 //!   what was expected, the interfaces stale, and the driver resynchronises on the
 //!   next header; no good frame for `reply_timeout` is a loss: the supervisor reopens
 //!   the port every second (a cable pulled and plugged back is found again).
@@ -216,6 +220,16 @@ impl Roomba {
             match protocol::take_frame(&mut s.buf) {
                 Ok(None) => break,
                 Ok(Some(f)) => {
+                    if let Some((left, right)) = self.odo.step(f.left_count, f.right_count) {
+                        let max = protocol::max_counts(s.last_good.elapsed());
+                        if left.abs() > max || right.abs() > max {
+                            // Not believed, and the counts' new origin.
+                            self.odo.rebase();
+                            self.odo.update(f.left_count, f.right_count);
+                            self.trouble(s, &FrameError::Counts { left, right, max });
+                            continue;
+                        }
+                    }
                     s.last_good = Instant::now();
                     if s.trouble.take().is_some() {
                         tracing::info!("{}: stream frames good again", self.conf.head.serial);

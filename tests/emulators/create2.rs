@@ -30,7 +30,8 @@
 //! that measure how soon a stop comes.
 //!
 //! Faults the tests inject: `garbage` bytes, a `bad_checksum` frame, a `half`
-//! frame, `silent` (no stream), `other` (a GPS's NMEA text instead), `noise`
+//! frame, `jump` (the encoder counters jump by 5000, as after a reset), `silent`
+//! (no stream), `other` (a GPS's NMEA text instead), `noise`
 //! (uniformly random bytes at the line's rate instead of frames), and `unplug`
 //! (the pty closes and its path disappears; `plug` brings it back, same room).
 #![allow(dead_code)]
@@ -82,6 +83,8 @@ pub struct Faults {
     pub half: bool,
     /// Uniformly random bytes instead of frames, as many as 115200 baud carries.
     pub noise: bool,
+    /// The encoder counters jump by 5000 (as after a reset), once.
+    pub jump: bool,
 }
 
 pub struct State {
@@ -337,6 +340,10 @@ fn serve(pty: super::room::Pty, state: &Mutex<State>, room: &Shared, stop: &Atom
                 next_frame += Duration::from_millis(15);
                 if next_frame < now {
                     next_frame = now + Duration::from_millis(15);
+                }
+                if std::mem::take(&mut st.faults.jump) {
+                    st.counts.0 += 5000.0;
+                    st.counts.1 += 5000.0;
                 }
                 let f = &mut st.faults;
                 if f.noise {
