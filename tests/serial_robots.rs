@@ -821,7 +821,7 @@ fn conf_errors_name_the_line_and_the_range() {
         "{e}"
     );
     let e = common::start_error("driver rplidar\nserial /tmp/x\nend_driver\nload_driver rplidar\n");
-    assert!(e.contains("provides nothing"), "{e}");
+    assert!(e.contains("has no `provides` line"), "{e}");
     let e = common::start_error(
         "driver roomba\nserial /tmp/x\nmode turbo\nprovides motors\nend_driver\nload_driver roomba\n",
     );
