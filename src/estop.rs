@@ -238,6 +238,11 @@ mod signals {
                     let mut b = 0u8;
                     libc::read(p.fd, (&mut b as *mut u8).cast(), 1);
                 }
+                // Pending (blocked in its own handler) until this returns, then
+                // the default action: the process ends even when SIGABRT came
+                // from kill, not from abort().
+                set(sig, libc::SIG_DFL);
+                libc::raise(sig);
             }
             *libc::__errno_location() = errno;
         }
