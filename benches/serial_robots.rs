@@ -33,7 +33,7 @@ use std::{
 
 use jderobot::{
     conf::Conf,
-    drivers::rplidar::protocol::{Revolution, node},
+    drivers::rplidar::protocol::{LIMITS, Revolution, node},
     interfaces::{Interface, Laser, Motors},
 };
 
@@ -59,11 +59,22 @@ fn revolution_bytes() -> Vec<u8> {
     out
 }
 
-fn decode(bytes: &[u8], rev: &mut Revolution, out: &mut Vec<i32>, laser: &mut Laser) -> usize {
+/// Decodes and checks (each finished revolution's plausibility, as the driver
+/// does) as if the nodes came at the A1's rate, from `clock` on.
+fn decode(
+    bytes: &[u8],
+    rev: &mut Revolution,
+    out: &mut Vec<i32>,
+    laser: &mut Laser,
+    clock: &mut Instant,
+) -> usize {
+    let per_node = Duration::from_secs_f64(1.0 / (rplidar::RATE_HZ * rplidar::SAMPLES));
     let mut scans = 0;
     for c in bytes.chunks_exact(5) {
+        *clock += per_node;
         if let Some(n) = node(c)
-            && rev.push(&n, out).is_some()
+            && let Some(st) = rev.push(&n, *clock, out)
+            && st.implausible(&LIMITS).is_none()
         {
             laser.readings.clear();
             laser.readings.extend_from_slice(out);
@@ -79,8 +90,9 @@ fn bench_decode() {
     let mut rev = Revolution::new(360, 1.0, -180.0, 12_000);
     let mut out = Vec::new();
     let mut laser = Laser::default();
+    let mut clock = Instant::now();
     assert!(
-        decode(&bytes, &mut rev, &mut out, &mut laser) >= 1,
+        decode(&bytes, &mut rev, &mut out, &mut laser, &mut clock) >= 1,
         "a whole revolution"
     );
     let reps = 2000;
@@ -88,7 +100,13 @@ fn bench_decode() {
     for _ in 0..7 {
         let t0 = Instant::now();
         for _ in 0..reps {
-            black_box(decode(black_box(&bytes), &mut rev, &mut out, &mut laser));
+            black_box(decode(
+                black_box(&bytes),
+                &mut rev,
+                &mut out,
+                &mut laser,
+                &mut clock,
+            ));
         }
         ours.push(t0.elapsed().as_secs_f64() / (2 * reps) as f64);
         let t0 = Instant::now();

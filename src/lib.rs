@@ -14,6 +14,7 @@ pub mod blobs;
 pub mod cli;
 pub mod colorspaces;
 pub mod conf;
+pub mod estop;
 pub mod files;
 pub mod fuzzy;
 #[cfg(feature = "gui")]

@@ -6,7 +6,8 @@
 //!
 //! The supervisor's thread opens the device (only while somebody uses one of its
 //! interfaces, for an on-demand device), serves it step by step until it is lost,
-//! the driver stops, or nobody uses it any more; on a loss it marks every interface
+//! the driver stops, or nobody uses it any more; on a loss it hands the session to
+//! the driver's `lost_session` (a last stop to the device), marks every interface
 //! stale with the reason, runs the driver's `on_loss` (zeroing what moves), and
 //! tries again after a bounded backoff. Each change of state (lost, still
 //! unavailable for another reason, up again) is one line; a reason that repeats is not
@@ -39,6 +40,11 @@ pub trait Device: Send + 'static {
     fn idle(&mut self, _session: &mut Self::Session) -> bool {
         false
     }
+    /// The session was lost (`step` failed): what can still be said to the
+    /// device before the session is dropped, such as a stop to the wheels over a
+    /// port that may still be writable. It must not wait for an answer. Runs
+    /// before [`on_loss`](Device::on_loss); by default the session is just dropped.
+    fn lost_session(&mut self, _session: Self::Session) {}
     /// The session was lost, or the driver stops: zero what moves. Runs before
     /// the interfaces are marked stale, so a zero published here keeps the reason.
     fn on_loss(&mut self) {}
@@ -285,13 +291,14 @@ fn run<D: Device>(how: Supervision, mut device: D, stop: &AtomicBool) {
                     device.close(session);
                     break None;
                 }
-                break Some(Some(why));
+                break Some(Some((why, session)));
             }
         };
         match lost {
             None => break,
             Some(None) => {}
-            Some(Some(why)) => {
+            Some(Some((why, session))) => {
+                device.lost_session(session);
                 tracing::warn!("{}: lost: {why}", how.name);
                 device.on_loss();
                 stale(&why);

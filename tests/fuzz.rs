@@ -688,9 +688,16 @@ fn rplidar_target() -> Target {
             let _ = protocol::Info::parse(b.get(7..27).unwrap_or(&[]));
             let _ = protocol::health(b.get(7..10).unwrap_or(&[]));
             let (mut rev, mut out) = (Revolution::new(360, 1.0, -180.0, 12000), Vec::new());
-            for c in b.windows(5) {
-                if let Some(n) = protocol::node(c) {
-                    let _ = rev.push(&n, &mut out);
+            let t0 = std::time::Instant::now();
+            for (i, c) in b.windows(5).enumerate() {
+                let at = t0 + std::time::Duration::from_micros(500 * i as u64);
+                match protocol::node(c) {
+                    Some(n) => {
+                        if let Some(st) = rev.push(&n, at, &mut out) {
+                            let _ = st.implausible(&protocol::LIMITS);
+                        }
+                    }
+                    None => rev.skipped(1),
                 }
             }
         },

@@ -190,6 +190,284 @@ fn motors_timeout_zeroes_the_wheels_and_stop_leaves_the_robot_passive() {
     assert_eq!(r.emu.state.lock().mode, 1, "Passive");
 }
 
+/// Publishes `m` every 50 ms on a thread until the returned flag is set.
+fn keep_driving(
+    mot: Arc<Interface<Motors>>,
+    m: Motors,
+) -> (
+    Arc<std::sync::atomic::AtomicBool>,
+    std::thread::JoinHandle<()>,
+) {
+    use std::sync::atomic::{AtomicBool, Ordering};
+    let stop = Arc::new(AtomicBool::new(false));
+    let s = stop.clone();
+    let t = std::thread::spawn(move || {
+        while !s.load(Ordering::Acquire) {
+            let _ = mot.publish(m);
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    });
+    (stop, t)
+}
+
+/// Issue 52: a robot that stops streaming, or whose stream turns to noise, is
+/// lost after `reply_timeout`; the stop goes out on the port then, before it is
+/// dropped (not a second later at the reopen), while the controller still
+/// commands 150 mm/s.
+#[test]
+fn a_lost_stream_stops_the_wheels_within_100_ms_of_the_loss() {
+    let dir = tempfile::tempdir().unwrap();
+    let room = room::Room::new(6000.0, 3000.0, 1000.0, 1500.0, 0.0);
+    let r = robot(dir.path(), room);
+    let reply_timeout = Duration::from_millis(300);
+    let (stop, t) = keep_driving(r.mot.clone(), Motors { v: 150.0, w: 0.0 });
+    for fault in ["silent", "noise"] {
+        eventually("driving", || r.emu.state.lock().wheels == (150, 150));
+        let t0 = Instant::now();
+        r.emu.faults(|f| match fault {
+            "silent" => f.silent = true,
+            _ => f.noise = true,
+        });
+        let last_frame = r.emu.state.lock().last_frame_at.unwrap();
+        let mut stopped = None;
+        poll_until(5, || {
+            stopped = r.emu.stop_after(t0);
+            stopped.is_some()
+        });
+        let stopped = stopped.unwrap_or_else(|| panic!("{fault}: no stop in 5 s"));
+        // The driver counts the loss from the last good frame it read.
+        let loss = last_frame + reply_timeout;
+        assert!(
+            stopped >= loss,
+            "{fault}: a stop {:?} before the loss",
+            loss - stopped
+        );
+        let after = stopped - loss;
+        eprintln!(
+            "{fault}: stop {:.1} ms after the loss ({:.1} ms after the fault began)",
+            after.as_secs_f64() * 1e3,
+            (stopped - t0).as_secs_f64() * 1e3
+        );
+        assert!(
+            after < Duration::from_millis(100),
+            "{fault}: the stop came {after:?} after the loss"
+        );
+        assert_eq!(r.emu.state.lock().wheels, (0, 0), "{fault}");
+        r.emu.faults(|f| {
+            f.silent = false;
+            f.noise = false;
+        });
+        eventually("back", || r.enc.stale().is_none());
+    }
+    stop.store(true, std::sync::atomic::Ordering::Release);
+    t.join().unwrap();
+    r.rt.shutdown();
+}
+
+/// A `jderobot --headless` process driving the emulated Create 2 at `port` from
+/// its shell (`set motors`), in a process group of its own (so that a stop
+/// signal's default action is not discarded as for an orphaned group).
+struct Process {
+    child: std::process::Child,
+    out: Arc<std::sync::Mutex<String>>,
+}
+
+impl Process {
+    fn start(dir: &Path, port: &Path) -> Process {
+        use std::os::unix::process::CommandExt;
+        let conf = dir.join("roomba.conf");
+        std::fs::write(
+            &conf,
+            roomba_conf(port, "reply_timeout 300\nmotors_timeout 60000\n"),
+        )
+        .unwrap();
+        let mut cmd = common::jderobot([Path::new("--headless"), &conf]);
+        cmd.process_group(0);
+        // SAFETY: setrlimit is async-signal-safe: no core file from the tests
+        // that end it by SIGQUIT or SIGABRT.
+        unsafe {
+            cmd.pre_exec(|| {
+                let none = libc::rlimit {
+                    rlim_cur: 0,
+                    rlim_max: 0,
+                };
+                libc::setrlimit(libc::RLIMIT_CORE, &none);
+                Ok(())
+            });
+        }
+        let mut child = cmd.spawn().expect("start jderobot");
+        let out = common::process::collect_output(&mut child);
+        Process { child, out }
+    }
+    fn send(&mut self, cmd: &str) {
+        use std::io::Write;
+        let stdin = self.child.stdin.as_mut().unwrap();
+        let _ = stdin.write_all(format!("{cmd}\n").as_bytes());
+        let _ = stdin.flush();
+    }
+    fn signal(&self, sig: i32) {
+        // SAFETY: a signal to our own child.
+        unsafe { libc::kill(self.child.id() as i32, sig) };
+    }
+    /// The process's state letter in /proc (R, S, T: stopped, ...).
+    fn state(&self) -> char {
+        let stat =
+            std::fs::read_to_string(format!("/proc/{}/stat", self.child.id())).unwrap_or_default();
+        stat.rsplit(") ")
+            .next()
+            .and_then(|s| s.chars().next())
+            .unwrap_or('?')
+    }
+    fn text(&self) -> String {
+        self.out.lock().unwrap().clone()
+    }
+    fn wait(&mut self, secs: u64) -> Option<std::process::ExitStatus> {
+        let mut status = None;
+        poll_until(secs, || {
+            status = self.child.try_wait().ok().flatten();
+            status.is_some()
+        });
+        status
+    }
+}
+
+impl Drop for Process {
+    fn drop(&mut self) {
+        if self.child.try_wait().ok().flatten().is_none() {
+            let _ = self.child.kill();
+            let _ = self.child.wait();
+        }
+    }
+}
+
+/// Starts the robot and a process driving it at 150 mm/s.
+fn driven(dir: &Path) -> (create2::Create2, Process) {
+    let port = dir.join("create2");
+    let emu = create2::Create2::start(
+        &port,
+        room::Room::new(20_000.0, 3000.0, 1000.0, 1500.0, 0.0),
+    );
+    let mut p = Process::start(dir, &port);
+    let moving = poll_until(20, || {
+        p.send("set motors v=150 w=0");
+        std::thread::sleep(Duration::from_millis(200));
+        emu.state.lock().wheels == (150, 150)
+    });
+    assert!(
+        moving,
+        "the robot never drove; jderobot said:\n{}",
+        p.text()
+    );
+    (emu, p)
+}
+
+/// How long after `t0` the first stop arrived (within 5 s).
+fn time_to_stop(emu: &create2::Create2, t0: Instant, what: &str, p: &Process) -> Duration {
+    let mut stopped = None;
+    poll_until(5, || {
+        stopped = emu.stop_after(t0);
+        stopped.is_some()
+    });
+    let at =
+        stopped.unwrap_or_else(|| panic!("{what}: no stop in 5 s; jderobot said:\n{}", p.text()));
+    at - t0
+}
+
+/// Issue 52: Ctrl+Z (SIGTSTP) sends the stop before the process suspends; the
+/// process does suspend, the wheels stay stopped while it is, and after SIGCONT
+/// it runs on (a new command drives again) and quits normally.
+#[test]
+fn sigtstp_stops_the_wheels_within_100_ms_then_suspends_and_sigcont_resumes() {
+    let dir = tempfile::tempdir().unwrap();
+    let (emu, mut p) = driven(dir.path());
+    let t0 = Instant::now();
+    p.signal(libc::SIGTSTP);
+    let took = time_to_stop(&emu, t0, "SIGTSTP", &p);
+    eprintln!("SIGTSTP: stop after {:.1} ms", took.as_secs_f64() * 1e3);
+    assert!(
+        took < Duration::from_millis(100),
+        "SIGTSTP: stop after {took:?}"
+    );
+    assert!(
+        poll_until(5, || p.state() == 'T'),
+        "not suspended (state {}); jderobot said:\n{}",
+        p.state(),
+        p.text()
+    );
+    std::thread::sleep(Duration::from_millis(700));
+    assert_eq!(emu.state.lock().wheels, (0, 0), "stopped while suspended");
+    assert_eq!(p.state(), 'T');
+    p.signal(libc::SIGCONT);
+    assert!(poll_until(5, || p.state() != 'T'), "not resumed");
+    let driving = poll_until(10, || {
+        p.send("set motors v=120 w=0");
+        std::thread::sleep(Duration::from_millis(200));
+        emu.state.lock().wheels == (120, 120)
+    });
+    assert!(
+        driving,
+        "no command after SIGCONT; jderobot said:\n{}",
+        p.text()
+    );
+    p.send("quit");
+    let status = p.wait(20).expect("quit after SIGCONT");
+    assert!(status.success(), "{status}; jderobot said:\n{}", p.text());
+    assert_eq!(emu.state.lock().wheels, (0, 0), "stopped at quit");
+}
+
+/// Issue 52: SIGTERM, SIGINT and SIGHUP send the stop before the shutdown (exit
+/// code 128 + the signal); SIGALRM (a student's `signal.alarm`), SIGQUIT and
+/// SIGABRT (an abort) before the process dies by them; and nothing the driver
+/// sends afterwards moves the wheels again.
+#[test]
+fn ending_signals_stop_the_wheels_within_100_ms() {
+    use std::os::unix::process::ExitStatusExt;
+    for (sig, name) in [
+        (libc::SIGTERM, "SIGTERM"),
+        (libc::SIGINT, "SIGINT"),
+        (libc::SIGHUP, "SIGHUP"),
+        (libc::SIGALRM, "SIGALRM"),
+        (libc::SIGQUIT, "SIGQUIT"),
+        (libc::SIGABRT, "SIGABRT"),
+    ] {
+        let dir = tempfile::tempdir().unwrap();
+        let (emu, mut p) = driven(dir.path());
+        let t0 = Instant::now();
+        p.signal(sig);
+        let took = time_to_stop(&emu, t0, name, &p);
+        eprintln!("{name}: stop after {:.1} ms", took.as_secs_f64() * 1e3);
+        assert!(
+            took < Duration::from_millis(100),
+            "{name}: stop after {took:?}"
+        );
+        let status = p
+            .wait(20)
+            .unwrap_or_else(|| panic!("{name} did not end it"));
+        if [libc::SIGALRM, libc::SIGQUIT, libc::SIGABRT].contains(&sig) {
+            assert_eq!(
+                status.signal(),
+                Some(sig),
+                "{name}; jderobot said:\n{}",
+                p.text()
+            );
+        } else {
+            assert_eq!(
+                status.code(),
+                Some(128 + sig),
+                "{name}; jderobot said:\n{}",
+                p.text()
+            );
+        }
+        let st = emu.state.lock();
+        let moved_again = st
+            .commands
+            .iter()
+            .any(|(at, c)| *at >= t0 && c[0] == 145 && !create2::is_stop(c));
+        assert!(!moved_again, "{name}: a drive command after the stop");
+        assert_eq!(st.wheels, (0, 0), "{name}");
+    }
+}
+
 #[test]
 fn bad_checksums_garbage_half_frames_and_another_device_mark_stale_then_resync() {
     let dir = tempfile::tempdir().unwrap();
@@ -201,20 +479,29 @@ fn bad_checksums_garbage_half_frames_and_another_device_mark_stale_then_resync()
             .import::<jderobot::drivers::roomba::Status>("roomba", "status")
             .unwrap()
     };
+    let x0 = r.enc.read().value.x;
     for (what, expect) in [
         ("checksum", "bad checksum"),
         ("garbage", "no stream frame"),
         ("half", "expected"),
+        ("jump", "wheel counts that jumped by 5000"),
     ] {
+        // The last fault's aftermath is over: good frames again.
+        let c = r.enc.clock();
+        eventually("good frames", || {
+            r.enc.clock() > c + 5 && r.enc.stale().is_none()
+        });
+        let before = status().last_refused();
         r.emu.faults(|f| match what {
             "checksum" => f.bad_checksum = true,
             "garbage" => f.garbage = 7,
+            "jump" => f.jump = true,
             _ => f.half = true,
         });
         // A half frame is found out, and passed, when the next one arrives: the
         // driver's count of refused frames and its last reason say so.
         eventually(what, || {
-            r.enc.stale().is_some() || status().line().contains(expect)
+            r.enc.stale().is_some() || status().last_refused() != before
         });
         let why = r
             .enc
@@ -224,6 +511,9 @@ fn bad_checksums_garbage_half_frames_and_another_device_mark_stale_then_resync()
         assert!(why.contains(&port) && why.contains(expect), "{what}: {why}");
         eventually("resynchronised", || r.enc.stale().is_none());
     }
+    // The jump (2.2 m of counts) is not odometry: the robot stood still.
+    let x = r.enc.read().value.x;
+    assert!((x - x0).abs() < 5.0, "odometry moved {:.0} mm", x - x0);
     // Another device: NMEA text instead of frames; a loss after reply_timeout.
     r.emu.faults(|f| f.other = true);
     eventually("stale", || {
@@ -378,6 +668,75 @@ fn a_health_error_garbage_and_another_device_are_said_and_resynchronised() {
     });
     emu.faults(|f| f.health_error = false);
     eventually("back", || laser.stale().is_none());
+    rt.shutdown();
+}
+
+/// Issue 52: uniformly random bytes on the lidar's line (11520 a second, the
+/// line's rate) made ~430 "scans" a second, mostly 12 m. Now the laser is stale
+/// within one revolution's time (182 ms at the A1's 5.5 Hz: the revolution the
+/// noise lands in is ended by the noise's first start flag, a node or two away,
+/// and fails the checks; the first byte that is no node marks it stale at once),
+/// stays stale with no scan published while the noise lasts, and plausible
+/// revolutions clear it once the noise stops (the revolution the noise ends in is
+/// refused, the next whole one is good: within three revolutions).
+#[test]
+fn noise_on_the_lidar_line_is_stale_within_one_revolution_and_good_scans_clear_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let room = room::Room::new(4000.0, 3000.0, 1000.0, 1000.0, 0.0);
+    let (emu, rt, laser) = lidar(dir.path(), room.clone());
+    let revolution = Duration::from_secs_f64(1.0 / rplidar::RATE_HZ);
+    let port = emu.link.display().to_string();
+    for round in 0..2 {
+        let t0 = Instant::now();
+        emu.faults(|f| f.noise = true);
+        let mut stale_at = None;
+        while t0.elapsed() < Duration::from_secs(2) {
+            if laser.stale().is_some() {
+                stale_at = Some(Instant::now());
+                break;
+            }
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        let took = stale_at.expect("never stale in 2 s of noise") - t0;
+        eprintln!(
+            "noise {round}: stale after {:.1} ms",
+            took.as_secs_f64() * 1e3
+        );
+        assert!(took < revolution, "stale after {took:?}");
+        // 1.5 s of noise: stale all along, no scan published.
+        let c = laser.clock();
+        let t1 = Instant::now();
+        while t1.elapsed() < Duration::from_millis(1500) {
+            assert!(
+                laser.stale().is_some(),
+                "believed the noise at {:?}",
+                t1.elapsed()
+            );
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        assert_eq!(laser.clock(), c, "scans published from noise");
+        let why = laser.stale().unwrap();
+        assert!(
+            why.contains(&port)
+                && why.contains("scan not believed")
+                && why.contains("revolutions/s"),
+            "{why}"
+        );
+        let t2 = Instant::now();
+        emu.faults(|f| f.noise = false);
+        let good = poll_until(5, || laser.stale().is_none());
+        let back = t2.elapsed();
+        assert!(good, "still stale 5 s after the noise: {:?}", laser.stale());
+        eprintln!(
+            "noise {round}: good again after {:.1} ms",
+            back.as_secs_f64() * 1e3
+        );
+        assert!(
+            back < 3 * revolution + Duration::from_millis(100),
+            "good again after {back:?}"
+        );
+        assert!(match_room(&laser.read().value, &room.lock()) > 0.95);
+    }
     rt.shutdown();
 }
 

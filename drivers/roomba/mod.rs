@@ -30,14 +30,25 @@
 //! - Opening: Start (128), Safe (131) or Full (132), Stream (148) of packets 7, 21,
 //!   22, 23, 25, 26, 35, 43..51. The first good frame must come within
 //!   `reply_timeout`, otherwise the robot is absent (one line naming the port).
-//! - Every frame's checksum is verified (all its bytes sum to 0 mod 256); garbage,
-//!   a wrong length, a bad checksum or a half frame make one line naming the port and
+//! - Every frame's checksum is verified (all its bytes sum to 0 mod 256), its
+//!   length and its packet ids, then its values: an OI mode over 3, a charging
+//!   state over 5, or wheel counts that moved more than the wheels can turn at
+//!   500 mm/s since the last good frame (a counter reset: odometry goes on from
+//!   the new counts) are not believed. Garbage,
+//!   a wrong length, a bad checksum, a half frame or such a value make one line naming the port and
 //!   what was expected, the interfaces stale, and the driver resynchronises on the
 //!   next header; no good frame for `reply_timeout` is a loss: the supervisor reopens
 //!   the port every second (a cable pulled and plugged back is found again).
 //! - Motors: Drive Direct when the wheel speeds change (and every 500 ms); zero when
-//!   the command is older than `motors_timeout`, on a loss, and at stop; at stop the
+//!   the command is older than `motors_timeout`, and at stop; at stop the
 //!   stream is paused and Start sent, leaving the robot in Passive mode.
+//! - The stop (Drive Direct 0 0) is also sent on a loss, on the port before it is
+//!   dropped (a robot that stopped streaming may still listen), and whenever the
+//!   process ends or is suspended: the open port's stop is registered with
+//!   [`crate::estop`], which SIGINT, SIGTERM, SIGHUP, Ctrl+Z, an abort and a panic
+//!   run first. The Create 2 has no watchdog of its own: what nothing can catch
+//!   (`kill -9`, the computer's power) leaves the last Drive running
+//!   (docs/serial-robots.md).
 //! - The battery (mV, mA, mAh of mAh) and the OI mode are kept as the driver's
 //!   status line ([`Status`], exported as `NAME.status` in the name space, and `ps` prints it).
 //!
@@ -57,6 +68,7 @@ use crate::{
         ComponentConf,
         settings::{MOTORS_TIMEOUT, Setting, choice, int},
     },
+    estop,
     interfaces::{AnyInterface, Bumpers, Encoders, Interface, Motors, Sonars},
     runtime::{Backoff, Device, Driver, Runtime, Supervision, Supervisor},
     serialhead::{HeadConf, HeadLines, REPLY_TIMEOUT, SERIAL, open_port},
@@ -164,6 +176,8 @@ struct Session {
     trouble: Option<String>,
     sent: Option<(i16, i16)>,
     sent_at: Instant,
+    /// The port's stop, registered with [`estop`] while the session lives.
+    _estop: Option<estop::Registration>,
 }
 
 /// How often a robot that cannot be opened, or went silent, is tried again.
@@ -206,6 +220,16 @@ impl Roomba {
             match protocol::take_frame(&mut s.buf) {
                 Ok(None) => break,
                 Ok(Some(f)) => {
+                    if let Some((left, right)) = self.odo.step(f.left_count, f.right_count) {
+                        let max = protocol::max_counts(s.last_good.elapsed());
+                        if left.abs() > max || right.abs() > max {
+                            // Not believed, and the counts' new origin.
+                            self.odo.rebase();
+                            self.odo.update(f.left_count, f.right_count);
+                            self.trouble(s, &FrameError::Counts { left, right, max });
+                            continue;
+                        }
+                    }
                     s.last_good = Instant::now();
                     if s.trouble.take().is_some() {
                         tracing::info!("{}: stream frames good again", self.conf.head.serial);
@@ -282,6 +306,7 @@ impl Roomba {
     fn open_session(&mut self) -> Result<Session, String> {
         let c = &self.conf;
         let port = open_port(&c.head.serial, c.baud, "the robot").map_err(|e| self.port_err(e))?;
+        let _estop = self.register_stop(&*port);
         let mut s = Session {
             port,
             buf: Vec::with_capacity(1024),
@@ -289,6 +314,7 @@ impl Roomba {
             trouble: None,
             sent: None,
             sent_at: Instant::now(),
+            _estop,
         };
         self.write(&mut s, &[protocol::START])?;
         std::thread::sleep(Duration::from_millis(20));
@@ -337,9 +363,37 @@ impl Roomba {
         })
     }
 
+    /// Registers the port's stop with [`estop`]: Drive Direct 0 0 written through a
+    /// handle of its own (a second descriptor of the port: the kernel writes each
+    /// 5-byte command whole, so it cannot split one of the driver's).
+    fn register_stop(&self, port: &dyn serialport::SerialPort) -> Option<estop::Registration> {
+        let serial = self.conf.head.serial.clone();
+        match port.try_clone() {
+            Ok(w) => {
+                let w = parking_lot::Mutex::new(w);
+                Some(estop::register(format!("roomba {serial}"), move || {
+                    if let Some(mut p) = w.try_lock_for(Duration::from_millis(50)) {
+                        let _ = p.write_all(&protocol::STOP_WHEELS).and_then(|_| p.flush());
+                    }
+                }))
+            }
+            Err(e) => {
+                tracing::warn!(
+                    "{serial}: no second handle on the port ({e}): a signal or a panic will not stop the wheels first"
+                );
+                None
+            }
+        }
+    }
+
     fn serve(&mut self, s: &mut Session) -> Result<(), String> {
         if let Some(m) = &self.mot {
-            let cmd = m.command(self.conf.motors_timeout);
+            // Once the process is ending (estop::halt), nothing but zero.
+            let cmd = if estop::halted() {
+                Motors::default()
+            } else {
+                m.command(self.conf.motors_timeout)
+            };
             let w = protocol::wheels(cmd.v, cmd.w);
             if s.sent != Some(w) || s.sent_at.elapsed() >= RESEND {
                 self.write(s, &protocol::drive_direct(w.0, w.1))?;
@@ -368,6 +422,11 @@ impl Device for Roomba {
     }
     fn step(&mut self, s: &mut Session) -> Result<(), String> {
         self.serve(s)
+    }
+    fn lost_session(&mut self, mut s: Session) {
+        // The stream stopped or went bad, but the robot may still listen: stop
+        // its wheels before the port is dropped (it is reopened after RETRY).
+        let _ = self.write(&mut s, &protocol::STOP_WHEELS);
     }
     fn on_loss(&mut self) {
         if let Some(m) = &self.mot {

@@ -79,6 +79,11 @@ pub fn drive_direct(right: i16, left: i16) -> [u8; 5] {
     [DRIVE_DIRECT, r[0], r[1], l[0], l[1]]
 }
 
+/// The stop: Drive Direct with both wheels at 0 mm/s (as the driver drives with
+/// Drive Direct; Drive 137 with velocity 0 stops the robot as well). The OI obeys
+/// it in Safe and Full mode; in Passive mode the wheels are stopped already.
+pub const STOP_WHEELS: [u8; 5] = [DRIVE_DIRECT, 0, 0, 0, 0];
+
 /// The wheel speeds (right, left) mm/s for `v` mm/s forward and `w` deg/s
 /// counter-clockwise; if one would exceed 500 mm/s both are scaled down so the
 /// robot keeps its curve.
@@ -142,6 +147,13 @@ pub enum FrameError {
     Checksum(u8),
     /// A frame with a packet that was not asked for, or out of order.
     Packet(u8),
+    /// A good frame whose values no robot sends: an OI mode over 3 (packet 35)
+    /// or a charging state over 5 (packet 21).
+    Value { packet: u8, value: u8, max: u8 },
+    /// A good frame whose wheel counts moved more than the wheels can turn
+    /// (at most `max` counts since the last good frame at 500 mm/s): a counter
+    /// reset, not motion. Odometry starts again from the new counts.
+    Counts { left: i32, right: i32, max: i32 },
 }
 
 impl std::fmt::Display for FrameError {
@@ -163,6 +175,15 @@ impl std::fmt::Display for FrameError {
             FrameError::Packet(id) => write!(
                 f,
                 "a stream frame with packet {id} where another was expected"
+            ),
+            FrameError::Value { packet, value, max } => write!(
+                f,
+                "a stream frame with packet {packet} = {value} (expected 0..{max})"
+            ),
+            FrameError::Counts { left, right, max } => write!(
+                f,
+                "wheel counts that jumped by {left} (left) and {right} (right) in one frame \
+                 (expected at most {max} at 500 mm/s); odometry goes on from the new counts"
             ),
         }
     }
@@ -238,7 +259,19 @@ pub fn take_frame(buf: &mut Vec<u8>) -> Result<Option<Sensors>, FrameError> {
         i += 1 + size;
     }
     buf.drain(..n + 3);
+    for (packet, value, max) in [(35, s.mode, 3), (21, s.charging, 5)] {
+        if value > max {
+            return Err(FrameError::Value { packet, value, max });
+        }
+    }
     Ok(Some(s))
+}
+
+/// The most encoder counts a wheel can turn in `dt` (since the last good frame)
+/// at its top speed, 500 mm/s, twice over and with two stream periods' slack.
+pub fn max_counts(dt: std::time::Duration) -> i32 {
+    ((dt.as_secs_f64() + 2.0 * STREAM_PERIOD_S) * MAX_WHEEL as f64 / MM_PER_COUNT * 2.0).ceil()
+        as i32
 }
 
 /// Odometry from the wheel encoder counts (16-bit, wrapping).
@@ -264,6 +297,15 @@ impl Odometry {
             self.theta += dth;
         }
         self.last = Some((left, right));
+    }
+    /// The counts' step (left, right) from the last frame's, if there was one.
+    pub fn step(&self, left: u16, right: u16) -> Option<(i32, i32)> {
+        self.last.map(|(l0, r0)| {
+            (
+                left.wrapping_sub(l0) as i16 as i32,
+                right.wrapping_sub(r0) as i16 as i32,
+            )
+        })
     }
     /// Forgets the last counts (a new session: the robot's counters may have moved).
     pub fn rebase(&mut self) {
@@ -342,6 +384,24 @@ mod tests {
         assert_eq!(got.unwrap().voltage, 14_800);
         let mut half = f[..10].to_vec();
         assert_eq!(take_frame(&mut half), Ok(None));
+        // A frame that sums right but says OI mode 9.
+        let mut odd = frame(&Sensors { mode: 9, ..s });
+        assert_eq!(
+            take_frame(&mut odd),
+            Err(FrameError::Value {
+                packet: 35,
+                value: 9,
+                max: 3
+            })
+        );
+        assert!(odd.is_empty());
+        // 15 ms at 500 mm/s is 17 counts; the bound leaves room, a reset does not fit.
+        let max = max_counts(std::time::Duration::from_millis(15));
+        assert!((60..200).contains(&max), "{max}");
+        let mut o = Odometry::default();
+        o.update(100, 100);
+        assert_eq!(o.step(117, 83), Some((17, -17)));
+        assert_eq!(o.step(5, 65530), Some((-95, -106)));
     }
 
     #[test]

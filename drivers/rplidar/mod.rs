@@ -30,6 +30,14 @@
 //!   expected, the laser stale, and the driver resynchronises byte by byte on the
 //!   next good nodes. No good node for `reply_timeout` is a loss; the supervisor
 //!   reopens the port every second (a cable pulled and plugged back is found again).
+//! - Each revolution is checked as a whole before it is published
+//!   ([`protocol::LIMITS`]): 1..25 revolutions a second, 64 nodes or more round
+//!   320° or more, no byte skipped while it was gathered, at most 10 % of its
+//!   angles going backwards and 20 % of its distances with quality 0. Random bytes pass the node checks one window in
+//!   six, and would make hundreds of "scans" a second; they make no revolution
+//!   that passes these, so the laser is stale (the reason says which check failed,
+//!   one line when the trouble starts) until plausible revolutions come again. A
+//!   revolution that lasts over a second (a stalled motor) is stale too.
 //! - At stop: STOP and the motor stopped (DTR set).
 //! - Model, firmware, serial number and health are the driver's status line
 //!   ([`Status`], exported as `NAME.status`, and `ps` prints it). Express scans are not used.
@@ -163,7 +171,8 @@ struct Session {
     buf: Vec<u8>,
     rev: Revolution,
     last_good: Instant,
-    trouble: Option<String>,
+    /// The stream's trouble, said once until a plausible revolution comes.
+    trouble: Option<Trouble>,
     pwm: bool,
 }
 
@@ -330,56 +339,90 @@ impl Lidar {
         })
     }
 
-    /// Decodes the nodes in the buffer; publishes each finished revolution.
-    pub fn nodes(&mut self, s: &mut Session) {
+    /// Decodes the nodes in the buffer, read at `now`; publishes each finished
+    /// revolution that is plausible ([`protocol::LIMITS`]).
+    pub fn nodes(&mut self, s: &mut Session, now: Instant) {
         let mut i = 0;
-        let b = &s.buf;
-        let mut bad = 0usize;
-        let mut published = false;
-        while i + 5 <= b.len() {
-            match protocol::node(&b[i..i + 5]) {
+        while i + 5 <= s.buf.len() {
+            match protocol::node(&s.buf[i..i + 5]) {
                 Some(nd) => {
-                    s.last_good = Instant::now();
-                    if s.rev.push(&nd, &mut self.out).is_some() {
-                        published = true;
-                        let (c, out) = (&self.conf, &self.out);
-                        let start = Laser::centred_start(c.n, c.per_deg);
-                        let _ = self.laser.write(|l| {
-                            l.readings.clear();
-                            l.readings.extend_from_slice(out);
-                            l.resolution = c.per_deg as f32;
-                            l.start = start;
-                            l.min_range = 0.0;
-                            l.max_range = c.max_range as f32;
-                            l.mount = c.mount;
-                        });
+                    s.last_good = now;
+                    if let Some(st) = s.rev.push(&nd, now, &mut self.out) {
+                        match st.implausible(&protocol::LIMITS) {
+                            None => self.publish(s),
+                            Some(why) => self.trouble(s, Trouble::Revolutions, &why),
+                        }
                     }
                     i += 5;
                 }
                 None => {
-                    bad += 1;
+                    s.rev.skipped(1);
+                    if s.trouble.is_none() {
+                        self.trouble(
+                            s,
+                            Trouble::Bytes,
+                            "bytes that are no scan node (expected 5-byte nodes with S ≠ !S and C = 1)",
+                        );
+                    }
                     i += 1;
                 }
             }
         }
         s.buf.drain(..i);
-        if bad > 0 {
-            if s.trouble.is_none() {
-                let why = self.port_err(format!(
-                    "{bad} byte(s) that are no scan node (expected 5-byte nodes with S ≠ !S and C = 1); another device, or a wrong baud rate?"
-                ));
-                tracing::warn!("{why}; resynchronising on the next nodes");
-                self.laser.set_stale(&why);
-                s.trouble = Some(why);
-            }
-        } else if published && s.trouble.take().is_some() {
-            tracing::info!("{}: scan nodes good again", self.conf.serial);
+        // A revolution that never ends: the motor stalled, or nodes without start flags.
+        let longest = Duration::from_secs_f64(1.0 / protocol::LIMITS.min_hz);
+        if let Some(d) = s.rev.going_for(now)
+            && d > longest
+            && s.trouble.is_none_or(|t| t != Trouble::Revolutions)
+        {
+            let why = format!(
+                "no start flag for {} ms (expected a revolution at {} revolutions/s or more); the motor stalled?",
+                d.as_millis(),
+                protocol::LIMITS.min_hz
+            );
+            self.trouble(s, Trouble::Revolutions, &why);
         }
+    }
+
+    /// Publishes the revolution just finished (in `self.out`); the laser is good again.
+    fn publish(&mut self, s: &mut Session) {
+        let (c, out) = (&self.conf, &self.out);
+        let start = Laser::centred_start(c.n, c.per_deg);
+        let _ = self.laser.write(|l| {
+            l.readings.clear();
+            l.readings.extend_from_slice(out);
+            l.resolution = c.per_deg as f32;
+            l.start = start;
+            l.min_range = 0.0;
+            l.max_range = c.max_range as f32;
+            l.mount = c.mount;
+        });
+        if s.trouble.take().is_some() {
+            tracing::info!("{}: plausible revolutions again", self.conf.serial);
+        }
+    }
+
+    /// Marks the laser stale with `what` (the port named); one line when the
+    /// kind of trouble changes.
+    fn trouble(&self, s: &mut Session, kind: Trouble, what: &str) {
+        let why = match kind {
+            Trouble::Bytes => {
+                self.port_err(format!("{what}; another device, or a wrong baud rate?"))
+            }
+            Trouble::Revolutions => self.port_err(format!(
+                "scan not believed: {what}; noise on the line, a wrong baud rate or another device?"
+            )),
+        };
+        if s.trouble != Some(kind) {
+            tracing::warn!("{why}; the laser is stale until plausible revolutions come");
+            s.trouble = Some(kind);
+        }
+        self.laser.set_stale(&why);
     }
 
     fn serve(&mut self, s: &mut Session) -> Result<(), String> {
         if self.read_into(&mut *s.port, &mut s.buf)? {
-            self.nodes(s);
+            self.nodes(s, Instant::now());
         }
         if s.last_good.elapsed() > self.conf.reply_timeout {
             return Err(self.port_err(format!(
@@ -389,6 +432,15 @@ impl Lidar {
         }
         Ok(())
     }
+}
+
+/// What is wrong with the scan stream, as said once.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Trouble {
+    /// Bytes that are no node (a glitch, until the revolution is checked).
+    Bytes,
+    /// Revolutions that cannot be a lidar's.
+    Revolutions,
 }
 
 fn hex(b: &[u8]) -> String {

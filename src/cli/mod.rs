@@ -272,15 +272,20 @@ fn run(cli: &Cli) -> ExitCode {
         tracing::warn!("this binary has no GUI compiled in; running headless");
     }
     {
+        // SIGINT, SIGTERM, SIGHUP, Ctrl+Z, an abort or a panic: every actuator's
+        // stop first (crate::estop), then, for the ones that end the program, the
+        // shutdown. Ctrl+C stops a shell command that is waiting (echo N), else
+        // the program.
         let rt = rt.clone();
-        let _ = ctrlc::set_handler(move || {
-            // Ctrl+C stops a shell command that is waiting (echo N), else the program.
-            if shell::interrupt_foreground() {
-                return;
-            }
+        let quit = move |code: i32| {
             rt.shutdown();
-            std::process::exit(130);
-        });
+            std::process::exit(code);
+        };
+        if let Err(e) = crate::estop::install(shell::interrupt_foreground, quit) {
+            tracing::error!(
+                "cannot catch signals ({e}): Ctrl+C or SIGTERM will not stop the motors first"
+            );
+        }
     }
     if let Some(secs) = cli.run_for {
         let rt = rt.clone();

@@ -22,8 +22,17 @@
 //!   (tests/emulators/room.rs); it stops at a wall with its bumper pressed (the side
 //!   the wall touches), its wheels stalled.
 //!
+//! - Drive (137): velocity (−500..500 mm/s) and radius (−2000..2000 mm, 32768 or
+//!   32767 straight, −1 and 1 turning in place), both signed 16-bit high byte first;
+//!   velocity 0 stops the robot. Obeyed in Safe and Full mode like Drive Direct.
+//!
+//! Every command is logged with the time it arrived (`commands`), for the tests
+//! that measure how soon a stop comes.
+//!
 //! Faults the tests inject: `garbage` bytes, a `bad_checksum` frame, a `half`
-//! frame, `silent` (no stream), `other` (a GPS's NMEA text instead), and `unplug`
+//! frame, `jump` (the encoder counters jump by 5000, as after a reset), `silent`
+//! (no stream), `other` (a GPS's NMEA text instead), `noise`
+//! (uniformly random bytes at the line's rate instead of frames), and `unplug`
 //! (the pty closes and its path disappears; `plug` brings it back, same room).
 #![allow(dead_code)]
 
@@ -72,6 +81,10 @@ pub struct Faults {
     pub bad_checksum: bool,
     /// The next frame is cut in half.
     pub half: bool,
+    /// Uniformly random bytes instead of frames, as many as 115200 baud carries.
+    pub noise: bool,
+    /// The encoder counters jump by 5000 (as after a reset), once.
+    pub jump: bool,
 }
 
 pub struct State {
@@ -88,6 +101,10 @@ pub struct State {
     pub frames: u64,
     /// When each Drive Direct was applied (for the latency benchmark).
     pub last_drive: Option<(Instant, (i16, i16))>,
+    /// Every command received, with the time it arrived.
+    pub commands: Vec<(Instant, Vec<u8>)>,
+    /// When the last good frame was sent.
+    pub last_frame_at: Option<Instant>,
 }
 
 /// The robot on its serial cable.
@@ -110,6 +127,8 @@ impl Create2 {
             faults: Faults::default(),
             frames: 0,
             last_drive: None,
+            commands: Vec::new(),
+            last_frame_at: None,
         };
         Device::new(link, room, state, serve)
     }
@@ -121,6 +140,22 @@ impl Create2 {
     pub fn received(&self) -> Vec<u8> {
         self.state.lock().received.clone()
     }
+
+    /// When the first stop (Drive Direct 0 0, or Drive with velocity 0) arrived
+    /// after `t`, if one did.
+    pub fn stop_after(&self, t: Instant) -> Option<Instant> {
+        self.state
+            .lock()
+            .commands
+            .iter()
+            .find(|(at, c)| *at >= t && is_stop(c))
+            .map(|(at, _)| *at)
+    }
+}
+
+/// Drive Direct with both wheels 0, or Drive with velocity 0.
+pub fn is_stop(cmd: &[u8]) -> bool {
+    matches!(cmd, [145, 0, 0, 0, 0] | [137, 0, 0, _, _])
 }
 
 /// Bytes of each command after its opcode (the command reference).
@@ -152,6 +187,20 @@ fn apply(st: &mut State, cmd: &[u8]) {
             st.mode = 0;
             st.streaming = false;
             st.wheels = (0, 0);
+        }
+        137 if st.mode >= 2 => {
+            let v = i16::from_be_bytes([cmd[1], cmd[2]]).clamp(-500, 500) as f64;
+            let r = i16::from_be_bytes([cmd[3], cmd[4]]);
+            let w = match r {
+                -32768 | 32767 => 0.0,
+                -1 => -2.0 * v.abs() / WHEEL_BASE,
+                1 => 2.0 * v.abs() / WHEEL_BASE,
+                r => v / r.clamp(-2000, 2000) as f64,
+            };
+            let half = w * WHEEL_BASE / 2.0;
+            let (r, l) = ((v + half).round() as i16, (v - half).round() as i16);
+            st.wheels = (r, l);
+            st.last_drive = Some((Instant::now(), (r, l)));
         }
         145 if st.mode >= 2 => {
             let r = i16::from_be_bytes([cmd[1], cmd[2]]).clamp(-500, 500);
@@ -264,8 +313,10 @@ fn serve(pty: super::room::Pty, state: &Mutex<State>, room: &Shared, stop: &Atom
     let mut pending: Vec<u8> = Vec::new();
     let mut last = Instant::now();
     let mut next_frame = Instant::now();
+    let mut lcg: u64 = 0x2545_F491_4F6C_DD1D;
     while !stop.load(Ordering::Acquire) {
         let n = read_fd(&pty.master, Duration::from_millis(2), &mut buf).unwrap_or(0);
+        let arrived = Instant::now();
         let mut out = Vec::new();
         {
             let mut st = state.lock();
@@ -280,6 +331,7 @@ fn serve(pty: super::room::Pty, state: &Mutex<State>, room: &Shared, stop: &Atom
                 }
                 let cmd: Vec<u8> = pending.drain(..1 + len).collect();
                 apply(&mut st, &cmd);
+                st.commands.push((arrived, cmd));
             }
             let now = Instant::now();
             physics(&mut st, room, now.duration_since(last).as_secs_f64());
@@ -289,8 +341,20 @@ fn serve(pty: super::room::Pty, state: &Mutex<State>, room: &Shared, stop: &Atom
                 if next_frame < now {
                     next_frame = now + Duration::from_millis(15);
                 }
+                if std::mem::take(&mut st.faults.jump) {
+                    st.counts.0 += 5000.0;
+                    st.counts.1 += 5000.0;
+                }
                 let f = &mut st.faults;
-                if f.other {
+                if f.noise {
+                    // 15 ms of the line: 173 bytes at 115200 baud.
+                    out.extend((0..173).map(|_| {
+                        lcg = lcg
+                            .wrapping_mul(6_364_136_223_846_793_005)
+                            .wrapping_add(1_442_695_040_888_963_407);
+                        (lcg >> 56) as u8
+                    }));
+                } else if f.other {
                     out.extend_from_slice(
                         b"$GPGGA,123519,4807.038,N,01131.000,E,1,08,0.9,545.4,M,46.9,M,,*47\r\n",
                     );
@@ -299,6 +363,7 @@ fn serve(pty: super::room::Pty, state: &Mutex<State>, room: &Shared, stop: &Atom
                     out.extend((0..g).map(|i| (i * 37 + 5) as u8 | 0x80));
                 } else if st.streaming && !st.faults.silent {
                     let mut fr = frame(&st, room);
+                    let damaged = st.faults.bad_checksum || st.faults.half;
                     if std::mem::take(&mut st.faults.bad_checksum) {
                         *fr.last_mut().unwrap() ^= 0x5A;
                     }
@@ -307,6 +372,9 @@ fn serve(pty: super::room::Pty, state: &Mutex<State>, room: &Shared, stop: &Atom
                     }
                     out.extend(fr);
                     st.frames += 1;
+                    if !damaged {
+                        st.last_frame_at = Some(now);
+                    }
                 }
             }
         }

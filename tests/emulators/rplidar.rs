@@ -21,7 +21,9 @@
 //! - It measures the shared room (tests/emulators/room.rs) from the robot's pose.
 //!
 //! Faults: `health_error` (GET_HEALTH says error 0x8001), `garbage` bytes in the
-//! scan, `other` (answers as a GPS would), `silent`, and unplug/plug.
+//! scan, `noise` (uniformly random bytes at the line's rate, 11520 a second,
+//! instead of the scan's nodes), `other` (answers as a GPS would), `silent`, and
+//! unplug/plug.
 #![allow(dead_code)]
 
 use std::{
@@ -42,6 +44,7 @@ pub const MAX_MM: f64 = 12_000.0;
 pub struct Faults {
     pub health_error: bool,
     pub garbage: usize,
+    pub noise: bool,
     pub other: bool,
     pub silent: bool,
 }
@@ -99,6 +102,9 @@ fn serve(pty: super::room::Pty, state: &Mutex<State>, room: &Shared, stop: &Atom
     let mut t0 = Instant::now();
     let mut k: u64 = 0;
     let step = 360.0 / SAMPLES;
+    let mut lcg: u64 = 0x853C_49E6_748F_EA9B;
+    let mut noise_sent = 0u64;
+    let mut noise_from: Option<Instant> = None;
     while !stop.load(Ordering::Acquire) {
         let n = read_fd(&pty.master, Duration::from_millis(3), &mut buf).unwrap_or(0);
         let mut out: Vec<u8> = Vec::new();
@@ -167,6 +173,25 @@ fn serve(pty: super::room::Pty, state: &Mutex<State>, room: &Shared, stop: &Atom
             let due = (t0.elapsed().as_secs_f64() * RATE_HZ * SAMPLES) as u64;
             let g = std::mem::take(&mut st.faults.garbage);
             out.extend((0..g).map(|i| (i as u8).wrapping_mul(3) & 0xFC));
+            if st.faults.noise {
+                // The line's rate: 115200 baud, 10 bits a byte.
+                let from = *noise_from.get_or_insert_with(|| {
+                    noise_sent = 0;
+                    Instant::now()
+                });
+                let owed = (from.elapsed().as_secs_f64() * 11_520.0) as u64;
+                while noise_sent < owed {
+                    lcg = lcg
+                        .wrapping_mul(6_364_136_223_846_793_005)
+                        .wrapping_add(1_442_695_040_888_963_407);
+                    out.push((lcg >> 56) as u8);
+                    noise_sent += 1;
+                }
+                // The scan's clock runs on underneath.
+                k = due;
+            } else {
+                noise_from = None;
+            }
             let r = room.lock().clone();
             while k < due {
                 let a = (k as f64 * step) % 360.0;
