@@ -21,9 +21,10 @@ use std::{
 use common::{process::Proc, root};
 
 /// A DDS domain of its own for each test (and each run), so tests running at
-/// once and other DDS users on the machine stay apart.
+/// once and other DDS users on the machine stay apart; within ROS 2's 0..232
+/// for offsets up to 34.
 fn domain(offset: u32) -> u32 {
-    100 + (std::process::id() % 60) * 2 + offset
+    100 + (std::process::id() % 50) * 2 + offset
 }
 
 fn peer(py: &std::path::Path, mode: &str, domain: u32, secs: u32) -> std::process::Child {
@@ -1130,4 +1131,144 @@ fn a_cyclone_subscriber_on_another_host_reads_the_service_over_a_veth_pair() {
     // Its /cmd_vel (0.3 m/s, 0.2 rad/s) crossed back and drove the robot.
     robot.expect_moved(&start, 100.0);
     robot.quit();
+}
+
+/// Issue 50: one `frames` setting for every topic that names a frame. /odom
+/// hard-coded odom → base_link while /tf followed the line, so a custom frame
+/// broke the TF tree: a Cyclone subscriber now reads the same ODOM → BASE on
+/// /odom and /tf, BASE → LASER on /tf_static, LASER on /scan, CAMERA on the
+/// camera and BASE on /imu.
+#[test]
+fn a_frames_line_names_the_same_frames_on_odom_tf_and_the_sensors() {
+    let Some(py) = common::python_with("cyclonedds") else {
+        return;
+    };
+    let d = domain(21);
+    let dir = tempfile::tempdir().unwrap();
+    let conf = dir.path().join("frames.conf");
+    std::fs::write(
+        &conf,
+        format!(
+            "driver simulator\nworld {}\nprovides encoders\nprovides motors\nprovides laser 180 1\n\
+             provides colorA\nprovides imu\nend_driver\n\
+             service ros2\ninsecure\ndomain {d}\nframes r1_odom r1_base r1_lidar r1_cam\nend_service\n\
+             load_driver simulator\nload_service ros2\n",
+            common::world_path("simple.world")
+        ),
+    )
+    .unwrap();
+    let robot = Proc::start(&conf);
+    let got = json_of(peer(&py, "frames", d, 30), "the Cyclone subscriber", &robot);
+    let pair = |a: &str, b: &str| serde_json::json!([a, b]);
+    assert_eq!(got["odom"], pair("r1_odom", "r1_base"), "{got}");
+    assert_eq!(
+        got["tf"],
+        serde_json::json!([pair("r1_odom", "r1_base")]),
+        "{got}"
+    );
+    assert_eq!(
+        got["tf_static"],
+        serde_json::json!([pair("r1_base", "r1_lidar")]),
+        "{got}"
+    );
+    assert_eq!(got["scan"], "r1_lidar", "{got}");
+    assert_eq!(got["colorA/image_raw"], "r1_cam", "{got}");
+    assert_eq!(got["imu"], "r1_base", "{got}");
+    robot.quit();
+}
+
+/// Issue 50: the driver read only `bgr8`; the common ROS camera drivers and the
+/// Gazebo bridge publish `rgb8`. Each 8-bit encoding, rows padded past the
+/// pixels (`step`), reaches its interface as the same BGR pixels.
+#[test]
+fn the_driver_reads_every_8_bit_image_encoding_as_bgr() {
+    use jderobot::interfaces::Image;
+    let Some(py) = common::python_with("cyclonedds") else {
+        return;
+    };
+    let d = domain(22);
+    let encodings = ["bgr8", "rgb8", "mono8", "bgra8", "rgba8"];
+    let mut text = format!("driver ros2\ninsecure\ndomain {d}\n");
+    for e in encodings {
+        text += &format!("provides varcolorA.{e} /img/{e}\n");
+    }
+    text += "end_driver\nload_driver ros2\n";
+    let rt = common::start_conf(&text);
+    let ifaces: Vec<_> = (encodings.iter())
+        .map(|e| {
+            rt.interfaces
+                .get::<Image>(&format!("varcolorA.{e}"))
+                .unwrap()
+        })
+        .collect();
+    let mut cam = peer(&py, "images", d, 30);
+    let all = common::poll_until(25, || ifaces.iter().all(|i| i.clock() > 0));
+    let _ = cam.kill();
+    let _ = cam.wait();
+    rt.shutdown();
+    assert!(
+        all,
+        "images read: {:?}",
+        (encodings.iter().zip(&ifaces))
+            .map(|(e, i)| (e, i.clock()))
+            .collect::<Vec<_>>()
+    );
+    // The peer's PIXELS: pixel i is (b, g, r) = (10 i, 10 i + 1, 10 i + 2).
+    let bgr: Vec<u8> = (0..6u8)
+        .flat_map(|i| [10 * i, 10 * i + 1, 10 * i + 2])
+        .collect();
+    let grey: Vec<u8> = (0..6u8).flat_map(|i| [10 * i; 3]).collect();
+    for (e, i) in encodings.iter().zip(&ifaces) {
+        let img = i.snapshot();
+        let want = if *e == "mono8" { &grey } else { &bgr };
+        assert_eq!((img.value.width, img.value.height), (3, 2), "{e}");
+        assert_eq!(&img.value.data, want, "{e}");
+    }
+}
+
+/// Issue 50: a scan from +90° to −90° (a negative `angle_increment`, as some
+/// lidars publish) became 1° per reading; and the laser's mount was never read
+/// from /tf_static. A Cyclone lidar mounted backwards 10 cm ahead (/tf_static
+/// base_link → laser at (0.1 m, 0), 180°) publishes the same readings both ways:
+/// the driver holds one scan, placed as the robot says.
+#[test]
+fn the_driver_reads_a_reversed_scan_as_the_forward_one_mounted_from_tf_static() {
+    use jderobot::interfaces::{InterfaceValue, Laser, Mount};
+    let Some(py) = common::python_with("cyclonedds") else {
+        return;
+    };
+    let d = domain(23);
+    let rt = common::start_conf(&format!(
+        "driver ros2\ninsecure\ndomain {d}\nprovides laser /scan\nprovides laser.fwd /scan_fwd\n\
+         end_driver\nload_driver ros2\n"
+    ));
+    let rev = rt.interfaces.get::<Laser>("laser").unwrap();
+    let fwd = rt.interfaces.get::<Laser>("laser.fwd").unwrap();
+    let mut lidar = peer(&py, "mounted", d, 30);
+    let mounted = |l: &Laser| l.mount.x == 100.0;
+    let ok = common::poll_until(25, || {
+        mounted(&rev.read().value) && mounted(&fwd.read().value)
+    });
+    let _ = lidar.kill();
+    let _ = lidar.wait();
+    rt.shutdown();
+    let (r, f) = (rev.snapshot(), fwd.snapshot());
+    assert!(
+        ok,
+        "no mounted scans: /scan {}, /scan_fwd {}",
+        r.value.describe(),
+        f.value.describe()
+    );
+    assert_eq!(r.value, f.value);
+    let l = &r.value;
+    assert_eq!((l.start, l.resolution, l.readings.len()), (-90.0, 1.0, 181));
+    assert_eq!((l.readings[0], l.readings[180]), (1000, 2800));
+    assert_eq!(
+        l.mount,
+        Mount {
+            x: 100.0,
+            y: 0.0,
+            yaw: 180.0
+        }
+    );
 }

@@ -13,11 +13,13 @@
 //! domain 0                        # ROS_DOMAIN_ID, 0..232 (default 0)
 //! node jderobot_driver            # the node's name (default jderobot_driver)
 //! namespace /                     # namespace of relative topic names (default /)
-//! provides laser /scan            # sensor_msgs/msg/LaserScan, best effort
+//! provides laser /scan            # sensor_msgs/msg/LaserScan, best effort (its mount
+//!                                 #   from /tf_static, see below)
 //! provides encoders /odom         # nav_msgs/msg/Odometry, reliable
 //! provides motors /cmd_vel        # geometry_msgs/msg/Twist, written reliable
 //! provides imu /imu               # sensor_msgs/msg/Imu, best effort
-//! provides colorA /camera/image_raw   # sensor_msgs/msg/Image (bgr8), best effort
+//! provides colorA /camera/image_raw   # sensor_msgs/msg/Image (bgr8, rgb8, mono8, bgra8,
+//!                                 #   rgba8), best effort
 //! provides varcolorA /camera/image_raw/compressed   # a topic ending in /compressed:
 //!                                 #   sensor_msgs/msg/CompressedImage (JPEG or PNG)
 //! silence 2000                    # ms without a message before the robot counts as lost
@@ -26,10 +28,22 @@
 //! ```
 //!
 //! # Interfaces (the units of `crate::interfaces`)
-//! `laser` (mm, the scan's own geometry: start, step, range limits), `encoders`
-//! (x, y mm, θ rad), `imu` (SI), `colorA..D`/`varcolorA..D` (BGR; `bgr8` Images,
-//! or JPEG/PNG CompressedImages of at most 8192x8192 pixels), `motors` (v mm/s, w deg/s → Twist m/s, rad/s, sent every 100 ms and on
-//! each new command).
+//! `laser` (mm, the scan's own geometry: start, step, range limits; a scan whose
+//! `angle_increment` is negative, from +angle to −angle, is read from its other
+//! end, so it is the same value as the forward scan), `encoders` (x, y mm, θ
+//! rad), `imu` (SI), `colorA..D`/`varcolorA..D` (BGR: `bgr8`, `rgb8`, `mono8`,
+//! `bgra8` and `rgba8` Images, rows `step` bytes apart, converted once; or
+//! JPEG/PNG CompressedImages of at most 8192x8192 pixels), `motors` (v mm/s, w
+//! deg/s → Twist m/s, rad/s, sent every 100 ms and on each new command).
+//!
+//! The laser's mount: with a laser, the driver also reads `/tf_static` (as tf2's
+//! static listener: reliable, transient local) and places the scan's frame
+//! (its header's `frame_id`) in the root of the static tree it hangs from, the
+//! robot's base (`base_link`; `base_footprint` on a TurtleBot 3): x, y mm and yaw
+//! on the robot's plane (heights and small tilts left out). An upside-down laser
+//! (its z axis down) is read from the other end, so angles stay counter-clockwise
+//! on the robot. Without a static transform for the frame the mount is the
+//! robot's centre.
 //!
 //! Sensor readers are best effort (they match best-effort and reliable writers:
 //! real ROS 2 drivers publish sensor data best effort), the odometry reader is
@@ -49,9 +63,13 @@ use std::{
 };
 
 use rustdds::{
-    DomainParticipant, TopicKind,
+    DomainParticipant, QosPolicyBuilder, TopicKind,
     no_key::{DataReader, DataWriter},
+    policy::{Durability, History, Reliability},
 };
+
+mod tf;
+use tf::Statics;
 
 use crate::{
     conf::{
@@ -102,18 +120,19 @@ struct Input {
     last: Option<Instant>,
 }
 
-/// Decodes one CDR message into an interface; false when the message is refused.
-type Decode = Box<dyn FnMut(&Source, &[u8]) -> bool + Send>;
+/// Decodes one CDR message into an interface (with the robot's static
+/// transforms, for a laser's mount); false when the message is refused.
+type Decode = Box<dyn FnMut(&Source, &[u8], &Statics) -> bool + Send>;
 
 /// `motors` and the `/cmd_vel` writer it feeds, with the topic's name.
 type CmdVelOut = (Arc<Interface<Motors>>, DataWriter<Cdr, CdrAdapter>, String);
 
-/// Decodes a message of `topic`: (wall time ns, value); the last argument is
-/// the time of messages without a header.
-type DecodeFn<T> = fn(&str, &[u8], u64) -> Result<(u64, T), crate::mcapfmt::FormatError>;
+/// Decodes a message of `topic`: (wall time ns, value); the third argument is
+/// the time of messages without a header, the last the robot's static transforms.
+type DecodeFn<T> = fn(&str, &[u8], u64, &Statics) -> Result<(u64, T), crate::mcapfmt::FormatError>;
 
 /// A reader of `topic` with its kind's ROS 2 message into `iface`.
-fn input<T: Ros2>(
+fn input<T: Ros2 + Mounted>(
     dp: &DomainParticipant,
     sub: &rustdds::Subscriber,
     topic: String,
@@ -121,8 +140,30 @@ fn input<T: Ros2>(
     iface: Arc<Interface<T>>,
 ) -> anyhow::Result<Input> {
     let dds_type = T::MESSAGE.map(|m| m.dds).unwrap_or("");
-    input_as(dp, sub, topic, reliable, iface, dds_type, ros2::decode::<T>)
+    let dec: DecodeFn<T> = |topic, data, now, statics| {
+        let (t, mut v) = ros2::decode::<T>(topic, data, now)?;
+        v.mount(topic, data, statics);
+        Ok((t, v))
+    };
+    input_as(dp, sub, topic, reliable, iface, dds_type, dec)
 }
+
+/// A value placed on the robot by the static transform of its message's frame.
+trait Mounted {
+    /// Sets the mount from `statics` for the frame of message `data`.
+    fn mount(&mut self, _topic: &str, _data: &[u8], _statics: &Statics) {}
+}
+
+impl Mounted for Laser {
+    fn mount(&mut self, topic: &str, data: &[u8], statics: &Statics) {
+        if let Ok(frame) = ros2::header_frame(topic, data) {
+            tf::mount_laser(self, statics, &frame);
+        }
+    }
+}
+impl Mounted for Encoders {}
+impl Mounted for Imu {}
+impl Mounted for Image {}
 
 /// A topic ending in `/compressed` carries `sensor_msgs/msg/CompressedImage`
 /// (image_transport's name for it), any other camera topic `sensor_msgs/msg/Image`.
@@ -133,7 +174,7 @@ fn camera_input(
     iface: Arc<Interface<Image>>,
 ) -> anyhow::Result<Input> {
     if topic.ends_with("/compressed") {
-        let dec: DecodeFn<Image> = |t, d, _| ros2::decode_compressed(t, d);
+        let dec: DecodeFn<Image> = |t, d, _, _| ros2::decode_compressed(t, d);
         input_as(dp, sub, topic, false, iface, ros2::COMPRESSED_IMAGE, dec)
     } else {
         input(dp, sub, topic, false, iface)
@@ -177,9 +218,9 @@ fn input_as<T: crate::interfaces::InterfaceValue>(
         topic,
         dds_type,
         reader,
-        apply: Box::new(move |source, data| {
+        apply: Box::new(move |source, data, statics| {
             let now = crate::mcapfmt::nanos(SystemTime::now());
-            match decode(&name, data, now) {
+            match decode(&name, data, now, statics) {
                 Ok((_, v)) => iface.accept(source, v).is_some(),
                 Err(e) => {
                     source.refused(e);
@@ -191,8 +232,73 @@ fn input_as<T: crate::interfaces::InterfaceValue>(
     })
 }
 
+/// `/tf_static`'s reader (when the driver provides a laser) and what it heard.
+struct StaticsInput {
+    reader: Reader,
+    source: Source,
+    statics: Statics,
+}
+
+impl StaticsInput {
+    /// Takes the waiting `TFMessage`s into the static tree.
+    fn take(&mut self) {
+        loop {
+            match self.reader.take_next_sample() {
+                Ok(Some(sample)) => {
+                    let r = ros2::decode_tf(TF_STATIC, &sample.value().0)
+                        .map_err(|e| e.to_string())
+                        .and_then(|t| self.statics.add(t));
+                    if let Err(e) = r {
+                        self.source.refused(e);
+                    }
+                }
+                Ok(None) => break,
+                Err(e) => {
+                    self.source.refused(format!("{TF_STATIC}: {e}"));
+                    break;
+                }
+            }
+        }
+    }
+}
+
+const TF_STATIC: &str = "/tf_static";
+
+/// The reader of `/tf_static` as tf2's static listener makes it: reliable,
+/// transient local (a late reader gets what was sent), keep last 100.
+fn statics_input(
+    dp: &DomainParticipant,
+    sub: &rustdds::Subscriber,
+) -> anyhow::Result<StaticsInput> {
+    let qos = QosPolicyBuilder::new()
+        .reliability(Reliability::Reliable {
+            max_blocking_time: rustdds::Duration::from_millis(100),
+        })
+        .history(History::KeepLast { depth: 100 })
+        .durability(Durability::TransientLocal)
+        .build();
+    let t = dp
+        .create_topic(
+            dds_topic(TF_STATIC),
+            ros2::TF_MESSAGE.into(),
+            &qos,
+            TopicKind::NoKey,
+        )
+        .map_err(|e| anyhow::anyhow!("driver ros2: topic {TF_STATIC}: {e}"))?;
+    let reader = sub
+        .create_datareader_no_key::<Cdr, CdrAdapter>(&t, Some(qos))
+        .map_err(|e| anyhow::anyhow!("driver ros2: a reader of {TF_STATIC}: {e}"))?;
+    Ok(StaticsInput {
+        reader,
+        source: Source::new(format!("ros2: {TF_STATIC}")),
+        statics: Statics::default(),
+    })
+}
+
 struct Robot {
     inputs: Vec<Input>,
+    /// `/tf_static`, read for the laser's mount.
+    statics: Option<StaticsInput>,
     motors: Option<CmdVelOut>,
     silence: Duration,
     timeout: Duration,
@@ -258,11 +364,16 @@ impl crate::supervisor::Device for Robot {
 
     fn step(&mut self, s: &mut Session) -> Result<(), String> {
         self.ready.wait(Duration::from_millis(2));
+        if let Some(s) = &mut self.statics {
+            s.take();
+        }
+        let none = Statics::default();
+        let statics = self.statics.as_ref().map_or(&none, |s| &s.statics);
         for i in &mut self.inputs {
             loop {
                 match i.reader.take_next_sample() {
                     Ok(Some(sample)) => {
-                        if (i.apply)(&i.source, &sample.value().0) {
+                        if (i.apply)(&i.source, &sample.value().0, statics) {
                             i.last = Some(Instant::now());
                         }
                     }
@@ -321,6 +432,11 @@ impl crate::supervisor::Device for Robot {
         }
         self.send_motors(Motors::default());
     }
+}
+
+/// The DDS type name of kind `T`'s ROS 2 message.
+fn ros2_type<T: Ros2>() -> &'static str {
+    T::MESSAGE.map(|m| m.dds).unwrap_or("")
 }
 
 /// The writer of the robot's velocity command (`/cmd_vel`, reliable) for `motors`.
@@ -420,9 +536,18 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
             ),
         }
     }
+    // The laser's mount from the robot's static transforms, when it has a laser.
+    let mut statics = if inputs.iter().any(|i| i.dds_type == ros2_type::<Laser>()) {
+        Some(statics_input(dp, &sub)?)
+    } else {
+        None
+    };
     let mut ready = Readiness::new("driver ros2")?;
     for i in &mut inputs {
         ready.add(&mut i.reader)?;
+    }
+    if let Some(s) = &mut statics {
+        ready.add(&mut s.reader)?;
     }
     let waits: Vec<String> = inputs.iter().map(|i| i.topic.clone()).collect();
     tracing::info!(
@@ -438,6 +563,7 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
     );
     let robot = Robot {
         inputs,
+        statics,
         motors,
         silence: Duration::from_millis(l.silence),
         timeout: Duration::from_millis(l.motors_timeout),

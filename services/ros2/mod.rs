@@ -23,7 +23,9 @@
 //! domain 0                 # ROS_DOMAIN_ID, 0..232 (default 0)
 //! serves laser             # what is served (default: every interface with a
 //! serves encoders odom     #   ROS 2 message); an optional ROS 2 topic name
-//! frames odom base_link laser camera   # frame ids (these are the defaults)
+//! frames odom base_link laser camera   # frame ids ODOM BASE LASER CAMERA (the defaults):
+//!                          #   /odom and /tf ODOM → BASE, /tf_static BASE → LASER,
+//!                          #   /scan LASER, images CAMERA, /imu and /hazard_detection BASE
 //! compressed colorA 80     # also colorA as CompressedImage, JPEG quality 80 (repeatable)
 //! sonar 25 100 5000        # each sonar's field of view (deg), min and max range (mm)
 //! joints pan tilt          # the pan-tilt's joint names
@@ -37,9 +39,9 @@
 //! | interface | topic (default) | type | QoS |
 //! |---|---|---|---|
 //! | laser | `scan` | `sensor_msgs/msg/LaserScan`, the scan's own geometry | best effort, keep last 5 |
-//! | encoders | `odom` | `nav_msgs/msg/Odometry` (odom → base_link) | reliable, keep last 10 |
-//! | encoders | `/tf` | `tf2_msgs/msg/TFMessage` odom → base_link | reliable, keep last 100 |
-//! | laser | `/tf_static` | base_link → laser (the laser's mount) | reliable, transient local, keep last 1 |
+//! | encoders | `odom` | `nav_msgs/msg/Odometry` ODOM → BASE (`frames`: odom → base_link) | reliable, keep last 10 |
+//! | encoders | `/tf` | `tf2_msgs/msg/TFMessage` ODOM → BASE, the same two frames | reliable, keep last 100 |
+//! | laser | `/tf_static` | BASE → LASER (the laser's mount) | reliable, transient local, keep last 1 |
 //! | imu | `imu` | `sensor_msgs/msg/Imu` | best effort, keep last 5 |
 //! | colorA..D, varcolorA..D | `NAME/image_raw` | `sensor_msgs/msg/Image` `bgr8` | best effort, keep last 5 |
 //! | sonars | `sonar_0`..`sonar_N` | `sensor_msgs/msg/Range` ULTRASOUND, frame `sonar_I` | best effort, keep last 5 |
@@ -671,7 +673,14 @@ impl Plan {
                     ros2::TF_MESSAGE,
                     reliable_qos(100),
                 )?;
-                let odom = d.served(iface, topic, f.0.clone(), reliable_qos(10))?;
+                // Odometry and /tf name the same two frames, the `frames` line's.
+                let base = f.1.clone();
+                let enc: Encode<Encoders> = Box::new(move |odom, s, buf| {
+                    ros2::encode_odometry(s.time, odom, &base, &s.value, buf);
+                    true
+                });
+                let (qos, dds) = (reliable_qos(10), dds_name::<Encoders>());
+                let odom = d.served_as(iface, topic, f.0.clone(), qos, dds, enc)?;
                 self.odom.push((odom, tf));
             }
             Kind::Imu => {

@@ -10,9 +10,12 @@
 use std::time::SystemTime;
 
 use super::{FormatError, bad, nanos};
-use crate::interfaces::{
-    Bumpers, Encoders, Image, Imu, InterfaceValue, Kind, Laser, Motors, PtEncoders, PtMotors,
-    Sample, Sonars, ZoomEncoders, ZoomMotors, with_kind,
+use crate::{
+    interfaces::{
+        Bumpers, Encoders, Image, Imu, InterfaceValue, Kind, Laser, Motors, PtEncoders, PtMotors,
+        Sample, Sonars, ZoomEncoders, ZoomMotors, with_kind,
+    },
+    vision::pixfmt::{Packed8, packed_to_bgr},
 };
 
 const SEP: &str =
@@ -261,18 +264,33 @@ impl Ros2 for Laser {
             };
             readings.push((v as f64 * 1000.0).round() as i32);
         }
-        let resolution = if inc > 0.0 {
-            ((1.0 / (inc as f64).to_degrees()) as f32 * 1000.0).round() / 1000.0
+        if !inc.is_finite() || (inc == 0.0 && n > 1) {
+            return Err(bad(
+                r.topic,
+                format!("a LaserScan of {n} readings with angle_increment {inc}"),
+            ));
+        }
+        let resolution = if inc != 0.0 {
+            ((1.0 / (inc.abs() as f64).to_degrees()) as f32 * 1000.0).round() / 1000.0
         } else {
             1.0
         };
-        let deg = |rad: f32| ((rad as f64).to_degrees() * 1000.0).round() as f32 / 1000.0;
+        // A scan from +angle to −angle (a negative increment, as some lidars
+        // publish it) is the same scan read from its other end: its last reading
+        // is the first counter-clockwise.
+        let first = if inc < 0.0 {
+            readings.reverse();
+            min as f64 + inc as f64 * n.saturating_sub(1) as f64
+        } else {
+            min as f64
+        };
+        let deg = |rad: f64| (rad.to_degrees() * 1000.0).round() as f32 / 1000.0;
         Ok((
             t,
             Laser {
                 readings,
                 resolution,
-                start: deg(min),
+                start: deg(first),
                 min_range: range_min * 1000.0,
                 max_range: range_max * 1000.0,
                 ..Laser::default()
@@ -300,6 +318,21 @@ pub fn image_head(name: &str, s: &Sample<Image>, out: &mut Vec<u8>) {
     image_fields_but_pixels(&s.value, name, s.time, &mut Writer(out));
 }
 
+/// The `sensor_msgs/msg/Image` encodings jderobot reads.
+pub const IMAGE_ENCODINGS: [&str; 5] = ["bgr8", "rgb8", "mono8", "bgra8", "rgba8"];
+
+/// The pixel layout of a `sensor_msgs/msg/Image` encoding jderobot reads.
+fn image_encoding(enc: &str) -> Option<Packed8> {
+    Some(match enc {
+        "bgr8" => Packed8::Bgr,
+        "rgb8" => Packed8::Rgb,
+        "mono8" => Packed8::Grey,
+        "bgra8" => Packed8::Bgra,
+        "rgba8" => Packed8::Rgba,
+        _ => return None,
+    })
+}
+
 const IMAGE: Message = Message {
     name: "sensor_msgs/msg/Image",
     dds: "sensor_msgs::msg::dds_::Image_",
@@ -318,29 +351,46 @@ impl Ros2 for Image {
         image_fields_but_pixels(self, name, time, w);
         w.0.extend_from_slice(&self.data);
     }
+    /// `bgr8`, `rgb8`, `mono8`, `bgra8` and `rgba8` (sensor_msgs/image_encodings),
+    /// rows `step` bytes apart, converted once to BGR (alpha dropped, grey in the
+    /// three channels). `is_bigendian` says the byte order of multi-byte channels:
+    /// these have one byte per channel, so it changes nothing.
     fn from_cdr(r: &mut Reader, _log_time: u64) -> Result<(u64, Self), FormatError> {
         let t = r.header()?;
         let height = r.u32()?;
         let width = r.u32()?;
         let enc = r.string()?;
-        let _be = r.u8()?;
-        let _step = r.u32()?;
+        let _big_endian = r.u8()?;
+        let step = r.u32()?;
         let n = r.u32()? as usize;
-        // u64 and checked: a damaged width and height must not overflow.
-        let need = (width as u64 * height as u64).checked_mul(3);
-        if enc != "bgr8" || need != Some(n as u64) {
-            return Err(bad(
-                r.topic,
-                format!("a {width}x{height} `{enc}` image of {n} bytes; jderobot reads bgr8"),
-            ));
+        let topic = r.topic;
+        let refuse = |why: &str| {
+            bad(
+                topic,
+                format!("a {width}x{height} `{enc}` image of {n} bytes (step {step}): {why}"),
+            )
+        };
+        let Some(format) = image_encoding(&enc) else {
+            return Err(refuse(&format!(
+                "jderobot reads {}",
+                IMAGE_ENCODINGS.join(", ")
+            )));
+        };
+        if width == 0 || height == 0 {
+            return Err(refuse("no pixels"));
         }
-        let data = r.take(n, 1)?.to_vec();
+        let data = r
+            .take(n, 1)
+            .map_err(|_| refuse("the message ends before its data"))?;
+        let mut bgr = Vec::new();
+        packed_to_bgr(data, width, height, step as usize, format, &mut bgr)
+            .map_err(|e| refuse(&e.to_string()))?;
         Ok((
             t,
             Image {
                 width,
                 height,
-                data,
+                data: bgr,
             },
         ))
     }
@@ -365,22 +415,40 @@ const ODOMETRY: Message = Message {
     },
 };
 
+/// Encodes `nav_msgs/msg/Odometry`: the robot's frame `child` in the odometry
+/// frame `parent` (the service's `frames` line), into `out` (cleared first).
+pub fn encode_odometry(
+    time: SystemTime,
+    parent: &str,
+    child: &str,
+    e: &Encoders,
+    out: &mut Vec<u8>,
+) {
+    odometry(e, time, parent, child, &mut start(out));
+}
+
+fn odometry(e: &Encoders, time: SystemTime, parent: &str, child: &str, w: &mut Writer) {
+    w.header(time, parent);
+    w.string(child);
+    w.f64(e.x as f64 / 1000.0);
+    w.f64(e.y as f64 / 1000.0);
+    w.f64(0.0);
+    let half = e.theta as f64 / 2.0;
+    w.f64(0.0);
+    w.f64(0.0);
+    w.f64(half.sin());
+    w.f64(half.cos());
+    for _ in 0..36 + 6 + 36 {
+        w.f64(0.0);
+    }
+}
+
 impl Ros2 for Encoders {
     const MESSAGE: Option<&'static Message> = Some(&ODOMETRY);
+    /// REP 105's frames, `odom` → `base_link` (the recorder's and zenoh's; the
+    /// service writes its `frames` line's with [`encode_odometry`]).
     fn to_cdr(&self, _name: &str, time: SystemTime, w: &mut Writer) {
-        w.header(time, "odom");
-        w.string("base_link");
-        w.f64(self.x as f64 / 1000.0);
-        w.f64(self.y as f64 / 1000.0);
-        w.f64(0.0);
-        let half = self.theta as f64 / 2.0;
-        w.f64(0.0);
-        w.f64(0.0);
-        w.f64(half.sin());
-        w.f64(half.cos());
-        for _ in 0..36 + 6 + 36 {
-            w.f64(0.0);
-        }
+        odometry(self, time, "odom", "base_link", w);
     }
     fn from_cdr(r: &mut Reader, _log_time: u64) -> Result<(u64, Self), FormatError> {
         let t = r.header()?;
@@ -527,6 +595,59 @@ pub fn encode_tf(time: SystemTime, transforms: &[Transform], out: &mut Vec<u8>) 
             w.f64(v);
         }
     }
+}
+
+/// One `geometry_msgs/TransformStamped` as read from `/tf` or `/tf_static`:
+/// frame `child` in frame `parent`, its translation (m) and rotation (the
+/// quaternion x, y, z, w).
+#[derive(Clone, Debug, PartialEq)]
+pub struct StampedTransform {
+    pub parent: String,
+    pub child: String,
+    pub translation: [f64; 3],
+    pub rotation: [f64; 4],
+}
+
+/// Decodes a `tf2_msgs/msg/TFMessage`.
+pub fn decode_tf(topic: &str, data: &[u8]) -> Result<Vec<StampedTransform>, FormatError> {
+    let mut r = cdr_reader(topic, data)?;
+    // Each: a header (8 bytes and a string of 4 or more), a string, 7 f64s.
+    let n = r.len(72, "TFMessage.transforms")?;
+    let mut out = Vec::with_capacity(n);
+    for _ in 0..n {
+        r.i32()?;
+        r.u32()?;
+        let parent = r.string()?;
+        let child = r.string()?;
+        let mut v = [0f64; 7];
+        for x in &mut v {
+            *x = r.f64()?;
+        }
+        out.push(StampedTransform {
+            parent,
+            child,
+            translation: [v[0], v[1], v[2]],
+            rotation: [v[3], v[4], v[5], v[6]],
+        });
+    }
+    Ok(out)
+}
+
+/// The `frame_id` of a message that starts with a `std_msgs/Header` (every
+/// sensor message here).
+pub fn header_frame(topic: &str, data: &[u8]) -> Result<String, FormatError> {
+    let mut r = cdr_reader(topic, data)?;
+    r.i32()?;
+    r.u32()?;
+    r.string()
+}
+
+/// A reader of a little-endian CDR message, past its encapsulation header.
+fn cdr_reader<'a>(topic: &'a str, data: &'a [u8]) -> Result<Reader<'a>, FormatError> {
+    if data.len() < 4 || data[..2] != [0, 1] {
+        return Err(bad(topic, "not little-endian CDR (encapsulation 0x0001)"));
+    }
+    Ok(Reader { data, at: 4, topic })
 }
 
 /// The DDS type name of `rosgraph_msgs/msg/Clock` (`/clock`).
@@ -765,5 +886,137 @@ mod tests {
         ));
         assert_eq!(kind_of("sensor_msgs/msg/Imu"), Some(Kind::Imu));
         assert_eq!(schema(Kind::Bumpers), None);
+    }
+
+    /// A LaserScan's CDR: `n` ranges from `min` rad by `inc` rad.
+    fn scan(min: f32, inc: f32, ranges: &[f32]) -> Vec<u8> {
+        let mut b = Vec::new();
+        let mut w = start(&mut b);
+        w.header(SystemTime::UNIX_EPOCH, "laser");
+        let max = min + inc * ranges.len().saturating_sub(1) as f32;
+        for v in [min, max, inc, 0.0, 0.0, 0.1, 8.0] {
+            w.f32(v);
+        }
+        w.u32(ranges.len() as u32);
+        ranges.iter().for_each(|r| w.f32(*r));
+        w.u32(0);
+        b
+    }
+
+    #[test]
+    fn a_scan_with_a_negative_increment_reads_as_the_forward_one() {
+        let ranges: Vec<f32> = (0..181).map(|i| 1.0 + i as f32 / 100.0).collect();
+        let inc = 1f32.to_radians();
+        let half = std::f32::consts::FRAC_PI_2;
+        let forward = decode::<Laser>("s", &scan(-half, inc, &ranges), 0)
+            .unwrap()
+            .1;
+        let back: Vec<f32> = ranges.iter().rev().copied().collect();
+        let reversed = decode::<Laser>("s", &scan(half, -inc, &back), 0).unwrap().1;
+        assert_eq!(reversed, forward);
+        assert_eq!((forward.start, forward.resolution), (-90.0, 1.0));
+        assert_eq!(forward.readings[0], 1000);
+        // An increment of 0 for several readings, or not a number, is refused;
+        // one reading needs none.
+        assert!(decode::<Laser>("s", &scan(0.0, 0.0, &[1.0, 2.0]), 0).is_err());
+        assert!(decode::<Laser>("s", &scan(0.0, f32::NAN, &[1.0, 2.0]), 0).is_err());
+        assert!(decode::<Laser>("s", &scan(0.0, 0.0, &[1.0]), 0).is_ok());
+        assert_eq!(header_frame("s", &scan(0.0, 0.0, &[1.0])).unwrap(), "laser");
+    }
+
+    /// An Image's CDR: `px` are the pixels of a `w`-wide image in `enc`, rows
+    /// padded to `step` bytes.
+    fn image(enc: &str, w: u32, h: u32, step: u32, data: &[u8]) -> Vec<u8> {
+        let mut b = Vec::new();
+        let mut wr = start(&mut b);
+        wr.header(SystemTime::UNIX_EPOCH, "camera");
+        wr.u32(h);
+        wr.u32(w);
+        wr.string(enc);
+        wr.u8(1);
+        wr.u32(step);
+        wr.u32(data.len() as u32);
+        wr.0.extend_from_slice(data);
+        b
+    }
+
+    #[test]
+    fn every_8_bit_encoding_reads_as_bgr_with_its_row_padding() {
+        // 2x2: red, green / blue, white; rows padded to 12 bytes.
+        let rgb = [[255u8, 0, 0], [0, 255, 0], [0, 0, 255], [255, 255, 255]];
+        let bgr: Vec<u8> = rgb.iter().flat_map(|p| [p[2], p[1], p[0]]).collect();
+        let padded = |bpp: usize, px: &dyn Fn([u8; 3]) -> Vec<u8>| -> Vec<u8> {
+            let mut d = vec![];
+            for row in rgb.chunks(2) {
+                let mut r: Vec<u8> = row.iter().flat_map(|p| px(*p)).collect();
+                r.resize(12, 0xAA);
+                d.extend(r);
+            }
+            assert!(bpp * 2 <= 12);
+            d
+        };
+        let cases: [(&str, usize, &dyn Fn([u8; 3]) -> Vec<u8>); 4] = [
+            ("bgr8", 3, &|p| vec![p[2], p[1], p[0]]),
+            ("rgb8", 3, &|p| p.to_vec()),
+            ("bgra8", 4, &|p| vec![p[2], p[1], p[0], 9]),
+            ("rgba8", 4, &|p| vec![p[0], p[1], p[2], 9]),
+        ];
+        for (enc, bpp, px) in cases {
+            let img = decode::<Image>("c", &image(enc, 2, 2, 12, &padded(bpp, px)), 0)
+                .unwrap()
+                .1;
+            assert_eq!((img.width, img.height, &img.data), (2, 2, &bgr), "{enc}");
+        }
+        let grey = decode::<Image>("c", &image("mono8", 3, 2, 4, &[1, 2, 3, 0, 4, 5, 6]), 0)
+            .unwrap()
+            .1;
+        assert_eq!(
+            grey.data,
+            [1, 1, 1, 2, 2, 2, 3, 3, 3, 4, 4, 4, 5, 5, 5, 6, 6, 6]
+        );
+        for (enc, step, n) in [
+            ("yuv422", 4, 8),
+            ("16UC1", 4, 8),
+            ("rgb8", 5, 11),
+            ("rgb8", 6, 11),
+            ("mono8", 2, 3),
+        ] {
+            let e = decode::<Image>("c", &image(enc, 2, 2, step, &vec![0; n]), 0).unwrap_err();
+            assert!(
+                e.to_string()
+                    .contains(&format!("`{enc}` image of {n} bytes")),
+                "{e}"
+            );
+        }
+    }
+
+    #[test]
+    fn odometry_takes_its_frames_and_tf_reads_back() {
+        let e = Encoders::from_pose(1000.0, -500.0, 1.0);
+        let mut b = Vec::new();
+        encode_odometry(SystemTime::UNIX_EPOCH, "world", "robot", &e, &mut b);
+        assert_eq!(header_frame("o", &b).unwrap(), "world");
+        let (_, back) = decode::<Encoders>("o", &b, 0).unwrap();
+        assert!((back.x - 1000.0).abs() < 1e-3 && (back.theta - 1.0).abs() < 1e-6);
+        let t = Transform {
+            parent: "base".into(),
+            child: "laser".into(),
+            x: 0.1,
+            y: -0.2,
+            z: 0.3,
+            yaw: 0.5,
+        };
+        encode_tf(SystemTime::UNIX_EPOCH, &[t.clone(), t], &mut b);
+        let got = decode_tf("tf", &b).unwrap();
+        assert_eq!(got.len(), 2);
+        assert_eq!(
+            (got[0].parent.as_str(), got[0].child.as_str()),
+            ("base", "laser")
+        );
+        assert_eq!(got[0].translation, [0.1, -0.2, 0.3]);
+        assert!((got[1].rotation[2] - 0.25f64.sin()).abs() < 1e-12);
+        for n in 0..b.len() {
+            assert!(decode_tf("tf", &b[..n]).is_err());
+        }
     }
 }

@@ -10,6 +10,7 @@
 //! | Bayer RGGB, GBRG, GRBG, BGGR (8 bit) | [`bayer_to_bgr`] | libdc1394 `dc1394_bayer_decoding_8bit(.., DC1394_BAYER_METHOD_BILINEAR)` (borders black) |
 //! | RGB24 / BGR24 | [`rgb_to_bgr`], `copy_from_slice` | — |
 //! | GREY / MONO8 | [`grey_to_bgr`] | — |
+//! | any of those, BGRA32 / RGBA32, with row padding (ROS 2 `sensor_msgs/Image`'s `step`) | [`packed_to_bgr`] | — |
 //!
 //! Every function takes the source bytes, the size in pixels and the BGR
 //! destination (`w*h*3` bytes), and checks the lengths: a short source (a
@@ -438,11 +439,7 @@ pub fn yuv420_to_bgr(
 pub fn rgb_to_bgr(src: &[u8], w: u32, h: u32, dst: &mut Vec<u8>) -> Result<(), PixError> {
     let n = w as usize * h as usize;
     check("RGB24", src.len(), n * 3, w, h, dst)?;
-    for (s, d) in src[..n * 3].chunks_exact(3).zip(dst.chunks_exact_mut(3)) {
-        d[0] = s[2];
-        d[1] = s[1];
-        d[2] = s[0];
-    }
+    Packed8::Rgb.row(&src[..n * 3], dst);
     Ok(())
 }
 
@@ -458,10 +455,101 @@ pub fn bgr_to_bgr(src: &[u8], w: u32, h: u32, dst: &mut Vec<u8>) -> Result<(), P
 pub fn grey_to_bgr(src: &[u8], w: u32, h: u32, dst: &mut Vec<u8>) -> Result<(), PixError> {
     let n = w as usize * h as usize;
     check("GREY", src.len(), n, w, h, dst)?;
-    for (s, d) in src[..n].iter().zip(dst.chunks_exact_mut(3)) {
-        d[0] = *s;
-        d[1] = *s;
-        d[2] = *s;
+    Packed8::Grey.row(&src[..n], dst);
+    Ok(())
+}
+
+/// A packed layout of 8-bit channels, one pixel after another (ROS's `bgr8`,
+/// `rgb8`, `mono8`, `bgra8`, `rgba8`; gz-msgs' `*_INT8`; V4L2's RGB24, BGR24,
+/// GREY, ...).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Packed8 {
+    Bgr,
+    Rgb,
+    Grey,
+    Bgra,
+    Rgba,
+}
+
+impl Packed8 {
+    /// Bytes per pixel.
+    pub fn bytes(self) -> usize {
+        match self {
+            Packed8::Grey => 1,
+            Packed8::Bgr | Packed8::Rgb => 3,
+            Packed8::Bgra | Packed8::Rgba => 4,
+        }
+    }
+
+    fn name(self) -> &'static str {
+        match self {
+            Packed8::Bgr => "BGR24",
+            Packed8::Rgb => "RGB24",
+            Packed8::Grey => "GREY",
+            Packed8::Bgra => "BGRA32",
+            Packed8::Rgba => "RGBA32",
+        }
+    }
+
+    /// One row (or a whole unpadded image): `src` pixels into `dst` BGR pixels,
+    /// as many as both hold; alpha is dropped.
+    fn row(self, src: &[u8], dst: &mut [u8]) {
+        let d = dst.chunks_exact_mut(3);
+        match self {
+            Packed8::Bgr => {
+                let n = dst.len().min(src.len()) / 3 * 3;
+                dst[..n].copy_from_slice(&src[..n]);
+            }
+            Packed8::Grey => src.iter().zip(d).for_each(|(s, d)| d.fill(*s)),
+            Packed8::Rgb => (src.chunks_exact(3).zip(d)).for_each(|(s, d)| {
+                d.copy_from_slice(&[s[2], s[1], s[0]]);
+            }),
+            Packed8::Bgra => (src.chunks_exact(4).zip(d)).for_each(|(s, d)| {
+                d.copy_from_slice(&s[..3]);
+            }),
+            Packed8::Rgba => (src.chunks_exact(4).zip(d)).for_each(|(s, d)| {
+                d.copy_from_slice(&[s[2], s[1], s[0]]);
+            }),
+        }
+    }
+}
+
+/// Packed 8-bit pixels with rows `stride` bytes apart (row padding, as ROS's
+/// `step` and gz-msgs' `step` allow) → BGR, in one pass. The last row need not
+/// carry its padding. A `stride` shorter than a row is an error, and so is a
+/// source that ends before the last row does.
+pub fn packed_to_bgr(
+    src: &[u8],
+    w: u32,
+    h: u32,
+    stride: usize,
+    format: Packed8,
+    dst: &mut Vec<u8>,
+) -> Result<(), PixError> {
+    let row = w as usize * format.bytes();
+    if stride < row {
+        return Err(PixError::Size {
+            format: format.name(),
+            w,
+            h,
+            why: "the row stride is shorter than a row",
+        });
+    }
+    let need = match h {
+        0 => 0,
+        h => stride.saturating_mul(h as usize - 1).saturating_add(row),
+    };
+    check(format.name(), src.len(), need, w, h, dst)?;
+    if stride == row {
+        format.row(&src[..need], dst);
+        return Ok(());
+    }
+    let out = w as usize * 3;
+    if out == 0 {
+        return Ok(());
+    }
+    for (y, d) in dst.chunks_exact_mut(out).enumerate() {
+        format.row(&src[y * stride..y * stride + row], d);
     }
     Ok(())
 }
@@ -839,6 +927,57 @@ mod tests {
     fn noise(n: usize) -> Vec<u8> {
         let mut rng = fastrand::Rng::with_seed(0x9e37_79b9);
         std::iter::repeat_with(|| rng.u8(..)).take(n).collect()
+    }
+
+    /// Every packed layout, with and without row padding, gives the same BGR
+    /// pixels; a short source or a stride shorter than a row is an error.
+    #[test]
+    fn packed_layouts_with_row_padding_give_the_same_bgr() {
+        let (w, h) = (3u32, 2u32);
+        let bgr: Vec<[u8; 3]> = (0..6).map(|i| [10 * i, 10 * i + 1, 10 * i + 2]).collect();
+        let want: Vec<u8> = bgr.iter().flatten().copied().collect();
+        for f in [
+            Packed8::Bgr,
+            Packed8::Rgb,
+            Packed8::Bgra,
+            Packed8::Rgba,
+            Packed8::Grey,
+        ] {
+            let px = |p: &[u8; 3]| -> Vec<u8> {
+                match f {
+                    Packed8::Bgr => p.to_vec(),
+                    Packed8::Rgb => vec![p[2], p[1], p[0]],
+                    Packed8::Bgra => vec![p[0], p[1], p[2], 255],
+                    Packed8::Rgba => vec![p[2], p[1], p[0], 255],
+                    Packed8::Grey => vec![p[0]],
+                }
+            };
+            let want: Vec<u8> = match f {
+                Packed8::Grey => bgr.iter().flat_map(|p| [p[0]; 3]).collect(),
+                _ => want.clone(),
+            };
+            for pad in [0, 1, 5] {
+                let stride = w as usize * f.bytes() + pad;
+                let mut src = vec![];
+                for y in 0..h as usize {
+                    for x in 0..w as usize {
+                        src.extend(px(&bgr[y * w as usize + x]));
+                    }
+                    if y + 1 < h as usize {
+                        src.extend(vec![0xEE; pad]);
+                    }
+                }
+                let mut out = vec![];
+                packed_to_bgr(&src, w, h, stride, f, &mut out).unwrap();
+                assert_eq!(out, want, "{f:?} padded {pad}");
+                assert!(packed_to_bgr(&src[..src.len() - 1], w, h, stride, f, &mut out).is_err());
+            }
+            let short = w as usize * f.bytes() - 1;
+            assert!(packed_to_bgr(&[0; 64], w, h, short, f, &mut vec![]).is_err());
+        }
+        let mut none = vec![1];
+        assert!(packed_to_bgr(&[0; 28], 0, 5, 7, Packed8::Rgb, &mut none).is_ok());
+        assert!(none.is_empty());
     }
 
     /// The portable build and the dispatched (AVX2 where the CPU has it) agree.

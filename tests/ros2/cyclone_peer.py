@@ -20,6 +20,13 @@ in XCDR1 as rmw_cyclonedds does.
     cyclone_peer.py clock DOMAIN SECS    read /clock (rclcpp's ClockQoS) and /scan's stamps
     cyclone_peer.py stall DOMAIN SECS    stall reliable readers of /odom and /tf (never
                                          take, room for 1 sample) while sending /cmd_vel
+    cyclone_peer.py frames DOMAIN SECS   read the frame ids of /scan, /odom, /tf, /tf_static,
+                                         the camera and /imu
+    cyclone_peer.py images DOMAIN SECS   publish a 3x2 image in each 8-bit encoding, rows
+                                         padded, on rt/img/ENCODING
+    cyclone_peer.py mounted DOMAIN SECS  publish /tf_static base_link -> laser at (0.1 m, 0,
+                                         180 deg), a scan from +90 to -90 deg on /scan and
+                                         the same scan from -90 to +90 deg on /scan_fwd
 
 Prints one JSON line.
 """
@@ -399,6 +406,78 @@ def many(dp, secs):
     print(json.dumps({"readers": len(readers), "writers": len(writers), "matched_scan": matched}))
 
 
+def frames(dp, secs):
+    """Reads the frame ids of /scan, /odom, /tf, /tf_static, the camera and /imu
+    (rclcpp's QoS for each) until it has each, SECS at most."""
+    topics = [("scan", LaserScan, SENSOR), ("odom", Odometry, DEFAULT), ("tf", TFMessage, DEFAULT),
+              ("tf_static", TFMessage, STATIC), ("colorA/image_raw", Image, SENSOR), ("imu", Imu, SENSOR)]
+    readers = {n: DataReader(dp, Topic(dp, "rt/" + n, t, qos=q), qos=q) for n, t, q in topics}
+    got = {}
+    end = time.time() + secs
+    while time.time() < end and len(got) < len(readers):
+        for name, r in readers.items():
+            for m in r.take(N=10):
+                if name == "odom":
+                    got[name] = [m.header.frame_id, m.child_frame_id]
+                elif name.startswith("tf"):
+                    got[name] = [[t.header.frame_id, t.child_frame_id] for t in m.transforms]
+                else:
+                    got[name] = m.header.frame_id
+        time.sleep(0.02)
+    print(json.dumps(got))
+
+
+# The pixels of the `images` mode, 3x2, row by row, as (b, g, r).
+PIXELS = [(10 * i, 10 * i + 1, 10 * i + 2) for i in range(6)]
+# Each encoding's bytes of one (b, g, r) pixel (sensor_msgs/image_encodings.hpp).
+ENCODINGS = {"bgr8": lambda b, g, r: [b, g, r], "rgb8": lambda b, g, r: [r, g, b],
+             "mono8": lambda b, g, r: [b], "bgra8": lambda b, g, r: [b, g, r, 255],
+             "rgba8": lambda b, g, r: [r, g, b, 255]}
+
+
+def images(dp, secs):
+    """Publishes PIXELS in each 8-bit encoding on rt/img/ENCODING (camera drivers'
+    sensor QoS), every row padded with 2 bytes of 0xEE, as a driver whose rows
+    are aligned does (step = 3 pixels + 2)."""
+    writers = {e: DataWriter(dp, Topic(dp, "rt/img/" + e, Image, qos=SENSOR), qos=SENSOR) for e in ENCODINGS}
+    end = time.time() + secs
+    n = 0
+    while time.time() < end:
+        for enc, px in ENCODINGS.items():
+            rows = []
+            for y in range(2):
+                row = [v for p in PIXELS[y * 3:y * 3 + 3] for v in px(*p)]
+                rows += row + [0xEE, 0xEE]
+            step = len(rows) // 2
+            writers[enc].write(Image(Header(Time(int(time.time()), 0), "camera"), 2, 3, enc, 0, step, rows))
+        n += 1
+        time.sleep(0.05)
+    print(json.dumps({"sent": n, "pixels": PIXELS}))
+
+
+def mounted(dp, secs):
+    """A lidar that scans clockwise (angle_increment < 0), mounted backwards 10 cm
+    ahead of the robot's centre: /tf_static base_link -> laser at (0.1 m, 0 m),
+    yaw 180 deg (tf2's static broadcaster: reliable, transient local, sent once),
+    /scan from +90 to -90 deg, and on /scan_fwd the same readings from -90 to +90."""
+    tf = DataWriter(dp, Topic(dp, "rt/tf_static", TFMessage, qos=STATIC), qos=STATIC)
+    tf.write(TFMessage([TransformStamped(Header(Time(int(time.time()), 0), "base_link"), "laser",
+                                         Transform(Vector3(0.1, 0.0, 0.0), Quaternion(0.0, 0.0, 1.0, 0.0)))]))
+    rev = DataWriter(dp, Topic(dp, "rt/scan", LaserScan, qos=SENSOR), qos=SENSOR)
+    fwd = DataWriter(dp, Topic(dp, "rt/scan_fwd", LaserScan, qos=SENSOR), qos=SENSOR)
+    inc = math.pi / 180.0
+    ccw = [1.0 + i / 100.0 for i in range(181)]  # from -90 deg to +90 deg
+    end = time.time() + secs
+    n = 0
+    while time.time() < end:
+        h = Header(Time(int(time.time()), 0), "laser")
+        rev.write(LaserScan(h, math.pi / 2, -math.pi / 2, -inc, 0.0, 0.05, 0.1, 8.0, ccw[::-1], []))
+        fwd.write(LaserScan(h, -math.pi / 2, math.pi / 2, inc, 0.0, 0.05, 0.1, 8.0, ccw, []))
+        n += 1
+        time.sleep(0.05)
+    print(json.dumps({"sent": n}))
+
+
 def main():
     mode, domain, secs = sys.argv[1], int(sys.argv[2]), float(sys.argv[3])
     dp = DomainParticipant(domain)
@@ -406,7 +485,8 @@ def main():
         camera(dp, secs, sys.argv[4])
     else:
         {"listen": listen, "robot": robot, "bad": bad, "many": many, "clock": clock,
-         "stall": stall, "scans": scans}[mode](dp, secs)
+         "stall": stall, "scans": scans, "frames": frames, "images": images,
+         "mounted": mounted}[mode](dp, secs)
 
 
 if __name__ == "__main__":
