@@ -12,15 +12,13 @@
 
 use std::{
     alloc::{GlobalAlloc, Layout, System},
+    cell::Cell,
     collections::{BTreeMap, HashSet},
     io::Cursor,
     ops::ControlFlow,
     path::{Path, PathBuf},
     process::{Command, Stdio},
-    sync::{
-        Arc,
-        atomic::{AtomicUsize, Ordering},
-    },
+    sync::Arc,
     time::Instant,
 };
 
@@ -38,23 +36,45 @@ const BIN: &str = env!("CARGO_BIN_EXE_jderobot");
 const MAX_ALLOC: usize = 4 << 20;
 
 struct Counting;
-static LARGEST: AtomicUsize = AtomicUsize::new(0);
+thread_local! {
+    /// Whether this thread's allocations are measured ([`measure_allocations`]):
+    /// only a test's own thread, so another test of the binary that allocates a
+    /// large buffer at the same time (a recorder's frames, a child's output) is
+    /// not counted against this one.
+    static MEASURED: Cell<bool> = const { Cell::new(false) };
+    /// The largest allocation this thread asked for while measured.
+    static LARGEST: Cell<usize> = const { Cell::new(0) };
+}
+
+/// Notes an allocation of `size` bytes when this thread is measured.
+fn note(size: usize) {
+    let _ = MEASURED.try_with(|m| {
+        if m.get() {
+            let _ = LARGEST.try_with(|l| l.set(l.get().max(size)));
+        }
+    });
+}
+
+/// Measures this thread's allocations from now on (for [`assert_alloc_bound`]).
+fn measure_allocations() {
+    MEASURED.with(|m| m.set(true));
+}
 
 // SAFETY: forwards to the system allocator, only noting the sizes asked for.
 unsafe impl GlobalAlloc for Counting {
     unsafe fn alloc(&self, l: Layout) -> *mut u8 {
-        LARGEST.fetch_max(l.size(), Ordering::Relaxed);
+        note(l.size());
         unsafe { System.alloc(l) }
     }
     unsafe fn alloc_zeroed(&self, l: Layout) -> *mut u8 {
-        LARGEST.fetch_max(l.size(), Ordering::Relaxed);
+        note(l.size());
         unsafe { System.alloc_zeroed(l) }
     }
     unsafe fn dealloc(&self, p: *mut u8, l: Layout) {
         unsafe { System.dealloc(p, l) }
     }
     unsafe fn realloc(&self, p: *mut u8, l: Layout, new: usize) -> *mut u8 {
-        LARGEST.fetch_max(new, Ordering::Relaxed);
+        note(new);
         unsafe { System.realloc(p, l, new) }
     }
 }
@@ -63,7 +83,7 @@ unsafe impl GlobalAlloc for Counting {
 static ALLOC: Counting = Counting;
 
 fn assert_alloc_bound() {
-    let largest = LARGEST.load(Ordering::Relaxed);
+    let largest = LARGEST.with(Cell::get);
     assert!(
         largest <= MAX_ALLOC,
         "an allocation of {largest} bytes (the bound is {MAX_ALLOC})"
@@ -221,6 +241,7 @@ fn positions(len: usize) -> Vec<usize> {
 /// original's messages, a damaged one a subset of them.
 #[test]
 fn every_single_byte_flip_is_read_without_panic_or_huge_allocation() {
+    measure_allocations();
     let quiet = common::quiet_panics();
     let mut failures = Vec::new();
     let mut copies = 0;
@@ -346,6 +367,7 @@ fn info_on_damaged_sizes_neither_aborts_nor_panics() {
 /// the chunks after it.
 #[test]
 fn a_flipped_pixel_is_a_corrupt_chunk_and_the_replay_uses_the_rest() {
+    measure_allocations();
     let file = recording(None, 200);
     let (_, original) = replay_pass(&file).unwrap();
     // The first image's pixels, found as they are in the (uncompressed) file.
@@ -441,6 +463,7 @@ fn a_flipped_pixel_is_a_corrupt_chunk_and_the_replay_uses_the_rest() {
 /// say both.
 #[test]
 fn mid_file_corruption_is_not_cut_short_and_a_cut_file_is() {
+    measure_allocations();
     for (form, file) in forms(200) {
         let c = chunks(&file);
         let (at, end) = c[2];
@@ -586,6 +609,7 @@ fn a_device_or_a_directory_is_not_read() {
 /// message): no panic, the allocation bound held.
 #[test]
 fn fuzz_smoke_ten_thousand_structured_mutations() {
+    measure_allocations();
     let quiet = common::quiet_panics();
     let bases: Vec<Vec<u8>> = vec![
         recording_in(Some(mcap::Compression::Zstd), 24, 8),
