@@ -945,7 +945,9 @@ mod tests {
         // 2x2: red, green / blue, white; rows padded to 12 bytes.
         let rgb = [[255u8, 0, 0], [0, 255, 0], [0, 0, 255], [255, 255, 255]];
         let bgr: Vec<u8> = rgb.iter().flat_map(|p| [p[2], p[1], p[0]]).collect();
-        let padded = |bpp: usize, px: &dyn Fn([u8; 3]) -> Vec<u8>| -> Vec<u8> {
+        // One pixel's bytes in an encoding.
+        type Px = fn([u8; 3]) -> Vec<u8>;
+        let padded = |bpp: usize, px: Px| -> Vec<u8> {
             let mut d = vec![];
             for row in rgb.chunks(2) {
                 let mut r: Vec<u8> = row.iter().flat_map(|p| px(*p)).collect();
@@ -955,11 +957,11 @@ mod tests {
             assert!(bpp * 2 <= 12);
             d
         };
-        let cases: [(&str, usize, &dyn Fn([u8; 3]) -> Vec<u8>); 4] = [
-            ("bgr8", 3, &|p| vec![p[2], p[1], p[0]]),
-            ("rgb8", 3, &|p| p.to_vec()),
-            ("bgra8", 4, &|p| vec![p[2], p[1], p[0], 9]),
-            ("rgba8", 4, &|p| vec![p[0], p[1], p[2], 9]),
+        let cases: [(&str, usize, Px); 4] = [
+            ("bgr8", 3, |p| vec![p[2], p[1], p[0]]),
+            ("rgb8", 3, |p| p.to_vec()),
+            ("bgra8", 4, |p| vec![p[2], p[1], p[0], 9]),
+            ("rgba8", 4, |p| vec![p[0], p[1], p[2], 9]),
         ];
         for (enc, bpp, px) in cases {
             let img = decode::<Image>("c", &image(enc, 2, 2, 12, &padded(bpp, px)), 0)
