@@ -321,11 +321,11 @@ mod signals {
         }
     }
 
-    /// Suspends the process as `sig`'s default action would, then catches it again.
-    fn suspend(sig: c_int) {
+    /// Raises `sig` on this thread with its default action.
+    fn raise_default(sig: c_int) {
         // SAFETY: SIG_DFL for `sig`, unblocked on this thread, raised on this
-        // thread: the process stops before `raise` returns, and runs on after
-        // SIGCONT; then the handler is set back.
+        // thread: its default action happens before `raise` returns (a stop:
+        // the process runs on after SIGCONT).
         unsafe {
             set(sig, libc::SIG_DFL);
             let mut only: libc::sigset_t = std::mem::zeroed();
@@ -333,21 +333,19 @@ mod signals {
             libc::sigaddset(&mut only, sig);
             libc::pthread_sigmask(libc::SIG_UNBLOCK, &only, std::ptr::null_mut());
             libc::raise(sig);
-            set(sig, on_signal as extern "C" fn(c_int) as libc::sighandler_t);
         }
+    }
+
+    /// Suspends the process as `sig`'s default action would, then catches it again.
+    fn suspend(sig: c_int) {
+        raise_default(sig);
+        // SAFETY: the handler set back, as `install` set it.
+        unsafe { set(sig, on_signal as extern "C" fn(c_int) as libc::sighandler_t) };
     }
 
     /// Ends the process by `sig`'s default action.
     fn die_by(sig: c_int) {
-        // SAFETY: as in `suspend`; the default action of these ends the process.
-        unsafe {
-            set(sig, libc::SIG_DFL);
-            let mut only: libc::sigset_t = std::mem::zeroed();
-            libc::sigemptyset(&mut only);
-            libc::sigaddset(&mut only, sig);
-            libc::pthread_sigmask(libc::SIG_UNBLOCK, &only, std::ptr::null_mut());
-            libc::raise(sig);
-        }
+        raise_default(sig);
     }
 
     pub fn install(

@@ -461,28 +461,20 @@ fn motors_output(
     Ok((motors, w, topic))
 }
 
-fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>> {
-    let l: Lines = conf.read()?;
-    let range = dds::discovery_range(
-        l.discovery.as_deref(),
-        l.insecure,
-        "driver ros2",
-        "drive it",
-    )?;
-    if l.provides.is_empty() {
-        anyhow::bail!(
-            "driver ros2 has no `provides` line, and needs one: provides laser /scan, \
-             provides encoders /odom, provides motors /cmd_vel, ..."
-        );
-    }
-    let graph = Graph::join("driver ros2", range, l.domain, &l.namespace, &l.node)?;
-    let (ns, dp) = (graph.ns.clone(), &graph.dp);
-    let sub = dp
-        .create_subscriber(&reliable_qos(5))
-        .map_err(|e| anyhow::anyhow!("driver ros2: {e}"))?;
-    let publ = dp
-        .create_publisher(&reliable_qos(5))
-        .map_err(|e| anyhow::anyhow!("driver ros2: {e}"))?;
+/// What the `provides` lines make: the readers that feed the interfaces, the
+/// `/cmd_vel` writer, and the interfaces provided.
+type Provided = (Vec<Input>, Option<CmdVelOut>, Vec<Arc<dyn AnyInterface>>);
+
+/// Provides the interfaces of the `provides` lines ([`Provided`]).
+fn provide(
+    l: &Lines,
+    conf: &ComponentConf,
+    rt: &Runtime,
+    graph: &Graph,
+    sub: &rustdds::Subscriber,
+    publ: &rustdds::Publisher,
+) -> anyhow::Result<Provided> {
+    let (ns, dp) = (&graph.ns, &graph.dp);
     let mut inputs = vec![];
     let mut motors = None;
     let mut ifaces: Vec<Arc<dyn AnyInterface>> = vec![];
@@ -495,32 +487,32 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
             Some(Kind::Imu) => "imu".to_string(),
             _ => format!("{name}/image_raw"),
         };
-        let topic = ros_topic(&ns, topic.as_deref().unwrap_or(&default));
+        let topic = ros_topic(ns, topic.as_deref().unwrap_or(&default));
         match kind {
             Some(Kind::Laser) => {
                 let i = rt.interfaces.provide::<Laser>(name, &conf.name)?;
                 ifaces.push(i.clone());
-                inputs.push(input(dp, &sub, topic, false, i)?);
+                inputs.push(input(dp, sub, topic, false, i)?);
             }
             Some(Kind::Encoders) => {
                 let i = rt.interfaces.provide::<Encoders>(name, &conf.name)?;
                 ifaces.push(i.clone());
-                inputs.push(input(dp, &sub, topic, true, i)?);
+                inputs.push(input(dp, sub, topic, true, i)?);
             }
             Some(Kind::Imu) => {
                 let i = rt.interfaces.provide::<Imu>(name, &conf.name)?;
                 ifaces.push(i.clone());
-                inputs.push(input(dp, &sub, topic, false, i)?);
+                inputs.push(input(dp, sub, topic, false, i)?);
             }
             Some(Kind::Image) => {
                 let i = rt.interfaces.provide::<Image>(name, &conf.name)?;
                 ifaces.push(i.clone());
-                inputs.push(camera_input(dp, &sub, topic, i)?);
+                inputs.push(camera_input(dp, sub, topic, i)?);
             }
             Some(Kind::Motors) => {
                 let i = rt.interfaces.provide::<Motors>(name, &conf.name)?;
                 ifaces.push(i.clone());
-                motors = Some(motors_output(dp, &publ, topic, i)?);
+                motors = Some(motors_output(dp, publ, topic, i)?);
             }
             Some(
                 Kind::Sonars
@@ -536,6 +528,32 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
             ),
         }
     }
+    Ok((inputs, motors, ifaces))
+}
+
+fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>> {
+    let l: Lines = conf.read()?;
+    let range = dds::discovery_range(
+        l.discovery.as_deref(),
+        l.insecure,
+        "driver ros2",
+        "drive it",
+    )?;
+    if l.provides.is_empty() {
+        anyhow::bail!(
+            "driver ros2 has no `provides` line, and needs one: provides laser /scan, \
+             provides encoders /odom, provides motors /cmd_vel, ..."
+        );
+    }
+    let graph = Graph::join("driver ros2", range, l.domain, &l.namespace, &l.node)?;
+    let dp = &graph.dp;
+    let sub = dp
+        .create_subscriber(&reliable_qos(5))
+        .map_err(|e| anyhow::anyhow!("driver ros2: {e}"))?;
+    let publ = dp
+        .create_publisher(&reliable_qos(5))
+        .map_err(|e| anyhow::anyhow!("driver ros2: {e}"))?;
+    let (mut inputs, motors, ifaces) = provide(&l, conf, rt, &graph, &sub, &publ)?;
     // The laser's mount from the robot's static transforms, when it has a laser.
     let mut statics = if inputs.iter().any(|i| i.dds_type == ros2_type::<Laser>()) {
         Some(statics_input(dp, &sub)?)
