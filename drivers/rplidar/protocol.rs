@@ -308,9 +308,7 @@ impl Revolution {
             self.stats.span = self.stats.span.max(nd.angle - self.first_angle);
         }
         self.last_angle = nd.angle;
-        if self.began.is_none() {
-            return None;
-        }
+        self.began?;
         self.stats.nodes += 1;
         if nd.distance > 0.0 && nd.quality == 0 {
             self.stats.no_quality += 1;
