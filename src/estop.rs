@@ -15,16 +15,17 @@
 //! | what happens | what is done |
 //! |---|---|
 //! | SIGINT, SIGTERM, SIGHUP | [`halt`], then the caller's `quit` (shut down, exit 128+signal) on a thread of its own; a second one exits at once. SIGINT first asks `interrupt` (a shell command waiting): if it takes it, nothing else |
-//! | SIGTSTP (Ctrl+Z), SIGTTIN, SIGTTOU | [`stop_all`], then the process suspends as by default; after SIGCONT it runs on (the drivers send what their controllers command again) |
+//! | SIGTSTP (Ctrl+Z), SIGTTIN, SIGTTOU | [`stop_all`], then the process suspends as by default; after SIGCONT it runs on (the drivers send what their controllers command again). The thread the signal came to waits in its handler until then, as the default action would have it (rustyline sends itself SIGTSTP on Ctrl+Z and puts the terminal back in raw mode when that returns) |
 //! | SIGQUIT, SIGALRM | [`halt`], then the default action (the process ends; SIGQUIT dumps core) |
 //! | SIGABRT (`abort`, a failed allocation, a stack overflow, a panic while panicking) | [`halt`] before the process dies (the aborting thread waits for it, at most [`FATAL_WAIT`]) |
 //! | a panic on any thread | [`stop_all`] before the panic is reported (the panicking thread waits, at most [`FATAL_WAIT`]); a panic on the `main` thread ends the process: [`halt`] |
 //!
 //! A signal disposition the process inherited as ignored (`nohup`, a background
 //! job's SIGINT) is left ignored. The signal handlers only write the signal's
-//! number to a pipe (async-signal-safe); the stops run on the thread `estop`
-//! that reads it, and the waits above are bounded, so a stop that hangs cannot
-//! keep the process from ending. What no process can catch (SIGKILL, SIGSTOP,
+//! number to a pipe (async-signal-safe), and wait where the table says so; the
+//! stops run on the thread `estop` that reads it, and the waits are bounded (but
+//! for a suspension's own length), so a stop that hangs cannot keep the process
+//! from ending. What no process can catch (SIGKILL, SIGSTOP,
 //! power loss, `_exit` from a foreign library) sends nothing: see
 //! docs/serial-robots.md for what the robot itself offers.
 
@@ -176,15 +177,19 @@ mod signals {
     use libc::c_int;
     use std::sync::{
         Arc,
-        atomic::{AtomicBool, AtomicI32, Ordering},
+        atomic::{AtomicBool, AtomicI32, AtomicU64, Ordering},
     };
 
     /// The pipe the handlers write to (write end, non-blocking) and the thread
     /// reads (read end, blocking).
     static WAKE_W: AtomicI32 = AtomicI32::new(-1);
-    /// SIGABRT's handler waits on this pipe for the thread's answer.
+    /// The handlers of SIGABRT and the stop signals wait on this pipe (a wake-up
+    /// only) until the thread counts their request done in `DONE`.
     static ACK_R: AtomicI32 = AtomicI32::new(-1);
     static ACK_W: AtomicI32 = AtomicI32::new(-1);
+    static DONE: AtomicU64 = AtomicU64::new(0);
+    /// The thread is suspending the process, or is suspended: keep waiting.
+    static SUSPENDING: AtomicBool = AtomicBool::new(false);
     static RUNNING: AtomicBool = AtomicBool::new(false);
 
     const QUIT: &[c_int] = &[libc::SIGINT, libc::SIGTERM, libc::SIGHUP];
@@ -222,22 +227,20 @@ mod signals {
     }
 
     extern "C" fn on_signal(sig: c_int) {
-        // SAFETY: only async-signal-safe calls (write, poll, read) and errno saved
-        // and restored around them.
+        // SAFETY: only async-signal-safe calls (write, poll, read, sigaction,
+        // raise) and atomics; errno saved and restored around them.
         unsafe {
             let errno = *libc::__errno_location();
+            let before = DONE.load(Ordering::Acquire);
             wake(sig as u8);
+            if sig == libc::SIGABRT || SUSPEND.contains(&sig) {
+                // SIGABRT: the process dies when this returns. A stop signal: the
+                // thread that sent it (rustyline's Ctrl+Z sends SIGTSTP to its own
+                // process and then puts the terminal back in raw mode) must go on
+                // only after the suspension, as with the default action.
+                wait_done(before);
+            }
             if sig == libc::SIGABRT {
-                // The process dies when this returns: wait for the stops.
-                let mut p = libc::pollfd {
-                    fd: ACK_R.load(Ordering::Acquire),
-                    events: libc::POLLIN,
-                    revents: 0,
-                };
-                if libc::poll(&mut p, 1, super::FATAL_WAIT.as_millis() as c_int) > 0 {
-                    let mut b = 0u8;
-                    libc::read(p.fd, (&mut b as *mut u8).cast(), 1);
-                }
                 // Pending (blocked in its own handler) until this returns, then
                 // the default action: the process ends even when SIGABRT came
                 // from kill, not from abort().
@@ -245,6 +248,57 @@ mod signals {
                 libc::raise(sig);
             }
             *libc::__errno_location() = errno;
+        }
+    }
+
+    /// Waits until the thread has done more than `before` requests: at most
+    /// [`super::FATAL_WAIT`] for it to start, and then as long as it is
+    /// suspending the process. (Async-signal-safe: poll, read, atomics.)
+    fn wait_done(before: u64) {
+        let fd = ACK_R.load(Ordering::Acquire);
+        let mut idle_ms = 0;
+        while DONE.load(Ordering::Acquire) <= before {
+            let mut p = libc::pollfd {
+                fd,
+                events: libc::POLLIN,
+                revents: 0,
+            };
+            // SAFETY: polls and drains a pipe we own, into a live local.
+            unsafe {
+                if libc::poll(&mut p, 1, 50) > 0 {
+                    let mut b = [0u8; 16];
+                    libc::read(fd, b.as_mut_ptr().cast(), b.len());
+                }
+            }
+            if SUSPENDING.load(Ordering::Acquire) {
+                idle_ms = 0;
+            } else {
+                idle_ms += 50;
+                if idle_ms as u128 >= super::FATAL_WAIT.as_millis() {
+                    return;
+                }
+            }
+        }
+    }
+
+    /// Counts a request done and wakes the handlers waiting for it.
+    fn done() {
+        DONE.fetch_add(1, Ordering::AcqRel);
+        let b = 1u8;
+        // SAFETY: one byte from a live local to the non-blocking ack pipe.
+        unsafe { libc::write(ACK_W.load(Ordering::Acquire), (&b as *const u8).cast(), 1) };
+    }
+
+    /// Blocks (`how` SIG_BLOCK) or unblocks the stop signals on this thread.
+    fn mask_suspend(how: c_int) {
+        // SAFETY: a signal set built and used locally.
+        unsafe {
+            let mut set: libc::sigset_t = std::mem::zeroed();
+            libc::sigemptyset(&mut set);
+            for &s in SUSPEND {
+                libc::sigaddset(&mut set, s);
+            }
+            libc::pthread_sigmask(how, &set, std::ptr::null_mut());
         }
     }
 
@@ -321,11 +375,27 @@ mod signals {
         }
     }
 
-    /// Raises `sig` on this thread with its default action.
-    fn raise_default(sig: c_int) {
+    /// Suspends the process as `sig`'s default action would, then catches it
+    /// again. The stop signals are blocked on this thread but here (so that no
+    /// handler waits on the thread that must do the suspending).
+    fn suspend(sig: c_int) {
+        SUSPENDING.store(true, Ordering::Release);
         // SAFETY: SIG_DFL for `sig`, unblocked on this thread, raised on this
-        // thread: its default action happens before `raise` returns (a stop:
-        // the process runs on after SIGCONT).
+        // thread: the process stops before `raise` returns, and runs on after
+        // SIGCONT; then the handler is set back.
+        unsafe {
+            set(sig, libc::SIG_DFL);
+            mask_suspend(libc::SIG_UNBLOCK);
+            libc::raise(sig);
+            mask_suspend(libc::SIG_BLOCK);
+            set(sig, on_signal as extern "C" fn(c_int) as libc::sighandler_t);
+        }
+        SUSPENDING.store(false, Ordering::Release);
+    }
+
+    /// Ends the process by `sig`'s default action.
+    fn die_by(sig: c_int) {
+        // SAFETY: as in `suspend`; the default action of these ends the process.
         unsafe {
             set(sig, libc::SIG_DFL);
             let mut only: libc::sigset_t = std::mem::zeroed();
@@ -334,18 +404,6 @@ mod signals {
             libc::pthread_sigmask(libc::SIG_UNBLOCK, &only, std::ptr::null_mut());
             libc::raise(sig);
         }
-    }
-
-    /// Suspends the process as `sig`'s default action would, then catches it again.
-    fn suspend(sig: c_int) {
-        raise_default(sig);
-        // SAFETY: the handler set back, as `install` set it.
-        unsafe { set(sig, on_signal as extern "C" fn(c_int) as libc::sighandler_t) };
-    }
-
-    /// Ends the process by `sig`'s default action.
-    fn die_by(sig: c_int) {
-        raise_default(sig);
     }
 
     pub fn install(
@@ -377,6 +435,7 @@ mod signals {
         interrupt: Box<dyn Fn() -> bool + Send>,
         quit: Arc<dyn Fn(i32) + Send + Sync>,
     ) {
+        mask_suspend(libc::SIG_BLOCK);
         let mut quitting = false;
         let mut queued: Vec<u8> = Vec::new();
         loop {
@@ -418,6 +477,7 @@ mod signals {
                 _ if SUSPEND.contains(&sig) => {
                     stop_all(&name(sig));
                     suspend(sig);
+                    done();
                     tracing::info!("continued after {}", name(sig));
                     // The requests that came before the suspension: a stop signal
                     // repeated (a background read retried) is passed over.
@@ -429,12 +489,7 @@ mod signals {
                 }
                 _ if sig == libc::SIGABRT => {
                     halt("SIGABRT (the process aborts)");
-                    let b = 1u8;
-                    // SAFETY: one byte to the ack pipe, which the aborting
-                    // thread's handler polls.
-                    unsafe {
-                        libc::write(ACK_W.load(Ordering::Acquire), (&b as *const u8).cast(), 1)
-                    };
+                    done();
                 }
                 _ if FATAL.contains(&sig) => {
                     halt(&name(sig));

@@ -139,6 +139,27 @@ fn schema_output_does_not_garble_the_line_being_typed() {
     p.exp_eof().unwrap();
 }
 
+/// Ctrl+Z at the prompt: rustyline sends the process SIGTSTP, whose handler
+/// (src/estop.rs) runs every actuator's stop and suspends the process. Here the
+/// child leads a session of its own (an orphaned process group), where the
+/// kernel ignores a stop signal's default action, so it runs on: the shell must
+/// answer after it as before (the handler waits for the suspension, not forever).
+#[test]
+fn ctrl_z_at_the_prompt_leaves_the_shell_working() {
+    let dir = tempfile::tempdir().unwrap();
+    let conf = write_conf(
+        dir.path(),
+        "driver simulator\nprovides encoders\nend_driver\nload_driver simulator\n",
+    );
+    let mut p = spawn(&conf, dir.path());
+    p.exp_string("jdeC $> ").unwrap();
+    p.send_control('z').unwrap();
+    p.send_line("echo encoders").unwrap();
+    p.exp_string("encoders clock=").unwrap();
+    p.send_line("quit").unwrap();
+    p.exp_eof().unwrap();
+}
+
 #[test]
 fn ctrl_c_stops_a_waiting_echo_not_the_program() {
     let dir = tempfile::tempdir().unwrap();
