@@ -6,7 +6,12 @@
 //! in `jderobot check`), a traceback with the program's lines, a program stuck in
 //! `while True: pass` (or in `time.sleep`) stopped within 100 ms with its motors
 //! zeroed, other schemas unaffected, reload on save, a print flood, venvs, a
-//! missing interface, the shell's `run`/`stop`/`reload`, and the panel.
+//! missing interface, the shell's `run`/`stop`/`reload`, and the panel. Then issue
+//! 51's Academy semantics, on the simulator in real time: programs in the
+//! patterns students write (a cleaner timed with `time.sleep`, a busy-loop
+//! back-up, an Academy 5 cleaner paced by `Frequency.tick`, `setV` + `sleep`), the
+//! clamp of a speed past the limit, a call that is not here, the Academy 5 API's
+//! conventions, its stop, and the silence limit.
 #![cfg(all(feature = "python", feature = "simulator"))]
 
 use crate::common;
@@ -316,16 +321,21 @@ fn an_exception_prints_the_programs_traceback_stops_it_zeroes_its_motors_only() 
 /// Stops a program stuck in `body` and returns how long the stop took to zero
 /// the motors and end the Python code.
 fn stop_stuck(body: &str) -> Duration {
-    let dir = tempfile::tempdir().unwrap();
-    let (rt, _) = with_other_schema(
-        dir.path(),
+    stop_stuck_program(
         &format!("from HAL import HAL\nimport time\nHAL.setV(0.3)\nwhile True:\n{body}\n"),
-        "",
-    );
+        "loop",
+    )
+}
+
+/// Stops `program` (which sets v = 0.3 m/s and gets stuck) once its phase is
+/// `phase`; returns how long the stop took.
+fn stop_stuck_program(program: &str, phase: &str) -> Duration {
+    let dir = tempfile::tempdir().unwrap();
+    let (rt, _) = with_other_schema(dir.path(), program, "");
     rt.run("python").unwrap();
     let s = shared(&rt, "python");
     eventually("the program is stuck in its loop", || {
-        s.in_python.load(std::sync::atomic::Ordering::Acquire) && *s.phase.lock() == "loop"
+        s.in_python.load(std::sync::atomic::Ordering::Acquire) && *s.phase.lock() == phase
     });
     std::thread::sleep(Duration::from_millis(200));
     assert_eq!(
@@ -342,7 +352,7 @@ fn stop_stuck(body: &str) -> Duration {
     assert_eq!(state(&rt, "myschema"), State::Winner);
     // And it runs again from the start.
     rt.run("python").unwrap();
-    eventually("it runs again", || *s.phase.lock() == "loop");
+    eventually("it runs again", || *s.phase.lock() == phase);
     rt.shutdown();
     took
 }
@@ -451,12 +461,13 @@ fn the_api_gives_the_academys_units() {
          l = HAL.getLaserData()\nprint('laser', len(l.values), round(l.minAngle, 4), round(l.maxAngle, 4), l.minRange, l.maxRange)\n\
          print('ahead', round(l.values[90], 2))\nb = HAL.getBumperData()\nprint('bumper', b.state, b.bumper)\n\
          img = HAL.getImage()\nprint('image', img.shape, img.dtype, img.flags.writeable)\n\
-         HAL.setV(0.25)\nHAL.setW(math.pi / 4)\n",
+         HAL.setV(0.25)\nHAL.setW(math.pi / 4)\nprint('set')\nimport time\ntime.sleep(60)\n",
         "",
     );
     rt.run("python").unwrap();
     let s = shared(&rt, "python");
-    eventually("it ran", || *s.phase.lock() == "finished");
+    // The command holds while the program lives (here: sleeps).
+    eventually("it ran", || console(&s).contains("set"));
     let text = console(&s);
     // Robot at (1000, 1000) mm heading 90°: yaw π/2; straight ahead the laser (at
     // 19 mm in front of the centre) sees the green box's side at y = 3249 mm, in m;
@@ -671,5 +682,397 @@ fn the_same_program_drives_a_player_stage_robot() {
             .iter()
             .any(|(v, _, _)| (*v - 0.4).abs() < 1e-6)
     );
+    rt.shutdown();
+}
+
+// ------------------------------------------------ the Academy's semantics (issue 51)
+
+/// A runtime with the simulator in real time (its default clock, as the
+/// Academy's Gazebo runs) and the python schema on `program`, for the programs
+/// that time themselves with `time.sleep`, `time.time` or `Frequency.tick`.
+fn realtime(program: &Path, pose: (i32, i32, i32)) -> Arc<Runtime> {
+    start_conf(&format!(
+        "driver simulator\nworld {}\nrobot robot1 {} {} {}\nprovides encoders\nprovides motors\n\
+         provides laser 180 1\nprovides bumpers\nseed 1\nend_driver\n\
+         schema python\nfile {}\ncycle 20\ncamera none\nend_schema\n\
+         load_driver simulator\nload_schema python\n",
+        common::world_path("simple.world"),
+        pose.0,
+        pose.1,
+        pose.2,
+        program.display()
+    ))
+}
+
+/// The simulator's own record of a real-time run: every 10 ms its pose (mm,
+/// rad) and whether a bumper touches.
+fn record(rt: &Runtime, secs: f64) -> Vec<(Encoders, bool)> {
+    let enc = rt.interfaces.get::<Encoders>("encoders").unwrap();
+    let bumpers = rt.interfaces.get::<Bumpers>("bumpers").unwrap();
+    let t = Instant::now();
+    let mut track = Vec::new();
+    while t.elapsed().as_secs_f64() < secs {
+        let touching = bumpers.read().value.bumpers.iter().any(|&b| b != 0);
+        track.push((enc.read().value, touching));
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    track
+}
+
+fn angle_between(a: f32, b: f32) -> f32 {
+    let d = a - b;
+    d.sin().atan2(d.cos()).abs().to_degrees()
+}
+
+/// Judges a bump-and-go run on the simulator's record: it bumps at least
+/// twice; after each bump it backs away (at least 0.1 m from where it touched,
+/// within 2 s) and, by the next bump, has turned at least 45°. When the command
+/// did not hold through a `time.sleep` or a slow pass (the motors' 500 ms
+/// timeout), it backed up 0.04 m and turned about 14°. Returns the bumps.
+fn judge_bump_and_go(track: &[(Encoders, bool)], text: &str) -> usize {
+    let starts: Vec<usize> = (1..track.len())
+        .filter(|&i| track[i].1 && !track[i - 1].1)
+        .collect();
+    assert!(
+        starts.len() >= 2,
+        "it bumped {} times; console:\n{text}",
+        starts.len()
+    );
+    for (k, &i) in starts.iter().enumerate() {
+        let at = &track[i].0;
+        let window = &track[i..track.len().min(i + 200)];
+        if window.len() < 200 {
+            break;
+        }
+        let away = window
+            .iter()
+            .map(|(p, _)| (p.x - at.x).hypot(p.y - at.y))
+            .fold(0.0f32, f32::max);
+        assert!(
+            away >= 100.0,
+            "after bump {k} at ({:.0}, {:.0}) it moved only {away:.0} mm away; console:\n{text}",
+            at.x,
+            at.y
+        );
+        if let Some(&j) = starts.get(k + 1) {
+            let turned = angle_between(track[j].0.theta, at.theta);
+            assert!(
+                turned >= 45.0,
+                "between bumps {k} and {} it turned {turned:.0}°; console:\n{text}",
+                k + 1
+            );
+        }
+    }
+    starts.len()
+}
+
+#[test]
+fn a_cleaner_timed_with_time_sleep_backs_up_and_turns_away() {
+    // The 4.x shape, as students write it: the turns are timed with time.sleep
+    // inside the loop's pass.
+    let dir = tempfile::tempdir().unwrap();
+    let prog = write_program(
+        dir.path(),
+        "sleepy_cleaner.py",
+        "from HAL import HAL\nfrom GUI import GUI\nimport random\nimport time\n\n\
+         random.seed(7)\nprint('cleaner: go')\n\n\
+         while True:\n    bump = HAL.getBumperData()\n    if bump.state == 1:\n        \
+         print('bump', bump.bumper)\n        HAL.setW(0)\n        HAL.setV(-0.25)\n        \
+         time.sleep(1)\n        HAL.setV(0)\n        if bump.bumper == 0:\n            \
+         HAL.setW(-0.8)\n        elif bump.bumper == 2:\n            HAL.setW(0.8)\n        \
+         else:\n            HAL.setW(random.choice([-0.8, 0.8]))\n        \
+         time.sleep(random.uniform(1.5, 3.0))\n        HAL.setW(0)\n    else:\n        \
+         HAL.setV(0.4)\n        HAL.setW(0)\n",
+    );
+    let rt = realtime(&prog, (1000, 1000, 90));
+    rt.run("python").unwrap();
+    let track = record(&rt, 32.0);
+    let text = console(&shared(&rt, "python"));
+    assert_eq!(state(&rt, "python"), State::Winner, "console:\n{text}");
+    let bumps = judge_bump_and_go(&track, &text);
+    assert!(text.contains("bump"), "{text}");
+    eprintln!("sleepy cleaner: {bumps} bumps in 32 s");
+    rt.shutdown();
+}
+
+#[test]
+fn a_busy_loop_back_up_backs_up() {
+    // `while time.time() - t < 2: HAL.setV(-0.5)`: each call reaches the motors
+    // (before, the command waited for the end of the pass and the robot never
+    // moved back). The program then ends: the motors stop.
+    let dir = tempfile::tempdir().unwrap();
+    let prog = write_program(
+        dir.path(),
+        "backup.py",
+        "from HAL import HAL\nimport time\n\nprint('backing up')\nt = time.time()\n\
+         while time.time() - t < 2:\n    HAL.setV(-0.5)\nHAL.setV(0)\nprint('done')\n",
+    );
+    let rt = realtime(&prog, (2000, 2500, 0));
+    let enc = rt.interfaces.get::<Encoders>("encoders").unwrap();
+    let x0 = enc.read().value.x;
+    rt.run("python").unwrap();
+    let track = record(&rt, 5.0);
+    let text = console(&shared(&rt, "python"));
+    let back = x0 - track.iter().map(|(p, _)| p.x).fold(f32::MAX, f32::min);
+    // 2 s at up to 0.5 m/s (0.3 m/s² to get there): 0.58 m, then 0.42 m to a stop.
+    assert!(
+        (800.0..1200.0).contains(&back),
+        "it backed up {back:.0} mm; console:\n{text}"
+    );
+    assert!(text.contains("done"), "{text}");
+    assert_eq!(motors(&rt), Motors::default(), "the ended program's motors");
+    eprintln!("busy back-up: {back:.0} mm");
+    rt.shutdown();
+}
+
+#[test]
+fn a_cleaner_in_the_academy_5_shape_runs_its_own_loop() {
+    // import HAL, WebGUI, Frequency; module functions; the student's own
+    // `while True:` paced by Frequency.tick(); the state machine timed by
+    // time.time(); the Academy 5's bumper sides (0 right, 2 left).
+    let dir = tempfile::tempdir().unwrap();
+    let prog = write_program(
+        dir.path(),
+        "cleaner5.py",
+        "import HAL\nimport WebGUI\nimport Frequency\nimport random\nimport time\n\n\
+         random.seed(5)\nstate = 'forward'\nuntil = 0\nprint('cleaner 5: go')\n\n\
+         while True:\n    now = time.time()\n    if state == 'forward':\n        \
+         HAL.setV(0.4)\n        HAL.setW(0)\n        bump = HAL.getBumperData()\n        \
+         if bump.state == 1:\n            side = bump.bumper\n            print('bump', side)\n            \
+         state, until = 'back', now + 1.0\n    elif state == 'back':\n        HAL.setV(-0.25)\n        \
+         HAL.setW(0)\n        if now > until:\n            state, until = 'turn', now + random.uniform(1.5, 3.0)\n            \
+         turn = 0.8 if side == 0 else -0.8 if side == 2 else random.choice([-0.8, 0.8])\n    \
+         elif state == 'turn':\n        HAL.setV(0)\n        HAL.setW(turn)\n        \
+         if now > until:\n            state = 'forward'\n    Frequency.tick()\n",
+    );
+    let rt = realtime(&prog, (1000, 1000, 90));
+    rt.run("python").unwrap();
+    let s = shared(&rt, "python");
+    let t = Instant::now();
+    let track = record(&rt, 32.0);
+    let ticks = s.ticks.load(std::sync::atomic::Ordering::Acquire);
+    let secs = t.elapsed().as_secs_f64();
+    let text = console(&s);
+    assert_eq!(state(&rt, "python"), State::Winner, "console:\n{text}");
+    assert_eq!(*s.phase.lock(), "running");
+    let bumps = judge_bump_and_go(&track, &text);
+    // Frequency.tick() paces it at the Academy's 50 Hz (loosely: a slow machine).
+    let rate = ticks as f64 / secs;
+    assert!(
+        (20.0..=51.0).contains(&rate),
+        "{ticks} ticks in {secs:.1} s"
+    );
+    eprintln!("Academy 5 cleaner: {bumps} bumps, {rate:.1} ticks/s");
+    rt.shutdown();
+}
+
+#[test]
+fn set_v_then_sleep_drives_two_metres() {
+    // The Academy's semantics: setV reaches the motors when called and holds
+    // through time.sleep (the simulator's motors_timeout is 500 ms; before, the
+    // robot moved 0.075 m). The program then ends and the motors stop.
+    let dir = tempfile::tempdir().unwrap();
+    let prog = write_program(
+        dir.path(),
+        "straight.py",
+        "import HAL\nimport time\n\nt0 = time.time()\nHAL.setV(0.5)\nt1 = time.time()\n\
+         print('set', repr(t0), repr(t1))\ntime.sleep(4)\nprint('slept')\n",
+    );
+    let rt = realtime(&prog, (500, 2500, 0));
+    let m = rt.interfaces.get::<Motors>("motors").unwrap();
+    let enc = rt.interfaces.get::<Encoders>("encoders").unwrap();
+    let x0 = enc.read().value.x;
+    rt.run("python").unwrap();
+    // The first command of 500 mm/s, as the motors got it.
+    let mut first = None;
+    assert!(poll_until(10, || {
+        let s = m.read();
+        if s.value.v == 500.0 {
+            first = Some(s.time);
+        }
+        first.is_some()
+    }));
+    let s = shared(&rt, "python");
+    eventually("it ends", || *s.phase.lock() == "finished");
+    std::thread::sleep(Duration::from_millis(2500)); // it coasts to a stop
+    let x1 = enc.read().value.x;
+    let text = console(&s);
+    // 4 s at 0.5 m/s, reached at 0.3 m/s² (1.58 m), then 0.42 m to a stop: 2 m.
+    let moved = x1 - x0;
+    assert!(
+        (1800.0..2200.0).contains(&moved),
+        "it moved {moved:.0} mm; console:\n{text}"
+    );
+    // The command reached the motors inside the call.
+    let line = text.lines().find(|l| l.starts_with("set ")).expect(&text);
+    let t: Vec<f64> = line[4..].split(' ').map(|x| x.parse().unwrap()).collect();
+    let at = first
+        .unwrap()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .as_secs_f64();
+    assert!(
+        t[0] <= at && at <= t[1],
+        "the command reached the motors at {at}, the call ran {} .. {}",
+        t[0],
+        t[1]
+    );
+    assert!(text.contains("-- the program has ended; the motors are stopped"));
+    assert_eq!(motors(&rt), Motors::default());
+    eprintln!("setV(0.5) + sleep(4): {moved:.0} mm");
+    rt.shutdown();
+}
+
+#[test]
+fn a_speed_past_the_limit_is_clamped_and_said_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let (rt, _) = with_other_schema(
+        dir.path(),
+        "import HAL\nimport Frequency\nfor i in range(20):\n    HAL.setV(1e6)\n    HAL.setW(-100)\n    \
+         Frequency.tick()\nprint('driving')\nwhile True:\n    Frequency.tick()\n",
+        "",
+    );
+    rt.run("python").unwrap();
+    let s = shared(&rt, "python");
+    eventually("it drives", || console(&s).contains("driving"));
+    let text = console(&s);
+    let said: Vec<&str> = text.lines().filter(|l| l.contains("clamped")).collect();
+    assert_eq!(said.len(), 2, "{text}");
+    assert!(
+        said[0].starts_with("-- HAL.setV(1000000): past the motors' limit, 10.0000 m/s"),
+        "{text}"
+    );
+    assert!(said[1].starts_with("-- HAL.setW(-100): past the motors' limit, 62.8319 rad/s"));
+    // Clamped, never dropped: the motors have the limits (the simulator drives
+    // its robot at its own maxima, 1 m/s and 180°/s).
+    let m = motors(&rt);
+    assert_eq!((m.v, m.w), (10_000.0, -3_600.0));
+    let enc = rt.interfaces.get::<Encoders>("encoders").unwrap();
+    let c = enc.clock();
+    eventually("the robot moves", || {
+        let p = enc.read().value;
+        enc.clock() > c + 10 && (p.x - 1000.0).hypot(p.y - 1000.0) > 10.0
+    });
+    assert_eq!(state(&rt, "python"), State::Winner);
+    rt.shutdown();
+}
+
+#[test]
+fn a_call_that_is_not_here_names_itself() {
+    for (program, want) in [
+        (
+            "import HAL\nimport Frequency\nwhile True:\n    d = HAL.getFrontalLaserData()\n    Frequency.tick()\n",
+            "4: AttributeError: HAL.getFrontalLaserData is not here: jderobot's HAL has setV, setW, \
+             getPose3d, getLaserData, getBumperData, getImage, getSimTime",
+        ),
+        (
+            "from HAL import HAL\nfrom GUI import GUI\n\nimg = HAL.getLeftImage()\n",
+            "4: AttributeError: HAL.getLeftImage is not here",
+        ),
+        (
+            "import HAL\nimport WebGUI\n\n\ntarget = WebGUI.map.getNextTarget()\n",
+            "5: AttributeError: WebGUI.map is not here: jderobot's WebGUI has showImage",
+        ),
+        (
+            "from GUI import GUI\nGUI.showForces(1, 2, 3)\n",
+            "2: AttributeError: GUI.showForces is not here",
+        ),
+    ] {
+        let dir = tempfile::tempdir().unwrap();
+        let (rt, prog) = with_other_schema(dir.path(), program, "");
+        rt.run("python").unwrap();
+        eventually("the program fails", || state(&rt, "python") == State::Slept);
+        let err = rt.schema_status("python").unwrap().last_error.unwrap();
+        let want = format!("{}:{want}", prog.display());
+        assert!(err.contains(&want), "wanted `{want}` in `{err}`");
+        assert_eq!(motors(&rt), Motors::default());
+        rt.shutdown();
+    }
+}
+
+#[test]
+fn the_academy_5_api_gives_its_own_conventions() {
+    let dir = tempfile::tempdir().unwrap();
+    let (rt, _) = with_other_schema(
+        dir.path(),
+        "import HAL\nimport GUI\nimport numpy\n\
+         l = HAL.getLaserData()\nprint('laser', len(l), round(l[90], 2), l.values is l, \
+         round(l.minAngle, 4), round(l.maxAngle, 4), l.maxRange)\n\
+         b = HAL.getBumperData()\nprint('bumper', b.state, b.bumper)\n\
+         p = HAL.getPose3d()\nprint('pose', p.x, p.y, [round(q, 4) for q in p.q])\n\
+         print('simtime', repr(float(HAL.getSimTime())))\n\
+         GUI.showImage(numpy.zeros((4, 6), numpy.uint8))\nprint('shown')\n",
+        "",
+    );
+    rt.run("python").unwrap();
+    let s = shared(&rt, "python");
+    eventually("it ran", || console(&s).contains("shown"));
+    let text = console(&s);
+    // The vacuum's getLaserData is a list of m, the other exercises' a LaserData:
+    // both; angles from the robot's right (pi/2 ahead).
+    assert!(
+        text.contains("laser 180 2.23 True 0.0 3.1241 8.0"),
+        "{text}"
+    );
+    assert!(text.contains("bumper 0 1"), "{text}");
+    assert!(
+        text.contains("pose 1.0 1.0 [0.7071, 0.0, 0.0, 0.7071]"),
+        "{text}"
+    );
+    // The lock-stepped simulator's time is the run's clock.
+    let line = text.lines().find(|l| l.starts_with("simtime")).unwrap();
+    let sim: f64 = line[8..].parse().unwrap();
+    let clock = jderobot::runtime::RunClock::import(&rt.names)
+        .and_then(|c| c.now())
+        .unwrap()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .as_secs_f64();
+    assert!(sim <= clock && clock - sim < 5.0, "{sim} vs {clock}");
+    let img = s.image.lock().clone().unwrap();
+    assert_eq!((img.width, img.height), (6, 4));
+    rt.shutdown();
+}
+
+#[test]
+fn an_academy_5_program_stops_within_100_ms_in_a_busy_loop_or_a_tick() {
+    for (body, what) in [
+        ("    pass\n", "a busy loop"),
+        ("    Frequency.tick(2)\n", "Frequency.tick"),
+        ("    time.sleep(30)\n", "time.sleep"),
+    ] {
+        let took = stop_stuck_program(
+            &format!(
+                "import HAL\nimport Frequency\nimport time\nHAL.setV(0.3)\nwhile True:\n{body}"
+            ),
+            "running",
+        );
+        assert!(took < Duration::from_millis(100), "{what}: took {took:?}");
+    }
+}
+
+#[test]
+fn a_program_silent_past_the_limit_has_its_motors_stopped() {
+    // A program stuck computing (no HAL call, no sleep) drives on for at most
+    // python::SILENCE (5 s), then its motors stop and the console says so.
+    let dir = tempfile::tempdir().unwrap();
+    let (rt, _) = with_other_schema(
+        dir.path(),
+        "from HAL import HAL\nHAL.setV(0.3)\nx = 0\nwhile x >= 0:\n    x += 1\n",
+        "",
+    );
+    rt.run("python").unwrap();
+    let s = shared(&rt, "python");
+    std::thread::sleep(Duration::from_secs(2));
+    assert_eq!(motors(&rt).v, 300.0, "held while it computes");
+    let t = Instant::now();
+    eventually("the motors stop", || motors(&rt).v == 0.0);
+    let text = console(&s);
+    assert!(
+        text.contains("-- no HAL call for 5 s: the motors are stopped"),
+        "{text}"
+    );
+    assert!(t.elapsed() > Duration::from_secs(2), "not before the limit");
+    assert_eq!(state(&rt, "python"), State::Winner);
     rt.shutdown();
 }

@@ -46,6 +46,10 @@ const BUILTINS: &[&str] = &[
 const ACADEMY: &[&str] = &[
     "HAL",
     "GUI",
+    "WebGUI",
+    "Frequency",
+    "tick",
+    "getSimTime",
     "setV",
     "setW",
     "getPose3d",

@@ -1,7 +1,8 @@
 //! The python schema's panel, the Academy's editor page in the one window: the
 //! program's text highlighted with its line numbers (the failing line marked),
-//! Play / Stop / Reload, the real loop frequency, the console and the image the
-//! program shows with `GUI.showImage`. It shares state with the schema only through
+//! Play / Stop / Reload, the real loop frequency (the runtime's iterations per
+//! second, or `Frequency.tick`'s measured rate in the Academy 5 shape), the
+//! console and the image the program shows with `GUI.showImage`. It shares state with the schema only through
 //! [`Shared`] (short locks), so drawing never waits on a running program.
 
 use std::sync::{Arc, atomic::Ordering};
@@ -62,6 +63,14 @@ impl Panel for PythonPanel {
             }
             let phase = *self.shared.phase.lock();
             match &status {
+                // The Academy 5 shape paces its own loop with Frequency.tick.
+                Some(s) if running && self.shared.academy5.load(Ordering::Acquire) => {
+                    ui.label(format!(
+                        "{} · {:.1} Hz (Frequency.tick) · {phase}",
+                        s.state,
+                        self.shared.tick_rate()
+                    ));
+                }
                 Some(s) if running => {
                     ui.label(format!(
                         "{} · {:.1} Hz (cycle {} ms) · {phase}",

@@ -22,13 +22,15 @@ use std::{
 
 use parking_lot::Mutex;
 use pyo3::{
-    exceptions::{PyRuntimeError, PyValueError},
+    exceptions::{PyAttributeError, PyRuntimeError, PyValueError},
     prelude::*,
     types::{PyByteArray, PyBytes, PyDict, PyModule},
 };
 
 use crate::{
-    interfaces::{Bumpers, Encoders, Image, Interface, Laser, Motors, heading},
+    interfaces::{
+        Bumpers, Encoders, Image, Interface, Laser, MAX_MOTOR_V, MAX_MOTOR_W, Motors, heading,
+    },
     output,
 };
 
@@ -64,6 +66,33 @@ pub struct Shared {
     pub loads: AtomicU64,
     /// The program's phase for the panel ("init", "loop", "finished", ...).
     pub phase: Mutex<&'static str>,
+    /// The program's shape: the Academy 5 one (its own loop, `Frequency.tick`).
+    pub academy5: AtomicBool,
+    /// When the program last showed it is alive ([`Shared::touch`]), ns after
+    /// [`epoch`]: a HAL, GUI or Frequency call, the end of a pass.
+    pub last_call: AtomicU64,
+    /// While the program waits in `time.sleep` or `Frequency.tick` (alive).
+    pub sleeping: AtomicBool,
+    /// Set when the silence limit stopped the motors (said once).
+    pub silenced: AtomicBool,
+    /// `Frequency.tick` calls, its next deadline, and the loop's rate it measured
+    /// (Hz, as f64 bits) for the panel.
+    pub ticks: AtomicU64,
+    pub next_tick: Mutex<Option<Instant>>,
+    pub last_tick: Mutex<Option<Instant>>,
+    pub tick_rate: AtomicU64,
+    /// Whether the console was told that a setV / setW was clamped (once a run).
+    pub clamped: [AtomicBool; 2],
+}
+
+/// The instant the schema's times count from.
+pub fn epoch() -> Instant {
+    static EPOCH: OnceLock<Instant> = OnceLock::new();
+    *EPOCH.get_or_init(Instant::now)
+}
+
+fn since_epoch() -> u64 {
+    epoch().elapsed().as_nanos() as u64
 }
 
 /// The console: the last lines a program printed.
@@ -126,6 +155,35 @@ impl Shared {
             to_shell(&self.name, l);
         }
     }
+    /// The program shows it is alive (see [`SILENCE`](super::SILENCE)).
+    #[inline]
+    pub fn touch(&self) {
+        self.last_call.store(since_epoch(), Ordering::Release);
+        if self.silenced.load(Ordering::Relaxed) {
+            self.silenced.store(false, Ordering::Release);
+        }
+    }
+    /// How long since the program last showed it is alive.
+    pub fn silent_for(&self) -> Duration {
+        Duration::from_nanos(since_epoch().saturating_sub(self.last_call.load(Ordering::Acquire)))
+    }
+    /// A new run: the clock of the silence limit, the ticks and the clamp
+    /// messages start afresh.
+    pub fn new_run(&self) {
+        self.touch();
+        self.sleeping.store(false, Ordering::Release);
+        self.ticks.store(0, Ordering::Release);
+        self.tick_rate.store(0, Ordering::Release);
+        *self.next_tick.lock() = None;
+        *self.last_tick.lock() = None;
+        for c in &self.clamped {
+            c.store(false, Ordering::Release);
+        }
+    }
+    /// The loop's rate as `Frequency.tick` measured it (Hz; 0 before two ticks).
+    pub fn tick_rate(&self) -> f64 {
+        f64::from_bits(self.tick_rate.load(Ordering::Acquire))
+    }
     /// Clears the console (a new run).
     pub fn clear_console(&self) {
         let mut c = self.console.lock();
@@ -184,6 +242,12 @@ fn to_shell(name: &str, line: String) {
 
 /// The robot a program drives: the interfaces its `uses` lines name (`None`:
 /// `none`, or not provided), and the command `HAL.setV`/`setW` set.
+///
+/// The command reaches the motors when a call changes it, and is held: while the
+/// program lives ([`Robot::hold`]) the watchdog publishes it again whenever the
+/// motors' latest value is [`REFRESH`] old, so a driver's `motors_timeout` never
+/// zeroes a living program's command; it is zeroed when the program ends, fails,
+/// is stopped or goes silent ([`SILENCE`](super::SILENCE)).
 pub struct Robot {
     pub motors: Option<Arc<Interface<Motors>>>,
     pub encoders: Option<Arc<Interface<Encoders>>>,
@@ -192,9 +256,28 @@ pub struct Robot {
     pub camera: Option<Arc<Interface<Image>>>,
     /// Which line names each, for errors: (key, interface name or `none`).
     pub names: Vec<(&'static str, String)>,
-    /// v mm/s, w deg/s, and whether a program has set them since the last publish.
-    pub command: Mutex<(f32, f32, bool)>,
+    /// The command: v mm/s, w deg/s.
+    pub command: Mutex<Command>,
+    /// While the program lives: its command is kept fresh.
+    pub hold: AtomicBool,
+    /// The run, for its clock (`HAL.getSimTime`).
+    pub runtime: std::sync::Weak<crate::runtime::Runtime>,
 }
+
+/// The program's command and whether it reached the motors during the current
+/// pass (a pass without one publishes it at its end, so a lock-stepped simulator
+/// steps once per pass).
+#[derive(Clone, Copy, Default, Debug)]
+pub struct Command {
+    pub v: f32,
+    pub w: f32,
+    pub sent: bool,
+}
+
+/// How old the motors' latest value may get while a program lives before its
+/// command is published again: well inside the drivers' `motors_timeout`
+/// (500 ms by default).
+pub const REFRESH: Duration = Duration::from_millis(100);
 
 impl Robot {
     fn missing(&self, key: &str, call: &str) -> PyErr {
@@ -216,18 +299,72 @@ impl Robot {
         })
     }
 
-    /// Publishes the command if a program changed it (once per iteration).
-    pub fn publish_command(&self) {
-        let mut c = self.command.lock();
-        if let Some(m) = &self.motors {
-            let _ = m.publish(Motors { v: c.0, w: c.1 });
+    fn publish(&self, m: &Interface<Motors>, c: &Command) {
+        if let Err(e) = m.publish(Motors { v: c.v, w: c.w }) {
+            tracing::warn!("python: the motors refused the command: {e}");
         }
-        c.2 = false;
     }
 
-    /// Zeroes the motors (stop, error, reload).
+    /// Sets v (mm/s) and/or w (deg/s); the command reaches the motors at once
+    /// unless they already have it, fresh.
+    pub fn set(&self, v: Option<f32>, w: Option<f32>) {
+        let Some(m) = &self.motors else { return };
+        let mut c = self.command.lock();
+        if let Some(v) = v {
+            c.v = v;
+        }
+        if let Some(w) = w {
+            c.w = w;
+        }
+        let latest = m.read();
+        let have = latest.clock > 0
+            && latest.value == (Motors { v: c.v, w: c.w })
+            && latest.stamp.elapsed() < REFRESH / 2;
+        drop(latest);
+        if !have {
+            self.publish(m, &c);
+            c.sent = true;
+        }
+    }
+
+    /// The end of a pass (4.x: the loop body's end; Academy 5: `Frequency.tick`):
+    /// publishes the command if nothing reached the motors during the pass.
+    pub fn end_of_pass(&self) {
+        let Some(m) = &self.motors else { return };
+        let mut c = self.command.lock();
+        if !c.sent {
+            self.publish(m, &c);
+        }
+        c.sent = false;
+    }
+
+    /// Publishes the command again if the motors' latest value is [`REFRESH`]
+    /// old (the watchdog, while the program lives).
+    pub fn refresh(&self) {
+        let Some(m) = &self.motors else { return };
+        let c = self.command.lock();
+        if m.read().stamp.elapsed() >= REFRESH {
+            self.publish(m, &c);
+        }
+    }
+
+    /// The program starts: its command (zero) is held.
+    pub fn start_holding(&self) {
+        self.zero();
+        self.hold.store(true, Ordering::Release);
+    }
+
+    /// The program ends, fails or is stopped: the motors are zeroed and no
+    /// longer refreshed.
+    pub fn release(&self) {
+        self.hold.store(false, Ordering::Release);
+        self.zero();
+    }
+
+    /// Zeroes the command and the motors (stop, error, reload, silence).
     pub fn zero(&self) {
-        *self.command.lock() = (0.0, 0.0, false);
+        let mut c = self.command.lock();
+        *c = Command::default();
         if let Some(m) = &self.motors {
             let _ = m.publish(Motors::default());
         }
@@ -249,13 +386,37 @@ pub fn set_current(c: Option<Current>) {
     CURRENT.with(|x| *x.borrow_mut() = c);
 }
 
-fn with_current<R>(call: &str, f: impl FnOnce(&Current) -> PyResult<R>) -> PyResult<R> {
+/// Runs `f` with the calling thread's program: a call outside a program's
+/// thread is an error; a call after the schema was stopped raises
+/// `ProgramStopped`; any call shows the program is alive.
+fn with_current<R>(
+    py: Python<'_>,
+    call: &str,
+    f: impl FnOnce(&Current) -> PyResult<R>,
+) -> PyResult<R> {
     CURRENT.with(|c| match &*c.borrow() {
-        Some(c) => f(c),
+        Some(c) => {
+            if c.shared.interrupted.load(Ordering::Acquire) {
+                return Err(stopped(py));
+            }
+            c.shared.touch();
+            f(c)
+        }
         None => Err(PyRuntimeError::new_err(format!(
             "{call}: called outside a python schema's own thread (HAL and GUI work only in the program's thread)"
         ))),
     })
+}
+
+/// `ProgramStopped`, raised in a program whose schema stops.
+fn stopped(py: Python<'_>) -> PyErr {
+    match runner(py).and_then(|r| r.getattr("ProgramStopped")) {
+        Ok(t) => match t.cast_into() {
+            Ok(t) => PyErr::from_type(t, "stopped"),
+            Err(e) => e.into(),
+        },
+        Err(e) => e,
+    }
 }
 
 // ---------------------------------------------------------------- HAL
@@ -276,6 +437,15 @@ pub struct Pose3d {
     roll: f64,
     #[pyo3(get)]
     pitch: f64,
+    /// The Academy's `h` (always 1).
+    #[pyo3(get)]
+    h: f64,
+    /// The orientation as a quaternion [w, x, y, z] (about z).
+    #[pyo3(get)]
+    q: [f64; 4],
+    /// When the pose was measured, s (wall clock).
+    #[pyo3(get, name = "timeStamp")]
+    time_stamp: f64,
 }
 
 #[pymethods]
@@ -315,8 +485,9 @@ impl LaserData {
     }
 }
 
-/// `HAL.getBumperData()`: `state` 1 while touching; `bumper` 0 left, 1 centre,
-/// 2 right (-1 when nothing touches).
+/// `HAL.getBumperData()`: `state` 1 while touching; `bumper` which side (4.x:
+/// 0 left, 1 centre, 2 right, -1 when nothing touches; Academy 5: 0 right,
+/// 1 centre, 2 left, 1 when nothing touches).
 #[pyclass(name = "BumperData", frozen)]
 pub struct BumperData {
     #[pyo3(get)]
@@ -329,6 +500,28 @@ pub struct BumperData {
 impl BumperData {
     fn __repr__(&self) -> String {
         format!("BumperData: state={} bumper={}", self.state, self.bumper)
+    }
+}
+
+/// `HAL.getSimTime()`: the run's time (s and ns).
+#[pyclass(name = "SimTimeData", frozen)]
+pub struct SimTimeData {
+    #[pyo3(get)]
+    seconds: u64,
+    #[pyo3(get)]
+    nanoseconds: u32,
+}
+
+#[pymethods]
+impl SimTimeData {
+    fn __repr__(&self) -> String {
+        format!(
+            "SimTimeData: seconds={} nanoseconds={}",
+            self.seconds, self.nanoseconds
+        )
+    }
+    fn __float__(&self) -> f64 {
+        self.seconds as f64 + self.nanoseconds as f64 * 1e-9
     }
 }
 
@@ -368,9 +561,15 @@ pub fn bumper_side(b: &[u8]) -> (i32, i32) {
     }
 }
 
-/// The Academy's `HAL` object.
+/// The Academy's `HAL` object (4.x: `from HAL import HAL`). The Academy 5
+/// module functions (`import HAL`) are its methods, but for `getLaserData` and
+/// `getBumperData`, which follow the Academy 5's conventions ([`laser_values`],
+/// [`bumper_data_5`]).
 #[pyclass(name = "HAL", frozen)]
 pub struct Hal;
+
+/// What the HAL has, for the error of a call it has not.
+const HAL_CALLS: &str = "setV, setW, getPose3d, getLaserData, getBumperData, getImage, getSimTime";
 
 fn finite(call: &str, what: &str, unit: &str, x: f64) -> PyResult<f64> {
     if x.is_finite() {
@@ -382,59 +581,90 @@ fn finite(call: &str, what: &str, unit: &str, x: f64) -> PyResult<f64> {
     }
 }
 
+/// A speed in the motors' units, limited to what the `motors` interface takes
+/// ([`MAX_MOTOR_V`], [`MAX_MOTOR_W`]): past it, the limit, said once a run in the
+/// console.
+fn clamp_speed(c: &Current, which: usize, asked: f64, shown: &str) -> f32 {
+    let (max, call, unit, factor) = if which == 0 {
+        (MAX_MOTOR_V as f64, "setV", "m/s", 1000.0)
+    } else {
+        (
+            MAX_MOTOR_W as f64,
+            "setW",
+            "rad/s",
+            180.0 / std::f64::consts::PI,
+        )
+    };
+    let units = asked * factor;
+    if units.abs() <= max {
+        return units as f32;
+    }
+    let limit = max.copysign(units);
+    if !c.shared.clamped[which].swap(true, Ordering::AcqRel) {
+        c.shared.print(&format!(
+            "-- HAL.{call}({shown}): past the motors' limit, {:.4} {unit}; clamped to it \
+             (the driver may limit it further to its robot's maximum; said once)\n",
+            max / factor
+        ));
+    }
+    limit as f32
+}
+
 #[pymethods]
 impl Hal {
     /// Forward speed, m/s.
-    #[allow(non_snake_case)]
     #[pyo3(name = "setV")]
-    fn set_v(&self, v: f64) -> PyResult<()> {
+    fn set_v(&self, py: Python<'_>, v: f64) -> PyResult<()> {
         let v = finite("setV", "v", "m/s", v)?;
-        with_current("HAL.setV", |c| {
+        with_current(py, "HAL.setV", |c| {
             if c.robot.motors.is_none() {
                 return Err(c.robot.missing("motors", "setV"));
             }
-            let mut m = c.robot.command.lock();
-            m.0 = (v * 1000.0) as f32;
-            m.2 = true;
+            let mm = clamp_speed(c, 0, v, &format!("{v}"));
+            c.robot.set(Some(mm), None);
             Ok(())
         })
     }
     /// Turn speed, rad/s (positive turns left).
     #[pyo3(name = "setW")]
-    fn set_w(&self, w: f64) -> PyResult<()> {
+    fn set_w(&self, py: Python<'_>, w: f64) -> PyResult<()> {
         let w = finite("setW", "w", "rad/s", w)?;
-        with_current("HAL.setW", |c| {
+        with_current(py, "HAL.setW", |c| {
             if c.robot.motors.is_none() {
                 return Err(c.robot.missing("motors", "setW"));
             }
-            let mut m = c.robot.command.lock();
-            m.1 = w.to_degrees() as f32;
-            m.2 = true;
+            let deg = clamp_speed(c, 1, w, &format!("{w}"));
+            c.robot.set(None, Some(deg));
             Ok(())
         })
     }
     #[pyo3(name = "getPose3d")]
-    fn get_pose3d(&self) -> PyResult<Pose3d> {
-        with_current("HAL.getPose3d", |c| {
+    fn get_pose3d(&self, py: Python<'_>) -> PyResult<Pose3d> {
+        with_current(py, "HAL.getPose3d", |c| {
             let e = c
                 .robot
                 .encoders
                 .as_ref()
                 .ok_or_else(|| c.robot.missing("encoders", "getPose3d"))?;
-            let p = e.read().value;
+            let s = e.read();
+            let p = &s.value;
+            let yaw = heading(p.theta) as f64;
             Ok(Pose3d {
                 x: p.x as f64 / 1000.0,
                 y: p.y as f64 / 1000.0,
                 z: 0.0,
-                yaw: heading(p.theta) as f64,
+                yaw,
                 roll: 0.0,
                 pitch: 0.0,
+                h: 1.0,
+                q: [(yaw / 2.0).cos(), 0.0, 0.0, (yaw / 2.0).sin()],
+                time_stamp: unix_seconds(s.time),
             })
         })
     }
     #[pyo3(name = "getLaserData")]
     fn get_laser_data(&self, py: Python<'_>) -> PyResult<LaserData> {
-        let laser = with_current("HAL.getLaserData", |c| {
+        let laser = with_current(py, "HAL.getLaserData", |c| {
             c.robot
                 .laser
                 .as_ref()
@@ -457,8 +687,8 @@ impl Hal {
         })
     }
     #[pyo3(name = "getBumperData")]
-    fn get_bumper_data(&self) -> PyResult<BumperData> {
-        with_current("HAL.getBumperData", |c| {
+    fn get_bumper_data(&self, py: Python<'_>) -> PyResult<BumperData> {
+        with_current(py, "HAL.getBumperData", |c| {
             let b = c
                 .robot
                 .bumpers
@@ -471,7 +701,7 @@ impl Hal {
     /// The camera's image: a numpy uint8 array H x W x 3, BGR (one copy of the bytes).
     #[pyo3(name = "getImage")]
     fn get_image<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
-        let cam = with_current("HAL.getImage", |c| {
+        let cam = with_current(py, "HAL.getImage", |c| {
             c.robot
                 .camera
                 .clone()
@@ -487,7 +717,188 @@ impl Hal {
             3usize,
         ))
     }
+    /// The run's time: the simulator's when it keeps its own (it exports
+    /// `run.clock` when it does not run in real time), else the wall clock.
+    #[pyo3(name = "getSimTime")]
+    fn get_sim_time(&self, py: Python<'_>) -> PyResult<SimTimeData> {
+        let t = with_current(py, "HAL.getSimTime", |c| {
+            Ok(c.robot
+                .runtime
+                .upgrade()
+                .and_then(|rt| crate::runtime::RunClock::import(&rt.names))
+                .and_then(|clock| clock.now())
+                .unwrap_or_else(std::time::SystemTime::now))
+        })?;
+        let d = t.duration_since(std::time::UNIX_EPOCH).unwrap_or_default();
+        Ok(SimTimeData {
+            seconds: d.as_secs(),
+            nanoseconds: d.subsec_nanos(),
+        })
+    }
+    fn __getattr__(&self, name: &str) -> PyResult<()> {
+        Err(not_here("HAL", name, HAL_CALLS))
+    }
 }
+
+fn unix_seconds(t: std::time::SystemTime) -> f64 {
+    t.duration_since(std::time::UNIX_EPOCH)
+        .map_or(0.0, |d| d.as_secs_f64())
+}
+
+/// The error of a call the Academy has and jderobot has not: an AttributeError
+/// that names it and says what is here.
+fn not_here(module: &str, name: &str, here: &str) -> PyErr {
+    PyAttributeError::new_err(format!(
+        "{module}.{name} is not here: jderobot's {module} has {here} \
+         (docs/python.md, \"How it differs from the Academy\")"
+    ))
+}
+
+/// The Academy 5 `HAL.getLaserData()`: a list of the ranges in m that also has
+/// the LaserData fields, with the Academy 5's angles (0 to the robot's right,
+/// π/2 ahead: the angle from ahead plus π/2).
+#[pyfunction]
+#[pyo3(name = "getLaserData")]
+fn laser_values(py: Python<'_>) -> PyResult<Bound<'_, PyAny>> {
+    let laser = with_current(py, "HAL.getLaserData", |c| {
+        c.robot
+            .laser
+            .as_ref()
+            .map(|l| l.snapshot())
+            .ok_or_else(|| c.robot.missing("laser", "getLaserData"))
+    })?;
+    let (min_angle, max_angle, min_range, max_range) = laser_geometry(&laser.value);
+    let values: Vec<f64> = laser
+        .value
+        .readings
+        .iter()
+        .map(|&r| r as f64 / 1000.0)
+        .collect();
+    let half = std::f64::consts::FRAC_PI_2;
+    runner(py)?.getattr("laser_values")?.call1((
+        values,
+        min_angle + half,
+        max_angle + half,
+        min_range,
+        max_range,
+        unix_seconds(laser.time),
+    ))
+}
+
+/// The Academy 5 `HAL.getBumperData()`: `state` 1 while touching; `bumper` 0
+/// right, 1 centre, 2 left (1 when nothing touches), as its bumper interface.
+#[pyfunction]
+#[pyo3(name = "getBumperData")]
+fn bumper_data_5(py: Python<'_>) -> PyResult<BumperData> {
+    let b = Hal.get_bumper_data(py)?;
+    Ok(match (b.state, b.bumper) {
+        (0, _) => BumperData {
+            state: 0,
+            bumper: 1,
+        },
+        (s, side) => BumperData {
+            state: s,
+            bumper: 2 - side,
+        },
+    })
+}
+
+/// `__getattr__` of the Academy's modules: a name they do not have is a call
+/// that is not here.
+#[pyfunction]
+#[pyo3(pass_module, name = "__getattr__")]
+fn module_getattr(module: &Bound<'_, PyModule>, name: &str) -> PyResult<()> {
+    let m = module.name()?.to_string();
+    let here = match m.as_str() {
+        "HAL" => HAL_CALLS,
+        "Frequency" => "tick",
+        _ => GUI_CALLS,
+    };
+    Err(not_here(&m, name, here))
+}
+
+// ---------------------------------------------------------------- Frequency
+
+/// `Frequency.tick(hz)`: the Academy 5's pacing of a program's own loop. Sleeps
+/// what is left of the period 1/hz since the previous tick (absolute deadlines:
+/// no drift; a pass longer than a period starts the count again), publishes the
+/// command if the pass did not (a lock-stepped simulator steps once per tick),
+/// and raises `ProgramStopped` when the schema stops. `hz` is the Academy's
+/// `ideal_cycle`, 50 by default.
+#[pyfunction]
+#[pyo3(name = "tick", signature = (ideal_cycle = None, *, hz = None))]
+fn tick(py: Python<'_>, ideal_cycle: Option<f64>, hz: Option<f64>) -> PyResult<()> {
+    let hz = hz.or(ideal_cycle).unwrap_or(TICK_HZ);
+    if !hz.is_finite() || hz <= 0.0 {
+        return Err(PyValueError::new_err(format!(
+            "Frequency.tick: the frequency must be a positive number of Hz, not {hz}"
+        )));
+    }
+    let (shared, robot) = with_current(py, "Frequency.tick", |c| {
+        Ok((c.shared.clone(), c.robot.clone()))
+    })?;
+    robot.end_of_pass();
+    let period = Duration::from_secs_f64(1.0 / hz);
+    let now = Instant::now();
+    let until = {
+        let mut next = shared.next_tick.lock();
+        let until = match *next {
+            Some(t) if now < t + period => t,
+            // The first tick, or a pass a period late: from now.
+            _ => now,
+        };
+        *next = Some(until + period);
+        until
+    };
+    if wait_until(py, &shared, until) {
+        return Err(stopped(py));
+    }
+    // The loop's rate, smoothed over about ten passes.
+    shared.ticks.fetch_add(1, Ordering::AcqRel);
+    let now = Instant::now();
+    if let Some(last) = shared.last_tick.lock().replace(now) {
+        let dt = now.duration_since(last).as_secs_f64();
+        if dt > 0.0 {
+            let old = shared.tick_rate();
+            let rate = if old == 0.0 {
+                1.0 / dt
+            } else {
+                0.9 * old + 0.1 / dt
+            };
+            shared.tick_rate.store(rate.to_bits(), Ordering::Release);
+        }
+    }
+    Ok(())
+}
+
+/// The Academy's default loop frequency, Hz (`Frequency.tick()`).
+pub const TICK_HZ: f64 = 50.0;
+
+/// Waits until `until` (the GIL released), counting as alive; true if the schema
+/// was stopped meanwhile.
+fn wait_until(py: Python<'_>, shared: &Shared, until: Instant) -> bool {
+    shared.sleeping.store(true, Ordering::Release);
+    let stopped = py.detach(|| {
+        loop {
+            if shared.interrupted.load(Ordering::Acquire) {
+                return true;
+            }
+            let left = until.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                return false;
+            }
+            std::thread::sleep(left.min(Duration::from_millis(5)));
+        }
+    });
+    shared.sleeping.store(false, Ordering::Release);
+    shared.touch();
+    stopped
+}
+
+// ---------------------------------------------------------------- GUI
+
+/// What the GUI has, for the error of a call it has not.
+const GUI_CALLS: &str = "showImage";
 
 /// The Academy's `GUI` object.
 #[pyclass(name = "GUI", frozen)]
@@ -513,11 +924,14 @@ impl Gui {
             height: h as u32,
             data,
         };
-        with_current("GUI.showImage", |c| {
+        with_current(py, "GUI.showImage", |c| {
             *c.shared.image.lock() = Some(Arc::new(image));
             c.shared.images.fetch_add(1, Ordering::AcqRel);
             Ok(())
         })
+    }
+    fn __getattr__(&self, name: &str) -> PyResult<()> {
+        Err(not_here("GUI", name, GUI_CALLS))
     }
 }
 
@@ -552,8 +966,8 @@ impl Output {
     }
 }
 
-/// `time.sleep`, replaced so a stop interrupts a sleeping program at once and a
-/// command set before sleeping reaches the motors.
+/// `time.sleep`, replaced so a stop interrupts a sleeping program at once; a
+/// sleeping program is alive (its command held).
 #[pyfunction]
 fn sleep(py: Python<'_>, seconds: f64) -> PyResult<()> {
     if !seconds.is_finite() || seconds < 0.0 {
@@ -561,35 +975,16 @@ fn sleep(py: Python<'_>, seconds: f64) -> PyResult<()> {
             "sleep length must be a non-negative number",
         ));
     }
-    let current = CURRENT.with(|c| {
-        c.borrow()
-            .as_ref()
-            .map(|c| (c.shared.clone(), c.robot.clone()))
-    });
+    let shared = CURRENT.with(|c| c.borrow().as_ref().map(|c| c.shared.clone()));
     let until = Instant::now() + Duration::from_secs_f64(seconds.min(1e6));
-    let Some((shared, robot)) = current else {
+    let Some(shared) = shared else {
         py.detach(|| std::thread::sleep(until.saturating_duration_since(Instant::now())));
         return Ok(());
     };
-    if robot.command.lock().2 {
-        robot.publish_command();
+    if shared.interrupted.load(Ordering::Acquire) || wait_until(py, &shared, until) {
+        return Err(stopped(py));
     }
-    let stopped = py.detach(|| {
-        loop {
-            if shared.interrupted.load(Ordering::Acquire) {
-                return true;
-            }
-            let left = until.saturating_duration_since(Instant::now());
-            if left.is_zero() {
-                return false;
-            }
-            std::thread::sleep(left.min(Duration::from_millis(5)));
-        }
-    });
-    if stopped {
-        let t = runner(py)?.getattr("ProgramStopped")?;
-        return Err(PyErr::from_type(t.cast_into()?, "stopped"));
-    }
+    shared.touch();
     Ok(())
 }
 
@@ -613,15 +1008,35 @@ pub fn interpreter() -> Result<(), String> {
                 let r = PyModule::from_code(py, &code, c"<jderobot runner>", c"_jderobot")?;
                 r.add_function(wrap_pyfunction!(sleep, &r)?)?;
                 modules.set_item("_jderobot", &r)?;
+                // HAL: the 4.x object `HAL.HAL` and the Academy 5 functions.
                 let hal = PyModule::new(py, "HAL")?;
-                hal.add("HAL", Bound::new(py, Hal)?)?;
+                let hal_object = Bound::new(py, Hal)?;
+                for f in ["setV", "setW", "getPose3d", "getImage", "getSimTime"] {
+                    hal.add(f, hal_object.getattr(f)?)?;
+                }
+                hal.add_function(wrap_pyfunction!(laser_values, &hal)?)?;
+                hal.add_function(wrap_pyfunction!(bumper_data_5, &hal)?)?;
+                hal.add("HAL", hal_object)?;
                 hal.add_class::<Pose3d>()?;
                 hal.add_class::<LaserData>()?;
                 hal.add_class::<BumperData>()?;
+                hal.add_class::<SimTimeData>()?;
+                hal.add_function(wrap_pyfunction!(module_getattr, &hal)?)?;
                 modules.set_item("HAL", hal)?;
-                let gui = PyModule::new(py, "GUI")?;
-                gui.add("GUI", Bound::new(py, Gui)?)?;
-                modules.set_item("GUI", gui)?;
+                // GUI (4.x `GUI.GUI`, Academy 5 `GUI.showImage`) and WebGUI, its
+                // Academy 5 name.
+                let gui_object = Bound::new(py, Gui)?;
+                for name in ["GUI", "WebGUI"] {
+                    let gui = PyModule::new(py, name)?;
+                    gui.add("showImage", gui_object.getattr("showImage")?)?;
+                    gui.add("GUI", &gui_object)?;
+                    gui.add_function(wrap_pyfunction!(module_getattr, &gui)?)?;
+                    modules.set_item(name, gui)?;
+                }
+                let frequency = PyModule::new(py, "Frequency")?;
+                frequency.add_function(wrap_pyfunction!(tick, &frequency)?)?;
+                frequency.add_function(wrap_pyfunction!(module_getattr, &frequency)?)?;
+                modules.set_item("Frequency", frequency)?;
                 sys.setattr("stdout", Bound::new(py, Output)?)?;
                 sys.setattr("stderr", Bound::new(py, Output)?)?;
                 sys.setattr("argv", vec![String::from("jderobot")])?;
@@ -665,7 +1080,9 @@ pub struct Program {
     init: Py<PyAny>,
     loop_body: Option<Py<PyAny>>,
     after: Option<Py<PyAny>>,
-
+    /// The Academy 5 shape: `init` is the whole program, run in a thread of its
+    /// own with its own loop.
+    pub academy5: bool,
     globals: Py<PyDict>,
 }
 
@@ -684,6 +1101,8 @@ pub enum Outcome {
     Broke,
     /// Interrupted because the schema stops.
     Stopped,
+    /// `sys.exit(...)` / `exit()`: the program ended itself (its argument).
+    Exited(String),
     Failed(Failure),
 }
 
@@ -694,15 +1113,20 @@ impl Program {
             let r = runner(py).map_err(|e| internal(py, e))?;
             match r.getattr("split").and_then(|f| f.call1((source, path))) {
                 Ok(t) => {
-                    let (init, lp, after, _line): (Py<PyAny>, Py<PyAny>, Py<PyAny>, usize) =
-                        t.extract().map_err(|e| internal(py, e))?;
+                    let (init, lp, after, _line, shape): (
+                        Py<PyAny>,
+                        Py<PyAny>,
+                        Py<PyAny>,
+                        usize,
+                        u8,
+                    ) = t.extract().map_err(|e| internal(py, e))?;
                     let opt = |o: Py<PyAny>| (!o.is_none(py)).then_some(o);
                     Ok(Program {
                         path: path.to_string(),
                         init,
                         loop_body: opt(lp),
                         after: opt(after),
-
+                        academy5: shape == 5,
                         globals: fresh_globals(py, path).map_err(|e| internal(py, e))?,
                     })
                 }
@@ -730,7 +1154,8 @@ impl Program {
 
     /// Runs the init code (`which` 0), one loop iteration (1) or the after-loop
     /// code (2) on this thread, marking `shared.in_python` for the watchdog.
-    pub fn run(&self, which: u8, shared: &Shared) -> Outcome {
+    /// With `cancel` set before the code starts, it does not start.
+    pub fn run(&self, which: u8, shared: &Shared, cancel: Option<&AtomicBool>) -> Outcome {
         let code = match which {
             0 => Some(&self.init),
             1 => self.loop_body.as_ref(),
@@ -750,8 +1175,12 @@ impl Program {
                     std::ptr::null_mut(),
                 )
             };
-            shared.interrupted.store(false, Ordering::Release);
-            shared.in_python.store(true, Ordering::Release);
+            shared.interrupted.store(false, Ordering::SeqCst);
+            shared.in_python.store(true, Ordering::SeqCst);
+            if cancel.is_some_and(|c| c.load(Ordering::SeqCst)) {
+                shared.in_python.store(false, Ordering::SeqCst);
+                return Outcome::Stopped;
+            }
             let g = self.globals.bind(py);
             let result = py
                 .import("builtins")
@@ -772,6 +1201,16 @@ impl Program {
                     }
                 }
                 Err(e) if is_stop(py, &e) => Outcome::Stopped,
+                Err(e) if e.is_instance_of::<pyo3::exceptions::PySystemExit>(py) => {
+                    let code = e
+                        .value(py)
+                        .getattr("code")
+                        .ok()
+                        .filter(|c| !c.is_none())
+                        .map(|c| c.to_string())
+                        .unwrap_or_default();
+                    Outcome::Exited(code)
+                }
                 Err(e) => Outcome::Failed(describe(py, &e, &self.path)),
             }
         })
@@ -822,7 +1261,7 @@ fn internal(py: Python<'_>, e: PyErr) -> Failure {
 /// Interrupts the program running on `shared`'s thread with `ProgramStopped`
 /// (the watchdog calls it; a program stuck in `while True: pass` stops too).
 pub fn interrupt(shared: &Shared) {
-    shared.interrupted.store(true, Ordering::Release);
+    shared.interrupted.store(true, Ordering::SeqCst);
     Python::attach(|py| {
         if !shared.in_python.load(Ordering::Acquire) {
             return;

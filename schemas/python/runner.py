@@ -25,17 +25,41 @@ def _module(body):
     return ast.Module(body=body, type_ignores=[])
 
 
+# The Academy's modules as a program imports them: `from HAL import HAL` (and
+# GUI) is the 4.x shape; `import HAL`, `import GUI`, `import WebGUI`,
+# `import Frequency` (or `from HAL import setV`, ...) is the Academy 5 shape.
+ACADEMY = ("HAL", "GUI", "WebGUI", "Frequency")
+
+
+def shape(tree):
+    """5 if the program imports the Academy's modules the Academy 5 way (module
+    functions, its own loop paced by Frequency.tick), else 4."""
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            if any(a.name in ACADEMY for a in node.names):
+                return 5
+        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module in ACADEMY:
+            if node.module in ("WebGUI", "Frequency"):
+                return 5
+            if any(a.name != node.module for a in node.names):
+                return 5
+    return 4
+
+
 def split(source, path):
-    """(init, loop, after, loop_line): code objects; loop and after are None
-    without a top-level `while True:`. Raises SyntaxError."""
+    """(init, loop, after, loop_line, shape): code objects; loop and after are
+    None without a top-level `while True:` and in the Academy 5 shape (the whole
+    program is `init`: its own loop runs). Raises SyntaxError."""
     tree = ast.parse(source, path)
     add_program_dir(path)
+    if shape(tree) == 5:
+        return compile(tree, path, "exec"), None, None, 0, 5
     body = tree.body
     for i, node in enumerate(body):
         if isinstance(node, ast.While) and _forever(node.test):
             break
     else:
-        return compile(tree, path, "exec"), None, None, 0
+        return compile(tree, path, "exec"), None, None, 0, 4
     # One iteration: `for _ in (0,): BODY else: BROKE = False`, so `continue`
     # ends the iteration and `break` ends the loop, as in the original `while`.
     set_broke = ast.Assign(
@@ -61,7 +85,35 @@ def split(source, path):
         compile(loop, path, "exec"),
         compile(after, path, "exec"),
         node.lineno,
+        4,
     )
+
+
+class LaserValues(list):
+    """The Academy 5 `HAL.getLaserData()`: the ranges in m (a list, as the vacuum
+    cleaner's HAL returns them) that also has the LaserData fields (`values`,
+    `minAngle`, `maxAngle` rad with 0 to the robot's right and pi/2 ahead,
+    `minRange`, `maxRange` m, `timeStamp` s), as the other exercises' HAL."""
+
+    __slots__ = ("minAngle", "maxAngle", "minRange", "maxRange", "timeStamp")
+
+    @property
+    def values(self):
+        return self
+
+    def __str__(self):
+        return (
+            f"LaserData: {{ minAngle: {self.minAngle} maxAngle: {self.maxAngle} "
+            f"minRange: {self.minRange} maxRange: {self.maxRange} "
+            f"timeStamp: {self.timeStamp} values: {list.__repr__(self)} }}"
+        )
+
+
+def laser_values(values, min_angle, max_angle, min_range, max_range, stamp):
+    l = LaserValues(values)
+    l.minAngle, l.maxAngle = min_angle, max_angle
+    l.minRange, l.maxRange, l.timeStamp = min_range, max_range, stamp
+    return l
 
 
 def add_program_dir(path):
