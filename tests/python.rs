@@ -38,11 +38,22 @@ fn exercise(name: &str) -> PathBuf {
 }
 
 /// A runtime with the simulator in simple.world (robot at X Y THETA) lock-stepped
-/// `step_ms` of simulated time per command, and the python schema on `program`.
+/// 50 ms of simulated time per command, and the python schema on `program`.
 fn academy(program: &Path, pose: (i32, i32, i32), python_lines: &str, more: &str) -> Arc<Runtime> {
+    simulated(program, pose, "stepped 50\n", python_lines, more)
+}
+
+/// The same with the simulator's clock line `clock` (none: real time).
+fn simulated(
+    program: &Path,
+    pose: (i32, i32, i32),
+    clock: &str,
+    python_lines: &str,
+    more: &str,
+) -> Arc<Runtime> {
     start_conf(&format!(
         "driver simulator\nworld {}\nrobot robot1 {} {} {}\nprovides encoders\nprovides motors\n\
-         provides laser 180 1\nprovides bumpers\nprovides colorA\nstepped 50\nseed 1\nend_driver\n\
+         provides laser 180 1\nprovides bumpers\nprovides colorA\n{clock}seed 1\nend_driver\n\
          schema python\nfile {}\ncycle 10\n{python_lines}end_schema\n{more}\
          load_driver simulator\nload_schema python\n",
         common::world_path("simple.world"),
@@ -266,9 +277,10 @@ fn a_syntax_error_is_file_line_message_at_load_and_in_check() {
 /// running whatever the program does.
 fn with_other_schema(dir: &Path, text: &str, python_lines: &str) -> (Arc<Runtime>, PathBuf) {
     let prog = write_program(dir, "prog.py", text);
-    let rt = academy(
+    let rt = simulated(
         &prog,
         (1000, 1000, 90),
+        "",
         python_lines,
         "schema myschema\ncycle 20\nend_schema\nload_schema myschema\n",
     );
@@ -993,8 +1005,9 @@ fn a_call_that_is_not_here_names_itself() {
 #[test]
 fn the_academy_5_api_gives_its_own_conventions() {
     let dir = tempfile::tempdir().unwrap();
-    let (rt, _) = with_other_schema(
+    let prog = write_program(
         dir.path(),
+        "prog.py",
         "import HAL\nimport GUI\nimport numpy\n\
          l = HAL.getLaserData()\nprint('laser', len(l), round(l[90], 2), l.values is l, \
          round(l.minAngle, 4), round(l.maxAngle, 4), l.maxRange)\n\
@@ -1002,8 +1015,8 @@ fn the_academy_5_api_gives_its_own_conventions() {
          p = HAL.getPose3d()\nprint('pose', p.x, p.y, [round(q, 4) for q in p.q])\n\
          print('simtime', repr(float(HAL.getSimTime())))\n\
          GUI.showImage(numpy.zeros((4, 6), numpy.uint8))\nprint('shown')\n",
-        "",
     );
+    let rt = academy(&prog, (1000, 1000, 90), "", "");
     rt.run("python").unwrap();
     let s = shared(&rt, "python");
     eventually("it ran", || console(&s).contains("shown"));

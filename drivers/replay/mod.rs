@@ -259,7 +259,7 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
     } else {
         None
     };
-    let clock = RunClock::export(&rt.names)
+    let clock = RunClock::export(&rt.names, settings.lockstep)
         .map_err(|e| tracing::warn!("replay: its time is not the run's clock: {e}"))
         .ok();
     let stop = Arc::new(AtomicBool::new(false));

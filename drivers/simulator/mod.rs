@@ -94,7 +94,7 @@ pub use physics::{Noise, Pose, Rng, Robot, RobotModel, Sim};
 fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>> {
     let mut simulation = Simulation::parse(conf)?;
     if !matches!(simulation.clock, Clock::Speed(s) if s == 1.0) {
-        match RunClock::export(&rt.names) {
+        match RunClock::export(&rt.names, matches!(simulation.clock, Clock::Stepped(_))) {
             Ok(c) => simulation.run_clock = Some(c),
             Err(e) => tracing::warn!("simulator: its time is not the run's clock: {e}"),
         }

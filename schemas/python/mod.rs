@@ -572,6 +572,7 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
         command: Default::default(),
         hold: AtomicBool::new(false),
         runtime: Arc::downgrade(&rt.arc()),
+        per_command: Default::default(),
     });
     let shared = shared(rt, &conf.name);
     // A re-init (the shell's `init`, `reload`) replaces a running program: ask the

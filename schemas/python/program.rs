@@ -262,6 +262,13 @@ pub struct Robot {
     pub hold: AtomicBool,
     /// The run, for its clock (`HAL.getSimTime`).
     pub runtime: std::sync::Weak<crate::runtime::Runtime>,
+    /// Whether the run's clock advances per motors command (a lock-stepped
+    /// simulator, a `stepped motors` replay), read at the first command: then the
+    /// command goes out once per pass, at its end, and never on the wall clock's
+    /// account (no refresh): the simulator steps once per pass and the run is the
+    /// same every time whatever the machine's load (two commands in one pass
+    /// could reach it as one step or two).
+    pub per_command: std::sync::OnceLock<bool>,
 }
 
 /// The program's command and whether it reached the motors during the current
@@ -305,8 +312,19 @@ impl Robot {
         }
     }
 
+    /// See [`Robot::per_command`].
+    fn per_command(&self) -> bool {
+        *self.per_command.get_or_init(|| {
+            self.runtime
+                .upgrade()
+                .and_then(|rt| crate::runtime::RunClock::import(&rt.names))
+                .is_some_and(|clock| clock.per_command)
+        })
+    }
+
     /// Sets v (mm/s) and/or w (deg/s); the command reaches the motors at once
-    /// unless they already have it, fresh.
+    /// unless they already have it, fresh (on a per-command clock: at the pass's
+    /// end, [`Robot::end_of_pass`]).
     pub fn set(&self, v: Option<f32>, w: Option<f32>) {
         let Some(m) = &self.motors else { return };
         let mut c = self.command.lock();
@@ -315,6 +333,9 @@ impl Robot {
         }
         if let Some(w) = w {
             c.w = w;
+        }
+        if self.per_command() {
+            return;
         }
         let latest = m.read();
         let have = latest.clock > 0
@@ -342,6 +363,9 @@ impl Robot {
     /// old (the watchdog, while the program lives).
     pub fn refresh(&self) {
         let Some(m) = &self.motors else { return };
+        if self.per_command() {
+            return;
+        }
         let c = self.command.lock();
         if m.read().stamp.elapsed() >= REFRESH {
             self.publish(m, &c);

@@ -24,17 +24,23 @@ pub struct RunClock {
     base: SystemTime,
     /// Nanoseconds since the Unix epoch; 0 until the owner first sets it.
     ns: AtomicU64,
+    /// The time advances once per motors command (a lock-stepped simulator): a
+    /// controller then commands once per pass of its loop, and never on the wall
+    /// clock's account, or the run is no longer the same every time.
+    pub per_command: bool,
 }
 
 impl RunClock {
-    /// A clock whose time 0 is now, exported as `run.clock` (one per run).
-    pub fn export(names: &Namespace) -> Result<Arc<RunClock>, NamespaceError> {
+    /// A clock whose time 0 is now, exported as `run.clock` (one per run);
+    /// `per_command`: see [`RunClock::per_command`].
+    pub fn export(names: &Namespace, per_command: bool) -> Result<Arc<RunClock>, NamespaceError> {
         names.export(
             KEY.0,
             KEY.1,
             RunClock {
                 base: SystemTime::now(),
                 ns: AtomicU64::new(0),
+                per_command,
             },
         )
     }
@@ -71,7 +77,7 @@ mod tests {
     #[test]
     fn the_clock_is_unset_until_its_owner_sets_it_and_then_advances() {
         let names = Namespace::default();
-        let c = RunClock::export(&names).unwrap();
+        let c = RunClock::export(&names, false).unwrap();
         assert!(RunClock::import(&names).unwrap().now().is_none());
         c.set_elapsed(2.5);
         let t = RunClock::import(&names).unwrap().now().unwrap();
@@ -79,6 +85,6 @@ mod tests {
             t.duration_since(c.base).unwrap(),
             Duration::from_millis(2500)
         );
-        assert!(RunClock::export(&names).is_err(), "one clock per run");
+        assert!(RunClock::export(&names, true).is_err(), "one clock per run");
     }
 }
