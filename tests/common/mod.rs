@@ -664,6 +664,8 @@ pub fn run_in_private_netns(args: &[&str], what: &str) -> Netns {
 pub struct TwoHosts {
     pub a: String,
     pub b: String,
+    /// A's address on the veth pair (B's is the same ending in .2).
+    pub ip_a: String,
 }
 
 #[allow(dead_code)]
@@ -680,7 +682,11 @@ impl TwoHosts {
         };
         let (va, vb) = (format!("jva{n}"), format!("jvb{n}"));
         let (addr_a, addr_b) = (format!("10.77.{n}.1/24"), format!("10.77.{n}.2/24"));
-        let hosts = TwoHosts { a, b };
+        let hosts = TwoHosts {
+            a,
+            b,
+            ip_a: format!("10.77.{n}.1"),
+        };
         let ok = have("ip")
             && ip(&["netns", "add", &hosts.a])
             && ip(&["netns", "add", &hosts.b])

@@ -377,17 +377,19 @@ def stall(dp, secs):
 
 
 def scans(dp, secs):
-    """Reads /scan (sensor QoS) until SECS pass: how many arrived, and the seconds
-    from the start to the first."""
+    """Reads /scan (sensor QoS) until SECS pass: how many arrived, the seconds
+    from the start to the first, and the header stamps (s) of the first and last."""
     r = DataReader(dp, Topic(dp, "rt/scan", LaserScan, qos=SENSOR), qos=SENSOR)
     start = time.time()
-    n, first = 0, None
+    n, first, stamps = 0, None, []
     while time.time() < start + secs:
-        for _ in r.take(N=10):
+        for m in r.take(N=10):
             n += 1
             first = first or time.time() - start
+            stamps.append(m.header.stamp.sec + m.header.stamp.nanosec * 1e-9)
         time.sleep(0.01)
-    print(json.dumps({"scans": n, "first_s": first}), flush=True)
+    print(json.dumps({"scans": n, "first_s": first, "first_stamp": stamps[0] if stamps else None,
+                      "last_stamp": stamps[-1] if stamps else None}), flush=True)
 
 
 def many(dp, secs):

@@ -1109,15 +1109,10 @@ impl Discovery {
       match self.dcps_subscription.reader.into_iterator() {
         Ok(ds) => ds
           .map(|d| d.map_dispose(|g| g.0)) // map_dispose removes Endpoint_GUID wrapper around GUID
-          .filter(|d|
-              // If a participant was specified, we must match its GUID prefix.
-              match (read_history, d) {
-                (None, _) => true, // Not asked to filter by participant
-                (Some(participant_to_update), Sample::Value(drd)) =>
-                  drd.reader_proxy.remote_reader_guid.prefix == participant_to_update,
-                (Some(participant_to_update), Sample::Dispose(guid)) =>
-                  guid.prefix == participant_to_update,
-              })
+          // jderobot's patch: every sample taken is processed, whichever participant
+          // it is from. A rediscovery (read_history) took all new samples and
+          // dropped those of other participants: with ten subscribers started at
+          // once, some were never matched (their announcements, acknowledged, lost).
           .collect(),
         Err(e) => {
           error!("sedp_receive_subscription: {e:?}");
@@ -1174,7 +1169,7 @@ impl Discovery {
     } // loop
   }
 
-  pub fn sedp_receive_publication(&mut self, read_history: Option<GuidPrefix>) {
+  pub fn sedp_receive_publication(&mut self, _read_history: Option<GuidPrefix>) {
     let dwds: Vec<Sample<DiscoveredWriterData, GUID>> =
       match self.dcps_publication.reader.into_iterator() {
         // a lot of cloning here, but we must copy the data out of the
@@ -1182,16 +1177,10 @@ impl Discovery {
         // a reader and thus self
         Ok(ds) => ds
           .map(|d| d.map_dispose(|g| g.0)) // map_dispose removes Endpoint_GUID wrapper around GUID
-          // If a participant was specified, we must match its GUID prefix.
-          .filter(|d| match (read_history, d) {
-            (None, _) => true, // Not asked to filter by participant
-            (Some(participant_to_update), Sample::Value(dwd)) => {
-              dwd.writer_proxy.remote_writer_guid.prefix == participant_to_update
-            }
-            (Some(participant_to_update), Sample::Dispose(guid)) => {
-              guid.prefix == participant_to_update
-            }
-          })
+          // jderobot's patch: every sample taken is processed, whichever participant
+          // it is from. A rediscovery (read_history) took all new samples and
+          // dropped those of other participants: with ten subscribers started at
+          // once, some were never matched (their announcements, acknowledged, lost).
           .collect(),
         Err(e) => {
           error!("sedp_receive_publication: {e:?}");
@@ -1580,20 +1569,15 @@ impl Discovery {
   }
 
   #[cfg(feature = "security")]
-  pub fn secure_sedp_receive_subscription(&mut self, read_history: Option<GuidPrefix>) {
+  pub fn secure_sedp_receive_subscription(&mut self, _read_history: Option<GuidPrefix>) {
     let sec_subs: Vec<Sample<SubscriptionBuiltinTopicDataSecure, GUID>> =
       match self.dcps_subscriptions_secure.reader.into_iterator() {
         Ok(ds) => ds
           .map(|d| d.map_dispose(|g| g.0)) // map_dispose removes Endpoint_GUID wrapper around GUID
-          .filter(|d|
-              // If a participant was specified, we must match its GUID prefix.
-              match (read_history, d) {
-                (None, _) => true, // Not asked to filter by participant
-                (Some(participant_to_update), Sample::Value(sec_sub)) =>
-                sec_sub.discovered_reader_data.reader_proxy.remote_reader_guid.prefix == participant_to_update,
-                (Some(participant_to_update), Sample::Dispose(guid)) =>
-                  guid.prefix == participant_to_update,
-              })
+          // jderobot's patch: every sample taken is processed, whichever participant
+          // it is from. A rediscovery (read_history) took all new samples and
+          // dropped those of other participants: with ten subscribers started at
+          // once, some were never matched (their announcements, acknowledged, lost).
           .collect(),
         Err(e) => {
           error!("secure_sedp_receive_subscription: {e:?}");
@@ -1634,26 +1618,15 @@ impl Discovery {
   }
 
   #[cfg(feature = "security")]
-  pub fn secure_sedp_receive_publication(&mut self, read_history: Option<GuidPrefix>) {
+  pub fn secure_sedp_receive_publication(&mut self, _read_history: Option<GuidPrefix>) {
     let sec_pubs: Vec<Sample<PublicationBuiltinTopicDataSecure, GUID>> =
       match self.dcps_publications_secure.reader.into_iterator() {
         Ok(ds) => ds
           .map(|d| d.map_dispose(|g| g.0)) // map_dispose removes Endpoint_GUID wrapper around GUID
-          // If a participant was specified, we must match its GUID prefix.
-          .filter(|d| match (read_history, d) {
-            (None, _) => true, // Not asked to filter by participant
-            (Some(participant_to_update), Sample::Value(sec_pub)) => {
-              sec_pub
-                .discovered_writer_data
-                .writer_proxy
-                .remote_writer_guid
-                .prefix
-                == participant_to_update
-            }
-            (Some(participant_to_update), Sample::Dispose(guid)) => {
-              guid.prefix == participant_to_update
-            }
-          })
+          // jderobot's patch: every sample taken is processed, whichever participant
+          // it is from. A rediscovery (read_history) took all new samples and
+          // dropped those of other participants: with ten subscribers started at
+          // once, some were never matched (their announcements, acknowledged, lost).
           .collect(),
         Err(e) => {
           error!("secure_sedp_receive_publication: {e:?}");

@@ -230,8 +230,17 @@ impl UDPListener {
         "ensure_receive_buffer_capacity - {} bytes left",
         self.receive_buffer.capacity()
       );
-      let nbytes = match self.socket.recv(&mut self.receive_buffer) {
-        Ok(n) => n,
+      let nbytes = match self.socket.recv_from(&mut self.receive_buffer) {
+        // jderobot's patch: kept to this host, a datagram from an address that
+        // is not loopback is dropped unread: a multicast listener is bound to
+        // 0.0.0.0, so a LAN host could send to its port by unicast. (Linux drops
+        // a loopback source arriving on another interface as a martian.)
+        Ok((_, from)) if super::util::localhost_only() && !from.ip().is_loopback() => {
+          self.receive_buffer.clear();
+          debug!("localhost only: dropped a datagram from {from}");
+          continue;
+        }
+        Ok((n, _)) => n,
         Err(e) => {
           self.receive_buffer.clear(); // since nothing was received
           if e.kind() == io::ErrorKind::WouldBlock {

@@ -321,6 +321,9 @@ pub(crate) struct Writer {
   status_sender: StatusChannelSender<DataWriterStatus>,
   // offered_deadline_status: OfferedDeadlineMissedStatus,
   ack_waiter: Option<AckWaiter>,
+  /// jderobot's patch: the readers whose pre-emptive ACKNACK this discovery
+  /// writer has answered with a HEARTBEAT (once each, see handle_ack_nack).
+  preemptive_answered: BTreeSet<GUID>,
   participant_status_sender: StatusChannelSender<DomainParticipantStatusEvent>,
 
   security_plugins: Option<SecurityPluginsHandle>,
@@ -393,7 +396,14 @@ impl Writer {
       push_mode: true,
       heartbeat_period,
       cache_cleaning_period,
-      nack_response_delay: NACK_RESPONSE_DELAY, // default value from dp_event_loop
+      // jderobot's patch: discovery's writers repair after 10 ms, not the spec's
+      // default 200 ms (Fast DDS: 5 ms), so a new participant knows our
+      // endpoints a round trip after it asks; user writers keep 200 ms.
+      nack_response_delay: if i.guid.entity_id.kind().is_built_in() {
+        std::time::Duration::from_millis(10)
+      } else {
+        NACK_RESPONSE_DELAY // default value from dp_event_loop
+      },
       nackfrag_response_delay: NACK_RESPONSE_DELAY, // default value from dp_event_loop
       repairfrags_continue_delay: std::time::Duration::from_millis(1),
       nack_suppression_duration: NACK_SUPPRESSION_DURATION,
@@ -417,6 +427,7 @@ impl Writer {
       status_sender: i.status_sender,
       participant_status_sender,
       ack_waiter: None,
+      preemptive_answered: BTreeSet::new(),
 
       security_plugins: i.security_plugins,
     }
@@ -877,6 +888,28 @@ impl Writer {
     }
   }
 
+  /// A HEARTBEAT (not final) to one matched reader, by unicast: the reader
+  /// answers with an ACKNACK of what it misses.
+  fn heartbeat_to(&self, reader: GUID) {
+    let Some(rp) = self.readers.get(&reader) else {
+      return;
+    };
+    let hb_message = MessageBuilder::new()
+      .ts_msg(self.endianness, Some(Timestamp::now()))
+      .heartbeat_msg(
+        self.entity_id(),
+        self.history_buffer.first_change_sequence_number(),
+        self.history_buffer.last_change_sequence_number(),
+        self.next_heartbeat_count(),
+        self.endianness,
+        reader.entity_id,
+        false,
+        false,
+      )
+      .add_header_and_build(self.my_guid.prefix);
+    self.send_message_to_readers(DeliveryMode::Unicast, hb_message, &mut std::iter::once(rp));
+  }
+
   /// When receiving an ACKNACK Message indicating a Reader is missing some data
   /// samples, the Writer must respond by either sending the missing data
   /// samples, sending a GAP message when the sample is not relevant, or
@@ -985,6 +1018,23 @@ impl Writer {
             );
           }
         } // if have reader_proxy
+
+        // jderobot's patch: a reader that has nothing and asks for nothing (a
+        // pre-emptive ACKNACK: Cyclone DDS sends one when it matches a writer)
+        // does not know what this writer has; a discovery writer tells it at
+        // once with a HEARTBEAT, once per reader. Our periodic heartbeat (1 s)
+        // came first, and a HEARTBEAT sent when we matched the reader arrives
+        // before the peer knows our participant and is dropped: a new Cyclone
+        // subscriber got our endpoints, and so our samples, ~1.2 s late.
+        if self.entity_id().kind().is_built_in()
+          && an.reader_sn_state.base() == SequenceNumber::from(1)
+          && an.reader_sn_state.iter().next().is_none()
+          && last_seq >= SequenceNumber::from(1)
+          && self.readers.contains_key(&reader_guid)
+          && self.preemptive_answered.insert(reader_guid)
+        {
+          self.heartbeat_to(reader_guid);
+        }
 
         // See if we need to respond by GAP message
         if let Some(reader_proxy) = self.readers.get(&reader_guid) {
@@ -1512,9 +1562,9 @@ impl Writer {
             remote_reader: reader_proxy.remote_reader_guid,
           });
           // If we're reliable, should we send out a heartbeat so that new reader can
-          // catch up? (jderobot: tried for discovery's writers, 50 ms after the
-          // match; it made tests/ros2.rs's stalled-subscriber test lose every
-          // /cmd_vel now and then, cause not found, so it is not done.)
+          // catch up? (jderobot: at the match the peer may not know us yet and
+          // drops it; a discovery writer answers the reader's pre-emptive ACKNACK
+          // instead, see handle_ack_nack.)
           info!(
             "Matched new remote reader on topic={:?} reader={:?}",
             self.topic_name(),
@@ -1577,6 +1627,7 @@ impl Writer {
   }
 
   fn matched_reader_remove(&mut self, guid: GUID) -> Option<RtpsReaderProxy> {
+    self.preemptive_answered.remove(&guid);
     let removed = self.readers.remove(&guid);
     if let Some(ref removed_reader) = removed {
       info!(
