@@ -749,7 +749,9 @@ impl Writer {
           // no image arrived whole; by unicast 91 % of Cyclone's own rate).
           // Discovery (built-in writers) stays on multicast: SPDP announcements
           // must reach participants not yet known.
-          let mode = if self.my_guid.entity_id.kind().is_user_defined() {
+          let mode = if self.my_guid.entity_id.kind().is_user_defined()
+            && (fragmentation_needed || self.readers.len() < 2)
+          {
             DeliveryMode::Unicast
           } else {
             DeliveryMode::Multicast
