@@ -48,6 +48,23 @@ fn peer_with(
         .expect("start the Cyclone peer")
 }
 
+/// Writes DIR/NAME: the simulator's laser served by the ros2 service on domain
+/// `d`, with its discovery line(s) `discovery` (`insecure`, `discovery localhost`).
+fn laser_service_conf(dir: &Path, name: &str, d: u32, discovery: &str) -> PathBuf {
+    let conf = dir.join(name);
+    std::fs::write(
+        &conf,
+        format!(
+            "driver simulator\nworld {}\nprovides laser 180 1\nend_driver\n\
+             service ros2\n{discovery}\ndomain {d}\nend_service\n\
+             load_driver simulator\nload_service ros2\n",
+            common::world_path("simple.world")
+        ),
+    )
+    .unwrap();
+    conf
+}
+
 fn json_of(child: std::process::Child, what: &str, robot: &Proc) -> serde_json::Value {
     let out = child.wait_with_output().unwrap();
     let stdout = String::from_utf8_lossy(&out.stdout);
@@ -334,17 +351,7 @@ fn garbage_rtps_datagrams_neither_crash_nor_stop_the_service_and_the_driver() {
     let d = domain(4);
     let dir = tempfile::tempdir().unwrap();
     // One process serves the simulated laser, another reads it back over DDS.
-    let served = dir.path().join("served.conf");
-    std::fs::write(
-        &served,
-        format!(
-            "driver simulator\nworld {}\nprovides laser 180 1\nend_driver\n\
-             service ros2\ninsecure\ndomain {d}\nend_service\n\
-             load_driver simulator\nload_service ros2\n",
-            common::world_path("simple.world")
-        ),
-    )
-    .unwrap();
+    let served = laser_service_conf(dir.path(), "served.conf", d, "insecure");
     let reads = dir.path().join("reads.conf");
     std::fs::write(
         &reads,
@@ -711,17 +718,7 @@ fn ten_cyclone_subscribers_started_at_once_each_get_every_scan() {
     };
     let d = domain(22);
     let dir = tempfile::tempdir().unwrap();
-    let conf = dir.path().join("fan.conf");
-    std::fs::write(
-        &conf,
-        format!(
-            "driver simulator\nworld {}\nprovides laser 180 1\nend_driver\n\
-             service ros2\ninsecure\ndomain {d}\nend_service\n\
-             load_driver simulator\nload_service ros2\n",
-            common::world_path("simple.world")
-        ),
-    )
-    .unwrap();
+    let conf = laser_service_conf(dir.path(), "fan.conf", d, "insecure");
     let mut robot = Proc::start(&conf);
     robot.ask_until("echo laser", "the laser", |l| {
         l.starts_with("laser clock=") && !l.starts_with("laser clock=0 ")
@@ -755,17 +752,7 @@ fn discovery_localhost_keeps_dds_on_loopback_and_a_localhost_cyclone_peer_reads_
     };
     let d = domain(10);
     let dir = tempfile::tempdir().unwrap();
-    let conf = dir.path().join("local.conf");
-    std::fs::write(
-        &conf,
-        format!(
-            "driver simulator\nworld {}\nprovides laser 180 1\nend_driver\n\
-             service ros2\ndiscovery localhost\ndomain {d}\nend_service\n\
-             load_driver simulator\nload_service ros2\n",
-            common::world_path("simple.world")
-        ),
-    )
-    .unwrap();
+    let conf = laser_service_conf(dir.path(), "local.conf", d, "discovery localhost");
     let mut robot = Proc::start(&conf);
     robot.ask_until("echo laser", "the laser", |l| {
         l.starts_with("laser clock=") && !l.starts_with("laser clock=0 ")
