@@ -688,20 +688,7 @@ impl Hal {
     }
     #[pyo3(name = "getLaserData")]
     fn get_laser_data(&self, py: Python<'_>) -> PyResult<LaserData> {
-        let laser = with_current(py, "HAL.getLaserData", |c| {
-            c.robot
-                .laser
-                .as_ref()
-                .map(|l| l.snapshot())
-                .ok_or_else(|| c.robot.missing("laser", "getLaserData"))
-        })?;
-        let (min_angle, max_angle, min_range, max_range) = laser_geometry(&laser.value);
-        let values: Vec<f64> = laser
-            .value
-            .readings
-            .iter()
-            .map(|&r| r as f64 / 1000.0)
-            .collect();
+        let (values, (min_angle, max_angle, min_range, max_range), _) = latest_scan(py)?;
         Ok(LaserData {
             values: values.into_pyobject(py)?.into_any().unbind(),
             min_angle,
@@ -784,20 +771,7 @@ fn not_here(module: &str, name: &str, here: &str) -> PyErr {
 #[pyfunction]
 #[pyo3(name = "getLaserData")]
 fn laser_values(py: Python<'_>) -> PyResult<Bound<'_, PyAny>> {
-    let laser = with_current(py, "HAL.getLaserData", |c| {
-        c.robot
-            .laser
-            .as_ref()
-            .map(|l| l.snapshot())
-            .ok_or_else(|| c.robot.missing("laser", "getLaserData"))
-    })?;
-    let (min_angle, max_angle, min_range, max_range) = laser_geometry(&laser.value);
-    let values: Vec<f64> = laser
-        .value
-        .readings
-        .iter()
-        .map(|&r| r as f64 / 1000.0)
-        .collect();
+    let (values, (min_angle, max_angle, min_range, max_range), time) = latest_scan(py)?;
     let half = std::f64::consts::FRAC_PI_2;
     runner(py)?.getattr("laser_values")?.call1((
         values,
@@ -805,8 +779,29 @@ fn laser_values(py: Python<'_>) -> PyResult<Bound<'_, PyAny>> {
         max_angle + half,
         min_range,
         max_range,
-        unix_seconds(laser.time),
+        unix_seconds(time),
     ))
+}
+
+/// The robot's latest scan, for both generations' `HAL.getLaserData`: its
+/// ranges in m, its geometry ([`laser_geometry`]) and when it was taken.
+type Scan = (Vec<f64>, (f64, f64, f64, f64), std::time::SystemTime);
+
+fn latest_scan(py: Python<'_>) -> PyResult<Scan> {
+    let laser = with_current(py, "HAL.getLaserData", |c| {
+        c.robot
+            .laser
+            .as_ref()
+            .map(|l| l.snapshot())
+            .ok_or_else(|| c.robot.missing("laser", "getLaserData"))
+    })?;
+    let values = laser
+        .value
+        .readings
+        .iter()
+        .map(|&r| r as f64 / 1000.0)
+        .collect();
+    Ok((values, laser_geometry(&laser.value), laser.time))
 }
 
 /// The Academy 5 `HAL.getBumperData()`: `state` 1 while touching; `bumper` 0
