@@ -841,21 +841,7 @@ impl Writer {
     {
       trace!("heartbeat tick: all readers have all available data.");
     } else {
-      // the interface to .heartbeat_msg is silly: we give ref to ourself
-      // and that function then queries us.
-      let hb_message = MessageBuilder::new()
-        .ts_msg(self.endianness, Some(Timestamp::now()))
-        .heartbeat_msg(
-          self.entity_id(), // from Writer
-          self.history_buffer.first_change_sequence_number(),
-          self.history_buffer.last_change_sequence_number(),
-          self.next_heartbeat_count(),
-          self.endianness,
-          EntityId::UNKNOWN, // to Reader
-          final_flag,
-          liveliness_flag,
-        )
-        .add_header_and_build(self.my_guid.prefix);
+      let hb_message = self.heartbeat_message(EntityId::UNKNOWN, final_flag, liveliness_flag);
 
       debug!(
         "Writer {:?} topic={:} HEARTBEAT {:?} to {:?}",
@@ -890,25 +876,33 @@ impl Writer {
     }
   }
 
-  /// A HEARTBEAT (not final) to one matched reader, by unicast: the reader
-  /// answers with an ACKNACK of what it misses.
-  fn heartbeat_to(&self, reader: GUID) {
-    let Some(rp) = self.readers.get(&reader) else {
-      return;
-    };
-    let hb_message = MessageBuilder::new()
+  /// A HEARTBEAT message of this writer's history, to `to_reader` (UNKNOWN:
+  /// every reader).
+  fn heartbeat_message(&self, to_reader: EntityId, final_flag: bool, liveliness_flag: bool) -> Message {
+    // the interface to .heartbeat_msg is silly: we give ref to ourself
+    // and that function then queries us.
+    MessageBuilder::new()
       .ts_msg(self.endianness, Some(Timestamp::now()))
       .heartbeat_msg(
-        self.entity_id(),
+        self.entity_id(), // from Writer
         self.history_buffer.first_change_sequence_number(),
         self.history_buffer.last_change_sequence_number(),
         self.next_heartbeat_count(),
         self.endianness,
-        reader.entity_id,
-        false,
-        false,
+        to_reader,
+        final_flag,
+        liveliness_flag,
       )
-      .add_header_and_build(self.my_guid.prefix);
+      .add_header_and_build(self.my_guid.prefix)
+  }
+
+  /// jderobot's patch: a HEARTBEAT (not final) to one matched reader, by
+  /// unicast: the reader answers with an ACKNACK of what it misses.
+  fn heartbeat_to(&self, reader: GUID) {
+    let Some(rp) = self.readers.get(&reader) else {
+      return;
+    };
+    let hb_message = self.heartbeat_message(reader.entity_id, false, false);
     self.send_message_to_readers(DeliveryMode::Unicast, hb_message, &mut std::iter::once(rp));
   }
 
