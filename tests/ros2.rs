@@ -1186,7 +1186,7 @@ fn a_lan_host_cannot_reach_a_discovery_localhost_node() {
     };
     let d = domain(23);
     let dir = tempfile::tempdir().unwrap();
-    let probe = root().join("tests/ros2/spdp_probe.py");
+    let probe = root().join("tests/ros2/rtps_probe.py");
     for (mode, answered) in [("insecure", true), ("discovery localhost", false)] {
         let conf = dir.path().join("node.conf");
         std::fs::write(
@@ -1255,6 +1255,53 @@ fn a_lan_host_cannot_reach_a_discovery_localhost_node() {
         }
         node.quit();
     }
+}
+
+/// Issue 52: no allocation a datagram can ask for. 100 DATA_FRAGs, each from a
+/// new writer and announcing a 16 MiB sample, then one announcing 0xFFFFFFF0
+/// bytes, to the domain's SPDP port: the service stays up, its memory grows by
+/// less than 32 MB (112 kB measured), and it still serves. Without the vendored
+/// RustDDS's patch 0018 each took its announced size at once: +1.49 GB here (the
+/// attack took 256 MB per 1080-byte datagram, and a claim near 4 GiB aborted).
+#[test]
+fn data_frags_announcing_huge_samples_neither_grow_the_memory_nor_end_the_service() {
+    let d = domain(24);
+    let dir = tempfile::tempdir().unwrap();
+    let conf = laser_service_conf(dir.path(), "frag.conf", d, "insecure");
+    let mut robot = Proc::start(&conf);
+    robot.ask_until("echo laser", "the laser", |l| {
+        l.starts_with("laser clock=") && !l.starts_with("laser clock=0 ")
+    });
+    let pid = robot.child.id();
+    let before = rss_kb(pid);
+    let out = Command::new("python3")
+        .arg(root().join("tests/ros2/rtps_probe.py"))
+        .args([
+            "datafrag",
+            "127.0.0.1",
+            &(7400 + 250 * d).to_string(),
+            "100",
+        ])
+        .arg((16u32 << 20).to_string())
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    std::thread::sleep(std::time::Duration::from_millis(500));
+    assert!(
+        robot.child.try_wait().unwrap().is_none(),
+        "the service ended:\n{}",
+        robot.text()
+    );
+    let grown = rss_kb(pid).saturating_sub(before);
+    eprintln!("RSS {before} kB, then +{grown} kB after 101 huge DATA_FRAGs");
+    assert!(grown < 32 * 1024, "RSS grew {grown} kB");
+    let e = robot.ask_until("echo laser", "the laser", |l| l.starts_with("laser clock="));
+    assert!(!e.starts_with("laser clock=0 "), "{e}");
+    robot.quit();
 }
 
 /// Issue 50: one `frames` setting for every topic that names a frame. /odom

@@ -224,6 +224,31 @@ impl FragmentAssembler {
   // AssemblyBuffers   self.assembly_buffers.keys()
   // }
 
+  /// jderobot's patch: the bytes this assembler holds for unfinished samples.
+  pub fn buffered_bytes(&self) -> usize {
+    self.assembly_buffers.values().map(|ab| ab.buffer_bytes.len()).sum()
+  }
+
+  /// jderobot's patch: how many unfinished samples this assembler holds.
+  pub fn buffered_samples(&self) -> usize {
+    self.assembly_buffers.len()
+  }
+
+  /// jderobot's patch: the unfinished sample that has gone longest without a
+  /// fragment, and when its last one came.
+  pub fn stalest(&self) -> Option<(SequenceNumber, Timestamp)> {
+    self
+      .assembly_buffers
+      .iter()
+      .map(|(sn, ab)| (*sn, ab.modified_time))
+      .min_by_key(|(_, t)| *t)
+  }
+
+  /// jderobot's patch: drops an unfinished sample.
+  pub fn drop_sample(&mut self, sn: SequenceNumber) {
+    self.assembly_buffers.remove(&sn);
+  }
+
   pub fn is_partially_received(&self, sn: SequenceNumber) -> bool {
     self.assembly_buffers.contains_key(&sn)
     // assembly buffers map contains a key (SN) if and only if we have some

@@ -159,6 +159,20 @@ const FRAGMENT_ASSEMBLY_TIMEOUT: Duration = Duration::from_secs(10);
 // minimum interval (max frequency) of AssemblyBuffer GC
 const MIN_FRAGMENT_GC_INTERVAL: Duration = Duration::from_secs(2);
 
+// jderobot's patch: what fragments a peer can make a reader hold. A DATA_FRAG
+// announces its sample's size and the assembly buffer was allocated (and
+// zeroed) at that size on the first fragment: one 1080-byte datagram to the
+// SPDP port took 256 MB, never freed, and a size near 4 GiB aborted the process.
+// The largest sample a user reader assembles (a 4K RGB image is 25 MB):
+const MAX_USER_SAMPLE: usize = 64 << 20;
+// discovery's samples are a few KB (a built-in reader: SPDP, SEDP):
+const MAX_BUILTIN_SAMPLE: usize = 1 << 20;
+// unfinished samples a reader holds at once, and their bytes (per sample
+// kind above: twice the largest sample); past either, the sample that has gone
+// longest without a fragment is dropped for the new one.
+const MAX_UNFINISHED_SAMPLES: usize = 64;
+const MAX_UNFINISHED_BYTES_FACTOR: usize = 2;
+
 impl Reader {
   pub(crate) fn new(
     i: ReaderIngredients,
@@ -612,6 +626,10 @@ impl Reader {
       write_options_b = write_options_b.related_sample_identity(related_sample_identity);
     }
 
+    if !self.make_room_for(writer_guid, datafrag) {
+      return;
+    }
+
     // Feed to fragment assembler ...
     let writer_seq_num = datafrag.writer_sn; // for borrow checker
     let completed_dds_data = self
@@ -631,6 +649,56 @@ impl Reader {
       );
     } else {
       self.garbage_collect_fragments();
+    }
+  }
+
+  /// jderobot's patch: whether `datafrag` may be assembled: its sample is no
+  /// larger than this reader assembles, and a new sample finds room among the
+  /// unfinished ones (the stalest are dropped to make it).
+  fn make_room_for(&mut self, writer_guid: GUID, datafrag: &DataFrag) -> bool {
+    let size = datafrag.data_size as usize;
+    let largest = if self.my_guid.entity_id.kind().is_built_in() {
+      MAX_BUILTIN_SAMPLE
+    } else {
+      MAX_USER_SAMPLE
+    };
+    if size > largest {
+      debug!(
+        "DATA_FRAG of a {size}-byte sample from {writer_guid:?} dropped: this reader assembles \
+         {largest} bytes at most"
+      );
+      return false;
+    }
+    let known = self
+      .fragment_assemblers
+      .get(&writer_guid)
+      .is_some_and(|fa| fa.is_partially_received(datafrag.writer_sn));
+    if known {
+      return true;
+    }
+    loop {
+      let (samples, bytes) = self
+        .fragment_assemblers
+        .values()
+        .fold((0, 0), |(n, b), fa| (n + fa.buffered_samples(), b + fa.buffered_bytes()));
+      if samples < MAX_UNFINISHED_SAMPLES && bytes + size <= MAX_UNFINISHED_BYTES_FACTOR * largest {
+        return true;
+      }
+      let stalest = self
+        .fragment_assemblers
+        .iter()
+        .filter_map(|(w, fa)| fa.stalest().map(|(sn, t)| (*w, sn, t)))
+        .min_by_key(|(_, _, t)| *t);
+      let Some((w, sn, _)) = stalest else {
+        return true;
+      };
+      debug!("unfinished sample {sn:?} of {w:?} dropped to make room");
+      if let Some(fa) = self.fragment_assemblers.get_mut(&w) {
+        fa.drop_sample(sn);
+        if fa.buffered_samples() == 0 {
+          self.fragment_assemblers.remove(&w);
+        }
+      }
     }
   }
 
@@ -663,6 +731,11 @@ impl Reader {
           debug!("AssemblyBuffer GC writer {writer:?}");
           fa.garbage_collect_before(expire_before);
         });
+      // jderobot's patch: an assembler left with nothing goes too (one per
+      // writer GUID a peer ever made up).
+      self
+        .fragment_assemblers
+        .retain(|_, fa| fa.buffered_samples() > 0);
     } else {
       trace!("Not yet AssemblyBuffer GC time.");
     }

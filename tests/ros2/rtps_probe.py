@@ -1,14 +1,22 @@
-"""A hand-written SPDP announcement (DDSI-RTPS 2.3, 8.5.3 and 9.6.2.2), sent by
-unicast from another host, and a listener for whatever a DDS participant sends
-back: how tests/ros2.rs shows that a `discovery localhost` node takes nothing
-from the LAN. The announcement says the new participant's metatraffic and
-default unicast locator is 127.0.0.1:REPLY_PORT, so a node that accepts it
-answers there, on its own host, where the listener waits.
+"""Hand-written RTPS datagrams (DDSI-RTPS 2.3), from the specification, for what
+no DDS implementation sends on purpose:
 
-    spdp_probe.py send HOST REPLY_PORT PORT...   the announcement to HOST:PORT, each
+- an SPDP announcement (8.5.3, 9.6.2.2) sent by unicast from another host, and a
+  listener for whatever a DDS participant sends back: how tests/ros2.rs shows
+  that a `discovery localhost` node takes nothing from the LAN. The announcement
+  says the new participant's metatraffic and default unicast locator is
+  127.0.0.1:REPLY_PORT, so a node that accepts it answers there, on its own
+  host, where the listener waits;
+- DATA_FRAGs (8.3.7.3, 9.4.5.4) that announce huge samples, one fragment each,
+  from a new writer each time, to the SPDP reader: what one datagram can make a
+  reader allocate.
+
+    rtps_probe.py send HOST REPLY_PORT PORT...   the announcement to HOST:PORT, each
                                                   PORT, 10 times over 2 s
-    spdp_probe.py listen REPLY_PORT SECS          count RTPS datagrams received on
+    rtps_probe.py listen REPLY_PORT SECS          count RTPS datagrams received on
                                                   127.0.0.1:REPLY_PORT
+    rtps_probe.py datafrag HOST PORT N SIZE       N DATA_FRAGs of a SIZE-byte sample,
+                                                  and one of 0xFFFFFFF0 bytes
 
 Prints one JSON line.
 """
@@ -50,9 +58,31 @@ def announcement(reply_port):
     return b"RTPS\x02\x03\x01\xaa" + prefix + data
 
 
+def datafrag(sample_size):
+    """A DATA_FRAG from a new writer (a random GUID prefix) to the SPDP reader:
+    fragment 1 of 1024 bytes of a sample of `sample_size` bytes."""
+    prefix = os.urandom(12)
+    frag = b"\x00\x03\x00\x00" + os.urandom(1020)
+    # extraFlags, octetsToInlineQos 28, readerId SPDP reader, writerId SPDP writer,
+    # writerSN 1, fragmentStartingNum 1, fragmentsInSubmessage 1, fragmentSize
+    # 1024, sampleSize; flags E (little endian).
+    body = struct.pack("<HH", 0, 28) + bytes.fromhex("000100c7000100c2") + struct.pack("<iI", 0, 1)
+    body += struct.pack("<IHHI", 1, 1, 1024, sample_size) + frag
+    return b"RTPS\x02\x03\x01\xaa" + prefix + struct.pack("<BBH", 0x16, 0x01, len(body)) + body
+
+
 def main():
     mode = sys.argv[1]
-    if mode == "send":
+    if mode == "datafrag":
+        host, port, n, size = sys.argv[2], int(sys.argv[3]), int(sys.argv[4]), int(sys.argv[5])
+        s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        for k in range(n):
+            s.sendto(datafrag(size), (host, port))
+            if k % 10 == 9:
+                time.sleep(0.01)
+        s.sendto(datafrag(0xFFFFFFF0), (host, port))
+        print(json.dumps({"sent": n + 1}), flush=True)
+    elif mode == "send":
         host, reply_port, ports = sys.argv[2], int(sys.argv[3]), [int(p) for p in sys.argv[4:]]
         s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         msg = announcement(reply_port)
