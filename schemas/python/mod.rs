@@ -1,6 +1,8 @@
 //! python: runs a student's Python program, written against JdeRobot's Robotics
-//! Academy API in either of its shapes, as a schema, in an interpreter embedded in
-//! the one binary, on whatever driver provides the robot.
+//! Academy API in either of its shapes, as a schema, on whatever driver provides
+//! the robot. Each program runs in a worker process of its own (the binary
+//! itself, started again: still one file to install), so nothing it does can
+//! take jderobot or another schema down, and two programs never share a GIL.
 //!
 //! Conf (`file` is required; the other lines show their defaults):
 //! ```text
@@ -9,6 +11,7 @@
 //! cycle 50                      # ms: the 4.x loop's period (the Academy's "brain frequency")
 //! venv none                     # a virtual environment's directory (default: $VIRTUAL_ENV)
 //! watch on                      # reload the program when its file changes
+//! memory 4096                   # MiB: the worker's address space (0: no limit)
 //! motors motors                 # the interfaces HAL reads and writes (`none`: without)
 //! encoders encoders
 //! laser laser
@@ -29,7 +32,7 @@
 //! **HAL** (the Academy's wheeled-robot API; units converted from the interfaces'):
 //! `setV(v)` m/s and `setW(w)` rad/s (positive turns left) write `motors` (mm/s,
 //! deg/s) when called (past the interface's range: clamped, said once) and the
-//! command holds while the program lives (the watchdog publishes it again every
+//! command holds while the program lives (the keeper publishes it again every
 //! [`REFRESH`]); it is zeroed when the program ends, fails, is stopped or goes
 //! silent for [`SILENCE`]. `getPose3d()` `.x .y` m, `.yaw` rad in (−π, π] (from
 //! `encoders`); `getLaserData()` `.values` m (from `laser`, its own geometry);
@@ -43,30 +46,38 @@
 //!
 //! **Faults never take the suite down.** A syntax error stops the load (and
 //! `jderobot check`) with `FILE:LINE: message`; an exception prints its traceback,
-//! marks the line in the panel, stops this schema and zeroes its motors. Stopping
-//! interrupts a running program within a few ms (a watchdog raises
-//! `ProgramStopped` in its thread; `time.sleep` and `Frequency.tick` give up at
-//! once), even one stuck in `while True: pass`, and zeroes the motors. Saving the
-//! file reloads it (motors zeroed in between), as do the panel's Reload button and
-//! the shell's `reload python`. See docs/python.md.
+//! marks the line in the panel, stops this schema and zeroes its motors. A
+//! program whose process ends (`os._exit`, a segfault, the memory limit's
+//! killer, `kill -9`) stops this schema with `the program's process ended (HOW)`
+//! and its motors zeroed at once; the other schemas run on. Stopping ends the
+//! worker (`SIGKILL` to its process group: its threads and children too) and
+//! zeroes the motors within a few ms, whatever the program is doing; each run
+//! starts a fresh worker. Saving the file reloads it (motors zeroed in
+//! between), as do the panel's Reload button and the shell's `reload python`.
+//! See docs/python.md; [`worker`] and [`process`] say how the two processes
+//! talk.
 //!
 //! Interfaces: writes `motors` (mm/s, deg/s); reads `encoders` (mm, rad), `laser`
 //! (mm), `bumpers`, `colorA` (BGR) — each optional (a HAL call without it raises a
 //! Python error naming the conf line). System: Debian `python3-dev` to build,
-//! `python3-numpy` for `getImage`/`showImage`.
+//! `python3-numpy` for `getImage`/`showImage`, `python3-opencv` for `cv2`.
 
+pub mod board;
 #[cfg(feature = "gui")]
 pub mod highlight;
 #[cfg(feature = "gui")]
 mod panel;
-mod program;
+pub mod process;
+mod shared;
+mod wire;
+pub mod worker;
 
 use parking_lot::Mutex;
 use std::{
     path::PathBuf,
     sync::{
         Arc, Weak,
-        atomic::{AtomicBool, Ordering},
+        atomic::{AtomicBool, AtomicI32, Ordering},
     },
     time::{Duration, Instant, SystemTime},
 };
@@ -74,14 +85,19 @@ use std::{
 use crate::{
     conf::{
         ComponentConf,
-        settings::{self, CYCLE, Setting, on_off, word},
+        settings::{self, CYCLE, Setting, int, on_off, word},
     },
-    interfaces::{Bumpers, Encoders, Image, Laser, Motors},
-    runtime::{Context, Runtime, Schema, State},
+    interfaces::{Bumpers, Encoders, Image, Laser, Motors, Watch},
+    runtime::{Context, RunClock, Runtime, Schema, State},
 };
 
-pub use program::{CONSOLE_LINES, REFRESH, Shared, TICK_HZ, bumper_side, laser_geometry, shared};
-use program::{Current, Outcome, Program, Robot};
+use board::Board;
+pub use process::set_worker_exe;
+use process::{Event, WorkerProcess};
+use shared::Robot;
+pub use shared::{CONSOLE_LINES, REFRESH, Shared, shared};
+use wire::{Failure, Outcome, ToWorker};
+pub use worker::{TICK_HZ, main_if_worker};
 
 crate::declare_lines! {
     /// python's lines, declared once (`jderobot help python`).
@@ -105,6 +121,12 @@ crate::declare_lines! {
             &[on_off("SWITCH")],
         )
         .default("on"),
+        memory: u64 = Setting::new(
+            "memory",
+            "the program's memory limit (its worker process's address space; past it Python raises MemoryError), MiB; 0: none",
+            &[int("MIB", "MiB", 0, 1 << 20)],
+        )
+        .default("4096"),
         motors: String = settings::uses("motors", "the base HAL.setV/setW drive (none: none)"),
         encoders: String = settings::uses("encoders", "HAL.getPose3d's odometry (none: none)"),
         laser: String = settings::uses("laser", "HAL.getLaserData's scan (none: none)"),
@@ -112,22 +134,44 @@ crate::declare_lines! {
         camera: String = settings::uses("camera", "HAL.getImage's camera (none: none)").default("colorA"),
     }
 }
+
 /// Which piece of the program runs next.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
 enum Phase {
     Init,
-    /// 4.x: the loop body runs each cycle; Academy 5: the program's thread runs.
+    /// 4.x: the loop body runs each cycle; Academy 5: the program runs.
     Loop,
     Finished,
 }
 
-/// A program in the Academy 5 shape, running in a thread of its own.
-struct ProgramThread {
-    /// Set to stop it (before it starts, or with an interrupt).
-    cancel: Arc<AtomicBool>,
-    /// Its outcome, once it ended.
-    outcome: Arc<Mutex<Option<Outcome>>>,
-    handle: std::thread::JoinHandle<()>,
+/// What the schema shares with its keeper: the running worker.
+#[derive(Default)]
+struct Live {
+    /// The running worker's board (None between runs).
+    board: Mutex<Option<Arc<Board>>>,
+    /// The clocks of the sensor values written on it, in `board::Sensor` order.
+    fed: Mutex<[u64; 4]>,
+    /// The running worker's process id (0: none).
+    pid: AtomicI32,
+    /// Set when the keeper ended the worker because the schema stops.
+    killed: AtomicBool,
+}
+
+impl Live {
+    /// Writes the sensors' new values on the worker's board.
+    fn feed(&self, robot: &Robot) {
+        let board = self.board.lock().clone();
+        if let Some(b) = board {
+            robot.feed(&b, &mut self.fed.lock());
+        }
+    }
+}
+
+/// What a program's worker said when it loaded the program.
+#[derive(Clone, Copy)]
+struct Loaded {
+    academy5: bool,
+    has_loop: bool,
 }
 
 /// The schema.
@@ -135,7 +179,9 @@ pub struct PythonSchema {
     shared: Arc<Shared>,
     robot: Arc<Robot>,
     path: PathBuf,
-    program: Option<Arc<Program>>,
+    venv: Option<PathBuf>,
+    /// The worker's memory limit, bytes.
+    memory: Option<u64>,
     phase: Phase,
     cycle: Duration,
     watch: bool,
@@ -143,52 +189,69 @@ pub struct PythonSchema {
     checked: Instant,
     /// The sensors resumed while running.
     children: Vec<String>,
-    watchdog: Option<Watchdog>,
-    /// The Academy 5 program's thread, while it runs (or would not end).
-    thread: Option<ProgramThread>,
+    live: Arc<Live>,
+    keeper: Option<Keeper>,
+    /// The running program's worker and what it loaded.
+    worker: Option<(WorkerProcess, Loaded)>,
     #[cfg(feature = "gui")]
     panel: Option<Box<dyn crate::runtime::Panel>>,
 }
 
 /// How often the file's modification time is looked at.
 const WATCH_EVERY: Duration = Duration::from_millis(250);
-/// How often the watchdog looks for a stop while Python runs (and keeps the
-/// command fresh).
-const WATCHDOG_PERIOD: Duration = Duration::from_millis(5);
+/// How often the keeper looks for a stop and keeps the command fresh, at the
+/// latest (it also wakes when a sensor publishes).
+const KEEPER_PERIOD: Duration = Duration::from_millis(5);
 /// How long a living program may go without showing it is alive (a HAL, GUI or
 /// Frequency call, the end of a 4.x pass; a `time.sleep` or `Frequency.tick`
 /// counts as alive while it lasts) before its motors are stopped: a program
 /// stuck computing, or waiting on something else, does not drive on blind.
 pub const SILENCE: Duration = Duration::from_secs(5);
-/// How long a stop waits for an Academy 5 program's thread to end.
-const STOP_WAIT: Duration = Duration::from_secs(3);
+/// How long a worker may take to start and compile the program.
+const LOAD_WAIT: Duration = Duration::from_secs(30);
 
 fn mtime(p: &std::path::Path) -> Option<SystemTime> {
     std::fs::metadata(p).and_then(|m| m.modified()).ok()
 }
 
 impl PythonSchema {
-    /// Reads and compiles the program; a failure is `FILE:LINE: message`.
-    fn load(&mut self) -> Result<(), String> {
+    /// Reads the program and starts a worker that compiles it; a failure is
+    /// `FILE:LINE: message`.
+    fn start_worker(&mut self) -> Result<(), String> {
+        self.end_worker();
         self.mtime = mtime(&self.path);
         let source = std::fs::read_to_string(&self.path)
             .map_err(|e| format!("{}: cannot read the program: {e}", self.path.display()))?;
         *self.shared.source.lock() = Arc::new(source.clone());
         *self.shared.file.lock() = self.path.clone();
-        let path = self.path.display().to_string();
-        match Program::compile(&path, &source) {
-            Ok(p) => {
-                self.shared.academy5.store(p.academy5, Ordering::Release);
-                self.program = Some(Arc::new(p));
-                *self.shared.error.lock() = None;
-                Ok(())
-            }
-            Err(f) => {
-                self.program = None;
-                *self.shared.error.lock() = Some((f.line, f.summary.clone()));
-                Err(f.summary)
-            }
+        let (worker, loaded) = load(
+            &self.shared,
+            &self.robot,
+            &self.path,
+            source,
+            self.venv.as_ref(),
+            self.memory,
+        )?;
+        self.shared
+            .academy5
+            .store(loaded.academy5, Ordering::Release);
+        *self.shared.error.lock() = None;
+        *self.live.board.lock() = Some(worker.board.clone());
+        *self.live.fed.lock() = [0; 4];
+        self.live.killed.store(false, Ordering::Release);
+        self.live.pid.store(worker.pid(), Ordering::Release);
+        self.worker = Some((worker, loaded));
+        Ok(())
+    }
+
+    /// Ends the running worker, if any (its reader zeroes the motors if it drove).
+    fn end_worker(&mut self) {
+        self.live.pid.store(0, Ordering::Release);
+        if let Some((w, _)) = self.worker.take() {
+            w.kill();
         }
+        *self.live.board.lock() = None;
+        self.shared.in_python.store(false, Ordering::Release);
     }
 
     /// Reloads when the file changed or a reload was asked for: motors zeroed, the
@@ -202,10 +265,12 @@ impl PythonSchema {
         if !asked && !changed {
             return Ok(());
         }
-        self.stop_thread()?;
         self.shared.reload.store(false, Ordering::Release);
         self.robot.release();
-        self.load()?;
+        if let Err(e) = self.start_worker() {
+            self.set_phase(Phase::Finished);
+            return Err(e);
+        }
         self.set_phase(Phase::Init);
         self.shared.clear_console();
         self.shared.print(&format!(
@@ -217,7 +282,7 @@ impl PythonSchema {
 
     fn set_phase(&mut self, p: Phase) {
         self.phase = p;
-        let academy5 = self.program.as_ref().is_some_and(|p| p.academy5);
+        let academy5 = self.worker.as_ref().is_some_and(|(_, l)| l.academy5);
         *self.shared.phase.lock() = match p {
             Phase::Init => "init",
             Phase::Loop if academy5 => "running",
@@ -227,15 +292,11 @@ impl PythonSchema {
     }
 
     /// Waits (at most 2 s) for the first value of the sensors a program reads at
-    /// once, so its init code never sees an empty scan.
+    /// once, so its init code never sees an empty scan; then writes them on the
+    /// worker's board.
     fn wait_for_sensors(&self) {
         let t = Instant::now();
-        let have = |r: &Robot| {
-            r.encoders.as_ref().is_none_or(|e| e.clock() > 0)
-                && r.laser.as_ref().is_none_or(|l| l.clock() > 0)
-                && r.bumpers.as_ref().is_none_or(|b| b.clock() > 0)
-                && r.camera.as_ref().is_none_or(|c| c.clock() > 0)
-        };
+        let have = |r: &Robot| r.sensors().iter().all(|s| s.clock() > 0);
         let mut nudged = Instant::now();
         while !have(&self.robot)
             && t.elapsed() < Duration::from_secs(2)
@@ -248,65 +309,45 @@ impl PythonSchema {
             }
             std::thread::sleep(Duration::from_millis(2));
         }
+        self.live.feed(&self.robot);
     }
 
-    /// Starts an Academy 5 program in a thread of its own.
-    fn start_thread(&mut self, program: Arc<Program>) -> anyhow::Result<()> {
-        let cancel = Arc::new(AtomicBool::new(false));
-        let outcome = Arc::new(Mutex::new(None));
-        let (c, o, shared, robot) = (
-            cancel.clone(),
-            outcome.clone(),
-            self.shared.clone(),
-            self.robot.clone(),
-        );
-        let handle = std::thread::Builder::new()
-            .name(format!("{}-program", self.shared.name))
-            .spawn(move || {
-                program::set_current(Some(Current {
-                    shared: shared.clone(),
-                    robot,
-                }));
-                let r = program.run(0, &shared, Some(&c));
-                program::set_current(None);
-                shared.flush();
-                *o.lock() = Some(r);
-            })?;
-        self.thread = Some(ProgramThread {
-            cancel,
-            outcome,
-            handle,
-        });
-        Ok(())
-    }
-
-    /// Stops the Academy 5 program's thread: interrupts it until it ends (at
-    /// most [`STOP_WAIT`]). A thread that will not end (stuck in C code) is
-    /// kept: the next run waits for it.
-    fn stop_thread(&mut self) -> Result<(), String> {
-        let Some(t) = self.thread.take() else {
-            return Ok(());
+    /// Sends a piece of the program to the worker (0 init, 1 a pass, 2 after the
+    /// loop).
+    fn send_pass(&mut self, which: u8) -> Result<(), String> {
+        let Some((w, _)) = self.worker.as_mut() else {
+            return Err("no program is loaded".into());
         };
-        t.cancel.store(true, Ordering::SeqCst);
-        let since = Instant::now();
-        while !t.handle.is_finished() {
-            if since.elapsed() >= STOP_WAIT {
-                self.thread = Some(t);
-                return Err(format!(
-                    "{}: the program's previous run does not end (it is stuck outside Python code); \
-                     stop jderobot to end it",
-                    self.shared.name
-                ));
+        self.shared.in_python.store(true, Ordering::Release);
+        w.send(&ToWorker::Pass(which))
+            .map_err(|e| format!("the program's process does not listen: {e}"))
+    }
+
+    /// What the worker answers: the outcome of a pass, or how its process ended
+    /// (None: nothing yet within `wait`).
+    fn answer(&mut self, wait: Option<Duration>) -> Option<Result<Outcome, String>> {
+        let (w, _) = self.worker.as_ref()?;
+        loop {
+            let event = match wait {
+                Some(d) => Some(w.next(d)?),
+                None => w.next(Duration::from_millis(50)),
+            };
+            match event {
+                Some(Event::Outcome(o)) => return Some(Ok(o)),
+                Some(Event::Ended(how)) => return Some(Err(how)),
+                Some(other) => tracing::debug!("python: unexpected {other:?}"),
+                None => {}
             }
-            program::interrupt(&self.shared);
-            std::thread::sleep(WATCHDOG_PERIOD);
         }
-        let _ = t.handle.join();
-        Ok(())
     }
 
     /// What a piece of the program's outcome means for the schema.
-    fn conclude(&mut self, outcome: Outcome, next: Phase) -> anyhow::Result<()> {
+    fn conclude(&mut self, answer: Result<Outcome, String>, next: Phase) -> anyhow::Result<()> {
+        self.shared.in_python.store(false, Ordering::Release);
+        let outcome = match answer {
+            Ok(o) => o,
+            Err(how) => return self.ended(how),
+        };
         match outcome {
             Outcome::Done | Outcome::Broke => {
                 if next == Phase::Finished {
@@ -314,9 +355,9 @@ impl PythonSchema {
                         self.robot.release();
                         self.shared
                             .print("-- the program has ended; the motors are stopped\n");
+                        self.end_worker();
                     }
                 } else {
-                    self.robot.end_of_pass();
                     self.shared.touch();
                 }
                 self.set_phase(next);
@@ -327,24 +368,139 @@ impl PythonSchema {
                 self.shared.print(&format!(
                     "-- the program has ended (sys.exit({code})); the motors are stopped\n"
                 ));
+                self.end_worker();
                 self.set_phase(Phase::Finished);
                 Ok(())
             }
-            // The runtime is stopping this schema (or a reload interrupted it).
-            Outcome::Stopped => {
-                self.robot.release();
+            Outcome::Failed(f) => self.failed(f),
+        }
+    }
+
+    fn failed(&mut self, f: Failure) -> anyhow::Result<()> {
+        self.robot.release();
+        self.shared.print(&f.text);
+        if !f.text.ends_with('\n') {
+            self.shared.print("\n");
+        }
+        self.shared.flush();
+        *self.shared.error.lock() = Some((f.line, f.summary.clone()));
+        self.end_worker();
+        self.set_phase(Phase::Finished);
+        Err(anyhow::anyhow!(f.summary))
+    }
+
+    /// The worker's process ended: a stop's doing, or the program's (then the
+    /// schema stops, saying how).
+    fn ended(&mut self, how: String) -> anyhow::Result<()> {
+        self.robot.release();
+        let stopped = self.live.killed.swap(false, Ordering::AcqRel);
+        self.end_worker();
+        if stopped {
+            self.set_phase(Phase::Init);
+            return Ok(());
+        }
+        let what = format!("the program's process ended ({how})");
+        self.shared
+            .print(&format!("-- {what}; the motors are stopped\n"));
+        *self.shared.error.lock() = Some((0, what.clone()));
+        self.set_phase(Phase::Finished);
+        Err(anyhow::anyhow!(what))
+    }
+
+    /// One iteration of a program in the 4.x shape: its init, or one pass of its
+    /// loop (and what follows the loop after a `break`).
+    fn run_4x(&mut self, has_loop: bool) -> anyhow::Result<()> {
+        let which = match self.phase {
+            Phase::Init => 0,
+            Phase::Loop => 1,
+            Phase::Finished => return Ok(()),
+        };
+        self.send_pass(which).map_err(anyhow::Error::msg)?;
+        let Some(mut answer) = self.answer(None) else {
+            return Ok(());
+        };
+        let mut next = match (which, &answer) {
+            (0, Ok(Outcome::Done)) if has_loop => Phase::Loop,
+            (1, Ok(Outcome::Done)) => Phase::Loop,
+            _ => Phase::Finished,
+        };
+        if which == 1 && matches!(answer, Ok(Outcome::Broke)) {
+            self.send_pass(2).map_err(anyhow::Error::msg)?;
+            answer = self.answer(None).unwrap_or(Ok(Outcome::Done));
+            next = Phase::Finished;
+        }
+        self.conclude(answer, next)
+    }
+
+    /// One iteration of a program in the Academy 5 shape: start it, or see
+    /// whether it ended.
+    fn run_5(&mut self) -> anyhow::Result<()> {
+        match self.phase {
+            Phase::Init => {
+                self.send_pass(0).map_err(anyhow::Error::msg)?;
+                self.set_phase(Phase::Loop);
                 Ok(())
             }
-            Outcome::Failed(f) => {
-                self.robot.release();
-                self.shared.print(&f.text);
-                if !f.text.ends_with('\n') {
-                    self.shared.print("\n");
-                }
-                self.shared.flush();
-                *self.shared.error.lock() = Some((f.line, f.summary.clone()));
-                self.set_phase(Phase::Finished);
-                Err(anyhow::anyhow!(f.summary))
+            Phase::Loop => match self.answer(Some(Duration::ZERO)) {
+                Some(answer) => self.conclude(answer, Phase::Finished),
+                None => Ok(()),
+            },
+            Phase::Finished => Ok(()),
+        }
+    }
+}
+
+/// Starts a worker and has it compile `source`: the worker and what it loaded,
+/// or the failure (`FILE:LINE: message`; also kept for the panel).
+fn load(
+    shared: &Arc<Shared>,
+    robot: &Arc<Robot>,
+    path: &std::path::Path,
+    source: String,
+    venv: Option<&PathBuf>,
+    memory: Option<u64>,
+) -> Result<(WorkerProcess, Loaded), String> {
+    let mut worker = WorkerProcess::start(shared.clone(), robot.clone(), memory)
+        .map_err(|e| format!("{}: {e}", shared.name))?;
+    worker
+        .send(&ToWorker::Load {
+            path: path.display().to_string(),
+            source,
+            venv: venv.map(|v| v.display().to_string()),
+            per_command: robot.per_command(),
+            lines: robot.lines(),
+        })
+        .map_err(|e| {
+            format!(
+                "{}: the program's process does not listen: {e}",
+                shared.name
+            )
+        })?;
+    let since = Instant::now();
+    loop {
+        let left = LOAD_WAIT.saturating_sub(since.elapsed());
+        match worker.next(left) {
+            Some(Event::Loaded { academy5, has_loop }) => {
+                return Ok((worker, Loaded { academy5, has_loop }));
+            }
+            Some(Event::Refused(f)) => {
+                *shared.error.lock() = Some((f.line, f.summary.clone()));
+                return Err(f.summary);
+            }
+            Some(Event::Ended(how)) => {
+                return Err(format!(
+                    "{}: the python worker ended before it loaded the program ({how}); \
+                     its output is in the console",
+                    shared.name
+                ));
+            }
+            Some(_) => {}
+            None => {
+                return Err(format!(
+                    "{}: the python worker did not load the program within {} s",
+                    shared.name,
+                    LOAD_WAIT.as_secs()
+                ));
             }
         }
     }
@@ -356,12 +512,11 @@ impl Schema for PythonSchema {
     }
 
     fn on_run(&mut self, ctx: &Context) -> anyhow::Result<()> {
-        // A previous run's thread that would not end blocks a new one.
-        self.stop_thread().map_err(anyhow::Error::msg)?;
         ctx.run_children(&self.children, None)?;
         self.shared.clear_console();
-        // Each run starts the program afresh (the file as it is now).
-        self.load().map_err(anyhow::Error::msg)?;
+        // Each run starts the program afresh (the file as it is now), in a
+        // fresh worker.
+        self.start_worker().map_err(anyhow::Error::msg)?;
         self.set_phase(Phase::Init);
         self.robot.zero();
         self.wait_for_sensors();
@@ -369,80 +524,41 @@ impl Schema for PythonSchema {
     }
 
     fn iteration(&mut self, ctx: &Context) -> anyhow::Result<()> {
-        if self.watchdog.is_none() {
-            self.watchdog = Some(Watchdog::start(
+        if self.keeper.is_none() {
+            self.keeper = Some(Keeper::start(
                 ctx.runtime(),
                 self.shared.clone(),
                 self.robot.clone(),
+                self.live.clone(),
             ));
         }
         self.reload_if_asked().map_err(anyhow::Error::msg)?;
-        let Some(program) = self.program.clone() else {
+        let Some(loaded) = self.worker.as_ref().map(|(_, l)| *l) else {
             return Ok(());
         };
         if self.phase == Phase::Init {
             self.shared.new_run();
             self.robot.start_holding();
         }
-        if program.academy5 {
-            return match self.phase {
-                Phase::Init => {
-                    self.start_thread(program)?;
-                    self.set_phase(Phase::Loop);
-                    Ok(())
-                }
-                Phase::Loop => {
-                    let done = self.thread.as_ref().and_then(|t| t.outcome.lock().take());
-                    let Some(outcome) = done else {
-                        return Ok(());
-                    };
-                    if let Some(t) = self.thread.take() {
-                        let _ = t.handle.join();
-                    }
-                    self.conclude(outcome, Phase::Finished)
-                }
-                Phase::Finished => Ok(()),
-            };
+        if loaded.academy5 {
+            self.run_5()
+        } else {
+            self.run_4x(loaded.has_loop)
         }
-        let which = match self.phase {
-            Phase::Init => 0,
-            Phase::Loop => 1,
-            Phase::Finished => return Ok(()),
-        };
-        program::set_current(Some(Current {
-            shared: self.shared.clone(),
-            robot: self.robot.clone(),
-        }));
-        let mut outcome = program.run(which, &self.shared, None);
-        let mut next = match (which, &outcome) {
-            (0, Outcome::Done) if program.has_loop() => Phase::Loop,
-            (1, Outcome::Done) => Phase::Loop,
-            _ => Phase::Finished,
-        };
-        if which == 1 && matches!(outcome, Outcome::Broke) {
-            outcome = program.run(2, &self.shared, None);
-            next = Phase::Finished;
-        }
-        program::set_current(None);
-        self.shared.flush();
-        self.conclude(outcome, next)
     }
 
-    fn on_stop(&mut self, ctx: &Context) {
-        let _ = ctx;
+    fn on_stop(&mut self, _ctx: &Context) {
         self.robot.release();
-        if let Err(e) = self.stop_thread() {
-            self.shared.print(&format!("-- {e}\n"));
-        }
+        self.end_worker();
         self.robot.release();
         self.set_phase(Phase::Init);
     }
 
     fn terminate(&mut self) {
         self.robot.release();
-        let _ = self.stop_thread();
-        if let Some(w) = self.watchdog.take() {
-            w.stop();
+        self.end_worker();
+        if let Some(k) = self.keeper.take() {
+            k.stop();
         }
     }
 
@@ -452,62 +568,102 @@ impl Schema for PythonSchema {
     }
 }
 
-/// A thread that interrupts the schema's Python code when the schema is stopped
-/// (or asked to reload) while the program runs: it zeroes the motors at once and
-/// raises `ProgramStopped` in the program's thread until it gives up. While the
-/// program lives it also keeps its command fresh ([`Robot::refresh`]), and stops
-/// the motors when it goes silent past [`SILENCE`].
-struct Watchdog {
+/// A thread that looks after a running program from jderobot's side: it writes
+/// the sensors' new values on the worker's board as they are published; keeps
+/// the program's command fresh while it lives ([`Robot::refresh`]) and stops
+/// the motors when it goes silent past [`SILENCE`]; and when the schema is
+/// stopped (or asked to reload) while the program runs, zeroes the motors and
+/// ends the worker at once.
+struct Keeper {
     alive: Arc<AtomicBool>,
     thread: Option<std::thread::JoinHandle<()>>,
 }
 
-impl Watchdog {
-    fn start(rt: &Arc<Runtime>, shared: Arc<Shared>, robot: Arc<Robot>) -> Watchdog {
+impl Keeper {
+    fn start(rt: &Arc<Runtime>, shared: Arc<Shared>, robot: Arc<Robot>, live: Arc<Live>) -> Keeper {
         let alive = Arc::new(AtomicBool::new(true));
         let a = alive.clone();
         let rt: Weak<Runtime> = Arc::downgrade(rt);
         let thread = std::thread::Builder::new()
-            .name(format!("{}-watchdog", shared.name))
+            .name(format!("{}-keeper", shared.name))
             .spawn(move || {
+                let watch = Watch::for_current_thread();
+                for s in robot.sensors() {
+                    s.watch(watch.clone());
+                }
+                let mut calls = 0;
+                let mut clock: Option<Arc<RunClock>> = None;
                 while a.load(Ordering::Acquire) {
-                    std::thread::sleep(WATCHDOG_PERIOD);
-                    if robot.hold.load(Ordering::Acquire) {
-                        keep(&shared, &robot);
+                    watch.wait(KEEPER_PERIOD);
+                    let Some(rt) = rt.upgrade() else { break };
+                    live.feed(&robot);
+                    let board = live.board.lock().clone();
+                    if let Some(b) = &board {
+                        let h = b.header();
+                        let now = h.calls.load(Ordering::Acquire);
+                        if now != calls {
+                            calls = now;
+                            shared.touch();
+                        }
+                        shared
+                            .ticks
+                            .store(h.ticks.load(Ordering::Acquire), Ordering::Release);
+                        shared
+                            .tick_rate
+                            .store(h.tick_rate.load(Ordering::Acquire), Ordering::Release);
+                        if clock.is_none() {
+                            clock = RunClock::import(&rt.names);
+                        }
+                        if let Some(t) = clock.as_ref().and_then(|c| c.now()) {
+                            let ns = t
+                                .duration_since(std::time::UNIX_EPOCH)
+                                .map_or(0, |d| d.as_nanos() as u64);
+                            h.sim_clock.store(ns, Ordering::Release);
+                        }
+                        if robot.hold.load(Ordering::Acquire) {
+                            keep(&shared, &robot, b);
+                        }
                     }
-                    if !shared.in_python.load(Ordering::Acquire) {
+                    let pid = live.pid.load(Ordering::Acquire);
+                    if pid == 0 || !shared.in_python.load(Ordering::Acquire) {
                         continue;
                     }
-                    let Some(rt) = rt.upgrade() else { return };
                     let stopped = rt
                         .schema_status(&shared.name)
                         .is_none_or(|s| s.state == State::Slept);
-                    drop(rt);
                     if stopped || shared.reload.load(Ordering::Acquire) {
                         robot.release();
-                        program::interrupt(&shared);
+                        if !live.killed.swap(true, Ordering::AcqRel) {
+                            process::kill_group(pid);
+                        }
                     }
+                }
+                for s in robot.sensors() {
+                    s.unwatch(watch.as_ref());
                 }
             })
             .ok();
-        Watchdog { alive, thread }
+        Keeper { alive, thread }
     }
 
     fn stop(mut self) {
         self.alive.store(false, Ordering::Release);
         if let Some(t) = self.thread.take() {
+            t.thread().unpark();
             let _ = t.join();
         }
     }
 }
 
-/// The watchdog's care of a living program's command: fresh while it shows it
+/// The keeper's care of a living program's command: fresh while it shows it
 /// is alive, stopped (once, said in the console) when it goes silent.
-fn keep(shared: &Shared, robot: &Robot) {
-    let silent = !shared.sleeping.load(Ordering::Acquire) && shared.silent_for() > SILENCE;
+fn keep(shared: &Shared, robot: &Robot, board: &Board) {
+    let h = board.header();
+    let sleeping = h.sleeping.load(Ordering::Acquire) != 0;
+    let silent = !sleeping && shared.silent_for() > SILENCE;
     if !silent {
         robot.refresh();
-    } else if !shared.silenced.swap(true, Ordering::AcqRel) {
+    } else if h.silenced.swap(1, Ordering::AcqRel) == 0 {
         robot.zero();
         shared.print(&format!(
             "-- no HAL call for {} s: the motors are stopped (the next setV/setW drives again)\n",
@@ -521,18 +677,22 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
     let file_line = conf.line("file").expect("file is required");
     let path = file_line.existing_file(0, "the program")?;
     let _ = &lines.file;
-    program::interpreter().map_err(anyhow::Error::msg)?;
-    if lines.venv != "none" {
-        let venv = conf
-            .line("venv")
-            .expect("a venv line gave the value")
-            .path(0, "the virtual environment")?;
-        program::add_venv(&venv).map_err(|e| {
-            conf.line("venv")
-                .expect("a venv line gave the value")
-                .error(format!("venv: {e}"))
-        })?;
-    }
+    let venv = if lines.venv != "none" {
+        let venv_line = conf.line("venv").expect("a venv line gave the value");
+        let venv = venv_line.path(0, "the virtual environment")?;
+        if !venv.is_dir() {
+            return Err(venv_line
+                .error(format!(
+                    "venv: `{}` is not a directory (make one with `python3 -m venv {}`)",
+                    venv.display(),
+                    venv.display()
+                ))
+                .into());
+        }
+        Some(venv)
+    } else {
+        None
+    };
     let ifs = &rt.interfaces;
     let pick = |n: &str| (n != "none" && ifs.contains(n)).then(|| n.to_string());
     let motors = pick(&lines.motors)
@@ -576,7 +736,7 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
     });
     let shared = shared(rt, &conf.name);
     // A re-init (the shell's `init`, `reload`) replaces a running program: ask the
-    // old one to give way (its watchdog interrupts it); the new one starts afresh.
+    // old one to give way (its keeper ends it); the new one starts afresh.
     if shared.loads.fetch_add(1, Ordering::AcqRel) > 0 {
         shared.reload.store(true, Ordering::Release);
     }
@@ -584,20 +744,30 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
         shared: shared.clone(),
         robot,
         path,
-        program: None,
+        venv,
+        memory: (lines.memory > 0).then_some(lines.memory << 20),
         phase: Phase::Init,
         cycle: Duration::from_millis(lines.cycle),
         watch: lines.watch,
         mtime: None,
         checked: Instant::now(),
         children,
-        watchdog: None,
-        thread: None,
+        live: Default::default(),
+        keeper: None,
+        worker: None,
         #[cfg(feature = "gui")]
         panel: None,
     };
     // A syntax error stops the load (and `jderobot check`): FILE:LINE: message.
-    s.load().map_err(anyhow::Error::msg)?;
+    // The worker that compiled it ends here; each run starts its own.
+    s.start_worker().map_err(|e| {
+        if let (Some(v), true) = (conf.line("venv"), e.starts_with("venv:")) {
+            anyhow::Error::from(v.error(e))
+        } else {
+            anyhow::Error::msg(e)
+        }
+    })?;
+    s.end_worker();
     #[cfg(feature = "gui")]
     {
         s.panel = Some(Box::new(panel::PythonPanel::new(shared)));

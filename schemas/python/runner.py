@@ -11,10 +11,6 @@ import traceback
 BROKE = "__jderobot_broke__"
 
 
-class ProgramStopped(BaseException):
-    """Raised inside a program when its schema is stopped (not an error)."""
-
-
 def _forever(test):
     return isinstance(test, ast.Constant) and (
         test.value is True or (type(test.value) is int and test.value != 0)

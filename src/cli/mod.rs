@@ -75,6 +75,11 @@ const DEFAULT_LOG: &str = "warn,winit=error,rustdds=off";
 
 /// Runs the program; returns its exit code.
 pub fn main() -> ExitCode {
+    // A python schema's worker is this binary started again.
+    #[cfg(feature = "python")]
+    if let Some(code) = crate::schemas::python::main_if_worker() {
+        return code;
+    }
     tracing_subscriber::fmt()
         .with_env_filter(
             tracing_subscriber::EnvFilter::try_from_default_env()
