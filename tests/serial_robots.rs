@@ -907,3 +907,67 @@ fn the_academys_bump_and_go_runs_unchanged_on_the_roomba() {
     assert!(far > 500.0, "it moved only {far:.0} mm:\n{console}");
     rt.shutdown();
 }
+
+/// Issue 52: a python program's worker process that dies (here `os._exit`)
+/// stops the Create 2 it drove within 100 ms: the schema zeroes its motors when
+/// it sees the process end, and the roomba driver sends Drive Direct 0.
+#[cfg(feature = "python")]
+#[test]
+fn a_python_programs_process_ending_stops_the_create2_within_100_ms() {
+    let dir = tempfile::tempdir().unwrap();
+    let port = dir.path().join("create2");
+    let room = room::Room::new(8000.0, 3000.0, 1000.0, 1500.0, 0.0);
+    let emu = create2::Create2::start(&port, room);
+    let program = dir.path().join("drive_then_exit.py");
+    std::fs::write(
+        &program,
+        "from HAL import HAL\nimport os, time\nHAL.setV(0.15)\ntime.sleep(1.5)\n\
+         print('end', repr(time.time()))\nos._exit(0)\n",
+    )
+    .unwrap();
+    let rt = start_conf(&format!(
+        "{}schema python\nfile {}\ncycle 50\ncamera none\nend_schema\nload_schema python\n",
+        roomba_conf(&port, "reply_timeout 300\n"),
+        program.display()
+    ));
+    // The emulator stamps commands with Instants; the program says when it
+    // ended in Unix seconds.
+    let (i0, s0) = (Instant::now(), std::time::SystemTime::now());
+    rt.run("python").unwrap();
+    let shared = jderobot::schemas::python::shared(&rt, "python");
+    eventually("it drives", || emu.state.lock().wheels == (150, 150));
+    eventually("its process ends", || {
+        rt.schema_status("python").unwrap().state == jderobot::State::Slept
+    });
+    let console = shared
+        .console
+        .lock()
+        .lines
+        .iter()
+        .cloned()
+        .collect::<Vec<_>>()
+        .join("\n");
+    let t_end: f64 = console
+        .lines()
+        .find_map(|l| l.strip_prefix("end "))
+        .expect(&console)
+        .parse()
+        .unwrap();
+    let end = i0
+        + (std::time::UNIX_EPOCH + Duration::from_secs_f64(t_end))
+            .duration_since(s0)
+            .unwrap_or_default();
+    let stop = emu.stop_after(end).expect("a stop after the end");
+    let took = stop.saturating_duration_since(end);
+    eprintln!(
+        "the worker's end: Drive Direct 0 after {:.1} ms",
+        took.as_secs_f64() * 1e3
+    );
+    assert!(took < Duration::from_millis(100), "stop after {took:?}");
+    assert_eq!(emu.state.lock().wheels, (0, 0));
+    assert!(
+        console.contains("the program's process ended (exit 0)"),
+        "{console}"
+    );
+    rt.shutdown();
+}
