@@ -256,7 +256,7 @@ fn networkserver_beyond_loopback_needs_a_token_or_insecure() {
         e.contains("beyond loopback") && e.contains("token SECRET") && e.contains("insecure"),
         "{e}"
     );
-    for extra in ["token s3cret\n", "insecure\n"] {
+    for extra in ["token 7f3a9c2e5b8d4f16a0c3e9b2d7f14a68\n", "insecure\n"] {
         let p = dir.path().join("ok.conf");
         std::fs::write(&p, conf(extra)).unwrap();
         let out = common::run_for(&p, 0.5);
@@ -347,4 +347,74 @@ fn the_accept_loop_survives_running_out_of_descriptors() {
         (1..=3).contains(&lines),
         "{lines} lines about running out (at most one per 10 s expected):\n{log}"
     );
+}
+
+/// Issue 52: wrong tokens from one address (one thread connecting as fast as
+/// it can, 8,400 a second in the report) are backed off per address, with one
+/// log line a back-off, never one per attempt; meanwhile a client with the token
+/// from another address gets in at once.
+#[cfg(feature = "simulator")]
+#[test]
+fn wrong_tokens_are_backed_off_per_address_with_one_line_a_burst() {
+    use jderobot::netwire::hello;
+    const TOKEN: &str = "7f3a9c2e5b8d4f16a0c3e9b2d7f14a68";
+    let dir = tempfile::tempdir().unwrap();
+    let world = common::world_path("simple.world");
+    let port = common::process::free_port();
+    let p = dir.path().join("srv.conf");
+    std::fs::write(
+        &p,
+        format!(
+            "driver simulator\nworld {world}\nprovides laser 180 1\nend_driver\n\
+             driver networkserver\nsocket {port}\nserves laser\ntoken {TOKEN}\nend_driver\n\
+             load_driver simulator\nload_service networkserver\n"
+        ),
+    )
+    .unwrap();
+    let srv = common::process::Proc::start(&p);
+    let addr: SocketAddr = format!("127.0.0.1:{port}").parse().unwrap();
+    assert!(
+        common::poll_until(20, || TcpStream::connect(addr).is_ok()),
+        "the server did not listen"
+    );
+    let guesser = thread::spawn(move || {
+        let bad = hello(Some("guess-guess-guess-guess")).unwrap();
+        let (t0, mut tries, mut unread) = (Instant::now(), 0u32, 0u32);
+        while t0.elapsed() < Duration::from_secs(3) {
+            let mut s = connect_from([127, 0, 0, 2], addr);
+            let _ = s.set_read_timeout(Some(Duration::from_secs(2)));
+            let _ = s.write_all(&bad);
+            let mut reply = String::new();
+            let _ = s.read_to_string(&mut reply);
+            tries += 1;
+            unread += u32::from(reply.contains("try again"));
+        }
+        (tries, unread)
+    });
+    thread::sleep(Duration::from_millis(500));
+    let good = hello(Some(TOKEN)).unwrap();
+    let t0 = Instant::now();
+    let mut s = connect_from([127, 0, 0, 3], addr);
+    assert!(
+        super::network_bad_input::gets_laser_on(&mut s, &good, b""),
+        "the token's client from another address was refused during the guessing"
+    );
+    let took = t0.elapsed();
+    let (tries, unread) = guesser.join().unwrap();
+    let log = srv.text();
+    let lines = log.lines().filter(|l| l.contains("127.0.0.2")).count();
+    eprintln!(
+        "{tries} guesses in 3 s ({unread} refused unread); the good client got a push in \
+         {took:?}; {lines} log lines about the guesser"
+    );
+    assert!(
+        tries > 100 && unread + 10 > tries,
+        "{tries} tries, {unread} unread"
+    );
+    assert!(
+        (2..=5).contains(&lines),
+        "{lines} lines about the guesser:\n{log}"
+    );
+    assert!(log.contains("backing off"), "{log}");
+    srv.quit();
 }
