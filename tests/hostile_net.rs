@@ -418,3 +418,109 @@ fn wrong_tokens_are_backed_off_per_address_with_one_line_a_burst() {
     assert!(log.contains("backing off"), "{log}");
     srv.quit();
 }
+
+/// Issue 52: docs/security.md's "reachable from the LAN" column, from a second
+/// host (network namespace B on a veth pair): every listening TCP socket of a
+/// robot running a component in its default (loopback) mode refuses B; the
+/// control row (networkserver `bind 0.0.0.0` with a token) shows B would get in.
+#[cfg(all(feature = "simulator", feature = "foxglove", feature = "zenoh"))]
+#[test]
+fn a_lan_host_reaches_no_listener_in_its_default_mode() {
+    if std::env::var_os("JDE_TEST_IN_NETNS").is_some() {
+        return;
+    }
+    let Some(hosts) = common::TwoHosts::new() else {
+        return;
+    };
+    let token = "7f3a9c2e5b8d4f16a0c3e9b2d7f14a68";
+    // (what, its section, reachable from B)
+    let rows = [
+        (
+            "networkserver",
+            "driver networkserver\nsocket 3001\nserves laser\nend_driver\n".to_string(),
+            false,
+        ),
+        (
+            "networkserver bind 0.0.0.0 (control)",
+            format!(
+                "driver networkserver\nsocket 3001\nbind 0.0.0.0\ntoken {token}\nserves laser\nend_driver\n"
+            ),
+            true,
+        ),
+        (
+            "foxglove",
+            "service foxglove\nend_service\n".to_string(),
+            false,
+        ),
+        (
+            "zenoh",
+            "service zenoh\nrobot pioneer\npublishes laser\nend_service\n".to_string(),
+            false,
+        ),
+    ];
+    let dir = tempfile::tempdir().unwrap();
+    for (what, section, reachable) in rows {
+        let name = what.split(' ').next().unwrap();
+        let conf = dir.path().join("robot.conf");
+        std::fs::write(
+            &conf,
+            format!(
+                "driver simulator\nworld {}\nprovides laser 180 1\nprovides motors\nend_driver\n\
+                 {section}load_driver simulator\nload_service {name}\n",
+                common::world_path("simple.world")
+            ),
+        )
+        .unwrap();
+        let mut robot = common::process::Proc::start_in(&hosts.a, &conf);
+        robot.ask_until("echo laser", "the robot", |l| l.starts_with("laser clock="));
+        let ports = listening_tcp_ports(robot.child.id());
+        assert!(!ports.is_empty(), "{what}: no listening socket found");
+        let mut probe = std::process::Command::new("python3");
+        probe.args([
+            "-c",
+            "import socket, sys\n\
+             for p in sys.argv[2:]:\n\
+             \x20   try:\n\
+             \x20       socket.create_connection((sys.argv[1], int(p)), 2).close(); print(p)\n\
+             \x20   except OSError: pass\n",
+            &hosts.ip_a,
+        ]);
+        probe.args(ports.iter().map(|p| p.to_string()));
+        let out = common::TwoHosts::command(&hosts.b, &probe)
+            .output()
+            .unwrap();
+        let got = String::from_utf8_lossy(&out.stdout).to_string();
+        eprintln!("{what}: listening on {ports:?}; reached from the LAN: {got:?}");
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert_eq!(
+            !got.trim().is_empty(),
+            reachable,
+            "{what}: {ports:?} reached: {got}"
+        );
+        robot.quit();
+    }
+}
+
+/// The TCP ports process `pid` listens on (its rows of /proc/PID/net/tcp{,6}).
+#[cfg(all(feature = "simulator", feature = "foxglove", feature = "zenoh"))]
+fn listening_tcp_ports(pid: u32) -> Vec<u16> {
+    let ours = common::socket_inodes(pid);
+    let mut ports = Vec::new();
+    for t in ["tcp", "tcp6"] {
+        let table = std::fs::read_to_string(format!("/proc/{pid}/net/{t}")).unwrap_or_default();
+        for row in table.lines().skip(1) {
+            let f: Vec<&str> = row.split_whitespace().collect();
+            if f.len() >= 10 && f[3] == "0A" && ours.iter().any(|i| i == f[9]) {
+                let port = f[1].rsplit_once(':').unwrap().1;
+                ports.push(u16::from_str_radix(port, 16).unwrap());
+            }
+        }
+    }
+    ports.sort();
+    ports.dedup();
+    ports
+}
