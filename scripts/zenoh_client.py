@@ -161,6 +161,9 @@ def main():
     wait_for(list(DECODE))
     with lock:
         start = pose(latest["encoders"][0])
+    # The driving token: when this session ends, the robot zeroes its motors at
+    # once instead of after its motors_timeout (docs/zenoh.md, "Keys and presence").
+    driving = session.liveliness().declare_token(f"{motors_key}/driven/{session.zid()}")
     publisher = session.declare_publisher(motors_key)
     moved = 0.0
     seq = 0

@@ -35,6 +35,7 @@ pub mod progeo;
 pub mod protowire;
 pub mod registry;
 pub mod runtime;
+pub mod secret;
 #[cfg(feature = "_serialhead")]
 pub mod serialhead;
 pub mod shell;

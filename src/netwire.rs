@@ -29,10 +29,15 @@
 //! so an f32 arrives exactly.
 //! Subscribed devices are pushed every 33 ms when their value changed.
 //!
-//! **Token.** 4.3's name is `jdec` and NUL bytes. With a shared secret, the name
-//! is `jdec`, NUL, then the secret (at most [`MAX_TOKEN`] bytes) NUL-padded: a 4.3
-//! server prints only `jdec` (its `strncpy`/`%s` stops at the first NUL), so the
-//! wire stays 4.3's. See [`client_name`] and [`split_name`].
+//! **Token.** 4.3's name is `jdec` and NUL bytes, and a 4.3 client sends nothing
+//! else before its requests. With a shared secret ([`crate::secret`]: 16 to 128
+//! characters, too long for the 15 bytes a 20-byte name has after `jdec` and its
+//! NUL), the name is `jdec`, NUL, the marker [`TOKEN_MARK`] (`token-line`),
+//! NUL-padded, and a token line follows it: `2100 SECRET\n` ([`code::TOKEN`],
+//! jderobot's extension). A 4.3 server prints only `jdec` (its `strncpy`/`%s`
+//! stops at the first NUL) and ignores the `2100` line as it ignores every code
+//! it does not know, so the wire stays 4.3's; a name without the marker (every
+//! 4.3 client's) carries no token. See [`hello`] and [`split_name`].
 
 use std::{
     fmt::Write as _,
@@ -46,8 +51,10 @@ use crate::interfaces::{
 
 /// Length of the client name that opens every connection (4.3's MAX_CLIENT_NAME).
 pub const NAME_LEN: usize = 20;
-/// The longest token that fits in the name after `jdec` and a NUL.
-pub const MAX_TOKEN: usize = NAME_LEN - 5;
+/// What a client name holds after `jdec` and its NUL when a token line follows.
+pub const TOKEN_MARK: &[u8] = b"token-line";
+/// The longest token line: `2100 `, the longest token, `\n`.
+pub const MAX_TOKEN_LINE: usize = 5 + crate::secret::MAX_TOKEN + 1;
 /// The period of subscription pushes (4.3: 33 ms).
 pub const PUSH_PERIOD_MS: u64 = 33;
 
@@ -85,6 +92,9 @@ pub mod code {
     pub const SUBSCRIBE_IMU: u32 = 2001;
     pub const UNSUBSCRIBE_IMU: u32 = 2002;
     pub const IMU: u32 = 2003;
+    /// jderobot's extension: the token line that follows a name marked with
+    /// [`super::TOKEN_MARK`] (`2100 SECRET`).
+    pub const TOKEN: u32 = 2100;
     /// Codes 4.3 declared but never handled (ir, bumpers, battery, sensed speeds,
     /// limp, replay, other image formats, pan-tilt relative/reset/origin/halt).
     pub const UNHANDLED: &[u32] = &[
@@ -907,49 +917,37 @@ impl Net43 for ZoomMotors {
     }
 }
 
-/// The 20-byte name a client opens each connection with: `jdec`, NUL, then the
-/// token if any, NUL-padded. Fails if the token is longer than [`MAX_TOKEN`] or
-/// not printable ASCII.
-pub fn client_name(token: Option<&str>) -> Result<[u8; NAME_LEN], String> {
-    let mut b = [0u8; NAME_LEN];
+/// What a client opens each connection with: the 20-byte name (`jdec`, NUL,
+/// then [`TOKEN_MARK`] with a token, NUL-padded) and, with a token, the token
+/// line `2100 SECRET\n`. Fails if the token is not a valid one
+/// ([`crate::secret::check_token`]).
+pub fn hello(token: Option<&str>) -> Result<Vec<u8>, String> {
+    let mut b = vec![0u8; NAME_LEN];
     b[..4].copy_from_slice(b"jdec");
     if let Some(t) = token {
-        check_token(t)?;
-        b[5..5 + t.len()].copy_from_slice(t.as_bytes());
+        crate::secret::check_token(t)?;
+        b[5..5 + TOKEN_MARK.len()].copy_from_slice(TOKEN_MARK);
+        let _ = writeln!(Adapter(&mut b), "{} {t}", code::TOKEN);
     }
     Ok(b)
 }
 
-/// Checks a token: 1 to [`MAX_TOKEN`] printable ASCII characters, no spaces.
-pub fn check_token(t: &str) -> Result<(), String> {
-    if t.is_empty() || t.len() > MAX_TOKEN || !t.bytes().all(|b| b.is_ascii_graphic()) {
-        return Err(format!(
-            "a token is 1 to {MAX_TOKEN} printable ASCII characters without spaces (it travels in 4.3's 20-byte client name); got {} characters",
-            t.len()
-        ));
-    }
-    Ok(())
-}
-
-/// Splits a received name into the printable name (up to the first NUL) and the
-/// token that follows that NUL (up to the next NUL; empty if none).
-pub fn split_name(b: &[u8; NAME_LEN]) -> (String, &[u8]) {
+/// Splits a received name into the printable name (up to the first NUL) and
+/// whether a token line follows it (the name carries [`TOKEN_MARK`] after that NUL).
+pub fn split_name(b: &[u8; NAME_LEN]) -> (String, bool) {
     let end = b.iter().position(|&c| c == 0).unwrap_or(NAME_LEN);
     let name: String = b[..end]
         .iter()
         .map(|&c| if c.is_ascii_graphic() { c as char } else { '?' })
         .collect();
     let rest = if end < NAME_LEN { &b[end + 1..] } else { &[] };
-    let tend = rest.iter().position(|&c| c == 0).unwrap_or(rest.len());
-    (name, &rest[..tend])
+    let marked = rest.starts_with(TOKEN_MARK) && rest[TOKEN_MARK.len()..].iter().all(|&c| c == 0);
+    (name, marked)
 }
 
-/// Compares two byte strings in time independent of where they differ.
-pub fn same_secret(a: &[u8], b: &[u8]) -> bool {
-    if a.len() != b.len() {
-        return false;
-    }
-    a.iter().zip(b).fold(0u8, |acc, (x, y)| acc | (x ^ y)) == 0
+/// The secret of a token line (`2100 SECRET`, without its `\n`), if it is one.
+pub fn token_of(line: &[u8]) -> Option<&[u8]> {
+    line.strip_prefix(format!("{} ", code::TOKEN).as_bytes())
 }
 
 /// What [`LineReader::read_line`] gives.
@@ -1194,16 +1192,26 @@ mod tests {
     }
 
     #[test]
-    fn names_carry_a_token_after_the_nul() {
-        let n = client_name(Some("s3cret")).unwrap();
-        assert_eq!(&n[..10], b"jdec\0s3cre");
-        let (name, tok) = split_name(&n);
-        assert_eq!(name, "jdec");
-        assert_eq!(tok, b"s3cret");
-        let plain = client_name(None).unwrap();
-        let (_, none) = split_name(&plain);
-        assert!(none.is_empty());
-        assert!(client_name(Some("far too long a secret")).is_err());
+    fn a_marked_name_says_a_token_line_follows() {
+        let secret = "0123456789abcdef0123456789abcdef";
+        let h = hello(Some(secret)).unwrap();
+        let name: [u8; NAME_LEN] = h[..NAME_LEN].try_into().unwrap();
+        assert_eq!(&name[..15], b"jdec\0token-line");
+        assert_eq!(split_name(&name), ("jdec".into(), true));
+        let line = &h[NAME_LEN..];
+        assert_eq!(line, format!("2100 {secret}\n").as_bytes());
+        assert_eq!(token_of(&line[..line.len() - 1]), Some(secret.as_bytes()));
+        let plain = hello(None).unwrap();
+        assert_eq!(plain, b"jdec\0\0\0\0\0\0\0\0\0\0\0\0\0\0\0\0");
+        assert_eq!(
+            split_name(&plain[..].try_into().unwrap()),
+            ("jdec".into(), false)
+        );
+        // A pre-marker short token in the name is no token.
+        let mut old = [0u8; NAME_LEN];
+        old[..11].copy_from_slice(b"jdec\0s3cret");
+        assert!(!split_name(&old).1);
+        assert!(hello(Some("short")).is_err());
     }
 
     #[test]

@@ -940,12 +940,16 @@ fn absurd_motor_values_are_refused_on_every_path() {
 
 #[test]
 fn a_token_is_asked_for_and_a_bind_beyond_loopback_needs_one() {
-    let (rt, a) = start("token s3cret\nsdk_port 0\n");
+    let (rt, a) = start("token 7f3a9c2e5b8d4f16a0c3e9b2d7f14a68\nsdk_port 0\n");
     let (_s, head) = handshake_at(a, "/", Some("foxglove.sdk.v1"));
     assert!(head.starts_with("HTTP/1.1 401"), "{head}");
     let (_s, head) = handshake_at(a, "/?token=wrong", Some("foxglove.sdk.v1"));
     assert!(head.starts_with("HTTP/1.1 401"), "{head}");
-    let (_s, head) = handshake_at(a, "/?token=s3cret", Some("foxglove.websocket.v1"));
+    let (_s, head) = handshake_at(
+        a,
+        "/?token=7f3a9c2e5b8d4f16a0c3e9b2d7f14a68",
+        Some("foxglove.websocket.v1"),
+    );
     assert!(head.starts_with("HTTP/1.1 101"), "{head}");
     // The second port asks for it too.
     let b = *rt
@@ -1058,7 +1062,9 @@ fn wss_with_a_token_serves_beyond_loopback_and_plain_ws_gets_nothing() {
     let (ca, cert, key) = make_certs(dir.path());
     let tls = format!("tls {} {}\n", cert.display(), key.display());
     // Beyond loopback: a token alone, or TLS alone, is not enough.
-    let e = common::start_error(&conf("bind 0.0.0.0\ntoken s3cret\n"));
+    let e = common::start_error(&conf(
+        "bind 0.0.0.0\ntoken 7f3a9c2e5b8d4f16a0c3e9b2d7f14a68\n",
+    ));
     assert!(e.contains("add `tls CERT.pem KEY.pem` too"), "{e}");
     let e = common::start_error(&conf(&format!("bind 0.0.0.0\n{tls}")));
     assert!(e.contains("add `token SECRET` too"), "{e}");
@@ -1075,7 +1081,7 @@ fn wss_with_a_token_serves_beyond_loopback_and_plain_ws_gets_nothing() {
     );
 
     let rt = common::start_conf(&conf(&format!(
-        "bind 0.0.0.0\ntoken s3cret\n{tls}sdk_port 0\n"
+        "bind 0.0.0.0\ntoken 7f3a9c2e5b8d4f16a0c3e9b2d7f14a68\n{tls}sdk_port 0\n"
     )));
     let port = addr(&rt).port();
     let a = SocketAddr::from(([127, 0, 0, 1], port));
@@ -1085,7 +1091,11 @@ fn wss_with_a_token_serves_beyond_loopback_and_plain_ws_gets_nothing() {
     plain
         .set_read_timeout(Some(Duration::from_secs(5)))
         .unwrap();
-    let (head, _) = upgrade_over(&mut plain, "/?token=s3cret", "foxglove.websocket.v1");
+    let (head, _) = upgrade_over(
+        &mut plain,
+        "/?token=7f3a9c2e5b8d4f16a0c3e9b2d7f14a68",
+        "foxglove.websocket.v1",
+    );
     assert!(!head.contains(" 101 "), "plain ws on the TLS port: {head}");
     // wss:// without the token: 401; with it: 101 and serverInfo, on both ports.
     let mut t = tls_connect(a, &ca).expect("a TLS handshake");
@@ -1098,7 +1108,11 @@ fn wss_with_a_token_serves_beyond_loopback_and_plain_ws_gets_nothing() {
     for port in [port, b.port()] {
         let at = SocketAddr::from(([127, 0, 0, 1], port));
         let mut t = tls_connect(at, &ca).expect("a TLS handshake");
-        let (head, rest) = upgrade_over(&mut t, "/?token=s3cret", "foxglove.websocket.v1");
+        let (head, rest) = upgrade_over(
+            &mut t,
+            "/?token=7f3a9c2e5b8d4f16a0c3e9b2d7f14a68",
+            "foxglove.websocket.v1",
+        );
         assert!(head.starts_with("HTTP/1.1 101"), "{at}: {head}");
         assert!(
             String::from_utf8_lossy(&rest).contains("\"serverInfo\""),
@@ -1109,7 +1123,7 @@ fn wss_with_a_token_serves_beyond_loopback_and_plain_ws_gets_nothing() {
     if let Some(dir) = node_client() {
         let r = run_node_client(
             &dir,
-            &format!("wss://127.0.0.1:{port}/?token=s3cret"),
+            &format!("wss://127.0.0.1:{port}/?token=7f3a9c2e5b8d4f16a0c3e9b2d7f14a68"),
             Some(&ca),
         );
         assert_eq!(r["protocol"], "foxglove.websocket.v1", "{r}");
@@ -1153,7 +1167,7 @@ fn the_sdk_listens_on_no_port_of_its_own() {
     if common::ran_in_own_process("foxglove::the_sdk_listens_on_no_port_of_its_own") {
         return;
     }
-    let (rt, a) = start("token s3cret\nsdk_port 0\n");
+    let (rt, a) = start("token 7f3a9c2e5b8d4f16a0c3e9b2d7f14a68\nsdk_port 0\n");
     let direct = *rt
         .names
         .import::<SocketAddr>("foxglove", "sdk_address")

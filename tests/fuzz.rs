@@ -935,14 +935,18 @@ fn relay_target() -> Target {
         f
     };
     let sub = br#"{"op":"subscribe","subscriptions":[{"id":1,"channelId":1}]}"#;
-    let mut a = head("/?token=s3cret", "foxglove.websocket.v1");
+    let mut a = head(
+        "/?token=7f3a9c2e5b8d4f16a0c3e9b2d7f14a68",
+        "foxglove.websocket.v1",
+    );
     a.extend(frame(true, 1, sub));
     a.extend(frame(true, 9, b"ping"));
     let mut b = head("/", "foxglove.sdk.v1, foxglove.sdk.v1.1");
     b.extend(frame(false, 1, &sub[..20]));
     b.extend(frame(true, 0, &sub[20..]));
     b.extend(frame(true, 2, &[7; 300]));
-    let mut c = b"GET / HTTP/1.1\r\nAuthorization: Bearer s3cret\r\n".to_vec();
+    let mut c =
+        b"GET / HTTP/1.1\r\nAuthorization: Bearer 7f3a9c2e5b8d4f16a0c3e9b2d7f14a68\r\n".to_vec();
     c.extend(b"Sec-WebSocket-Protocol: foxglove.websocket.v1\r\n\r\n");
     c.extend(frame(true, 8, &[3, 232]));
     Target {
@@ -956,7 +960,7 @@ fn relay_target() -> Target {
                 Some(r) => r,
                 None => (buf, Vec::new()),
             };
-            for token in [None, Some("s3cret")] {
+            for token in [None, Some("7f3a9c2e5b8d4f16a0c3e9b2d7f14a68")] {
                 if let Ok((head, to_sdk, _legacy)) = relay::check_request(head.clone(), token) {
                     let _ = relay::offered(&head);
                     let _ = relay::replace_protocol(&to_sdk, relay::LEGACY);

@@ -256,7 +256,7 @@ fn networkserver_beyond_loopback_needs_a_token_or_insecure() {
         e.contains("beyond loopback") && e.contains("token SECRET") && e.contains("insecure"),
         "{e}"
     );
-    for extra in ["token s3cret\n", "insecure\n"] {
+    for extra in ["token 7f3a9c2e5b8d4f16a0c3e9b2d7f14a68\n", "insecure\n"] {
         let p = dir.path().join("ok.conf");
         std::fs::write(&p, conf(extra)).unwrap();
         let out = common::run_for(&p, 0.5);
@@ -347,4 +347,180 @@ fn the_accept_loop_survives_running_out_of_descriptors() {
         (1..=3).contains(&lines),
         "{lines} lines about running out (at most one per 10 s expected):\n{log}"
     );
+}
+
+/// Issue 52: wrong tokens from one address (one thread connecting as fast as
+/// it can, 8,400 a second in the report) are backed off per address, with one
+/// log line a back-off, never one per attempt; meanwhile a client with the token
+/// from another address gets in at once.
+#[cfg(feature = "simulator")]
+#[test]
+fn wrong_tokens_are_backed_off_per_address_with_one_line_a_burst() {
+    use jderobot::netwire::hello;
+    const TOKEN: &str = "7f3a9c2e5b8d4f16a0c3e9b2d7f14a68";
+    let dir = tempfile::tempdir().unwrap();
+    let world = common::world_path("simple.world");
+    let port = common::process::free_port();
+    let p = dir.path().join("srv.conf");
+    std::fs::write(
+        &p,
+        format!(
+            "driver simulator\nworld {world}\nprovides laser 180 1\nend_driver\n\
+             driver networkserver\nsocket {port}\nserves laser\ntoken {TOKEN}\nend_driver\n\
+             load_driver simulator\nload_service networkserver\n"
+        ),
+    )
+    .unwrap();
+    let srv = common::process::Proc::start(&p);
+    let addr: SocketAddr = format!("127.0.0.1:{port}").parse().unwrap();
+    assert!(
+        common::poll_until(20, || TcpStream::connect(addr).is_ok()),
+        "the server did not listen"
+    );
+    let guesser = thread::spawn(move || {
+        let bad = hello(Some("guess-guess-guess-guess")).unwrap();
+        let (t0, mut tries, mut unread) = (Instant::now(), 0u32, 0u32);
+        while t0.elapsed() < Duration::from_secs(3) {
+            let mut s = connect_from([127, 0, 0, 2], addr);
+            let _ = s.set_read_timeout(Some(Duration::from_secs(2)));
+            let _ = s.write_all(&bad);
+            let mut reply = String::new();
+            let _ = s.read_to_string(&mut reply);
+            tries += 1;
+            unread += u32::from(reply.contains("try again"));
+        }
+        (tries, unread)
+    });
+    thread::sleep(Duration::from_millis(500));
+    let good = hello(Some(TOKEN)).unwrap();
+    let t0 = Instant::now();
+    let mut s = connect_from([127, 0, 0, 3], addr);
+    assert!(
+        super::network_bad_input::gets_laser_on(&mut s, &good, b""),
+        "the token's client from another address was refused during the guessing"
+    );
+    let took = t0.elapsed();
+    let (tries, unread) = guesser.join().unwrap();
+    let log = srv.text();
+    let lines = log.lines().filter(|l| l.contains("127.0.0.2")).count();
+    eprintln!(
+        "{tries} guesses in 3 s ({unread} refused unread); the good client got a push in \
+         {took:?}; {lines} log lines about the guesser"
+    );
+    assert!(
+        tries > 100 && unread + 10 > tries,
+        "{tries} tries, {unread} unread"
+    );
+    assert!(
+        (2..=5).contains(&lines),
+        "{lines} lines about the guesser:\n{log}"
+    );
+    assert!(log.contains("backing off"), "{log}");
+    srv.quit();
+}
+
+/// Issue 52: docs/security.md's "reachable from the LAN" column, from a second
+/// host (network namespace B on a veth pair): every listening TCP socket of a
+/// robot running a component in its default (loopback) mode refuses B; the
+/// control row (networkserver `bind 0.0.0.0` with a token) shows B would get in.
+#[cfg(all(feature = "simulator", feature = "foxglove", feature = "zenoh"))]
+#[test]
+fn a_lan_host_reaches_no_listener_in_its_default_mode() {
+    if std::env::var_os("JDE_TEST_IN_NETNS").is_some() {
+        return;
+    }
+    let Some(hosts) = common::TwoHosts::new() else {
+        return;
+    };
+    let token = "7f3a9c2e5b8d4f16a0c3e9b2d7f14a68";
+    // (what, its section, reachable from B)
+    let rows = [
+        (
+            "networkserver",
+            "driver networkserver\nsocket 3001\nserves laser\nend_driver\n".to_string(),
+            false,
+        ),
+        (
+            "networkserver bind 0.0.0.0 (control)",
+            format!(
+                "driver networkserver\nsocket 3001\nbind 0.0.0.0\ntoken {token}\nserves laser\nend_driver\n"
+            ),
+            true,
+        ),
+        (
+            "foxglove",
+            "service foxglove\nend_service\n".to_string(),
+            false,
+        ),
+        (
+            "zenoh",
+            "service zenoh\nrobot pioneer\npublishes laser\nend_service\n".to_string(),
+            false,
+        ),
+    ];
+    let dir = tempfile::tempdir().unwrap();
+    for (what, section, reachable) in rows {
+        let name = what.split(' ').next().unwrap();
+        let conf = dir.path().join("robot.conf");
+        std::fs::write(
+            &conf,
+            format!(
+                "driver simulator\nworld {}\nprovides laser 180 1\nprovides motors\nend_driver\n\
+                 {section}load_driver simulator\nload_service {name}\n",
+                common::world_path("simple.world")
+            ),
+        )
+        .unwrap();
+        let mut robot = common::process::Proc::start_in(&hosts.a, &conf);
+        robot.ask_until("echo laser", "the robot", |l| l.starts_with("laser clock="));
+        let ports = listening_tcp_ports(robot.child.id());
+        assert!(!ports.is_empty(), "{what}: no listening socket found");
+        let mut probe = std::process::Command::new("python3");
+        probe.args([
+            "-c",
+            "import socket, sys\n\
+             for p in sys.argv[2:]:\n\
+             \x20   try:\n\
+             \x20       socket.create_connection((sys.argv[1], int(p)), 2).close(); print(p)\n\
+             \x20   except OSError: pass\n",
+            &hosts.ip_a,
+        ]);
+        probe.args(ports.iter().map(|p| p.to_string()));
+        let out = common::TwoHosts::command(&hosts.b, &probe)
+            .output()
+            .unwrap();
+        let got = String::from_utf8_lossy(&out.stdout).to_string();
+        eprintln!("{what}: listening on {ports:?}; reached from the LAN: {got:?}");
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert_eq!(
+            !got.trim().is_empty(),
+            reachable,
+            "{what}: {ports:?} reached: {got}"
+        );
+        robot.quit();
+    }
+}
+
+/// The TCP ports process `pid` listens on (its rows of /proc/PID/net/tcp{,6}).
+#[cfg(all(feature = "simulator", feature = "foxglove", feature = "zenoh"))]
+fn listening_tcp_ports(pid: u32) -> Vec<u16> {
+    let ours = common::socket_inodes(pid);
+    let mut ports = Vec::new();
+    for t in ["tcp", "tcp6"] {
+        let table = std::fs::read_to_string(format!("/proc/{pid}/net/{t}")).unwrap_or_default();
+        for row in table.lines().skip(1) {
+            let f: Vec<&str> = row.split_whitespace().collect();
+            if f.len() >= 10 && f[3] == "0A" && ours.iter().any(|i| i == f[9]) {
+                let port = f[1].rsplit_once(':').unwrap().1;
+                ports.push(u16::from_str_radix(port, 16).unwrap());
+            }
+        }
+    }
+    ports.sort();
+    ports.dedup();
+    ports
 }

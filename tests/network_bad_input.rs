@@ -628,7 +628,7 @@ fn a_client_reading_a_trickle_is_dropped_at_the_timeout_in_all() {
 fn a_client_with_the_token_gets_in_while_strangers_fill_the_table() {
     let conf = ServerConf {
         max_clients: 8,
-        token: Some("s3cret".into()),
+        token: Some("7f3a9c2e5b8d4f16a0c3e9b2d7f14a68".into()),
         timeout: Duration::from_secs(10),
         ..Default::default()
     };
@@ -639,7 +639,7 @@ fn a_client_with_the_token_gets_in_while_strangers_fill_the_table() {
         server.stats().clients.load(Ordering::Acquire) == 8
     });
     thread::sleep(Duration::from_millis(400));
-    let name = jderobot::netwire::client_name(Some("s3cret")).unwrap();
+    let name = jderobot::netwire::hello(Some("7f3a9c2e5b8d4f16a0c3e9b2d7f14a68")).unwrap();
     assert!(gets_laser(addr, &name), "the token's client was refused");
     assert!(gets_laser(addr, &name), "a second token client was refused");
     drop(strangers);

@@ -303,16 +303,16 @@ fn zoom_needs_zoom_motors_not_pantilt_and_unserved_devices_get_1027() {
 }
 
 #[test]
-fn a_token_in_the_name_is_required_when_configured() {
-    let (rt, addr) = served("token s3cret\n");
+fn a_token_line_is_required_when_configured() {
+    let (rt, addr) = served("token 7f3a9c2e5b8d4f16a0c3e9b2d7f14a68\n");
     let mut no = Client43::connect(addr, None);
     no.send("1022");
     let e = no.expect("1027");
     assert!(e.join(" ").contains("token"), "{e:?}");
     assert!(no.closed_within(5));
-    let mut wrong = Client43::connect(addr, Some("guess"));
+    let mut wrong = Client43::connect(addr, Some("guess-guess-guess-guess"));
     assert!(wrong.closed_within(5));
-    let mut yes = Client43::connect(addr, Some("s3cret"));
+    let mut yes = Client43::connect(addr, Some("7f3a9c2e5b8d4f16a0c3e9b2d7f14a68"));
     yes.send("1022");
     yes.expect("1023");
     rt.shutdown();
@@ -343,7 +343,21 @@ fn conf_errors_name_the_line() {
             "socket 0\nbind nowhere\n",
             &["<inline>:2", "IP address"],
         ),
-        (server, "socket 0\ntoken a b\n", &["token SECRET"]),
+        (
+            server,
+            "socket 0\ntoken 0123456789abcdef b\n",
+            &["token SECRET"],
+        ),
+        (
+            server,
+            "socket 0\ntoken s\n",
+            &["<inline>:2", "too short", "at least 16 needed"],
+        ),
+        (
+            client,
+            "token 123456789012345\nprovides laser host 3001\n",
+            &["<inline>:1", "too short", "at least 16 needed"],
+        ),
         (
             client,
             "provides colorA host 3001\n",
@@ -579,7 +593,7 @@ fn the_client_reconnects_marks_stale_zeroes_motors_and_resubscribes() {
 
 #[test]
 fn our_client_against_our_server_with_a_token() {
-    let (srv, addr) = served("token s3cret\n");
+    let (srv, addr) = served("token 7f3a9c2e5b8d4f16a0c3e9b2d7f14a68\n");
     publish_all(&srv, 5);
     let h = format!("127.0.0.1 {}", addr.port());
     let good = Runtime::new(std::path::Path::new("test.conf"));
@@ -588,7 +602,7 @@ fn our_client_against_our_server_with_a_token() {
         Kind::Driver,
         "networkclient",
         &format!(
-            "token s3cret\nprovides varcolorB {h} 1\nprovides laser {h}\nprovides motors {h}\n\
+            "token 7f3a9c2e5b8d4f16a0c3e9b2d7f14a68\nprovides varcolorB {h} 1\nprovides laser {h}\nprovides motors {h}\n\
              provides imu {h}\n"
         ),
     )
@@ -598,7 +612,7 @@ fn our_client_against_our_server_with_a_token() {
         &bad,
         Kind::Driver,
         "networkclient",
-        &format!("token guess\nprovides laser {h}\n"),
+        &format!("token guess-guess-guess-guess\nprovides laser {h}\n"),
     )
     .unwrap();
     for rt in [&good, &bad] {

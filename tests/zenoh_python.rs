@@ -247,3 +247,86 @@ while time.time() - t0 < 3:
 print(json.dumps({"laser_bytes": got[0] if got else 0}))
 session.close()
 "#;
+
+/// Issue 52: a Python controller that declares the driving token
+/// (`<key>/driven/<zid>`, docs/zenoh.md) drives, then closes its session: the
+/// robot's motors are zero at once, long before its `motors_timeout` (5000 ms
+/// here). A raw one that never declared the token keeps the `motors_timeout` rule.
+#[test]
+fn motors_zero_when_the_driving_python_session_closes() {
+    let Some(py) = common::python_with("zenoh") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let port = free_port();
+    let conf = dir.path().join("robot.conf");
+    std::fs::write(
+        &conf,
+        format!(
+            "driver simulator\nworld {}\nrobot robot1 1000 1000 90\nprovides encoders\n\
+             provides motors\nprovides laser 180 1\nmotors_timeout 5000\nend_driver\n\
+             service zenoh\nrobot pioneer\npublishes all\nlisten tcp/127.0.0.1:{port}\n\
+             scouting off\nend_service\nload_driver simulator\nload_service zenoh\n",
+            common::world_path("simple.world")
+        ),
+    )
+    .unwrap();
+    let mut robot = Proc::start(&conf);
+    robot.ask_until("echo encoders", "the robot", |l| {
+        l.starts_with("encoders clock=")
+    });
+    let v = |l: &str| common::process::number_after(l, " v=");
+    for declares in [true, false] {
+        let script = format!(
+            "import struct, time, zenoh\n\
+             c = zenoh.Config()\n\
+             c.insert_json5('connect/endpoints', '[\"tcp/127.0.0.1:{port}\"]')\n\
+             c.insert_json5('scouting/multicast/enabled', 'false')\n\
+             s = zenoh.open(c)\n\
+             key = 'jderobot/pioneer/motors'\n\
+             tok = s.liveliness().declare_token(f'{{key}}/driven/{{s.zid()}}') if {} else None\n\
+             pub = s.declare_publisher(key)\n\
+             for _ in range(10):\n    pub.put(struct.pack('<ff', 300.0, 0.0)); time.sleep(0.1)\n\
+             s.close()\n",
+            if declares { "True" } else { "False" }
+        );
+        let out = Command::new(&py).args(["-c", &script]).output().unwrap();
+        assert!(
+            out.status.success(),
+            "python: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let closed = std::time::Instant::now();
+        if declares {
+            let l = robot.ask_until("echo motors", "motors zero", |l| {
+                l.starts_with("motors clock=") && v(l) == 0.0
+            });
+            let took = closed.elapsed();
+            eprintln!("motors zero {took:?} after the driving session closed: {l}");
+            assert!(took < std::time::Duration::from_millis(2500), "{took:?}");
+        } else {
+            let l = robot.ask_until("echo motors", "motors", |l| l.starts_with("motors clock="));
+            assert_eq!(
+                v(&l),
+                300.0,
+                "a raw client's command stands until motors_timeout"
+            );
+            // It counts as zero after motors_timeout: the robot stops.
+            let mut last = String::new();
+            let stopped = common::poll_until(20, || {
+                std::thread::sleep(std::time::Duration::from_millis(500));
+                let e = robot.ask_until("echo encoders", "encoders", |l| {
+                    l.starts_with("encoders clock=")
+                });
+                let e = e.split(" x=").nth(1).unwrap_or("").to_string();
+                std::mem::replace(&mut last, e) == last
+            });
+            assert!(stopped, "the robot never stopped after a raw client left");
+            eprintln!(
+                "a raw client's command: robot still {:?} after it closed (motors_timeout 5000 ms)",
+                closed.elapsed()
+            );
+        }
+    }
+    robot.quit();
+}

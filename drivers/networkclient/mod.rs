@@ -15,7 +15,7 @@
 //! provides motors robot.local 3001          #   zoomencoders, zoommotors, imu (jderobot)
 //! initial_position 1000 1000 90             # X Y mm, THETA deg: where the remote odometry's
 //!                                           #   origin is in this side's world (default 0 0 0)
-//! token s3cret                              # the server's token, if it has one
+//! token 7f3a9c2e5b8d4f16a0c3e9b2d7f14a68     # the server's token, if it has one (16 to 128 characters)
 //! motors_timeout 500                        # ms: an older motors command is sent as zero
 //! depth 2                                   # image requests kept in flight (pipelining)
 //! end_driver
@@ -154,11 +154,7 @@ crate::declare_lines! {
         )
         .required(),
         initial_position: Option<(f32, f32, f32)> = settings::INITIAL_POSITION.help("the odometry offset added to the remote encoders"),
-        token: Option<String> = Setting::new(
-            "token",
-            "the server's secret (its `token` line)",
-            &[word("SECRET")],
-        ),
+        token: Option<String> = settings::TOKEN.help("the server's secret (its `token` line)"),
         #[allow(dead_code)] // read by `conf.motors_timeout()`
         motors_timeout: u64 = MOTORS_TIMEOUT,
         depth: u32 = Setting::new(
@@ -182,9 +178,6 @@ enum Provides {
 impl ClientConf {
     pub fn parse(conf: &ComponentConf) -> anyhow::Result<ClientConf> {
         let lines: Lines = conf.read()?;
-        if let (Some(t), Some(l)) = (&lines.token, conf.line("token")) {
-            netwire::check_token(t).map_err(|e| l.error(format!("`token`: {e}")))?;
-        }
         let mut c = ClientConf {
             remotes: Vec::new(),
             initial: lines.initial_position.unwrap_or_default(),
@@ -336,7 +329,7 @@ impl NetClient {
     /// connection each: sensors and images connect while somebody uses them,
     /// commands always.
     pub fn start(cc: ClientConf, ifaces: &Interfaces, provider: &str) -> anyhow::Result<NetClient> {
-        let name = netwire::client_name(cc.token.as_deref()).map_err(anyhow::Error::msg)?;
+        let hello = netwire::hello(cc.token.as_deref()).map_err(anyhow::Error::msg)?;
         let stop = Arc::new(AtomicBool::new(false));
         let mut devs = Vec::new();
         for r in &cc.remotes {
@@ -382,7 +375,7 @@ impl NetClient {
                 remote: r,
                 dev,
                 stop: stop.clone(),
-                name,
+                hello: hello.clone(),
                 depth: cc.depth,
                 timeout: cc.motors_timeout,
             };
@@ -439,7 +432,8 @@ struct Link {
     remote: Remote,
     dev: Dev,
     stop: Arc<AtomicBool>,
-    name: [u8; netwire::NAME_LEN],
+    /// The 20-byte name and the token line, if any ([`netwire::hello`]).
+    hello: Vec<u8>,
     depth: u32,
     /// A renewed command (motors) older than this is sent as zero.
     timeout: Duration,
@@ -592,7 +586,7 @@ impl Link {
                 Ok(s) => {
                     s.set_nodelay(true)?;
                     s.set_write_timeout(Some(Duration::from_secs(5)))?;
-                    (&s).write_all(&self.name)?;
+                    (&s).write_all(&self.hello)?;
                     return Ok(s);
                 }
                 Err(e) => last = e,

@@ -174,10 +174,8 @@ crate::declare_lines! {
             &[int("N", "", 1, 4096)],
         )
         .default("64"),
-        token: Option<String> = Setting::new(
-            "token",
+        token: Option<String> = settings::TOKEN.help(
             "a secret clients must present (ws://HOST:PORT/?token=SECRET, or `Authorization: Bearer SECRET`)",
-            &[word("SECRET")],
         ),
         #[allow(dead_code)] // read through `existing_file`, which checks them
         tls: Option<(String, String)> = Setting::new(
@@ -918,7 +916,7 @@ mod tests {
                 "`tls CERT.pem KEY.pem` and `token SECRET`",
             ),
             (
-                "bind 0.0.0.0\ntoken s3cret\n",
+                "bind 0.0.0.0\ntoken 7f3a9c2e5b8d4f16a0c3e9b2d7f14a68\n",
                 "add `tls CERT.pem KEY.pem` too",
             ),
             ("tls /nonexistent.pem k.pem\n", "the certificate chain"),

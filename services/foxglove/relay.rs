@@ -40,6 +40,7 @@
 //! message than `max_message`.
 
 use std::{
+    collections::HashMap,
     net::SocketAddr,
     os::fd::AsRawFd,
     pin::Pin,
@@ -59,7 +60,10 @@ use tokio::{
     time::Sleep,
 };
 
-use crate::sockets;
+use crate::{
+    secret::{Refusals, same_secret},
+    sockets,
+};
 
 /// The longest HTTP upgrade request or response head.
 pub const MAX_HEAD: usize = 16 * 1024;
@@ -143,6 +147,11 @@ pub struct Door {
     t0: Instant,
     /// When the cap was last logged (ms since t0), to log it once a minute.
     cap_logged: AtomicU64,
+    /// Wrong tokens per source address, and their back-off.
+    pub(crate) refusals: Refusals,
+    /// The TLS bridges' local ports and the clients they carry (so the token's
+    /// back-off sees the client's address, not loopback).
+    bridged: Mutex<HashMap<u16, SocketAddr>>,
 }
 
 impl Door {
@@ -155,7 +164,28 @@ impl Door {
             conns: Mutex::new(Vec::new()),
             t0: Instant::now(),
             cap_logged: AtomicU64::new(u64::MAX),
+            refusals: Refusals::new("foxglove"),
+            bridged: Mutex::new(HashMap::new()),
         })
+    }
+
+    /// A TLS bridge from local port `port` carries `client` (until [`Door::unbridge`]).
+    pub(crate) fn bridge(&self, port: u16, client: SocketAddr) {
+        self.bridged.lock().insert(port, client);
+    }
+    pub(crate) fn unbridge(&self, port: u16) {
+        self.bridged.lock().remove(&port);
+    }
+    /// Who a connection from `peer` is: the TLS client it bridges, or itself.
+    fn client_of(&self, peer: SocketAddr) -> SocketAddr {
+        if !peer.ip().is_loopback() {
+            return peer;
+        }
+        self.bridged
+            .lock()
+            .get(&peer.port())
+            .copied()
+            .unwrap_or(peer)
     }
     fn now(&self) -> u64 {
         self.t0.elapsed().as_millis() as u64
@@ -243,6 +273,22 @@ pub async fn accept_loop(listener: TcpListener, door: Arc<Door>) {
             }
         };
         door.stats.accepted.fetch_add(1, Ordering::Relaxed);
+        let peer = door.client_of(peer);
+        if let Some(left) = door.refusals.holds(peer.ip()) {
+            door.stats.refused.fetch_add(1, Ordering::Relaxed);
+            tokio::spawn(async move {
+                let why = format!(
+                    "too many wrong tokens from your address; try again in {} s",
+                    left.as_secs() + 1
+                );
+                let _ = tokio::time::timeout(
+                    Duration::from_millis(100),
+                    refuse(&mut { client }, "429 Too Many Requests", &why),
+                )
+                .await;
+            });
+            continue;
+        }
         let conn = door.admit();
         let door = door.clone();
         tokio::spawn(async move {
@@ -253,9 +299,17 @@ pub async fn accept_loop(listener: TcpListener, door: Arc<Door>) {
                 () = conn.kill.notified() => Err("closed to admit a newer client (max_clients)".into()),
             };
             door.leave(&conn);
-            if let Err(why) = r {
-                door.stats.refused.fetch_add(1, Ordering::Relaxed);
-                tracing::info!("foxglove: client {peer}: {why}");
+            match r {
+                Ok(()) => {}
+                // `refusals` says it (one line per burst, not per attempt).
+                Err(why) if why == WRONG_TOKEN => {
+                    door.stats.refused.fetch_add(1, Ordering::Relaxed);
+                    door.refusals.failed(peer.ip());
+                }
+                Err(why) => {
+                    door.stats.refused.fetch_add(1, Ordering::Relaxed);
+                    tracing::info!("foxglove: client {peer}: {why}");
+                }
             }
         });
     }
@@ -347,15 +401,6 @@ fn percent_decode(s: &str) -> String {
 }
 
 /// Equal, in a time that does not depend on where they differ.
-fn same_secret(a: &str, b: &str) -> bool {
-    let (a, b) = (a.as_bytes(), b.as_bytes());
-    let mut d = (a.len() != b.len()) as u8;
-    for i in 0..a.len().max(b.len()) {
-        d |= a.get(i).copied().unwrap_or(0) ^ b.get(i).copied().unwrap_or(0);
-    }
-    d == 0
-}
-
 /// The request head to send the SDK, and whether the client speaks the legacy name.
 pub fn rewrite_request(head: &str) -> (String, bool) {
     let offers = offered(head);
@@ -397,6 +442,9 @@ pub struct Refusal {
     pub log: &'static str,
 }
 
+/// The log of a refusal for a missing or wrong token.
+const WRONG_TOKEN: &str = "no token or a wrong one";
+
 /// Checks a client's upgrade request head (text, a GET, the token when `token`
 /// is set): (the head, the head to send the SDK, whether the client speaks the
 /// legacy name), or why it is refused. No I/O, so it is callable on bytes.
@@ -422,13 +470,13 @@ pub fn check_request(
         ));
     }
     if let Some(want) = token
-        && !presented_token(&head).is_some_and(|t| same_secret(&t, want))
+        && !presented_token(&head).is_some_and(|t| same_secret(t.as_bytes(), want.as_bytes()))
     {
         return Err(Refusal {
             status: "401 Unauthorized",
             answer: "this server wants its token: ws[s]://HOST:PORT/?token=SECRET \
                      (or the header `Authorization: Bearer SECRET`)",
-            log: "no token or a wrong one",
+            log: WRONG_TOKEN,
         });
     }
     let (to_sdk, legacy) = rewrite_request(&head);
@@ -1241,8 +1289,5 @@ mod tests {
         let h = "GET / HTTP/1.1\r\nauthorization: Bearer abc\r\n\r\n";
         assert_eq!(presented_token(h).as_deref(), Some("abc"));
         assert_eq!(presented_token("GET / HTTP/1.1\r\n\r\n"), None);
-        assert!(
-            same_secret("abc", "abc") && !same_secret("abc", "abd") && !same_secret("ab", "abc")
-        );
     }
 }

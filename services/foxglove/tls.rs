@@ -128,8 +128,11 @@ pub async fn accept_loop(
                 continue;
             }
         };
+        if door.refusals.holds(peer.ip()).is_some() {
+            continue; // backed off for wrong tokens: not even a handshake
+        }
         let (id, kill) = pending.enter(max_pending);
-        let (acceptor, pending) = (acceptor.clone(), pending.clone());
+        let (acceptor, pending, door) = (acceptor.clone(), pending.clone(), door.clone());
         tokio::spawn(async move {
             let shake = tokio::time::timeout(HANDSHAKE_TIMEOUT, acceptor.accept(tcp));
             let r = tokio::select! {
@@ -154,7 +157,7 @@ pub async fn accept_loop(
                     return;
                 }
             };
-            if let Err(e) = bridge(tls, door_addr).await {
+            if let Err(e) = bridge(tls, peer, door_addr, &door).await {
                 tracing::debug!("foxglove: client {peer} (TLS): {e}");
             }
         });
@@ -165,9 +168,33 @@ pub async fn accept_loop(
 /// door until one side ends (the other then gets [`CLOSE_GRACE`]).
 async fn bridge(
     tls: tokio_rustls::server::TlsStream<TcpStream>,
+    peer: SocketAddr,
     door_addr: SocketAddr,
+    door: &Door,
 ) -> std::io::Result<()> {
-    let inner = TcpStream::connect(door_addr).await?;
+    // Bound before it connects, so the door knows whom the port carries when
+    // it accepts (`Door::bridge`).
+    let sock = if door_addr.is_ipv4() {
+        tokio::net::TcpSocket::new_v4()?
+    } else {
+        tokio::net::TcpSocket::new_v6()?
+    };
+    sock.bind(SocketAddr::new(door_addr.ip(), 0))?;
+    let port = sock.local_addr()?.port();
+    door.bridge(port, peer);
+    let inner = sock.connect(door_addr).await;
+    let r = match inner {
+        Ok(inner) => carry(tls, inner).await,
+        Err(e) => Err(e),
+    };
+    door.unbridge(port);
+    r
+}
+
+async fn carry(
+    tls: tokio_rustls::server::TlsStream<TcpStream>,
+    inner: TcpStream,
+) -> std::io::Result<()> {
     let _ = inner.set_nodelay(true);
     let (mut cr, mut cw) = tokio::io::split(tls);
     let (mut ir, mut iw) = inner.into_split();

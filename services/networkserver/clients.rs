@@ -30,7 +30,7 @@ use std::{
 
 use crate::{
     interfaces::{Notify, Source},
-    netwire, sockets,
+    netwire, secret, sockets,
 };
 
 use super::{
@@ -246,6 +246,19 @@ pub(super) fn accept_loop(listener: TcpListener, sh: Arc<Shared>) {
         if sh.stop.load(Ordering::Acquire) {
             return;
         }
+        if let Some(left) = sh.refusals.holds(peer.ip()) {
+            // Unread, from the nonblocking socket: a guesser costs no thread and
+            // no wait, and holds up no one else.
+            sh.stats.dropped.fetch_add(1, Ordering::Relaxed);
+            let mut out = Vec::new();
+            let why = format!(
+                "refused: too many wrong tokens from your address; try again in {} s",
+                left.as_secs() + 1
+            );
+            netwire::write_error(&mut out, &why);
+            let _ = (&stream).write(&out);
+            continue;
+        }
         if let Err(e) = stream.set_nonblocking(false) {
             tracing::warn!("networkserver: cannot set up the connection from {peer}: {e}");
             continue;
@@ -314,8 +327,13 @@ pub(super) fn accept_loop(listener: TcpListener, sh: Arc<Shared>) {
 fn client(stream: TcpStream, peer: SocketAddr, id: u64, slot: &Slot, sh: &Arc<Shared>) {
     let conf = &sh.conf;
     let _ = stream.set_nodelay(true);
-    let finish = |why: String, bad: bool| {
+    // `why` None: said elsewhere (a wrong token: `refusals`, one line a burst).
+    let finish = |why: Option<String>, bad: bool| {
         sh.clients.lock().retain(|c| c.id != id);
+        let Some(why) = why else {
+            sh.stats.dropped.fetch_add(1, Ordering::Relaxed);
+            return;
+        };
         if bad {
             sh.stats.dropped.fetch_add(1, Ordering::Relaxed);
             tracing::warn!("networkserver: client {peer} disconnected: {why}");
@@ -323,52 +341,60 @@ fn client(stream: TcpStream, peer: SocketAddr, id: u64, slot: &Slot, sh: &Arc<Sh
             tracing::info!("networkserver: client {peer} left: {why}");
         }
     };
-    // The 20-byte name, within `timeout` in all (not per read: a byte every
-    // few seconds must not hold the connection for minutes).
-    let mut name = [0u8; netwire::NAME_LEN];
+    // The 20-byte name and its token line, within `timeout` in all (not per
+    // read: a byte every few seconds must not hold the connection for minutes).
     let _ = stream.set_write_timeout(Some(conf.timeout));
-    if let Err(e) = read_name(&stream, &mut name, conf.timeout) {
-        let why = if slot.evicted.load(Ordering::Acquire) {
-            format!(
-                "closed to make room: {} connections, and it had sent no name after {} ms",
-                conf.max_clients,
-                EVICT_AFTER.as_millis()
-            )
-        } else if netwire::is_timeout(&e) {
-            format!(
-                "sent no 20-byte name within {} ms",
-                conf.timeout.as_millis()
-            )
-        } else {
-            format!("closed before sending its name ({e})")
-        };
-        return finish(why, true);
-    }
-    let (cname, token) = netwire::split_name(&name);
-    if let Some(t) = &conf.token
-        && !netwire::same_secret(t.as_bytes(), token)
-    {
-        let mut out = Vec::new();
-        netwire::write_error(&mut out, "refused: wrong or missing token");
-        let _ = (&stream).write_all(&out);
-        let _ = stream.shutdown(Shutdown::Both);
-        return finish(
-            format!("client `{cname}` refused: wrong or missing token"),
-            true,
-        );
+    let (cname, token) = match read_hello(&stream, conf.timeout) {
+        Ok(h) => h,
+        Err(e) => {
+            let why = if slot.evicted.load(Ordering::Acquire) {
+                format!(
+                    "closed to make room: {} connections, and it had sent no name after {} ms",
+                    conf.max_clients,
+                    EVICT_AFTER.as_millis()
+                )
+            } else if netwire::is_timeout(&e) {
+                format!(
+                    "sent no 20-byte name (and token line) within {} ms",
+                    conf.timeout.as_millis()
+                )
+            } else {
+                format!("closed before sending its name ({e})")
+            };
+            return finish(Some(why), true);
+        }
+    };
+    if let Some(t) = &conf.token {
+        if !token.is_some_and(|got| secret::same_secret(t.as_bytes(), &got)) {
+            let mut out = Vec::new();
+            netwire::write_error(&mut out, "refused: wrong or missing token");
+            let _ = (&stream).write_all(&out);
+            let _ = stream.shutdown(Shutdown::Both);
+            sh.refusals.failed(peer.ip());
+            return finish(None, true);
+        }
+        sh.refusals.passed(peer.ip());
     }
     if sh.stop.load(Ordering::Acquire) {
-        return finish("server stopping".into(), false);
+        return finish(Some("server stopping".into()), false);
     }
     slot.heard(sh, false);
     slot.named.store(true, Ordering::Release);
     if slot.evicted.load(Ordering::Acquire) {
-        return finish("closed to make room before its name was read".into(), true);
+        return finish(
+            Some("closed to make room before its name was read".into()),
+            true,
+        );
     }
     tracing::info!("networkserver: new client {cname} from {peer}");
     let bell = match Bell::new() {
         Ok(b) => b,
-        Err(e) => return finish(format!("cannot make its wake-up descriptor: {e}"), true),
+        Err(e) => {
+            return finish(
+                Some(format!("cannot make its wake-up descriptor: {e}")),
+                true,
+            );
+        }
     };
     let cl = Arc::new(Client {
         bell,
@@ -409,26 +435,59 @@ fn client(stream: TcpStream, peer: SocketAddr, id: u64, slot: &Slot, sh: &Arc<Sh
     } else {
         ended
     };
-    finish(why, bad);
+    finish(Some(why), bad);
 }
 
-/// Reads exactly `name.len()` bytes within `limit` in all.
-fn read_name(stream: &TcpStream, name: &mut [u8], limit: Duration) -> io::Result<()> {
+/// Reads a client's 20-byte name and, when the name says one follows
+/// ([`netwire::TOKEN_MARK`]), its token line, within `limit` in all: (the
+/// printable name, the token if one came). Bytes after them stay unread.
+fn read_hello(stream: &TcpStream, limit: Duration) -> io::Result<(String, Option<Vec<u8>>)> {
     let deadline = Instant::now() + limit;
+    let mut name = [0u8; netwire::NAME_LEN];
+    read_until(stream, &mut name, deadline, None)?;
+    let (cname, marked) = netwire::split_name(&name);
+    if !marked {
+        return Ok((cname, None));
+    }
+    let mut line = [0u8; netwire::MAX_TOKEN_LINE];
+    let n = read_until(stream, &mut line, deadline, Some(b'\n'))?;
+    if line[n - 1] != b'\n' {
+        return Err(netwire::too_long(netwire::MAX_TOKEN_LINE));
+    }
+    let token = netwire::token_of(&line[..n - 1]).map(<[u8]>::to_vec);
+    Ok((cname, Some(token.unwrap_or_default())))
+}
+
+/// Reads into `buf` until it is full or, with `end`, up to and with that byte,
+/// by `deadline`: the bytes read. With `end` it reads a byte at a time, so
+/// nothing after it is taken from the socket.
+fn read_until(
+    stream: &TcpStream,
+    buf: &mut [u8],
+    deadline: Instant,
+    end: Option<u8>,
+) -> io::Result<usize> {
     let mut got = 0;
     let mut r = stream;
-    while got < name.len() {
+    let step = if end.is_some() { 1 } else { buf.len() };
+    while got < buf.len() {
         let left = deadline.saturating_duration_since(Instant::now());
         if left.is_zero() {
             return Err(io::ErrorKind::TimedOut.into());
         }
         stream.set_read_timeout(Some(left))?;
-        match io::Read::read(&mut r, &mut name[got..]) {
+        let want = (got + step).min(buf.len());
+        match io::Read::read(&mut r, &mut buf[got..want]) {
             Ok(0) => return Err(io::ErrorKind::UnexpectedEof.into()),
-            Ok(n) => got += n,
+            Ok(n) => {
+                got += n;
+                if end == Some(buf[got - 1]) {
+                    return Ok(got);
+                }
+            }
             Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
             Err(e) => return Err(e),
         }
     }
-    Ok(())
+    Ok(got)
 }

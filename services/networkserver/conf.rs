@@ -8,7 +8,7 @@ use std::{
 use crate::{
     conf::{
         ComponentConf, ConfLine,
-        settings::{self, Setting, int, interface, word},
+        settings::{self, Setting, int, interface},
     },
     interfaces::{canonical, family},
     netwire,
@@ -59,11 +59,8 @@ crate::declare_lines! {
         bind: String = settings::BIND,
         #[allow(dead_code)] // read by `settings::guard_listen`
         insecure: Option<bool> = settings::INSECURE,
-        token: Option<String> = Setting::new(
-            "token",
-            "a secret every client must send as its name (`networkclient`'s `token`)",
-            &[word("SECRET")],
-        ),
+        token: Option<String> = settings::TOKEN
+            .help("a secret every client must send after its name (`networkclient`'s `token`)"),
         serves: Vec<(String, Option<u32>)> = Setting::new(
             "serves",
             "an interface it serves; images with their network id (0, 1, 2 ...)",
@@ -130,10 +127,7 @@ impl ServerConf {
                 crate::conf::settings::echo(&lines.bind)
             )
         })?;
-        if let (Some(t), Some(l)) = (&lines.token, conf.line("token")) {
-            netwire::check_token(t).map_err(|e| err(l, format!("`token`: {e}")))?;
-            c.token = Some(t.clone());
-        }
+        c.token = lines.token;
         for (l, (name, id)) in conf.lines_with("serves").zip(lines.serves) {
             let name = canonical(&name);
             let Some(fam) = family(&name) else {
@@ -183,7 +177,7 @@ impl ServerConf {
             "bind",
             &c.bind.to_string(),
             c.token.is_some(),
-            "Add a `token SECRET` line (1 to 15 characters) here and the same `token` line to \
+            "Add a `token SECRET` line (16 to 128 characters) here and the same `token` line to \
              each networkclient",
         )?;
         if !socket {

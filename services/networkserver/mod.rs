@@ -8,7 +8,7 @@
 //! driver networkserver
 //! socket 3001              # TCP port (0 = any free port)
 //! bind 127.0.0.1           # address to listen on (default 127.0.0.1; 0.0.0.0 = every interface)
-//! token s3cret             # refuse clients whose 20-byte name does not carry it (needed
+//! token 7f3a9c2e5b8d4f16a0c3e9b2d7f14a68  # 16 to 128 characters: refuse clients that do not send it (needed
 //!                          #   beyond loopback)
 //! insecure                 # beyond loopback with no token: say so (a network you trust)
 //! serves colorA 0          # an image and its network id (colorA..D, varcolorA..D any size)
@@ -330,6 +330,8 @@ struct Shared {
     /// has not sent its name when the table is full) and their threads.
     clients: Mutex<Vec<Conn>>,
     threads: Mutex<Vec<JoinHandle<()>>>,
+    /// Wrong tokens per source address, and their back-off.
+    refusals: crate::secret::Refusals,
 }
 
 /// A running server.
@@ -362,6 +364,7 @@ impl NetServer {
             epoch: Instant::now(),
             clients: Mutex::new(Vec::new()),
             threads: Mutex::new(Vec::new()),
+            refusals: crate::secret::Refusals::new("networkserver"),
         });
         let sh = shared.clone();
         let accept = std::thread::Builder::new()

@@ -478,6 +478,18 @@ pub const BIND: Setting = Setting::new(
 )
 .default("127.0.0.1");
 
+/// `token SECRET`: a shared secret ([`crate::secret`]: 16 to 128 printable
+/// characters, refused at its line otherwise). Each component gives its help.
+pub const TOKEN: Setting = Setting::new(
+    "token",
+    "a shared secret",
+    &[custom(
+        "SECRET",
+        "a secret of 16 to 128 printable ASCII characters without spaces",
+        crate::secret::check_token,
+    )],
+);
+
 /// `domain ID`: the ROS 2 domain (ROS_DOMAIN_ID) of the ros2 driver and service.
 pub const ROS_DOMAIN: Setting =
     Setting::new("domain", "ROS_DOMAIN_ID", &[int("ID", "", 0, 232)]).default("0");

@@ -20,10 +20,13 @@ impl Client43 {
     pub fn connect(addr: SocketAddr, token: Option<&str>) -> Client43 {
         let s = TcpStream::connect(addr).expect("connect to the server");
         s.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
-        let mut name = [0u8; 20];
-        name[..4].copy_from_slice(b"jdec");
+        // `jdec`, NUL-padded; with a token (jderobot's): the marker after the
+        // NUL and the token line (docs/network.md).
+        let mut name = b"jdec".to_vec();
+        name.resize(20, 0);
         if let Some(t) = token {
-            name[5..5 + t.len()].copy_from_slice(t.as_bytes());
+            name[5..15].copy_from_slice(b"token-line");
+            name.extend_from_slice(format!("2100 {t}\n").as_bytes());
         }
         let mut out = s.try_clone().unwrap();
         out.write_all(&name).unwrap();
