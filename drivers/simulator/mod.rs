@@ -99,6 +99,12 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
             Err(e) => tracing::warn!("simulator: its time is not the run's clock: {e}"),
         }
     }
+    if let Some(score) = simulation.sim.score() {
+        match world::export_score(&rt.names, score.clone()) {
+            Ok(live) => simulation.live_score = Some(live),
+            Err(e) => tracing::warn!("simulator: the score is not exported: {e}"),
+        }
+    }
     let balls = simulation.sim.balls.clone();
     // The first exporter of the world keeps the keys; a second one warns and runs
     // with balls nobody else sees.
