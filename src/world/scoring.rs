@@ -30,8 +30,8 @@ pub const TARGET_RADIUS: f64 = 500.0;
 pub const LAP_CHECKPOINTS: usize = 8;
 /// A checkpoint is passed when the robot's centre comes this close to it, mm.
 pub const CHECKPOINT_RADIUS: f64 = 1000.0;
-/// The largest floor grid, cells (a 40 m x 40 m world at 200 mm).
-const MAX_CELLS: usize = 40_000;
+/// The largest floor grid, cells (a 100 m x 100 m world at 200 mm).
+const MAX_CELLS: usize = 250_000;
 
 /// Which score a run keeps.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
