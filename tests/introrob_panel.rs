@@ -102,3 +102,18 @@ fn balls_are_wireframe_spheres_on_the_floor() {
         }
     }
 }
+
+/// With a `score` line, the world view says the exercise's score (`world.score`).
+#[test]
+fn introrob_panel_says_the_exercise_score() {
+    let rt = start_conf(&format!(
+        "driver simulator\nworld {}\nprovides encoders\nprovides motors\nprovides laser\n\
+         score targets\nend_driver\nschema introrob\nbehaviour stop\nend_schema\n\
+         load_driver simulator\nload_schema introrob\n",
+        world_path("obstacle_circuit.world")
+    ));
+    let mut h = panel_harness(&rt, "introrob", vec2(1000.0, 700.0));
+    h.run();
+    h.get_by_label_contains("targets 0 of 8");
+    rt.shutdown();
+}

@@ -1,6 +1,7 @@
 //! The camera: a pinhole camera on the robot's pan-tilt unit, with progeo's model
-//! and pixel conventions, and a small scanline renderer (floor with tiles, sky,
-//! walls with their heights, boxes, balls and the other robots), depth-tested
+//! and pixel conventions, and a small scanline renderer (floor with tiles, lines
+//! painted on it, sky, walls with their heights, boxes, balls and the other
+//! robots), depth-tested
 //! with an inverse-depth buffer.
 //!
 //! The camera is a [`PinholeCamera`] from [`crate::progeo`] (`position`, `foa`,
@@ -13,7 +14,7 @@
 use crate::{
     interfaces::Image,
     progeo::{HPoint3D, PinholeCamera, focal_from_fov},
-    world::Rgb,
+    world::{Paint, Rgb},
 };
 
 use super::physics::Sim;
@@ -58,6 +59,10 @@ impl Sim {
 
 /// Near clipping distance, mm.
 const NEAR: f64 = 10.0;
+
+/// Paint is drawn this high above the floor (mm), so that it wins the depth
+/// test against the floor and loses it against everything else.
+const PAINT_Z: f64 = 1.0;
 
 /// The body of a robot as the camera sees it: length, width, height (mm).
 const ROBOT_BODY: [f64; 3] = [450.0, 380.0, 240.0];
@@ -134,6 +139,9 @@ impl Renderer {
             return;
         }
         self.floor_and_sky(sim, img);
+        for p in &sim.world.paint {
+            self.paint(p, img);
+        }
         let light = [0.6, 0.8];
         for s in &sim.world.segments {
             if let Some(n) = s.normal
@@ -255,6 +263,34 @@ impl Renderer {
                     px.copy_from_slice(if odd { &f2 } else { &f1 });
                 }
             }
+        }
+    }
+
+    /// A painted line: a flat quad per piece, square-capped by half the width
+    /// so the joints of a bending line have no gaps.
+    fn paint(&mut self, p: &Paint, img: &mut Image) {
+        let (bgr, h) = (shade(p.color, 1.0), p.width / 2.0);
+        for (a, b) in p.segments() {
+            let e = [b[0] - a[0], b[1] - a[1]];
+            let l = e[0].hypot(e[1]);
+            if l < 1e-9 {
+                continue;
+            }
+            let (u, n) = ([e[0] / l * h, e[1] / l * h], [-e[1] / l * h, e[0] / l * h]);
+            let at = |p: [f64; 2], s: f64, t: f64| {
+                [
+                    p[0] + s * u[0] + t * n[0],
+                    p[1] + s * u[1] + t * n[1],
+                    PAINT_Z,
+                ]
+            };
+            let quad = [
+                at(a, -1.0, -1.0),
+                at(b, 1.0, -1.0),
+                at(b, 1.0, 1.0),
+                at(a, -1.0, 1.0),
+            ];
+            self.polygon(&quad, [0.0, 0.0, 1.0], bgr, img);
         }
     }
 

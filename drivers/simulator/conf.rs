@@ -15,7 +15,7 @@ use crate::{
         },
     },
     interfaces::{COLOR_HEIGHT, COLOR_WIDTH, Kind, interface_name},
-    world::{World, closest_on_segment},
+    world::{LiveScore, Rule, World, closest_on_segment},
 };
 
 use super::physics::{Noise, Pose, RobotModel, Sim};
@@ -90,6 +90,9 @@ pub struct Simulation {
     /// The run's clock (`run.clock`), exported when the simulation does not run
     /// in real time (`speed` other than 1, `max`, `stepped`): simulated time.
     pub run_clock: Option<std::sync::Arc<crate::runtime::RunClock>>,
+    /// Where the driver stores the score (`world.score`) as it changes, when the
+    /// conf keeps one (`score`) and the simulation exports it.
+    pub live_score: Option<std::sync::Arc<LiveScore>>,
 }
 
 /// The sensors a `period` line names (the words of [`Sensor`]).
@@ -115,6 +118,16 @@ enum Sensor {
     Camera,
     Pantiltencoders,
     Imu,
+}
+
+/// A `score` line's rule.
+#[derive(Clone, Copy, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+enum ScoreLine {
+    None,
+    Swept,
+    Targets,
+    Lap,
 }
 
 /// The devices a `provides` line of the device form names.
@@ -271,6 +284,18 @@ crate::declare_lines! {
             "the pan-tilt camera's horizontal field of view",
             &[float("FOV", "deg", 0.001, 169.999)],
         ),
+        camera_tilt: Option<f64> = Setting::new(
+            "camera_tilt",
+            "the pan-tilt camera's tilt at the start (negative: down, at the floor ahead)",
+            &[float("TILT", "deg", -46.0, 30.0)],
+        ),
+        score: ScoreLine = Setting::new(
+            "score",
+            "the exercise's score, kept from the first robot's true pose and exported as world.score: \
+             floor swept, targets reached in order, laps of the closed painted line (docs/simulator.md)",
+            &[choice("RULE", &["none", "swept", "targets", "lap"])],
+        )
+        .default("none"),
         publish_always: bool = Setting::new(
             "publish_always",
             "publish sensors even while nobody uses them",
@@ -314,6 +339,7 @@ struct Settings {
     step: f64,
     periods: Periods,
     publish_always: bool,
+    score: Option<Rule>,
 }
 
 /// The world of the `world` line (an empty world without one).
@@ -365,6 +391,9 @@ fn model(l: &Lines) -> (RobotModel, Noise, Periods) {
     set(&mut model.laser_range, l.laser_range);
     set(&mut model.camera_height, l.camera_height);
     set(&mut model.camera_fov, l.camera_fov);
+    if let Some(t) = l.camera_tilt {
+        model.pantilt.latitude = t as f32;
+    }
     let mut noise = Noise::default();
     for n in &l.noise {
         match n {
@@ -413,6 +442,12 @@ fn settings(conf: &ComponentConf) -> Result<(Settings, Vec<ProvidesLine>), ConfE
         step: l.step / 1000.0,
         periods,
         publish_always: l.publish_always,
+        score: match l.score {
+            ScoreLine::None => None,
+            ScoreLine::Swept => Some(Rule::Swept),
+            ScoreLine::Targets => Some(Rule::Targets),
+            ScoreLine::Lap => Some(Rule::Lap),
+        },
     };
     Ok((s, l.provides))
 }
@@ -501,6 +536,18 @@ impl Simulation {
             }
             taken.push(name);
         }
+        if let Some(rule) = s.score
+            && let Err(e) = sim.start_score(rule)
+            && let Some(l) = conf.line("score")
+        {
+            let world = conf
+                .line("world")
+                .map_or("none".into(), |w| w.args().join(" "));
+            return Err(l.error(format!(
+                "`score {}`: {e} (world: {world}); or choose another score: swept, targets, lap, none",
+                l.args().join(" ")
+            )));
+        }
         for (k, r) in sim.robots.iter().enumerate() {
             if sim.world.segments.iter().any(|s| {
                 let q = closest_on_segment([r.pose.x, r.pose.y], s);
@@ -523,6 +570,7 @@ impl Simulation {
             motors_timeout,
             publish_always: s.publish_always,
             run_clock: None,
+            live_score: None,
         })
     }
 }

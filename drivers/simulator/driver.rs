@@ -185,6 +185,9 @@ fn publish(simulation: &mut Simulation, out: &mut Outputs, next: &mut NextPublis
         is_due(&mut next.camera, t, p.camera),
         is_due(&mut next.pantilt_encoders, t, p.pantiltencoders),
     );
+    if enc && let (Some(out), Some(score)) = (&simulation.live_score, simulation.sim.score()) {
+        out.store(Arc::new(score.clone()));
+    }
     let sim = &mut simulation.sim;
     if enc && !sim.balls.is_empty() {
         out.balls.store(Arc::new(sim.balls.clone()));
@@ -253,12 +256,24 @@ fn commands(simulation: &mut Simulation, robots: &[RobotInterfaces], stepped: bo
     }
 }
 
-/// The driver thread.
-fn run(mut simulation: Simulation, mut out: Outputs, stop: &AtomicBool) {
+/// The driver thread; says the score, if one is kept, when it ends.
+fn run(mut simulation: Simulation, out: Outputs, stop: &AtomicBool) {
+    step_until_stopped(&mut simulation, out, stop);
+    if let Some(score) = simulation.sim.score() {
+        tracing::info!(
+            "simulator: score after {:.1} s: {}",
+            simulation.sim.time,
+            score.summary()
+        );
+    }
+}
+
+/// Steps and publishes until `stop`, at the simulation's clock.
+fn step_until_stopped(simulation: &mut Simulation, mut out: Outputs, stop: &AtomicBool) {
     let dt = simulation.step;
     let mut next = NextPublish::default();
-    commands(&mut simulation, &out.robots, false);
-    publish(&mut simulation, &mut out, &mut next);
+    commands(simulation, &out.robots, false);
+    publish(simulation, &mut out, &mut next);
     match simulation.clock {
         Clock::Stepped(per) => {
             let steps = ((per / dt).round() as u64).max(1);
@@ -276,10 +291,10 @@ fn run(mut simulation: Simulation, mut out: Outputs, stop: &AtomicBool) {
                     continue;
                 }
                 seen = c;
-                commands(&mut simulation, &out.robots, true);
+                commands(simulation, &out.robots, true);
                 for _ in 0..steps {
                     simulation.sim.step(dt);
-                    publish(&mut simulation, &mut out, &mut next);
+                    publish(simulation, &mut out, &mut next);
                 }
             }
         }
@@ -308,9 +323,9 @@ fn run(mut simulation: Simulation, mut out: Outputs, stop: &AtomicBool) {
                     done = target - cap;
                 }
                 while done < target && !stop.load(Ordering::Acquire) {
-                    commands(&mut simulation, &out.robots, false);
+                    commands(simulation, &out.robots, false);
                     simulation.sim.step(dt);
-                    publish(&mut simulation, &mut out, &mut next);
+                    publish(simulation, &mut out, &mut next);
                     done += 1;
                 }
             }

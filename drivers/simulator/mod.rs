@@ -50,6 +50,8 @@
 //! radius 250                         # robot radius, mm
 //! laser_range 8000                   # mm
 //! camera_height 500                  # mm; camera_fov 65 (deg)
+//! camera_tilt -20                    # deg: the pan-tilt unit's tilt at the start (-46..30; 0)
+//! score lap                          # the exercise's score: swept, targets, lap or none (default)
 //! publish_always off                 # on: compute laser, sonars and camera even when unused
 //! end_driver
 //! ```
@@ -62,7 +64,12 @@
 //! balls start), and `world.balls`, the balls as they roll
 //! ([`LiveBalls`], refreshed at the encoders' period). Schemas read them with
 //! [`crate::world::map`] and [`crate::world::balls`], whichever driver exported
-//! them. When it does not run in real time (`speed` other than 1, `max`,
+//! them. With a `score` line it keeps that score (the rules of
+//! [`crate::world::scoring`]) from the first robot's true pose after each step and
+//! exports it as `world.score` ([`LiveScore`](crate::world::LiveScore), refreshed at the
+//! encoders' period; [`crate::world::score`] reads it); a world that lacks what the
+//! score needs (targets, a closed painted line, walls) is an error at the `score`
+//! line. When it does not run in real time (`speed` other than 1, `max`,
 //! `stepped`), it also exports its simulated time as the run's clock, `run.clock`
 //! ([`RunClock`]): the simulator's start time plus the simulated seconds (the
 //! `ros2` service publishes it on `/clock`).
@@ -97,6 +104,12 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
         match RunClock::export(&rt.names, matches!(simulation.clock, Clock::Stepped(_))) {
             Ok(c) => simulation.run_clock = Some(c),
             Err(e) => tracing::warn!("simulator: its time is not the run's clock: {e}"),
+        }
+    }
+    if let Some(score) = simulation.sim.score() {
+        match world::export_score(&rt.names, score.clone()) {
+            Ok(live) => simulation.live_score = Some(live),
+            Err(e) => tracing::warn!("simulator: the score is not exported: {e}"),
         }
     }
     let balls = simulation.sim.balls.clone();

@@ -4,7 +4,7 @@
 
 use crate::interfaces::{Encoders, Imu, Motors, Mount, PtEncoders, PtMotors};
 
-use crate::world::{Ball, Point2, Segment, World, closest_on_segment};
+use crate::world::{Ball, Point2, Rule, Score, Scorer, Segment, World, closest_on_segment};
 
 /// A tiny deterministic random number generator (xorshift64*), with Gaussian draws.
 #[derive(Clone, Debug)]
@@ -259,6 +259,9 @@ pub struct Sim {
     pub time: f64,
     pub noise: Noise,
     pub rng: Rng,
+    /// The exercise's score, kept from the first robot's true pose after each
+    /// step ([`Sim::start_score`]).
+    pub scorer: Option<Scorer>,
 }
 
 impl Sim {
@@ -273,6 +276,7 @@ impl Sim {
             time: 0.0,
             noise: Noise::default(),
             rng: Rng::new(seed),
+            scorer: None,
         }
     }
 
@@ -294,8 +298,9 @@ impl Sim {
             v: 0.0,
             w: 0.0,
             cmd: Motors::default(),
-            pan: 0.0,
-            tilt: 0.0,
+            // The unit starts where its command points (`camera_tilt`).
+            pan: model.pantilt.longitude as f64,
+            tilt: model.pantilt.latitude as f64,
             pt_cmd: PtMotors {
                 longitude_speed: 0.0,
                 latitude_speed: 0.0,
@@ -308,6 +313,23 @@ impl Sim {
             model,
         });
         self.robots.len() - 1
+    }
+
+    /// Keeps `rule`'s score from now on, for the first robot from where it stands
+    /// (the clock counts from this time). Errors say what the world lacks for it
+    /// (targets, a closed painted line, walls) or that there is no robot.
+    pub fn start_score(&mut self, rule: Rule) -> Result<(), String> {
+        let r = self.robots.first().ok_or("the score needs a robot")?;
+        let p = [r.pose.x, r.pose.y];
+        let mut s = Scorer::new(rule, &self.world, p, r.pose.theta, r.model.radius)?;
+        s.update(p, self.time);
+        self.scorer = Some(s);
+        Ok(())
+    }
+
+    /// The score as it stands, if one is kept ([`Sim::start_score`]).
+    pub fn score(&self) -> Option<&Score> {
+        self.scorer.as_ref().map(Scorer::score)
     }
 
     /// Sets robot `i`'s base command (the motors interface).
@@ -398,6 +420,9 @@ impl Sim {
         }
         self.step_balls(dt);
         self.time += dt;
+        if let (Some(s), Some(r)) = (&mut self.scorer, self.robots.first()) {
+            s.update([r.pose.x, r.pose.y], self.time);
+        }
     }
 
     fn step_robot(&mut self, i: usize, dt: f64) {

@@ -43,7 +43,8 @@
 //! (`Mutex<Option<[f32; 2]>>`, mm), `teleop` (`Mutex<`[`Motors`]`>`), and `state`
 //! ([`Dashboard`], everything the panel shows). It reads the map from
 //! `world.map` and the balls from `world.balls` ([`crate::world`]) when a driver
-//! exports them; without a map the world view shows the odometry pose and the laser
+//! exports them (the world view draws the map's floor paint and targets, and says
+//! the exercise's score from `world.score` when one is kept); without a map the world view shows the odometry pose and the laser
 //! (the sonars in their own view), and gpp says it needs a map.
 //!
 //! Files: this one wires the schema (factory, [`Schema`] impl); [`settings`] reads
@@ -241,6 +242,7 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
         sonars.clone(),
         camera.clone(),
         world::balls(&rt.names),
+        world::score(&rt.names),
     )));
     Ok(Box::new(Introrob {
         brain,

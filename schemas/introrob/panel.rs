@@ -1,6 +1,6 @@
 //! introrob's panel: behaviour choice, teleoperation joystick and stop, the robot
-//! in its world (walls, laser points, path, forces, your drawings; a click sets
-//! the target), laser and sonar views and the camera image.
+//! in its world (walls, floor paint, targets, laser points, path, forces, your
+//! drawings, the exercise's score; a click sets the target), laser and sonar views and the camera image.
 
 use std::sync::Arc;
 
@@ -13,7 +13,7 @@ use crate::{
         ImageView, Joystick, PolarStyle, WorldScene, WorldView, laser_points, polar_view,
         relative_to_world, sonar_points,
     },
-    world::LiveBalls,
+    world::{LiveBalls, LiveScore, World},
 };
 
 use super::{Behaviour, Dashboard};
@@ -26,6 +26,10 @@ pub struct IntrorobPanel {
     sonars: Option<Arc<Interface<Sonars>>>,
     camera: Option<Arc<Interface<Image>>>,
     walls: Vec<[f32; 4]>,
+    /// The map's floor paint and targets, as coloured segments.
+    marks: Vec<([f32; 4], Color32)>,
+    /// The exercise's score (`world.score`), said under the world view.
+    score: Option<Arc<LiveScore>>,
     /// The balls (`world.balls`), drawn in the world view.
     balls: Option<Arc<LiveBalls>>,
     world: WorldView,
@@ -42,6 +46,7 @@ impl IntrorobPanel {
         sonars: Option<Arc<Interface<Sonars>>>,
         camera: Option<Arc<Interface<Image>>>,
         balls: Option<Arc<LiveBalls>>,
+        score: Option<Arc<LiveScore>>,
     ) -> IntrorobPanel {
         let walls = dashboard
             .world
@@ -63,6 +68,7 @@ impl IntrorobPanel {
                 ((hi[0] - lo[0]).max((hi[1] - lo[1]) * 1.4) as f32 + 1000.0).clamp(500.0, 20000.0);
         }
         let joystick = Joystick::new("introrob joystick", dashboard.max_v, dashboard.max_w);
+        let marks = dashboard.world.as_deref().map(marks).unwrap_or_default();
         IntrorobPanel {
             dashboard,
             encoders,
@@ -70,6 +76,8 @@ impl IntrorobPanel {
             sonars,
             camera,
             walls,
+            marks,
+            score,
             balls,
             world,
             joystick,
@@ -102,6 +110,29 @@ impl IntrorobPanel {
     }
 }
 
+/// The map's floor paint (in its colour) and its targets (blue diamonds of
+/// 250 mm, the score's reach radius is 500 mm), as segments for the world view.
+fn marks(w: &World) -> Vec<([f32; 4], Color32)> {
+    let mut out = Vec::new();
+    for p in &w.paint {
+        let [r, g, b] = p.color;
+        for (a, e) in p.segments() {
+            let seg = [a[0] as f32, a[1] as f32, e[0] as f32, e[1] as f32];
+            out.push((seg, Color32::from_rgb(r, g, b)));
+        }
+    }
+    let k = 250.0;
+    for t in &w.targets {
+        let (x, y) = (t[0] as f32, t[1] as f32);
+        let c = [[x + k, y], [x, y + k], [x - k, y], [x, y - k]];
+        for i in 0..4 {
+            let (a, e) = (c[i], c[(i + 1) % 4]);
+            out.push(([a[0], a[1], e[0], e[1]], Color32::from_rgb(30, 60, 220)));
+        }
+    }
+    out
+}
+
 impl Panel for IntrorobPanel {
     fn title(&self) -> Option<String> {
         Some("introrob".into())
@@ -118,7 +149,7 @@ impl Panel for IntrorobPanel {
         // The target shows as the view's cross (set by conf, shell or click).
         self.world.target = *self.dashboard.target.lock();
         let view = self.dashboard.view.lock().clone();
-        let mut segs: Vec<([f32; 4], Color32)> = Vec::new();
+        let mut segs = self.marks.clone();
         let path_c = Color32::from_rgb(230, 140, 0);
         for w in view.path.windows(2) {
             segs.push(([w[0][0], w[0][1], w[1][0], w[1][1]], path_c));
@@ -167,6 +198,9 @@ impl Panel for IntrorobPanel {
                 let r = self.world.show(ui, vec2(440.0, 330.0), &scene);
                 if let Some(t) = r.clicked {
                     self.dashboard.set_target(Some(t));
+                }
+                if let Some(s) = &self.score {
+                    ui.label(s.load().summary());
                 }
                 ui.small("click: target · drag: pan · wheel: zoom · right click: the robot");
             });

@@ -45,12 +45,24 @@ pub fn ray_circle(o: Point2, d: Point2, c: Point2, r: f64) -> Option<f64> {
 /// The point of segment s nearest to p.
 #[inline]
 pub fn closest_on_segment(p: Point2, s: &Segment) -> Point2 {
-    let e = [s.b[0] - s.a[0], s.b[1] - s.a[1]];
+    closest_on(p, s.a, s.b)
+}
+
+/// The point of the segment a-b nearest to p.
+#[inline]
+pub fn closest_on(p: Point2, a: Point2, b: Point2) -> Point2 {
+    let e = [b[0] - a[0], b[1] - a[1]];
     let l2 = e[0] * e[0] + e[1] * e[1];
     let t = if l2 > 0.0 {
-        (((p[0] - s.a[0]) * e[0] + (p[1] - s.a[1]) * e[1]) / l2).clamp(0.0, 1.0)
+        (((p[0] - a[0]) * e[0] + (p[1] - a[1]) * e[1]) / l2).clamp(0.0, 1.0)
     } else {
         0.0
     };
-    [s.a[0] + t * e[0], s.a[1] + t * e[1]]
+    [a[0] + t * e[0], a[1] + t * e[1]]
+}
+
+/// The distance between two points.
+#[inline]
+pub fn distance(a: Point2, b: Point2) -> f64 {
+    (a[0] - b[0]).hypot(a[1] - b[1])
 }

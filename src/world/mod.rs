@@ -5,13 +5,15 @@
 //! one.
 //!
 //! - [`World`] (this file): [`Segment`]s (wall faces), [`BoxObstacle`]s,
-//!   [`BallSpec`]s and [`StartPose`]s, with [`World::cast`] (the nearest wall along
+//!   [`BallSpec`]s, [`StartPose`]s, floor [`Paint`] and targets, with [`World::cast`] (the nearest wall along
 //!   a ray) and [`World::near`] (the walls around a point).
 //! - [`parse`]: the world file format ([`World::load`], [`World::parse`]) and
 //!   colours ([`parse_color`], [`COLOR_NAMES`]).
 //! - [`geometry`]: [`Point2`] and rays against segments and circles.
 //! - [`grid`]: the uniform grid over the walls that [`World::cast`] walks.
 //! - [`bitmap`]: occupancy bitmaps (PNG floor plans) turned into wall faces.
+//! - [`scoring`]: the Robotics Academy's scores (floor swept, targets reached,
+//!   laps of a painted line) kept from a robot's true pose: [`Scorer`], [`Score`].
 //!
 //! Coordinates are in mm: x to the right, y up (as seen from above), z up from the
 //! floor; angles in degrees counter-clockwise from the x axis in files, radians in
@@ -25,9 +27,11 @@
 //! |---|---|---|---|
 //! | [`COMPONENT`] (`world`) | [`MAP`] (`map`) | [`World`] | the static world: walls, boxes, where balls start |
 //! | [`COMPONENT`] (`world`) | [`BALLS`] (`balls`) | [`LiveBalls`] | the balls as they roll, refreshed by the exporter (the simulator: at its encoders' period); readers never wait |
+//! | [`COMPONENT`] (`world`) | [`SCORE`] (`score`) | [`LiveScore`] | the exercise's [`Score`] as it stands (the simulator's `score` line: at its encoders' period); [`Score::summary`] says it in one line |
 //!
-//! [`export_map`]/[`export_balls`] export them, [`map`]/[`balls`] look them up.
-//! Import the balls once and `load()` them whenever they are drawn.
+//! [`export_map`]/[`export_balls`]/[`export_score`] export them,
+//! [`map`]/[`balls`]/[`score`] look them up. Import the balls or the score once
+//! and `load()` them whenever they are drawn.
 //!
 //! # World file
 //! Line based, `#` comments, lengths in mm, angles in degrees; errors name
@@ -45,6 +49,11 @@
 //! box X Y SIZE_X SIZE_Y HEIGHT COLOR [THETA]   # a static box centred at (X, Y)
 //! ball X Y RADIUS COLOR [FRICTION]             # a ball; rolling deceleration mm/s² (300)
 //! start X Y THETA              # a start pose for robots the conf does not place
+//! target X Y                   # the next target of the obstacle course (in order)
+//! paint WIDTH COLOR [closed]   # a line painted on the floor, WIDTH mm wide, through the
+//! point X Y                    #   `point` lines right after it (2 or more; 3 if closed,
+//! point X Y                    #   the last joins the first); the camera sees it, the
+//! point X Y                    #   laser and bumpers do not (no obstacle)
 //! ```
 //!
 //! This is the bottom layer: it uses only std, external crates (`png` for floor
@@ -55,6 +64,7 @@ pub mod bitmap;
 pub mod geometry;
 pub mod grid;
 pub mod parse;
+pub mod scoring;
 
 use std::{fmt, path::PathBuf, sync::Arc};
 
@@ -63,8 +73,9 @@ use arc_swap::ArcSwap;
 use crate::namespace::{Namespace, NamespaceError};
 
 pub use bitmap::{Bitmap, load_bitmap};
-pub use geometry::{Point2, closest_on_segment, ray_circle, ray_segment};
+pub use geometry::{Point2, closest_on, closest_on_segment, distance, ray_circle, ray_segment};
 pub use parse::{COLOR_NAMES, parse_color};
+pub use scoring::{Rule, Score, Scorer};
 
 use grid::SegmentGrid;
 
@@ -163,6 +174,44 @@ impl From<&BallSpec> for Ball {
 /// The balls as they are now, replaced whole by their exporter; readers never wait.
 pub type LiveBalls = ArcSwap<Vec<Ball>>;
 
+/// A line painted on the floor (`paint` and its `point`s): the camera sees it,
+/// nothing bumps into it (the laser, sonars and bumpers ignore it).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Paint {
+    /// The centre line's vertices, mm (at least 2; 3 if closed).
+    pub points: Vec<Point2>,
+    /// Whether the last point joins the first.
+    pub closed: bool,
+    /// Width of the stroke, mm.
+    pub width: f64,
+    pub color: Rgb,
+}
+
+impl Paint {
+    /// The centre line's pieces, in order (the closing one last when closed).
+    pub fn segments(&self) -> impl Iterator<Item = (Point2, Point2)> + '_ {
+        let n = self.points.len();
+        let pieces = if self.closed && n > 2 {
+            n
+        } else {
+            n.saturating_sub(1)
+        };
+        (0..pieces).map(move |k| (self.points[k], self.points[(k + 1) % n]))
+    }
+
+    /// The distance from `p` to the centre line, mm.
+    pub fn distance(&self, p: Point2) -> f64 {
+        self.segments()
+            .map(|(a, b)| distance(p, closest_on(p, a, b)))
+            .fold(f64::INFINITY, f64::min)
+    }
+
+    /// The centre line's length, mm.
+    pub fn length(&self) -> f64 {
+        self.segments().map(|(a, b)| distance(a, b)).sum()
+    }
+}
+
 /// A robot's start pose named in a world file (`start X Y THETA`).
 #[derive(Clone, Debug, PartialEq)]
 pub struct StartPose {
@@ -179,6 +228,10 @@ pub struct World {
     pub boxes: Vec<BoxObstacle>,
     pub balls: Vec<BallSpec>,
     pub starts: Vec<StartPose>,
+    /// Lines painted on the floor, in file order.
+    pub paint: Vec<Paint>,
+    /// Targets (`target X Y`), in the order they are to be reached, mm.
+    pub targets: Vec<Point2>,
     pub floor_color: Rgb,
     pub sky_color: Rgb,
     /// Side of the floor's checker tiles, mm (0 = plain floor).
@@ -200,6 +253,8 @@ impl World {
             boxes: Vec::new(),
             balls: Vec::new(),
             starts: Vec::new(),
+            paint: Vec::new(),
+            targets: Vec::new(),
             floor_color: [150, 150, 140],
             sky_color: [170, 200, 235],
             tile: 1000.0,
@@ -302,6 +357,25 @@ pub const COMPONENT: &str = "world";
 pub const MAP: &str = "map";
 /// The name of the [`LiveBalls`] under [`COMPONENT`].
 pub const BALLS: &str = "balls";
+
+/// The name of the [`LiveScore`] under [`COMPONENT`].
+pub const SCORE: &str = "score";
+
+/// The score of the run as it stands, replaced whole by its keeper; readers never
+/// wait.
+pub type LiveScore = ArcSwap<Score>;
+
+/// Exports `score` as `world.score`; the returned handle is where the keeper
+/// stores each new state.
+pub fn export_score(names: &Namespace, score: Score) -> Result<Arc<LiveScore>, NamespaceError> {
+    names.export(COMPONENT, SCORE, LiveScore::from_pointee(score))
+}
+
+/// The exported score (`world.score`), whoever keeps it; None if nobody does.
+/// Import once and `load()` whenever it is shown.
+pub fn score(names: &Namespace) -> Option<Arc<LiveScore>> {
+    names.import::<LiveScore>(COMPONENT, SCORE).ok()
+}
 
 /// Exports `world` as `world.map` for the schemas that draw or plan over it. If
 /// another component exported a map first, that one stays and this is an error.

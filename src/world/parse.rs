@@ -3,7 +3,7 @@
 
 use std::path::Path;
 
-use super::{BallSpec, BoxObstacle, Rgb, StartPose, World, WorldError};
+use super::{BallSpec, BoxObstacle, Paint, Rgb, StartPose, World, WorldError};
 
 /// Named colours accepted in world files.
 pub const COLOR_NAMES: &[(&str, Rgb)] = &[
@@ -67,6 +67,8 @@ impl World {
     pub fn parse(text: &str, file: &Path) -> Result<World, WorldError> {
         let mut w = World::new();
         let mut pen = WallPen::default();
+        // The line of the `paint` whose `point`s are being read.
+        let mut painting: Option<usize> = None;
         for (n, raw) in text.lines().enumerate() {
             let content = raw.split('#').next().unwrap_or("");
             let words: Vec<&str> = content.split_whitespace().collect();
@@ -79,16 +81,49 @@ impl World {
                 key,
                 args,
             };
-            if !(st.looks(&mut w, &mut pen)? || st.walls(&mut w, &pen)? || st.things(&mut w)?) {
+            if key != "point"
+                && let Some(at) = painting.take()
+            {
+                painted(&w, file, at)?;
+            }
+            if key == "paint" || key == "point" {
+                st.paint(&mut w, &mut painting)?;
+            } else if !(st.looks(&mut w, &mut pen)?
+                || st.walls(&mut w, &pen)?
+                || st.things(&mut w)?)
+            {
                 return Err(st.err(format!(
                     "unknown keyword `{key}`; expected one of wall, room, floorplan, box, ball, start, \
-                     wall_height, wall_color, floor_color, sky_color, floor_tile"
+                     target, paint, point, wall_height, wall_color, floor_color, sky_color, floor_tile"
                 )));
             }
+        }
+        if let Some(at) = painting {
+            painted(&w, file, at)?;
         }
         w.finish();
         Ok(w)
     }
+}
+
+/// Checks that the last `paint` (at line `at`) got enough `point`s.
+fn painted(w: &World, file: &Path, at: usize) -> Result<(), WorldError> {
+    let Some(p) = w.paint.last() else {
+        return Ok(());
+    };
+    let need = if p.closed { 3 } else { 2 };
+    if p.points.len() >= need {
+        return Ok(());
+    }
+    Err(WorldError {
+        file: file.to_path_buf(),
+        line: at,
+        message: format!(
+            "`paint` has {} point(s); a{} painted line needs at least {need} `point X Y` lines right after it",
+            p.points.len(),
+            if p.closed { " closed" } else { "n open" }
+        ),
+    })
 }
 
 /// The height and colour of the walls that follow (`wall_height`, `wall_color`).
@@ -261,7 +296,52 @@ impl Statement<'_> {
             .map_err(|e| self.err(format!("floorplan {}: {e}", path.display())))
     }
 
-    /// The things in the world: `box`, `ball`, `start`. False: not one of these.
+    /// `paint WIDTH COLOR [closed]` starts a painted line (`painting` becomes its
+    /// line); `point X Y` adds a vertex to it.
+    fn paint(&self, w: &mut World, painting: &mut Option<usize>) -> Result<(), WorldError> {
+        if self.key == "point" {
+            self.count(2, 2, "point X Y (after a `paint` line)")?;
+            let p = [self.num(0, "X in mm")?, self.num(1, "Y in mm")?];
+            let line = match (painting.is_some(), w.paint.last_mut()) {
+                (true, Some(line)) => line,
+                _ => {
+                    return Err(self.err(
+                        "`point` adds to a painted line: put it right after a `paint WIDTH COLOR [closed]` \
+                         line or another `point`"
+                            .into(),
+                    ));
+                }
+            };
+            if line.points.last() == Some(&p) {
+                return Err(self.err(format!(
+                    "`point {} {}` repeats the point before it; each point must move on",
+                    p[0], p[1]
+                )));
+            }
+            line.points.push(p);
+            return Ok(());
+        }
+        self.count(2, 3, "paint WIDTH COLOR [closed]")?;
+        let closed = match self.args.get(2) {
+            None => false,
+            Some(&"closed") => true,
+            Some(other) => {
+                return Err(self.err(format!(
+                    "`paint`: argument 3 is `{other}`, expected `closed` (or nothing: an open line)"
+                )));
+            }
+        };
+        w.paint.push(Paint {
+            points: Vec::new(),
+            closed,
+            width: self.positive(self.num(0, "WIDTH in mm")?, "WIDTH")?,
+            color: self.color(1)?,
+        });
+        *painting = Some(self.line);
+        Ok(())
+    }
+
+    /// The things in the world: `box`, `ball`, `target`, `start`. False: not one of these.
     fn things(&self, w: &mut World) -> Result<bool, WorldError> {
         let args = self.args;
         match self.key {
@@ -300,6 +380,11 @@ impl Statement<'_> {
                     friction,
                 });
             }
+            "target" => {
+                self.count(2, 2, "target X Y")?;
+                let t = [self.num(0, "X in mm")?, self.num(1, "Y in mm")?];
+                w.targets.push(t);
+            }
             "start" => {
                 self.count(3, 3, "start X Y THETA_DEG")?;
                 w.starts.push(StartPose {
@@ -327,5 +412,61 @@ mod tests {
         assert!(e.message.contains("not a colour"), "{e}");
         let e = World::parse("tree 1 2\n", Path::new("x.world")).unwrap_err();
         assert!(e.message.contains("unknown keyword"), "{e}");
+    }
+
+    #[test]
+    fn paint_and_targets_parse_in_order() {
+        let text = "paint 40 red closed # a loop\npoint 0 0\n\npoint 1000 0\npoint 1000 1000\n\
+                    paint 30 0,0,255\npoint 5 5\npoint 6 6\ntarget 1 2\ntarget 3 4\n";
+        let w = World::parse(text, Path::new("x.world")).unwrap();
+        assert_eq!(w.paint.len(), 2);
+        let (a, b) = (&w.paint[0], &w.paint[1]);
+        assert!(a.closed && !b.closed);
+        assert_eq!((a.width, a.color, a.points.len()), (40.0, [220, 20, 20], 3));
+        assert_eq!((b.width, b.color, b.points.len()), (30.0, [0, 0, 255], 2));
+        assert_eq!(a.segments().count(), 3, "closed: back to the first point");
+        assert_eq!(b.segments().count(), 1);
+        assert!((a.length() - (2000.0 + 2f64.sqrt() * 1000.0)).abs() < 1e-9);
+        assert!((a.distance([500.0, 100.0]) - 100.0).abs() < 1e-9);
+        assert_eq!(w.targets, vec![[1.0, 2.0], [3.0, 4.0]]);
+        assert!(w.segments.is_empty(), "paint is no obstacle");
+    }
+
+    #[test]
+    fn bad_paint_and_targets_say_what_is_right() {
+        let cases = [
+            ("point 1 2\n", 1, "right after a `paint"),
+            (
+                "paint 40 red\npoint 0 0\nwall 0 0 1 1\n",
+                1,
+                "at least 2 `point X Y`",
+            ),
+            (
+                "paint 40 red closed\npoint 0 0\npoint 1 0\n",
+                1,
+                "closed painted line needs at least 3",
+            ),
+            (
+                "paint 40 red\npoint 0 0\nwall 0 0 1 1\npoint 1 1\n",
+                1,
+                "at least 2",
+            ),
+            ("paint 0 red\n", 1, "WIDTH must be > 0"),
+            ("paint 40 red loop\n", 1, "expected `closed`"),
+            ("paint 40\n", 1, "usage: paint WIDTH COLOR [closed]"),
+            (
+                "paint 40 red\npoint 0 0\npoint 0 0\n",
+                3,
+                "repeats the point",
+            ),
+            ("paint 40 red\npoint 0 x\n", 2, "expected Y in mm"),
+            ("target 1\n", 1, "usage: target X Y"),
+            ("target 1 inf\n", 1, "expected Y in mm"),
+        ];
+        for (text, line, says) in cases {
+            let e = World::parse(text, Path::new("x.world")).unwrap_err();
+            assert_eq!(e.line, line, "{text:?}: {e}");
+            assert!(e.to_string().contains(says), "{text:?}: {e}");
+        }
     }
 }

@@ -15,6 +15,8 @@ mod common;
 #[path = "../emulators/ptu.rs"]
 mod ptu;
 
+#[path = "../academy_worlds.rs"]
+mod academy_worlds;
 #[path = "../evi.rs"]
 mod evi;
 #[path = "../followball.rs"]
