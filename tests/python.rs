@@ -987,12 +987,18 @@ fn a_call_that_is_not_here_names_itself() {
             "4: AttributeError: HAL.getLeftImage is not here",
         ),
         (
-            "import HAL\nimport WebGUI\n\n\ntarget = WebGUI.map.getNextTarget()\n",
-            "5: AttributeError: WebGUI.map is not here: jderobot's WebGUI has showImage",
+            "import HAL\nimport WebGUI\n\n\nWebGUI.showDynamicWindow([])\n",
+            "5: AttributeError: WebGUI.showDynamicWindow is not here: jderobot's WebGUI has \
+             showImage, showForces, showLocalTarget, map, getNextTarget",
         ),
         (
-            "from GUI import GUI\nGUI.showForces(1, 2, 3)\n",
-            "2: AttributeError: GUI.showForces is not here",
+            "from GUI import GUI\nGUI.showNumpy(1)\n",
+            "2: AttributeError: GUI.showNumpy is not here",
+        ),
+        (
+            // simple.world has no targets.
+            "from GUI import GUI\nt = GUI.map.getNextTarget()\n",
+            "2: RuntimeError: GUI.map.getNextTarget: this world has no targets",
         ),
     ] {
         let dir = tempfile::tempdir().unwrap();
@@ -1270,5 +1276,159 @@ fn a_stop_ends_the_programs_threads_and_a_wait_that_never_returns() {
     eprintln!("stopped a waiting program and its spinning thread in {took:?}");
     rt.run("python").unwrap();
     eventually("it runs again", || console(&s).contains("pid "));
+    rt.shutdown();
+}
+
+/// The Academy's three classic exercises as jderobot hands them out: each
+/// solution in `assets/exercises/` on its exercise's world, lock-stepped 50 ms a
+/// command, judged on the score the simulator keeps from the robot's true pose
+/// (`world.score`, what the Academy shows). Returns the score once `done` says
+/// so or `sim_secs` of simulated time passed.
+fn exercise_score(
+    world: &str,
+    provides: &str,
+    program: &str,
+    python_lines: &str,
+    sim_secs: f64,
+    done: impl Fn(&jderobot::world::scoring::Score, &str) -> bool,
+) -> (jderobot::world::scoring::Score, String) {
+    let rt = start_conf(&format!(
+        "driver simulator\nworld {}\nrobot robot1\nprovides encoders\nprovides motors\n{provides}\
+         stepped 50\nseed 1\nend_driver\n\
+         schema python\nfile {}\n{python_lines}end_schema\nload_driver simulator\nload_schema python\n",
+        common::world_path(world),
+        exercise(program).display()
+    ));
+    rt.run("python").unwrap();
+    let score = jderobot::world::score(&rt.names).expect("the simulator keeps a score");
+    let t0 = Instant::now();
+    loop {
+        let s = score.load_full();
+        if done(&s, &console(&shared(&rt, "python"))) || s_time(&s) >= sim_secs {
+            break;
+        }
+        assert!(
+            t0.elapsed() < Duration::from_secs(240),
+            "stalled at {}; console:\n{}",
+            s.summary(),
+            console(&shared(&rt, "python"))
+        );
+        assert_ne!(
+            state(&rt, "python"),
+            State::Slept,
+            "the program stopped: {:?}; console:\n{}",
+            rt.schema_status("python").unwrap().last_error,
+            console(&shared(&rt, "python"))
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let s = (*score.load_full()).clone();
+    let text = console(&shared(&rt, "python"));
+    rt.shutdown();
+    (s, text)
+}
+
+fn s_time(s: &jderobot::world::scoring::Score) -> f64 {
+    use jderobot::world::scoring::Score;
+    match s {
+        Score::Swept(x) => x.time,
+        Score::Targets(x) => x.time,
+        Score::Lap(x) => x.time,
+    }
+}
+
+#[test]
+fn the_obstacle_avoidance_solution_reaches_every_target_with_gui_map() {
+    use jderobot::world::scoring::Score;
+    let (s, text) = exercise_score(
+        "obstacle_circuit.world",
+        "provides laser 180 1\nscore targets\n",
+        "obstacle_solution.py",
+        NO_CAMERA,
+        400.0,
+        |s, text| {
+            matches!(s, Score::Targets(t) if t.reached == t.total) && text.contains("every target")
+        },
+    );
+    let Score::Targets(t) = &s else {
+        panic!("{s:?}")
+    };
+    assert_eq!(
+        (t.reached, t.total),
+        (8, 8),
+        "{}; console:\n{text}",
+        s.summary()
+    );
+    assert!(text.contains("every target reached"), "{text}");
+    eprintln!("obstacle avoidance: {}", s.summary());
+}
+
+#[test]
+fn the_follow_line_solution_laps_the_circuit_with_cv2() {
+    use jderobot::world::scoring::Score;
+    let (s, text) = exercise_score(
+        "line_circuit.world",
+        "provides colorA\ncamera_tilt -20\nscore lap\n",
+        "followline_solution.py",
+        "",
+        150.0,
+        |s, _| matches!(s, Score::Lap(l) if !l.laps.is_empty()),
+    );
+    let Score::Lap(l) = &s else { panic!("{s:?}") };
+    let lap = l
+        .laps
+        .first()
+        .unwrap_or_else(|| panic!("no lap: {}; console:\n{text}", s.summary()));
+    assert!(lap.mean < 150.0, "{}", s.summary());
+    eprintln!("follow line: {}", s.summary());
+}
+
+#[test]
+fn the_vacuum_solution_sweeps_the_furnished_flat() {
+    use jderobot::world::scoring::Score;
+    let (s, text) = exercise_score(
+        "flat.world",
+        "provides laser 180 1\nprovides bumpers\nscore swept\n",
+        "vacuum_solution.py",
+        NO_CAMERA,
+        300.0,
+        |_, _| false,
+    );
+    let Score::Swept(w) = &s else { panic!("{s:?}") };
+    let share = w.swept as f64 / w.cells as f64;
+    assert!(share > 0.15, "{}; console:\n{text}", s.summary());
+    eprintln!("vacuum: {}", s.summary());
+}
+
+#[test]
+fn gui_map_forces_and_the_local_target_reach_the_panel() {
+    // The obstacle-avoidance API in both shapes: GUI.map's targets in the
+    // world's order (m), setReached moving on, the forces and the local target
+    // drawn in the panel (shared.overlay), and a 4.x program's GUI.map.carx...
+    let dir = tempfile::tempdir().unwrap();
+    let prog = write_program(
+        dir.path(),
+        "map.py",
+        "import GUI, HAL, Frequency\nt = GUI.map.getNextTarget()\n\
+         print('first', t.getId(), t.getPose().x, t.getPose().y, t.isReached())\n\
+         t.setReached(True)\nu = GUI.getNextTarget()\nprint('next', u.getId(), u.getPose().x)\n\
+         GUI.showForces([1, 0], (0, -0.5), [1, -0.5])\nGUI.showLocalTarget([2.0, 0.25])\n\
+         print('shown')\nwhile True:\n    Frequency.tick()\n",
+    );
+    let rt = start_conf(&format!(
+        "driver simulator\nworld {}\nrobot robot1\nprovides encoders\nprovides motors\nend_driver\n\
+         schema python\nfile {}\ncamera none\nend_schema\nload_driver simulator\nload_schema python\n",
+        common::world_path("obstacle_circuit.world"),
+        prog.display()
+    ));
+    rt.run("python").unwrap();
+    let s = shared(&rt, "python");
+    eventually("it shows", || console(&s).contains("shown"));
+    let text = console(&s);
+    assert!(text.contains("first 0 4.5 1.75 False"), "{text}");
+    assert!(text.contains("next 1 9.0"), "{text}");
+    let o = *s.overlay.lock();
+    assert_eq!(o.forces, Some([[1.0, 0.0], [0.0, -0.5], [1.0, -0.5]]));
+    assert_eq!(o.local_target, Some([2.0, 0.25]));
     rt.shutdown();
 }

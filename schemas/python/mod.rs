@@ -95,7 +95,7 @@ use board::Board;
 pub use process::set_worker_exe;
 use process::{Event, WorkerProcess};
 use shared::Robot;
-pub use shared::{CONSOLE_LINES, REFRESH, Shared, shared};
+pub use shared::{CONSOLE_LINES, Overlay, REFRESH, Shared, shared};
 use wire::{Failure, Outcome, ToWorker};
 pub use worker::{TICK_HZ, main_if_worker};
 
@@ -469,6 +469,7 @@ fn load(
             venv: venv.map(|v| v.display().to_string()),
             per_command: robot.per_command(),
             lines: robot.lines(),
+            targets: robot.targets(),
         })
         .map_err(|e| {
             format!(

@@ -7,7 +7,7 @@
 
 use std::sync::{Arc, atomic::Ordering};
 
-use super::{Shared, highlight};
+use super::{Overlay, Shared, highlight};
 use crate::{
     runtime::{Panel, Runtime, State},
     widgets::ImageView,
@@ -128,11 +128,53 @@ impl Panel for PythonPanel {
                     ui.scroll_to_cursor(Some(egui::Align::BOTTOM));
                 }
             });
+        if let Some(score) = crate::world::score(&rt.names) {
+            ui.separator();
+            ui.label(format!("Score: {}", score.load().summary()));
+        }
+        let overlay = *self.shared.overlay.lock();
+        if overlay.forces.is_some() || overlay.local_target.is_some() {
+            ui.separator();
+            ui.label("Forces (robot's frame: ahead up, left to the left)");
+            draw_forces(ui, &overlay);
+        }
         let image = self.shared.image.lock().clone();
         if let Some(img) = image {
             ui.separator();
             let clock = self.shared.images.load(Ordering::Acquire);
             self.view.show(ui, &img, clock);
         }
+    }
+}
+
+/// The obstacle-avoidance exercise's drawing: the robot at the centre heading
+/// up, the car (attraction, green), obstacle (repulsion, red) and average
+/// (white) forces as arrows, the local target as a blue dot; scaled so the
+/// longest fits.
+fn draw_forces(ui: &mut egui::Ui, o: &Overlay) {
+    let size = egui::vec2(180.0, 180.0);
+    let (rect, _) = ui.allocate_exact_size(size, egui::Sense::hover());
+    let p = ui.painter_at(rect);
+    p.rect_filled(rect, 4.0, egui::Color32::from_gray(30));
+    let c = rect.center();
+    let mut longest: f64 = 1e-9;
+    for v in o.forces.iter().flatten().chain(o.local_target.iter()) {
+        longest = longest.max(v[0].hypot(v[1]));
+    }
+    let scale = (size.x as f64 * 0.42) / longest;
+    // Robot frame (x ahead, y left) to the screen (ahead up, left left).
+    let at = |v: [f64; 2]| c + egui::vec2((-v[1] * scale) as f32, (-v[0] * scale) as f32);
+    p.circle_stroke(c, 6.0, egui::Stroke::new(1.5, egui::Color32::GRAY));
+    if let Some([car, obstacle, average]) = o.forces {
+        for (v, color) in [
+            (car, egui::Color32::from_rgb(80, 200, 80)),
+            (obstacle, egui::Color32::from_rgb(230, 70, 70)),
+            (average, egui::Color32::WHITE),
+        ] {
+            p.arrow(c, at(v) - c, egui::Stroke::new(2.0, color));
+        }
+    }
+    if let Some(t) = o.local_target {
+        p.circle_filled(at(t), 4.0, egui::Color32::from_rgb(80, 140, 250));
     }
 }

@@ -289,6 +289,14 @@ fn read(
                 }
                 continue;
             }
+            (FromWorker::Forces(f), _) => {
+                shared.overlay.lock().forces = Some(f);
+                continue;
+            }
+            (FromWorker::LocalTarget(t), _) => {
+                shared.overlay.lock().local_target = Some(t);
+                continue;
+            }
             (FromWorker::Command { v, w, end_of_pass }, _) => {
                 board.header().silenced.store(0, Ordering::Release);
                 robot.command_from_program(v, w, end_of_pass);

@@ -190,3 +190,96 @@ def image_bytes(img):
         )
     a = numpy.ascontiguousarray(a)
     return a.shape[0], a.shape[1], channels, a.tobytes()
+
+
+class Pose:
+    """A target's pose (`getPose()`): `x`, `y` in m, in the world's frame (the
+    one `HAL.getPose3d()` gives on the simulator), `yaw` 0."""
+
+    __slots__ = ("x", "y", "yaw")
+
+    def __init__(self, x, y):
+        self.x, self.y, self.yaw = x, y, 0.0
+
+    def __repr__(self):
+        return f"Pose: x={self.x:.3f} y={self.y:.3f}"
+
+
+class Target:
+    """A target of the obstacle-avoidance exercise, as `GUI.map.getNextTarget()`
+    gives it: `getPose()`, `getId()`, `isReached()`, `setReached(True)`."""
+
+    def __init__(self, id, x, y):
+        self._id, self._pose, self._reached = id, Pose(x, y), False
+
+    def getId(self):
+        return self._id
+
+    def getPose(self):
+        return self._pose
+
+    def isReached(self):
+        return self._reached
+
+    def setReached(self, value=True):
+        self._reached = bool(value)
+
+    def __repr__(self):
+        return f"Target {self._id}: x={self._pose.x:.3f} y={self._pose.y:.3f} reached={self._reached}"
+
+
+class Map:
+    """`GUI.map` of the obstacle-avoidance exercise: the world's targets in
+    order, and the attributes 4.x programs set for the GUI to draw
+    (`targetx`/`targety`, `carx`/`cary`, `obsx`/`obsy`, `avgx`/`avgy`, in the
+    robot's frame, m)."""
+
+    def __init__(self):
+        self.targets = []
+        for a in ("targetx", "targety", "carx", "cary", "obsx", "obsy", "avgx", "avgy", "posx", "posy"):
+            setattr(self, a, None)
+
+    def getNextTarget(self):
+        """The first target not yet reached (`setReached(True)` moves on); None
+        after the last."""
+        if not self.targets:
+            raise RuntimeError(
+                "GUI.map.getNextTarget: this world has no targets (the simulator's world file "
+                "lists them as `target X Y` lines: assets/worlds/obstacle_circuit.world)"
+            )
+        for t in self.targets:
+            if not t._reached:
+                return t
+        return None
+
+    def getTargets(self):
+        return list(self.targets)
+
+    def reset(self):
+        for t in self.targets:
+            t._reached = False
+
+
+MAP = Map()
+
+
+def set_targets(points):
+    """The world's targets, (x, y) in m, in order."""
+    MAP.targets = [Target(i, x, y) for i, (x, y) in enumerate(points)]
+
+
+def map_forces():
+    """The forces a 4.x program set on GUI.map for the GUI to draw: (car,
+    obstacle, average) as (x, y) pairs, or None if it set none."""
+    pairs = [(MAP.carx, MAP.cary), (MAP.obsx, MAP.obsy), (MAP.avgx, MAP.avgy)]
+    if all(x is None and y is None for x, y in pairs):
+        return None
+    return [(float(x or 0.0), float(y or 0.0)) for x, y in pairs]
+
+
+def vec2(v, name):
+    """Two floats from a list, tuple or numpy array (x, y)."""
+    try:
+        return float(v[0]), float(v[1])
+    except (TypeError, IndexError, ValueError):
+        raise TypeError(f"{name}: a vector is [x, y] (a list, tuple or array of two numbers), not {v!r}") from None

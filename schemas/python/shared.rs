@@ -59,10 +59,21 @@ pub struct Shared {
     /// [`epoch`]: the keeper sees the worker's HAL, GUI or Frequency calls
     /// counted on the board, or a pass ends.
     pub last_call: AtomicU64,
+    /// What the program drew with `GUI.showForces` and `GUI.showLocalTarget`.
+    pub overlay: Mutex<Overlay>,
     /// `Frequency.tick` calls and the loop's rate it measured (Hz, as f64
     /// bits), for the panel (the keeper copies them from the board).
     pub ticks: AtomicU64,
     pub tick_rate: AtomicU64,
+}
+
+/// The obstacle-avoidance exercise's drawings, in the robot's frame (x ahead, y
+/// left; the program's units).
+#[derive(Default, Clone, Copy, Debug)]
+pub struct Overlay {
+    /// Car (attraction), obstacle (repulsion), average (the sum).
+    pub forces: Option<[[f64; 2]; 3]>,
+    pub local_target: Option<[f64; 2]>,
 }
 
 /// The instant the schema's times count from.
@@ -146,6 +157,7 @@ impl Shared {
     /// A new run: the clock of the silence limit and the ticks start afresh.
     pub fn new_run(&self) {
         self.touch();
+        *self.overlay.lock() = Overlay::default();
         self.ticks.store(0, Ordering::Release);
         self.tick_rate.store(0, Ordering::Release);
     }
@@ -271,6 +283,21 @@ impl Robot {
             .zip(there)
             .map(|((k, n), t)| (k.to_string(), n.clone(), t))
             .collect()
+    }
+
+    /// The targets of the world the robot is in (`world.map`'s, whoever exported
+    /// it), m, for `GUI.map`.
+    pub fn targets(&self) -> Vec<(f64, f64)> {
+        self.runtime
+            .upgrade()
+            .and_then(|rt| crate::world::map(&rt.names))
+            .map(|w| {
+                w.targets
+                    .iter()
+                    .map(|t| (t[0] / 1000.0, t[1] / 1000.0))
+                    .collect()
+            })
+            .unwrap_or_default()
     }
 
     /// Writes on `board` every sensor value newer than the one it has

@@ -22,6 +22,8 @@ pub enum ToWorker {
         per_command: bool,
         /// (the `uses` line's key, the interface or `none`, whether it is there).
         lines: Vec<(String, String, bool)>,
+        /// The world's targets (`GUI.map`), x and y in m, in order.
+        targets: Vec<(f64, f64)>,
     },
     /// Run the init code (0), one pass of the loop (1) or the code after it (2);
     /// answered by [`FromWorker::Outcome`]. In the Academy 5 shape 0 is the
@@ -51,6 +53,11 @@ pub enum FromWorker {
         width: u32,
         height: u32,
     },
+    /// `GUI.showForces` (or a 4.x pass's `GUI.map.carx`...): car, obstacle and
+    /// average, [x, y] in the robot's frame.
+    Forces([[f64; 2]; 3]),
+    /// `GUI.showLocalTarget`: [x, y] m in the robot's frame.
+    LocalTarget([f64; 2]),
     Outcome(Outcome),
 }
 

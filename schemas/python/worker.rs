@@ -156,6 +156,22 @@ impl Worker {
         }
     }
 
+    /// The forces a 4.x program set on `GUI.map` (`carx`, `obsx`, ...), for the
+    /// panel to draw as `GUI.showForces` does.
+    fn send_map_forces(&self) {
+        let forces = Python::attach(|py| -> PyResult<Option<Vec<(f64, f64)>>> {
+            runner(py)?.getattr("map_forces")?.call0()?.extract()
+        });
+        if let Ok(Some(f)) = forces
+            && let [c, o, a] = f[..]
+        {
+            self.send(
+                &FromWorker::Forces([[c.0, c.1], [o.0, o.1], [a.0, a.1]]),
+                &[],
+            );
+        }
+    }
+
     /// The end of a pass: on a per-command clock, the command goes out now.
     fn end_of_pass(&self) {
         if self.per_command.load(Ordering::Relaxed) {
@@ -235,8 +251,14 @@ fn serve() -> Result<(), String> {
                 venv,
                 per_command,
                 lines,
+                targets,
             } => {
                 let w = worker();
+                Python::attach(|py| -> PyResult<()> {
+                    runner(py)?.getattr("set_targets")?.call1((targets,))?;
+                    Ok(())
+                })
+                .map_err(|e| e.to_string())?;
                 w.per_command.store(per_command, Ordering::Relaxed);
                 *w.lines.lock() = lines;
                 let loaded = venv
@@ -267,6 +289,7 @@ fn serve() -> Result<(), String> {
                     None => Outcome::Done,
                 };
                 w.flush();
+                w.send_map_forces();
                 if which == 1 || (which == 0 && program.as_ref().is_some_and(|p| !p.academy5)) {
                     w.end_of_pass();
                 }
@@ -744,7 +767,51 @@ fn wait_until(py: Python<'_>, until: Instant) {
 // ---------------------------------------------------------------- GUI
 
 /// What the GUI has, for the error of a call it has not.
-const GUI_CALLS: &str = "showImage";
+const GUI_CALLS: &str = "showImage, showForces, showLocalTarget, map, getNextTarget";
+
+/// `GUI.showForces(car, obstacle, average)`: the obstacle-avoidance exercise's
+/// three force vectors, [x, y] each in the robot's frame (x ahead, y left), drawn
+/// in the panel.
+#[pyfunction]
+#[pyo3(name = "showForces")]
+fn show_forces(
+    py: Python<'_>,
+    car: Bound<'_, PyAny>,
+    obstacle: Bound<'_, PyAny>,
+    average: Bound<'_, PyAny>,
+) -> PyResult<()> {
+    let r = runner(py)?;
+    let v = |o: Bound<'_, PyAny>| -> PyResult<[f64; 2]> {
+        let (x, y): (f64, f64) = r.getattr("vec2")?.call1((o, "GUI.showForces"))?.extract()?;
+        Ok([x, y])
+    };
+    let forces = [v(car)?, v(obstacle)?, v(average)?];
+    hal(|w| {
+        w.send(&FromWorker::Forces(forces), &[]);
+        Ok(())
+    })
+}
+
+/// `GUI.showLocalTarget([x, y])` (or `(x, y)`): the target in the robot's frame,
+/// m, drawn in the panel.
+#[pyfunction]
+#[pyo3(name = "showLocalTarget", signature = (x, y = None))]
+fn show_local_target(py: Python<'_>, x: Bound<'_, PyAny>, y: Option<f64>) -> PyResult<()> {
+    let at = match y {
+        Some(y) => [x.extract::<f64>()?, y],
+        None => {
+            let (x, y): (f64, f64) = runner(py)?
+                .getattr("vec2")?
+                .call1((x, "GUI.showLocalTarget"))?
+                .extract()?;
+            [x, y]
+        }
+    };
+    hal(|w| {
+        w.send(&FromWorker::LocalTarget(at), &[]);
+        Ok(())
+    })
+}
 
 /// The Academy's `GUI` object.
 #[pyclass(name = "GUI", frozen)]
@@ -778,7 +845,12 @@ impl Gui {
             Ok(())
         })
     }
-    fn __getattr__(&self, name: &str) -> PyResult<()> {
+    /// The 4.x `GUI.GUI` object has the module's other calls too (`GUI.map`,
+    /// `GUI.showForces`, ...).
+    fn __getattr__(&self, py: Python<'_>, name: &str) -> PyResult<Py<PyAny>> {
+        if ["map", "showForces", "showLocalTarget", "getNextTarget"].contains(&name) {
+            return Ok(py.import("GUI")?.getattr(name)?.unbind());
+        }
         Err(not_here("GUI", name, GUI_CALLS))
     }
 }
@@ -860,6 +932,11 @@ pub fn interpreter() -> Result<(), String> {
                 for name in ["GUI", "WebGUI"] {
                     let gui = PyModule::new(py, name)?;
                     gui.add("showImage", gui_object.getattr("showImage")?)?;
+                    gui.add_function(wrap_pyfunction!(show_forces, &gui)?)?;
+                    gui.add_function(wrap_pyfunction!(show_local_target, &gui)?)?;
+                    let map = r.getattr("MAP")?;
+                    gui.add("getNextTarget", map.getattr("getNextTarget")?)?;
+                    gui.add("map", map)?;
                     gui.add("GUI", &gui_object)?;
                     gui.add_function(wrap_pyfunction!(module_getattr, &gui)?)?;
                     modules.set_item(name, gui)?;
