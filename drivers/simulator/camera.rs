@@ -63,6 +63,8 @@ const NEAR: f64 = 10.0;
 /// Paint is drawn this high above the floor (mm), so that it wins the depth
 /// test against the floor and loses it against everything else.
 const PAINT_Z: f64 = 1.0;
+/// The longest piece a painted line is drawn in, mm (see `paint`).
+const PAINT_PIECE: f64 = 250.0;
 
 /// The body of a robot as the camera sees it: length, width, height (mm).
 const ROBOT_BODY: [f64; 3] = [450.0, 380.0, 240.0];
@@ -266,8 +268,12 @@ impl Renderer {
         }
     }
 
-    /// A painted line: a flat quad per piece, square-capped by half the width
-    /// so the joints of a bending line have no gaps.
+    /// A painted line: a flat quad per piece (at most [`PAINT_PIECE`] long),
+    /// square-capped by half the width so the joints of a bending line have no
+    /// gaps. A piece under a pixel wide or long in the image is left out (the
+    /// line fades out with distance): without anti-aliasing a far piece comes out
+    /// as scattered specks, each a zero-area contour that a student's
+    /// `cv2.findContours(...)[0]` would take for the line.
     fn paint(&mut self, p: &Paint, img: &mut Image) {
         let (bgr, h) = (shade(p.color, 1.0), p.width / 2.0);
         for (a, b) in p.segments() {
@@ -276,22 +282,56 @@ impl Renderer {
             if l < 1e-9 {
                 continue;
             }
+            let pieces = (l / PAINT_PIECE).ceil().max(1.0) as usize;
             let (u, n) = ([e[0] / l * h, e[1] / l * h], [-e[1] / l * h, e[0] / l * h]);
-            let at = |p: [f64; 2], s: f64, t: f64| {
-                [
-                    p[0] + s * u[0] + t * n[0],
-                    p[1] + s * u[1] + t * n[1],
-                    PAINT_Z,
-                ]
-            };
-            let quad = [
-                at(a, -1.0, -1.0),
-                at(b, 1.0, -1.0),
-                at(b, 1.0, 1.0),
-                at(a, -1.0, 1.0),
-            ];
-            self.polygon(&quad, [0.0, 0.0, 1.0], bgr, img);
+            for k in 0..pieces {
+                let (s0, s1) = (k as f64 / pieces as f64, (k + 1) as f64 / pieces as f64);
+                let a = [a[0] + s0 * e[0], a[1] + s0 * e[1]];
+                let b = [a[0] + (s1 - s0) * e[0], a[1] + (s1 - s0) * e[1]];
+                let (thick, long) = self.on_screen(a, b, [n[0] * 2.0, n[1] * 2.0]);
+                if thick < 1.0 || long < 1.0 {
+                    continue;
+                }
+                let at = |p: [f64; 2], s: f64, t: f64| {
+                    [
+                        p[0] + s * u[0] + t * n[0],
+                        p[1] + s * u[1] + t * n[1],
+                        PAINT_Z,
+                    ]
+                };
+                let quad = [
+                    at(a, -1.0, -1.0),
+                    at(b, 1.0, -1.0),
+                    at(b, 1.0, 1.0),
+                    at(a, -1.0, 1.0),
+                ];
+                self.polygon(&quad, [0.0, 0.0, 1.0], bgr, img);
+            }
         }
+    }
+
+    /// How thick and how long, in pixels, the floor strip from `a` to `b`,
+    /// `width` wide (a world vector across it), is in the image, from the
+    /// projections of its width and length at its middle: the thickness is the
+    /// width's part across the strip's direction on the screen.
+    fn on_screen(&self, a: [f64; 2], b: [f64; 2], width: [f64; 2]) -> (f64, f64) {
+        let mid = [(a[0] + b[0]) / 2.0, (a[1] + b[1]) / 2.0];
+        let c = self.cam([mid[0], mid[1], PAINT_Z]);
+        if c[2] < NEAR {
+            return (f64::INFINITY, f64::INFINITY); // at or behind the camera: clipping decides
+        }
+        let screen = |v: [f64; 2]| {
+            let t = self.cam([mid[0] + v[0], mid[1] + v[1], PAINT_Z]);
+            let z = t[2].max(NEAR);
+            [
+                self.fx * (t[0] / z - c[0] / c[2]),
+                self.fy * (t[1] / z - c[1] / c[2]),
+            ]
+        };
+        let (w, l) = (screen(width), screen([b[0] - a[0], b[1] - a[1]]));
+        let long = l[0].hypot(l[1]);
+        let thick = (w[0] * l[1] - w[1] * l[0]).abs() / long.max(1e-9);
+        (thick, long)
     }
 
     /// The horizontal top face of a prism with footprint `c` at height `z`.
