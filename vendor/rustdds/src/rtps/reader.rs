@@ -190,6 +190,22 @@ const MAX_UNFINISHED_BYTES_FACTOR: usize = 2;
 // announcement may be dropped during a flood: it repeats it.
 const MAX_UNMATCHED_SAMPLES_PER_SECOND: u32 = 100;
 
+/// jderobot's patch: the largest sample a reader assembles from fragments.
+fn largest_sample(built_in: bool) -> usize {
+  if built_in {
+    MAX_BUILTIN_SAMPLE
+  } else {
+    MAX_USER_SAMPLE
+  }
+}
+
+/// jderobot's patch: whether a (built-in or user) reader assembles the sample
+/// `datafrag` is a fragment of: no larger than [`largest_sample`]. Also the
+/// check of the fuzzing entry point (src/fuzzing.rs).
+pub(crate) fn assembles(datafrag: &DataFrag, built_in: bool) -> bool {
+  datafrag.data_size as usize <= largest_sample(built_in)
+}
+
 impl Reader {
   pub(crate) fn new(
     i: ReaderIngredients,
@@ -708,12 +724,9 @@ impl Reader {
   /// unfinished ones (the stalest are dropped to make it).
   fn make_room_for(&mut self, writer_guid: GUID, datafrag: &DataFrag) -> bool {
     let size = datafrag.data_size as usize;
-    let largest = if self.my_guid.entity_id.kind().is_built_in() {
-      MAX_BUILTIN_SAMPLE
-    } else {
-      MAX_USER_SAMPLE
-    };
-    if size > largest {
+    let built_in = self.my_guid.entity_id.kind().is_built_in();
+    let largest = largest_sample(built_in);
+    if !assembles(datafrag, built_in) {
       debug!(
         "DATA_FRAG of a {size}-byte sample from {writer_guid:?} dropped: this reader assembles \
          {largest} bytes at most"
