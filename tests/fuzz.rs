@@ -364,6 +364,8 @@ fn driver_targets(p: &Path) -> Vec<Target> {
     t.push(obj_mtl_target());
     #[cfg(feature = "ros2")]
     t.push(ros2_dds_target());
+    #[cfg(feature = "ros2")]
+    t.extend(rtps_targets());
     #[cfg(feature = "evi")]
     t.push(visca_target());
     #[cfg(feature = "pantilt")]
@@ -1045,6 +1047,117 @@ fn a_short_colour_line_is_an_error_at_its_line_not_a_panic() {
             "{mtl:?}: {shown}"
         );
     }
+}
+
+/// An RTPS datagram (DDSI-RTPS 2.3, 8.3.3 and 9.4): the header, then `subs`.
+#[cfg(feature = "ros2")]
+fn rtps(subs: &[Vec<u8>]) -> Vec<u8> {
+    let mut d = b"RTPS\x02\x03\x01\xaa".to_vec();
+    d.extend_from_slice(&[7; 12]);
+    subs.iter().for_each(|s| d.extend_from_slice(s));
+    d
+}
+
+/// A submessage: id, flags E (little endian) plus `flags`, its length, `body`.
+#[cfg(feature = "ros2")]
+fn submessage(id: u8, flags: u8, body: &[u8]) -> Vec<u8> {
+    let mut s = vec![id, 1 | flags];
+    s.extend_from_slice(&(body.len() as u16).to_le_bytes());
+    s.extend_from_slice(body);
+    s
+}
+
+/// DATA_FRAG `k` (from 1) of a `size`-byte sample in `frag`-byte fragments,
+/// writer SN `sn`, from the SPDP writer to the SPDP reader.
+#[cfg(feature = "ros2")]
+fn data_frag(sn: u32, k: u32, frag: u16, size: u32) -> Vec<u8> {
+    let mut b = vec![0, 0, 28, 0];
+    b.extend_from_slice(&[0, 1, 0, 0xc7, 0, 1, 0, 0xc2]);
+    b.extend_from_slice(&0i32.to_le_bytes());
+    b.extend_from_slice(&sn.to_le_bytes());
+    b.extend_from_slice(&k.to_le_bytes());
+    b.extend_from_slice(&1u16.to_le_bytes());
+    b.extend_from_slice(&frag.to_le_bytes());
+    b.extend_from_slice(&size.to_le_bytes());
+    let from = (k - 1) as usize * frag as usize;
+    let n = (size as usize - from).min(frag as usize);
+    let mut payload = vec![0, 3, 0, 0];
+    payload.resize(size as usize, 0x5a);
+    b.extend_from_slice(&payload[from..from + n]);
+    submessage(0x16, 0, &b)
+}
+
+/// Valid datagrams: an SPDP DATA (as tests/ros2/rtps_probe.py sends), a
+/// HEARTBEAT, an ACKNACK, INFO_TS and INFO_DST before a DATA, a GAP, and
+/// samples in 2 and 3 DATA_FRAGs.
+#[cfg(feature = "ros2")]
+fn rtps_seeds() -> Vec<Vec<u8>> {
+    let ids = [0, 1, 0, 0xc7, 0, 1, 0, 0xc2];
+    let sn = |n: u32| [0i32.to_le_bytes(), n.to_le_bytes()].concat();
+    let mut spdp = vec![0, 0, 16, 0];
+    spdp.extend_from_slice(&ids);
+    spdp.extend_from_slice(&sn(1));
+    spdp.extend_from_slice(&[0, 3, 0, 0]);
+    spdp.extend_from_slice(&[0x15, 0, 4, 0, 2, 3, 0, 0, 0x50, 0, 16, 0]);
+    spdp.extend_from_slice(&[7; 12]);
+    spdp.extend_from_slice(&[
+        0, 0, 1, 0xc1, 2, 0, 8, 0, 100, 0, 0, 0, 0, 0, 0, 0, 1, 0, 0, 0,
+    ]);
+    let data = submessage(0x15, 4, &spdp);
+    let hb = submessage(
+        0x07,
+        0,
+        &[ids.as_slice(), &sn(1), &sn(5), &1u32.to_le_bytes()].concat(),
+    );
+    let acknack = [
+        ids.as_slice(),
+        &sn(1),
+        &32u32.to_le_bytes(),
+        &[0xff; 4],
+        &1u32.to_le_bytes(),
+    ];
+    let gap = [ids.as_slice(), &sn(2), &sn(4), &0u32.to_le_bytes()].concat();
+    vec![
+        rtps(std::slice::from_ref(&data)),
+        rtps(&[hb.clone(), submessage(0x06, 0, &acknack.concat())]),
+        rtps(&[
+            submessage(0x09, 0, &[1, 0, 0, 0, 0, 0, 0, 0]),
+            submessage(0x0e, 0, &[9; 12]),
+            data,
+        ]),
+        rtps(&[submessage(0x08, 0, &gap), hb]),
+        rtps(&[data_frag(1, 1, 8, 16), data_frag(1, 2, 8, 16)]),
+        rtps(&[
+            data_frag(2, 3, 8, 20),
+            data_frag(2, 1, 8, 20),
+            data_frag(2, 2, 8, 20),
+        ]),
+    ]
+}
+
+/// The vendored RustDDS's parser of a peer's datagrams, and its fragment
+/// assembly (the DATA_FRAGs of a datagram, then the same again: a sample
+/// completed twice, fragments repeated).
+#[cfg(feature = "ros2")]
+fn rtps_targets() -> Vec<Target> {
+    vec![
+        Target {
+            name: "rtps_datagram",
+            seeds: rtps_seeds(),
+            text: false,
+            run: |b| {
+                let _ = rustdds::fuzzing::parse(b);
+            },
+        },
+        Target {
+            name: "rtps_fragments",
+            seeds: rtps_seeds(),
+            text: false,
+            run: |b| {
+                let _ = rustdds::fuzzing::assemble(&[b, b]);
+            },
+        },
+    ]
 }
 
 /// ROS 2 messages as DDS hands them over: the CDR body after RTPS's

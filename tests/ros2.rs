@@ -1304,6 +1304,94 @@ fn data_frags_announcing_huge_samples_neither_grow_the_memory_nor_end_the_servic
     robot.quit();
 }
 
+/// The CPU time process `pid` has used, in seconds (utime + stime of
+/// /proc/PID/stat, at the usual 100 ticks a second).
+fn cpu_s(pid: u32) -> f64 {
+    let s = std::fs::read_to_string(format!("/proc/{pid}/stat")).unwrap_or_default();
+    let fields: Vec<&str> = s.rsplit(") ").next().unwrap_or("").split(' ').collect();
+    let tick = |i: usize| {
+        fields
+            .get(i)
+            .and_then(|v| v.parse::<f64>().ok())
+            .unwrap_or(0.0)
+    };
+    // After the command name: state is field 0, utime 11, stime 12.
+    (tick(11) + tick(12)) / 100.0
+}
+
+/// Process `pid`'s share of a core over the next `secs` seconds.
+fn cpu_share(pid: u32, secs: f64) -> f64 {
+    let t0 = cpu_s(pid);
+    std::thread::sleep(std::time::Duration::from_secs_f64(secs));
+    (cpu_s(pid) - t0) / secs
+}
+
+/// Issue 52: a LAN host announced 50,000 participants with fresh GUIDs: the
+/// service's memory went 46 → 316 MB, its discovery thread kept 92 % of a core
+/// afterwards and `quit` hung over 90 s. Sent here (tests/ros2/rtps_probe.py
+/// `participants`, each with a 1000-s lease) to the domain's SPDP port at
+/// 10,000 a second (5 s): the memory grows by less than 30 MB, the CPU is back under
+/// 20 % of a core within 5 s, a Cyclone subscriber still reads /scan, and
+/// `quit` ends the process within 2 s.
+#[test]
+fn a_flood_of_fake_participants_neither_grows_the_memory_nor_holds_a_core_nor_delays_quit() {
+    let Some(py) = common::python_with("cyclonedds") else {
+        return;
+    };
+    let d = domain(25);
+    let dir = tempfile::tempdir().unwrap();
+    let conf = laser_service_conf(dir.path(), "flood.conf", d, "insecure");
+    let mut robot = Proc::start(&conf);
+    robot.ask_until("echo laser", "the laser", |l| {
+        l.starts_with("laser clock=") && !l.starts_with("laser clock=0 ")
+    });
+    let pid = robot.child.id();
+    let idle = cpu_share(pid, 1.0);
+    let before = rss_kb(pid);
+    let out = Command::new("python3")
+        .arg(root().join("tests/ros2/rtps_probe.py"))
+        .args(["participants", "127.0.0.1", &(7400 + 250 * d).to_string()])
+        .args(["50000", "9", "10000"])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let mut peak = rss_kb(pid);
+    let mut cpu = vec![];
+    for _ in 0..5 {
+        cpu.push(cpu_share(pid, 1.0));
+        peak = peak.max(rss_kb(pid));
+        if cpu[cpu.len() - 1] < 0.2 {
+            break;
+        }
+    }
+    let grown = peak.saturating_sub(before);
+    eprintln!(
+        "50,000 fake participants: RSS {before} kB, then +{grown} kB; CPU {:.0} % idle, \
+         then each second after: {:?} %",
+        idle * 100.0,
+        cpu.iter().map(|c| (c * 100.0).round()).collect::<Vec<_>>()
+    );
+    assert!(
+        robot.child.try_wait().unwrap().is_none(),
+        "the service ended:\n{}",
+        robot.text()
+    );
+    let scans = json_of(peer(&py, "scans", d, 5), "the Cyclone subscriber", &robot);
+    let start = std::time::Instant::now();
+    robot.send("quit");
+    let quit = common::poll_until(30, || robot.child.try_wait().ok().flatten().is_some());
+    let quit_s = start.elapsed().as_secs_f64();
+    eprintln!("quit took {quit_s:.2} s (ended: {quit})");
+    assert!(grown < 30 * 1024, "RSS grew {grown} kB");
+    assert!(cpu[cpu.len() - 1] < 0.2, "CPU after the flood: {cpu:?}");
+    assert!(f(&scans, &["scans"]) >= 1.0, "{scans}");
+    assert!(quit && quit_s < 2.0, "quit took {quit_s:.2} s");
+}
+
 /// Issue 50: one `frames` setting for every topic that names a frame. /odom
 /// hard-coded odom → base_link while /tf followed the line, so a custom frame
 /// broke the TF tree: a Cyclone subscriber now reads the same ODOM → BASE on

@@ -9,7 +9,10 @@ no DDS implementation sends on purpose:
   host, where the listener waits;
 - DATA_FRAGs (8.3.7.3, 9.4.5.4) that announce huge samples, one fragment each,
   from a new writer each time, to the SPDP reader: what one datagram can make a
-  reader allocate.
+  reader allocate;
+- a flood of SPDP announcements, each from a new participant (a fresh GUID
+  prefix), as fast as a socket sends them: what a LAN host can make discovery
+  remember and work on.
 
     rtps_probe.py send HOST REPLY_PORT PORT...   the announcement to HOST:PORT, each
                                                   PORT, 10 times over 2 s
@@ -17,6 +20,10 @@ no DDS implementation sends on purpose:
                                                   127.0.0.1:REPLY_PORT
     rtps_probe.py datafrag HOST PORT N SIZE       N DATA_FRAGs of a SIZE-byte sample,
                                                   and one of 0xFFFFFFF0 bytes
+    rtps_probe.py participants HOST PORT N REPLY_PORT [RATE]
+                                                  N announcements, each from a new
+                                                  participant, RATE a second (as
+                                                  fast as it can without RATE)
 
 Prints one JSON line.
 """
@@ -37,15 +44,15 @@ def locator(port):
     return struct.pack("<iI", 1, port) + b"\0" * 12 + socket.inet_aton("127.0.0.1")
 
 
-def announcement(reply_port):
-    prefix = os.urandom(12)
+def announcement(reply_port, prefix=None, lease_s=100):
+    prefix = prefix or os.urandom(12)
     params = b"".join([
         param(0x0015, b"\x02\x03"),                      # PID_PROTOCOL_VERSION 2.3
         param(0x0016, b"\x01\xaa"),                      # PID_VENDORID
         param(0x0050, prefix + b"\x00\x00\x01\xc1"),     # PID_PARTICIPANT_GUID
         param(0x0032, locator(reply_port)),              # PID_METATRAFFIC_UNICAST_LOCATOR
         param(0x0031, locator(reply_port)),              # PID_DEFAULT_UNICAST_LOCATOR
-        param(0x0002, struct.pack("<iI", 100, 0)),       # PID_PARTICIPANT_LEASE_DURATION
+        param(0x0002, struct.pack("<iI", lease_s, 0)),   # PID_PARTICIPANT_LEASE_DURATION
         param(0x0058, struct.pack("<I", 0x3F)),          # PID_BUILTIN_ENDPOINT_SET
         struct.pack("<HH", 0x0001, 0),                   # PID_SENTINEL
     ])
@@ -73,7 +80,22 @@ def datafrag(sample_size):
 
 def main():
     mode = sys.argv[1]
-    if mode == "datafrag":
+    if mode == "participants":
+        host, port, n, reply_port = sys.argv[2], int(sys.argv[3]), int(sys.argv[4]), int(sys.argv[5])
+        rate = float(sys.argv[6]) if len(sys.argv) > 6 else 0
+        s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, 1 << 20)
+        # Built first (os.urandom per GUID), so the send is only sendto calls. A
+        # lease of 1000 s: an attacker's participants never expire by themselves.
+        msgs = [announcement(reply_port, os.urandom(12), 1000) for _ in range(n)]
+        start = time.time()
+        for k, m in enumerate(msgs):
+            s.sendto(m, (host, port))
+            if rate and k % 100 == 99:
+                time.sleep(max(0, start + (k + 1) / rate - time.time()))
+        secs = time.time() - start
+        print(json.dumps({"sent": n, "secs": round(secs, 3)}), flush=True)
+    elif mode == "datafrag":
         host, port, n, size = sys.argv[2], int(sys.argv[3]), int(sys.argv[4]), int(sys.argv[5])
         s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         for k in range(n):

@@ -171,6 +171,9 @@ mod serialization_test;
 mod checked_impl;
 #[doc(hidden)]
 pub mod discovery; // to access some Discovered data in e.g. ros2-client crate
+// jderobot's patch: entry points for jderobot's fuzzing, not an API.
+#[doc(hidden)]
+pub mod fuzzing;
 mod messages;
 mod network;
 mod rtps;

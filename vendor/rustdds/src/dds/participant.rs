@@ -909,20 +909,44 @@ impl Drop for DomainParticipantDisc {
     }
 
     debug!("Sending Discovery Stop signal.");
-    if self
+    // jderobot's patch: neither the send nor the join waits for a busy
+    // discovery thread (a flood of participants kept it busy for minutes, and
+    // the application's exit with it): a full command channel or a thread not
+    // done within STOP_WAIT is left to end on its own.
+    if let Err(e) = self
       .discovery_command_sender
-      .send(DiscoveryCommand::StopDiscovery)
-      .is_err()
+      .try_send(DiscoveryCommand::StopDiscovery)
     {
-      warn!("Failed to send stop signal to Discovery");
+      warn!("Failed to send stop signal to Discovery: {e:?}; not waiting for it");
       return;
     }
 
     debug!("Waiting for Discovery join.");
     if let Ok(handle) = self.discovery_join_handle.try_recv() {
-      handle.join().unwrap();
-      debug!("Joined Discovery.");
+      join_within(handle, "Discovery");
     }
+  }
+}
+
+/// jderobot's patch: how long dropping a participant waits for each of its
+/// threads (discovery, then the event loop) to end.
+const STOP_WAIT: std::time::Duration = std::time::Duration::from_millis(700);
+
+/// jderobot's patch: joins `handle` if its thread ends within [`STOP_WAIT`];
+/// otherwise leaves it running (detached), with a warning. A thread that
+/// panicked is a warning too, not a second panic.
+fn join_within(handle: JoinHandle<()>, what: &str) {
+  let start = std::time::Instant::now();
+  while !handle.is_finished() && start.elapsed() < STOP_WAIT {
+    thread::sleep(std::time::Duration::from_millis(5));
+  }
+  if !handle.is_finished() {
+    warn!("{what} thread still busy after {STOP_WAIT:?}: not waiting for it");
+    return;
+  }
+  match handle.join() {
+    Ok(()) => debug!("Joined {what}."),
+    Err(e) => warn!("{what} thread panicked: {e:?}"),
   }
 }
 
@@ -970,11 +994,8 @@ impl Drop for DomainParticipantInner {
 
     debug!("Waiting for dp_event_loop join");
     match self.ev_loop_handle.take() {
-      Some(join_handle) => {
-        join_handle
-          .join()
-          .unwrap_or_else(|e| warn!("Failed to join dp_event_loop: {e:?}"));
-      }
+      // jderobot's patch: for STOP_WAIT at most
+      Some(join_handle) => join_within(join_handle, "dp_event_loop"),
       None => {
         error!("Someone managed to steal dp_event_loop join handle from DomainParticipantInner.");
       }

@@ -997,8 +997,22 @@ impl Discovery {
     &mut self,
     participant_data: &SpdpDiscoveredParticipantData,
   ) {
-    let was_new = discovery_db_write(&self.discovery_db).update_participant(participant_data);
     let guid_prefix = participant_data.participant_guid.prefix;
+    // jderobot's patch: at most MAX_PARTICIPANTS remote participants; the one
+    // heard from longest ago makes room for a new one, and is lost.
+    let mut db = discovery_db_write(&self.discovery_db);
+    let evicted = db.make_room_for_participant(guid_prefix);
+    let was_new = db.update_participant(participant_data);
+    drop(db);
+    if let Some(lost) = evicted {
+      self.send_discovery_notification(DiscoveryNotificationType::ParticipantLost {
+        guid_prefix: lost,
+      });
+      self.send_participant_status(DomainParticipantStatusEvent::ParticipantLost {
+        id: lost,
+        reason: LostReason::Disposed,
+      });
+    }
 
     // Send notification to dp_event_loop. It will update local reader/writer
     // proxies as the SpdpDiscoveredParticipantData contains a bitmap of the
@@ -1137,7 +1151,10 @@ impl Discovery {
         match d {
           Sample::Value(d) => {
             trace!("sedp_receive_subscription - {d:?}");
-            let drd = discovery_db_write(&self.discovery_db).update_subscription(&d);
+            // jderobot's patch: None when the DB's endpoint caps refuse it.
+            let Some(drd) = discovery_db_write(&self.discovery_db).update_subscription(&d) else {
+              continue;
+            };
             debug!(
               "sedp_receive_subscription - send_discovery_notification ReaderUpdated  {:?}",
               &drd
@@ -1205,8 +1222,12 @@ impl Discovery {
         match d {
           Sample::Value(dwd) => {
             trace!("sedp_receive_publication discovered {:?}", &dwd);
-            let discovered_writer_data =
-              discovery_db_write(&self.discovery_db).update_publication(&dwd);
+            // jderobot's patch: None when the DB's endpoint caps refuse it.
+            let Some(discovered_writer_data) =
+              discovery_db_write(&self.discovery_db).update_publication(&dwd)
+            else {
+              continue;
+            };
             self.send_discovery_notification(DiscoveryNotificationType::WriterUpdated {
               discovered_writer_data,
             });
@@ -1598,10 +1619,14 @@ impl Discovery {
           Sample::Value(sec_sub) => {
             // Currently we use only the DiscoveredReaderData field, no DataTag
             let drd_from_topic = sec_sub.discovered_reader_data;
-            let drd = discovery_db_write(&self.discovery_db).update_subscription(&drd_from_topic);
-            self.send_discovery_notification(DiscoveryNotificationType::ReaderUpdated {
-              discovered_reader_data: drd,
-            });
+            // jderobot's patch: None when the DB's endpoint caps refuse it.
+            if let Some(drd) =
+              discovery_db_write(&self.discovery_db).update_subscription(&drd_from_topic)
+            {
+              self.send_discovery_notification(DiscoveryNotificationType::ReaderUpdated {
+                discovered_reader_data: drd,
+              });
+            }
           }
           Sample::Dispose(reader_guid) => {
             info!("Secure Dispose Reader {reader_guid:?}");
@@ -1647,10 +1672,14 @@ impl Discovery {
           Sample::Value(se_pub) => {
             // Currently we use only the DiscoveredWriterData field, no DataTag
             let dwd_from_topic = se_pub.discovered_writer_data;
-            let dwd = discovery_db_write(&self.discovery_db).update_publication(&dwd_from_topic);
-            self.send_discovery_notification(DiscoveryNotificationType::WriterUpdated {
-              discovered_writer_data: dwd,
-            });
+            // jderobot's patch: None when the DB's endpoint caps refuse it.
+            if let Some(dwd) =
+              discovery_db_write(&self.discovery_db).update_publication(&dwd_from_topic)
+            {
+              self.send_discovery_notification(DiscoveryNotificationType::WriterUpdated {
+                discovered_writer_data: dwd,
+              });
+            }
           }
           Sample::Dispose(writer_guid) => {
             info!("Secure Dispose Writer {writer_guid:?}");

@@ -45,6 +45,47 @@ const DEFAULT_PARTICIPANT_LEASE_DURATION: Duration = Duration::from_secs(60);
 // How much longer to wait than lease duration before pronouncing lost.
 const PARTICIPANT_LEASE_DURATION_TOLERANCE: Duration = Duration::from_secs(0);
 
+// jderobot's patch: how much a peer can make discovery remember. 50,000 SPDP
+// announcements with fresh GUIDs took 270 MB (about 5.4 kB each: the DB entry,
+// a proxy in every built-in reader and writer, the SPDP reader's instance) and
+// made every later discovery step slower. Remote participants: a ROS 2 graph
+// is one participant per process, and the RTPS port mapping gives one host at
+// most 120 per domain; 256 leaves room for several hosts at about 1.4 MB. When
+// full, a new participant takes the place of the one heard from longest ago
+// (an attacker's one-off announcements go first, live peers refresh theirs).
+pub(crate) const MAX_PARTICIPANTS: usize = 256;
+// Remote readers and writers: per participant (a Cyclone test peer has 1,000;
+// a composed ROS 2 process with dozens of nodes, each with a dozen service
+// endpoints, a few hundred) and in all (each a few kB).
+pub(crate) const MAX_ENDPOINTS_PER_PARTICIPANT: usize = 2048;
+pub(crate) const MAX_ENDPOINTS: usize = 4096;
+// At most one log line per this period for each kind of refusal.
+const REFUSAL_LOG_PERIOD: std::time::Duration = std::time::Duration::from_secs(10);
+
+/// jderobot's patch: a warning at most once per [`REFUSAL_LOG_PERIOD`], with
+/// the count of those not logged since the last.
+#[derive(Default)]
+pub(crate) struct RateLimitedLog {
+  last: Option<Instant>,
+  suppressed: u64,
+}
+
+impl RateLimitedLog {
+  pub(crate) fn warn(&mut self, what: std::fmt::Arguments) {
+    let now = Instant::now();
+    if self
+      .last
+      .is_some_and(|t| now.duration_since(t) < REFUSAL_LOG_PERIOD)
+    {
+      self.suppressed += 1;
+      return;
+    }
+    warn!("{what} ({} more like it not logged)", self.suppressed);
+    self.last = Some(now);
+    self.suppressed = 0;
+  }
+}
+
 // TODO: Let DiscoveryDB itself become thread-safe and support smaller-scope
 // lock
 pub(crate) struct DiscoveryDB {
@@ -79,6 +120,10 @@ pub(crate) struct DiscoveryDB {
   topic_updated_sender: mio_extras::channel::SyncSender<()>,
 
   participant_status_sender: StatusChannelSender<DomainParticipantStatusEvent>,
+
+  // jderobot's patch: the rate-limited warnings of the caps above.
+  eviction_log: RateLimitedLog,
+  endpoint_refusal_log: RateLimitedLog,
 }
 
 // How did we discover this topic
@@ -140,7 +185,54 @@ impl DiscoveryDB {
       topics: BTreeMap::new(),
       topic_updated_sender,
       participant_status_sender,
+      eviction_log: RateLimitedLog::default(),
+      endpoint_refusal_log: RateLimitedLog::default(),
     }
+  }
+
+  /// jderobot's patch: before a participant is added, when [`MAX_PARTICIPANTS`]
+  /// are known and `guid_prefix` is not one of them, removes the one heard from
+  /// longest ago (never this participant itself), with its endpoints, and
+  /// returns it: the caller tells the event loop it is lost.
+  pub fn make_room_for_participant(&mut self, guid_prefix: GuidPrefix) -> Option<GuidPrefix> {
+    if self.participant_proxies.len() < MAX_PARTICIPANTS
+      || self.participant_proxies.contains_key(&guid_prefix)
+    {
+      return None;
+    }
+    let me = self.my_guid.prefix;
+    let (&oldest, _) = self
+      .participant_last_life_signs
+      .iter()
+      .filter(|(p, _)| **p != me)
+      .min_by_key(|(_, t)| **t)?;
+    self.eviction_log.warn(format_args!(
+      "Discovery: {MAX_PARTICIPANTS} remote participants known: {oldest:?}, heard from longest \
+       ago, forgotten for {guid_prefix:?}"
+    ));
+    self.remove_participant(oldest, true);
+    Some(oldest)
+  }
+
+  /// jderobot's patch: whether a new remote endpoint `guid` fits under
+  /// [`MAX_ENDPOINTS_PER_PARTICIPANT`] and [`MAX_ENDPOINTS`] (one already known
+  /// always does).
+  fn endpoint_fits(&mut self, guid: GUID) -> bool {
+    let (readers, writers) = (&self.external_topic_readers, &self.external_topic_writers);
+    if readers.contains_key(&guid) || writers.contains_key(&guid) {
+      return true;
+    }
+    let total = readers.len() + writers.len();
+    let of_participant = readers.range(guid.prefix.range()).count()
+      + writers.range(guid.prefix.range()).count();
+    let fits = total < MAX_ENDPOINTS && of_participant < MAX_ENDPOINTS_PER_PARTICIPANT;
+    if !fits {
+      self.endpoint_refusal_log.warn(format_args!(
+        "Discovery: remote endpoint {guid:?} ignored: {of_participant} known of its participant \
+         (at most {MAX_ENDPOINTS_PER_PARTICIPANT}), {total} in all (at most {MAX_ENDPOINTS})"
+      ));
+    }
+    fits
   }
 
   fn send_participant_status(&self, event: DomainParticipantStatusEvent) {
@@ -235,8 +327,13 @@ impl DiscoveryDB {
     if active_disposal {
       self.remove_topic_reader_with_prefix(guid_prefix);
       self.remove_topic_writer_with_prefix(guid_prefix);
-    } else {
+    } else if self.external_topic_readers_attic.len() + self.external_topic_writers_attic.len()
+      < MAX_ENDPOINTS
+    {
       // move to attic
+      // jderobot's patch: while the attic holds fewer than MAX_ENDPOINTS (it
+      // was never emptied: participants timing out one after another grew it
+      // for ever); past that, a timed-out participant's endpoints are dropped.
       move_by_guid_prefix(
         guid_prefix,
         &mut self.external_topic_readers,
@@ -247,6 +344,9 @@ impl DiscoveryDB {
         &mut self.external_topic_writers,
         &mut self.external_topic_writers_attic,
       );
+    } else {
+      self.remove_topic_reader_with_prefix(guid_prefix);
+      self.remove_topic_writer_with_prefix(guid_prefix);
     }
   }
 
@@ -421,8 +521,16 @@ impl DiscoveryDB {
   // them from the remote participant.
   //
   // The topic is updated to the topics table.
-  pub fn update_subscription(&mut self, data: &DiscoveredReaderData) -> DiscoveredReaderData {
+  //
+  // jderobot's patch: None when the reader is refused ([`Self::endpoint_fits`]).
+  pub fn update_subscription(
+    &mut self,
+    data: &DiscoveredReaderData,
+  ) -> Option<DiscoveredReaderData> {
     let guid = data.reader_proxy.remote_reader_guid;
+    if !self.endpoint_fits(guid) {
+      return None;
+    }
 
     self.external_topic_readers.insert(guid, data.clone());
 
@@ -464,19 +572,26 @@ impl DiscoveryDB {
     // from that record and modify by QoS given in the DRD.
 
     // Return DiscoveredReaderData with possibly updated locators.
-    DiscoveredReaderData {
+    Some(DiscoveredReaderData {
       reader_proxy: ReaderProxy::from(RtpsReaderProxy::from_discovered_reader_data(
         data,
         &default_locator_lists.0,
         &default_locator_lists.1,
       )),
       ..data.clone()
-    }
+    })
   }
 
   // TODO: This is silly. Returns one of the parameters cloned, or None
-  pub fn update_publication(&mut self, data: &DiscoveredWriterData) -> DiscoveredWriterData {
+  // jderobot's patch: None when the writer is refused ([`Self::endpoint_fits`]).
+  pub fn update_publication(
+    &mut self,
+    data: &DiscoveredWriterData,
+  ) -> Option<DiscoveredWriterData> {
     let guid = data.writer_proxy.remote_writer_guid;
+    if !self.endpoint_fits(guid) {
+      return None;
+    }
 
     self
       .external_topic_writers
@@ -516,14 +631,14 @@ impl DiscoveryDB {
       DiscoveredVia::Publication,
     );
 
-    DiscoveredWriterData {
+    Some(DiscoveredWriterData {
       writer_proxy: WriterProxy::from(RtpsWriterProxy::from_discovered_writer_data(
         data,
         &default_locator_lists.0,
         &default_locator_lists.1,
       )),
       ..data.clone()
-    }
+    })
   }
 
   // This is for local participant updating the topic table

@@ -85,6 +85,16 @@ impl AssemblyBuffer {
     // unwrap: u32 should fit into usize
     let from_byte = start_frag_from_0 * frag_size;
 
+    // jderobot's patch: a fragment this buffer cannot hold is dropped. Found by
+    // jderobot's fuzzing (tests/fuzz.rs `rtps_fragments`): a DATA_FRAG whose
+    // fragment size differs from the one its writer's first DATA_FRAG set (the
+    // assembler's), or which claims more fragments than its sample has, indexed
+    // past the buffer or the bitmap and panicked the event loop thread.
+    if usize::from(datafrag.fragment_size) != frag_size || from_byte >= self.buffer_bytes.len() {
+      debug!("insert_frags: a fragment outside its sample dropped");
+      return;
+    }
+
     // Last fragment might be smaller than fragment size
     // Copy reported number of fragments, or as much data as there is, whichever
     // ends first.
@@ -127,8 +137,9 @@ impl AssemblyBuffer {
     self.buffer_bytes.as_mut()[from_byte..to_before_byte]
       .copy_from_slice(&datafrag.serialized_payload[..payload_size]);
 
-    for f in 0..frags_in_submessage {
-      self.received_bitmap.set(start_frag_from_0 + f, true);
+    // jderobot's patch: no further than the sample's last fragment.
+    for f in start_frag_from_0..(start_frag_from_0 + frags_in_submessage).min(self.fragment_count) {
+      self.received_bitmap.set(f, true);
     }
     self.modified_time = Timestamp::now();
   }

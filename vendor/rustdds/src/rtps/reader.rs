@@ -138,6 +138,11 @@ pub(crate) struct Reader {
   last_fragment_garbage_collect: Timestamp,
   matched_writers: BTreeMap<GUID, RtpsWriterProxy>,
   writer_match_count_total: i32, // total count, never decreases
+  // jderobot's patch: the samples a built-in reader took from unmatched writers
+  // in the current second, when that second began, and its warning.
+  unmatched_taken: u32,
+  unmatched_since: std::time::Instant,
+  unmatched_log: crate::discovery::discovery_db::RateLimitedLog,
 
   requested_deadline_missed_count: i32,
   offered_incompatible_qos_count: i32,
@@ -172,6 +177,34 @@ const MAX_BUILTIN_SAMPLE: usize = 1 << 20;
 // longest without a fragment is dropped for the new one.
 const MAX_UNFINISHED_SAMPLES: usize = 64;
 const MAX_UNFINISHED_BYTES_FACTOR: usize = 2;
+
+// jderobot's patch: the work a peer can make discovery do. 50,000 SPDP
+// announcements with fresh GUIDs reached the SPDP reader's cache at once; the
+// discovery thread took them one by one (each take sorts the whole cache) and
+// held a core for minutes, unable to stop. A built-in reader now takes at most
+// this many samples (DATA or DATA_FRAG submessages) a second from writers it is
+// not matched with, i.e. from participants not yet discovered (the SPDP
+// announcements of new participants, a peer's SEDP before its SPDP); the rest
+// are dropped before they are parsed. Matched writers (known participants'
+// refreshes, their endpoints) are not counted. A new participant's first
+// announcement may be dropped during a flood: it repeats it.
+const MAX_UNMATCHED_SAMPLES_PER_SECOND: u32 = 100;
+
+/// jderobot's patch: the largest sample a reader assembles from fragments.
+fn largest_sample(built_in: bool) -> usize {
+  if built_in {
+    MAX_BUILTIN_SAMPLE
+  } else {
+    MAX_USER_SAMPLE
+  }
+}
+
+/// jderobot's patch: whether a (built-in or user) reader assembles the sample
+/// `datafrag` is a fragment of: no larger than [`largest_sample`]. Also the
+/// check of the fuzzing entry point (src/fuzzing.rs).
+pub(crate) fn assembles(datafrag: &DataFrag, built_in: bool) -> bool {
+  datafrag.data_size as usize <= largest_sample(built_in)
+}
 
 impl Reader {
   pub(crate) fn new(
@@ -218,6 +251,9 @@ impl Reader {
       last_fragment_garbage_collect: Timestamp::now(),
       matched_writers: BTreeMap::new(),
       writer_match_count_total: 0,
+      unmatched_taken: 0,
+      unmatched_since: std::time::Instant::now(),
+      unmatched_log: Default::default(),
       requested_deadline_missed_count: 0,
       offered_incompatible_qos_count: 0,
       timed_event_timer,
@@ -538,6 +574,10 @@ impl Reader {
     mr_state: &MessageReceiverState,
   ) {
     // trace!("handle_data_msg entry");
+    let writer_guid = GUID::new_with_prefix_and_id(mr_state.source_guid_prefix, data.writer_id);
+    if !self.within_unmatched_budget(writer_guid) {
+      return;
+    }
     let receive_timestamp = Timestamp::now();
 
     // parse write_options out of the message
@@ -560,7 +600,6 @@ impl Reader {
       write_options_b = write_options_b.related_sample_identity(related_sample_identity);
     }
 
-    let writer_guid = GUID::new_with_prefix_and_id(mr_state.source_guid_prefix, data.writer_id);
     let writer_seq_num = data.writer_sn; // for borrow checker
 
     match self.data_to_dds_data(data, data_flags) {
@@ -582,6 +621,9 @@ impl Reader {
     mr_state: &MessageReceiverState,
   ) {
     let writer_guid = GUID::new_with_prefix_and_id(mr_state.source_guid_prefix, datafrag.writer_id);
+    if !self.within_unmatched_budget(writer_guid) {
+      return;
+    }
     let seq_num = datafrag.writer_sn;
     let receive_timestamp = Timestamp::now();
     //trace!("DATAFRAG received topic={:?}", self.topic_name);
@@ -652,17 +694,39 @@ impl Reader {
     }
   }
 
+  /// jderobot's patch: whether a sample from `writer_guid` may be taken: always
+  /// by a user reader or from a matched writer; by a built-in reader from an
+  /// unmatched one, [`MAX_UNMATCHED_SAMPLES_PER_SECOND`] a second.
+  fn within_unmatched_budget(&mut self, writer_guid: GUID) -> bool {
+    if !self.my_guid.entity_id.kind().is_built_in() || self.matched_writers.contains_key(&writer_guid)
+    {
+      return true;
+    }
+    let now = std::time::Instant::now();
+    if now.duration_since(self.unmatched_since) >= StdDuration::from_secs(1) {
+      self.unmatched_since = now;
+      self.unmatched_taken = 0;
+    }
+    if self.unmatched_taken < MAX_UNMATCHED_SAMPLES_PER_SECOND {
+      self.unmatched_taken += 1;
+      return true;
+    }
+    self.unmatched_log.warn(format_args!(
+      "Reader {:?}: more than {MAX_UNMATCHED_SAMPLES_PER_SECOND} samples a second from \
+       undiscovered writers: {writer_guid:?}'s dropped",
+      self.my_guid.entity_id
+    ));
+    false
+  }
+
   /// jderobot's patch: whether `datafrag` may be assembled: its sample is no
   /// larger than this reader assembles, and a new sample finds room among the
   /// unfinished ones (the stalest are dropped to make it).
   fn make_room_for(&mut self, writer_guid: GUID, datafrag: &DataFrag) -> bool {
     let size = datafrag.data_size as usize;
-    let largest = if self.my_guid.entity_id.kind().is_built_in() {
-      MAX_BUILTIN_SAMPLE
-    } else {
-      MAX_USER_SAMPLE
-    };
-    if size > largest {
+    let built_in = self.my_guid.entity_id.kind().is_built_in();
+    let largest = largest_sample(built_in);
+    if !assembles(datafrag, built_in) {
       debug!(
         "DATA_FRAG of a {size}-byte sample from {writer_guid:?} dropped: this reader assembles \
          {largest} bytes at most"

@@ -27,6 +27,9 @@ use crate::{
 // Data samples are here ordered and indexed by Timestamp, which must be a
 // unique key. RTPS Timestamp has sub-nanosecond resolution, so it could be
 // unique, provided that the source clock ticks frequently enough.
+// jderobot's patch: instances kept before those with no sample are forgotten.
+const MAX_INSTANCES_KEPT: usize = 1024;
+
 pub struct DataSampleCache<D: Keyed> {
   qos: QosPolicies,
   datasamples: BTreeMap<Timestamp, SampleWithMetaData<D>>, /* ordered storage for deserialized
@@ -93,6 +96,19 @@ where
     );
   }
 
+  /// jderobot's patch: at [`MAX_INSTANCES_KEPT`] instances, those with no
+  /// sample left (all taken) are forgotten. The map only grew: the SPDP
+  /// reader kept an instance for every participant GUID ever announced (a
+  /// flood of fresh GUIDs, for ever). A forgotten instance that comes back
+  /// starts its generation counts anew.
+  fn forget_empty_instances(&mut self) {
+    if self.instance_map.len() >= MAX_INSTANCES_KEPT {
+      self
+        .instance_map
+        .retain(|_, imd| !imd.instance_samples.is_empty());
+    }
+  }
+
   fn add_sample(
     &mut self,
     new_sample: Sample<D, D::K>,
@@ -115,6 +131,7 @@ where
     let instance_metadata = if let Some(imd) = self.instance_map.get_mut(&instance_key) {
       imd
     } else {
+      self.forget_empty_instances();
       // not found, create new one.
       let imd = InstanceMetaData {
         instance_samples: BTreeSet::new(),
