@@ -1432,3 +1432,36 @@ fn gui_map_forces_and_the_local_target_reach_the_panel() {
     assert_eq!(o.local_target, Some([2.0, 0.25]));
     rt.shutdown();
 }
+
+#[test]
+fn academy_4_programs_paced_with_rospy_run_without_ros() {
+    // The Academy 4.x ran on ROS 1, and students paced their programs with it
+    // (`rospy.sleep(1)`, `rospy.Time.now()`, `rospy.Rate`): where no rospy is
+    // installed, jderobot's stand-in gives those, and names what it lacks.
+    let dir = tempfile::tempdir().unwrap();
+    let (rt, prog) = with_other_schema(
+        dir.path(),
+        "from HAL import HAL\nimport rospy\nt0 = rospy.Time.now()\nHAL.setV(0.2)\nrospy.sleep(0.3)\n\
+         rate = rospy.Rate(20)\nfor i in range(4):\n    rate.sleep()\n\
+         print('slept', round((rospy.Time.now() - t0).to_sec(), 1), rospy.is_shutdown())\n\
+         rospy.Subscriber('/scan', None, None)\n",
+        "",
+    );
+    rt.run("python").unwrap();
+    eventually("it ends", || state(&rt, "python") == State::Slept);
+    let text = console(&shared(&rt, "python"));
+    assert!(text.contains("slept 0.5 False"), "{text}");
+    let err = rt
+        .schema_status("python")
+        .unwrap()
+        .last_error
+        .unwrap_or_default();
+    assert!(
+        err.contains(&format!(
+            "{}:10: AttributeError: rospy.Subscriber is not here",
+            prog.display()
+        )),
+        "{err}"
+    );
+    rt.shutdown();
+}

@@ -283,3 +283,84 @@ def vec2(v, name):
         return float(v[0]), float(v[1])
     except (TypeError, IndexError, ValueError):
         raise TypeError(f"{name}: a vector is [x, y] (a list, tuple or array of two numbers), not {v!r}") from None
+
+
+def install_rospy():
+    """Where ROS 1 is not installed, a stand-in `rospy` with what the Academy's
+    4.x programs pace themselves with: `rospy.sleep`, `rospy.Time.now()`
+    (`.secs`, `.nsecs`, `.to_sec()`), `rospy.Duration`, `rospy.Rate(hz).sleep()`,
+    `rospy.get_time()`, `rospy.is_shutdown()`, `rospy.loginfo`/`logwarn`/`logerr`,
+    `rospy.init_node`. Anything else raises an AttributeError that says so."""
+    import importlib.util
+    import time
+    import types
+
+    if importlib.util.find_spec("rospy") is not None:
+        return
+    m = types.ModuleType("rospy", "jderobot's stand-in for ROS 1's rospy (time and logging only)")
+
+    class Duration:
+        def __init__(self, secs=0, nsecs=0):
+            self._s = float(secs) + float(nsecs) * 1e-9
+
+        def to_sec(self):
+            return self._s
+
+        @property
+        def secs(self):
+            return int(self._s)
+
+        @property
+        def nsecs(self):
+            return int(round((self._s - int(self._s)) * 1e9))
+
+        def __sub__(self, other):
+            return Duration(self._s - other.to_sec())
+
+        def __add__(self, other):
+            return type(self)(self._s + other.to_sec())
+
+        def __lt__(self, other):
+            return self._s < other.to_sec()
+
+        def __repr__(self):
+            return f"rospy.{type(self).__name__}[{self._s:.9f}]"
+
+    class Time(Duration):
+        @staticmethod
+        def now():
+            return Time(time.time())
+
+        def __sub__(self, other):
+            return Duration(self._s - other.to_sec())
+
+    class Rate:
+        def __init__(self, hz):
+            self._period, self._next = 1.0 / float(hz), None
+
+        def sleep(self):
+            now = time.monotonic()
+            if self._next is None or now > self._next + self._period:
+                self._next = now
+            self._next += self._period
+            time.sleep(max(0.0, self._next - now))
+
+    def sleep(d):
+        time.sleep(d.to_sec() if hasattr(d, "to_sec") else float(d))
+
+    def log(*args, **kwargs):
+        print(*args)
+
+    def missing(name):
+        raise AttributeError(
+            f"rospy.{name} is not here: jderobot has no ROS 1; its stand-in rospy has sleep, "
+            "Time, Duration, Rate, get_time, is_shutdown, loginfo, logwarn, logerr, init_node"
+        )
+
+    m.Duration, m.Time, m.Rate, m.sleep = Duration, Time, Rate, sleep
+    m.get_time = time.time
+    m.is_shutdown = lambda: False
+    m.loginfo = m.logwarn = m.logerr = m.logdebug = log
+    m.init_node = lambda *a, **k: None
+    m.__getattr__ = missing
+    sys.modules["rospy"] = m

@@ -952,6 +952,7 @@ pub fn interpreter() -> Result<(), String> {
                 sys.setattr("stderr", Bound::new(py, Output)?)?;
                 sys.setattr("argv", vec![String::from("jderobot")])?;
                 py.import("time")?.setattr("sleep", r.getattr("sleep")?)?;
+                r.getattr("install_rospy")?.call0()?;
                 if let Some(v) = std::env::var_os("VIRTUAL_ENV") {
                     r.getattr("add_venv")?
                         .call1((v.to_string_lossy().to_string(),))?;
