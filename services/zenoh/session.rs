@@ -487,13 +487,24 @@ mod tests {
 
     #[test]
     fn tls_listen_endpoints_get_the_handshake_deadline_unless_they_set_one() {
-        let s = parse(
-            "listen tls/127.0.0.1:7447\nlisten tls/127.0.0.1:7448#tls_handshake_timeout_ms=900\n\
-             listen tcp/127.0.0.1:7449\n",
-        )
-        .unwrap();
-        let listen = s.config().unwrap().get_json("listen/endpoints").unwrap();
+        let listen = parse("listen tls/127.0.0.1:7447\n")
+            .unwrap()
+            .config()
+            .unwrap();
+        let listen = listen.get_json("listen/endpoints").unwrap();
         let v: Vec<String> = serde_json::from_str(&listen).unwrap();
+        assert_eq!(
+            v,
+            [format!(
+                "tls/127.0.0.1:7447#tls_handshake_timeout_ms={TLS_HANDSHAKE_MS}"
+            )]
+        );
+        // A config file's endpoint (a conf line's `#` starts a comment) keeps its own.
+        let mut c = Config::default();
+        let file = r#"["tls/127.0.0.1:7447", "tls/127.0.0.1:7448#tls_handshake_timeout_ms=900",
+                       "tcp/127.0.0.1:7449"]"#;
+        c.insert_json5("listen/endpoints", file).unwrap();
+        let v: Vec<String> = serde_json::from_value(handshake_deadlines(&c).unwrap()).unwrap();
         assert_eq!(
             v,
             [
