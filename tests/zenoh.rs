@@ -464,3 +464,143 @@ fn a_controller_drops_nan_and_absurd_encoders_and_its_clock_only_grows() {
     assert_eq!(enc.clock(), 5, "the clock only grows");
     rt.shutdown();
 }
+
+/// How long a client with a valid certificate may take to get a session and a
+/// laser sample, while 1,100 silent connections are open or just after they
+/// closed (docs/zenoh.md, "TLS").
+const ADMISSION_BOUND: Duration = Duration::from_secs(15);
+
+/// Issue 52: the zenoh service on mutual TLS, in a process limited to 1024
+/// descriptors, takes 1,100 TCP connections that never say a word. A client
+/// with the `operator` certificate still gets a session and reads the laser
+/// within [`ADMISSION_BOUND`] while they are open, and again after they closed;
+/// the service stays up. Without vendor/tls-listener's patches 0002 and 0003 the
+/// silent connections take every descriptor and the operator never gets in.
+#[test]
+fn zenoh_tls_with_1100_silent_connections_and_the_operator_admitted() {
+    use std::os::unix::process::CommandExt;
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    common::certs::ca(d, "ca");
+    for who in ["robot", "operator"] {
+        common::certs::signed(d, who, "ca");
+    }
+    let port = free_port();
+    let conf = d.join("robot.conf");
+    std::fs::write(
+        &conf,
+        format!(
+            "driver simulator\nworld {}\nrobot robot1 1000 1000 90\nprovides encoders\n\
+             provides motors\nprovides laser 180 1\nend_driver\nservice zenoh\nrobot pioneer\n\
+             publishes all\nlisten tls/127.0.0.1:{port}\nscouting off\n\
+             tls ca.pem robot.pem robot.key\nwriters operator\nend_service\n\
+             load_driver simulator\nload_service zenoh\n",
+            common::world_path("simple.world")
+        ),
+    )
+    .unwrap();
+    let mut c = common::jderobot([Path::new("--headless"), &conf]);
+    // SAFETY: only setrlimit, async-signal-safe, between fork and exec.
+    unsafe {
+        c.pre_exec(|| {
+            let lim = libc::rlimit {
+                rlim_cur: 1024,
+                rlim_max: 1024,
+            };
+            match libc::setrlimit(libc::RLIMIT_NOFILE, &lim) {
+                0 => Ok(()),
+                _ => Err(std::io::Error::last_os_error()),
+            }
+        });
+    }
+    let mut robot = Proc::spawn(c);
+    robot.ask_until("echo laser", "the simulator", |l| {
+        l.starts_with("laser clock=")
+    });
+    let first = operator_reads(d, port).expect("the operator, before any silent connection");
+    eprintln!("admitted with no silent connection: {first:?}");
+
+    let addr = std::net::SocketAddr::from(([127, 0, 0, 1], port));
+    let (mut silent, mut failed) = (Vec::new(), 0);
+    for _ in 0..1100 {
+        match std::net::TcpStream::connect_timeout(&addr, Duration::from_millis(200)) {
+            Ok(s) => silent.push(s),
+            Err(_) => failed += 1,
+        }
+    }
+    let open = Instant::now();
+    let during = operator_reads(d, port);
+    let closed_by_service = silent.iter().filter(|s| peer_closed(s)).count();
+    eprintln!(
+        "silent connections: {} made, {failed} failed; the operator admitted {during:?} \
+         after them; {closed_by_service} closed by the service after {:?}",
+        silent.len(),
+        open.elapsed()
+    );
+    drop(silent);
+    let after = operator_reads(d, port);
+    eprintln!("the operator admitted {after:?} after they closed");
+    let alive = robot.child.try_wait().unwrap().is_none();
+    let text = robot.text();
+    let tail: Vec<&str> = text.lines().rev().take(20).collect();
+    assert!(
+        during.is_some() && after.is_some() && alive,
+        "the operator must get in within {ADMISSION_BOUND:?} (during: {during:?}, after: \
+         {after:?}); service alive: {alive}; its last lines:\n{}",
+        tail.join("\n")
+    );
+    robot.ask_until("echo laser", "the robot after all", |l| {
+        l.starts_with("laser clock=")
+    });
+    robot.quit();
+}
+
+/// Whether the peer closed `s` (a read gives end of file at once).
+fn peer_closed(s: &std::net::TcpStream) -> bool {
+    use std::io::Read;
+    s.set_nonblocking(true).unwrap();
+    matches!((&*s).read(&mut [0]), Ok(0))
+}
+
+/// The time a client with the `operator` certificate of `dir` took to open a
+/// session over TLS and read one laser sample, trying again until
+/// [`ADMISSION_BOUND`]; `None` if it did not within it.
+fn operator_reads(dir: &Path, port: u16) -> Option<Duration> {
+    let mut config = zenoh::Config::default();
+    let file = |f: &str| format!("{:?}", dir.join(f).display().to_string());
+    let tls = "transport/link/tls";
+    for (key, value) in [
+        ("mode", r#""client""#.to_string()),
+        ("connect/endpoints", format!(r#"["tls/127.0.0.1:{port}"]"#)),
+        ("listen/endpoints", "[]".into()),
+        ("scouting/multicast/enabled", "false".into()),
+        (&*format!("{tls}/root_ca_certificate"), file("ca.pem")),
+        (&*format!("{tls}/connect_certificate"), file("operator.pem")),
+        (&*format!("{tls}/connect_private_key"), file("operator.key")),
+        (&*format!("{tls}/enable_mtls"), "true".into()),
+    ] {
+        config.insert_json5(key, &value).unwrap();
+    }
+    let t0 = Instant::now();
+    let (tx, rx) = std::sync::mpsc::channel();
+    // In a thread: a handshake the service never answers must not hang the test.
+    std::thread::spawn(move || {
+        while t0.elapsed() < ADMISSION_BOUND {
+            let Ok(s) = zenoh::open(config.clone()).wait() else {
+                std::thread::sleep(Duration::from_millis(200));
+                continue;
+            };
+            let sub = s
+                .declare_subscriber("jderobot/pioneer/laser")
+                .wait()
+                .unwrap();
+            if let Ok(Some(_)) = sub.recv_timeout(ADMISSION_BOUND.saturating_sub(t0.elapsed())) {
+                let _ = tx.send(t0.elapsed());
+            }
+            let _ = s.close().wait();
+            return;
+        }
+    });
+    rx.recv_timeout(ADMISSION_BOUND + Duration::from_secs(1))
+        .ok()
+}

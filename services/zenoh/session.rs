@@ -28,6 +28,14 @@ pub enum Scouting {
     Off,
 }
 
+/// Zenoh's TLS handshake deadline (`tls_handshake_timeout_ms`, Zenoh's default
+/// 10 000) set on every `tls/` endpoint the session listens on that does not set
+/// its own: a connection that has not finished its handshake by then is closed.
+/// With the cap on handshakes in progress (64, vendor/tls-listener patch 0003),
+/// strangers that connect and stay silent hold no descriptor for long
+/// (docs/zenoh.md, "TLS").
+pub const TLS_HANDSHAKE_MS: u64 = 3000;
+
 /// The group of the session's lines in a component's declaration.
 pub const GROUP: &str = "session";
 
@@ -290,6 +298,9 @@ impl SessionConf {
             set(&mut c, &format!("{tls}/connect_private_key"), file(&t.key))?;
             set(&mut c, &format!("{tls}/enable_mtls"), "true".into())?;
         }
+        if let Some(v) = handshake_deadlines(&c) {
+            set(&mut c, "listen/endpoints", v.to_string())?;
+        }
         if !self.writers.is_empty() {
             set(&mut c, "access_control", acl(&self.writers))?;
         }
@@ -345,6 +356,29 @@ fn strings(v: &serde_json::Value, out: &mut Vec<String>) {
         serde_json::Value::Object(o) => o.values().for_each(|x| strings(x, out)),
         _ => {}
     }
+}
+
+/// The listen endpoints with [`TLS_HANDSHAKE_MS`] on each `tls/` one that sets
+/// no deadline of its own (`tls/HOST:PORT#tls_handshake_timeout_ms=3000`, Zenoh's
+/// per-endpoint TLS setting); `None` when there is nothing to change.
+fn handshake_deadlines(c: &Config) -> Option<serde_json::Value> {
+    fn add(v: &mut serde_json::Value) -> bool {
+        match v {
+            serde_json::Value::String(e)
+                if e.starts_with("tls/") && !e.contains("tls_handshake_timeout_ms") =>
+            {
+                let sep = if e.contains('#') { ';' } else { '#' };
+                e.push_str(&format!("{sep}tls_handshake_timeout_ms={TLS_HANDSHAKE_MS}"));
+                true
+            }
+            serde_json::Value::Array(a) => a.iter_mut().map(add).fold(false, |x, y| x | y),
+            serde_json::Value::Object(o) => o.values_mut().map(add).fold(false, |x, y| x | y),
+            _ => false,
+        }
+    }
+    let json = c.get_json("listen/endpoints").ok()?;
+    let mut v = serde_json::from_str(&json).ok()?;
+    add(&mut v).then_some(v)
 }
 
 /// Zenoh's access control for `writers`: by default nothing is allowed; every
@@ -449,6 +483,36 @@ mod tests {
         assert!(listen.contains("tcp/127.0.0.1:0"), "{listen}");
         let q = c.get_json("transport/link/tx/queue/size/data_low").unwrap();
         assert_eq!(q.trim(), FRAME_QUEUE.to_string());
+    }
+
+    #[test]
+    fn tls_listen_endpoints_get_the_handshake_deadline_unless_they_set_one() {
+        let listen = parse("listen tls/127.0.0.1:7447\n")
+            .unwrap()
+            .config()
+            .unwrap();
+        let listen = listen.get_json("listen/endpoints").unwrap();
+        let v: Vec<String> = serde_json::from_str(&listen).unwrap();
+        assert_eq!(
+            v,
+            [format!(
+                "tls/127.0.0.1:7447#tls_handshake_timeout_ms={TLS_HANDSHAKE_MS}"
+            )]
+        );
+        // A config file's endpoint (a conf line's `#` starts a comment) keeps its own.
+        let mut c = Config::default();
+        let file = r#"["tls/127.0.0.1:7447", "tls/127.0.0.1:7448#tls_handshake_timeout_ms=900",
+                       "tcp/127.0.0.1:7449"]"#;
+        c.insert_json5("listen/endpoints", file).unwrap();
+        let v: Vec<String> = serde_json::from_value(handshake_deadlines(&c).unwrap()).unwrap();
+        assert_eq!(
+            v,
+            [
+                format!("tls/127.0.0.1:7447#tls_handshake_timeout_ms={TLS_HANDSHAKE_MS}"),
+                "tls/127.0.0.1:7448#tls_handshake_timeout_ms=900".into(),
+                "tcp/127.0.0.1:7449".into(),
+            ]
+        );
     }
 
     #[test]

@@ -47,7 +47,8 @@ impl Proc {
         Proc::spawn(super::TwoHosts::command(ns, &c))
     }
 
-    fn spawn(mut c: std::process::Command) -> Proc {
+    /// A `jderobot` command the caller made (limits, environment), started.
+    pub fn spawn(mut c: std::process::Command) -> Proc {
         let mut child = c.spawn().expect("start jderobot");
         let out = collect_output(&mut child);
         Proc { child, out }
