@@ -136,6 +136,16 @@ impl WorkerProcess {
         robot: Arc<Robot>,
         memory: Option<u64>,
     ) -> io::Result<WorkerProcess> {
+        // A binary that is not jderobot's, started as a worker, runs its own
+        // main: it must not start workers in turn (each would start another).
+        if std::env::var_os(WORKER_ENV).is_some() {
+            return Err(io::Error::other(format!(
+                "this process was started as a python worker but its binary ({}) does not run \
+                 jderobot::cli::main; name the jderobot binary with \
+                 jderobot::schemas::python::set_worker_exe or $JDEROBOT_EXE",
+                std::env::current_exe().unwrap_or_default().display()
+            )));
+        }
         let board = Arc::new(Board::create()?);
         let (ours, theirs) = UnixStream::pair()?;
         let (life_r, life_w) = std::io::pipe()?;
