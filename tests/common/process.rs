@@ -29,6 +29,36 @@ pub fn collect_output(child: &mut Child) -> Arc<Mutex<String>> {
     out
 }
 
+/// A peer's stdout lines with when each arrived (a thread reads them as they come).
+pub type TimedLines = Arc<Mutex<Vec<(std::time::Instant, String)>>>;
+
+/// Reads `child`'s piped stdout into [`TimedLines`].
+#[allow(dead_code)]
+pub fn timed_lines(child: &mut Child) -> TimedLines {
+    let lines = TimedLines::default();
+    let out = child.stdout.take().expect("a piped stdout");
+    let l = lines.clone();
+    std::thread::spawn(move || {
+        for line in BufReader::new(out).lines().map_while(Result::ok) {
+            l.lock().unwrap().push((std::time::Instant::now(), line));
+        }
+    });
+    lines
+}
+
+/// When the first line `line` arrived at or after `t0`, if one did.
+#[allow(dead_code)]
+pub fn line_after(
+    lines: &TimedLines,
+    t0: std::time::Instant,
+    line: &str,
+) -> Option<std::time::Instant> {
+    let l = lines.lock().unwrap();
+    l.iter()
+        .find(|(at, s)| *at >= t0 && s == line)
+        .map(|(at, _)| *at)
+}
+
 /// A running `jderobot --headless CONF` whose shell we type into.
 pub struct Proc {
     pub child: Child,
