@@ -468,7 +468,8 @@ fn ros2_type<T: Ros2>() -> &'static str {
 /// The writer of the robot's velocity command (`/cmd_vel`, reliable) for
 /// `motors`, and the stop registered with [`estop`]: a zero Twist written by a
 /// second writer of the topic, which only the stop uses (RustDDS's own thread
-/// sends it; nothing the driver's thread holds is waited for).
+/// sends it; nothing the driver's thread holds is waited for, the readers'
+/// acknowledgements at most 50 ms).
 fn motors_output(
     dp: &DomainParticipant,
     publ: &rustdds::Publisher,
@@ -496,7 +497,11 @@ fn motors_output(
     let zero = bytes::Bytes::from(zero);
     let _estop = estop::register(format!("ros2 {topic}"), move || {
         if let Some(w) = stop.try_lock_for(Duration::from_millis(50)) {
-            let _ = w.write(Cdr(zero.clone()), None);
+            // RustDDS's thread sends it: wait (a little) for the readers' acks,
+            // or a suspension (Ctrl+Z) right after could stop it unsent.
+            if w.write(Cdr(zero.clone()), None).is_ok() {
+                let _ = w.wait_for_acknowledgments(Duration::from_millis(50));
+            }
         }
     });
     Ok(CmdVelOut {
