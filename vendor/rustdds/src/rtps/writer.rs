@@ -324,23 +324,10 @@ pub(crate) struct Writer {
   /// jderobot's patch: the readers whose pre-emptive ACKNACK this discovery
   /// writer has answered with a HEARTBEAT (once each, see handle_ack_nack).
   preemptive_answered: BTreeSet<GUID>,
-  /// jderobot's patch: when this user writer last sent a HEARTBEAT with a
-  /// sample (see PIGGYBACK_EVERY).
-  last_piggyback: Option<std::time::Instant>,
   participant_status_sender: StatusChannelSender<DomainParticipantStatusEvent>,
 
   security_plugins: Option<SecurityPluginsHandle>,
 }
-
-/// jderobot's patch: a user writer sends a HEARTBEAT with its DATA at most this
-/// often. Each non-final HEARTBEAT makes every matched reliable reader answer
-/// with an ACKNACK: with one on every sample, 10 reliable readers of a 20 Hz
-/// topic sent the writer 200 ACKNACKs a second, each a datagram to receive and
-/// parse (benches/ros2.rs: 1.9 times Cyclone DDS's CPU). Cyclone DDS piggybacks
-/// its heartbeats on data at a throttled rate too. The periodic HEARTBEAT (1 s)
-/// still comes; a lost sample waits at most this long for its repair to be
-/// asked. Built-in (discovery) writers send one with every sample, as before.
-const PIGGYBACK_EVERY: std::time::Duration = std::time::Duration::from_millis(100);
 
 pub enum WriterCommand {
   // TODO: try to make this more private, like pub(crate)
@@ -441,7 +428,6 @@ impl Writer {
       participant_status_sender,
       ack_waiter: None,
       preemptive_answered: BTreeSet::new(),
-      last_piggyback: None,
 
       security_plugins: i.security_plugins,
     }
@@ -635,13 +621,13 @@ impl Writer {
 
           if self.push_mode {
             // Send data (DATA or DATAFRAGs) and a Heartbeat
-            let send_also_heartbeat = self.piggyback_heartbeat();
             if let Some(cc) = self.history_buffer.get_change(timestamp) {
               let target_reader_opt = match write_options.to_single_reader() {
                 Some(guid) => self.readers.get(&guid), // Sending only to this reader
                 None => None,                          // Sending to all matched readers
               };
 
+              let send_also_heartbeat = true;
               self.send_cache_change(cc, send_also_heartbeat, target_reader_opt);
             } else {
               error!("Lost the cache change that was just added?!");
@@ -714,21 +700,6 @@ impl Writer {
         }
       }
     }
-  }
-
-  /// jderobot's patch: whether the sample being sent carries a HEARTBEAT (see
-  /// PIGGYBACK_EVERY).
-  fn piggyback_heartbeat(&mut self) -> bool {
-    if self.my_guid.entity_id.kind().is_built_in() {
-      return true;
-    }
-    let due = self
-      .last_piggyback
-      .is_none_or(|t| t.elapsed() >= PIGGYBACK_EVERY);
-    if due {
-      self.last_piggyback = Some(std::time::Instant::now());
-    }
-    due
   }
 
   // Returns a boolean telling if the data had to be fragmented
