@@ -443,7 +443,7 @@ fn faults_say_what_is_awaited_what_exists_and_both_types() {
 /// subscriber (DiffDrive's place) timestamps each Twist as it comes.
 #[test]
 fn ending_and_suspending_signals_send_a_zero_twist_within_100_ms() {
-    use common::process::{Proc as Jde, STOP_SIGNALS, line_after, time_to_stop, timed_lines};
+    use common::process::{Proc as Jde, STOP_SIGNALS, line_after, timed_lines};
     let Some(bin) = peer_bin() else {
         return;
     };
@@ -473,32 +473,18 @@ fn ending_and_suspending_signals_send_a_zero_twist_within_100_ms() {
         )
         .unwrap();
         let mut p = Jde::start_alone(&conf);
-        let moving = poll_until(30, || {
-            p.send("set motors v=150 w=0");
-            std::thread::sleep(Duration::from_millis(200));
-            lines
-                .lock()
-                .unwrap()
-                .last()
-                .is_some_and(|l| l.1 == "twist 0.1500 0.0000")
-        });
-        assert!(
-            moving,
-            "no Twist reached the subscriber; jderobot said:\n{}",
-            p.text()
-        );
-        let took = time_to_stop(&mut p, signal, |t0| {
-            line_after(&lines, t0, "twist 0.0000 0.0000")
-        });
-        eprintln!(
-            "gazebo, {}: a zero Twist after {:.1} ms",
-            signal.1,
-            took.as_secs_f64() * 1e3
-        );
-        assert!(
-            took < Duration::from_millis(100),
-            "{}: stop after {took:?}",
-            signal.1
+        common::process::drive_then_signal(
+            &mut p,
+            "gazebo (a zero Twist)",
+            signal,
+            || {
+                lines
+                    .lock()
+                    .unwrap()
+                    .last()
+                    .is_some_and(|l| l.1 == "twist 0.1500 0.0000")
+            },
+            |t0| line_after(&lines, t0, "twist 0.0000 0.0000"),
         );
     }
 }

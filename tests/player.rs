@@ -1048,35 +1048,23 @@ fn ending_and_suspending_signals_send_cmd_vel_zero_within_100_ms() {
         )
         .unwrap();
         let mut p = common::process::Proc::start_alone(&conf);
-        let moving = poll_until(20, || {
-            p.send("set motors v=150 w=0");
-            std::thread::sleep(Duration::from_millis(200));
-            emu.world()
-                .commands
-                .last()
-                .is_some_and(|c| (c.0 - 0.15).abs() < 1e-6)
-        });
-        assert!(
-            moving,
-            "the robot never drove; jderobot said:\n{}",
-            p.text()
-        );
-        let took = common::process::time_to_stop(&mut p, signal, |t0| {
-            emu.world()
-                .commands
-                .iter()
-                .find(|c| c.2 >= t0 && c.0 == 0.0 && c.1 == 0.0)
-                .map(|c| c.2)
-        });
-        eprintln!(
-            "player, {}: CMD_VEL 0 after {:.1} ms",
-            signal.1,
-            took.as_secs_f64() * 1e3
-        );
-        assert!(
-            took < Duration::from_millis(100),
-            "{}: stop after {took:?}",
-            signal.1
+        common::process::drive_then_signal(
+            &mut p,
+            "player (CMD_VEL 0)",
+            signal,
+            || {
+                emu.world()
+                    .commands
+                    .last()
+                    .is_some_and(|c| (c.0 - 0.15).abs() < 1e-6)
+            },
+            |t0| {
+                emu.world()
+                    .commands
+                    .iter()
+                    .find(|c| c.2 >= t0 && c.0 == 0.0 && c.1 == 0.0)
+                    .map(|c| c.2)
+            },
         );
     }
 }

@@ -257,6 +257,42 @@ pub fn time_to_stop(
     at - t0
 }
 
+/// The driver stop tests' one shape: `p` drives its robot through the shell
+/// (`set motors v=150 w=0`) until `moving` says the robot got it, then gets
+/// `signal`; the stop (`stop_after`, as for [`time_to_stop`]) must come within
+/// 100 ms. `what` names the robot and its stop in the messages.
+#[allow(dead_code)]
+pub fn drive_then_signal(
+    p: &mut Proc,
+    what: &str,
+    signal: (i32, &str),
+    mut moving: impl FnMut() -> bool,
+    stop_after: impl FnMut(std::time::Instant) -> Option<std::time::Instant>,
+) -> Duration {
+    let driving = super::poll_until(30, || {
+        p.send("set motors v=150 w=0");
+        std::thread::sleep(Duration::from_millis(200));
+        moving()
+    });
+    assert!(
+        driving,
+        "{what}: the robot never drove; jderobot said:\n{}",
+        p.text()
+    );
+    let took = time_to_stop(p, signal, stop_after);
+    eprintln!(
+        "{what}, {}: stop after {:.1} ms",
+        signal.1,
+        took.as_secs_f64() * 1e3
+    );
+    assert!(
+        took < Duration::from_millis(100),
+        "{what}, {}: stop after {took:?}",
+        signal.1
+    );
+    took
+}
+
 impl Drop for Proc {
     /// A failed test leaves no process behind.
     fn drop(&mut self) {
