@@ -1430,6 +1430,9 @@ fn gui_map_forces_and_the_local_target_reach_the_panel() {
     let o = *s.overlay.lock();
     assert_eq!(o.forces, Some([[1.0, 0.0], [0.0, -0.5], [1.0, -0.5]]));
     assert_eq!(o.local_target, Some([2.0, 0.25]));
+    // The same for the world views (introrob's draws them at the robot).
+    let world = jderobot::world::drawings(&rt.names).expect("world.drawings");
+    assert_eq!(**world.load(), o);
     rt.shutdown();
 }
 

@@ -138,7 +138,7 @@ impl Panel for IntrorobPanel {
         Some("introrob".into())
     }
 
-    fn ui(&mut self, ui: &mut egui::Ui, _rt: &Runtime) {
+    fn ui(&mut self, ui: &mut egui::Ui, rt: &Runtime) {
         self.controls(ui);
         let pose = self.encoders.read().value;
         let laser = self.laser.snapshot();
@@ -168,6 +168,12 @@ impl Panel for IntrorobPanel {
             segs.push((arrow(f.attractive), Color32::from_rgb(0, 160, 0)));
             segs.push((arrow(f.repulsive), Color32::from_rgb(220, 0, 0)));
             segs.push((arrow(f.resultant), Color32::from_rgb(0, 60, 220)));
+        }
+        // A robot program's own (the python schema's GUI.showForces and
+        // showLocalTarget, `world.drawings`): forces as arrows, the longest
+        // 1 m; the local target as a cross.
+        if let Some(d) = crate::world::drawings(&rt.names).map(|d| **d.load()) {
+            program_drawings(&d, &pose, &mut segs);
         }
         for d in &view.drawings {
             let [r, g, b] = d.color;
@@ -249,5 +255,34 @@ impl Panel for IntrorobPanel {
                 }
             });
         });
+    }
+}
+
+/// A robot program's drawings (`world.drawings`) as world segments at the
+/// robot's pose: the car, obstacle and average forces (green, red, blue; the
+/// longest 1 m long) and the local target (m) as a purple cross.
+fn program_drawings(
+    d: &crate::world::Drawings,
+    pose: &Encoders,
+    segs: &mut Vec<([f32; 4], Color32)>,
+) {
+    if let Some(forces) = d.forces {
+        let longest = forces.iter().map(|f| f[0].hypot(f[1])).fold(1e-9, f64::max);
+        let o = relative_to_world(pose, [0.0, 0.0]);
+        for (f, c) in forces.iter().zip([
+            Color32::from_rgb(0, 160, 0),
+            Color32::from_rgb(220, 0, 0),
+            Color32::from_rgb(0, 60, 220),
+        ]) {
+            let k = 1000.0 / longest;
+            let tip = relative_to_world(pose, [(f[0] * k) as f32, (f[1] * k) as f32]);
+            segs.push(([o[0], o[1], tip[0], tip[1]], c));
+        }
+    }
+    if let Some(t) = d.local_target {
+        let c = relative_to_world(pose, [(t[0] * 1000.0) as f32, (t[1] * 1000.0) as f32]);
+        let (k, purple) = (120.0, Color32::from_rgb(160, 60, 200));
+        segs.push(([c[0] - k, c[1] - k, c[0] + k, c[1] + k], purple));
+        segs.push(([c[0] - k, c[1] + k, c[0] + k, c[1] - k], purple));
     }
 }

@@ -736,6 +736,9 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
         per_command: Default::default(),
     });
     let shared = shared(rt, &conf.name);
+    if let Ok(d) = crate::world::export_drawings(&rt.names) {
+        let _ = shared.drawings.set(d);
+    }
     // A re-init (the shell's `init`, `reload`) replaces a running program: ask the
     // old one to give way (its keeper ends it); the new one starts afresh.
     if shared.loads.fetch_add(1, Ordering::AcqRel) > 0 {

@@ -300,11 +300,11 @@ fn read(
                 continue;
             }
             (FromWorker::Forces(f), _) => {
-                shared.overlay.lock().forces = Some(f);
+                shared.draw(|o| o.forces = Some(f));
                 continue;
             }
             (FromWorker::LocalTarget(t), _) => {
-                shared.overlay.lock().local_target = Some(t);
+                shared.draw(|o| o.local_target = Some(t));
                 continue;
             }
             (FromWorker::Command { v, w, end_of_pass }, _) => {

@@ -59,22 +59,19 @@ pub struct Shared {
     /// [`epoch`]: the keeper sees the worker's HAL, GUI or Frequency calls
     /// counted on the board, or a pass ends.
     pub last_call: AtomicU64,
-    /// What the program drew with `GUI.showForces` and `GUI.showLocalTarget`.
+    /// What the program drew with `GUI.showForces` and `GUI.showLocalTarget`,
+    /// also exported as `world.drawings` for the world views (introrob's).
     pub overlay: Mutex<Overlay>,
+    pub drawings: OnceLock<Arc<crate::world::LiveDrawings>>,
     /// `Frequency.tick` calls and the loop's rate it measured (Hz, as f64
     /// bits), for the panel (the keeper copies them from the board).
     pub ticks: AtomicU64,
     pub tick_rate: AtomicU64,
 }
 
-/// The obstacle-avoidance exercise's drawings, in the robot's frame (x ahead, y
-/// left; the program's units).
-#[derive(Default, Clone, Copy, Debug)]
-pub struct Overlay {
-    /// Car (attraction), obstacle (repulsion), average (the sum).
-    pub forces: Option<[[f64; 2]; 3]>,
-    pub local_target: Option<[f64; 2]>,
-}
+/// The obstacle-avoidance exercise's drawings (`GUI.showForces`,
+/// `GUI.showLocalTarget`), as the world's drawings are kept.
+pub type Overlay = crate::world::Drawings;
 
 /// The instant the schema's times count from.
 pub fn epoch() -> Instant {
@@ -150,6 +147,14 @@ impl Shared {
     pub fn touch(&self) {
         self.last_call.store(since_epoch(), Ordering::Release);
     }
+    /// Changes the program's drawings, here and in `world.drawings`.
+    pub fn draw(&self, change: impl FnOnce(&mut Overlay)) {
+        let mut o = self.overlay.lock();
+        change(&mut o);
+        if let Some(d) = self.drawings.get() {
+            d.store(Arc::new(*o));
+        }
+    }
     /// How long since the program last showed it is alive.
     pub fn silent_for(&self) -> Duration {
         Duration::from_nanos(since_epoch().saturating_sub(self.last_call.load(Ordering::Acquire)))
@@ -157,7 +162,7 @@ impl Shared {
     /// A new run: the clock of the silence limit and the ticks start afresh.
     pub fn new_run(&self) {
         self.touch();
-        *self.overlay.lock() = Overlay::default();
+        self.draw(|o| *o = Overlay::default());
         self.ticks.store(0, Ordering::Release);
         self.tick_rate.store(0, Ordering::Release);
     }

@@ -360,6 +360,38 @@ pub const BALLS: &str = "balls";
 
 /// The name of the [`LiveScore`] under [`COMPONENT`].
 pub const SCORE: &str = "score";
+/// The name of the [`LiveDrawings`] under [`COMPONENT`].
+pub const DRAWINGS: &str = "drawings";
+
+/// What a robot's program draws over the world, in the robot's frame (x ahead,
+/// y left): the obstacle-avoidance exercise's car (attraction), obstacle
+/// (repulsion) and average forces (unitless), and its local target (m).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Drawings {
+    pub forces: Option<[[f64; 2]; 3]>,
+    pub local_target: Option<[f64; 2]>,
+}
+
+/// The program's latest drawings, replaced whole; readers never wait.
+pub type LiveDrawings = ArcSwap<Drawings>;
+
+/// Exports empty drawings as `world.drawings`, or gives the ones exported
+/// already (one robot's program draws them).
+pub fn export_drawings(names: &Namespace) -> Result<Arc<LiveDrawings>, NamespaceError> {
+    match drawings(names) {
+        Some(d) => Ok(d),
+        None => names.export(
+            COMPONENT,
+            DRAWINGS,
+            LiveDrawings::from_pointee(Drawings::default()),
+        ),
+    }
+}
+
+/// The exported drawings (`world.drawings`), whoever draws them.
+pub fn drawings(names: &Namespace) -> Option<Arc<LiveDrawings>> {
+    names.import::<LiveDrawings>(COMPONENT, DRAWINGS).ok()
+}
 
 /// The score of the run as it stands, replaced whole by its keeper; readers never
 /// wait.
