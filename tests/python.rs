@@ -1468,3 +1468,55 @@ fn academy_4_programs_paced_with_rospy_run_without_ros() {
     );
     rt.shutdown();
 }
+
+#[test]
+fn a_fork_bomb_stops_at_the_process_limit_and_its_children_end_with_it() {
+    // Linear, not exponential: 300 children that sleep. The worker's control
+    // group holds 256 processes and threads, so a fork fails first
+    // (BlockingIOError), the program fails, and its children are killed.
+    let dir = tempfile::tempdir().unwrap();
+    let (rt, prog) = with_other_schema(
+        dir.path(),
+        "from HAL import HAL\nimport os, time\nHAL.setV(0.2)\nkids = []\ntry:\n    \
+         for i in range(300):\n        pid = os.fork()\n        if pid == 0:\n            \
+         time.sleep(60)\n            os._exit(0)\n        kids.append(pid)\nfinally:\n    \
+         print('forked', len(kids), kids[-1])\n",
+        "",
+    );
+    rt.run("python").unwrap();
+    eventually("it fails", || state(&rt, "python") == State::Slept);
+    let text = console(&shared(&rt, "python"));
+    let line = text
+        .lines()
+        .find_map(|l| l.strip_prefix("forked "))
+        .expect(&text);
+    let (n, last): (usize, u32) = {
+        let mut f = line.split(' ').map(|x| x.parse::<u32>().unwrap());
+        (f.next().unwrap() as usize, f.next().unwrap())
+    };
+    if n == 300 {
+        assert!(
+            std::env::var_os("CI").is_none(),
+            "no process limit here (a control group needs root and a pids controller)"
+        );
+        eprintln!("SKIPPED: the worker could not be put under a process limit here");
+    } else {
+        let err = rt
+            .schema_status("python")
+            .unwrap()
+            .last_error
+            .unwrap_or_default();
+        assert!(
+            err.contains(&format!("{}:7: BlockingIOError", prog.display())),
+            "{err}"
+        );
+        eprintln!("a fork bomb: {n} children, then BlockingIOError");
+    }
+    assert!(
+        poll_until(5, || !alive(last)),
+        "its last child {last} lives on"
+    );
+    assert_eq!(motors(&rt), Motors::default());
+    assert_eq!(state(&rt, "myschema"), State::Winner);
+    rt.shutdown();
+}

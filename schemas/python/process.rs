@@ -5,8 +5,11 @@
 //! The worker runs in a process group of its own (a program's children end
 //! with it; the terminal's Ctrl+C and Ctrl+Z reach jderobot, which stops the
 //! robot, not the program) under a memory limit (`RLIMIT_AS`: past it Python
-//! raises `MemoryError` in the program), with no core dumps. Ending it is
-//! `SIGKILL` to the group, so a stop never waits for the program.
+//! raises `MemoryError` in the program), with no core dumps, and, where
+//! jderobot may make one (root, a pids controller: cgroup v2 or v1), in a
+//! control group of its own that holds at most [`MAX_PROCESSES`] processes and
+//! threads (a fork bomb's `os.fork()` fails there with `BlockingIOError`).
+//! Ending it is `SIGKILL` to the group, so a stop never waits for the program.
 
 use std::{
     io::{self, BufRead, BufReader},
@@ -83,6 +86,58 @@ pub enum Event {
     Ended(String),
 }
 
+/// The most processes and threads a worker and all it starts may hold at once
+/// (its control group's `pids.max`).
+pub const MAX_PROCESSES: u32 = 256;
+
+/// A worker's control group (pids controller), removed when dropped.
+struct PidsGroup(PathBuf);
+
+impl PidsGroup {
+    /// Puts process `pid` in a new control group of at most [`MAX_PROCESSES`],
+    /// under cgroup v2's or v1's pids hierarchy; None where jderobot cannot
+    /// (not root, no pids controller).
+    fn limit(pid: i32) -> Option<PidsGroup> {
+        for root in ["/sys/fs/cgroup", "/sys/fs/cgroup/pids"] {
+            let root = std::path::Path::new(root);
+            if !root.join("cgroup.procs").exists() {
+                continue; // not a cgroup hierarchy (v1 mounts a tmpfs here)
+            }
+            if root.join("cgroup.subtree_control").exists() {
+                // v2: the pids controller enabled for the children.
+                let _ = std::fs::write(root.join("cgroup.subtree_control"), "+pids");
+            }
+            let group = PidsGroup(root.join(format!("jderobot-python-{pid}")));
+            if std::fs::create_dir(&group.0).is_ok()
+                && std::fs::write(group.0.join("pids.max"), MAX_PROCESSES.to_string()).is_ok()
+                && std::fs::write(group.0.join("cgroup.procs"), pid.to_string()).is_ok()
+            {
+                return Some(group);
+            }
+        }
+        None
+    }
+}
+
+impl Drop for PidsGroup {
+    /// Kills what is left in the group (a process that left the worker's
+    /// process group), then removes it.
+    fn drop(&mut self) {
+        if let Ok(procs) = std::fs::read_to_string(self.0.join("cgroup.procs")) {
+            for pid in procs.lines().filter_map(|l| l.trim().parse::<i32>().ok()) {
+                // SAFETY: a signal to a process of the worker's own group.
+                unsafe { libc::kill(pid, libc::SIGKILL) };
+            }
+        }
+        for _ in 0..100 {
+            if std::fs::remove_dir(&self.0).is_ok() || !self.0.exists() {
+                return;
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+    }
+}
+
 /// A running worker.
 pub struct WorkerProcess {
     pid: i32,
@@ -93,6 +148,8 @@ pub struct WorkerProcess {
     /// Set once a program runs: from then the worker's end zeroes the motors.
     driving: Arc<AtomicBool>,
     _lifeline: std::io::PipeWriter,
+    /// Its control group, if one could be made (dropped after the process).
+    pids: Option<PidsGroup>,
 }
 
 /// Moves `fds` to descriptors 3, 4, 5... of the child (between fork and exec:
@@ -180,6 +237,8 @@ impl WorkerProcess {
         drop(cmd);
         drop((theirs, life_r));
         let pid = child.id() as i32;
+        // Before it loads a program, so nothing it starts escapes the limit.
+        let pids = PidsGroup::limit(pid);
         let console = shared.clone();
         std::thread::Builder::new()
             .name(format!("{}-output", shared.name))
@@ -205,6 +264,7 @@ impl WorkerProcess {
             reader: Some(reader),
             driving,
             _lifeline: life_w,
+            pids,
         })
     }
 
@@ -242,6 +302,7 @@ impl WorkerProcess {
         };
         kill_group(self.pid);
         let _ = reader.join();
+        self.pids.take();
     }
 }
 
