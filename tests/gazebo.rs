@@ -436,3 +436,69 @@ fn faults_say_what_is_awaited_what_exists_and_both_types() {
     );
     assert!(poll_until(1, || true));
 }
+
+/// Issue 52: a `jderobot` process driving a Gazebo robot from its shell sends a
+/// zero Twist on its cmd_vel (estop, through each subscriber's connection) when
+/// it gets SIGTERM or SIGTSTP, before it ends or suspends; the C++ gz-transport
+/// subscriber (DiffDrive's place) timestamps each Twist as it comes.
+#[test]
+fn ending_and_suspending_signals_send_a_zero_twist_within_100_ms() {
+    use common::process::{Proc as Jde, STOP_SIGNALS, line_after, time_to_stop, timed_lines};
+    let Some(bin) = peer_bin() else {
+        return;
+    };
+    for signal in STOP_SIGNALS {
+        let part = partition();
+        let mut sub = gz(&bin, &part)
+            .args([
+                "echo-twist",
+                "--topic",
+                "/model/robot9/cmd_vel",
+                "--seconds",
+                "60",
+            ])
+            .stdout(Stdio::piped())
+            .spawn()
+            .unwrap();
+        let lines = timed_lines(&mut sub);
+        let _sub = Proc(sub);
+        let dir = tempfile::tempdir().unwrap();
+        let conf = dir.path().join("gazebo.conf");
+        std::fs::write(
+            &conf,
+            format!(
+                "{}provides motors robot9\nmotors_timeout 60000\nend_driver\nload_driver gazebo\n",
+                head(&part, "gazebo")
+            ),
+        )
+        .unwrap();
+        let mut p = Jde::start_alone(&conf);
+        let moving = poll_until(30, || {
+            p.send("set motors v=150 w=0");
+            std::thread::sleep(Duration::from_millis(200));
+            lines
+                .lock()
+                .unwrap()
+                .last()
+                .is_some_and(|l| l.1 == "twist 0.1500 0.0000")
+        });
+        assert!(
+            moving,
+            "no Twist reached the subscriber; jderobot said:\n{}",
+            p.text()
+        );
+        let took = time_to_stop(&mut p, signal, |t0| {
+            line_after(&lines, t0, "twist 0.0000 0.0000")
+        });
+        eprintln!(
+            "gazebo, {}: a zero Twist after {:.1} ms",
+            signal.1,
+            took.as_secs_f64() * 1e3
+        );
+        assert!(
+            took < Duration::from_millis(100),
+            "{}: stop after {took:?}",
+            signal.1
+        );
+    }
+}

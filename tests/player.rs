@@ -1028,3 +1028,55 @@ fn an_unusable_camera_frame_is_said_once_while_it_lasts() {
     );
     rt.shutdown();
 }
+
+/// Issue 52: a `jderobot` process driving the robot from its shell sends
+/// CMD_VEL 0 (through its estop handle on the connection) when it gets SIGTERM
+/// or SIGTSTP, before it ends or suspends.
+#[test]
+fn ending_and_suspending_signals_send_cmd_vel_zero_within_100_ms() {
+    for signal in common::process::STOP_SIGNALS {
+        let emu = Emulator::start();
+        let dir = tempfile::tempdir().unwrap();
+        let conf = dir.path().join("player.conf");
+        std::fs::write(
+            &conf,
+            format!(
+                "driver player\nhostname 127.0.0.1 port {}\nprovides motors\nmotors_timeout 60000\n\
+                 end_driver\nload_driver player\n",
+                emu.port
+            ),
+        )
+        .unwrap();
+        let mut p = common::process::Proc::start_alone(&conf);
+        let moving = poll_until(20, || {
+            p.send("set motors v=150 w=0");
+            std::thread::sleep(Duration::from_millis(200));
+            emu.world()
+                .commands
+                .last()
+                .is_some_and(|c| (c.0 - 0.15).abs() < 1e-6)
+        });
+        assert!(
+            moving,
+            "the robot never drove; jderobot said:\n{}",
+            p.text()
+        );
+        let took = common::process::time_to_stop(&mut p, signal, |t0| {
+            emu.world()
+                .commands
+                .iter()
+                .find(|c| c.2 >= t0 && c.0 == 0.0 && c.1 == 0.0)
+                .map(|c| c.2)
+        });
+        eprintln!(
+            "player, {}: CMD_VEL 0 after {:.1} ms",
+            signal.1,
+            took.as_secs_f64() * 1e3
+        );
+        assert!(
+            took < Duration::from_millis(100),
+            "{}: stop after {took:?}",
+            signal.1
+        );
+    }
+}

@@ -1531,3 +1531,62 @@ fn the_driver_reads_a_reversed_scan_as_the_forward_one_mounted_from_tf_static() 
         }
     );
 }
+
+/// Issue 52: a `jderobot` process driving a ROS 2 robot from its shell writes a
+/// zero Twist on /cmd_vel (its estop writer) when it gets SIGTERM or SIGTSTP,
+/// before it ends or suspends; a Cyclone reader of /cmd_vel (a robot base's)
+/// timestamps each Twist as it comes.
+#[test]
+fn ending_and_suspending_signals_write_a_zero_twist_within_100_ms() {
+    use common::process::{STOP_SIGNALS, line_after, time_to_stop, timed_lines};
+    use std::time::Duration;
+    let Some(py) = common::python_with("cyclonedds") else {
+        return;
+    };
+    for (k, signal) in STOP_SIGNALS.into_iter().enumerate() {
+        let d = domain(20 + k as u32);
+        // It ends by itself after 60 s (a failed test leaves it no longer).
+        let mut base = peer(&py, "cmds", d, 60);
+        let lines = timed_lines(&mut base);
+        let dir = tempfile::tempdir().unwrap();
+        let conf = dir.path().join("ros2.conf");
+        std::fs::write(
+            &conf,
+            format!(
+                "driver ros2\ninsecure\ndomain {d}\nprovides motors /cmd_vel\nmotors_timeout 60000\n\
+                 end_driver\nload_driver ros2\n"
+            ),
+        )
+        .unwrap();
+        let mut p = Proc::start_alone(&conf);
+        let moving = common::poll_until(30, || {
+            p.send("set motors v=150 w=0");
+            std::thread::sleep(Duration::from_millis(200));
+            lines
+                .lock()
+                .unwrap()
+                .last()
+                .is_some_and(|l| l.1 == "twist 0.1500 0.0000")
+        });
+        assert!(
+            moving,
+            "no Twist reached the peer; jderobot said:\n{}",
+            p.text()
+        );
+        let took = time_to_stop(&mut p, signal, |t0| {
+            line_after(&lines, t0, "twist 0.0000 0.0000")
+        });
+        eprintln!(
+            "ros2, {}: a zero Twist after {:.1} ms",
+            signal.1,
+            took.as_secs_f64() * 1e3
+        );
+        let _ = base.kill();
+        let _ = base.wait();
+        assert!(
+            took < Duration::from_millis(100),
+            "{}: stop after {took:?}",
+            signal.1
+        );
+    }
+}

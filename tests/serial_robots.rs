@@ -21,7 +21,7 @@ use std::{
     time::{Duration, Instant},
 };
 
-use common::{eventually, poll_until, start_conf};
+use common::{eventually, poll_until, process::Proc, start_conf};
 use jderobot::interfaces::{Bumpers, Encoders, Interface, Laser, Motors};
 
 fn roomba_conf(port: &Path, extra: &str) -> String {
@@ -264,90 +264,20 @@ fn a_lost_stream_stops_the_wheels_within_100_ms_of_the_loss() {
     r.rt.shutdown();
 }
 
-/// A `jderobot --headless` process driving the emulated Create 2 at `port` from
-/// its shell (`set motors`), in a process group of its own (so that a stop
-/// signal's default action is not discarded as for an orphaned group).
-struct Process {
-    child: std::process::Child,
-    out: Arc<std::sync::Mutex<String>>,
-}
-
-impl Process {
-    fn start(dir: &Path, port: &Path) -> Process {
-        use std::os::unix::process::CommandExt;
-        let conf = dir.join("roomba.conf");
-        std::fs::write(
-            &conf,
-            roomba_conf(port, "reply_timeout 300\nmotors_timeout 60000\n"),
-        )
-        .unwrap();
-        let mut cmd = common::jderobot([Path::new("--headless"), &conf]);
-        cmd.process_group(0);
-        // SAFETY: setrlimit is async-signal-safe: no core file from the tests
-        // that end it by SIGQUIT or SIGABRT.
-        unsafe {
-            cmd.pre_exec(|| {
-                let none = libc::rlimit {
-                    rlim_cur: 0,
-                    rlim_max: 0,
-                };
-                libc::setrlimit(libc::RLIMIT_CORE, &none);
-                Ok(())
-            });
-        }
-        let mut child = cmd.spawn().expect("start jderobot");
-        let out = common::process::collect_output(&mut child);
-        Process { child, out }
-    }
-    fn send(&mut self, cmd: &str) {
-        use std::io::Write;
-        let stdin = self.child.stdin.as_mut().unwrap();
-        let _ = stdin.write_all(format!("{cmd}\n").as_bytes());
-        let _ = stdin.flush();
-    }
-    fn signal(&self, sig: i32) {
-        // SAFETY: a signal to our own child.
-        unsafe { libc::kill(self.child.id() as i32, sig) };
-    }
-    /// The process's state letter in /proc (R, S, T: stopped, ...).
-    fn state(&self) -> char {
-        let stat =
-            std::fs::read_to_string(format!("/proc/{}/stat", self.child.id())).unwrap_or_default();
-        stat.rsplit(") ")
-            .next()
-            .and_then(|s| s.chars().next())
-            .unwrap_or('?')
-    }
-    fn text(&self) -> String {
-        self.out.lock().unwrap().clone()
-    }
-    fn wait(&mut self, secs: u64) -> Option<std::process::ExitStatus> {
-        let mut status = None;
-        poll_until(secs, || {
-            status = self.child.try_wait().ok().flatten();
-            status.is_some()
-        });
-        status
-    }
-}
-
-impl Drop for Process {
-    fn drop(&mut self) {
-        if self.child.try_wait().ok().flatten().is_none() {
-            let _ = self.child.kill();
-            let _ = self.child.wait();
-        }
-    }
-}
-
 /// Starts the robot and a process driving it at 150 mm/s.
-fn driven(dir: &Path) -> (create2::Create2, Process) {
+fn driven(dir: &Path) -> (create2::Create2, Proc) {
     let port = dir.join("create2");
     let emu = create2::Create2::start(
         &port,
         room::Room::new(20_000.0, 3000.0, 1000.0, 1500.0, 0.0),
     );
-    let mut p = Process::start(dir, &port);
+    let conf = dir.join("roomba.conf");
+    std::fs::write(
+        &conf,
+        roomba_conf(&port, "reply_timeout 300\nmotors_timeout 60000\n"),
+    )
+    .unwrap();
+    let mut p = Proc::start_alone(&conf);
     let moving = poll_until(20, || {
         p.send("set motors v=150 w=0");
         std::thread::sleep(Duration::from_millis(200));
@@ -362,7 +292,7 @@ fn driven(dir: &Path) -> (create2::Create2, Process) {
 }
 
 /// How long after `t0` the first stop arrived (within 5 s).
-fn time_to_stop(emu: &create2::Create2, t0: Instant, what: &str, p: &Process) -> Duration {
+fn time_to_stop(emu: &create2::Create2, t0: Instant, what: &str, p: &Proc) -> Duration {
     let mut stopped = None;
     poll_until(5, || {
         stopped = emu.stop_after(t0);

@@ -69,15 +69,30 @@
 //! that do exist; a topic published under a type we do not read is an error
 //! naming both types. Type names must match exactly for gz-transport to deliver,
 //! so what we publish uses the namespace Gazebo's own topics show (`messages`).
+//!
+//! # The stop
+//! A zero Twist on each motors topic when the driver stops, when Gazebo is lost
+//! (to the subscribers still connected), and whenever the process ends or is
+//! suspended: registered with [`crate::estop`] (SIGINT, SIGTERM, SIGHUP, Ctrl+Z,
+//! an abort and a panic run it first), it is written to each cmd_vel
+//! subscriber's connection through a second handle (the list is swapped in
+//! whole when subscribers change: no lock). The connections are non-blocking and
+//! the stop is one write: were a subscriber's connection full (a subscriber far
+//! behind), the stop is cut short and may split a message, and ZeroMQ drops that
+//! connection. After [`crate::estop::halted`] the driver sends only zero. What
+//! nothing can catch (`kill -9`, power loss) sends nothing: see docs/gazebo.md.
 
 pub mod node;
 pub mod pb;
 pub mod zmtp;
 
 use std::{
+    io::Write,
     sync::Arc,
     time::{Duration, Instant, SystemTime},
 };
+
+use arc_swap::ArcSwap;
 
 use crate::{
     conf::{
@@ -86,6 +101,7 @@ use crate::{
             COLOR, CYCLE, Form, MOTORS_TIMEOUT, Setting, VARCOLOR, choice, float, int, kinds, word,
         },
     },
+    estop,
     interfaces::{
         AnyInterface, COLOR_HEIGHT, COLOR_WIDTH, Encoders, Image, Imu, Interface, Interfaces,
         Kind as IfaceKind, Laser, LaserMap, Motors, PtEncoders, PtMotors, Source, limit,
@@ -401,7 +417,15 @@ struct Gz {
     /// The node's [`changes`](Node::changes) at the last [`resolve`](Self::resolve).
     resolved: Option<u64>,
     name: String,
+    /// The stop's targets (read by [`estop`] without a lock) and what they were
+    /// made from: the subscribers' changes and the Twist's type name.
+    stops: Stops,
+    stops_of: Option<(u64, String)>,
 }
+
+/// Each cmd_vel subscriber's connection (a second handle) and the zero Twists
+/// it is to get, framed.
+type Stops = Arc<ArcSwap<Vec<(std::net::TcpStream, Vec<u8>)>>>;
 
 /// The topic a line that names a model or sensor reads: of the right type, named
 /// `/NAME` (first) or with a part `NAME` (a joint state: `.../model/NAME/joint_state`),
@@ -869,7 +893,8 @@ impl Gz {
             let (Sink::Motors(m), Some(t)) = (&self.lines[k].sink, &self.lines[k].topic) else {
                 continue;
             };
-            let c = if zero {
+            // Once the process is ending (estop::halt), nothing but zero.
+            let c = if zero || estop::halted() {
                 Motors::default()
             } else {
                 let c = m.command(self.gc.motors_timeout);
@@ -883,6 +908,26 @@ impl Gz {
             let fq = self.node.qualify(t);
             self.node.publish(&fq, &ty, &self.twist);
         }
+    }
+
+    /// Makes the stop's targets again when the subscribers or the type changed:
+    /// a zero Twist on each motors line's topic, to each subscriber of it.
+    fn refresh_stops(&mut self) {
+        let key = (self.node.subscriber_changes(), self.msg_type("Twist"));
+        if self.stops_of.as_ref() == Some(&key) {
+            return;
+        }
+        let mut zero = Vec::new();
+        pb::encode_twist(0.0, 0.0, &mut zero);
+        let msgs: Vec<(String, String, Vec<u8>)> = self
+            .lines
+            .iter()
+            .filter(|l| matches!(l.sink, Sink::Motors(_)))
+            .filter_map(|l| l.topic.as_ref())
+            .map(|t| (self.node.qualify(t), key.1.clone(), zero.clone()))
+            .collect();
+        self.stops.store(Arc::new(self.node.stop_targets(&msgs)));
+        self.stops_of = Some(key);
     }
 
     /// Listens up to `max` until every line is served.
@@ -935,6 +980,7 @@ impl runtime::Device for Gz {
             .min(Duration::from_millis(50));
         self.pump(wait);
         self.resolve();
+        self.refresh_stops();
         if !self.all_served() {
             let why = format!(
                 "{}: lost Gazebo (no {}: {}); motors zero, waiting for it to come back",
@@ -975,6 +1021,7 @@ impl runtime::Device for Gz {
 pub struct GazeboDriver {
     sup: Supervisor,
     motors: Vec<Arc<Interface<Motors>>>,
+    _estop: Option<estop::Registration>,
 }
 
 impl Driver for GazeboDriver {
@@ -1078,7 +1125,17 @@ impl GazeboDriver {
             ns,
             resolved: None,
             name: provider.to_string(),
+            stops: Stops::default(),
+            stops_of: None,
         };
+        let _estop = (!motors.is_empty()).then(|| {
+            let stops = gz.stops.clone();
+            estop::register(provider.to_string(), move || {
+                for (s, bytes) in stops.load().iter() {
+                    let _ = (&*s).write_all(bytes);
+                }
+            })
+        });
         let mut how = Supervision {
             name: provider.into(),
             interfaces: all,
@@ -1106,6 +1163,7 @@ impl GazeboDriver {
         Ok(GazeboDriver {
             sup: Supervisor::start(how, gz)?,
             motors,
+            _estop,
         })
     }
 }

@@ -29,7 +29,7 @@
 use std::{
     collections::{BTreeMap, HashMap, HashSet},
     io,
-    net::{Ipv4Addr, SocketAddr, SocketAddrV4, UdpSocket},
+    net::{Ipv4Addr, SocketAddr, SocketAddrV4, TcpStream, UdpSocket},
     os::fd::AsRawFd,
     time::{Duration, Instant},
 };
@@ -361,6 +361,23 @@ impl Node {
             data,
             msg_type.as_bytes(),
         ]);
+    }
+
+    /// For each subscriber of one of `msgs` (topic, type, data): a second handle
+    /// on its connection and those messages as we would publish them
+    /// ([`Pub::stop_targets`]).
+    pub fn stop_targets(&self, msgs: &[(String, String, Vec<u8>)]) -> Vec<(TcpStream, Vec<u8>)> {
+        let addr = self.publ.endpoint.as_bytes();
+        let parts: Vec<Vec<&[u8]>> = msgs
+            .iter()
+            .map(|(t, ty, d)| vec![t.as_bytes(), addr, d.as_slice(), ty.as_bytes()])
+            .collect();
+        self.publ.stop_targets(&parts)
+    }
+
+    /// Counts changes of our subscribers (connected, gone, their topics).
+    pub fn subscriber_changes(&self) -> u64 {
+        self.publ.changes
     }
 
     /// Whether a subscriber is connected to `topic_fq`.

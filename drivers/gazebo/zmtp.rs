@@ -396,6 +396,8 @@ pub struct Pub {
     pub subs: Vec<(Conn, Vec<Vec<u8>>)>,
     /// The cap was said (again once it has room).
     full_said: bool,
+    /// Counts changes of the subscribers and their prefixes.
+    pub changes: u64,
 }
 
 impl Pub {
@@ -408,6 +410,7 @@ impl Pub {
             endpoint,
             subs: Vec::new(),
             full_said: false,
+            changes: 0,
         })
     }
 
@@ -436,6 +439,7 @@ impl Pub {
             }
             if let Ok(c) = Conn::new(s, "PUB", a.to_string()) {
                 self.subs.push((c, Vec::new()));
+                self.changes += 1;
             }
             // A connect flood does not hold the thread: the rest wait for the next call.
             if accepted >= 16 {
@@ -446,6 +450,7 @@ impl Pub {
             self.full_said = false;
         }
         let now = std::time::Instant::now();
+        let before = self.subs.iter().map(|(_, ps)| ps.len()).sum::<usize>() + self.subs.len();
         self.subs.retain_mut(|(c, prefixes)| {
             if c.flush().is_err() || c.greeting_late(now) {
                 return false;
@@ -479,6 +484,34 @@ impl Pub {
                 }
             }
         });
+        let after = self.subs.iter().map(|(_, ps)| ps.len()).sum::<usize>() + self.subs.len();
+        if after != before {
+            self.changes += 1;
+        }
+    }
+
+    /// For each greeted subscriber of one of `msgs`' topics (each message's
+    /// first frame): a second handle on its connection and those messages,
+    /// framed, for a write of their own (the emergency stop).
+    pub fn stop_targets(&self, msgs: &[Vec<&[u8]>]) -> Vec<(TcpStream, Vec<u8>)> {
+        let mut out = Vec::new();
+        for (c, ps) in &self.subs {
+            let mut bytes = Vec::new();
+            for m in msgs {
+                let topic = m.first().copied().unwrap_or_default();
+                if c.framer.ready && ps.iter().any(|p| topic.starts_with(p)) {
+                    for (i, part) in m.iter().enumerate() {
+                        frame(&mut bytes, i + 1 < m.len(), part);
+                    }
+                }
+            }
+            if !bytes.is_empty()
+                && let Ok(s) = c.stream.try_clone()
+            {
+                out.push((s, bytes));
+            }
+        }
+        out
     }
 
     /// Whether some subscriber subscribed to a prefix of `topic`.

@@ -47,6 +47,15 @@
 //! reconnection (a server restart left stale values forever) and no `varcolor`
 //! without a fixed size.
 //!
+//! The stop: a connection of `motors` writes zero (`22`, `23`) when the driver
+//! stops and whenever the process ends or is suspended: registered with
+//! [`crate::estop`] (SIGINT, SIGTERM, SIGHUP, Ctrl+Z, an abort and a panic run
+//! it first), through a second handle on the connection; after
+//! [`crate::estop::halted`] it sends only zero. A connection that closed carries
+//! nothing; jderobot's networkserver sets the motors to zero when the client
+//! that drove them leaves, which covers `kill -9` too (the kernel closes the
+//! socket), but not a power loss of the client's machine.
+//!
 //! System packages: none.
 
 use std::{
@@ -64,6 +73,7 @@ use crate::{
         ComponentConf,
         settings::{self, Form, MOTORS_TIMEOUT, Setting, choice, int, word},
     },
+    estop,
     interfaces::{
         AnyInterface, COLOR_HEIGHT, COLOR_WIDTH, Image, Interface, Interfaces, Source, canonical,
         family, with_kind,
@@ -256,6 +266,8 @@ trait Wired: Send + Sync {
     fn take_limits(&self, code: u32, f: &[&str]) -> Result<Option<u64>, WireError>;
     /// Publishes the zero value (a renewed command whose connection is gone).
     fn zero(&self);
+    /// A renewed command's (motors') zero on the wire: the emergency stop.
+    fn stop(&self) -> Option<Vec<Request>>;
 }
 
 /// A local interface of kind `T` fed or sent by a connection.
@@ -303,6 +315,16 @@ impl<T: Net43> Wired for Remote43<T> {
         {
             let _ = self.iface.publish(T::default());
         }
+    }
+    fn stop(&self) -> Option<Vec<Request>> {
+        matches!(
+            T::ON_WIRE,
+            OnWire::Commanded {
+                keep_alive: true,
+                ..
+            }
+        )
+        .then(|| T::default().requests())
     }
 }
 
@@ -447,6 +469,8 @@ struct Session {
     stream: TcpStream,
     lines: LineReader,
     state: State,
+    /// A renewed command's stop, registered with [`estop`] while connected.
+    _estop: Option<estop::Registration>,
 }
 
 enum State {
@@ -496,6 +520,7 @@ impl runtime::Device for Link {
             },
         };
         Ok(Session {
+            _estop: self.register_stop(&stream),
             stream,
             lines: LineReader::new(MAX_LINE),
             state,
@@ -507,6 +532,7 @@ impl runtime::Device for Link {
             stream,
             lines,
             state,
+            ..
         } = s;
         let r = match (&self.dev, state) {
             (
@@ -563,6 +589,35 @@ impl runtime::Device for Link {
 }
 
 impl Link {
+    /// Registers a renewed command's stop (motors: `22 0.0 0.0`, `23 0.0 0.0`)
+    /// with [`estop`], written through a second handle on the connection (each
+    /// request a line of its own, in one write).
+    fn register_stop(&self, stream: &TcpStream) -> Option<estop::Registration> {
+        let Dev::Wired(w) = &self.dev else {
+            return None;
+        };
+        let mut out = Vec::new();
+        for r in w.stop()? {
+            r.write_to(&mut out);
+        }
+        match stream.try_clone() {
+            Ok(s) => Some(estop::register(
+                format!("networkclient {} {}", self.remote.name, self.where_()),
+                move || {
+                    let _ = (&s).write_all(&out);
+                },
+            )),
+            Err(e) => {
+                tracing::warn!(
+                    "networkclient: no second handle on the connection to {} ({e}): a signal or a panic will not stop {} first",
+                    self.where_(),
+                    self.remote.name
+                );
+                None
+            }
+        }
+    }
+
     fn where_(&self) -> String {
         format!("{}:{}", self.remote.host, self.remote.port)
     }
@@ -787,7 +842,12 @@ impl Link {
         let due = renewed && last_sent.elapsed() >= Duration::from_millis(100);
         if clock != *last_clock || due {
             if clock > 0 || renewed {
-                self.send(s, &w.requests(self.timeout))?;
+                // Once the process is ending (estop::halt), nothing but zero.
+                let reqs = match w.stop().filter(|_| estop::halted()) {
+                    Some(zero) => zero,
+                    None => w.requests(self.timeout),
+                };
+                self.send(s, &reqs)?;
             }
             *last_clock = clock;
             *last_sent = Instant::now();

@@ -239,6 +239,14 @@ impl Conn {
         })
     }
 
+    /// A second handle on the socket, for the emergency stop ([`crate::estop`]):
+    /// it writes whole messages of its own (each in one write, which the kernel
+    /// does not split while the send buffer has room) without the connection's
+    /// buffers.
+    pub fn stop_handle(&self) -> io::Result<TcpStream> {
+        self.stream.try_clone()
+    }
+
     /// Closes the socket.
     pub fn close(&self) {
         let _ = self.stream.shutdown(std::net::Shutdown::Both);

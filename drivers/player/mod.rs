@@ -61,6 +61,16 @@
 //! number out of its documented range: `interfaces::RANGES`) or a camera frame it
 //! cannot use is dropped, the last good value staying, with one log line per
 //! device and change of state.
+//!
+//! # The stop
+//! Each position2d with `motors` gets CMD_VEL 0 when the driver stops, on a
+//! loss the connection may still carry (no data, a malformed message: before
+//! the socket closes; a closed socket carries nothing), and whenever the
+//! process ends or is suspended: while connected, the stop is registered with
+//! [`crate::estop`] (SIGINT, SIGTERM, SIGHUP, Ctrl+Z, an abort and a panic run
+//! it first), written through a second handle on the socket; after
+//! [`crate::estop::halted`] the driver sends only zero. What nothing can catch
+//! (`kill -9`, power loss) sends nothing: see docs/player.md for the server's side.
 
 pub mod client;
 pub mod conf;
@@ -69,12 +79,14 @@ pub mod xdr;
 
 use std::{
     collections::BTreeMap,
+    io::Write,
     sync::Arc,
     time::{Duration, Instant},
 };
 
 use crate::{
     conf::ComponentConf,
+    estop,
     interfaces::{Image, Interface, Interfaces, Motors, Mount, PtMotors, Source, limit},
     runtime::{self, Backoff, Driver, Runtime, Supervision, Supervisor},
 };
@@ -249,6 +261,17 @@ fn dispatch(devices: &mut [Device], h: &Header, p: &[u8]) -> Result<(), XdrError
 }
 
 impl Session {
+    /// CMD_VEL 0 to each position2d with motors, as the bytes of whole messages.
+    fn stop_bytes(&self) -> Vec<u8> {
+        let z = xdr::cmd_vel(0.0, 0.0, 0.0, true);
+        let mut out = Vec::new();
+        for d in self.devices.iter().filter(|d| d.motors.is_some()) {
+            Header::new(d.addr, msg::CMD, sub::POSITION2D_CMD_VEL, 0, z.len()).encode(&mut out);
+            out.extend_from_slice(&z);
+        }
+        out
+    }
+
     fn timeout(&self) -> Duration {
         self.pc.timeout
     }
@@ -311,7 +334,12 @@ impl Session {
             if let Some(m) = &d.motors
                 && d.subscribed
             {
-                let cmd = m.command(self.pc.motors_timeout);
+                // Once the process is ending (estop::halt), nothing but zero.
+                let cmd = if estop::halted() {
+                    Motors::default()
+                } else {
+                    m.command(self.pc.motors_timeout)
+                };
                 let cmd = Motors::limited(cmd.v, cmd.w, MAX_V, MAX_W);
                 let p = xdr::cmd_vel(
                     cmd.v as f64 / 1000.0,
@@ -365,6 +393,8 @@ struct Live {
     awaiting_synch: bool,
     last_pull: Instant,
     silent_since: Instant,
+    /// The connection's stop, registered with [`estop`] while it is open.
+    _estop: Option<estop::Registration>,
 }
 
 impl runtime::Device for Link {
@@ -397,6 +427,7 @@ impl runtime::Device for Link {
         }
         let now = Instant::now();
         Ok(Live {
+            _estop: self.register_stop(&conn),
             conn,
             next_cmd: now,
             awaiting_synch: false,
@@ -407,13 +438,22 @@ impl runtime::Device for Link {
 
     fn step(&mut self, live: &mut Live) -> Result<(), String> {
         self.session.step(live).map_err(|e| {
-            live.conn.close();
             self.lost = Some(format!(
                 "player: lost the Player server at {}: {e}; reconnecting",
                 self.srv
             ));
             e.to_string()
         })
+    }
+
+    /// The connection failed: a last CMD_VEL 0 (it may still carry one: a
+    /// server that fell silent or sent garbage; a closed one carries nothing),
+    /// then it closes.
+    fn lost_session(&mut self, live: Live) {
+        if let Ok(mut s) = live.conn.stop_handle() {
+            let _ = s.write_all(&self.session.stop_bytes());
+        }
+        live.conn.close();
     }
 
     /// The session ended: nothing is subscribed, the motors are zero, and every
@@ -457,6 +497,33 @@ impl runtime::Device for Link {
 }
 
 impl Link {
+    /// Registers the connection's stop with [`estop`]: CMD_VEL 0 to each
+    /// position2d with motors, written through a second handle on the socket
+    /// (within the connection's write timeout).
+    fn register_stop(&self, conn: &Conn) -> Option<estop::Registration> {
+        let bytes = self.session.stop_bytes();
+        if bytes.is_empty() {
+            return None;
+        }
+        match conn.stop_handle() {
+            Ok(s) => {
+                let s = parking_lot::Mutex::new(s);
+                Some(estop::register(format!("player {}", self.srv), move || {
+                    if let Some(mut s) = s.try_lock_for(Duration::from_millis(50)) {
+                        let _ = s.write_all(&bytes);
+                    }
+                }))
+            }
+            Err(e) => {
+                tracing::warn!(
+                    "player: no second handle on the connection to {} ({e}): a signal or a panic will not stop the robot first",
+                    self.srv
+                );
+                None
+            }
+        }
+    }
+
     /// A new connection: binds the lines still waiting, sets the data mode and
     /// subscribes what is used.
     fn begin(&mut self, c: &mut Conn) -> Result<(), ConnError> {

@@ -55,6 +55,15 @@
 //! valid (NaN, infinite, an image whose size disagrees with its data), is refused
 //! with one line and never reaches an interface.
 //!
+//! The stop: a zero Twist on the motors topic when the driver stops, when the
+//! robot is lost (the topic is still written: a robot whose sensors fell silent
+//! may still listen), and whenever the process ends or is suspended: it is
+//! registered with [`crate::estop`] (SIGINT, SIGTERM, SIGHUP, Ctrl+Z, an abort
+//! and a panic run it first) and written by a second writer of the topic; after
+//! [`crate::estop::halted`] the driver sends only zero. What nothing can catch
+//! (`kill -9`, power loss) sends nothing: the robot's base must time out a
+//! silent `/cmd_vel` (docs/ros2.md).
+//!
 //! System packages: none.
 
 use std::{
@@ -76,6 +85,7 @@ use crate::{
         ComponentConf,
         settings::{self, MOTORS_TIMEOUT, Setting, int},
     },
+    estop,
     interfaces::{AnyInterface, Encoders, Image, Imu, Interface, Kind, Laser, Motors, Source},
     mcapfmt::{
         dds::{
@@ -124,8 +134,14 @@ struct Input {
 /// transforms, for a laser's mount); false when the message is refused.
 type Decode = Box<dyn FnMut(&Source, &[u8], &Statics) -> bool + Send>;
 
-/// `motors` and the `/cmd_vel` writer it feeds, with the topic's name.
-type CmdVelOut = (Arc<Interface<Motors>>, DataWriter<Cdr, CdrAdapter>, String);
+/// `motors` and the `/cmd_vel` writer it feeds, with the topic's name and
+/// the stop registered with [`estop`].
+struct CmdVelOut {
+    iface: Arc<Interface<Motors>>,
+    writer: DataWriter<Cdr, CdrAdapter>,
+    topic: String,
+    _estop: estop::Registration,
+}
 
 /// Decodes a message of `topic`: (wall time ns, value); the third argument is
 /// the time of messages without a header, the last the robot's static transforms.
@@ -314,18 +330,23 @@ struct Session {
     sent: Option<(u64, Instant)>,
 }
 
+/// Encodes `m` as a `geometry_msgs/Twist` into `buf`; false if it cannot be.
+fn twist(m: Motors, buf: &mut Vec<u8>) -> bool {
+    let s = crate::interfaces::Sample {
+        clock: 1,
+        stamp: Instant::now(),
+        time: SystemTime::now(),
+        value: m,
+    };
+    ros2::encode("", &s, buf)
+}
+
 impl Robot {
     fn send_motors(&mut self, m: Motors) {
-        if let Some((_, w, _)) = &self.motors {
-            let s = crate::interfaces::Sample {
-                clock: 1,
-                stamp: Instant::now(),
-                time: SystemTime::now(),
-                value: m,
-            };
+        if let Some(o) = &self.motors {
             let mut buf = self.bufs.buffer();
-            if ros2::encode("", &s, &mut buf) {
-                let _ = w.write(self.bufs.message(buf), None);
+            if twist(m, &mut buf) {
+                let _ = o.writer.write(self.bufs.message(buf), None);
             }
         }
     }
@@ -386,9 +407,14 @@ impl crate::supervisor::Device for Robot {
             }
         }
         // Motors: every new command at once, and again every 100 ms.
-        if let Some((iface, _, _)) = &self.motors {
-            let clock = iface.clock();
-            let cmd = iface.command(self.timeout);
+        if let Some(o) = &self.motors {
+            let clock = o.iface.clock();
+            // Once the process is ending (estop::halt), nothing but zero.
+            let cmd = if estop::halted() {
+                Motors::default()
+            } else {
+                o.iface.command(self.timeout)
+            };
             let due = match s.sent {
                 None => true,
                 Some((c, t)) => c != clock || t.elapsed() >= Duration::from_millis(100),
@@ -427,8 +453,8 @@ impl crate::supervisor::Device for Robot {
     }
 
     fn on_loss(&mut self) {
-        if let Some((iface, _, _)) = &self.motors {
-            let _ = iface.publish(Motors::default());
+        if let Some(o) = &self.motors {
+            let _ = o.iface.publish(Motors::default());
         }
         self.send_motors(Motors::default());
     }
@@ -439,7 +465,11 @@ fn ros2_type<T: Ros2>() -> &'static str {
     T::MESSAGE.map(|m| m.dds).unwrap_or("")
 }
 
-/// The writer of the robot's velocity command (`/cmd_vel`, reliable) for `motors`.
+/// The writer of the robot's velocity command (`/cmd_vel`, reliable) for
+/// `motors`, and the stop registered with [`estop`]: a zero Twist written by a
+/// second writer of the topic, which only the stop uses (RustDDS's own thread
+/// sends it; nothing the driver's thread holds is waited for, the readers'
+/// acknowledgements at most 50 ms).
 fn motors_output(
     dp: &DomainParticipant,
     publ: &rustdds::Publisher,
@@ -455,10 +485,31 @@ fn motors_output(
             TopicKind::NoKey,
         )
         .map_err(|e| anyhow::anyhow!("driver ros2: topic {topic}: {e}"))?;
-    let w = publ
-        .create_datawriter_no_key::<Cdr, CdrAdapter>(&t, Some(reliable_qos(5)))
-        .map_err(|e| anyhow::anyhow!("driver ros2: a writer of {topic}: {e}"))?;
-    Ok((motors, w, topic))
+    let writer = || {
+        publ.create_datawriter_no_key::<Cdr, CdrAdapter>(&t, Some(reliable_qos(5)))
+            .map_err(|e| anyhow::anyhow!("driver ros2: a writer of {topic}: {e}"))
+    };
+    let (w, stop) = (writer()?, parking_lot::Mutex::new(writer()?));
+    let mut zero = Vec::new();
+    if !twist(Motors::default(), &mut zero) {
+        anyhow::bail!("driver ros2: cannot encode a zero Twist for {topic}");
+    }
+    let zero = bytes::Bytes::from(zero);
+    let _estop = estop::register(format!("ros2 {topic}"), move || {
+        if let Some(w) = stop.try_lock_for(Duration::from_millis(50)) {
+            // RustDDS's thread sends it: wait (a little) for the readers' acks,
+            // or a suspension (Ctrl+Z) right after could stop it unsent.
+            if w.write(Cdr(zero.clone()), None).is_ok() {
+                let _ = w.wait_for_acknowledgments(Duration::from_millis(50));
+            }
+        }
+    });
+    Ok(CmdVelOut {
+        iface: motors,
+        writer: w,
+        topic,
+        _estop,
+    })
 }
 
 /// What the `provides` lines make: the readers that feed the interfaces, the
@@ -576,7 +627,7 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
         waits.join(", "),
         motors
             .as_ref()
-            .map(|m| format!(", writes {}", m.2))
+            .map(|m| format!(", writes {}", m.topic))
             .unwrap_or_default()
     );
     let robot = Robot {

@@ -29,6 +29,36 @@ pub fn collect_output(child: &mut Child) -> Arc<Mutex<String>> {
     out
 }
 
+/// A peer's stdout lines with when each arrived (a thread reads them as they come).
+pub type TimedLines = Arc<Mutex<Vec<(std::time::Instant, String)>>>;
+
+/// Reads `child`'s piped stdout into [`TimedLines`].
+#[allow(dead_code)]
+pub fn timed_lines(child: &mut Child) -> TimedLines {
+    let lines = TimedLines::default();
+    let out = child.stdout.take().expect("a piped stdout");
+    let l = lines.clone();
+    std::thread::spawn(move || {
+        for line in BufReader::new(out).lines().map_while(Result::ok) {
+            l.lock().unwrap().push((std::time::Instant::now(), line));
+        }
+    });
+    lines
+}
+
+/// When the first line `line` arrived at or after `t0`, if one did.
+#[allow(dead_code)]
+pub fn line_after(
+    lines: &TimedLines,
+    t0: std::time::Instant,
+    line: &str,
+) -> Option<std::time::Instant> {
+    let l = lines.lock().unwrap();
+    l.iter()
+        .find(|(at, s)| *at >= t0 && s == line)
+        .map(|(at, _)| *at)
+}
+
 /// A running `jderobot --headless CONF` whose shell we type into.
 pub struct Proc {
     pub child: Child,
@@ -47,6 +77,29 @@ impl Proc {
         Proc::spawn(super::TwoHosts::command(ns, &c))
     }
 
+    /// `jderobot --headless CONF` in a process group of its own (so that a stop
+    /// signal's default action is not discarded as for an orphaned group) and
+    /// without core files (tests that end it by SIGQUIT or SIGABRT), for tests
+    /// that [`signal`](Proc::signal) it.
+    #[allow(dead_code)]
+    pub fn start_alone(conf: &Path) -> Proc {
+        use std::os::unix::process::CommandExt;
+        let mut c = super::jderobot([Path::new("--headless"), conf]);
+        c.process_group(0);
+        // SAFETY: setrlimit is async-signal-safe.
+        unsafe {
+            c.pre_exec(|| {
+                let none = libc::rlimit {
+                    rlim_cur: 0,
+                    rlim_max: 0,
+                };
+                libc::setrlimit(libc::RLIMIT_CORE, &none);
+                Ok(())
+            });
+        }
+        Proc::spawn(c)
+    }
+
     /// A `jderobot` command the caller made (limits, environment), started.
     pub fn spawn(mut c: std::process::Command) -> Proc {
         let mut child = c.spawn().expect("start jderobot");
@@ -62,6 +115,35 @@ impl Proc {
 
     pub fn text(&self) -> String {
         self.out.lock().unwrap().clone()
+    }
+
+    /// Sends `sig` to the process.
+    #[allow(dead_code)]
+    pub fn signal(&self, sig: i32) {
+        // SAFETY: a signal to our own child.
+        unsafe { libc::kill(self.child.id() as i32, sig) };
+    }
+
+    /// The process's state letter in /proc (R, S, T: stopped, ...).
+    #[allow(dead_code)]
+    pub fn state(&self) -> char {
+        let stat =
+            std::fs::read_to_string(format!("/proc/{}/stat", self.child.id())).unwrap_or_default();
+        stat.rsplit(") ")
+            .next()
+            .and_then(|s| s.chars().next())
+            .unwrap_or('?')
+    }
+
+    /// Its exit status, if it ends within `secs`.
+    #[allow(dead_code)]
+    pub fn wait(&mut self, secs: u64) -> Option<std::process::ExitStatus> {
+        let mut status = None;
+        super::poll_until(secs, || {
+            status = self.child.try_wait().ok().flatten();
+            status.is_some()
+        });
+        status
     }
 
     /// Types `cmd` until a line of its answer (after this call) satisfies `ok`;
@@ -124,6 +206,55 @@ impl Proc {
         }
         status.unwrap()
     }
+}
+
+/// The signals a robot driver's stop is tested with (issue 52): one that ends
+/// the process and one that suspends it.
+#[allow(dead_code)]
+pub const STOP_SIGNALS: [(i32, &str); 2] = [(libc::SIGTERM, "SIGTERM"), (libc::SIGTSTP, "SIGTSTP")];
+
+/// Sends `sig` (one of [`STOP_SIGNALS`]) to `p`, a process driving a robot, and
+/// returns how long after it the robot got its stop (`stop_after(t0)`: when the
+/// first stop after `t0` arrived; polled for 5 s). Then SIGTERM must end the
+/// process with 128 + 15; SIGTSTP must suspend it, and after SIGCONT it must quit
+/// normally.
+#[allow(dead_code)]
+pub fn time_to_stop(
+    p: &mut Proc,
+    (sig, name): (i32, &str),
+    mut stop_after: impl FnMut(std::time::Instant) -> Option<std::time::Instant>,
+) -> Duration {
+    let t0 = std::time::Instant::now();
+    p.signal(sig);
+    let mut stopped = None;
+    super::poll_until(5, || {
+        stopped = stop_after(t0);
+        stopped.is_some()
+    });
+    let at =
+        stopped.unwrap_or_else(|| panic!("{name}: no stop in 5 s; jderobot said:\n{}", p.text()));
+    if sig == libc::SIGTSTP {
+        assert!(
+            super::poll_until(5, || p.state() == 'T'),
+            "{name}: not suspended (state {}); jderobot said:\n{}",
+            p.state(),
+            p.text()
+        );
+        p.signal(libc::SIGCONT);
+        assert!(super::poll_until(5, || p.state() != 'T'), "not resumed");
+        p.send("quit");
+    }
+    let status = p
+        .wait(20)
+        .unwrap_or_else(|| panic!("{name}: jderobot did not end; it said:\n{}", p.text()));
+    let code = if sig == libc::SIGTSTP { 0 } else { 128 + sig };
+    assert_eq!(
+        status.code(),
+        Some(code),
+        "{name}; jderobot said:\n{}",
+        p.text()
+    );
+    at - t0
 }
 
 impl Drop for Proc {

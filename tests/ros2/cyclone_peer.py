@@ -20,6 +20,8 @@ in XCDR1 as rmw_cyclonedds does.
     cyclone_peer.py clock DOMAIN SECS    read /clock (rclcpp's ClockQoS) and /scan's stamps
     cyclone_peer.py stall DOMAIN SECS    stall reliable readers of /odom and /tf (never
                                          take, room for 1 sample) while sending /cmd_vel
+    cyclone_peer.py cmds DOMAIN SECS     read /cmd_vel (a robot base's reliable reader); print
+                                         each Twist as it comes: "twist LX AZ"
     cyclone_peer.py frames DOMAIN SECS   read the frame ids of /scan, /odom, /tf, /tf_static,
                                          the camera and /imu
     cyclone_peer.py images DOMAIN SECS   publish a 3x2 image in each 8-bit encoding, rows
@@ -28,7 +30,7 @@ in XCDR1 as rmw_cyclonedds does.
                                          180 deg), a scan from +90 to -90 deg on /scan and
                                          the same scan from -90 to +90 deg on /scan_fwd
 
-Prints one JSON line.
+Prints one JSON line (but `cmds`).
 """
 import json
 import math
@@ -350,6 +352,17 @@ def clock(dp, secs):
     print(json.dumps(got))
 
 
+def cmds(dp, secs):
+    """A robot base's /cmd_vel reader: each Twist printed as it arrives, at once."""
+    cmd_r = DataReader(dp, Topic(dp, "rt/cmd_vel", Twist, qos=DEFAULT), qos=DEFAULT)
+    print("ready", flush=True)
+    end = time.time() + secs
+    while time.time() < end:
+        for m in cmd_r.take(N=20):
+            print("twist %.4f %.4f" % (m.linear.x, m.angular.z), flush=True)
+        time.sleep(0.001)
+
+
 def stall(dp, secs):
     """A slow reliable subscriber: readers of /odom and /tf with room for one
     sample that never take (DDS flow control then holds the writer back), while
@@ -487,7 +500,7 @@ def main():
         camera(dp, secs, sys.argv[4])
     else:
         {"listen": listen, "robot": robot, "bad": bad, "many": many, "clock": clock,
-         "stall": stall, "scans": scans, "frames": frames, "images": images,
+         "stall": stall, "cmds": cmds, "scans": scans, "frames": frames, "images": images,
          "mounted": mounted}[mode](dp, secs)
 
 
