@@ -145,7 +145,11 @@ fn main() {
                 starts.push(t.elapsed().as_secs_f64() * 1e3);
             }
         }
-        while names.iter().zip(&before).any(|(n, b)| iterations(n) < b + 3) {
+        while names
+            .iter()
+            .zip(&before)
+            .any(|(n, b)| iterations(n) < b + 3)
+        {
             std::thread::sleep(Duration::from_millis(1));
         }
         let start: Vec<u64> = names
