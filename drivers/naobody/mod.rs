@@ -50,6 +50,11 @@
 //!   within `reply_timeout`, garbage on the socket) marks the interfaces stale;
 //!   on reconnection the walk is stopped (`stopMove`) until a new command, and
 //!   cameras are subscribed again.
+//! - The walk's emergency stop: `stopMove`, registered with [`crate::estop`]
+//!   while a session lasts (SIGINT, SIGTERM, SIGHUP, Ctrl+Z, an abort and a
+//!   panic run it first), sent through a second handle on the session's socket
+//!   ([`qi::Detached`]); after [`crate::estop::halted`] the driver sends no walk
+//!   or head command, only `stopMove`.
 //! - The body thread wakes on every motors or head command (no polling delay) and
 //!   reads the sensors every `poll` ms.
 //!
@@ -58,7 +63,10 @@
 pub mod qi;
 
 use std::{
-    sync::Arc,
+    sync::{
+        Arc,
+        atomic::{AtomicBool, Ordering},
+    },
     time::{Duration, Instant},
 };
 
@@ -67,6 +75,7 @@ use crate::{
         ComponentConf, ConfLine,
         settings::{self, Form, MOTORS_TIMEOUT, Setting, choice, float, int, kinds, pixels, word},
     },
+    estop,
     interfaces::{
         AnyInterface, Bumpers, COLOR_HEIGHT, COLOR_WIDTH, Encoders, Image, Interface, Kind, Motors,
         PtEncoders, PtMotors, Sonars, Source, Watch, limit,
@@ -652,6 +661,26 @@ fn memory_services(
     Ok((Some(mem), sonar))
 }
 
+/// Registers the walk's stop (`ALMotion.stopMove`, a [`qi::Detached`] call on
+/// the session's socket) with [`estop`]; the flag it returns is set each time
+/// the stop runs.
+fn register_stop(
+    qi: &Session,
+    motion: &Service,
+    url: &str,
+) -> Result<(estop::Registration, Arc<AtomicBool>), String> {
+    let stop = qi
+        .detached(motion, "stopMove", &[])
+        .map_err(|e| format!("{url}: the emergency stop: {e}"))?;
+    let ran = Arc::new(AtomicBool::new(false));
+    let flag = ran.clone();
+    let registration = estop::register(format!("naobody {url}"), move || {
+        let _ = stop.send();
+        flag.store(true, Ordering::Release);
+    });
+    Ok((registration, ran))
+}
+
 struct BodySession {
     qi: Session,
     motion: Option<Service>,
@@ -664,6 +693,9 @@ struct BodySession {
     head_clock: Option<u64>,
     head_sent: [Option<(f32, f32)>; 2],
     next_poll: Instant,
+    /// The walk's emergency stop, registered with [`estop`] while the session
+    /// lasts, and whether it ran since the walk was last sent.
+    estop: Option<(estop::Registration, Arc<AtomicBool>)>,
 }
 
 impl Body {
@@ -698,6 +730,7 @@ impl Body {
             head_clock: None,
             head_sent: [None, None],
             next_poll: Instant::now(),
+            estop: None,
         };
         if let Some(m) = s.motion.clone() {
             if c.motors {
@@ -706,6 +739,7 @@ impl Body {
                 s.qi.call(&m, "stopMove", &[])
                     .map_err(|e| format!("{url}: {e}"))?;
                 s.sent = Some((0.0, 0.0));
+                s.estop = Some(register_stop(&s.qi, &m, &url)?);
             }
             if c.ptmotors {
                 self.read_head_limits(&mut s, &m, &url)?;
@@ -775,9 +809,21 @@ impl Body {
 
     fn serve(&mut self, s: &mut BodySession) -> Result<(), QiError> {
         let c = self.conf.clone();
+        if let Some((_, ran)) = &s.estop
+            && ran.swap(false, Ordering::AcqRel)
+        {
+            // The emergency stop stopped the walk (a suspension): what the
+            // controller commands now is sent again.
+            s.sent = Some((0.0, 0.0));
+        }
         if let (Some(mi), Some(m)) = (&self.motors, s.motion.clone()) {
             let cmd = mi.command(c.motors_timeout);
-            let want = walk_args(cmd.v, cmd.w, c.max_v, c.max_w, s.walk == Walk::MoveToward);
+            // Once the process is ending (estop::halt), nothing but stopMove.
+            let want = if estop::halted() {
+                (0.0, 0.0)
+            } else {
+                walk_args(cmd.v, cmd.w, c.max_v, c.max_w, s.walk == Walk::MoveToward)
+            };
             if s.sent != Some(want) {
                 if want == (0.0, 0.0) {
                     s.qi.call(&m, "stopMove", &[])?;
@@ -801,7 +847,11 @@ impl Body {
                 s.sent = Some(want);
             }
         }
-        if let (Some(p), Some(m), Some((yaw, pitch))) = (&self.ptm, s.motion.clone(), self.limits) {
+        // Once the process is ending, the head is not moved either.
+        if !estop::halted()
+            && let (Some(p), Some(m), Some((yaw, pitch))) =
+                (&self.ptm, s.motion.clone(), self.limits)
+        {
             let clock = p.clock();
             if s.head_clock != Some(clock) {
                 s.head_clock = Some(clock);
