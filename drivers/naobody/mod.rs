@@ -54,7 +54,8 @@
 //!   while a session lasts (SIGINT, SIGTERM, SIGHUP, Ctrl+Z, an abort and a
 //!   panic run it first), sent through a second handle on the session's socket
 //!   ([`qi::Detached`]); after [`crate::estop::halted`] the driver sends no walk
-//!   or head command, only `stopMove`.
+//!   or head command, only `stopMove`; after a suspension the robot walks again
+//!   on the next `motors` command.
 //! - The body thread wakes on every motors or head command (no polling delay) and
 //!   reads the sensors every `poll` ms.
 //!
@@ -696,6 +697,9 @@ struct BodySession {
     /// The walk's emergency stop, registered with [`estop`] while the session
     /// lasts, and whether it ran since the walk was last sent.
     estop: Option<(estop::Registration, Arc<AtomicBool>)>,
+    /// The `motors` clock when the emergency stop last ran (a suspension): the
+    /// robot stands until a newer command.
+    stood_at: Option<u64>,
 }
 
 impl Body {
@@ -731,6 +735,7 @@ impl Body {
             head_sent: [None, None],
             next_poll: Instant::now(),
             estop: None,
+            stood_at: None,
         };
         if let Some(m) = s.motion.clone() {
             if c.motors {
@@ -809,17 +814,19 @@ impl Body {
 
     fn serve(&mut self, s: &mut BodySession) -> Result<(), QiError> {
         let c = self.conf.clone();
-        if let Some((_, ran)) = &s.estop
+        if let (Some((_, ran)), Some(mi)) = (&s.estop, &self.motors)
             && ran.swap(false, Ordering::AcqRel)
         {
-            // The emergency stop stopped the walk (a suspension): what the
-            // controller commands now is sent again.
+            // The emergency stop stopped the walk (a suspension): it walks again
+            // on the controller's next command, not on the one it had (which
+            // could go out before the process is suspended).
             s.sent = Some((0.0, 0.0));
+            s.stood_at = Some(mi.clock());
         }
         if let (Some(mi), Some(m)) = (&self.motors, s.motion.clone()) {
             let cmd = mi.command(c.motors_timeout);
             // Once the process is ending (estop::halt), nothing but stopMove.
-            let want = if estop::halted() {
+            let want = if estop::halted() || s.stood_at == Some(mi.clock()) {
                 (0.0, 0.0)
             } else {
                 walk_args(cmd.v, cmd.w, c.max_v, c.max_w, s.walk == Walk::MoveToward)
