@@ -170,6 +170,80 @@ fn the_walk_turns_and_stops_on_zero_and_on_timeout() {
     rt.shutdown();
 }
 
+/// A `jderobot` process (signalled alone) walking the stand-in's NAO from its
+/// shell at 80 mm/s, with a command that does not expire.
+fn walking(py: &Path) -> (Peer, common::process::Proc, tempfile::TempDir) {
+    let peer = Peer::start(py, free_port(), &[]);
+    let dir = tempfile::tempdir().unwrap();
+    let conf = dir.path().join("nao.conf");
+    std::fs::write(
+        &conf,
+        naobody(peer.port, "provides motors\nmotors_timeout 60000\n"),
+    )
+    .unwrap();
+    let mut p = common::process::Proc::start_alone(&conf);
+    let walks = poll_until(20, || {
+        p.send("set motors v=80 w=0");
+        std::thread::sleep(Duration::from_millis(200));
+        peer.count("MOVE 0.080000") > 0
+    });
+    assert!(
+        walks,
+        "the robot never walked; jderobot said:\n{}\nthe stand-in:\n{}",
+        p.text(),
+        peer.text()
+    );
+    (peer, p, dir)
+}
+
+/// Issue 52: a `jderobot` process walking the NAO from its shell sends
+/// `ALMotion.stopMove` (through its estop handle on the session's socket) when
+/// it gets SIGTERM or SIGTSTP, before it ends or suspends. The time is when the
+/// stand-in's trace line reached the test (an upper bound).
+#[test]
+fn ending_and_suspending_signals_send_stop_move_within_100_ms() {
+    let Some(py) = python() else { return };
+    for signal in common::process::STOP_SIGNALS {
+        let (peer, mut p, _dir) = walking(&py);
+        let stops = peer.count("CALL stopMove");
+        let took = common::process::time_to_stop(&mut p, signal, |_| {
+            (peer.count("CALL stopMove") > stops).then(Instant::now)
+        });
+        eprintln!(
+            "naobody, {}: stopMove after {:.1} ms",
+            signal.1,
+            took.as_secs_f64() * 1e3
+        );
+        assert!(
+            took < Duration::from_millis(100),
+            "{}: stop after {took:?}",
+            signal.1
+        );
+    }
+}
+
+/// Issue 52: after Ctrl+Z (stopMove) and `fg`, the NAO stands until the
+/// controller's next command: the one it had is not sent again.
+#[test]
+fn after_a_suspension_the_nao_walks_on_the_next_command_only() {
+    let Some(py) = python() else { return };
+    let (peer, mut p, _dir) = walking(&py);
+    let stops = peer.count("CALL stopMove");
+    p.signal(libc::SIGTSTP);
+    eventually("stopMove", || peer.count("CALL stopMove") > stops);
+    eventually("suspended", || p.state() == 'T');
+    p.signal(libc::SIGCONT);
+    eventually("resumed", || p.state() != 'T');
+    let moves = peer.count("MOVE ");
+    std::thread::sleep(Duration::from_millis(500));
+    assert_eq!(peer.count("MOVE "), moves, "stands:\n{}", peer.text());
+    p.send("set motors v=60 w=0");
+    eventually("walks on the next command", || {
+        peer.count("MOVE 0.060000") > 0
+    });
+    assert!(p.quit().success());
+}
+
 #[test]
 fn the_head_follows_ptmotors_within_the_robots_limits() {
     let Some(py) = python() else { return };

@@ -520,6 +520,56 @@ fn our_client_against_a_4_3_server() {
     });
 }
 
+/// Issue 52: a `jderobot` process driving a 4.3 robot from its shell sends
+/// `22 0.0 0.0` and `23 0.0 0.0` (through its estop handle on the motors
+/// connection) when it gets SIGTERM or SIGTSTP, before it ends or suspends. The
+/// time is when the test saw both lines at the server (polled every 2 ms: an
+/// upper bound).
+#[test]
+fn ending_and_suspending_signals_send_motors_zero_within_100_ms() {
+    for signal in common::process::STOP_SIGNALS {
+        let emu = Server43::start(0, robot43());
+        let dir = tempfile::tempdir().unwrap();
+        let conf = dir.path().join("client.conf");
+        std::fs::write(
+            &conf,
+            format!(
+                "driver networkclient\nprovides motors 127.0.0.1 {}\nmotors_timeout 60000\n\
+                 end_driver\nload_driver networkclient\n",
+                emu.addr.port()
+            ),
+        )
+        .unwrap();
+        let mut p = common::process::Proc::start_alone(&conf);
+        let driving = poll_until(20, || {
+            p.send("set motors v=150 w=10");
+            std::thread::sleep(Duration::from_millis(200));
+            emu.got("22 150.0 0.0") && emu.got("23 10.0 0.0")
+        });
+        assert!(
+            driving,
+            "the robot never drove; jderobot said:\n{}",
+            p.text()
+        );
+        let zeros = || (emu.count("22 0.0 0.0"), emu.count("23 0.0 0.0"));
+        let before = zeros();
+        let took = common::process::time_to_stop(&mut p, signal, |_| {
+            let now = zeros();
+            (now.0 > before.0 && now.1 > before.1).then(std::time::Instant::now)
+        });
+        eprintln!(
+            "networkclient, {}: 22/23 zero after {:.1} ms",
+            signal.1,
+            took.as_secs_f64() * 1e3
+        );
+        assert!(
+            took < Duration::from_millis(100),
+            "{}: stop after {took:?}",
+            signal.1
+        );
+    }
+}
+
 #[test]
 fn a_frame_of_the_wrong_size_is_an_error_naming_both_sizes() {
     // Network id 1 is 640x480, but colorA is 320x240 here.

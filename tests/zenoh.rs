@@ -365,6 +365,67 @@ fn a_command_written_before_the_robot_came_reaches_it_when_it_does() {
     rt.shutdown();
 }
 
+/// Issue 52: a `jderobot` process driving a robot's `motors` over Zenoh from its
+/// shell puts a zero command (its estop stop, straight on the session) when it
+/// gets SIGTERM or SIGTSTP, before it ends or suspends. The robot is the test's
+/// own session, which times each sample as it arrives.
+#[test]
+fn ending_and_suspending_signals_put_motors_zero_within_100_ms() {
+    for signal in common::process::STOP_SIGNALS {
+        let dir = tempfile::tempdir().unwrap();
+        let port = free_port();
+        let conf = dir.path().join("controller.conf");
+        std::fs::write(
+            &conf,
+            format!(
+                "driver zenoh\nrobot pioneer\nprovides motors\nlisten tcp/127.0.0.1:{port}\n\
+                 scouting off\nend_driver\nload_driver zenoh\n"
+            ),
+        )
+        .unwrap();
+        let mut p = Proc::start_alone(&conf);
+        let session = raw_session(port);
+        let samples = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+        let _sub = {
+            let samples = samples.clone();
+            session
+                .declare_subscriber("jderobot/pioneer/motors")
+                .callback(move |s| {
+                    let b = s.payload().to_bytes().into_owned();
+                    samples.lock().unwrap().push((Instant::now(), b));
+                })
+                .wait()
+                .unwrap()
+        };
+        let driving = common::poll_until(20, || {
+            p.send("set motors v=150 w=10");
+            std::thread::sleep(Duration::from_millis(200));
+            let drive = floats(&[150.0, 10.0]);
+            samples.lock().unwrap().iter().any(|s| s.1 == drive)
+        });
+        assert!(
+            driving,
+            "the robot never drove; jderobot said:\n{}",
+            p.text()
+        );
+        let took = common::process::time_to_stop(&mut p, signal, |t0| {
+            let zero = floats(&[0.0, 0.0]);
+            let s = samples.lock().unwrap();
+            s.iter().find(|s| s.0 >= t0 && s.1 == zero).map(|s| s.0)
+        });
+        eprintln!(
+            "zenoh, {}: motors zero after {:.1} ms",
+            signal.1,
+            took.as_secs_f64() * 1e3
+        );
+        assert!(
+            took < Duration::from_millis(100),
+            "{}: stop after {took:?}",
+            signal.1
+        );
+    }
+}
+
 fn floats(v: &[f32]) -> Vec<u8> {
     v.iter().flat_map(|f| f.to_le_bytes()).collect()
 }

@@ -50,6 +50,12 @@
 //!   within `reply_timeout`, garbage on the socket) marks the interfaces stale;
 //!   on reconnection the walk is stopped (`stopMove`) until a new command, and
 //!   cameras are subscribed again.
+//! - The walk's emergency stop: `stopMove`, registered with [`crate::estop`]
+//!   while a session lasts (SIGINT, SIGTERM, SIGHUP, Ctrl+Z, an abort and a
+//!   panic run it first), sent through a second handle on the session's socket
+//!   ([`qi::Detached`]); after [`crate::estop::halted`] the driver sends no walk
+//!   or head command, only `stopMove`; after a suspension the robot walks again
+//!   on the next `motors` command.
 //! - The body thread wakes on every motors or head command (no polling delay) and
 //!   reads the sensors every `poll` ms.
 //!
@@ -58,7 +64,10 @@
 pub mod qi;
 
 use std::{
-    sync::Arc,
+    sync::{
+        Arc,
+        atomic::{AtomicBool, Ordering},
+    },
     time::{Duration, Instant},
 };
 
@@ -67,6 +76,7 @@ use crate::{
         ComponentConf, ConfLine,
         settings::{self, Form, MOTORS_TIMEOUT, Setting, choice, float, int, kinds, pixels, word},
     },
+    estop,
     interfaces::{
         AnyInterface, Bumpers, COLOR_HEIGHT, COLOR_WIDTH, Encoders, Image, Interface, Kind, Motors,
         PtEncoders, PtMotors, Sonars, Source, Watch, limit,
@@ -652,6 +662,26 @@ fn memory_services(
     Ok((Some(mem), sonar))
 }
 
+/// Registers the walk's stop (`ALMotion.stopMove`, a [`qi::Detached`] call on
+/// the session's socket) with [`estop`]; the flag it returns is set each time
+/// the stop runs.
+fn register_stop(
+    qi: &Session,
+    motion: &Service,
+    url: &str,
+) -> Result<(estop::Registration, Arc<AtomicBool>), String> {
+    let stop = qi
+        .detached(motion, "stopMove", &[])
+        .map_err(|e| format!("{url}: the emergency stop: {e}"))?;
+    let ran = Arc::new(AtomicBool::new(false));
+    let flag = ran.clone();
+    let registration = estop::register(format!("naobody {url}"), move || {
+        let _ = stop.send();
+        flag.store(true, Ordering::Release);
+    });
+    Ok((registration, ran))
+}
+
 struct BodySession {
     qi: Session,
     motion: Option<Service>,
@@ -664,6 +694,12 @@ struct BodySession {
     head_clock: Option<u64>,
     head_sent: [Option<(f32, f32)>; 2],
     next_poll: Instant,
+    /// The walk's emergency stop, registered with [`estop`] while the session
+    /// lasts, and whether it ran since the walk was last sent.
+    estop: Option<(estop::Registration, Arc<AtomicBool>)>,
+    /// The `motors` clock when the emergency stop last ran (a suspension): the
+    /// robot stands until a newer command.
+    stood_at: Option<u64>,
 }
 
 impl Body {
@@ -698,6 +734,8 @@ impl Body {
             head_clock: None,
             head_sent: [None, None],
             next_poll: Instant::now(),
+            estop: None,
+            stood_at: None,
         };
         if let Some(m) = s.motion.clone() {
             if c.motors {
@@ -706,6 +744,7 @@ impl Body {
                 s.qi.call(&m, "stopMove", &[])
                     .map_err(|e| format!("{url}: {e}"))?;
                 s.sent = Some((0.0, 0.0));
+                s.estop = Some(register_stop(&s.qi, &m, &url)?);
             }
             if c.ptmotors {
                 self.read_head_limits(&mut s, &m, &url)?;
@@ -775,9 +814,23 @@ impl Body {
 
     fn serve(&mut self, s: &mut BodySession) -> Result<(), QiError> {
         let c = self.conf.clone();
+        if let (Some((_, ran)), Some(mi)) = (&s.estop, &self.motors)
+            && ran.swap(false, Ordering::AcqRel)
+        {
+            // The emergency stop stopped the walk (a suspension): it walks again
+            // on the controller's next command, not on the one it had (which
+            // could go out before the process is suspended).
+            s.sent = Some((0.0, 0.0));
+            s.stood_at = Some(mi.clock());
+        }
         if let (Some(mi), Some(m)) = (&self.motors, s.motion.clone()) {
             let cmd = mi.command(c.motors_timeout);
-            let want = walk_args(cmd.v, cmd.w, c.max_v, c.max_w, s.walk == Walk::MoveToward);
+            // Once the process is ending (estop::halt), nothing but stopMove.
+            let want = if estop::halted() || s.stood_at == Some(mi.clock()) {
+                (0.0, 0.0)
+            } else {
+                walk_args(cmd.v, cmd.w, c.max_v, c.max_w, s.walk == Walk::MoveToward)
+            };
             if s.sent != Some(want) {
                 if want == (0.0, 0.0) {
                     s.qi.call(&m, "stopMove", &[])?;
@@ -801,7 +854,11 @@ impl Body {
                 s.sent = Some(want);
             }
         }
-        if let (Some(p), Some(m), Some((yaw, pitch))) = (&self.ptm, s.motion.clone(), self.limits) {
+        // Once the process is ending, the head is not moved either.
+        if !estop::halted()
+            && let (Some(p), Some(m), Some((yaw, pitch))) =
+                (&self.ptm, s.motion.clone(), self.limits)
+        {
             let clock = p.clock();
             if s.head_clock != Some(clock) {
                 s.head_clock = Some(clock);

@@ -934,7 +934,7 @@ impl Conn {
         action: u32,
         payload: &[u8],
     ) -> Result<(u8, Vec<u8>), QiError> {
-        self.next_id = self.next_id.wrapping_add(1).max(1);
+        self.next_id = self.next_id.wrapping_add(1).max(DETACHED_ID + 1);
         let id = self.next_id;
         let h = Header {
             id,
@@ -1292,17 +1292,8 @@ impl Session {
     /// Calls `method` of `svc` with `args` (converted to the method's parameter
     /// types); its reply as a value.
     pub fn call(&mut self, svc: &Service, method: &str, args: &[Value]) -> Result<Value, QiError> {
-        let m = svc.method(method, args.len()).ok_or_else(|| {
-            QiError::Protocol(format!(
-                "{} has no method {method} taking {} argument(s)",
-                svc.name,
-                args.len()
-            ))
-        })?;
+        let (m, p) = arguments(svc, method, args)?;
         let (uid, ret) = (m.uid, m.ret.clone());
-        let mut p = Vec::with_capacity(64);
-        encode(&Value::Tuple(args.to_vec()), &m.params, &mut p)
-            .map_err(|e| QiError::Protocol(format!("{}.{method}: {e}", svc.name)))?;
         let conn = self
             .conns
             .get_mut(svc.conn)
@@ -1314,6 +1305,74 @@ impl Session {
                     other => other,
                 })?;
         decode_reply(&payload, flags, &ret)
+    }
+
+    /// `method` of `svc` with `args`, as a [`Detached`] call (id [`DETACHED_ID`]).
+    pub fn detached(
+        &self,
+        svc: &Service,
+        method: &str,
+        args: &[Value],
+    ) -> Result<Detached, QiError> {
+        let (m, p) = arguments(svc, method, args)?;
+        let conn = self
+            .conns
+            .get(svc.conn)
+            .ok_or_else(|| QiError::Protocol("a service of another session".into()))?;
+        let h = Header {
+            id: DETACHED_ID,
+            ty: ty::CALL,
+            service: svc.id,
+            object: MAIN_OBJECT,
+            action: m.uid,
+            ..Header::default()
+        };
+        let mut message = Vec::with_capacity(HEADER + p.len());
+        write_message(&mut message, h, &p)?;
+        Ok(Detached {
+            stream: conn.stream.try_clone().map_err(QiError::io)?,
+            message,
+        })
+    }
+}
+
+/// `method` of `svc` taking `args`, and `args` encoded for it.
+fn arguments<'a>(
+    svc: &'a Service,
+    method: &str,
+    args: &[Value],
+) -> Result<(&'a Method, Vec<u8>), QiError> {
+    let m = svc.method(method, args.len()).ok_or_else(|| {
+        QiError::Protocol(format!(
+            "{} has no method {method} taking {} argument(s)",
+            svc.name,
+            args.len()
+        ))
+    })?;
+    let mut p = Vec::with_capacity(64);
+    encode(&Value::Tuple(args.to_vec()), &m.params, &mut p)
+        .map_err(|e| QiError::Protocol(format!("{}.{method}: {e}", svc.name)))?;
+    Ok((m, p))
+}
+
+/// The message id of a [`Detached`] call: [`Conn::call_raw`] never uses it, so
+/// its reply is skipped as an answer to another call.
+pub const DETACHED_ID: u32 = 0;
+
+/// A call made ready to send without its session, from any thread, through a
+/// second handle on the service's connection: an emergency stop that must not
+/// wait for the session's thread (which may be inside a call).
+pub struct Detached {
+    stream: TcpStream,
+    message: Vec<u8>,
+}
+
+impl Detached {
+    /// Sends the call, in one write (a message the session's thread writes at
+    /// the same time is not cut into, unless the socket's send buffer is full),
+    /// waiting at most the connection's write timeout.
+    pub fn send(&self) -> std::io::Result<()> {
+        (&self.stream).write_all(&self.message)
     }
 }
 

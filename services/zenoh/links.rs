@@ -10,7 +10,7 @@ use std::{
         Arc,
         atomic::{AtomicBool, Ordering},
     },
-    time::{Duration, SystemTime},
+    time::{Duration, Instant, SystemTime},
 };
 
 use zenoh::{
@@ -24,7 +24,8 @@ use zenoh::{
 
 use super::wire::{self, Fill, Format, Wire};
 use crate::{
-    interfaces::{AnyInterface, Interface, Kind, Motors, Notify, Source, Watch},
+    estop,
+    interfaces::{AnyInterface, Interface, Kind, Motors, Notify, Sample, Source, Watch},
     mcapfmt,
 };
 
@@ -98,7 +99,9 @@ impl<T: Wire> Outbound for Out<T> {
     }
 
     fn send_if_new(&self) {
-        if !self.matching.load(Ordering::Acquire) {
+        // Once the process is ending (estop::halt), an actuator's last word is
+        // its stop's ([`register_stop`]).
+        if !self.matching.load(Ordering::Acquire) || (estop::halted() && self.iface.is_actuator()) {
             return;
         }
         let mut state = self.state.lock();
@@ -107,23 +110,8 @@ impl<T: Wire> Outbound for Out<T> {
             return;
         }
         state.0 = s.clock;
-        let (payload, encoding, attachment): (ZBytes, Encoding, Vec<u8>) =
-            if self.route.ros2(T::KIND) {
-                let mut cdr = Vec::new();
-                mcapfmt::ros2::encode(self.iface.name(), &s, &mut cdr);
-                let a = wire::rmw_attachment(s.clock, s.time, &self.gid);
-                (cdr.into(), Encoding::ZENOH_BYTES, a.to_vec())
-            } else {
-                let a = wire::attachment(s.clock, s.time).to_vec();
-                match self.route.jpeg.and_then(|q| s.value.to_jpeg(q)) {
-                    Some(jpeg) => (jpeg.into(), Encoding::IMAGE_JPEG, a),
-                    None => (
-                        T::payload(&s),
-                        Encoding::ZENOH_BYTES.with_schema(wire::encoding(T::KIND)),
-                        a,
-                    ),
-                }
-            };
+        let (payload, encoding, attachment) =
+            message(&self.route, self.iface.name(), &self.gid, &s);
         let put = self
             .publisher
             .put(payload)
@@ -143,6 +131,79 @@ impl<T: Wire> Outbound for Out<T> {
             Err(_) => {}
         }
     }
+}
+
+/// Sample `s` of interface `name` as it travels on `route`: payload, encoding
+/// and attachment.
+fn message<T: Wire>(
+    route: &Route,
+    name: &str,
+    gid: &[u8; 16],
+    s: &Arc<Sample<T>>,
+) -> (ZBytes, Encoding, Vec<u8>) {
+    if route.ros2(T::KIND) {
+        let mut cdr = Vec::new();
+        mcapfmt::ros2::encode(name, s, &mut cdr);
+        let a = wire::rmw_attachment(s.clock, s.time, gid);
+        return (cdr.into(), Encoding::ZENOH_BYTES, a.to_vec());
+    }
+    let a = wire::attachment(s.clock, s.time).to_vec();
+    match route.jpeg.and_then(|q| s.value.to_jpeg(q)) {
+        Some(jpeg) => (jpeg.into(), Encoding::IMAGE_JPEG, a),
+        None => (
+            T::payload(s),
+            Encoding::ZENOH_BYTES.with_schema(wire::encoding(T::KIND)),
+            a,
+        ),
+    }
+}
+
+/// The rmw_zenoh publisher id of this session's samples.
+fn gid(session: &Session) -> [u8; 16] {
+    let mut gid = [0u8; 16];
+    let zid = session.zid().to_le_bytes();
+    gid[..zid.len().min(16)].copy_from_slice(&zid[..zid.len().min(16)]);
+    gid
+}
+
+/// How long the emergency stop leaves Zenoh's own threads to write its zero:
+/// a put returns once the sample is queued, and a suspension (Ctrl+Z) that
+/// came right after would leave it unsent (seen under load: 3 runs in 6 with
+/// no wait). Zenoh offers no flush nor acknowledgement to wait for instead.
+const STOP_GRACE: Duration = Duration::from_millis(20);
+
+/// Registers with [`estop`] the stop of a remote robot's `motors` written here:
+/// a zero command put on `route.key` straight on the session (not through the
+/// interface's [`Outbound`], whose lock the publishing thread may hold), with
+/// the interface's next clock and the motors publisher's QoS (in order behind a
+/// command already queued, never waiting for room); then [`STOP_GRACE`].
+pub fn register_stop(
+    session: &Session,
+    motors: Arc<Interface<Motors>>,
+    route: Route,
+) -> estop::Registration {
+    let session = session.clone();
+    let gid = gid(&session);
+    estop::register(format!("zenoh {}", route.key), move || {
+        let zero = Arc::new(Sample {
+            clock: motors.clock() + 1,
+            stamp: Instant::now(),
+            time: SystemTime::now(),
+            value: Motors::default(),
+        });
+        let (payload, encoding, attachment) = message(&route, motors.name(), &gid, &zero);
+        let put = session
+            .put(route.key.clone(), payload)
+            .encoding(encoding)
+            .attachment(attachment)
+            .congestion_control(CongestionControl::Drop)
+            .priority(Priority::Data)
+            .express(true)
+            .wait();
+        if put.is_ok() {
+            std::thread::sleep(STOP_GRACE);
+        }
+    })
 }
 
 /// An [`Outbound`] for interface `iface` (of value type `T`) on `route`. While a
@@ -203,9 +264,7 @@ pub fn outbound<T: Wire>(
                 anyhow::anyhow!("zenoh: cannot watch subscribers of `{}`: {e}", route.key)
             })?
     };
-    let mut gid = [0u8; 16];
-    let zid = session.zid().to_le_bytes();
-    gid[..zid.len().min(16)].copy_from_slice(&zid[..zid.len().min(16)]);
+    let gid = gid(session);
     Ok(Arc::new(Out {
         iface: typed,
         _listener: listener,

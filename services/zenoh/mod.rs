@@ -50,6 +50,11 @@
 //! liveliness token `<key>/served`, which disappears within the session's lease
 //! when the robot's process dies (at once when its connection closes).
 //!
+//! A process that provides `motors` registers a stop with [`crate::estop`]: a
+//! zero command put straight on the session when the process ends, is
+//! suspended or panics ([`links::register_stop`]); after
+//! [`crate::estop::halted`] no actuator value is put.
+//!
 //! A subscriber that appears gets the latest value within 100 ms (a robot that
 //! restarts gets the pan-tilt command written while it was away). A payload that
 //! is not a value of its kind is dropped with one log line per key.
@@ -391,6 +396,14 @@ fn provide<T: Wire>(
             session,
             format!("{}/driven/{}", route.key, session.zid()),
         )?);
+        if T::KIND == Kind::Motors {
+            let motors = rt.interfaces.get(name)?;
+            plan.keep.push(Box::new(links::register_stop(
+                session,
+                motors,
+                route.clone(),
+            )));
+        }
         plan.outs
             .push(links::outbound::<T>(session, any, route, &rt.interfaces)?);
     } else {
