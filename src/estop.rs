@@ -15,7 +15,7 @@
 //! | what happens | what is done |
 //! |---|---|
 //! | SIGINT, SIGTERM, SIGHUP | [`halt`], then the caller's `quit` (shut down, exit 128+signal) on a thread of its own; a second one exits at once. SIGINT first asks `interrupt` (a shell command waiting): if it takes it, nothing else |
-//! | SIGTSTP (Ctrl+Z), SIGTTIN, SIGTTOU | [`stop_all`], then the process suspends as by default; after SIGCONT it runs on (the drivers send what their controllers command again). The thread the signal came to waits in its handler until then, as the default action would have it (rustyline sends itself SIGTSTP on Ctrl+Z and puts the terminal back in raw mode when that returns) |
+//! | SIGTSTP (Ctrl+Z), SIGTTIN, SIGTTOU | [`halted`] until the process runs on, [`stop_all`], then the process suspends as by default; after SIGCONT it runs on (the drivers send what their controllers command again). The thread the signal came to waits in its handler until then, as the default action would have it (rustyline sends itself SIGTSTP on Ctrl+Z and puts the terminal back in raw mode when that returns) |
 //! | SIGQUIT, SIGALRM | [`halt`], then the default action (the process ends; SIGQUIT dumps core) |
 //! | SIGABRT (`abort`, a failed allocation, a stack overflow, a panic while panicking) | [`halt`] before the process dies (the aborting thread waits for it, at most [`FATAL_WAIT`]) |
 //! | a panic on any thread | [`stop_all`] before the panic is reported (the panicking thread waits, at most [`FATAL_WAIT`]); a panic on the `main` thread ends the process: [`halt`] |
@@ -49,6 +49,8 @@ struct Entry {
 static REGISTRY: Mutex<Vec<Entry>> = Mutex::new(Vec::new());
 static NEXT_ID: AtomicU64 = AtomicU64::new(1);
 static HALTED: AtomicBool = AtomicBool::new(false);
+/// Set from just before a suspension's stops until the process runs on.
+static SUSPENDED: AtomicBool = AtomicBool::new(false);
 
 /// How long a panicking or aborting thread waits for the stops.
 pub const FATAL_WAIT: Duration = Duration::from_millis(300);
@@ -119,10 +121,12 @@ pub fn halt(why: &str) -> Vec<String> {
     stop_all(why)
 }
 
-/// Whether the process is ending after [`halt`]: a driver sends no motion
-/// command any more (zero instead), so nothing undoes the stop.
+/// Whether the process is ending after [`halt`], or is being suspended (from
+/// just before the stops until it runs on after SIGCONT): a driver sends no
+/// motion command (zero instead), so nothing its thread sends in the moment
+/// before the process stops undoes the stop.
 pub fn halted() -> bool {
-    HALTED.load(Ordering::Acquire)
+    HALTED.load(Ordering::Acquire) || SUSPENDED.load(Ordering::Acquire)
 }
 
 /// What the `estop` thread is asked to do: a signal's number, or a panic.
@@ -475,8 +479,10 @@ mod signals {
                     }
                 }
                 _ if SUSPEND.contains(&sig) => {
+                    super::SUSPENDED.store(true, Ordering::Release);
                     stop_all(&name(sig));
                     suspend(sig);
+                    super::SUSPENDED.store(false, Ordering::Release);
                     done();
                     tracing::info!("continued after {}", name(sig));
                     // The requests that came before the suspension: a stop signal

@@ -897,7 +897,13 @@ fn a_python_programs_process_ending_stops_the_create2_within_100_ms() {
     let stop = stop.unwrap_or_else(|| {
         panic!(
             "no stop after the program's end; the emulator got {:?}",
-            emu.state.lock().commands.iter().rev().take(5).collect::<Vec<_>>()
+            emu.state
+                .lock()
+                .commands
+                .iter()
+                .rev()
+                .take(5)
+                .collect::<Vec<_>>()
         )
     });
     let took = stop.saturating_duration_since(end);
