@@ -114,12 +114,22 @@ fn main() {
     );
 
     // 3: pacing at 20 ms, the python schema beside a Rust schema.
-    let text = conf(
-        &idle,
-        20,
-        "schema myschema\ncycle 20\nend_schema\nload_schema myschema\n",
+    pacing(
+        &conf(
+            &idle,
+            20,
+            "schema myschema\ncycle 20\nend_schema\nload_schema myschema\n",
+        ),
+        &dir,
     );
-    let rt = jderobot::loader::start(&Conf::parse(&text, &dir.join("p.conf")).unwrap()).unwrap();
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The pacing of a python schema at 20 ms beside a Rust schema (myschema) in
+/// the same runtime (conf `text`), once both loops turn; and a run's start (a
+/// fresh worker process) to its first pass.
+fn pacing(text: &str, dir: &Path) {
+    let rt = jderobot::loader::start(&Conf::parse(text, &dir.join("p.conf")).unwrap()).unwrap();
     jderobot::output::set_sink(Some(Box::new(|_| {})));
     let mut py_err: Vec<f64> = Vec::new();
     let mut rs_err: Vec<f64> = Vec::new();
@@ -185,5 +195,4 @@ fn main() {
         "python: a run's start (a fresh worker process, the program compiled) to its first pass: {:.1} ms",
         median(&starts)
     );
-    let _ = std::fs::remove_dir_all(&dir);
 }

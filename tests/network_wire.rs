@@ -553,19 +553,14 @@ fn ending_and_suspending_signals_send_motors_zero_within_100_ms() {
         );
         let zeros = || (emu.count("22 0.0 0.0"), emu.count("23 0.0 0.0"));
         let before = zeros();
-        let took = common::process::time_to_stop(&mut p, signal, |_| {
-            let now = zeros();
-            (now.0 > before.0 && now.1 > before.1).then(std::time::Instant::now)
-        });
-        eprintln!(
-            "networkclient, {}: 22/23 zero after {:.1} ms",
-            signal.1,
-            took.as_secs_f64() * 1e3
-        );
-        assert!(
-            took < Duration::from_millis(100),
-            "{}: stop after {took:?}",
-            signal.1
+        common::process::signal_stops_within_100_ms(
+            &mut p,
+            "networkclient (22/23 zero)",
+            signal,
+            |_| {
+                let now = zeros();
+                (now.0 > before.0 && now.1 > before.1).then(std::time::Instant::now)
+            },
         );
     }
 }

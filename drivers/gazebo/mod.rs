@@ -1039,6 +1039,61 @@ impl Drop for GazeboDriver {
     }
 }
 
+/// Provides the interface a `provides` line asks for, and the sink its
+/// messages go to (sensors are added to `all`, motors to `motors`).
+fn provide(
+    w: &Want,
+    gc: &GzConf,
+    ifaces: &Interfaces,
+    provider: &str,
+    all: &mut Vec<Arc<dyn AnyInterface>>,
+    motors: &mut Vec<Arc<Interface<Motors>>>,
+) -> anyhow::Result<Sink> {
+    Ok(match &w.kind {
+        Kind::Encoders => {
+            let i = ifaces.provide::<Encoders>(&w.iface, provider)?;
+            all.push(i.clone());
+            Sink::Encoders(i)
+        }
+        Kind::Motors => {
+            let i = ifaces.provide::<Motors>(&w.iface, provider)?;
+            motors.push(i.clone());
+            Sink::Motors(i)
+        }
+        Kind::Laser(n, r) => {
+            let i = ifaces.provide::<Laser>(&w.iface, provider)?;
+            all.push(i.clone());
+            Sink::Laser(i, LaserMap::new(*n, *r))
+        }
+        Kind::PtEncoders => {
+            let i = ifaces.provide::<PtEncoders>(&w.iface, provider)?;
+            all.push(i.clone());
+            Sink::PtEncoders(i, gc.joints.0.clone(), gc.joints.1.clone())
+        }
+        Kind::PtMotors => {
+            let i = ifaces.provide::<PtMotors>(&w.iface, provider)?;
+            all.push(i.clone());
+            let tilt = format!("/model/{}/joint/{}/0/cmd_pos", w.target, gc.joints.1);
+            Sink::PtMotors(i, tilt)
+        }
+        Kind::Imu => {
+            let i = ifaces.provide::<Imu>(&w.iface, provider)?;
+            all.push(i.clone());
+            Sink::Imu(i)
+        }
+        Kind::Camera(fixed) => {
+            let init = if *fixed {
+                Image::new(COLOR_WIDTH, COLOR_HEIGHT)
+            } else {
+                Image::default()
+            };
+            let i = ifaces.provide_value(&w.iface, provider, init)?;
+            all.push(i.clone());
+            Sink::Camera(i, *fixed)
+        }
+    })
+}
+
 impl GazeboDriver {
     /// Provides the interfaces, joins gz-transport and starts the thread.
     pub fn start(gc: GzConf, ifaces: &Interfaces, provider: &str) -> anyhow::Result<GazeboDriver> {
@@ -1055,49 +1110,7 @@ impl GazeboDriver {
         let mut all: Vec<Arc<dyn AnyInterface>> = Vec::new();
         let mut motors = Vec::new();
         for w in &gc.wants {
-            let sink = match &w.kind {
-                Kind::Encoders => {
-                    let i = ifaces.provide::<Encoders>(&w.iface, provider)?;
-                    all.push(i.clone());
-                    Sink::Encoders(i)
-                }
-                Kind::Motors => {
-                    let i = ifaces.provide::<Motors>(&w.iface, provider)?;
-                    motors.push(i.clone());
-                    Sink::Motors(i)
-                }
-                Kind::Laser(n, r) => {
-                    let i = ifaces.provide::<Laser>(&w.iface, provider)?;
-                    all.push(i.clone());
-                    Sink::Laser(i, LaserMap::new(*n, *r))
-                }
-                Kind::PtEncoders => {
-                    let i = ifaces.provide::<PtEncoders>(&w.iface, provider)?;
-                    all.push(i.clone());
-                    Sink::PtEncoders(i, gc.joints.0.clone(), gc.joints.1.clone())
-                }
-                Kind::PtMotors => {
-                    let i = ifaces.provide::<PtMotors>(&w.iface, provider)?;
-                    all.push(i.clone());
-                    let tilt = format!("/model/{}/joint/{}/0/cmd_pos", w.target, gc.joints.1);
-                    Sink::PtMotors(i, tilt)
-                }
-                Kind::Imu => {
-                    let i = ifaces.provide::<Imu>(&w.iface, provider)?;
-                    all.push(i.clone());
-                    Sink::Imu(i)
-                }
-                Kind::Camera(fixed) => {
-                    let init = if *fixed {
-                        Image::new(COLOR_WIDTH, COLOR_HEIGHT)
-                    } else {
-                        Image::default()
-                    };
-                    let i = ifaces.provide_value(&w.iface, provider, init)?;
-                    all.push(i.clone());
-                    Sink::Camera(i, *fixed)
-                }
-            };
+            let sink = provide(w, &gc, ifaces, provider, &mut all, &mut motors)?;
             let topic = matches!(w.kind, Kind::PtMotors)
                 .then(|| format!("/model/{}/joint/{}/0/cmd_pos", w.target, gc.joints.0));
             lines.push(Line {

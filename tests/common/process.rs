@@ -258,9 +258,8 @@ pub fn time_to_stop(
 }
 
 /// The driver stop tests' one shape: `p` drives its robot through the shell
-/// (`set motors v=150 w=0`) until `moving` says the robot got it, then gets
-/// `signal`; the stop (`stop_after`, as for [`time_to_stop`]) must come within
-/// 100 ms. `what` names the robot and its stop in the messages.
+/// (`set motors v=150 w=0`) until `moving` says the robot got it, then
+/// [`signal_stops_within_100_ms`].
 #[allow(dead_code)]
 pub fn drive_then_signal(
     p: &mut Proc,
@@ -279,6 +278,18 @@ pub fn drive_then_signal(
         "{what}: the robot never drove; jderobot said:\n{}",
         p.text()
     );
+    signal_stops_within_100_ms(p, what, signal, stop_after)
+}
+
+/// [`time_to_stop`], said (`what` names the robot and its stop) and asserted
+/// within 100 ms.
+#[allow(dead_code)]
+pub fn signal_stops_within_100_ms(
+    p: &mut Proc,
+    what: &str,
+    signal: (i32, &str),
+    stop_after: impl FnMut(std::time::Instant) -> Option<std::time::Instant>,
+) -> Duration {
     let took = time_to_stop(p, signal, stop_after);
     eprintln!(
         "{what}, {}: stop after {:.1} ms",
