@@ -443,7 +443,7 @@ fn faults_say_what_is_awaited_what_exists_and_both_types() {
 /// subscriber (DiffDrive's place) timestamps each Twist as it comes.
 #[test]
 fn ending_and_suspending_signals_send_a_zero_twist_within_100_ms() {
-    use common::process::{Proc as Jde, STOP_SIGNALS, line_after, timed_lines};
+    use common::process::{Proc as Jde, STOP_SIGNALS, timed_lines};
     let Some(bin) = peer_bin() else {
         return;
     };
@@ -473,18 +473,11 @@ fn ending_and_suspending_signals_send_a_zero_twist_within_100_ms() {
         )
         .unwrap();
         let mut p = Jde::start_alone(&conf);
-        common::process::drive_then_signal(
+        common::process::drive_twist_peer_then_signal(
             &mut p,
             "gazebo (a zero Twist)",
             signal,
-            || {
-                lines
-                    .lock()
-                    .unwrap()
-                    .last()
-                    .is_some_and(|l| l.1 == "twist 0.1500 0.0000")
-            },
-            |t0| line_after(&lines, t0, "twist 0.0000 0.0000"),
+            &lines,
         );
     }
 }

@@ -1404,7 +1404,7 @@ fn the_vacuum_solution_sweeps_the_furnished_flat() {
 fn gui_map_forces_and_the_local_target_reach_the_panel() {
     // The obstacle-avoidance API in both shapes: GUI.map's targets in the
     // world's order (m), setReached moving on, the forces and the local target
-    // drawn in the panel (shared.overlay), and a 4.x program's GUI.map.carx...
+    // drawn in the panel (shared.drawings()), and a 4.x program's GUI.map.carx...
     let dir = tempfile::tempdir().unwrap();
     let prog = write_program(
         dir.path(),
@@ -1427,7 +1427,7 @@ fn gui_map_forces_and_the_local_target_reach_the_panel() {
     let text = console(&s);
     assert!(text.contains("first 0 4.5 1.75 False"), "{text}");
     assert!(text.contains("next 1 9.0"), "{text}");
-    let o = *s.overlay.lock();
+    let o = **s.drawings().load();
     assert_eq!(o.forces, Some([[1.0, 0.0], [0.0, -0.5], [1.0, -0.5]]));
     assert_eq!(o.local_target, Some([2.0, 0.25]));
     // The same for the world views (introrob's draws them at the robot).

@@ -95,7 +95,7 @@ use board::Board;
 pub use process::set_worker_exe;
 use process::{Event, WorkerProcess};
 use shared::Robot;
-pub use shared::{CONSOLE_LINES, Overlay, REFRESH, Shared, shared};
+pub use shared::{CONSOLE_LINES, REFRESH, Shared, shared};
 use wire::{Failure, Outcome, ToWorker};
 pub use worker::{TICK_HZ, main_if_worker};
 
@@ -737,7 +737,7 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Schema>>
     });
     let shared = shared(rt, &conf.name);
     if let Ok(d) = crate::world::export_drawings(&rt.names) {
-        let _ = shared.drawings.set(d);
+        shared.draw_into(d);
     }
     // A re-init (the shell's `init`, `reload`) replaces a running program: ask the
     // old one to give way (its keeper ends it); the new one starts afresh.

@@ -7,7 +7,7 @@
 
 use std::sync::{Arc, atomic::Ordering};
 
-use super::{Overlay, Shared, highlight};
+use super::{Shared, highlight};
 use crate::{
     runtime::{Panel, Runtime, State},
     widgets::ImageView,
@@ -132,7 +132,7 @@ impl Panel for PythonPanel {
             ui.separator();
             ui.label(format!("Score: {}", score.load().summary()));
         }
-        let overlay = *self.shared.overlay.lock();
+        let overlay = **self.shared.drawings().load();
         if overlay.forces.is_some() || overlay.local_target.is_some() {
             ui.separator();
             ui.label("Forces (robot's frame: ahead up, left to the left)");
@@ -151,7 +151,7 @@ impl Panel for PythonPanel {
 /// up, the car (attraction, green), obstacle (repulsion, red) and average
 /// (white) forces as arrows, the local target as a blue dot; scaled so the
 /// longest fits.
-fn draw_forces(ui: &mut egui::Ui, o: &Overlay) {
+fn draw_forces(ui: &mut egui::Ui, o: &crate::world::Drawings) {
     let size = egui::vec2(180.0, 180.0);
     let (rect, _) = ui.allocate_exact_size(size, egui::Sense::hover());
     let p = ui.painter_at(rect);

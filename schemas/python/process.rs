@@ -103,13 +103,16 @@ impl PidsGroup {
             if !root.join("cgroup.procs").exists() {
                 continue; // not a cgroup hierarchy (v1 mounts a tmpfs here)
             }
-            if root.join("cgroup.subtree_control").exists() {
-                // v2: the pids controller enabled for the children.
+            let group = PidsGroup(root.join(format!("jderobot-python-{pid}")));
+            if std::fs::create_dir(&group.0).is_err() {
+                continue;
+            }
+            // cgroup v2 gives a child the pids controller only where its parent
+            // hands it down: asked for once, where it is missing.
+            if !group.0.join("pids.max").exists() {
                 let _ = std::fs::write(root.join("cgroup.subtree_control"), "+pids");
             }
-            let group = PidsGroup(root.join(format!("jderobot-python-{pid}")));
-            if std::fs::create_dir(&group.0).is_ok()
-                && std::fs::write(group.0.join("pids.max"), MAX_PROCESSES.to_string()).is_ok()
+            if std::fs::write(group.0.join("pids.max"), MAX_PROCESSES.to_string()).is_ok()
                 && std::fs::write(group.0.join("cgroup.procs"), pid.to_string()).is_ok()
             {
                 return Some(group);

@@ -17,6 +17,7 @@ use std::{
 use parking_lot::Mutex;
 
 use super::board::{Board, Sensor, values};
+use crate::world::{Drawings, LiveDrawings};
 use crate::{
     interfaces::{
         AnyInterface, Bumpers, Encoders, Image, Interface, InterfaceValue, Laser, Motors, Sample,
@@ -59,19 +60,15 @@ pub struct Shared {
     /// [`epoch`]: the keeper sees the worker's HAL, GUI or Frequency calls
     /// counted on the board, or a pass ends.
     pub last_call: AtomicU64,
-    /// What the program drew with `GUI.showForces` and `GUI.showLocalTarget`,
-    /// also exported as `world.drawings` for the world views (introrob's).
-    pub overlay: Mutex<Overlay>,
-    pub drawings: OnceLock<Arc<crate::world::LiveDrawings>>,
+    /// What the program drew with `GUI.showForces` and `GUI.showLocalTarget`:
+    /// the run's `world.drawings` (the world views, introrob's, draw them too),
+    /// or its own where none could be exported ([`Shared::drawings`]).
+    drawings: OnceLock<Arc<LiveDrawings>>,
     /// `Frequency.tick` calls and the loop's rate it measured (Hz, as f64
     /// bits), for the panel (the keeper copies them from the board).
     pub ticks: AtomicU64,
     pub tick_rate: AtomicU64,
 }
-
-/// The obstacle-avoidance exercise's drawings (`GUI.showForces`,
-/// `GUI.showLocalTarget`), as the world's drawings are kept.
-pub type Overlay = crate::world::Drawings;
 
 /// The instant the schema's times count from.
 pub fn epoch() -> Instant {
@@ -147,13 +144,21 @@ impl Shared {
     pub fn touch(&self) {
         self.last_call.store(since_epoch(), Ordering::Release);
     }
-    /// Changes the program's drawings, here and in `world.drawings`.
-    pub fn draw(&self, change: impl FnOnce(&mut Overlay)) {
-        let mut o = self.overlay.lock();
-        change(&mut o);
-        if let Some(d) = self.drawings.get() {
-            d.store(Arc::new(*o));
-        }
+    /// Shares its drawings through `d` (the run's `world.drawings`); before
+    /// the first drawing only.
+    pub fn draw_into(&self, d: Arc<LiveDrawings>) {
+        let _ = self.drawings.set(d);
+    }
+    /// The program's drawings.
+    pub fn drawings(&self) -> &Arc<LiveDrawings> {
+        self.drawings.get_or_init(Default::default)
+    }
+    /// Changes the program's drawings.
+    pub fn draw(&self, change: impl FnOnce(&mut Drawings)) {
+        let d = self.drawings();
+        let mut now = **d.load();
+        change(&mut now);
+        d.store(Arc::new(now));
     }
     /// How long since the program last showed it is alive.
     pub fn silent_for(&self) -> Duration {
@@ -162,7 +167,7 @@ impl Shared {
     /// A new run: the clock of the silence limit and the ticks start afresh.
     pub fn new_run(&self) {
         self.touch();
-        self.draw(|o| *o = Overlay::default());
+        self.draw(|o| *o = Drawings::default());
         self.ticks.store(0, Ordering::Release);
         self.tick_rate.store(0, Ordering::Release);
     }

@@ -90,24 +90,21 @@ pub fn send<T: Serialize>(w: &mut impl Write, msg: &T, payload: &[u8]) -> io::Re
     let mut head = [0u8; 8];
     head[..4].copy_from_slice(&(json.len() as u32).to_le_bytes());
     head[4..].copy_from_slice(&(payload.len() as u32).to_le_bytes());
-    let mut frame = Vec::with_capacity(
-        8 + json.len()
-            + if payload.len() < 4096 {
-                payload.len()
-            } else {
-                0
-            },
-    );
+    let mut frame = Vec::with_capacity(8 + json.len() + SMALL);
     frame.extend_from_slice(&head);
     frame.extend_from_slice(&json);
-    if payload.len() < 4096 {
+    // A small payload goes in the same write; a large one (an image) is not
+    // copied into the frame.
+    if payload.len() <= SMALL {
         frame.extend_from_slice(payload);
-        w.write_all(&frame)
-    } else {
-        w.write_all(&frame)?;
-        w.write_all(payload)
+        return w.write_all(&frame);
     }
+    w.write_all(&frame)?;
+    w.write_all(payload)
 }
+
+/// The largest payload [`send`] copies into its frame.
+const SMALL: usize = 4096;
 
 /// Reads one message and its payload; Ok(None) when the other side closed.
 pub fn receive<T: for<'de> Deserialize<'de>>(

@@ -54,7 +54,8 @@ struct Worker {
     board: Board,
     to_jderobot: Mutex<UnixStream>,
     /// (the `uses` line's key, the interface or `none`, whether it is there).
-    lines: Mutex<Vec<(String, String, bool)>>,
+    /// Set by the (one) load of the worker's program.
+    lines: OnceLock<Vec<(String, String, bool)>>,
     per_command: AtomicBool,
     /// The program's command (v mm/s, w deg/s) and the last one sent.
     command: Mutex<(f32, f32)>,
@@ -106,9 +107,11 @@ impl Worker {
 
     /// The error of a HAL call that needs the interface `key` the robot has not.
     fn missing(&self, key: &str, call: &str) -> PyErr {
-        let lines = self.lines.lock();
-        let name = lines
-            .iter()
+        let name = self
+            .lines
+            .get()
+            .into_iter()
+            .flatten()
             .find(|(k, _, _)| k == key)
             .map(|(_, n, _)| n.as_str())
             .unwrap_or("none");
@@ -125,7 +128,9 @@ impl Worker {
     }
 
     fn has(&self, key: &str) -> bool {
-        self.lines.lock().iter().any(|(k, _, t)| k == key && *t)
+        self.lines
+            .get()
+            .is_some_and(|l| l.iter().any(|(k, _, t)| k == key && *t))
     }
 
     /// Sets v (mm/s) and/or w (deg/s); a changed command is sent at once (on a
@@ -260,7 +265,7 @@ fn serve() -> Result<(), String> {
                 })
                 .map_err(|e| e.to_string())?;
                 w.per_command.store(per_command, Ordering::Relaxed);
-                *w.lines.lock() = lines;
+                let _ = w.lines.set(lines);
                 let loaded = venv
                     .map_or(Ok(()), |v| add_venv(Path::new(&v)).map(|_| ()))
                     .map_err(|e| Failure {
@@ -649,19 +654,9 @@ fn latest_scan() -> PyResult<Scan> {
         if !w.has("laser") {
             return Err(w.missing("laser", "getLaserData"));
         }
-        let (laser, time) = values::laser(&w.board).unwrap_or_else(|| {
-            (
-                Laser {
-                    readings: Vec::new(),
-                    resolution: 1.0,
-                    start: -90.0,
-                    min_range: 0.0,
-                    max_range: 0.0,
-                    mount: Default::default(),
-                },
-                std::time::UNIX_EPOCH,
-            )
-        });
+        // No scan yet: the interface's own first value, as before the worker.
+        let (laser, time) =
+            values::laser(&w.board).unwrap_or_else(|| (Laser::default(), std::time::UNIX_EPOCH));
         let values = laser.readings.iter().map(|&r| r as f64 / 1000.0).collect();
         Ok((values, laser_geometry(&laser), time))
     })

@@ -281,6 +281,30 @@ pub fn drive_then_signal(
     signal_stops_within_100_ms(p, what, signal, stop_after)
 }
 
+/// [`drive_then_signal`] for a peer that prints each Twist it gets as a line
+/// `twist V W` (m/s, rad/s): the ROS 2 and Gazebo subscribers.
+#[allow(dead_code)]
+pub fn drive_twist_peer_then_signal(
+    p: &mut Proc,
+    what: &str,
+    signal: (i32, &str),
+    lines: &TimedLines,
+) {
+    drive_then_signal(
+        p,
+        what,
+        signal,
+        || {
+            lines
+                .lock()
+                .unwrap()
+                .last()
+                .is_some_and(|l| l.1 == "twist 0.1500 0.0000")
+        },
+        |t0| line_after(lines, t0, "twist 0.0000 0.0000"),
+    );
+}
+
 /// [`time_to_stop`], said (`what` names the robot and its stop) and asserted
 /// within 100 ms.
 #[allow(dead_code)]
