@@ -18,12 +18,13 @@
 //! (d) CPU (process ticks) of the service serving laser + odom (and a 640x480
 //!     image) at 20 Hz to 10 Cyclone subscriber processes, vs a Cyclone
 //!     publisher of the same topics to the same 10 subscribers.
+//!     `JDEROBOT_BENCH_THREADS=1` also prints each side's CPU by thread.
 //!
 //! Run: `cargo bench --no-default-features --features ros2,simulator --bench ros2`
 //! (docs/benchmarks.md). Without idlc, cc or libddsc it prints SKIPPED.
 
 mod common;
-use common::{median, process_cpu};
+use common::{cpu_by_thread_of, median, process_cpu};
 
 use std::{
     collections::HashMap,
@@ -316,13 +317,33 @@ fn ten_subscribers(bin: &Path, d: &str, pid: u32, image: bool) -> (f64, f64) {
         .map(|_| cyclone(bin, &["sub-many", d, &(SECS + 4).to_string(), img]))
         .collect();
     std::thread::sleep(Duration::from_secs(3));
+    let by0 = cpu_by_thread_of(&pid.to_string());
     let (t0, c0) = (Instant::now(), process_cpu(pid).unwrap_or(0.0));
     std::thread::sleep(Duration::from_secs(SECS as u64));
     let cpu = process_cpu(pid).unwrap_or(0.0) - c0;
     let secs = t0.elapsed().as_secs_f64();
+    if std::env::var_os("JDEROBOT_BENCH_THREADS").is_some() {
+        show_threads(pid, &by0, secs);
+    }
     let scans: Vec<f64> = subs.into_iter().map(|s| num(&output(s), "scan")).collect();
     let fewest = scans.iter().copied().fold(f64::INFINITY, f64::min);
     (cpu / secs * 100.0, fewest)
+}
+
+/// Where a process's CPU went since `by0` (`JDEROBOT_BENCH_THREADS=1`): % of a
+/// core by thread name, the largest first.
+fn show_threads(pid: u32, by0: &std::collections::BTreeMap<String, f64>, secs: f64) {
+    let mut by: Vec<(f64, String)> = cpu_by_thread_of(&pid.to_string())
+        .into_iter()
+        .map(|(name, s)| ((s - by0.get(&name).unwrap_or(&0.0)) / secs * 100.0, name))
+        .collect();
+    by.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let top: Vec<String> = by
+        .iter()
+        .take(6)
+        .map(|(p, n)| format!("{n} {p:.3}"))
+        .collect();
+    println!("    threads of {pid}: {}", top.join(", "));
 }
 
 /// (d) Ours: the service (this process) at 20 Hz.

@@ -1570,3 +1570,60 @@ fn ending_and_suspending_signals_write_a_zero_twist_within_100_ms() {
         let _ = base.wait();
     }
 }
+
+/// The vendored RustDDS's `DataWriter::matched_readers` (patch 0028): the
+/// service makes no sample of a volatile topic nobody reads (`/tf` at 20 Hz
+/// to no one was a tenth of its CPU), so the count must follow readers as
+/// they come and go: in another participant and in the writer's own.
+#[test]
+fn a_writers_matched_readers_follow_readers_coming_and_going() {
+    use jderobot::mcapfmt::dds::{Cdr, CdrAdapter, dds_topic, reliable_qos};
+    use rustdds::{DomainParticipant, TopicKind};
+    use std::time::{Duration, Instant};
+    let d = domain(17) as u16;
+    let (a, b) = (
+        DomainParticipant::new(d).unwrap(),
+        DomainParticipant::new(d).unwrap(),
+    );
+    let qos = reliable_qos(5);
+    let topic = |p: &DomainParticipant| {
+        p.create_topic(
+            dds_topic("matched"),
+            "std_msgs::msg::dds_::String_".into(),
+            &qos,
+            TopicKind::NoKey,
+        )
+        .unwrap()
+    };
+    let reader = |p: &DomainParticipant| {
+        p.create_subscriber(&qos)
+            .unwrap()
+            .create_datareader_no_key::<Cdr, CdrAdapter>(&topic(p), None)
+            .unwrap()
+    };
+    let w = a
+        .create_publisher(&qos)
+        .unwrap()
+        .create_datawriter_no_key::<Cdr, CdrAdapter>(&topic(&a), None)
+        .unwrap();
+    let becomes = |n: usize, what: &str| {
+        let t0 = Instant::now();
+        while w.matched_readers() != n {
+            assert!(
+                t0.elapsed() < Duration::from_secs(10),
+                "{what}: {} matched readers, not {n}",
+                w.matched_readers()
+            );
+            std::thread::sleep(Duration::from_millis(10));
+        }
+    };
+    becomes(0, "no reader yet");
+    let remote = reader(&b);
+    becomes(1, "a reader in another participant");
+    let local = reader(&a);
+    becomes(2, "and one in the writer's participant");
+    drop(remote);
+    becomes(1, "the other participant's reader gone");
+    drop(local);
+    becomes(0, "both gone");
+}

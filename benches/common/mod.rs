@@ -154,8 +154,13 @@ pub fn threads_cpu(prefix: &str) -> f64 {
 /// name (`/proc/self/task/*/comm` and `schedstat`): a breakdown of where a
 /// benchmark's time goes, kernel time included.
 pub fn cpu_by_thread() -> std::collections::BTreeMap<String, f64> {
+    cpu_by_thread_of("self")
+}
+
+/// [`cpu_by_thread`] of process `pid` (a number, or `self`).
+pub fn cpu_by_thread_of(pid: &str) -> std::collections::BTreeMap<String, f64> {
     let mut by = std::collections::BTreeMap::new();
-    let Ok(dir) = std::fs::read_dir("/proc/self/task") else {
+    let Ok(dir) = std::fs::read_dir(format!("/proc/{pid}/task")) else {
         return by;
     };
     for t in dir.flatten() {

@@ -384,7 +384,7 @@ impl crate::supervisor::Device for Robot {
     }
 
     fn step(&mut self, s: &mut Session) -> Result<(), String> {
-        self.ready.wait(Duration::from_millis(2));
+        self.ready.wait(Some(Duration::from_millis(2)));
         if let Some(s) = &mut self.statics {
             s.take();
         }

@@ -178,6 +178,16 @@ crate::declare_lines! {
 type Writer = DataWriter<Cdr, CdrAdapter>;
 type Reader = DataReader<Cdr, CdrAdapter>;
 
+/// Whether a sample written now would reach anyone. The sensor topics are
+/// volatile (a reader that comes later gets the next sample, not this one), so
+/// with no reader the service neither encodes nor writes: each write wakes
+/// RustDDS's event loop, and /tf at 20 Hz to nobody was a tenth of the
+/// service's CPU (benches/ros2.rs `cpu`, whose subscribers read /scan and
+/// /odom). `/tf_static` (transient local) is always written.
+fn read_by_anyone(w: &Writer) -> bool {
+    w.matched_readers() > 0
+}
+
 fn writer(
     dp: &DomainParticipant,
     publisher: &Publisher,
@@ -220,6 +230,9 @@ impl<T: InterfaceValue> Served<T> {
             return None;
         }
         self.clock = s.clock;
+        if !read_by_anyone(&self.writer) {
+            return Some(s);
+        }
         let mut buf = self.bufs.buffer();
         if !(self.encode)(&self.frame, &s, &mut buf) {
             return Some(s);
@@ -283,6 +296,9 @@ impl Out for SonarsOut {
                         return;
                     }
                 }
+            }
+            if !read_by_anyone(&self.writers[i]) {
+                continue;
             }
             let frame = format!("{}_{i}", self.frame);
             let r = RangeReading {
@@ -415,13 +431,15 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
     let timeout = Duration::from_millis(l.motors_timeout);
     let stop = Arc::new(AtomicBool::new(false));
     let stop2 = stop.clone();
+    let ready = Readiness::new("service ros2")?;
+    let commands_waker = ready.waker();
     let (tx, rx) = std::sync::mpsc::sync_channel(1);
     let keep_name = format!("{} ({})", d.graph.full_name(), d.graph.reach());
     let keep = d.graph;
     let worker = Worker::start("ros2", stop.clone(), move || {
         let watch = Watch::for_current_thread();
         let _ = tx.send(watch.clone());
-        serve(plan, watch, timeout, stop2, keep);
+        serve(plan, watch, (ready, timeout), stop2, keep);
     })?;
     let watch = rx.recv().ok();
     tracing::info!(
@@ -434,7 +452,12 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
             .collect::<Vec<_>>()
             .join(", ")
     );
-    Ok(Box::new(Ros2Service { worker, watch }))
+    Ok(Box::new(Ros2Service {
+        worker,
+        watch,
+        stop,
+        commands_waker,
+    }))
 }
 
 /// The run's clock and `/clock`'s writer, per the `clock` line.
@@ -811,13 +834,20 @@ impl Plan {
 struct Ros2Service {
     worker: Worker,
     watch: Option<Arc<Watch>>,
+    stop: Arc<AtomicBool>,
+    /// Wakes the commands' thread, which sleeps until a command or a stop.
+    commands_waker: Arc<mio::Waker>,
 }
 
 impl Driver for Ros2Service {
+    /// The flag first, then the wake-ups: a thread woken before the flag
+    /// would sleep again.
     fn terminate(&mut self) {
+        self.stop.store(true, Ordering::Release);
         if let Some(w) = &self.watch {
             w.wake();
         }
+        let _ = self.commands_waker.wake();
         self.worker.stop();
     }
 }
@@ -878,15 +908,15 @@ fn hold(pt: &Command<PtMotors>, enc: Option<&Arc<Interface<PtEncoders>>>) {
     }
 }
 
-/// The longest a service thread sleeps with nothing to do before it looks at
-/// its stop flag: `quit` waits this long at most for it.
+/// The longest the serving thread sleeps with nothing to do (new data and
+/// `terminate` wake it sooner).
 const IDLE_WAKE: Duration = Duration::from_millis(100);
 
 /// The thread: sends each new sensor value; the commands have their own.
 fn serve(
     mut plan: Plan,
     watch: Arc<Watch>,
-    timeout: Duration,
+    (ready, timeout): (Readiness, Duration),
     stop: Arc<AtomicBool>,
     _keep: Graph,
 ) {
@@ -894,7 +924,7 @@ fn serve(
     let stop2 = stop.clone();
     let cmd_thread = std::thread::Builder::new()
         .name("ros2-cmd".into())
-        .spawn(move || commands.run(timeout, &stop2));
+        .spawn(move || commands.run(ready, timeout, &stop2));
     if let Err(e) = &cmd_thread {
         tracing::warn!("service ros2: no thread for /cmd_vel: {e}");
     }
@@ -925,7 +955,7 @@ fn serve(
             s.send(stamp);
         }
         for (s, tf) in &mut plan.odom {
-            if let Some(sample) = s.send(stamp) {
+            if let Some(sample) = s.send(stamp).filter(|_| read_by_anyone(tf)) {
                 let e = sample.value;
                 let t = Transform {
                     parent: s.frame.clone(),
@@ -959,6 +989,9 @@ fn send_clock(
         return;
     }
     *sent = (Some(t), Instant::now());
+    if !read_by_anyone(w) {
+        return;
+    }
     let mut buf = bufs.buffer();
     ros2::encode_clock(t, &mut buf);
     let _ = w.write(bufs.message(buf), None);
@@ -968,14 +1001,7 @@ impl Commands {
     /// Applies each command as it comes (a reliable write of a sensor topic to
     /// a slow reader blocks up to 100 ms: it must not delay a stop), zeroes
     /// motors `timeout` after the last one and at stop.
-    fn run(mut self, timeout: Duration, stop: &AtomicBool) {
-        let mut ready = match Readiness::new("service ros2") {
-            Ok(r) => r,
-            Err(e) => {
-                tracing::warn!("{e}");
-                return;
-            }
-        };
+    fn run(mut self, mut ready: Readiness, timeout: Duration, stop: &AtomicBool) {
         let readers = [
             self.cmd.as_mut().map(|c| &mut c.reader),
             self.pantilt.as_mut().map(|c| &mut c.reader),
@@ -992,17 +1018,14 @@ impl Commands {
         self.step(Duration::ZERO);
     }
 
-    /// How long the thread may sleep: until the first held command expires, and
-    /// [`IDLE_WAKE`] at most (to see a stop). It woke every 10 ms whatever came;
-    /// benches/ros2.rs `cpu` saw no difference above its noise, but a robot's
-    /// computer idles better.
-    fn next_wake(&self, timeout: Duration) -> Duration {
+    /// How long the thread may sleep: until the first held command expires;
+    /// with none, until a command comes or the service stops (its waker). It
+    /// woke every 100 ms to look at its stop flag: 4 % of the service's CPU
+    /// while serving (benches/ros2.rs `cpu`).
+    fn next_wake(&self, timeout: Duration) -> Option<Duration> {
         let cmd = self.cmd.as_ref().and_then(|c| c.expires_in(timeout));
         let pt = self.pantilt.as_ref().and_then(|c| c.expires_in(timeout));
-        [cmd, pt]
-            .into_iter()
-            .flatten()
-            .fold(IDLE_WAKE, Duration::min)
+        [cmd, pt].into_iter().flatten().min()
     }
 
     /// Takes the waiting commands; motors to zero, the pan-tilt held, when the

@@ -5,6 +5,8 @@
 //! driver `ros2`, zenoh's `format ros2` and the recorder's `profile ros2` share
 //! each message's code.
 
+use std::sync::Arc;
+
 use bytes::Bytes;
 use rustdds::{
     QosPolicies, QosPolicyBuilder, RepresentationIdentifier,
@@ -301,21 +303,33 @@ pub fn static_qos() -> QosPolicies {
 }
 
 /// Waits for data on DDS readers (RustDDS's mio event source of each), so a
-/// message wakes its thread at once rather than a polling period later.
+/// message wakes its thread at once rather than a polling period later; and
+/// for its [`Readiness::waker`], so a thread with nothing to read sleeps until
+/// it is asked to stop.
 pub struct Readiness {
     poll: mio::Poll,
     events: mio::Events,
     count: usize,
+    waker: Arc<mio::Waker>,
 }
 
 impl Readiness {
     /// `who` (`driver ros2`) names the component in errors.
     pub fn new(who: &str) -> anyhow::Result<Readiness> {
+        let poll = mio::Poll::new().map_err(|e| anyhow::anyhow!("{who}: a mio poll: {e}"))?;
+        let waker = mio::Waker::new(poll.registry(), mio::Token(0))
+            .map_err(|e| anyhow::anyhow!("{who}: a mio waker: {e}"))?;
         Ok(Readiness {
-            poll: mio::Poll::new().map_err(|e| anyhow::anyhow!("{who}: a mio poll: {e}"))?,
+            poll,
             events: mio::Events::with_capacity(16),
             count: 0,
+            waker: Arc::new(waker),
         })
+    }
+
+    /// Wakes [`Readiness::wait`] from another thread.
+    pub fn waker(&self) -> Arc<mio::Waker> {
+        self.waker.clone()
     }
 
     /// Wakes [`Readiness::wait`] when `reader` has data.
@@ -327,10 +341,11 @@ impl Readiness {
             .map_err(|e| anyhow::anyhow!("ros2: watching a reader: {e}"))
     }
 
-    /// Waits until a reader has data or `timeout` passes.
-    pub fn wait(&mut self, timeout: std::time::Duration) {
-        if self.poll.poll(&mut self.events, Some(timeout)).is_err() {
-            std::thread::sleep(timeout);
+    /// Waits until a reader has data, the waker wakes it, or `timeout` (if
+    /// any) passes.
+    pub fn wait(&mut self, timeout: Option<std::time::Duration>) {
+        if self.poll.poll(&mut self.events, timeout).is_err() {
+            std::thread::sleep(timeout.unwrap_or(std::time::Duration::from_millis(10)));
         }
     }
 }

@@ -1059,18 +1059,13 @@ impl DomainParticipantInner {
     };
     listeners.insert(DISCOVERY_LISTENER_TOKEN, discovery_listener);
 
-    // Now the user traffic listeners
-
-    match UDPListener::new_multicast(
-      "0.0.0.0",
-      user_traffic_multicast_port(domain_id),
-      Ipv4Addr::new(239, 255, 0, 1),
-    ) {
-      Ok(l) => {
-        listeners.insert(USER_TRAFFIC_MUL_LISTENER_TOKEN, l);
-      }
-      Err(e) => warn!("Cannot get multicast user traffic listener: {e:?}"),
-    }
+    // Now the user traffic listener. jderobot's patch: unicast only, as Fast
+    // DDS does by default: our readers announce no multicast locator, so
+    // writers send them user data by unicast. A participant listening on the
+    // user traffic group got back each sample it sent there itself (one more
+    // datagram to read and drop per sample: 40 a second serving /scan and
+    // /odom, benches/ros2.rs `cpu`); we send small samples to the group of
+    // readers that ask for it (patch 0017), and read none there.
 
     let user_traffic_listener = UDPListener::new_unicast(
       "0.0.0.0",

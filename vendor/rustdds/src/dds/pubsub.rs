@@ -532,6 +532,7 @@ impl InnerPublisher {
     }
 
     // Construct the data writer
+    let matched_readers = Arc::new(std::sync::atomic::AtomicUsize::new(0));
     let data_writer = WithKeyDataWriter::<D, SA>::new(
       outer.clone(),
       topic.clone(),
@@ -541,6 +542,7 @@ impl InnerPublisher {
       Arc::clone(&writer_waker),
       self.discovery_command.clone(),
       status_receiver,
+      Arc::clone(&matched_readers),
     )?;
 
     // Construct security info if needed
@@ -610,6 +612,7 @@ impl InnerPublisher {
       like_stateless: writer_like_stateless,
       qos_policies: writer_qos,
       status_sender,
+      matched_readers,
       security_plugins: self.security_plugins_handle.clone(),
     };
 

@@ -16,6 +16,9 @@ pub const fn spdp_well_known_unicast_port(domain_id: u16, participant_id: u16) -
   PB + DG * domain_id + D1 + PG * participant_id
 }
 
+// jderobot's patch: no user traffic multicast listener (participant.rs); the
+// port stays for its place in the spec's table.
+#[allow(dead_code)]
 pub const fn user_traffic_multicast_port(domain_id: u16) -> u16 {
   PB + DG * domain_id + D2
 }

@@ -22,7 +22,7 @@ use crate::{
   },
   messages::submessages::submessages::AckSubmessage,
   network::{udp_listener::UDPListener, udp_sender::UDPSender},
-  polling::new_simple_timer,
+  polling::LoopTimer,
   //qos::HasQoSPolicy,
   rtps::{
     constant::*,
@@ -229,40 +229,35 @@ impl DPEventLoop {
   pub fn event_loop(self) {
     let mut events = Events::with_capacity(16); // too small capacity just delays events to next poll
 
-    let mut acknack_timer = new_simple_timer();
+    let mut acknack_timer = LoopTimer::new();
     acknack_timer.set_timeout(PREEMPTIVE_ACKNACK_PERIOD, ());
 
-    let mut cache_gc_timer = new_simple_timer();
+    let mut cache_gc_timer = LoopTimer::new();
     cache_gc_timer.set_timeout(CACHE_CLEAN_PERIOD, ());
 
-    self
-      .poll
-      .register(
-        &acknack_timer,
-        DPEV_ACKNACK_TIMER_TOKEN,
-        Ready::readable(),
-        PollOpt::edge(),
-      )
-      .unwrap();
-    self
-      .poll
-      .register(
-        &cache_gc_timer,
-        DPEV_CACHE_CLEAN_TIMER_TOKEN,
-        Ready::readable(),
-        PollOpt::edge(),
-      )
-      .unwrap();
     let mut poll_alive = Instant::now();
     let mut ev_wrapper = self;
     let mut preparing_to_stop = false;
 
     // loop starts here
     loop {
+      let timeout = ev_wrapper.poll_timeout([acknack_timer.next_due(), cache_gc_timer.next_due()]);
       ev_wrapper
         .poll
-        .poll(&mut events, Some(Duration::from_millis(2000)))
+        .poll(&mut events, Some(timeout))
         .expect("Failed in waiting of poll.");
+      // jderobot's patch: the timers (polling::LoopTimer) run here, not on
+      // threads of their own that woke this loop through a token.
+      ev_wrapper.run_due_timers();
+      if acknack_timer.poll().is_some() {
+        ev_wrapper.message_receiver.send_preemptive_acknacks();
+        acknack_timer.set_timeout(PREEMPTIVE_ACKNACK_PERIOD, ());
+      }
+      if cache_gc_timer.poll().is_some() {
+        debug!("Clean DDSCache on timer");
+        ev_wrapper.dds_cache.write().unwrap().garbage_collect();
+        cache_gc_timer.set_timeout(CACHE_CLEAN_PERIOD, ());
+      }
 
       // liveness watchdog
       let now = Instant::now();
@@ -377,16 +372,6 @@ impl DPEventLoop {
                   }
                 }
               }
-              DPEV_ACKNACK_TIMER_TOKEN => {
-                ev_wrapper.message_receiver.send_preemptive_acknacks();
-                acknack_timer.set_timeout(PREEMPTIVE_ACKNACK_PERIOD, ());
-              }
-              DPEV_CACHE_CLEAN_TIMER_TOKEN => {
-                debug!("Clean DDSCache on timer");
-                ev_wrapper.dds_cache.write().unwrap().garbage_collect();
-                cache_gc_timer.set_timeout(CACHE_CLEAN_PERIOD, ());
-              }
-
               fixed_unknown => {
                 error!(
                   "Unknown event.token {:?} = 0x{:x?} , decoded as {:?}",
@@ -432,15 +417,9 @@ impl DPEventLoop {
               }
             }
 
-            // Timed Actions
+            // Timed actions run after the poll (run_due_timers).
             TokenDecode::AltEntity(eid) => {
-              if eid.kind().is_reader() {
-                ev_wrapper.handle_reader_timed_event(eid);
-              } else if eid.kind().is_writer() {
-                ev_wrapper.handle_writer_timed_event(eid);
-              } else {
-                error!("AltEntity Event for unknown EntityKind {eid:?}");
-              }
+              error!("AltEntity Event for {eid:?}: timers have no token");
             }
           }
         } // for
@@ -501,19 +480,36 @@ impl DPEventLoop {
   /// Writer timed events can be heartbeats or cache cleaning events.
   /// events are distinguished by TimerMessageType which is send via mio
   /// channel. Channel token in
-  fn handle_writer_timed_event(&mut self, entity_id: EntityId) {
-    if let Some(writer) = self.writers.get_mut(&entity_id) {
-      writer.handle_timed_event();
-    } else {
-      error!("Writer was not found with {entity_id:?}");
-    }
+  /// jderobot's patch: how long a poll may wait: until the earliest timed
+  /// event of a local writer or reader or of the loop's own `timers`, at most
+  /// 2 s.
+  fn poll_timeout(&self, timers: [Option<Instant>; 2]) -> Duration {
+    let writers = self.writers.values().map(|w| w.timed_event_timer.next_due());
+    let readers = (self.message_receiver.available_readers.values())
+      .map(|r| r.timed_event_timer.next_due());
+    let idle = Duration::from_millis(2000);
+    writers
+      .chain(readers)
+      .chain(timers)
+      .flatten()
+      .min()
+      .map_or(idle, |due| due.saturating_duration_since(Instant::now()).min(idle))
   }
 
-  fn handle_reader_timed_event(&mut self, entity_id: EntityId) {
-    if let Some(reader) = self.message_receiver.reader_mut(entity_id) {
-      reader.handle_timed_event();
-    } else {
-      error!("Reader was not found with {entity_id:?}");
+  /// jderobot's patch: the timed events of local writers and readers whose
+  /// time has come.
+  fn run_due_timers(&mut self) {
+    let now = Instant::now();
+    let due = |at: Option<Instant>| at.is_some_and(|at| at <= now);
+    for writer in self.writers.values_mut() {
+      if due(writer.timed_event_timer.next_due()) {
+        writer.handle_timed_event();
+      }
+    }
+    for reader in self.message_receiver.available_readers.values_mut() {
+      if due(reader.timed_event_timer.next_due()) {
+        reader.handle_timed_event();
+      }
     }
   }
 
@@ -876,21 +872,10 @@ impl DPEventLoop {
   }
 
   fn add_local_reader(&mut self, reader_ing: ReaderIngredients) {
-    let timer = new_simple_timer();
-    self
-      .poll
-      .register(
-        &timer,
-        reader_ing.alt_entity_token(),
-        Ready::readable(),
-        PollOpt::edge(),
-      )
-      .expect("Reader timer channel registration failed!");
-
     let mut new_reader = Reader::new(
       reader_ing,
       self.udp_sender.clone(),
-      timer,
+      LoopTimer::new(),
       self.participant_status_sender.clone(),
     );
 
@@ -914,10 +899,6 @@ impl DPEventLoop {
     if let Some(old_reader) = self.message_receiver.remove_reader(reader_guid) {
       self
         .poll
-        .deregister(&old_reader.timed_event_timer)
-        .unwrap_or_else(|e| error!("Cannot deregister Reader timed_event_timer: {e:?}"));
-      self
-        .poll
         .deregister(&old_reader.data_reader_command_receiver)
         .unwrap_or_else(|e| {
           error!("Cannot deregister data_reader_command_receiver: {e:?}");
@@ -939,21 +920,10 @@ impl DPEventLoop {
   }
 
   fn add_local_writer(&mut self, writer_ing: WriterIngredients) {
-    let timer = new_simple_timer();
-    self
-      .poll
-      .register(
-        &timer,
-        writer_ing.alt_entity_token(),
-        Ready::readable(),
-        PollOpt::edge(),
-      )
-      .expect("Writer heartbeat timer channel registration failed!!");
-
     let new_writer = Writer::new(
       writer_ing,
       self.udp_sender.clone(),
-      timer,
+      LoopTimer::new(),
       self.participant_status_sender.clone(),
     );
 
@@ -976,10 +946,6 @@ impl DPEventLoop {
         .poll
         .deregister(&w.writer_command_receiver)
         .unwrap_or_else(|e| error!("Deregister fail (writer command rec) {e:?}"));
-      self
-        .poll
-        .deregister(&w.timed_event_timer)
-        .unwrap_or_else(|e| error!("Deregister fail (writer timer) {e:?}"));
 
       #[cfg(feature = "security")]
       if let Some(plugins_handle) = self.security_plugins_opt.as_ref() {

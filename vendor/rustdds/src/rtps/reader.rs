@@ -8,7 +8,7 @@ use std::{
 };
 
 use mio_06::Token;
-use mio_extras::{channel as mio_channel, timer::Timer};
+use mio_extras::channel as mio_channel;
 use log::{debug, error, info, trace, warn};
 use enumflags2::BitFlags;
 use speedy::{Endianness, Writable};
@@ -39,6 +39,7 @@ use crate::{
   },
   mio_source,
   network::udp_sender::UDPSender,
+  polling::LoopTimer,
   rtps::{
     fragment_assembler::FragmentAssembler, message_receiver::MessageReceiverState,
     rtps_writer_proxy::RtpsWriterProxy, Message,
@@ -82,12 +83,6 @@ pub(crate) struct ReaderIngredients {
   pub(crate) poll_event_sender: mio_source::PollEventSender,
 
   pub(crate) security_plugins: Option<SecurityPluginsHandle>,
-}
-
-impl ReaderIngredients {
-  pub fn alt_entity_token(&self) -> Token {
-    self.guid.entity_id.as_alt_token()
-  }
 }
 
 impl fmt::Debug for ReaderIngredients {
@@ -147,7 +142,7 @@ pub(crate) struct Reader {
   requested_deadline_missed_count: i32,
   offered_incompatible_qos_count: i32,
 
-  pub(crate) timed_event_timer: Timer<TimedEvent>,
+  pub(crate) timed_event_timer: LoopTimer<TimedEvent>,
   pub(crate) data_reader_command_receiver: mio_channel::Receiver<ReaderCommand>,
   data_reader_waker: Arc<Mutex<Option<Waker>>>,
   poll_event_sender: mio_source::PollEventSender,
@@ -210,7 +205,7 @@ impl Reader {
   pub(crate) fn new(
     i: ReaderIngredients,
     udp_sender: Rc<UDPSender>,
-    timed_event_timer: Timer<TimedEvent>,
+    timed_event_timer: LoopTimer<TimedEvent>,
     participant_status_sender: StatusChannelSender<DomainParticipantStatusEvent>,
   ) -> Self {
     // Verify that the topic cache corresponds to the topic of the Reader
@@ -1640,7 +1635,7 @@ mod tests {
     let mut reader = Reader::new(
       reader_ing,
       Rc::new(UDPSender::new(0).unwrap()),
-      mio_extras::timer::Builder::default().build(),
+      crate::polling::LoopTimer::new(),
       participant_status_sender,
     );
 
@@ -1725,7 +1720,7 @@ mod tests {
     let mut reader = Reader::new(
       reader_ing,
       Rc::new(UDPSender::new(0).unwrap()),
-      mio_extras::timer::Builder::default().build(),
+      crate::polling::LoopTimer::new(),
       participant_status_sender,
     );
 
@@ -1831,7 +1826,7 @@ mod tests {
     let mut reader = Reader::new(
       reader_ing,
       Rc::new(UDPSender::new(0).unwrap()),
-      mio_extras::timer::Builder::default().build(),
+      crate::polling::LoopTimer::new(),
       participant_status_sender,
     );
 
@@ -1940,7 +1935,7 @@ mod tests {
     let mut reader = Reader::new(
       reader_ing,
       Rc::new(UDPSender::new(0).unwrap()),
-      mio_extras::timer::Builder::default().build(),
+      crate::polling::LoopTimer::new(),
       participant_status_sender,
     );
 
@@ -2078,7 +2073,7 @@ mod tests {
     let mut reader = Reader::new(
       reader_ing,
       Rc::new(UDPSender::new(0).unwrap()),
-      mio_extras::timer::Builder::default().build(),
+      crate::polling::LoopTimer::new(),
       participant_status_sender,
     );
 

@@ -250,6 +250,13 @@ where
     self.keyed_datawriter.get_publication_matched_status()
   }
   */
+
+  /// jderobot's patch: how many readers this writer is matched with now (see
+  /// the keyed `DataWriter::matched_readers`).
+  pub fn matched_readers(&self) -> usize {
+    self.keyed_datawriter.matched_readers()
+  }
+
   /// Topic this DataWriter is connected to.
   ///
   /// # Examples

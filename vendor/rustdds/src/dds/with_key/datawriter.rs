@@ -2,7 +2,7 @@ use std::{
   marker::PhantomData,
   pin::Pin,
   sync::{
-    atomic::{AtomicI64, Ordering},
+    atomic::{AtomicI64, AtomicUsize, Ordering},
     Arc, Mutex,
   },
   task::{Context, Poll, Waker},
@@ -166,6 +166,7 @@ pub struct DataWriter<D: Keyed, SA: SerializerAdapter<D> = CDRSerializerAdapter<
   cc_upload_waker: Arc<Mutex<Option<Waker>>>,
   discovery_command: mio_channel::SyncSender<DiscoveryCommand>,
   status_receiver: StatusChannelReceiver<DataWriterStatus>,
+  matched_readers: Arc<AtomicUsize>,
   available_sequence_number: AtomicI64,
 }
 
@@ -210,6 +211,7 @@ where
     cc_upload_waker: Arc<Mutex<Option<Waker>>>,
     discovery_command: mio_channel::SyncSender<DiscoveryCommand>,
     status_receiver: StatusChannelReceiver<DataWriterStatus>,
+    matched_readers: Arc<AtomicUsize>,
   ) -> CreateResult<Self> {
     if let Some(lv) = qos.liveliness {
       match lv {
@@ -232,6 +234,7 @@ where
       cc_upload_waker,
       discovery_command,
       status_receiver,
+      matched_readers,
       available_sequence_number: AtomicI64::new(1), // valid numbering starts from 1
     })
   }
@@ -651,6 +654,16 @@ where
   }
 
   */
+
+  /// jderobot's patch: how many readers, remote and in this participant,
+  /// this writer is matched with now (the `current_count` of DDS's
+  /// PublicationMatchedStatus, whose getter is not implemented here). A
+  /// volatile writer with none can skip making a sample nobody will get. Read
+  /// from the event loop's last update, without the status channel (which
+  /// drops events when it is full).
+  pub fn matched_readers(&self) -> usize {
+    self.matched_readers.load(Ordering::Relaxed)
+  }
 
   /// Topic assigned to this DataWriter
   ///
