@@ -63,7 +63,7 @@
 //! # Threads
 //! One thread sends the sensor topics as their interfaces change; `/cmd_vel` and
 //! `joint_command` are read on a thread of their own (`ros2-cmd`), woken by the
-//! data, so a reliable write to a slow subscriber of `/odom` or `/tf` (which can
+//! data or the stop, so a reliable write to a slow subscriber of `/odom` or `/tf` (which can
 //! block up to 100 ms) never delays a command or a stop.
 //!
 //! A Twist that is not a valid motors value (NaN, infinite, out of motors' range)
