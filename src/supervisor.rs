@@ -80,7 +80,15 @@ impl Worker {
 
     /// Asks the thread to stop and waits for it.
     pub fn stop(&mut self) {
+        self.stop_waking(|| {});
+    }
+
+    /// [`Worker::stop`] for a thread that sleeps on something (a watch, a
+    /// poll's waker): `wake` runs after the flag is set, so the thread cannot
+    /// wake, find no flag and sleep again.
+    pub fn stop_waking(&mut self, wake: impl FnOnce()) {
         self.stop.store(true, Ordering::Release);
+        wake();
         if let Some(t) = self.thread.take() {
             let _ = t.join();
         }

@@ -79,7 +79,6 @@ use std::{
         Arc,
         atomic::{AtomicBool, Ordering},
     },
-    thread::JoinHandle,
     time::{Duration, Instant, SystemTime},
 };
 
@@ -99,6 +98,7 @@ use crate::{
     interfaces::{self, AnyInterface, Watch},
     mcapfmt::{Snapshot, Source},
     runtime::{Driver, Runtime},
+    supervisor::Worker,
     world::{self, LiveBalls, World},
 };
 use channels::{Out, Served};
@@ -363,9 +363,9 @@ pub struct Foxglove {
     runtime: Option<tokio::runtime::Runtime>,
     /// The SDK's server, which the door hands its checked sockets to.
     server: Arc<Mutex<Option<WebSocketServerHandle>>>,
-    stop: Arc<AtomicBool>,
+    /// The publishing thread, which sleeps on `watch`.
+    worker: Worker,
     watch: Arc<Watch>,
-    thread: Option<JoinHandle<()>>,
     wanted: Arc<Vec<Wanted>>,
     addr: SocketAddr,
     direct: Option<SocketAddr>,
@@ -383,11 +383,8 @@ impl Foxglove {
     }
 
     fn stop(&mut self) {
-        self.stop.store(true, Ordering::Release);
-        self.watch.wake();
-        if let Some(t) = self.thread.take() {
-            let _ = t.join();
-        }
+        let watch = &self.watch;
+        self.worker.stop_waking(|| watch.wake());
         let server = self.server.lock().take();
         if let Some(s) = server {
             let h = s.stop();
@@ -577,18 +574,16 @@ pub fn start(s: &Settings, rt: &Runtime) -> anyhow::Result<Foxglove> {
     // The publishing thread and its watch.
     let stop = Arc::new(AtomicBool::new(false));
     let (tx, rx) = std::sync::mpsc::sync_channel(1);
-    let thread = {
-        let stop = stop.clone();
+    let worker = {
+        let stop2 = stop.clone();
         let wanted = wanted.clone();
         let pace = Pace::new(relay_stats.clone(), served.len());
-        std::thread::Builder::new()
-            .name("foxglove".into())
-            .spawn(move || {
-                let watch = Watch::for_current_thread();
-                let _ = tx.send(watch.clone());
-                publish_loop(served, world, &wanted, &watch, &stop, pace);
-            })
-            .context("foxglove: cannot start its thread")?
+        Worker::start("foxglove", stop, move || {
+            let watch = Watch::for_current_thread();
+            let _ = tx.send(watch.clone());
+            publish_loop(served, world, &wanted, &watch, &stop2, pace);
+        })
+        .context("foxglove: cannot start its thread")?
     };
     let watch = rx.recv().context("foxglove: its thread did not start")?;
     let _ = relay_stats.taken.set(watch.clone());
@@ -596,9 +591,8 @@ pub fn start(s: &Settings, rt: &Runtime) -> anyhow::Result<Foxglove> {
         _ctx: ctx.clone(),
         runtime: None,
         server: Arc::new(Mutex::new(None)),
-        stop,
+        worker,
         watch: watch.clone(),
-        thread: Some(thread),
         wanted: wanted.clone(),
         addr: SocketAddr::new(s.bind, s.port),
         direct: None,

@@ -439,7 +439,7 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
     let worker = Worker::start("ros2", stop.clone(), move || {
         let watch = Watch::for_current_thread();
         let _ = tx.send(watch.clone());
-        serve(plan, watch, (ready, timeout), stop2, keep);
+        serve(plan, watch, ready, timeout, stop2, keep);
     })?;
     let watch = rx.recv().ok();
     tracing::info!(
@@ -455,7 +455,6 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
     Ok(Box::new(Ros2Service {
         worker,
         watch,
-        stop,
         commands_waker,
     }))
 }
@@ -834,21 +833,19 @@ impl Plan {
 struct Ros2Service {
     worker: Worker,
     watch: Option<Arc<Watch>>,
-    stop: Arc<AtomicBool>,
     /// Wakes the commands' thread, which sleeps until a command or a stop.
     commands_waker: Arc<mio::Waker>,
 }
 
 impl Driver for Ros2Service {
-    /// The flag first, then the wake-ups: a thread woken before the flag
-    /// would sleep again.
     fn terminate(&mut self) {
-        self.stop.store(true, Ordering::Release);
-        if let Some(w) = &self.watch {
-            w.wake();
-        }
-        let _ = self.commands_waker.wake();
-        self.worker.stop();
+        let (watch, waker) = (&self.watch, &self.commands_waker);
+        self.worker.stop_waking(|| {
+            if let Some(w) = watch {
+                w.wake();
+            }
+            let _ = waker.wake();
+        });
     }
 }
 
@@ -916,7 +913,8 @@ const IDLE_WAKE: Duration = Duration::from_millis(100);
 fn serve(
     mut plan: Plan,
     watch: Arc<Watch>,
-    (ready, timeout): (Readiness, Duration),
+    ready: Readiness,
+    timeout: Duration,
     stop: Arc<AtomicBool>,
     _keep: Graph,
 ) {

@@ -72,12 +72,7 @@ mod session;
 pub mod wire;
 
 use std::{
-    sync::{
-        Arc,
-        atomic::{AtomicBool, Ordering},
-        mpsc::sync_channel,
-    },
-    thread::JoinHandle,
+    sync::{Arc, atomic::AtomicBool, mpsc::sync_channel},
     time::Duration,
 };
 
@@ -91,6 +86,7 @@ use crate::{
     },
     interfaces::{self, AnyInterface, Interface, Interfaces, Watch},
     runtime::{Driver, Runtime},
+    supervisor::Worker,
 };
 use links::{Keep, Outbound, Route};
 pub use session::{FRAME_QUEUE, Scouting, SessionConf};
@@ -280,21 +276,16 @@ pub fn parse(conf: &ComponentConf) -> Result<Settings, ConfError> {
 
 struct Zenoh {
     session: Session,
-    stop: Arc<AtomicBool>,
+    worker: Worker,
     watch: Option<Arc<Watch>>,
-    thread: Option<JoinHandle<()>>,
     keep: Keep,
 }
 
 impl Driver for Zenoh {
     fn terminate(&mut self) {
-        self.stop.store(true, Ordering::Release);
-        if let Some(w) = &self.watch {
-            w.wake();
-        }
-        if let Some(t) = self.thread.take() {
-            let _ = t.join();
-        }
+        let watch = &self.watch;
+        self.worker
+            .stop_waking(|| watch.iter().for_each(|w| w.wake()));
         self.keep.clear();
         let _ = self.session.close().wait();
     }
@@ -513,26 +504,23 @@ fn create(conf: &ComponentConf, rt: &Runtime) -> anyhow::Result<Box<dyn Driver>>
     }
     let stop = Arc::new(AtomicBool::new(false));
     let (tx, rx) = sync_channel(1);
-    let thread = {
-        let stop = stop.clone();
+    let worker = {
+        let stop2 = stop.clone();
         let outs = std::mem::take(&mut plan.outs);
         let mut on_demand = std::mem::take(&mut plan.on_demand);
-        std::thread::Builder::new()
-            .name("zenoh".into())
-            .spawn(move || {
-                let watch = Watch::for_current_thread();
-                let _ = tx.send(watch.clone());
-                links::run_outbound(outs, &watch, &stop, || {
-                    on_demand.iter_mut().for_each(OnDemand::update)
-                });
-            })?
+        Worker::start("zenoh", stop, move || {
+            let watch = Watch::for_current_thread();
+            let _ = tx.send(watch.clone());
+            links::run_outbound(outs, &watch, &stop2, || {
+                on_demand.iter_mut().for_each(OnDemand::update)
+            });
+        })?
     };
     let watch = rx.recv().ok();
     Ok(Box::new(Zenoh {
         session,
-        stop,
+        worker,
         watch,
-        thread: Some(thread),
         keep: plan.keep,
     }))
 }
