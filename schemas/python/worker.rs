@@ -473,33 +473,41 @@ fn finite(call: &str, what: &str, unit: &str, x: f64) -> PyResult<f64> {
     }
 }
 
-/// A speed in the motors' units, limited to what the `motors` interface takes
-/// ([`MAX_MOTOR_V`], [`MAX_MOTOR_W`]): past it, the limit, said once a run in the
-/// console.
-fn clamp_speed(w: &Worker, which: usize, asked: f64, shown: &str) -> f32 {
-    let (max, call, unit, factor) = if which == 0 {
-        (MAX_MOTOR_V as f64, "setV", "m/s", 1000.0)
+/// `HAL.setV` (`which` 0: m/s, forward) or `HAL.setW` (1: rad/s, positive
+/// turns left): the speed in the motors' units (mm/s, deg/s), limited to what
+/// the `motors` interface takes ([`MAX_MOTOR_V`], [`MAX_MOTOR_W`]; past it,
+/// the limit, said once a run in the console), then commanded.
+fn drive(which: usize, asked: f64) -> PyResult<()> {
+    let (call, arg, unit, max, factor) = if which == 0 {
+        ("setV", "v", "m/s", MAX_MOTOR_V as f64, 1000.0)
     } else {
-        (
-            MAX_MOTOR_W as f64,
-            "setW",
-            "rad/s",
-            180.0 / std::f64::consts::PI,
-        )
+        let per_rad = 180.0 / std::f64::consts::PI;
+        ("setW", "w", "rad/s", MAX_MOTOR_W as f64, per_rad)
     };
-    let units = asked * factor;
-    if units.abs() <= max {
-        return units as f32;
-    }
-    let limit = max.copysign(units);
-    if !w.clamped[which].swap(true, Ordering::AcqRel) {
-        w.print(&format!(
-            "-- HAL.{call}({shown}): past the motors' limit, {:.4} {unit}; clamped to it \
-             (the driver may limit it further to its robot's maximum; said once)\n",
-            max / factor
-        ));
-    }
-    limit as f32
+    let asked = finite(call, arg, unit, asked)?;
+    hal(|w| {
+        if !w.has("motors") {
+            return Err(w.missing("motors", call));
+        }
+        let units = asked * factor;
+        let speed = if units.abs() <= max {
+            units as f32
+        } else {
+            if !w.clamped[which].swap(true, Ordering::AcqRel) {
+                w.print(&format!(
+                    "-- HAL.{call}({asked}): past the motors' limit, {:.4} {unit}; clamped to \
+                     it (the driver may limit it further to its robot's maximum; said once)\n",
+                    max / factor
+                ));
+            }
+            max.copysign(units) as f32
+        };
+        match which {
+            0 => w.set(Some(speed), None),
+            _ => w.set(None, Some(speed)),
+        }
+        Ok(())
+    })
 }
 
 #[pymethods]
@@ -507,28 +515,12 @@ impl Hal {
     /// Forward speed, m/s.
     #[pyo3(name = "setV")]
     fn set_v(&self, v: f64) -> PyResult<()> {
-        let v = finite("setV", "v", "m/s", v)?;
-        hal(|w| {
-            if !w.has("motors") {
-                return Err(w.missing("motors", "setV"));
-            }
-            let mm = clamp_speed(w, 0, v, &format!("{v}"));
-            w.set(Some(mm), None);
-            Ok(())
-        })
+        drive(0, v)
     }
     /// Turn speed, rad/s (positive turns left).
     #[pyo3(name = "setW")]
     fn set_w(&self, w: f64) -> PyResult<()> {
-        let turn = finite("setW", "w", "rad/s", w)?;
-        hal(|w| {
-            if !w.has("motors") {
-                return Err(w.missing("motors", "setW"));
-            }
-            let deg = clamp_speed(w, 1, turn, &format!("{turn}"));
-            w.set(None, Some(deg));
-            Ok(())
-        })
+        drive(1, w)
     }
     #[pyo3(name = "getPose3d")]
     fn get_pose3d(&self) -> PyResult<Pose3d> {
