@@ -83,11 +83,20 @@ impl<T> LoopTimer<T> {
     Self::default()
   }
 
-  /// `event` comes out of `poll` once `delay` has passed.
-  pub fn set_timeout(&mut self, delay: Duration, event: T) {
+  /// `event` comes out of `poll` once `delay` has passed. An equal event
+  /// already waiting to come out no later is not armed again: a flood of
+  /// ACKNACKs asking one reader's repair arms one repair, not one each.
+  pub fn set_timeout(&mut self, delay: Duration, event: T)
+  where
+    T: PartialEq,
+  {
+    let at = Instant::now() + delay;
+    if self.due.iter().any(|d| d.event == event && d.at <= at) {
+      return;
+    }
     self.armed += 1;
     self.due.push(Due {
-      at: Instant::now() + delay,
+      at,
       order: self.armed,
       event,
     });
@@ -126,5 +135,15 @@ mod loop_timer_tests {
     std::thread::sleep(Duration::from_millis(30));
     assert_eq!(t.poll(), Some("late"));
     assert_eq!((t.poll(), t.next_due()), (None, None));
+  }
+
+  #[test]
+  fn an_equal_event_waiting_is_not_armed_twice() {
+    let mut t = LoopTimer::new();
+    for _ in 0..1000 {
+      t.set_timeout(Duration::ZERO, "repair");
+    }
+    t.set_timeout(Duration::from_secs(60), "repair");
+    assert_eq!((t.poll(), t.poll()), (Some("repair"), None));
   }
 }
